@@ -1,0 +1,14 @@
+"""Command-line interface: ``tankdaq <command>``; one module per room registers its commands."""
+
+from __future__ import annotations
+
+from . import hulls  # noqa: F401  (each import registers commands on ``app``)
+from .app import app
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app()
+
+
+__all__ = ["app", "main"]

@@ -1,0 +1,82 @@
+"""The typer application and the small helpers every command shares.
+
+Commands live in one module per room (``cli/decode.py``, ``cli/record.py``...)
+and stay thin: parse arguments, call the library, print. Errors raised on
+purpose (``TankdaqError``) become one line on stderr and the error's exit code.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import typer
+from rich.console import Console
+
+from ..errors import TankdaqError
+
+app = typer.Typer(
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+    help="tankdaq: record towing-tank decay tests from an Xsens MTi-G and identify damping and restoring.",
+)
+
+#: Progress bars and status lines go to stderr so stdout stays machine-readable.
+err_console = Console(stderr=True)
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def fail(message: str, code: int = 2) -> typer.Exit:
+    """Print one error line and return the Exit to raise."""
+    err_console.print(f"error: {message}", markup=False, highlight=False, soft_wrap=True)
+    return typer.Exit(code)
+
+
+def handles_errors(fn: F) -> F:
+    """Turn TankdaqError into one line and its exit code; Ctrl-C into exit 130, quietly."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except TankdaqError as exc:
+            raise fail(str(exc), exc.exit_code) from None
+        except KeyboardInterrupt:
+            err_console.print("interrupted", markup=False)
+            raise typer.Exit(130) from None
+        except BrokenPipeError:
+            raise typer.Exit(0) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+def parse_draft_option(value: str) -> float:
+    """typer parser for --draft: '0.9T', 'T', '1.1T' -> factor (bad values exit 2)."""
+    from ..config import parse_draft
+    from ..errors import InputError
+
+    try:
+        return parse_draft(value)
+    except InputError as exc:
+        raise typer.BadParameter(str(exc)) from None
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from .. import __version__
+
+        typer.echo(f"tankdaq {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def root(
+    version: bool = typer.Option(
+        False, "--version", callback=_print_version, is_eager=True, help="Print the version and exit."
+    ),
+) -> None:
+    """tankdaq: record towing-tank decay tests from an Xsens MTi-G and identify damping and restoring."""

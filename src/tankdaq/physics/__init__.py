@@ -1,0 +1,1 @@
+"""Physics: the decay equation, hull configurations, simulation of decays."""

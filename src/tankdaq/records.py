@@ -1,0 +1,78 @@
+"""A decay run as the identification sees it: time, angle, rate, extra channels.
+
+Recordings (MCAP), CSV files and the simulator all become ``DecayRun`` objects,
+so estimators and the discrepancy workflow never care where data came from.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import BadIdentificationInput
+
+
+@dataclass
+class DecayRun:
+    """One free decay of one axis, from the release onwards.
+
+    ``t`` in s (starting anywhere), ``angle`` in rad, ``rate`` in rad/s or None
+    when only the angle was measured. ``channels`` holds other measured signals
+    on the same time base (e.g. ``heave_m``, ``acc_z_m_s2``, ``other_angle``),
+    ``meta`` whatever is known about the run (hull, draft, nominal angle, file).
+    """
+
+    t: np.ndarray
+    angle: np.ndarray
+    rate: np.ndarray | None = None
+    axis: str = "roll"
+    name: str = "run"
+    channels: dict[str, np.ndarray] = field(default_factory=dict)
+    meta: dict[str, object] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.t = np.asarray(self.t, dtype=float)
+        self.angle = np.asarray(self.angle, dtype=float)
+        if self.rate is not None:
+            self.rate = np.asarray(self.rate, dtype=float)
+        self.validate()
+
+    def validate(self) -> None:
+        """Refuse data no estimator can use, with a message that says what is wrong."""
+        n = self.t.size
+        if n == 0:
+            raise BadIdentificationInput(f"{self.name}: the record is empty")
+        if self.angle.shape != self.t.shape:
+            raise BadIdentificationInput(f"{self.name}: time and angle have different lengths")
+        if self.rate is not None and self.rate.shape != self.t.shape:
+            raise BadIdentificationInput(f"{self.name}: time and rate have different lengths")
+        for label, arr in (("time", self.t), ("angle", self.angle), ("rate", self.rate)):
+            if arr is not None and not np.all(np.isfinite(arr)):
+                raise BadIdentificationInput(
+                    f"{self.name}: the {label} column holds NaN or infinite values; clean or cut the record"
+                )
+        if n > 1 and np.any(np.diff(self.t) <= 0):
+            raise BadIdentificationInput(f"{self.name}: time is not strictly increasing")
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.t.size else 0.0
+
+    @property
+    def sample_rate(self) -> float:
+        """Median sample rate in Hz."""
+        return float(1.0 / np.median(np.diff(self.t))) if self.t.size > 1 else float("nan")
+
+    def window(self, start: int, stop: int | None = None) -> DecayRun:
+        """A copy restricted to samples ``start:stop`` (channels cut alike)."""
+        sl = slice(start, stop)
+        return DecayRun(
+            t=self.t[sl],
+            angle=self.angle[sl],
+            rate=None if self.rate is None else self.rate[sl],
+            axis=self.axis,
+            name=self.name,
+            channels={k: v[sl] for k, v in self.channels.items()},
+            meta=dict(self.meta),
+        )
