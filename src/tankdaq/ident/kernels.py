@@ -1,0 +1,267 @@
+"""Compiled decay integration with exact forward sensitivities (numba, cached).
+
+The output-error fit needs the simulated angle and rate at the sample instants
+*and* their derivatives with respect to every coefficient and the initial
+state. Integrating the sensitivity equations alongside the state (fixed-step
+RK4, sub-stepped when the step is large against the period) gives a Jacobian
+that is exact to the integration error and costs one pass, instead of the
+noisy finite differences that stall optimisers (reference §4).
+
+The equation is ``x'' = -sum_j theta_j * phi_j(x, x', u)``. Each term is one
+row of ``TERM_REGISTRY`` plus one branch of ``term_eval`` giving phi and its
+partial derivatives in x and x'; adding a term touches nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TermSpec:
+    """One term of the decay equation: its code in the kernel and how people read it."""
+
+    code: int
+    kind: str  # "damping", "restoring", "friction" or "exogenous"
+    label: str
+    unit: str
+
+
+#: The term vocabulary: the nine canonical terms, then the extra effects.
+#: ``fc``: Coulomb friction fc*tanh(x'/eps) (eps is an estimator setting);
+#: ``ku``: coupling k*u(t) to a measured exogenous channel u.
+TERM_REGISTRY: dict[str, TermSpec] = {
+    "b1": TermSpec(0, "damping", "linear damping  b1*x'", "1/s"),
+    "b2": TermSpec(1, "damping", "quadratic damping  b2*|x'|x'", "1/rad"),
+    "b3": TermSpec(2, "damping", "cubic damping  b3*x'^3", "s/rad^2"),
+    "c1": TermSpec(3, "restoring", "linear restoring  c1*x", "1/s^2"),
+    "c2": TermSpec(4, "restoring", "quadratic restoring  c2*x^2", "1/(rad s^2)"),
+    "c3": TermSpec(5, "restoring", "cubic restoring  c3*x^3", "1/(rad^2 s^2)"),
+    "s1": TermSpec(6, "restoring", "sine restoring  s1*sin(x)", "1/s^2"),
+    "s2": TermSpec(7, "restoring", "sine-squared restoring  s2*sin(x)^2", "1/s^2"),
+    "s3": TermSpec(8, "restoring", "sine-cubed restoring  s3*sin(x)^3", "1/s^2"),
+    "fc": TermSpec(9, "friction", "Coulomb friction  fc*tanh(x'/eps)", "rad/s^2"),
+    "ku": TermSpec(10, "exogenous", "exogenous coupling  ku*u(t)", "rad/(s^2 unit of u)"),
+}
+
+
+def term_codes(terms: Sequence[str]) -> np.ndarray:
+    """Kernel codes of the named terms (KeyError names the unknown one)."""
+    return np.array([TERM_REGISTRY[name].code for name in terms], dtype=np.int64)
+
+
+@numba.njit(cache=True, inline="always")
+def term_eval(code: int, x: float, v: float, u: float, eps: float) -> tuple[float, float, float]:
+    """phi, dphi/dx, dphi/dv of one term at the state (x, v) and input u."""
+    if code == 0:
+        return v, 0.0, 1.0
+    if code == 1:
+        return abs(v) * v, 0.0, 2.0 * abs(v)
+    if code == 2:
+        return v * v * v, 0.0, 3.0 * v * v
+    if code == 3:
+        return x, 1.0, 0.0
+    if code == 4:
+        return x * x, 2.0 * x, 0.0
+    if code == 5:
+        return x * x * x, 3.0 * x * x, 0.0
+    s = math.sin(x)
+    if code == 6:
+        return s, math.cos(x), 0.0
+    if code == 7:
+        return s * s, 2.0 * s * math.cos(x), 0.0
+    if code == 8:
+        return s * s * s, 3.0 * s * s * math.cos(x), 0.0
+    if code == 9:
+        th = math.tanh(v / eps)
+        return th, 0.0, (1.0 - th * th) / eps
+    if code == 10:
+        return u, 0.0, 0.0
+    return math.nan, math.nan, math.nan
+
+
+@numba.njit(cache=True)
+def term_matrix(codes: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray, eps: float) -> np.ndarray:
+    """Regressor matrix phi_j(x_i, v_i, u_i), shape (n, len(codes)): x'' = -phi @ theta."""
+    out = np.empty((x.size, codes.size))
+    for i in range(x.size):
+        for j in range(codes.size):
+            out[i, j] = term_eval(codes[j], x[i], v[i], u[i], eps)[0]
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _deriv(z: np.ndarray, dz: np.ndarray, theta: np.ndarray, codes: np.ndarray, u: float, eps: float) -> None:
+    """Time derivative of the state and its sensitivities (theta first, then x0, v0)."""
+    x = z[0]
+    v = z[1]
+    acc = 0.0
+    ax = 0.0
+    av = 0.0
+    n_theta = codes.size
+    n_par = (z.size - 2) // 2
+    for j in range(n_theta):
+        phi, phx, phv = term_eval(codes[j], x, v, u, eps)
+        acc -= theta[j] * phi
+        ax -= theta[j] * phx
+        av -= theta[j] * phv
+        dz[2 + 2 * j + 1] = -phi
+    dz[0] = v
+    dz[1] = acc
+    for p in range(n_par):
+        sx = z[2 + 2 * p]
+        sv = z[3 + 2 * p]
+        dz[2 + 2 * p] = sv
+        forcing = dz[3 + 2 * p] if p < n_theta else 0.0
+        dz[3 + 2 * p] = ax * sx + av * sv + forcing
+
+
+@numba.njit(cache=True)
+def simulate_with_sensitivities(
+    t: np.ndarray,
+    x0: float,
+    v0: float,
+    theta: np.ndarray,
+    codes: np.ndarray,
+    u: np.ndarray,
+    eps: float,
+    n_sub: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Angle, rate and their sensitivities at every t, integrating from (x0, v0) at t[0].
+
+    Returns ``(x, v, sx, sv, ok)`` with ``sx[i, p] = dx(t_i)/dp`` for p over
+    theta then x0, v0. ``u`` is the exogenous input at the sample times, linear
+    inside a step. ``ok`` is False when the solution left any sane range (the
+    rest is then filled with the last finite values so an optimiser can back off).
+    """
+    n = t.size
+    n_theta = codes.size
+    n_par = n_theta + 2
+    size = 2 + 2 * n_par
+    z = np.zeros(size)
+    z[0] = x0
+    z[1] = v0
+    z[2 + 2 * n_theta] = 1.0  # dx/dx0
+    z[3 + 2 * (n_theta + 1)] = 1.0  # dv/dv0
+    k1 = np.empty(size)
+    k2 = np.empty(size)
+    k3 = np.empty(size)
+    k4 = np.empty(size)
+    tmp = np.empty(size)
+    xs = np.empty(n)
+    vs = np.empty(n)
+    sx = np.empty((n, n_par))
+    sv = np.empty((n, n_par))
+    ok = True
+    for i in range(n):
+        if i > 0 and ok:
+            h = (t[i] - t[i - 1]) / n_sub
+            du = (u[i] - u[i - 1]) / n_sub
+            for s in range(n_sub):
+                u0 = u[i - 1] + s * du
+                _deriv(z, k1, theta, codes, u0, eps)
+                for m in range(size):
+                    tmp[m] = z[m] + 0.5 * h * k1[m]
+                _deriv(tmp, k2, theta, codes, u0 + 0.5 * du, eps)
+                for m in range(size):
+                    tmp[m] = z[m] + 0.5 * h * k2[m]
+                _deriv(tmp, k3, theta, codes, u0 + 0.5 * du, eps)
+                for m in range(size):
+                    tmp[m] = z[m] + h * k3[m]
+                _deriv(tmp, k4, theta, codes, u0 + du, eps)
+                for m in range(size):
+                    z[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
+            if not (abs(z[0]) < 1e3 and abs(z[1]) < 1e5 and np.all(np.isfinite(z))):
+                ok = False
+        if ok:
+            xs[i] = z[0]
+            vs[i] = z[1]
+            for p in range(n_par):
+                sx[i, p] = z[2 + 2 * p]
+                sv[i, p] = z[3 + 2 * p]
+        else:
+            xs[i] = xs[i - 1]
+            vs[i] = vs[i - 1]
+            sx[i, :] = 0.0
+            sv[i, :] = 0.0
+    return xs, vs, sx, sv, ok
+
+
+@numba.njit(cache=True)
+def simulate(
+    t: np.ndarray, x0: float, v0: float, theta: np.ndarray, codes: np.ndarray, u: np.ndarray, eps: float, n_sub: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Angle and rate only (RK4 without sensitivities): prediction and plotting."""
+    n = t.size
+    xs = np.empty(n)
+    vs = np.empty(n)
+    x = x0
+    v = v0
+    xs[0] = x
+    vs[0] = v
+    for i in range(1, n):
+        h = (t[i] - t[i - 1]) / n_sub
+        du = (u[i] - u[i - 1]) / n_sub
+        for s in range(n_sub):
+            u0 = u[i - 1] + s * du
+            x, v = _rk4_state_step(x, v, h, theta, codes, u0, du, eps)
+        xs[i] = x
+        vs[i] = v
+    return xs, vs
+
+
+@numba.njit(cache=True, inline="always")
+def _acc(x: float, v: float, theta: np.ndarray, codes: np.ndarray, u: float, eps: float) -> float:
+    acc = 0.0
+    for j in range(codes.size):
+        acc -= theta[j] * term_eval(codes[j], x, v, u, eps)[0]
+    return acc
+
+
+@numba.njit(cache=True, inline="always")
+def _rk4_state_step(
+    x: float, v: float, h: float, theta: np.ndarray, codes: np.ndarray, u0: float, du: float, eps: float
+) -> tuple[float, float]:
+    a1 = _acc(x, v, theta, codes, u0, eps)
+    x2 = x + 0.5 * h * v
+    v2 = v + 0.5 * h * a1
+    a2 = _acc(x2, v2, theta, codes, u0 + 0.5 * du, eps)
+    x3 = x + 0.5 * h * v2
+    v3 = v + 0.5 * h * a2
+    a3 = _acc(x3, v3, theta, codes, u0 + 0.5 * du, eps)
+    x4 = x + h * v3
+    v4 = v + h * a3
+    a4 = _acc(x4, v4, theta, codes, u0 + du, eps)
+    return (
+        x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4),
+        v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4),
+    )
+
+
+@numba.njit(cache=True)
+def one_step_rates(
+    t: np.ndarray, x: np.ndarray, v: np.ndarray, theta: np.ndarray, codes: np.ndarray, u: np.ndarray, eps: float
+) -> np.ndarray:
+    """Rate at t[k+1] predicted from the measured state at t[k] (the seeds' criterion, eq. 4.5)."""
+    out = np.empty(t.size - 1)
+    for k in range(t.size - 1):
+        out[k] = _rk4_state_step(x[k], v[k], t[k + 1] - t[k], theta, codes, u[k], u[k + 1] - u[k], eps)[1]
+    return out
+
+
+def substeps(dt: float, theta: np.ndarray, terms: Sequence[str], amplitude: float) -> int:
+    """RK4 sub-steps per sample so that omega*h stays below 0.1 (phase error ~1e-7 per step)."""
+    coeff = dict(zip(terms, np.abs(theta), strict=True))
+    stiffness = (
+        coeff.get("c1", 0.0)
+        + coeff.get("s1", 0.0)
+        + 3 * (coeff.get("c3", 0.0) + coeff.get("s3", 0.0)) * amplitude**2
+        + 2 * (coeff.get("c2", 0.0) + coeff.get("s2", 0.0)) * amplitude
+    )
+    rate_scale = math.sqrt(max(stiffness, 1e-12)) + coeff.get("b1", 0.0)
+    return max(1, math.ceil(2.0 * rate_scale * dt / 0.1))

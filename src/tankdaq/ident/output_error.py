@@ -1,0 +1,407 @@
+"""Output error: THE estimator. Simulate the decay, compare with what was measured.
+
+All runs of one condition share the coefficients; each run has its own initial
+angle and rate (free, so a rough first half-cycle does not bias the fit) and its
+own angle offset. Angle and gyro rate are both outputs, each weighted by its
+noise level estimated per run. Levenberg-Marquardt on the exact Jacobian from
+the sensitivity kernel, started from the equation-error fit.
+
+Optional observation effects for the discrepancy workflow: the angle's gain and
+lag relative to the gyro (``angle = gain * x(t - lag) + offset``, first-order in
+lag) and a gyro bias (``rate = x' + bias``). They need a measured rate: against
+the angle alone a gain or a delay is indistinguishable from the initial state.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..errors import BadIdentificationInput, InputError
+from ..records import DecayRun
+from .equation_error import EquationError, check_runs, exogenous_input
+from .kernels import one_step_rates, simulate, simulate_with_sensitivities, substeps, term_codes
+from .models import resolve_model
+from .signals import estimate_period, savgol_window, smoothed_derivatives, white_noise_level
+from .uncertainty import (
+    classic_covariance,
+    coefficient_warnings,
+    correlation_from_covariance,
+    hac_covariance,
+    residual_whiteness,
+    whiteness_warning,
+)
+
+OBSERVATION_PARAMS: tuple[str, ...] = ("gain", "lag_s", "gyro_bias")
+
+
+class _Layout:
+    """Where each parameter sits in the vector: coefficients, global observation terms, then per run."""
+
+    def __init__(self, terms: tuple[str, ...], observation: tuple[str, ...], n_runs: int) -> None:
+        self.terms = terms
+        self.observation = observation
+        self.n_runs = n_runs
+        self.n_theta = len(terms)
+        self.n_global = self.n_theta + len(observation)
+        self.size = self.n_global + 3 * n_runs
+        self.names = [*terms, *observation] + [
+            f"{name}[{r}]" for r in range(n_runs) for name in ("angle0", "rate0", "offset")
+        ]
+
+    def obs_index(self, name: str) -> int | None:
+        return self.n_theta + self.observation.index(name) if name in self.observation else None
+
+    def run_slice(self, r: int) -> slice:
+        start = self.n_global + 3 * r
+        return slice(start, start + 3)
+
+
+class OutputError:
+    """Joint output-error fit of a decay model to one or several runs (scikit-learn style).
+
+    Settings: ``terms`` (term list or alias), ``exogenous`` (channel name feeding
+    the ``ku`` term), ``friction_eps`` (rad/s, smoothing of the Coulomb sign),
+    ``fit_gain`` / ``fit_lag`` / ``fit_gyro_bias`` (observation effects),
+    ``use_rate`` (the gyro as a second output), ``cov_type`` ("hac" or
+    "classic"), ``hac_periods`` (HAC bandwidth in natural periods), ``reweight``
+    (re-estimate the noise levels from the residuals and refit once).
+    """
+
+    def __init__(
+        self,
+        terms: str | Sequence[str] = "ittc-quadratic-restoring",
+        *,
+        exogenous: str | None = None,
+        friction_eps: float = 1e-3,
+        fit_gain: bool = False,
+        fit_lag: bool = False,
+        fit_gyro_bias: bool = False,
+        use_rate: bool = True,
+        cov_type: str = "hac",
+        hac_periods: float = 1.0,
+        reweight: bool = True,
+        max_nfev: int = 200,
+        compute_diagnostics: bool = True,
+    ) -> None:
+        self.terms = terms
+        self.exogenous = exogenous
+        self.friction_eps = friction_eps
+        self.fit_gain = fit_gain
+        self.fit_lag = fit_lag
+        self.fit_gyro_bias = fit_gyro_bias
+        self.use_rate = use_rate
+        self.cov_type = cov_type
+        self.hac_periods = hac_periods
+        self.reweight = reweight
+        self.max_nfev = max_nfev
+        self.compute_diagnostics = compute_diagnostics
+
+    def clone(self) -> OutputError:
+        """An unfitted copy with the same settings."""
+        fresh = copy.copy(self)
+        fresh.__dict__ = {k: v for k, v in self.__dict__.items() if not k.endswith("_")}
+        return fresh
+
+    # ------------------------------------------------------------------ fitting
+    def fit(
+        self,
+        runs: Sequence[DecayRun] | DecayRun,
+        start: OutputError | dict[str, float] | None = None,
+        fixed_coefficients: dict[str, float] | None = None,
+    ) -> OutputError:
+        """Fit jointly on ``runs``; returns self.
+
+        ``start``: a fitted OutputError (warm start: all parameters when the runs
+        match, else its coefficients) or a coefficient dict; default: the
+        equation-error fit. ``fixed_coefficients`` freezes the coefficients and
+        fits only the per-run parameters (used to score held-out runs).
+        """
+        started = time.perf_counter()
+        runs = check_runs(runs)
+        self._check_settings(runs)
+        self.terms_ = resolve_model(self.terms)
+        self.runs_ = runs
+        observation = tuple(
+            name
+            for name, wanted in zip(OBSERVATION_PARAMS, (self.fit_gain, self.fit_lag, self.fit_gyro_bias), strict=True)
+            if wanted
+        )
+        layout = _Layout(self.terms_, observation, len(runs))
+        self._layout = layout
+        self._codes = term_codes(self.terms_)
+        self._inputs = [exogenous_input(run, self.exogenous) for run in runs]
+        self._has_rate = [self.use_rate and run.rate is not None for run in runs]
+        p0 = self._start_vector(runs, layout, start, fixed_coefficients)
+        free = np.ones(layout.size, dtype=bool)
+        if fixed_coefficients is not None:
+            free[: layout.n_theta] = False
+        amplitude = max(float(np.max(np.abs(run.angle - np.median(run.angle)))) for run in runs)
+        dt_max = max(float(np.max(np.diff(run.t))) for run in runs)
+        self._n_sub = substeps(dt_max, p0[: layout.n_theta], self.terms_, amplitude)
+        self._sigmas = [self._initial_sigmas(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)]
+
+        params = self._solve(p0, free)
+        if self.reweight:
+            self._sigmas = self._residual_sigmas(params)
+            params = self._solve(params, free)
+        self._finish(params, free)
+        self.elapsed_s_ = time.perf_counter() - started
+        return self
+
+    def _check_settings(self, runs: list[DecayRun]) -> None:
+        if self.cov_type not in ("hac", "classic"):
+            raise InputError(f"cov_type {self.cov_type!r}: use 'hac' or 'classic'")
+        needs_rate = [n for n, on in (("gain", self.fit_gain), ("lag", self.fit_lag), ("gyro bias", self.fit_gyro_bias)) if on]
+        if needs_rate and not all(self.use_rate and run.rate is not None for run in runs):
+            raise BadIdentificationInput(
+                f"fitting the angle's {', '.join(needs_rate)} needs a measured rate in every run "
+                f"(against the angle alone it is indistinguishable from the initial state)"
+            )
+
+    def _start_vector(
+        self,
+        runs: list[DecayRun],
+        layout: _Layout,
+        start: OutputError | dict[str, float] | None,
+        fixed: dict[str, float] | None,
+    ) -> np.ndarray:
+        ee = EquationError(
+            self.terms_, use_rate=self.use_rate, exogenous=self.exogenous, friction_eps=self.friction_eps
+        ).fit(runs)
+        p0 = np.zeros(layout.size)
+        coefficients = dict(ee.coefficients_)
+        if isinstance(start, OutputError):
+            coefficients.update(start.coefficients_)
+        elif start is not None:
+            coefficients.update(start)
+        if fixed is not None:
+            coefficients.update(fixed)
+        p0[: layout.n_theta] = [coefficients.get(k, 0.0) for k in self.terms_]
+        if (i := layout.obs_index("gain")) is not None:
+            p0[i] = 1.0
+        for r in range(len(runs)):
+            p0[layout.run_slice(r)] = [*ee.initial_states_[r], ee.offsets_[r]]
+        if isinstance(start, OutputError) and start._layout.size == layout.size and start.terms_ == self.terms_:
+            p0[:] = start.params_
+        return p0
+
+    @staticmethod
+    def _initial_sigmas(run: DecayRun, has_rate: bool) -> dict[str, float]:
+        """Noise levels from third differences, floored so a clean record does not get infinite weight."""
+        floor_angle = 1e-4 * float(np.ptp(run.angle))
+        sig = {"angle": max(white_noise_level(run.angle), floor_angle)}
+        if has_rate:
+            sig["rate"] = max(white_noise_level(run.rate), 1e-4 * float(np.ptp(run.rate)))
+        return sig
+
+    def _residual_sigmas(self, params: np.ndarray) -> list[dict[str, float]]:
+        out = []
+        for r, run in enumerate(self.runs_):
+            pred = self._predict_run(params, r, with_jacobian=False)
+            sig = {"angle": max(_rms(run.angle - pred["angle"]), 1e-12)}
+            if self._has_rate[r]:
+                sig["rate"] = max(_rms(run.rate - pred["rate"]), 1e-12)
+            out.append(sig)
+        return out
+
+    def _predict_run(self, params: np.ndarray, r: int, with_jacobian: bool) -> dict[str, Any]:
+        """Measured-frame angle and rate of run r, and their Jacobian rows over the full vector."""
+        layout = self._layout
+        run = self.runs_[r]
+        theta = params[: layout.n_theta]
+        angle0, rate0, offset = params[layout.run_slice(r)]
+        gi, li, bi = (layout.obs_index(n) for n in OBSERVATION_PARAMS)
+        gain = params[gi] if gi is not None else 1.0
+        lag = params[li] if li is not None else 0.0
+        bias = params[bi] if bi is not None else 0.0
+        args = (run.t, angle0, rate0, theta, self._codes, self._inputs[r], self.friction_eps, self._n_sub)
+        if not with_jacobian:
+            x, v = simulate(*args)
+            return {"angle": gain * (x - lag * v) + offset, "rate": v + bias}
+        x, v, sx, sv, ok = simulate_with_sensitivities(*args)
+        n = run.t.size
+        ja = np.zeros((n, layout.size))
+        jv = np.zeros((n, layout.size))
+        sl = layout.run_slice(r)
+        cols = [*range(layout.n_theta), sl.start, sl.start + 1]
+        ja[:, cols] = gain * (sx - lag * sv)
+        jv[:, cols] = sv
+        ja[:, sl.start + 2] = 1.0
+        if gi is not None:
+            ja[:, gi] = x - lag * v
+        if li is not None:
+            ja[:, li] = -gain * v
+        if bi is not None:
+            jv[:, bi] = 1.0
+        return {"angle": gain * (x - lag * v) + offset, "rate": v + bias, "ja": ja, "jv": jv, "ok": ok}
+
+    def _weighted(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], bool]:
+        """Residuals and Jacobian divided by the noise levels, plus per-sample scores for HAC."""
+        res, jac, scores = [], [], []
+        ok_all = True
+        for r, run in enumerate(self.runs_):
+            pred = self._predict_run(params, r, with_jacobian=True)
+            ok_all &= bool(pred["ok"])
+            sig = self._sigmas[r]
+            ra = (run.angle - pred["angle"]) / sig["angle"]
+            ja = -pred["ja"] / sig["angle"]
+            score = ja * ra[:, None]
+            res.append(ra)
+            jac.append(ja)
+            if self._has_rate[r]:
+                rv = (run.rate - pred["rate"]) / sig["rate"]
+                jv = -pred["jv"] / sig["rate"]
+                score = score + jv * rv[:, None]
+                res.append(rv)
+                jac.append(jv)
+            scores.append(score)
+        return np.concatenate(res), np.vstack(jac), scores, ok_all
+
+    def _solve(self, p0: np.ndarray, free: np.ndarray) -> np.ndarray:
+        cache: dict[str, Any] = {}
+
+        def evaluate(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            if cache.get("q") is None or not np.array_equal(cache["q"], q):
+                p = p0.copy()
+                p[free] = q
+                res, jac, _, ok = self._weighted(p)
+                if not ok:  # diverged: a large, smooth-enough penalty makes LM back off
+                    res = np.full_like(res, 1e6)
+                cache.update(q=q.copy(), res=res, jac=jac[:, free])
+            return cache["res"], cache["jac"]
+
+        result = least_squares(
+            lambda q: evaluate(q)[0],
+            p0[free],
+            jac=lambda q: evaluate(q)[1],
+            method="lm",
+            x_scale="jac",
+            xtol=1e-10,
+            ftol=1e-10,
+            max_nfev=self.max_nfev,
+        )
+        params = p0.copy()
+        params[free] = result.x
+        self.nfev_ = int(result.nfev)
+        return params
+
+    # ------------------------------------------------------------------ results
+    def _finish(self, params: np.ndarray, free: np.ndarray) -> None:
+        layout = self._layout
+        self.params_ = params
+        self.param_names_ = layout.names
+        res_w, jac_w, scores, _ = self._weighted(params)
+        theta = params[: layout.n_theta]
+        self.coefficients_ = dict(zip(self.terms_, theta.tolist(), strict=True))
+        self.natural_period_s_ = _natural_period(self.coefficients_)
+        n_obs = res_w.size
+        n_free = int(free.sum())
+        jac_free = jac_w[:, free]
+        if self.cov_type == "hac":
+            period_samples = self.natural_period_s_ / float(np.median(np.diff(self.runs_[0].t)))
+            bandwidth = max(1, int(round(self.hac_periods * period_samples))) if math.isfinite(period_samples) else 1
+            cov_free = hac_covariance([s[:, free] for s in scores], jac_free, bandwidth)
+        else:
+            cov_free = classic_covariance(jac_free)
+        cov_free *= n_obs / max(n_obs - n_free, 1)
+        cov = np.zeros((layout.size, layout.size))
+        cov[np.ix_(free, free)] = cov_free
+        self.param_covariance_ = cov
+        self.covariance_ = cov[: layout.n_theta, : layout.n_theta]
+        std = np.sqrt(np.clip(np.diag(self.covariance_), 0.0, None))
+        self.std_ = dict(zip(self.terms_, std.tolist(), strict=True))
+        self.ci95_ = {k: (v - 1.96 * s, v + 1.96 * s) for (k, v), s in zip(self.coefficients_.items(), std, strict=True)}
+        self.correlation_ = correlation_from_covariance(self.covariance_)
+        for name in layout.observation:
+            setattr(self, f"{name}_", float(params[layout.obs_index(name)]))
+        self.offsets_ = [float(params[layout.run_slice(r)][2]) for r in range(layout.n_runs)]
+        self.initial_states_ = [tuple(map(float, params[layout.run_slice(r)][:2])) for r in range(layout.n_runs)]
+
+        self.fitted_, self.residuals_ = [], []
+        ss_res = ss_tot = 0.0
+        log_lik_terms = 0.0
+        for r, run in enumerate(self.runs_):
+            pred = self._predict_run(params, r, with_jacobian=False)
+            resid_angle = run.angle - pred["angle"]
+            resid_rate = run.rate - pred["rate"] if self._has_rate[r] else None
+            self.fitted_.append({"angle": pred["angle"], "rate": pred["rate"]})
+            self.residuals_.append({"angle": resid_angle, "rate": resid_rate})
+            ss_res += float(resid_angle @ resid_angle)
+            ss_tot += float(np.sum((run.angle - run.angle.mean()) ** 2))
+            for resid in (resid_angle, resid_rate):
+                if resid is not None:
+                    log_lik_terms += resid.size * (math.log(2 * math.pi * max(np.mean(resid**2), 1e-300)) + 1)
+        self.r2_angle_ = 1.0 - ss_res / ss_tot
+        all_angle = np.concatenate([run.angle for run in self.runs_])
+        self.nrmse_ = math.sqrt(ss_res / all_angle.size) / float(np.ptp(all_angle))
+        self.n_obs_ = n_obs
+        self.bic_ = log_lik_terms + n_free * math.log(n_obs)
+        self.seed_objective_ = self._seed_objective()
+        self.warnings_ = []
+        if self.compute_diagnostics:
+            self.warnings_ = coefficient_warnings(self.terms_, theta, std, self.correlation_)
+            for run, resid in zip(self.runs_, self.residuals_, strict=True):
+                for output in ("angle", "rate"):
+                    if resid[output] is not None:
+                        warning = whiteness_warning(run.name, output, *residual_whiteness(resid[output]))
+                        if warning:
+                            self.warnings_.append(warning)
+
+    def _seed_objective(self) -> float:
+        """RMS of the one-step-ahead predicted rate from the measured state (seed 000 eq. 4.6), rad/s.
+
+        Where no gyro was recorded the 'measured' rate is the smoothed derivative of the angle.
+        """
+        theta = np.array(list(self.coefficients_.values()))
+        bias = getattr(self, "gyro_bias_", 0.0)
+        gain = getattr(self, "gain_", 1.0)
+        errors = []
+        for r, run in enumerate(self.runs_):
+            x = (run.angle - self.offsets_[r]) / gain
+            if self._has_rate[r]:
+                v = run.rate - bias
+            else:
+                dt = float(np.median(np.diff(run.t)))
+                window = savgol_window(dt, estimate_period(run.t, run.angle), 0.15, 3)
+                v = smoothed_derivatives(run.angle, dt, window)[1] / gain
+            predicted = one_step_rates(run.t, x, v, theta, self._codes, self._inputs[r], self.friction_eps)
+            errors.append(v[1:] - predicted)
+        return _rms(np.concatenate(errors))
+
+    def predict(
+        self,
+        run: DecayRun | np.ndarray,
+        run_index: int = 0,
+        initial_state: tuple[float, float] | None = None,
+        offset: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Measured-frame (angle, rate) of the fitted model at a run's or an array's instants.
+
+        The initial state and offset default to those fitted for ``run_index``
+        and apply at the first instant given.
+        """
+        t = run.t if isinstance(run, DecayRun) else np.asarray(run, dtype=float)
+        u = exogenous_input(run, self.exogenous) if isinstance(run, DecayRun) else np.zeros_like(t)
+        angle0, rate0 = initial_state if initial_state is not None else self.initial_states_[run_index]
+        off = self.offsets_[run_index] if offset is None else offset
+        theta = np.array(list(self.coefficients_.values()))
+        x, v = simulate(t, angle0, rate0, theta, self._codes, u, self.friction_eps, self._n_sub)
+        gain = getattr(self, "gain_", 1.0)
+        lag = getattr(self, "lag_s_", 0.0)
+        return gain * (x - lag * v) + off, v + getattr(self, "gyro_bias_", 0.0)
+
+
+def _rms(a: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(a))))
+
+
+def _natural_period(coefficients: dict[str, float]) -> float:
+    stiffness = coefficients.get("c1", 0.0) + coefficients.get("s1", 0.0)
+    return 2.0 * math.pi / math.sqrt(stiffness) if stiffness > 0 else float("nan")

@@ -1,0 +1,69 @@
+"""Signal helpers the estimators share: period, smoothed derivatives, noise level, half-cycles."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from ..errors import BadIdentificationInput
+
+
+def zero_crossings(y: np.ndarray) -> np.ndarray:
+    """Indices i where y changes sign between i and i+1 (exact zeros count once)."""
+    s = np.sign(y)
+    s[s == 0] = 1.0
+    return np.flatnonzero(s[1:] != s[:-1])
+
+
+def estimate_period(t: np.ndarray, angle: np.ndarray) -> float:
+    """Oscillation period from the mean spacing of zero crossings about the record's median.
+
+    The median is a cheap stand-in for the equilibrium; a decay crosses it every
+    half period. Raises when the record does not oscillate at least once.
+    """
+    crossings = zero_crossings(angle - np.median(angle[angle.size // 2 :]))
+    if crossings.size < 3:
+        raise BadIdentificationInput(
+            "the record does not oscillate (fewer than three zero crossings): no decay to identify"
+        )
+    half_periods = np.diff(t[crossings])
+    return float(2.0 * np.median(half_periods))
+
+
+def savgol_window(dt: float, period_s: float, fraction: float, polyorder: int) -> int:
+    """An odd Savitzky-Golay window of about ``fraction`` of a period, long enough for the order."""
+    n = int(round(fraction * period_s / dt)) | 1
+    return max(n, polyorder + 3 | 1)
+
+
+def smoothed_derivatives(
+    y: np.ndarray, dt: float, window: int, polyorder: int = 3
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Savitzky-Golay value, first and second derivative of a uniformly sampled signal."""
+    if y.size <= window:
+        raise BadIdentificationInput(f"the record ({y.size} samples) is shorter than one smoothing window")
+    return (
+        savgol_filter(y, window, polyorder),
+        savgol_filter(y, window, polyorder, deriv=1, delta=dt),
+        savgol_filter(y, window, polyorder, deriv=2, delta=dt),
+    )
+
+
+def white_noise_level(y: np.ndarray) -> float:
+    """Standard deviation of white noise on a smooth signal, from third differences (robust MAD).
+
+    The third difference of white noise has variance 20 sigma^2 while a smooth
+    oscillation sampled well above its frequency nearly cancels out.
+    """
+    d3 = np.diff(y, 3)
+    mad = np.median(np.abs(d3 - np.median(d3)))
+    return float(1.4826 * mad / np.sqrt(20.0))
+
+
+def half_cycle_peaks(y: np.ndarray) -> np.ndarray:
+    """Index of the largest |y| in each complete half-cycle between zero crossings."""
+    crossings = zero_crossings(y)
+    return np.array(
+        [a + 1 + int(np.argmax(np.abs(y[a + 1 : b + 1]))) for a, b in zip(crossings[:-1], crossings[1:], strict=True)],
+        dtype=int,
+    )
