@@ -1,0 +1,178 @@
+"""Payload builders and parsers for the configuration messages (reference §3).
+
+The driver composes these with ``build_frame``; nothing here touches a port.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from ..errors import ProtocolError
+from .constants import BAUD_CODES, baud_code, error_name
+from .mtdata2 import SPEC_BY_BASE, TYPE_MASK, item_size, make_xdi
+
+#: Frequency that means "as fast as possible"; counters, time and status always read back as this.
+MAX_FREQUENCY = 0xFFFF
+MAX_OUTPUT_ENTRIES = 32
+#: Highest output rate of the orientation/inertial groups on an MTi-G-710 (LLCP Table 16).
+MAX_RATE_HZ = 400
+#: 8N1 serial framing: start bit + 8 data bits + stop bit.
+BITS_PER_BYTE = 10
+#: Per-message bytes around the items: FA BID MID LEN ... CS.
+FRAME_OVERHEAD = 5
+#: A GnssSatInfo budget: header + 32 satellites (its size varies with the sky).
+SATINFO_BUDGET_BYTES = 8 + 4 * 32
+
+#: The outputs a decay test needs: counter, device time, attitude, rates, accelerations, status.
+DECAY_OUTPUTS: tuple[str, ...] = (
+    "PacketCounter",
+    "SampleTimeFine",
+    "EulerAngles",
+    "RateOfTurn",
+    "Acceleration",
+    "StatusWord",
+)
+#: Outputs that ride along with every message (their frequency is ignored by the device).
+PER_MESSAGE_OUTPUTS = frozenset(
+    {"PacketCounter", "SampleTimeFine", "SampleTimeCoarse", "UtcTime", "StatusByte", "StatusWord"}
+)
+
+
+def output_configuration_payload(entries: Sequence[tuple[int, int]]) -> bytes:
+    """SetOutputConfiguration data: (xdi, Hz) pairs, 0xFFFF = maximum rate, at most 32 entries."""
+    if not entries or len(entries) > MAX_OUTPUT_ENTRIES:
+        raise ProtocolError(
+            f"an output configuration holds 1 to {MAX_OUTPUT_ENTRIES} entries, got {len(entries)}"
+        )
+    for xdi, hz in entries:
+        if not (0 <= xdi <= 0xFFFF and 0 <= hz <= 0xFFFF):
+            raise ProtocolError(f"output entry (0x{xdi:X}, {hz} Hz): identifier and rate must fit in 16 bits")
+    return b"".join(struct.pack(">HH", xdi, hz) for xdi, hz in entries)
+
+
+def parse_output_configuration(payload: bytes) -> list[tuple[int, int]]:
+    """(xdi, Hz) pairs of an output configuration (the ack echoes what the device accepted)."""
+    if len(payload) % 4:
+        raise ProtocolError(
+            f"output configuration of {len(payload)} bytes is not a whole number of 4-byte entries"
+        )
+    return [struct.unpack_from(">HH", payload, offset) for offset in range(0, len(payload), 4)]
+
+
+def decay_output_configuration(rate_hz: int, precision: str = "float32") -> list[tuple[int, int]]:
+    """The decay-test output set at ``rate_hz`` (counters, time and status at 0xFFFF)."""
+    if not 1 <= rate_hz <= MAX_RATE_HZ:
+        raise ProtocolError(f"output rate {rate_hz} Hz is outside 1..{MAX_RATE_HZ} Hz (MTi-G-710 maximum)")
+    return [
+        (make_xdi(name), MAX_FREQUENCY)
+        if name in PER_MESSAGE_OUTPUTS
+        else (make_xdi(name, precision), rate_hz)
+        for name in DECAY_OUTPUTS
+    ]
+
+
+def _entry_bytes(xdi: int) -> int:
+    spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
+    if spec is None:
+        raise ProtocolError(f"unknown data identifier 0x{xdi:04X}: its size is not known")
+    size = item_size(spec, xdi)
+    if size is None:
+        size = SATINFO_BUDGET_BYTES if spec.name == "GnssSatInfo" else 8
+    return 3 + size
+
+
+def frame_bytes_per_second(entries: Sequence[tuple[int, int]], rate_hz: float) -> float:
+    """Serial bytes per second when MTData2 messages go out at ``rate_hz``.
+
+    Every message carries the per-message outputs; an output configured slower than the
+    message rate adds its bytes only at its own rate. Outputs at other rates (GNSS) in fact
+    travel in separate messages, so this is a slight underestimate for them.
+    """
+    total = FRAME_OVERHEAD * rate_hz
+    for xdi, hz in entries:
+        per_message = hz in (0, MAX_FREQUENCY) or SPEC_BY_BASE.get(xdi & TYPE_MASK) is None
+        total += _entry_bytes(xdi) * (rate_hz if per_message else min(hz, rate_hz))
+    return total
+
+
+@dataclass(frozen=True)
+class Bandwidth:
+    """How much of a serial link an output configuration uses."""
+
+    bits_per_second: float
+    baud: int
+    headroom: float
+
+    @property
+    def utilisation(self) -> float:
+        """Fraction of the link's bit rate the data needs."""
+        return self.bits_per_second / self.baud
+
+    @property
+    def ok(self) -> bool:
+        """True when the data fits with the headroom left for acks and bursts."""
+        return self.utilisation <= self.headroom
+
+    def message(self) -> str:
+        """One line a person can act on."""
+        need = f"{self.bits_per_second / 1000:.1f} kbit/s ({self.utilisation:.0%} of {self.baud} baud)"
+        if self.ok:
+            return f"output needs {need}"
+        faster = [
+            rate for rate in sorted(set(BAUD_CODES.values())) if self.bits_per_second <= rate * self.headroom
+        ]
+        hint = f"use at least {faster[0]} baud" if faster else "lower the rate or drop outputs"
+        return f"output needs {need}, over the {self.headroom:.0%} budget: {hint}"
+
+
+def check_bandwidth(
+    entries: Sequence[tuple[int, int]], rate_hz: float, baud: int, headroom: float = 0.9
+) -> Bandwidth:
+    """Bits per second (8N1) the configuration needs at ``rate_hz`` against ``baud``."""
+    return Bandwidth(frame_bytes_per_second(entries, rate_hz) * BITS_PER_BYTE, baud, headroom)
+
+
+def baudrate_payload(rate: int) -> bytes:
+    """SetBaudrate data (one code byte); the new rate applies after a reset."""
+    return bytes((baud_code(rate),))
+
+
+def parse_baudrate(payload: bytes) -> int:
+    """Rate in bit/s from a ReqBaudrate ack."""
+    if len(payload) != 1 or payload[0] not in BAUD_CODES:
+        raise ProtocolError(f"baud-rate reply {payload.hex(' ') or '(empty)'} is not one known code byte")
+    return BAUD_CODES[payload[0]]
+
+
+def parse_fw_rev(payload: bytes) -> str:
+    """Firmware revision text: 'major.minor.rev' (legacy 3 bytes) plus ' build B scm S' (11 bytes)."""
+    if len(payload) == 3:
+        return "{}.{}.{}".format(*payload)
+    if len(payload) == 11:
+        major, minor, rev, build, scm = struct.unpack(">3BII", payload)
+        return f"{major}.{minor}.{rev} build {build} scm {scm}"
+    raise ProtocolError(f"firmware revision reply of {len(payload)} bytes (expected 3 or 11)")
+
+
+def parse_device_id(payload: bytes) -> int:
+    """Device id from a DeviceID reply (4 bytes on 1/10/100-series and legacy, 8 on 600-series)."""
+    if len(payload) not in (4, 8):
+        raise ProtocolError(f"device id reply of {len(payload)} bytes (expected 4 or 8)")
+    return int.from_bytes(payload, "big")
+
+
+def parse_product_code(payload: bytes) -> str:
+    """Product code text such as 'MTi-G-710-2A8G4' (NUL and space padded on the wire)."""
+    try:
+        return bytes(payload).rstrip(b"\x00 ").decode("ascii")
+    except UnicodeDecodeError:
+        raise ProtocolError(f"product code {payload.hex(' ')} is not ASCII") from None
+
+
+def parse_error(payload: bytes) -> tuple[int, str]:
+    """(code, meaning) of a device Error message."""
+    if not payload:
+        raise ProtocolError("device error message without an error code")
+    return payload[0], error_name(payload[0])

@@ -1,0 +1,442 @@
+"""MTData2 (MID 0x36): the data-identifier table, value codecs and the per-message decoder.
+
+A payload is a run of ``XDI (u16) | SIZE (u8) | DATA``. The XDI's low nibble carries the
+precision (bits 1-0) and, for orientation and velocity, the coordinate frame (bits 3-2);
+dispatch is on ``xdi & 0xFFF0``. Values stay in device units (Euler angles in degrees):
+conversion to SI happens once, when messages become samples (``batch.to_samples``).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import astuple, dataclass, fields
+from datetime import UTC, datetime
+
+from ..errors import ProtocolError
+
+TYPE_MASK = 0xFFF0
+PRECISION_MASK = 0x0003
+FRAME_MASK = 0x000C
+
+#: Precision name -> format bits (LLCP Table 17).
+PRECISIONS: dict[str, int] = {"float32": 0x0, "fp1220": 0x1, "fp1632": 0x2, "float64": 0x3}
+PRECISION_NAMES: dict[int, str] = {bits: name for name, bits in PRECISIONS.items()}
+#: Bytes per real value for each precision's format bits.
+REAL_SIZES: dict[int, int] = {0x0: 4, 0x1: 4, 0x2: 6, 0x3: 8}
+#: Coordinate frame name -> format bits (orientation and velocity outputs only).
+FRAMES: dict[str, int] = {"ENU": 0x0, "NED": 0x4, "NWU": 0x8}
+FRAME_NAMES: dict[int, str] = {bits: name for name, bits in FRAMES.items()}
+
+FP1220_SCALE = 1 << 20
+FP1632_SCALE = 1 << 32
+
+
+@dataclass(frozen=True)
+class UtcTime:
+    """UtcTime output: calendar time with nanoseconds and the validity flags (bit 2 = UTC usable)."""
+
+    ns: int
+    year: int
+    month: int
+    day: int
+    hour: int
+    minute: int
+    second: int
+    flags: int
+
+    def isoformat(self) -> str:
+        """RFC 3339 text with trailing zeros of the fraction dropped ('2019-01-20T13:47:24.1219Z')."""
+        stamp = datetime(self.year, self.month, self.day, self.hour, self.minute, self.second, tzinfo=UTC)
+        fraction = f"{self.ns:09d}".rstrip("0")
+        return stamp.strftime("%Y-%m-%dT%H:%M:%S") + (f".{fraction}" if fraction else "") + "Z"
+
+
+@dataclass(frozen=True)
+class GnssPvt:
+    """GnssPvtData output (LLCP Table 25), u-blox NAV-PVT-like, in device units (1e-7 deg, mm, mm/s, 0.01)."""
+
+    itow: int
+    year: int
+    month: int
+    day: int
+    hour: int
+    minute: int
+    second: int
+    valid: int
+    t_acc: int
+    nano: int
+    fix_type: int
+    flags: int
+    num_sv: int
+    reserved1: int
+    lon: int
+    lat: int
+    height: int
+    h_msl: int
+    h_acc: int
+    v_acc: int
+    vel_n: int
+    vel_e: int
+    vel_d: int
+    g_speed: int
+    head_mot: int
+    s_acc: int
+    head_acc: int
+    head_veh: int
+    gdop: int
+    pdop: int
+    tdop: int
+    vdop: int
+    hdop: int
+    ndop: int
+    edop: int
+
+
+@dataclass(frozen=True)
+class GnssSatellite:
+    """One satellite entry of GnssSatInfo."""
+
+    gnss_id: int
+    sv_id: int
+    cno: int
+    flags: int
+
+
+@dataclass(frozen=True)
+class GnssSatInfo:
+    """GnssSatInfo output: an 8-byte header and 4 bytes per satellite."""
+
+    itow: int
+    num_svs: int
+    res1: int
+    res2: int
+    res3: int
+    satellites: tuple[GnssSatellite, ...] = ()
+
+
+UTC_STRUCT = struct.Struct(">IH6B")
+PVT_STRUCT = struct.Struct(">IH6BIi4B4i2I5i2Ii7H")
+SATINFO_HEADER = struct.Struct(">I4B")
+SATELLITE_STRUCT = struct.Struct(">4B")
+
+
+@dataclass(frozen=True)
+class DataSpec:
+    """One row of the data-identifier table.
+
+    ``kind``: "real" (``count`` values in the XDI's precision), "int" (one unsigned field,
+    struct ``fmt``), "ints" (a tuple of integers, ``fmt``), or one of the structured
+    outputs "utc", "pvt", "satinfo", "deviceid" (U4 or U8).
+    """
+
+    name: str
+    base: int
+    kind: str
+    unit: str
+    count: int = 0
+    fmt: str = ""
+    has_frame: bool = False
+    fixed_point: bool = True
+
+    def precisions(self) -> tuple[str, ...]:
+        """Precision names this output can be configured with."""
+        if self.kind != "real":
+            return ("float32",)  # format nibble 0: integer and structured outputs have one encoding
+        if not self.fixed_point:
+            return ("float32", "float64")
+        return tuple(PRECISIONS)
+
+    def frames(self) -> tuple[str, ...]:
+        """Coordinate frames this output can be configured with."""
+        return tuple(FRAMES) if self.has_frame else ("ENU",)
+
+
+def _real(name: str, base: int, count: int, unit: str, **kw: bool) -> DataSpec:
+    return DataSpec(name, base, "real", unit, count=count, **kw)
+
+
+#: Every data identifier of LLCP Table 16 (reference §2.4), keyed by ``xdi & 0xFFF0``.
+DATA_SPECS: tuple[DataSpec, ...] = (
+    _real("Temperature", 0x0810, 1, "degC"),
+    DataSpec("UtcTime", 0x1010, "utc", "-"),
+    DataSpec("PacketCounter", 0x1020, "int", "-", fmt=">H"),
+    DataSpec("SampleTimeFine", 0x1060, "int", "0.1 ms", fmt=">I"),
+    DataSpec("SampleTimeCoarse", 0x1070, "int", "s", fmt=">I"),
+    _real("Quaternion", 0x2010, 4, "-", has_frame=True),
+    _real("RotationMatrix", 0x2020, 9, "-", has_frame=True),
+    _real("EulerAngles", 0x2030, 3, "deg", has_frame=True),
+    DataSpec("BaroPressure", 0x3010, "int", "Pa", fmt=">I"),
+    _real("DeltaV", 0x4010, 3, "m/s"),
+    _real("Acceleration", 0x4020, 3, "m/s^2"),
+    _real("FreeAcceleration", 0x4030, 3, "m/s^2"),
+    _real("AccelerationHR", 0x4040, 3, "m/s^2"),
+    _real("AltitudeEllipsoid", 0x5020, 1, "m"),
+    _real("PositionEcef", 0x5030, 3, "m", fixed_point=False),
+    _real("LatLon", 0x5040, 2, "deg"),
+    DataSpec("GnssPvtData", 0x7010, "pvt", "-"),
+    DataSpec("GnssSatInfo", 0x7020, "satinfo", "-"),
+    _real("RateOfTurn", 0x8020, 3, "rad/s"),
+    _real("DeltaQ", 0x8030, 4, "-"),
+    _real("RateOfTurnHR", 0x8040, 3, "rad/s"),
+    DataSpec("RawAccGyrMagTemp", 0xA010, "ints", "counts", fmt=">9Hh"),
+    _real("MagneticField", 0xC020, 3, "a.u."),
+    _real("VelocityXYZ", 0xD010, 3, "m/s", has_frame=True),
+    DataSpec("StatusByte", 0xE010, "int", "bits", fmt=">B"),
+    DataSpec("StatusWord", 0xE020, "int", "bits", fmt=">I"),
+    DataSpec("DeviceId", 0xE080, "deviceid", "-"),
+    DataSpec("LocationId", 0xE090, "int", "-", fmt=">H"),
+)
+SPEC_BY_BASE: dict[int, DataSpec] = {spec.base: spec for spec in DATA_SPECS}
+SPEC_BY_NAME: dict[str, DataSpec] = {spec.name: spec for spec in DATA_SPECS}
+
+
+def _normalise_precision(precision: str) -> str:
+    key = precision.lower().replace(".", "").replace("_", "").replace("-", "")
+    if key not in PRECISIONS:
+        raise ProtocolError(f"unknown precision {precision!r}; use one of {', '.join(PRECISIONS)}")
+    return key
+
+
+def spec_for(name: str) -> DataSpec:
+    """The table row of an output by its Xsens name (ProtocolError lists the names otherwise)."""
+    try:
+        return SPEC_BY_NAME[name]
+    except KeyError:
+        raise ProtocolError(f"unknown MTData2 output {name!r}; known: {', '.join(SPEC_BY_NAME)}") from None
+
+
+def make_xdi(name: str, precision: str = "float32", frame: str = "ENU") -> int:
+    """The XDI for output ``name`` in ``precision`` (float32, fp1220, fp1632, float64) and ``frame``."""
+    spec = spec_for(name)
+    key = _normalise_precision(precision)
+    if key not in spec.precisions():
+        raise ProtocolError(f"{name} cannot be sent as {precision}; allowed: {', '.join(spec.precisions())}")
+    frame_key = frame.upper()
+    if frame_key not in spec.frames():
+        raise ProtocolError(f"{name} cannot be given in frame {frame}; allowed: {', '.join(spec.frames())}")
+    return spec.base | FRAMES[frame_key] | PRECISIONS[key]
+
+
+def describe_xdi(xdi: int) -> str:
+    """People's name of an XDI: 'EulerAngles(ENU,float32)', 'PacketCounter', or 'unknown 0x1234'."""
+    spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
+    if spec is None:
+        return f"unknown 0x{xdi:04X}"
+    if spec.kind != "real":
+        return spec.name
+    parts = [PRECISION_NAMES[xdi & PRECISION_MASK]]
+    if spec.has_frame:
+        parts.insert(0, FRAME_NAMES.get(xdi & FRAME_MASK, f"frame{xdi & FRAME_MASK:X}"))
+    return f"{spec.name}({','.join(parts)})"
+
+
+def item_size(spec: DataSpec, xdi: int) -> int | None:
+    """Payload bytes of one item; None for outputs whose size varies (DeviceId, GnssSatInfo)."""
+    if spec.kind == "real":
+        return spec.count * REAL_SIZES[xdi & PRECISION_MASK]
+    if spec.kind in ("int", "ints"):
+        return struct.calcsize(spec.fmt)
+    if spec.kind == "utc":
+        return UTC_STRUCT.size
+    if spec.kind == "pvt":
+        return PVT_STRUCT.size
+    return None
+
+
+# ----------------------------------------------------------------------------------------- reals
+
+
+def encode_reals(values: Sequence[float], precision_bits: int) -> bytes:
+    """Big-endian reals in one precision; fixed point rounds to nearest and refuses out-of-range values."""
+    if precision_bits == PRECISIONS["float32"]:
+        return struct.pack(f">{len(values)}f", *values)
+    if precision_bits == PRECISIONS["float64"]:
+        return struct.pack(f">{len(values)}d", *values)
+    out = bytearray()
+    for value in values:
+        if precision_bits == PRECISIONS["fp1220"]:
+            raw = round(value * FP1220_SCALE)
+            if not -(1 << 31) <= raw < (1 << 31):
+                raise ProtocolError(f"{value} is outside the FP12.20 range [-2048, 2048)")
+            out += struct.pack(">i", raw)
+        else:
+            raw = round(value * FP1632_SCALE)
+            if not -(1 << 47) <= raw < (1 << 47):
+                raise ProtocolError(f"{value} is outside the FP16.32 range [-32768, 32768)")
+            out += struct.pack(">Ih", raw & 0xFFFFFFFF, raw >> 32)  # fraction first, then integer part
+    return bytes(out)
+
+
+def decode_reals(data: bytes, precision_bits: int) -> tuple[float, ...]:
+    """Inverse of ``encode_reals``; fixed point decodes exactly (the scale is a power of two)."""
+    if precision_bits == PRECISIONS["float32"]:
+        return struct.unpack(f">{len(data) // 4}f", data)
+    if precision_bits == PRECISIONS["float64"]:
+        return struct.unpack(f">{len(data) // 8}d", data)
+    if precision_bits == PRECISIONS["fp1220"]:
+        return tuple(raw / FP1220_SCALE for raw in struct.unpack(f">{len(data) // 4}i", data))
+    pairs = struct.unpack(f">{len(data) // 6 * 'Ih'}", data)
+    return tuple((pairs[i + 1] * FP1632_SCALE + pairs[i]) / FP1632_SCALE for i in range(0, len(pairs), 2))
+
+
+# ----------------------------------------------------------------------------------------- items
+
+
+def encode_value(xdi: int, value: object) -> bytes:
+    """The DATA bytes of one item; ``bytes`` are passed through for the structured outputs."""
+    spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
+    if spec is None:
+        if isinstance(value, bytes | bytearray):
+            return bytes(value)  # unknown identifiers can still be sent raw (tests, simulators)
+        raise ProtocolError(f"unknown data identifier 0x{xdi:04X}: give its value as bytes")
+    if isinstance(value, bytes | bytearray) and spec.kind != "real":
+        return bytes(value)
+    try:
+        if spec.kind == "real":
+            values = (value,) if isinstance(value, int | float) else tuple(value)  # type: ignore[arg-type]
+            if len(values) != spec.count:
+                raise ProtocolError(f"{spec.name} takes {spec.count} values, got {len(values)}")
+            return encode_reals(values, xdi & PRECISION_MASK)
+        if spec.kind == "int":
+            return struct.pack(spec.fmt, value)
+        if spec.kind == "ints":
+            return struct.pack(spec.fmt, *value)  # type: ignore[misc]
+        if spec.kind == "deviceid":
+            return struct.pack(">Q" if value > 0xFFFFFFFF else ">I", value)  # type: ignore[operator]
+        if spec.kind == "utc":
+            return UTC_STRUCT.pack(*astuple(value))  # type: ignore[arg-type]
+        if spec.kind == "pvt":
+            return PVT_STRUCT.pack(*astuple(value))  # type: ignore[arg-type]
+        header = SATINFO_HEADER.pack(value.itow, value.num_svs, value.res1, value.res2, value.res3)  # type: ignore[attr-defined]
+        return header + b"".join(SATELLITE_STRUCT.pack(*astuple(sat)) for sat in value.satellites)  # type: ignore[attr-defined]
+    except (struct.error, TypeError, AttributeError) as exc:
+        raise ProtocolError(f"cannot encode {value!r} as {spec.name}: {exc}") from None
+
+
+def decode_value(spec: DataSpec, xdi: int, data: bytes) -> object:
+    """One item's value in device units; ProtocolError when DATA has the wrong size for the XDI."""
+    expected = item_size(spec, xdi)
+    if expected is not None and len(data) != expected:
+        raise ProtocolError(f"{describe_xdi(xdi)} needs {expected} data bytes, the message gives {len(data)}")
+    if spec.kind == "real":
+        values = decode_reals(data, xdi & PRECISION_MASK)
+        return values[0] if spec.count == 1 else values
+    if spec.kind == "int":
+        return struct.unpack(spec.fmt, data)[0]
+    if spec.kind == "ints":
+        return struct.unpack(spec.fmt, data)
+    if spec.kind == "utc":
+        return UtcTime(*UTC_STRUCT.unpack(data))
+    if spec.kind == "pvt":
+        return GnssPvt(*PVT_STRUCT.unpack(data))
+    if spec.kind == "deviceid":
+        if len(data) not in (4, 8):
+            raise ProtocolError(f"DeviceId needs 4 or 8 data bytes, the message gives {len(data)}")
+        return int.from_bytes(data, "big")
+    return decode_satinfo(data)
+
+
+def decode_satinfo(data: bytes) -> GnssSatInfo:
+    """GnssSatInfo: header, then ``num_svs`` 4-byte satellite entries (the size must agree)."""
+    if len(data) < SATINFO_HEADER.size or (len(data) - SATINFO_HEADER.size) % SATELLITE_STRUCT.size:
+        raise ProtocolError(f"GnssSatInfo of {len(data)} bytes is not 8 + 4 per satellite")
+    itow, num_svs, res1, res2, res3 = SATINFO_HEADER.unpack_from(data)
+    satellites = tuple(
+        GnssSatellite(*SATELLITE_STRUCT.unpack_from(data, offset))
+        for offset in range(SATINFO_HEADER.size, len(data), SATELLITE_STRUCT.size)
+    )
+    return GnssSatInfo(itow, num_svs, res1, res2, res3, satellites)
+
+
+def encode_mtdata2(items: Sequence[tuple[int, object]]) -> bytes:
+    """MTData2 payload from (xdi, value) pairs, in the order given."""
+    out = bytearray()
+    for xdi, value in items:
+        data = encode_value(xdi, value)
+        if len(data) > 0xFF:
+            raise ProtocolError(
+                f"{describe_xdi(xdi)} data of {len(data)} bytes does not fit one MTData2 item"
+            )
+        out += struct.pack(">HB", xdi, len(data)) + data
+    return bytes(out)
+
+
+class MTData2Message(Mapping[str, object]):
+    """One decoded MTData2 message: Xsens name -> value in device units, plus each item's XDI."""
+
+    __slots__ = ("_values", "unknown_xdis", "xdis")
+
+    def __init__(self, values: dict[str, object], xdis: dict[str, int], unknown_xdis: tuple[int, ...] = ()):
+        self._values = values
+        self.xdis = xdis
+        self.unknown_xdis = unknown_xdis
+
+    def __getitem__(self, name: str) -> object:
+        return self._values[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __repr__(self) -> str:
+        return f"MTData2Message({self._values!r})"
+
+    @property
+    def unknown_count(self) -> int:
+        """Items skipped because their identifier is not in the table."""
+        return len(self.unknown_xdis)
+
+    def precision(self, name: str) -> str:
+        """The precision the item ``name`` was sent in."""
+        return PRECISION_NAMES[self.xdis[name] & PRECISION_MASK]
+
+    def frame(self, name: str) -> str:
+        """The coordinate frame of item ``name`` (ENU for outputs without frame bits)."""
+        return FRAME_NAMES.get(self.xdis[name] & FRAME_MASK, "ENU")
+
+
+def iter_items(payload: bytes) -> Iterator[tuple[int, bytes]]:
+    """(xdi, data) of every item; ProtocolError when the item sizes do not add up to the payload."""
+    pos = 0
+    end = len(payload)
+    while pos < end:
+        if end - pos < 3:
+            raise ProtocolError(f"MTData2 payload ends inside an item header at byte {pos} of {end}")
+        xdi, size = struct.unpack_from(">HB", payload, pos)
+        pos += 3
+        if pos + size > end:
+            raise ProtocolError(f"MTData2 item 0x{xdi:04X} claims {size} bytes but only {end - pos} remain")
+        yield xdi, bytes(payload[pos : pos + size])
+        pos += size
+
+
+def decode_mtdata2(payload: bytes) -> MTData2Message:
+    """Decode one MTData2 payload; unknown identifiers are skipped by size and counted, never fatal."""
+    values: dict[str, object] = {}
+    xdis: dict[str, int] = {}
+    unknown: list[int] = []
+    for xdi, data in iter_items(payload):
+        spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
+        if spec is None:
+            unknown.append(xdi)
+            continue
+        values[spec.name] = decode_value(spec, xdi, data)
+        xdis[spec.name] = xdi
+    return MTData2Message(values, xdis, tuple(unknown))
+
+
+def to_jsonable(value: object) -> object:
+    """A JSON-ready form of a decoded value: tuples -> lists, structured outputs -> dicts."""
+    if isinstance(value, UtcTime):
+        return {**{f.name: getattr(value, f.name) for f in fields(value)}, "iso": value.isoformat()}
+    if isinstance(value, GnssPvt | GnssSatellite):
+        return {f.name: getattr(value, f.name) for f in fields(value)}
+    if isinstance(value, GnssSatInfo):
+        head = {f.name: getattr(value, f.name) for f in fields(value) if f.name != "satellites"}
+        return {**head, "satellites": [to_jsonable(sat) for sat in value.satellites]}
+    if isinstance(value, tuple | list):
+        return [to_jsonable(v) for v in value]
+    return value
