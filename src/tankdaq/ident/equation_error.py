@@ -25,7 +25,9 @@ def exogenous_input(run: DecayRun, channel: str | None) -> np.ndarray:
         return np.zeros_like(run.t)
     if channel not in run.channels:
         known = ", ".join(run.channels) or "none"
-        raise BadIdentificationInput(f"{run.name}: no channel {channel!r} for the ku term (channels: {known})")
+        raise BadIdentificationInput(
+            f"{run.name}: no channel {channel!r} for the ku term (channels: {known})"
+        )
     return np.asarray(run.channels[channel], dtype=float)
 
 
@@ -102,11 +104,15 @@ class EquationError:
         self.coefficients_ = dict(zip(self.terms_, theta.tolist(), strict=True))
         std = np.sqrt(np.clip(np.diag(covariance)[:n_theta], 0.0, None))
         self.std_ = dict(zip(self.terms_, std.tolist(), strict=True))
-        self.ci95_ = {k: (v - 1.96 * s, v + 1.96 * s) for (k, v), s in zip(self.coefficients_.items(), std, strict=True)}
+        self.ci95_ = {
+            k: (v - 1.96 * s, v + 1.96 * s) for (k, v), s in zip(self.coefficients_.items(), std, strict=True)
+        }
         stiffness = self.coefficients_.get("c1", 0.0) + self.coefficients_.get("s1", 0.0)
         scale = stiffness if abs(stiffness) > 1e-12 else 1.0
         self.offsets_ = [float(k / scale) for k in solution[n_theta:]]
-        self.initial_states_ = [(float(a - off), float(v)) for (a, v), off in zip(states, self.offsets_, strict=True)]
+        self.initial_states_ = [
+            (float(a - off), float(v)) for (a, v), off in zip(states, self.offsets_, strict=True)
+        ]
         self.r2_acc_ = float(1.0 - residual @ residual / np.sum((target - target.mean()) ** 2))
         self.elapsed_s_ = time.perf_counter() - started
         return self

@@ -194,7 +194,14 @@ def simulate_with_sensitivities(
 
 @numba.njit(cache=True)
 def simulate(
-    t: np.ndarray, x0: float, v0: float, theta: np.ndarray, codes: np.ndarray, u: np.ndarray, eps: float, n_sub: int
+    t: np.ndarray,
+    x0: float,
+    v0: float,
+    theta: np.ndarray,
+    codes: np.ndarray,
+    u: np.ndarray,
+    eps: float,
+    n_sub: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Angle and rate only (RK4 without sensitivities): prediction and plotting."""
     n = t.size
@@ -241,17 +248,6 @@ def _rk4_state_step(
         x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4),
         v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4),
     )
-
-
-@numba.njit(cache=True)
-def one_step_rates(
-    t: np.ndarray, x: np.ndarray, v: np.ndarray, theta: np.ndarray, codes: np.ndarray, u: np.ndarray, eps: float
-) -> np.ndarray:
-    """Rate at t[k+1] predicted from the measured state at t[k] (the seeds' criterion, eq. 4.5)."""
-    out = np.empty(t.size - 1)
-    for k in range(t.size - 1):
-        out[k] = _rk4_state_step(x[k], v[k], t[k + 1] - t[k], theta, codes, u[k], u[k + 1] - u[k], eps)[1]
-    return out
 
 
 def substeps(dt: float, theta: np.ndarray, terms: Sequence[str], amplitude: float) -> int:

@@ -34,7 +34,9 @@ MODEL_ALIASES: dict[str, ModelAlias] = {
         _alias("ittc-linear", "b1,c1", "ITTC 7.5-02-07-04.5 eq. 7/11: linear damping and restoring"),
         _alias("ittc-quadratic", "b1,b2,c1", "ITTC eq. 8-9 up to quadratic damping, linear restoring"),
         _alias("ittc-cubic", "b1,b2,b3,c1", "ITTC eq. 9 (Bulian): linear + quadratic + cubic damping"),
-        _alias("ittc-quadratic-restoring", "b1,b2,c1,c3", "ITTC eq. 6 + 9: quadratic damping, cubic restoring"),
+        _alias(
+            "ittc-quadratic-restoring", "b1,b2,c1,c3", "ITTC eq. 6 + 9: quadratic damping, cubic restoring"
+        ),
         _alias("ittc-cubic-restoring", "b1,b2,b3,c1,c3", "ITTC eq. 6 + 9: cubic damping, cubic restoring"),
         _alias("seed000-eq1", "b1,b2,b3,s1", "seed 000 eq. 4.1 (psi^3 read as psi'^3, per eq. 5.1)"),
         _alias("seed000-eq2", "b1,b2,b3,c1,c2", "seed 000 eq. 4.2 (psi^3 read as psi'^3)"),

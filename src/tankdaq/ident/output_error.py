@@ -26,9 +26,9 @@ from scipy.optimize import least_squares
 from ..errors import BadIdentificationInput, InputError
 from ..records import DecayRun
 from .equation_error import EquationError, check_runs, exogenous_input
-from .kernels import one_step_rates, simulate, simulate_with_sensitivities, substeps, term_codes
+from .kernels import simulate, simulate_with_sensitivities, substeps, term_codes, term_matrix
 from .models import resolve_model
-from .signals import estimate_period, savgol_window, smoothed_derivatives, white_noise_level
+from .signals import white_noise_level
 from .uncertainty import (
     classic_covariance,
     coefficient_warnings,
@@ -39,6 +39,8 @@ from .uncertainty import (
 )
 
 OBSERVATION_PARAMS: tuple[str, ...] = ("gain", "lag_s", "gyro_bias")
+#: Below this angle R^2 the fit from the equation-error start is retried from a linear start.
+FALLBACK_R2 = 0.9
 
 
 class _Layout:
@@ -130,7 +132,9 @@ class OutputError:
         self.runs_ = runs
         observation = tuple(
             name
-            for name, wanted in zip(OBSERVATION_PARAMS, (self.fit_gain, self.fit_lag, self.fit_gyro_bias), strict=True)
+            for name, wanted in zip(
+                OBSERVATION_PARAMS, (self.fit_gain, self.fit_lag, self.fit_gyro_bias), strict=True
+            )
             if wanted
         )
         layout = _Layout(self.terms_, observation, len(runs))
@@ -145,9 +149,15 @@ class OutputError:
         amplitude = max(float(np.max(np.abs(run.angle - np.median(run.angle)))) for run in runs)
         dt_max = max(float(np.max(np.diff(run.t))) for run in runs)
         self._n_sub = substeps(dt_max, p0[: layout.n_theta], self.terms_, amplitude)
-        self._sigmas = [self._initial_sigmas(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)]
+        self._sigmas = [
+            self._initial_sigmas(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
+        ]
 
         params = self._solve(p0, free)
+        if start is None and self._angle_r2(params) < FALLBACK_R2:
+            fallback = self._solve(self._start_vector(runs, layout, None, fixed_coefficients, True), free)
+            if self._angle_r2(fallback) > self._angle_r2(params):
+                params = fallback
         if self.reweight:
             self._sigmas = self._residual_sigmas(params)
             params = self._solve(params, free)
@@ -158,7 +168,11 @@ class OutputError:
     def _check_settings(self, runs: list[DecayRun]) -> None:
         if self.cov_type not in ("hac", "classic"):
             raise InputError(f"cov_type {self.cov_type!r}: use 'hac' or 'classic'")
-        needs_rate = [n for n, on in (("gain", self.fit_gain), ("lag", self.fit_lag), ("gyro bias", self.fit_gyro_bias)) if on]
+        needs_rate = [
+            n
+            for n, on in (("gain", self.fit_gain), ("lag", self.fit_lag), ("gyro bias", self.fit_gyro_bias))
+            if on
+        ]
         if needs_rate and not all(self.use_rate and run.rate is not None for run in runs):
             raise BadIdentificationInput(
                 f"fitting the angle's {', '.join(needs_rate)} needs a measured rate in every run "
@@ -171,25 +185,37 @@ class OutputError:
         layout: _Layout,
         start: OutputError | dict[str, float] | None,
         fixed: dict[str, float] | None,
+        linear_only: bool = False,
     ) -> np.ndarray:
-        ee = EquationError(
-            self.terms_, use_rate=self.use_rate, exogenous=self.exogenous, friction_eps=self.friction_eps
-        ).fit(runs)
-        p0 = np.zeros(layout.size)
-        coefficients = dict(ee.coefficients_)
-        if isinstance(start, OutputError):
-            coefficients.update(start.coefficients_)
-        elif start is not None:
-            coefficients.update(start)
+        """Warm start from a fitted estimator of the same shape, else equation error (+ ``start``).
+
+        ``linear_only`` keeps just the linear damping and stiffness of the equation-error
+        fit: the fallback when the full start leads the fit astray.
+        """
+        if (
+            isinstance(start, OutputError)
+            and start.terms_ == self.terms_
+            and start._layout.names == layout.names
+        ):
+            p0 = start.params_.copy()
+        else:
+            ee_terms = ("b1", "c1" if "c1" in self.terms_ else "s1") if linear_only else self.terms_
+            ee = EquationError(
+                ee_terms, use_rate=self.use_rate, exogenous=self.exogenous, friction_eps=self.friction_eps
+            ).fit(runs)
+            coefficients = dict(ee.coefficients_)
+            if isinstance(start, OutputError):
+                coefficients.update(start.coefficients_)
+            elif start is not None:
+                coefficients.update(start)
+            p0 = np.zeros(layout.size)
+            p0[: layout.n_theta] = [coefficients.get(k, 0.0) for k in self.terms_]
+            if (i := layout.obs_index("gain")) is not None:
+                p0[i] = 1.0
+            for r in range(len(runs)):
+                p0[layout.run_slice(r)] = [*ee.initial_states_[r], ee.offsets_[r]]
         if fixed is not None:
-            coefficients.update(fixed)
-        p0[: layout.n_theta] = [coefficients.get(k, 0.0) for k in self.terms_]
-        if (i := layout.obs_index("gain")) is not None:
-            p0[i] = 1.0
-        for r in range(len(runs)):
-            p0[layout.run_slice(r)] = [*ee.initial_states_[r], ee.offsets_[r]]
-        if isinstance(start, OutputError) and start._layout.size == layout.size and start.terms_ == self.terms_:
-            p0[:] = start.params_
+            p0[: layout.n_theta] = [fixed.get(k, 0.0) for k in self.terms_]
         return p0
 
     @staticmethod
@@ -200,6 +226,14 @@ class OutputError:
         if has_rate:
             sig["rate"] = max(white_noise_level(run.rate), 1e-4 * float(np.ptp(run.rate)))
         return sig
+
+    def _angle_r2(self, params: np.ndarray) -> float:
+        ss_res = ss_tot = 0.0
+        for r, run in enumerate(self.runs_):
+            pred = self._predict_run(params, r, with_jacobian=False)
+            ss_res += float(np.sum((run.angle - pred["angle"]) ** 2))
+            ss_tot += float(np.sum((run.angle - run.angle.mean()) ** 2))
+        return 1.0 - ss_res / ss_tot
 
     def _residual_sigmas(self, params: np.ndarray) -> list[dict[str, float]]:
         out = []
@@ -306,7 +340,9 @@ class OutputError:
         jac_free = jac_w[:, free]
         if self.cov_type == "hac":
             period_samples = self.natural_period_s_ / float(np.median(np.diff(self.runs_[0].t)))
-            bandwidth = max(1, int(round(self.hac_periods * period_samples))) if math.isfinite(period_samples) else 1
+            bandwidth = (
+                max(1, round(self.hac_periods * period_samples)) if math.isfinite(period_samples) else 1
+            )
             cov_free = hac_covariance([s[:, free] for s in scores], jac_free, bandwidth)
         else:
             cov_free = classic_covariance(jac_free)
@@ -317,12 +353,16 @@ class OutputError:
         self.covariance_ = cov[: layout.n_theta, : layout.n_theta]
         std = np.sqrt(np.clip(np.diag(self.covariance_), 0.0, None))
         self.std_ = dict(zip(self.terms_, std.tolist(), strict=True))
-        self.ci95_ = {k: (v - 1.96 * s, v + 1.96 * s) for (k, v), s in zip(self.coefficients_.items(), std, strict=True)}
+        self.ci95_ = {
+            k: (v - 1.96 * s, v + 1.96 * s) for (k, v), s in zip(self.coefficients_.items(), std, strict=True)
+        }
         self.correlation_ = correlation_from_covariance(self.covariance_)
         for name in layout.observation:
             setattr(self, f"{name}_", float(params[layout.obs_index(name)]))
         self.offsets_ = [float(params[layout.run_slice(r)][2]) for r in range(layout.n_runs)]
-        self.initial_states_ = [tuple(map(float, params[layout.run_slice(r)][:2])) for r in range(layout.n_runs)]
+        self.initial_states_ = [
+            tuple(map(float, params[layout.run_slice(r)][:2])) for r in range(layout.n_runs)
+        ]
 
         self.fitted_, self.residuals_ = [], []
         ss_res = ss_tot = 0.0
@@ -355,24 +395,20 @@ class OutputError:
                             self.warnings_.append(warning)
 
     def _seed_objective(self) -> float:
-        """RMS of the one-step-ahead predicted rate from the measured state (seed 000 eq. 4.6), rad/s.
+        """RMS of the one-step-ahead predicted rate (seed 000 eq. 4.5-4.6), rad/s.
 
-        Where no gyro was recorded the 'measured' rate is the smoothed derivative of the angle.
+        As in the seeds' software (and ``ident.seed_methods``): one Euler step from
+        the measured state at k predicts the rate at k+1; the measured rate is the
+        gyro, or the angle differentiated when there is none. The angle is taken
+        relative to the fitted offset, the model's equilibrium.
         """
         theta = np.array(list(self.coefficients_.values()))
-        bias = getattr(self, "gyro_bias_", 0.0)
-        gain = getattr(self, "gain_", 1.0)
         errors = []
         for r, run in enumerate(self.runs_):
-            x = (run.angle - self.offsets_[r]) / gain
-            if self._has_rate[r]:
-                v = run.rate - bias
-            else:
-                dt = float(np.median(np.diff(run.t)))
-                window = savgol_window(dt, estimate_period(run.t, run.angle), 0.15, 3)
-                v = smoothed_derivatives(run.angle, dt, window)[1] / gain
-            predicted = one_step_rates(run.t, x, v, theta, self._codes, self._inputs[r], self.friction_eps)
-            errors.append(v[1:] - predicted)
+            x = run.angle - self.offsets_[r]
+            v = run.rate if run.rate is not None else np.gradient(run.angle, run.t)
+            acc = -term_matrix(self._codes, x[:-1], v[:-1], self._inputs[r][:-1], self.friction_eps) @ theta
+            errors.append(v[1:] - (v[:-1] + np.diff(run.t) * acc))
         return _rms(np.concatenate(errors))
 
     def predict(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from scipy.signal import savgol_filter
 
@@ -32,7 +34,7 @@ def estimate_period(t: np.ndarray, angle: np.ndarray) -> float:
 
 def savgol_window(dt: float, period_s: float, fraction: float, polyorder: int) -> int:
     """An odd Savitzky-Golay window of about ``fraction`` of a period, long enough for the order."""
-    n = int(round(fraction * period_s / dt)) | 1
+    n = round(fraction * period_s / dt) | 1
     return max(n, polyorder + 3 | 1)
 
 
@@ -64,6 +66,9 @@ def half_cycle_peaks(y: np.ndarray) -> np.ndarray:
     """Index of the largest |y| in each complete half-cycle between zero crossings."""
     crossings = zero_crossings(y)
     return np.array(
-        [a + 1 + int(np.argmax(np.abs(y[a + 1 : b + 1]))) for a, b in zip(crossings[:-1], crossings[1:], strict=True)],
+        [
+            a + 1 + int(np.argmax(np.abs(y[a + 1 : b + 1])))
+            for a, b in itertools.pairwise(crossings)
+        ],
         dtype=int,
     )

@@ -81,7 +81,8 @@ def coefficient_warnings(
             if abs(correlation[i, j]) > CORRELATION_WARN:
                 out.append(
                     f"{names[i]} and {names[j]} are strongly correlated ({correlation[i, j]:+.3f}): "
-                    f"the data cannot separate them; report B_eq over the tested amplitudes or add release angles"
+                    f"the data cannot separate them; report B_eq over the tested amplitudes "
+                    f"or add release angles"
                 )
     return out
 
@@ -107,7 +108,10 @@ class IntervalSummary:
 
 
 def moving_block_bootstrap(
-    estimator: Any, n_boot: int = 100, block_periods: float = 1.0, seed: int = 0,
+    estimator: Any,
+    n_boot: int = 100,
+    block_periods: float = 1.0,
+    seed: int = 0,
     progress: Callable[[int], None] | None = None,
 ) -> IntervalSummary:
     """Refit on fitted curve + residuals resampled in blocks of about a cycle (keeps their correlation).
@@ -123,7 +127,7 @@ def moving_block_bootstrap(
         replicas = []
         for run, fitted, resid in zip(runs, estimator.fitted_, estimator.residuals_, strict=True):
             n = run.t.size
-            block = max(2, min(n, int(round(block_periods * period / np.median(np.diff(run.t))))))
+            block = max(2, min(n, round(block_periods * period / np.median(np.diff(run.t)))))
             starts = rng.integers(0, n - block + 1, size=int(np.ceil(n / block)))
             idx = np.concatenate([np.arange(s, s + block) for s in starts])[:n]
             angle = fitted["angle"] + resid["angle"][idx]

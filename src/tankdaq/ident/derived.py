@@ -1,0 +1,204 @@
+"""What people report from a decay fit: period, damping ratio, B_eq(phi_a), Bertin N, extinction curve.
+
+Formulas from ITTC 7.5-02-07-04.5 (reference §2): equivalent linear damping by
+equal energy per cycle (eq. 13/15), Bertin's N (eq. 18; "Bertin N", unrelated
+to the seeds' N), the extinction curve from successive peaks, and dimensional
+coefficients once Delta*GM fixes the inertia scale (§5). Uncertainties of
+derived quantities come from the coefficient covariance by the delta method.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..records import DecayRun
+from .signals import half_cycle_peaks
+
+G = 9.81
+
+
+def linear_stiffness(coefficients: Mapping[str, float]) -> float:
+    """Restoring slope at equilibrium, c1 + s1 (= omega_0^2)."""
+    return coefficients.get("c1", 0.0) + coefficients.get("s1", 0.0)
+
+
+def natural_frequency(coefficients: Mapping[str, float]) -> float:
+    """Undamped natural frequency omega_0 in rad/s (NaN without positive stiffness)."""
+    k = linear_stiffness(coefficients)
+    return math.sqrt(k) if k > 0 else math.nan
+
+
+def natural_period(coefficients: Mapping[str, float]) -> float:
+    return 2.0 * math.pi / natural_frequency(coefficients)
+
+
+def damping_ratio(coefficients: Mapping[str, float]) -> float:
+    """Linear damping ratio zeta = b1 / (2 omega_0)."""
+    return coefficients.get("b1", 0.0) / (2.0 * natural_frequency(coefficients))
+
+
+def equivalent_frequency(coefficients: Mapping[str, float], amplitude: float) -> float:
+    """omega_eq(phi_a) of the restoring by the describing function (ITTC eq. 14), rad/s.
+
+    The first Fourier coefficient of r(phi_a cos a) over phi_a: for c3 x^3 it adds
+    (3/4) c3 phi_a^2; the sine terms are integrated numerically. Even terms drop out.
+    """
+    alpha = np.linspace(0.0, 2.0 * math.pi, 257)[:-1]
+    x = amplitude * np.cos(alpha)
+    restoring = (
+        coefficients.get("c1", 0.0) * x
+        + coefficients.get("c3", 0.0) * x**3
+        + coefficients.get("s1", 0.0) * np.sin(x)
+        + coefficients.get("s3", 0.0) * np.sin(x) ** 3
+    )
+    k_eq = float(np.mean(restoring * np.cos(alpha))) * 2.0 / amplitude if amplitude > 0 else 0.0
+    k_eq = k_eq if amplitude > 0 else linear_stiffness(coefficients)
+    return math.sqrt(k_eq) if k_eq > 0 else math.nan
+
+
+def b_eq(coefficients: Mapping[str, float], amplitude: float) -> float:
+    """Equivalent linear damping per unit inertia at amplitude phi_a (rad), 1/s (ITTC eq. 15 / I).
+
+    Uses omega_E = omega_eq(phi_a); ``mu_eq = b_eq / 2``.
+    """
+    omega = equivalent_frequency(coefficients, amplitude)
+    return (
+        coefficients.get("b1", 0.0)
+        + 8.0 / (3.0 * math.pi) * omega * amplitude * coefficients.get("b2", 0.0)
+        + 0.75 * (omega * amplitude) ** 2 * coefficients.get("b3", 0.0)
+    )
+
+
+def bertin_n_per_deg(coefficients: Mapping[str, float], amplitude: float) -> float:
+    """Bertin N per degree (MSC.1/Circ.1200) at amplitude phi_a: mu_eq = N phi_a omega / pi (eq. 18)."""
+    mu = 0.5 * b_eq(coefficients, amplitude)
+    n_per_rad = math.pi * mu / (amplitude * equivalent_frequency(coefficients, amplitude))
+    return n_per_rad * math.pi / 180.0
+
+
+def delta_method(
+    fn: Callable[[Mapping[str, float]], float], coefficients: Mapping[str, float], covariance: np.ndarray
+) -> float:
+    """Standard deviation of fn(coefficients) from the coefficient covariance (central differences)."""
+    names = list(coefficients)
+    values = np.array([coefficients[k] for k in names])
+    grad = np.empty(len(names))
+    for i, value in enumerate(values):
+        step = 1e-6 * max(abs(value), 1e-3)
+        up, down = values.copy(), values.copy()
+        up[i] += step
+        down[i] -= step
+        grad[i] = (fn(dict(zip(names, up, strict=True))) - fn(dict(zip(names, down, strict=True)))) / (
+            2 * step
+        )
+    return float(math.sqrt(max(grad @ covariance @ grad, 0.0)))
+
+
+@dataclass
+class AmplitudePoint:
+    """B_eq and friends at one amplitude, with their delta-method standard deviations."""
+
+    amplitude_deg: float
+    b_eq: float
+    b_eq_std: float
+    mu_eq: float
+    bertin_n_per_deg: float
+    bertin_n_std: float
+
+
+def amplitude_table(
+    coefficients: Mapping[str, float], covariance: np.ndarray, amplitudes_deg: Sequence[float]
+) -> list[AmplitudePoint]:
+    """B_eq(phi_a), mu_eq and Bertin N over the amplitudes (deg), with uncertainty."""
+    out = []
+    for a_deg in amplitudes_deg:
+        a = math.radians(a_deg)
+        value = b_eq(coefficients, a)
+        n = bertin_n_per_deg(coefficients, a)
+        out.append(
+            AmplitudePoint(
+                amplitude_deg=float(a_deg),
+                b_eq=value,
+                b_eq_std=delta_method(lambda c, a=a: b_eq(c, a), coefficients, covariance),
+                mu_eq=0.5 * value,
+                bertin_n_per_deg=n,
+                bertin_n_std=delta_method(lambda c, a=a: bertin_n_per_deg(c, a), coefficients, covariance),
+            )
+        )
+    return out
+
+
+def tested_amplitudes_deg(runs: Sequence[DecayRun], offsets: Sequence[float], count: int = 5) -> list[float]:
+    """A grid over the amplitude band the runs covered: smallest to largest half-cycle peak, deg."""
+    peaks = np.concatenate(
+        [
+            np.abs((run.angle - off)[half_cycle_peaks(run.angle - off)])
+            for run, off in zip(runs, offsets, strict=True)
+        ]
+    )
+    if peaks.size == 0:
+        return []
+    return [round(math.degrees(a), 2) for a in np.linspace(float(peaks.min()), float(peaks.max()), count)]
+
+
+@dataclass
+class ExtinctionCurve:
+    """Measured decrement per half-cycle against mean amplitude, and the model's curve (rad)."""
+
+    mean_amplitude: np.ndarray
+    decrement: np.ndarray
+    model_amplitude: np.ndarray
+    model_decrement: np.ndarray
+
+
+def extinction_curve(
+    runs: Sequence[DecayRun], offsets: Sequence[float], coefficients: Mapping[str, float]
+) -> ExtinctionCurve:
+    """Decrement phi_n - phi_(n+1) vs mean amplitude phi_m of successive peaks, and the model's curve.
+
+    The model: a phi + b phi^2 + c phi^3 with a = pi mu / omega, b = 4 beta / 3,
+    c = 3 pi delta omega / 8 (reference §2, from the half-cycle energy balance).
+    An intercept of the measured points at phi_m -> 0 means friction.
+    """
+    means, decrements = [], []
+    for run, off in zip(runs, offsets, strict=True):
+        y = run.angle - off
+        peaks = np.abs(y[half_cycle_peaks(y)])
+        means.append(0.5 * (peaks[:-1] + peaks[1:]))
+        decrements.append(peaks[:-1] - peaks[1:])
+    mean_amplitude = np.concatenate(means) if means else np.zeros(0)
+    omega = natural_frequency(coefficients)
+    grid = np.linspace(0.0, float(mean_amplitude.max()) if mean_amplitude.size else 0.0, 50)
+    model = (
+        math.pi * 0.5 * coefficients.get("b1", 0.0) / omega * grid
+        + 4.0 / 3.0 * coefficients.get("b2", 0.0) * grid**2
+        + 3.0 * math.pi / 8.0 * coefficients.get("b3", 0.0) * omega * grid**3
+    )
+    return ExtinctionCurve(
+        mean_amplitude, np.concatenate(decrements) if decrements else np.zeros(0), grid, model
+    )
+
+
+@dataclass
+class Dimensional:
+    """Dimensional results once Delta*GM fixes the inertia scale (SI: kg m^2, N m s/rad ...)."""
+
+    total_inertia_kg_m2: float
+    coefficients: dict[str, float]  # every term times the total inertia
+    added_inertia_fraction: float | None  # (I_total - I_dry) / I_dry when the dry inertia is known
+
+
+def dimensional(
+    coefficients: Mapping[str, float],
+    displacement_kg: float,
+    gm_m: float,
+    dry_inertia_kg_m2: float | None = None,
+) -> Dimensional:
+    """I = Delta g GM / (c1 + s1); B1 = b1 I, C3 = c3 I ... (reference §5)."""
+    inertia = displacement_kg * G * gm_m / linear_stiffness(coefficients)
+    added = (inertia - dry_inertia_kg_m2) / dry_inertia_kg_m2 if dry_inertia_kg_m2 else None
+    return Dimensional(inertia, {k: v * inertia for k, v in coefficients.items()}, added)
