@@ -1,0 +1,34 @@
+"""``tankdaq recover``: turn a recording cut short (killed writer, full disk) into a valid MCAP file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
+
+from ..store.recover import recover
+from .app import app, err_console, handles_errors
+
+
+@app.command("recover")
+@handles_errors
+def recover_command(
+    file: Annotated[Path, typer.Argument(help="The damaged recording (.mcap).")],
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="Where to write the repaired file (default: NAME.recovered.mcap)."),
+    ] = None,
+) -> None:
+    """Rebuild a truncated recording. Exit 0: nothing lost; 3: damaged tail dropped; 1: nothing recovered."""
+    columns = (TextColumn("recovering"), BarColumn(), DownloadColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=err_console, transient=True) as progress:
+        task = progress.add_task("recover", total=None)
+
+        def advance(done: int, total: int) -> None:
+            progress.update(task, completed=done, total=total)
+
+        report = recover(file, out, progress=advance)
+    typer.echo(report.summary())
+    raise typer.Exit(report.exit_code)

@@ -1,0 +1,289 @@
+"""Read tankdaq recordings back: samples in SI, raw bytes for re-decoding, events, fits, metadata.
+
+Every reader goes through ``RecordScan``, which reads the file front to back
+with mcap's StreamReader. That path does not need the summary at the end of
+the file, so a file whose writer was killed (no summary, maybe a torn last
+chunk) reads up to its last complete chunk instead of failing.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zstandard
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata
+from mcap.stream_reader import StreamReader, breakup_chunk
+
+from ..config import parse_draft
+from ..errors import BadRecordingInput, InputError
+from ..records import DecayRun
+from ..samples import AXIS_FIELDS
+from . import schemas
+
+#: What a torn tail can raise inside mcap: short reads, bad lengths, CRC mismatches, broken zstd frames.
+_DAMAGE = (McapError, ValueError, struct.error, zstandard.ZstdError, RuntimeError)
+
+
+class RecordScan:
+    """Every record of an MCAP file in file order, stopping quietly where a damaged tail begins.
+
+    Chunks are opened here (not inside StreamReader) so a torn last chunk is
+    noticed as damage and counted. After iterating: ``complete`` (the footer was
+    read), ``clean_end`` (the file ended on a record boundary, so nothing on disk
+    was lost), ``damage`` (what stopped the scan, or None), ``chunks``,
+    ``bytes_read`` and ``size``.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise BadRecordingInput(f"{self.path} does not exist (or is not a file)")
+        self.size = self.path.stat().st_size
+        if self.size == 0:
+            raise BadRecordingInput(f"{self.path} is empty: the writer died before writing anything")
+        self.complete = False
+        self.damage: str | None = None
+        self.bytes_read = 0
+        self.chunks = 0
+
+    @property
+    def clean_end(self) -> bool:
+        return self.complete or (self.damage is not None and self.bytes_read == self.size)
+
+    def __iter__(self) -> Iterator[McapRecord]:
+        with self.path.open("rb") as stream:
+            records = StreamReader(stream, emit_chunks=True, validate_crcs=True).records
+            try:
+                first = next(records)
+            except (InvalidMagic, struct.error):  # wrong magic, or shorter than the magic itself
+                raise BadRecordingInput(
+                    f"{self.path} is not an MCAP file (it does not start with the MCAP magic bytes)"
+                ) from None
+            except _DAMAGE as exc:
+                raise BadRecordingInput(f"{self.path} is not a readable MCAP file: {exc}") from None
+            if not isinstance(first, Header):
+                raise BadRecordingInput(f"{self.path} is not a readable MCAP file: no header record")
+            yield first
+            while True:
+                self.bytes_read = stream.tell()
+                try:
+                    record = next(records)
+                    inner = (
+                        breakup_chunk(record, validate_crc=True) if isinstance(record, Chunk) else [record]
+                    )
+                except StopIteration:
+                    break
+                except _DAMAGE as exc:
+                    self.damage = "file ends early" if isinstance(exc, EndOfFile) else str(exc)
+                    break
+                self.chunks += isinstance(record, Chunk)
+                self.complete = isinstance(record, Footer)
+                yield from inner
+            self.bytes_read = stream.tell() if self.complete else self.bytes_read
+
+
+@dataclass
+class Recording:
+    """Everything in one tankdaq recording, samples already back in SI units."""
+
+    path: Path
+    metadata: dict[str, str]
+    samples: np.ndarray
+    raw_chunks: list[tuple[int, bytes]]
+    events: list[dict[str, Any]]
+    fits: list[dict[str, Any]]
+    attachments: dict[str, bytes]
+    channel_metadata: dict[str, dict[str, str]]
+    complete: bool
+    release_index: int | None = None
+    metadata_history: list[dict[str, str]] = field(default_factory=list)
+
+    @property
+    def axis(self) -> str:
+        return self.metadata.get("axis", "roll")
+
+    @property
+    def run_config(self) -> dict[str, Any]:
+        raw = self.attachments.get(schemas.CONFIG_ATTACHMENT_NAME)
+        return json.loads(raw) if raw else {}
+
+
+def _check_tankdaq(path: Path, channels: dict[int, Channel]) -> None:
+    topics = {channel.topic for channel in channels.values()}
+    if not topics & {schemas.TOPIC_SAMPLES, schemas.TOPIC_RAW}:
+        found = ", ".join(sorted(topics)) or "no channels"
+        raise BadRecordingInput(
+            f"{path} is an MCAP file but not a tankdaq recording (it has {found}, not "
+            f"{schemas.TOPIC_SAMPLES} or {schemas.TOPIC_RAW})"
+        )
+
+
+def _release_times(events: list[dict[str, Any]]) -> list[float]:
+    return sorted(e["t_s"] for e in events if e.get("kind") == "release" and e.get("t_s") is not None)
+
+
+def _release_index(samples: np.ndarray, events: list[dict[str, Any]]) -> int | None:
+    releases = _release_times(events)
+    if not releases or samples.size == 0:
+        return None
+    index = int(np.searchsorted(samples["t"], releases[0], side="left"))
+    return index if index < samples.size else None
+
+
+def read_recording(path: str | Path) -> Recording:
+    """Read a whole recording (also a truncated one); raise BadRecordingInput if it is not one."""
+    scan = RecordScan(path)
+    channels: dict[int, Channel] = {}
+    sample_payloads: list[bytes] = []
+    sample_stamps: list[int] = []
+    raw_chunks: list[tuple[int, bytes]] = []
+    events: list[dict[str, Any]] = []
+    fits: list[dict[str, Any]] = []
+    attachments: dict[str, bytes] = {}
+    history: list[dict[str, str]] = []
+    for record in scan:
+        if isinstance(record, Channel):
+            channels[record.id] = record
+        elif isinstance(record, Message) and record.channel_id in channels:
+            topic = channels[record.channel_id].topic
+            if topic == schemas.TOPIC_SAMPLES:
+                sample_payloads.append(record.data)
+                sample_stamps.append(record.log_time)
+            elif topic == schemas.TOPIC_RAW:
+                raw_chunks.append((record.log_time, record.data))
+            elif topic == schemas.TOPIC_EVENTS:
+                events.append(json.loads(record.data))
+            elif topic == schemas.TOPIC_FIT:
+                fits.append(json.loads(record.data))
+        elif isinstance(record, Metadata) and record.name == schemas.RUN_METADATA_NAME:
+            history.append(dict(record.metadata))
+        elif isinstance(record, Attachment):
+            attachments[record.name] = record.data
+    path = Path(path)
+    _check_tankdaq(path, channels)
+    try:
+        samples = schemas.samples_from_json(sample_payloads, sample_stamps)
+    except (json.JSONDecodeError, TypeError, ValueError) as exc:
+        raise BadRecordingInput(f"{path}: {schemas.TOPIC_SAMPLES} holds malformed JSON ({exc})") from None
+    return Recording(
+        path=path,
+        metadata=history[-1] if history else {},
+        samples=samples,
+        raw_chunks=raw_chunks,
+        events=events,
+        fits=fits,
+        attachments=attachments,
+        channel_metadata={c.topic: dict(c.metadata) for c in channels.values()},
+        complete=scan.complete,
+        release_index=_release_index(samples, events),
+        metadata_history=history,
+    )
+
+
+def iter_raw_chunks(path: str | Path) -> Iterator[tuple[int, bytes]]:
+    """``(host arrival ns, bytes)`` of ``/xsens/raw`` in file order, for replay through a decoder."""
+    scan = RecordScan(path)
+    raw_channels: set[int] = set()
+    seen_channels: dict[int, Channel] = {}
+    for record in scan:
+        if isinstance(record, Channel):
+            seen_channels[record.id] = record
+            if record.topic == schemas.TOPIC_RAW:
+                raw_channels.add(record.id)
+        elif isinstance(record, Message) and record.channel_id in raw_channels:
+            yield record.log_time, record.data
+    _check_tankdaq(scan.path, seen_channels)
+
+
+def _finite_increasing(t: np.ndarray, *columns: np.ndarray) -> np.ndarray:
+    """Mask of rows usable for identification: all finite, time strictly increasing."""
+    keep = np.isfinite(t)
+    for column in columns:
+        keep &= np.isfinite(column)
+    indices = np.flatnonzero(keep)
+    if indices.size:
+        running_max = np.maximum.accumulate(t[indices])
+        increasing = np.concatenate([[True], t[indices][1:] > running_max[:-1]])
+        keep[indices[~increasing]] = False
+    return keep
+
+
+def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]:
+    """The decays of a recording: from each release event to the next one (or the end).
+
+    The axis comes from the file's metadata unless given; the rate is the gyro's.
+    Rows with NaN (dropouts) are left out; ``meta`` says what was dropped.
+    """
+    recording = read_recording(path)
+    axis = axis or recording.axis
+    if axis not in AXIS_FIELDS:
+        raise InputError(f"axis {axis!r} not understood; use one of: {', '.join(AXIS_FIELDS)}")
+    releases = _release_times(recording.events)
+    if not releases:
+        raise BadRecordingInput(
+            f"{recording.path} holds no release event (the recording stopped before a release was detected)"
+        )
+    samples = recording.samples
+    angle_field, rate_field = AXIS_FIELDS[axis]
+    other_axis = next(name for name in AXIS_FIELDS if name != axis)
+    other_angle, other_rate = AXIS_FIELDS[other_axis]
+    runs: list[DecayRun] = []
+    bounds = [*releases, np.inf]
+    for number, (start, stop) in enumerate(itertools.pairwise(bounds), start=1):
+        part = samples[(samples["t"] >= start) & (samples["t"] < stop)]
+        keep = _finite_increasing(part["t"], part[angle_field], part[rate_field])
+        part_kept = part[keep]
+        if part_kept.size < 2:
+            raise BadRecordingInput(
+                f"{recording.path}: release {number} at t = {start:.3f} s has no usable samples after it"
+            )
+        runs.append(
+            DecayRun(
+                t=part_kept["t"],
+                angle=part_kept[angle_field],
+                rate=part_kept[rate_field],
+                axis=axis,
+                name=recording.path.stem if len(releases) == 1 else f"{recording.path.stem}#{number}",
+                channels={
+                    f"other_angle_{other_axis}": part_kept[other_angle],
+                    f"other_rate_{other_axis}": part_kept[other_rate],
+                    "acc_x_m_s2": part_kept["ax"],
+                    "acc_y_m_s2": part_kept["ay"],
+                    "acc_z_m_s2": part_kept["az"],
+                },
+                meta=_run_meta(recording, axis, start, dropped=int(part.size - part_kept.size)),
+            )
+        )
+    return runs
+
+
+def _run_meta(recording: Recording, axis: str, release_t_s: float, dropped: int) -> dict[str, object]:
+    meta = recording.metadata
+    out: dict[str, object] = {
+        "file": str(recording.path),
+        "hull": meta.get("hull"),
+        "axis": axis,
+        "release_t_s": release_t_s,
+        "dropped_samples": dropped,
+        "complete_file": recording.complete,
+    }
+    if "draft" in meta:
+        out["draft"] = parse_draft(meta["draft"])
+    for key in ("angle_nominal_deg", "angle_initial_deg", "sample_rate_hz"):
+        if key in meta:
+            out[key] = float(meta[key])
+    for key in ("device_id", "operator", "note"):
+        if key in meta:
+            out[key] = meta[key]
+    return out
+
+
+__all__ = ["RecordScan", "Recording", "iter_raw_chunks", "read_decay_runs", "read_recording"]

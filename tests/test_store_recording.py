@@ -1,0 +1,247 @@
+"""RecordingWriter -> reader round trips on real MCAP files, names, and refusals of bad input."""
+
+from __future__ import annotations
+
+import json
+import os
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from tankdaq.errors import BadRecordingInput, InputError
+from tankdaq.physics.decay import simulate_decay
+from tankdaq.samples import SAMPLE_DTYPE
+from tankdaq.store import schemas
+from tankdaq.store.naming import create_exclusive, next_run_number, recording_name
+from tankdaq.store.reader import iter_raw_chunks, read_decay_runs, read_recording
+from tankdaq.store.writer import RecordingWriter
+
+RATE_HZ = 200.0
+RELEASE_T_S = 2.0
+TRUTH = {"b1": 0.8, "b2": 0.6, "c1": 40.0, "c3": -15.0}
+ANGLE0_RAD = np.radians(8.0)
+RUN_METADATA = {
+    "hull": "swath",
+    "draft": "1.1T",
+    "axis": "roll",
+    "angle_nominal_deg": 8.0,
+    "operator": "test",
+    "hull_length_m": 1.2,
+}
+RUN_CONFIG = {"port": "/dev/ttyUSB0", "rate_hz": RATE_HZ, "model": ["b1", "b2", "c1", "c3"]}
+
+
+def decay_samples(seconds: float = 8.0) -> np.ndarray:
+    """Held at 8 deg until RELEASE_T_S, then a known-truth decay; other fields random but reproducible."""
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, seconds, 1 / RATE_HZ)
+    after = t >= RELEASE_T_S
+    angle = np.full(t.size, ANGLE0_RAD)
+    rate = np.zeros(t.size)
+    if after.any():
+        angle[after], rate[after] = simulate_decay(TRUTH, t[after], ANGLE0_RAD)
+    samples = np.zeros(t.size, dtype=SAMPLE_DTYPE)
+    samples["t"] = t
+    samples["ticks"] = np.round(t * 1e4).astype(np.int64)
+    samples["host_t"] = 1.79e9 + t + rng.uniform(0, 1e-3, t.size)
+    samples["counter"] = np.arange(t.size) % 65536
+    samples["roll"], samples["p"] = angle, rate
+    for name in ("pitch", "yaw", "q", "r", "ax", "ay"):
+        samples[name] = rng.normal(0, 0.05, t.size)
+    samples["az"] = 9.81 + rng.normal(0, 0.01, t.size)
+    samples["status"] = rng.integers(0, 2**32, t.size, dtype=np.uint64).astype(np.uint32)
+    return samples
+
+
+def write_recording(path: Path, samples: np.ndarray, raw: list[tuple[int, bytes]]) -> Path:
+    with RecordingWriter(path, RUN_METADATA, RUN_CONFIG) as writer:
+        for (host_ns, data), block in zip(raw, np.array_split(samples, len(raw)), strict=True):
+            writer.write_raw(data, host_ns=host_ns)
+            writer.write_samples(block)
+            if block["t"][0] <= RELEASE_T_S < block["t"][-1] + 1 / RATE_HZ:
+                writer.write_event(
+                    "release", "released by hand", t_s=RELEASE_T_S, data={"threshold_deg_s": 2.0}
+                )
+        writer.write_event("warning", "roll exceeded 7.5 deg before release", t_s=1.0)
+        writer.write_fit(
+            5.0,
+            {"c1": 39.0, "b1": 0.7},
+            std={"b1": 0.05, "c1": 0.4},
+            ci95={"b1": 0.1, "c1": [38, 40]},
+            r2=0.98,
+        )
+        writer.write_event("settled", "below 0.5 deg", t_s=7.5)
+    return writer.path
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, np.ndarray, list[tuple[int, bytes]]]:
+    rng = np.random.default_rng(3)
+    samples = decay_samples()
+    raw = [
+        (1_790_000_000_000_000_000 + k * 10_000_000, rng.bytes(int(rng.integers(1, 300)))) for k in range(40)
+    ]
+    raw[3] = (raw[3][0], b"\xfa\xff\x36\x00" + bytes(range(256)))  # every byte value survives
+    path = write_recording(tmp_path_factory.mktemp("rec") / "run.mcap", samples, raw)
+    return path, samples, raw
+
+
+def test_samples_round_trip_to_float_precision(recording: tuple[Path, np.ndarray, list]) -> None:
+    path, samples, _ = recording
+    back = read_recording(path).samples
+    assert back.dtype == SAMPLE_DTYPE and back.size == samples.size
+    for name in ("ticks", "counter", "status"):
+        np.testing.assert_array_equal(back[name], samples[name])
+    for name in ("t", "roll", "pitch", "yaw", "p", "q", "r", "ax", "ay", "az"):
+        np.testing.assert_allclose(back[name], samples[name], rtol=1e-15, atol=0, err_msg=name)
+    np.testing.assert_allclose(back["host_t"], samples["host_t"], rtol=0, atol=1e-6)
+
+
+def test_raw_chunks_are_byte_identical(recording: tuple[Path, np.ndarray, list]) -> None:
+    path, _, raw = recording
+    assert read_recording(path).raw_chunks == raw
+    assert list(iter_raw_chunks(path)) == raw
+
+
+def test_events_fits_metadata_and_attachment(recording: tuple[Path, np.ndarray, list]) -> None:
+    path, samples, _ = recording
+    rec = read_recording(path)
+    assert rec.complete
+    assert [e["kind"] for e in rec.events] == ["release", "warning", "settled"]
+    assert rec.events[0] == {
+        "t_s": RELEASE_T_S,
+        "kind": "release",
+        "message": "released by hand",
+        "data": {"threshold_deg_s": 2.0},
+    }
+    (fit,) = rec.fits
+    assert fit["terms"] == ["b1", "c1"]  # canonical order, whatever order was given
+    assert fit["coefficients"] == {"b1": 0.7, "c1": 39.0}
+    assert fit["ci95"] == {"b1": pytest.approx([0.6, 0.8]), "c1": [38.0, 40.0]}
+    assert fit["r2"] == 0.98
+    assert rec.run_config == json.loads(json.dumps(RUN_CONFIG))
+
+    start, final = rec.metadata_history
+    assert "closed_utc" not in start and start["hull"] == "swath"
+    assert rec.metadata is not start and rec.metadata == final
+    assert final["draft"] == "1.1T" and final["axis"] == "roll" and float(final["angle_nominal_deg"]) == 8.0
+    assert final["hull_length_m"] == "1.2"
+    assert int(final["samples"]) == samples.size
+    assert float(final["measured_sample_rate_hz"]) == pytest.approx(RATE_HZ)
+    assert float(final["release_t_s"]) == RELEASE_T_S
+    assert float(final["angle_initial_deg"]) == pytest.approx(8.0, abs=1e-9)
+    assert json.loads(final["warnings"]) == ["roll exceeded 7.5 deg before release"]
+    assert rec.release_index == int(np.flatnonzero(samples["t"] >= RELEASE_T_S)[0])
+
+
+def test_file_is_indexed_mcap_that_foxglove_can_plot(recording: tuple[Path, np.ndarray, list]) -> None:
+    path, samples, _ = recording
+    with path.open("rb") as stream:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None
+        channels = {c.topic: c for c in summary.channels.values()}
+        raw = channels[schemas.TOPIC_RAW]
+        assert raw.schema_id == 0 and raw.message_encoding == "xbus"
+        for topic in (schemas.TOPIC_SAMPLES, schemas.TOPIC_EVENTS, schemas.TOPIC_FIT):
+            schema = summary.schemas[channels[topic].schema_id]
+            assert channels[topic].message_encoding == "json" and schema.encoding == "jsonschema"
+            assert json.loads(schema.data)["type"] == "object"
+        assert "deg" in json.loads(channels[schemas.TOPIC_SAMPLES].metadata["units"])["roll_deg"]
+        sample_schema = json.loads(summary.schemas[channels[schemas.TOPIC_SAMPLES].schema_id].data)
+        messages = [json.loads(m.data) for _, _, m in reader.iter_messages(topics=[schemas.TOPIC_SAMPLES])]
+    assert len(messages) == samples.size
+    assert set(messages[0]) == set(sample_schema["required"])
+    assert messages[500]["roll_deg"] == pytest.approx(np.degrees(samples["roll"][500]), rel=1e-15)
+    assert isinstance(messages[500]["counter"], int)
+
+
+def test_missing_values_become_null_and_come_back_as_nan(tmp_path: Path) -> None:
+    samples = decay_samples(1.0)
+    samples["pitch"][[3, 4]] = np.nan
+    samples["yaw"][5] = np.inf
+    path = write_recording(tmp_path / "gaps.mcap", samples, [(1, b"x")])
+    with path.open("rb") as stream:
+        texts = [m.data for _, _, m in make_reader(stream).iter_messages(topics=[schemas.TOPIC_SAMPLES])]
+    assert json.loads(texts[3])["pitch_deg"] is None  # valid JSON, not NaN
+    back = read_recording(path).samples
+    assert np.isnan(back["pitch"][[3, 4]]).all() and np.isnan(back["yaw"][5])
+    assert np.isfinite(back["pitch"][5])
+
+
+def test_decay_runs_start_at_the_release(recording: tuple[Path, np.ndarray, list]) -> None:
+    path, samples, _ = recording
+    (run,) = read_decay_runs(path)
+    after = samples["t"] >= RELEASE_T_S
+    assert run.axis == "roll" and run.t[0] == pytest.approx(RELEASE_T_S)
+    np.testing.assert_allclose(run.angle, samples["roll"][after], rtol=1e-15)
+    np.testing.assert_allclose(run.rate, samples["p"][after], rtol=1e-15)
+    assert run.meta["hull"] == "swath" and run.meta["draft"] == 1.1 and run.meta["angle_nominal_deg"] == 8.0
+    assert run.meta["file"] == str(path)
+    (pitch_run,) = read_decay_runs(path, axis="pitch")
+    np.testing.assert_allclose(pitch_run.angle, samples["pitch"][after], rtol=1e-15)
+    with pytest.raises(InputError, match="axis 'yaw'"):
+        read_decay_runs(path, axis="yaw")
+
+
+def test_no_release_event_is_a_clear_error(tmp_path: Path) -> None:
+    path = tmp_path / "norelease.mcap"
+    with RecordingWriter(path, {"axis": "roll"}, {}) as writer:
+        writer.write_samples(decay_samples(1.0))
+    with pytest.raises(BadRecordingInput, match="no release event"):
+        read_decay_runs(path)
+
+
+def test_not_mcap_and_foreign_mcap_are_refused(tmp_path: Path) -> None:
+    text = tmp_path / "notes.mcap"
+    text.write_text("time,roll\n0,1\n")
+    empty = tmp_path / "empty.mcap"
+    empty.touch()
+    foreign = tmp_path / "camera.mcap"
+    with foreign.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start()
+        channel = writer.register_channel("/camera/image", "raw", 0)
+        writer.add_message(channel, 1, b"pixels", 1)
+        writer.finish()
+    for path, message in (
+        (text, "not an MCAP file"),
+        (empty, "is empty"),
+        (foreign, "not a tankdaq recording .*?/camera/image"),
+        (tmp_path / "missing.mcap", "does not exist"),
+    ):
+        with pytest.raises(BadRecordingInput, match=message) as info:
+            read_recording(path)
+        assert "\n" not in str(info.value) and info.value.exit_code == 2
+
+
+def test_existing_files_are_never_overwritten(tmp_path: Path) -> None:
+    first = tmp_path / "run.mcap"
+    first.write_bytes(b"precious")
+    with RecordingWriter(first, {}, {}) as writer:
+        writer.write_raw(b"abc")
+    assert writer.path == tmp_path / "run-2.mcap"
+    assert first.read_bytes() == b"precious"
+    path, fd = create_exclusive(first)
+    os.close(fd)
+    assert path == tmp_path / "run-3.mcap"
+
+
+def test_names_say_what_a_person_looks_for(tmp_path: Path) -> None:
+    when = datetime(2026, 11, 21, 14, 30, 15)
+    assert (
+        recording_name("swath", 1.1, "roll", 8, 3, when) == "swath_1.1T_roll_8deg_20261121-143015_run03.mcap"
+    )
+    assert (
+        recording_name("swath", "T", "pitch", 7.5, 12, when)
+        == "swath_T_pitch_7.5deg_20261121-143015_run12.mcap"
+    )
+    assert next_run_number(tmp_path, "swath", 1.1, "roll") == 1
+    (tmp_path / recording_name("swath", 1.1, "roll", 8, 3, when)).touch()
+    (tmp_path / "swath_1.1T_roll_8deg_20261121-143015_run07-2.mcap").touch()
+    (tmp_path / recording_name("swath", 0.9, "roll", 8, 9, when)).touch()  # another draft: not counted
+    assert next_run_number(tmp_path, "swath", 1.1, "roll") == 8
