@@ -1,0 +1,180 @@
+"""The seeds' GA and PSO: their objective, their boxes, and what they find on known-truth decays."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import lsq_linear
+
+from tankdaq.config import load_hull
+from tankdaq.errors import BadIdentificationInput, InputError
+from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.seed_methods import (
+    INERTIA_FLOOR,
+    GeneticSeed,
+    GeneticSettings,
+    OneStepData,
+    SearchSpace,
+    SwarmSeed,
+    SwarmSettings,
+    seed_objective,
+)
+from tankdaq.physics.decay import acceleration, simulate_decay
+from tankdaq.records import DecayRun
+
+SWATH_ROLL_T = load_hull("swath").axis_model("roll").coefficients(1.0)
+QUICK_GA = GeneticSettings(population=200, generations=150)
+
+
+def swath_decay(angle_deg: float = 5.0, angle_noise: float = 1e-3, rate_noise: float = 0.01, seed: int = 1):
+    """15 s of the SWATH roll decay at 100 Hz with white noise on angle (rad) and gyro (rad/s)."""
+    t = np.arange(0.0, 15.0, 0.01)
+    angle, rate = simulate_decay(SWATH_ROLL_T, t, np.deg2rad(angle_deg))
+    rng = np.random.default_rng(seed)
+    return DecayRun(
+        t, angle + rng.normal(0, angle_noise, t.size), rate + rng.normal(0, rate_noise, t.size), name="swath"
+    )
+
+
+@pytest.fixture(scope="module")
+def noisy_run() -> DecayRun:
+    return swath_decay()
+
+
+@pytest.fixture(scope="module")
+def ga_fit(noisy_run: DecayRun) -> GeneticSeed:
+    return GeneticSeed("seed001-eq1", settings=QUICK_GA, random_state=3).fit(noisy_run)
+
+
+def box_optimum(run: DecayRun, model: str) -> float:
+    """The smallest seed objective anywhere in the paper's box, by bounded linear least squares.
+
+    With I free down to its floor each coefficient can reach factor * high / I_floor, so the box
+    in coefficient space is [0, factor * high / I_floor] per term.
+    """
+    space = SearchSpace.for_model(model)
+    data = OneStepData.from_runs([run], space.terms)
+    high = np.array([v.factor * v.high for v in space.variables]) / INERTIA_FLOOR
+    solution = lsq_linear(data.design, -data.change, bounds=(np.zeros_like(high), high))
+    return float(data.rms(solution.x)[0])
+
+
+def test_population_objective_equals_the_euler_prediction_sample_by_sample(noisy_run: DecayRun) -> None:
+    space = SearchSpace.for_model("seed001-eq1")
+    data = OneStepData.from_runs([noisy_run], space.terms)
+    rng = np.random.default_rng(0)
+    population = rng.uniform(space.lower, space.upper, size=(5, space.lower.size))
+    fast = data.rms(space.coefficients(population))
+    for row, value in zip(population, fast, strict=True):
+        coefficients = dict(zip(space.terms, space.coefficients(row)[0], strict=True))
+        x, v, t = noisy_run.angle, noisy_run.rate, noisy_run.t
+        predicted = v[:-1] + np.diff(t) * acceleration(coefficients, x[:-1], v[:-1])
+        assert value == pytest.approx(np.sqrt(np.mean((v[1:] - predicted) ** 2)), rel=1e-9)
+
+
+def test_seed_tables_map_onto_the_hull_coefficients() -> None:
+    """Seed 001 Table 4 (I, N, W, x, C1, C2, C3) divided through by I is the swath roll model at T."""
+    space = SearchSpace.for_model("seed001-eq1")
+    table4 = np.array([0.09484457, 0.01397576, 0.00125340, 1.14244500, 0.00263590, 6.58768553, 1.34854038])
+    # design vector order is I then the terms' variables: b1 N, b2 W, b3 x, c1 C3, c2 C2, c3 C1
+    design = table4[[0, 1, 2, 3, 6, 4, 5]]
+    coefficients = dict(zip(space.terms, space.coefficients(design)[0], strict=True))
+    for term, value in SWATH_ROLL_T.items():
+        assert coefficients[term] == pytest.approx(value, rel=2e-3), term
+    assert [v.symbol for v in space.variables] == ["N", "W", "x", "C3", "C2", "C1"]
+
+
+def test_seed000_table3_gives_its_equation_5_1() -> None:
+    space = SearchSpace.for_model("seed000-eq1")
+    assert space.paper == "seed000" and space.terms == ("b1", "b2", "b3", "s1")
+    table3 = np.array([0.090243325, 0.098322896, 0.000479988, 0.001392731, 1.30e-05])
+    b1, b2, b3, s1 = space.coefficients(table3)[0]
+    assert (b1, b2, b3) == pytest.approx((2.1791, 0.00532, 0.015433), rel=2e-3)
+    assert s1 == pytest.approx(0.000145, rel=0.02)
+    assert space.upper.tolist() == [0.1, 0.5, 0.5, 0.2, 0.5]
+
+
+def test_a_plain_term_list_gets_seed001_boxes() -> None:
+    space = SearchSpace.for_model("b1,b2,c1,c3")
+    assert space.paper == "seed001"
+    assert space.upper.tolist() == [0.1, 1.0, 1.0, 10.0, 10.0]
+
+
+def test_ga_reaches_the_best_objective_in_the_box(noisy_run: DecayRun, ga_fit: GeneticSeed) -> None:
+    best = box_optimum(noisy_run, "seed001-eq1")
+    assert ga_fit.seed_objective_ <= best * (1 + 1e-4)
+    assert ga_fit.seed_objective_ == pytest.approx(seed_objective(ga_fit.coefficients_, noisy_run), rel=1e-9)
+    # the history is the best of each generation: it never gets worse
+    assert np.all(np.diff(ga_fit.history_) <= 1e-15)
+    assert ga_fit.history_.size == QUICK_GA.generations
+
+
+def test_ga_matches_the_truth_objective_with_coefficients_far_from_it(
+    noisy_run: DecayRun, ga_fit: GeneticSeed
+) -> None:
+    """On a noisy decay the seeds' objective is flat: the truth scores no better than the GA's answer."""
+    at_truth = seed_objective(SWATH_ROLL_T, noisy_run)
+    assert ga_fit.seed_objective_ <= at_truth
+    assert at_truth <= ga_fit.seed_objective_ * 1.02
+    # ... yet the GA's linear damping is several times the truth (gyro noise biases the one-step fit)
+    assert ga_fit.coefficients_["b1"] > 3 * SWATH_ROLL_T["b1"]
+
+
+def test_output_error_recovers_the_truth_better_than_the_ga(noisy_run: DecayRun, ga_fit: GeneticSeed) -> None:
+    oe = OutputError("seed001-eq1").fit(noisy_run)
+    for term in ("b1", "c1", "c3"):
+        truth = SWATH_ROLL_T[term]
+        assert abs(oe.coefficients_[term] - truth) < abs(ga_fit.coefficients_[term] - truth), term
+    assert oe.r2_angle_ > 0.99 > ga_fit.r2_angle_
+
+
+def test_ga_recovers_the_linear_terms_on_a_clean_gyro() -> None:
+    """With little gyro noise the seeds' method works: damping and stiffness come back near the truth."""
+    run = swath_decay(angle_noise=1e-4, rate_noise=1e-4)
+    fit = GeneticSeed("seed001-eq1", settings=QUICK_GA).fit(run)
+    assert fit.coefficients_["c1"] == pytest.approx(SWATH_ROLL_T["c1"], rel=0.02)
+    assert fit.coefficients_["b1"] == pytest.approx(SWATH_ROLL_T["b1"], abs=0.1)
+    assert fit.r2_angle_ > 0.95
+
+
+def test_swarm_reaches_the_best_objective_in_the_box(noisy_run: DecayRun) -> None:
+    fit = SwarmSeed("seed001-eq1", settings=SwarmSettings(population=200, generations=60)).fit(noisy_run)
+    assert fit.seed_objective_ <= box_optimum(noisy_run, "seed001-eq1") * (1 + 1e-3)
+    assert set(fit.seed_variables_) == {"I", "N", "W", "x", "C1", "C2", "C3"}
+
+
+def test_fit_is_reproducible_and_reports_progress(noisy_run: DecayRun) -> None:
+    calls: list[tuple[int, int]] = []
+    settings = GeneticSettings(population=40, generations=12)
+    first = GeneticSeed(
+        "b1,c1", settings=settings, random_state=7, progress=lambda d, n: calls.append((d, n))
+    )
+    second = GeneticSeed("b1,c1", settings=settings, random_state=7)
+    assert first.fit(noisy_run).coefficients_ == second.fit(noisy_run).coefficients_
+    assert calls[-1] == (12, 12) and len(calls) == 12
+
+
+def test_each_alias_defaults_to_its_papers_settings() -> None:
+    """Seed 002 ran a population of 400 with crossover 0.7; seed 000 has no PSO, so seed 001's is used."""
+    assert GeneticSeed("seed002-eq1")._resolved_settings("seed002") == GeneticSettings(400, 2000, 0.7, 0.15)
+    assert GeneticSeed("seed000-eq1")._resolved_settings("seed000") == GeneticSettings(200, 2000, 0.8, 0.15)
+    assert SwarmSeed("seed000-eq1")._resolved_settings("seed000") == SwarmSettings(200, 1000, 0.15)
+
+
+@pytest.mark.parametrize(
+    ("estimator", "message"),
+    [
+        (GeneticSeed("b1,c1,fc", settings=QUICK_GA), "search only"),
+        (GeneticSeed("b1,c1", settings="seed009"), "no GeneticSeed settings"),
+        (SwarmSeed("b1,c1", settings=QUICK_GA), "takes SwarmSettings"),
+        (GeneticSeed("b1,zz", settings=QUICK_GA), "unknown model term"),
+    ],
+)
+def test_bad_settings_are_input_errors(noisy_run: DecayRun, estimator: GeneticSeed, message: str) -> None:
+    with pytest.raises(InputError, match=message):
+        estimator.fit(noisy_run)
+
+
+def test_no_runs_is_an_input_error() -> None:
+    with pytest.raises(BadIdentificationInput):
+        GeneticSeed("b1,c1", settings=QUICK_GA).fit([])
