@@ -383,7 +383,9 @@ class OutputError:
         self.nrmse_ = math.sqrt(ss_res / all_angle.size) / float(np.ptp(all_angle))
         self.n_obs_ = n_obs
         self.bic_ = log_lik_terms + n_free * math.log(n_obs)
-        self.seed_objective_ = self._seed_objective()
+        self.seed_objective_ = seed_objective(
+            self.terms_, theta, self.runs_, self.offsets_, self._inputs, self.friction_eps
+        )
         self.warnings_ = []
         if self.compute_diagnostics:
             self.warnings_ = coefficient_warnings(self.terms_, theta, std, self.correlation_)
@@ -393,23 +395,6 @@ class OutputError:
                         warning = whiteness_warning(run.name, output, *residual_whiteness(resid[output]))
                         if warning:
                             self.warnings_.append(warning)
-
-    def _seed_objective(self) -> float:
-        """RMS of the one-step-ahead predicted rate (seed 000 eq. 4.5-4.6), rad/s.
-
-        As in the seeds' software (and ``ident.seed_methods``): one Euler step from
-        the measured state at k predicts the rate at k+1; the measured rate is the
-        gyro, or the angle differentiated when there is none. The angle is taken
-        relative to the fitted offset, the model's equilibrium.
-        """
-        theta = np.array(list(self.coefficients_.values()))
-        errors = []
-        for r, run in enumerate(self.runs_):
-            x = run.angle - self.offsets_[r]
-            v = run.rate if run.rate is not None else np.gradient(run.angle, run.t)
-            acc = -term_matrix(self._codes, x[:-1], v[:-1], self._inputs[r][:-1], self.friction_eps) @ theta
-            errors.append(v[1:] - (v[:-1] + np.diff(run.t) * acc))
-        return _rms(np.concatenate(errors))
 
     def predict(
         self,
@@ -432,6 +417,32 @@ class OutputError:
         gain = getattr(self, "gain_", 1.0)
         lag = getattr(self, "lag_s_", 0.0)
         return gain * (x - lag * v) + off, v + getattr(self, "gyro_bias_", 0.0)
+
+
+def seed_objective(
+    terms: Sequence[str],
+    theta: np.ndarray,
+    runs: Sequence[DecayRun],
+    offsets: Sequence[float],
+    inputs: Sequence[np.ndarray] | None = None,
+    friction_eps: float = 1e-3,
+) -> float:
+    """RMS of the one-step-ahead predicted rate (seed 000 eq. 4.5-4.6), rad/s.
+
+    As in the seeds' software (and ``ident.seed_methods``): one Euler step from
+    the measured state at k predicts the rate at k+1; the measured rate is the
+    gyro, or the angle differentiated when there is none. The angle is taken
+    relative to the fitted offset, the model's equilibrium.
+    """
+    codes = term_codes(terms)
+    errors = []
+    for r, (run, offset) in enumerate(zip(runs, offsets, strict=True)):
+        x = run.angle - offset
+        v = run.rate if run.rate is not None else np.gradient(run.angle, run.t)
+        u = np.zeros_like(run.t) if inputs is None else inputs[r]
+        acc = -term_matrix(codes, x[:-1], v[:-1], u[:-1], friction_eps) @ theta
+        errors.append(v[1:] - (v[:-1] + np.diff(run.t) * acc))
+    return _rms(np.concatenate(errors))
 
 
 def _rms(a: np.ndarray) -> float:

@@ -24,9 +24,9 @@ def estimate_period(t: np.ndarray, angle: np.ndarray) -> float:
     half period. Raises when the record does not oscillate at least once.
     """
     crossings = zero_crossings(angle - np.median(angle[angle.size // 2 :]))
-    if crossings.size < 3:
+    if crossings.size < 2:
         raise BadIdentificationInput(
-            "the record does not oscillate (fewer than three zero crossings): no decay to identify"
+            "the record does not oscillate (fewer than two zero crossings): no decay to identify"
         )
     half_periods = np.diff(t[crossings])
     return float(2.0 * np.median(half_periods))

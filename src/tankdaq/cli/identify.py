@@ -1,0 +1,157 @@
+"""``tankdaq identify``: damping and restoring coefficients from decay recordings or CSV files."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from ..errors import InputError
+from ..records import DecayRun
+from .app import app, err_console, handles_errors, parse_draft_option
+
+
+def _progress() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+    )
+
+
+def load_runs(
+    inputs: list[Path],
+    axis: str,
+    time_col: str,
+    angle_col: str,
+    rate_col: str | None,
+    angle_unit: str,
+    keep_all: bool,
+    skip_half_cycles: int,
+) -> list[DecayRun]:
+    """Decay runs from every input: MCAP recordings through the store reader, anything else as CSV."""
+    from ..store.csv_import import read_csv_runs
+
+    runs: list[DecayRun] = []
+    for path in inputs:
+        if path.suffix.lower() == ".mcap":
+            try:
+                from ..store.reader import read_decay_runs
+            except ImportError:
+                raise InputError(f"{path}: reading MCAP recordings is not available in this build") from None
+            runs.extend(read_decay_runs(path, axis))
+        else:
+            runs.extend(
+                read_csv_runs(
+                    path,
+                    time_col=time_col,
+                    angle_col=angle_col,
+                    rate_col=rate_col,
+                    angle_unit=angle_unit,
+                    axis=axis,
+                    keep_all=keep_all,
+                    skip_half_cycles=skip_half_cycles,
+                )
+            )
+    return runs
+
+
+def _json_default(value: object) -> object:
+    """NaN/inf become null so the output stays valid JSON."""
+    return None if isinstance(value, float) and not math.isfinite(value) else str(value)
+
+
+def _clean(value: object) -> object:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    return value
+
+
+@app.command("identify")
+@handles_errors
+def identify_command(
+    inputs: Annotated[
+        list[Path], typer.Argument(help="Decay recordings (.mcap) or CSV files, one decay each.")
+    ],
+    axis: str = typer.Option("roll", "--axis", help="roll or pitch."),
+    model: str = typer.Option(
+        "ittc-quadratic-restoring", "--model", help="Terms (b1,b2,c1,c3) or an alias (docs/models.md)."
+    ),
+    method: str = typer.Option("oe", "--method", help="oe (output error), ee (equation error), ..."),
+    compare: bool = typer.Option(
+        False, "--compare", help="Fit every seed formula and ITTC form; print the table."
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
+    time_col: str = typer.Option("time_s", "--time-col", help="CSV time column (s)."),
+    angle_col: str = typer.Option("angle_deg", "--angle-col", help="CSV angle column."),
+    rate_col: str = typer.Option("rate_deg_s", "--rate-col", help="CSV rate column (ignored when absent)."),
+    angle_unit: str = typer.Option("deg", "--angle-unit", help="Unit of the CSV angle and rate: deg or rad."),
+    keep_all: bool = typer.Option(False, "--keep-all", help="Do not cut the CSV record at the release."),
+    skip_half_cycles: int = typer.Option(
+        0, "--skip-half-cycles", min=0, help="Half-cycles to drop after it."
+    ),
+    bootstrap: int = typer.Option(
+        0, "--bootstrap", min=0, help="Moving-block bootstrap replicas for intervals."
+    ),
+    hull: str = typer.Option(None, "--hull", help="Hull config for dimensional results."),
+    draft: float = typer.Option(
+        "T", "--draft", parser=parse_draft_option, help="Draft with --hull: 0.9T, T, 1.1T."
+    ),
+) -> None:
+    """Identify the decay equation's coefficients from free-decay records."""
+    from ..config import load_hull
+    from ..ident.estimators import make_estimator
+    from ..ident.models import resolve_model
+    from ..ident.report import compare_models, compare_text, summarize, text_report
+    from ..ident.uncertainty import moving_block_bootstrap
+
+    if axis not in ("roll", "pitch"):
+        raise InputError(f"axis {axis!r} not understood: use roll or pitch")
+    hull_config = load_hull(hull) if hull else None
+    terms = resolve_model(model)
+    runs = load_runs(inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles)
+
+    if compare:
+        from ..ident.models import COMPARE_MODELS
+
+        with _progress() as progress:
+            task = progress.add_task("fitting models", total=len(COMPARE_MODELS))
+            rows = compare_models(
+                runs, COMPARE_MODELS, method, lambda name: progress.update(task, advance=1, description=name)
+            )
+            progress.update(task, completed=len(COMPARE_MODELS))
+        if as_json:
+            typer.echo(json.dumps(_clean({"compare": rows}), default=_json_default))
+        else:
+            typer.echo(compare_text(rows))
+        return
+
+    estimator = make_estimator(method, terms)
+    with _progress() as progress:
+        task = progress.add_task(f"fitting {method}", total=1 + bootstrap)
+        estimator.fit(runs)
+        progress.update(task, advance=1)
+        interval_method = None
+        if bootstrap:
+            if not hasattr(estimator, "clone"):
+                raise InputError(f"--bootstrap works with --method oe, not {method}")
+            spread = moving_block_bootstrap(
+                estimator, bootstrap, progress=lambda done: progress.update(task, completed=1 + done)
+            )
+            estimator.std_, estimator.ci95_ = spread.std, spread.ci95
+            interval_method = f"{spread.method}, {bootstrap} replicas"
+    summary = summarize(estimator, runs, method, hull_config, draft, interval_method)
+    if as_json:
+        typer.echo(json.dumps(_clean(summary), default=_json_default))
+    else:
+        typer.echo(text_report(summary))

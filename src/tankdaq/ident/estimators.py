@@ -1,0 +1,36 @@
+"""The estimators by method name, so the CLI dispatches through a table others can extend.
+
+``oe`` (output error, the default) and ``ee`` (equation error) live here; the
+seeds' GA/PSO searches register themselves with ``register_estimator``. A
+factory takes the model terms and keyword settings and returns an unfitted
+estimator with ``fit(runs) -> self`` and at least ``terms_``,
+``coefficients_``, ``std_``, ``ci95_``, ``offsets_`` and ``initial_states_``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from ..errors import InputError
+from .equation_error import EquationError
+from .output_error import OutputError
+
+EstimatorFactory = Callable[..., Any]
+
+ESTIMATORS: dict[str, EstimatorFactory] = {"oe": OutputError, "ee": EquationError}
+
+
+def register_estimator(name: str, factory: EstimatorFactory) -> None:
+    """Make ``--method NAME`` (and ``make_estimator``) build ``factory(terms, **settings)``."""
+    ESTIMATORS[name] = factory
+
+
+def make_estimator(method: str, terms: str | Sequence[str], **settings: Any) -> Any:
+    """An unfitted estimator for a method name; unknown names list the known ones."""
+    if method not in ESTIMATORS:
+        raise InputError(f"unknown method {method!r}; known: {', '.join(ESTIMATORS)}")
+    return ESTIMATORS[method](terms, **settings)
+
+
+__all__ = ["ESTIMATORS", "EquationError", "OutputError", "make_estimator", "register_estimator"]

@@ -1,0 +1,280 @@
+"""A fitted decay as people read it: one JSON-ready summary, a text report, and the model-selection table.
+
+Works for any estimator from ``ident.estimators`` (output error, equation
+error, the seeds' searches): what an estimator does not provide itself (angle
+R^2, seed objective) is computed here from its coefficients, initial states and
+offsets, so every method is scored the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from ..records import DecayRun
+from .derived import (
+    amplitude_table,
+    damping_ratio,
+    dimensional,
+    extinction_curve,
+    natural_period,
+    tested_amplitudes_deg,
+)
+from .estimators import make_estimator
+from .kernels import TERM_REGISTRY, simulate, substeps, term_codes
+from .models import MODEL_ALIASES, model_name
+from .output_error import OutputError, seed_objective
+
+
+def predicted_angles(estimator: Any, runs: Sequence[DecayRun]) -> list[np.ndarray]:
+    """Each run's angle as the fitted model simulates it from the fitted initial state and offset."""
+    if isinstance(estimator, OutputError):
+        return [estimator.predict(run, run_index=r)[0] for r, run in enumerate(runs)]
+    terms = estimator.terms_
+    theta = np.array([estimator.coefficients_[k] for k in terms])
+    out = []
+    for run, (angle0, rate0), offset in zip(runs, estimator.initial_states_, estimator.offsets_, strict=True):
+        n_sub = substeps(float(np.max(np.diff(run.t))), theta, terms, float(np.ptp(run.angle)))
+        x, _ = simulate(run.t, angle0, rate0, theta, term_codes(terms), np.zeros_like(run.t), 1e-3, n_sub)
+        out.append(x + offset)
+    return out
+
+
+def _r2(measured: np.ndarray, predicted: np.ndarray) -> float:
+    return float(1.0 - np.sum((measured - predicted) ** 2) / np.sum((measured - measured.mean()) ** 2))
+
+
+def covariance_of(estimator: Any) -> np.ndarray:
+    """The coefficient covariance, or a diagonal one from ``std_`` for estimators that give only that."""
+    cov = getattr(estimator, "covariance_", None)
+    if cov is not None:
+        return cov
+    return np.diag([estimator.std_.get(k, 0.0) ** 2 for k in estimator.terms_])
+
+
+def summarize(
+    estimator: Any,
+    runs: Sequence[DecayRun],
+    method: str = "oe",
+    hull: Any = None,
+    draft: float = 1.0,
+    interval_method: str | None = None,
+) -> dict[str, Any]:
+    """The one JSON object ``tankdaq identify --json`` prints (angles in deg at this edge)."""
+    terms = estimator.terms_
+    coefficients = dict(estimator.coefficients_)
+    predicted = predicted_angles(estimator, runs)
+    all_measured = np.concatenate([run.angle for run in runs])
+    all_predicted = np.concatenate(predicted)
+    rms = math.sqrt(float(np.mean((all_measured - all_predicted) ** 2)))
+    theta = np.array([coefficients[k] for k in terms])
+    seed_obj = getattr(estimator, "seed_objective_", None)
+    if seed_obj is None:
+        seed_obj = seed_objective(terms, theta, runs, estimator.offsets_)
+    amplitudes = tested_amplitudes_deg(runs, estimator.offsets_)
+    table = amplitude_table(coefficients, covariance_of(estimator), amplitudes)
+    extinction = extinction_curve(runs, estimator.offsets_, coefficients)
+    summary: dict[str, Any] = {
+        "model": {"name": model_name(terms), "terms": list(terms)},
+        "method": method,
+        "axis": runs[0].axis,
+        "coefficients": {
+            k: {
+                "value": coefficients[k],
+                "std": estimator.std_[k],
+                "ci95": list(estimator.ci95_[k]),
+                "unit": TERM_REGISTRY[k].unit,
+            }
+            for k in terms
+        },
+        "intervals": interval_method or getattr(estimator, "cov_type", "classic"),
+        "offset_deg": [math.degrees(o) for o in estimator.offsets_],
+        "natural_period_s": natural_period(coefficients),
+        "damping_ratio": damping_ratio(coefficients),
+        "seed_objective": seed_obj,
+        "r2_angle": _r2(all_measured, all_predicted),
+        "nrmse": rms / float(np.ptp(all_measured)),
+        "bic": getattr(estimator, "bic_", None),
+        "runs": [
+            {
+                "file": str(run.meta.get("file", run.name)),
+                "name": run.name,
+                "samples": int(run.t.size),
+                "initial_angle_deg": math.degrees(float(run.angle[0] - offset)),
+                "offset_deg": math.degrees(offset),
+                "r2_angle": _r2(run.angle, pred),
+            }
+            for run, pred, offset in zip(runs, predicted, estimator.offsets_, strict=True)
+        ],
+        "b_eq": [{"amplitude_deg": p.amplitude_deg, "value_per_s": p.b_eq, "std": p.b_eq_std} for p in table],
+        "bertin_n": [
+            {"amplitude_deg": p.amplitude_deg, "value_per_deg": p.bertin_n_per_deg, "std": p.bertin_n_std}
+            for p in table
+        ],
+        "extinction": {
+            "mean_amplitude_deg": np.degrees(extinction.mean_amplitude).tolist(),
+            "decrement_deg": np.degrees(extinction.decrement).tolist(),
+        },
+        "warnings": list(getattr(estimator, "warnings_", [])),
+        "elapsed_s": float(getattr(estimator, "elapsed_s_", math.nan)),
+    }
+    if hull is not None:
+        summary["dimensional"] = dimensional_summary(coefficients, hull, runs[0].axis, draft)
+    return summary
+
+
+def dimensional_summary(coefficients: dict[str, float], hull: Any, axis: str, draft: float) -> dict[str, Any]:
+    """Dimensional coefficients from the hull's displacement and GM (GM_L for pitch).
+
+    The displacement is scaled with the draft factor (wall-sided approximation):
+    the configs give it at the design draft only.
+    """
+    axis_model = hull.axis_model(axis)
+    if hull.displacement_kg is None or axis_model.gm_m is None:
+        return {"note": f"hull {hull.name!r} lacks displacement_kg or the {axis} gm_m"}
+    displacement = hull.displacement_kg * draft
+    dry = hull.dimensions.get(f"dry_inertia_{axis}_kg_m2")
+    result = dimensional(coefficients, displacement, axis_model.gm_m, dry)
+    return {
+        "hull": hull.name,
+        "draft_factor": draft,
+        "displacement_kg": displacement,
+        "gm_m": axis_model.gm_m,
+        "total_inertia_kg_m2": result.total_inertia_kg_m2,
+        "coefficients_si": result.coefficients,
+        "added_inertia_fraction": result.added_inertia_fraction,
+        "note": "displacement scaled with the draft factor (wall-sided approximation); I = Delta g GM / c1",
+    }
+
+
+def equation_text(coefficients: dict[str, float], axis: str = "roll") -> str:
+    """The identified equation written out, e.g. ``phi'' + 0.0144 phi' + ... = 0``."""
+    x = "phi" if axis == "roll" else "theta"
+    forms = {
+        "b1": f"{x}'",
+        "b2": f"|{x}'|{x}'",
+        "b3": f"{x}'^3",
+        "c1": x,
+        "c2": f"{x}^2",
+        "c3": f"{x}^3",
+        "s1": f"sin({x})",
+        "s2": f"sin({x})^2",
+        "s3": f"sin({x})^3",
+        "fc": f"tanh({x}'/eps)",
+        "ku": "u(t)",
+    }
+    text = f"{x}''"
+    for k, v in coefficients.items():
+        text += f" {'-' if v < 0 else '+'} {abs(v):.5g} {forms[k]}"
+    return text + " = 0"
+
+
+def text_report(summary: dict[str, Any]) -> str:
+    """A readable report of ``summarize``'s output."""
+    lines = [
+        f"model {summary['model']['name']} ({', '.join(summary['model']['terms'])}), "
+        f"method {summary['method']}, "
+        f"{len(summary['runs'])} run(s), {summary['axis']}",
+        "",
+        "  " + equation_text({k: v["value"] for k, v in summary["coefficients"].items()}, summary["axis"]),
+        "",
+        f"  {'term':<5}{'value':>13}{'std':>12}{'95 % interval':>28}  unit",
+    ]
+    for k, c in summary["coefficients"].items():
+        lo, hi = c["ci95"]
+        lines.append(
+            f"  {k:<5}{c['value']:>13.6g}{c['std']:>12.3g}   [{lo:>11.5g}, {hi:>11.5g}]  {c['unit']}"
+        )
+    lines += [
+        f"  (intervals: {summary['intervals']})",
+        "",
+        f"  natural period {summary['natural_period_s']:.4f} s, damping ratio {summary['damping_ratio']:.4f}",
+        f"  angle R^2 {summary['r2_angle']:.5f}, NRMSE {summary['nrmse']:.4f}, "
+        f"seed objective {summary['seed_objective']:.4g} rad/s",
+        "",
+        f"  {'amplitude':>10}{'B_eq/I (1/s)':>16}{'std':>11}{'Bertin N (1/deg)':>19}",
+    ]
+    for b, n in zip(summary["b_eq"], summary["bertin_n"], strict=True):
+        lines.append(
+            f"  {b['amplitude_deg']:>8.2f} deg{b['value_per_s']:>14.5g}{b['std']:>11.2g}"
+            f"{n['value_per_deg']:>19.4g}"
+        )
+    lines.append("")
+    for run in summary["runs"]:
+        lines.append(
+            f"  run {run['name']}: start {run['initial_angle_deg']:+.2f} deg, "
+            f"offset {run['offset_deg']:+.4f} deg, "
+            f"R^2 {run['r2_angle']:.5f}, {run['samples']} samples"
+        )
+    if "dimensional" in summary and "total_inertia_kg_m2" in summary["dimensional"]:
+        dim = summary["dimensional"]
+        lines.append(f"  total inertia {dim['total_inertia_kg_m2']:.4g} kg m^2 ({dim['note']})")
+        lines.append("  " + ", ".join(f"{k.upper()} = {v:.4g}" for k, v in dim["coefficients_si"].items()))
+    for warning in summary["warnings"]:
+        lines.append(f"  warning: {warning}")
+    return "\n".join(lines)
+
+
+def compare_models(
+    runs: Sequence[DecayRun],
+    models: Sequence[str] = tuple(MODEL_ALIASES),
+    method: str = "oe",
+    progress: Callable[[str], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Fit every model; rows with seed objective, R^2, BIC and (several runs) leave-one-run-out error.
+
+    Aliases with identical term sets are fitted once and listed together. The
+    held-out error is the angle RMS (deg) on each left-out run with the
+    coefficients fitted on the others and only its initial state and offset free.
+    """
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for name in models:
+        groups.setdefault(
+            MODEL_ALIASES[name].terms if name in MODEL_ALIASES else tuple(name.split(",")), []
+        ).append(name)
+    rows = []
+    for terms, names in groups.items():
+        if progress is not None:
+            progress(names[0])
+        estimator = make_estimator(method, terms).fit(runs)
+        summary = summarize(estimator, runs, method)
+        rows.append(
+            {
+                "models": names,
+                "terms": list(terms),
+                "n_terms": len(terms),
+                "seed_objective": summary["seed_objective"],
+                "r2_angle": summary["r2_angle"],
+                "bic": summary["bic"],
+                "held_out_rms_deg": held_out_rms_deg(terms, runs) if len(runs) > 1 else None,
+            }
+        )
+    return sorted(rows, key=lambda row: row["bic"] if row["bic"] is not None else -row["r2_angle"])
+
+
+def held_out_rms_deg(terms: Sequence[str], runs: Sequence[DecayRun]) -> float:
+    """Leave-one-run-out angle RMS (deg): coefficients from the other runs, the left-out run's state free."""
+    squares, count = 0.0, 0
+    for i, run in enumerate(runs):
+        others = [r for j, r in enumerate(runs) if j != i]
+        coefficients = OutputError(terms, compute_diagnostics=False).fit(others).coefficients_
+        held = OutputError(terms, compute_diagnostics=False).fit([run], fixed_coefficients=coefficients)
+        squares += float(np.sum(held.residuals_[0]["angle"] ** 2))
+        count += run.t.size
+    return math.degrees(math.sqrt(squares / count))
+
+
+def compare_text(rows: list[dict[str, Any]]) -> str:
+    """The model-selection table, best (lowest BIC) first."""
+    lines = [f"  {'model':<42}{'k':>3}{'seed obj':>11}{'R^2 angle':>11}{'BIC':>13}{'held-out deg':>14}"]
+    for row in rows:
+        held = f"{row['held_out_rms_deg']:.4f}" if row["held_out_rms_deg"] is not None else "-"
+        bic = f"{row['bic']:.1f}" if row["bic"] is not None else "-"
+        lines.append(
+            f"  {' = '.join(row['models']):<42}{row['n_terms']:>3}{row['seed_objective']:>11.4g}"
+            f"{row['r2_angle']:>11.6f}{bic:>13}{held:>14}"
+        )
+    return "\n".join(lines)
