@@ -23,12 +23,17 @@ def recover_command(
 ) -> None:
     """Rebuild a truncated recording. Exit 0: nothing lost; 3: damaged tail dropped; 1: nothing recovered."""
     columns = (TextColumn("recovering"), BarColumn(), DownloadColumn(), TimeRemainingColumn())
-    with Progress(*columns, console=err_console, transient=True) as progress:
-        task = progress.add_task("recover", total=None)
+    progress = Progress(*columns, console=err_console, transient=True)
+    task = progress.add_task("recover", total=None)
 
-        def advance(done: int, total: int) -> None:
-            progress.update(task, completed=done, total=total)
+    def advance(done: int, total: int) -> None:
+        progress.start()  # only once reading has begun: a refused file gets its error line alone
+        progress.update(task, completed=done, total=total)
 
+    try:
         report = recover(file, out, progress=advance)
+    finally:
+        if progress.live.is_started:
+            progress.stop()
     typer.echo(report.summary())
     raise typer.Exit(report.exit_code)
