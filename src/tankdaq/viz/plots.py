@@ -1,0 +1,118 @@
+"""PNG figures for reports: a decay with its model and residual, and series with error bars.
+
+Figures are built on ``matplotlib.figure.Figure`` with the Agg canvas, never
+pyplot, so they hold no global state and work on a headless lab PC or in
+threads. Inputs are SI (rad, rad/s); degrees appear only on the axes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+import matplotlib as mpl
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from ..errors import RecordingError
+
+MEASURED_COLOR = "#1f77b4"
+MODEL_COLOR = "#d62728"
+STYLE = {
+    "axes.grid": True,
+    "grid.alpha": 0.3,
+    "axes.spines.top": False,
+    "axes.spines.right": False,
+    "font.size": 10,
+    "axes.titlesize": 11,
+    "legend.frameon": False,
+    "lines.linewidth": 1.2,
+}
+
+
+@contextmanager
+def report_style() -> Iterator[None]:
+    """The one look of every tankdaq figure (applied while the figure is built)."""
+    with mpl.rc_context(STYLE):
+        yield
+
+
+def _figure(
+    rows: int, height_ratios: Sequence[float] | None = None, sharex: bool = True
+) -> tuple[Figure, list]:
+    fig = Figure(figsize=(8.0, 2.2 + 2.0 * rows), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, 1, sharex=sharex, squeeze=False, height_ratios=height_ratios)[:, 0]
+    return fig, list(axes)
+
+
+def decay_fit_figure(
+    t_s: np.ndarray,
+    angle_rad: np.ndarray,
+    model_angle_rad: np.ndarray | None = None,
+    *,
+    axis: str = "roll",
+    title: str | None = None,
+    model_label: str = "model",
+) -> Figure:
+    """Measured decay with the model drawn over it and, with a model, the residual underneath."""
+    t_s = np.asarray(t_s, dtype=float)
+    measured_deg = np.degrees(np.asarray(angle_rad, dtype=float))
+    with report_style():
+        fig, axes = _figure(
+            2 if model_angle_rad is not None else 1, [3, 1] if model_angle_rad is not None else None
+        )
+        top = axes[0]
+        top.plot(t_s, measured_deg, color=MEASURED_COLOR, label="measured")
+        top.set_ylabel(f"{axis} angle (deg)")
+        if model_angle_rad is not None:
+            model_deg = np.degrees(np.asarray(model_angle_rad, dtype=float))
+            top.plot(t_s, model_deg, color=MODEL_COLOR, linestyle="--", label=model_label)
+            residual = axes[1]
+            residual.plot(t_s, measured_deg - model_deg, color=MEASURED_COLOR, linewidth=0.8)
+            residual.axhline(0.0, color="0.4", linewidth=0.6)
+            residual.set_ylabel("residual (deg)")
+        axes[-1].set_xlabel("time (s)")
+        top.legend(loc="upper right")
+        if title:
+            top.set_title(title)
+    return fig
+
+
+def series_figure(
+    x: np.ndarray,
+    series: Mapping[str, tuple[np.ndarray, np.ndarray | None]],
+    *,
+    xlabel: str,
+    ylabel: str,
+    title: str | None = None,
+) -> Figure:
+    """Several named series against one x, each with optional symmetric error bars (``(y, yerr)``).
+
+    Labels must carry their units, e.g. ``xlabel="amplitude (deg)"``.
+    """
+    with report_style():
+        fig, (ax,) = _figure(1)
+        for label, (y, yerr) in series.items():
+            ax.errorbar(x, y, yerr=yerr, marker="o", markersize=4, capsize=3, label=label)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        if len(series) > 1:
+            ax.legend()
+        if title:
+            ax.set_title(title)
+    return fig
+
+
+def save_png(fig: Figure, path: str | Path, dpi: int = 150) -> Path:
+    """Write ``fig`` as PNG (overwriting: a figure is derived, not an archive)."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise RecordingError(f"cannot write {path}: folder {path.parent} does not exist")
+    try:
+        fig.savefig(path, dpi=dpi, format="png")
+    except OSError as exc:
+        raise RecordingError(f"cannot write {path}: {exc.strerror or exc}") from None
+    return path
