@@ -1,0 +1,502 @@
+"""Release detection: when did the engineer let go, and when has the model come to rest?
+
+A streaming state machine on the samples of one axis:
+
+    still -> tilted -> held (away from rest, rate small) -> leaving (moving back fast)
+          -> released (confirmed once the model swings through its rest angle) -> settled
+
+Two questions are kept apart. *Whether* the model was released is decided late and safely:
+the angle must swing through the still-water angle, which a hand putting the model back does
+not do, and hand tremor cannot. *When* it was released is then found looking back: the release
+is the instant the held-with-tremor motion stops explaining the data and the restoring moment
+takes over, i.e. where the angular acceleration jumps. A piecewise polynomial with a hinge at
+the release (rate continuous, acceleration free to jump) is fitted jointly to angle and rate
+around the departure, and the hinge is scanned over the candidate instants. The event reports
+the first sample of free motion, not the sample at which the detector became sure.
+
+Everything is vectorised per state (the machine jumps from transition to transition through
+numpy searches), so an hour of samples is scanned in about a second, offline or fed in blocks.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+from ..samples import AXIS_FIELDS
+
+STILL, TILTED, HELD, LEAVING, SWUNG, DECAYING = "still", "tilted", "held", "leaving", "swung", "decaying"
+UNKNOWN = "unknown"
+
+
+@dataclass(frozen=True)
+class ReleaseEvent:
+    """Something the detector saw. ``index`` counts samples from the first one fed.
+
+    ``held``: the model is held away from rest (``angle_rad`` the held angle).
+    ``released``: ``index`` is the first sample of free motion, ``release_t`` the estimated
+    instant (between samples), ``angle_rad``/``rate_rad_s`` the initial state.
+    ``put_back``: a hold ended without a release. ``settled``: the amplitude stayed below the
+    threshold for a window (``reason`` "amplitude") or the decay timed out ("timeout");
+    ``settle_s`` is the time from release.
+    Every event also carries ``confirmed_index``: the sample at which the detector decided.
+    """
+
+    kind: str
+    index: int
+    t: float
+    confirmed_index: int
+    angle_rad: float = math.nan
+    rate_rad_s: float = math.nan
+    baseline_rad: float = math.nan
+    release_t: float = math.nan
+    settle_s: float = math.nan
+    reason: str = ""
+
+
+def _first_sustained(mask: np.ndarray, length: int, start: int) -> int | None:
+    """First index j >= start such that mask[j-length+1 .. j] is all true (None if none yet)."""
+    if length <= 1:
+        hits = np.flatnonzero(mask[start:])
+        return int(start + hits[0]) if hits.size else None
+    counts = np.concatenate(([0], np.cumsum(mask, dtype=np.int64)))
+    ends = np.arange(max(start, length - 1), mask.size)
+    full = counts[ends + 1] - counts[ends + 1 - length] == length
+    hits = np.flatnonzero(full)
+    return int(ends[hits[0]]) if hits.size else None
+
+
+def _first(mask: np.ndarray, start: int) -> int | None:
+    hits = np.flatnonzero(mask[start:])
+    return int(start + hits[0]) if hits.size else None
+
+
+def _trailing_mean(values: np.ndarray, width: int) -> np.ndarray:
+    """Causal moving average (shorter at the start)."""
+    sums = np.cumsum(np.concatenate(([0.0], values)))
+    idx = np.arange(values.size)
+    lo = np.maximum(idx + 1 - width, 0)
+    return (sums[idx + 1] - sums[lo]) / (idx + 1 - lo)
+
+
+class ReleaseDetector:
+    """Streaming release/settle detector for one axis (scikit-learn style settings, results in ``_``).
+
+    Angles and rates in the samples are rad and rad/s; thresholds are given in degrees because
+    people set them. ``settle_deg`` 0.5 follows ITTC (record until the amplitude is below 0.5 deg).
+    """
+
+    def __init__(
+        self,
+        axis: str = "roll",
+        rate_hz: float | None = None,
+        tilt_min_deg: float = 1.5,
+        hold_rate_max_deg_s: float = 3.0,
+        hold_min_s: float = 0.5,
+        leave_rate_deg_s: float = 3.0,
+        swing_through_deg: float = 0.3,
+        confirm_timeout_s: float = 5.0,
+        settle_deg: float = 0.5,
+        settle_window_s: float = 3.0,
+        decay_timeout_s: float = 120.0,
+        smooth_s: float = 0.05,
+        fit_before_s: float = 0.6,
+        scan_back_s: float = 0.4,
+        fit_quarters: float = 3.0,
+    ) -> None:
+        if axis not in AXIS_FIELDS:
+            raise InputError(f"axis {axis!r} not understood; use {' or '.join(AXIS_FIELDS)} (or auto)")
+        self.axis = axis
+        self.rate_hz = rate_hz
+        self.tilt_min_deg = tilt_min_deg
+        self.hold_rate_max_deg_s = hold_rate_max_deg_s
+        self.hold_min_s = hold_min_s
+        self.leave_rate_deg_s = leave_rate_deg_s
+        self.swing_through_deg = swing_through_deg
+        self.confirm_timeout_s = confirm_timeout_s
+        self.settle_deg = settle_deg
+        self.settle_window_s = settle_window_s
+        self.decay_timeout_s = decay_timeout_s
+        self.smooth_s = smooth_s
+        self.fit_before_s = fit_before_s
+        self.scan_back_s = scan_back_s
+        self.fit_quarters = fit_quarters
+        self.reset()
+
+    def reset(self) -> ReleaseDetector:
+        """Forget everything fed so far."""
+        self.state_ = UNKNOWN
+        self.events_: list[ReleaseEvent] = []
+        self.baseline_rad_: float = math.nan
+        self.samples_seen_ = 0
+        self._t = np.empty(0)
+        self._x = np.empty(0)
+        self._r = np.empty(0)
+        self._first = 0  # global index of the buffer's first sample
+        self._pos = 0  # global index of the next sample to examine
+        self._hold_angle = math.nan
+        self._leave_index = 0
+        self._swung_index = 0
+        self._release: ReleaseEvent | None = None
+        return self
+
+    # ---- feeding -------------------------------------------------------------------------------------------
+
+    def feed(self, samples: np.ndarray) -> list[ReleaseEvent]:
+        """Feed a block of ``SAMPLE_DTYPE`` samples; return the events it completed."""
+        angle_field, rate_field = AXIS_FIELDS[self.axis]
+        return self.feed_arrays(samples["t"], samples[angle_field], samples[rate_field])
+
+    def feed_arrays(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray) -> list[ReleaseEvent]:
+        """Feed device time (s), angle (rad) and rate (rad/s) of the axis; return new events."""
+        t, angle, rate = (np.asarray(a, dtype=float) for a in (t, angle, rate))
+        if not t.shape == angle.shape == rate.shape:
+            raise InputError("time, angle and rate blocks have different lengths")
+        self._t = np.concatenate((self._t, t))
+        self._x = np.concatenate((self._x, angle))
+        self._r = np.concatenate((self._r, rate))
+        self.samples_seen_ += t.size
+        if self.rate_hz is None and self._t.size > 10:
+            self.rate_hz = float(1.0 / np.median(np.diff(self._t)))
+        if self.rate_hz is None:
+            return []
+        before = len(self.events_)
+        steps: dict[str, Callable[[], bool]] = {
+            UNKNOWN: self._step_unknown,
+            STILL: self._step_still,
+            TILTED: self._step_tilted,
+            HELD: self._step_held,
+            LEAVING: self._step_leaving,
+            SWUNG: self._step_swung,
+            DECAYING: self._step_decaying,
+        }
+        self._derive()
+        while steps[self.state_]():
+            pass
+        self._trim()
+        return self.events_[before:]
+
+    def fit(self, samples: np.ndarray) -> ReleaseDetector:
+        """Offline: run over a whole array (from a fresh state); events in ``events_``."""
+        self.reset()
+        self.feed(samples)
+        return self
+
+    # ---- derived signals over the buffer ------------------------------------------------------------------
+
+    def _n(self, seconds: float) -> int:
+        return max(1, round(seconds * float(self.rate_hz or 1.0)))
+
+    def _derive(self) -> None:
+        self._smooth = _trailing_mean(self._r, self._n(self.smooth_s))
+        self._calm = np.abs(self._smooth) < math.radians(self.hold_rate_max_deg_s)
+
+    def _local(self, index: int) -> int:
+        return index - self._first
+
+    def _offset(self) -> np.ndarray:
+        return self._x - self.baseline_rad_
+
+    def _emit(self, kind: str, local: int, confirmed_local: int, **values: float | str) -> ReleaseEvent:
+        event = ReleaseEvent(
+            kind,
+            local + self._first,
+            float(self._t[local]),
+            confirmed_local + self._first,
+            baseline_rad=self.baseline_rad_,
+            **values,
+        )  # type: ignore[arg-type]
+        self.events_.append(event)
+        return event
+
+    def _go(self, state: str, local: int) -> bool:
+        self.state_ = state
+        self._pos = local + self._first
+        return True
+
+    def _wait(self) -> bool:
+        self._pos = self._first + self._t.size
+        return False
+
+    def _trim(self) -> None:
+        """Drop history no state can look back to (the release fit reaches at most a few s back)."""
+        keep_s = max(10.0, self.settle_window_s + 1.0, self.fit_before_s + self.confirm_timeout_s + 1.0)
+        cut = self._t.size - self._n(keep_s)
+        if self.state_ in (LEAVING, SWUNG):
+            cut = min(cut, self._local(self._leave_index) - self._n(self.fit_before_s) - 1)
+        if cut > 0:
+            self._t, self._x, self._r = self._t[cut:], self._x[cut:], self._r[cut:]
+            self._first += cut
+
+    # ---- states -------------------------------------------------------------------------------------------
+
+    def _step_unknown(self) -> bool:
+        """Learn the still-water angle from the first calm stretch (a model held at start: level 0)."""
+        n = self._n(1.0)
+        j = _first_sustained(self._calm, n, self._local(self._pos))
+        if j is None:
+            return self._wait()
+        level = float(np.mean(self._x[j - n + 1 : j + 1]))
+        if abs(level) < math.radians(self.tilt_min_deg):
+            self.baseline_rad_ = level
+            return self._go(STILL, j)
+        self.baseline_rad_ = 0.0
+        self._hold_angle = level
+        self._emit("held", j, j, angle_rad=level)
+        return self._go(HELD, j)
+
+    def _step_still(self) -> bool:
+        j = _first(np.abs(self._offset()) > math.radians(self.tilt_min_deg), self._local(self._pos))
+        return self._wait() if j is None else self._go(TILTED, j)
+
+    def _step_tilted(self) -> bool:
+        n = self._n(self.hold_min_s)
+        away = np.abs(self._offset()) > math.radians(self.tilt_min_deg)
+        start = self._local(self._pos)
+        held = _first_sustained(self._calm & away, n, start)
+        back = _first_sustained(self._calm & ~away, n, start)
+        if held is None and back is None:
+            return self._wait()
+        if back is not None and (held is None or back < held):
+            return self._go(STILL, back)
+        assert held is not None
+        self._hold_angle = float(np.mean(self._x[held - n + 1 : held + 1]))
+        self._emit("held", held, held, angle_rad=self._hold_angle)
+        return self._go(HELD, held)
+
+    def _step_held(self) -> bool:
+        side = math.copysign(1.0, self._hold_angle - self.baseline_rad_)
+        j = _first(side * self._smooth < -math.radians(self.leave_rate_deg_s), self._local(self._pos))
+        if j is None:
+            return self._wait()
+        n = self._n(1.0)
+        self._hold_angle = float(np.mean(self._x[max(0, j - n) : j + 1]))
+        self._leave_index = j + self._first
+        return self._go(LEAVING, j)
+
+    def _step_leaving(self) -> bool:
+        """Released (swung through rest), put back / re-held (calm again), or timed out."""
+        offset = self._offset()
+        side = math.copysign(1.0, self._hold_angle - self.baseline_rad_)
+        start = self._local(self._pos)
+        leave = self._local(self._leave_index)
+        through_rad = max(
+            math.radians(self.swing_through_deg), 0.05 * abs(self._hold_angle - self.baseline_rad_)
+        )
+        swung = _first(side * offset < -through_rad, start)
+        calm = _first_sustained(self._calm, self._n(self.hold_min_s), max(start, leave))
+        timeout = _first(self._t - self._t[leave] > self.confirm_timeout_s, start)
+        found = [j for j in (swung, calm, timeout) if j is not None]
+        if not found:
+            return self._wait()
+        j = min(found)
+        if j == swung:
+            self._swung_index = j + self._first
+            return self._go(SWUNG, j)
+        if abs(offset[j]) > math.radians(self.tilt_min_deg):
+            return self._go(HELD if j == calm else TILTED, j)
+        self._emit("put_back", j, j, angle_rad=self._hold_angle)
+        return self._go(STILL, j)
+
+    def _step_decaying(self) -> bool:
+        assert self._release is not None
+        n = self._n(self.settle_window_s)
+        start = max(self._local(self._pos), self._local(self._release.index) + n - 1)
+        quiet = _first_sustained(np.abs(self._offset()) < math.radians(self.settle_deg), n, start)
+        timeout = _first(self._t - self._release.release_t > self.decay_timeout_s, self._local(self._pos))
+        if quiet is None and timeout is None:
+            return self._wait()
+        if quiet is not None and (timeout is None or quiet <= timeout):
+            settle, confirmed, reason = quiet - n + 1, quiet, "amplitude"
+            self.baseline_rad_ = float(np.mean(self._x[settle : quiet + 1]))
+        else:
+            assert timeout is not None
+            settle, confirmed, reason = timeout, timeout, "timeout"
+        self._emit(
+            "settled",
+            settle,
+            confirmed,
+            release_t=self._release.release_t,
+            settle_s=float(self._t[settle] - self._release.release_t),
+            reason=reason,
+        )
+        self._release = None
+        return self._go(STILL, confirmed)
+
+    # ---- locating the release -----------------------------------------------------------------------------
+
+    def _step_swung(self) -> bool:
+        """Wait for a few quarter cycles of free motion: the decay's own dynamics pin the release down."""
+        leave, swung = self._local(self._leave_index), self._local(self._swung_index)
+        end = leave + round(self.fit_quarters * (swung - leave))
+        if end >= self._t.size:
+            return self._wait()
+        self._release = self._locate_release(leave, end)
+        return self._go(DECAYING, end)
+
+    def _locate_release(self, leave: int, end: int) -> ReleaseEvent:
+        """Find the release instant in two passes; emit the release event.
+
+        Coarse: a hinge in a local polynomial around the departure (where the acceleration jumps).
+        Fine: the held motion before, the decay equation after (integral form, linear in its
+        coefficients, so every candidate instant is one least-squares solve), over several quarter
+        cycles; the instant that explains both best is the release.
+        """
+        lo = max(0, leave - self._n(self.fit_before_s))
+        span = abs(self._hold_angle - self.baseline_rad_)
+        side = math.copysign(1.0, self._hold_angle - self.baseline_rad_)
+        near = _first(side * (self._x - self._hold_angle) < -0.3 * span, leave)
+        near = end if near is None else min(near, end)
+        window = slice(lo, near + 1)
+        hinge = _HingeFit(self._t[window], self._x[window], self._r[window], hold=leave - lo)
+        dt = 1.0 / float(self.rate_hz or 1.0)
+        first = max(lo + 2, leave - self._n(self.scan_back_s))
+        coarse = min((float(self._t[k]) for k in range(first, leave + 1)), key=hinge.sse)
+        window = slice(lo, end + 1)
+        physics = _DecayFit(
+            self._t[window],
+            self._x[window],
+            self._r[window],
+            leave - lo,
+            hold_rad=self._hold_angle,
+            rest_rad=self.baseline_rad_,
+        )
+        earliest = float(self._t[lo + 2])
+        near_tau = min((coarse + dt * j for j in range(-6, 7) if coarse + dt * j > earliest), key=physics.sse)
+        tau = min(
+            (near_tau + dt * j / 4 for j in range(-3, 4) if near_tau + dt * j / 4 > earliest), key=physics.sse
+        )
+        angle0, rate0 = physics.state_at(tau)
+        index = int(np.searchsorted(self._t, tau - 1e-9 * dt))
+        return self._emit("released", index, end, angle_rad=angle0, rate_rad_s=rate0, release_t=tau)
+
+
+class _HingeFit:
+    """Angle and rate around a release as one smooth motion plus a hinge at tau.
+
+    rate(t)  = bias + p0 + p1 u + p2 u^2 + h1 u+ + h2 u+^2 + h3 u+^3,   u = t - tau, u+ = max(u, 0)
+    angle(t) = q0 + p0 u + p1 u^2/2 + p2 u^3/3 + h1 u+^2/2 + h2 u+^3/3 + h3 u+^4/4
+    The smooth part absorbs the hand's slow sway, the hinge the restoring moment that takes over
+    at release; the gyro bias is free. Rows are weighted by each channel's noise, estimated from
+    sample-to-sample differences during the hold.
+    """
+
+    def __init__(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray, hold: int) -> None:
+        self.t, self.angle, self.rate = t, angle, rate
+        held = slice(0, max(hold, 3))
+        self.w_angle = 1.0 / max(float(np.std(np.diff(angle[held]))) / math.sqrt(2), 1e-6)
+        self.w_rate = 1.0 / max(float(np.std(np.diff(rate[held]))) / math.sqrt(2), 1e-5)
+        self.y = np.concatenate((angle * self.w_angle, rate * self.w_rate))
+
+    def _design(self, tau: float) -> np.ndarray:
+        u = self.t - tau
+        up = np.maximum(u, 0.0)
+        zero, one = np.zeros_like(u), np.ones_like(u)
+        angle_cols = [one, zero, u, u**2 / 2, u**3 / 3, up**2 / 2, up**3 / 3, up**4 / 4]
+        rate_cols = [zero, one, one, u, u**2, up, up**2, up**3]
+        return np.vstack(
+            (np.column_stack(angle_cols) * self.w_angle, np.column_stack(rate_cols) * self.w_rate)
+        )
+
+    def _solve(self, tau: float) -> tuple[np.ndarray, float]:
+        design = self._design(tau)
+        coef, *_ = np.linalg.lstsq(design, self.y, rcond=None)
+        residual = self.y - design @ coef
+        return coef, float(residual @ residual)
+
+    def sse(self, tau: float) -> float:
+        return self._solve(tau)[1]
+
+    def state_at(self, tau: float) -> tuple[float, float]:
+        """Fitted angle and angle rate at tau: the initial state of the free decay."""
+        coef, _ = self._solve(tau)
+        return float(coef[0]), float(coef[2])
+
+
+def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: float) -> list[ReleaseEvent]:
+    """Offline: all events in a whole array of samples (``axis='auto'`` picks the tilted axis)."""
+    chosen = pick_axis(samples) if axis == "auto" else axis
+    return ReleaseDetector(axis=chosen, **settings).fit(samples).events_  # type: ignore[arg-type]
+
+
+def pick_axis(samples: np.ndarray) -> str:
+    """The axis that was tilted: the one whose angle spans the widest range (robust percentiles)."""
+    if samples.size == 0:
+        raise InputError("no samples to pick an axis from")
+    spans = {}
+    for axis, (angle_field, _) in AXIS_FIELDS.items():
+        values = samples[angle_field][np.isfinite(samples[angle_field])]
+        spans[axis] = float(np.subtract(*np.percentile(values, [99.5, 0.5]))) if values.size else 0.0
+    return max(spans, key=spans.__getitem__)
+
+
+class _DecayFit:
+    """Held motion before tau, the decay equation after it, jointly on angle and rate.
+
+    After release, x'' = -(k0 + c1 y + c2 y^2 + c3 y^3 + b1 x' + b2 |x'|x' + b3 x'^3), y = x - rest;
+    integrating
+    once (rate rows) and twice (angle rows) from tau with the *measured* signals inside the
+    integrals makes the model linear in (k0, c1, c3, b1, b2). The state at tau is shared with the
+    held polynomial, so the decay must start where the hand left the model.
+    """
+
+    def __init__(
+        self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray, hold: int, hold_rad: float, rest_rad: float
+    ) -> None:
+        self.t = t
+        held = slice(0, max(hold, 3))
+        self.w_angle = 1.0 / max(float(np.std(np.diff(angle[held]))) / math.sqrt(2), 1e-6)
+        self.w_rate = 1.0 / max(float(np.std(np.diff(rate[held]))) / math.sqrt(2), 1e-5)
+        self.y = np.concatenate((angle * self.w_angle, rate * self.w_rate))
+        from_rest = angle - rest_rad
+        # the canonical polynomial terms c1, c2, c3, b2, b3 (b1 below)
+        self.integrands = [from_rest, from_rest**2, from_rest**3, np.abs(rate) * rate, rate**3]
+        self.from_hold = angle - hold_rad  # b1 term: the integral of the rate, anchored at the hold
+        self.once = [self._cumulative(f) for f in self.integrands]
+        self.twice = [self._cumulative(c) for c in self.once]
+        self.once_hold = self._cumulative(self.from_hold)
+
+    def _cumulative(self, f: np.ndarray) -> np.ndarray:
+        steps = 0.5 * (f[1:] + f[:-1]) * np.diff(self.t)
+        return np.concatenate(([0.0], np.cumsum(steps)))
+
+    def _from(self, tau: float, cum: np.ndarray) -> np.ndarray:
+        """Integral from tau to t of the function whose running integral is ``cum``."""
+        return cum - np.interp(tau, self.t, cum)
+
+    def _design(self, tau: float) -> np.ndarray:
+        u = self.t - tau
+        after = u >= 0
+        before = ~after
+        zero, one = np.zeros_like(u), np.ones_like(u)
+        ub = np.where(before, u, 0.0)
+        ua = np.where(after, u, 0.0)
+        angle_cols = [one, zero, u, ub**2 / 2, ub**3 / 3, ua**2 / 2]
+        rate_cols = [zero, one, one, ub, ub**2, ua]
+        for once, twice in zip(self.once, self.twice, strict=True):
+            start_value = np.interp(tau, self.t, once)
+            angle_cols.append(-np.where(after, self._from(tau, twice) - start_value * u, 0.0))
+            rate_cols.append(-np.where(after, self._from(tau, once), 0.0))
+        angle_cols.append(-np.where(after, self._from(tau, self.once_hold), 0.0))
+        rate_cols.append(-np.where(after, self.from_hold - np.interp(tau, self.t, self.from_hold), 0.0))
+        return np.vstack(
+            (np.column_stack(angle_cols) * self.w_angle, np.column_stack(rate_cols) * self.w_rate)
+        )
+
+    def _solve(self, tau: float) -> tuple[np.ndarray, float]:
+        design = self._design(tau)
+        coef, *_ = np.linalg.lstsq(design, self.y, rcond=None)
+        residual = self.y - design @ coef
+        return coef, float(residual @ residual)
+
+    def sse(self, tau: float) -> float:
+        return self._solve(tau)[1]
+
+    def state_at(self, tau: float) -> tuple[float, float]:
+        """Fitted angle and angle rate at tau: the initial state of the free decay."""
+        coef, _ = self._solve(tau)
+        return float(coef[0]), float(coef[2])

@@ -1,0 +1,479 @@
+"""A scripted, hand-operated decay test with known truth, and the sensor that watches it.
+
+A towing-tank decay test is not a clean initial-value problem: the model rests in still
+water, an engineer tilts it by hand (a smooth 1-2 s push), holds it for a few seconds with a
+trembling hand, lets go, and the model decays back to rest. Release detection, the recorder
+and the estimators are tested against exactly this, so the scenario produces:
+
+- the true motion of the sensed axis (angle, rate, acceleration) plus a little cross-axis and
+  heave motion, on the device clock (SampleTimeFine, 10 kHz ticks);
+- the truth of every run: release instant (s, ticks, first free sample), initial state,
+  model terms and coefficients;
+- sensor samples (``SAMPLE_DTYPE``) with MTi-G-like noise, bias and quantisation on top.
+
+Everything is vectorised and seeded: an hour of still water and handling takes well under a
+second per hour of 100 Hz data apart from the decay integrations themselves.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from ..errors import InputError
+from ..samples import SAMPLE_DTYPE
+from .decay import TERMS
+
+#: SampleTimeFine ticks per second, and the wrap of the 10/100-series (one day of ticks).
+TICKS_PER_S = 10_000
+TICK_MODULUS = 864_000_000
+GRAVITY_M_S2 = 9.81
+
+#: StatusWord of a healthy MTi-G streaming: self-test passed (bit 0), filter valid (bit 1).
+STATUS_OK = 0x00000003
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """MTi-G measurement imperfections; the defaults sit in the range of the datasheets.
+
+    MTi-G-710 (and the 2007 MTi-G): roll/pitch filter output noise a few hundredths of a
+    degree (static accuracy 0.2-0.5 deg is bias, not noise); gyro noise density 0.01-0.05
+    deg/s/sqrt(Hz), here 0.028 so that a 100 Hz stream (50 Hz bandwidth) shows 0.2 deg/s rms
+    and 400 Hz shows 0.4 deg/s; accelerometer noise density ~0.002 m/s^2/sqrt(Hz). Rate and
+    acceleration are quantised by a 16-bit ADC over +-300 deg/s and +-50 m/s^2. Biases are
+    drawn once per scenario with the given rms.
+    """
+
+    angle_noise_deg: float = 0.02
+    angle_bias_deg: float = 0.05
+    gyro_noise_deg_s_rthz: float = 0.028
+    gyro_bias_deg_s: float = 0.05
+    gyro_lsb_deg_s: float = 600.0 / 65536
+    acc_noise_m_s2_rthz: float = 0.002
+    acc_bias_m_s2: float = 0.02
+    acc_lsb_m_s2: float = 100.0 / 65536
+
+    @classmethod
+    def none(cls) -> SensorNoise:
+        """A perfect sensor: for checking the truth against the samples."""
+        return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Handling:
+    """How the engineer handles the model: timings (s) and hand tremor.
+
+    The hand's sway (0.1-0.8 Hz, ``sway_deg`` rms) and physiological tremor (8-12 Hz,
+    ``tremor_deg`` rms) act during the tilt and the hold and stop at release. Tremor reaches a
+    floating model as a force: ~1 % of the ~0.6 N holding force at 0.3 m is 2e-3 N m, which a
+    0.12 kg m^2 model at 10 Hz turns into ~4e-4 deg, so 0.001 deg is on the generous side; the model then
+    starts from the hand's angle *and rate*, as in a real release. A fraction
+    ``put_back_fraction`` of runs are aborted: held, then lowered back by hand with no release.
+    """
+
+    tilt_s: tuple[float, float] = (1.0, 2.0)
+    hold_s: tuple[float, float] = (2.5, 5.0)
+    angle_scatter_deg: float = 0.3
+    sway_deg: float = 0.08
+    tremor_deg: float = 0.001
+    put_back_s: tuple[float, float] = (1.5, 2.5)
+    put_back_fraction: float = 0.0
+    lead_in_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class RunTruth:
+    """What really happened in one run (angles in rad; times on the device clock)."""
+
+    run: int
+    kind: str  # "release" or "put_back"
+    axis: str
+    tilt_start_s: float
+    release_s: float | None = None
+    release_ticks: int | None = None  # SampleTimeFine at release, wrapped like the device's counter
+    release_index: int | None = None  # the first sample at or after the release: the first free sample
+    angle0_rad: float | None = None
+    rate0_rad_s: float | None = None
+    end_s: float = 0.0
+    coefficients: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def terms(self) -> list[str]:
+        return [k for k in TERMS if self.coefficients.get(k, 0.0) != 0.0]
+
+    def to_json(self) -> dict[str, object]:
+        """Plain JSON: SI values, plus degrees for people."""
+        out: dict[str, object] = asdict(self)
+        out["terms"] = self.terms
+        if self.angle0_rad is not None:
+            out["angle0_deg"] = math.degrees(self.angle0_rad)
+        return out
+
+
+@dataclass
+class ScenarioTrace:
+    """True motion on the sample grid, and the truth of every run."""
+
+    rate_hz: float
+    axis: str
+    start_ticks: int
+    t: np.ndarray  # s since the scenario start (device clock)
+    angle: np.ndarray  # rad, sensed axis
+    rate: np.ndarray  # rad/s
+    acc: np.ndarray  # rad/s^2
+    other_angle: np.ndarray  # rad, the other of roll/pitch
+    other_rate: np.ndarray
+    heave_m: np.ndarray
+    heave_acc_m_s2: np.ndarray
+    runs: list[RunTruth]
+
+    @property
+    def ticks(self) -> np.ndarray:
+        """Unwrapped SampleTimeFine of every sample."""
+        return self.start_ticks + np.round(self.t * TICKS_PER_S).astype(np.int64)
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+def _quintic_step(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Smoothstep 10s^3-15s^4+6s^5 on [0, 1] and its first two derivatives (d/ds)."""
+    s = np.clip(s, 0.0, 1.0)
+    return (
+        s**3 * (10 - 15 * s + 6 * s**2),
+        30 * s**2 * (1 - s) ** 2,
+        60 * s * (1 - s) * (1 - 2 * s),
+    )
+
+
+@dataclass(frozen=True)
+class _Wobble:
+    """A random sum of sinusoids in a band: the hand's sway or tremor, evaluated at any time."""
+
+    freqs_hz: np.ndarray
+    phases: np.ndarray
+    amps: np.ndarray
+
+    @classmethod
+    def draw(
+        cls, rng: np.random.Generator, rms: float, band_hz: tuple[float, float], count: int = 5
+    ) -> _Wobble:
+        amps = rng.uniform(0.5, 1.0, count)
+        amps *= rms * math.sqrt(2) / np.sqrt(np.sum(amps**2))
+        return cls(rng.uniform(*band_hz, count), rng.uniform(0, 2 * np.pi, count), amps)
+
+    def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Value and time derivative at t."""
+        omega = 2 * np.pi * self.freqs_hz
+        arg = omega[None, :] * t[:, None] + self.phases[None, :]
+        return np.sin(arg) @ self.amps, np.cos(arg) @ (self.amps * omega)
+
+
+def _decay_rhs(coefficients: Mapping[str, float]):
+    """A scalar right-hand side of the decay equation (fast enough to integrate hours of runs)."""
+    b1, b2, b3, c1, c2, c3, s1, s2, s3 = (float(coefficients.get(k, 0.0)) for k in TERMS)
+
+    def rhs(_t: float, y: np.ndarray) -> list[float]:
+        x, v = y
+        sx = math.sin(x)
+        acc = -(b1 * v + b2 * abs(v) * v + b3 * v**3 + c1 * x + c2 * x * x + c3 * x**3)
+        acc -= s1 * sx + s2 * sx * sx + s3 * sx**3
+        return [v, acc]
+
+    return rhs
+
+
+def integrate_decay(
+    coefficients: Mapping[str, float], t0: float, t: np.ndarray, angle0: float, rate0: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Free decay from (angle0, rate0) at t0, sampled at t (all >= t0); tolerances as physics.decay."""
+    if t.size == 0:
+        return np.empty(0), np.empty(0)
+    sol = solve_ivp(
+        _decay_rhs(coefficients),
+        (t0, float(t[-1])),
+        [angle0, rate0],
+        t_eval=t,
+        rtol=1e-10,
+        atol=1e-12,
+        method="DOP853",
+    )
+    if not sol.success:  # pragma: no cover - only on absurd coefficients
+        raise RuntimeError(f"decay simulation failed: {sol.message}")
+    return sol.y[0], sol.y[1]
+
+
+def decay_acceleration(coefficients: Mapping[str, float], x: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """x'' of the decay equation, vectorised."""
+    b1, b2, b3, c1, c2, c3, s1, s2, s3 = (float(coefficients.get(k, 0.0)) for k in TERMS)
+    sx = np.sin(x)
+    return -(
+        b1 * v
+        + b2 * np.abs(v) * v
+        + b3 * v**3
+        + c1 * x
+        + c2 * x**2
+        + c3 * x**3
+        + s1 * sx
+        + s2 * sx**2
+        + s3 * sx**3
+    )
+
+
+def valid_rate(rate_hz: float) -> float:
+    """Refuse output rates the 10 kHz SampleTimeFine clock cannot tick evenly (MTi rates divide 400 Hz)."""
+    if not (rate_hz > 0 and TICKS_PER_S % rate_hz == 0 and rate_hz <= 2000):
+        raise InputError(
+            f"rate {rate_hz:g} Hz is not an MTi output rate; use a divisor of 400 Hz, e.g. 100, 200, 400"
+        )
+    return float(rate_hz)
+
+
+@dataclass
+class DecayScenario:
+    """N hand-operated decay runs of one axis of one hull, deterministic given ``seed``.
+
+    Each run lasts ``release_after_s + decay_s``: still water, a tilt to about ``angle_deg``
+    (random sign), a hold with tremor, the release ``release_after_s`` (plus a fraction of a
+    sample) after the run starts, and a free decay by ``physics.decay`` that carries on into the next run's still water.
+    ``coefficients`` overrides the hull's model (``hull``/``draft`` then only label the data).
+    """
+
+    hull: str = "swath"
+    draft: float = 1.0
+    axis: str = "roll"
+    angle_deg: float = 8.0
+    rate_hz: float = 100.0
+    runs: int = 1
+    seed: int = 0
+    release_after_s: float = 10.0
+    decay_s: float = 25.0
+    handling: Handling = field(default_factory=Handling)
+    noise: SensorNoise = field(default_factory=SensorNoise)
+    coefficients: dict[str, float] | None = None
+    start_ticks: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.axis not in ("roll", "pitch"):
+            raise InputError(f"axis {self.axis!r} not understood; use roll or pitch")
+        self.rate_hz = valid_rate(self.rate_hz)
+        if not 0.5 <= abs(self.angle_deg) <= 30:
+            raise InputError(f"angle {self.angle_deg:g} deg is outside 0.5..30 deg")
+        if self.runs < 0:
+            raise InputError(f"runs must be >= 0, got {self.runs}")
+        shortest = self.handling.lead_in_s + self.handling.tilt_s[1] + 0.5
+        if self.release_after_s < shortest:
+            raise InputError(
+                f"release-after {self.release_after_s:g} s is too short to tilt and hold; use >= {shortest:g}"
+            )
+        if self.decay_s <= 0:
+            raise InputError("decay time must be positive")
+        if self.coefficients is None:
+            from ..config import load_hull
+
+            self.coefficients = load_hull(self.hull).axis_model(self.axis).coefficients(self.draft)
+        if self.start_ticks is None:
+            self.start_ticks = int(np.random.default_rng([self.seed, 1]).integers(0, TICK_MODULUS // 2))
+
+    @property
+    def run_s(self) -> float:
+        return self.release_after_s + self.decay_s
+
+    @property
+    def duration_s(self) -> float:
+        return self.runs * self.run_s
+
+    def trace(self) -> ScenarioTrace:
+        """The true motion of all runs on the sample grid."""
+        rng = np.random.default_rng([self.seed, 2])
+        n = round(self.duration_s * self.rate_hz)
+        t = np.arange(n) / self.rate_hz
+        x, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
+        h = self.handling
+        coeffs = dict(self.coefficients or {})
+        truths: list[RunTruth] = []
+        tilt_starts = []
+        hands = []
+        for run in range(self.runs):
+            tilt_s = rng.uniform(*h.tilt_s)
+            hold_s = min(rng.uniform(*h.hold_s), self.release_after_s - tilt_s - h.lead_in_s)
+            # The hand lets go anywhere between two samples, not on the sample grid.
+            release = run * self.run_s + self.release_after_s + rng.uniform(0, 1 / self.rate_hz)
+            sign = 1.0 if rng.uniform() < 0.5 else -1.0
+            target = sign * math.radians(abs(self.angle_deg) + rng.normal(0, h.angle_scatter_deg))
+            hand = _Hand(
+                release - hold_s - tilt_s,
+                tilt_s,
+                target,
+                _Wobble.draw(rng, h.sway_deg, (0.1, 0.8)),
+                _Wobble.draw(rng, h.tremor_deg, (8.0, 12.0)),
+            )
+            put_back_s = rng.uniform(*h.put_back_s) if rng.uniform() < h.put_back_fraction else None
+            hands.append((release, hand, put_back_s))
+            tilt_starts.append(hand.start_s)
+        tilt_starts.append(self.duration_s)
+        index = self._first_index_at
+        for run, (release, hand, put_back_s) in enumerate(hands):
+            i_tilt, i_release = index(hand.start_s), index(release)
+            held = slice(i_tilt, i_release)
+            base = x[i_tilt - 1] if i_tilt > 0 else 0.0  # the rest angle the tilt starts from
+            x[held], v[held], a[held] = hand(t[held], base)
+            x0, v0 = (float(q[0]) for q in hand(np.array([release]), base)[:2])
+            free = slice(i_release, index(tilt_starts[run + 1]))
+            run_end = (run + 1) * self.run_s
+            if put_back_s is not None:
+                step, dstep, ddstep = _quintic_step((t[free] - release) / put_back_s)
+                x[free] = x0 * (1 - step)
+                v[free] = -x0 * dstep / put_back_s
+                a[free] = -x0 * ddstep / put_back_s**2
+                truths.append(RunTruth(run, "put_back", self.axis, hand.start_s, end_s=run_end))
+                continue
+            x[free], v[free] = integrate_decay(coeffs, release, t[free], x0, v0)
+            a[free] = decay_acceleration(coeffs, x[free], v[free])
+            ticks = (int(self.start_ticks or 0) + round(release * TICKS_PER_S)) % TICK_MODULUS
+            truths.append(
+                RunTruth(
+                    run,
+                    "release",
+                    self.axis,
+                    hand.start_s,
+                    release,
+                    ticks,
+                    i_release,
+                    x0,
+                    v0,
+                    run_end,
+                    coeffs,
+                )
+            )
+        # Cross-axis: a small coupled share of the motion plus a trim; heave: the hull sinks when heeled.
+        cross_share, trim_rad, heave_m_rad2 = 0.03, math.radians(0.3), 0.02
+        return ScenarioTrace(
+            rate_hz=self.rate_hz,
+            axis=self.axis,
+            start_ticks=int(self.start_ticks or 0),
+            t=t,
+            angle=x,
+            rate=v,
+            acc=a,
+            other_angle=trim_rad + cross_share * x,
+            other_rate=cross_share * v,
+            heave_m=-heave_m_rad2 * x**2,
+            heave_acc_m_s2=-2 * heave_m_rad2 * (v**2 + x * a),
+            runs=truths,
+        )
+
+    def sensor(self) -> SensorModel:
+        """The scenario's sensor (its biases follow the seed)."""
+        return SensorModel(self.noise, self.rate_hz, self.seed)
+
+    def samples(self) -> tuple[np.ndarray, ScenarioTrace]:
+        """Measured samples of all runs, and the trace they measure (the truth)."""
+        trace = self.trace()
+        return self.sensor().measure(trace), trace
+
+    def _first_index_at(self, time_s: float) -> int:
+        """Index of the first sample at or after ``time_s``."""
+        return min(math.ceil(time_s * self.rate_hz - 1e-9), round(self.duration_s * self.rate_hz))
+
+
+@dataclass(frozen=True)
+class _Hand:
+    """The engineer's hand: a smooth tilt from the rest angle to ``target``, then a hold with wobble."""
+
+    start_s: float
+    tilt_s: float
+    target: float
+    sway: _Wobble
+    tremor: _Wobble
+
+    def __call__(self, t: np.ndarray, base: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Angle, rate and acceleration at t (the wobble's own acceleration is left out: it is tiny)."""
+        s, ds, dds = _quintic_step((t - self.start_s) / self.tilt_s)
+        grip_time = 0.5 * self.tilt_s  # the hand's wobble fades in during the first half of the tilt
+        grip, dgrip, _ = _quintic_step((t - self.start_s) / grip_time)
+        sway_x, sway_v = self.sway(t)
+        trem_x, trem_v = self.tremor(t)
+        wobble_x, wobble_v = np.radians(sway_x + trem_x), np.radians(sway_v + trem_v)
+        span = self.target - base
+        x = base + span * s + grip * wobble_x
+        v = span * ds / self.tilt_s + grip * wobble_v + dgrip / grip_time * wobble_x
+        return x, v, span * dds / self.tilt_s**2
+
+
+def still_trace(rate_hz: float, axis: str, start_ticks: int, start_index: int, n: int) -> ScenarioTrace:
+    """Still water on the sample grid from sample ``start_index`` on (after the scripted runs)."""
+    t = (start_index + np.arange(n)) / rate_hz
+    zeros = np.zeros(n)
+    return ScenarioTrace(
+        rate_hz, axis, start_ticks, t, zeros, zeros, zeros, zeros + math.radians(0.3), zeros, zeros, zeros, []
+    )
+
+
+class SensorModel:
+    """Turns true motion into MTi-G samples: biases fixed per seed, fresh noise per block."""
+
+    heading_deg = 30.0
+    lever_arm_m = 0.15  # sensor height above the rotation axis: adds tangential and centripetal acceleration
+
+    def __init__(self, noise: SensorNoise, rate_hz: float, seed: int) -> None:
+        self.noise = noise
+        self.rate_hz = rate_hz
+        self.seed = seed
+        bias_rng = np.random.default_rng([seed, 3])
+        self.angle_bias = np.radians(noise.angle_bias_deg) * bias_rng.standard_normal(3)
+        self.gyro_bias = np.radians(noise.gyro_bias_deg_s) * bias_rng.standard_normal(3)
+        self.acc_bias = noise.acc_bias_m_s2 * bias_rng.standard_normal(3)
+
+    def measure(self, trace: ScenarioTrace, block: int = 0) -> np.ndarray:
+        """``SAMPLE_DTYPE`` samples of the trace; ``block`` seeds the noise of successive pieces."""
+        rng = np.random.default_rng([self.seed, 4, block])
+        n = len(trace)
+        nz = self.noise
+        nyquist_rthz = math.sqrt(self.rate_hz / 2)
+        main, other = trace.angle, trace.other_angle
+        roll, pitch = (main, other) if trace.axis == "roll" else (other, main)
+        p, q = (trace.rate, trace.other_rate) if trace.axis == "roll" else (trace.other_rate, trace.rate)
+        out = np.zeros(n, dtype=SAMPLE_DTYPE)
+        out["ticks"] = trace.ticks
+        out["t"] = out["ticks"] / TICKS_PER_S
+        out["counter"] = (np.round(trace.t * self.rate_hz).astype(np.int64) + self.seed) & 0xFFFF
+        out["status"] = STATUS_OK
+        angle_sd = math.radians(nz.angle_noise_deg)
+        for k, (name, value) in enumerate(
+            (("roll", roll), ("pitch", pitch), ("yaw", math.radians(self.heading_deg)))
+        ):
+            out[name] = value + self.angle_bias[k] + angle_sd * rng.standard_normal(n)
+        gyro_sd = math.radians(nz.gyro_noise_deg_s_rthz) * nyquist_rthz
+        for k, (name, value) in enumerate((("p", p), ("q", q), ("r", 0.0))):
+            out[name] = _quantise(
+                value + self.gyro_bias[k] + gyro_sd * rng.standard_normal(n), math.radians(nz.gyro_lsb_deg_s)
+            )
+        specific_force = self._specific_force(trace, roll, pitch)
+        acc_sd = nz.acc_noise_m_s2_rthz * nyquist_rthz
+        for k, name in enumerate(("ax", "ay", "az")):
+            out[name] = _quantise(
+                specific_force[k] + self.acc_bias[k] + acc_sd * rng.standard_normal(n), nz.acc_lsb_m_s2
+            )
+        return out
+
+    def _specific_force(self, trace: ScenarioTrace, roll: np.ndarray, pitch: np.ndarray) -> list[np.ndarray]:
+        """Gravity seen in the body frame, plus lever-arm and heave accelerations (small-angle kinematics)."""
+        g = GRAVITY_M_S2
+        fx = -g * np.sin(pitch)
+        fy = g * np.cos(pitch) * np.sin(roll)
+        fz = g * np.cos(pitch) * np.cos(roll) + trace.heave_acc_m_s2 - self.lever_arm_m * trace.rate**2
+        if trace.axis == "roll":
+            fy = fy - self.lever_arm_m * trace.acc
+        else:
+            fx = fx + self.lever_arm_m * trace.acc
+        return [fx, fy, fz]
+
+
+def _quantise(values: np.ndarray, step: float) -> np.ndarray:
+    return np.round(values / step) * step if step > 0 else values
