@@ -1,0 +1,206 @@
+"""The library of physical effects a decay model may be missing.
+
+Every entry has a physical name, a family (what tests and reports commit to:
+quadratic and cubic damping are nearly interchangeable over one decay, the
+family "amplitude-dependent damping" is not), what it adds to the model, and
+the signature it leaves in the residual of a model that lacks it. Measurement
+errors change the observation equation, not the equation of motion; a late
+disturbance (reflected tank waves) is cut off, not modelled.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from ..records import DecayRun
+from .fitting import ModelSpec
+
+#: Measured channels a coupling term may use, by the motion they carry.
+HEAVE_CHANNELS: tuple[str, ...] = ("heave_m", "acc_z_m_s2")
+OTHER_ROTATION_CHANNELS: tuple[str, ...] = ("other_angle", "other_angle_rad", "other_angle_deg")
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One candidate: what it is, what it adds, what its absence looks like."""
+
+    key: str
+    name: str
+    family: str
+    adds: str  # the term(s) in words and symbols
+    signature: str  # what the residual of a model without it shows
+    kind: str  # "dynamics", "observation" or "truncation"
+    apply: Callable[[ModelSpec, Sequence[DecayRun]], ModelSpec | None]
+
+    def extend(self, spec: ModelSpec, runs: Sequence[DecayRun]) -> ModelSpec | None:
+        """The model with this effect added, or None when it is present already or cannot be fitted here."""
+        return self.apply(spec, runs)
+
+
+def _add_term(term: str) -> Callable[[ModelSpec, Sequence[DecayRun]], ModelSpec | None]:
+    def apply(spec: ModelSpec, _runs: Sequence[DecayRun]) -> ModelSpec | None:
+        return None if term in spec.terms else spec.with_(terms=(*spec.terms, term))
+
+    return apply
+
+
+def _sine_restoring(spec: ModelSpec, _runs: Sequence[DecayRun]) -> ModelSpec | None:
+    """Replace the linear spring c1*x by a wall-sided GZ s1*sin(x) (same number of parameters)."""
+    if "c1" not in spec.terms or "s1" in spec.terms:
+        return None
+    return spec.with_(terms=tuple("s1" if t == "c1" else t for t in spec.terms))
+
+
+def _set_flag(flag: str, needs_rate: bool) -> Callable[[ModelSpec, Sequence[DecayRun]], ModelSpec | None]:
+    def apply(spec: ModelSpec, runs: Sequence[DecayRun]) -> ModelSpec | None:
+        if getattr(spec, flag) or (needs_rate and any(r.rate is None for r in runs)):
+            return None
+        return spec.with_(**{flag: True})
+
+    return apply
+
+
+def measured_channel(runs: Sequence[DecayRun], candidates: Sequence[str]) -> str | None:
+    """The first of ``candidates`` measured in every run."""
+    return next((ch for ch in candidates if all(ch in r.channels for r in runs)), None)
+
+
+def _couple(candidates: tuple[str, ...]) -> Callable[[ModelSpec, Sequence[DecayRun]], ModelSpec | None]:
+    def apply(spec: ModelSpec, runs: Sequence[DecayRun]) -> ModelSpec | None:
+        channel = measured_channel(runs, candidates)
+        if channel is None or channel in spec.coupling:
+            return None
+        return spec.with_(coupling=(*spec.coupling, channel))
+
+    return apply
+
+
+def _never(_spec: ModelSpec, _runs: Sequence[DecayRun]) -> ModelSpec | None:
+    """Truncation is not a model change; the workflow handles it by cutting the records."""
+    return None
+
+
+LIBRARY: tuple[Effect, ...] = (
+    Effect(
+        "damping.quadratic",
+        "quadratic damping",
+        "amplitude-dependent damping",
+        "b2*|x'|x'",
+        "damping ratio grows linearly with amplitude; envelope under-damped early, over-damped late",
+        "dynamics",
+        _add_term("b2"),
+    ),
+    Effect(
+        "damping.cubic",
+        "cubic damping",
+        "amplitude-dependent damping",
+        "b3*x'^3",
+        "damping ratio grows with amplitude squared; envelope mismatch like quadratic damping",
+        "dynamics",
+        _add_term("b3"),
+    ),
+    Effect(
+        "restoring.cubic",
+        "cubic restoring",
+        "nonlinear restoring",
+        "c3*x^3",
+        "period changes with amplitude; phase drift growing along the decay; residual peak at 3w",
+        "dynamics",
+        _add_term("c3"),
+    ),
+    Effect(
+        "restoring.sine",
+        "GZ-like sine restoring",
+        "nonlinear restoring",
+        "s1*sin(x) instead of c1*x",
+        "period grows with amplitude (softening); phase drift growing along the decay",
+        "dynamics",
+        _sine_restoring,
+    ),
+    Effect(
+        "sensor.offset",
+        "angle offset",
+        "offset or asymmetry",
+        "per-run offset in y = x + b",
+        "residual mean not zero; peak near zero frequency; unequal positive and negative peaks",
+        "observation",
+        _set_flag("offset", needs_rate=False),
+    ),
+    Effect(
+        "restoring.asymmetric",
+        "asymmetric restoring",
+        "offset or asymmetry",
+        "c2*x^2",
+        "mean shift that shrinks with amplitude; residual peak at 2w and near zero",
+        "dynamics",
+        _add_term("c2"),
+    ),
+    Effect(
+        "sensor.gyro_bias",
+        "gyro bias",
+        "measurement error",
+        "rate y = x' + b_gyro",
+        "rate residual has a non-zero mean",
+        "observation",
+        _set_flag("gyro_bias", needs_rate=True),
+    ),
+    Effect(
+        "sensor.lag",
+        "sensor time lag",
+        "measurement error",
+        "angle y = x(t - tau)",
+        "angle residual proportional to the rate (quarter period out of phase with the angle)",
+        "observation",
+        _set_flag("lag", needs_rate=True),
+    ),
+    Effect(
+        "sensor.gain",
+        "sensor gain error",
+        "measurement error",
+        "angle y = (1 + g) x",
+        "angle residual proportional to the angle itself",
+        "observation",
+        _set_flag("gain", needs_rate=True),
+    ),
+    Effect(
+        "friction.coulomb",
+        "Coulomb friction of the rig",
+        "dry friction",
+        "fc*tanh(x'/eps)",
+        "decrement per half cycle tends to a constant at small amplitude; straight-line envelope; "
+        "damping ratio falls with amplitude",
+        "dynamics",
+        lambda spec, _runs: None if spec.coulomb else spec.with_(coulomb=True),
+    ),
+    Effect(
+        "coupling.heave",
+        "coupling with heave",
+        "coupled motion",
+        "k*z(t) with z the measured heave",
+        "residual peak at the heave frequency; residual correlated with the measured heave",
+        "dynamics",
+        _couple(HEAVE_CHANNELS),
+    ),
+    Effect(
+        "coupling.other_rotation",
+        "coupling with the other rotation",
+        "coupled motion",
+        "k*theta(t) with theta the measured other rotation",
+        "residual peak at the other axis' frequency; residual correlated with the measured other angle",
+        "dynamics",
+        _couple(OTHER_ROTATION_CHANNELS),
+    ),
+    Effect(
+        "disturbance.late",
+        "reflected tank waves arriving late",
+        "late-time disturbance",
+        "nothing: the records are cut before the disturbance arrives",
+        "residual near noise level early, then a burst after the reflection time",
+        "truncation",
+        _never,
+    ),
+)
+
+EFFECTS: dict[str, Effect] = {e.key: e for e in LIBRARY}
+FAMILIES: tuple[str, ...] = tuple(dict.fromkeys(e.family for e in LIBRARY))

@@ -1,0 +1,324 @@
+"""The discrepancy workflow: fit a baseline, find where it disagrees, name and add the missing effect, repeat.
+
+Decisions are made by output-error refits scored by BIC with a clear margin
+(derivative-based screening fails at realistic noise); the residual
+diagnostics say why and go into the story. After each addition every candidate
+is tried again, because an unmodelled effect biases the terms already in.
+A late disturbance (reflected waves) is handled first when its signature is
+present, by cutting the records, since no term should be made to fit it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import BadIdentificationInput, InputError
+from ..physics.decay import TERMS
+from ..records import DecayRun
+from .effects import LIBRARY, Effect
+from .fitting import Fit, ModelSpec, fit_spec, predict
+from .residuals import (
+    CycleTrend,
+    LateOnset,
+    Spectrum,
+    channel_correlation,
+    cycle_trend,
+    late_onset,
+    noise_level,
+    residual_spectrum,
+)
+
+DEFAULT_BASELINE = "b1,c1"
+#: A late burst counts when the residual after the change point is this many times louder than before,
+LATE_RATIO = 3.0
+#: and the records are cut there only if the model then fits to within this multiple of the noise level.
+LATE_QUIET = 1.5
+
+
+def parse_baseline(text: str) -> tuple[str, ...]:
+    """'b1,c1' -> terms; anything else is handed to the ident model aliases (e.g. 'seed001-eq1')."""
+    tokens = tuple(tok.strip() for tok in text.split(",") if tok.strip())
+    if tokens and all(tok in TERMS for tok in tokens):
+        return tokens
+    try:
+        from ..ident.models import resolve_model
+    except ImportError:
+        raise InputError(
+            f"baseline {text!r} not understood: give decay terms such as b1,c1 (known: {', '.join(TERMS)})"
+        ) from None
+    model = resolve_model(text)
+    terms = tuple(getattr(model, "terms", model))
+    unknown = [t for t in terms if t not in TERMS]
+    if unknown:
+        raise InputError(f"baseline {text!r} holds terms the discrepancy workflow cannot refit: {unknown}")
+    return terms
+
+
+@dataclass
+class Diagnostics:
+    """What the residual of one fit says (see tankdaq.diagnose.residuals)."""
+
+    rms_angle_rad: float
+    noise_angle_rad: float
+    ljung_box_p: float
+    spectrum: Spectrum
+    residual_mean_angle_rad: float
+    residual_mean_rate_rad_s: float | None
+    corr_with_rate: float  # angle residual vs predicted rate: lag signature
+    corr_with_angle: float  # angle residual vs predicted angle: gain signature
+    channel_corr: dict[str, float]
+    late: list[LateOnset]
+
+    @property
+    def white(self) -> bool:
+        return self.ljung_box_p > 0.01
+
+
+@dataclass
+class FamilyEvidence:
+    """One member of the chosen effect's family, scored against the same starting model."""
+
+    effect: str
+    delta_bic: float  # vs the model before the step
+    vs_chosen: float  # BIC(member) - BIC(chosen): positive = chosen is better
+
+
+@dataclass
+class Step:
+    """One accepted change: an effect added (or the records cut) and the fits around it."""
+
+    effect: Effect
+    before: Fit
+    after: Fit
+    diagnostics: Diagnostics  # of the fit before the step: why this effect
+    delta_bic: float | None  # None for truncation (different data, BIC not comparable)
+    added: dict[str, float]
+    family: list[FamilyEvidence] = field(default_factory=list)
+    cut_s: list[float] = field(default_factory=list)
+
+
+def start_at_release(run: DecayRun) -> DecayRun:
+    """Cut a record that begins at rest to its largest extreme (the release): the decay starts there."""
+    tail = run.angle[int(0.9 * run.t.size) :]
+    deviation = np.abs(run.angle - np.median(tail))
+    i_max = int(np.argmax(deviation))
+    if i_max == 0 or deviation[0] > 0.5 * deviation[i_max]:
+        return run
+    return run.window(i_max)
+
+
+def initial_guess(runs: Sequence[DecayRun], terms: Sequence[str]) -> dict[str, float]:
+    """Natural frequency from the angle spectrum, damping from the cycle decrement: LM starts near the end."""
+    omegas = []
+    for run in runs:
+        x = run.angle - np.mean(run.angle)
+        n_fft = 8 * x.size
+        spec = np.abs(np.fft.rfft(x, n_fft))
+        freqs = np.fft.rfftfreq(n_fft, 1.0 / run.sample_rate)
+        omegas.append(2 * np.pi * freqs[int(np.argmax(spec[1:])) + 1])
+    omega = float(np.median(omegas))
+    trend = cycle_trend([r.t for r in runs], [r.angle for r in runs], omega)
+    zeta = float(np.clip(np.median(trend.zeta), 1e-4, 0.5)) if trend.zeta.size else 0.02
+    stiffness = omega**2 / max(1 - zeta**2, 1e-3)
+    guess = {"b1": 2 * zeta * np.sqrt(stiffness)}
+    guess["s1" if "c1" not in terms and "s1" in terms else "c1"] = stiffness
+    return guess
+
+
+def _cut(runs: Sequence[DecayRun], cut_s: Sequence[float]) -> list[DecayRun]:
+    """Each run up to its cut time (from its start)."""
+    return [r.window(0, int(np.searchsorted(r.t, r.t[0] + c))) for r, c in zip(runs, cut_s, strict=True)]
+
+
+def natural_frequency(fit: Fit) -> float:
+    stiffness = fit.coefficients.get("c1", 0.0) + fit.coefficients.get("s1", 0.0)
+    return float(np.sqrt(max(stiffness, 1e-6)))
+
+
+def diagnose_fit(fit: Fit, runs: Sequence[DecayRun]) -> Diagnostics:
+    """All residual diagnostics of one fit."""
+    omega0 = natural_frequency(fit)
+    residuals = [p.residual_angle for p in fit.runs]
+    noise = float(np.sqrt(np.mean([noise_level(r.angle) ** 2 for r in runs])))
+    rate_res = [p.residual_rate for p in fit.runs if p.residual_rate is not None]
+    e = np.concatenate(residuals)
+    corr_rate = float(abs(np.corrcoef(e, np.concatenate([p.rate for p in fit.runs]))[0, 1]))
+    corr_angle = float(abs(np.corrcoef(e, np.concatenate([p.angle for p in fit.runs]))[0, 1]))
+    channel_corr: dict[str, float] = {}
+    shared = set.intersection(*(set(r.channels) for r in runs)) if runs else set()
+    for ch in sorted(shared):
+        max_lag = int(np.pi / omega0 * runs[0].sample_rate)
+        channel_corr[ch] = float(
+            np.mean(
+                [
+                    channel_correlation(p.residual_angle, r.channels[ch], max_lag)
+                    for p, r in zip(fit.runs, runs, strict=True)
+                ]
+            )
+        )
+    return Diagnostics(
+        rms_angle_rad=fit.rms_angle,
+        noise_angle_rad=noise,
+        ljung_box_p=fit.ljung_box_p,
+        spectrum=residual_spectrum(residuals, runs[0].sample_rate, omega0),
+        residual_mean_angle_rad=float(np.mean(e)),
+        residual_mean_rate_rad_s=float(np.mean(np.concatenate(rate_res))) if rate_res else None,
+        corr_with_rate=0.0 if np.isnan(corr_rate) else corr_rate,
+        corr_with_angle=0.0 if np.isnan(corr_angle) else corr_angle,
+        channel_corr=channel_corr,
+        late=[late_onset(p.t, p.residual_angle) for p in fit.runs],
+    )
+
+
+class Diagnoser:
+    """Find what a decay model is missing, add it, and show the gap shrink.
+
+    ``Diagnoser(baseline="b1,c1").fit(runs)`` sets ``baseline_``, ``steps_``,
+    ``final_`` (Fit objects), ``cycle_trend_`` (model-free amplitude trends),
+    ``runs_`` (the records as finally used, cut if a late disturbance was found),
+    ``verdict_`` and ``gap_reduction_``.
+    """
+
+    def __init__(
+        self,
+        baseline: str | Sequence[str] = DEFAULT_BASELINE,
+        max_steps: int = 4,
+        delta_bic: float = -10.0,
+        library: Sequence[Effect] = LIBRARY,
+        progress: Callable[[str], None] | None = None,
+    ):
+        self.baseline = baseline
+        self.max_steps = max_steps
+        self.delta_bic = delta_bic
+        self.library = library
+        self.progress = progress
+
+    def _fit(self, runs: Sequence[DecayRun], spec: ModelSpec, label: str, **kwargs: object) -> Fit:
+        if self.progress is not None:
+            self.progress(label)
+        return fit_spec(runs, spec, **kwargs)  # type: ignore[arg-type]
+
+    def fit(self, runs: Sequence[DecayRun]) -> Diagnoser:
+        if not runs:
+            raise BadIdentificationInput("no decay runs to diagnose")
+        if self.max_steps < 0:
+            raise InputError(f"--max-steps must be 0 or more, not {self.max_steps}")
+        axes = {r.axis for r in runs}
+        if len(axes) > 1:
+            raise BadIdentificationInput(f"runs mix axes {sorted(axes)}; diagnose one axis at a time")
+        terms = parse_baseline(self.baseline) if isinstance(self.baseline, str) else tuple(self.baseline)
+        runs = [start_at_release(r) for r in runs]
+        spec = ModelSpec(terms=terms)
+        current = self._fit(runs, spec, "baseline", guess=initial_guess(runs, terms))
+        self.baseline_ = current
+        self.cycle_trend_: CycleTrend = cycle_trend(
+            [r.t for r in runs], [r.angle for r in runs], natural_frequency(current)
+        )
+        self.steps_: list[Step] = []
+        self.diagnostics_: list[Diagnostics] = []
+        while len(self.steps_) < self.max_steps:
+            diag = diagnose_fit(current, runs)
+            self.diagnostics_.append(diag)
+            step = self._best_addition(current, runs, diag)
+            explains_all = step is not None and step.after.rms_angle <= LATE_QUIET * diag.noise_angle_rad
+            if not explains_all and not self._was_truncated():
+                truncated = self._truncate(current, runs, diag, step)
+                if truncated is not None:
+                    runs, step = truncated
+            if step is None:
+                break
+            self.steps_.append(step)
+            current = step.after
+        else:
+            self.diagnostics_.append(diagnose_fit(current, runs))
+        self.final_ = current
+        self.runs_ = runs
+        self.gap_reduction_ = 1.0 - self.final_.rms_angle / self.baseline_.rms_angle
+        self.verdict_ = self._verdict()
+        return self
+
+    def _was_truncated(self) -> bool:
+        return any(s.effect.kind == "truncation" for s in self.steps_)
+
+    def _truncate(
+        self, current: Fit, runs: list[DecayRun], diag: Diagnostics, best: Step | None
+    ) -> tuple[list[DecayRun], Step] | None:
+        """Cut the records where the residual turns from noise into a burst, if that is what it does.
+
+        The fit to the whole record is bent by the burst, so the onset is found
+        twice: roughly on its residual, then on the residual of a model fitted
+        before the rough onset and simulated over the whole record. The cut is
+        kept when the model fits the rest to the noise level, the burst is loud,
+        and the best added term would not have explained it.
+        """
+        effect = next((e for e in self.library if e.kind == "truncation"), None)
+        if effect is None:
+            return None
+        noise = diag.noise_angle_rad
+        early = self._fit(
+            _cut(runs, [o.onset_s for o in diag.late]), current.spec, "early refit", start=current
+        )
+        onsets = [late_onset(p.t, p.residual_angle) for p in predict(early, runs)]
+        if not all(o.ratio > LATE_RATIO for o in onsets):
+            return None
+        if best is not None:
+            late_rms = [
+                float(np.sqrt(np.mean(p.residual_angle[p.t - p.t[0] >= o.onset_s] ** 2)))
+                for p, o in zip(best.after.runs, onsets, strict=True)
+            ]
+            if min(late_rms) <= 2 * noise:
+                return None
+        cut_s = [
+            o.onset_s - 0.25 * 2 * np.pi / natural_frequency(current) for o in onsets
+        ]  # a quarter period early
+        cut_runs = _cut(runs, cut_s)
+        after = self._fit(cut_runs, current.spec, "truncated refit", start=early)
+        if after.rms_angle > LATE_QUIET * noise:
+            return None
+        return cut_runs, Step(effect, current, after, diag, None, {}, cut_s=cut_s)
+
+    def _best_addition(self, current: Fit, runs: list[DecayRun], diag: Diagnostics) -> Step | None:
+        """Refit every applicable candidate; keep the best if it beats the BIC margin."""
+        scored: list[tuple[Effect, Fit, float]] = []
+        for effect in self.library:
+            spec = effect.extend(current.spec, runs)
+            if spec is None:
+                continue
+            candidate = self._fit(runs, spec, effect.name, start=current)
+            scored.append((effect, candidate, candidate.bic - current.bic))
+        if not scored:
+            return None
+        effect, best, delta = min(scored, key=lambda item: item[2])
+        if delta >= self.delta_bic:
+            return None
+        family = [
+            FamilyEvidence(e.key, d, f.bic - best.bic)
+            for e, f, d in scored
+            if e.family == effect.family and e is not effect
+        ]
+        return Step(effect, current, best, diag, delta, _added(current, best), family)
+
+    def _verdict(self) -> str:
+        added = [s.effect for s in self.steps_]
+        white = self.diagnostics_[-1].white if self.diagnostics_ else False
+        if not added:
+            if white:
+                return "nothing missing: the baseline model explains the decays to the noise level"
+            return (
+                "nothing in the library improves the model clearly, yet the residual is not white: "
+                "an effect outside the library"
+            )
+        names = "; ".join(f"{e.name} ({e.family})" for e in added)
+        tail = "residual white" if white else "residual still not white, something remains"
+        return f"missing: {names}; gap reduced by {100 * self.gap_reduction_:.0f} %; {tail}"
+
+
+def _added(before: Fit, after: Fit) -> dict[str, float]:
+    """Parameters the step brought in (the per-run angle offset as its mean)."""
+    added = {k: v for k, v in after.coefficients.items() if k not in before.coefficients}
+    if after.offsets and not before.offsets:
+        added["angle_offset_rad"] = float(np.mean(after.offsets))
+    return added
