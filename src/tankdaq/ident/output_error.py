@@ -276,27 +276,26 @@ class OutputError:
             jv[:, bi] = 1.0
         return {"angle": gain * (x - lag * v) + offset, "rate": v + bias, "ja": ja, "jv": jv, "ok": ok}
 
-    def _weighted(self, params: np.ndarray) -> tuple[np.ndarray, np.ndarray, list[np.ndarray], bool]:
-        """Residuals and Jacobian divided by the noise levels, plus per-sample scores for HAC."""
-        res, jac, scores = [], [], []
+    def _weighted(
+        self, params: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, list[tuple[list[np.ndarray], list[np.ndarray]]], bool]:
+        """Residuals and Jacobian divided by the noise levels; also per run the (Jacobians, residuals)
+        of each output, which the HAC covariance needs instant by instant."""
+        res, jac, blocks = [], [], []
         ok_all = True
         for r, run in enumerate(self.runs_):
             pred = self._predict_run(params, r, with_jacobian=True)
             ok_all &= bool(pred["ok"])
             sig = self._sigmas[r]
-            ra = (run.angle - pred["angle"]) / sig["angle"]
-            ja = -pred["ja"] / sig["angle"]
-            score = ja * ra[:, None]
-            res.append(ra)
-            jac.append(ja)
+            run_jac = [-pred["ja"] / sig["angle"]]
+            run_res = [(run.angle - pred["angle"]) / sig["angle"]]
             if self._has_rate[r]:
-                rv = (run.rate - pred["rate"]) / sig["rate"]
-                jv = -pred["jv"] / sig["rate"]
-                score = score + jv * rv[:, None]
-                res.append(rv)
-                jac.append(jv)
-            scores.append(score)
-        return np.concatenate(res), np.vstack(jac), scores, ok_all
+                run_jac.append(-pred["jv"] / sig["rate"])
+                run_res.append((run.rate - pred["rate"]) / sig["rate"])
+            res += run_res
+            jac += run_jac
+            blocks.append((run_jac, run_res))
+        return np.concatenate(res), np.vstack(jac), blocks, ok_all
 
     def _solve(self, p0: np.ndarray, free: np.ndarray) -> np.ndarray:
         cache: dict[str, Any] = {}
@@ -331,7 +330,7 @@ class OutputError:
         layout = self._layout
         self.params_ = params
         self.param_names_ = layout.names
-        res_w, jac_w, scores, _ = self._weighted(params)
+        res_w, jac_w, blocks, _ = self._weighted(params)
         theta = params[: layout.n_theta]
         self.coefficients_ = dict(zip(self.terms_, theta.tolist(), strict=True))
         self.natural_period_s_ = _natural_period(self.coefficients_)
@@ -343,7 +342,7 @@ class OutputError:
             bandwidth = (
                 max(1, round(self.hac_periods * period_samples)) if math.isfinite(period_samples) else 1
             )
-            cov_free = hac_covariance([s[:, free] for s in scores], jac_free, bandwidth)
+            cov_free = hac_covariance([([j[:, free] for j in js], rs) for js, rs in blocks], bandwidth)
         else:
             cov_free = classic_covariance(jac_free)
         cov_free *= n_obs / max(n_obs - n_free, 1)

@@ -66,9 +66,6 @@ def half_cycle_peaks(y: np.ndarray) -> np.ndarray:
     """Index of the largest |y| in each complete half-cycle between zero crossings."""
     crossings = zero_crossings(y)
     return np.array(
-        [
-            a + 1 + int(np.argmax(np.abs(y[a + 1 : b + 1])))
-            for a, b in itertools.pairwise(crossings)
-        ],
+        [a + 1 + int(np.argmax(np.abs(y[a + 1 : b + 1]))) for a, b in itertools.pairwise(crossings)],
         dtype=int,
     )

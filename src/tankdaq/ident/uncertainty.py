@@ -30,23 +30,47 @@ def classic_covariance(jac_w: np.ndarray) -> np.ndarray:
     return np.linalg.pinv(jac_w.T @ jac_w)
 
 
-def hac_covariance(scores: Sequence[np.ndarray], jac_w: np.ndarray, bandwidth: int) -> np.ndarray:
-    """Newey-West sandwich A^-1 S A^-1 with Bartlett weights up to ``bandwidth`` lags.
+def hac_covariance(blocks: Sequence[tuple[list[np.ndarray], list[np.ndarray]]], bandwidth: int) -> np.ndarray:
+    """Newey-West sandwich A^-1 S A^-1 with Bartlett weights up to ``bandwidth`` lags, bias-corrected.
 
-    ``scores`` holds, per run, the per-sample gradient contributions g_t
-    (Jacobian rows times residuals, summed over the outputs of one instant);
-    runs are independent, lags stay inside a run. With white residuals it
-    reduces to the classic covariance; with residuals correlated over a cycle it
-    widens the intervals as it should.
+    ``blocks`` holds per run the weighted Jacobian (n, p) and residuals (n,) of
+    each output; runs are independent and lags stay inside a run. The scores
+    g_t (Jacobian rows times residuals, summed over the outputs of one instant)
+    are smoothed with the triangular kernel instead of looping over lags.
+
+    Fitted residuals are orthogonal to the Jacobian, so the plain estimate is
+    biased low, badly so for a decay whose information sits in its first cycles
+    (about -30 % in variance with a one-period bandwidth). The bias under white
+    noise is known exactly, E[S] = A - sum_t M_t A^-1 K_t with M_t the
+    information of instant t and K_t its triangular smooth, and is added back:
+    white residuals then give the classic covariance on average, and residuals
+    correlated over a cycle widen the intervals as they should.
     """
-    bread = np.linalg.pinv(jac_w.T @ jac_w)
+    info = [sum(j[:, :, None] * j[:, None, :] for j in jacs) for jacs, _ in blocks]  # M_t per run
+    bread = np.linalg.pinv(sum(m.sum(axis=0) for m in info))
     meat = np.zeros_like(bread)
-    for g in scores:
-        meat += g.T @ g
-        for lag in range(1, min(bandwidth, g.shape[0] - 1) + 1):
-            gamma = g[lag:].T @ g[:-lag]
-            meat += (1.0 - lag / (bandwidth + 1.0)) * (gamma + gamma.T)
+    for (jacs, residuals), m in zip(blocks, info, strict=True):
+        g = sum(j * r[:, None] for j, r in zip(jacs, residuals, strict=True))
+        meat += g.T @ _triangle_smooth(g, bandwidth)
+        weighted = (m @ bread).transpose(1, 0, 2).reshape(bread.shape[0], -1)  # (p, n*p)
+        meat += weighted @ _triangle_smooth(m, bandwidth).reshape(-1, bread.shape[0])
+    meat = 0.5 * (meat + meat.T)
     return bread @ meat @ bread
+
+
+def _triangle_smooth(x: np.ndarray, bandwidth: int) -> np.ndarray:
+    """sum_s w(|t-s|) x_s with Bartlett weights w(l) = 1 - l/(L+1), |l| <= L, along axis 0.
+
+    The triangle is two boxcars of L+1 samples convolved, each a cumulative-sum difference: O(n).
+    """
+    n = x.shape[0]
+    width = bandwidth + 1
+    out = x
+    for _ in range(2):
+        pad = np.zeros((width - 1, *x.shape[1:]))
+        c = np.cumsum(np.concatenate([np.zeros((1, *x.shape[1:])), pad, out, pad]), axis=0)
+        out = c[width:] - c[:-width]
+    return out[bandwidth : bandwidth + n] / width
 
 
 def correlation_from_covariance(cov: np.ndarray) -> np.ndarray:
