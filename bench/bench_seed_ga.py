@@ -18,7 +18,7 @@ import numpy as np
 
 from tankdaq.config import load_hull
 from tankdaq.ident.derived import b_eq, natural_period
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputError, seed_objective
 from tankdaq.ident.seed_methods import (
     GENETIC_SETTINGS,
     SWARM_SETTINGS,
@@ -26,7 +26,6 @@ from tankdaq.ident.seed_methods import (
     OneStepData,
     SearchSpace,
     SwarmSeed,
-    seed_objective,
 )
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
@@ -76,7 +75,7 @@ def main() -> None:
     eval_s = evaluation_only_s(run, ga_settings.population, ga_settings.generations)
 
     amplitude = np.deg2rad(5.0)
-    truth_objective = seed_objective(truth, run)
+    truth_objective = seed_objective(tuple(truth), np.array(list(truth.values())), [run], [0.0])
     print(f"model {MODEL} on {run.name}: {run.t.size} samples, 5 deg release, noise 1e-3 rad / 0.01 rad/s")
     print()
     print(f"{'coefficient':<34}" + "".join(f"{k:>11}" for k in truth))

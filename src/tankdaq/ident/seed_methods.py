@@ -42,7 +42,7 @@ INERTIA_FLOOR = 1e-3
 # --------------------------------------------------------------------------------------------------
 
 
-def measured_rate(run: DecayRun) -> np.ndarray:
+def _measured_rate(run: DecayRun) -> np.ndarray:
     """The gyro rate when the run has one, else the angle differentiated (the seeds always had the gyro)."""
     return run.rate if run.rate is not None else np.gradient(run.angle, run.t)
 
@@ -66,7 +66,7 @@ class OneStepData:
         codes = term_codes(terms)
         designs, changes = [], []
         for run in runs:
-            rate = measured_rate(run)
+            rate = _measured_rate(run)
             phi = term_matrix(codes, run.angle[:-1], rate[:-1], np.zeros(run.t.size - 1), 1.0)
             designs.append(np.diff(run.t)[:, None] * phi)
             changes.append(np.diff(rate))
@@ -92,13 +92,6 @@ class OneStepData:
         theta = np.atleast_2d(theta)
         mean_square = total + 2.0 * theta @ cross + np.einsum("ij,jk,ik->i", theta, gram, theta)
         return np.sqrt(np.clip(mean_square, 0.0, None))
-
-
-def seed_objective(coefficients: Mapping[str, float], runs: DecayRun | Sequence[DecayRun]) -> float:
-    """The seeds' objective F (rad/s) of any coefficients on runs, offset zero; seed 001 prints 1/F."""
-    terms = tuple(k for k in TERMS if k in coefficients)
-    theta = np.array([coefficients[k] for k in terms])
-    return float(OneStepData.from_runs(check_runs(runs), terms).rms(theta)[0])
 
 
 # --------------------------------------------------------------------------------------------------
@@ -349,7 +342,7 @@ class _SeedSearch:
         dt_max = max(float(np.max(np.diff(run.t))) for run in self.runs_)
         n_sub = substeps(dt_max, theta, self.terms_, amplitude)
         self.offsets_ = [0.0] * len(self.runs_)
-        self.initial_states_ = [(float(run.angle[0]), float(measured_rate(run)[0])) for run in self.runs_]
+        self.initial_states_ = [(float(run.angle[0]), float(_measured_rate(run)[0])) for run in self.runs_]
         self.fitted_, self.residuals_ = [], []
         for run, (angle0, rate0) in zip(self.runs_, self.initial_states_, strict=True):
             angle, rate = simulate(run.t, angle0, rate0, theta, codes, np.zeros_like(run.t), 1.0, n_sub)
