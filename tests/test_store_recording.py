@@ -12,13 +12,14 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from tankdaq.errors import BadRecordingInput, InputError
+from tankdaq.config import load_hull
+from tankdaq.errors import BadRecordingInput, InputError, RecordingError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store import schemas
 from tankdaq.store.naming import create_exclusive, next_run_number, recording_name
 from tankdaq.store.reader import iter_raw_chunks, read_decay_runs, read_recording
-from tankdaq.store.writer import RecordingWriter
+from tankdaq.store.writer import RecordingWriter, describe_run
 
 RATE_HZ = 200.0
 RELEASE_T_S = 2.0
@@ -245,3 +246,43 @@ def test_names_say_what_a_person_looks_for(tmp_path: Path) -> None:
     (tmp_path / "swath_1.1T_roll_8deg_20261121-143015_run07-2.mcap").touch()
     (tmp_path / recording_name("swath", 0.9, "roll", 8, 9, when)).touch()  # another draft: not counted
     assert next_run_number(tmp_path, "swath", 1.1, "roll") == 8
+
+
+def test_describe_run_fills_the_ittc_keys_from_the_hull() -> None:
+    hull = load_hull("catamaran")
+    described = describe_run(
+        "pitch",
+        6.0,
+        hull=hull,
+        draft=1.1,
+        sample_rate_hz=100,
+        device={"device_id": "037003F2", "firmware": "1.8.2", "product_code": None},
+        operator="kim",
+    )
+    assert described["hull"] == "catamaran" and described["draft"] == "1.1T" and described["axis"] == "pitch"
+    assert described["hull_length_m"] == hull.dimensions["length_m"]
+    assert described["device_id"] == "037003F2" and "product_code" not in described
+    assert set(described) - {f"hull_{k}" for k in hull.dimensions} <= set(schemas.RUN_METADATA_KEYS)
+
+
+def test_misuse_of_a_writer_is_refused(tmp_path: Path) -> None:
+    writer = RecordingWriter(tmp_path / "x.mcap", {}, {})
+    with pytest.raises(ValueError, match="unknown event kind 'oops'"):
+        writer.write_event("oops", "")
+    with pytest.raises(ValueError, match="unknown decay terms"):
+        writer.write_fit(1.0, {"k9": 1.0})
+    writer.close()
+    writer.close()  # idempotent
+    with pytest.raises(RecordingError, match="already closed"):
+        writer.write_raw(b"late")
+    assert read_recording(writer.path).complete
+
+
+def test_a_file_cut_before_its_first_chunk_says_so(tmp_path: Path) -> None:
+    path = write_recording(tmp_path / "run.mcap", decay_samples(1.0), [(1, b"x")])
+    data = path.read_bytes()
+    first_chunk = data.index(b"run_config.json")  # header, metadata, then the attachment, then data
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: first_chunk + 200])
+    with pytest.raises(BadRecordingInput, match="cut short before its first data"):
+        read_recording(cut)

@@ -116,8 +116,12 @@ class Recording:
         return json.loads(raw) if raw else {}
 
 
-def _check_tankdaq(path: Path, channels: dict[int, Channel]) -> None:
+def _check_tankdaq(path: Path, channels: dict[int, Channel], has_run_metadata: bool) -> None:
     topics = {channel.topic for channel in channels.values()}
+    if not topics and has_run_metadata:
+        raise BadRecordingInput(
+            f"{path} is a tankdaq recording cut short before its first data reached the disk: nothing to read"
+        )
     if not topics & {schemas.TOPIC_SAMPLES, schemas.TOPIC_RAW}:
         found = ", ".join(sorted(topics)) or "no channels"
         raise BadRecordingInput(
@@ -168,7 +172,7 @@ def read_recording(path: str | Path) -> Recording:
         elif isinstance(record, Attachment):
             attachments[record.name] = record.data
     path = Path(path)
-    _check_tankdaq(path, channels)
+    _check_tankdaq(path, channels, bool(history))
     try:
         samples = schemas.samples_from_json(sample_payloads, sample_stamps)
     except (json.JSONDecodeError, TypeError, ValueError) as exc:
@@ -193,14 +197,16 @@ def iter_raw_chunks(path: str | Path) -> Iterator[tuple[int, bytes]]:
     scan = RecordScan(path)
     raw_channels: set[int] = set()
     seen_channels: dict[int, Channel] = {}
+    has_run_metadata = False
     for record in scan:
+        has_run_metadata |= isinstance(record, Metadata) and record.name == schemas.RUN_METADATA_NAME
         if isinstance(record, Channel):
             seen_channels[record.id] = record
             if record.topic == schemas.TOPIC_RAW:
                 raw_channels.add(record.id)
         elif isinstance(record, Message) and record.channel_id in raw_channels:
             yield record.log_time, record.data
-    _check_tankdaq(scan.path, seen_channels)
+    _check_tankdaq(scan.path, seen_channels, has_run_metadata)
 
 
 def _finite_increasing(t: np.ndarray, *columns: np.ndarray) -> np.ndarray:

@@ -26,6 +26,7 @@ from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
 from .. import __version__
+from ..config import Hull, format_draft
 from ..errors import RecordingError
 from ..samples import AXIS_FIELDS
 from . import schemas
@@ -63,6 +64,41 @@ class _UnbufferedFile:
 
 def _utc_now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+def describe_run(
+    axis: str,
+    angle_nominal_deg: float,
+    hull: Hull | None = None,
+    draft: float | None = None,
+    sample_rate_hz: float | None = None,
+    device: Mapping[str, object] | None = None,
+    operator: str = "",
+    note: str = "",
+) -> dict[str, object]:
+    """The ``run_metadata`` a recording starts with, under the keys of ``schemas.RUN_METADATA_KEYS``.
+
+    ``device`` holds what the driver read from the instrument (device_id,
+    product_code, firmware). Hull dimensions are copied so the file stands alone
+    when the hull configuration changes later.
+    """
+    described: dict[str, object] = {"axis": axis, "angle_nominal_deg": float(angle_nominal_deg)}
+    if hull is not None:
+        described["hull"] = hull.name
+        described["hull_description"] = hull.description
+        described.update({f"hull_{key}": value for key, value in hull.dimensions.items()})
+    if draft is not None:
+        described["draft"] = format_draft(draft)
+    if sample_rate_hz is not None:
+        described["sample_rate_hz"] = float(sample_rate_hz)
+    for key in ("device_id", "product_code", "firmware"):
+        if device and device.get(key) is not None:
+            described[key] = device[key]
+    if operator:
+        described["operator"] = operator
+    if note:
+        described["note"] = note
+    return described
 
 
 class RecordingWriter:

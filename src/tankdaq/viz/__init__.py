@@ -1,1 +1,4 @@
-"""tankdaq.viz"""
+"""tankdaq.viz: the rerun live view (``viz.live``) and PNG report figures (``viz.plots``).
+
+Nothing is imported here: PNG reports should not pay for loading rerun.
+"""
