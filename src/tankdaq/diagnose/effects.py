@@ -17,8 +17,10 @@ from ..records import DecayRun
 from .fitting import ModelSpec
 
 #: Measured channels a coupling term may use, by the motion they carry.
-HEAVE_CHANNELS: tuple[str, ...] = ("heave_m", "acc_z_m_s2")
-OTHER_ROTATION_CHANNELS: tuple[str, ...] = ("other_angle", "other_angle_rad", "other_angle_deg")
+#: Names as DecayRun.channels holds them (CSV import strips _deg/_rad after converting to rad);
+#: ``z`` and ``theta``/``phi`` are the columns of the KVLCC2 motion-tracking files.
+HEAVE_CHANNELS: tuple[str, ...] = ("heave_m", "heave", "z", "acc_z_m_s2")
+OTHER_ROTATION_CHANNELS: tuple[str, ...] = ("other_angle", "theta", "phi", "pitch", "roll")
 
 
 @dataclass(frozen=True)

@@ -280,7 +280,8 @@ def _prepare(runs: Sequence[DecayRun], spec: ModelSpec) -> list[_RunData]:
             raise BadIdentificationInput(f"{run.name}: lag, gain and gyro bias need a measured rate")
         sigma_angle = max(noise_level(run.angle), 1e-9)
         sigma_rate = max(noise_level(run.rate), 1e-9) if run.rate is not None else 1.0
-        channels = {ch: np.asarray(run.channels[ch], dtype=float) for ch in spec.coupling}
+        # about its mean: a static part (gravity in acc_z, the tracker's zero) is an offset, not a coupling
+        channels = {ch: run.channels[ch] - np.mean(run.channels[ch]) for ch in spec.coupling}
         prepared.append(_RunData(run, sigma_angle, sigma_rate, channels))
     return prepared
 

@@ -130,11 +130,11 @@ class CycleTrend:
 
     @property
     def period_changes_with_amplitude(self) -> bool:
-        """Period changing by more than 0.5 % over the tested amplitude band."""
+        """Period changing by more than 1 % over the tested amplitude band (damping alone moves it less)."""
         if self.amplitude_rad.size < 3:
             return False
         span = float(np.ptp(self.amplitude_rad**2))
-        return abs(self.period_slope_s_per_rad2) * span > 0.005 * float(np.median(self.period_s))
+        return abs(self.period_slope_s_per_rad2) * span > 0.01 * float(np.median(self.period_s))
 
 
 def cycle_trend(
@@ -218,6 +218,6 @@ def channel_correlation(residual: np.ndarray, channel: np.ndarray, max_lag: int)
         return 0.0
     best = 0.0
     for lag in range(-max_lag, max_lag + 1):
-        c = float(np.dot(e[lag:], u[:u.size - lag])) if lag >= 0 else float(np.dot(e[:lag], u[-lag:]))
+        c = float(np.dot(e[lag:], u[: u.size - lag])) if lag >= 0 else float(np.dot(e[:lag], u[-lag:]))
         best = max(best, abs(c) / denom)
     return best

@@ -39,21 +39,16 @@ LATE_QUIET = 1.5
 
 
 def parse_baseline(text: str) -> tuple[str, ...]:
-    """'b1,c1' -> terms; anything else is handed to the ident model aliases (e.g. 'seed001-eq1')."""
-    tokens = tuple(tok.strip() for tok in text.split(",") if tok.strip())
-    if tokens and all(tok in TERMS for tok in tokens):
-        return tokens
-    try:
-        from ..ident.models import resolve_model
-    except ImportError:
+    """'b1,c1' or an ident alias ('ittc-linear', 'seed001-eq1') -> the canonical terms of the baseline."""
+    from ..ident.models import resolve_model
+
+    terms = resolve_model(text)
+    extra = [t for t in terms if t not in TERMS]
+    if extra:
         raise InputError(
-            f"baseline {text!r} not understood: give decay terms such as b1,c1 (known: {', '.join(TERMS)})"
-        ) from None
-    model = resolve_model(text)
-    terms = tuple(getattr(model, "terms", model))
-    unknown = [t for t in terms if t not in TERMS]
-    if unknown:
-        raise InputError(f"baseline {text!r} holds terms the discrepancy workflow cannot refit: {unknown}")
+            f"baseline {text!r} holds {', '.join(extra)}: start from canonical terms "
+            f"({', '.join(TERMS)}); friction and coupling are effects the workflow adds itself"
+        )
     return terms
 
 
@@ -98,16 +93,6 @@ class Step:
     added: dict[str, float]
     family: list[FamilyEvidence] = field(default_factory=list)
     cut_s: list[float] = field(default_factory=list)
-
-
-def start_at_release(run: DecayRun) -> DecayRun:
-    """Cut a record that begins at rest to its largest extreme (the release): the decay starts there."""
-    tail = run.angle[int(0.9 * run.t.size) :]
-    deviation = np.abs(run.angle - np.median(tail))
-    i_max = int(np.argmax(deviation))
-    if i_max == 0 or deviation[0] > 0.5 * deviation[i_max]:
-        return run
-    return run.window(i_max)
 
 
 def initial_guess(runs: Sequence[DecayRun], terms: Sequence[str]) -> dict[str, float]:
@@ -210,7 +195,7 @@ class Diagnoser:
         if len(axes) > 1:
             raise BadIdentificationInput(f"runs mix axes {sorted(axes)}; diagnose one axis at a time")
         terms = parse_baseline(self.baseline) if isinstance(self.baseline, str) else tuple(self.baseline)
-        runs = [start_at_release(r) for r in runs]
+        runs = list(runs)
         spec = ModelSpec(terms=terms)
         current = self._fit(runs, spec, "baseline", guess=initial_guess(runs, terms))
         self.baseline_ = current

@@ -1,0 +1,71 @@
+"""``tankdaq diagnose``: find what a decay model is missing, add it, and show the gap shrink."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from ..errors import InputError
+from .app import app, err_console, handles_errors
+
+
+@app.command("diagnose")
+@handles_errors
+def diagnose_command(
+    inputs: Annotated[
+        list[Path], typer.Argument(help="Decay recordings (.mcap) or CSV files, one decay each.")
+    ],
+    axis: str = typer.Option("roll", "--axis", help="roll or pitch."),
+    baseline: str = typer.Option(
+        "b1,c1", "--baseline", help="Baseline terms (b1,c1) or an alias (ittc-linear)."
+    ),
+    max_steps: int = typer.Option(4, "--max-steps", help="At most this many effects added."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
+    report: Annotated[
+        Path | None, typer.Option("--report", help="Write a Markdown report with PNG figures into DIR.")
+    ] = None,
+    time_col: str = typer.Option("time_s", "--time-col", help="CSV time column (s)."),
+    angle_col: str = typer.Option("angle_deg", "--angle-col", help="CSV angle column."),
+    rate_col: str = typer.Option("rate_deg_s", "--rate-col", help="CSV rate column (ignored when absent)."),
+    angle_unit: str = typer.Option("deg", "--angle-unit", help="Unit of the CSV angle and rate: deg or rad."),
+    keep_all: bool = typer.Option(False, "--keep-all", help="Do not cut the CSV record at the release."),
+    skip_half_cycles: int = typer.Option(
+        0, "--skip-half-cycles", min=0, help="Half-cycles to drop after it."
+    ),
+) -> None:
+    """Fit a baseline, find where it disagrees with the decays, name and add the missing effects."""
+    from ..diagnose.effects import LIBRARY
+    from ..diagnose.report import story, summary_json, write_report
+    from ..diagnose.workflow import Diagnoser
+    from .identify import load_runs
+
+    if axis not in ("roll", "pitch"):
+        raise InputError(f"axis {axis!r} not understood: use roll or pitch")
+    if max_steps < 0:
+        raise InputError(f"--max-steps must be 0 or more, not {max_steps}")
+    runs = load_runs(inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles)
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+    ) as progress:
+        task = progress.add_task("baseline", total=1 + max_steps * (len(LIBRARY) + 1))
+
+        def advance(label: str) -> None:
+            progress.update(task, advance=1, description=f"refit: {label}")
+
+        diagnoser = Diagnoser(baseline=baseline, max_steps=max_steps, progress=advance).fit(runs)
+        progress.update(task, completed=progress.tasks[0].total, description="done")
+    if report is not None:
+        path = write_report(diagnoser, report)
+        err_console.print(f"report: {path}", markup=False, highlight=False)
+    if as_json:
+        typer.echo(summary_json(diagnoser))
+    else:
+        for line in story(diagnoser):
+            typer.echo(line)
