@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 from . import hulls  # noqa: F401  (each import registers commands on ``app``)
+from . import diagnose  # noqa: F401
+from . import auv  # noqa: F401
 from . import identify  # noqa: F401
 from . import store  # noqa: F401
 from .app import app
