@@ -197,3 +197,17 @@ def test_default_mode_spawns_only_with_a_display(monkeypatch: pytest.MonkeyPatch
     assert default_viewer_mode() == "save"
     monkeypatch.setenv("WAYLAND_DISPLAY", "wayland-0")
     assert default_viewer_mode() == "spawn"
+
+
+def test_a_forecast_beyond_the_measurement_has_no_residual_there(tmp_path: Path) -> None:
+    samples = decay_samples(300)
+    ahead = 10.0 + np.arange(500) / 100.0  # two seconds further than measured
+    angle, rate = simulate_decay(TRUTH, ahead, np.radians(6.0))
+    with LiveView("save", rrd_path=tmp_path / "ahead.rrd") as view:
+        view.log_samples(samples)
+        view.log_fit(ahead, angle, rate, TRUTH)
+    rows, _, _ = read_rrd(tmp_path / "ahead.rrd")
+    t_model, _ = series(rows["/angle/model/fit_001"])
+    t_residual, residual = series(rows["/residual/model/fit_001"])
+    assert t_model.size == 500 and t_residual.size == 300
+    np.testing.assert_allclose(residual[:, 0], 0.0, atol=1e-9)  # the truth fits its own samples

@@ -28,7 +28,7 @@ from mcap.writer import CompressionType, Writer
 from .. import __version__
 from ..config import Hull, format_draft
 from ..errors import RecordingError
-from ..samples import AXIS_FIELDS
+from ..samples import AXIS_FIELDS, SAMPLE_DTYPE
 from . import schemas
 from .naming import create_exclusive
 
@@ -139,7 +139,12 @@ class RecordingWriter:
         self.samples_written = 0
         self.raw_bytes_written = 0
         self._mcap = Writer(self._file, chunk_size=chunk_size, compression=CompressionType.ZSTD)  # type: ignore[arg-type]
-        self._guarded(self._start, run_config)
+        try:
+            self._guarded(self._start, run_config)
+        except RecordingError:
+            os.close(fd)  # nobody holds this writer yet, so nobody else could close it
+            self._closed = True
+            raise
 
     # -- life cycle -------------------------------------------------------------------------------------
 
@@ -202,6 +207,8 @@ class RecordingWriter:
 
     def write_samples(self, samples: np.ndarray) -> None:
         """A SAMPLE_DTYPE array; log time is each sample's host arrival (now, where it is unknown)."""
+        if samples.dtype != SAMPLE_DTYPE:
+            raise ValueError(f"write_samples takes a SAMPLE_DTYPE array, not {samples.dtype}")
         if samples.size == 0:
             return
         host_ns = samples["host_t"] * 1e9

@@ -140,6 +140,8 @@ class LiveView:
         sinks: list[rr.GrpcSink | rr.FileSink] = []
         if self.mode == "spawn":
             if not self._spawned:
+                if rerun_executable() is None:
+                    raise InputError("no rerun viewer found to spawn; use --viewer save (an .rrd per run)")
                 rec.spawn(port=self.spawn_port, connect=False, hide_welcome_screen=True)
                 self._spawned = True
             sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{self.spawn_port}/proxy"))
@@ -219,20 +221,22 @@ class LiveView:
         fit = f"fit_{self._revision:03d}"
         stamp = float(t[-1]) if t_fit is None else float(t_fit)
         label = f"model (fit {self._revision}, t = {stamp:.1f} s)"
-        curves = {"angle": np.degrees(predicted_angle), "rate": np.degrees(predicted_rate)}
+        curves = {"angle": (t, np.degrees(predicted_angle)), "rate": (t, np.degrees(predicted_rate))}
         if self._measured_t:
             measured_t = np.concatenate(self._measured_t)
             measured = np.degrees(np.concatenate(self._measured_angle))
             order = np.argsort(measured_t, kind="stable")
-            curves["residual"] = np.interp(t, measured_t[order], measured[order]) - curves["angle"]
-        for group, values in curves.items():
+            inside = (t >= measured_t.min()) & (t <= measured_t.max())  # no residual against extrapolation
+            at_t = np.interp(t[inside], measured_t[order], measured[order])
+            curves["residual"] = (t[inside], at_t - curves["angle"][1][inside])
+        for group, (times, values) in curves.items():
             name = label if group != "residual" else f"residual (fit {self._revision})"
             rec.log(
                 f"{group}/model/{fit}",
                 rr.SeriesLines(colors=[MODEL_COLOR], widths=[2.0], names=[name]),
                 static=True,
             )
-            self._columns(f"{group}/model/{fit}", t, values)
+            self._columns(f"{group}/model/{fit}", times, values)
             if self._revision >= 2:
                 previous = f"{group}/model/fit_{self._revision - 1:03d}"
                 rec.log(
