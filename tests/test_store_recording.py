@@ -14,7 +14,7 @@ from mcap.writer import Writer
 
 from tankdaq.config import load_hull
 from tankdaq.errors import BadRecordingInput, InputError, RecordingError
-from tankdaq.physics.decay import simulate_decay
+from tankdaq.physics.decay import TERMS, simulate_decay
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store import schemas
 from tankdaq.store.naming import create_exclusive, next_run_number, recording_name
@@ -159,6 +159,36 @@ def test_file_is_indexed_mcap_that_foxglove_can_plot(recording: tuple[Path, np.n
     assert set(messages[0]) == set(sample_schema["required"])
     assert messages[500]["roll_deg"] == pytest.approx(np.degrees(samples["roll"][500]), rel=1e-15)
     assert isinstance(messages[500]["counter"], int)
+
+
+FOXGLOVE_SCALARS = {"boolean", "string", "number", "integer"}
+
+
+def assert_foxglove_parses(schema: dict, where: str) -> None:
+    """Foxglove's parseJsonSchema (mcap-support) rules: one type name per field, objects with properties."""
+    assert schema["type"] == "object", where
+    for name, field in schema["properties"].items():
+        path = f"{where}.{name}"
+        assert isinstance(field.get("type"), str), f"{path}: type must be one name, got {field.get('type')!r}"
+        if field["type"] == "object":
+            assert_foxglove_parses(field, path)
+        elif field["type"] == "array":
+            item = field["items"]
+            assert isinstance(item.get("type"), str), path
+            if item["type"] == "object":
+                assert_foxglove_parses(item, path)
+            else:
+                assert item["type"] in FOXGLOVE_SCALARS, path
+        else:
+            assert field["type"] in FOXGLOVE_SCALARS, path
+
+
+def test_schemas_parse_in_foxglove_and_fit_terms_are_plottable() -> None:
+    for body in (schemas.SAMPLES_SCHEMA, schemas.EVENTS_SCHEMA, schemas.FIT_SCHEMA):
+        schema = json.loads(body)
+        assert_foxglove_parses(schema, schema["title"])
+    fit = json.loads(schemas.FIT_SCHEMA)
+    assert set(fit["properties"]["coefficients"]["properties"]) == set(TERMS)  # /fit.coefficients.b1 plots
 
 
 def test_missing_values_become_null_and_come_back_as_nan(tmp_path: Path) -> None:

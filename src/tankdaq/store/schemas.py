@@ -62,7 +62,13 @@ def _schema(title: str, properties: dict[str, Any], required: Sequence[str]) -> 
 
 
 def _number(unit: str, description: str = "") -> dict[str, Any]:
-    return {"type": ["number", "null"], "description": f"{description} ({unit})".strip()}
+    """A number field, null when missing; typed "number" only, as Foxglove's parser takes one type name."""
+    return {"type": "number", "description": f"{description} ({unit}; null when missing)".strip()}
+
+
+def _per_term(item: dict[str, Any], description: str) -> dict[str, Any]:
+    """An object with one optional property per decay term (Foxglove needs named properties to plot)."""
+    return {"type": "object", "description": description, "properties": {term: item for term in TERMS}}
 
 
 SAMPLES_SCHEMA = _schema(
@@ -84,7 +90,7 @@ EVENTS_SCHEMA = _schema(
         "t_s": _number("s", "device time of the event"),
         "kind": {"type": "string", "enum": list(EVENT_KINDS)},
         "message": {"type": "string"},
-        "data": {"type": "object", "description": "kind-specific details"},
+        "data": {"type": "object", "description": "kind-specific details", "properties": {}},
     },
     ["t_s", "kind", "message"],
 )
@@ -94,19 +100,13 @@ FIT_SCHEMA = _schema(
     {
         "t_s": _number("s", "device time of the fit"),
         "terms": {"type": "array", "items": {"type": "string", "enum": list(TERMS)}},
-        "coefficients": {"type": "object", "additionalProperties": {"type": "number"}},
-        "std": {"type": "object", "additionalProperties": {"type": "number"}},
-        "ci95": {
-            "type": "object",
-            "description": "95 % confidence interval [low, high] per term",
-            "additionalProperties": {
-                "type": "array",
-                "items": {"type": "number"},
-                "minItems": 2,
-                "maxItems": 2,
-            },
-        },
-        "r2": {"type": ["number", "null"]},
+        "coefficients": _per_term({"type": "number"}, "fitted value per term (units in channel metadata)"),
+        "std": _per_term({"type": "number"}, "standard error per term"),
+        "ci95": _per_term(
+            {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
+            "95 % confidence interval [low, high] per term",
+        ),
+        "r2": _number("-", "coefficient of determination of the angle"),
     },
     ["t_s", "terms", "coefficients"],
 )
