@@ -398,8 +398,9 @@ class MTData2Message(Mapping[str, object]):
         return FRAME_NAMES.get(self.xdis[name] & FRAME_MASK, "ENU")
 
 
-def iter_items(payload: bytes) -> Iterator[tuple[int, bytes]]:
-    """(xdi, data) of every item; ProtocolError when the item sizes do not add up to the payload."""
+def item_spans(payload: bytes) -> list[tuple[int, int, int]]:
+    """(xdi, data offset, size) of every item; ProtocolError when the sizes do not add up to the payload."""
+    spans = []
     pos = 0
     end = len(payload)
     while pos < end:
@@ -409,8 +410,9 @@ def iter_items(payload: bytes) -> Iterator[tuple[int, bytes]]:
         pos += 3
         if pos + size > end:
             raise ProtocolError(f"MTData2 item 0x{xdi:04X} claims {size} bytes but only {end - pos} remain")
-        yield xdi, bytes(payload[pos : pos + size])
+        spans.append((xdi, pos, size))
         pos += size
+    return spans
 
 
 def decode_mtdata2(payload: bytes) -> MTData2Message:
@@ -418,12 +420,12 @@ def decode_mtdata2(payload: bytes) -> MTData2Message:
     values: dict[str, object] = {}
     xdis: dict[str, int] = {}
     unknown: list[int] = []
-    for xdi, data in iter_items(payload):
+    for xdi, offset, size in item_spans(payload):
         spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
         if spec is None:
             unknown.append(xdi)
             continue
-        values[spec.name] = decode_value(spec, xdi, data)
+        values[spec.name] = decode_value(spec, xdi, bytes(payload[offset : offset + size]))
         xdis[spec.name] = xdi
     return MTData2Message(values, xdis, tuple(unknown))
 

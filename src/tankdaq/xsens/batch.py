@@ -1,0 +1,700 @@
+"""Vectorised decoding of raw Xbus captures into columns (numpy), with the framer's exact semantics.
+
+A per-message Python parser manages ~1e5 frames/s; a long capture needs array code:
+
+1. every 0xFA is a candidate frame start; lengths and checksums are checked for all
+   candidates at once (row sums of equal-length candidates, or a mod-256 running sum);
+2. the frames the sequential framer accepts (the first valid frame at or after the end of
+   the previous one) are chosen by following a ``next`` pointer, in bulk over the runs where
+   the next frame is simply the next valid candidate;
+3. MTData2 frames are grouped by item layout: a layout is learnt from one frame, and every
+   frame of the same length whose item headers sit at the same offsets with the same bytes
+   has, by construction, the same layout. Each layout is a numpy structured dtype, so all its
+   fields are read with one gather and big-endian views.
+
+The result is a ``DecodedBlock``: per output name an array (one row per MTData2 message) and
+a presence mask, the counters, and the non-MTData2 frames (acks, errors) as ``Frame`` objects.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ProtocolError
+from ..samples import empty_samples
+from .constants import EXTENDED_LENGTH, MAX_DATA_LENGTH, MID, PREAMBLE
+from .frame import Frame, frame_length
+from .mtdata2 import (
+    FP1220_SCALE,
+    FP1632_SCALE,
+    FRAME_MASK,
+    FRAMES,
+    PRECISION_MASK,
+    PRECISIONS,
+    PVT_STRUCT,
+    SPEC_BY_BASE,
+    TYPE_MASK,
+    GnssPvt,
+    MTData2Message,
+    UtcTime,
+    decode_satinfo,
+    item_size,
+    item_spans,
+)
+from .timebase import TICKS_PER_SECOND, SampleTimeUnwrapper
+
+_STRUCT_TO_DTYPE = {"B": "u1", "H": ">u2", "I": ">u4", "i": ">i4", "h": ">i2"}
+UTC_DTYPE = np.dtype(
+    [("ns", ">u4"), ("year", ">u2"), ("month", "u1"), ("day", "u1"), ("hour", "u1"), ("minute", "u1"),
+     ("second", "u1"), ("flags", "u1")]
+)  # fmt: skip
+RAW_IMU_DTYPE = np.dtype([("counts", ">u2", (9,)), ("temp", ">i2")])
+FP1632_DTYPE = np.dtype([("fraction", ">u4"), ("integer", ">i2")])
+#: Channels that make a message a sample (GNSS-only messages are not).
+INERTIAL_OUTPUTS = ("EulerAngles", "RateOfTurn", "Acceleration")
+#: Below this many bytes a running sum is the cheaper checksum; above, row sums per frame length.
+RUNNING_SUM_LIMIT = 1 << 18
+#: Up to this many rows a layout is matched with one gather; beyond, one compare per header field.
+FEW_ROWS = 4096
+
+
+def _struct_dtype(fmt: str, names: Sequence[str]) -> np.dtype:
+    """The numpy dtype of a big-endian ``struct`` format such as '>IH6B' with the given field names."""
+    codes: list[str] = []
+    digits = ""
+    for char in fmt.lstrip("<>!="):
+        if char.isdigit():
+            digits += char
+        else:
+            codes += [char] * int(digits or 1)
+            digits = ""
+    return np.dtype([(name, _STRUCT_TO_DTYPE[code]) for name, code in zip(names, codes, strict=True)])
+
+
+PVT_DTYPE = _struct_dtype(PVT_STRUCT.format, list(GnssPvt.__dataclass_fields__))
+
+
+# ----------------------------------------------------------------------------------- 1+2: framing
+
+
+@dataclass
+class FrameScan:
+    """Accepted frames of a buffer and what the sequential framer would have counted."""
+
+    starts: np.ndarray  # preamble positions
+    payload_starts: np.ndarray
+    lengths: np.ndarray  # data bytes
+    bad_checksums: int
+    skipped_bytes: int
+    consumed: int  # bytes before the first incomplete frame: the rest waits for more data
+
+
+def scan_frames(buf: np.ndarray, max_length: int = MAX_DATA_LENGTH) -> FrameScan:
+    """All frames ``StreamFramer`` would accept from ``buf`` (uint8), found with array operations."""
+    count, total, header_size = _regular_run(buf, max_length)
+    if not count:
+        return _scan_general(buf, max_length)
+    offset = count * total
+    starts = np.arange(0, offset, total)
+    lengths = np.full(count, total - header_size - 1)
+    rest = buf[offset:]
+    if _waits_at_start(rest, max_length):  # the usual stream tail: the next frame's first bytes
+        return FrameScan(starts, starts + header_size, lengths, 0, 0, offset)
+    tail = _scan_general(rest, max_length)
+    return FrameScan(
+        starts=np.concatenate((starts, tail.starts + offset)),
+        payload_starts=np.concatenate((starts + header_size, tail.payload_starts + offset)),
+        lengths=np.concatenate((lengths, tail.lengths)),
+        bad_checksums=tail.bad_checksums,
+        skipped_bytes=tail.skipped_bytes,
+        consumed=offset + tail.consumed,
+    )
+
+
+def _regular_run(buf: np.ndarray, max_length: int) -> tuple[int, int, int]:
+    """(count, total, header size) of the valid frames that repeat back-to-back from byte 0.
+
+    A live stream is mostly one frame shape after another: when the bytes at 0, L, 2L, ...
+    are all the same header and every row checks out, the sequential framer accepts exactly
+    those rows, and a reshape verifies them in a few array operations.
+    """
+    total = frame_length(buf[:6].tobytes()) if buf.size and buf[0] == PREAMBLE else None
+    if total is None or total > buf.size:
+        return 0, 0, 0
+    header_size = 6 if buf[3] == EXTENDED_LENGTH else 4
+    if total - header_size - 1 > max_length:
+        return 0, 0, 0
+    rows = buf[: buf.size // total * total].reshape(-1, total)
+    good = (rows[:, 1:].sum(axis=1, dtype=np.uint8) == 0) & np.all(
+        rows[:, :header_size] == rows[0, :header_size], axis=1
+    )
+    count = rows.shape[0] if good.all() else int(np.argmin(good))
+    return count, total, header_size
+
+
+def _waits_at_start(rest: np.ndarray, max_length: int) -> bool:
+    """True when ``rest`` is just the start of one frame: the framer waits there for more bytes."""
+    if not rest.size or rest[0] != PREAMBLE or np.any(rest[1:] == PREAMBLE):
+        return not rest.size
+    total = frame_length(rest[:6].tobytes())
+    header_size = 6 if rest.size > 3 and rest[3] == EXTENDED_LENGTH else 4
+    return total is None or (total - header_size - 1 <= max_length and total > rest.size)
+
+
+def _scan_general(buf: np.ndarray, max_length: int) -> FrameScan:
+    """The general scan: any mix of frames, garbage and corrupted frames."""
+    n = buf.size
+    cand = np.flatnonzero(buf == PREAMBLE)
+    last = max(n - 1, 0)
+    length = buf[np.minimum(cand + 3, last)].astype(np.int64)  # clipped reads are caught by have_header
+    extended = length == EXTENDED_LENGTH
+    if extended.any():
+        at = cand[extended]
+        length[extended] = buf[np.minimum(at + 4, last)].astype(np.int64) << 8 | buf[np.minimum(at + 5, last)]
+    header_size = 4 + 2 * extended
+    total = header_size + length + 1
+    fits = length <= max_length
+    incomplete = (cand + header_size > n) | (fits & (cand + total > n))
+    complete = ~incomplete & fits
+
+    # Checksums are needed only where the sequential framer looks: at candidates no accepted
+    # frame covers. Check the most common length first (the real frames), follow the chain,
+    # then check whatever it leaves uncovered, until nothing unchecked is left uncovered.
+    complete_at = np.flatnonzero(complete)
+    c_starts, c_totals = cand[complete_at], total[complete_at]
+    checked = np.zeros(complete_at.size, dtype=bool)
+    ok = np.zeros(complete_at.size, dtype=bool)
+    if n <= RUNNING_SUM_LIMIT or not c_totals.size:
+        to_check = np.arange(complete_at.size)
+    else:
+        to_check = np.flatnonzero(c_totals == np.bincount(c_totals).argmax())
+    while True:
+        ok[to_check] = _checksums_ok(buf, c_starts[to_check], c_totals[to_check])
+        checked[to_check] = True
+        valid = np.flatnonzero(ok)
+        chosen = complete_at[valid[_follow_chain(c_starts[valid], c_starts[valid] + c_totals[valid])]]
+        starts, ends = cand[chosen], cand[chosen] + total[chosen]
+        unchecked = np.flatnonzero(~checked)
+        to_check = unchecked[~_covered(starts, ends, c_starts[unchecked])]
+        if not to_check.size:
+            break
+
+    consumed = n
+    waiting = cand[incomplete]  # all within the last max_length + 7 bytes: few
+    if waiting.size:
+        free = waiting[~_covered(starts, ends, waiting)]
+        if free.size:
+            consumed = int(free[0])
+            keep = starts < consumed
+            chosen, starts, ends = chosen[keep], starts[keep], ends[keep]
+    bad = c_starts[checked & ~ok]
+    bad = bad[bad < consumed]
+    return FrameScan(
+        starts=starts,
+        payload_starts=starts + header_size[chosen],
+        lengths=length[chosen],
+        bad_checksums=int(np.count_nonzero(~_covered(starts, ends, bad))),
+        skipped_bytes=consumed - int(np.sum(ends - starts)),
+        consumed=consumed,
+    )
+
+
+def _checksums_ok(buf: np.ndarray, starts: np.ndarray, totals: np.ndarray) -> np.ndarray:
+    """True where the bytes after the preamble, checksum included, sum to 0 mod 256."""
+    if buf.size <= RUNNING_SUM_LIMIT:
+        running = np.zeros(buf.size + 1, dtype=np.uint8)  # running[k] = sum(buf[:k]) mod 256
+        np.cumsum(buf, dtype=np.uint8, out=running[1:])
+        return running[starts + totals] == running[starts + 1]
+    # Long buffers: sum each candidate's bytes as a row, one group per candidate length.
+    ok = np.zeros(starts.size, dtype=bool)
+    order = np.argsort(totals, kind="stable")
+    for group in np.split(order, np.flatnonzero(np.diff(totals[order])) + 1):
+        if group.size:
+            rows = np.lib.stride_tricks.sliding_window_view(buf, int(totals[group[0]]) - 1)[starts[group] + 1]
+            ok[group] = rows.sum(axis=1, dtype=np.uint8) == 0
+    return ok
+
+
+def _follow_chain(valid_starts: np.ndarray, valid_ends: np.ndarray) -> np.ndarray:
+    """Indices of the valid candidates the sequential framer accepts (first valid at/after each end).
+
+    The next frame after valid candidate k is k + 1 unless candidate k + 1 starts inside k
+    (then it is found by search): only those breaks are walked one by one.
+    """
+    count = valid_starts.size
+    breaks = np.flatnonzero(valid_starts[1:] < valid_ends[:-1])
+    if breaks.size == 0:
+        return np.arange(count)
+    following = np.searchsorted(valid_starts, valid_ends[breaks])
+    marks = np.zeros(count + 1, dtype=np.int64)
+    k = 0
+    while k < count:
+        at = int(np.searchsorted(breaks, k))
+        if at == breaks.size:
+            marks[k] += 1
+            marks[count] -= 1
+            break
+        marks[k] += 1
+        marks[breaks[at] + 1] -= 1
+        k = int(following[at])
+    return np.flatnonzero(np.cumsum(marks[:-1]) > 0)
+
+
+def _covered(starts: np.ndarray, ends: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """True where a position lies inside an accepted frame (no position tested here starts one)."""
+    idx = np.searchsorted(starts, positions, side="right") - 1
+    inside = idx >= 0
+    inside[inside] = ends[idx[inside]] > positions[inside]
+    return inside
+
+
+# ---------------------------------------------------------------------------------- 3: MTData2 items
+
+
+@dataclass(frozen=True)
+class Field:
+    """One known item of a layout: its column name, XDI and how its bytes become column values."""
+
+    name: str
+    xdi: int
+    convert: Callable[[np.ndarray], np.ndarray]  # structured field view (rows, ...) -> column values
+    column_dtype: np.dtype
+    row_shape: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The item sequence of one MTData2 payload: a structured dtype plus the header bytes that identify it."""
+
+    length: int
+    headers: np.dtype  # structured view of the item headers (xdi u16, size u8 per item)
+    header_values: tuple[int, ...]  # their values in every payload of this layout, in field order
+    header_offsets: np.ndarray  # the same headers as byte offsets ...
+    header_bytes: np.ndarray  # ... and byte values
+    dtype: np.dtype  # structured view of the known items' data
+    fields: tuple[Field, ...]
+    unknown: int
+
+    def matches(self, payloads: np.ndarray) -> np.ndarray:
+        """Rows of ``payloads`` (rows, length) with exactly this layout.
+
+        Equal length and equal header bytes at this layout's header offsets mean the item
+        walk of a row goes exactly the same way, so the match is exact.
+        """
+        if not self.header_values:
+            return np.ones(payloads.shape[0], dtype=bool)
+        if payloads.shape[0] <= FEW_ROWS:  # one gather beats a compare per header field
+            return np.all(payloads[:, self.header_offsets] == self.header_bytes, axis=1)
+        view = payloads.view(self.headers)[:, 0]
+        hit = np.ones(payloads.shape[0], dtype=bool)
+        for name, value in zip(self.headers.names, self.header_values, strict=True):
+            hit &= view[name] == value
+        return hit
+
+
+def _item_field(xdi: int, size: int) -> tuple[np.dtype, Field] | None:
+    """(field dtype, Field) of a known item; None for unknown XDIs; ProtocolError for impossible sizes."""
+    spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
+    if spec is None:
+        return None
+    expected = item_size(spec, xdi)
+    if expected is not None and size != expected:
+        raise ProtocolError(f"0x{xdi:04X} needs {expected} data bytes, a message gives {size}")
+    if spec.kind == "real":
+        precision = xdi & PRECISION_MASK
+        shape = () if spec.count == 1 else (spec.count,)
+        if precision == PRECISIONS["fp1632"]:
+            dtype = np.dtype((FP1632_DTYPE, shape))
+            convert = _fp1632
+        else:
+            dtype = np.dtype(({0: ">f4", 1: ">i4", 3: ">f8"}[precision], shape))
+            convert = _fp1220 if precision == PRECISIONS["fp1220"] else _to_float
+        return dtype, Field(spec.name, xdi, convert, np.dtype(np.float64), shape)
+    if spec.kind == "int":
+        return np.dtype(_STRUCT_TO_DTYPE[spec.fmt[-1]]), Field(
+            spec.name, xdi, _to_int, np.dtype(np.int64), ()
+        )
+    if spec.kind == "deviceid":
+        if size not in (4, 8):
+            raise ProtocolError(f"DeviceId needs 4 or 8 data bytes, a message gives {size}")
+        return np.dtype(">u4" if size == 4 else ">u8"), Field(
+            spec.name, xdi, _to_uint, np.dtype(np.uint64), ()
+        )
+    if spec.kind == "satinfo":
+        decode_satinfo(bytes(size))  # raises for a size that is not 8 + 4 per satellite
+        return np.dtype(("u1", (size,))), Field(spec.name, xdi, _satinfo, np.dtype(object), ())
+    structured = {"utc": UTC_DTYPE, "pvt": PVT_DTYPE, "ints": RAW_IMU_DTYPE}[spec.kind]
+    return structured, Field(spec.name, xdi, np.copy, structured, ())
+
+
+def _to_float(view: np.ndarray) -> np.ndarray:
+    return view.astype(np.float64)
+
+
+def _to_int(view: np.ndarray) -> np.ndarray:
+    return view.astype(np.int64)
+
+
+def _to_uint(view: np.ndarray) -> np.ndarray:
+    return view.astype(np.uint64)
+
+
+def _fp1220(view: np.ndarray) -> np.ndarray:
+    return view.astype(np.float64) / FP1220_SCALE
+
+
+def _fp1632(view: np.ndarray) -> np.ndarray:
+    raw = (view["integer"].astype(np.int64) << 32) + view["fraction"]
+    return raw.astype(np.float64) / FP1632_SCALE  # |raw| < 2**47: exact in float64
+
+
+def _satinfo(view: np.ndarray) -> np.ndarray:
+    out = np.empty(view.shape[0], dtype=object)
+    out[:] = [decode_satinfo(row.tobytes()) for row in view]
+    return out
+
+
+def learn_layout(payload: bytes) -> Layout:
+    """The layout of one MTData2 payload; ProtocolError if its sizes do not add up or cannot be."""
+    spans = item_spans(payload)
+    names, formats, offsets, fields = [], [], [], []
+    unknown = 0
+    for xdi, offset, size in spans:
+        found = _item_field(xdi, size)
+        if found is None:
+            unknown += 1
+            continue
+        dtype, item = found
+        if item.name in names:  # a repeated output: the last one wins, as in decode_mtdata2
+            drop = names.index(item.name)
+            for seq in (names, formats, offsets, fields):
+                del seq[drop]
+        names.append(item.name)
+        formats.append(dtype)
+        offsets.append(offset)
+        fields.append(item)
+    itemsize = max(len(payload), 1)  # empty payloads get a one-byte placeholder record
+    headers = np.dtype(
+        {
+            "names": [f"{kind}{j}" for j in range(len(spans)) for kind in ("xdi", "size")],
+            "formats": ["u1" if kind else ">u2" for _ in spans for kind in (0, 1)],
+            "offsets": [offset - shift for _, offset, _ in spans for shift in (3, 1)],
+            "itemsize": itemsize,
+        }
+    )
+    header_offsets = np.array([offset - back for _, offset, _ in spans for back in (3, 2, 1)], dtype=np.int64)
+    return Layout(
+        length=len(payload),
+        headers=headers,
+        header_values=tuple(value for xdi, _, size in spans for value in (xdi, size)),
+        header_offsets=header_offsets,
+        header_bytes=np.frombuffer(payload, dtype=np.uint8)[header_offsets],
+        dtype=np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize}),
+        fields=tuple(fields),
+        unknown=unknown,
+    )
+
+
+class LayoutCache:
+    """Layouts seen so far, by payload length, so a stream learns each layout once.
+
+    At most ``per_length`` layouts are kept per length, most recently used first, so a noisy
+    stream with many one-off layouts cannot make every later match slower.
+    """
+
+    def __init__(self, per_length: int = 16) -> None:
+        self.per_length = per_length
+        self.by_length: dict[int, list[Layout]] = {}
+
+    def assign(self, payloads: np.ndarray) -> tuple[list[tuple[Layout, np.ndarray]], np.ndarray]:
+        """Split equal-length payload rows by layout: ([(layout, rows)], malformed rows)."""
+        known = self.by_length.get(payloads.shape[1], [])
+        unassigned = np.arange(payloads.shape[0])
+        groups: list[tuple[Layout, np.ndarray]] = []
+        malformed: list[int] = []
+        for layout in known:
+            if not unassigned.size:
+                break
+            unassigned = _take(layout, payloads, unassigned, groups)
+        while unassigned.size:
+            try:
+                layout = learn_layout(payloads[unassigned[0]].tobytes())
+            except ProtocolError:
+                malformed.append(int(unassigned[0]))
+                unassigned = unassigned[1:]
+                continue
+            unassigned = _take(layout, payloads, unassigned, groups)
+        used = [layout for layout, _ in groups]
+        self.by_length[payloads.shape[1]] = (used + [k for k in known if k not in used])[: self.per_length]
+        return groups, np.array(malformed, dtype=np.int64)
+
+
+def _take(
+    layout: Layout, payloads: np.ndarray, unassigned: np.ndarray, groups: list[tuple[Layout, np.ndarray]]
+) -> np.ndarray:
+    """Add (layout, its rows among ``unassigned``) to ``groups`` if any match; return the rows left."""
+    rows = payloads if unassigned.size == payloads.shape[0] else payloads[unassigned]
+    hit = layout.matches(rows)
+    if not hit.any():
+        return unassigned
+    groups.append((layout, unassigned[hit]))
+    return unassigned[~hit]
+
+
+# -------------------------------------------------------------------------------------- the block
+
+
+@dataclass
+class DecodedBlock:
+    """Columnar decode of a run of frames.
+
+    ``columns[name]`` has one row per accepted MTData2 message (NaN / 0 / None where the
+    message lacks the output, see ``present[name]``), ``xdis[name]`` the identifier each row
+    came with. ``frame_index`` places each message among all frames; ``other_frames`` are
+    the remaining frames (acks, errors, legacy MTData) at ``other_index``.
+    """
+
+    n_messages: int = 0
+    columns: dict[str, np.ndarray] = field(default_factory=dict)
+    present: dict[str, np.ndarray] = field(default_factory=dict)
+    xdis: dict[str, np.ndarray] = field(default_factory=dict)
+    unknown_counts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    frame_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    other_frames: list[Frame] = field(default_factory=list)
+    other_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    frames: int = 0
+    bad_checksums: int = 0
+    skipped_bytes: int = 0
+    malformed: int = 0  # MTData2 frames whose item sizes do not add up (rejected)
+    pending_bytes: int = 0  # trailing bytes that may start a frame still incomplete
+
+    @property
+    def unknown_ids(self) -> int:
+        """Items skipped because their identifier is unknown."""
+        return int(self.unknown_counts.sum())
+
+    def message(self, index: int) -> MTData2Message:
+        """Row ``index`` as the per-message decoder returns it (unknown items are counted, not named)."""
+        values: dict[str, object] = {}
+        xdis: dict[str, int] = {}
+        for name, column in self.columns.items():
+            if self.present[name][index]:
+                values[name] = _python_value(name, column[index])
+                xdis[name] = int(self.xdis[name][index])
+        return MTData2Message(values, xdis, (0,) * int(self.unknown_counts[index]))
+
+    @staticmethod
+    def concat(blocks: Sequence[DecodedBlock]) -> DecodedBlock:
+        """One block from consecutive blocks (a column missing from some blocks is absent there)."""
+        out = DecodedBlock()
+        examples: dict[str, np.ndarray] = {}
+        for block in blocks:
+            for name, column in block.columns.items():
+                examples.setdefault(name, column)
+        for name, example in examples.items():
+            out.columns[name] = np.concatenate(
+                [b.columns[name] if name in b.columns else _absent(example, b.n_messages) for b in blocks]
+            )
+            out.present[name] = np.concatenate(
+                [b.present.get(name, np.zeros(b.n_messages, bool)) for b in blocks]
+            )
+            out.xdis[name] = np.concatenate(
+                [b.xdis.get(name, np.zeros(b.n_messages, np.int64)) for b in blocks]
+            )
+        offsets = np.cumsum([0, *(b.frames for b in blocks)])
+        out.frame_index = np.concatenate(
+            [out.frame_index, *(b.frame_index + o for b, o in zip(blocks, offsets[:-1], strict=True))]
+        )
+        out.other_index = np.concatenate(
+            [out.other_index, *(b.other_index + o for b, o in zip(blocks, offsets[:-1], strict=True))]
+        )
+        out.unknown_counts = np.concatenate([out.unknown_counts, *(b.unknown_counts for b in blocks)])
+        for block in blocks:
+            out.other_frames += block.other_frames
+        for counter in ("n_messages", "frames", "bad_checksums", "skipped_bytes", "malformed"):
+            setattr(out, counter, sum(getattr(b, counter) for b in blocks))
+        out.pending_bytes = blocks[-1].pending_bytes if blocks else 0
+        return out
+
+
+def _absent(example: np.ndarray, rows: int) -> np.ndarray:
+    """A column of ``rows`` absent values shaped like ``example`` (NaN for reals)."""
+    out = np.zeros((rows, *example.shape[1:]), dtype=example.dtype)
+    if out.dtype == np.float64:
+        out.fill(np.nan)
+    return out
+
+
+def _python_value(name: str, cell: object) -> object:
+    """A column cell as the per-message decoder's Python value."""
+    if isinstance(cell, np.ndarray):
+        return tuple(cell.tolist())
+    if isinstance(cell, np.void):
+        record = cell.item()
+        if name == "UtcTime":
+            return UtcTime(*record)
+        if name == "GnssPvtData":
+            return GnssPvt(*record)
+        counts, temp = record
+        return (*counts.tolist(), temp)
+    if isinstance(cell, np.generic):
+        return cell.item()
+    return cell
+
+
+def decode_buffer(
+    buf: np.ndarray, max_length: int = MAX_DATA_LENGTH, layouts: LayoutCache | None = None
+) -> DecodedBlock:
+    """Decode every complete frame of ``buf`` (uint8); bytes from ``consumed`` on are left pending."""
+    scan = scan_frames(buf, max_length)
+    layouts = LayoutCache() if layouts is None else layouts
+    block = DecodedBlock(
+        frames=int(scan.starts.size),
+        bad_checksums=scan.bad_checksums,
+        skipped_bytes=scan.skipped_bytes,
+        pending_bytes=buf.size - scan.consumed,
+    )
+    is_data = buf[scan.starts + 2] == MID.MTDATA2
+    if not is_data.all():
+        others = np.flatnonzero(~is_data)
+        block.other_index = others
+        block.other_frames = [
+            Frame(int(buf[s + 1]), int(buf[s + 2]), buf[p : p + n].tobytes())
+            for s, p, n in zip(
+                scan.starts[others].tolist(),
+                scan.payload_starts[others].tolist(),
+                scan.lengths[others].tolist(),
+                strict=True,
+            )
+        ]
+    data_frames = np.flatnonzero(is_data)
+    groups, malformed = _layout_groups(
+        buf, scan.payload_starts[data_frames], scan.lengths[data_frames], layouts
+    )
+    accepted = np.ones(data_frames.size, dtype=bool)
+    accepted[malformed] = False
+    block.malformed = int(malformed.size)
+    block.n_messages = int(accepted.sum())
+    block.frame_index = data_frames[accepted]
+    row_of = np.cumsum(accepted) - 1
+    block.unknown_counts = np.zeros(block.n_messages, dtype=np.int64)
+    single = len(groups) == 1 and not malformed.size
+    everywhere = np.ones(block.n_messages, dtype=bool)
+    everywhere.flags.writeable = False  # shared by the columns of a one-layout block
+    for layout, members, records in groups:
+        rows = row_of[members]
+        if layout.unknown:
+            block.unknown_counts[rows] = layout.unknown
+        for item in layout.fields:
+            values = item.convert(records[item.name])
+            if single:  # the common case: one layout, every row present
+                block.columns[item.name] = values
+                block.present[item.name] = everywhere
+                block.xdis[item.name] = np.full(block.n_messages, item.xdi, dtype=np.int64)
+                continue
+            if item.name not in block.columns:
+                block.columns[item.name] = _absent(
+                    np.zeros((0, *item.row_shape), item.column_dtype), block.n_messages
+                )
+                block.present[item.name] = np.zeros(block.n_messages, dtype=bool)
+                block.xdis[item.name] = np.zeros(block.n_messages, dtype=np.int64)
+            block.columns[item.name][rows] = values
+            block.present[item.name][rows] = True
+            block.xdis[item.name][rows] = item.xdi
+    return block
+
+
+def _layout_groups(
+    buf: np.ndarray, payload_starts: np.ndarray, lengths: np.ndarray, layouts: LayoutCache
+) -> tuple[list[tuple[Layout, np.ndarray, np.ndarray]], np.ndarray]:
+    """(layout, frame indices, structured records) per layout, and the malformed frame indices."""
+    if lengths.size == 0:
+        return [], np.empty(0, dtype=np.int64)
+    if lengths[0] == lengths[-1] and np.all(lengths == lengths[0]):
+        by_length = [np.arange(lengths.size)]
+    else:
+        order = np.argsort(lengths, kind="stable")
+        by_length = np.split(order, np.flatnonzero(np.diff(lengths[order])) + 1)
+    groups: list[tuple[Layout, np.ndarray, np.ndarray]] = []
+    malformed: list[np.ndarray] = []
+    for frames in by_length:
+        length = int(lengths[frames[0]])
+        payloads = _payload_rows(buf, payload_starts[frames], length)
+        assigned, bad = layouts.assign(payloads)
+        malformed.append(frames[bad])
+        for layout, rows in assigned:
+            if not length:  # empty payloads: the layout's dtype is a one-byte placeholder
+                records = np.zeros((rows.size, 1), dtype=np.uint8)
+            else:
+                records = payloads if rows.size == frames.size else payloads[rows]
+            groups.append((layout, frames[rows], records.view(layout.dtype)[:, 0]))
+    return groups, np.sort(np.concatenate(malformed))
+
+
+def _payload_rows(buf: np.ndarray, starts: np.ndarray, length: int) -> np.ndarray:
+    """(frames, length) payload bytes: a strided view when frames are evenly spaced, else a gather."""
+    if not length:
+        return np.zeros((starts.size, 0), dtype=np.uint8)
+    step = int(starts[1] - starts[0]) if starts.size > 1 else length
+    if (
+        step >= length
+        and starts[-1] - starts[0] == step * (starts.size - 1)
+        and np.all(np.diff(starts) == step)
+    ):
+        return np.lib.stride_tricks.as_strided(
+            buf[starts[0] :], (starts.size, length), (step, 1), writeable=False
+        )
+    return np.lib.stride_tricks.sliding_window_view(buf, length)[starts]
+
+
+def decode_capture(data: bytes, max_length: int = MAX_DATA_LENGTH) -> DecodedBlock:
+    """Batch-decode a whole raw capture (bytes as read from the serial port)."""
+    return decode_buffer(np.frombuffer(data, dtype=np.uint8), max_length)
+
+
+# ----------------------------------------------------------------------------------- to samples
+
+
+def to_samples(
+    block: DecodedBlock, unwrapper: SampleTimeUnwrapper, host_t: float | np.ndarray | None = None
+) -> np.ndarray:
+    """``SAMPLE_DTYPE`` rows for the inertial messages of a block (Euler deg -> rad, time from ticks).
+
+    GNSS-only messages are not samples; messages without SampleTimeFine cannot be placed in
+    time and are dropped. ``unwrapper`` carries the time base across consecutive blocks.
+    """
+    none = np.zeros(block.n_messages, dtype=bool)
+    inertial = none.copy()
+    for name in INERTIAL_OUTPUTS:
+        inertial |= block.present.get(name, none)
+    rows = np.flatnonzero(inertial & block.present.get("SampleTimeFine", none))
+    if "EulerAngles" in block.xdis:
+        with_euler = rows[block.present["EulerAngles"][rows]]
+        if np.any(block.xdis["EulerAngles"][with_euler] & FRAME_MASK != FRAMES["ENU"]):
+            raise ProtocolError("EulerAngles are not in ENU: configure the device for ENU orientation output")
+    out = empty_samples(rows.size)
+    if not rows.size:
+        return out
+    out["ticks"] = unwrapper.update_many(block.columns["SampleTimeFine"][rows])
+    out["t"] = out["ticks"] / TICKS_PER_SECOND
+    if host_t is not None:
+        out["host_t"] = host_t
+    channels = {"EulerAngles": ("roll", "pitch", "yaw"), "RateOfTurn": ("p", "q", "r"),
+                "Acceleration": ("ax", "ay", "az")}  # fmt: skip
+    for name, sample_fields in channels.items():
+        if name in block.columns:
+            values = block.columns[name][rows]
+            if name == "EulerAngles":
+                values = np.deg2rad(values)
+            for axis, sample_field in enumerate(sample_fields):
+                out[sample_field] = values[:, axis]
+    if "PacketCounter" in block.columns:
+        out["counter"] = block.columns["PacketCounter"][rows]
+    for status in ("StatusByte", "StatusWord"):  # StatusWord wins where both exist
+        if status in block.columns:
+            present = block.present[status][rows]
+            out["status"][present] = block.columns[status][rows][present]
+    return out
