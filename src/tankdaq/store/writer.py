@@ -300,7 +300,9 @@ class RecordingWriter:
         self._unflushed_since = None
 
     def _add(self, topic: str, payloads: list[bytes], stamps: list[int]) -> None:
-        if self._closed or self._failed:
+        if self._failed:
+            raise RecordingError(f"{self.path} stopped after a write error; run tankdaq recover {self.path}")
+        if self._closed:
             raise RecordingError(f"{self.path} is already closed; start a new recording")
         channel = self._channels[topic]
 
