@@ -316,3 +316,19 @@ def test_a_file_cut_before_its_first_chunk_says_so(tmp_path: Path) -> None:
     cut.write_bytes(data[: first_chunk + 200])
     with pytest.raises(BadRecordingInput, match="cut short before its first data"):
         read_recording(cut)
+
+
+CAPTURE = Path("/work/shared/data/xsens-captures/einride-1/output.bin")
+
+
+@pytest.mark.skipif(not CAPTURE.is_file(), reason="shared Xsens captures not present")
+def test_a_real_xsens_capture_survives_byte_for_byte(tmp_path: Path) -> None:
+    capture = CAPTURE.read_bytes()
+    cuts = np.sort(np.random.default_rng(5).choice(np.arange(1, len(capture)), size=60, replace=False))
+    pieces = [capture[a:b] for a, b in zip([0, *cuts], [*cuts, len(capture)], strict=True)]  # as serial reads
+    with RecordingWriter(tmp_path / "capture.mcap", {"axis": "roll"}, {}) as writer:
+        for k, piece in enumerate(pieces):
+            writer.write_raw(piece, host_ns=1_000 + k)
+    chunks = list(iter_raw_chunks(writer.path))
+    assert b"".join(data for _, data in chunks) == capture
+    assert [stamp for stamp, _ in chunks] == [1_000 + k for k in range(len(pieces))]

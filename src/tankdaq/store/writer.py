@@ -107,7 +107,8 @@ class RecordingWriter:
     ``path`` is never overwritten (``-2``, ``-3`` ... is added; the final name is
     ``self.path``). ``run_metadata`` goes into the ``tankdaq.run`` metadata record
     at start and, completed, again at close; ``run_config`` is attached as JSON.
-    Use as a context manager or call ``close()``.
+    Use as a context manager or call ``close()``. Not thread-safe: one record
+    loop owns it, and calls ``maybe_flush()`` on ticks without data.
     """
 
     def __init__(
