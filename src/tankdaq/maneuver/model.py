@@ -167,7 +167,7 @@ def _integrate(p, s0, h, n_sub, n_samples, t_execute, delta_amp, theta_switch, m
                 mid = _rk4(p, s, f * h, command, table_t, table_delta, t)
                 switches[n_switch] = t + f * h
                 n_switch += 1
-                if n_switch > max_switches:
+                if n_switch > max_switches + 1:  # execution, max_switches reversals, and this one
                     out[k] = mid
                     return out[: k + 1], switches[:n_switch]
                 direction = -direction
@@ -231,7 +231,7 @@ def simulate_zigzag(
     empty = np.empty(0)
     samples, switch_times = _integrate(pack_parameters(vehicle), trim_state(vehicle), h, n_sub, n_max,
                                        approach_s, delta_rad, theta_rad, switches, empty, empty)
-    if switch_times.size <= switches:
+    if switch_times.size < switches + 2:
         raise InputError(
             f"{vehicle.name}: pitch did not reach {np.degrees(theta_rad):g} deg often enough within "
             f"{MAX_DURATION_S:g} s with a {np.degrees(delta_rad):g} deg stern plane; "

@@ -1,0 +1,273 @@
+"""``tankdaq auv ...``: AUV diving-plane manoeuvres (seed 003): simulate, identify, sensitivity, validate."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import typer
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from scipy.stats import spearmanr
+
+from ..errors import InputError
+from ..maneuver.identify import SeparateIdentifier, relative_errors
+from ..maneuver.io import read_record, read_vehicle_attachment, write_record
+from ..maneuver.model import StateRecord, add_noise, simulate_zigzag
+from ..maneuver.sensitivity import OUTPUTS, SensitivityResult, sensitivity_analysis
+from ..maneuver.validate import SCORED_STATES, plot_validation, resimulate
+from ..maneuver.vehicle import Vehicle, list_vehicles, load_vehicle
+from .app import app, err_console, handles_errors
+
+auv_app = typer.Typer(no_args_is_help=True, help="AUV diving-plane manoeuvres: simulate, identify, sensitivity, "
+                      "validate (seed 003).")
+app.add_typer(auv_app, name="auv")
+
+DEFAULT_VEHICLE = "nps_auv2"
+DEFAULT_DELTA_DEG = 15.0
+DEFAULT_THETA_DEG = 10.0
+METHODS = ("lssvm", "ols")
+
+
+def parse_noise(text: str) -> float:
+    """'none' -> 0, 'realistic' -> 1, a number -> that multiple of the realistic sensor noise."""
+    named = {"none": 0.0, "realistic": 1.0}
+    if text.lower() in named:
+        return named[text.lower()]
+    try:
+        scale = float(text)
+    except ValueError:
+        raise InputError(f"--noise {text!r} not understood: use none, realistic or a factor such as 0.5") from None
+    if not 0 <= scale <= 100:
+        raise InputError(f"--noise {text!r}: the factor must be between 0 and 100")
+    return scale
+
+
+@contextmanager
+def _progress(description: str) -> Iterator[Callable[[int, int], None]]:
+    """A rich progress bar on stderr, advanced by the callback it yields."""
+    columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+               TimeElapsedColumn())
+    with Progress(*columns, console=err_console, transient=True) as bar:
+        task = bar.add_task(description, total=None)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update
+
+
+def _check_method(method: str) -> None:
+    if method not in METHODS:
+        raise InputError(f"--method {method!r} unknown; use {' or '.join(METHODS)}")
+
+
+def _vehicle_for(path: Path, record: StateRecord, name: str | None) -> Vehicle:
+    """The vehicle named on the command line, else the one the record carries or names."""
+    if name:
+        return load_vehicle(name)
+    attached = read_vehicle_attachment(path)
+    if attached is not None:
+        return attached
+    if record.meta.get("vehicle"):
+        return load_vehicle(record.meta["vehicle"])
+    raise InputError(f"{path} does not say which vehicle it is; give --vehicle ({', '.join(list_vehicles())})")
+
+
+def _manoeuvre_angles_rad(record: StateRecord) -> tuple[float, float]:
+    """The zigzag's plane and switching angles from the record's metadata, else the defaults."""
+    try:
+        return (np.radians(float(record.meta.get("delta_deg", DEFAULT_DELTA_DEG))),
+                np.radians(float(record.meta.get("theta_deg", DEFAULT_THETA_DEG))))
+    except ValueError:
+        raise InputError("the record's delta_deg/theta_deg metadata are not numbers") from None
+
+
+def _sensitivity(vehicle: Vehicle, delta_rad: float, theta_rad: float, step: float = 0.10,
+                 threshold: float = 0.10) -> SensitivityResult:
+    with _progress("sensitivity: re-simulating the zigzag") as update:
+        return sensitivity_analysis(vehicle, delta_rad, theta_rad, step=step, dominant_threshold=threshold,
+                                    progress=update)
+
+
+@auv_app.command("simulate")
+@handles_errors
+def simulate_command(
+    out: Path = typer.Option(..., "--out", help="Output file: .mcap or .csv (the suffix picks the writer)."),
+    vehicle_name: str = typer.Option(DEFAULT_VEHICLE, "--vehicle", help="Vehicle in configs/vehicles."),
+    manoeuvre: str = typer.Option("zigzag", "--manoeuvre", help="Manoeuvre: zigzag (stern plane +/-delta, "
+                                  "switched when pitch reaches -/+theta)."),
+    delta_deg: float = typer.Option(DEFAULT_DELTA_DEG, "--delta", help="Stern-plane angle about trim [deg]."),
+    theta_deg: float = typer.Option(DEFAULT_THETA_DEG, "--theta", help="Pitch at which the plane reverses [deg]."),
+    switches: int = typer.Option(8, "--switches", help="Plane reversals to record."),
+    rate_hz: float = typer.Option(100.0, "--rate-hz", help="Sample rate [Hz]."),
+    noise: str = typer.Option("none", "--noise", help="Sensor noise: none, realistic, or a factor of realistic."),
+    seed: int = typer.Option(0, "--seed", help="Noise random seed."),
+) -> None:
+    """Simulate a diving-plane manoeuvre with the vehicle's standard derivatives and write it."""
+    if manoeuvre != "zigzag":
+        raise InputError(f"--manoeuvre {manoeuvre!r} unknown; the only manoeuvre is zigzag")
+    if not 1 <= rate_hz <= 1000:
+        raise InputError(f"--rate-hz {rate_hz:g} must be between 1 and 1000")
+    scale = parse_noise(noise)
+    vehicle = load_vehicle(vehicle_name)
+    record = simulate_zigzag(vehicle, np.radians(delta_deg), np.radians(theta_deg), switches=switches,
+                             rate_hz=rate_hz)
+    record = add_noise(record, scale, seed) if scale > 0 else record
+    record.meta.update({"noise": "none" if scale == 0 else f"{scale:g} x realistic", "seed": str(seed),
+                        "rate_hz": f"{rate_hz:g}"})
+    path = write_record(out, record, vehicle)
+    typer.echo(f"wrote {path}: {vehicle.name} zigzag {delta_deg:g}/{theta_deg:g} deg, {record.t.size} samples "
+               f"over {record.t[-1]:.1f} s, {switches} plane reversals, noise {record.meta['noise']}")
+
+
+def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle,
+                     sensitivity: SensitivityResult | None) -> dict[str, object]:
+    errors = relative_errors(ident.derivatives_, vehicle.derivatives)
+    rows = []
+    for name, value in ident.derivatives_.items():
+        rows.append({
+            "derivative": name, "standard": vehicle.coefficient(name), "identified": value,
+            "std_error": ident.std_[name], "relative_error": errors.get(name),
+            "sensitivity_index": sensitivity.index.get(name) if sensitivity else None,
+            "dominant": (name in sensitivity.dominant) if sensitivity else None,
+        })
+    report: dict[str, object] = {
+        "vehicle": vehicle.name, "method": ident.method,
+        "window_s": ident.window_s if ident.window_s is not None else vehicle.length_m / vehicle.nominal_speed_m_s,
+        "derivatives": rows,
+        "bias": ident.bias_, "bias_std": ident.bias_std_,
+        "gamma": {eq: fit.gamma for eq, fit in ident.equations_.items()},
+        "r2_equation": {eq: fit.r2 for eq, fit in ident.equations_.items()},
+    }
+    ranked = [n for n in (sensitivity.ranking if sensitivity else []) if n in errors]
+    if len(ranked) >= 4:
+        half = len(ranked) // 2
+        rho, p_value = spearmanr([sensitivity.index[n] for n in ranked], [errors[n] for n in ranked])
+        report["sensitivity_vs_error"] = {
+            "spearman_rho": float(rho), "p_value": float(p_value),
+            "mean_error_top_half": float(np.mean([errors[n] for n in ranked[:half]])),
+            "mean_error_bottom_half": float(np.mean([errors[n] for n in ranked[half:]])),
+        }
+    return report
+
+
+def _print_identify(report: dict) -> None:
+    typer.echo(f"{report['vehicle']}: separate identification by {report['method']} "
+               f"(weak-form window {report['window_s']:.2f} s); prime-system derivatives")
+    typer.echo(f"{'derivative':<10} {'standard':>11} {'identified':>11} {'std err':>10} {'rel err':>9} "
+               f"{'sensitivity':>11}")
+    for row in report["derivatives"]:
+        err = f"{100 * row['relative_error']:.2f} %" if row["relative_error"] is not None else "-"
+        sens = f"{row['sensitivity_index']:.3f}" if row["sensitivity_index"] is not None else "-"
+        mark = " *" if row["dominant"] else ""
+        typer.echo(f"{row['derivative']:<10} {row['standard']:>11.4g} {row['identified']:>11.4g} "
+                   f"{row['std_error']:>10.2g} {err:>9} {sens:>11}{mark}")
+    for eq, bias in report["bias"].items():
+        gamma = report["gamma"][eq]
+        gamma_text = f", gamma {gamma:.3g}" if gamma is not None else ""
+        typer.echo(f"{eq} equation: bias {bias:.3g} +/- {report['bias_std'][eq]:.2g}, "
+                   f"R^2 {report['r2_equation'][eq]:.5f}{gamma_text}")
+    summary = report.get("sensitivity_vs_error")
+    if summary:
+        typer.echo("* dominant (sensitivity index >= 0.1). Sensitivity vs identification error: Spearman rho "
+                   f"{summary['spearman_rho']:.2f} (p {summary['p_value']:.3f}); mean error of the more "
+                   f"sensitive half {100 * summary['mean_error_top_half']:.2f} %, of the less sensitive half "
+                   f"{100 * summary['mean_error_bottom_half']:.2f} %")
+
+
+@auv_app.command("identify")
+@handles_errors
+def identify_command(
+    file: Path = typer.Argument(..., help="A record written by `tankdaq auv simulate` (.mcap or .csv)."),
+    vehicle_name: str = typer.Option(None, "--vehicle", help="Vehicle (default: the one the record carries)."),
+    method: str = typer.Option("lssvm", "--method", help="lssvm (linear kernel, gamma by held-out folds) or ols."),
+    window_s: float = typer.Option(None, "--window", help="Weak-form filter width [s] (default: L/U)."),
+    with_sensitivity: bool = typer.Option(True, "--sensitivity/--no-sensitivity",
+                                          help="Rank the derivatives by sensitivity next to their errors."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+) -> None:
+    """Identify the surge, heave and pitch derivatives one equation at a time; compare with the standard."""
+    _check_method(method)
+    if window_s is not None and window_s <= 0:
+        raise InputError(f"--window {window_s:g} must be positive (seconds)")
+    record = read_record(file)
+    vehicle = _vehicle_for(file, record, vehicle_name)
+    ident = SeparateIdentifier(vehicle, method=method, window_s=window_s).fit(record)
+    sensitivity = _sensitivity(vehicle, *_manoeuvre_angles_rad(record)) if with_sensitivity else None
+    report = _identify_report(ident, vehicle, sensitivity)
+    if as_json:
+        typer.echo(json.dumps(report, indent=1))
+    else:
+        _print_identify(report)
+
+
+@auv_app.command("sensitivity")
+@handles_errors
+def sensitivity_command(
+    vehicle_name: str = typer.Option(DEFAULT_VEHICLE, "--vehicle", help="Vehicle in configs/vehicles."),
+    delta_deg: float = typer.Option(DEFAULT_DELTA_DEG, "--delta", help="Stern-plane angle about trim [deg]."),
+    theta_deg: float = typer.Option(DEFAULT_THETA_DEG, "--theta", help="Pitch at which the plane reverses [deg]."),
+    step_percent: float = typer.Option(10.0, "--step", help="Perturbation of each derivative [%]."),
+    threshold: float = typer.Option(0.10, "--threshold", help="Sensitivity index that makes a derivative dominant."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+) -> None:
+    """Rank the derivatives by how much the zigzag changes when each is perturbed."""
+    vehicle = load_vehicle(vehicle_name)
+    result = _sensitivity(vehicle, np.radians(delta_deg), np.radians(theta_deg), step_percent / 100.0, threshold)
+    if as_json:
+        typer.echo(json.dumps(result.to_dict(), indent=1))
+        return
+    base = result.baseline
+    typer.echo(f"{vehicle.name}: zigzag {delta_deg:g}/{theta_deg:g} deg, each derivative perturbed by "
+               f"+/-{step_percent:g} %; S = relative output change per relative derivative change")
+    typer.echo(f"baseline: overshoot {np.degrees(base['overshoot']):.2f} deg, depth change "
+               f"{base['depth_change']:.2f} m, period {base['period']:.1f} s, speed {base['speed']:.3f} m/s")
+    typer.echo(f"{'rank':<5}{'derivative':<11}" + "".join(f"{o:>13}" for o in OUTPUTS) + f"{'index':>9}")
+    for rank, name in enumerate(result.ranking, start=1):
+        cells = "".join(f"{result.sensitivities[name][o]:>13.4f}" for o in OUTPUTS)
+        mark = "  dominant" if name in result.dominant else ""
+        typer.echo(f"{rank:<5}{name:<11}{cells}{result.index[name]:>9.4f}{mark}")
+
+
+@auv_app.command("validate")
+@handles_errors
+def validate_command(
+    file: Path = typer.Argument(..., help="Record to identify from (.mcap or .csv)."),
+    test: Path = typer.Option(None, "--test", help="Held-out record to predict (default: FILE itself)."),
+    vehicle_name: str = typer.Option(None, "--vehicle", help="Vehicle (default: the one the record carries)."),
+    method: str = typer.Option("lssvm", "--method", help="lssvm or ols."),
+    plot: Path = typer.Option(None, "--plot", help="Write a PNG of measured vs re-simulated motion."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+) -> None:
+    """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""
+    _check_method(method)
+    record = read_record(file)
+    vehicle = _vehicle_for(file, record, vehicle_name)
+    target = read_record(test) if test is not None else record
+    sensitivity = _sensitivity(vehicle, *_manoeuvre_angles_rad(record))
+    others = {n: vehicle.coefficient(n) for n in vehicle.present_terms() if n not in sensitivity.dominant}
+    models = {
+        "identified, all derivatives": SeparateIdentifier(vehicle, method=method).fit(record).model(),
+        "identified dominant, others standard": SeparateIdentifier(
+            vehicle, method=method, terms=sensitivity.dominant, fixed=others).fit(record).model(),
+        "identified dominant, others dropped": SeparateIdentifier(
+            vehicle, method=method, terms=sensitivity.dominant).fit(record).model(),
+    }
+    results = [resimulate(target, model, label) for label, model in models.items()]
+    if plot is not None:
+        plot_validation(target, results, plot)
+    report = {"train": str(file), "test": str(test or file), "dominant": sensitivity.dominant,
+              "r2": {r.label: r.r2 for r in results}, "plot": str(plot) if plot else None}
+    if as_json:
+        typer.echo(json.dumps(report, indent=1))
+        return
+    typer.echo(f"identified from {file}, re-simulated {test or file} (driven by its measured stern plane)")
+    typer.echo(f"dominant derivatives: {', '.join(sensitivity.dominant)}")
+    typer.echo(f"{'model':<38}" + "".join(f"{'R2 ' + s:>10}" for s in SCORED_STATES))
+    for result in results:
+        typer.echo(f"{result.label:<38}" + "".join(f"{result.r2[s]:>10.4f}" for s in SCORED_STATES))
+    if plot is not None:
+        typer.echo(f"plot: {plot}")
