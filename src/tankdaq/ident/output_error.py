@@ -331,6 +331,7 @@ class OutputError:
         self.params_ = params
         self.param_names_ = layout.names
         res_w, jac_w, blocks, _ = self._weighted(params)
+        self.score_blocks_ = [([j[:, free] for j in js], rs) for js, rs in blocks]
         theta = params[: layout.n_theta]
         self.coefficients_ = dict(zip(self.terms_, theta.tolist(), strict=True))
         self.natural_period_s_ = _natural_period(self.coefficients_)
@@ -342,7 +343,7 @@ class OutputError:
             bandwidth = (
                 max(1, round(self.hac_periods * period_samples)) if math.isfinite(period_samples) else 1
             )
-            cov_free = hac_covariance([([j[:, free] for j in js], rs) for js, rs in blocks], bandwidth)
+            cov_free = hac_covariance(self.score_blocks_, bandwidth)
         else:
             cov_free = classic_covariance(jac_free)
         cov_free *= n_obs / max(n_obs - n_free, 1)

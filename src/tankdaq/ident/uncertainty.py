@@ -30,7 +30,10 @@ def classic_covariance(jac_w: np.ndarray) -> np.ndarray:
     return np.linalg.pinv(jac_w.T @ jac_w)
 
 
-def hac_covariance(blocks: Sequence[tuple[list[np.ndarray], list[np.ndarray]]], bandwidth: int) -> np.ndarray:
+ScoreBlocks = Sequence[tuple[list[np.ndarray], list[np.ndarray]]]
+
+
+def hac_covariance(blocks: ScoreBlocks, bandwidth: int, bias_correction: bool = True) -> np.ndarray:
     """Newey-West sandwich A^-1 S A^-1 with Bartlett weights up to ``bandwidth`` lags, bias-corrected.
 
     ``blocks`` holds per run the weighted Jacobian (n, p) and residuals (n,) of
@@ -52,8 +55,9 @@ def hac_covariance(blocks: Sequence[tuple[list[np.ndarray], list[np.ndarray]]], 
     for (jacs, residuals), m in zip(blocks, info, strict=True):
         g = sum(j * r[:, None] for j, r in zip(jacs, residuals, strict=True))
         meat += g.T @ _triangle_smooth(g, bandwidth)
-        weighted = (m @ bread).transpose(1, 0, 2).reshape(bread.shape[0], -1)  # (p, n*p)
-        meat += weighted @ _triangle_smooth(m, bandwidth).reshape(-1, bread.shape[0])
+        if bias_correction:
+            weighted = (m @ bread).transpose(1, 0, 2).reshape(bread.shape[0], -1)  # (p, n*p)
+            meat += weighted @ _triangle_smooth(m, bandwidth).reshape(-1, bread.shape[0])
     meat = 0.5 * (meat + meat.T)
     return bread @ meat @ bread
 
@@ -141,17 +145,27 @@ def moving_block_bootstrap(
     """Refit on fitted curve + residuals resampled in blocks of about a cycle (keeps their correlation).
 
     ``estimator`` is a fitted OutputError; each replica is fitted warm-started
-    from it. Intervals are percentile intervals of the replicas.
+    from it. Fitted residuals are orthogonal to the Jacobian, which makes
+    resampled blocks of them too quiet in the directions the fit used (the same
+    bias as in the HAC estimate, whose Bartlett form the moving-block bootstrap
+    mimics): each coefficient's replica spread is therefore scaled by the ratio
+    of the bias-corrected to the plain HAC standard error at the block length.
+    Intervals are percentile intervals of the scaled replicas.
     """
     rng = np.random.default_rng(seed)
     runs: list[DecayRun] = estimator.runs_
     period = estimator.natural_period_s_
+    blocks = [
+        max(2, min(run.t.size, round(block_periods * period / float(np.median(np.diff(run.t))))))
+        for run in runs
+    ]
     samples = []
     for b in range(n_boot):
         replicas = []
-        for run, fitted, resid in zip(runs, estimator.fitted_, estimator.residuals_, strict=True):
+        for run, fitted, resid, block in zip(
+            runs, estimator.fitted_, estimator.residuals_, blocks, strict=True
+        ):
             n = run.t.size
-            block = max(2, min(n, round(block_periods * period / np.median(np.diff(run.t)))))
             starts = rng.integers(0, n - block + 1, size=int(np.ceil(n / block)))
             idx = np.concatenate([np.arange(s, s + block) for s in starts])[:n]
             angle = fitted["angle"] + resid["angle"][idx]
@@ -165,7 +179,13 @@ def moving_block_bootstrap(
         samples.append([clone.coefficients_[k] for k in estimator.terms_])
         if progress is not None:
             progress(b + 1)
-    return _summary("moving-block bootstrap", estimator.terms_, np.array(samples), percentile=True)
+    n_theta = len(estimator.terms_)
+    corrected = np.diag(hac_covariance(estimator.score_blocks_, blocks[0]))[:n_theta]
+    plain = np.diag(hac_covariance(estimator.score_blocks_, blocks[0], bias_correction=False))[:n_theta]
+    centre = np.array([estimator.coefficients_[k] for k in estimator.terms_])
+    scale = np.sqrt(corrected / np.clip(plain, 1e-300, None))
+    scaled = centre + (np.array(samples) - centre) * scale
+    return _summary("moving-block bootstrap", estimator.terms_, scaled, percentile=True)
 
 
 def repeat_spread(make_estimator: Callable[[], Any], runs: Sequence[DecayRun]) -> IntervalSummary:

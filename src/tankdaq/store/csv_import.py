@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import BadIdentificationInput, InputError
+from ..ident.signals import white_noise_level
 from ..records import DecayRun
 
 ANGLE_UNITS: dict[str, float] = {"deg": math.pi / 180.0, "rad": 1.0}
@@ -117,7 +118,8 @@ def release_index(angle: np.ndarray, skip_half_cycles: int = 0) -> int:
 
     The equilibrium is the median of the last quarter (where the decay has
     settled). Within the first large half-wave the release is the last sample
-    still within 1 % of its peak: the end of a held tilt, or just past a peak.
+    still within the noise (3 sigma) of its peak: the end of a held tilt, or
+    just past the top of a peak.
     """
     excursion = angle - np.median(angle[-max(angle.size // 4, 1) :])
     threshold = RELEASE_FRACTION * float(np.max(np.abs(excursion)))
@@ -130,5 +132,5 @@ def release_index(angle: np.ndarray, skip_half_cycles: int = 0) -> int:
         )
     a, b = large[skip_half_cycles]
     segment = np.abs(excursion[a:b])
-    near_peak = np.flatnonzero(segment >= segment.max() - 0.01 * segment.max())
-    return int(a + near_peak[-1])
+    tolerance = 3.0 * white_noise_level(angle) + 1e-6 * segment.max()
+    return int(a + np.flatnonzero(segment >= segment.max() - tolerance)[-1])

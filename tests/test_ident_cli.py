@@ -1,0 +1,81 @@
+"""tankdaq identify end to end: JSON shape, the text report, --compare, and one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from tankdaq.cli import app
+from test_ident_csv_import import write_held_tilt_csv
+
+runner = CliRunner()
+
+
+def invoke(*args):
+    return runner.invoke(app, ["identify", *map(str, args)])
+
+
+def test_json_has_the_documented_shape(tmp_path):
+    result = invoke(write_held_tilt_csv(tmp_path / "a.csv"), "--model", "ittc-quadratic", "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert out["model"]["terms"] == ["b1", "b2", "c1"]
+    assert set(out["coefficients"]) == {"b1", "b2", "c1"}
+    for entry in out["coefficients"].values():
+        assert (
+            set(entry) >= {"value", "std", "ci95"} and entry["ci95"][0] <= entry["value"] <= entry["ci95"][1]
+        )
+    assert out["coefficients"]["c1"]["value"] == pytest.approx(14.0, rel=1e-3)
+    for key in ("offset_deg", "natural_period_s", "damping_ratio", "seed_objective", "r2_angle", "nrmse"):
+        assert key in out
+    assert out["natural_period_s"] == pytest.approx(2 * np.pi / np.sqrt(14.0), rel=1e-3)
+    assert out["runs"][0]["initial_angle_deg"] == pytest.approx(8.0, abs=0.05)
+    assert out["runs"][0]["r2_angle"] > 0.9999
+    assert [p["amplitude_deg"] for p in out["b_eq"]] == [p["amplitude_deg"] for p in out["bertin_n"]]
+    assert isinstance(out["warnings"], list) and out["elapsed_s"] > 0
+
+
+def test_text_report_writes_out_the_equation_and_dimensional_results(tmp_path):
+    result = invoke(write_held_tilt_csv(tmp_path / "a.csv"), "--model", "b1,b2,c1", "--hull", "swath")
+    assert result.exit_code == 0, result.output
+    assert "phi'' + " in result.stdout and "|phi'|phi'" in result.stdout
+    assert "total inertia" in result.stdout
+
+
+def test_compare_ranks_every_model_with_held_out_error(tmp_path):
+    files = [write_held_tilt_csv(tmp_path / f"{i}.csv", angle0_deg=a) for i, a in enumerate((8.0, 5.0))]
+    result = invoke(*files, "--compare", "--json")
+    assert result.exit_code == 0, result.output
+    rows = json.loads(result.stdout)["compare"]
+    named = {name for row in rows for name in row["models"]}
+    assert {"ittc-linear", "seed001-eq1", "seed000-eq4", "seed002-eq2"} <= named
+    assert all(row["held_out_rms_deg"] is not None for row in rows)
+    bics = [row["bic"] for row in rows]
+    assert bics == sorted(bics)
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("missing.csv",),
+        ("{good}", "--model", "b1,zz"),
+        ("{good}", "--method", "nope"),
+        ("{good}", "--axis", "yaw"),
+        ("{good}", "--angle-unit", "grad"),
+        ("{good}", "--angle-col", "phi"),
+        ("{good}", "--hull", "titanic"),
+        ("{flat}",),
+    ],
+)
+def test_bad_input_exits_2_with_one_line_and_no_traceback(tmp_path, args):
+    good = write_held_tilt_csv(tmp_path / "good.csv")
+    flat = tmp_path / "flat.csv"
+    flat.write_text("time_s,angle_deg\n" + "".join(f"{i / 100},0.0001\n" for i in range(100)))
+    result = invoke(*(a.format(good=good, flat=flat) for a in args))
+    assert result.exit_code == 2
+    assert "Traceback" not in result.output
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr

@@ -1,0 +1,88 @@
+"""CSV decays: units, channels, the release cut, and one-line errors for bad files."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tankdaq.errors import BadIdentificationInput, InputError
+from tankdaq.physics.decay import simulate_decay
+from tankdaq.store.csv_import import read_csv_runs
+from test_ident_helpers import KVLCC2_21338
+
+
+def write_held_tilt_csv(path, hold_s=2.0, angle0_deg=8.0, extra=True):
+    """A held tilt, then a release: what the lab records."""
+    c = {"b1": 0.3, "b2": 0.4, "c1": 14.0}
+    t = np.arange(int((hold_s + 12.0) * 100)) / 100.0
+    free = t >= hold_s
+    angle = np.full(t.size, math.radians(angle0_deg))
+    rate = np.zeros(t.size)
+    angle[free], rate[free] = simulate_decay(c, t[free] - hold_s, math.radians(angle0_deg))
+    columns = {"time_s": t, "angle_deg": np.degrees(angle), "rate_deg_s": np.degrees(rate)}
+    if extra:
+        columns |= {"heave_m": 0.001 * np.sin(t), "other_angle_deg": 0.5 * np.ones(t.size)}
+    path.write_text(
+        ",".join(columns)
+        + "\n"
+        + "\n".join(",".join(f"{col[i]:.9g}" for col in columns.values()) for i in range(t.size))
+    )
+    return path
+
+
+def test_units_channels_and_release_cut(tmp_path):
+    (run,) = read_csv_runs(write_held_tilt_csv(tmp_path / "d.csv"))
+    assert run.t[0] == pytest.approx(2.0, abs=0.011)  # the end of the hold
+    assert run.angle[0] == pytest.approx(math.radians(8.0), rel=1e-3)
+    assert run.rate is not None and abs(run.rate[0]) < 0.05
+    assert set(run.channels) == {"heave_m", "other_angle"}
+    assert run.channels["other_angle"][0] == pytest.approx(math.radians(0.5))
+    assert run.name == "d"
+
+
+def test_keep_all_keeps_the_hold(tmp_path):
+    (run,) = read_csv_runs(write_held_tilt_csv(tmp_path / "d.csv"), keep_all=True)
+    assert run.t[0] == 0.0
+
+
+@pytest.mark.parametrize(
+    ("content", "error", "message"),
+    [
+        (None, InputError, "no such file"),
+        ("time_s,angle_deg\n0,1\n", BadIdentificationInput, "data rows"),
+        (
+            "time_s,angle_deg\n" + "".join(f"{i / 100},{'nan' if i == 5 else 1}\n" for i in range(50)),
+            BadIdentificationInput,
+            "NaN",
+        ),
+        (
+            "time_s,angle_deg\n" + "".join(f"{i / 100},0.001\n" for i in range(50)),
+            BadIdentificationInput,
+            "not move",
+        ),
+        (
+            "time_s,angle_deg\n" + "".join(f"{i / 100},{i / 10}\n" for i in range(50)),
+            BadIdentificationInput,
+            "no decay",
+        ),
+        ("t,angle_deg\n" + "".join(f"{i / 100},1\n" for i in range(50)), InputError, "no time column"),
+        ("time_s,angle_deg\n" + "".join(f"{i / 100},x\n" for i in range(50)), InputError, "not a number"),
+    ],
+)
+def test_bad_files_give_one_clear_error(tmp_path, content, error, message):
+    path = tmp_path / "bad.csv"
+    if content is not None:
+        path.write_text(content)
+    with pytest.raises(error, match=message):
+        read_csv_runs(path)
+
+
+@pytest.mark.skipif(not KVLCC2_21338.is_file(), reason=f"KVLCC2 reference run not found at {KVLCC2_21338}")
+def test_kvlcc2_starts_at_its_first_large_peak():
+    (run,) = read_csv_runs(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
+    # reference §7: driven from ~6.5 s to -10.4 deg at 8.08 s, free from there
+    assert 8.0 < run.t[0] < 8.2
+    assert math.degrees(run.angle[0]) == pytest.approx(-10.4, abs=0.1)
+    assert run.rate is None and {"theta", "psi", "z"} <= set(run.channels)
