@@ -17,12 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap.records import MessageIndex
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
 from tankdaq.errors import BadRecordingInput
 from tankdaq.store import schemas
-from tankdaq.store.reader import read_recording
+from tankdaq.store.reader import RecordScan, read_recording
 from tankdaq.store.recover import recover
 
 #: A writer child: argv = mode path [path2]. Prints "batch host_ns" after each batch it handed to the writer.
@@ -193,3 +194,17 @@ def test_recover_refuses_non_mcap_before_creating_anything(tmp_path: Path) -> No
     with pytest.raises(BadRecordingInput, match="not an MCAP file"):
         recover(notes)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.mcap"]
+
+
+def test_lossless_means_the_cut_fell_between_records(tmp_path: Path, complete_file: Path) -> None:
+    scan = RecordScan(complete_file)
+    boundary = next(
+        scan.bytes_read for record in scan if isinstance(record, MessageIndex)
+    )  # first chunk's end
+    data = complete_file.read_bytes()
+    for cut, lossless in ((boundary, True), (boundary + 3, False)):
+        torn = tmp_path / f"cut{cut}.mcap"
+        torn.write_bytes(data[:cut])
+        report = recover(torn)
+        assert report.lossless is lossless and not report.source_complete
+        assert report.exit_code == (0 if lossless else 3) and report.chunks == 1
