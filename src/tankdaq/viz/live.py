@@ -191,7 +191,7 @@ class LiveView:
 
     def log_samples(self, samples: np.ndarray) -> None:
         """Measured angle and rate of the view's axis, in degrees, against device time."""
-        if samples.size == 0:
+        if samples.size == 0 or self.mode == "none":
             return
         angle_field, rate_field = AXIS_FIELDS[self.axis]
         self._recording()
@@ -215,6 +215,8 @@ class LiveView:
         plotted at ``t_fit`` (default: the last time of ``t``) so they converge
         along the same time axis as the decay.
         """
+        if self.mode == "none":
+            return
         rec = self._recording()
         t = np.asarray(t, dtype=float)
         self._revision += 1
@@ -271,6 +273,8 @@ class LiveView:
 
     def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
         """A run event (release, settled, warning, ...) in the Events panel, at its device time."""
+        if self.mode == "none":
+            return
         rec = self._recording()
         if t_s is not None:
             rec.set_time(TIMELINE, duration=float(t_s))
