@@ -1,0 +1,688 @@
+"""A simulated Xsens MTi-G on a real pseudo-terminal: the driver opens it exactly like hardware.
+
+The simulator owns the master side of a pty (raw mode, slave kept open so reads never hit
+EIO) and plays a ``DecayScenario`` on the device clock: sample ``k`` is due ``k / rate``
+seconds (divided by ``speed``) after power-up, whether or not anyone listens, as on a real
+MTi. It answers the configuration messages a driver uses, honours SetOutputConfiguration
+(outputs, rates, precision; the ack echoes what it will really send), paces its bytes to the
+baud rate, and speaks the 2007-era MTData (0x32) protocol when ``legacy=True``.
+
+Fault injection covers what goes wrong in a tank: corrupted and dropped bytes, a stall, an
+unplugged cable (the pty closes and its path vanishes) and a re-plug (a new pty behind the
+same stable symlink, like a ``/dev/serial/by-id`` link).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import errno
+import math
+import os
+import pty
+import queue
+import select
+import struct
+import tempfile
+import termios
+import threading
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..physics.scenario import (
+    TICK_MODULUS,
+    TICKS_PER_S,
+    DecayScenario,
+    RunTruth,
+    SensorModel,
+    still_trace,
+)
+from ..xsens.constants import BAUD_CODES, MID
+from ..xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS, output_configuration_payload
+from ..xsens.frame import Frame, build_frame
+from ..xsens.framer import StreamFramer
+from ..xsens.mtdata2 import FRAME_MASK, SPEC_BY_BASE, TYPE_MASK, encode_mtdata2, make_xdi
+from . import legacy_codec
+
+#: Rates an MTi-G-710 can output: divisors of 400 Hz (the echo rounds a request down to one).
+DEVICE_RATES_HZ = (1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, 80, 100, 200, 400)
+MAX_RATE_HZ = 400
+#: Outputs the simulator can produce (a request for others is dropped from the echoed configuration).
+SUPPORTED_OUTPUTS = frozenset(
+    {"PacketCounter", "SampleTimeFine", "SampleTimeCoarse", "EulerAngles", "Quaternion", "RateOfTurn",
+     "Acceleration", "StatusWord", "StatusByte"}
+)  # fmt: skip
+#: Answer to the host's WakeUpAck must come within this time after WakeUp, else the device measures.
+WAKEUP_WINDOW_S = 0.5
+ERROR_INVALID_MESSAGE = 0x04
+
+
+@dataclass(frozen=True)
+class DeviceIdentity:
+    """What the device says about itself."""
+
+    device_id: int
+    product_code: str
+    firmware: bytes  # raw ReqFWRev payload (11 bytes MkIV+, 3 bytes legacy)
+
+    @classmethod
+    def mti_g_710(cls) -> DeviceIdentity:
+        return cls(0x077B1A2C, "MTi-G-710-2A8G4", struct.pack(">3BII", 1, 8, 2, 35, 0))
+
+    @classmethod
+    def legacy_mti_g(cls) -> DeviceIdentity:
+        """The public ethz issue #66 device: a 2007-era MTi-G (Mark III)."""
+        return cls(0x01500618, "MTi-G-28A53G35", bytes((2, 4, 6)))
+
+
+@dataclass(frozen=True)
+class Faults:
+    """Faults switched on from the start (rates per byte; times in device seconds, -1 = never)."""
+
+    corrupt_rate: float = 0.0
+    drop_rate: float = 0.0
+    stall_at_s: float = -1.0
+    stall_s: float = 0.0
+    unplug_at_s: float = -1.0
+    replug_after_s: float = -1.0
+
+    @classmethod
+    def parse(cls, text: str) -> Faults:
+        """``corrupt=1e-3,drop=1e-4,stall=2@30,unplug=60,replug=5`` (stall S seconds at T)."""
+        values: dict[str, float] = {}
+        for part in filter(None, (p.strip() for p in text.split(","))):
+            key, _, value = part.partition("=")
+            try:
+                if key == "stall":
+                    seconds, _, at = value.partition("@")
+                    values["stall_s"], values["stall_at_s"] = float(seconds), float(at or 0.0)
+                elif key in ("corrupt", "drop"):
+                    values[f"{key}_rate"] = float(value)
+                elif key == "unplug":
+                    values["unplug_at_s"] = float(value)
+                elif key == "replug":
+                    values["replug_after_s"] = float(value)
+                else:
+                    raise ValueError(key)
+            except ValueError:
+                example = "corrupt=0.001,drop=1e-4,stall=2@30,unplug=60,replug=5"
+                raise InputError(f"fault {part!r} not understood; write e.g. {example}") from None
+        faults = cls(**values)
+        if not (0 <= faults.corrupt_rate < 1 and 0 <= faults.drop_rate < 1):
+            raise InputError("corrupt and drop rates are fractions of bytes between 0 and 1")
+        return faults
+
+
+@dataclass
+class OutputItem:
+    """One configured output: identifier and the frequency the device will really use (Hz)."""
+
+    xdi: int
+    hz: int  # MAX_FREQUENCY for outputs that ride along with every message
+
+    @property
+    def name(self) -> str:
+        return SPEC_BY_BASE[self.xdi & TYPE_MASK].name
+
+
+def effective_configuration(requested: list[tuple[int, int]]) -> list[OutputItem]:
+    """What the device makes of a requested configuration: unsupported outputs dropped, frames
+    forced to ENU, rates rounded down to a divisor of 400 Hz, per-message outputs at 0xFFFF."""
+    items: list[OutputItem] = []
+    for xdi, hz in requested:
+        spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
+        if spec is None or spec.name not in SUPPORTED_OUTPUTS:
+            continue
+        if spec.name in PER_MESSAGE_OUTPUTS:
+            items.append(OutputItem(xdi, MAX_FREQUENCY))
+            continue
+        rate = MAX_RATE_HZ if hz in (0, MAX_FREQUENCY) else max(r for r in DEVICE_RATES_HZ if r <= max(hz, 1))
+        items.append(OutputItem(xdi & ~FRAME_MASK, rate))
+    return items
+
+
+def default_configuration(rate_hz: int = 100) -> list[OutputItem]:
+    """MTi-G-710 factory-like default: counter, time, quaternion, status at 100 Hz."""
+    names = ("PacketCounter", "SampleTimeFine", "Quaternion", "StatusWord")
+    return effective_configuration([(make_xdi(n), rate_hz) for n in names])
+
+
+def euler_to_quaternion(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """ZYX Euler angles (rad) to unit quaternions (q0, q1, q2, q3), rows."""
+    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
+    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
+    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
+    return np.column_stack(
+        (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
+         cr * cp * sy - sr * sp * cy)
+    )  # fmt: skip
+
+
+class SampleSource:
+    """Samples of the scenario by index on the device clock, then still water for ever."""
+
+    tail_block = 4096
+
+    def __init__(self, scenario: DecayScenario) -> None:
+        self.scenario = scenario
+        self.samples, self.trace = scenario.samples()
+        self._sensor: SensorModel = scenario.sensor()
+        self._tail_start = -1
+        self._tail = self.samples[:0]
+
+    @property
+    def rate_hz(self) -> float:
+        return self.scenario.rate_hz
+
+    @property
+    def truth(self) -> list[RunTruth]:
+        return self.trace.runs
+
+    def block(self, start: int, stop: int) -> np.ndarray:
+        """Samples ``start`` .. ``stop - 1``."""
+        n = self.samples.size
+        if stop <= n:
+            return self.samples[start:stop]
+        head = self.samples[start:n] if start < n else self.samples[:0]
+        parts = [head]
+        k = max(start, n)
+        while k < stop:
+            block_start = n + (k - n) // self.tail_block * self.tail_block
+            if block_start != self._tail_start:
+                trace = still_trace(self.rate_hz, self.scenario.axis, self.trace.start_ticks, block_start,
+                                    self.tail_block)  # fmt: skip
+                self._tail = self._sensor.measure(trace, block=1 + block_start // self.tail_block)
+                self._tail_start = block_start
+            upto = min(stop, block_start + self.tail_block)
+            parts.append(self._tail[k - block_start : upto - block_start])
+            k = upto
+        return np.concatenate(parts)
+
+
+class SimulatedMTi:
+    """An MTi-G on a pty, run by a background thread (context manager, or ``start``/``stop``).
+
+    ``port`` is the current /dev/pts/N; ``link`` a stable symlink to it that survives a
+    re-plug (open ``link`` when testing reconnection). ``speed`` > 1 plays the device clock
+    faster than real time for tests.
+    """
+
+    def __init__(
+        self,
+        scenario: DecayScenario | None = None,
+        *,
+        speed: float = 1.0,
+        legacy: bool = False,
+        baud: int = 115200,
+        faults: Faults | None = None,
+        link: str | Path | None = None,
+        identity: DeviceIdentity | None = None,
+        seed: int = 0,
+    ) -> None:
+        if speed <= 0:
+            raise InputError(f"speed must be positive, got {speed:g}")
+        if baud not in BAUD_CODES.values():
+            raise InputError(f"baud {baud} is not an MTi rate; use one of {sorted(set(BAUD_CODES.values()))}")
+        self.scenario = scenario or DecayScenario(runs=1)
+        self.speed = speed
+        self.legacy = legacy
+        self.baud = baud
+        self.faults = faults or Faults()
+        self.identity = identity or (DeviceIdentity.legacy_mti_g() if legacy else DeviceIdentity.mti_g_710())
+        self._own_link_dir = None if link else tempfile.mkdtemp(prefix="tankdaq-sim-")
+        self.link = str(link) if link else os.path.join(self._own_link_dir or "", "ttyMTi0")
+        self._rng = np.random.default_rng([seed, 99])
+        self._sources: dict[float, SampleSource] = {}
+        self._commands: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._running = threading.Event()
+        self._plugged = threading.Event()
+        self._wake_r, self._wake_w = os.pipe()
+        self.port = ""
+        self._master = -1
+        self._slave = -1
+        # device state (touched only by the thread once started)
+        self.config = default_configuration()
+        self.legacy_mode = legacy_codec.LegacyOutput.default()
+        self.measuring = False
+        self.pending_baud = baud
+        self._boot = 0.0
+        self._epoch = time.monotonic()
+        self._next_sample = 0
+        self._stall_until = 0.0
+        self._fired: set[str] = set()
+        self._outbox = bytearray()
+        self._budget = 0.0
+        self._budget_at = 0.0
+        self._framer = StreamFramer()
+        self._wakeup_sent_at: float | None = None
+        # counters people and tests look at
+        self.frames_sent = 0
+        self.bytes_corrupted = 0
+        self.bytes_dropped = 0
+        self.bytes_overflowed = 0
+        self.commands_seen: list[int] = []
+
+    # ---- life cycle ----------------------------------------
+
+    def __enter__(self) -> SimulatedMTi:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def start(self) -> SimulatedMTi:
+        """Open the pty, power the device up (WakeUp) and start serving in a background thread."""
+        if self._thread is not None:
+            return self
+        self._open_pty()
+        self._running.set()
+        self._thread = threading.Thread(target=self._serve, name="SimulatedMTi", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop serving and remove the pty and the symlink."""
+        self._running.clear()
+        self._wake()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+            self._thread = None
+        self._close_pty()
+        for fd in (self._wake_r, self._wake_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._wake_r = self._wake_w = -1
+        if self._own_link_dir:
+            with contextlib.suppress(OSError):
+                os.rmdir(self._own_link_dir)
+
+    @property
+    def plugged(self) -> bool:
+        return self._plugged.is_set()
+
+    def unplug(self) -> None:
+        """Pull the cable: the pty closes, its path and the symlink vanish."""
+        self._call(self._close_pty)
+
+    def replug(self) -> None:
+        """Plug back in: a new pty (new /dev/pts number) behind the same symlink; the device boots."""
+        self._call(self._open_pty)
+
+    def stall(self, seconds: float) -> None:
+        """The device goes silent for ``seconds`` of wall time (data is lost, not queued)."""
+        self._call(lambda: setattr(self, "_stall_until", time.monotonic() + seconds))
+
+    def set_faults(self, faults: Faults) -> None:
+        self._call(lambda: setattr(self, "faults", faults))
+
+    def device_time(self) -> float:
+        """Seconds on the device clock since power-up."""
+        return (time.monotonic() - self._epoch) * self.speed
+
+    @property
+    def truth(self) -> list[RunTruth]:
+        """The scenario's runs (release instants in s from power-up and in SampleTimeFine ticks)."""
+        return self._source().truth
+
+    @property
+    def start_ticks(self) -> int:
+        return int(self.scenario.start_ticks or 0)
+
+    def _call(self, action: Callable[[], None]) -> None:
+        """Run ``action`` on the device thread (or here when not running) and wait for it."""
+        if self._thread is None or threading.current_thread() is self._thread:
+            action()
+            return
+        done = threading.Event()
+
+        def run() -> None:
+            try:
+                action()
+            finally:
+                done.set()
+
+        self._commands.put(run)
+        self._wake()
+        done.wait(timeout=5)
+
+    def _wake(self) -> None:
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"x")
+
+    # ---- pty ----------------------------------------
+
+    def _open_pty(self) -> None:
+        if self._master >= 0:
+            return
+        master, slave = pty.openpty()
+        tty.setraw(slave)  # a cooked slave would echo and mangle the binary stream
+        os.set_blocking(master, False)
+        self._master, self._slave = master, slave
+        self.port = os.ttyname(slave)
+        tmp = f"{self.link}.new"
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        os.symlink(self.port, tmp)
+        os.replace(tmp, self.link)
+        self._power_up()
+        self._plugged.set()
+
+    def _close_pty(self) -> None:
+        self._plugged.clear()
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.link)
+        for fd in (self._master, self._slave):
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self._master = self._slave = -1
+        self.measuring = False
+
+    def _power_up(self) -> None:
+        """Boot: the clock restarts, the stored configuration stays (it lives in flash), WakeUp goes out."""
+        self._epoch = time.monotonic()
+        self._next_sample = 0
+        self._outbox.clear()
+        self._framer = StreamFramer()
+        self.baud = self.pending_baud
+        self.measuring = False
+        self._budget, self._budget_at = 0.0, time.monotonic()
+        self._send(build_frame(MID.WAKEUP))
+        self._wakeup_sent_at = time.monotonic()
+
+    # ---- the device loop ----------------------------------------
+
+    def _serve(self) -> None:
+        while self._running.is_set():
+            while not self._commands.empty():
+                self._commands.get()()
+            if self._master < 0:
+                select.select([self._wake_r], [], [], 0.05)
+                self._drain_wake()
+                continue
+            self._fire_scheduled_faults()
+            if self._wakeup_sent_at is not None and time.monotonic() - self._wakeup_sent_at > WAKEUP_WINDOW_S:
+                self._wakeup_sent_at = None  # no WakeUpAck: the device starts measuring on its own
+                self._start_measuring()
+            timeout = self._next_due_s()
+            wanted_write = [self._master] if self._outbox else []
+            try:
+                readable, _, _ = select.select([self._master, self._wake_r], wanted_write, [], timeout)
+            except (OSError, ValueError):
+                continue
+            if self._wake_r in readable:
+                self._drain_wake()
+            if self._master in readable:
+                self._read_commands()
+            if self._master >= 0:
+                self._produce_samples()
+                self._flush()
+
+    def _drain_wake(self) -> None:
+        with contextlib.suppress(OSError):
+            os.read(self._wake_r, 4096)
+
+    def _next_due_s(self) -> float:
+        if not self.measuring:
+            return 0.02
+        due = self._boot + self._next_sample / (self._rate_hz() * self.speed)
+        return min(0.02, max(0.0, due - time.monotonic()))
+
+    def _fire_scheduled_faults(self) -> None:
+        f, now = self.faults, self.device_time()
+        if f.stall_at_s >= 0 and now >= f.stall_at_s and "stall" not in self._fired:
+            self._fired.add("stall")
+            self._stall_until = time.monotonic() + f.stall_s / self.speed
+        if f.unplug_at_s >= 0 and now >= f.unplug_at_s and "unplug" not in self._fired:
+            self._fired.add("unplug")
+            self._close_pty()
+            if f.replug_after_s >= 0:
+                timer = threading.Timer(f.replug_after_s / self.speed, self.replug)
+                timer.daemon = True
+                timer.start()
+
+    def _read_commands(self) -> None:
+        try:
+            data = os.read(self._master, 4096)
+        except OSError as exc:
+            if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
+                return
+            raise
+        if not self._line_matches():
+            return  # at the wrong baud rate the device sees noise
+        for frame in self._framer.feed(data):
+            self.commands_seen.append(frame.mid)
+            self._handle(frame)
+
+    def _line_matches(self) -> bool:
+        """True when the driver set the pty to the device's baud rate (pty speeds are only labels)."""
+        if self._slave < 0:
+            return False
+        speed = termios.tcgetattr(self._slave)[5]
+        wanted = getattr(termios, f"B{self.baud}", None)
+        return wanted is None or speed == wanted
+
+    # ---- messages ----------------------------------------
+
+    def _reply(self, mid: int, payload: bytes = b"") -> None:
+        self._send(build_frame(mid, payload))
+
+    def _error(self, code: int) -> None:
+        self._reply(MID.ERROR, bytes((code,)))
+
+    def _handle(self, frame: Frame) -> None:
+        mid, data = frame.mid, frame.payload
+        if mid == MID.WAKEUP_ACK:
+            self._wakeup_sent_at = None
+            return
+        if mid == MID.GOTO_CONFIG:
+            self._wakeup_sent_at = None
+            self.measuring = False
+            self._reply(MID.GOTO_CONFIG_ACK)
+            return
+        if mid == MID.RESET:
+            self._reply(MID.RESET_ACK)
+            self._flush()
+            self._power_up()
+            return
+        if self.measuring and mid not in (MID.REQ_DATA,):
+            return  # a measuring device ignores all but GoToConfig and Reset
+        handlers: dict[int, Callable[[bytes], None]] = {
+            MID.GOTO_MEASUREMENT: lambda _: self._start_measuring(ack=True),
+            MID.REQ_DID: lambda _: self._reply(MID.DEVICE_ID, struct.pack(">I", self.identity.device_id)),
+            MID.REQ_PRODUCT_CODE: lambda _: self._reply(
+                MID.PRODUCT_CODE, self.identity.product_code.encode()
+            ),
+            MID.REQ_FW_REV: lambda _: self._reply(MID.FW_REV, self.identity.firmware),
+            MID.REQ_BAUDRATE: self._on_baudrate,
+        }
+        handlers.update(self._legacy_handlers() if self.legacy else self._mkiv_handlers())
+        handler = handlers.get(mid)
+        if handler is None:
+            self._error(ERROR_INVALID_MESSAGE)
+            return
+        handler(data)
+
+    def _mkiv_handlers(self) -> dict[int, Callable[[bytes], None]]:
+        return {MID.OUTPUT_CONFIGURATION: self._on_output_configuration}
+
+    def _legacy_handlers(self) -> dict[int, Callable[[bytes], None]]:
+        def setter(field: str, fmt: str, ack: int) -> Callable[[bytes], None]:
+            def handle(data: bytes) -> None:
+                if data:
+                    try:
+                        (value,) = struct.unpack(fmt, data)
+                        self.legacy_mode = dataclasses.replace(self.legacy_mode, **{field: value})
+                        self._sources.clear()
+                    except (struct.error, ValueError):
+                        self._error(0x21)
+                        return
+                    self._reply(ack)
+                else:
+                    self._reply(ack, struct.pack(fmt, getattr(self.legacy_mode, field)))
+
+            return handle
+
+        return {
+            MID.OUTPUT_MODE: setter("mode", ">H", MID.OUTPUT_MODE_ACK),
+            MID.OUTPUT_SETTINGS: setter("settings", ">I", MID.OUTPUT_SETTINGS_ACK),
+            MID.PERIOD: setter("period", ">H", MID.PERIOD_ACK),
+        }
+
+    def _on_baudrate(self, data: bytes) -> None:
+        if not data:
+            code = next(c for c, rate in BAUD_CODES.items() if rate == self.baud)
+            self._reply(MID.BAUDRATE_ACK, bytes((code,)))
+            return
+        if data[0] not in BAUD_CODES:
+            self._error(0x20)
+            return
+        self.pending_baud = BAUD_CODES[data[0]]  # applies after Reset / power cycle
+        self._reply(MID.BAUDRATE_ACK)
+
+    def _on_output_configuration(self, data: bytes) -> None:
+        if data:
+            if len(data) % 4:
+                self._error(0x21)
+                return
+            requested = [struct.unpack_from(">HH", data, i) for i in range(0, len(data), 4)]
+            effective = effective_configuration(requested)
+            if not effective:
+                self._error(0x21)
+                return
+            self.config = effective
+        self._reply(
+            MID.OUTPUT_CONFIGURATION_ACK, output_configuration_payload([(o.xdi, o.hz) for o in self.config])
+        )
+
+    def _start_measuring(self, ack: bool = False) -> None:
+        if ack:
+            self._reply(MID.GOTO_MEASUREMENT_ACK)
+        self.measuring = True
+        # Samples follow the device clock: the first one sent is the next one due from now on.
+        self._boot = self._epoch
+        rate = self._rate_hz()
+        self._next_sample = math.ceil((time.monotonic() - self._epoch) * self.speed * rate)
+
+    # ---- streaming ----------------------------------------
+
+    def _rate_hz(self) -> float:
+        if self.legacy:
+            return self.legacy_mode.rate_hz
+        rates = [o.hz for o in self.config if o.hz != MAX_FREQUENCY]
+        return float(max(rates) if rates else 100)
+
+    def _source(self) -> SampleSource:
+        """The scenario played at the configured output rate (the truth in s and ticks is the same)."""
+        rate = self._rate_hz()
+        if rate not in self._sources:
+            self._sources[rate] = SampleSource(dataclasses.replace(self.scenario, rate_hz=rate))
+        return self._sources[rate]
+
+    def _produce_samples(self) -> None:
+        if not self.measuring:
+            return
+        now = time.monotonic()
+        rate = self._rate_hz()
+        due = math.floor((now - self._boot) * self.speed * rate) + 1
+        if due <= self._next_sample:
+            return
+        due = min(due, self._next_sample + int(rate * self.speed) + 1)  # catch up at most one second per turn
+        block = self._source().block(self._next_sample, due)
+        indices = np.arange(self._next_sample, due)
+        self._next_sample = due
+        if now < self._stall_until:
+            return
+        encoded = self._encode_legacy(block) if self.legacy else self._encode(block, indices, rate)
+        self.frames_sent += block.size
+        self._send(self._inject(encoded))
+
+    def _encode(self, block: np.ndarray, indices: np.ndarray, rate: float) -> bytes:
+        quats = None
+        out = bytearray()
+        for row, (sample, k) in enumerate(zip(block, indices, strict=True)):
+            items: list[tuple[int, object]] = []
+            for item in self.config:
+                if item.hz != MAX_FREQUENCY and k % max(1, round(rate / item.hz)):
+                    continue
+                name = item.name
+                if name == "Quaternion" and quats is None:
+                    quats = euler_to_quaternion(block["roll"], block["pitch"], block["yaw"])
+                items.append((item.xdi, self._value(name, sample, None if quats is None else quats[row])))
+            out += build_frame(MID.MTDATA2, encode_mtdata2(items))
+        return bytes(out)
+
+    @staticmethod
+    def _value(name: str, sample: np.void, quaternion: np.ndarray | None) -> object:
+        ticks = int(sample["ticks"])
+        values: dict[str, Callable[[], object]] = {
+            "PacketCounter": lambda: int(sample["counter"]),
+            "SampleTimeFine": lambda: ticks % TICK_MODULUS,
+            "SampleTimeCoarse": lambda: (ticks // TICKS_PER_S) & 0xFFFFFFFF,
+            "EulerAngles": lambda: tuple(math.degrees(float(sample[f])) for f in ("roll", "pitch", "yaw")),
+            "Quaternion": lambda: tuple(float(q) for q in quaternion),  # type: ignore[union-attr]
+            "RateOfTurn": lambda: tuple(float(sample[f]) for f in ("p", "q", "r")),
+            "Acceleration": lambda: tuple(float(sample[f]) for f in ("ax", "ay", "az")),
+            "StatusWord": lambda: int(sample["status"]),
+            "StatusByte": lambda: int(sample["status"]) & 0xFF,
+        }
+        return values[name]()
+
+    def _encode_legacy(self, block: np.ndarray) -> bytes:
+        return b"".join(
+            build_frame(MID.MTDATA, legacy_codec.encode(self.legacy_mode, sample)) for sample in block
+        )
+
+    def _inject(self, data: bytes) -> bytes:
+        """Corrupt and drop bytes at the configured rates (on data frames only, as line noise would)."""
+        f = self.faults
+        if not (f.corrupt_rate or f.drop_rate) or not data:
+            return data
+        arr = np.frombuffer(data, dtype=np.uint8).copy()
+        if f.corrupt_rate:
+            hit = np.flatnonzero(self._rng.random(arr.size) < f.corrupt_rate)
+            arr[hit] ^= self._rng.integers(1, 256, hit.size, dtype=np.uint8)
+            self.bytes_corrupted += hit.size
+        if f.drop_rate:
+            keep = self._rng.random(arr.size) >= f.drop_rate
+            self.bytes_dropped += int(arr.size - keep.sum())
+            arr = arr[keep]
+        return arr.tobytes()
+
+    def _send(self, data: bytes) -> None:
+        self._outbox += data
+        limit = 1 << 18  # a device's output buffer: beyond it, data is lost (as on a link that is too slow)
+        if len(self._outbox) > limit:
+            excess = len(self._outbox) - limit
+            del self._outbox[:excess]
+            self.bytes_overflowed += excess
+
+    def _flush(self) -> None:
+        """Write what the baud rate allows since the last write (the pty itself has no speed)."""
+        if not self._outbox or self._master < 0:
+            return
+        now = time.monotonic()
+        bytes_per_s = self.baud / 10 * self.speed
+        self._budget = min(self._budget + (now - self._budget_at) * bytes_per_s, max(bytes_per_s * 0.05, 256))
+        self._budget_at = now
+        n = min(len(self._outbox), int(self._budget))
+        if n <= 0:
+            return
+        chunk = bytes(self._outbox[:n])
+        if not self._line_matches():  # read at the wrong baud rate, every byte comes out garbled
+            chunk = self._rng.integers(0, 256, n, dtype=np.uint8).tobytes()
+        try:
+            written = os.write(self._master, chunk)
+        except BlockingIOError:
+            return
+        except OSError:
+            return  # nobody reads (or the pty went away): keep the bytes, the buffer limit applies
+        del self._outbox[:written]
+        self._budget -= written
