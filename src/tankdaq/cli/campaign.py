@@ -1,0 +1,106 @@
+"""``tankdaq campaign``: identify a whole test campaign by group; ``tankdaq simulate-campaign``: make one."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from .app import app, err_console, handles_errors
+
+
+def _progress() -> Progress:
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,  # an error after it then stays the one line printed
+    )
+
+
+@app.command("campaign")
+@handles_errors
+def campaign_command(
+    inputs: Annotated[list[Path], typer.Argument(help="Recordings (.mcap, .csv) or folders of them.")],
+    report: Annotated[
+        Path | None, typer.Option("--report", help="Write campaign.csv, campaign.md and PNG plots here.")
+    ] = None,
+    model: Annotated[
+        str, typer.Option("--model", help="Terms (b1,b2,c1,c3) or an alias (docs/models.md).")
+    ] = "ittc-quadratic-restoring",
+) -> None:
+    """Group decays by hull, axis, draft and initial angle; fit each group jointly (output error).
+
+    CSV files name their condition like trimaran_0.9T_pitch_8deg.csv (or carry a JSON sidecar with
+    hull, draft, axis, angle_deg); tankdaq recordings carry it in their metadata. The table goes to
+    stdout.
+    """
+    from ..ident.campaign import (
+        find_recordings,
+        group_runs,
+        identify_groups,
+        markdown_table,
+        read_campaign_runs,
+    )
+    from ..ident.models import resolve_model
+
+    resolve_model(model)  # a typo fails before any file is read
+    paths = find_recordings(inputs)
+    with _progress() as progress:
+        reading = progress.add_task("reading", total=len(paths))
+        runs = []
+        for path in paths:
+            runs.extend(read_campaign_runs(path))
+            progress.update(reading, advance=1, description=f"reading {path.name}")
+        groups = group_runs(runs)
+        fitting = progress.add_task("fitting", total=len(groups))
+        results = identify_groups(
+            groups, model, progress=lambda key: progress.update(fitting, advance=1, description=key.label)
+        )
+    typer.echo(markdown_table(results), nl=False)
+    failed = [r for r in results if r.fit is None]
+    for result in failed:
+        err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
+    if report is not None:
+        from ..ident.campaign import write_report
+
+        written = write_report(results, report)
+        err_console.print(f"wrote {len(written)} files to {report}", markup=False)
+
+
+@app.command("simulate-campaign")
+@handles_errors
+def simulate_campaign_command(
+    folder: Annotated[Path, typer.Argument(help="Folder for the simulated recordings (created).")],
+    hulls: Annotated[list[str] | None, typer.Option("--hull", help="Hull configs (repeat).")] = None,
+    axis: Annotated[str, typer.Option("--axis", help="roll or pitch.")] = "pitch",
+    drafts: Annotated[list[str] | None, typer.Option("--draft", help="Drafts (repeat).")] = None,
+    angles_deg: Annotated[
+        list[float] | None, typer.Option("--angle", help="Initial angles, deg (repeat).")
+    ] = None,
+    file_format: Annotated[str, typer.Option("--format", help="csv or mcap.")] = "csv",
+    seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,
+) -> None:
+    """Simulate a decay campaign from configs/hulls: by default the seeds' matrix of trimaran and
+    catamaran pitch decays at 0.9T, T, 1.1T from 2, 4, 6, 8 deg."""
+    from ..config import parse_draft
+    from ..errors import InputError
+    from ..ident.campaign import write_simulated_campaign
+
+    if axis not in ("roll", "pitch"):
+        raise InputError(f"axis {axis!r} not understood: use roll or pitch")
+    factors = [parse_draft(d) for d in drafts or ["0.9T", "T", "1.1T"]]
+    written = write_simulated_campaign(
+        folder,
+        hulls or ["trimaran", "catamaran"],
+        axis,
+        factors,
+        angles_deg or [2.0, 4.0, 6.0, 8.0],
+        file_format,
+        seed=seed,
+    )
+    typer.echo(f"wrote {len(written)} {file_format} recordings to {folder}")

@@ -1,0 +1,520 @@
+"""A test campaign: many decays grouped by hull, axis, draft and initial angle, one joint fit per group.
+
+This is the seeds' workflow (three drafts x four initial angles per hull, coefficients plotted against
+the initial angle, two hulls compared) done with output error and the ITTC quantities people report:
+B_eq against amplitude, extinction curves, natural period against draft. Recordings come from tankdaq
+MCAP files (their metadata says hull, draft, axis, angle) or CSV files (a JSON sidecar or a file name
+``hull_draft_axis_<angle>deg...``, the name tankdaq gives its recordings).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+from collections import defaultdict
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import format_draft, load_hull, parse_draft
+from ..errors import IdentificationError, InputError
+from ..physics.decay import simulate_decay
+from ..records import DecayRun
+from ..samples import AXIS_FIELDS, empty_samples
+from .derived import b_eq, bertin_n_per_deg, damping_ratio, extinction_curve, natural_period
+from .kernels import TERM_REGISTRY
+from .output_error import OutputError
+
+#: File-name pattern of a recording: ``swath_1.1T_roll_8deg_20261121-143015_run03``.
+NAME_PATTERN = re.compile(
+    r"^(?P<hull>[A-Za-z0-9-]+)_(?P<draft>\d*\.?\d*T)_(?P<axis>roll|pitch)_(?P<angle>\d+(?:\.\d+)?)deg(?:_|$)"
+)
+RECORDING_SUFFIXES = (".mcap", ".csv")
+
+
+@dataclass(frozen=True, order=True)
+class GroupKey:
+    """What a campaign varies: runs with the same key are repeats and are fitted jointly."""
+
+    hull: str
+    axis: str
+    draft: float  # factor of the design draft
+    angle_deg: float  # nominal initial angle
+
+    @property
+    def label(self) -> str:
+        return f"{self.hull} {self.axis} {format_draft(self.draft)} {self.angle_deg:g} deg"
+
+
+@dataclass
+class GroupResult:
+    """One group's joint output-error fit, or why it could not be made."""
+
+    key: GroupKey
+    runs: list[DecayRun]
+    fit: OutputError | None = None
+    error: str | None = None
+    extra: dict[str, float] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        """One row of the campaign table (angles in deg, coefficients per unit inertia, SI)."""
+        row: dict[str, Any] = {
+            "hull": self.key.hull,
+            "axis": self.key.axis,
+            "draft": format_draft(self.key.draft),
+            "angle_deg": self.key.angle_deg,
+            "runs": len(self.runs),
+            "files": " ".join(str(run.meta.get("file", run.name)) for run in self.runs),
+        }
+        if self.fit is None:
+            return row | {"error": self.error}
+        coefficients = self.fit.coefficients_
+        amplitude = math.radians(self.key.angle_deg)
+        for term, value in coefficients.items():
+            row[term] = value
+            row[f"{term}_std"] = self.fit.std_[term]
+        return row | {
+            "natural_period_s": natural_period(coefficients),
+            "damping_ratio": damping_ratio(coefficients),
+            "b_eq_per_s": b_eq(coefficients, amplitude),
+            "bertin_n_per_deg": bertin_n_per_deg(coefficients, amplitude),
+            "r2_angle": self.fit.r2_angle_,
+            "seed_objective_rad_s": self.fit.seed_objective_,
+            "error": "",
+        }
+
+
+# --------------------------------------------------------------------------------------------------
+# Finding and reading recordings
+# --------------------------------------------------------------------------------------------------
+
+
+def find_recordings(inputs: Sequence[str | Path]) -> list[Path]:
+    """The .mcap and .csv files among ``inputs`` (folders searched recursively), sorted."""
+    found: list[Path] = []
+    for item in map(Path, inputs):
+        if item.is_dir():
+            found.extend(p for p in sorted(item.rglob("*")) if p.suffix.lower() in RECORDING_SUFFIXES)
+        elif item.is_file():
+            if item.suffix.lower() not in RECORDING_SUFFIXES:
+                raise InputError(f"{item}: not a recording; give .mcap or .csv files or a folder of them")
+            found.append(item)
+        else:
+            raise InputError(f"{item}: no such file or folder")
+    if not found:
+        raise InputError(f"no .mcap or .csv recordings in {', '.join(map(str, inputs))}")
+    return sorted(set(found))
+
+
+def csv_labels(path: Path) -> dict[str, Any]:
+    """hull, draft, axis, angle_deg of a CSV decay: its JSON sidecar, else its file name."""
+    sidecar = path.with_suffix(".json")
+    if sidecar.is_file():
+        try:
+            data = json.loads(sidecar.read_text())
+            return {
+                "hull": str(data["hull"]),
+                "draft": parse_draft(str(data.get("draft", "T"))),
+                "axis": str(data["axis"]),
+                "angle_deg": float(data["angle_deg"]),
+            }
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise InputError(
+                f'{sidecar}: needs JSON with hull, axis, angle_deg (and draft, e.g. "1.1T"): {exc}'
+            ) from None
+    match = NAME_PATTERN.match(path.stem)
+    if not match:
+        raise InputError(
+            f"{path}: cannot tell hull, draft, axis and angle; name it like trimaran_0.9T_pitch_8deg.csv "
+            f"or put {sidecar.name} beside it with hull, draft, axis, angle_deg"
+        )
+    return {
+        "hull": match["hull"],
+        "draft": parse_draft(match["draft"]),
+        "axis": match["axis"],
+        "angle_deg": float(match["angle"]),
+    }
+
+
+def read_campaign_runs(path: Path) -> list[DecayRun]:
+    """The decays of one file, with hull, axis, draft and nominal angle in ``meta``."""
+    if path.suffix.lower() == ".mcap":
+        from ..store.reader import read_decay_runs
+
+        runs = read_decay_runs(path)
+        for run in runs:
+            missing = [k for k in ("hull", "draft") if run.meta.get(k) is None]
+            if missing:
+                raise InputError(f"{path}: the recording's metadata lacks {', '.join(missing)}")
+            nominal = run.meta.get("angle_nominal_deg")
+            run.meta["angle_deg"] = float(nominal) if nominal is not None else _rounded_first_peak_deg(run)
+        return runs
+    from ..store.csv_import import read_csv_runs
+
+    labels = csv_labels(path)
+    if labels["axis"] not in AXIS_FIELDS:
+        raise InputError(f"{path}: axis {labels['axis']!r} not understood; use roll or pitch")
+    runs = read_csv_runs(path, axis=labels["axis"])
+    for run in runs:
+        run.meta.update(labels)
+    return runs
+
+
+def _rounded_first_peak_deg(run: DecayRun) -> float:
+    """The initial angle to the nearest degree when the recording does not state a nominal one."""
+    return float(round(abs(math.degrees(float(run.angle[0])))))
+
+
+def group_runs(runs: Iterable[DecayRun]) -> dict[GroupKey, list[DecayRun]]:
+    """Runs by (hull, axis, draft, nominal angle), in sorted key order."""
+    groups: dict[GroupKey, list[DecayRun]] = defaultdict(list)
+    for run in runs:
+        key = GroupKey(
+            str(run.meta["hull"]), run.axis, round(float(run.meta["draft"]), 6), float(run.meta["angle_deg"])
+        )
+        groups[key].append(run)
+    return dict(sorted(groups.items()))
+
+
+# --------------------------------------------------------------------------------------------------
+# Identifying
+# --------------------------------------------------------------------------------------------------
+
+
+def identify_groups(
+    groups: dict[GroupKey, list[DecayRun]],
+    model: str = "ittc-quadratic-restoring",
+    progress: Callable[[GroupKey], None] | None = None,
+) -> list[GroupResult]:
+    """One joint output-error fit per group; a group that cannot be fitted keeps its reason instead.
+
+    ``progress`` is called after each group, so a long campaign shows where it is.
+    """
+    results = []
+    for key, runs in groups.items():
+        try:
+            results.append(GroupResult(key, runs, fit=OutputError(model).fit(runs)))
+        except IdentificationError as exc:
+            results.append(GroupResult(key, runs, error=str(exc)))
+        if progress is not None:
+            progress(key)
+    return results
+
+
+# --------------------------------------------------------------------------------------------------
+# Report: CSV, Markdown, PNG
+# --------------------------------------------------------------------------------------------------
+
+
+def write_csv(results: Sequence[GroupResult], path: Path) -> Path:
+    rows = [r.summary() for r in results]
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=columns, restval="")
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def markdown_table(results: Sequence[GroupResult]) -> str:
+    """The campaign as a Markdown table: coefficients ± 1 sigma, period, B_eq at the initial angle, R²."""
+    terms = list(dict.fromkeys(t for r in results if r.fit for t in r.fit.terms_))
+    header = ["hull", "axis", "draft", "angle deg", "runs", *terms, "T0 s", "zeta", "B_eq 1/s", "R² angle"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for result in results:
+        row = result.summary()
+        cells = [row["hull"], row["axis"], row["draft"], f"{row['angle_deg']:g}", str(row["runs"])]
+        if result.fit is None:
+            cells += [f"not fitted: {result.error}"] + [""] * (len(header) - len(cells) - 1)
+        else:
+            cells += [f"{row[t]:.4g} ± {row[t + '_std']:.2g}" if t in row else "" for t in terms]
+            cells += [
+                f"{row['natural_period_s']:.4g}",
+                f"{row['damping_ratio']:.3g}",
+                f"{row['b_eq_per_s']:.4g}",
+                f"{row['r2_angle']:.4f}",
+            ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(results: Sequence[GroupResult], folder: Path) -> list[Path]:
+    """campaign.csv, campaign.md and the PNG plots into ``folder`` (created); returns the files written."""
+    folder.mkdir(parents=True, exist_ok=True)
+    written = [write_csv(results, folder / "campaign.csv")]
+    md = folder / "campaign.md"
+    md.write_text("# Decay campaign\n\nCoefficients per unit total inertia (SI, rad), ± 1 sigma.\n\n")
+    with md.open("a") as fh:
+        fh.write(markdown_table(results))
+    written.append(md)
+    written += write_plots([r for r in results if r.fit is not None], folder)
+    return written
+
+
+def write_plots(results: Sequence[GroupResult], folder: Path) -> list[Path]:
+    """The seeds' figures and the ITTC ones, one PNG each (matplotlib, no display needed)."""
+    written: list[Path] = []
+    by_series: dict[tuple[str, str], list[GroupResult]] = defaultdict(list)
+    for result in results:
+        by_series[(result.key.hull, result.key.axis)].append(result)
+    for (hull, axis), series in sorted(by_series.items()):
+        written.append(_plot_coefficients(series, folder / f"coefficients_{hull}_{axis}.png"))
+        written.append(_plot_b_eq(series, folder / f"b_eq_{hull}_{axis}.png"))
+        written.append(_plot_extinction(series, folder / f"extinction_{hull}_{axis}.png"))
+    for axis in sorted({r.key.axis for r in results}):
+        on_axis = [r for r in results if r.key.axis == axis]
+        written.append(_plot_period(on_axis, folder / f"period_vs_draft_{axis}.png"))
+        shared = _shared_draft(on_axis)
+        if shared is not None:
+            compared = [r for r in on_axis if r.key.draft == shared]
+            name = f"hulls_{axis}_{format_draft(shared)}.png"
+            written.append(_plot_hulls(compared, folder / name))
+    return written
+
+
+def _figure(ncols: int, title: str) -> tuple[Any, Any]:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(3.6 * ncols, 3.2), layout="constrained")
+    axes = fig.subplots(1, ncols, squeeze=False)[0]
+    fig.suptitle(title)
+    return fig, axes
+
+
+def _save(fig: Any, path: Path) -> Path:
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def _terms(results: Sequence[GroupResult]) -> list[str]:
+    return list(dict.fromkeys(t for r in results for t in r.fit.terms_))
+
+
+def _errorbar_series(ax: Any, points: Sequence[GroupResult], term: str, label: str) -> None:
+    points = sorted((r for r in points if term in r.fit.coefficients_), key=lambda r: r.key.angle_deg)
+    ax.errorbar(
+        [r.key.angle_deg for r in points],
+        [r.fit.coefficients_[term] for r in points],
+        yerr=[1.96 * r.fit.std_[term] for r in points],
+        marker="o",
+        capsize=3,
+        label=label,
+    )
+
+
+def _plot_coefficients(series: Sequence[GroupResult], path: Path) -> Path:
+    """Each coefficient against the initial angle, one line per draft (the seeds' Fig. 5), 95 % bars."""
+    terms = _terms(series)
+    first = series[0].key
+    fig, axes = _figure(len(terms), f"{first.hull} {first.axis}: coefficients vs initial angle")
+    for ax, term in zip(axes, terms, strict=True):
+        for draft in sorted({r.key.draft for r in series}):
+            _errorbar_series(ax, [r for r in series if r.key.draft == draft], term, format_draft(draft))
+        ax.set_xlabel("initial angle (deg)")
+        ax.set_title(f"{term} ({TERM_REGISTRY[term].unit})")
+    axes[0].legend(title="draft")
+    return _save(fig, path)
+
+
+def _plot_hulls(results: Sequence[GroupResult], path: Path) -> Path:
+    """Hulls side by side at one draft: each coefficient against the initial angle (seed 000 Fig. 7)."""
+    terms = _terms(results)
+    key = results[0].key
+    fig, axes = _figure(len(terms), f"{key.axis} at {format_draft(key.draft)}: hulls compared")
+    for ax, term in zip(axes, terms, strict=True):
+        for hull in sorted({r.key.hull for r in results}):
+            _errorbar_series(ax, [r for r in results if r.key.hull == hull], term, hull)
+        ax.set_xlabel("initial angle (deg)")
+        ax.set_title(f"{term} ({TERM_REGISTRY[term].unit})")
+    axes[0].legend()
+    return _save(fig, path)
+
+
+def _plot_b_eq(series: Sequence[GroupResult], path: Path) -> Path:
+    """B_eq(phi_a) of each group's fit over 0 ... its initial angle; colour by draft."""
+    first = series[0].key
+    fig, axes = _figure(1, f"{first.hull} {first.axis}: equivalent linear damping")
+    ax = axes[0]
+    drafts = sorted({r.key.draft for r in series})
+    for result in series:
+        grid_deg = np.linspace(0.2, result.key.angle_deg, 40)
+        values = [b_eq(result.fit.coefficients_, math.radians(a)) for a in grid_deg]
+        colour = f"C{drafts.index(result.key.draft)}"
+        ax.plot(grid_deg, values, color=colour, alpha=0.8)
+        ax.plot(grid_deg[-1], values[-1], "o", color=colour)
+    for i, draft in enumerate(drafts):
+        ax.plot([], [], color=f"C{i}", label=format_draft(draft))
+    ax.set_xlabel("amplitude (deg)")
+    ax.set_ylabel("B_eq / I (1/s)")
+    ax.legend(title="draft")
+    return _save(fig, path)
+
+
+def _plot_extinction(series: Sequence[GroupResult], path: Path) -> Path:
+    """Measured decrement per half-cycle against mean amplitude, and each fit's curve (deg)."""
+    first = series[0].key
+    fig, axes = _figure(1, f"{first.hull} {first.axis}: extinction curves")
+    ax = axes[0]
+    drafts = sorted({r.key.draft for r in series})
+    for result in series:
+        curve = extinction_curve(result.runs, result.fit.offsets_, result.fit.coefficients_)
+        colour = f"C{drafts.index(result.key.draft)}"
+        ax.plot(np.degrees(curve.mean_amplitude), np.degrees(curve.decrement), ".", color=colour, alpha=0.6)
+        ax.plot(np.degrees(curve.model_amplitude), np.degrees(curve.model_decrement), color=colour, alpha=0.8)
+    for i, draft in enumerate(drafts):
+        ax.plot([], [], color=f"C{i}", label=format_draft(draft))
+    ax.set_xlabel("mean amplitude of successive peaks (deg)")
+    ax.set_ylabel("decrement per half-cycle (deg)")
+    ax.legend(title="draft")
+    return _save(fig, path)
+
+
+def _plot_period(results: Sequence[GroupResult], path: Path) -> Path:
+    """Natural period against draft, one line per hull (mean over initial angles, bars = spread)."""
+    fig, axes = _figure(1, f"{results[0].key.axis}: natural period vs draft")
+    ax = axes[0]
+    for hull in sorted({r.key.hull for r in results}):
+        drafts = sorted({r.key.draft for r in results if r.key.hull == hull})
+        periods = [
+            [natural_period(r.fit.coefficients_) for r in results if r.key.hull == hull and r.key.draft == d]
+            for d in drafts
+        ]
+        ax.errorbar(
+            drafts,
+            [np.mean(p) for p in periods],
+            yerr=[np.ptp(p) / 2 for p in periods],
+            marker="o",
+            capsize=3,
+            label=hull,
+        )
+    ax.set_xlabel("draft / design draft")
+    ax.set_ylabel("natural period (s)")
+    ax.legend()
+    return _save(fig, path)
+
+
+def _shared_draft(results: Sequence[GroupResult]) -> float | None:
+    """The draft nearest to T that two or more hulls were tested at (None when only one hull)."""
+    hulls_at: dict[float, set[str]] = defaultdict(set)
+    for r in results:
+        hulls_at[r.key.draft].add(r.key.hull)
+    shared = [d for d, hulls in hulls_at.items() if len(hulls) >= 2]
+    return min(shared, key=lambda d: abs(d - 1.0)) if shared else None
+
+
+# --------------------------------------------------------------------------------------------------
+# A simulated campaign from the hull configurations (tests, demos, docs)
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SimulatedTest:
+    """How each simulated decay is made: hold the tilt, release at rest, sample like an MTi-G.
+
+    Noise: about the MTi-G's (0.02 deg on the angle, 0.1 deg/s on the gyro at 100 Hz).
+    """
+
+    duration_s: float = 5.0
+    hold_s: float = 0.5
+    rate_hz: float = 100.0
+    angle_noise_rad: float = 3e-4
+    rate_noise_rad_s: float = 2e-3
+
+    @property
+    def release_index(self) -> int:
+        return round(self.hold_s * self.rate_hz)
+
+
+def simulated_decay(
+    coefficients: dict[str, float], angle_deg: float, test: SimulatedTest, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, angle, rate): a held tilt, then the free decay from rest, with white sensor noise."""
+    dt = 1.0 / test.rate_hz
+    t = np.arange(0.0, test.duration_s, dt)
+    n_hold = test.release_index
+    angle = np.full(t.size, math.radians(angle_deg))
+    rate = np.zeros(t.size)
+    angle[n_hold:], rate[n_hold:] = simulate_decay(coefficients, t[n_hold:], math.radians(angle_deg))
+    return (
+        t,
+        angle + rng.normal(0.0, test.angle_noise_rad, t.size),
+        rate + rng.normal(0.0, test.rate_noise_rad_s, t.size),
+    )
+
+
+def write_simulated_campaign(
+    folder: Path,
+    hulls: Sequence[str],
+    axis: str,
+    drafts: Sequence[float],
+    angles_deg: Sequence[float],
+    file_format: str = "csv",
+    test: SimulatedTest = SimulatedTest(),
+    seed: int = 0,
+) -> list[Path]:
+    """One decay file per hull x draft x angle, from the coefficients in configs/hulls.
+
+    CSV: columns time_s, angle_deg, rate_deg_s from the release on, labels in the file name. MCAP: a
+    tankdaq recording (the held tilt, the samples and a release event) with the labels in its metadata.
+    """
+    if file_format not in ("csv", "mcap"):
+        raise InputError(f"format {file_format!r} not understood: use csv or mcap")
+    folder.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    written = []
+    for hull_name in hulls:
+        model = load_hull(hull_name).axis_model(axis)
+        for draft in drafts:
+            coefficients = model.coefficients(draft)
+            for angle_deg in angles_deg:
+                t, angle, rate = simulated_decay(coefficients, angle_deg, test, rng)
+                stem = f"{hull_name}_{format_draft(draft)}_{axis}_{angle_deg:g}deg_run01"
+                if file_format == "csv":
+                    path = folder / f"{stem}.csv"
+                    table = np.column_stack([t, np.degrees(angle), np.degrees(rate)])[test.release_index :]
+                    np.savetxt(path, table, delimiter=",", header="time_s,angle_deg,rate_deg_s", comments="")
+                else:
+                    labels = (hull_name, axis, draft, angle_deg)
+                    path = _write_mcap(folder / f"{stem}.mcap", labels, t, angle, rate, test)
+                written.append(path)
+    return written
+
+
+def _write_mcap(
+    path: Path,
+    labels: tuple[str, str, float, float],
+    t: np.ndarray,
+    angle: np.ndarray,
+    rate: np.ndarray,
+    test: SimulatedTest,
+) -> Path:
+    from ..store.writer import RecordingWriter
+
+    hull, axis, draft, angle_deg = labels
+    samples = empty_samples(t.size)
+    samples["t"] = t
+    samples["ticks"] = np.round(t * 1e4).astype(np.int64)
+    samples["counter"] = np.arange(t.size) % 65536
+    angle_field, rate_field = AXIS_FIELDS[axis]
+    for name in ("roll", "pitch", "yaw", "p", "q", "r", "ax", "ay"):
+        samples[name] = 0.0
+    samples["az"] = 9.81
+    samples[angle_field] = angle
+    samples[rate_field] = rate
+    metadata = {
+        "hull": hull,
+        "axis": axis,
+        "draft": format_draft(draft),
+        "angle_nominal_deg": angle_deg,
+        "sample_rate_hz": test.rate_hz,
+        "note": "simulated from configs/hulls",
+    }
+    with RecordingWriter(path, metadata, {"simulated": True, "hull": hull}) as writer:
+        writer.write_samples(samples)
+        writer.write_event("release", "simulated release", t_s=float(t[test.release_index]))
+    return writer.path

@@ -1,0 +1,190 @@
+"""Campaigns: simulated from the hull configs, written as real CSV and MCAP files, grouped and identified."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+from typer.testing import CliRunner
+
+from tankdaq.cli import app
+from tankdaq.config import load_hull
+from tankdaq.errors import InputError
+from tankdaq.ident.campaign import (
+    GroupKey,
+    csv_labels,
+    find_recordings,
+    group_runs,
+    identify_groups,
+    read_campaign_runs,
+    write_report,
+    write_simulated_campaign,
+)
+from tankdaq.ident.derived import b_eq
+
+HULLS = ("trimaran", "catamaran")
+DRAFTS = (0.9, 1.1)
+ANGLES_DEG = (4.0, 8.0)
+runner = CliRunner()
+
+
+def truth(key: GroupKey) -> dict[str, float]:
+    return load_hull(key.hull).axis_model(key.axis).coefficients(key.draft)
+
+
+@pytest.fixture(scope="module")
+def csv_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("csv_campaign")
+    write_simulated_campaign(folder, HULLS, "pitch", DRAFTS, ANGLES_DEG, "csv", seed=1)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def csv_results(csv_campaign: Path) -> list:
+    runs = [run for path in find_recordings([csv_campaign]) for run in read_campaign_runs(path)]
+    return identify_groups(group_runs(runs))
+
+
+def test_every_condition_is_one_group_and_recovers_its_hull(csv_results: list) -> None:
+    keys = [r.key for r in csv_results]
+    expected = {GroupKey(h, "pitch", d, a) for h in HULLS for d in DRAFTS for a in ANGLES_DEG}
+    assert set(keys) == expected and len(keys) == len(expected)
+    for result in csv_results:
+        true = truth(result.key)
+        fitted = result.fit.coefficients_
+        assert fitted["c1"] == pytest.approx(true["c1"], rel=0.005), result.key
+        assert fitted["b1"] == pytest.approx(true["b1"], rel=0.05), result.key
+        amplitude = math.radians(result.key.angle_deg)
+        assert b_eq(fitted, amplitude) == pytest.approx(b_eq(true, amplitude), rel=0.03), result.key
+
+
+def test_report_files_hold_the_table_and_the_plots(csv_results: list, tmp_path: Path) -> None:
+    written = write_report(csv_results, tmp_path)
+    names = {p.name for p in written}
+    assert {"campaign.csv", "campaign.md", "hulls_pitch_0.9T.png", "period_vs_draft_pitch.png"} <= names
+    for hull in HULLS:
+        assert {
+            f"coefficients_{hull}_pitch.png",
+            f"b_eq_{hull}_pitch.png",
+            f"extinction_{hull}_pitch.png",
+        } <= names
+    with (tmp_path / "campaign.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(csv_results)
+    for row, result in zip(rows, csv_results, strict=True):
+        assert float(row["c1"]) == pytest.approx(result.fit.coefficients_["c1"], rel=1e-9)
+        assert row["draft"] in ("0.9T", "1.1T") and row["error"] == ""
+    table = (tmp_path / "campaign.md").read_text()
+    assert table.count("| trimaran | pitch |") == len(DRAFTS) * len(ANGLES_DEG)
+    for png in (p for p in written if p.suffix == ".png"):
+        image = imread(png)
+        assert image.ndim == 3 and image.shape[0] > 100 and image.shape[1] > 100
+        assert float(np.std(image)) > 0.01, png.name  # something was drawn
+
+
+def test_mcap_campaign_reads_back_like_the_csv_one(tmp_path: Path) -> None:
+    """Real tankdaq recordings (held tilt + release event) give the same groups and the hull's values."""
+    write_simulated_campaign(tmp_path, ["trimaran"], "pitch", [1.0], [6.0], "mcap", seed=2)
+    paths = find_recordings([tmp_path])
+    assert [p.suffix for p in paths] == [".mcap"]
+    runs = read_campaign_runs(paths[0])
+    assert runs[0].t[0] == pytest.approx(0.5)  # cut at the release event, after the held tilt
+    (result,) = identify_groups(group_runs(runs))
+    assert result.key == GroupKey("trimaran", "pitch", 1.0, 6.0)
+    assert result.fit.coefficients_["c1"] == pytest.approx(truth(result.key)["c1"], rel=0.005)
+
+
+def test_repeats_are_fitted_jointly(csv_campaign: Path, tmp_path: Path) -> None:
+    """Two files of the same condition (run01, run02) form one group with both runs."""
+    source = csv_campaign / "trimaran_0.9T_pitch_8deg_run01.csv"
+    shutil.copy(source, tmp_path / source.name)
+    shutil.copy(source, tmp_path / "trimaran_0.9T_pitch_8deg_run02.csv")
+    runs = [run for path in find_recordings([tmp_path]) for run in read_campaign_runs(path)]
+    groups = group_runs(runs)
+    assert list(groups) == [GroupKey("trimaran", "pitch", 0.9, 8.0)]
+    (result,) = identify_groups(groups)
+    assert len(result.runs) == 2 and result.summary()["runs"] == 2
+
+
+def test_a_sidecar_names_the_condition(tmp_path: Path) -> None:
+    path = tmp_path / "decay 17.csv"
+    path.write_text("time_s,angle_deg\n")
+    path.with_suffix(".json").write_text(
+        json.dumps({"hull": "swath", "draft": "1.1T", "axis": "roll", "angle_deg": 5})
+    )
+    assert csv_labels(path) == {"hull": "swath", "draft": 1.1, "axis": "roll", "angle_deg": 5.0}
+    path.with_suffix(".json").write_text(json.dumps({"hull": "swath"}))
+    with pytest.raises(InputError, match="needs JSON with hull, axis, angle_deg"):
+        csv_labels(path)
+
+
+def test_cli_campaign_prints_the_table_and_writes_the_report(csv_campaign: Path, tmp_path: Path) -> None:
+    result = runner.invoke(app, ["campaign", str(csv_campaign), "--report", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    data_rows = [line for line in result.stdout.splitlines() if line.startswith("| catamaran")]
+    assert len(data_rows) == len(DRAFTS) * len(ANGLES_DEG)
+    assert (tmp_path / "out" / "campaign.md").read_text().endswith(result.stdout)
+    assert (tmp_path / "out" / "hulls_pitch_0.9T.png").stat().st_size > 0
+
+
+def test_cli_simulate_campaign_writes_the_seeds_matrix(tmp_path: Path) -> None:
+    result = runner.invoke(
+        app,
+        [
+            "simulate-campaign",
+            str(tmp_path),
+            "--hull",
+            "swath",
+            "--axis",
+            "roll",
+            "--angle",
+            "3",
+            "--angle",
+            "5",
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert len(names) == 6 and names[0] == "swath_0.9T_roll_3deg_run01.csv"
+    (run,) = read_campaign_runs(tmp_path / "swath_T_roll_5deg_run01.csv")
+    assert math.degrees(run.angle[0]) == pytest.approx(5.0, abs=0.1)  # starts at the release
+    assert run.rate is not None and run.axis == "roll"
+    assert run.meta["hull"] == "swath" and run.meta["draft"] == 1.0
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["campaign", "/no/such/folder"], "no such file or folder"),
+        (["campaign", "{empty}"], "no .mcap or .csv recordings"),
+        (["campaign", "{unnamed}"], "cannot tell hull, draft, axis and angle"),
+        (["campaign", "{notes}"], "not a recording"),
+        (["campaign", "{campaign}", "--model", "b1,zz"], "unknown model term"),
+        (["simulate-campaign", "{empty}", "--axis", "yaw"], "axis 'yaw' not understood"),
+        (["simulate-campaign", "{empty}", "--draft", "deep"], "draft 'deep' not understood"),
+        (["simulate-campaign", "{empty}", "--hull", "ferry"], "unknown hull 'ferry'"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(
+    args: list[str], message: str, csv_campaign: Path, tmp_path: Path
+) -> None:
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "unnamed").mkdir()
+    shutil.copy(csv_campaign / "trimaran_0.9T_pitch_8deg_run01.csv", tmp_path / "unnamed" / "decay1.csv")
+    (tmp_path / "notes.txt").write_text("hello")
+    places = {
+        "{empty}": tmp_path / "empty",
+        "{unnamed}": tmp_path / "unnamed",
+        "{notes}": tmp_path / "notes.txt",
+        "{campaign}": csv_campaign,
+    }
+    result = runner.invoke(app, [str(places.get(a, a)) for a in args])
+    assert result.exit_code == 2, result.output
+    assert message in result.output
+    assert len(result.output.strip().splitlines()) == 1 and "Traceback" not in result.output
