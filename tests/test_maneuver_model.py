@@ -41,7 +41,8 @@ def test_dimensional_remus_values_become_prime_values_by_rho_half_length_powers(
     # Prestero: M_q|q| = -188 N m s^2 multiplies q|q|, a rho/2 L^5 term; Z_uw = -28.6 kg/m a rho/2 L^2 term.
     assert remus.coefficient("M_q|q|") == pytest.approx(-188.0 / (0.5 * 1030.0 * 1.33**5), rel=1e-12)
     assert remus.coefficient("Z_uw") == pytest.approx(-28.6 / (0.5 * 1030.0 * 1.33**2), rel=1e-12)
-    assert remus.scale(TERM_BY_NAME["M_q|q|"].length_power) * remus.coefficient("M_q|q|") == pytest.approx(-188.0)
+    power = TERM_BY_NAME["M_q|q|"].length_power
+    assert remus.scale(power) * remus.coefficient("M_q|q|") == pytest.approx(-188.0)
 
 
 def test_nps_prime_values_are_taken_as_published():

@@ -6,6 +6,7 @@ import json
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 import typer
@@ -13,7 +14,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from scipy.stats import spearmanr
 
 from ..errors import InputError
-from ..maneuver.identify import SeparateIdentifier, relative_errors
+from ..maneuver.identify import SeparateIdentifier, default_window_s, relative_errors
 from ..maneuver.io import read_record, read_vehicle_attachment, write_record
 from ..maneuver.model import StateRecord, add_noise, simulate_zigzag
 from ..maneuver.sensitivity import OUTPUTS, SensitivityResult, sensitivity_analysis
@@ -21,14 +22,19 @@ from ..maneuver.validate import SCORED_STATES, plot_validation, resimulate
 from ..maneuver.vehicle import Vehicle, list_vehicles, load_vehicle
 from .app import app, err_console, handles_errors
 
-auv_app = typer.Typer(no_args_is_help=True, help="AUV diving-plane manoeuvres: simulate, identify, sensitivity, "
-                      "validate (seed 003).")
+auv_app = typer.Typer(
+    no_args_is_help=True,
+    help="AUV diving-plane manoeuvres (seed 003): simulate, identify, sensitivity, validate.",
+)
 app.add_typer(auv_app, name="auv")
 
 DEFAULT_VEHICLE = "nps_auv2"
 DEFAULT_DELTA_DEG = 15.0
 DEFAULT_THETA_DEG = 10.0
 METHODS = ("lssvm", "ols")
+DELTA_HELP = "Stern-plane angle about trim [deg]."
+THETA_HELP = "Pitch at which the plane reverses [deg]."
+RECORD_VEHICLE_HELP = "Vehicle (default: the one the record carries)."
 
 
 def parse_noise(text: str) -> float:
@@ -39,7 +45,8 @@ def parse_noise(text: str) -> float:
     try:
         scale = float(text)
     except ValueError:
-        raise InputError(f"--noise {text!r} not understood: use none, realistic or a factor such as 0.5") from None
+        raise InputError(
+            f"--noise {text!r} not understood: use none, realistic or a factor such as 0.5") from None
     if not 0 <= scale <= 100:
         raise InputError(f"--noise {text!r}: the factor must be between 0 and 100")
     return scale
@@ -73,7 +80,8 @@ def _vehicle_for(path: Path, record: StateRecord, name: str | None) -> Vehicle:
         return attached
     if record.meta.get("vehicle"):
         return load_vehicle(record.meta["vehicle"])
-    raise InputError(f"{path} does not say which vehicle it is; give --vehicle ({', '.join(list_vehicles())})")
+    known = ", ".join(list_vehicles())
+    raise InputError(f"{path} does not say which vehicle it is; give --vehicle ({known})")
 
 
 def _manoeuvre_angles_rad(record: StateRecord) -> tuple[float, float]:
@@ -95,15 +103,15 @@ def _sensitivity(vehicle: Vehicle, delta_rad: float, theta_rad: float, step: flo
 @auv_app.command("simulate")
 @handles_errors
 def simulate_command(
-    out: Path = typer.Option(..., "--out", help="Output file: .mcap or .csv (the suffix picks the writer)."),
+    out: Annotated[Path, typer.Option("--out", help="Output: .mcap or .csv, by suffix.")],
     vehicle_name: str = typer.Option(DEFAULT_VEHICLE, "--vehicle", help="Vehicle in configs/vehicles."),
     manoeuvre: str = typer.Option("zigzag", "--manoeuvre", help="Manoeuvre: zigzag (stern plane +/-delta, "
                                   "switched when pitch reaches -/+theta)."),
-    delta_deg: float = typer.Option(DEFAULT_DELTA_DEG, "--delta", help="Stern-plane angle about trim [deg]."),
-    theta_deg: float = typer.Option(DEFAULT_THETA_DEG, "--theta", help="Pitch at which the plane reverses [deg]."),
+    delta_deg: float = typer.Option(DEFAULT_DELTA_DEG, "--delta", help=DELTA_HELP),
+    theta_deg: float = typer.Option(DEFAULT_THETA_DEG, "--theta", help=THETA_HELP),
     switches: int = typer.Option(8, "--switches", help="Plane reversals to record."),
     rate_hz: float = typer.Option(100.0, "--rate-hz", help="Sample rate [Hz]."),
-    noise: str = typer.Option("none", "--noise", help="Sensor noise: none, realistic, or a factor of realistic."),
+    noise: str = typer.Option("none", "--noise", help="Sensor noise: none, realistic, or a factor of it."),
     seed: int = typer.Option(0, "--seed", help="Noise random seed."),
 ) -> None:
     """Simulate a diving-plane manoeuvre with the vehicle's standard derivatives and write it."""
@@ -119,8 +127,9 @@ def simulate_command(
     record.meta.update({"noise": "none" if scale == 0 else f"{scale:g} x realistic", "seed": str(seed),
                         "rate_hz": f"{rate_hz:g}"})
     path = write_record(out, record, vehicle)
-    typer.echo(f"wrote {path}: {vehicle.name} zigzag {delta_deg:g}/{theta_deg:g} deg, {record.t.size} samples "
-               f"over {record.t[-1]:.1f} s, {switches} plane reversals, noise {record.meta['noise']}")
+    typer.echo(f"wrote {path}: {vehicle.name} zigzag {delta_deg:g}/{theta_deg:g} deg, "
+               f"{record.t.size} samples over {record.t[-1]:.1f} s, {switches} plane reversals, "
+               f"noise {record.meta['noise']}")
 
 
 def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle,
@@ -136,7 +145,7 @@ def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle,
         })
     report: dict[str, object] = {
         "vehicle": vehicle.name, "method": ident.method,
-        "window_s": ident.window_s if ident.window_s is not None else vehicle.length_m / vehicle.nominal_speed_m_s,
+        "window_s": ident.window_s if ident.window_s is not None else default_window_s(vehicle),
         "derivatives": rows,
         "bias": ident.bias_, "bias_std": ident.bias_std_,
         "gamma": {eq: fit.gamma for eq, fit in ident.equations_.items()},
@@ -181,9 +190,9 @@ def _print_identify(report: dict) -> None:
 @auv_app.command("identify")
 @handles_errors
 def identify_command(
-    file: Path = typer.Argument(..., help="A record written by `tankdaq auv simulate` (.mcap or .csv)."),
-    vehicle_name: str = typer.Option(None, "--vehicle", help="Vehicle (default: the one the record carries)."),
-    method: str = typer.Option("lssvm", "--method", help="lssvm (linear kernel, gamma by held-out folds) or ols."),
+    file: Annotated[Path, typer.Argument(help="A record written by `tankdaq auv simulate` (.mcap or .csv).")],
+    vehicle_name: str = typer.Option(None, "--vehicle", help=RECORD_VEHICLE_HELP),
+    method: str = typer.Option("lssvm", "--method", help="lssvm (linear kernel, gamma) or ols."),
     window_s: float = typer.Option(None, "--window", help="Weak-form filter width [s] (default: L/U)."),
     with_sensitivity: bool = typer.Option(True, "--sensitivity/--no-sensitivity",
                                           help="Rank the derivatives by sensitivity next to their errors."),
@@ -208,15 +217,16 @@ def identify_command(
 @handles_errors
 def sensitivity_command(
     vehicle_name: str = typer.Option(DEFAULT_VEHICLE, "--vehicle", help="Vehicle in configs/vehicles."),
-    delta_deg: float = typer.Option(DEFAULT_DELTA_DEG, "--delta", help="Stern-plane angle about trim [deg]."),
-    theta_deg: float = typer.Option(DEFAULT_THETA_DEG, "--theta", help="Pitch at which the plane reverses [deg]."),
+    delta_deg: float = typer.Option(DEFAULT_DELTA_DEG, "--delta", help=DELTA_HELP),
+    theta_deg: float = typer.Option(DEFAULT_THETA_DEG, "--theta", help=THETA_HELP),
     step_percent: float = typer.Option(10.0, "--step", help="Perturbation of each derivative [%]."),
-    threshold: float = typer.Option(0.10, "--threshold", help="Sensitivity index that makes a derivative dominant."),
+    threshold: float = typer.Option(0.10, "--threshold", help="Index at which a derivative is dominant."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Rank the derivatives by how much the zigzag changes when each is perturbed."""
     vehicle = load_vehicle(vehicle_name)
-    result = _sensitivity(vehicle, np.radians(delta_deg), np.radians(theta_deg), step_percent / 100.0, threshold)
+    delta_rad, theta_rad = np.radians(delta_deg), np.radians(theta_deg)
+    result = _sensitivity(vehicle, delta_rad, theta_rad, step_percent / 100.0, threshold)
     if as_json:
         typer.echo(json.dumps(result.to_dict(), indent=1))
         return
@@ -235,11 +245,11 @@ def sensitivity_command(
 @auv_app.command("validate")
 @handles_errors
 def validate_command(
-    file: Path = typer.Argument(..., help="Record to identify from (.mcap or .csv)."),
-    test: Path = typer.Option(None, "--test", help="Held-out record to predict (default: FILE itself)."),
-    vehicle_name: str = typer.Option(None, "--vehicle", help="Vehicle (default: the one the record carries)."),
+    file: Annotated[Path, typer.Argument(help="Record to identify from (.mcap or .csv).")],
+    test: Annotated[Path | None, typer.Option("--test", help="Held-out record (default: FILE).")] = None,
+    vehicle_name: str = typer.Option(None, "--vehicle", help=RECORD_VEHICLE_HELP),
     method: str = typer.Option("lssvm", "--method", help="lssvm or ols."),
-    plot: Path = typer.Option(None, "--plot", help="Write a PNG of measured vs re-simulated motion."),
+    plot: Annotated[Path | None, typer.Option("--plot", help="PNG: measured vs re-simulated.")] = None,
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""

@@ -82,7 +82,8 @@ def check_record(record: StateRecord) -> None:
     """Refuse records the identification cannot use, saying what is missing."""
     missing = [c for c in ("u", "w", "q", "theta", "delta_s") if c not in record.states]
     if missing:
-        raise BadIdentificationInput(f"the record lacks the channels {missing}; it needs u, w, q, theta, delta_s")
+        raise BadIdentificationInput(
+            f"the record lacks the channels {missing}; it needs u, w, q, theta, delta_s")
     if record.t.size < 50:
         raise BadIdentificationInput(f"the record has only {record.t.size} samples; a zigzag needs hundreds")
     dt = np.diff(record.t)
@@ -100,7 +101,7 @@ def check_record(record: StateRecord) -> None:
 
 def weak_form_kernels(window_s: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Sampled h(s) = (1 - s^2)^4 (unit area, times dt) and its time derivative, over ``window_s``."""
-    half = max(3, int(round(0.5 * window_s / dt)))
+    half = max(3, round(0.5 * window_s / dt))
     s = np.arange(-half, half + 1) / half
     h = (1 - s * s) ** 4
     dh = -8 * s * (1 - s * s) ** 3 / (half * dt)
@@ -133,7 +134,7 @@ def build_regressions(records: Sequence[StateRecord], vehicle: Vehicle, window_s
         raise InputError(f"unknown derivatives {sorted(unknown)}; known: {', '.join(VISCOUS_TERMS)}")
     v = vehicle
     mass, speed, length = v.mass_kg, v.nominal_speed_m_s, v.length_m
-    r2, r3, r4, r5 = (v.scale(n) for n in (2, 3, 4, 5))
+    r3, r4, r5 = (v.scale(n) for n in (3, 4, 5))
     names = {eq: tuple(n for n in wanted if TERM_BY_NAME[n].equation == eq) for eq in EQUATIONS}
     rows: dict[str, list] = {eq: [] for eq in EQUATIONS}
     for record in records:
@@ -141,7 +142,8 @@ def build_regressions(records: Sequence[StateRecord], vehicle: Vehicle, window_s
         dt = float(np.median(np.diff(record.t)))
         h, dh = weak_form_kernels(window_s, dt)
         if h.size >= record.t.size:
-            raise BadIdentificationInput(f"the record ({record.t.size} samples) is shorter than the filter window")
+            raise BadIdentificationInput(
+                f"the record ({record.t.size} samples) is shorter than the filter window")
         u, w, q, theta, ds = (record[c] for c in ("u", "w", "q", "theta", "delta_s"))
         du, dw, dq = (_acceleration(x, dh) for x in (u, w, q))
         excess = v.weight_n - v.buoyancy_n
@@ -222,7 +224,10 @@ class LSSVMRegressor:
                     errors[i] += np.sum((y[fold] - b - X[fold] @ w) ** 2)
             self.cv_errors_ = errors / y.size
             self.gamma_ = float(candidates[int(np.argmin(errors))])
-        self.intercept_, self.coef_ = _ridge_solve(X, y, self.gamma_) if X.shape[1] else (float(y.mean()), np.empty(0))
+        if X.shape[1]:
+            self.intercept_, self.coef_ = _ridge_solve(X, y, self.gamma_)
+        else:
+            self.intercept_, self.coef_ = float(y.mean()), np.empty(0)
         A = _with_intercept(X)
         resid = y - A @ np.concatenate([[self.intercept_], self.coef_])
         penalty = np.eye(A.shape[1]) / self.gamma_

@@ -83,10 +83,11 @@ def _write_mcap(path: Path, record: StateRecord, meta: dict[str, str], vehicle: 
         writer = Writer(fh)
         writer.start(profile="", library=f"tankdaq {__version__}")
         schema_id = writer.register_schema(SCHEMA_NAME, "jsonschema", json.dumps(_SCHEMA).encode())
-        channel_id = writer.register_channel(TOPIC, "json", schema_id, metadata={f: STATE_UNITS[f] for f in FIELDS})
+        units = {f: STATE_UNITS[f] for f in FIELDS}
+        channel_id = writer.register_channel(TOPIC, "json", schema_id, metadata=units)
         columns = np.column_stack([record.t] + [record[c] for c in STATE_COLUMNS])
         for sequence, row in enumerate(columns):
-            stamp = int(round(row[0] * 1e9))
+            stamp = round(row[0] * 1e9)
             data = json.dumps(dict(zip(FIELDS, row.tolist(), strict=True))).encode()
             writer.add_message(channel_id, log_time=stamp, data=data, publish_time=stamp, sequence=sequence)
         writer.add_metadata(METADATA_NAME, {k: str(v) for k, v in meta.items()})
@@ -108,7 +109,8 @@ def read_record(path: str | Path) -> StateRecord:
 def _columns_to_record(path: Path, columns: dict[str, list[float]], meta: dict[str, str]) -> StateRecord:
     missing = [f for f in FIELDS if f not in columns or not columns[f]]
     if missing:
-        raise BadRecordingInput(f"{path}: missing channels {missing}; a diving-plane record needs {', '.join(FIELDS)}")
+        raise BadRecordingInput(
+            f"{path}: missing channels {missing}; a diving-plane record needs {', '.join(FIELDS)}")
     arrays = {f: np.asarray(columns[f], dtype=float) for f in FIELDS}
     return StateRecord(t=arrays["t"], states={c: arrays[c] for c in STATE_COLUMNS}, meta=meta)
 

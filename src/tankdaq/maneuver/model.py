@@ -1,6 +1,7 @@
 """The diving-plane equations of motion and the zigzag-like manoeuvre (seed 003 eq. 1, completed).
 
-    (m - r3 X'udot) du/dt = -m w q + r3 X'wq w q + r2 (X'u|u| u|u| + X'dsds u^2 ds^2) + X_T - (W - B) sin(theta)
+    (m - r3 X'udot) du/dt = -m w q + r3 X'wq w q + r2 (X'u|u| u|u| + X'dsds u^2 ds^2) + X_T
+                            - (W - B) sin(theta)
     (m - r3 Z'wdot) dw/dt - r4 Z'qdot dq/dt = m u q + r3 Z'uq u q
                      + r2 (Z'uu u^2 + Z'uw u w + Z'w|w| w|w| + Z'ds u^2 ds) + (W - B) cos(theta)
     (Iy - r5 M'qdot) dq/dt - r4 M'wdot dw/dt = r5 M'q|q| q|q| + r4 M'uq u q
@@ -76,7 +77,8 @@ def pack_parameters(vehicle: Vehicle) -> np.ndarray:
 @njit(cache=True)
 def _rhs(p, s, delta, command):  # pragma: no cover - compiled
     u, w, q, theta = s[0], s[1], s[2], s[3]
-    mass, weight, buoy, bg, thrust, r2, r3, r4, r5, servo = p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7], p[8], p[9]
+    mass, weight, buoy, bg, thrust = p[0], p[1], p[2], p[3], p[4]
+    r2, r3, r4, r5, servo = p[5], p[6], p[7], p[8], p[9]
     xwq, xuu, xdd, zuq, zuu, zuw, zww, zds = p[10], p[11], p[12], p[13], p[14], p[15], p[16], p[17]
     mqq, muq, muu, muw, mww, mds = p[18], p[19], p[20], p[21], p[22], p[23]
     sin_t, cos_t = np.sin(theta), np.cos(theta)
@@ -199,7 +201,8 @@ def trim_state(vehicle: Vehicle) -> np.ndarray:
 
     solution, info, ok, _ = fsolve(residual, [vehicle.nominal_speed_m_s, 0.0, 0.0, 0.0], full_output=True)
     if ok != 1 or np.max(np.abs(info["fvec"])) > 1e-8:
-        raise InputError(f"{vehicle.name}: no steady level flight found at the nominal speed; check the vehicle file")
+        raise InputError(
+            f"{vehicle.name}: no steady level flight found at the nominal speed; check the vehicle file")
     u, w, theta, delta = solution
     return np.array([u, w, 0.0, theta, 0.0, 0.0, delta])
 

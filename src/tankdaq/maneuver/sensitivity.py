@@ -7,15 +7,17 @@ re-simulated with the same switching rule, and for every manoeuvre output y
     S = (y(+) - y(-)) / (2 step y0)      (central difference, relative change per relative change)
 
 Outputs: pitch overshoot beyond the switching angle, depth change between successive depth extremes,
-the zigzag period (between plane reversals of the same sign) and the mean speed during the manoeuvre. A derivative's overall index is the
-root-mean-square of its |S| over the outputs; derivatives are ranked by it. Dominant derivatives are
-those whose index reaches ``dominant_threshold``.
+the zigzag period (between plane reversals of the same sign) and the mean speed during the manoeuvre.
+A derivative's overall index is the root-mean-square of its |S| over the outputs; derivatives are ranked
+by it. Dominant derivatives are those whose index reaches ``dominant_threshold`` (0.1 by default: a
+10 % change of the derivative moves the manoeuvre outputs by 1 % in the RMS sense).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -36,14 +38,15 @@ def _extremum(values: np.ndarray, t: np.ndarray, index: int) -> float:
     return float(y1 - 0.125 * (y2 - y0) ** 2 / curvature) if curvature != 0 else float(y1)
 
 
-def manoeuvre_outputs(record: StateRecord, theta_switch_rad: float, theta_trim_rad: float = 0.0) -> dict[str, float]:
+def manoeuvre_outputs(record: StateRecord, theta_switch_rad: float,
+                      theta_trim_rad: float = 0.0) -> dict[str, float]:
     """Pitch overshoot (rad), depth change (m), period (s) and mean speed (m/s) of a zigzag record."""
     t, theta, z = record.t, record["theta"] - theta_trim_rad, record["z"]
     reversals = record.switch_times
     if reversals.size < 3:
         raise InputError("the zigzag has fewer than three plane reversals; run it longer")
     overshoots = []
-    for start, end in zip(reversals[:-1], reversals[1:], strict=True):
+    for start, end in pairwise(reversals):
         inside = np.flatnonzero((t >= start) & (t < end))
         if inside.size < 3:
             continue
@@ -122,5 +125,5 @@ def sensitivity_analysis(
     index = {n: float(np.sqrt(np.mean([s ** 2 for s in sensitivities[n].values()]))) for n in names}
     ranking = sorted(names, key=lambda n: -index[n])
     dominant = [n for n in ranking if index[n] >= dominant_threshold]
-    return SensitivityResult(vehicle.name, step, delta_rad, theta_rad, baseline, sensitivities, index, ranking,
-                             dominant, dominant_threshold)
+    return SensitivityResult(vehicle.name, step, delta_rad, theta_rad, baseline, sensitivities, index,
+                             ranking, dominant, dominant_threshold)

@@ -39,7 +39,7 @@ def r_squared(measured: np.ndarray, simulated: np.ndarray) -> float:
 
 def resimulate(record: StateRecord, model: Vehicle, label: str) -> ValidationResult:
     """Drive ``model`` with the record's stern-plane angle and compare every scored state."""
-    n_start = max(2, int(round(INITIAL_FIT_S * record.rate_hz)))
+    n_start = max(2, round(INITIAL_FIT_S * record.rate_hz))
     t = record.t[:n_start] - record.t[0]
     state0 = np.array([np.polyfit(t, record[c][:n_start], 1)[1] for c in STATE_COLUMNS])
     simulated = replay(model, record.t, record["delta_s"], state0)
@@ -57,8 +57,9 @@ def plot_validation(record: StateRecord, results: list[ValidationResult], path: 
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise InputError(f"{path}: the plot is written as PNG; give a file name ending in .png")
-    panels = (("theta", "pitch [deg]", True), ("q", "pitch rate [deg/s]", True), ("w", "heave velocity [m/s]", False),
-              ("z", "depth [m]", False), ("delta_s", "stern plane [deg]", True))
+    panels = (("theta", "pitch [deg]", True), ("q", "pitch rate [deg/s]", True),
+              ("w", "heave velocity [m/s]", False), ("z", "depth [m]", False),
+              ("delta_s", "stern plane [deg]", True))
     fig, axes = plt.subplots(len(panels), 1, figsize=(9, 11), sharex=True)
     for ax, (column, label, in_degrees) in zip(axes, panels, strict=True):
         scale = np.degrees(1.0) if in_degrees else 1.0

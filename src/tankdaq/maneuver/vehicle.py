@@ -53,7 +53,8 @@ TERM_BY_NAME: dict[str, Term] = {t.name: t for t in TERMS}
 #: The derivatives identified from a manoeuvre (the added-mass ones are taken as known, as in the seed).
 VISCOUS_TERMS: tuple[str, ...] = tuple(t.name for t in TERMS if not t.inertia)
 
-_REQUIRED_CONSTANTS = ("length_m", "rho_kg_m3", "weight_n", "buoyancy_n", "bg_m", "iy_kg_m2", "nominal_speed_m_s")
+_REQUIRED_CONSTANTS = (
+    "length_m", "rho_kg_m3", "weight_n", "buoyancy_n", "bg_m", "iy_kg_m2", "nominal_speed_m_s")
 GRAVITY_M_S2 = 9.81
 
 
@@ -147,10 +148,12 @@ def vehicle_from_dict(data: dict, default_name: str = "vehicle") -> Vehicle:
     raw = data.get("derivatives", {})
     unknown = sorted(set(raw) - set(TERM_BY_NAME))
     if unknown:
-        raise ConfigError(f"vehicle {default_name!r}: unknown derivatives {unknown}; known: {', '.join(TERM_BY_NAME)}")
+        raise ConfigError(
+            f"vehicle {default_name!r}: unknown derivatives {unknown}; known: {', '.join(TERM_BY_NAME)}")
     system = data.get("system", "prime")
     if system not in ("prime", "dimensional"):
-        raise ConfigError(f"vehicle {default_name!r}: system must be 'prime' or 'dimensional', not {system!r}")
+        raise ConfigError(
+            f"vehicle {default_name!r}: system must be 'prime' or 'dimensional', not {system!r}")
     length_m = float(constants["length_m"])
     rho = float(constants["rho_kg_m3"])
     derivatives = {}
@@ -160,7 +163,8 @@ def vehicle_from_dict(data: dict, default_name: str = "vehicle") -> Vehicle:
     limit = constants.get("plane_limit_deg")
     speed = float(constants["nominal_speed_m_s"])
     # Constant propeller thrust X_T: given, or self-propulsion at the nominal speed (balances the u|u| drag).
-    thrust = float(constants.get("thrust_n", -0.5 * rho * length_m**2 * derivatives.get("X_u|u|", 0.0) * speed**2))
+    drag_at_speed = -0.5 * rho * length_m**2 * derivatives.get("X_u|u|", 0.0) * speed**2
+    thrust = float(constants.get("thrust_n", drag_at_speed))
     return Vehicle(
         name=data.get("name", default_name),
         description=data.get("description", ""),
