@@ -8,6 +8,7 @@ from . import auv  # noqa: F401
 from . import identify  # noqa: F401
 from . import store  # noqa: F401
 from . import campaign  # noqa: F401
+from . import simulate  # noqa: F401
 from . import decode  # noqa: F401
 from .app import app
 

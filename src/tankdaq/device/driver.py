@@ -431,7 +431,10 @@ class MTiDriver:
     def samples(self, duration_s: float) -> np.ndarray:
         """Convenience: all samples of the next ``duration_s`` device seconds in one array."""
         blocks = [b.samples for b in self.stream(duration_s=duration_s)]
-        return np.concatenate(blocks) if blocks else np.zeros(0, dtype=SAMPLE_DTYPE)
+        if not blocks:
+            return np.zeros(0, dtype=SAMPLE_DTYPE)
+        out = np.concatenate(blocks)
+        return out[out["t"] - out["t"][0] < duration_s - 1e-9]
 
     # ---- reconnecting ----------------------------------------
 

@@ -328,8 +328,9 @@ class SimulatedMTi:
 
     @property
     def truth(self) -> list[RunTruth]:
-        """The scenario's runs (release instants in s from power-up and in SampleTimeFine ticks)."""
-        return self._source().truth
+        """The scenario's runs (release instants in s from power-up and in SampleTimeFine ticks;
+        release indices at the scenario's rate)."""
+        return self._source(self.scenario.rate_hz).truth
 
     @property
     def start_ticks(self) -> int:
@@ -579,9 +580,9 @@ class SimulatedMTi:
         rates = [o.hz for o in self.config if o.hz != MAX_FREQUENCY]
         return float(max(rates) if rates else 100)
 
-    def _source(self) -> SampleSource:
+    def _source(self, rate: float | None = None) -> SampleSource:
         """The scenario played at the configured output rate (the truth in s and ticks is the same)."""
-        rate = self._rate_hz()
+        rate = rate or self._rate_hz()
         if rate not in self._sources:
             self._sources[rate] = SampleSource(dataclasses.replace(self.scenario, rate_hz=rate))
         return self._sources[rate]
