@@ -1,0 +1,106 @@
+"""``tankdaq decode`` on real and synthetic captures: JSON lines, CSV, the summary and one-line errors."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from tankdaq.cli import app
+from tankdaq.xsens.constants import MID
+from tankdaq.xsens.frame import build_frame
+from tankdaq.xsens.framer import StreamFramer
+from tankdaq.xsens.mtdata2 import decode_mtdata2
+from tankdaq.xsens.synthetic import decay_capture
+
+CAPTURES = Path(__file__).parents[2] / "shared" / "data" / "xsens-captures"
+runner = CliRunner()
+
+
+def real_capture(name: str) -> Path:
+    path = CAPTURES / name / "output.bin"
+    if not path.is_file():
+        pytest.skip(f"real captures not found at {path}")
+    return path
+
+
+def test_jsonl_has_one_object_per_message_with_the_decoded_values(tmp_path: Path) -> None:
+    capture = real_capture("einride-1")
+    out = tmp_path / "out.jsonl"
+    result = runner.invoke(app, ["decode", str(capture), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    frames = StreamFramer().feed(capture.read_bytes())
+    assert len(lines) == len(frames) == 100
+    for line, frame in zip(lines, frames, strict=True):
+        msg = decode_mtdata2(frame.payload)
+        assert set(line) == set(msg)
+        assert line["PacketCounter"] == msg["PacketCounter"]
+        if "EulerAngles" in msg:
+            assert line["EulerAngles"] == list(msg["EulerAngles"])  # degrees, as the device sends them
+        assert line["UtcTime"]["iso"] == msg["UtcTime"].isoformat()
+    assert "100 MTData2 messages" in result.stderr and "0 counter gaps" in result.stderr
+
+
+def test_csv_flattens_vectors_with_units(tmp_path: Path) -> None:
+    capture = real_capture("einride-2")
+    out = tmp_path / "out.csv"
+    result = runner.invoke(app, ["decode", str(capture), "--format", "csv", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    with out.open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 100
+    first_euler = next(decode_mtdata2(f.payload) for f in StreamFramer().feed(capture.read_bytes())
+                       if "EulerAngles" in decode_mtdata2(f.payload))  # fmt: skip
+    row = next(r for r in rows if r["EulerAngles.roll_deg"])
+    assert float(row["EulerAngles.roll_deg"]) == first_euler["EulerAngles"][0]
+    assert {"RateOfTurn.z_rad_s", "Acceleration.x_m_s2", "LatLon.lat_deg", "GnssPvtData.num_sv"} <= set(
+        rows[0]
+    )
+
+
+def test_summary_reports_corruption_and_counter_gaps(tmp_path: Path) -> None:
+    frames = decay_capture(50)
+    damaged = bytearray(frames[: 69 * 10] + frames[69 * 13 :])  # three messages lost
+    damaged[69 * 20 + 30] ^= 0xFF  # one bad checksum
+    damaged += build_frame(MID.ERROR, b"\x04") + b"\x01\x02\x03"
+    capture = tmp_path / "damaged.bin"
+    capture.write_bytes(bytes(damaged))
+    result = runner.invoke(app, ["decode", str(capture)])
+    assert result.exit_code == 0
+    assert len(result.stdout.splitlines()) == 46
+    summary = result.stderr
+    assert "46 MTData2 messages" in summary and "1 other frames" in summary and "1 bad checksums" in summary
+    assert "2 counter gaps (4 packets lost)" in summary  # the 3 cut out and the one with the bad checksum
+    assert "72 skipped bytes" in summary  # the corrupted frame (69) and the 3 trailing bytes
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "message"),
+    [
+        ("missing.bin", None, "does not exist"),
+        (".", None, "is a directory"),
+        ("empty.bin", b"", "is empty"),
+        ("text.txt", b"hello, not a capture", "no Xbus frames"),
+    ],
+)
+def test_bad_captures_give_one_line_and_exit_2(
+    tmp_path: Path, name: str, content: bytes | None, message: str
+) -> None:
+    capture = tmp_path / name
+    if content is not None:
+        capture.write_bytes(content)
+    result = runner.invoke(app, ["decode", str(capture)])
+    assert result.exit_code == 2
+    assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert "Traceback" not in result.output
+
+
+def test_unknown_format_is_a_usage_error(tmp_path: Path) -> None:
+    capture = tmp_path / "c.bin"
+    capture.write_bytes(decay_capture(2))
+    result = runner.invoke(app, ["decode", str(capture), "--format", "xml"])
+    assert result.exit_code == 2
