@@ -22,11 +22,13 @@ from tankdaq.ident.campaign import (
     find_recordings,
     group_runs,
     identify_groups,
+    markdown_table,
     read_campaign_runs,
     write_report,
     write_simulated_campaign,
 )
 from tankdaq.ident.derived import b_eq
+from tankdaq.records import DecayRun
 
 HULLS = ("trimaran", "catamaran")
 DRAFTS = (0.9, 1.1)
@@ -188,3 +190,15 @@ def test_bad_input_is_one_line_and_exit_2(
     assert result.exit_code == 2, result.output
     assert message in result.output
     assert len(result.output.strip().splitlines()) == 1 and "Traceback" not in result.output
+
+
+def test_a_group_that_cannot_be_fitted_keeps_its_reason(csv_results: list) -> None:
+    """One bad condition must not sink the campaign: it is reported, the others are fitted."""
+    still = DecayRun(np.arange(0.0, 1.0, 0.01), np.zeros(100), np.zeros(100), axis="pitch", name="still")
+    still.meta.update(hull="trimaran", draft=1.0, angle_deg=3.0)
+    good = csv_results[0].runs
+    results = identify_groups(group_runs([still, *good]))
+    failed = [r for r in results if r.fit is None]
+    assert [r.key.angle_deg for r in failed] == [3.0] and "does not move" in failed[0].error
+    assert "not fitted: still" in markdown_table(results)
+    assert sum(r.fit is not None for r in results) == 1

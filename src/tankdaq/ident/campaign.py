@@ -257,24 +257,26 @@ def write_report(results: Sequence[GroupResult], folder: Path) -> list[Path]:
 
 
 def write_plots(results: Sequence[GroupResult], folder: Path) -> list[Path]:
-    """The seeds' figures and the ITTC ones, one PNG each (matplotlib, no display needed)."""
-    written: list[Path] = []
+    """The seeds' figures and the ITTC ones, one PNG each, in tankdaq's report style (no display needed)."""
+    from ..viz.plots import report_style, save_png
+
+    figures = []
     by_series: dict[tuple[str, str], list[GroupResult]] = defaultdict(list)
     for result in results:
         by_series[(result.key.hull, result.key.axis)].append(result)
-    for (hull, axis), series in sorted(by_series.items()):
-        written.append(_plot_coefficients(series, folder / f"coefficients_{hull}_{axis}.png"))
-        written.append(_plot_b_eq(series, folder / f"b_eq_{hull}_{axis}.png"))
-        written.append(_plot_extinction(series, folder / f"extinction_{hull}_{axis}.png"))
-    for axis in sorted({r.key.axis for r in results}):
-        on_axis = [r for r in results if r.key.axis == axis]
-        written.append(_plot_period(on_axis, folder / f"period_vs_draft_{axis}.png"))
-        shared = _shared_draft(on_axis)
-        if shared is not None:
-            compared = [r for r in on_axis if r.key.draft == shared]
-            name = f"hulls_{axis}_{format_draft(shared)}.png"
-            written.append(_plot_hulls(compared, folder / name))
-    return written
+    with report_style():
+        for (hull, axis), series in sorted(by_series.items()):
+            figures.append((_plot_coefficients(series), f"coefficients_{hull}_{axis}.png"))
+            figures.append((_plot_b_eq(series), f"b_eq_{hull}_{axis}.png"))
+            figures.append((_plot_extinction(series), f"extinction_{hull}_{axis}.png"))
+        for axis in sorted({r.key.axis for r in results}):
+            on_axis = [r for r in results if r.key.axis == axis]
+            figures.append((_plot_period(on_axis), f"period_vs_draft_{axis}.png"))
+            shared = _shared_draft(on_axis)
+            if shared is not None:
+                compared = [r for r in on_axis if r.key.draft == shared]
+                figures.append((_plot_hulls(compared), f"hulls_{axis}_{format_draft(shared)}.png"))
+    return [save_png(fig, folder / name, dpi=110) for fig, name in figures]
 
 
 def _figure(ncols: int, title: str) -> tuple[Any, Any]:
@@ -284,11 +286,6 @@ def _figure(ncols: int, title: str) -> tuple[Any, Any]:
     axes = fig.subplots(1, ncols, squeeze=False)[0]
     fig.suptitle(title)
     return fig, axes
-
-
-def _save(fig: Any, path: Path) -> Path:
-    fig.savefig(path, dpi=110)
-    return path
 
 
 def _terms(results: Sequence[GroupResult]) -> list[str]:
@@ -307,7 +304,7 @@ def _errorbar_series(ax: Any, points: Sequence[GroupResult], term: str, label: s
     )
 
 
-def _plot_coefficients(series: Sequence[GroupResult], path: Path) -> Path:
+def _plot_coefficients(series: Sequence[GroupResult]) -> Any:
     """Each coefficient against the initial angle, one line per draft (the seeds' Fig. 5), 95 % bars."""
     terms = _terms(series)
     first = series[0].key
@@ -318,10 +315,10 @@ def _plot_coefficients(series: Sequence[GroupResult], path: Path) -> Path:
         ax.set_xlabel("initial angle (deg)")
         ax.set_title(f"{term} ({TERM_REGISTRY[term].unit})")
     axes[0].legend(title="draft")
-    return _save(fig, path)
+    return fig
 
 
-def _plot_hulls(results: Sequence[GroupResult], path: Path) -> Path:
+def _plot_hulls(results: Sequence[GroupResult]) -> Any:
     """Hulls side by side at one draft: each coefficient against the initial angle (seed 000 Fig. 7)."""
     terms = _terms(results)
     key = results[0].key
@@ -332,10 +329,10 @@ def _plot_hulls(results: Sequence[GroupResult], path: Path) -> Path:
         ax.set_xlabel("initial angle (deg)")
         ax.set_title(f"{term} ({TERM_REGISTRY[term].unit})")
     axes[0].legend()
-    return _save(fig, path)
+    return fig
 
 
-def _plot_b_eq(series: Sequence[GroupResult], path: Path) -> Path:
+def _plot_b_eq(series: Sequence[GroupResult]) -> Any:
     """B_eq(phi_a) of each group's fit over 0 ... its initial angle; colour by draft."""
     first = series[0].key
     fig, axes = _figure(1, f"{first.hull} {first.axis}: equivalent linear damping")
@@ -352,10 +349,10 @@ def _plot_b_eq(series: Sequence[GroupResult], path: Path) -> Path:
     ax.set_xlabel("amplitude (deg)")
     ax.set_ylabel("B_eq / I (1/s)")
     ax.legend(title="draft")
-    return _save(fig, path)
+    return fig
 
 
-def _plot_extinction(series: Sequence[GroupResult], path: Path) -> Path:
+def _plot_extinction(series: Sequence[GroupResult]) -> Any:
     """Measured decrement per half-cycle against mean amplitude, and each fit's curve (deg)."""
     first = series[0].key
     fig, axes = _figure(1, f"{first.hull} {first.axis}: extinction curves")
@@ -371,10 +368,10 @@ def _plot_extinction(series: Sequence[GroupResult], path: Path) -> Path:
     ax.set_xlabel("mean amplitude of successive peaks (deg)")
     ax.set_ylabel("decrement per half-cycle (deg)")
     ax.legend(title="draft")
-    return _save(fig, path)
+    return fig
 
 
-def _plot_period(results: Sequence[GroupResult], path: Path) -> Path:
+def _plot_period(results: Sequence[GroupResult]) -> Any:
     """Natural period against draft, one line per hull (mean over initial angles, bars = spread)."""
     fig, axes = _figure(1, f"{results[0].key.axis}: natural period vs draft")
     ax = axes[0]
@@ -395,7 +392,7 @@ def _plot_period(results: Sequence[GroupResult], path: Path) -> Path:
     ax.set_xlabel("draft / design draft")
     ax.set_ylabel("natural period (s)")
     ax.legend()
-    return _save(fig, path)
+    return fig
 
 
 def _shared_draft(results: Sequence[GroupResult]) -> float | None:
