@@ -235,7 +235,7 @@ class MTiDriver:
                     return frame
         return None
 
-    def _request(self, mid: int, payload: bytes = b"", what: str = "") -> Frame:
+    def request(self, mid: int, payload: bytes = b"", what: str = "") -> Frame:
         """Send one message and return its reply (mid + 1); device errors become DeviceError."""
         self._write(build_frame(mid, payload))
         reply = self._frames_until({mid + 1}, self.reply_timeout_s)
@@ -273,11 +273,11 @@ class MTiDriver:
             self._find_baud()
         else:
             self.go_to_config()
-        device_id = parse_device_id(self._request(MID.REQ_DID).payload)
-        product = parse_product_code(self._request(MID.REQ_PRODUCT_CODE).payload)
-        firmware = parse_fw_rev(self._request(MID.REQ_FW_REV).payload)
+        device_id = parse_device_id(self.request(MID.REQ_DID).payload)
+        product = parse_product_code(self.request(MID.REQ_PRODUCT_CODE).payload)
+        firmware = parse_fw_rev(self.request(MID.REQ_FW_REV).payload)
         configuration, legacy = self._configure_outputs()
-        self._request(MID.GOTO_MEASUREMENT)
+        self.request(MID.GOTO_MEASUREMENT)
         self._reset_stream_state()
         if legacy:
             self._legacy_output = legacy_codec.LegacyOutput.for_decay(self.rate_hz)
@@ -336,9 +336,9 @@ class MTiDriver:
         bits_per_second = (output.size + FRAME_OVERHEAD) * self.rate_hz * BITS_PER_BYTE
         if bits_per_second > 0.9 * self.baud:
             raise InputError(self._budget_message(bits_per_second))
-        self._request(MID.OUTPUT_MODE, output.mode.to_bytes(2, "big"), "SetOutputMode")
-        self._request(MID.OUTPUT_SETTINGS, output.settings.to_bytes(4, "big"), "SetOutputSettings")
-        self._request(MID.PERIOD, output.period.to_bytes(2, "big"), "SetPeriod")
+        self.request(MID.OUTPUT_MODE, output.mode.to_bytes(2, "big"), "SetOutputMode")
+        self.request(MID.OUTPUT_SETTINGS, output.settings.to_bytes(4, "big"), "SetOutputSettings")
+        self.request(MID.PERIOD, output.period.to_bytes(2, "big"), "SetPeriod")
 
     # ---- streaming ----------------------------------------
 
