@@ -10,6 +10,7 @@ from . import store  # noqa: F401
 from . import campaign  # noqa: F401
 from . import simulate  # noqa: F401
 from . import decode  # noqa: F401
+from . import record  # noqa: F401
 from .app import app
 
 

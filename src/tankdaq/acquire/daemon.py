@@ -1,0 +1,242 @@
+"""The record daemon: device -> release detection -> one MCAP per decay, live fit and view.
+
+It runs until ``runs`` decays are recorded or it is stopped (Ctrl-C, SIGTERM). A
+device that vanishes mid-decay closes that file with what arrived, and the
+daemon waits for the device to come back. ``port="sim"`` starts the built-in
+simulated MTi-G in-process on a pseudo-terminal, opened like hardware.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from ..config import Hull, format_draft, load_hull
+from ..device.driver import MTiDriver
+from ..errors import DeviceGone, InputError
+from ..viz.live import LiveView
+from ..xsens.control import check_bandwidth, decay_output_configuration
+from .session import Block, DecayOutcome, DecaySession, SessionSettings
+
+#: Standard baud rates tried, smallest first, when the simulated sensor needs a faster line.
+SIM_BAUDS = (115200, 230400, 460800, 921600)
+
+
+@dataclass
+class RecordSettings:
+    """Everything ``tankdaq record`` is told (degrees at this edge)."""
+
+    port: str
+    draft: float
+    angle_deg: float
+    hull: str = "swath"
+    axis: str = "roll"  # roll, pitch, auto
+    rate_hz: float = 100.0
+    baud: int | None = None  # None: 115200 on hardware, the smallest that carries the rate on sim
+    out_dir: Path = Path("recordings")
+    runs: int | None = None
+    viewer: str = "none"
+    operator: str = ""
+    note: str = ""
+    model: str = "ittc-quadratic-restoring"
+    pretrigger_s: float = 2.0
+    angle_tolerance_deg: float = 1.0
+    reconnect_timeout_s: float = 120.0
+    sim_speed: float = 1.0
+    sim_seed: int = 0
+    extra: dict[str, object] = field(default_factory=dict)
+
+
+@dataclass
+class DaemonStatus:
+    """What the status line shows between runs."""
+
+    state: str = "starting"
+    held_deg: float = float("nan")
+    runs_done: int = 0
+    samples: int = 0
+    gaps: int = 0
+    bad_frames: int = 0
+    device: str = ""
+
+    def line(self, runs_wanted: int | None) -> str:
+        state = f"held at {self.held_deg:+.2f} deg" if self.state == "held" else self.state
+        wanted = f"/{runs_wanted}" if runs_wanted else ""
+        return (
+            f"state: {state} | runs {self.runs_done}{wanted} | samples {self.samples} | "
+            f"gaps {self.gaps} | bad frames {self.bad_frames}"
+        )
+
+
+def _sim_baud(rate_hz: float) -> int:
+    """The slowest standard line that carries the decay outputs at ``rate_hz``."""
+    entries = decay_output_configuration(int(rate_hz))
+    return next((b for b in SIM_BAUDS if check_bandwidth(entries, rate_hz, b).ok), SIM_BAUDS[-1])
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """SIGTERM stops the daemon the way Ctrl-C does, so files are closed properly."""
+
+    def handler(_signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (tests): leave signals alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+class RecordDaemon:
+    """``run()`` records decays from the device until done; see the module docstring."""
+
+    def __init__(
+        self,
+        settings: RecordSettings,
+        on_event: Callable[[str], None] | None = None,
+        on_status: Callable[[DaemonStatus], None] | None = None,
+    ) -> None:
+        self.settings = settings
+        self.on_event = on_event or (lambda _line: None)
+        self.on_status = on_status or (lambda _status: None)
+        self.status = DaemonStatus()
+        self.hull: Hull | None = load_hull(settings.hull) if settings.hull else None
+        if settings.axis not in ("roll", "pitch", "auto"):
+            raise InputError(f"axis {settings.axis!r} not understood; use roll, pitch or auto")
+        if not settings.angle_deg > 0:
+            raise InputError(f"angle must be a positive number of degrees, got {settings.angle_deg:g}")
+        self.simulator = None
+        self.outcomes: list[DecayOutcome] = []
+
+    # ---- the device ----------------------------------------
+
+    def _start_simulator(self) -> str:
+        from ..device.simulator import SimulatedMTi
+        from ..physics.scenario import DecayScenario
+
+        s = self.settings
+        axis = "roll" if s.axis == "auto" else s.axis
+        if self.hull is not None:
+            self.hull.axis_model(axis).coefficients(s.draft)  # refuse an unknown draft before starting
+        scenario = DecayScenario(
+            hull=s.hull,
+            draft=s.draft,
+            axis=axis,
+            angle_deg=s.angle_deg,
+            rate_hz=s.rate_hz,
+            runs=(s.runs or 20) + 1,
+            seed=s.sim_seed,
+        )
+        baud = s.baud or _sim_baud(s.rate_hz)
+        self.simulator = SimulatedMTi(scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed).start()
+        self.on_event(f"simulated MTi-G on {self.simulator.link} ({s.hull} {format_draft(s.draft)} {axis})")
+        return self.simulator.link
+
+    def _driver(self) -> MTiDriver:
+        s = self.settings
+        port = self._start_simulator() if s.port == "sim" else s.port
+        baud = s.baud or (self.simulator.baud if self.simulator else 115200)
+        return MTiDriver(port, baud=baud, rate_hz=s.rate_hz)
+
+    def _session(self, driver: MTiDriver) -> DecaySession:
+        from ..store.writer import describe_run
+
+        s = self.settings
+        info = driver.info
+        device = asdict(info) if info else {}
+        metadata = describe_run(
+            s.axis,
+            s.angle_deg,
+            hull=self.hull,
+            draft=s.draft,
+            sample_rate_hz=s.rate_hz,
+            device={k: device.get(k) for k in ("device_id", "product_code", "firmware")},
+            operator=s.operator,
+            note=s.note,
+        )
+        metadata["port"] = info.port if info else s.port
+        metadata["baud"] = info.baud if info else s.baud
+        metadata["legacy_protocol"] = bool(info.legacy) if info else False
+        config = {"record": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(s).items()}}
+        config["device"] = {k: v for k, v in device.items() if k != "configuration"}
+        config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
+        json.dumps(config, default=str)  # refuse unserialisable settings early
+        view = LiveView(s.viewer, axis="roll" if s.axis == "auto" else s.axis)
+        session_settings = SessionSettings(
+            axis=s.axis,
+            angle_deg=s.angle_deg,
+            angle_tolerance_deg=s.angle_tolerance_deg,
+            pretrigger_s=s.pretrigger_s,
+            model=s.model,
+            out_dir=s.out_dir,
+            hull=self.hull,
+            draft=s.draft,
+            run_metadata=metadata,
+            run_config=config,
+        )
+        return DecaySession(session_settings, view, on_event=self.on_event)
+
+    # ---- the loop ----------------------------------------
+
+    def run(self) -> list[DecayOutcome]:
+        """Record until ``runs`` decays are done or stopped; returns what was recorded."""
+        s = self.settings
+        driver = self._driver()
+        session: DecaySession | None = None
+        try:
+            with _sigterm_as_interrupt():
+                driver.open()
+                driver.configure()
+                self.status.device = driver.info.describe() if driver.info else s.port
+                self.on_event(f"device: {self.status.device}")
+                session = self._session(driver)
+                self.status.state = "waiting"
+                while s.runs is None or len(self.outcomes) < s.runs:
+                    try:
+                        self._pump(driver, session)
+                    except DeviceGone as exc:
+                        self._device_gone(driver, session, str(exc))
+        except KeyboardInterrupt:
+            self.on_event("stopping: closing files")
+        finally:
+            if session is not None:
+                closed = session.abort("note", "recording stopped by the operator")
+                if closed is not None:
+                    self.outcomes.append(closed)
+                session.view.close()
+            driver.close()
+            if self.simulator is not None:
+                self.simulator.stop()
+        return self.outcomes
+
+    def _pump(self, driver: MTiDriver, session: DecaySession) -> None:
+        block = driver.read_block()
+        finished = session.feed(Block(block.samples, block.raw, block.host_t))
+        self.outcomes.extend(finished)
+        c = driver.counters
+        st = self.status
+        st.samples, st.gaps, st.bad_frames = c.samples, c.gaps, c.bad_frames
+        st.state, st.held_deg, st.runs_done = session.state, session.held_deg, len(self.outcomes)
+        self.on_status(st)
+
+    def _device_gone(self, driver: MTiDriver, session: DecaySession, message: str) -> None:
+        closed = session.abort("unplug", message)
+        if closed is not None:
+            self.outcomes.append(closed)
+        self.status.state = "device gone: waiting for it to come back"
+        self.on_status(self.status)
+        self.on_event(f"device gone ({message}); waiting up to {self.settings.reconnect_timeout_s:g} s")
+        started = time.monotonic()
+        driver.reconnect(timeout_s=self.settings.reconnect_timeout_s)
+        self.on_event(f"device back after {time.monotonic() - started:.1f} s")
+        self.status.state = "waiting"

@@ -1,0 +1,284 @@
+"""``tankdaq record``, ``replay`` and ``demo``: the daemon in the tank lab and its replays."""
+
+from __future__ import annotations
+
+import math
+from enum import StrEnum
+from pathlib import Path
+
+import typer
+
+from .app import app, err_console, handles_errors, parse_draft_option
+
+
+class AxisChoice(StrEnum):
+    roll = "roll"
+    pitch = "pitch"
+    auto = "auto"
+
+
+def _positive_angle(value: float) -> float:
+    if not (math.isfinite(value) and 0 < value <= 45):
+        raise typer.BadParameter(
+            f"{value:g} is not a release angle; give a positive number of degrees up to 45"
+        )
+    return value
+
+
+def _viewer(value: str) -> str:
+    from ..errors import InputError
+    from ..viz.live import check_mode
+
+    try:
+        return check_mode(value)
+    except InputError as exc:
+        raise typer.BadParameter(str(exc)) from None
+
+
+def _hull(value: str) -> str:
+    from ..config import list_hulls
+
+    if value not in list_hulls():
+        raise typer.BadParameter(f"unknown hull {value!r}; known hulls: {', '.join(list_hulls())}")
+    return value
+
+
+def _rate(value: float) -> float:
+    if not (value > 0 and 400 % value == 0):
+        raise typer.BadParameter(
+            f"{value:g} Hz is not an MTi output rate; use a divisor of 400 (100, 200, 400)"
+        )
+    return value
+
+
+def _default_viewer() -> str:
+    from ..viz.live import default_viewer_mode
+
+    return default_viewer_mode()
+
+
+class _StatusLine:
+    """One status line on stderr, refreshed in place on a terminal; event lines above it."""
+
+    def __init__(self, runs: int | None) -> None:
+        from rich.live import Live
+        from rich.text import Text
+
+        self.runs = runs
+        self._text = Text("state: starting")
+        self._live = Live(self._text, console=err_console, refresh_per_second=4, transient=True)
+
+    def __enter__(self) -> _StatusLine:
+        if err_console.is_terminal:
+            self._live.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if err_console.is_terminal:
+            self._live.__exit__(None, None, None)
+
+    def event(self, line: str) -> None:
+        err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+
+    def status(self, status: object) -> None:
+        self._text.plain = status.line(self.runs)  # type: ignore[attr-defined]
+
+
+def run_record(
+    port: str,
+    draft: float,
+    angle: float,
+    hull: str,
+    axis: str,
+    rate: float,
+    baud: int | None,
+    out: Path,
+    runs: int | None,
+    viewer: str | None,
+    operator: str,
+    note: str,
+    model: str,
+    sim_speed: float = 1.0,
+    sim_seed: int = 0,
+) -> list:
+    """Build the daemon from command-line values, run it with a status line, print what it saved."""
+    from ..acquire.daemon import RecordDaemon, RecordSettings
+    from ..ident.models import resolve_model
+
+    resolve_model(model)  # refuse a bad model before the port is opened
+    settings = RecordSettings(
+        port=port,
+        draft=draft,
+        angle_deg=angle,
+        hull=hull,
+        axis=axis,
+        rate_hz=rate,
+        baud=baud,
+        out_dir=out,
+        runs=runs,
+        viewer=viewer or _default_viewer(),
+        operator=operator,
+        note=note,
+        model=model,
+        sim_speed=sim_speed,
+        sim_seed=sim_seed,
+    )
+    with _StatusLine(runs) as line:
+        daemon = RecordDaemon(settings, on_event=line.event, on_status=line.status)
+        outcomes = daemon.run()
+    saved = [o for o in outcomes if o.path is not None]
+    err_console.print(f"{len(saved)} decay(s) recorded under {out}", markup=False)
+    return outcomes
+
+
+@app.command("record")
+@handles_errors
+def record_command(
+    port: str = typer.Option(
+        ..., "--port", help="Device path, pyserial URL, or 'sim' for the built-in simulated MTi-G."
+    ),
+    draft: float = typer.Option(
+        ..., "--draft", parser=parse_draft_option, help="Draft as a factor of design: 0.9T, T, 1.1T."
+    ),
+    angle: float = typer.Option(
+        ..., "--angle", callback=_positive_angle, help="Nominal release angle (deg)."
+    ),
+    hull: str = typer.Option(
+        "swath", "--hull", callback=_hull, help="Hull name from configs/hulls (see tankdaq hulls)."
+    ),
+    axis: AxisChoice = typer.Option(
+        AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
+    ),
+    rate: float = typer.Option(100.0, "--rate", callback=_rate, help="Output rate (Hz): 100, 200 or 400."),
+    baud: int = typer.Option(
+        None, "--baud", help="Serial baud rate (default 115200; sim picks one that fits)."
+    ),
+    out: Path = typer.Option(Path("recordings"), "--out", help="Folder for the MCAP files (one per decay)."),
+    runs: int = typer.Option(
+        None, "--runs", min=1, help="Stop after this many decays (default: until Ctrl-C)."
+    ),
+    viewer: str = typer.Option(
+        None,
+        "--viewer",
+        callback=lambda v: v if v is None else _viewer(v),
+        help="spawn, save (an .rrd beside each MCAP), none, or a rerun URL.",
+    ),
+    operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
+    note: str = typer.Option("", "--note", help="A note stored in the file."),
+    model: str = typer.Option(
+        "ittc-quadratic-restoring", "--model", help="Live model: terms (b1,b2,c1,c3) or alias."
+    ),
+    sim_speed: float = typer.Option(1.0, "--sim-speed", min=0.1, max=50.0, hidden=True),
+    sim_seed: int = typer.Option(0, "--sim-seed", hidden=True),
+) -> None:
+    """Record decays: detect each release, write one MCAP per decay, fit and show it live."""
+    run_record(
+        port,
+        draft,
+        angle,
+        hull,
+        axis.value,
+        rate,
+        baud,
+        out,
+        runs,
+        viewer,
+        operator,
+        note,
+        model,
+        sim_speed,
+        sim_seed,
+    )
+
+
+def _speed(value: str) -> float | None:
+    if value == "max":
+        return None
+    try:
+        speed = float(value)
+    except ValueError:
+        raise typer.BadParameter(f"{value!r}: give a factor like 1, 4 or 'max'") from None
+    if not speed > 0:
+        raise typer.BadParameter("speed must be positive, or 'max'")
+    return speed
+
+
+@app.command("replay")
+@handles_errors
+def replay_command(
+    files: list[Path] = typer.Argument(..., help="tankdaq MCAP recordings."),
+    speed: str = typer.Option("1", "--speed", help="Playback speed factor, or 'max'."),
+    viewer: str = typer.Option(
+        None,
+        "--viewer",
+        callback=lambda v: v if v is None else _viewer(v),
+        help="spawn, save (an .rrd beside each file), none, or a rerun URL.",
+    ),
+) -> None:
+    """Replay recordings: re-decode the raw bytes, re-detect the release, re-fit, show it again."""
+    from ..acquire.replay import replay_recording
+
+    pace = _speed(speed)
+    mode = viewer or _default_viewer()
+    for path in files:
+        outcomes = replay_recording(
+            path,
+            speed=pace,
+            viewer=mode,
+            on_event=lambda line: err_console.print(line, markup=False, highlight=False),
+        )
+        for o in outcomes:
+            fit = o.fit
+            coeffs = "  ".join(f"{k}={v:.4g}" for k, v in fit.coefficients.items()) if fit else "no fit"
+            typer.echo(
+                f"{path.name}: release t={o.release_t:.3f} s at {abs(o.angle_initial_deg):.2f} deg; {coeffs}"
+            )
+
+
+def identify_recordings(paths: list[Path], report_dir: Path, model: str = "ittc-quadratic-restoring") -> None:
+    """Fit all recordings jointly, print the table, and draw each decay with its model (PNG)."""
+    from ..ident.models import resolve_model
+    from ..ident.output_error import OutputError
+    from ..ident.report import predicted_angles, summarize, text_report
+    from ..store.reader import read_decay_runs
+    from ..viz.plots import decay_fit_figure, save_png
+
+    runs = [run for path in paths for run in read_decay_runs(path)]
+    estimator = OutputError(resolve_model(model)).fit(runs)
+    typer.echo(text_report(summarize(estimator, runs)))
+    for run, predicted in zip(runs, predicted_angles(estimator, runs), strict=True):
+        stem = Path(str(run.meta.get("file", run.name))).stem
+        png = save_png(
+            decay_fit_figure(run.t - run.t[0], run.angle, predicted, axis=run.axis, title=stem),
+            report_dir / f"{stem}.png",
+        )
+        typer.echo(f"plot: {png}")
+
+
+@app.command("demo")
+@handles_errors
+def demo_command(
+    out: Path = typer.Option(Path("recordings/demo"), "--out", help="Folder for the demo recordings."),
+    runs: int = typer.Option(3, "--runs", min=1, help="How many decays to record."),
+    sim_speed: float = typer.Option(4.0, "--sim-speed", min=0.1, max=50.0, help="Simulated clock speed-up."),
+) -> None:
+    """The whole chain on the built-in simulated MTi-G: record decays, then identify them jointly."""
+    err_console.print(f"recording {runs} simulated decays (swath, T, roll, 8 deg) into {out}", markup=False)
+    outcomes = run_record(
+        "sim",
+        1.0,
+        8.0,
+        "swath",
+        "roll",
+        100.0,
+        None,
+        out,
+        runs,
+        "save",
+        "demo",
+        "make demo",
+        "ittc-quadratic-restoring",
+        sim_speed,
+    )
+    paths = [o.path for o in outcomes if o.path is not None]
+    identify_recordings(paths, out)
