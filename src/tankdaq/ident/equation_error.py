@@ -16,7 +16,7 @@ from ..errors import BadIdentificationInput
 from ..records import DecayRun
 from .kernels import term_codes, term_matrix
 from .models import resolve_model
-from .signals import estimate_period, savgol_window, smoothed_derivatives
+from .signals import estimate_period, savgol_window, smoothed_derivatives, start_state
 
 
 def exogenous_input(run: DecayRun, channel: str | None) -> np.ndarray:
@@ -91,7 +91,10 @@ class EquationError:
             intercepts[:, r] = 1.0
             blocks.append(np.hstack([-phi, intercepts]))
             targets.append(acc_s[keep])
-            states.append((angle_s[0], rate_s[0]))
+            angle0, rate0 = start_state(run.t, run.angle, window, self.polyorder)
+            if self.use_rate and run.rate is not None:
+                rate0 = start_state(run.t, run.rate, window, self.polyorder)[0]
+            states.append((angle0, rate0))
         design = np.vstack(blocks)
         target = np.concatenate(targets)
         solution, *_ = np.linalg.lstsq(design, target, rcond=None)

@@ -153,14 +153,18 @@ class OutputError:
             self._initial_sigmas(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
         ]
 
-        params = self._solve(p0, free)
+        # with reweighting the first solve only has to get close: the second one polishes
+        rough = 1e-6 if self.reweight else 1e-10
+        params = self._solve(p0, free, rough)
         if start is None and self._angle_r2(params) < FALLBACK_R2:
-            fallback = self._solve(self._start_vector(runs, layout, None, fixed_coefficients, True), free)
+            fallback = self._solve(
+                self._start_vector(runs, layout, None, fixed_coefficients, True), free, rough
+            )
             if self._angle_r2(fallback) > self._angle_r2(params):
                 params = fallback
         if self.reweight:
             self._sigmas = self._residual_sigmas(params)
-            params = self._solve(params, free)
+            params = self._solve(params, free, 1e-10)
         self._finish(params, free)
         self.elapsed_s_ = time.perf_counter() - started
         return self
@@ -297,7 +301,7 @@ class OutputError:
             blocks.append((run_jac, run_res))
         return np.concatenate(res), np.vstack(jac), blocks, ok_all
 
-    def _solve(self, p0: np.ndarray, free: np.ndarray) -> np.ndarray:
+    def _solve(self, p0: np.ndarray, free: np.ndarray, tol: float) -> np.ndarray:
         cache: dict[str, Any] = {}
 
         def evaluate(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -316,8 +320,8 @@ class OutputError:
             jac=lambda q: evaluate(q)[1],
             method="lm",
             x_scale="jac",
-            xtol=1e-10,
-            ftol=1e-10,
+            xtol=tol,
+            ftol=tol,
             max_nfev=self.max_nfev,
         )
         params = p0.copy()

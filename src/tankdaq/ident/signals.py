@@ -41,14 +41,20 @@ def savgol_window(dt: float, period_s: float, fraction: float, polyorder: int) -
 def smoothed_derivatives(
     y: np.ndarray, dt: float, window: int, polyorder: int = 3
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Savitzky-Golay value, first and second derivative of a uniformly sampled signal."""
+    """Savitzky-Golay value, first and second derivative of a uniformly sampled signal.
+
+    The first and last half-windows are only padded, not fitted: callers trim
+    them (see ``start_state`` for the state at the first sample).
+    """
     if y.size <= window:
         raise BadIdentificationInput(f"the record ({y.size} samples) is shorter than one smoothing window")
-    return (
-        savgol_filter(y, window, polyorder),
-        savgol_filter(y, window, polyorder, deriv=1, delta=dt),
-        savgol_filter(y, window, polyorder, deriv=2, delta=dt),
-    )
+    return tuple(savgol_filter(y, window, polyorder, deriv=d, delta=dt, mode="nearest") for d in range(3))
+
+
+def start_state(t: np.ndarray, y: np.ndarray, window: int, polyorder: int = 3) -> tuple[float, float]:
+    """Value and slope at t[0] of a polynomial fitted to the first window: the smoothed initial state."""
+    coef = np.polynomial.polynomial.polyfit(t[:window] - t[0], y[:window], polyorder)
+    return float(coef[0]), float(coef[1])
 
 
 def white_noise_level(y: np.ndarray) -> float:

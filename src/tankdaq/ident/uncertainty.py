@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from scipy import stats
 
@@ -49,32 +50,70 @@ def hac_covariance(blocks: ScoreBlocks, bandwidth: int, bias_correction: bool = 
     white residuals then give the classic covariance on average, and residuals
     correlated over a cycle widen the intervals as they should.
     """
-    info = [sum(j[:, :, None] * j[:, None, :] for j in jacs) for jacs, _ in blocks]  # M_t per run
-    bread = np.linalg.pinv(sum(m.sum(axis=0) for m in info))
+    stacked = [
+        (np.ascontiguousarray(np.stack(jacs)), np.ascontiguousarray(np.stack(res))) for jacs, res in blocks
+    ]
+    bread = np.linalg.pinv(sum(np.einsum("otp,otq->pq", jac, jac) for jac, _ in stacked))
     meat = np.zeros_like(bread)
-    for (jacs, residuals), m in zip(blocks, info, strict=True):
-        g = sum(j * r[:, None] for j, r in zip(jacs, residuals, strict=True))
-        meat += g.T @ _triangle_smooth(g, bandwidth)
-        if bias_correction:
-            weighted = (m @ bread).transpose(1, 0, 2).reshape(bread.shape[0], -1)  # (p, n*p)
-            meat += weighted @ _triangle_smooth(m, bandwidth).reshape(-1, bread.shape[0])
+    for jac, res in stacked:
+        meat += _hac_meat(jac, res, bread, bandwidth, bias_correction)
     meat = 0.5 * (meat + meat.T)
     return bread @ meat @ bread
 
 
-def _triangle_smooth(x: np.ndarray, bandwidth: int) -> np.ndarray:
-    """sum_s w(|t-s|) x_s with Bartlett weights w(l) = 1 - l/(L+1), |l| <= L, along axis 0.
+@numba.njit(cache=True)
+def _box_full(x: np.ndarray, width: int) -> np.ndarray:
+    """Full convolution of each column of x (n, k) with a boxcar of ``width`` ones."""
+    n, k = x.shape
+    out = np.zeros((n + width - 1, k))
+    acc = np.zeros(k)
+    for t in range(n + width - 1):
+        if t < n:
+            acc += x[t]
+        if t >= width:
+            acc -= x[t - width]
+        out[t] = acc
+    return out
 
-    The triangle is two boxcars of L+1 samples convolved, each a cumulative-sum difference: O(n).
+
+@numba.njit(cache=True)
+def triangle_smooth(x: np.ndarray, bandwidth: int) -> np.ndarray:
+    """sum_s w(|t-s|) x_s with Bartlett weights w(l) = 1 - l/(L+1), |l| <= L, down the rows of x (n, k).
+
+    The triangle is two boxcars of L+1 samples convolved: O(n k) whatever the bandwidth.
     """
-    n = x.shape[0]
     width = bandwidth + 1
-    out = x
-    for _ in range(2):
-        pad = np.zeros((width - 1, *x.shape[1:]))
-        c = np.cumsum(np.concatenate([np.zeros((1, *x.shape[1:])), pad, out, pad]), axis=0)
-        out = c[width:] - c[:-width]
-    return out[bandwidth : bandwidth + n] / width
+    return _box_full(_box_full(x, width), width)[bandwidth : bandwidth + x.shape[0]] / width
+
+
+@numba.njit(cache=True)
+def _hac_meat(
+    jac: np.ndarray, res: np.ndarray, bread: np.ndarray, bandwidth: int, correct: bool
+) -> np.ndarray:
+    """One run's HAC meat: sum_t g_t (smoothed g)_t' plus, if ``correct``, sum_t M_t A^-1 K_t.
+
+    ``jac`` (outputs, n, p) and ``res`` (outputs, n) are noise-weighted.
+    """
+    n_out, n, p = jac.shape
+    g = np.zeros((n, p))
+    info = np.zeros((n, p * p))
+    for o in range(n_out):
+        for t in range(n):
+            for a in range(p):
+                g[t, a] += jac[o, t, a] * res[o, t]
+                for b in range(p):
+                    info[t, a * p + b] += jac[o, t, a] * jac[o, t, b]
+    meat = g.T @ triangle_smooth(g, bandwidth)
+    if correct:
+        smooth_info = triangle_smooth(info, bandwidth)
+        for t in range(n):
+            k_t = smooth_info[t].reshape((p, p))
+            for o in range(n_out):
+                w = (bread @ jac[o, t]) @ k_t
+                for a in range(p):
+                    for b in range(p):
+                        meat[a, b] += jac[o, t, a] * w[b]
+    return meat
 
 
 def correlation_from_covariance(cov: np.ndarray) -> np.ndarray:
