@@ -10,6 +10,7 @@ from scipy.optimize import lsq_linear
 
 from tankdaq.config import load_hull
 from tankdaq.errors import BadIdentificationInput, InputError
+from tankdaq.ident.estimators import make_estimator
 from tankdaq.ident.output_error import OutputError, seed_objective
 from tankdaq.ident.seed_methods import (
     INERTIA_FLOOR,
@@ -100,10 +101,25 @@ def test_seed000_table3_gives_its_equation_5_1() -> None:
     assert space.upper.tolist() == [0.1, 0.5, 0.5, 0.2, 0.5]
 
 
-def test_a_plain_term_list_gets_seed001_boxes() -> None:
+def test_a_plain_term_list_gets_seed001_boxes_unless_a_paper_is_named() -> None:
     space = SearchSpace.for_model("b1,b2,c1,c3")
     assert space.paper == "seed001"
     assert space.upper.tolist() == [0.1, 1.0, 1.0, 10.0, 10.0]
+    pinned = SearchSpace.for_model(("b1", "b2", "b3", "s1"), paper="seed000")
+    assert pinned.upper.tolist() == [0.1, 0.5, 0.5, 0.2, 0.5]
+    with pytest.raises(InputError, match="no seed paper 'seed007'"):
+        SearchSpace.for_model("b1,c1", paper="seed007")
+
+
+def test_registry_offers_the_seeds_searches() -> None:
+    """``--method ga-seed000`` pins seed 000's boxes although the CLI passes a bare term list."""
+    assert isinstance(make_estimator("ga", ("b1", "c1")), GeneticSeed)
+    assert isinstance(make_estimator("pso", ("b1", "c1")), SwarmSeed)
+    pinned = make_estimator("ga-seed000", ("b1", "b2", "b3", "s1"))
+    assert isinstance(pinned, GeneticSeed) and pinned.paper == "seed000"
+    assert (
+        pinned._resolved_settings(SearchSpace.for_model(pinned.terms, pinned.paper).paper).generations == 2000
+    )
 
 
 def test_ga_reaches_the_best_objective_in_the_box(noisy_run: DecayRun, ga_fit: GeneticSeed) -> None:

@@ -14,7 +14,7 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 from pymoo.algorithms.soo.nonconvex.ga import GA
@@ -143,8 +143,8 @@ class SearchSpace:
     inertia_high: float = 0.1
 
     @classmethod
-    def for_model(cls, model: str | Sequence[str]) -> SearchSpace:
-        """A seed alias (``seed001-eq1``) gets its paper's boxes; any other model seed 001's."""
+    def for_model(cls, model: str | Sequence[str], paper: str | None = None) -> SearchSpace:
+        """The boxes of ``paper``; by default an alias's own paper's (``seed000-eq1``), else seed 001's."""
         terms = resolve_model(model)
         outside = [t for t in terms if t not in TERMS]
         if outside:
@@ -152,8 +152,13 @@ class SearchSpace:
                 f"the seeds' GA/PSO search only {', '.join(TERMS)}; drop {', '.join(outside)} "
                 f"or use --method oe"
             )
-        alias = model.strip().lower() if isinstance(model, str) else ""
-        paper = alias.split("-")[0] if alias in MODEL_ALIASES and alias.startswith("seed") else DEFAULT_PAPER
+        if paper is None:
+            alias = model.strip().lower() if isinstance(model, str) else ""
+            paper = (
+                alias.split("-")[0] if alias in MODEL_ALIASES and alias.startswith("seed") else DEFAULT_PAPER
+            )
+        if paper not in PAPER_VARIABLES:
+            raise InputError(f"no seed paper {paper!r}; known: {', '.join(PAPER_VARIABLES)}")
         return cls(paper, tuple(PAPER_VARIABLES[paper][term] for term in terms))
 
     @property
@@ -250,10 +255,14 @@ class _Recorder(Callback):
 class _SeedSearch:
     """Shared fit of GeneticSeed and SwarmSeed: the paper's box, a pymoo run, results as tankdaq terms.
 
-    Settings: ``terms`` (term list or alias; a seed alias selects its paper's boxes), ``settings``
-    (a preset name or a settings object; default the model's paper's preset), ``random_state``,
-    ``progress`` (called with (generation, generations) after each generation).
+    Settings: ``terms`` (term list or alias), ``paper`` (whose boxes and preset: ``seed000``,
+    ``seed001``, ``seed002``; default the alias's paper, else seed 001), ``settings`` (a preset name
+    or a settings object, overriding the paper's preset), ``random_state``, ``progress`` (called
+    with (generation, generations) after each generation).
     """
+
+    #: What ``std_`` and ``ci95_`` mean, for reports: the curvature of the seeds' objective.
+    cov_type = "one-step least squares"
 
     _presets: Mapping[str, GeneticSettings | SwarmSettings]
     _settings_type: type
@@ -262,11 +271,13 @@ class _SeedSearch:
         self,
         terms: str | Sequence[str] = "seed001-eq1",
         *,
+        paper: str | None = None,
         settings: str | GeneticSettings | SwarmSettings | None = None,
         random_state: int = 0,
         progress: Callable[[int, int], None] | None = None,
     ) -> None:
         self.terms = terms
+        self.paper = paper
         self.settings = settings
         self.random_state = random_state
         self.progress = progress
@@ -289,7 +300,7 @@ class _SeedSearch:
         """Search the paper's box for the smallest seed objective over all runs jointly; returns self."""
         started = time.perf_counter()
         self.runs_ = check_runs(runs)
-        self.space_ = SearchSpace.for_model(self.terms)
+        self.space_ = SearchSpace.for_model(self.terms, self.paper)
         self.settings_ = self._resolved_settings(self.space_.paper)
         data = OneStepData.from_runs(self.runs_, self.space_.terms)
         recorder = _Recorder(self.settings_.generations, self.progress)
@@ -388,3 +399,12 @@ class SwarmSeed(_SeedSearch):
     def _algorithm(self, settings: GeneticSettings | SwarmSettings) -> Algorithm:
         assert isinstance(settings, SwarmSettings)
         return PSO(pop_size=settings.population, max_velocity_rate=settings.max_velocity, adaptive=True)
+
+
+#: ``--method`` names of the seeds' searches; ``ga-seed000`` etc. pin a paper's boxes and preset, since
+#: the CLI hands estimators the model as a term list, not as the alias.
+SEED_ESTIMATORS: dict[str, Callable[..., _SeedSearch]] = {
+    "ga": GeneticSeed,
+    "pso": SwarmSeed,
+    **{f"ga-{paper}": partial(GeneticSeed, paper=paper) for paper in GENETIC_SETTINGS},
+}
