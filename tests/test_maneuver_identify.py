@@ -19,6 +19,7 @@ from tankdaq.maneuver.identify import (
     SeparateIdentifier,
     _ridge_solve,
     relative_errors,
+    weak_form_kernels,
 )
 from tankdaq.maneuver.model import StateRecord, add_noise, simulate_zigzag
 from tankdaq.maneuver.sensitivity import sensitivity_analysis
@@ -168,3 +169,13 @@ def test_missing_channel_and_unknown_method_are_refused(nps, zigzag):
         SeparateIdentifier(nps).fit(partial)
     with pytest.raises(InputError, match="lssvm or ols"):
         SeparateIdentifier(nps, method="svr").fit(zigzag)
+
+
+def test_weak_form_kernel_turns_a_state_into_its_filtered_derivative():
+    dt, omega = 0.01, 0.7
+    t = np.arange(0.0, 30.0, dt)
+    h, dh = weak_form_kernels(2.0, dt)
+    assert h.sum() == pytest.approx(1.0)
+    x = np.sin(omega * t) + 0.3 * t**2
+    filtered_rate = np.convolve(omega * np.cos(omega * t) + 0.6 * t, h, mode="valid")
+    assert np.allclose(np.convolve(x, dh, mode="valid"), filtered_rate, atol=1e-9)

@@ -19,7 +19,7 @@ from ..maneuver.io import read_record, read_vehicle_attachment, write_record
 from ..maneuver.model import StateRecord, add_noise, simulate_zigzag
 from ..maneuver.sensitivity import OUTPUTS, SensitivityResult, sensitivity_analysis
 from ..maneuver.validate import SCORED_STATES, plot_validation, resimulate
-from ..maneuver.vehicle import Vehicle, list_vehicles, load_vehicle
+from ..maneuver.vehicle import TERM_BY_NAME, Vehicle, list_vehicles, load_vehicle
 from .app import app, err_console, handles_errors
 
 auv_app = typer.Typer(
@@ -138,7 +138,8 @@ def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle,
     rows = []
     for name, value in ident.derivatives_.items():
         rows.append({
-            "derivative": name, "standard": vehicle.coefficient(name), "identified": value,
+            "derivative": name, "multiplies": TERM_BY_NAME[name].multiplies,
+            "standard": vehicle.coefficient(name), "identified": value,
             "std_error": ident.std_[name], "relative_error": errors.get(name),
             "sensitivity_index": sensitivity.index.get(name) if sensitivity else None,
             "dominant": (name in sensitivity.dominant) if sensitivity else None,

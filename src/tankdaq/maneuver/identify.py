@@ -110,12 +110,9 @@ def weak_form_kernels(window_s: float, dt: float) -> tuple[np.ndarray, np.ndarra
 
 
 def _filter(values: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """Kernel * values over the full windows only. With h' as the kernel this is h * d(values)/dt
+    (summation by parts: h vanishes at the window edges)."""
     return np.convolve(values, kernel, mode="valid")
-
-
-def _acceleration(values: np.ndarray, dkernel: np.ndarray) -> np.ndarray:
-    """h * dx/dt = h' * x (by parts: h vanishes at the window edges)."""
-    return np.convolve(values, dkernel, mode="valid")
 
 
 def build_regressions(records: Sequence[StateRecord], vehicle: Vehicle, window_s: float | None = None,
@@ -145,7 +142,7 @@ def build_regressions(records: Sequence[StateRecord], vehicle: Vehicle, window_s
             raise BadIdentificationInput(
                 f"the record ({record.t.size} samples) is shorter than the filter window")
         u, w, q, theta, ds = (record[c] for c in ("u", "w", "q", "theta", "delta_s"))
-        du, dw, dq = (_acceleration(x, dh) for x in (u, w, q))
+        du, dw, dq = (_filter(x, dh) for x in (u, w, q))
         excess = v.weight_n - v.buoyancy_n
         forces = {
             "X": (mass - r3 * v.coefficient("X_udot")) * du

@@ -54,10 +54,6 @@ class StateRecord:
     def rate_hz(self) -> float:
         return float(1.0 / np.median(np.diff(self.t)))
 
-    def matrix(self) -> np.ndarray:
-        """Samples as rows, STATE_COLUMNS as columns."""
-        return np.column_stack([self.states[c] for c in STATE_COLUMNS])
-
 
 def pack_parameters(vehicle: Vehicle) -> np.ndarray:
     """Everything the compiled right-hand side needs, in one float array (inverse mass matrix last)."""
