@@ -59,6 +59,8 @@ INERTIAL_OUTPUTS = ("EulerAngles", "RateOfTurn", "Acceleration")
 RUNNING_SUM_LIMIT = 1 << 18
 #: Up to this many rows a layout is matched with one gather; beyond, one compare per header field.
 FEW_ROWS = 4096
+#: Rows of a regular run checked before the whole buffer is (a mixed stream breaks off early).
+PROBE_ROWS = 64
 
 
 def _struct_dtype(fmt: str, names: Sequence[str]) -> np.dtype:
@@ -128,16 +130,26 @@ def _regular_run(buf: np.ndarray, max_length: int) -> tuple[int, int, int]:
     if total - header_size - 1 > max_length:
         return 0, 0, 0
     rows = buf[: buf.size // total * total].reshape(-1, total)
-    good = (rows[:, 1:].sum(axis=1, dtype=np.uint8) == 0) & np.all(
-        rows[:, :header_size] == rows[0, :header_size], axis=1
-    )
-    count = rows.shape[0] if good.all() else int(np.argmin(good))
+    count = 0
+    for stop in (PROBE_ROWS, rows.shape[0]):  # probe a few rows first: mixed streams break off early
+        part = rows[count:stop]
+        good = (part[:, 1:].sum(axis=1, dtype=np.uint8) == 0) & np.all(
+            part[:, :header_size] == rows[0, :header_size], axis=1
+        )
+        if not good.all():
+            return count + int(np.argmin(good)), total, header_size
+        count += part.shape[0]
     return count, total, header_size
 
 
 def _waits_at_start(rest: np.ndarray, max_length: int) -> bool:
     """True when ``rest`` is just the start of one frame: the framer waits there for more bytes."""
-    if not rest.size or rest[0] != PREAMBLE or np.any(rest[1:] == PREAMBLE):
+    if (
+        not rest.size
+        or rest.size > 7 + MAX_DATA_LENGTH
+        or rest[0] != PREAMBLE
+        or np.any(rest[1:] == PREAMBLE)
+    ):
         return not rest.size
     total = frame_length(rest[:6].tobytes())
     header_size = 6 if rest.size > 3 and rest[3] == EXTENDED_LENGTH else 4
