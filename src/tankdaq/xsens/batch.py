@@ -144,13 +144,10 @@ def _regular_run(buf: np.ndarray, max_length: int) -> tuple[int, int, int]:
 
 def _waits_at_start(rest: np.ndarray, max_length: int) -> bool:
     """True when ``rest`` is just the start of one frame: the framer waits there for more bytes."""
-    if (
-        not rest.size
-        or rest.size > 7 + MAX_DATA_LENGTH
-        or rest[0] != PREAMBLE
-        or np.any(rest[1:] == PREAMBLE)
-    ):
-        return not rest.size
+    if not rest.size:
+        return True
+    if rest.size > 7 + max_length or rest[0] != PREAMBLE or np.any(rest[1:] == PREAMBLE):
+        return False
     total = frame_length(rest[:6].tobytes())
     header_size = 6 if rest.size > 3 and rest[3] == EXTENDED_LENGTH else 4
     return total is None or (total - header_size - 1 <= max_length and total > rest.size)
