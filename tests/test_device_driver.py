@@ -118,11 +118,12 @@ def test_a_stall_shows_up_as_a_counter_gap() -> None:
     with SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
         driver.configure()
         driver.samples(1.0)
-        sim.stall(0.1)  # wall seconds: one device second at speed 10
-        samples = driver.samples(3.0)
+        sim.stall(0.3)  # wall seconds: three device seconds at speed 10
+        samples = driver.samples(5.0)
     assert driver.counters.gaps == 1
-    assert driver.counters.lost == pytest.approx(100, abs=15)
-    assert samples.size == pytest.approx(200, abs=15)
+    # The silence is timed on a busy machine: allow the scheduler a few tens of milliseconds.
+    assert driver.counters.lost == pytest.approx(300, abs=60)
+    assert samples.size == pytest.approx(500 - driver.counters.lost, abs=2)
 
 
 def test_missing_port_lists_the_ports_that_exist() -> None:

@@ -71,8 +71,12 @@ def simulate_command(
             markup=False,
             highlight=False,
         )
-        while not stop.wait(0.5):
-            pass
+        with err_console.status("serving") as status:
+            while not stop.wait(0.5):
+                state = "measuring" if sim.measuring else "config" if sim.plugged else "unplugged"
+                status.update(
+                    f"device time {sim.device_time():.0f} s, {state}, {sim.frames_sent} frames sent"
+                )
     err_console.print(f"stopped after {sim.frames_sent} frames", markup=False, highlight=False)
 
 

@@ -46,10 +46,11 @@ from ..xsens.control import (
 )
 from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
+from ..xsens.legacy import decode_mtdata
 from ..xsens.mtdata2 import describe_xdi
 from ..xsens.stream import StreamDecoder
 from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, CounterTracker, SampleTimeUnwrapper
-from . import legacy_codec
+from .legacy_output import LegacyOutput
 from .ports import describe_missing, path_exists
 
 #: Baud rates tried by ``scan_baud`` (most common first).
@@ -141,7 +142,7 @@ class MTiDriver:
         self._decoder = StreamDecoder()
         self._unwrapper = SampleTimeUnwrapper(self.modulus)
         self._tracker = CounterTracker()
-        self._legacy_output: legacy_codec.LegacyOutput | None = None
+        self._legacy_output: LegacyOutput | None = None
         self._legacy_counter = SampleTimeUnwrapper(1 << 16)
 
     # ---- opening ----------------------------------------
@@ -280,7 +281,7 @@ class MTiDriver:
         self.request(MID.GOTO_MEASUREMENT)
         self._reset_stream_state()
         if legacy:
-            self._legacy_output = legacy_codec.LegacyOutput.for_decay(self.rate_hz)
+            self._legacy_output = LegacyOutput.for_decay(self.rate_hz)
         self.counters = StreamCounters()
         self._last_data = time.monotonic()
         self.info = DeviceInfo(self.port, self.baud, device_id, product, firmware, legacy, self.rate_hz,
@@ -332,8 +333,8 @@ class MTiDriver:
 
     def _configure_legacy(self) -> None:
         """2007-era MTi-G: OutputMode, OutputSettings and Period (reference §4)."""
-        output = legacy_codec.LegacyOutput.for_decay(self.rate_hz)
-        bits_per_second = (output.size + FRAME_OVERHEAD) * self.rate_hz * BITS_PER_BYTE
+        output = LegacyOutput.for_decay(self.rate_hz)
+        bits_per_second = (output.layout.length + FRAME_OVERHEAD) * self.rate_hz * BITS_PER_BYTE
         if bits_per_second > 0.9 * self.baud:
             raise InputError(self._budget_message(bits_per_second))
         self.request(MID.OUTPUT_MODE, output.mode.to_bytes(2, "big"), "SetOutputMode")
@@ -386,25 +387,27 @@ class MTiDriver:
             if frame.mid != MID.MTDATA:
                 continue
             try:
-                rows.append(legacy_codec.decode(output, frame.payload))
+                rows.append(decode_mtdata(frame.payload, output.mode, output.settings))
             except ProtocolError:  # a frame that does not fit the layout is counted, not fatal
                 self._decoder.malformed += 1
         out = empty_samples(len(rows))
         if not rows:
             return out
-        counts = self._legacy_counter.update_many(np.array([r["counter"] for r in rows]))
+        counters = np.array([r["PacketCounter"] for r in rows])
+        counts = self._legacy_counter.update_many(counters)
         out["ticks"] = np.round(counts * (TICKS_PER_SECOND / output.rate_hz)).astype(np.int64)
         out["t"] = out["ticks"] / TICKS_PER_SECOND
         out["host_t"] = host_t
-        out["counter"] = [r["counter"] for r in rows]
-        euler = np.radians(np.array([r["euler"] for r in rows]))
-        for column, name in enumerate(("roll", "pitch", "yaw")):
-            out[name] = euler[:, column]
-        for block, names in (("gyr", ("p", "q", "r")), ("acc", ("ax", "ay", "az"))):
-            values = np.array([r[block] for r in rows])
+        out["counter"] = counters
+        columns = {"EulerAngles": ("roll", "pitch", "yaw"), "RateOfTurn": ("p", "q", "r"),
+                   "Acceleration": ("ax", "ay", "az")}  # fmt: skip
+        for block, names in columns.items():
+            values = np.array([r[block] for r in rows], dtype=float)
+            if block == "EulerAngles":
+                values = np.radians(values)
             for column, name in enumerate(names):
                 out[name] = values[:, column]
-        out["status"] = [r.get("status", 0) for r in rows]
+        out["status"] = [r.get("StatusByte", 0) for r in rows]
         return out
 
     def stream(

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, ProtocolError
 from ..physics.scenario import (
     TICK_MODULUS,
     TICKS_PER_S,
@@ -47,8 +47,10 @@ from ..xsens.constants import BAUD_CODES, MID
 from ..xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS, output_configuration_payload
 from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
+from ..xsens.legacy import encode_mtdata
 from ..xsens.mtdata2 import FRAME_MASK, SPEC_BY_BASE, TYPE_MASK, encode_mtdata2, make_xdi
-from . import legacy_codec
+from .attitude import quaternion
+from .legacy_output import LegacyOutput, sample_values
 
 #: Rates an MTi-G-710 can output: divisors of 400 Hz (the echo rounds a request down to one).
 DEVICE_RATES_HZ = (1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, 80, 100, 200, 400)
@@ -61,6 +63,7 @@ SUPPORTED_OUTPUTS = frozenset(
 #: Answer to the host's WakeUpAck must come within this time after WakeUp, else the device measures.
 WAKEUP_WINDOW_S = 0.5
 ERROR_INVALID_MESSAGE = 0x04
+ERROR_INVALID_PARAMETER = 0x21
 
 
 @dataclass(frozen=True)
@@ -153,17 +156,6 @@ def default_configuration(rate_hz: int = 100) -> list[OutputItem]:
     return effective_configuration([(make_xdi(n), rate_hz) for n in names])
 
 
-def euler_to_quaternion(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
-    """ZYX Euler angles (rad) to unit quaternions (q0, q1, q2, q3), rows."""
-    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
-    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
-    cy, sy = np.cos(yaw / 2), np.sin(yaw / 2)
-    return np.column_stack(
-        (cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy,
-         cr * cp * sy - sr * sp * cy)
-    )  # fmt: skip
-
-
 class SampleSource:
     """Samples of the scenario by index on the device clock, then still water for ever."""
 
@@ -249,7 +241,7 @@ class SimulatedMTi:
         self._slave = -1
         # device state (touched only by the thread once started)
         self.config = default_configuration()
-        self.legacy_mode = legacy_codec.LegacyOutput.default()
+        self.legacy_mode = LegacyOutput.default()
         self.measuring = False
         self.pending_baud = baud
         self._boot = 0.0
@@ -496,7 +488,7 @@ class SimulatedMTi:
         if self.measuring and mid not in (MID.REQ_DATA,):
             return  # a measuring device ignores all but GoToConfig and Reset
         handlers: dict[int, Callable[[bytes], None]] = {
-            MID.GOTO_MEASUREMENT: lambda _: self._start_measuring(ack=True),
+            MID.GOTO_MEASUREMENT: self._on_goto_measurement,
             MID.REQ_DID: lambda _: self._reply(MID.DEVICE_ID, struct.pack(">I", self.identity.device_id)),
             MID.REQ_PRODUCT_CODE: lambda _: self._reply(
                 MID.PRODUCT_CODE, self.identity.product_code.encode()
@@ -521,9 +513,8 @@ class SimulatedMTi:
                     try:
                         (value,) = struct.unpack(fmt, data)
                         self.legacy_mode = dataclasses.replace(self.legacy_mode, **{field: value})
-                        self._sources.clear()
                     except (struct.error, ValueError):
-                        self._error(0x21)
+                        self._error(ERROR_INVALID_PARAMETER)
                         return
                     self._reply(ack)
                 else:
@@ -551,17 +542,26 @@ class SimulatedMTi:
     def _on_output_configuration(self, data: bytes) -> None:
         if data:
             if len(data) % 4:
-                self._error(0x21)
+                self._error(ERROR_INVALID_PARAMETER)
                 return
             requested = [struct.unpack_from(">HH", data, i) for i in range(0, len(data), 4)]
             effective = effective_configuration(requested)
             if not effective:
-                self._error(0x21)
+                self._error(ERROR_INVALID_PARAMETER)
                 return
             self.config = effective
         self._reply(
             MID.OUTPUT_CONFIGURATION_ACK, output_configuration_payload([(o.xdi, o.hz) for o in self.config])
         )
+
+    def _on_goto_measurement(self, _: bytes) -> None:
+        if self.legacy:
+            try:
+                self.legacy_mode.check_simulated()
+            except ProtocolError:
+                self._error(ERROR_INVALID_PARAMETER)
+                return
+        self._start_measuring(ack=True)
 
     def _start_measuring(self, ack: bool = False) -> None:
         if ack:
@@ -615,7 +615,7 @@ class SimulatedMTi:
                     continue
                 name = item.name
                 if name == "Quaternion" and quats is None:
-                    quats = euler_to_quaternion(block["roll"], block["pitch"], block["yaw"])
+                    quats = quaternion(block["roll"], block["pitch"], block["yaw"])
                 items.append((item.xdi, self._value(name, sample, None if quats is None else quats[row])))
             out += build_frame(MID.MTDATA2, encode_mtdata2(items))
         return bytes(out)
@@ -637,8 +637,9 @@ class SimulatedMTi:
         return values[name]()
 
     def _encode_legacy(self, block: np.ndarray) -> bytes:
+        mode, settings = self.legacy_mode.mode, self.legacy_mode.settings
         return b"".join(
-            build_frame(MID.MTDATA, legacy_codec.encode(self.legacy_mode, sample)) for sample in block
+            build_frame(MID.MTDATA, encode_mtdata(sample_values(s), mode, settings)) for s in block
         )
 
     def _inject(self, data: bytes) -> bytes:
