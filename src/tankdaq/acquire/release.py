@@ -144,7 +144,7 @@ class ReleaseDetector:
         self._release: ReleaseEvent | None = None
         return self
 
-    # ---- feeding -------------------------------------------------------------------------------------------
+    # ---- feeding ----------------------------------------
 
     def feed(self, samples: np.ndarray) -> list[ReleaseEvent]:
         """Feed a block of ``SAMPLE_DTYPE`` samples; return the events it completed."""
@@ -186,7 +186,7 @@ class ReleaseDetector:
         self.feed(samples)
         return self
 
-    # ---- derived signals over the buffer ------------------------------------------------------------------
+    # ---- derived signals over the buffer ----------------------------------------
 
     def _n(self, seconds: float) -> int:
         return max(1, round(seconds * float(self.rate_hz or 1.0)))
@@ -232,7 +232,7 @@ class ReleaseDetector:
             self._t, self._x, self._r = self._t[cut:], self._x[cut:], self._r[cut:]
             self._first += cut
 
-    # ---- states -------------------------------------------------------------------------------------------
+    # ---- states ----------------------------------------
 
     def _step_unknown(self) -> bool:
         """Learn the still-water angle from the first calm stretch (a model held at start: level 0)."""
@@ -327,7 +327,7 @@ class ReleaseDetector:
         self._release = None
         return self._go(STILL, confirmed)
 
-    # ---- locating the release -----------------------------------------------------------------------------
+    # ---- locating the release ----------------------------------------
 
     def _step_swung(self) -> bool:
         """Wait for a few quarter cycles of free motion: the decay's own dynamics pin the release down."""

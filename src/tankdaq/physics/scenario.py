@@ -33,6 +33,9 @@ TICKS_PER_S = 10_000
 TICK_MODULUS = 864_000_000
 GRAVITY_M_S2 = 9.81
 
+#: The release falls this much (uniformly) after the scripted instant: off the sample grid at any rate.
+RELEASE_JITTER_S = 0.01
+
 #: StatusWord of a healthy MTi-G streaming: self-test passed (bit 0), filter valid (bit 1).
 STATUS_OK = 0x00000003
 
@@ -239,8 +242,8 @@ class DecayScenario:
     """N hand-operated decay runs of one axis of one hull, deterministic given ``seed``.
 
     Each run lasts ``release_after_s + decay_s``: still water, a tilt to about ``angle_deg``
-    (random sign), a hold with tremor, the release ``release_after_s`` (plus a fraction of a
-    sample) after the run starts, and a free decay by ``physics.decay`` that carries on into the next run's still water.
+    (random sign), a hold with tremor, the release ``release_after_s`` (plus up to 10 ms) after
+    the run starts, and a free decay by ``physics.decay`` that carries on into the next run's still water.
     ``coefficients`` overrides the hull's model (``hull``/``draft`` then only label the data).
     """
 
@@ -302,8 +305,9 @@ class DecayScenario:
         for run in range(self.runs):
             tilt_s = rng.uniform(*h.tilt_s)
             hold_s = min(rng.uniform(*h.hold_s), self.release_after_s - tilt_s - h.lead_in_s)
-            # The hand lets go anywhere between two samples, not on the sample grid.
-            release = run * self.run_s + self.release_after_s + rng.uniform(0, 1 / self.rate_hz)
+            # The hand lets go between samples: a jitter independent of the rate keeps the truth
+            # (in s and ticks) the same whatever output rate the device is configured to.
+            release = run * self.run_s + self.release_after_s + rng.uniform(0, RELEASE_JITTER_S)
             sign = 1.0 if rng.uniform() < 0.5 else -1.0
             target = sign * math.radians(abs(self.angle_deg) + rng.normal(0, h.angle_scatter_deg))
             hand = _Hand(
