@@ -66,6 +66,12 @@ class ModelSpec:
         """Parameters of each run: initial state and (optionally) the angle offset."""
         return ["angle0", "rate0"] + (["angle_offset_rad"] if self.offset else [])
 
+    @property
+    def labels(self) -> list[str]:
+        """Everything the model holds, as short names: terms, then fc, k_<channel>, observation flags."""
+        flags = [flag for flag in ("offset", "gain", "lag", "gyro_bias") if getattr(self, flag)]
+        return [*self.terms, *(["fc"] if self.coulomb else []), *(f"k_{ch}" for ch in self.coupling), *flags]
+
     def describe(self) -> str:
         """Short text such as ``b1,c1,b2 + offset + lag``."""
         parts = [",".join(self.terms)]
@@ -214,6 +220,11 @@ class Fit:
     @property
     def bic(self) -> float:
         return float(self.n * np.log(self.rss / self.n) + self.k * np.log(self.n))
+
+    @property
+    def rms_noise_units(self) -> float:
+        """RMS of all outputs in units of their noise level: 1 when only sensor noise is left."""
+        return float(np.sqrt(self.rss / self.n))
 
     @property
     def residual_angle(self) -> np.ndarray:

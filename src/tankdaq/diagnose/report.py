@@ -31,7 +31,8 @@ def _whiteness(p: float) -> str:
 
 def _fit_summary(fit: Fit) -> dict[str, Any]:
     return {
-        "terms": fit.spec.describe(),
+        "terms": fit.spec.labels,
+        "model": fit.spec.describe(),
         "coefficients": fit.coefficients,
         "offsets_rad": fit.offsets,
         "rms_angle_deg": _deg(fit.rms_angle),
@@ -40,6 +41,7 @@ def _fit_summary(fit: Fit) -> dict[str, Any]:
         "nrmse_rate": fit.nrmse_rate,
         "fit_percent": fit.fit_percent,
         "ljung_box_p": fit.ljung_box_p,
+        "rms_noise_units": fit.rms_noise_units,
         "bic": fit.bic,
     }
 
@@ -92,15 +94,7 @@ def summary(diagnoser: Diagnoser) -> dict[str, Any]:
     trend = diagnoser.cycle_trend_
     return {
         "runs": [p.name for p in base.runs],
-        "baseline": {
-            "terms": base.spec.describe(),
-            "coefficients": base.coefficients,
-            "rms_angle_deg": _deg(base.rms_angle),
-            "nrmse": base.nrmse_angle,
-            "fit_percent": base.fit_percent,
-            "ljung_box_p": base.ljung_box_p,
-            "diagnostics": _diagnostics_summary(diagnoser.diagnostics_[0]),
-        },
+        "baseline": {**_fit_summary(base), "diagnostics": _diagnostics_summary(diagnoser.diagnostics_[0])},
         "cycle_trend": {
             "zeta_slope_per_rad": trend.zeta_slope_per_rad,
             "zeta_intercept": trend.zeta_intercept,
@@ -109,17 +103,9 @@ def summary(diagnoser: Diagnoser) -> dict[str, Any]:
             "period_changes_with_amplitude": trend.period_changes_with_amplitude,
         },
         "steps": [_step_summary(s) for s in diagnoser.steps_],
-        "final": {
-            "terms": final.spec.describe(),
-            "coefficients": final.coefficients,
-            "std": final.std,
-            "offsets_rad": final.offsets,
-            "rms_angle_deg": _deg(final.rms_angle),
-            "nrmse": final.nrmse_angle,
-            "fit_percent": final.fit_percent,
-            "ljung_box_p": final.ljung_box_p,
-        },
+        "final": {**_fit_summary(final), "std": final.std},
         "gap_reduction": diagnoser.gap_reduction_,
+        "gap_reduction_all_outputs": 1.0 - final.rms_noise_units / base.rms_noise_units,
         "verdict": diagnoser.verdict_,
     }
 
@@ -360,4 +346,4 @@ def log_to_rerun(diagnoser: Diagnoser, stream: Any) -> None:
                 columns=rr.Scalars.columns(scalars=np.degrees(np.asarray(values, dtype=float))),
             )
     for line in story(diagnoser):
-        stream.log("diagnose/story", rr.TextLog(line, level="INFO"), static=False)
+        stream.log("diagnose/story", rr.TextLog(line, level="INFO"))

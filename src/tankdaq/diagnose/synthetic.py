@@ -53,16 +53,16 @@ def _draw_truth(effects: Sequence[str], rng: np.random.Generator) -> dict[str, f
         "restoring.sine": lambda: {"s1": truth.pop("c1")},
         "sensor.offset": lambda: {"angle_offset_rad": sign * rng.uniform(0.005, 0.015)},
         "restoring.asymmetric": lambda: {"c2": sign * c1 * rng.uniform(0.3, 0.6)},
-        "sensor.gyro_bias": lambda: {"gyro_bias_rad_s": sign * rng.uniform(0.005, 0.015)},
+        "sensor.gyro_bias": lambda: {"gyro_bias_rad_s": sign * rng.uniform(0.01, 0.03)},
         "sensor.lag": lambda: {"angle_lag_s": rng.uniform(0.02, 0.06)},
-        "sensor.gain": lambda: {"angle_gain_error": sign * rng.uniform(0.03, 0.08)},
+        "sensor.gain": lambda: {"angle_gain_error": sign * rng.uniform(0.04, 0.1)},
         "friction.coulomb": lambda: {"fc": rng.uniform(0.01, 0.03)},
         "coupling.heave": lambda: {
-            "k_heave_m": sign * c1 * rng.uniform(0.6, 1.2),
+            "k_heave_m": sign * c1 * rng.uniform(1.2, 2.4),
             "heave_omega": omega0 * rng.uniform(1.6, 2.2),
         },
         "coupling.other_rotation": lambda: {
-            "k_other_angle": sign * c1 * rng.uniform(0.1, 0.2),
+            "k_other_angle": sign * c1 * rng.uniform(0.2, 0.4),
             "other_omega": omega0 * rng.uniform(1.3, 1.8),
         },
         "disturbance.late": lambda: {
@@ -112,7 +112,7 @@ def _forcing(
 def make_decay_set(
     effects: Sequence[str] = (),
     seed: int | None = None,
-    angles_deg: Sequence[float] = (12.0, 8.0, 4.0),
+    angles_deg: Sequence[float] = (24.0, 15.0, 8.0),
     duration_s: float = 15.0,
     rate_hz: float = 100.0,
     noise_angle_rad: float = NOISE_ANGLE_RAD,

@@ -1,0 +1,128 @@
+"""tankdaq diagnose end to end on CSV files, the Markdown report, the rerun log, and one-line errors."""
+
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rerun as rr
+from rerun.chunk import RrdReader
+from typer.testing import CliRunner
+
+from tankdaq.cli import app
+from tankdaq.diagnose.report import log_to_rerun, story
+from tankdaq.diagnose.synthetic import make_decay_set
+from tankdaq.diagnose.workflow import Diagnoser
+
+runner = CliRunner()
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def write_csvs(folder: Path, effects: tuple[str, ...], seed: int) -> list[Path]:
+    """One CSV per decay in the format tankdaq identify reads (degrees, extra channels as columns)."""
+    data = make_decay_set(effects, seed=seed)
+    paths = []
+    for run in data.runs:
+        columns = {"time_s": run.t, "angle_deg": np.degrees(run.angle), "rate_deg_s": np.degrees(run.rate)}
+        columns |= run.channels
+        path = folder / f"{run.name}.csv"
+        rows = np.column_stack(list(columns.values()))
+        np.savetxt(path, rows, delimiter=",", header=",".join(columns), comments="", fmt="%.9g")
+        paths.append(path)
+    return paths
+
+
+def invoke(*args: object):
+    return runner.invoke(app, ["diagnose", *map(str, args)])
+
+
+def test_json_tells_the_story_of_a_hidden_heave_coupling(tmp_path: Path) -> None:
+    result = invoke(*write_csvs(tmp_path, ("coupling.heave",), seed=21), "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert out["baseline"]["terms"] == ["b1", "c1"]
+    for key in ("rms_angle_deg", "nrmse", "ljung_box_p"):
+        assert key in out["baseline"] and key in out["final"]
+    first = out["steps"][0]
+    assert first["family"] == "coupled motion" and first["terms"].startswith("k*z(t)")
+    assert set(first["coefficients"]) == {"k_heave_m"}
+    assert first["delta_bic"] < -10 and first["rms_after_deg"] < first["rms_before_deg"]
+    assert out["baseline"]["ljung_box_p"] < 0.01 < first["ljung_box_p_after"]
+    assert out["final"]["terms"] == ["b1", "c1", "k_heave_m"]
+    assert 0 < out["gap_reduction"] < 1 and out["gap_reduction_all_outputs"] > 0.5
+    assert "coupling with heave" in out["verdict"]
+
+
+def test_text_and_report(tmp_path: Path) -> None:
+    report = tmp_path / "report"
+    result = invoke(*write_csvs(tmp_path, ("damping.quadratic",), seed=22), "--report", report)
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.strip().splitlines()
+    assert lines[0].startswith("baseline b1,c1: RMS") and "not white" in lines[0]
+    assert any(line.startswith("added quadratic damping (amplitude-dependent damping)") for line in lines)
+    assert lines[-1].startswith("missing: quadratic damping")
+    text = (report / "diagnose.md").read_text()
+    for name in ("models.png", "residuals.png", "spectrum.png"):
+        assert f"]({name})" in text
+        assert (report / name).read_bytes()[:8] == PNG_MAGIC
+    assert "| 1 | quadratic damping | amplitude-dependent damping |" in text
+
+
+def test_max_steps_zero_only_fits_the_baseline(tmp_path: Path) -> None:
+    result = invoke(*write_csvs(tmp_path, ("sensor.offset",), seed=23), "--max-steps", "0", "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert out["steps"] == [] and out["final"]["terms"] == out["baseline"]["terms"]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["missing.csv"], "no such file"),
+        (["{csv}", "--baseline", "b1,zz"], "unknown model term"),
+        (["{csv}", "--baseline", "b1,c1,fc"], "friction and coupling"),
+        (["{csv}", "--axis", "yaw"], "axis 'yaw'"),
+        (["{csv}", "--max-steps", "-1"], "max-steps"),
+        (["{csv}", "--angle-col", "phi"], "no angle column"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, args: list[str], message: str) -> None:
+    csv = write_csvs(tmp_path, (), seed=24)[0]
+    result = invoke(*[a.format(csv=csv) for a in args])
+    assert result.exit_code == 2, result.output
+    error_lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert len(error_lines) == 1 and message in error_lines[0]
+    assert "Traceback" not in result.output
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")
+def test_the_story_goes_to_rerun(tmp_path: Path) -> None:
+    data = make_decay_set(("restoring.cubic",), seed=25)
+    diagnoser = Diagnoser().fit(data.runs)
+    path = tmp_path / "diagnose.rrd"
+    stream = rr.RecordingStream("tankdaq")
+    stream.save(str(path))
+    log_to_rerun(diagnoser, stream)
+    stream.flush()
+    stream.disconnect()
+
+    scalars: dict[str, list[float]] = defaultdict(list)
+    texts: list[str] = []
+    reader = RrdReader(path)
+    (recording,) = reader.recordings()
+    for chunk in reader.stream(store=recording).to_chunks():
+        batch = chunk.to_record_batch()
+        if "Scalars:scalars" in batch.schema.names:
+            scalars[chunk.entity_path] += [v[0] for v in batch.column("Scalars:scalars").to_pylist() if v]
+        if "TextLog:text" in batch.schema.names:
+            texts += [v[0] for v in batch.column("TextLog:text").to_pylist() if v]
+    run = data.runs[0].name
+    for series in ("angle/measured", "angle/baseline", "angle/final", "residual/baseline", "residual/final"):
+        assert len(scalars[f"/diagnose/{run}/{series}"]) == data.runs[0].t.size
+    np.testing.assert_allclose(scalars[f"/diagnose/{run}/angle/measured"], np.degrees(data.runs[0].angle))
+    final_residual = np.array(scalars[f"/diagnose/{run}/residual/final"])
+    assert np.sqrt(np.mean(final_residual**2)) < 1.3 * np.degrees(data.noise_angle_rad)
+    assert texts == story(diagnoser)
