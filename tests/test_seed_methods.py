@@ -107,6 +107,7 @@ def test_a_plain_term_list_gets_seed001_boxes_unless_a_paper_is_named() -> None:
     assert space.upper.tolist() == [0.1, 1.0, 1.0, 10.0, 10.0]
     pinned = SearchSpace.for_model(("b1", "b2", "b3", "s1"), paper="seed000")
     assert pinned.upper.tolist() == [0.1, 0.5, 0.5, 0.2, 0.5]
+    assert SearchSpace.for_model("b1,c1,s1").symbols == ("N", "C3[c1]", "C3[s1]")
     with pytest.raises(InputError, match="no seed paper 'seed007'"):
         SearchSpace.for_model("b1,c1", paper="seed007")
 

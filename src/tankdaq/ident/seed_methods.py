@@ -166,6 +166,12 @@ class SearchSpace:
         return tuple(v.term for v in self.variables)
 
     @property
+    def symbols(self) -> tuple[str, ...]:
+        """The papers' symbols, with the term added where two terms share one (C3 is c1's and s1's)."""
+        counts = [v.symbol for v in self.variables].count
+        return tuple(v.symbol if counts(v.symbol) == 1 else f"{v.symbol}[{v.term}]" for v in self.variables)
+
+    @property
     def lower(self) -> np.ndarray:
         return np.array([INERTIA_FLOOR] + [0.0] * len(self.variables))
 
@@ -315,9 +321,9 @@ class _SeedSearch:
         best_x = np.atleast_1d(result.X).astype(float)
         theta = self.space_.coefficients(best_x)[0]
         self.terms_ = self.space_.terms
-        self.seed_variables_ = {"I": float(best_x[0])} | {
-            v.symbol: float(value) for v, value in zip(self.space_.variables, best_x[1:], strict=True)
-        }
+        self.seed_variables_ = {"I": float(best_x[0])} | dict(
+            zip(self.space_.symbols, best_x[1:].tolist(), strict=True)
+        )
         self.coefficients_ = dict(zip(self.terms_, theta.tolist(), strict=True))
         self.seed_objective_ = float(data.rms(theta)[0])
         self.history_ = np.array(recorder.best)
