@@ -53,6 +53,7 @@ UTC_DTYPE = np.dtype(
 )  # fmt: skip
 RAW_IMU_DTYPE = np.dtype([("counts", ">u2", (9,)), ("temp", ">i2")])
 FP1632_DTYPE = np.dtype([("fraction", ">u4"), ("integer", ">i2")])
+MTDATA2 = int(MID.MTDATA2)  # a plain int: enum attribute access is slow in a per-chunk path
 #: Channels that make a message a sample (GNSS-only messages are not).
 INERTIAL_OUTPUTS = ("EulerAngles", "RateOfTurn", "Acceleration")
 #: Below this many bytes a running sum is the cheaper checksum; above, row sums per frame length.
@@ -133,9 +134,9 @@ def _regular_run(buf: np.ndarray, max_length: int) -> tuple[int, int, int]:
     count = 0
     for stop in (PROBE_ROWS, rows.shape[0]):  # probe a few rows first: mixed streams break off early
         part = rows[count:stop]
-        good = (part[:, 1:].sum(axis=1, dtype=np.uint8) == 0) & np.all(
-            part[:, :header_size] == rows[0, :header_size], axis=1
-        )
+        good = (part[:, 1:].sum(axis=1, dtype=np.uint8) == 0) & (
+            part[:, :header_size] == rows[0, :header_size]
+        ).all(axis=1)
         if not good.all():
             return count + int(np.argmin(good)), total, header_size
         count += part.shape[0]
@@ -146,7 +147,7 @@ def _waits_at_start(rest: np.ndarray, max_length: int) -> bool:
     """True when ``rest`` is just the start of one frame: the framer waits there for more bytes."""
     if not rest.size:
         return True
-    if rest.size > 7 + max_length or rest[0] != PREAMBLE or np.any(rest[1:] == PREAMBLE):
+    if rest.size > 7 + max_length or rest[0] != PREAMBLE or (rest[1:] == PREAMBLE).any():
         return False
     total = frame_length(rest[:6].tobytes())
     header_size = 6 if rest.size > 3 and rest[3] == EXTENDED_LENGTH else 4
@@ -296,7 +297,7 @@ class Layout:
         if not self.header_values:
             return np.ones(payloads.shape[0], dtype=bool)
         if payloads.shape[0] <= FEW_ROWS:  # one gather beats a compare per header field
-            return np.all(payloads[:, self.header_offsets] == self.header_bytes, axis=1)
+            return (payloads[:, self.header_offsets] == self.header_bytes).all(axis=1)
         view = payloads.view(self.headers)[:, 0]
         hit = np.ones(payloads.shape[0], dtype=bool)
         for name, value in zip(self.headers.names, self.header_values, strict=True):
@@ -566,7 +567,7 @@ def decode_buffer(
         skipped_bytes=scan.skipped_bytes,
         pending_bytes=buf.size - scan.consumed,
     )
-    is_data = buf[scan.starts + 2] == MID.MTDATA2
+    is_data = buf[scan.starts + 2] == MTDATA2
     if not is_data.all():
         others = np.flatnonzero(~is_data)
         block.other_index = others
@@ -622,7 +623,7 @@ def _layout_groups(
     """(layout, frame indices, structured records) per layout, and the malformed frame indices."""
     if lengths.size == 0:
         return [], np.empty(0, dtype=np.int64)
-    if lengths[0] == lengths[-1] and np.all(lengths == lengths[0]):
+    if lengths[0] == lengths[-1] and (lengths == lengths[0]).all():
         by_length = [np.arange(lengths.size)]
     else:
         order = np.argsort(lengths, kind="stable")
@@ -651,7 +652,7 @@ def _payload_rows(buf: np.ndarray, starts: np.ndarray, length: int) -> np.ndarra
     if (
         step >= length
         and starts[-1] - starts[0] == step * (starts.size - 1)
-        and np.all(np.diff(starts) == step)
+        and (np.diff(starts) == step).all()
     ):
         return np.lib.stride_tricks.as_strided(
             buf[starts[0] :], (starts.size, length), (step, 1), writeable=False
