@@ -1,0 +1,364 @@
+"""The record daemon end to end: simulated MTi-G on a real pty -> driver -> detection -> MCAP.
+
+Everything here is real: the simulated sensor speaks the protocol on a pseudo-terminal,
+the driver opens it by path through pyserial, files are MCAP read back with the mcap
+reader, .rrd files are read back with rerun's RrdReader.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from typer.testing import CliRunner
+
+from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.cli import app
+from tankdaq.samples import AXIS_FIELDS
+from tankdaq.store.reader import iter_raw_chunks, read_recording
+from tankdaq.xsens.batch import to_samples
+from tankdaq.xsens.stream import StreamDecoder
+from tankdaq.xsens.timebase import SampleTimeUnwrapper
+
+TICKS_PER_S = 10_000
+
+
+def _events(recording, kind: str) -> list[dict]:
+    return [e for e in recording.events if e["kind"] == kind]
+
+
+def _decode_raw(path: Path) -> np.ndarray:
+    decoder, unwrapper = StreamDecoder(), SampleTimeUnwrapper()
+    blocks = [
+        to_samples(decoder.feed(raw), unwrapper, host_ns / 1e9) for host_ns, raw in iter_raw_chunks(path)
+    ]
+    return np.concatenate(blocks)
+
+
+@pytest.fixture(scope="module")
+def three_decays(tmp_path_factory: pytest.TempPathFactory) -> tuple[RecordDaemon, list]:
+    out = tmp_path_factory.mktemp("rec")
+    settings = RecordSettings(
+        port="sim",
+        draft=1.1,
+        angle_deg=8.0,
+        hull="swath",
+        axis="roll",
+        out_dir=out,
+        runs=3,
+        viewer="save",
+        operator="tester",
+        note="three in a row",
+        sim_speed=8.0,
+        sim_seed=3,
+    )
+    daemon = RecordDaemon(settings)
+    outcomes = daemon.run()
+    return daemon, outcomes
+
+
+def test_three_decays_in_one_run_each_a_valid_mcap(three_decays) -> None:
+    _, outcomes = three_decays
+    assert len(outcomes) == 3
+    paths = [o.path for o in outcomes]
+    assert len(set(paths)) == 3 and all(p.exists() for p in paths)
+    for path in paths:
+        assert path.name.startswith("swath_1.1T_roll_8deg_")
+        with path.open("rb") as f:
+            reader = make_reader(f)
+            topics = {c.topic for c in reader.get_summary().channels.values()}
+            assert {"/xsens/raw", "/samples", "/events", "/fit"} <= topics
+        recording = read_recording(path)
+        meta = recording.metadata
+        for key in (
+            "hull",
+            "draft",
+            "axis",
+            "angle_nominal_deg",
+            "angle_initial_deg",
+            "release_t_s",
+            "sample_rate_hz",
+            "device_id",
+            "product_code",
+            "firmware",
+            "software_version",
+            "operator",
+            "note",
+            "hull_length_m",
+            "hull_displacement_kg",
+        ):
+            assert key in meta, key
+        assert meta["operator"] == "tester" and meta["draft"] == "1.1T"
+        assert abs(abs(float(meta["angle_initial_deg"])) - 8.0) < 1.0
+        assert len(_events(recording, "release")) == 1 and len(_events(recording, "settled")) == 1
+        assert recording.fits, "the live fit is stored as it evolves"
+        assert recording.attachments, "the run configuration is attached"
+
+
+def test_raw_frames_decode_to_the_decoded_channel(three_decays) -> None:
+    _, outcomes = three_decays
+    for outcome in outcomes:
+        recording = read_recording(outcome.path)
+        stored = recording.samples
+        redecoded = _decode_raw(outcome.path)
+        assert redecoded.size == stored.size
+        np.testing.assert_array_equal(redecoded["counter"], stored["counter"])
+        np.testing.assert_array_equal(redecoded["ticks"], stored["ticks"])
+        for field in ("roll", "pitch", "p", "q", "az"):
+            np.testing.assert_allclose(redecoded[field], stored[field], rtol=1e-9, atol=1e-12)
+
+
+def test_release_within_one_sample_of_the_truth(three_decays) -> None:
+    daemon, outcomes = three_decays
+    truths = [r for r in daemon.simulator.truth if r.kind == "release"]
+    sample_ticks = TICKS_PER_S / 100
+    for outcome in outcomes:
+        recording = read_recording(outcome.path)
+        release = _events(recording, "release")[0]
+        first_free_ticks = round(release["data"]["first_free_sample_t_s"] * TICKS_PER_S)
+        # the truth's first free sample: the first sample at or after the true release instant
+        ticks = recording.samples["ticks"]
+        nearest = min(truths, key=lambda r: abs(r.release_ticks - first_free_ticks))
+        true_first = int(ticks[np.searchsorted(ticks, nearest.release_ticks)])
+        assert abs(first_free_ticks - true_first) <= sample_ticks, (first_free_ticks, true_first)
+
+
+def test_pretrigger_and_settle(three_decays) -> None:
+    _, outcomes = three_decays
+    for outcome in outcomes:
+        recording = read_recording(outcome.path)
+        t = recording.samples["t"]
+        release = _events(recording, "release")[0]
+        assert release["t_s"] - t[0] >= 1.9, "about 2 s of pre-trigger before the release"
+        angle_deg = np.degrees(recording.samples[AXIS_FIELDS["roll"][0]])
+        tail = np.abs(angle_deg[t > t[-1] - 1.0] - release["data"]["still_water_deg"])
+        assert tail.max() < 0.75, "recorded until the amplitude is below 0.5 deg (plus sensor noise)"
+
+
+def test_live_fit_converges_to_the_hull_model(three_decays) -> None:
+    daemon, outcomes = three_decays
+    truth = daemon.simulator.truth[0].coefficients
+    for outcome in outcomes:
+        fit = outcome.fit
+        assert fit is not None and fit.r2_angle > 0.99
+        natural_period = 2 * np.pi / np.sqrt(truth["c1"])
+        assert abs(fit.natural_period_s - natural_period) / natural_period < 0.02
+
+
+def test_rrd_beside_each_mcap_holds_angle_rate_and_fit(three_decays) -> None:
+    from rerun.chunk import RrdReader
+
+    _, outcomes = three_decays
+    rrd = outcomes[0].rrd_path
+    assert rrd is not None and rrd == outcomes[0].path.with_suffix(".rrd") and rrd.exists()
+    entities = {chunk.entity_path for chunk in RrdReader(str(rrd)).stream().to_chunks()}
+    assert "/angle/measured" in entities and "/rate/measured" in entities
+    assert any(e.startswith("/angle/model") for e in entities)
+    assert any(e.startswith("/coefficients") for e in entities)
+
+
+def test_replay_redetects_the_release_and_refits(three_decays) -> None:
+    from tankdaq.acquire.replay import replay_recording
+
+    _, outcomes = three_decays
+    recorded = outcomes[0]
+    replayed = replay_recording(recorded.path, speed=None, viewer="none")
+    assert len(replayed) == 1
+    again = replayed[0]
+    assert abs(again.release_t - recorded.release_t) < 0.011
+    for term, value in recorded.fit.coefficients.items():
+        half_width = abs(recorded.fit.ci95[term][1] - recorded.fit.ci95[term][0]) / 2
+        assert abs(again.fit.coefficients[term] - value) <= half_width + 1e-9, term
+
+
+def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: Path) -> None:
+    settings = RecordSettings(
+        port="sim",
+        draft=1.0,
+        angle_deg=8.0,
+        hull="swath",
+        out_dir=tmp_path,
+        runs=2,
+        viewer="none",
+        sim_speed=4.0,
+        sim_seed=5,
+        reconnect_timeout_s=30.0,
+    )
+    plugged = threading.Event()
+    daemon: RecordDaemon
+
+    def on_event(line: str) -> None:
+        if line.startswith("run 1: released") and not plugged.is_set():
+            plugged.set()
+
+            def pull_and_replug() -> None:
+                time.sleep(0.7)
+                daemon.simulator.unplug()
+                time.sleep(1.0)
+                daemon.simulator.replug()
+
+            threading.Thread(target=pull_and_replug, daemon=True).start()
+
+    daemon = RecordDaemon(settings, on_event=on_event)
+    outcomes = daemon.run()
+    assert plugged.is_set()
+    assert len(outcomes) == 2
+    cut, whole = outcomes
+    assert cut.settle_reason == "unplug"
+    partial = read_recording(cut.path)
+    assert _events(partial, "unplug") and partial.samples.size > 50
+    with cut.path.open("rb") as f:
+        assert sum(1 for _ in make_reader(f).iter_messages()) > 0
+    complete = read_recording(whole.path)
+    assert whole.settle_reason in ("amplitude", "timeout")
+    assert _events(complete, "release") and _events(complete, "settled")
+
+
+def _tankdaq(*args: str, **kwargs) -> subprocess.Popen:
+    exe = Path(sys.executable).with_name("tankdaq")
+    return subprocess.Popen(
+        [str(exe), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs
+    )
+
+
+def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
+    proc = _tankdaq(
+        "record",
+        "--port",
+        "sim",
+        "--draft",
+        "T",
+        "--angle",
+        "8",
+        "--out",
+        str(tmp_path),
+        "--viewer",
+        "none",
+        "--runs",
+        "1",
+        "--sim-seed",
+        "2",
+    )
+    deadline = time.monotonic() + 60
+    assert proc.stderr is not None
+    released = False
+    while time.monotonic() < deadline:
+        line = proc.stderr.readline()
+        if "released at" in line:
+            released = True
+            break
+    assert released, "the recorder saw a release"
+    time.sleep(2.5)  # well into the decay
+    os.kill(proc.pid, signal.SIGKILL)
+    killed_at = time.time()
+    proc.wait(timeout=10)
+    files = list(tmp_path.glob("*.mcap"))
+    assert len(files) == 1
+    result = subprocess.run(
+        [str(Path(sys.executable).with_name("tankdaq")), "recover", str(files[0])],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode in (0, 3), result.stderr
+    recovered = next(tmp_path.glob("*.recovered.mcap"))
+    with recovered.open("rb") as f:
+        reader = make_reader(f)
+        stamps = [m.log_time for _, c, m in reader.iter_messages(topics=["/samples"])]
+    assert stamps, "the recovered file holds samples"
+    newest = max(stamps) / 1e9
+    assert killed_at - newest <= 1.0 + 0.25, f"lost {killed_at - newest:.2f} s before the kill"
+
+
+def test_sigterm_closes_the_file_properly(tmp_path: Path) -> None:
+    proc = _tankdaq(
+        "record",
+        "--port",
+        "sim",
+        "--draft",
+        "T",
+        "--angle",
+        "8",
+        "--out",
+        str(tmp_path),
+        "--viewer",
+        "none",
+        "--sim-speed",
+        "4",
+    )
+    assert proc.stderr is not None
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and "released at" not in proc.stderr.readline():
+        pass
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(timeout=30)
+    assert proc.returncode in (0, 130)
+    path = next(tmp_path.glob("*.mcap"))
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()  # a seeking reader needs the footer: the file was finished
+    assert summary is not None and summary.statistics.message_count > 0
+
+
+BAD_INPUTS = [
+    (["--port", "sim", "--draft", "1.1X", "--angle", "8"], "draft"),
+    (["--port", "sim", "--draft", "T", "--angle", "-3"], "angle"),
+    (["--port", "sim", "--draft", "T", "--angle", "abc"], "angle"),
+    (["--port", "sim", "--draft", "T", "--angle", "8", "--hull", "titanic"], "hull"),
+    (["--port", "sim", "--draft", "T", "--angle", "8", "--axis", "yaw"], "axis"),
+    (["--port", "sim", "--draft", "T", "--angle", "8", "--rate", "150"], "rate"),
+    (["--port", "sim", "--draft", "T", "--angle", "8", "--viewer", "hologram"], "viewer"),
+    (["--port", "sim", "--draft", "T", "--angle", "8", "--model", "b9,c1"], "b9"),
+    (["--port", "sim", "--draft", "3T", "--angle", "8"], "draft"),
+    (["--draft", "T", "--angle", "8"], "port"),
+    (["--port", "/dev/ttyNOPE0", "--draft", "T", "--angle", "8", "--viewer", "none"], "/dev/ttyNOPE0"),
+]
+
+
+@pytest.mark.parametrize(("args", "mentions"), BAD_INPUTS)
+def test_bad_record_input_exit_2_one_line(args: list[str], mentions: str) -> None:
+    result = CliRunner().invoke(app, ["record", *args])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    assert mentions.lower() in result.output.lower()
+
+
+def test_missing_port_in_a_real_process_is_one_line_no_traceback(tmp_path: Path) -> None:
+    proc = _tankdaq(
+        "record", "--port", "/dev/ttyNOPE0", "--draft", "T", "--angle", "8", "--out", str(tmp_path)
+    )
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 2
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and "Traceback" not in err
+    assert not list(tmp_path.glob("*.mcap"))
+
+
+@pytest.mark.parametrize(
+    ("content", "mentions"), [(b"not an mcap at all", "mcap"), (None, "no such"), (b"", "empty")]
+)
+def test_replay_refuses_what_is_not_a_recording(tmp_path: Path, content: bytes | None, mentions: str) -> None:
+    path = tmp_path / "x.mcap"
+    if content is not None:
+        path.write_bytes(content)
+    result = CliRunner().invoke(app, ["replay", str(path), "--viewer", "none", "--speed", "max"])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_json_metadata_is_plain(three_decays) -> None:
+    _, outcomes = three_decays
+    recording = read_recording(outcomes[0].path)
+    config = recording.run_config
+    json.dumps(config)
+    assert config["record"]["hull"] == "swath"
