@@ -79,3 +79,41 @@ def test_bad_input_exits_2_with_one_line_and_no_traceback(tmp_path, args):
     assert "Traceback" not in result.output
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+
+
+def test_mcap_recordings_are_read_through_the_store_reader(tmp_path):
+    pytest.importorskip(
+        "tankdaq.store.reader", reason="the MCAP reader (store room) is not in this build yet"
+    )
+    from tankdaq.physics.decay import simulate_decay
+    from tankdaq.samples import SAMPLE_DTYPE
+    from tankdaq.store.writer import RecordingWriter
+
+    truth = {"b1": 0.4, "b2": 0.5, "c1": 20.0, "c3": 30.0}
+    t = np.arange(0.0, 12.0, 0.01)
+    free = t >= 2.0
+    samples = np.zeros(t.size, dtype=SAMPLE_DTYPE)
+    samples["t"], samples["ticks"] = t, np.round(t * 1e4).astype(np.int64)
+    samples["az"] = 9.81
+    samples["roll"] = np.radians(6.0)
+    samples["roll"][free], samples["p"][free] = simulate_decay(truth, t[free] - 2.0, np.radians(6.0))
+    path = tmp_path / "decay.mcap"
+    with RecordingWriter(path, {"axis": "roll"}, {}) as writer:
+        writer.write_samples(samples)
+        writer.write_event("release", "released by hand", t_s=2.0)
+    result = invoke(path, "--model", "b1,b2,c1,c3", "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    for k, value in truth.items():
+        assert out["coefficients"][k]["value"] == pytest.approx(value, rel=1e-3)
+    assert out["runs"][0]["initial_angle_deg"] == pytest.approx(6.0, abs=0.01)
+
+
+def test_bootstrap_intervals_replace_the_jacobian_ones(tmp_path):
+    result = invoke(
+        write_held_tilt_csv(tmp_path / "a.csv"), "--model", "ittc-quadratic", "--bootstrap", "8", "--json"
+    )
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert out["intervals"].startswith("moving-block bootstrap, 8 replicas")
+    assert all(c["std"] > 0 for c in out["coefficients"].values())
