@@ -94,9 +94,10 @@ def test_noise_free_dominant_derivatives_within_two_percent(nps, zigzag, sensiti
     assert all(abs(b) < 1e-4 for b in ident.bias_.values())  # the model has no constant force
 
 
-def test_noise_free_resimulation_matches_pitch_and_heave(nps, zigzag):
+@pytest.mark.parametrize("mode", ["zigzag", "replay"])
+def test_noise_free_resimulation_matches_pitch_and_heave(nps, zigzag, mode):
     model = SeparateIdentifier(nps, method="lssvm").fit(zigzag).model()
-    r2 = resimulate(zigzag, model, "identified").r2
+    r2 = resimulate(zigzag, model, "identified", mode).r2
     for state in ("theta", "q", "w", "z"):
         assert r2[state] >= 0.99, f"{state}: R^2 {r2[state]:.4f}"
 
@@ -133,9 +134,12 @@ def test_identification_error_follows_the_sensitivity_ranking(noisy_errors, sens
 def test_identified_model_predicts_a_held_out_manoeuvre(nps, zigzag, held_out_deg):
     model = SeparateIdentifier(nps).fit(add_noise(zigzag, 1.0, seed=4)).model()
     held_out = simulate_zigzag(nps, *np.radians(held_out_deg), rate_hz=RATE_HZ)
-    r2 = resimulate(held_out, model, "identified").r2
-    for state in ("u", "w", "q", "theta", "z"):
-        assert r2[state] >= 0.95, f"{state}: R^2 {r2[state]:.4f}"
+    for mode in ("zigzag", "replay"):
+        r2 = resimulate(held_out, model, "identified", mode).r2
+        for state in ("u", "w", "q", "theta", "z"):
+            assert r2[state] >= 0.95, f"{mode} {state}: R^2 {r2[state]:.4f}"
+    noisy_r2 = resimulate(add_noise(held_out, 1.0, seed=5), model, "identified").r2
+    assert noisy_r2["theta"] >= 0.95 and noisy_r2["q"] >= 0.95
 
 
 def test_fixed_derivatives_move_to_the_target(nps, zigzag, sensitivity):
@@ -148,12 +152,16 @@ def test_fixed_derivatives_move_to_the_target(nps, zigzag, sensitivity):
     assert all(model.coefficient(n) == v for n, v in others.items())
 
 
-def test_remus_noise_free_dominant_derivatives_within_two_percent():
+def test_remus_dominant_derivatives_and_held_out_zigzag():
     remus = load_vehicle("remus100")
     record = simulate_zigzag(remus, np.radians(10.0), np.radians(5.0), rate_hz=RATE_HZ)
     dominant = sensitivity_analysis(remus, np.radians(10.0), np.radians(5.0)).dominant
     errors = relative_errors(SeparateIdentifier(remus).fit(record).derivatives_, remus.derivatives)
     assert dominant and all(errors[n] < 0.02 for n in dominant)
+    model = SeparateIdentifier(remus).fit(add_noise(record, 1.0, seed=6)).model()
+    held_out = simulate_zigzag(remus, np.radians(20.0), np.radians(15.0), rate_hz=RATE_HZ)
+    r2 = resimulate(held_out, model, "identified", "zigzag").r2
+    assert all(r2[s] >= 0.95 for s in ("u", "w", "q", "theta", "z")), r2
 
 
 def test_record_without_plane_activity_is_refused(nps, zigzag):

@@ -18,7 +18,7 @@ from ..maneuver.identify import SeparateIdentifier, default_window_s, relative_e
 from ..maneuver.io import read_record, read_vehicle_attachment, write_record
 from ..maneuver.model import StateRecord, add_noise, simulate_zigzag
 from ..maneuver.sensitivity import OUTPUTS, SensitivityResult, sensitivity_analysis
-from ..maneuver.validate import SCORED_STATES, plot_validation, resimulate
+from ..maneuver.validate import MODES, SCORED_STATES, default_mode, plot_validation, resimulate
 from ..maneuver.vehicle import TERM_BY_NAME, Vehicle, list_vehicles, load_vehicle
 from .app import app, err_console, handles_errors
 
@@ -251,13 +251,18 @@ def validate_command(
     vehicle_name: str = typer.Option(None, "--vehicle", help=RECORD_VEHICLE_HELP),
     method: str = typer.Option("lssvm", "--method", help="lssvm or ols."),
     plot: Annotated[Path | None, typer.Option("--plot", help="PNG: measured vs re-simulated.")] = None,
+    mode: str = typer.Option(None, "--mode", help="zigzag (re-run the manoeuvre; default for zigzag records) "
+                             "or replay (driven by the measured plane)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""
     _check_method(method)
+    if mode is not None and mode not in MODES:
+        raise InputError(f"--mode {mode!r} unknown; use {' or '.join(MODES)}")
     record = read_record(file)
     vehicle = _vehicle_for(file, record, vehicle_name)
     target = read_record(test) if test is not None else record
+    mode = mode or default_mode(target)
     sensitivity = _sensitivity(vehicle, *_manoeuvre_angles_rad(record))
     others = {n: vehicle.coefficient(n) for n in vehicle.present_terms() if n not in sensitivity.dominant}
     models = {
@@ -267,15 +272,17 @@ def validate_command(
         "identified dominant, others dropped": SeparateIdentifier(
             vehicle, method=method, terms=sensitivity.dominant).fit(record).model(),
     }
-    results = [resimulate(target, model, label) for label, model in models.items()]
+    results = [resimulate(target, model, label, mode) for label, model in models.items()]
     if plot is not None:
         plot_validation(target, results, plot)
-    report = {"train": str(file), "test": str(test or file), "dominant": sensitivity.dominant,
+    report = {"train": str(file), "test": str(test or file), "mode": mode,
+              "dominant": sensitivity.dominant,
               "r2": {r.label: r.r2 for r in results}, "plot": str(plot) if plot else None}
     if as_json:
         typer.echo(json.dumps(report, indent=1))
         return
-    typer.echo(f"identified from {file}, re-simulated {test or file} (driven by its measured stern plane)")
+    how = "the zigzag re-run with each model" if mode == "zigzag" else "driven by its measured stern plane"
+    typer.echo(f"identified from {file}, re-simulated {test or file} ({how})")
     typer.echo(f"dominant derivatives: {', '.join(sensitivity.dominant)}")
     typer.echo(f"{'model':<38}" + "".join(f"{'R2 ' + s:>10}" for s in SCORED_STATES))
     for result in results:

@@ -240,7 +240,8 @@ def simulate_zigzag(
     record = StateRecord(t=t, states=dict(zip(STATE_COLUMNS, samples.T, strict=True)),
                          switch_times=switch_times[1:])
     record.meta.update({"vehicle": vehicle.name, "manoeuvre": "zigzag",
-                        "delta_deg": f"{np.degrees(delta_rad):g}", "theta_deg": f"{np.degrees(theta_rad):g}"})
+                        "delta_deg": f"{np.degrees(delta_rad):g}", "theta_deg": f"{np.degrees(theta_rad):g}",
+                        "switches": str(switches), "approach_s": f"{approach_s:g}"})
     return record
 
 
