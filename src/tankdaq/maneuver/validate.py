@@ -107,10 +107,10 @@ def plot_validation(record: StateRecord, results: list[ValidationResult], path: 
     for ax, (column, label, in_degrees) in zip(axes, panels, strict=True):
         scale = np.degrees(1.0) if in_degrees else 1.0
         ax.plot(record.t, record[column] * scale, color="0.3", lw=1.0, label="measured")
-        if column != "delta_s":
-            for result in results:
-                ax.plot(result.simulated.t, result.simulated[column] * scale, lw=1.2,
-                        label=f"{result.label} (R² {result.r2[column]:.3f})")
+        for result in results:
+            score = f" (R² {result.r2[column]:.3f})" if column in result.r2 else ""
+            simulated = result.simulated
+            ax.plot(simulated.t, simulated[column] * scale, lw=1.2, label=f"{result.label}{score}")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc="upper right")
