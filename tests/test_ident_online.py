@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from tankdaq.errors import IdentificationError
@@ -39,3 +40,19 @@ def test_nothing_is_fitted_before_enough_half_cycles_and_a_short_record_is_refus
     assert online.results_ == []
     with pytest.raises(IdentificationError):
         online.finish()
+
+
+def test_a_settled_noisy_record_does_not_trigger_refits():
+    """After the motion dies out the gyro only shows noise: its zero crossings are not half-cycles."""
+    truth = {"b1": 1.5, "c1": 14.0}  # heavily damped: settled within ~8 s
+    run = synthetic_run(truth, seed=23, duration_s=20.0)
+    online = OnlineIdentifier("ittc-linear")
+    settled_from = np.searchsorted(run.t, 10.0)
+    refits_after = 0
+    for start in range(0, run.t.size, 10):
+        result = online.update(
+            run.t[start : start + 10], run.angle[start : start + 10], run.rate[start : start + 10]
+        )
+        refits_after += result is not None and start >= settled_from
+    assert len(online.results_) >= 3
+    assert refits_after <= 1

@@ -4,7 +4,8 @@ The acquisition loop feeds samples as they arrive after the release. Every time
 the angle completes another half-cycle (a zero crossing of the rate), the
 output-error fit is redone on everything so far, started from the previous
 answer, so each refit costs a few Levenberg-Marquardt steps. Results go to a
-callback (the viewer, the recorder's /fit channel) and to ``results_``. At the
+callback (the viewer, the recorder's /fit channel) and to ``results_``; a refit
+that fails (too little motion yet) is noted in ``failures_`` and skipped. At the
 end of the decay the last result is the offline OutputError fit of the same data.
 """
 
@@ -19,7 +20,7 @@ import numpy as np
 from ..errors import IdentificationError
 from ..records import DecayRun
 from .output_error import OutputError
-from .signals import zero_crossings
+from .signals import band_crossings, white_noise_level
 
 
 @dataclass
@@ -75,6 +76,7 @@ class OnlineIdentifier:
         self._fitted_half_cycles = 0
         self.estimator_: OutputError | None = None
         self.results_: list[OnlineResult] = []
+        self.failures_: list[str] = []
 
     def update(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray | None = None) -> OnlineResult | None:
         """Append samples (rad, rad/s); refit and return the result when a new half-cycle completed."""
@@ -89,7 +91,11 @@ class OnlineIdentifier:
         if half_cycles < self.min_half_cycles or half_cycles <= self._fitted_half_cycles:
             return None
         self._fitted_half_cycles = half_cycles
-        return self._refit(run, half_cycles)
+        try:
+            return self._refit(run, half_cycles)
+        except IdentificationError as exc:  # a live refit that fails must not stop the acquisition
+            self.failures_.append(f"t = {run.t[-1]:.2f} s: {exc}")
+            return None
 
     def finish(self) -> OnlineResult:
         """Final refit on everything received: equals the offline fit of the same data."""
@@ -109,9 +115,12 @@ class OnlineIdentifier:
 
     @staticmethod
     def _half_cycles(run: DecayRun) -> int:
-        """Completed half-cycles: zero crossings of the rate (peaks of the angle), or of the angle's swing."""
+        """Completed half-cycles: crossings of the rate (peaks of the angle) through a 5-sigma noise band.
+
+        The band keeps a settled record's noisy rate from counting as new half-cycles.
+        """
         signal = run.rate if run.rate is not None else np.gradient(run.angle, run.t)
-        return int(zero_crossings(signal).size)
+        return band_crossings(signal, 5.0 * white_noise_level(signal))
 
     def _refit(self, run: DecayRun, half_cycles: int) -> OnlineResult:
         started = time.perf_counter()

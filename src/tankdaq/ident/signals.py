@@ -17,6 +17,12 @@ def zero_crossings(y: np.ndarray) -> np.ndarray:
     return np.flatnonzero(s[1:] != s[:-1])
 
 
+def band_crossings(y: np.ndarray, band: float) -> int:
+    """Sign changes of y across the whole band [-band, band]: hysteresis, noise near zero does not count."""
+    sides = np.sign(y[np.abs(y) > band])
+    return int(np.count_nonzero(sides[1:] != sides[:-1]))
+
+
 def estimate_period(t: np.ndarray, angle: np.ndarray) -> float:
     """Oscillation period from the mean spacing of zero crossings about the record's median.
 
