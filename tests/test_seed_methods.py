@@ -141,6 +141,8 @@ def test_ga_matches_the_truth_objective_with_coefficients_far_from_it(
     assert at_truth <= ga_fit.seed_objective_ * 1.02
     # ... yet the GA's linear damping is several times the truth (gyro noise biases the one-step fit)
     assert ga_fit.coefficients_["b1"] > 3 * SWATH_ROLL_T["b1"]
+    # and the quadratic damping W was pushed against the box's floor, which the fit says
+    assert any(w.startswith("W = ") and "lower bound of the seed001 box" in w for w in ga_fit.warnings_)
 
 
 def test_output_error_recovers_the_truth_better_than_the_ga(noisy_run: DecayRun, ga_fit: GeneticSeed) -> None:

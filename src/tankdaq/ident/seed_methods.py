@@ -32,6 +32,7 @@ from ..records import DecayRun
 from .equation_error import check_runs
 from .kernels import simulate, substeps, term_codes, term_matrix
 from .models import MODEL_ALIASES, resolve_model
+from .uncertainty import coefficient_warnings
 
 #: Lower bound of the total inertia. The papers write I in [0, 0.1]; 0 itself would divide by zero.
 INERTIA_FLOOR = 1e-3
@@ -330,8 +331,26 @@ class _SeedSearch:
         self.n_evaluations_ = int(result.algorithm.evaluator.n_eval)
         self._set_uncertainty(data, theta)
         self._set_angle_fit(theta)
+        self.warnings_ = self._bound_warnings(best_x) + coefficient_warnings(
+            self.terms_, theta, np.array(list(self.std_.values())), self.correlation_
+        )
         self.elapsed_s_ = time.perf_counter() - started
         return self
+
+    def _bound_warnings(self, best_x: np.ndarray) -> list[str]:
+        """Seed variables left on an edge of the paper's box: the box, not the data, decided them."""
+        names = ("I", *self.space_.symbols)
+        span = self.space_.upper - self.space_.lower
+        out = []
+        for name, value, low, high, width in zip(
+            names, best_x, self.space_.lower, self.space_.upper, span, strict=True
+        ):
+            edge = (
+                "lower" if value - low <= 1e-6 * width else "upper" if high - value <= 1e-6 * width else None
+            )
+            if edge:
+                out.append(f"{name} = {value:.4g} sits on the {edge} bound of the {self.space_.paper} box")
+        return out
 
     def _set_uncertainty(self, data: OneStepData, theta: np.ndarray) -> None:
         """Standard errors from the curvature of the seeds' objective (least squares in theta).
