@@ -67,6 +67,7 @@ def test_compare_ranks_every_model_with_held_out_error(tmp_path):
         ("{good}", "--angle-unit", "grad"),
         ("{good}", "--angle-col", "phi"),
         ("{good}", "--hull", "titanic"),
+        ("{good}", "--method", "ee", "--bootstrap", "3"),
         ("{flat}",),
     ],
 )

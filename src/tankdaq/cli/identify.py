@@ -22,6 +22,7 @@ def _progress() -> Progress:
         MofNCompleteColumn(),
         TimeElapsedColumn(),
         console=err_console,
+        transient=True,
     )
 
 
@@ -137,14 +138,14 @@ def identify_command(
         return
 
     estimator = make_estimator(method, terms)
+    if bootstrap and not hasattr(estimator, "clone"):
+        raise InputError(f"--bootstrap works with --method oe, not {method}")
     with _progress() as progress:
         task = progress.add_task(f"fitting {method}", total=1 + bootstrap)
         estimator.fit(runs)
         progress.update(task, advance=1)
         interval_method = None
         if bootstrap:
-            if not hasattr(estimator, "clone"):
-                raise InputError(f"--bootstrap works with --method oe, not {method}")
             spread = moving_block_bootstrap(
                 estimator, bootstrap, progress=lambda done: progress.update(task, completed=1 + done)
             )
