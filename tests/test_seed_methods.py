@@ -10,6 +10,7 @@ from scipy.optimize import lsq_linear
 
 from tankdaq.config import load_hull
 from tankdaq.errors import BadIdentificationInput, InputError
+from tankdaq.ident.derived import damping_ratio
 from tankdaq.ident.estimators import make_estimator
 from tankdaq.ident.output_error import OutputError, seed_objective
 from tankdaq.ident.seed_methods import (
@@ -99,6 +100,18 @@ def test_seed000_table3_gives_its_equation_5_1() -> None:
     assert (b1, b2, b3) == pytest.approx((2.1791, 0.00532, 0.015433), rel=2e-3)
     assert s1 == pytest.approx(0.000145, rel=0.02)
     assert space.upper.tolist() == [0.1, 0.5, 0.5, 0.2, 0.5]
+
+
+def test_seed000_equation_5_1_does_not_oscillate() -> None:
+    """docs/seeds.md: eq. 5.1 is overdamped either way it is read, unlike the paper's own Fig. 3."""
+    space = SearchSpace.for_model("seed000-eq1")
+    table3 = np.array([0.090243325, 0.098322896, 0.000479988, 0.001392731, 1.30e-05])
+    coefficients = dict(zip(space.terms, space.coefficients(table3)[0], strict=True))
+    assert damping_ratio(coefficients) > 50
+    assert damping_ratio({"b1": coefficients["b1"], "c1": coefficients["s1"] + 0.00532}) > 10
+    t = np.linspace(0.0, 60.0, 601)
+    angle, _ = simulate_decay(coefficients, t, np.deg2rad(2.0))
+    assert np.all(angle > 0) and np.rad2deg(angle[-1]) > 1.99  # never comes back within a minute
 
 
 def test_a_plain_term_list_gets_seed001_boxes_unless_a_paper_is_named() -> None:
