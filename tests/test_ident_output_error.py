@@ -160,3 +160,14 @@ def test_predict_reproduces_the_fitted_curve_and_seed_objective_is_the_one_step_
     assert np.allclose(angle, fit.fitted_[0]["angle"])
     # with the gyro noise dominating the one-step error, F ~ sqrt(2) * rate noise
     assert fit.seed_objective_ == pytest.approx(np.sqrt(2) * 5e-3, rel=0.1)
+
+
+def test_a_record_cut_mid_swing_after_two_cycles_is_still_fitted():
+    """A truncated end (the recording stopped early, mid-swing) only widens the intervals."""
+    truth = truth_for(("b1", "b2", "c1", "c3"))
+    full = synthetic_run(truth, seed=12)
+    cut = full.window(0, int(4.37 * 100))  # 2.6 periods, ending between a peak and a zero crossing
+    fit = OutputError(tuple(truth)).fit([cut])
+    for k, value in truth.items():
+        assert abs(fit.coefficients_[k] - value) < Z999 * fit.std_[k], k
+    assert fit.std_["b1"] > OutputError(tuple(truth)).fit([full]).std_["b1"]
