@@ -54,6 +54,12 @@ def test_identify_json_reports_every_derivative_against_the_standard(records):
     assert summary["mean_error_top_half"] < summary["mean_error_bottom_half"]
 
 
+def test_identify_with_gamma_chosen_on_a_held_out_record(records):
+    result = run("identify", str(records["train"]), "--holdout", str(records["test"]), "--no-sensitivity")
+    assert result.exit_code == 0, result.output
+    assert f"(on held-out record {records['test']})" in result.output
+
+
 def test_identify_table_with_ols(records):
     result = run("identify", str(records["test"]), "--method", "ols", "--no-sensitivity")
     assert result.exit_code == 0, result.output

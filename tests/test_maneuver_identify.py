@@ -187,3 +187,23 @@ def test_weak_form_kernel_turns_a_state_into_its_filtered_derivative():
     x = np.sin(omega * t) + 0.3 * t**2
     filtered_rate = np.convolve(omega * np.cos(omega * t) + 0.6 * t, h, mode="valid")
     assert np.allclose(np.convolve(x, dh, mode="valid"), filtered_rate, atol=1e-9)
+
+
+def test_gamma_can_be_chosen_on_a_second_manoeuvre(nps, zigzag):
+    second = add_noise(simulate_zigzag(nps, np.radians(20.0), np.radians(15.0), rate_hz=RATE_HZ), 1.0, seed=8)
+    ident = SeparateIdentifier(nps).fit(add_noise(zigzag, 1.0, seed=7), holdout=second)
+    for fit in ident.equations_.values():
+        assert fit.gamma is not None
+    errors = relative_errors(ident.derivatives_, nps.derivatives)
+    assert errors["M_uq"] < 0.10 and errors["Z_ds"] < 0.10
+
+
+def test_lssvm_validation_set_decides_gamma():
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(300, 2))
+    y = X @ [1.0, -2.0] + 0.1 * rng.normal(size=300)
+    held_X = rng.normal(size=(100, 2))
+    fit = LSSVMRegressor().fit(X, y, validation=(held_X, held_X @ [1.0, -2.0]))
+    assert fit.gamma_ >= 1e3 and np.allclose(fit.coef_, [1.0, -2.0], atol=0.05)
+    misleading = LSSVMRegressor().fit(X, y, validation=(held_X, np.zeros(100)))
+    assert misleading.gamma_ == 1e-2  # a validation target of zero asks for maximal shrinkage

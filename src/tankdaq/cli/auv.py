@@ -132,8 +132,8 @@ def simulate_command(
                f"noise {record.meta['noise']}")
 
 
-def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle,
-                     sensitivity: SensitivityResult | None) -> dict[str, object]:
+def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle, sensitivity: SensitivityResult | None,
+                     gamma_source: str) -> dict[str, object]:
     errors = relative_errors(ident.derivatives_, vehicle.derivatives)
     rows = []
     for name, value in ident.derivatives_.items():
@@ -150,6 +150,7 @@ def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle,
         "derivatives": rows,
         "bias": ident.bias_, "bias_std": ident.bias_std_,
         "gamma": {eq: fit.gamma for eq, fit in ident.equations_.items()},
+        "gamma_chosen_on": gamma_source if ident.method == "lssvm" else None,
         "r2_equation": {eq: fit.r2 for eq, fit in ident.equations_.items()},
     }
     ranked = [n for n in (sensitivity.ranking if sensitivity else []) if n in errors]
@@ -177,7 +178,7 @@ def _print_identify(report: dict) -> None:
                    f"{row['std_error']:>10.2g} {err:>9} {sens:>11}{mark}")
     for eq, bias in report["bias"].items():
         gamma = report["gamma"][eq]
-        gamma_text = f", gamma {gamma:.3g}" if gamma is not None else ""
+        gamma_text = f", gamma {gamma:.3g} (on {report['gamma_chosen_on']})" if gamma is not None else ""
         typer.echo(f"{eq} equation: bias {bias:.3g} +/- {report['bias_std'][eq]:.2g}, "
                    f"R^2 {report['r2_equation'][eq]:.5f}{gamma_text}")
     summary = report.get("sensitivity_vs_error")
@@ -195,6 +196,8 @@ def identify_command(
     vehicle_name: str = typer.Option(None, "--vehicle", help=RECORD_VEHICLE_HELP),
     method: str = typer.Option("lssvm", "--method", help="lssvm (linear kernel, gamma) or ols."),
     window_s: float = typer.Option(None, "--window", help="Weak-form filter width [s] (default: L/U)."),
+    holdout: Annotated[Path | None, typer.Option(
+        "--holdout", help="A second manoeuvre on which LS-SVM picks gamma (default: blocked folds).")] = None,
     with_sensitivity: bool = typer.Option(True, "--sensitivity/--no-sensitivity",
                                           help="Rank the derivatives by sensitivity next to their errors."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
@@ -205,9 +208,11 @@ def identify_command(
         raise InputError(f"--window {window_s:g} must be positive (seconds)")
     record = read_record(file)
     vehicle = _vehicle_for(file, record, vehicle_name)
-    ident = SeparateIdentifier(vehicle, method=method, window_s=window_s).fit(record)
+    held_out = read_record(holdout) if holdout is not None else None
+    ident = SeparateIdentifier(vehicle, method=method, window_s=window_s).fit(record, held_out)
     sensitivity = _sensitivity(vehicle, *_manoeuvre_angles_rad(record)) if with_sensitivity else None
-    report = _identify_report(ident, vehicle, sensitivity)
+    gamma_source = f"held-out record {holdout}" if holdout is not None else "5 blocked folds of the record"
+    report = _identify_report(ident, vehicle, sensitivity, gamma_source)
     if as_json:
         typer.echo(json.dumps(report, indent=1))
     else:

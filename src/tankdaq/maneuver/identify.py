@@ -195,31 +195,33 @@ def _ridge_solve(X: np.ndarray, y: np.ndarray, gamma: float) -> tuple[float, np.
 
 
 class LSSVMRegressor:
-    """LS-SVM regression with a linear kernel; gamma by blocked cross-validation over contiguous folds.
+    """LS-SVM regression with a linear kernel; gamma chosen on held-out data.
 
-    ``gammas``: the candidates (a single value fixes gamma). Contiguous folds keep neighbouring, strongly
-    correlated samples out of each other's validation set, so the choice reflects held-out data.
+    ``gammas``: the candidates (a single value fixes gamma). Held-out data: ``fit(..., validation=(X, y))``
+    (e.g. a second manoeuvre), else blocked cross-validation over ``n_folds`` contiguous parts of the
+    training data, which keeps neighbouring, strongly correlated samples out of each other's validation set.
+    ``cv_errors_``: mean squared held-out error per candidate.
     """
 
     def __init__(self, gammas: Sequence[float] | float = tuple(np.logspace(-2, 10, 25)), n_folds: int = 5):
         self.gammas = gammas
         self.n_folds = n_folds
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> LSSVMRegressor:
+    def fit(self, X: np.ndarray, y: np.ndarray,
+            validation: tuple[np.ndarray, np.ndarray] | None = None) -> LSSVMRegressor:
         candidates = np.atleast_1d(np.asarray(self.gammas, dtype=float))
         if candidates.size == 1 or X.shape[1] == 0:
             self.gamma_ = float(candidates[-1])
             self.cv_errors_ = np.array([np.nan])
         else:
-            folds = np.array_split(np.arange(y.size), self.n_folds)
+            splits = ([(np.ones(y.size, bool), validation)] if validation is not None
+                      else self._blocked_splits(X, y))
             errors = np.zeros(candidates.size)
-            for fold in folds:
-                train = np.ones(y.size, bool)
-                train[fold] = False
+            for train, (X_held, y_held) in splits:
                 for i, gamma in enumerate(candidates):
                     b, w = _ridge_solve(X[train], y[train], gamma)
-                    errors[i] += np.sum((y[fold] - b - X[fold] @ w) ** 2)
-            self.cv_errors_ = errors / y.size
+                    errors[i] += np.sum((y_held - b - X_held @ w) ** 2)
+            self.cv_errors_ = errors / sum(held[1].size for _, held in splits)
             self.gamma_ = float(candidates[int(np.argmin(errors))])
         if X.shape[1]:
             self.intercept_, self.coef_ = _ridge_solve(X, y, self.gamma_)
@@ -234,6 +236,15 @@ class LSSVMRegressor:
         cov = s2 * bread @ (A.T @ A) @ bread
         self.intercept_std_, self.std_ = float(np.sqrt(cov[0, 0])), np.sqrt(np.diag(cov)[1:])
         return self
+
+    def _blocked_splits(self, X: np.ndarray, y: np.ndarray) -> list:
+        """(training mask, (X, y) held out) for each contiguous fold."""
+        splits = []
+        for fold in np.array_split(np.arange(y.size), self.n_folds):
+            train = np.ones(y.size, bool)
+            train[fold] = False
+            splits.append((train, (X[fold], y[fold])))
+        return splits
 
     def predict(self, X: np.ndarray) -> np.ndarray:
         return self.intercept_ + X @ self.coef_
@@ -271,19 +282,25 @@ class SeparateIdentifier:
         self.terms = terms
         self.fixed = fixed
 
-    def fit(self, records: StateRecord | Sequence[StateRecord]) -> SeparateIdentifier:
+    def fit(self, records: StateRecord | Sequence[StateRecord],
+            holdout: StateRecord | Sequence[StateRecord] | None = None) -> SeparateIdentifier:
+        """Identify from ``records``; LS-SVM picks gamma on ``holdout`` records if given (OLS ignores it)."""
         if self.method not in ("lssvm", "ols"):
             raise InputError(f"unknown method {self.method!r}; use lssvm or ols")
-        records = [records] if isinstance(records, StateRecord) else list(records)
-        regressions = build_regressions(records, self.vehicle, self.window_s, self.terms, self.fixed)
+        settings = (self.vehicle, self.window_s, self.terms, self.fixed)
+        regressions = build_regressions(_as_list(records), *settings)
+        held_out = build_regressions(_as_list(holdout), *settings) if holdout is not None else None
         self.derivatives_: dict[str, float] = {}
         self.std_: dict[str, float] = {}
         self.bias_: dict[str, float] = {}
         self.bias_std_: dict[str, float] = {}
         self.equations_: dict[str, EquationFit] = {}
         for eq, reg in regressions.items():
-            estimator = LSSVMRegressor() if self.method == "lssvm" else LeastSquaresRegressor()
-            estimator.fit(reg.X, reg.y)
+            if self.method == "lssvm":
+                estimator = LSSVMRegressor().fit(
+                    reg.X, reg.y, (held_out[eq].X, held_out[eq].y) if held_out is not None else None)
+            else:
+                estimator = LeastSquaresRegressor().fit(reg.X, reg.y)
             resid = reg.y - estimator.predict(reg.X)
             r2 = 1.0 - float(resid @ resid) / float(np.sum((reg.y - reg.y.mean()) ** 2))
             self.equations_[eq] = EquationFit(eq, reg.terms, estimator.coef_, estimator.std_,
@@ -298,6 +315,10 @@ class SeparateIdentifier:
         known = {**(self.fixed or {}), **self.derivatives_}
         identified = {n: known.get(n, 0.0) for n in VISCOUS_TERMS}
         return self.vehicle.with_derivatives(identified, name=f"{self.vehicle.name} (identified)")
+
+
+def _as_list(records: StateRecord | Sequence[StateRecord]) -> list[StateRecord]:
+    return [records] if isinstance(records, StateRecord) else list(records)
 
 
 def relative_errors(identified: dict[str, float], standard: dict[str, float]) -> dict[str, float]:
