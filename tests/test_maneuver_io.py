@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import tomllib
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -97,3 +98,11 @@ def test_csv_without_a_needed_channel_names_it(tmp_path):
     with pytest.raises(BadRecordingInput, match="'q'") as info:
         read_record(path)
     assert info.value.exit_code == 2
+
+
+def test_a_vehicle_without_a_file_travels_as_json(tmp_path, record):
+    vehicle = replace(load_vehicle("nps_auv2").with_derivatives({"M_uw": 0.11}), path=None)
+    path = write_record(tmp_path / "modified.mcap", record, vehicle)
+    back = read_vehicle_attachment(path)
+    assert back.coefficient("M_uw") == 0.11 and back.thrust_n == pytest.approx(vehicle.thrust_n)
+    assert back.derivatives == vehicle.derivatives
