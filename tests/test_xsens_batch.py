@@ -16,7 +16,16 @@ from tankdaq.xsens.batch import RUNNING_SUM_LIMIT, DecodedBlock, decode_capture,
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.frame import Frame, build_frame
 from tankdaq.xsens.framer import StreamFramer
-from tankdaq.xsens.mtdata2 import MTData2Message, decode_mtdata2, encode_mtdata2, make_xdi
+from tankdaq.xsens.mtdata2 import (
+    GnssPvt,
+    GnssSatellite,
+    GnssSatInfo,
+    MTData2Message,
+    UtcTime,
+    decode_mtdata2,
+    encode_mtdata2,
+    make_xdi,
+)
 from tankdaq.xsens.stream import StreamDecoder
 from tankdaq.xsens.synthetic import decay_capture, decay_signals
 from tankdaq.xsens.timebase import MODULUS_ONE_DAY, SampleTimeUnwrapper
@@ -156,6 +165,26 @@ def test_batch_equals_reference_and_stream_under_any_chunking(stream: bytes, cut
     block = decode_capture(stream)
     assert_same_as_reference(block, stream)
     assert_blocks_equal(stream_in_chunks(stream, cuts), block)
+
+
+def test_structured_outputs_in_mixed_layouts_match_per_message() -> None:
+    structured = [
+        (make_xdi("UtcTime"), UtcTime(121_900_000, 2019, 1, 20, 13, 47, 24, 0x37)),
+        (make_xdi("RawAccGyrMagTemp"), (*range(100, 109), -300)),
+        (make_xdi("DeviceId"), 0x0778_0000_1234_5678),
+        (make_xdi("GnssSatInfo"), GnssSatInfo(49666750, 2, 0, 0, 0, (GnssSatellite(0, 5, 40, 13),) * 2)),
+        (make_xdi("GnssPvtData"), GnssPvt(*range(35))),
+        (make_xdi("LatLon", "fp1632"), (57.679442145396024, 11.88257829961367)),
+    ]
+    inertial = [(make_xdi("PacketCounter"), 7), (make_xdi("EulerAngles", "fp1220"), (1.5, -2.25, 179.0))]
+    stream = b"".join(
+        build_frame(MID.MTDATA2, encode_mtdata2(structured if i % 3 == 0 else inertial)) for i in range(12)
+    )
+    block = decode_capture(stream)
+    assert block.n_messages == 12 and block.present["GnssPvtData"].sum() == 4
+    assert np.isnan(block.columns["LatLon"][1]).all()  # absent rows of a real column are NaN
+    assert_same_as_reference(block, stream)
+    assert_blocks_equal(stream_in_chunks(stream, [50, 51, 400]), block)
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])

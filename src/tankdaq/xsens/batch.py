@@ -279,7 +279,6 @@ class Field:
 class Layout:
     """The item sequence of one MTData2 payload: a structured dtype plus the header bytes that identify it."""
 
-    length: int
     headers: np.dtype  # structured view of the item headers (xdi u16, size u8 per item)
     header_values: tuple[int, ...]  # their values in every payload of this layout, in field order
     header_offsets: np.ndarray  # the same headers as byte offsets ...
@@ -397,7 +396,6 @@ def learn_layout(payload: bytes) -> Layout:
     )
     header_offsets = np.array([offset - back for _, offset, _ in spans for back in (3, 2, 1)], dtype=np.int64)
     return Layout(
-        length=len(payload),
         headers=headers,
         header_values=tuple(value for xdi, _, size in spans for value in (xdi, size)),
         header_offsets=header_offsets,
