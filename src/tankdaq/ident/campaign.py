@@ -26,7 +26,7 @@ from ..errors import IdentificationError, InputError
 from ..physics.decay import simulate_decay
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, empty_samples
-from .derived import b_eq, bertin_n_per_deg, damping_ratio, extinction_curve, natural_period
+from .derived import amplitude_table, damping_ratio, extinction_curve, natural_period
 from .kernels import TERM_REGISTRY
 from .output_error import OutputError
 
@@ -74,15 +74,16 @@ class GroupResult:
         if self.fit is None:
             return row | {"error": self.error}
         coefficients = self.fit.coefficients_
-        amplitude = math.radians(self.key.angle_deg)
         for term, value in coefficients.items():
             row[term] = value
             row[f"{term}_std"] = self.fit.std_[term]
+        (at_release,) = amplitude_table(coefficients, self.fit.covariance_, [self.key.angle_deg])
         return row | {
             "natural_period_s": natural_period(coefficients),
             "damping_ratio": damping_ratio(coefficients),
-            "b_eq_per_s": b_eq(coefficients, amplitude),
-            "bertin_n_per_deg": bertin_n_per_deg(coefficients, amplitude),
+            "b_eq_per_s": at_release.b_eq,
+            "b_eq_std": at_release.b_eq_std,
+            "bertin_n_per_deg": at_release.bertin_n_per_deg,
             "r2_angle": self.fit.r2_angle_,
             "seed_objective_rad_s": self.fit.seed_objective_,
             "error": "",
@@ -236,7 +237,7 @@ def markdown_table(results: Sequence[GroupResult]) -> str:
             cells += [
                 f"{row['natural_period_s']:.4g}",
                 f"{row['damping_ratio']:.3g}",
-                f"{row['b_eq_per_s']:.4g}",
+                f"{row['b_eq_per_s']:.4g} ± {row['b_eq_std']:.2g}",
                 f"{row['r2_angle']:.4f}",
             ]
         lines.append("| " + " | ".join(cells) + " |")
@@ -333,16 +334,19 @@ def _plot_hulls(results: Sequence[GroupResult]) -> Any:
 
 
 def _plot_b_eq(series: Sequence[GroupResult]) -> Any:
-    """B_eq(phi_a) of each group's fit over 0 ... its initial angle; colour by draft."""
+    """B_eq(phi_a) of each group's fit over 0 ... its initial angle with its 95 % band; colour by draft."""
     first = series[0].key
     fig, axes = _figure(1, f"{first.hull} {first.axis}: equivalent linear damping")
     ax = axes[0]
     drafts = sorted({r.key.draft for r in series})
     for result in series:
-        grid_deg = np.linspace(0.2, result.key.angle_deg, 40)
-        values = [b_eq(result.fit.coefficients_, math.radians(a)) for a in grid_deg]
+        grid_deg = np.linspace(0.2, result.key.angle_deg, 25)
+        table = amplitude_table(result.fit.coefficients_, result.fit.covariance_, grid_deg)
+        values = np.array([p.b_eq for p in table])
+        half_width = 1.96 * np.array([p.b_eq_std for p in table])
         colour = f"C{drafts.index(result.key.draft)}"
         ax.plot(grid_deg, values, color=colour, alpha=0.8)
+        ax.fill_between(grid_deg, values - half_width, values + half_width, color=colour, alpha=0.15)
         ax.plot(grid_deg[-1], values[-1], "o", color=colour)
     for i, draft in enumerate(drafts):
         ax.plot([], [], color=f"C{i}", label=format_draft(draft))
