@@ -91,11 +91,11 @@ def test_equation_error_gives_usable_starting_values():
 
 
 def test_observation_gain_lag_and_gyro_bias_are_recovered():
-    """The lag model is first order, x(t - lag) ~ x - lag x': its error (omega lag)^2 / 2 ~ 7e-4 of the
-    angle at a 10 ms lag stays below the gain's standard error, so the truth must be inside 3.29 std."""
+    """The lag model is second order, x(t - lag) ~ x - lag x' + lag^2 x''/2: its error (omega lag)^3 / 6
+    ~ 2e-4 of the angle at a 30 ms lag stays below the gain's standard error."""
     truth = truth_for(("b1", "b2", "c1", "c3"))
     clean = synthetic_run(truth, seed=6, offset=0.0)
-    gain, lag, bias = 1.05, 0.01, 0.004
+    gain, lag, bias = 1.05, 0.03, 0.004
     rng = np.random.default_rng(7)
     # the angle sensor sees gain * x(t - lag): the reference simulation started one lag earlier
     fine_t = np.concatenate([[-lag], clean.t])
@@ -171,3 +171,20 @@ def test_a_record_cut_mid_swing_after_two_cycles_is_still_fitted():
     for k, value in truth.items():
         assert abs(fit.coefficients_[k] - value) < Z999 * fit.std_[k], k
     assert fit.std_["b1"] > OutputError(tuple(truth)).fit([full]).std_["b1"]
+
+
+def test_the_full_jacobian_with_observation_parameters_equals_central_differences():
+    truth = truth_for(("b1", "b2", "c1", "c3"))
+    fit = OutputError(tuple(truth), fit_gain=True, fit_lag=True, fit_gyro_bias=True).fit(
+        [synthetic_run(truth, seed=13, duration_s=5.0)]
+    )
+    params = fit.params_.copy()
+    params[fit.param_names_.index("lag_s")] = 0.03  # away from zero so the second-order lag terms count
+    _, jac, _, _ = fit._weighted(params)
+    for k, name in enumerate(fit.param_names_):
+        step = 1e-6 * max(1.0, abs(params[k]))
+        up, down = params.copy(), params.copy()
+        up[k] += step
+        down[k] -= step
+        numeric = (fit._weighted(up)[0] - fit._weighted(down)[0]) / (2 * step)
+        assert np.max(np.abs(numeric - jac[:, k])) < 1e-6 * np.max(np.abs(jac[:, k])), name

@@ -95,6 +95,26 @@ def term_matrix(codes: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray, 
     return out
 
 
+@numba.njit(cache=True)
+def acceleration_partials(
+    codes: np.ndarray, theta: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray, eps: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """x'' and its partials in x, x' and theta at every sample: what a lagged observation needs."""
+    n = x.size
+    acc = np.zeros(n)
+    acc_x = np.zeros(n)
+    acc_v = np.zeros(n)
+    phi = np.empty((n, codes.size))
+    for i in range(n):
+        for j in range(codes.size):
+            value, dx, dv = term_eval(codes[j], x[i], v[i], u[i], eps)
+            phi[i, j] = value
+            acc[i] -= theta[j] * value
+            acc_x[i] -= theta[j] * dx
+            acc_v[i] -= theta[j] * dv
+    return acc, acc_x, acc_v, phi
+
+
 @numba.njit(cache=True, inline="always")
 def _deriv(z: np.ndarray, dz: np.ndarray, theta: np.ndarray, codes: np.ndarray, u: float, eps: float) -> None:
     """Time derivative of the state and its sensitivities (theta first, then x0, v0)."""

@@ -7,8 +7,8 @@ noise level estimated per run. Levenberg-Marquardt on the exact Jacobian from
 the sensitivity kernel, started from the equation-error fit.
 
 Optional observation effects for the discrepancy workflow: the angle's gain and
-lag relative to the gyro (``angle = gain * x(t - lag) + offset``, first-order in
-lag) and a gyro bias (``rate = x' + bias``). They need a measured rate: against
+lag relative to the gyro (``angle = gain * x(t - lag) + offset``, second order
+in the lag) and a gyro bias (``rate = x' + bias``). They need a measured rate: against
 the angle alone a gain or a delay is indistinguishable from the initial state.
 """
 
@@ -26,7 +26,14 @@ from scipy.optimize import least_squares
 from ..errors import BadIdentificationInput, InputError
 from ..records import DecayRun
 from .equation_error import EquationError, check_runs, exogenous_input
-from .kernels import simulate, simulate_with_sensitivities, substeps, term_codes, term_matrix
+from .kernels import (
+    acceleration_partials,
+    simulate,
+    simulate_with_sensitivities,
+    substeps,
+    term_codes,
+    term_matrix,
+)
 from .models import resolve_model
 from .signals import white_noise_level
 from .uncertainty import (
@@ -259,26 +266,42 @@ class OutputError:
         gain = params[gi] if gi is not None else 1.0
         lag = params[li] if li is not None else 0.0
         bias = params[bi] if bi is not None else 0.0
-        args = (run.t, angle0, rate0, theta, self._codes, self._inputs[r], self.friction_eps, self._n_sub)
+        u = self._inputs[r]
+        args = (run.t, angle0, rate0, theta, self._codes, u, self.friction_eps, self._n_sub)
         if not with_jacobian:
             x, v = simulate(*args)
-            return {"angle": gain * (x - lag * v) + offset, "rate": v + bias}
+            return {"angle": gain * self._lagged(x, v, lag, theta, u) + offset, "rate": v + bias}
         x, v, sx, sv, ok = simulate_with_sensitivities(*args)
         n = run.t.size
         ja = np.zeros((n, layout.size))
         jv = np.zeros((n, layout.size))
         sl = layout.run_slice(r)
         cols = [*range(layout.n_theta), sl.start, sl.start + 1]
-        ja[:, cols] = gain * (sx - lag * sv)
+        lagged = x
+        ja[:, cols] = gain * sx
+        if li is not None:
+            acc, acc_x, acc_v, phi = acceleration_partials(self._codes, theta, x, v, u, self.friction_eps)
+            s_acc = acc_x[:, None] * sx + acc_v[:, None] * sv
+            s_acc[:, : layout.n_theta] -= phi
+            lagged = x - lag * v + 0.5 * lag**2 * acc
+            ja[:, cols] = gain * (sx - lag * sv + 0.5 * lag**2 * s_acc)
+            ja[:, li] = gain * (-v + lag * acc)
         jv[:, cols] = sv
         ja[:, sl.start + 2] = 1.0
         if gi is not None:
-            ja[:, gi] = x - lag * v
-        if li is not None:
-            ja[:, li] = -gain * v
+            ja[:, gi] = lagged
         if bi is not None:
             jv[:, bi] = 1.0
-        return {"angle": gain * (x - lag * v) + offset, "rate": v + bias, "ja": ja, "jv": jv, "ok": ok}
+        return {"angle": gain * lagged + offset, "rate": v + bias, "ja": ja, "jv": jv, "ok": ok}
+
+    def _lagged(
+        self, x: np.ndarray, v: np.ndarray, lag: float, theta: np.ndarray, u: np.ndarray
+    ) -> np.ndarray:
+        """x(t - lag) to second order in the lag, x - lag x' + lag^2/2 x'' (error (omega lag)^3 / 6)."""
+        if lag == 0.0:
+            return x
+        acc = acceleration_partials(self._codes, theta, x, v, u, self.friction_eps)[0]
+        return x - lag * v + 0.5 * lag**2 * acc
 
     def _weighted(
         self, params: np.ndarray
@@ -418,9 +441,8 @@ class OutputError:
         off = self.offsets_[run_index] if offset is None else offset
         theta = np.array(list(self.coefficients_.values()))
         x, v = simulate(t, angle0, rate0, theta, self._codes, u, self.friction_eps, self._n_sub)
-        gain = getattr(self, "gain_", 1.0)
-        lag = getattr(self, "lag_s_", 0.0)
-        return gain * (x - lag * v) + off, v + getattr(self, "gyro_bias_", 0.0)
+        angle = getattr(self, "gain_", 1.0) * self._lagged(x, v, getattr(self, "lag_s_", 0.0), theta, u)
+        return angle + off, v + getattr(self, "gyro_bias_", 0.0)
 
 
 def seed_objective(
