@@ -277,12 +277,19 @@ def validate_command(
         "identified dominant, others dropped": SeparateIdentifier(
             vehicle, method=method, terms=sensitivity.dominant).fit(record).model(),
     }
-    results = [resimulate(target, model, label, mode) for label, model in models.items()]
+    results, failures = [], {}
+    for label, model in models.items():
+        try:
+            results.append(resimulate(target, model, label, mode))
+        except InputError as exc:  # e.g. a reduced model whose pitch never reaches the switching angle
+            failures[label] = str(exc)
+    if not results:
+        raise InputError(f"no model could re-simulate {test or file}: {next(iter(failures.values()))}")
     if plot is not None:
         plot_validation(target, results, plot)
     report = {"train": str(file), "test": str(test or file), "mode": mode,
-              "dominant": sensitivity.dominant,
-              "r2": {r.label: r.r2 for r in results}, "plot": str(plot) if plot else None}
+              "dominant": sensitivity.dominant, "r2": {r.label: r.r2 for r in results},
+              "failed": failures, "plot": str(plot) if plot else None}
     if as_json:
         typer.echo(json.dumps(report, indent=1))
         return
@@ -292,5 +299,7 @@ def validate_command(
     typer.echo(f"{'model':<38}" + "".join(f"{'R2 ' + s:>10}" for s in SCORED_STATES))
     for result in results:
         typer.echo(f"{result.label:<38}" + "".join(f"{result.r2[s]:>10.4f}" for s in SCORED_STATES))
+    for label, reason in failures.items():
+        typer.echo(f"{label:<38} could not be re-simulated: {reason}")
     if plot is not None:
         typer.echo(f"plot: {plot}")
