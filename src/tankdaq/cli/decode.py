@@ -12,8 +12,9 @@ from enum import StrEnum
 from pathlib import Path
 from typing import IO, Annotated
 
+import numpy as np
 import typer
-from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ..errors import InputError
 from ..xsens.batch import DecodedBlock
@@ -23,6 +24,7 @@ from ..xsens.timebase import CounterTracker
 from .app import app, err_console, handles_errors
 
 CHUNK_BYTES = 1 << 20
+WRITE_BATCH = 10_000
 
 #: Component labels of vector outputs in CSV headers (x, y, z for the rest).
 COMPONENTS: dict[str, tuple[str, ...]] = {
@@ -105,15 +107,53 @@ def open_output(out: Path | None) -> Iterator[IO[str]]:
         yield handle
 
 
-def decode_blocks(data: bytes, label: str) -> Iterator[DecodedBlock]:
-    """Stream-decode ``data`` in 1 MiB pieces behind a progress bar on stderr."""
+def progress() -> Progress:
+    """A transient progress display on stderr (stdout stays machine-readable)."""
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
+    return Progress(*columns, console=err_console, transient=True)
+
+
+def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
+    """Stream-decode ``data`` in 1 MiB pieces (progress in KiB)."""
     decoder = StreamDecoder()
-    columns = (TextColumn("{task.description}"), BarColumn(), DownloadColumn(), TimeElapsedColumn())
-    with Progress(*columns, console=err_console, transient=True) as bar:
-        task = bar.add_task(f"decoding {label}", total=len(data))
-        for start in range(0, len(data), CHUNK_BYTES):
-            yield decoder.feed(data[start : start + CHUNK_BYTES])
-            bar.advance(task, min(CHUNK_BYTES, len(data) - start))
+    task = bar.add_task(f"decoding {label} (KiB)", total=len(data) // 1024 + 1)
+    blocks = []
+    for start in range(0, len(data), CHUNK_BYTES):
+        blocks.append(decoder.feed(data[start : start + CHUNK_BYTES]))
+        bar.advance(task, CHUNK_BYTES // 1024)
+    return DecodedBlock.concat(blocks)
+
+
+def csv_header(block: DecodedBlock) -> list[str]:
+    """Every column a row can have: each output's flattened parts, in order of first appearance."""
+    header: list[str] = []
+    for name in block.columns:
+        first = int(np.argmax(block.present[name]))
+        header += flatten(name, block.message(first)[name])
+    return header
+
+
+def write_messages(block: DecodedBlock, handle: IO[str], output_format: OutputFormat, bar: Progress) -> None:
+    """One JSON object or CSV row per message, in batches (columns go to Python once per batch)."""
+    task = bar.add_task("writing messages", total=block.n_messages)
+    writer = None
+    if output_format is OutputFormat.csv:
+        writer = csv.DictWriter(handle, fieldnames=csv_header(block), restval="", lineterminator="\n")
+        writer.writeheader()
+    for start in range(0, block.n_messages, WRITE_BATCH):
+        for message in block.messages(start, start + WRITE_BATCH):
+            if writer is None:
+                values = {name: to_jsonable(value) for name, value in message.items()}
+                handle.write(json.dumps(values, separators=(",", ":")) + "\n")
+            else:
+                writer.writerow(
+                    {
+                        col: cell
+                        for name, value in message.items()
+                        for col, cell in flatten(name, value).items()
+                    }
+                )
+        bar.advance(task, min(WRITE_BATCH, block.n_messages - start))
 
 
 def summary_line(block: DecodedBlock, tracker: CounterTracker) -> str:
@@ -144,31 +184,15 @@ def decode_command(
 ) -> None:
     """Decode a raw Xsens capture: one JSON object (or CSV row) per MTData2 message, device units."""
     data = read_capture(capture)
-    blocks = list(decode_blocks(data, capture.name))
-    block = DecodedBlock.concat(blocks)
-    if block.frames == 0:
-        raise InputError(f"no Xbus frames in {capture} ({len(data)} bytes): is it a raw serial capture?")
+    with progress() as bar:
+        block = decode_all(data, bar, capture.name)
+        if block.frames == 0:
+            raise InputError(f"no Xbus frames in {capture} ({len(data)} bytes): is it a raw serial capture?")
+        with open_output(out) as handle:
+            write_messages(block, handle, output_format, bar)
     tracker = CounterTracker()
     if "PacketCounter" in block.columns:
         tracker.update_many(block.columns["PacketCounter"][block.present["PacketCounter"]])
-    with open_output(out) as handle:
-        if output_format is OutputFormat.jsonl:
-            for index in range(block.n_messages):
-                message = {name: to_jsonable(value) for name, value in block.message(index).items()}
-                handle.write(json.dumps(message, separators=(",", ":")) + "\n")
-        else:
-            rows = [
-                {
-                    column: cell
-                    for name, value in block.message(i).items()
-                    for column, cell in flatten(name, value).items()
-                }
-                for i in range(block.n_messages)
-            ]
-            header = list(dict.fromkeys(column for row in rows for column in row))
-            writer = csv.DictWriter(handle, fieldnames=header, restval="", lineterminator="\n")
-            writer.writeheader()
-            writer.writerows(rows)
     err_console.print(
         f"{capture.name}: {summary_line(block, tracker)}", markup=False, highlight=False, soft_wrap=True
     )

@@ -18,7 +18,7 @@ a presence mask, the counters, and the non-MTData2 frames (acks, errors) as ``Fr
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -486,13 +486,22 @@ class DecodedBlock:
 
     def message(self, index: int) -> MTData2Message:
         """Row ``index`` as the per-message decoder returns it (unknown items are counted, not named)."""
-        values: dict[str, object] = {}
-        xdis: dict[str, int] = {}
-        for name, column in self.columns.items():
-            if self.present[name][index]:
-                values[name] = _python_value(name, column[index])
-                xdis[name] = int(self.xdis[name][index])
-        return MTData2Message(values, xdis, (0,) * int(self.unknown_counts[index]))
+        return next(self.messages(index, index + 1))
+
+    def messages(self, start: int = 0, stop: int | None = None) -> Iterator[MTData2Message]:
+        """Rows ``start:stop`` as per-message values; columns are converted to Python once, not per cell."""
+        rows = slice(start, self.n_messages if stop is None else stop)
+        names = [name for name in self.columns if self.present[name][rows].any()]
+        values = {name: _python_column(name, self.columns[name][rows]) for name in names}
+        present = {name: self.present[name][rows].tolist() for name in names}
+        xdis = {name: self.xdis[name][rows].tolist() for name in names}
+        for row, unknown in enumerate(self.unknown_counts[rows].tolist()):
+            here = [name for name in names if present[name][row]]
+            yield MTData2Message(
+                {name: values[name][row] for name in here},
+                {name: xdis[name][row] for name in here},
+                (0,) * unknown,
+            )
 
     @staticmethod
     def concat(blocks: Sequence[DecodedBlock]) -> DecodedBlock:
@@ -536,21 +545,18 @@ def _absent(example: np.ndarray, rows: int) -> np.ndarray:
     return out
 
 
-def _python_value(name: str, cell: object) -> object:
-    """A column cell as the per-message decoder's Python value."""
-    if isinstance(cell, np.ndarray):
-        return tuple(cell.tolist())
-    if isinstance(cell, np.void):
-        record = cell.item()
-        if name == "UtcTime":
-            return UtcTime(*record)
-        if name == "GnssPvtData":
-            return GnssPvt(*record)
-        counts, temp = record
-        return (*counts.tolist(), temp)
-    if isinstance(cell, np.generic):
-        return cell.item()
-    return cell
+def _python_column(name: str, column: np.ndarray) -> list[object]:
+    """A column as the per-message decoder's Python values (tuples for vectors, dataclasses for records)."""
+    if column.dtype == object:
+        return list(column)
+    records = column.tolist()
+    if column.dtype.names is None:
+        return [tuple(row) for row in records] if column.ndim > 1 else records
+    if name == "UtcTime":
+        return [UtcTime(*record) for record in records]
+    if name == "GnssPvtData":
+        return [GnssPvt(*record) for record in records]
+    return [(*counts.tolist(), temp) for counts, temp in records]  # RawAccGyrMagTemp
 
 
 def decode_buffer(
