@@ -126,3 +126,31 @@ def test_the_story_goes_to_rerun(tmp_path: Path) -> None:
     final_residual = np.array(scalars[f"/diagnose/{run}/residual/final"])
     assert np.sqrt(np.mean(final_residual**2)) < 1.3 * np.degrees(data.noise_angle_rad)
     assert texts == story(diagnoser)
+
+
+def test_mcap_recordings_are_diagnosed(tmp_path: Path) -> None:
+    from tankdaq.samples import SAMPLE_DTYPE
+    from tankdaq.store.writer import RecordingWriter
+
+    data = make_decay_set(("damping.quadratic",), seed=26)
+    rng = np.random.default_rng(26)
+    paths = []
+    for run in data.runs:
+        held = np.arange(-100, 0) / 100.0  # one second held at the release angle before it
+        t = np.concatenate([held, run.t]) + 5.0
+        samples = np.zeros(t.size, dtype=SAMPLE_DTYPE)
+        samples["t"], samples["ticks"] = t, np.round(t * 1e4).astype(np.int64)
+        samples["roll"] = np.concatenate([np.full(held.size, run.angle[0]), run.angle])
+        samples["p"] = np.concatenate([np.zeros(held.size), run.rate])
+        samples["pitch"] = rng.normal(0, 0.001, t.size)  # the other axis and gravity: noise only
+        samples["az"] = 9.81 + rng.normal(0, 0.01, t.size)
+        path = tmp_path / f"{run.name}.mcap"
+        with RecordingWriter(path, {"axis": "roll"}, {}) as writer:
+            writer.write_samples(samples)
+            writer.write_event("release", "released by hand", t_s=5.0)
+        paths.append(path)
+    result = invoke(*paths, "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert [s["family"] for s in out["steps"]] == ["amplitude-dependent damping"]
+    assert out["final"]["coefficients"]["b2"] == pytest.approx(data.truth["b2"], rel=0.2)

@@ -17,10 +17,18 @@ from ..records import DecayRun
 from .fitting import ModelSpec
 
 #: Measured channels a coupling term may use, by the motion they carry.
-#: Names as DecayRun.channels holds them (CSV import strips _deg/_rad after converting to rad);
-#: ``z`` and ``theta``/``phi`` are the columns of the KVLCC2 motion-tracking files.
+#: Names as DecayRun.channels holds them: CSV import strips _deg/_rad after converting to rad, MCAP
+#: recordings name the other axis (``other_angle_pitch``), the KVLCC2 tracking files have z, theta, phi.
 HEAVE_CHANNELS: tuple[str, ...] = ("heave_m", "heave", "z", "acc_z_m_s2")
-OTHER_ROTATION_CHANNELS: tuple[str, ...] = ("other_angle", "theta", "phi", "pitch", "roll")
+OTHER_ROTATION_CHANNELS: tuple[str, ...] = (
+    "other_angle",
+    "other_angle_pitch",
+    "other_angle_roll",
+    "theta",
+    "phi",
+    "pitch",
+    "roll",
+)
 
 
 @dataclass(frozen=True)

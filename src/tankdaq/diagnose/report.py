@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 from ..errors import RecordingError
 from .fitting import Fit
 from .residuals import SPECTRUM_MEANING
-from .workflow import Diagnoser, Diagnostics, Step
+from .workflow import Diagnoser, Diagnostics, Step, signature_seen
 
 
 def _deg(value_rad: float) -> float:
@@ -64,7 +64,7 @@ def _diagnostics_summary(diag: Diagnostics) -> dict[str, Any]:
     }
 
 
-def _step_summary(step: Step) -> dict[str, Any]:
+def _step_summary(step: Step, diagnoser: Diagnoser) -> dict[str, Any]:
     return {
         "effect": step.effect.name,
         "key": step.effect.key,
@@ -84,6 +84,7 @@ def _step_summary(step: Step) -> dict[str, Any]:
         ],
         "cut_s": step.cut_s,
         "signature": step.effect.signature,
+        "signature_seen": signature_seen(step.effect, step.diagnostics, diagnoser.cycle_trend_),
         "diagnostics_before": _diagnostics_summary(step.diagnostics),
     }
 
@@ -100,9 +101,10 @@ def summary(diagnoser: Diagnoser) -> dict[str, Any]:
             "zeta_intercept": trend.zeta_intercept,
             "period_slope_s_per_rad2": trend.period_slope_s_per_rad2,
             "damping_grows_with_amplitude": trend.damping_grows_with_amplitude,
+            "damping_falls_with_amplitude": trend.damping_falls_with_amplitude,
             "period_changes_with_amplitude": trend.period_changes_with_amplitude,
         },
-        "steps": [_step_summary(s) for s in diagnoser.steps_],
+        "steps": [_step_summary(s, diagnoser) for s in diagnoser.steps_],
         "final": {**_fit_summary(final), "std": final.std},
         "gap_reduction": diagnoser.gap_reduction_,
         "gap_reduction_all_outputs": 1.0 - final.rms_noise_units / base.rms_noise_units,
@@ -126,7 +128,7 @@ def summary_json(diagnoser: Diagnoser) -> str:
     return json.dumps(_finite(summary(diagnoser)))
 
 
-def _step_line(step: Step) -> str:
+def _step_line(step: Step, diagnoser: Diagnoser) -> str:
     effect = step.effect
     after = step.after
     if effect.kind == "truncation":
@@ -142,7 +144,8 @@ def _step_line(step: Step) -> str:
     if step.family:
         rivals = ", ".join(f"{f.effect} worse by {f.vs_chosen:.0f}" for f in step.family)
         line += f"; within the family: {rivals}"
-    return line
+    seen = signature_seen(step.effect, step.diagnostics, diagnoser.cycle_trend_)
+    return line + (f" [seen: {'; '.join(seen)}]" if seen else " [signature not evident before the refit]")
 
 
 def story(diagnoser: Diagnoser) -> list[str]:
@@ -159,13 +162,13 @@ def story(diagnoser: Diagnoser) -> list[str]:
     hints = []
     if trend.damping_grows_with_amplitude:
         hints.append("damping ratio grows with amplitude")
-    elif trend.zeta_slope_per_rad < 0 and trend.amplitude_rad.size >= 3:
+    elif trend.damping_falls_with_amplitude:
         hints.append("damping ratio falls with amplitude")
     if trend.period_changes_with_amplitude:
         hints.append("period changes with amplitude")
     if hints:
         lines.append("cycle by cycle: " + "; ".join(hints))
-    lines += [_step_line(s) for s in diagnoser.steps_]
+    lines += [_step_line(s, diagnoser) for s in diagnoser.steps_]
     lines.append(diagnoser.verdict_)
     return lines
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import find_peaks, welch
-from scipy.stats import chi2
+from scipy.stats import chi2, theilslopes
 
 
 def noise_level(signal: np.ndarray) -> float:
@@ -120,13 +120,22 @@ class CycleTrend:
     zeta_intercept: float
     period_slope_s_per_rad2: float  # d(period)/d(amplitude^2)
 
+    def _zeta_change(self) -> float:
+        """Change of ζ over the tested amplitude band, relative to its median (0 with too few cycles)."""
+        if self.amplitude_rad.size < 3:
+            return 0.0
+        span = float(np.ptp(self.amplitude_rad))
+        return self.zeta_slope_per_rad * span / max(abs(float(np.median(self.zeta))), 1e-6)
+
     @property
     def damping_grows_with_amplitude(self) -> bool:
         """ζ rising by more than a quarter over the tested amplitude band."""
-        if self.amplitude_rad.size < 3:
-            return False
-        span = float(np.ptp(self.amplitude_rad))
-        return self.zeta_slope_per_rad * span > 0.25 * max(abs(float(np.median(self.zeta))), 1e-6)
+        return self._zeta_change() > 0.25
+
+    @property
+    def damping_falls_with_amplitude(self) -> bool:
+        """ζ falling by more than a quarter over the band: dry friction dominates small cycles."""
+        return self._zeta_change() < -0.25
 
     @property
     def period_changes_with_amplitude(self) -> bool:
@@ -137,18 +146,36 @@ class CycleTrend:
         return abs(self.period_slope_s_per_rad2) * span > 0.01 * float(np.median(self.period_s))
 
 
+def alternating_extremes(angle: np.ndarray, min_spacing: int) -> np.ndarray:
+    """Indices of maxima and minima in strict alternation (of two same-sign neighbours the larger stays)."""
+    hi, _ = find_peaks(angle, distance=min_spacing)
+    lo, _ = find_peaks(-angle, distance=min_spacing)
+    maxima = set(hi.tolist())
+    kept: list[int] = []
+    signs: list[int] = []
+    for i in sorted([*hi.tolist(), *lo.tolist()]):
+        sign = 1 if i in maxima else -1
+        if signs and signs[-1] == sign:
+            if sign * angle[i] > sign * angle[kept[-1]]:
+                kept[-1] = i
+            continue
+        kept.append(i)
+        signs.append(sign)
+    return np.asarray(kept, dtype=int)
+
+
 def cycle_trend(
     runs_t: Sequence[np.ndarray], runs_angle: Sequence[np.ndarray], omega0_rad_s: float
 ) -> CycleTrend:
-    """Peaks of every run pooled: ζ_n = ln(D_n / D_{n+2}) / 2π on peak-to-peak heights D (offset-free)."""
+    """Peaks of every run pooled: ζ_n = ln(D_n / D_{n+2}) / 2π on peak-to-peak heights D (offset-free).
+
+    Trends are Theil-Sen slopes: a small cycle spoiled by noise does not tip them.
+    """
     amps, zetas, periods = [], [], []
     half_period = np.pi / max(omega0_rad_s, 1e-3)
     for t, angle in zip(runs_t, runs_angle, strict=True):
         dt = float(np.median(np.diff(t)))
-        distance = max(int(0.6 * half_period / dt), 1)
-        hi, _ = find_peaks(angle, distance=2 * distance)
-        lo, _ = find_peaks(-angle, distance=2 * distance)
-        idx = np.sort(np.concatenate([hi, lo]))
+        idx = alternating_extremes(angle, max(int(1.2 * half_period / dt), 1))
         if idx.size < 4:
             continue
         heights = np.abs(np.diff(angle[idx]))  # peak-to-peak, one per half cycle
@@ -163,8 +190,8 @@ def cycle_trend(
     zeta = np.asarray(zetas)
     period = np.asarray(periods)
     if amp.size >= 3 and np.ptp(amp) > 0:
-        zeta_slope, zeta_intercept = np.polyfit(amp, zeta, 1)
-        period_slope = float(np.polyfit(amp**2, period, 1)[0])
+        zeta_slope, zeta_intercept, _, _ = theilslopes(zeta, amp)
+        period_slope = float(theilslopes(period, amp**2)[0])
     else:
         zeta_slope, zeta_intercept, period_slope = 0.0, float(np.mean(zeta)) if zeta.size else 0.0, 0.0
     return CycleTrend(amp, zeta, period, float(zeta_slope), float(zeta_intercept), period_slope)

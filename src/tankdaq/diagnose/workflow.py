@@ -21,6 +21,7 @@ from ..records import DecayRun
 from .effects import LIBRARY, Effect
 from .fitting import Fit, ModelSpec, fit_spec, predict
 from .residuals import (
+    SPECTRUM_MEANING,
     CycleTrend,
     LateOnset,
     Spectrum,
@@ -156,6 +157,43 @@ def diagnose_fit(fit: Fit, runs: Sequence[DecayRun]) -> Diagnostics:
         channel_corr=channel_corr,
         late=[late_onset(p.t, p.residual_angle) for p in fit.runs],
     )
+
+
+def signature_seen(effect: Effect, diag: Diagnostics, trend: CycleTrend) -> list[str]:
+    """What the diagnostics before a step show of the effect's signature (empty: nothing evident).
+
+    The decision is the refit's; this is the why a person can check on the plots.
+    """
+    seen: list[str] = []
+    spectrum = diag.spectrum.location
+    if effect.family == "amplitude-dependent damping" and trend.damping_grows_with_amplitude:
+        seen.append(f"damping ratio grows with amplitude ({trend.zeta_slope_per_rad:.3f} per rad)")
+    if effect.family == "dry friction" and trend.damping_falls_with_amplitude:
+        seen.append(f"damping ratio falls with amplitude ({trend.zeta_slope_per_rad:.3f} per rad)")
+    if effect.family == "nonlinear restoring":
+        if trend.period_changes_with_amplitude:
+            seen.append(f"period changes with amplitude ({trend.period_slope_s_per_rad2:.3f} s per rad^2)")
+        if spectrum == "triple":
+            seen.append("residual peak at three times the natural frequency")
+    if effect.family == "offset or asymmetry":
+        if spectrum in ("zero", "double"):
+            seen.append(SPECTRUM_MEANING[spectrum])
+        if abs(diag.residual_mean_angle_rad) > 0.5 * diag.noise_angle_rad:
+            seen.append(f"angle residual mean {np.degrees(diag.residual_mean_angle_rad):.3f} deg")
+    if effect.key == "sensor.gyro_bias" and diag.residual_mean_rate_rad_s is not None:
+        seen.append(f"rate residual mean {np.degrees(diag.residual_mean_rate_rad_s):.3f} deg/s")
+    if effect.key == "sensor.lag" and diag.corr_with_rate > 0.5:
+        seen.append(f"angle residual follows the rate (correlation {diag.corr_with_rate:.2f})")
+    if effect.key == "sensor.gain" and diag.corr_with_angle > 0.5:
+        seen.append(f"angle residual follows the angle (correlation {diag.corr_with_angle:.2f})")
+    if effect.family == "coupled motion":
+        seen += [f"residual correlated with {ch} ({c:.2f})" for ch, c in diag.channel_corr.items() if c > 0.3]
+        if spectrum == "other":
+            seen.append(f"residual peak at {diag.spectrum.peak_rad_s:.2f} rad/s, not a harmonic")
+    if effect.kind == "truncation":
+        burst = [o for o in diag.late if o.ratio > LATE_RATIO]
+        seen += [f"residual {o.ratio:.1f}x louder after {o.onset_s:.1f} s" for o in burst]
+    return seen
 
 
 class Diagnoser:
