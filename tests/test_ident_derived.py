@@ -68,4 +68,3 @@ def test_dimensional_inertia_from_displacement_and_gm():
     assert result.total_inertia_kg_m2 == pytest.approx(inertia)
     assert result.coefficients["b1"] == pytest.approx(0.3 * inertia)
     assert result.added_inertia_fraction == pytest.approx((inertia - 1.2) / 1.2)
-
