@@ -113,7 +113,7 @@ def identify_command(
     from ..config import load_hull
     from ..ident.estimators import make_estimator
     from ..ident.models import resolve_model
-    from ..ident.report import compare_models, compare_text, summarize, text_report
+    from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
     from ..ident.uncertainty import moving_block_bootstrap
 
     if axis not in ("roll", "pitch"):
@@ -126,11 +126,10 @@ def identify_command(
         from ..ident.models import COMPARE_MODELS
 
         with _progress() as progress:
-            task = progress.add_task("fitting models", total=len(COMPARE_MODELS))
+            task = progress.add_task("fitting models", total=len(group_models(COMPARE_MODELS)))
             rows = compare_models(
                 runs, COMPARE_MODELS, method, lambda name: progress.update(task, advance=1, description=name)
             )
-            progress.update(task, completed=len(COMPARE_MODELS))
         if as_json:
             typer.echo(json.dumps(_clean({"compare": rows}), default=_json_default))
         else:

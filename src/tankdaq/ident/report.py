@@ -25,7 +25,7 @@ from .derived import (
 )
 from .estimators import make_estimator
 from .kernels import TERM_REGISTRY, simulate, substeps, term_codes
-from .models import MODEL_ALIASES, model_name
+from .models import MODEL_ALIASES, model_name, resolve_model
 from .output_error import OutputError, seed_objective
 
 
@@ -218,6 +218,14 @@ def text_report(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def group_models(models: Sequence[str]) -> dict[tuple[str, ...], list[str]]:
+    """Model names (aliases or term lists) grouped by their term set, in first-seen order."""
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for name in models:
+        groups.setdefault(resolve_model(name), []).append(name)
+    return groups
+
+
 def compare_models(
     runs: Sequence[DecayRun],
     models: Sequence[str] = tuple(MODEL_ALIASES),
@@ -230,13 +238,8 @@ def compare_models(
     held-out error is the angle RMS (deg) on each left-out run with the
     coefficients fitted on the others and only its initial state and offset free.
     """
-    groups: dict[tuple[str, ...], list[str]] = {}
-    for name in models:
-        groups.setdefault(
-            MODEL_ALIASES[name].terms if name in MODEL_ALIASES else tuple(name.split(",")), []
-        ).append(name)
     rows = []
-    for terms, names in groups.items():
+    for terms, names in group_models(models).items():
         if progress is not None:
             progress(names[0])
         estimator = make_estimator(method, terms).fit(runs)
