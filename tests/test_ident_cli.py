@@ -66,6 +66,7 @@ def test_compare_ranks_every_model_with_held_out_error(tmp_path):
         ("{good}", "--axis", "yaw"),
         ("{good}", "--angle-unit", "grad"),
         ("{good}", "--angle-col", "phi"),
+        ("{good}", "--rate-col", "gyro_deg_s"),
         ("{good}", "--hull", "titanic"),
         ("{good}", "--method", "ee", "--bootstrap", "3"),
         ("{flat}",),

@@ -24,19 +24,21 @@ ANGLE_UNITS: dict[str, float] = {"deg": math.pi / 180.0, "rad": 1.0}
 #: Fraction of the largest excursion a peak must reach to count as the release.
 RELEASE_FRACTION = 0.5
 MIN_SAMPLES = 20
+#: The rate column looked for by default; any other name given must exist.
+DEFAULT_RATE_COL = "rate_deg_s"
 
 
 def read_csv_runs(
     path: str | Path,
     time_col: str = "time_s",
     angle_col: str = "angle_deg",
-    rate_col: str | None = "rate_deg_s",
+    rate_col: str | None = DEFAULT_RATE_COL,
     angle_unit: str = "deg",
     axis: str = "roll",
     keep_all: bool = False,
     skip_half_cycles: int = 0,
 ) -> list[DecayRun]:
-    """Read one decay from a CSV file; a missing ``rate_col`` column means the angle is the only output.
+    """Read one decay from a CSV file; without the default rate column the angle is the only output.
 
     ``keep_all`` keeps the record from its first sample; otherwise it starts at
     the release, then ``skip_half_cycles`` more half-cycles are dropped.
@@ -53,6 +55,8 @@ def read_csv_runs(
                 f"{path}: no {label} column {name!r}; columns are {', '.join(columns)} "
                 f"(choose with --{label}-col)"
             )
+    if rate_col not in (None, DEFAULT_RATE_COL) and rate_col not in columns:
+        raise InputError(f"{path}: no rate column {rate_col!r}; columns are {', '.join(columns)}")
     to_rad = ANGLE_UNITS[angle_unit]
     t = columns.pop(time_col)
     angle = columns.pop(angle_col) * to_rad
