@@ -93,6 +93,7 @@ class FrameScan:
     bad_checksums: int
     skipped_bytes: int
     consumed: int  # bytes before the first incomplete frame: the rest waits for more data
+    regular_rows: np.ndarray | None = None  # (frames, frame bytes) view when all frames are one regular run
 
 
 def scan_frames(buf: np.ndarray, max_length: int = MAX_DATA_LENGTH) -> FrameScan:
@@ -105,7 +106,9 @@ def scan_frames(buf: np.ndarray, max_length: int = MAX_DATA_LENGTH) -> FrameScan
     lengths = np.full(count, total - header_size - 1)
     rest = buf[offset:]
     if _waits_at_start(rest, max_length):  # the usual stream tail: the next frame's first bytes
-        return FrameScan(starts, starts + header_size, lengths, 0, 0, offset)
+        return FrameScan(
+            starts, starts + header_size, lengths, 0, 0, offset, buf[:offset].reshape(count, total)
+        )
     tail = _scan_general(rest, max_length)
     return FrameScan(
         starts=np.concatenate((starts, tail.starts + offset)),
@@ -140,6 +143,8 @@ def _regular_run(buf: np.ndarray, max_length: int) -> tuple[int, int, int]:
         if not good.all():
             return count + int(np.argmin(good)), total, header_size
         count += part.shape[0]
+        if count == rows.shape[0]:
+            break
     return count, total, header_size
 
 
@@ -571,54 +576,71 @@ def decode_buffer(
         skipped_bytes=scan.skipped_bytes,
         pending_bytes=buf.size - scan.consumed,
     )
-    is_data = buf[scan.starts + 2] == MTDATA2
-    if not is_data.all():
-        others = np.flatnonzero(~is_data)
-        block.other_index = others
-        block.other_frames = [
-            Frame(int(buf[s + 1]), int(buf[s + 2]), buf[p : p + n].tobytes())
-            for s, p, n in zip(
-                scan.starts[others].tolist(),
-                scan.payload_starts[others].tolist(),
-                scan.lengths[others].tolist(),
-                strict=True,
-            )
-        ]
-    data_frames = np.flatnonzero(is_data)
-    groups, malformed = _layout_groups(
-        buf, scan.payload_starts[data_frames], scan.lengths[data_frames], layouts
-    )
+    if scan.regular_rows is not None and scan.regular_rows[0, 2] == MTDATA2:  # one frame shape throughout
+        header_size = int(scan.payload_starts[0])
+        data_frames = np.arange(scan.starts.size)
+        payloads = scan.regular_rows[:, header_size:-1]
+        groups, malformed = _assign_layouts(payloads, data_frames, layouts)
+    else:
+        is_data = buf[scan.starts + 2] == MTDATA2
+        if not is_data.all():
+            others = np.flatnonzero(~is_data)
+            block.other_index = others
+            block.other_frames = [
+                Frame(int(buf[s + 1]), int(buf[s + 2]), buf[p : p + n].tobytes())
+                for s, p, n in zip(
+                    scan.starts[others].tolist(),
+                    scan.payload_starts[others].tolist(),
+                    scan.lengths[others].tolist(),
+                    strict=True,
+                )
+            ]
+        data_frames = np.flatnonzero(is_data)
+        groups, malformed = _layout_groups(
+            buf, scan.payload_starts[data_frames], scan.lengths[data_frames], layouts
+        )
+    _fill_columns(block, data_frames, groups, malformed)
+    return block
+
+
+def _fill_columns(
+    block: DecodedBlock,
+    data_frames: np.ndarray,
+    groups: list[tuple[Layout, np.ndarray, np.ndarray]],
+    malformed: np.ndarray,
+) -> None:
+    """Columns, presence and identifiers of the accepted MTData2 messages, in stream order."""
+    block.malformed = int(malformed.size)
+    block.n_messages = data_frames.size - block.malformed
+    if len(groups) == 1 and not malformed.size:  # the common case: one layout, every row present
+        layout, _, records = groups[0]
+        block.frame_index = data_frames
+        block.unknown_counts = np.full(block.n_messages, layout.unknown, dtype=np.int64)
+        everywhere = np.ones(block.n_messages, dtype=bool)
+        everywhere.flags.writeable = False  # shared by all columns
+        for item in layout.fields:
+            block.columns[item.name] = item.convert(records[item.name])
+            block.present[item.name] = everywhere
+            block.xdis[item.name] = np.full(block.n_messages, item.xdi, dtype=np.int64)
+        return
     accepted = np.ones(data_frames.size, dtype=bool)
     accepted[malformed] = False
-    block.malformed = int(malformed.size)
-    block.n_messages = int(accepted.sum())
     block.frame_index = data_frames[accepted]
     row_of = np.cumsum(accepted) - 1
     block.unknown_counts = np.zeros(block.n_messages, dtype=np.int64)
-    single = len(groups) == 1 and not malformed.size
-    everywhere = np.ones(block.n_messages, dtype=bool)
-    everywhere.flags.writeable = False  # shared by the columns of a one-layout block
     for layout, members, records in groups:
         rows = row_of[members]
-        if layout.unknown:
-            block.unknown_counts[rows] = layout.unknown
+        block.unknown_counts[rows] = layout.unknown
         for item in layout.fields:
-            values = item.convert(records[item.name])
-            if single:  # the common case: one layout, every row present
-                block.columns[item.name] = values
-                block.present[item.name] = everywhere
-                block.xdis[item.name] = np.full(block.n_messages, item.xdi, dtype=np.int64)
-                continue
             if item.name not in block.columns:
                 block.columns[item.name] = _absent(
                     np.zeros((0, *item.row_shape), item.column_dtype), block.n_messages
                 )
                 block.present[item.name] = np.zeros(block.n_messages, dtype=bool)
                 block.xdis[item.name] = np.zeros(block.n_messages, dtype=np.int64)
-            block.columns[item.name][rows] = values
+            block.columns[item.name][rows] = item.convert(records[item.name])
             block.present[item.name][rows] = True
             block.xdis[item.name][rows] = item.xdi
-    return block
 
 
 def _layout_groups(
@@ -635,17 +657,26 @@ def _layout_groups(
     groups: list[tuple[Layout, np.ndarray, np.ndarray]] = []
     malformed: list[np.ndarray] = []
     for frames in by_length:
-        length = int(lengths[frames[0]])
-        payloads = _payload_rows(buf, payload_starts[frames], length)
-        assigned, bad = layouts.assign(payloads)
-        malformed.append(frames[bad])
-        for layout, rows in assigned:
-            if not length:  # empty payloads: the layout's dtype is a one-byte placeholder
-                records = np.zeros((rows.size, 1), dtype=np.uint8)
-            else:
-                records = payloads if rows.size == frames.size else payloads[rows]
-            groups.append((layout, frames[rows], records.view(layout.dtype)[:, 0]))
+        payloads = _payload_rows(buf, payload_starts[frames], int(lengths[frames[0]]))
+        assigned, bad = _assign_layouts(payloads, frames, layouts)
+        groups += assigned
+        malformed.append(bad)
     return groups, np.sort(np.concatenate(malformed))
+
+
+def _assign_layouts(
+    payloads: np.ndarray, frames: np.ndarray, layouts: LayoutCache
+) -> tuple[list[tuple[Layout, np.ndarray, np.ndarray]], np.ndarray]:
+    """Equal-length payload rows of ``frames`` split by layout, each as structured records."""
+    assigned, bad = layouts.assign(payloads)
+    groups = []
+    for layout, rows in assigned:
+        if not payloads.shape[1]:  # empty payloads: the layout's dtype is a one-byte placeholder
+            records = np.zeros((rows.size, 1), dtype=np.uint8)
+        else:
+            records = payloads if rows.size == frames.size else payloads[rows]
+        groups.append((layout, frames[rows], records.view(layout.dtype)[:, 0]))
+    return groups, frames[bad]
 
 
 def _payload_rows(buf: np.ndarray, starts: np.ndarray, length: int) -> np.ndarray:
