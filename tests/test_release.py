@@ -47,9 +47,8 @@ def test_release_within_one_sample_at_100_hz() -> None:
     _check_one_sample(100, runs=40, seed=21)
 
 
-@pytest.mark.slow
 def test_release_within_one_sample_at_400_hz() -> None:
-    _check_one_sample(400, runs=25, seed=22)
+    _check_one_sample(400, runs=40, seed=22)
 
 
 def test_release_within_one_sample_at_other_angles_and_drafts() -> None:
