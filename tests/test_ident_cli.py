@@ -119,3 +119,13 @@ def test_bootstrap_intervals_replace_the_jacobian_ones(tmp_path):
     out = json.loads(result.stdout)
     assert out["intervals"].startswith("moving-block bootstrap, 8 replicas")
     assert all(c["std"] > 0 for c in out["coefficients"].values())
+
+
+def test_repeats_give_intervals_from_the_spread_of_the_runs(tmp_path):
+    files = [write_held_tilt_csv(tmp_path / f"{i}.csv", noise_deg=0.05, seed=i) for i in range(4)]
+    result = invoke(*files, "--model", "ittc-quadratic", "--repeats", "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert out["intervals"] == "repeat runs, 4 runs"
+    for value, entry in zip((0.3, 0.4, 14.0), out["coefficients"].values(), strict=True):
+        assert entry["ci95"][0] < value < entry["ci95"][1]

@@ -104,6 +104,9 @@ def identify_command(
     bootstrap: int = typer.Option(
         0, "--bootstrap", min=0, help="Moving-block bootstrap replicas for intervals."
     ),
+    repeats: bool = typer.Option(
+        False, "--repeats", help="The runs are repeats: intervals from their spread (t, n-1 dof)."
+    ),
     hull: str = typer.Option(None, "--hull", help="Hull config for dimensional results."),
     draft: float = typer.Option(
         "T", "--draft", parser=parse_draft_option, help="Draft with --hull: 0.9T, T, 1.1T."
@@ -114,7 +117,7 @@ def identify_command(
     from ..ident.estimators import make_estimator
     from ..ident.models import resolve_model
     from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
-    from ..ident.uncertainty import moving_block_bootstrap
+    from ..ident.uncertainty import moving_block_bootstrap, repeat_spread
 
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
@@ -139,6 +142,8 @@ def identify_command(
     estimator = make_estimator(method, terms)
     if bootstrap and not hasattr(estimator, "clone"):
         raise InputError(f"--bootstrap works with --method oe, not {method}")
+    if repeats and (bootstrap or len(runs) < 3):
+        raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")
     with _progress() as progress:
         task = progress.add_task(f"fitting {method}", total=1 + bootstrap)
         estimator.fit(runs)
@@ -150,6 +155,10 @@ def identify_command(
             )
             estimator.std_, estimator.ci95_ = spread.std, spread.ci95
             interval_method = f"{spread.method}, {bootstrap} replicas"
+        if repeats:
+            spread = repeat_spread(lambda: make_estimator(method, terms), runs)
+            estimator.std_, estimator.ci95_ = spread.std, spread.ci95
+            interval_method = f"{spread.method}, {len(runs)} runs"
     summary = summarize(estimator, runs, method, hull_config, draft, interval_method)
     if as_json:
         typer.echo(json.dumps(_clean(summary), default=_json_default))

@@ -75,6 +75,8 @@ def b_eq(coefficients: Mapping[str, float], amplitude: float) -> float:
 
 def bertin_n_per_deg(coefficients: Mapping[str, float], amplitude: float) -> float:
     """Bertin N per degree (MSC.1/Circ.1200) at amplitude phi_a: mu_eq = N phi_a omega / pi (eq. 18)."""
+    if amplitude <= 0:
+        return math.nan
     mu = 0.5 * b_eq(coefficients, amplitude)
     n_per_rad = math.pi * mu / (amplitude * equivalent_frequency(coefficients, amplitude))
     return n_per_rad * math.pi / 180.0

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 from scipy.signal import savgol_filter
 
@@ -75,9 +73,21 @@ def white_noise_level(y: np.ndarray) -> float:
 
 
 def half_cycle_peaks(y: np.ndarray) -> np.ndarray:
-    """Index of the largest |y| in each complete half-cycle between zero crossings."""
-    crossings = zero_crossings(y)
+    """Index of the largest |y| in each complete half-cycle (not the first or last, which may be cut).
+
+    A half-cycle is a stretch on one side of zero, with hysteresis: y must leave
+    a band of 3 noise sigmas on the other side, so noise around a settled
+    equilibrium does not make tiny half-cycles.
+    """
+    band = 3.0 * white_noise_level(y) if y.size > 3 else 0.0
+    outside = np.flatnonzero(np.abs(y) > band)
+    if outside.size == 0:
+        return np.zeros(0, dtype=int)
+    sides = np.sign(y[outside])
+    switches = np.flatnonzero(sides[1:] != sides[:-1])
+    starts = outside[np.concatenate([[0], switches + 1])]
+    stops = np.concatenate([outside[switches], [outside[-1]]]) + 1
     return np.array(
-        [a + 1 + int(np.argmax(np.abs(y[a + 1 : b + 1]))) for a, b in itertools.pairwise(crossings)],
+        [a + int(np.argmax(np.abs(y[a:b]))) for a, b in zip(starts[1:-1], stops[1:-1], strict=True)],
         dtype=int,
     )
