@@ -55,8 +55,10 @@ def equivalent_frequency(coefficients: Mapping[str, float], amplitude: float) ->
         + coefficients.get("s1", 0.0) * np.sin(x)
         + coefficients.get("s3", 0.0) * np.sin(x) ** 3
     )
-    k_eq = float(np.mean(restoring * np.cos(alpha))) * 2.0 / amplitude if amplitude > 0 else 0.0
-    k_eq = k_eq if amplitude > 0 else linear_stiffness(coefficients)
+    if amplitude > 0:
+        k_eq = float(np.mean(restoring * np.cos(alpha))) * 2.0 / amplitude
+    else:
+        k_eq = linear_stiffness(coefficients)
     return math.sqrt(k_eq) if k_eq > 0 else math.nan
 
 

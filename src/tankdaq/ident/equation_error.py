@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import BadIdentificationInput
 from ..records import DecayRun
+from .derived import linear_stiffness
 from .kernels import term_codes, term_matrix
 from .models import resolve_model
 from .signals import estimate_period, savgol_window, smoothed_derivatives, start_state
@@ -110,7 +111,7 @@ class EquationError:
         self.ci95_ = {
             k: (v - 1.96 * s, v + 1.96 * s) for (k, v), s in zip(self.coefficients_.items(), std, strict=True)
         }
-        stiffness = self.coefficients_.get("c1", 0.0) + self.coefficients_.get("s1", 0.0)
+        stiffness = linear_stiffness(self.coefficients_)
         scale = stiffness if abs(stiffness) > 1e-12 else 1.0
         self.offsets_ = [float(k / scale) for k in solution[n_theta:]]
         self.initial_states_ = [

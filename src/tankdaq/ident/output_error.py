@@ -25,6 +25,7 @@ from scipy.optimize import least_squares
 
 from ..errors import BadIdentificationInput, InputError
 from ..records import DecayRun
+from .derived import natural_period
 from .equation_error import EquationError, check_runs, exogenous_input
 from .kernels import (
     acceleration_partials,
@@ -361,7 +362,7 @@ class OutputError:
         self.score_blocks_ = [([j[:, free] for j in js], rs) for js, rs in blocks]
         theta = params[: layout.n_theta]
         self.coefficients_ = dict(zip(self.terms_, theta.tolist(), strict=True))
-        self.natural_period_s_ = _natural_period(self.coefficients_)
+        self.natural_period_s_ = natural_period(self.coefficients_)
         n_obs = res_w.size
         n_free = int(free.sum())
         jac_free = jac_w[:, free]
@@ -473,8 +474,3 @@ def seed_objective(
 
 def _rms(a: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(a))))
-
-
-def _natural_period(coefficients: dict[str, float]) -> float:
-    stiffness = coefficients.get("c1", 0.0) + coefficients.get("s1", 0.0)
-    return 2.0 * math.pi / math.sqrt(stiffness) if stiffness > 0 else float("nan")
