@@ -82,6 +82,14 @@ class OutputError:
     ``use_rate`` (the gyro as a second output), ``cov_type`` ("hac" or
     "classic"), ``hac_periods`` (HAC bandwidth in natural periods), ``reweight``
     (re-estimate the noise levels from the residuals and refit once).
+
+    Fitted: ``coefficients_ std_ ci95_ covariance_ correlation_`` (coefficients),
+    ``param_names_ params_ param_covariance_`` (everything), ``offsets_`` (rad)
+    and ``initial_states_`` (rad, rad/s) per run, ``fitted_`` and ``residuals_``
+    per run ({"angle", "rate"}), ``r2_angle_``, ``nrmse_`` (angle RMS error over
+    the angle's peak-to-peak range), ``seed_objective_`` (rad/s), ``bic_``
+    (Gaussian, per-run-and-output variances), ``warnings_``,
+    ``natural_period_s_``, ``elapsed_s_``; ``gain_ lag_s_ gyro_bias_`` when fitted.
     """
 
     def __init__(
@@ -365,7 +373,6 @@ class OutputError:
         self.natural_period_s_ = natural_period(self.coefficients_)
         n_obs = res_w.size
         n_free = int(free.sum())
-        jac_free = jac_w[:, free]
         if self.cov_type == "hac":
             period_samples = self.natural_period_s_ / float(np.median(np.diff(self.runs_[0].t)))
             bandwidth = (
@@ -373,7 +380,7 @@ class OutputError:
             )
             cov_free = hac_covariance(self.score_blocks_, bandwidth)
         else:
-            cov_free = classic_covariance(jac_free)
+            cov_free = classic_covariance(jac_w[:, free])
         cov_free *= n_obs / max(n_obs - n_free, 1)
         cov = np.zeros((layout.size, layout.size))
         cov[np.ix_(free, free)] = cov_free
