@@ -9,10 +9,12 @@ Two questions are kept apart. *Whether* the model was released is decided late a
 the angle must swing through the still-water angle, which a hand putting the model back does
 not do, and hand tremor cannot. *When* it was released is then found looking back: the release
 is the instant the held-with-tremor motion stops explaining the data and the restoring moment
-takes over, i.e. where the angular acceleration jumps. A piecewise polynomial with a hinge at
-the release (rate continuous, acceleration free to jump) is fitted jointly to angle and rate
-around the departure, and the hinge is scanned over the candidate instants. The event reports
-the first sample of free motion, not the sample at which the detector became sure.
+takes over, i.e. where the angular acceleration jumps. A smooth polynomial (the hand) before
+the instant and the decay equation after it, sharing the state at the instant, are fitted
+jointly to angle and rate over three quarter cycles, and the instant is scanned. Right after
+release the motion is tiny against the noise; the later swing, run back through the
+equation, pins the start down. The event reports the first sample of free motion, not the
+sample at which the detector became sure (about 3/4 of a period later).
 
 Everything is vectorised per state (the machine jumps from transition to transition through
 numpy searches), so an hour of samples is scanned in about a second, offline or fed in blocks.
@@ -347,35 +349,22 @@ class ReleaseDetector:
         return self._go(DECAYING, end)
 
     def _locate_release(self, leave: int, end: int) -> ReleaseEvent:
-        """Find the release instant in two passes; emit the release event.
+        """Find the release instant; emit the release event.
 
-        Coarse: a hinge in a local polynomial around the departure (where the acceleration jumps).
-        Fine: the held motion before, the decay equation after (integral form, linear in its
-        coefficients, so every candidate instant is one least-squares solve), over several quarter
-        cycles; the instant that explains both best is the release.
+        The held motion before, the decay equation after (integral form, linear in its
+        coefficients, so every candidate instant is one least-squares solve), jointly on angle
+        and rate over several quarter cycles: the instant that explains both best is the release.
+        Scanned in 10 ms steps over the stretch before the departure, then refined down to a
+        quarter sample.
         """
         lo = max(0, leave - self._n(self.fit_before_s))
-        span = abs(self._hold_angle - self.baseline_rad_)
-        side = math.copysign(1.0, self._hold_angle - self.baseline_rad_)
-        near = _first(side * (self._x - self._hold_angle) < -0.3 * span, leave)
-        near = end if near is None else min(near, end)
-        window = slice(lo, near + 1)
-        hinge = _HingeFit(self._t[window], self._x[window], self._r[window], hold=leave - lo)
-        dt = 1.0 / float(self.rate_hz or 1.0)
-        first = max(lo + 2, leave - self._n(self.scan_back_s))
-        stride = self._n(0.01)  # the coarse pass needs 10 ms steps only: the fine pass searches +-12 samples
-        coarse = min((float(self._t[k]) for k in range(first, leave + 1, stride)), key=hinge.sse)
         window = slice(lo, end + 1)
-        physics = _DecayFit(
-            self._t[window],
-            self._x[window],
-            self._r[window],
-            leave - lo,
-            hold_rad=self._hold_angle,
-            rest_rad=self.baseline_rad_,
-        )
+        physics = _DecayFit(self._t[window], self._x[window], self._r[window], leave - lo,
+                            hold_rad=self._hold_angle, rest_rad=self.baseline_rad_)  # fmt: skip
+        dt = 1.0 / float(self.rate_hz or 1.0)
         earliest = float(self._t[lo + 2])
-        tau = coarse
+        first = max(lo + 2, leave - self._n(self.scan_back_s))
+        tau = min((float(self._t[k]) for k in range(first, leave + 1, self._n(0.01))), key=physics.sse)
         for step, reach in ((2.0, 6), (1.0, 2), (0.25, 3)):  # +-12, then +-2 samples, then quarter samples
             candidates = (tau + dt * step * j for j in range(-reach, reach + 1))
             tau = min((c for c in candidates if c > earliest), key=physics.sse)
@@ -430,24 +419,6 @@ class _JointFit:
         """Fitted angle and angle rate at tau: the initial state of the free decay."""
         coef, _ = self._solve(tau)
         return float(coef[0]), float(coef[2])
-
-
-class _HingeFit(_JointFit):
-    """Angle and rate around a release as one smooth motion plus a hinge at tau.
-
-    rate(t)  = bias + p0 + p1 u + p2 u^2 + h1 u+ + h2 u+^2 + h3 u+^3,   u = t - tau, u+ = max(u, 0)
-    angle(t) = q0 + p0 u + p1 u^2/2 + p2 u^3/3 + h1 u+^2/2 + h2 u+^3/3 + h3 u+^4/4
-    The smooth part absorbs the hand's slow sway, the hinge the restoring moment that takes over
-    at release; the gyro bias is free.
-    """
-
-    def _design(self, tau: float) -> np.ndarray:
-        u = self.t - tau
-        up = np.maximum(u, 0.0)
-        zero, one = np.zeros_like(u), np.ones_like(u)
-        angle_cols = [one, zero, u, u**2 / 2, u**3 / 3, up**2 / 2, up**3 / 3, up**4 / 4]
-        rate_cols = [zero, one, one, u, u**2, up, up**2, up**3]
-        return self._weighted(angle_cols, rate_cols)
 
 
 class _DecayFit(_JointFit):
