@@ -11,6 +11,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Mapping
 from dataclasses import astuple, dataclass
+from typing import Any
 
 from ..errors import ProtocolError
 from .mtdata2 import (
@@ -203,15 +204,15 @@ def encode_mtdata(values: Mapping[str, object], output_mode: int, output_setting
         raise ProtocolError(f"legacy output mode 0x{output_mode:04X} needs values for {', '.join(missing)}")
     out = bytearray()
     for block in layout.blocks:
-        value = values[block.name]
+        value: Any = values[block.name]
         try:
             if block.kind == "reals":
-                reals = (value,) if isinstance(value, int | float) else tuple(value)  # type: ignore[arg-type]
+                reals = (value,) if isinstance(value, int | float) else tuple(value)
                 if len(reals) != block.count:
                     raise ProtocolError(f"{block.name} takes {block.count} values, got {len(reals)}")
                 out += encode_reals(reals, layout.precision_bits)
             elif block.kind in ("utc", "rawgps"):
-                out += block.fmt.pack(*astuple(value))  # type: ignore[arg-type]
+                out += block.fmt.pack(*astuple(value))
             else:
                 out += block.fmt.pack(*(value if isinstance(value, tuple) else (value,)))
         except (struct.error, TypeError) as exc:

@@ -12,6 +12,7 @@ import struct
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import astuple, dataclass, fields
 from datetime import UTC, datetime
+from typing import Any
 
 from ..errors import ProtocolError
 
@@ -283,7 +284,7 @@ def decode_reals(data: bytes, precision_bits: int) -> tuple[float, ...]:
 # ----------------------------------------------------------------------------------------- items
 
 
-def encode_value(xdi: int, value: object) -> bytes:
+def encode_value(xdi: int, value: Any) -> bytes:
     """The DATA bytes of one item; ``bytes`` are passed through for the structured outputs."""
     spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
     if spec is None:
@@ -294,22 +295,22 @@ def encode_value(xdi: int, value: object) -> bytes:
         return bytes(value)
     try:
         if spec.kind == "real":
-            values = (value,) if isinstance(value, int | float) else tuple(value)  # type: ignore[arg-type]
+            values = (value,) if isinstance(value, int | float) else tuple(value)
             if len(values) != spec.count:
                 raise ProtocolError(f"{spec.name} takes {spec.count} values, got {len(values)}")
             return encode_reals(values, xdi & PRECISION_MASK)
         if spec.kind == "int":
             return struct.pack(spec.fmt, value)
         if spec.kind == "ints":
-            return struct.pack(spec.fmt, *value)  # type: ignore[misc]
+            return struct.pack(spec.fmt, *value)
         if spec.kind == "deviceid":
-            return struct.pack(">Q" if value > 0xFFFFFFFF else ">I", value)  # type: ignore[operator]
+            return struct.pack(">Q" if value > 0xFFFFFFFF else ">I", value)
         if spec.kind == "utc":
-            return UTC_STRUCT.pack(*astuple(value))  # type: ignore[arg-type]
+            return UTC_STRUCT.pack(*astuple(value))
         if spec.kind == "pvt":
-            return PVT_STRUCT.pack(*astuple(value))  # type: ignore[arg-type]
-        header = SATINFO_HEADER.pack(value.itow, value.num_svs, value.res1, value.res2, value.res3)  # type: ignore[attr-defined]
-        return header + b"".join(SATELLITE_STRUCT.pack(*astuple(sat)) for sat in value.satellites)  # type: ignore[attr-defined]
+            return PVT_STRUCT.pack(*astuple(value))
+        header = SATINFO_HEADER.pack(value.itow, value.num_svs, value.res1, value.res2, value.res3)
+        return header + b"".join(SATELLITE_STRUCT.pack(*astuple(sat)) for sat in value.satellites)
     except (struct.error, TypeError, AttributeError) as exc:
         raise ProtocolError(f"cannot encode {value!r} as {spec.name}: {exc}") from None
 
