@@ -133,6 +133,8 @@ def _regular_run(buf: np.ndarray, max_length: int) -> tuple[int, int, int]:
     header_size = 6 if buf[3] == EXTENDED_LENGTH else 4
     if total - header_size - 1 > max_length:
         return 0, 0, 0
+    if buf.size >= 2 * total and buf[total : total + header_size].tobytes() != buf[:header_size].tobytes():
+        return 0, 0, 0  # the next frame has another shape (a mixed stream): leave it to the general scan
     rows = buf[: buf.size // total * total].reshape(-1, total)
     count = 0
     for stop in (PROBE_ROWS, rows.shape[0]):  # probe a few rows first: mixed streams break off early
@@ -683,7 +685,9 @@ def _payload_rows(buf: np.ndarray, starts: np.ndarray, length: int) -> np.ndarra
     """(frames, length) payload bytes: a strided view when frames are evenly spaced, else a gather."""
     if not length:
         return np.zeros((starts.size, 0), dtype=np.uint8)
-    step = int(starts[1] - starts[0]) if starts.size > 1 else length
+    if starts.size == 1:
+        return buf[starts[0] : starts[0] + length].reshape(1, length)
+    step = int(starts[1] - starts[0])
     if (
         step >= length
         and starts[-1] - starts[0] == step * (starts.size - 1)
