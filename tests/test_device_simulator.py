@@ -1,0 +1,175 @@
+"""The simulated MTi-G at the message level, through a plain pyserial client on its pty."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+import serial
+
+from tankdaq.device.driver import MTiDriver
+from tankdaq.device.simulator import Faults, SimulatedMTi
+from tankdaq.errors import DeviceError, DeviceGone, InputError
+from tankdaq.physics.scenario import DecayScenario
+from tankdaq.xsens.constants import MID, baud_code
+from tankdaq.xsens.control import output_configuration_payload, parse_output_configuration
+from tankdaq.xsens.frame import Frame, build_frame
+from tankdaq.xsens.framer import StreamFramer
+from tankdaq.xsens.mtdata2 import decode_mtdata2, make_xdi
+
+
+class Client:
+    """A bare Xbus client: send a frame, collect frames for a while."""
+
+    def __init__(self, port: str, baud: int = 115200) -> None:
+        self.serial = serial.Serial(port, baud, timeout=0.02)
+        self.framer = StreamFramer()
+
+    def send(self, mid: int, payload: bytes = b"") -> None:
+        self.serial.write(build_frame(mid, payload))
+
+    def collect(self, seconds: float, until: int | None = None) -> list[Frame]:
+        frames: list[Frame] = []
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            frames += self.framer.feed(self.serial.read(4096))
+            if until is not None and any(f.mid == until for f in frames):
+                break
+        return frames
+
+    def ask(self, mid: int, payload: bytes = b"") -> Frame:
+        self.send(mid, payload)
+        replies = [f for f in self.collect(1.0, until=mid + 1) if f.mid in (mid + 1, MID.ERROR)]
+        assert replies, f"no reply to {MID(mid).name}"
+        return replies[-1]
+
+
+@pytest.fixture
+def sim():
+    with SimulatedMTi(DecayScenario(rate_hz=100), speed=10.0) as device:
+        yield device
+
+
+def test_power_up_sends_wakeup_and_stays_in_config_when_acknowledged(sim: SimulatedMTi) -> None:
+    client = Client(sim.link)
+    first = client.collect(0.3, until=MID.WAKEUP)
+    assert [f.mid for f in first] == [MID.WAKEUP]
+    client.send(MID.WAKEUP_ACK)
+    assert client.collect(0.8) == []  # acknowledged: no data until GoToMeasurement
+    assert client.ask(MID.GOTO_MEASUREMENT).mid == MID.GOTO_MEASUREMENT_ACK
+    assert any(f.mid == MID.MTDATA2 for f in client.collect(0.3))
+
+
+def test_unacknowledged_wakeup_means_measuring_with_the_stored_configuration(sim: SimulatedMTi) -> None:
+    client = Client(sim.link)
+    frames = [f for f in client.collect(1.0) if f.mid == MID.MTDATA2]
+    assert frames
+    # Factory-like default: counter, time, quaternion and status.
+    assert set(decode_mtdata2(frames[-1].payload)) == {
+        "PacketCounter",
+        "SampleTimeFine",
+        "Quaternion",
+        "StatusWord",
+    }
+
+
+def test_output_configuration_is_honoured_and_the_echo_is_effective(sim: SimulatedMTi) -> None:
+    client = Client(sim.link)
+    assert client.ask(MID.GOTO_CONFIG).mid == MID.GOTO_CONFIG_ACK
+    requested = [
+        (make_xdi("PacketCounter"), 0xFFFF),
+        (make_xdi("SampleTimeFine"), 0xFFFF),
+        (make_xdi("EulerAngles", "fp1632"), 120),  # not a divisor of 400 Hz: the device makes it 100
+        (make_xdi("RateOfTurn", "float64"), 50),
+        (0x7010, 4),  # GNSS PVT: this simulated device has none, so it is left out
+    ]
+    echo = parse_output_configuration(
+        client.ask(MID.OUTPUT_CONFIGURATION, output_configuration_payload(requested)).payload
+    )
+    assert echo == [requested[0], requested[1], (make_xdi("EulerAngles", "fp1632"), 100), requested[3]]
+    assert parse_output_configuration(client.ask(MID.OUTPUT_CONFIGURATION).payload) == echo
+    client.ask(MID.GOTO_MEASUREMENT)
+    messages = [decode_mtdata2(f.payload) for f in client.collect(1.0) if f.mid == MID.MTDATA2]
+    ticks = np.array([m["SampleTimeFine"] for m in messages])
+    assert np.all(np.diff(ticks) == 100)  # messages at 100 Hz
+    with_rate = [m for m in messages if "RateOfTurn" in m]
+    assert 0.4 < len(with_rate) / len(messages) < 0.6  # RateOfTurn at 50 Hz: every other message
+    assert all(set(m) <= {"PacketCounter", "SampleTimeFine", "EulerAngles", "RateOfTurn"} for m in messages)
+    assert messages[0].precision("EulerAngles") == "fp1632"
+
+
+def test_unknown_messages_get_error_0x04(sim: SimulatedMTi) -> None:
+    client = Client(sim.link)
+    client.ask(MID.GOTO_CONFIG)
+    reply = client.ask(MID.RUN_SELFTEST)
+    assert (reply.mid, reply.payload) == (MID.ERROR, b"\x04")
+
+
+def test_baud_rate_change_applies_after_reset_which_wakes_the_device_up(sim: SimulatedMTi) -> None:
+    client = Client(sim.link)
+    client.ask(MID.GOTO_CONFIG)
+    assert client.ask(MID.REQ_BAUDRATE).payload == bytes((baud_code(115200),))
+    assert client.ask(MID.SET_BAUDRATE, bytes((baud_code(460800),))).mid == MID.BAUDRATE_ACK
+    assert client.ask(MID.GOTO_CONFIG).mid == MID.GOTO_CONFIG_ACK  # still at the old rate until reset
+    client.send(MID.RESET)
+    assert [f.mid for f in client.collect(0.5, until=MID.RESET_ACK)][-1] == MID.RESET_ACK
+    client.serial.close()
+    with MTiDriver(sim.link, baud=115200, config_attempts=3) as driver, pytest.raises(DeviceError):
+        driver.configure()
+    with MTiDriver(sim.link, baud=460800) as driver:
+        assert driver.configure().baud == 460800
+
+
+def test_legacy_device_refuses_output_configuration() -> None:
+    with SimulatedMTi(legacy=True, speed=10.0) as old:
+        client = Client(old.link)
+        client.ask(MID.GOTO_CONFIG)
+        reply = client.ask(
+            MID.OUTPUT_CONFIGURATION, output_configuration_payload([(make_xdi("EulerAngles"), 100)])
+        )
+        assert (reply.mid, reply.payload) == (MID.ERROR, b"\x04")
+        assert client.ask(MID.REQ_FW_REV).payload == bytes((2, 4, 6))
+
+
+def test_driver_opens_a_pyserial_url(sim: SimulatedMTi, tmp_path) -> None:
+    log = tmp_path / "spy.txt"
+    with MTiDriver(f"spy://{sim.link}?file={log}") as driver:
+        driver.configure()
+        assert driver.samples(0.5).size == 50
+    assert log.stat().st_size > 0  # the spy handler saw the traffic
+
+
+def test_silence_longer_than_the_timeout_is_a_vanished_device(sim: SimulatedMTi) -> None:
+    with MTiDriver(sim.link, silence_timeout_s=0.3) as driver:
+        driver.configure()
+        driver.samples(0.5)
+        sim.stall(2.0)
+        with pytest.raises(DeviceGone, match="no data"):
+            driver.samples(5.0)
+
+
+def test_scheduled_unplug_and_replug_keep_the_link() -> None:
+    faults = Faults(unplug_at_s=3.0, replug_after_s=2.0)
+    with SimulatedMTi(DecayScenario(rate_hz=100), speed=10.0, faults=faults) as device:
+        link = device.link
+        deadline = time.monotonic() + 2.0
+        while device.plugged and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert not device.plugged and not os.path.exists(link)
+        while not device.plugged and time.monotonic() < deadline + 2.0:
+            time.sleep(0.01)
+        assert device.plugged and os.readlink(link) == device.port
+
+
+@pytest.mark.parametrize("text", ["corrupt=2", "stall=abc", "explode=1"])
+def test_bad_fault_specs_are_input_errors(text: str) -> None:
+    with pytest.raises(InputError):
+        Faults.parse(text)
+
+
+def test_fault_spec_parses() -> None:
+    assert Faults.parse("corrupt=0.001,drop=1e-4,stall=2@30,unplug=60,replug=5") == Faults(
+        corrupt_rate=0.001, drop_rate=1e-4, stall_at_s=30.0, stall_s=2.0, unplug_at_s=60.0, replug_after_s=5.0
+    )
