@@ -97,10 +97,10 @@ def test_mcap_recordings_are_read_through_the_store_reader(tmp_path):
     samples = np.zeros(t.size, dtype=SAMPLE_DTYPE)
     samples["t"], samples["ticks"] = t, np.round(t * 1e4).astype(np.int64)
     samples["az"] = 9.81
-    samples["roll"] = np.radians(6.0)
-    samples["roll"][free], samples["p"][free] = simulate_decay(truth, t[free] - 2.0, np.radians(6.0))
+    samples["pitch"] = np.radians(6.0)  # a pitch decay: the axis comes from the recording's metadata
+    samples["pitch"][free], samples["q"][free] = simulate_decay(truth, t[free] - 2.0, np.radians(6.0))
     path = tmp_path / "decay.mcap"
-    with RecordingWriter(path, {"axis": "roll"}, {}) as writer:
+    with RecordingWriter(path, {"axis": "pitch"}, {}) as writer:
         writer.write_samples(samples)
         writer.write_event("release", "released by hand", t_s=2.0)
     result = invoke(path, "--model", "b1,b2,c1,c3", "--json")
@@ -109,6 +109,7 @@ def test_mcap_recordings_are_read_through_the_store_reader(tmp_path):
     for k, value in truth.items():
         assert out["coefficients"][k]["value"] == pytest.approx(value, rel=1e-3)
     assert out["runs"][0]["initial_angle_deg"] == pytest.approx(6.0, abs=0.01)
+    assert out["axis"] == "pitch"
 
 
 def test_bootstrap_intervals_replace_the_jacobian_ones(tmp_path):

@@ -28,7 +28,7 @@ def _progress() -> Progress:
 
 def load_runs(
     inputs: list[Path],
-    axis: str,
+    axis: str | None,
     time_col: str,
     angle_col: str,
     rate_col: str | None,
@@ -36,7 +36,10 @@ def load_runs(
     keep_all: bool,
     skip_half_cycles: int,
 ) -> list[DecayRun]:
-    """Decay runs from every input: MCAP recordings through the store reader, anything else as CSV."""
+    """Decay runs from every input: MCAP recordings through the store reader, anything else as CSV.
+
+    Without ``axis`` a recording's decays are read on the axis its metadata names.
+    """
     from ..store.csv_import import read_csv_runs
 
     runs: list[DecayRun] = []
@@ -55,7 +58,7 @@ def load_runs(
                     angle_col=angle_col,
                     rate_col=rate_col,
                     angle_unit=angle_unit,
-                    axis=axis,
+                    axis=axis or "roll",
                     keep_all=keep_all,
                     skip_half_cycles=skip_half_cycles,
                 )
@@ -84,7 +87,9 @@ def identify_command(
     inputs: Annotated[
         list[Path], typer.Argument(help="Decay recordings (.mcap) or CSV files, one decay each.")
     ],
-    axis: str = typer.Option("roll", "--axis", help="roll or pitch."),
+    axis: str = typer.Option(
+        None, "--axis", help="roll or pitch (default: a recording's own axis; roll for CSV)."
+    ),
     model: str = typer.Option(
         "ittc-quadratic-restoring", "--model", help="Terms (b1,b2,c1,c3) or an alias (docs/models.md)."
     ),
@@ -119,7 +124,7 @@ def identify_command(
     from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
     from ..ident.uncertainty import moving_block_bootstrap, repeat_spread
 
-    if axis not in ("roll", "pitch"):
+    if axis not in (None, "roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     hull_config = load_hull(hull) if hull else None
     terms = resolve_model(model)
