@@ -52,10 +52,16 @@ def sim():
         yield device
 
 
-def test_power_up_sends_wakeup_and_stays_in_config_when_acknowledged(sim: SimulatedMTi) -> None:
+def _reset(client: Client) -> list[Frame]:
+    """Reset the device (a power cycle without unplugging: the port stays open) and collect the boot."""
+    client.ask(MID.GOTO_CONFIG)
+    client.send(MID.RESET)
+    return client.collect(0.3, until=MID.WAKEUP)
+
+
+def test_reset_boots_with_wakeup_and_an_acknowledged_wakeup_keeps_config(sim: SimulatedMTi) -> None:
     client = Client(sim.link)
-    first = client.collect(0.3, until=MID.WAKEUP)
-    assert [f.mid for f in first] == [MID.WAKEUP]
+    assert [f.mid for f in _reset(client)][-2:] == [MID.RESET_ACK, MID.WAKEUP]
     client.send(MID.WAKEUP_ACK)
     assert client.collect(0.8) == []  # acknowledged: no data until GoToMeasurement
     assert client.ask(MID.GOTO_MEASUREMENT).mid == MID.GOTO_MEASUREMENT_ACK
@@ -64,6 +70,7 @@ def test_power_up_sends_wakeup_and_stays_in_config_when_acknowledged(sim: Simula
 
 def test_unacknowledged_wakeup_means_measuring_with_the_stored_configuration(sim: SimulatedMTi) -> None:
     client = Client(sim.link)
+    assert _reset(client)[-1].mid == MID.WAKEUP
     frames = [f for f in client.collect(1.0) if f.mid == MID.MTDATA2]
     assert frames
     # Factory-like default: counter, time, quaternion and status.
