@@ -35,6 +35,7 @@ MEASURED_BY = {
     "friction.coulomb": "fc",
     "coupling.heave": "k_heave_m",
     "coupling.other_rotation": "k_other_angle",
+    "coupling.unmeasured": "ring_omega_rad_s",  # heave not recorded: its frequency is what can be measured
 }
 KVLCC2 = Path(__file__).parents[2] / "shared" / "data" / "kvlcc2-roll-decay" / "model_test_21338.csv"
 
@@ -123,6 +124,36 @@ def test_quadratic_and_cubic_damping_are_reported_head_to_head() -> None:
     assert set(rivals) == {"damping.cubic"}
     assert rivals["damping.cubic"].delta_bic < -10  # the rival explains much of it too ...
     assert rivals["damping.cubic"].vs_chosen > 0  # ... but less well than the chosen member
+
+
+def test_an_unmeasured_coupling_is_modelled_at_its_own_frequency() -> None:
+    data = make_decay_set(["coupling.unmeasured"], seed=6)
+    assert not data.runs[0].channels
+    diagnoser = Diagnoser().fit(data.runs)
+    assert [s.effect.key for s in diagnoser.steps_] == ["coupling.unmeasured"]
+    assert diagnoser.final_.coefficients["ring_omega_rad_s"] == pytest.approx(
+        data.truth["heave_omega"], rel=0.01
+    )
+    assert diagnoser.final_.rms_angle < 1.1 * data.noise_angle_rad
+
+
+def test_each_step_says_what_the_diagnostics_showed() -> None:
+    from tankdaq.diagnose.workflow import signature_seen
+
+    for key, expected in (
+        ("damping.quadratic", "damping ratio grows with amplitude"),
+        ("sensor.offset", "angle residual mean"),
+        ("sensor.lag", "angle residual follows the rate"),
+        ("friction.coulomb", "damping ratio falls with amplitude"),
+        ("coupling.other_rotation", "residual correlated with other_angle"),
+    ):
+        diagnoser = Diagnoser().fit(make_decay_set([key], seed=9).runs)
+        step = diagnoser.steps_[0]
+        seen = signature_seen(step.effect, step.diagnostics, diagnoser.cycle_trend_)
+        assert any(expected in s for s in seen), (key, seen)
+    clean = Diagnoser(max_steps=0).fit(make_decay_set([], seed=9).runs)
+    for effect in LIBRARY:
+        assert signature_seen(effect, clean.diagnostics_[0], clean.cycle_trend_) == [], effect.key
 
 
 def test_first_diagnostics_point_at_the_hidden_effect() -> None:

@@ -14,7 +14,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from ..records import DecayRun
-from .fitting import ModelSpec
+from .fitting import Fit, ModelSpec
+from .residuals import Diagnostics
+
+#: What a candidate is added from: the current model, the records, and what the residual says.
+Extend = Callable[[ModelSpec, Sequence[DecayRun], Diagnostics], ModelSpec | None]
 
 #: Measured channels a coupling term may use, by the motion they carry.
 #: Names as DecayRun.channels holds them: CSV import strips _deg/_rad after converting to rad, MCAP
@@ -41,29 +45,35 @@ class Effect:
     adds: str  # the term(s) in words and symbols
     signature: str  # what the residual of a model without it shows
     kind: str  # "dynamics", "observation" or "truncation"
-    apply: Callable[[ModelSpec, Sequence[DecayRun]], ModelSpec | None]
+    apply: Extend
+    #: A parameter that must stay >= 0 for the fit to mean this effect (friction cannot feed energy in).
+    non_negative: str | None = None
 
-    def extend(self, spec: ModelSpec, runs: Sequence[DecayRun]) -> ModelSpec | None:
+    def extend(self, spec: ModelSpec, runs: Sequence[DecayRun], diag: Diagnostics) -> ModelSpec | None:
         """The model with this effect added, or None when it is present already or cannot be fitted here."""
-        return self.apply(spec, runs)
+        return self.apply(spec, runs, diag)
+
+    def plausible(self, fit: Fit) -> bool:
+        """Whether the refit describes this effect physically (else it is fitting something else)."""
+        return self.non_negative is None or fit.coefficients[self.non_negative] >= 0.0
 
 
-def _add_term(term: str) -> Callable[[ModelSpec, Sequence[DecayRun]], ModelSpec | None]:
-    def apply(spec: ModelSpec, _runs: Sequence[DecayRun]) -> ModelSpec | None:
+def _add_term(term: str) -> Extend:
+    def apply(spec: ModelSpec, _runs: Sequence[DecayRun], _diag: Diagnostics) -> ModelSpec | None:
         return None if term in spec.terms else spec.with_(terms=(*spec.terms, term))
 
     return apply
 
 
-def _sine_restoring(spec: ModelSpec, _runs: Sequence[DecayRun]) -> ModelSpec | None:
+def _sine_restoring(spec: ModelSpec, _runs: Sequence[DecayRun], _diag: Diagnostics) -> ModelSpec | None:
     """Replace the linear spring c1*x by a wall-sided GZ s1*sin(x) (same number of parameters)."""
     if "c1" not in spec.terms or "s1" in spec.terms:
         return None
     return spec.with_(terms=tuple("s1" if t == "c1" else t for t in spec.terms))
 
 
-def _set_flag(flag: str, needs_rate: bool) -> Callable[[ModelSpec, Sequence[DecayRun]], ModelSpec | None]:
-    def apply(spec: ModelSpec, runs: Sequence[DecayRun]) -> ModelSpec | None:
+def _set_flag(flag: str, needs_rate: bool) -> Extend:
+    def apply(spec: ModelSpec, runs: Sequence[DecayRun], _diag: Diagnostics) -> ModelSpec | None:
         if getattr(spec, flag) or (needs_rate and any(r.rate is None for r in runs)):
             return None
         return spec.with_(**{flag: True})
@@ -76,8 +86,8 @@ def measured_channel(runs: Sequence[DecayRun], candidates: Sequence[str]) -> str
     return next((ch for ch in candidates if all(ch in r.channels for r in runs)), None)
 
 
-def _couple(candidates: tuple[str, ...]) -> Callable[[ModelSpec, Sequence[DecayRun]], ModelSpec | None]:
-    def apply(spec: ModelSpec, runs: Sequence[DecayRun]) -> ModelSpec | None:
+def _couple(candidates: tuple[str, ...]) -> Extend:
+    def apply(spec: ModelSpec, runs: Sequence[DecayRun], _diag: Diagnostics) -> ModelSpec | None:
         channel = measured_channel(runs, candidates)
         if channel is None or channel in spec.coupling:
             return None
@@ -86,7 +96,15 @@ def _couple(candidates: tuple[str, ...]) -> Callable[[ModelSpec, Sequence[DecayR
     return apply
 
 
-def _never(_spec: ModelSpec, _runs: Sequence[DecayRun]) -> ModelSpec | None:
+def _ringing(spec: ModelSpec, runs: Sequence[DecayRun], diag: Diagnostics) -> ModelSpec | None:
+    """Only when the residual rings at a non-harmonic frequency and no measured channel can explain it."""
+    measured = measured_channel(runs, HEAVE_CHANNELS + OTHER_ROTATION_CHANNELS)
+    if spec.ring or spec.coupling or measured is not None or diag.ringing_rad_s is None:
+        return None
+    return spec.with_(ring=True)
+
+
+def _never(_spec: ModelSpec, _runs: Sequence[DecayRun], _diag: Diagnostics) -> ModelSpec | None:
     """Truncation is not a model change; the workflow handles it by cutting the records."""
     return None
 
@@ -181,7 +199,8 @@ LIBRARY: tuple[Effect, ...] = (
         "decrement per half cycle tends to a constant at small amplitude; straight-line envelope; "
         "damping ratio falls with amplitude",
         "dynamics",
-        lambda spec, _runs: None if spec.coulomb else spec.with_(coulomb=True),
+        _set_flag("coulomb", needs_rate=False),
+        non_negative="fc",
     ),
     Effect(
         "coupling.heave",
@@ -200,6 +219,16 @@ LIBRARY: tuple[Effect, ...] = (
         "residual peak at the other axis' frequency; residual correlated with the measured other angle",
         "dynamics",
         _couple(OTHER_ROTATION_CHANNELS),
+    ),
+    Effect(
+        "coupling.unmeasured",
+        "coupling with an unmeasured motion",
+        "coupled motion",
+        "exp(-l t) (p cos wt + q sin wt), w and l shared, p and q per run",
+        "residual peak at a frequency that is no harmonic of the natural one, and no measured channel",
+        "dynamics",
+        _ringing,
+        non_negative="ring_decay_1_s",  # a motion released with the model rings down; a growing one is later
     ),
     Effect(
         "disturbance.late",

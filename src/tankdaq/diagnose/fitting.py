@@ -18,6 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numba import njit
 from scipy.optimize import least_squares
+from scipy.signal import butter, sosfiltfilt
 
 from ..errors import BadIdentificationInput, IdentificationError
 from ..physics.decay import TERMS
@@ -40,6 +41,7 @@ class ModelSpec:
     gain: bool = False  # angle gain error g: y = (1 + g) x
     lag: bool = False  # angle lag tau relative to the gyro rate
     gyro_bias: bool = False
+    ring: bool = False  # an unmeasured motion ringing down at its own frequency forces the decay
 
     def __post_init__(self) -> None:
         unknown = [t for t in self.terms if t not in TERMS]
@@ -59,17 +61,23 @@ class ModelSpec:
             names.append("angle_lag_s")
         if self.gyro_bias:
             names.append("gyro_bias_rad_s")
+        if self.ring:
+            names += ["ring_omega_rad_s", "ring_decay_1_s"]
         return names
 
     @property
     def run_names(self) -> list[str]:
-        """Parameters of each run: initial state and (optionally) the angle offset."""
-        return ["angle0", "rate0"] + (["angle_offset_rad"] if self.offset else [])
+        """Parameters of each run: initial state, optionally the angle offset and the ringing's amplitude."""
+        return (
+            ["angle0", "rate0"]
+            + (["angle_offset_rad"] if self.offset else [])
+            + (["ring_cos", "ring_sin"] if self.ring else [])
+        )
 
     @property
     def labels(self) -> list[str]:
         """Everything the model holds, as short names: terms, then fc, k_<channel>, observation flags."""
-        flags = [flag for flag in ("offset", "gain", "lag", "gyro_bias") if getattr(self, flag)]
+        flags = [flag for flag in ("offset", "gain", "lag", "gyro_bias", "ring") if getattr(self, flag)]
         return [*self.terms, *(["fc"] if self.coulomb else []), *(f"k_{ch}" for ch in self.coupling), *flags]
 
     def describe(self) -> str:
@@ -81,6 +89,8 @@ class ModelSpec:
         for flag in ("offset", "gain", "lag", "gyro_bias"):
             if getattr(self, flag):
                 parts.append(flag.replace("_", " "))
+        if self.ring:
+            parts.append("unmeasured ringing")
         return " + ".join(parts)
 
     def with_(self, **changes: object) -> ModelSpec:
@@ -209,13 +219,21 @@ class Fit:
     spec: ModelSpec
     coefficients: dict[str, float]
     std: dict[str, float]
-    initial_states: list[tuple[float, float]]
-    offsets: list[float]
+    run_params: list[dict[str, float]]  # per run: angle0, rate0 and what else the spec fits per run
     runs: list[RunPrediction]
     rss: float  # weighted (angle / sigma_angle, rate / sigma_rate)
     n: int
     k: int
     params: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+
+    @property
+    def initial_states(self) -> list[tuple[float, float]]:
+        return [(p["angle0"], p["rate0"]) for p in self.run_params]
+
+    @property
+    def offsets(self) -> list[float]:
+        """Per-run angle offsets, empty when the model has none."""
+        return [p["angle_offset_rad"] for p in self.run_params] if self.spec.offset else []
 
     @property
     def bic(self) -> float:
@@ -269,6 +287,25 @@ class Fit:
         return ljung_box_p([r.residual_angle for r in self.runs], model_df=0)
 
 
+#: Measured channels used as a forcing are low-passed here: ship motions live well below it.
+CHANNEL_CUTOFF_HZ = 5.0
+
+
+def forcing_channel(values: np.ndarray, rate_hz: float) -> np.ndarray:
+    """A measured channel made fit to drive the equation of motion.
+
+    About its mean: a static part (gravity in acc_z, the tracker's zero) is an
+    offset, not a coupling. Low-passed (zero phase): its sensor noise would
+    otherwise enter as a random forcing, a process noise the model cannot have.
+    """
+    centred = np.asarray(values, dtype=float) - np.mean(values)
+    cutoff = min(CHANNEL_CUTOFF_HZ, 0.4 * rate_hz)
+    if centred.size < 30:
+        return centred
+    sos = butter(4, cutoff, fs=rate_hz, output="sos")
+    return sosfiltfilt(sos, centred)
+
+
 @dataclass
 class _RunData:
     run: DecayRun
@@ -291,8 +328,7 @@ def _prepare(runs: Sequence[DecayRun], spec: ModelSpec) -> list[_RunData]:
             raise BadIdentificationInput(f"{run.name}: lag, gain and gyro bias need a measured rate")
         sigma_angle = max(noise_level(run.angle), 1e-9)
         sigma_rate = max(noise_level(run.rate), 1e-9) if run.rate is not None else 1.0
-        # about its mean: a static part (gravity in acc_z, the tracker's zero) is an offset, not a coupling
-        channels = {ch: run.channels[ch] - np.mean(run.channels[ch]) for ch in spec.coupling}
+        channels = {ch: forcing_channel(run.channels[ch], run.sample_rate) for ch in spec.coupling}
         prepared.append(_RunData(run, sigma_angle, sigma_rate, channels))
     return prepared
 
@@ -319,10 +355,15 @@ class _Problem:
         forcing = np.zeros(d.run.t.size)
         for ch, u in d.channels.items():
             forcing += g[f"k_{ch}"] * u
-        x, v = simulate_rk4(d.run.t, forcing, coef, g.get("fc", 0.0), rp[0], rp[1])
+        own = dict(zip(self.spec.run_names, rp, strict=True))
+        if self.spec.ring:
+            since = d.run.t - d.run.t[0]
+            phase = g["ring_omega_rad_s"] * since
+            envelope = np.exp(-g["ring_decay_1_s"] * since)
+            forcing += envelope * (own["ring_cos"] * np.cos(phase) + own["ring_sin"] * np.sin(phase))
+        x, v = simulate_rk4(d.run.t, forcing, coef, g.get("fc", 0.0), own["angle0"], own["rate0"])
         angle = (1.0 + g.get("angle_gain_error", 0.0)) * lagged(d.run.t, x, v, g.get("angle_lag_s", 0.0))
-        if self.spec.offset:
-            angle = angle + rp[2]
+        angle = angle + own.get("angle_offset_rad", 0.0)
         return angle, v + g.get("gyro_bias_rad_s", 0.0)
 
     def run_residual(self, d: _RunData, g: dict[str, float], rp: np.ndarray) -> np.ndarray:
@@ -363,18 +404,15 @@ def _start_vector(problem: _Problem, start: Fit | None, guess: dict[str, float])
     glob = [known.get(name, 0.0) for name in problem.gnames]
     per_run = []
     for i, d in enumerate(problem.data):
-        if start is not None and i < len(start.initial_states):
-            x0, v0 = start.initial_states[i]
-            off = start.offsets[i] if start.offsets else 0.0
-        else:
-            x0 = float(d.run.angle[0])
-            v0 = (
-                float(d.run.rate[0])
-                if d.run.rate is not None
-                else float((d.run.angle[1] - d.run.angle[0]) / (d.run.t[1] - d.run.t[0]))
-            )
-            off = 0.0
-        per_run += [x0, v0] + ([off] if problem.spec.offset else [])
+        measured = {
+            "angle0": float(d.run.angle[0]),
+            "rate0": float(d.run.rate[0])
+            if d.run.rate is not None
+            else float((d.run.angle[1] - d.run.angle[0]) / (d.run.t[1] - d.run.t[0])),
+        }
+        if start is not None and i < len(start.run_params):
+            measured |= start.run_params[i]
+        per_run += [measured.get(name, 0.0) for name in problem.spec.run_names]
     return np.array(glob + per_run, dtype=float)
 
 
@@ -402,8 +440,7 @@ def fit_spec(
         spec=spec,
         coefficients={k: float(v) for k, v in g.items()},
         std=_standard_errors(sol.jac, rss, n, problem.gnames),
-        initial_states=[(float(rp[0]), float(rp[1])) for rp in rps],
-        offsets=[float(rp[2]) for rp in rps] if spec.offset else [],
+        run_params=[{k: float(v) for k, v in zip(spec.run_names, rp, strict=True)} for rp in rps],
         runs=_predictions(problem, sol.x),
         rss=rss,
         n=n,

@@ -248,3 +248,45 @@ def channel_correlation(residual: np.ndarray, channel: np.ndarray, max_lag: int)
         c = float(np.dot(e[lag:], u[: u.size - lag])) if lag >= 0 else float(np.dot(e[:lag], u[-lag:]))
         best = max(best, abs(c) / denom)
     return best
+
+
+def ringing_frequency(residuals: Sequence[np.ndarray], rate_hz: float, omega0_rad_s: float) -> float | None:
+    """The frequency of a motion the residual rings with that is no harmonic of the decay (None if none).
+
+    A zero-padded periodogram summed over runs resolves it far finer than Welch
+    segments, as an unmeasured coupling's refit needs a start within a fraction
+    of 2*pi / record length. Zero, the natural frequency and its harmonics (+-15 %)
+    are left out: those are other effects' signatures.
+    """
+    n_fft = 8 * max(e.size for e in residuals)
+    power = sum(np.abs(np.fft.rfft(np.asarray(e) - np.mean(e), n_fft)) ** 2 for e in residuals)
+    omega = 2 * np.pi * np.fft.rfftfreq(n_fft, 1.0 / rate_hz)
+    ratio = omega / omega0_rad_s
+    allowed = (ratio > 0.3) & (ratio < 6.0) & (np.abs(ratio - np.round(ratio)) > 0.15)
+    floor = float(np.median(power[omega > 0]))
+    if not np.any(allowed) or floor == 0.0:
+        return None
+    i_peak = int(np.argmax(np.where(allowed, power, -np.inf)))
+    return float(omega[i_peak]) if power[i_peak] > 50 * floor else None
+
+
+@dataclass
+class Diagnostics:
+    """What the residual of one fit says."""
+
+    rms_angle_rad: float
+    noise_angle_rad: float
+    ljung_box_p: float
+    spectrum: Spectrum
+    residual_mean_angle_rad: float
+    residual_mean_rate_rad_s: float | None
+    noise_rate_rad_s: float | None
+    corr_with_rate: float  # angle residual vs predicted rate: lag signature
+    corr_with_angle: float  # angle residual vs predicted angle: gain signature
+    channel_corr: dict[str, float]
+    late: list[LateOnset]
+    ringing_rad_s: float | None  # a non-harmonic frequency the residual rings with
+
+    @property
+    def white(self) -> bool:
+        return self.ljung_box_p > 0.01

@@ -46,6 +46,10 @@ def _draw_truth(effects: Sequence[str], rng: np.random.Generator) -> dict[str, f
     c1 = omega0**2
     truth = {"b1": 2 * rng.uniform(0.02, 0.04) * omega0, "c1": c1}
     sign = rng.choice([-1.0, 1.0])
+
+    def heave() -> dict[str, float]:
+        return {"k_heave_m": sign * c1 * rng.uniform(1.2, 2.4), "heave_omega": omega0 * rng.uniform(1.6, 2.2)}
+
     draws: dict[str, Callable[[], dict[str, float]]] = {
         "damping.quadratic": lambda: {"b2": rng.uniform(0.2, 0.4)},
         "damping.cubic": lambda: {"b3": rng.uniform(0.3, 0.6)},
@@ -57,10 +61,9 @@ def _draw_truth(effects: Sequence[str], rng: np.random.Generator) -> dict[str, f
         "sensor.lag": lambda: {"angle_lag_s": rng.uniform(0.02, 0.06)},
         "sensor.gain": lambda: {"angle_gain_error": sign * rng.uniform(0.04, 0.1)},
         "friction.coulomb": lambda: {"fc": rng.uniform(0.01, 0.03)},
-        "coupling.heave": lambda: {
-            "k_heave_m": sign * c1 * rng.uniform(1.2, 2.4),
-            "heave_omega": omega0 * rng.uniform(1.6, 2.2),
-        },
+        "coupling.heave": heave,
+        # the same heave, not recorded: its frequency is what the workflow can measure
+        "coupling.unmeasured": lambda: {**(h := heave()), "ring_omega_rad_s": h["heave_omega"]},
         "coupling.other_rotation": lambda: {
             "k_other_angle": sign * c1 * rng.uniform(0.2, 0.4),
             "other_omega": omega0 * rng.uniform(1.3, 1.8),
@@ -147,6 +150,7 @@ def make_decay_set(
         measured = {
             name: f(t) + rng.normal(0.0, NOISE_HEAVE_M if name == "heave_m" else noise_angle_rad, t.size)
             for name, f in channels.items()
+            if "ring_omega_rad_s" not in truth  # an unmeasured coupling leaves no channel
         }
         runs.append(
             DecayRun(

@@ -23,13 +23,13 @@ from .fitting import Fit, ModelSpec, fit_spec, predict
 from .residuals import (
     SPECTRUM_MEANING,
     CycleTrend,
-    LateOnset,
-    Spectrum,
+    Diagnostics,
     channel_correlation,
     cycle_trend,
     late_onset,
     noise_level,
     residual_spectrum,
+    ringing_frequency,
 )
 
 DEFAULT_BASELINE = "b1,c1"
@@ -51,26 +51,6 @@ def parse_baseline(text: str) -> tuple[str, ...]:
             f"({', '.join(TERMS)}); friction and coupling are effects the workflow adds itself"
         )
     return terms
-
-
-@dataclass
-class Diagnostics:
-    """What the residual of one fit says (see tankdaq.diagnose.residuals)."""
-
-    rms_angle_rad: float
-    noise_angle_rad: float
-    ljung_box_p: float
-    spectrum: Spectrum
-    residual_mean_angle_rad: float
-    residual_mean_rate_rad_s: float | None
-    corr_with_rate: float  # angle residual vs predicted rate: lag signature
-    corr_with_angle: float  # angle residual vs predicted angle: gain signature
-    channel_corr: dict[str, float]
-    late: list[LateOnset]
-
-    @property
-    def white(self) -> bool:
-        return self.ljung_box_p > 0.01
 
 
 @dataclass
@@ -152,10 +132,16 @@ def diagnose_fit(fit: Fit, runs: Sequence[DecayRun]) -> Diagnostics:
         spectrum=residual_spectrum(residuals, runs[0].sample_rate, omega0),
         residual_mean_angle_rad=float(np.mean(e)),
         residual_mean_rate_rad_s=float(np.mean(np.concatenate(rate_res))) if rate_res else None,
+        noise_rate_rad_s=float(
+            np.sqrt(np.mean([noise_level(r.rate) ** 2 for r in runs if r.rate is not None]))
+        )
+        if rate_res
+        else None,
         corr_with_rate=0.0 if np.isnan(corr_rate) else corr_rate,
         corr_with_angle=0.0 if np.isnan(corr_angle) else corr_angle,
         channel_corr=channel_corr,
         late=[late_onset(p.t, p.residual_angle) for p in fit.runs],
+        ringing_rad_s=ringing_frequency(residuals, runs[0].sample_rate, omega0),
     )
 
 
@@ -180,7 +166,12 @@ def signature_seen(effect: Effect, diag: Diagnostics, trend: CycleTrend) -> list
             seen.append(SPECTRUM_MEANING[spectrum])
         if abs(diag.residual_mean_angle_rad) > 0.5 * diag.noise_angle_rad:
             seen.append(f"angle residual mean {np.degrees(diag.residual_mean_angle_rad):.3f} deg")
-    if effect.key == "sensor.gyro_bias" and diag.residual_mean_rate_rad_s is not None:
+    bias = diag.residual_mean_rate_rad_s
+    if (
+        effect.key == "sensor.gyro_bias"
+        and bias is not None
+        and abs(bias) > 0.5 * (diag.noise_rate_rad_s or 0)
+    ):
         seen.append(f"rate residual mean {np.degrees(diag.residual_mean_rate_rad_s):.3f} deg/s")
     if effect.key == "sensor.lag" and diag.corr_with_rate > 0.5:
         seen.append(f"angle residual follows the rate (correlation {diag.corr_with_rate:.2f})")
@@ -307,11 +298,12 @@ class Diagnoser:
         """Refit every applicable candidate; keep the best if it beats the BIC margin."""
         scored: list[tuple[Effect, Fit, float]] = []
         for effect in self.library:
-            spec = effect.extend(current.spec, runs)
+            spec = effect.extend(current.spec, runs, diag)
             if spec is None:
                 continue
-            candidate = self._fit(runs, spec, effect.name, start=current)
-            scored.append((effect, candidate, candidate.bic - current.bic))
+            candidate = self._fit(runs, spec, effect.name, start=current, guess=_ringing_guess(diag))
+            if effect.plausible(candidate):
+                scored.append((effect, candidate, candidate.bic - current.bic))
         if not scored:
             return None
         effect, best, delta = min(scored, key=lambda item: item[2])
@@ -337,6 +329,13 @@ class Diagnoser:
         names = "; ".join(f"{e.name} ({e.family})" for e in added)
         tail = "residual white" if white else "residual still not white, something remains"
         return f"missing: {names}; gap reduced by {100 * self.gap_reduction_:.0f} %; {tail}"
+
+
+def _ringing_guess(diag: Diagnostics) -> dict[str, float]:
+    """Start of an unmeasured ringing: the residual's frequency, decaying over about ten periods."""
+    if diag.ringing_rad_s is None:
+        return {}
+    return {"ring_omega_rad_s": diag.ringing_rad_s, "ring_decay_1_s": diag.ringing_rad_s / (20 * np.pi)}
 
 
 def _added(before: Fit, after: Fit) -> dict[str, float]:
