@@ -104,3 +104,52 @@ def test_unknown_format_is_a_usage_error(tmp_path: Path) -> None:
     capture.write_bytes(decay_capture(2))
     result = runner.invoke(app, ["decode", str(capture), "--format", "xml"])
     assert result.exit_code == 2
+
+
+# Two real legacy MTi-G messages (ethz-asl/ethzasl_xsens_driver issue #66: mode 0x0006, settings 0x1).
+LEGACY_PAYLOADS = [
+    "3D618499BD2559AD411D13ED3B1B5260BAC11234BB7F213FBE3A38CC3E49C10C"
+    "BEA3FCDA3E8BAD87BB5302CB3BF3D3BABF7647E04B33",
+    "3DA6C684BD576F7E411D096D3C082A01BC07803C3A6094CBBE3A15783E4A3450"
+    "BEA4556A3E8BAE07BB5529D13BF1A408BF7647D54B34",
+]
+
+
+@pytest.fixture
+def legacy_capture(tmp_path: Path) -> Path:
+    frames = [build_frame(MID.MTDATA, bytes.fromhex(p)) for p in LEGACY_PAYLOADS]
+    capture = tmp_path / "legacy.bin"
+    capture.write_bytes(frames[0] + build_frame(MID.GOTO_CONFIG_ACK) + frames[1])
+    return capture
+
+
+def test_legacy_mtdata_decodes_with_mode_and_settings(legacy_capture: Path) -> None:
+    result = runner.invoke(
+        app, ["decode", str(legacy_capture), "--legacy-mode", "0x0006", "--legacy-settings", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    lines = [json.loads(line) for line in result.stdout.splitlines()]
+    assert [line["PacketCounter"] for line in lines] == [19251, 19252]
+    assert set(lines[0]) == {"Acceleration", "RateOfTurn", "MagneticField", "Quaternion", "PacketCounter"}
+    assert "2 legacy MTData messages, 1 other frames" in result.stderr
+
+
+def test_legacy_frames_without_mode_get_a_hint(legacy_capture: Path) -> None:
+    result = runner.invoke(app, ["decode", str(legacy_capture)])
+    assert result.exit_code == 0 and result.stdout == ""
+    assert "2 legacy MTData frames not decoded: give --legacy-mode and --legacy-settings" in result.stderr
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--legacy-mode", "0x0004", "--legacy-settings", "1"], "does not match output mode 0x0004"),
+        (["--legacy-mode", "0x0006"], "give both"),
+        (["--legacy-mode", "0x8000", "--legacy-settings", "1"], "bits tankdaq does not know"),
+        (["--legacy-mode", "six", "--legacy-settings", "1"], "not a number"),
+    ],
+)
+def test_bad_legacy_options_exit_2(legacy_capture: Path, options: list[str], message: str) -> None:
+    result = runner.invoke(app, ["decode", str(legacy_capture), *options])
+    assert result.exit_code == 2
+    assert message in result.stderr

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import csv
+import heapq
 import json
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import fields, is_dataclass
 from enum import StrEnum
+from operator import itemgetter
 from pathlib import Path
 from typing import IO, Annotated
 
@@ -16,9 +18,11 @@ import numpy as np
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from ..errors import InputError
+from ..errors import InputError, ProtocolError
 from ..xsens.batch import DecodedBlock
-from ..xsens.mtdata2 import SPEC_BY_NAME, UtcTime, to_jsonable
+from ..xsens.constants import MID
+from ..xsens.legacy import decode_mtdata, legacy_layout
+from ..xsens.mtdata2 import SPEC_BY_NAME, MTData2Message, UtcTime, to_jsonable
 from ..xsens.stream import StreamDecoder
 from ..xsens.timebase import CounterTracker
 from .app import app, err_console, handles_errors
@@ -124,43 +128,75 @@ def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
     return DecodedBlock.concat(blocks)
 
 
-def csv_header(block: DecodedBlock) -> list[str]:
+def decode_legacy(block: DecodedBlock, mode: int, settings: int) -> list[tuple[int, MTData2Message]]:
+    """(frame index, message) of every legacy MTData frame, decoded with the device's mode and settings."""
+    decoded = []
+    for index, frame in zip(block.other_index.tolist(), block.other_frames, strict=True):
+        if frame.mid == MID.MTDATA:
+            try:
+                decoded.append((index, decode_mtdata(frame.payload, mode, settings)))
+            except ProtocolError as exc:
+                raise InputError(f"legacy frame {index}: {exc}") from None
+    return decoded
+
+
+def in_stream_order(
+    block: DecodedBlock, legacy: list[tuple[int, MTData2Message]]
+) -> Iterator[MTData2Message]:
+    """MTData2 rows (converted in batches) and legacy messages, merged in the order they were sent."""
+
+    def mtdata2() -> Iterator[tuple[int, MTData2Message]]:
+        for start in range(0, block.n_messages, WRITE_BATCH):
+            indices = block.frame_index[start : start + WRITE_BATCH].tolist()
+            yield from zip(indices, block.messages(start, start + WRITE_BATCH), strict=True)
+
+    for _, message in heapq.merge(mtdata2(), legacy, key=itemgetter(0)):
+        yield message
+
+
+def csv_header(block: DecodedBlock, legacy: list[tuple[int, MTData2Message]]) -> list[str]:
     """Every column a row can have: each output's flattened parts, in order of first appearance."""
     header: list[str] = []
     for name in block.columns:
         first = int(np.argmax(block.present[name]))
         header += flatten(name, block.message(first)[name])
-    return header
+    if legacy:  # every legacy message has the same blocks
+        header += [column for name, value in legacy[0][1].items() for column in flatten(name, value)]
+    return list(dict.fromkeys(header))
 
 
-def write_messages(block: DecodedBlock, handle: IO[str], output_format: OutputFormat, bar: Progress) -> None:
-    """One JSON object or CSV row per message, in batches (columns go to Python once per batch)."""
-    task = bar.add_task("writing messages", total=block.n_messages)
+def write_messages(
+    messages: Iterator[MTData2Message], total: int, handle: IO[str], header: list[str] | None, bar: Progress
+) -> list[int]:
+    """One JSON object (``header`` None) or CSV row per message; returns the PacketCounters seen, in order."""
+    task = bar.add_task("writing messages", total=total)
     writer = None
-    if output_format is OutputFormat.csv:
-        writer = csv.DictWriter(handle, fieldnames=csv_header(block), restval="", lineterminator="\n")
+    if header is not None:
+        writer = csv.DictWriter(handle, fieldnames=header, restval="", lineterminator="\n")
         writer.writeheader()
-    for start in range(0, block.n_messages, WRITE_BATCH):
-        for message in block.messages(start, start + WRITE_BATCH):
-            if writer is None:
-                values = {name: to_jsonable(value) for name, value in message.items()}
-                handle.write(json.dumps(values, separators=(",", ":")) + "\n")
-            else:
-                writer.writerow(
-                    {
-                        col: cell
-                        for name, value in message.items()
-                        for col, cell in flatten(name, value).items()
-                    }
-                )
-        bar.advance(task, min(WRITE_BATCH, block.n_messages - start))
+    counters = []
+    for count, message in enumerate(messages, 1):
+        if "PacketCounter" in message:
+            counters.append(message["PacketCounter"])
+        if writer is None:
+            values = {name: to_jsonable(value) for name, value in message.items()}
+            handle.write(json.dumps(values, separators=(",", ":")) + "\n")
+        else:
+            writer.writerow(
+                {col: cell for name, value in message.items() for col, cell in flatten(name, value).items()}
+            )
+        if count % WRITE_BATCH == 0:
+            bar.advance(task, WRITE_BATCH)
+    return counters
 
 
-def summary_line(block: DecodedBlock, tracker: CounterTracker) -> str:
+def summary_line(block: DecodedBlock, legacy: int, tracker: CounterTracker) -> str:
     """What was in the capture, for stderr."""
+    undecoded_legacy = sum(frame.mid == MID.MTDATA for frame in block.other_frames) - legacy
     parts = [
         f"{block.n_messages} MTData2 messages",
-        f"{len(block.other_frames)} other frames",
+        *([f"{legacy} legacy MTData messages"] if legacy else []),
+        f"{len(block.other_frames) - legacy} other frames",
         f"{block.bad_checksums} bad checksums",
         f"{block.skipped_bytes} skipped bytes",
         f"{block.unknown_ids} unknown identifiers",
@@ -170,7 +206,22 @@ def summary_line(block: DecodedBlock, tracker: CounterTracker) -> str:
         parts.append(f"{block.malformed} malformed messages")
     if block.pending_bytes:
         parts.append(f"{block.pending_bytes} bytes of a truncated last frame")
+    if undecoded_legacy:
+        parts.append(
+            f"{undecoded_legacy} legacy MTData frames not decoded: give --legacy-mode and --legacy-settings "
+            "(the output mode and settings of the device)"
+        )
     return ", ".join(parts)
+
+
+def parse_register(value: str | None) -> int | None:
+    """typer parser for --legacy-mode/--legacy-settings: '0x0006', '6' or None."""
+    if value is None:
+        return None
+    try:
+        return int(value, 0)
+    except ValueError:
+        raise typer.BadParameter(f"{value!r} is not a number (e.g. 0x0006)") from None
 
 
 @app.command("decode")
@@ -181,18 +232,43 @@ def decode_command(
         OutputFormat, typer.Option("--format", help="jsonl or csv.")
     ] = OutputFormat.jsonl,
     out: Annotated[Path | None, typer.Option("--out", help="Write here instead of stdout.")] = None,
+    legacy_mode: Annotated[
+        int | None,
+        typer.Option("--legacy-mode", parser=parse_register, help="Legacy MTi-G OutputMode, e.g. 0x0006."),
+    ] = None,
+    legacy_settings: Annotated[
+        int | None,
+        typer.Option(
+            "--legacy-settings", parser=parse_register, help="Legacy MTi-G OutputSettings, e.g. 0x1."
+        ),
+    ] = None,
 ) -> None:
-    """Decode a raw Xsens capture: one JSON object (or CSV row) per MTData2 message, device units."""
+    """Decode a raw Xsens capture: one JSON object (or CSV row) per message, in device units.
+
+    MTData2 messages always; legacy MTData (2007-era MTi-G) when its output mode and settings are given.
+    """
+    if (legacy_mode is None) != (legacy_settings is None):
+        raise InputError("give both --legacy-mode and --legacy-settings (see the device configuration)")
+    if legacy_mode is not None:
+        try:
+            legacy_layout(legacy_mode, legacy_settings or 0)
+        except ProtocolError as exc:
+            raise InputError(str(exc)) from None
     data = read_capture(capture)
     with progress() as bar:
         block = decode_all(data, bar, capture.name)
         if block.frames == 0:
             raise InputError(f"no Xbus frames in {capture} ({len(data)} bytes): is it a raw serial capture?")
+        legacy = [] if legacy_mode is None else decode_legacy(block, legacy_mode, legacy_settings or 0)
+        header = csv_header(block, legacy) if output_format is OutputFormat.csv else None
         with open_output(out) as handle:
-            write_messages(block, handle, output_format, bar)
+            total = block.n_messages + len(legacy)
+            counters = write_messages(in_stream_order(block, legacy), total, handle, header, bar)
     tracker = CounterTracker()
-    if "PacketCounter" in block.columns:
-        tracker.update_many(block.columns["PacketCounter"][block.present["PacketCounter"]])
+    tracker.update_many(np.array(counters, dtype=np.int64))
     err_console.print(
-        f"{capture.name}: {summary_line(block, tracker)}", markup=False, highlight=False, soft_wrap=True
+        f"{capture.name}: {summary_line(block, len(legacy), tracker)}",
+        markup=False,
+        highlight=False,
+        soft_wrap=True,
     )
