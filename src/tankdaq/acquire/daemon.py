@@ -23,6 +23,10 @@ from ..viz.live import LiveView
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 
+#: Reads are spaced at least this far apart: blocks of a few samples instead of one, so the
+#: per-block work (decode, detect, write, view) is shared; 20 ms is invisible in a live view.
+READ_INTERVAL_S = 0.02
+
 #: Standard baud rates tried, smallest first, when the simulated sensor needs a faster line.
 SIM_BAUDS = (115200, 230400, 460800, 921600)
 
@@ -117,6 +121,7 @@ class RecordDaemon:
             raise InputError(f"angle must be a positive number of degrees, got {settings.angle_deg:g}")
         self.simulator = None
         self.outcomes: list[DecayOutcome] = []
+        self._next_read = 0.0
 
     # ---- the device ----------------------------------------
 
@@ -220,6 +225,10 @@ class RecordDaemon:
         return self.outcomes
 
     def _pump(self, driver: MTiDriver, session: DecaySession) -> None:
+        wait = self._next_read - time.monotonic()
+        if wait > 0:
+            time.sleep(wait)
+        self._next_read = time.monotonic() + READ_INTERVAL_S
         block = driver.read_block()
         finished = session.feed(Block(block.samples, block.raw, block.host_t))
         self.outcomes.extend(finished)

@@ -14,12 +14,36 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ..errors import BadRecordingInput
-from ..store.reader import iter_raw_chunks, read_recording
+from ..store.reader import read_recording
 from ..viz.live import LiveView
 from ..xsens.batch import to_samples
 from ..xsens.stream import StreamDecoder
 from ..xsens.timebase import SampleTimeUnwrapper
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
+
+#: At full speed, serial reads are merged into blocks spanning this much arrival time: the
+#: per-block work is shared and the result is the same (the decoder is a stream decoder).
+COALESCE_S = 0.25
+
+
+def coalesce(chunks: list[tuple[int, bytes]], span_s: float) -> list[tuple[int, bytes]]:
+    """Merge consecutive ``(host ns, bytes)`` reads spanning at most ``span_s`` (stamped with the last)."""
+    if span_s <= 0:
+        return list(chunks)
+    merged: list[tuple[int, bytes]] = []
+    parts: list[bytes] = []
+    first_ns = last_ns = 0
+    for host_ns, raw in chunks:
+        if parts and host_ns - first_ns > span_s * 1e9:
+            merged.append((last_ns, b"".join(parts)))
+            parts = []
+        if not parts:
+            first_ns = host_ns
+        parts.append(raw)
+        last_ns = host_ns
+    if parts:
+        merged.append((last_ns, b"".join(parts)))
+    return merged
 
 
 def replay_recording(
@@ -52,7 +76,7 @@ def replay_recording(
     session = DecaySession(settings, view, on_event=on_event)
     decoder = StreamDecoder()
     unwrapper = SampleTimeUnwrapper()
-    chunks = list(iter_raw_chunks(path))
+    chunks = coalesce(recording.raw_chunks, COALESCE_S if speed is None else 0.0)
     if not chunks:
         raise BadRecordingInput(f"{path}: the recording holds no raw device bytes to replay")
     wall0: float | None = None

@@ -46,7 +46,8 @@ class OnlineIdentifier:
 
     ``min_half_cycles``: how many complete half-cycles before the first fit (the
     model needs at least a period to see its stiffness). ``horizon_s``: how far
-    past the last sample the published curve is predicted. Other keyword
+    past the last sample the published curve is predicted. ``check_interval_s``:
+    how often (device time) new half-cycles are looked for. Other keyword
     arguments go to the underlying ``OutputError``.
     """
 
@@ -58,6 +59,7 @@ class OnlineIdentifier:
         min_half_cycles: int = 3,
         horizon_s: float = 0.0,
         axis: str = "roll",
+        check_interval_s: float = 0.05,
         **estimator_settings: object,
     ) -> None:
         self.terms = terms
@@ -66,6 +68,7 @@ class OnlineIdentifier:
         self.horizon_s = horizon_s
         self.axis = axis
         self.estimator_settings = estimator_settings
+        self.check_interval_s = check_interval_s
         self.reset()
 
     def reset(self) -> None:
@@ -74,16 +77,25 @@ class OnlineIdentifier:
         self._angle: list[np.ndarray] = []
         self._rate: list[np.ndarray] = []
         self._fitted_half_cycles = 0
+        self._checked_at = -np.inf
         self.estimator_: OutputError | None = None
         self.results_: list[OnlineResult] = []
         self.failures_: list[str] = []
 
     def update(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray | None = None) -> OnlineResult | None:
-        """Append samples (rad, rad/s); refit and return the result when a new half-cycle completed."""
-        self._t.append(np.atleast_1d(np.asarray(t, dtype=float)))
+        """Append samples (rad, rad/s); refit and return the result when a new half-cycle completed.
+
+        Half-cycles are counted at most every ``check_interval_s`` of device time, so feeding
+        a few samples at a time at 400 Hz costs almost nothing between refits.
+        """
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        self._t.append(t)
         self._angle.append(np.atleast_1d(np.asarray(angle, dtype=float)))
         if rate is not None:
             self._rate.append(np.atleast_1d(np.asarray(rate, dtype=float)))
+        if t.size == 0 or t[-1] - self._checked_at < self.check_interval_s:
+            return None
+        self._checked_at = float(t[-1])
         run = self._run()
         if run is None:
             return None

@@ -1,0 +1,114 @@
+"""Recorder CPU share at 100 and 400 Hz (live fit included) and replay speed of a 10-minute file.
+
+CPU share: the simulated MTi-G runs in its own process (``tankdaq simulate``, real time) so
+only the recorder's own work is counted: process CPU time of this process over wall time,
+while it records decays with release detection, MCAP writing, live refits and no viewer.
+
+Replay: a 10-minute capture (a decay test every 35 s) is recorded into one MCAP, then
+``replay_recording(speed=None)`` re-decodes, re-detects and re-identifies all of it.
+"""
+
+from __future__ import annotations
+
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.replay import replay_recording
+from tankdaq.device.driver import MTiDriver
+from tankdaq.device.simulator import SimulatedMTi
+from tankdaq.physics.scenario import DecayScenario
+from tankdaq.store.writer import RecordingWriter
+
+TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
+
+
+def cpu_share(rate_hz: int, seconds: float, out: Path) -> tuple[float, int, int]:
+    """Record for ``seconds`` of wall time against a real-time simulator in another process."""
+    baud = 115200 if rate_hz <= 100 else 460800
+    sim = subprocess.Popen(
+        [TANKDAQ, "simulate", "--rate", str(rate_hz), "--baud", str(baud), "--runs", "50", "--seed", "4"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        assert sim.stdout is not None
+        port = sim.stdout.readline().strip()
+        settings = RecordSettings(
+            port=port,
+            draft=1.0,
+            angle_deg=8.0,
+            hull="swath",
+            rate_hz=rate_hz,
+            baud=baud,
+            out_dir=out,
+            viewer="none",
+        )
+        daemon = RecordDaemon(settings)
+        samples = 0
+        deadline: float | None = None
+
+        def status(st) -> None:
+            nonlocal samples
+            samples = st.samples
+            if deadline is not None and time.monotonic() > deadline:
+                raise KeyboardInterrupt
+
+        daemon.on_status = status
+        cpu0, wall0 = time.process_time(), time.monotonic()
+        deadline = wall0 + seconds
+        daemon.run()
+        cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+        return cpu / wall, samples, len(daemon.outcomes)
+    finally:
+        sim.terminate()
+        sim.wait(timeout=10)
+
+
+def ten_minute_file(folder: Path) -> Path:
+    """Record 10 minutes of simulated decay tests (raw bytes and samples) into one MCAP."""
+    scenario = DecayScenario(hull="swath", draft=1.0, angle_deg=8.0, runs=18, seed=7)  # 18 x 35 s = 10.5 min
+    path = folder / "ten_minutes.mcap"
+    with SimulatedMTi(scenario, speed=40.0) as sim, MTiDriver(sim.link) as driver:
+        driver.configure()
+        with RecordingWriter(path, {"axis": "roll", "angle_nominal_deg": 8.0, "hull": "swath"}, {}) as writer:
+            first = None
+            while True:
+                block = driver.read_block()
+                writer.write_raw(block.raw, int(block.host_t * 1e9))
+                writer.write_samples(block.samples)
+                if block.samples.size:
+                    first = first if first is not None else float(block.samples["t"][0])
+                    if float(block.samples["t"][-1]) - first >= 600.0:
+                        break
+    return path
+
+
+def main() -> None:
+    print(f"machine: {platform.processor() or platform.machine()}, {platform.python_version()}")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for rate in (100, 400):
+            share, samples, runs = cpu_share(rate, 75.0, folder / f"r{rate}")
+            print(f"record at {rate} Hz: CPU {share:.1%} of one core ({samples} samples, {runs} decays)")
+        path = ten_minute_file(folder)
+        started = time.perf_counter()
+        outcomes = replay_recording(path, speed=None)
+        elapsed = time.perf_counter() - started
+        fits = [o for o in outcomes if o.fit is not None]
+        r2 = np.median([o.fit.r2_angle for o in fits]) if fits else float("nan")
+        print(
+            f"replay of 600 s at max speed: {elapsed:.2f} s = {600.0 / elapsed:.0f}x real time, "
+            f"{len(outcomes)} decays re-detected, {len(fits)} refitted (median R2 {r2:.4f})"
+        )
+
+
+if __name__ == "__main__":
+    main()
