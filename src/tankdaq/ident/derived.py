@@ -137,7 +137,7 @@ def amplitude_table(
 
 
 def tested_amplitudes_deg(runs: Sequence[DecayRun], offsets: Sequence[float], count: int = 5) -> list[float]:
-    """A grid over the amplitude band the runs covered: smallest to largest half-cycle peak, deg."""
+    """A grid over the amplitude band the runs covered (smallest meaningful to largest peak), deg."""
     peaks = np.concatenate(
         [
             np.abs((run.angle - off)[half_cycle_peaks(run.angle - off)])
@@ -146,7 +146,11 @@ def tested_amplitudes_deg(runs: Sequence[DecayRun], offsets: Sequence[float], co
     )
     if peaks.size == 0:
         return []
-    return [round(math.degrees(a), 2) for a in np.linspace(float(peaks.min()), float(peaks.max()), count)]
+    # Peaks lost in the sensor noise at the end of a decay are not a tested amplitude: the band
+    # runs down to 0.5 deg (where ITTC stops a decay), or 20 % of the largest peak if that is lower.
+    top = float(peaks.max())
+    bottom = float(peaks[peaks >= min(math.radians(0.5), 0.2 * top)].min())
+    return [round(math.degrees(a), 2) for a in np.linspace(bottom, top, count)]
 
 
 @dataclass
