@@ -144,6 +144,7 @@ class MTiDriver:
         self._tracker = CounterTracker()
         self._legacy_output: LegacyOutput | None = None
         self._legacy_counter = SampleTimeUnwrapper(1 << 16)
+        self._carry: StreamBlock | None = None
 
     # ---- opening ----------------------------------------
 
@@ -413,31 +414,39 @@ class MTiDriver:
     def stream(
         self, duration_s: float | None = None, max_samples: int | None = None
     ) -> Iterator[StreamBlock]:
-        """Blocks with samples until ``duration_s`` of device time or ``max_samples`` (None: for ever)."""
+        """Blocks with samples until ``duration_s`` of device time or ``max_samples`` (None: for ever).
+
+        The last block is cut at the limit; the samples beyond it come first in the next call
+        (their raw bytes went out with the block they arrived in), so nothing read is lost.
+        """
         if self.info is None:
             self.configure()
         first_t: float | None = None
         count = 0
         while True:
-            block = self.read_block()
+            block, self._carry = (self._carry, None) if self._carry is not None else (self.read_block(), None)
             if not block.samples.size:
                 continue
             if first_t is None:
                 first_t = float(block.samples["t"][0])
+            keep = block.samples.size
+            if duration_s is not None:
+                keep = min(keep, int(np.searchsorted(block.samples["t"] - first_t, duration_s - 1e-9)))
+            if max_samples is not None:
+                keep = min(keep, max_samples - count)
+            if keep < block.samples.size:
+                self._carry = StreamBlock(block.samples[keep:], b"", block.host_t, 0)
+                block = StreamBlock(block.samples[:keep], block.raw, block.host_t, block.frames)
             count += block.samples.size
-            yield block
-            if max_samples is not None and count >= max_samples:
-                return
-            if duration_s is not None and float(block.samples["t"][-1]) - first_t >= duration_s:
+            if block.samples.size:
+                yield block
+            if self._carry is not None:
                 return
 
     def samples(self, duration_s: float) -> np.ndarray:
         """Convenience: all samples of the next ``duration_s`` device seconds in one array."""
         blocks = [b.samples for b in self.stream(duration_s=duration_s)]
-        if not blocks:
-            return np.zeros(0, dtype=SAMPLE_DTYPE)
-        out = np.concatenate(blocks)
-        return out[out["t"] - out["t"][0] < duration_s - 1e-9]
+        return np.concatenate(blocks) if blocks else np.zeros(0, dtype=SAMPLE_DTYPE)
 
     # ---- reconnecting ----------------------------------------
 
