@@ -92,3 +92,22 @@ def test_kvlcc2_starts_at_its_first_large_peak():
     assert 8.0 < run.t[0] < 8.2
     assert math.degrees(run.angle[0]) == pytest.approx(-10.4, abs=0.1)
     assert run.rate is None and {"theta", "psi", "z"} <= set(run.channels)
+
+
+def test_a_strongly_damped_decay_is_still_a_decay(tmp_path):
+    """Seed 001 SWATH roll at 15 deg swings back only a few degrees: still a decay, cut at the release."""
+    from tankdaq.config import load_hull
+
+    c = load_hull("swath").axis_model("roll").coefficients(1.0)
+    t = np.arange(1700) / 100.0
+    angle = np.full(t.size, math.radians(15.0))
+    free = t >= 2.0
+    angle[free], _ = simulate_decay(c, t[free] - 2.0, math.radians(15.0))
+    assert np.max(-angle[free]) < 0.5 * math.radians(15.0), "the swing back is less than half the tilt"
+    path = tmp_path / "damped.csv"
+    np.savetxt(
+        path, np.column_stack([t, np.degrees(angle)]), delimiter=",", header="time_s,angle_deg", comments=""
+    )
+    (run,) = read_csv_runs(path, rate_col=None)
+    assert abs(run.t[0] - 2.0) <= 0.011
+    assert math.degrees(run.angle[0]) == pytest.approx(15.0, abs=0.01)

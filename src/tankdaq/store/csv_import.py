@@ -126,14 +126,24 @@ def release_index(angle: np.ndarray, skip_half_cycles: int = 0) -> int:
     just past the top of a peak.
     """
     excursion = angle - np.median(angle[-max(angle.size // 4, 1) :])
-    threshold = RELEASE_FRACTION * float(np.max(np.abs(excursion)))
+    peak = float(np.max(np.abs(excursion)))
     sign = np.sign(excursion)
     boundaries = np.concatenate([[0], np.flatnonzero(sign[1:] != sign[:-1]) + 1, [angle.size]])
-    large = [(a, b) for a, b in itertools.pairwise(boundaries) if np.max(np.abs(excursion[a:b])) >= threshold]
-    if len(large) < 2 + skip_half_cycles:
+    waves = [
+        (a, b, float(np.max(np.abs(excursion[a:b]))))
+        for a, b in itertools.pairwise(boundaries)
+        if b < angle.size or int(np.argmax(np.abs(excursion[a:b]))) < b - a - 1  # it turns back: a swing
+    ]
+    tall = [i for i, (_, _, height) in enumerate(waves) if height >= RELEASE_FRACTION * peak]
+    first = tall[0] if tall else len(waves)
+    # a strongly damped decay may swing back only a little: any later half-wave clear of the noise counts
+    swing = max(0.05 * peak, 5.0 * white_noise_level(angle))
+    later = [w for w in waves[first:] if w[2] >= swing]
+    if len(later) < 2 + skip_half_cycles:
         raise BadIdentificationInput(
             "no decay found: the record does not swing through equilibrium after its largest tilt"
         )
+    large = [(a, b) for a, b, _ in later]
     a, b = large[skip_half_cycles]
     segment = np.abs(excursion[a:b])
     tolerance = 3.0 * white_noise_level(angle) + 1e-6 * segment.max()
