@@ -60,6 +60,8 @@ INERTIAL_OUTPUTS = ("EulerAngles", "RateOfTurn", "Acceleration")
 RUNNING_SUM_LIMIT = 1 << 18
 #: Up to this many rows a layout is matched with one gather; beyond, one compare per header field.
 FEW_ROWS = 4096
+#: Up to this many payload bytes, payload rows are gathered with an index matrix.
+SMALL_GATHER = 1 << 16
 #: Rows of a regular run checked before the whole buffer is (a mixed stream breaks off early).
 PROBE_ROWS = 64
 
@@ -682,11 +684,11 @@ def _assign_layouts(
 
 
 def _payload_rows(buf: np.ndarray, starts: np.ndarray, length: int) -> np.ndarray:
-    """(frames, length) payload bytes: a strided view when frames are evenly spaced, else a gather."""
+    """(frames, length) payload bytes: a gather when small, a strided view when evenly spaced."""
     if not length:
         return np.zeros((starts.size, 0), dtype=np.uint8)
-    if starts.size == 1:
-        return buf[starts[0] : starts[0] + length].reshape(1, length)
+    if starts.size * length <= SMALL_GATHER:  # an index matrix is cheaper than building a window view
+        return buf[starts[:, None] + np.arange(length)]
     step = int(starts[1] - starts[0])
     if (
         step >= length
