@@ -75,6 +75,8 @@ def _step_summary(step: Step, diagnoser: Diagnoser) -> dict[str, Any]:
         "rms_before_deg": _deg(step.before.rms_angle),
         "rms_after_deg": _deg(step.after.rms_angle),
         "nrmse_after": step.after.nrmse_angle,
+        "rms_rate_after_deg_s": None if step.after.rms_rate is None else _deg(step.after.rms_rate),
+        "nrmse_rate_after": step.after.nrmse_rate,
         "fit_percent_after": step.after.fit_percent,
         "ljung_box_p_after": step.after.ljung_box_p,
         "coefficients": step.added,
@@ -249,6 +251,14 @@ def spectrum_figure(diagnoser: Diagnoser) -> Figure:
     return fig
 
 
+def _gap_cells(fit: Fit) -> str:
+    rate = "n/a | n/a" if fit.rms_rate is None else f"{_deg(fit.rms_rate):.4f} | {fit.nrmse_rate:.4f}"
+    return (
+        f"{_deg(fit.rms_angle):.4f} | {fit.nrmse_angle:.4f} | {rate} | {fit.fit_percent:.2f} "
+        f"| {fit.ljung_box_p:.3g}"
+    )
+
+
 def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
     """``directory/diagnose.md`` with the story, a step table and three PNG figures."""
     from ..viz.plots import save_png
@@ -267,16 +277,15 @@ def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
         save_png(fig, out / name)
     base = diagnoser.baseline_
     rows = [
-        "| step | effect | family | dBIC | RMS (deg) | NRMSE | fit % | Ljung-Box p |",
-        "|---|---|---|---|---|---|---|---|",
-        f"| baseline | {base.spec.describe()} | | | {_deg(base.rms_angle):.4f} | {base.nrmse_angle:.4f} "
-        f"| {base.fit_percent:.2f} | {base.ljung_box_p:.3g} |",
+        "| step | effect | family | dBIC | RMS angle (deg) | NRMSE angle | RMS rate (deg/s) | NRMSE rate "
+        "| fit % | Ljung-Box p |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+        f"| baseline | {base.spec.describe()} | | | {_gap_cells(base)} |",
     ]
     for i, step in enumerate(diagnoser.steps_, 1):
         dbic = "cut" if step.delta_bic is None else f"{step.delta_bic:.0f}"
         rows.append(
-            f"| {i} | {step.effect.name} | {step.effect.family} | {dbic} | {_deg(step.after.rms_angle):.4f} "
-            f"| {step.after.nrmse_angle:.4f} | {step.after.fit_percent:.2f} | {step.after.ljung_box_p:.3g} |"
+            f"| {i} | {step.effect.name} | {step.effect.family} | {dbic} | {_gap_cells(step.after)} |"
         )
     coefficients = "\n".join(
         f"| {k} | {v:.6g} | {diagnoser.final_.std.get(k, float('nan')):.2g} |"
