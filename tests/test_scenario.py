@@ -49,6 +49,13 @@ def test_truth_matches_the_reference_integrator_after_release(roll_runs) -> None
         angle, rate = simulate_decay(run.coefficients, t, run.angle0_rad, run.rate0_rad_s)
         np.testing.assert_allclose(trace.angle[i:stop], angle[1:], atol=1e-7)
         np.testing.assert_allclose(trace.rate[i:stop], rate[1:], atol=1e-6)
+        # Independently of any integrator: the recorded motion satisfies the equation.
+        dt = 1 / scenario.rate_hz
+        assert np.allclose(
+            np.gradient(trace.angle[i:stop], dt)[1:-1], trace.rate[i + 1 : stop - 1], atol=2e-3
+        )
+        assert np.allclose(np.gradient(trace.rate[i:stop], dt)[1:-1], trace.acc[i + 1 : stop - 1], atol=2e-2)
+        assert np.max(np.abs(trace.acc[i:stop])) > 1.0  # rad/s^2: the check is not vacuous
 
 
 def test_release_state_is_where_the_hand_was(roll_runs) -> None:

@@ -18,15 +18,13 @@ second per hour of 100 Hz data apart from the decay integrations themselves.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from ..errors import InputError
 from ..samples import SAMPLE_DTYPE
-from .decay import TERMS
+from .decay import TERMS, acceleration, simulate_decay
 
 #: SampleTimeFine ticks per second, and the wrap of the 10/100-series (one day of ticks).
 TICKS_PER_S = 10_000
@@ -177,57 +175,6 @@ class _Wobble:
         return np.sin(arg) @ self.amps, np.cos(arg) @ (self.amps * omega)
 
 
-def _decay_rhs(coefficients: Mapping[str, float]):
-    """A scalar right-hand side of the decay equation (fast enough to integrate hours of runs)."""
-    b1, b2, b3, c1, c2, c3, s1, s2, s3 = (float(coefficients.get(k, 0.0)) for k in TERMS)
-
-    def rhs(_t: float, y: np.ndarray) -> list[float]:
-        x, v = y
-        sx = math.sin(x)
-        acc = -(b1 * v + b2 * abs(v) * v + b3 * v**3 + c1 * x + c2 * x * x + c3 * x**3)
-        acc -= s1 * sx + s2 * sx * sx + s3 * sx**3
-        return [v, acc]
-
-    return rhs
-
-
-def integrate_decay(
-    coefficients: Mapping[str, float], t0: float, t: np.ndarray, angle0: float, rate0: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Free decay from (angle0, rate0) at t0, sampled at t (all >= t0); tolerances as physics.decay."""
-    if t.size == 0:
-        return np.empty(0), np.empty(0)
-    sol = solve_ivp(
-        _decay_rhs(coefficients),
-        (t0, float(t[-1])),
-        [angle0, rate0],
-        t_eval=t,
-        rtol=1e-10,
-        atol=1e-12,
-        method="DOP853",
-    )
-    if not sol.success:  # pragma: no cover - only on absurd coefficients
-        raise RuntimeError(f"decay simulation failed: {sol.message}")
-    return sol.y[0], sol.y[1]
-
-
-def decay_acceleration(coefficients: Mapping[str, float], x: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """x'' of the decay equation, vectorised."""
-    b1, b2, b3, c1, c2, c3, s1, s2, s3 = (float(coefficients.get(k, 0.0)) for k in TERMS)
-    sx = np.sin(x)
-    return -(
-        b1 * v
-        + b2 * np.abs(v) * v
-        + b3 * v**3
-        + c1 * x
-        + c2 * x**2
-        + c3 * x**3
-        + s1 * sx
-        + s2 * sx**2
-        + s3 * sx**3
-    )
-
-
 def valid_rate(rate_hz: float) -> float:
     """Refuse output rates the 10 kHz SampleTimeFine clock cannot tick evenly (MTi rates divide 400 Hz)."""
     if not (rate_hz > 0 and TICKS_PER_S % rate_hz == 0 and rate_hz <= 2000):
@@ -337,8 +284,10 @@ class DecayScenario:
                 a[free] = -x0 * ddstep / put_back_s**2
                 truths.append(RunTruth(run, "put_back", self.axis, hand.start_s, end_s=run_end))
                 continue
-            x[free], v[free] = integrate_decay(coeffs, release, t[free], x0, v0)
-            a[free] = decay_acceleration(coeffs, x[free], v[free])
+            # Integrated from the off-grid release instant; the first point is the release itself.
+            free_x, free_v = simulate_decay(coeffs, np.concatenate(([release], t[free])), x0, v0)
+            x[free], v[free] = free_x[1:], free_v[1:]
+            a[free] = acceleration(coeffs, x[free], v[free])
             ticks = (int(self.start_ticks or 0) + round(release * TICKS_PER_S)) % TICK_MODULUS
             truths.append(
                 RunTruth(
