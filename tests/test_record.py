@@ -362,3 +362,43 @@ def test_json_metadata_is_plain(three_decays) -> None:
     config = recording.run_config
     json.dumps(config)
     assert config["record"]["hull"] == "swath"
+
+
+def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> None:
+    """A real EFBIG: the recorder runs with a file-size limit below one decay's size."""
+    import resource
+
+    def small_files() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (120_000, 120_000))
+
+    exe = str(Path(sys.executable).with_name("tankdaq"))
+    args = [
+        "record",
+        "--port",
+        "sim",
+        "--draft",
+        "T",
+        "--angle",
+        "8",
+        "--out",
+        str(tmp_path),
+        "--viewer",
+        "none",
+    ]
+    proc = subprocess.run(
+        [exe, *args, "--runs", "2", "--sim-speed", "8"],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        preexec_fn=small_files,
+    )
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    last = proc.stderr.strip().splitlines()[-1]
+    assert last.startswith("error: disk full writing") and "tankdaq recover" in last
+    (cut,) = tmp_path.glob("*.mcap")
+    result = subprocess.run([exe, "recover", str(cut)], capture_output=True, text=True, timeout=60)
+    assert result.returncode in (0, 3), result.stderr
+    recovered = read_recording(next(tmp_path.glob("*.recovered.mcap")))
+    assert recovered.samples.size > 100 and _events(recovered, "release")

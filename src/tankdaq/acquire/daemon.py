@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..config import Hull, format_draft, load_hull
 from ..device.driver import MTiDriver
-from ..errors import DeviceGone, InputError
+from ..errors import DeviceGone, InputError, RecordingError
 from ..viz.live import LiveView
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
@@ -213,16 +213,28 @@ class RecordDaemon:
                         self._device_gone(driver, session, str(exc))
         except KeyboardInterrupt:
             self.on_event("stopping: closing files")
+        except RecordingError:
+            self.on_event("recording stopped: a file could not be written (files already closed are intact)")
+            raise
         finally:
+            self._shut_down(driver, session)
+        return self.outcomes
+
+    def _shut_down(self, driver: MTiDriver, session: DecaySession | None) -> None:
+        """Close the decay under way (its file stays readable), the viewer, the port, the simulator."""
+        try:
             if session is not None:
                 closed = session.abort("note", "recording stopped by the operator")
                 if closed is not None:
                     self.outcomes.append(closed)
+        except RecordingError as exc:  # the disk is full: the file is left for tankdaq recover
+            self.on_event(str(exc))
+        finally:
+            if session is not None:
                 session.view.close()
             driver.close()
             if self.simulator is not None:
                 self.simulator.stop()
-        return self.outcomes
 
     def _pump(self, driver: MTiDriver, session: DecaySession) -> None:
         wait = self._next_read - time.monotonic()

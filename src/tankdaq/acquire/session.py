@@ -20,10 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Hull
-from ..errors import TankdaqError
+from ..errors import RecordingError, TankdaqError
 from ..ident.models import resolve_model
 from ..ident.online import OnlineIdentifier, OnlineResult
 from ..samples import AXIS_FIELDS
+from ..store.writer import RecordingWriter
 from ..viz.live import LiveView
 from ..xsens.framer import StreamFramer
 from .release import ReleaseDetector, ReleaseEvent
@@ -252,7 +253,7 @@ class _ActiveDecay:
         self.release_event = event
         self.warnings = warnings
         self.fit: OnlineResult | None = None
-        self.writer = None
+        self.writer: RecordingWriter | None = None
         self.path: Path | None = None
         s = session.settings
         self.identifier = OnlineIdentifier(self.session.terms, axis=axis, callback=self._on_fit)
@@ -271,7 +272,6 @@ class _ActiveDecay:
 
     def _open_writer(self) -> None:
         from ..store.naming import next_run_number, recording_name
-        from ..store.writer import RecordingWriter
 
         s = self.session.settings
         hull = s.hull.name if s.hull else str(s.run_metadata.get("hull", "hull"))
@@ -304,13 +304,27 @@ class _ActiveDecay:
         for line in self.warnings:
             self.event("warning", line, self.release_t)
 
+    def _write(self, action: Callable[[RecordingWriter], object]) -> None:
+        """Do ``action`` on the file; a failed write (disk full) closes it and stops the recording."""
+        if self.writer is None:
+            return
+        try:
+            action(self.writer)
+        except RecordingError:
+            self.writer.close()
+            self.writer = None
+            raise
+
     def append(self, block: Block) -> None:
         """Write a block to the file and view; samples after the release go to the identifier."""
         host_ns = int(block.host_t * 1e9)
-        if self.writer is not None:
-            self.writer.write_raw(block.raw, host_ns)
-            self.writer.write_samples(block.samples)
-            self.writer.maybe_flush()
+
+        def write(writer: RecordingWriter) -> None:
+            writer.write_raw(block.raw, host_ns)
+            writer.write_samples(block.samples)
+            writer.maybe_flush()
+
+        self._write(write)
         if block.samples.size:
             self.session.view.log_samples(block.samples)
             after = block.samples[block.samples["t"] >= self.release_t]
@@ -319,14 +333,12 @@ class _ActiveDecay:
                 self.identifier.update(after["t"], after[angle_field], after[rate_field])
 
     def idle(self) -> None:
-        if self.writer is not None:
-            self.writer.maybe_flush()
+        self._write(lambda writer: writer.maybe_flush())
 
     def event(
         self, kind: str, message: str, t_s: float | None = None, data: Mapping[str, object] | None = None
     ):
-        if self.writer is not None:
-            self.writer.write_event(kind, message, t_s, data)
+        self._write(lambda writer: writer.write_event(kind, message, t_s, data))
         self.session.view.log_event(kind, message, t_s)
 
     def _on_fit(self, result: OnlineResult) -> None:
@@ -342,8 +354,8 @@ class _ActiveDecay:
             result.ci95,
             t_fit=result.t_end,
         )
-        if self.writer is not None:
-            self.writer.write_fit(
+        self._write(
+            lambda writer: writer.write_fit(
                 result.t_end,
                 result.coefficients,
                 result.std,
@@ -357,6 +369,7 @@ class _ActiveDecay:
                     "elapsed_s": result.elapsed_s,
                 },
             )
+        )
 
     def finish(self, reason: str) -> DecayOutcome:
         started = time.perf_counter()
@@ -368,16 +381,19 @@ class _ActiveDecay:
             self.event("warning", f"no final fit: {exc}")
         else:
             self._on_fit(final)
-        if self.writer is not None:
-            self.writer.write_event("settled", f"decay ended ({reason})", None, {"reason": reason})
-            extra: dict[str, object] = {"settle_reason": reason, "final_fit_s": time.perf_counter() - started}
-            if final is not None:
-                extra.update({f"fit_{k}": v for k, v in final.coefficients.items()})
-                extra["fit_r2_angle"] = final.r2_angle
-                extra["natural_period_s"] = final.natural_period_s
-            self.writer.update_metadata(extra)
-            self.writer.close()
+        extra: dict[str, object] = {"settle_reason": reason, "final_fit_s": time.perf_counter() - started}
+        if final is not None:
+            extra.update({f"fit_{k}": v for k, v in final.coefficients.items()})
+            extra["fit_r2_angle"] = final.r2_angle
+            extra["natural_period_s"] = final.natural_period_s
+
+        def close(writer: RecordingWriter) -> None:
+            writer.write_event("settled", f"decay ended ({reason})", None, {"reason": reason})
+            writer.update_metadata(extra)
+            writer.close()
+
         self.session.view.close()
+        self._write(close)
         return DecayOutcome(
             run=self.run,
             axis=self.axis,
