@@ -202,3 +202,12 @@ def test_kvlcc2_run_is_diagnosed() -> None:
     assert diagnoser.gap_reduction_ > 0.5
     assert diagnoser.final_.fit_percent > diagnoser.baseline_.fit_percent
     assert diagnoser.verdict_.startswith("missing:")
+
+
+def test_runs_of_different_axes_are_refused() -> None:
+    from tankdaq.errors import BadIdentificationInput
+
+    runs = make_decay_set([], seed=2).runs
+    runs[1].axis = "pitch"
+    with pytest.raises(BadIdentificationInput, match="mix axes"):
+        Diagnoser().fit(runs)

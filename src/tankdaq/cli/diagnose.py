@@ -54,7 +54,8 @@ def diagnose_command(
         TimeElapsedColumn(),
         console=err_console,
     ) as progress:
-        task = progress.add_task("baseline", total=1 + max_steps * (len(LIBRARY) + 1))
+        # per step: every candidate, plus the two refits of the late-disturbance test
+        task = progress.add_task("baseline", total=1 + max_steps * (len(LIBRARY) + 2))
 
         def advance(label: str) -> None:
             progress.update(task, advance=1, description=f"refit: {label}")

@@ -285,9 +285,8 @@ class Diagnoser:
             ]
             if min(late_rms) <= 2 * noise:
                 return None
-        cut_s = [
-            o.onset_s - 0.25 * 2 * np.pi / natural_frequency(current) for o in onsets
-        ]  # a quarter period early
+        quarter_period_s = 0.5 * np.pi / natural_frequency(current)
+        cut_s = [o.onset_s - quarter_period_s for o in onsets]
         cut_runs = _cut(runs, cut_s)
         after = self._fit(cut_runs, current.spec, "truncated refit", start=early)
         if after.rms_angle > LATE_QUIET * noise:
