@@ -121,6 +121,20 @@ def test_perfect_data_gives_the_exact_first_free_sample() -> None:
     assert [e.index for e in released] == [r.release_index for r in trace.runs]
 
 
+def test_samples_without_angle_or_rate_do_not_shift_indices() -> None:
+    """A message missing an output decodes to NaN; the detector bridges it and keeps counting."""
+    samples, trace = DecayScenario(runs=2, seed=31).samples()
+    holes = samples.copy()
+    rng = np.random.default_rng(1)
+    holes["roll"][rng.choice(holes.size, 200, replace=False)] = np.nan
+    holes["p"][rng.choice(holes.size, 200, replace=False)] = np.nan
+    holes["roll"][:3] = np.nan
+    released = [e for e in ReleaseDetector().fit(holes).events_ if e.kind == "released"]
+    assert len(released) == 2
+    for event, run in zip(released, trace.runs, strict=True):
+        assert abs(event.index - run.release_index) <= 1
+
+
 def test_bad_settings_are_input_errors() -> None:
     with pytest.raises(InputError):
         ReleaseDetector(axis="yaw")

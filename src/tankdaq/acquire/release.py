@@ -143,6 +143,7 @@ class ReleaseDetector:
         self._hold_angle = math.nan
         self._leave_index = 0
         self._swung_index = 0
+        self._last_finite = [0.0, 0.0]  # angle, rate: what a NaN at the very start is read as
         self._release: ReleaseEvent | None = None
         return self
 
@@ -168,6 +169,7 @@ class ReleaseDetector:
     piece = 16384
 
     def _feed_piece(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray) -> None:
+        angle, rate = self._fill_gaps(angle, 0), self._fill_gaps(rate, 1)
         self._t = np.concatenate((self._t, t))
         self._x = np.concatenate((self._x, angle))
         self._r = np.concatenate((self._r, rate))
@@ -189,6 +191,19 @@ class ReleaseDetector:
         while steps[self.state_]():
             pass
         self._trim()
+
+    def _fill_gaps(self, values: np.ndarray, channel: int) -> np.ndarray:
+        """Carry the last finite value over NaN (a message without that output) so indices stay put."""
+        finite = np.isfinite(values)
+        if finite.all():
+            self._last_finite[channel] = float(values[-1]) if values.size else self._last_finite[channel]
+            return values
+        filled = values.copy()
+        last_index = np.maximum.accumulate(np.where(finite, np.arange(values.size), -1))
+        filled[last_index >= 0] = values[last_index[last_index >= 0]]
+        filled[last_index < 0] = self._last_finite[channel]
+        self._last_finite[channel] = float(filled[-1])
+        return filled
 
     def fit(self, samples: np.ndarray) -> ReleaseDetector:
         """Offline: run over a whole array (from a fresh state); events in ``events_``."""
