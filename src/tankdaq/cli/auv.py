@@ -11,7 +11,6 @@ from typing import Annotated
 import numpy as np
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-from scipy.stats import spearmanr
 
 from ..errors import InputError
 from ..maneuver.identify import SeparateIdentifier, default_window_s, relative_errors
@@ -156,6 +155,7 @@ def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle, sensitivity: S
     ranked = [n for n in (sensitivity.ranking if sensitivity else []) if n in errors]
     if len(ranked) >= 4:
         half = len(ranked) // 2
+        from scipy.stats import spearmanr  # scipy.stats is slow to import: only here
         rho, p_value = spearmanr([sensitivity.index[n] for n in ranked], [errors[n] for n in ranked])
         report["sensitivity_vs_error"] = {
             "spearman_rho": float(rho), "p_value": float(p_value),

@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
-from scipy.optimize import fsolve
 
 from ..errors import InputError
 from .vehicle import Vehicle
@@ -195,6 +194,7 @@ def trim_state(vehicle: Vehicle) -> np.ndarray:
         rates = _rhs(params, state, x[3], x[3])
         return np.array([rates[0], rates[1], rates[2], rates[4]])
 
+    from scipy.optimize import fsolve  # imported here: scipy.optimize is slow to import
     solution, info, ok, _ = fsolve(residual, [vehicle.nominal_speed_m_s, 0.0, 0.0, 0.0], full_output=True)
     if ok != 1 or np.max(np.abs(info["fvec"])) > 1e-8:
         raise InputError(

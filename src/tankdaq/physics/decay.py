@@ -14,7 +14,6 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 #: Canonical terms in their fixed order: damping first, then restoring.
 TERMS: tuple[str, ...] = ("b1", "b2", "b3", "c1", "c2", "c3", "s1", "s2", "s3")
@@ -97,6 +96,8 @@ def simulate_decay(
     A reference integrator (adaptive, tight tolerance) for making known-truth data
     and for the simulated sensor; the estimators use their own fast kernels.
     """
+    from scipy.integrate import solve_ivp  # scipy.integrate costs a second to import: only when simulating
+
     t = np.asarray(t, dtype=float)
     names = [k for k in TERMS if coefficients.get(k, 0.0) != 0.0]
     theta = np.array([coefficients[k] for k in names], dtype=float)
