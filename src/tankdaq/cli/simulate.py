@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import signal
+import sys
 import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -63,7 +64,7 @@ def simulate_command(
         if truth is not None:
             _write_truth(Path(truth), sim, scenario)
         typer.echo(sim.link)
-        print(flush=True, end="")
+        sys.stdout.flush()  # the first line is read by whoever started us, before we ever exit
         err_console.print(
             f"simulated {sim.identity.product_code} on {sim.port} (link {sim.link}), {baud} baud, "
             f"{hull} {format_draft(draft)} {axis} {angle_deg:g} deg, {runs} runs, speed x{speed:g}; "

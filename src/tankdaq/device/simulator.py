@@ -227,8 +227,8 @@ class SimulatedMTi:
         self.baud = baud
         self.faults = faults or Faults()
         self.identity = identity or (DeviceIdentity.legacy_mti_g() if legacy else DeviceIdentity.mti_g_710())
-        self._own_link_dir = None if link else tempfile.mkdtemp(prefix="tankdaq-sim-")
-        self.link = str(link) if link else os.path.join(self._own_link_dir or "", "ttyMTi0")
+        self._own_link_dir: str | None = None
+        self.link = str(link) if link else ""  # a temporary one is made at start()
         self._rng = np.random.default_rng([seed, 99])
         self._sources: dict[float, SampleSource] = {}
         self._commands: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()
@@ -244,7 +244,6 @@ class SimulatedMTi:
         self.legacy_mode = LegacyOutput.default()
         self.measuring = False
         self.pending_baud = baud
-        self._boot = 0.0
         self._epoch = time.monotonic()
         self._next_sample = 0
         self._stall_until = 0.0
@@ -273,6 +272,9 @@ class SimulatedMTi:
         """Open the pty, power the device up (WakeUp) and start serving in a background thread."""
         if self._thread is not None:
             return self
+        if not self.link:
+            self._own_link_dir = tempfile.mkdtemp(prefix="tankdaq-sim-")
+            self.link = os.path.join(self._own_link_dir, "ttyMTi0")
         self._open_pty()
         self._running.set()
         self._thread = threading.Thread(target=self._serve, name="SimulatedMTi", daemon=True)
@@ -425,7 +427,7 @@ class SimulatedMTi:
     def _next_due_s(self) -> float:
         if not self.measuring:
             return 0.02
-        due = self._boot + self._next_sample / (self._rate_hz() * self.speed)
+        due = self._epoch + self._next_sample / (self._rate_hz() * self.speed)
         return min(0.02, max(0.0, due - time.monotonic()))
 
     def _fire_scheduled_faults(self) -> None:
@@ -485,7 +487,7 @@ class SimulatedMTi:
             self._flush()
             self._power_up()
             return
-        if self.measuring and mid not in (MID.REQ_DATA,):
+        if self.measuring:
             return  # a measuring device ignores all but GoToConfig and Reset
         handlers: dict[int, Callable[[bytes], None]] = {
             MID.GOTO_MEASUREMENT: self._on_goto_measurement,
@@ -568,7 +570,6 @@ class SimulatedMTi:
             self._reply(MID.GOTO_MEASUREMENT_ACK)
         self.measuring = True
         # Samples follow the device clock: the first one sent is the next one due from now on.
-        self._boot = self._epoch
         rate = self._rate_hz()
         self._next_sample = math.ceil((time.monotonic() - self._epoch) * self.speed * rate)
 
@@ -592,7 +593,7 @@ class SimulatedMTi:
             return
         now = time.monotonic()
         rate = self._rate_hz()
-        due = math.floor((now - self._boot) * self.speed * rate) + 1
+        due = math.floor((now - self._epoch) * self.speed * rate) + 1
         if due <= self._next_sample:
             return
         due = min(due, self._next_sample + int(rate * self.speed) + 1)  # catch up at most one second per turn
