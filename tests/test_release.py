@@ -51,9 +51,10 @@ def test_release_within_one_sample_at_400_hz() -> None:
     _check_one_sample(400, runs=40, seed=22)
 
 
-def test_release_within_one_sample_at_other_angles_and_drafts() -> None:
+def test_release_within_one_sample_at_other_angles_drafts_and_pitch() -> None:
     _check_one_sample(100, runs=12, seed=23, angle_deg=5.0, draft=0.9)
     _check_one_sample(100, runs=12, seed=24, angle_deg=12.0, draft=1.1)
+    _check_one_sample(100, runs=20, seed=32, axis="pitch")
 
 
 def test_settling_follows_the_ittc_threshold() -> None:
