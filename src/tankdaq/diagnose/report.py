@@ -85,6 +85,7 @@ def _step_summary(step: Step, diagnoser: Diagnoser) -> dict[str, Any]:
             {"effect": f.effect, "delta_bic": f.delta_bic, "bic_vs_chosen": f.vs_chosen} for f in step.family
         ],
         "cut_s": step.cut_s,
+        "held_out_rms_noise_units": None if step.held_out is None else list(step.held_out),
         "signature": step.effect.signature,
         "signature_seen": signature_seen(step.effect, step.diagnostics, diagnoser.cycle_trend_),
         "diagnostics_before": _diagnostics_summary(step.diagnostics),
@@ -143,6 +144,8 @@ def _step_line(step: Step, diagnoser: Diagnoser) -> str:
         f"{action}; RMS {_deg(after.rms_angle):.3f} deg, fit {after.fit_percent:.1f} %, "
         f"residual {_whiteness(after.ljung_box_p)} (Ljung-Box p {after.ljung_box_p:.2g})"
     )
+    if step.held_out is not None:
+        line += f"; held-out RMS {step.held_out[0]:.2f} -> {step.held_out[1]:.2f} x noise"
     if step.family:
         rivals = ", ".join(f"{f.effect} worse by {f.vs_chosen:.0f}" for f in step.family)
         line += f"; within the family: {rivals}"

@@ -37,6 +37,10 @@ DEFAULT_BASELINE = "b1,c1"
 LATE_RATIO = 3.0
 #: and the records are cut there only if the model then fits to within this multiple of the noise level.
 LATE_QUIET = 1.5
+#: Split-sample check: fit the first part of every run, predict the rest.
+FIT_FRACTION = 0.6
+#: At most this many candidates (best BIC first) are checked on held-out data per step.
+MAX_CHECKED = 3
 
 
 def parse_baseline(text: str) -> tuple[str, ...]:
@@ -74,6 +78,7 @@ class Step:
     added: dict[str, float]
     family: list[FamilyEvidence] = field(default_factory=list)
     cut_s: list[float] = field(default_factory=list)
+    held_out: tuple[float, float] | None = None  # split-sample RMS before/after, in noise units
 
 
 def initial_guess(runs: Sequence[DecayRun], terms: Sequence[str]) -> dict[str, float]:
@@ -294,7 +299,12 @@ class Diagnoser:
         return cut_runs, Step(effect, current, after, diag, None, {}, cut_s=cut_s)
 
     def _best_addition(self, current: Fit, runs: list[DecayRun], diag: Diagnostics) -> Step | None:
-        """Refit every applicable candidate; keep the best if it beats the BIC margin."""
+        """Refit every applicable candidate; keep the best that beats the BIC margin and predicts better.
+
+        BIC on a coloured residual is over-confident (on real records every term
+        passes by thousands), so a candidate must also predict the held-out last
+        part of every run better than the model without it.
+        """
         scored: list[tuple[Effect, Fit, float]] = []
         for effect in self.library:
             spec = effect.extend(current.spec, runs, diag)
@@ -303,17 +313,34 @@ class Diagnoser:
             candidate = self._fit(runs, spec, effect.name, start=current, guess=_ringing_guess(diag))
             if effect.plausible(candidate):
                 scored.append((effect, candidate, candidate.bic - current.bic))
-        if not scored:
+        passing = sorted((item for item in scored if item[2] < self.delta_bic), key=lambda item: item[2])
+        if not passing:
             return None
-        effect, best, delta = min(scored, key=lambda item: item[2])
-        if delta >= self.delta_bic:
-            return None
-        family = [
-            FamilyEvidence(e.key, d, f.bic - best.bic)
-            for e, f, d in scored
-            if e.family == effect.family and e is not effect
-        ]
-        return Step(effect, current, best, diag, delta, _added(current, best), family)
+        held_before = self._held_out_rms(runs, current.spec, current, diag)
+        for effect, best, delta in passing[:MAX_CHECKED]:
+            held_after = self._held_out_rms(runs, best.spec, best, diag)
+            if held_after < held_before:
+                family = [
+                    FamilyEvidence(e.key, d, f.bic - best.bic)
+                    for e, f, d in scored
+                    if e.family == effect.family and e is not effect
+                ]
+                step = Step(effect, current, best, diag, delta, _added(current, best), family)
+                step.held_out = (held_before, held_after)
+                return step
+        return None
+
+    def _held_out_rms(self, runs: list[DecayRun], spec: ModelSpec, start: Fit, diag: Diagnostics) -> float:
+        """RMS of all outputs (noise units) on the last part of every run, from a fit to the first part."""
+        first = _cut(runs, [FIT_FRACTION * r.duration for r in runs])
+        fit = self._fit(first, spec, "split-sample check", start=start, guess=_ringing_guess(diag))
+        squares: list[np.ndarray] = []
+        for part, whole, pred in zip(first, runs, predict(fit, runs), strict=True):
+            held = slice(part.t.size, None)
+            squares.append((pred.residual_angle[held] / max(noise_level(whole.angle), 1e-12)) ** 2)
+            if pred.residual_rate is not None and whole.rate is not None:
+                squares.append((pred.residual_rate[held] / max(noise_level(whole.rate), 1e-12)) ** 2)
+        return float(np.sqrt(np.mean(np.concatenate(squares))))
 
     def _verdict(self) -> str:
         added = [s.effect for s in self.steps_]
