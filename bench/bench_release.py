@@ -48,7 +48,8 @@ def accuracy(axis: str, rate_hz: float, angle_deg: float, runs: int) -> None:
         f"{axis:5s} {rate_hz:4.0f} Hz {angle_deg:4.1f} deg: {len(errors)}/{len(trace.runs)} found, "
         f"{len(released) - len(errors)} false; within 1 sample {within:6.1%}; error histogram {histogram}; "
         f"confirmed {np.median(delays):.2f} s after release (median); "
-        f"generate {samples.size / generated / 1e6:.2f} M samples/s, detect {samples.size / detected / 1e6:.2f} M samples/s"
+        f"generate {samples.size / generated / 1e6:.2f} M samples/s, "
+        f"detect {samples.size / detected / 1e6:.2f} M samples/s"
     )
 
 
