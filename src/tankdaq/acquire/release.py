@@ -373,6 +373,9 @@ class ReleaseDetector:
         quarter sample.
         """
         lo = max(0, leave - self._n(self.fit_before_s))
+        if leave - lo < 4:  # streamed in while already moving: no hold to fit, report the departure
+            return self._emit("released", leave, end, angle_rad=float(self._x[leave]),
+                              rate_rad_s=float(self._r[leave]), release_t=float(self._t[leave]))  # fmt: skip
         window = slice(lo, end + 1)
         physics = _DecayFit(self._t[window], self._x[window], self._r[window], leave - lo,
                             hold_rad=self._hold_angle, rest_rad=self.baseline_rad_)  # fmt: skip
@@ -388,67 +391,25 @@ class ReleaseDetector:
         return self._emit("released", index, end, angle_rad=angle0, rate_rad_s=rate0, release_t=tau)
 
 
-class _JointFit:
-    """Least squares on angle and rate rows together, for a model with a kink at tau.
-
-    Rows are weighted by each channel's noise, estimated from sample-to-sample differences
-    during the hold. Subclasses give the design matrix; parameter 0 is the angle at tau and
-    parameter 2 the angle rate at tau.
-    """
-
-    def __init__(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray, hold: int) -> None:
-        self.t = t
-        held = slice(0, max(hold, 3))
-        self.w_angle = 1.0 / max(float(np.std(np.diff(angle[held]))) / math.sqrt(2), 1e-6)
-        self.w_rate = 1.0 / max(float(np.std(np.diff(rate[held]))) / math.sqrt(2), 1e-5)
-        self.y = np.concatenate((angle * self.w_angle, rate * self.w_rate))
-
-    def _design(self, tau: float) -> np.ndarray:
-        raise NotImplementedError
-
-    def _weighted(self, angle_cols: list[np.ndarray], rate_cols: list[np.ndarray]) -> np.ndarray:
-        return np.vstack(
-            (np.column_stack(angle_cols) * self.w_angle, np.column_stack(rate_cols) * self.w_rate)
-        )
-
-    def _solve(self, tau: float) -> tuple[np.ndarray, float]:
-        """Coefficients and residual sum of squares.
-
-        Normal equations on unit-norm columns: a dozen columns solve in microseconds, where a
-        LAPACK QR or SVD per candidate instant costs milliseconds (and far more when OpenBLAS
-        threads fight over a busy machine). The residual is formed directly, not from the
-        normal equations, so the sums of squares compared between instants stay exact.
-        """
-        design = self._design(tau)
-        norms = np.sqrt(np.einsum("ij,ij->j", design, design))
-        norms[norms == 0] = 1.0
-        scaled = design / norms
-        coef = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ self.y, rcond=None)[0]  # robust if singular
-        residual = self.y - scaled @ coef
-        return coef / norms, float(residual @ residual)
-
-    def sse(self, tau: float) -> float:
-        return self._solve(tau)[1]
-
-    def state_at(self, tau: float) -> tuple[float, float]:
-        """Fitted angle and angle rate at tau: the initial state of the free decay."""
-        coef, _ = self._solve(tau)
-        return float(coef[0]), float(coef[2])
-
-
-class _DecayFit(_JointFit):
+class _DecayFit:
     """Held motion before tau, the decay equation after it, jointly on angle and rate.
 
     After release x'' = -(k0 + c1 y + c2 y^2 + c3 y^3 + b1 x' + b2 |x'|x' + b3 x'^3), y = x - rest.
     Integrating once (rate rows) and twice (angle rows) from tau with the *measured* signals
-    inside the integrals makes the model linear in k0 ... b3. The state at tau is shared with the
-    held polynomial, so the decay must start where the hand left the model.
+    inside the integrals makes the model linear in k0 ... b3. Before tau a cubic in time (the
+    hand's slow sway) with a free gyro bias; the state at tau is shared, so the decay must start
+    where the hand left the model. Rows are weighted by each channel's noise, estimated from
+    sample-to-sample differences during the hold. Parameter 0 is the angle at tau, 2 its rate.
     """
 
     def __init__(
         self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray, hold: int, hold_rad: float, rest_rad: float
     ) -> None:
-        super().__init__(t, angle, rate, hold)
+        self.t = t
+        held = slice(0, max(hold, 3))
+        self.w_angle = 1.0 / max(float(np.std(np.diff(angle[held]))) / math.sqrt(2), 1e-6)
+        self.w_rate = 1.0 / max(float(np.std(np.diff(rate[held]))) / math.sqrt(2), 1e-5)
+        self.y = np.concatenate((angle * self.w_angle, rate * self.w_rate))
         from_rest = angle - rest_rad
         # the canonical polynomial terms c1, c2, c3, b2, b3 (b1 below)
         integrands = [from_rest, from_rest**2, from_rest**3, np.abs(rate) * rate, rate**3]
@@ -479,7 +440,33 @@ class _DecayFit(_JointFit):
             rate_cols.append(-np.where(after, self._from(tau, once), 0.0))
         angle_cols.append(-np.where(after, self._from(tau, self.once_hold), 0.0))
         rate_cols.append(-np.where(after, self.from_hold - np.interp(tau, self.t, self.from_hold), 0.0))
-        return self._weighted(angle_cols, rate_cols)
+        return np.vstack(
+            (np.column_stack(angle_cols) * self.w_angle, np.column_stack(rate_cols) * self.w_rate)
+        )
+
+    def _solve(self, tau: float) -> tuple[np.ndarray, float]:
+        """Coefficients and residual sum of squares.
+
+        Normal equations on unit-norm columns: a dozen columns solve in microseconds, where a
+        LAPACK QR or SVD per candidate instant costs milliseconds (and far more when OpenBLAS
+        threads fight over a busy machine). The residual is formed directly, not from the
+        normal equations, so the sums of squares compared between instants stay exact.
+        """
+        design = self._design(tau)
+        norms = np.sqrt(np.einsum("ij,ij->j", design, design))
+        norms[norms == 0] = 1.0
+        scaled = design / norms
+        coef = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ self.y, rcond=None)[0]  # robust if singular
+        residual = self.y - scaled @ coef
+        return coef / norms, float(residual @ residual)
+
+    def sse(self, tau: float) -> float:
+        return self._solve(tau)[1]
+
+    def state_at(self, tau: float) -> tuple[float, float]:
+        """Fitted angle and angle rate at tau: the initial state of the free decay."""
+        coef, _ = self._solve(tau)
+        return float(coef[0]), float(coef[2])
 
 
 def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: float) -> list[ReleaseEvent]:
