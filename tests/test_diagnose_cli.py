@@ -51,6 +51,8 @@ def test_json_tells_the_story_of_a_hidden_heave_coupling(tmp_path: Path) -> None
     assert set(first["coefficients"]) == {"k_heave_m"}
     assert first["delta_bic"] < -10 and first["rms_after_deg"] < first["rms_before_deg"]
     assert out["baseline"]["ljung_box_p"] < 0.01 < first["ljung_box_p_after"]
+    before, after = first["held_out_rms_noise_units"]
+    assert after < before and after < 1.3
     assert out["final"]["terms"] == ["b1", "c1", "k_heave_m"]
     assert 0 < out["gap_reduction"] < 1 and out["gap_reduction_all_outputs"] > 0.5
     assert "coupling with heave" in out["verdict"]
