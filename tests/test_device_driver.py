@@ -98,7 +98,9 @@ def test_legacy_device_is_driven_with_mtdata() -> None:
 
 
 def test_corrupted_bytes_are_survived_and_counted() -> None:
-    faults = Faults(corrupt_rate=2e-3, drop_rate=2e-4)
+    # Rates low enough that two faults in one frame (which an 8-bit checksum misses 1 time in 256)
+    # stay out of this test: one faulty byte per frame is always caught.
+    faults = Faults(corrupt_rate=5e-4, drop_rate=2e-5)
     with (
         SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED, faults=faults) as sim,
         MTiDriver(sim.link) as driver,
@@ -109,7 +111,7 @@ def test_corrupted_bytes_are_survived_and_counted() -> None:
     counters = driver.counters
     assert counters.bad_frames > 0
     assert counters.gaps > 0 and counters.lost >= counters.gaps
-    assert 0.6 * 1000 < samples.size < 1000  # most samples survive
+    assert 0.8 * 1000 < samples.size < 1000  # most samples survive
     assert samples.size + counters.lost == pytest.approx(1000, abs=3)
     assert np.all(np.abs(samples["roll"]) < np.radians(20))  # no garbage passes the checksum
 
