@@ -8,8 +8,18 @@ import os
 # (a 0.4 ms QR took 38 ms on a loaded 2-core machine). Set before numpy is first imported.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-# each module registers its commands on ``app``
-from . import auv, campaign, decode, diagnose, hulls, identify, record, simulate, store  # noqa: F401
+# each module registers its commands on ``app``; this order is the order of ``tankdaq --help``
+# isort: off
+from . import record  # noqa: F401  (record, replay, demo)
+from . import simulate  # noqa: F401
+from . import decode  # noqa: F401
+from . import store  # noqa: F401  (recover)
+from . import identify  # noqa: F401
+from . import campaign  # noqa: F401
+from . import diagnose  # noqa: F401
+from . import auv  # noqa: F401
+from . import hulls  # noqa: F401
+# isort: on
 from .app import app
 
 
