@@ -1,1 +1,7 @@
-"""tankdaq.diagnose"""
+"""The discrepancy workflow: where a decay model and the measurement disagree, and which effect is missing.
+
+``workflow.Diagnoser`` fits a baseline, reads its residual (``residuals``), refits
+candidates from the effect library (``effects``) with its own fast output-error
+engine (``fitting``), and tells the story (``report``); ``synthetic`` makes
+known-truth decays with hidden effects to prove it. See docs/diagnose.md.
+"""

@@ -6,7 +6,8 @@ milliseconds: a numba fixed-step RK4 on the sample grid, forward-difference
 Jacobians that re-simulate only the run a parameter touches, and
 Levenberg-Marquardt. Besides the canonical terms b1..s3 a variant may hold
 Coulomb friction ``fc*tanh(x'/eps)``, coupling ``k*u(t)`` to measured channels,
-and observation parameters (per-run angle offset, angle gain error, angle lag,
+a forcing by an unmeasured motion ringing down at its own frequency, and
+observation parameters (per-run angle offset, angle gain error, angle lag,
 gyro bias): ``y_angle = (1 + g) x(t - tau) + offset``, ``y_rate = x' + bias``.
 """
 
