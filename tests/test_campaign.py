@@ -202,3 +202,30 @@ def test_a_group_that_cannot_be_fitted_keeps_its_reason(csv_results: list) -> No
     assert [r.key.angle_deg for r in failed] == [3.0] and "does not move" in failed[0].error
     assert "not fitted: still" in markdown_table(results)
     assert sum(r.fit is not None for r in results) == 1
+
+
+def test_every_campaign_plan_loads_and_names_real_hulls_and_drafts():
+    from tankdaq.config import list_campaign_plans, load_campaign_plan, load_hull, parse_draft
+
+    plans = list_campaign_plans()
+    assert {"seed000-trimaran-catamaran-pitch", "seed001-swath-roll", "seed002-swath-pitch"} <= set(plans)
+    for name in plans:
+        plan = load_campaign_plan(name)
+        for hull in plan.hulls:
+            model = load_hull(hull).axis_model(plan.axis)
+            for draft in plan.drafts:
+                model.coefficients(parse_draft(draft))  # raises if the hull has no such draft
+        assert plan.angles_deg and all(0 < a <= 30 for a in plan.angles_deg)
+
+
+def test_simulate_campaign_follows_a_plan(tmp_path):
+    from typer.testing import CliRunner
+
+    from tankdaq.cli import app
+
+    result = CliRunner().invoke(app, ["simulate-campaign", str(tmp_path), "--plan", "seed001-swath-roll"])
+    assert result.exit_code == 0, result.output
+    names = sorted(p.name for p in tmp_path.glob("*.csv"))
+    assert len(names) == 12 and names[0].startswith("swath_0.9T_roll_")
+    bad = CliRunner().invoke(app, ["simulate-campaign", str(tmp_path / "x"), "--plan", "nope"])
+    assert bad.exit_code == 2 and "seed001-swath-roll" in bad.output

@@ -35,7 +35,9 @@ def parse_draft(text: str) -> float:
     """``'1.1T'`` -> 1.1, ``'T'`` -> 1.0. Raises InputError with the accepted forms."""
     m = _DRAFT_RE.match(str(text))
     if not m:
-        raise InputError(f"draft {text!r} not understood: write a factor of the design draft, e.g. 0.9T, T, 1.1T")
+        raise InputError(
+            f"draft {text!r} not understood: write a factor of the design draft, e.g. 0.9T, T, 1.1T"
+        )
     factor = float(m.group(1)) if m.group(1) not in ("", ".") else 1.0
     if not 0.3 <= factor <= 2.0:
         raise InputError(f"draft {text!r} is outside 0.3T..2.0T; write e.g. 0.9T, T, 1.1T")
@@ -128,3 +130,41 @@ def load_hull(name: str) -> Hull:
         sources=dict(data.get("sources", {})),
         path=path,
     )
+
+
+@dataclass
+class CampaignPlan:
+    """A test matrix: which hulls, axis, drafts and initial angles a campaign covers."""
+
+    name: str
+    description: str
+    hulls: list[str]
+    axis: str
+    drafts: list[str]
+    angles_deg: list[float]
+
+
+def list_campaign_plans() -> list[str]:
+    """Names of the test matrices in configs/campaigns."""
+    return sorted(p.stem for p in (config_dir() / "campaigns").glob("*.toml"))
+
+
+def load_campaign_plan(name: str) -> CampaignPlan:
+    """Load ``configs/campaigns/<name>.toml``; an unknown name lists the known ones."""
+    path = config_dir() / "campaigns" / f"{name}.toml"
+    if not path.is_file():
+        raise InputError(
+            f"unknown campaign plan {name!r}; known: {', '.join(list_campaign_plans()) or 'none'}"
+        )
+    try:
+        data = tomllib.loads(path.read_text())
+        return CampaignPlan(
+            name=name,
+            description=str(data.get("description", "")),
+            hulls=[str(h) for h in data["hulls"]],
+            axis=str(data["axis"]),
+            drafts=[str(d) for d in data["drafts"]],
+            angles_deg=[float(a) for a in data["angles_deg"]],
+        )
+    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as exc:
+        raise ConfigError(f"{path}: {exc} (needs hulls, axis, drafts, angles_deg)") from None

@@ -76,30 +76,38 @@ def campaign_command(
 @handles_errors
 def simulate_campaign_command(
     folder: Annotated[Path, typer.Argument(help="Folder for the simulated recordings (created).")],
-    hulls: Annotated[list[str] | None, typer.Option("--hull", help="Hull configs (repeat).")] = None,
-    axis: Annotated[str, typer.Option("--axis", help="roll or pitch.")] = "pitch",
-    drafts: Annotated[list[str] | None, typer.Option("--draft", help="Drafts (repeat).")] = None,
+    plan: Annotated[
+        str, typer.Option("--plan", help="Test matrix from configs/campaigns (hulls, axis, drafts, angles).")
+    ] = "seed000-trimaran-catamaran-pitch",
+    hulls: Annotated[
+        list[str] | None, typer.Option("--hull", help="Hull configs (repeat; overrides the plan).")
+    ] = None,
+    axis: Annotated[str | None, typer.Option("--axis", help="roll or pitch (overrides the plan).")] = None,
+    drafts: Annotated[
+        list[str] | None, typer.Option("--draft", help="Drafts (repeat; overrides the plan).")
+    ] = None,
     angles_deg: Annotated[
-        list[float] | None, typer.Option("--angle", help="Initial angles, deg (repeat).")
+        list[float] | None, typer.Option("--angle", help="Initial angles, deg (repeat; overrides the plan).")
     ] = None,
     file_format: Annotated[str, typer.Option("--format", help="csv or mcap.")] = "csv",
     seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,
 ) -> None:
-    """Simulate a decay campaign from configs/hulls: by default the seeds' matrix of trimaran and
-    catamaran pitch decays at 0.9T, T, 1.1T from 2, 4, 6, 8 deg."""
-    from ..config import parse_draft
+    """Simulate a decay campaign from configs/hulls, following a test matrix from configs/campaigns
+    (default: seed 000's trimaran and catamaran pitch decays at 0.9T, T, 1.1T from 2, 4, 6, 8 deg)."""
+    from ..config import load_campaign_plan, parse_draft
     from ..errors import InputError
     from ..ident.campaign import write_simulated_campaign
 
+    matrix = load_campaign_plan(plan)
+    axis = axis or matrix.axis
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
-    factors = [parse_draft(d) for d in drafts or ["0.9T", "T", "1.1T"]]
     written = write_simulated_campaign(
         folder,
-        hulls or ["trimaran", "catamaran"],
+        hulls or matrix.hulls,
         axis,
-        factors,
-        angles_deg or [2.0, 4.0, 6.0, 8.0],
+        [parse_draft(d) for d in drafts or matrix.drafts],
+        angles_deg or matrix.angles_deg,
         file_format,
         seed=seed,
     )
