@@ -110,6 +110,25 @@ def test_the_story_goes_to_rerun(tmp_path: Path) -> None:
     log_to_rerun(diagnoser, stream)
     stream.flush()
     stream.disconnect()
+    assert_rrd_tells(path, data.runs, data.noise_angle_rad, story(diagnoser))
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")
+def test_cli_writes_the_rrd(tmp_path: Path) -> None:
+    from tankdaq.store.csv_import import read_csv_runs
+
+    csvs = write_csvs(tmp_path, ("sensor.offset",), seed=27)
+    result = invoke(*csvs, "--rrd", tmp_path / "story.rrd")
+    assert result.exit_code == 0, result.output
+    runs = [run for path in csvs for run in read_csv_runs(path)]  # as the command read them (cut at release)
+    noise = make_decay_set(("sensor.offset",), seed=27).noise_angle_rad
+    assert_rrd_tells(tmp_path / "story.rrd", runs, noise, result.stdout.strip().splitlines())
+    missing_folder = invoke(*csvs, "--rrd", tmp_path / "nowhere" / "story.rrd")
+    assert missing_folder.exit_code == 2 and "does not exist" in missing_folder.stderr
+
+
+def assert_rrd_tells(path: Path, runs: list, noise_rad: float, lines: list[str]) -> None:
+    """The .rrd holds per run the five series over the whole record and the story, line for line."""
 
     scalars: dict[str, list[float]] = defaultdict(list)
     texts: list[str] = []
@@ -121,13 +140,19 @@ def test_the_story_goes_to_rerun(tmp_path: Path) -> None:
             scalars[chunk.entity_path] += [v[0] for v in batch.column("Scalars:scalars").to_pylist() if v]
         if "TextLog:text" in batch.schema.names:
             texts += [v[0] for v in batch.column("TextLog:text").to_pylist() if v]
-    run = data.runs[0].name
-    for series in ("angle/measured", "angle/baseline", "angle/final", "residual/baseline", "residual/final"):
-        assert len(scalars[f"/diagnose/{run}/{series}"]) == data.runs[0].t.size
-    np.testing.assert_allclose(scalars[f"/diagnose/{run}/angle/measured"], np.degrees(data.runs[0].angle))
-    final_residual = np.array(scalars[f"/diagnose/{run}/residual/final"])
-    assert np.sqrt(np.mean(final_residual**2)) < 1.3 * np.degrees(data.noise_angle_rad)
-    assert texts == story(diagnoser)
+    for run in runs:
+        for series in (
+            "angle/measured",
+            "angle/baseline",
+            "angle/final",
+            "residual/baseline",
+            "residual/final",
+        ):
+            assert len(scalars[f"/diagnose/{run.name}/{series}"]) == run.t.size
+        np.testing.assert_allclose(scalars[f"/diagnose/{run.name}/angle/measured"], np.degrees(run.angle))
+        final_residual = np.array(scalars[f"/diagnose/{run.name}/residual/final"])
+        assert np.sqrt(np.mean(final_residual**2)) < 1.3 * np.degrees(noise_rad)
+    assert texts == lines
 
 
 def test_mcap_recordings_are_diagnosed(tmp_path: Path) -> None:

@@ -27,6 +27,9 @@ def diagnose_command(
     report: Annotated[
         Path | None, typer.Option("--report", help="Write a Markdown report with PNG figures into DIR.")
     ] = None,
+    rrd: Annotated[
+        Path | None, typer.Option("--rrd", help="Also write the story to a rerun .rrd file for the viewer.")
+    ] = None,
     time_col: str = typer.Option("time_s", "--time-col", help="CSV time column (s)."),
     angle_col: str = typer.Option("angle_deg", "--angle-col", help="CSV angle column."),
     rate_col: str = typer.Option("rate_deg_s", "--rate-col", help="CSV rate column (ignored when absent)."),
@@ -38,7 +41,7 @@ def diagnose_command(
 ) -> None:
     """Fit a baseline, find where it disagrees with the decays, name and add the missing effects."""
     from ..diagnose.effects import LIBRARY
-    from ..diagnose.report import story, summary_json, write_report
+    from ..diagnose.report import save_rrd, story, summary_json, write_report
     from ..diagnose.workflow import Diagnoser
     from .identify import load_runs
 
@@ -46,6 +49,8 @@ def diagnose_command(
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     if max_steps < 0:
         raise InputError(f"--max-steps must be 0 or more, not {max_steps}")
+    if rrd is not None and not rrd.parent.is_dir():  # say so before minutes of fitting, not after
+        raise InputError(f"cannot write {rrd}: folder {rrd.parent} does not exist")
     runs = load_runs(inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles)
     with Progress(
         TextColumn("{task.description}"),
@@ -65,6 +70,9 @@ def diagnose_command(
     if report is not None:
         path = write_report(diagnoser, report)
         err_console.print(f"report: {path}", markup=False, highlight=False)
+    if rrd is not None:
+        save_rrd(diagnoser, rrd)
+        err_console.print(f"rerun recording: {rrd}", markup=False, highlight=False)
     if as_json:
         typer.echo(summary_json(diagnoser))
     else:

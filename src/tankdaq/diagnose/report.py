@@ -15,7 +15,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..errors import RecordingError
+from ..errors import InputError, RecordingError
 from .fitting import Fit
 from .residuals import SPECTRUM_MEANING
 from .workflow import Diagnoser, Diagnostics, Step, signature_seen
@@ -362,3 +362,20 @@ def log_to_rerun(diagnoser: Diagnoser, stream: Any) -> None:
             )
     for line in story(diagnoser):
         stream.log("diagnose/story", rr.TextLog(line, level="INFO"))
+
+
+def save_rrd(diagnoser: Diagnoser, path: str | Path) -> Path:
+    """``log_to_rerun`` into a new .rrd file (open it with ``rerun path``)."""
+    import rerun as rr
+
+    from ..viz.live import APPLICATION_ID
+
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise InputError(f"cannot write {path}: folder {path.parent} does not exist")
+    stream = rr.RecordingStream(APPLICATION_ID)
+    stream.save(str(path))
+    log_to_rerun(diagnoser, stream)
+    stream.flush()
+    stream.disconnect()
+    return path
