@@ -217,3 +217,23 @@ def test_runs_of_different_axes_are_refused() -> None:
     runs[1].axis = "pitch"
     with pytest.raises(BadIdentificationInput, match="mix axes"):
         Diagnoser().fit(runs)
+
+
+def test_simulated_campaign_recordings_reveal_the_hull_model(tmp_path: Path) -> None:
+    """Recordings from the campaign simulator (its own noise and release model, written as MCAP by the
+    store) of the SWATH roll model, whose truth is b1, b3 (cubic damping), c1, c3 (cubic restoring) plus
+    negligible b2, c2: from a linear baseline the workflow must find both nonlinear families."""
+    from tankdaq.config import load_hull
+    from tankdaq.ident.campaign import write_simulated_campaign
+    from tankdaq.store.reader import read_decay_runs
+
+    paths = write_simulated_campaign(tmp_path, ["swath"], "roll", [1.0], [4.0, 8.0, 12.0], "mcap", seed=1)
+    runs = [run for path in paths for run in read_decay_runs(path)]
+    truth = load_hull("swath").axis_model("roll").coefficients(1.0)
+    diagnoser = Diagnoser().fit(runs)
+    families = {s.effect.family for s in diagnoser.steps_}
+    assert families == {"amplitude-dependent damping", "nonlinear restoring"}
+    final = diagnoser.final_.coefficients
+    assert final["c3"] == pytest.approx(truth["c3"], rel=0.05)
+    assert final.get("b3", 0.0) == pytest.approx(truth["b3"], rel=0.05)
+    assert diagnoser.final_.ljung_box_p > 0.01
