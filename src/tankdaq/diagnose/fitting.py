@@ -345,6 +345,7 @@ class _Problem:
         self.ng = len(self.gnames)
         self.sizes = [d.run.t.size * (1 if d.run.rate is None else 2) for d in data]
         self.bounds = np.cumsum([0, *self.sizes])
+        self._last: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros(0))  # (p, residual) last evaluated
 
     def unpack(self, p: np.ndarray) -> tuple[dict[str, float], np.ndarray]:
         return dict(zip(self.gnames, p[: self.ng], strict=True)), p[self.ng :].reshape(
@@ -376,14 +377,18 @@ class _Problem:
 
     def residual(self, p: np.ndarray) -> np.ndarray:
         g, rps = self.unpack(p)
-        return np.concatenate([self.run_residual(d, g, rp) for d, rp in zip(self.data, rps, strict=True)])
+        value = np.concatenate([self.run_residual(d, g, rp) for d, rp in zip(self.data, rps, strict=True)])
+        self._last = (p.copy(), value)  # LM asks for the Jacobian where it just evaluated the residual
+        return value
 
     def jacobian(self, p: np.ndarray) -> np.ndarray:
         g, rps = self.unpack(p)
+        last_p, last_value = self._last
+        at_last = last_p is not None and np.array_equal(last_p, p)
         jac = np.zeros((int(self.bounds[-1]), p.size))
         for r, (d, rp) in enumerate(zip(self.data, rps, strict=True)):
             rows = slice(self.bounds[r], self.bounds[r + 1])
-            base = self.run_residual(d, g, rp)
+            base = last_value[rows] if at_last else self.run_residual(d, g, rp)
             for j, name in enumerate(self.gnames):
                 step = 1e-7 * max(abs(g[name]), 1e-2)
                 jac[rows, j] = (self.run_residual(d, {**g, name: g[name] + step}, rp) - base) / step
