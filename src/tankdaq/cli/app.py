@@ -13,6 +13,7 @@ from typing import Any, TypeVar
 
 import typer
 from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ..errors import TankdaqError
 
@@ -80,3 +81,16 @@ def root(
     ),
 ) -> None:
     """tankdaq: record towing-tank decay tests from an Xsens MTi-G and identify damping and restoring."""
+
+
+def progress_bar() -> Progress:
+    """The progress display every long command uses: on stderr (stdout stays machine-readable), transient
+    (an error after it stays the one line printed), counting done/total with the elapsed time."""
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err_console,
+        transient=True,
+    )

@@ -6,20 +6,8 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from .app import app, err_console, handles_errors
-
-
-def _progress() -> Progress:
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,  # an error after it then stays the one line printed
-    )
+from .app import app, err_console, handles_errors, progress_bar
 
 
 @app.command("campaign")
@@ -50,7 +38,7 @@ def campaign_command(
 
     resolve_model(model)  # a typo fails before any file is read
     paths = find_recordings(inputs)
-    with _progress() as progress:
+    with progress_bar() as progress:
         reading = progress.add_task("reading", total=len(paths))
         runs = []
         for path in paths:

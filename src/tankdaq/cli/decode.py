@@ -16,7 +16,7 @@ from typing import IO, Annotated
 
 import numpy as np
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import Progress
 
 from ..errors import InputError, ProtocolError
 from ..xsens.batch import DecodedBlock
@@ -25,7 +25,7 @@ from ..xsens.legacy import decode_mtdata, legacy_layout
 from ..xsens.mtdata2 import SPEC_BY_NAME, MTData2Message, UtcTime, to_jsonable
 from ..xsens.stream import StreamDecoder
 from ..xsens.timebase import CounterTracker
-from .app import app, err_console, handles_errors
+from .app import app, err_console, handles_errors, progress_bar
 
 CHUNK_BYTES = 1 << 20
 WRITE_BATCH = 10_000
@@ -109,12 +109,6 @@ def open_output(out: Path | None) -> Iterator[IO[str]]:
         raise InputError(f"cannot write {out}: {exc.strerror}") from None
     with handle:
         yield handle
-
-
-def progress() -> Progress:
-    """A transient progress display on stderr (stdout stays machine-readable)."""
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn())
-    return Progress(*columns, console=err_console, transient=True)
 
 
 def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
@@ -255,7 +249,7 @@ def decode_command(
         except ProtocolError as exc:
             raise InputError(str(exc)) from None
     data = read_capture(capture)
-    with progress() as bar:
+    with progress_bar() as bar:
         block = decode_all(data, bar, capture.name)
         if block.frames == 0:
             raise InputError(f"no Xbus frames in {capture} ({len(data)} bytes): is it a raw serial capture?")

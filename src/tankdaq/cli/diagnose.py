@@ -6,10 +6,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ..errors import InputError
-from .app import app, err_console, handles_errors
+from .app import app, err_console, handles_errors, progress_bar
 
 
 @app.command("diagnose")
@@ -52,13 +51,7 @@ def diagnose_command(
     if rrd is not None and not rrd.parent.is_dir():  # say so before minutes of fitting, not after
         raise InputError(f"cannot write {rrd}: folder {rrd.parent} does not exist")
     runs = load_runs(inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles)
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-    ) as progress:
+    with progress_bar() as progress:
         # per step: every candidate, plus the two refits of the late-disturbance test
         task = progress.add_task("baseline", total=1 + max_steps * (len(LIBRARY) + 2))
 

@@ -8,22 +8,10 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ..errors import InputError
 from ..records import DecayRun
-from .app import app, err_console, handles_errors, parse_draft_option
-
-
-def _progress() -> Progress:
-    return Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err_console,
-        transient=True,
-    )
+from .app import app, handles_errors, parse_draft_option, progress_bar
 
 
 def load_runs(
@@ -133,7 +121,7 @@ def identify_command(
     if compare:
         from ..ident.models import COMPARE_MODELS
 
-        with _progress() as progress:
+        with progress_bar() as progress:
             task = progress.add_task("fitting models", total=len(group_models(COMPARE_MODELS)))
             rows = compare_models(
                 runs, COMPARE_MODELS, method, lambda name: progress.update(task, advance=1, description=name)
@@ -149,7 +137,7 @@ def identify_command(
         raise InputError(f"--bootstrap works with --method oe, not {method}")
     if repeats and (bootstrap or len(runs) < 3):
         raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")
-    with _progress() as progress:
+    with progress_bar() as progress:
         task = progress.add_task(f"fitting {method}", total=1 + bootstrap)
         estimator.fit(runs)
         progress.update(task, advance=1)
