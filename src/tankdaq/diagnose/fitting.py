@@ -2,7 +2,8 @@
 
 The workflow refits the whole decay by simulation error for every candidate
 effect (a few dozen refits per diagnosis), so each refit has to cost
-milliseconds: a numba fixed-step RK4 on the sample grid, forward-difference
+milliseconds: the compiled fixed-step RK4 of ``ident.kernels`` on the sample
+grid (the same equation and integrator as the estimators), forward-difference
 Jacobians that re-simulate only the run a parameter touches, and
 Levenberg-Marquardt. Besides the canonical terms b1..s3 a variant may hold
 Coulomb friction ``fc*tanh(x'/eps)``, coupling ``k*u(t)`` to measured channels,
@@ -17,11 +18,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from numba import njit
 from scipy.optimize import least_squares
 from scipy.signal import butter, sosfiltfilt
 
 from ..errors import BadIdentificationInput, IdentificationError
+from ..ident.kernels import simulate, term_codes
 from ..physics.decay import TERMS
 from ..records import DecayRun
 from .residuals import ljung_box_p, noise_level
@@ -29,6 +30,9 @@ from .residuals import ljung_box_p, noise_level
 #: Smoothing rate of the Coulomb term fc*tanh(x'/eps): a dry friction that switches within 0.005 rad/s.
 COULOMB_EPS_RAD_S = 0.005
 _DIVERGED = 1e3  # value a diverging simulation is clamped to, so least squares backs off instead of crashing
+_CANONICAL_CODES = term_codes(TERMS)
+_COULOMB_CODE = term_codes(("fc",))
+_FORCING_CODE = term_codes(("ku",))
 
 
 @dataclass(frozen=True)
@@ -98,79 +102,34 @@ class ModelSpec:
         return replace(self, **changes)  # type: ignore[arg-type]
 
 
-@njit(cache=True)
-def _acceleration(coef: np.ndarray, fc: float, x: float, v: float, forcing: float, sine: bool) -> float:
-    acc = (
-        coef[0] * v
-        + coef[1] * abs(v) * v
-        + coef[2] * v * v * v
-        + coef[3] * x
-        + coef[4] * x * x
-        + coef[5] * x * x * x
-        + forcing
-    )
-    if sine:  # sin and tanh cost more than the rest together: only when the model has them
-        sx = np.sin(x)
-        acc += coef[6] * sx + coef[7] * sx * sx + coef[8] * sx * sx * sx
-    if fc != 0.0:
-        acc += fc * np.tanh(v / COULOMB_EPS_RAD_S)
-    return -acc
-
-
-@njit(cache=True)
 def simulate_rk4(
     t: np.ndarray, forcing: np.ndarray, coef: np.ndarray, fc: float, x0: float, v0: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Angle and rate on the sample grid.
+    """Angle and rate on the sample grid, integrated by ``ident.kernels`` (one equation, one RK4).
 
-    Classic RK4 over two sample intervals at a time: the step's midpoint is a
-    sample, so the forcing needs no interpolation, the last stage's acceleration
-    starts the next step, and the skipped sample is filled by cubic Hermite
-    interpolation (error ~(w h)^4 / 384 of the amplitude, far below sensor noise).
+    ``coef`` holds b1..s3 in ``TERMS`` order. The forcing sits on the left-hand
+    side like ident's ``ku*u(t)``, so it goes in as u with a unit ku. Terms with
+    a zero coefficient are left out: sin and tanh cost more than the rest together.
+    A solution leaving the sane range is clamped to ``_DIVERGED`` from there on,
+    so least squares backs off instead of chasing inf.
     """
-    n = t.size
-    x = np.empty(n)
-    v = np.empty(n)
-    sine = coef[6] != 0.0 or coef[7] != 0.0 or coef[8] != 0.0
-    x[0] = x0
-    v[0] = v0
-    a_i = _acceleration(coef, fc, x0, v0, forcing[0], sine)
-    i = 0
-    while i < n - 1:
-        stride = 2 if i + 2 < n else 1
-        j = i + stride
-        h = t[j] - t[i]
-        f_mid = forcing[i + 1] if stride == 2 else 0.5 * (forcing[i] + forcing[j])
-        xi = x[i]
-        vi = v[i]
-        x2 = xi + 0.5 * h * vi
-        v2 = vi + 0.5 * h * a_i
-        a2 = _acceleration(coef, fc, x2, v2, f_mid, sine)
-        x3 = xi + 0.5 * h * v2
-        v3 = vi + 0.5 * h * a2
-        a3 = _acceleration(coef, fc, x3, v3, f_mid, sine)
-        x4 = xi + h * v3
-        v4 = vi + h * a3
-        a4 = _acceleration(coef, fc, x4, v4, forcing[j], sine)
-        xn = xi + h / 6.0 * (vi + 2.0 * v2 + 2.0 * v3 + v4)
-        vn = vi + h / 6.0 * (a_i + 2.0 * a2 + 2.0 * a3 + a4)
-        if not (abs(xn) < _DIVERGED and abs(vn) < _DIVERGED):
-            x[i + 1 :] = _DIVERGED
-            v[i + 1 :] = _DIVERGED
-            return x, v
-        a_n = _acceleration(coef, fc, xn, vn, forcing[j], sine)
-        x[j] = xn
-        v[j] = vn
-        if stride == 2:
-            u = (t[i + 1] - t[i]) / h
-            h00 = (1 + 2 * u) * (1 - u) ** 2
-            h10 = u * (1 - u) ** 2
-            h01 = u * u * (3 - 2 * u)
-            h11 = u * u * (u - 1)
-            x[i + 1] = h00 * xi + h10 * h * vi + h01 * xn + h11 * h * vn
-            v[i + 1] = h00 * vi + h10 * h * a_i + h01 * vn + h11 * h * a_n
-        a_i = a_n
-        i = j
+    used = np.flatnonzero(coef)
+    codes = [_CANONICAL_CODES[used]]
+    theta = [coef[used]]
+    if fc != 0.0:
+        codes.append(_COULOMB_CODE)
+        theta.append(np.array([fc]))
+    if np.any(forcing):
+        codes.append(_FORCING_CODE)
+        theta.append(np.ones(1))
+    x, v = simulate(
+        t, float(x0), float(v0), np.concatenate(theta), np.concatenate(codes), forcing, COULOMB_EPS_RAD_S, 1
+    )
+    outside = ~((np.abs(x) < _DIVERGED) & (np.abs(v) < _DIVERGED))  # NaN counts as outside
+    if outside.any():
+        first = int(np.argmax(outside))
+        x[first:] = _DIVERGED
+        v[first:] = _DIVERGED
     return x, v
 
 
