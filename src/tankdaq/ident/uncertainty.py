@@ -106,13 +106,15 @@ def _hac_meat(
     meat = g.T @ triangle_smooth(g, bandwidth)
     if correct:
         smooth_info = triangle_smooth(info, bandwidth)
-        for t in range(n):
-            k_t = smooth_info[t].reshape((p, p))
-            for o in range(n_out):
-                w = (bread @ jac[o, t]) @ k_t
-                for a in range(p):
-                    for b in range(p):
-                        meat[a, b] += jac[o, t, a] * w[b]
+        for o in range(n_out):
+            spread = jac[o] @ bread  # row t is (bread @ jac[o, t])': bread is symmetric
+            for t in range(n):
+                for b in range(p):
+                    w = 0.0  # (bread @ jac[o, t]) @ K_t, one column at a time: no allocation per sample
+                    for c in range(p):
+                        w += spread[t, c] * smooth_info[t, c * p + b]
+                    for a in range(p):
+                        meat[a, b] += jac[o, t, a] * w
     return meat
 
 
