@@ -230,33 +230,21 @@ def _tankdaq(*args: str, **kwargs) -> subprocess.Popen:
     )
 
 
-def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
-    proc = _tankdaq(
-        "record",
-        "--port",
-        "sim",
-        "--draft",
-        "T",
-        "--angle",
-        "8",
-        "--out",
-        str(tmp_path),
-        "--viewer",
-        "none",
-        "--runs",
-        "1",
-        "--sim-seed",
-        "2",
-    )
-    deadline = time.monotonic() + 60
+def _recording_after_release(out: Path, *extra: str) -> subprocess.Popen:
+    """``tankdaq record --port sim`` in a subprocess, returned once it has reported a release."""
+    args = ["record", "--port", "sim", "--draft", "T", "--angle", "8", "--out", str(out), "--viewer", "none"]
+    proc = _tankdaq(*args, *extra)
     assert proc.stderr is not None
-    released = False
+    deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
-        line = proc.stderr.readline()
-        if "released at" in line:
-            released = True
-            break
-    assert released, "the recorder saw a release"
+        if "released at" in proc.stderr.readline():
+            return proc
+    proc.kill()
+    raise AssertionError("the recorder reported no release within 60 s")
+
+
+def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
+    proc = _recording_after_release(tmp_path, "--runs", "1", "--sim-seed", "2")
     time.sleep(2.5)  # well into the decay
     os.kill(proc.pid, signal.SIGKILL)
     killed_at = time.time()
@@ -280,25 +268,7 @@ def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
 
 
 def test_sigterm_closes_the_file_properly(tmp_path: Path) -> None:
-    proc = _tankdaq(
-        "record",
-        "--port",
-        "sim",
-        "--draft",
-        "T",
-        "--angle",
-        "8",
-        "--out",
-        str(tmp_path),
-        "--viewer",
-        "none",
-        "--sim-speed",
-        "4",
-    )
-    assert proc.stderr is not None
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline and "released at" not in proc.stderr.readline():
-        pass
+    proc = _recording_after_release(tmp_path, "--sim-speed", "4")
     time.sleep(1.0)
     proc.send_signal(signal.SIGTERM)
     proc.wait(timeout=30)

@@ -9,6 +9,15 @@ import typer
 
 from ..errors import InputError
 from .app import app, err_console, handles_errors, progress_bar
+from .identify import (
+    AngleColumn,
+    AngleUnit,
+    KeepAll,
+    RateColumn,
+    SkipHalfCycles,
+    TimeColumn,
+    load_runs,
+)
 
 
 @app.command("diagnose")
@@ -29,20 +38,17 @@ def diagnose_command(
     rrd: Annotated[
         Path | None, typer.Option("--rrd", help="Also write the story to a rerun .rrd file for the viewer.")
     ] = None,
-    time_col: str = typer.Option("time_s", "--time-col", help="CSV time column (s)."),
-    angle_col: str = typer.Option("angle_deg", "--angle-col", help="CSV angle column."),
-    rate_col: str = typer.Option("rate_deg_s", "--rate-col", help="CSV rate column (ignored when absent)."),
-    angle_unit: str = typer.Option("deg", "--angle-unit", help="Unit of the CSV angle and rate: deg or rad."),
-    keep_all: bool = typer.Option(False, "--keep-all", help="Do not cut the CSV record at the release."),
-    skip_half_cycles: int = typer.Option(
-        0, "--skip-half-cycles", min=0, help="Half-cycles to drop after it."
-    ),
+    time_col: TimeColumn = "time_s",
+    angle_col: AngleColumn = "angle_deg",
+    rate_col: RateColumn = "rate_deg_s",
+    angle_unit: AngleUnit = "deg",
+    keep_all: KeepAll = False,
+    skip_half_cycles: SkipHalfCycles = 0,
 ) -> None:
     """Fit a baseline, find where it disagrees with the decays, name and add the missing effects."""
     from ..diagnose.effects import LIBRARY
     from ..diagnose.report import save_rrd, story, summary_json, write_report
     from ..diagnose.workflow import Diagnoser
-    from .identify import load_runs
 
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")

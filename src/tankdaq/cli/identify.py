@@ -13,6 +13,16 @@ from ..errors import InputError
 from ..records import DecayRun
 from .app import app, handles_errors, parse_draft_option, progress_bar
 
+# Options every command that reads decays shares (identify, diagnose): how to read other labs' CSV.
+TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
+AngleColumn = Annotated[str, typer.Option("--angle-col", help="CSV angle column.")]
+RateColumn = Annotated[str, typer.Option("--rate-col", help="CSV rate column (ignored when absent).")]
+AngleUnit = Annotated[str, typer.Option("--angle-unit", help="Unit of the CSV angle and rate: deg or rad.")]
+KeepAll = Annotated[bool, typer.Option("--keep-all", help="Do not cut the CSV record at the release.")]
+SkipHalfCycles = Annotated[
+    int, typer.Option("--skip-half-cycles", min=0, help="Half-cycles dropped after it.")
+]
+
 
 def load_runs(
     inputs: list[Path],
@@ -86,14 +96,12 @@ def identify_command(
         False, "--compare", help="Fit every seed formula and ITTC form; print the table."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
-    time_col: str = typer.Option("time_s", "--time-col", help="CSV time column (s)."),
-    angle_col: str = typer.Option("angle_deg", "--angle-col", help="CSV angle column."),
-    rate_col: str = typer.Option("rate_deg_s", "--rate-col", help="CSV rate column (ignored when absent)."),
-    angle_unit: str = typer.Option("deg", "--angle-unit", help="Unit of the CSV angle and rate: deg or rad."),
-    keep_all: bool = typer.Option(False, "--keep-all", help="Do not cut the CSV record at the release."),
-    skip_half_cycles: int = typer.Option(
-        0, "--skip-half-cycles", min=0, help="Half-cycles to drop after it."
-    ),
+    time_col: TimeColumn = "time_s",
+    angle_col: AngleColumn = "angle_deg",
+    rate_col: RateColumn = "rate_deg_s",
+    angle_unit: AngleUnit = "deg",
+    keep_all: KeepAll = False,
+    skip_half_cycles: SkipHalfCycles = 0,
     bootstrap: int = typer.Option(
         0, "--bootstrap", min=0, help="Moving-block bootstrap replicas for intervals."
     ),
