@@ -372,3 +372,15 @@ def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> 
     assert result.returncode in (0, 3), result.stderr
     recovered = read_recording(next(tmp_path.glob("*.recovered.mcap")))
     assert recovered.samples.size > 100 and _events(recovered, "release")
+
+
+def test_demo_records_identifies_and_plots(tmp_path: Path) -> None:
+    """What `make demo` runs, shortened: one simulated decay, identified against the hull's truth."""
+    result = CliRunner().invoke(app, ["demo", "--out", str(tmp_path), "--runs", "1", "--sim-speed", "10"])
+    assert result.exit_code == 0, result.output
+    assert len(list(tmp_path.glob("*.mcap"))) == 1
+    assert len(list(tmp_path.glob("*.rrd"))) == 1
+    assert len(list(tmp_path.glob("*.png"))) == 1
+    verdicts = [line for line in result.output.splitlines() if "95 % interval)" in line]
+    assert len(verdicts) == 6, result.output
+    assert sum("inside" in line for line in verdicts) >= 5, "the truth lies inside (nearly) every interval"
