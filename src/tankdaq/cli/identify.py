@@ -147,6 +147,9 @@ def identify_command(
         raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")
     with progress_bar() as progress:
         task = progress.add_task(f"fitting {method}", total=1 + bootstrap)
+        if hasattr(estimator, "progress"):  # the seeds' GA/PSO report their generations
+            generations = progress.add_task("generations", total=None)
+            estimator.progress = lambda done, total: progress.update(generations, completed=done, total=total)
         estimator.fit(runs)
         progress.update(task, advance=1)
         interval_method = None
