@@ -130,12 +130,10 @@ class LiveView:
         self._measured_t: list[np.ndarray] = []
         self._measured_angle: list[np.ndarray] = []
         self._styled_terms: set[str] = set()
-        rec = rr.RecordingStream(
-            APPLICATION_ID, recording_id=uuid.uuid4(), default_enabled=self.mode != "none"
-        )
-        self._rec = rec
-        if self.mode == "none":
+        if self.mode == "none":  # no stream at all: a disabled one still warns when flushed or collected
             return
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
+        self._rec = rec
         blueprint = decay_blueprint(self.terms)
         sinks: list[rr.GrpcSink | rr.FileSink] = []
         if self.mode == "spawn":
