@@ -92,8 +92,6 @@ def resolve_model(spec: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
 
 
 def model_name(terms: tuple[str, ...]) -> str:
-    """The alias of a term set when it has one, else the comma list."""
-    for alias in MODEL_ALIASES.values():
-        if alias.terms == tuple(terms):
-            return alias.name
-    return ",".join(terms)
+    """The aliases of a term set (several seed formulas share one), else the comma list."""
+    names = [alias.name for alias in MODEL_ALIASES.values() if alias.terms == tuple(terms)]
+    return " = ".join(names) if names else ",".join(terms)
