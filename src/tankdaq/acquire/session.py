@@ -266,7 +266,10 @@ class _ActiveDecay:
             rrd = None
         session.view.axis = axis
         session.view.new_run(
-            name=self.path.stem if self.path else f"run {run}", rrd_path=rrd, terms=session.terms
+            name=self.path.stem if self.path else f"run {run}",
+            rrd_path=rrd,
+            terms=session.terms,
+            time_origin_s=release_t,  # the view reads in seconds since the release
         )
         self.rrd_path = session.view.rrd_path
 

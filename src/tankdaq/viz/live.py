@@ -112,15 +112,25 @@ class LiveView:
         self._first_rrd_path = None if rrd_path is None else Path(rrd_path)
         self._spawned = False
         self._rec: rr.RecordingStream | None = None
+        self._origin = 0.0
         self.rrd_path: Path | None = None
 
     # -- runs -------------------------------------------------------------------------------------------
 
     def new_run(
-        self, name: str = "decay", rrd_path: str | Path | None = None, terms: Sequence[str] | None = None
+        self,
+        name: str = "decay",
+        rrd_path: str | Path | None = None,
+        terms: Sequence[str] | None = None,
+        time_origin_s: float = 0.0,
     ) -> None:
-        """Start a fresh recording (one per decay); the previous one is flushed and closed."""
+        """Start a fresh recording (one per decay); the previous one is flushed and closed.
+
+        ``time_origin_s`` (device time, e.g. the release) becomes zero on the view's timeline, so a
+        person reads "seconds since release" instead of the sensor's hours since power-up.
+        """
         self.close()
+        self._origin = float(time_origin_s)
         if terms is not None:
             self.terms = tuple(terms)
         self.rrd_path = None if rrd_path is None else Path(rrd_path)
@@ -183,12 +193,12 @@ class LiveView:
     def _columns(self, entity: str, t: np.ndarray, values: np.ndarray) -> None:
         self._recording().send_columns(
             entity,
-            indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float))],
+            indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float) - self._origin)],
             columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=float)),
         )
 
     def log_samples(self, samples: np.ndarray) -> None:
-        """Measured angle and rate of the view's axis, in degrees, against device time."""
+        """Measured angle and rate of the view's axis, in degrees, against time from the run's origin."""
         if samples.size == 0 or self.mode == "none":
             return
         angle_field, rate_field = AXIS_FIELDS[self.axis]
@@ -220,7 +230,7 @@ class LiveView:
         self._revision += 1
         fit = f"fit_{self._revision:03d}"
         stamp = float(t[-1]) if t_fit is None else float(t_fit)
-        label = f"model (fit {self._revision}, t = {stamp:.1f} s)"
+        label = f"model (fit {self._revision}, t = {stamp - self._origin:.1f} s)"
         curves = {"angle": (t, np.degrees(predicted_angle)), "rate": (t, np.degrees(predicted_rate))}
         if self._measured_t:
             measured_t = np.concatenate(self._measured_t)
@@ -247,7 +257,7 @@ class LiveView:
             if self._revision >= 3:
                 older = f"{group}/model/fit_{self._revision - 2:03d}"
                 rec.log(older, rr.SeriesLines(visible_series=[False]), static=True)
-        rec.set_time(TIMELINE, duration=stamp)
+        rec.set_time(TIMELINE, duration=stamp - self._origin)
         intervals = interval_pairs(coefficients, ci95)
         for term, value in coefficients.items():
             entity = f"coefficients/{term}"
@@ -270,10 +280,10 @@ class LiveView:
             rec.log(entity, rr.Scalars([float(value), low, high]))
 
     def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
-        """A run event (release, settled, warning, ...) in the Events panel, at its device time."""
+        """A run event (release, settled, warning, ...) in the Events panel, at its time."""
         if self.mode == "none":
             return
         rec = self._recording()
         if t_s is not None:
-            rec.set_time(TIMELINE, duration=float(t_s))
+            rec.set_time(TIMELINE, duration=float(t_s) - self._origin)
         rec.log("events", rr.TextLog(f"{kind}: {message}", level=EVENT_LEVELS.get(kind, "INFO")))
