@@ -253,6 +253,7 @@ class _ActiveDecay:
         self.release_event = event
         self.warnings = warnings
         self.fit: OnlineResult | None = None
+        self._last_t = release_t
         self.writer: RecordingWriter | None = None
         self.path: Path | None = None
         s = session.settings
@@ -329,6 +330,7 @@ class _ActiveDecay:
 
         self._write(write)
         if block.samples.size:
+            self._last_t = float(block.samples["t"][-1])
             self.session.view.log_samples(block.samples)
             after = block.samples[block.samples["t"] >= self.release_t]
             if after.size:
@@ -395,6 +397,7 @@ class _ActiveDecay:
             writer.update_metadata(extra)
             writer.close()
 
+        self.session.view.log_event("settled", f"decay ended ({reason})", self._last_t)
         self.session.view.close()
         self._write(close)
         return DecayOutcome(
