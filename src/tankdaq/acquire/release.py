@@ -109,6 +109,7 @@ class ReleaseDetector:
         fit_before_s: float = 0.6,
         scan_back_s: float = 0.4,
         fit_quarters: float = 3.0,
+        still_mean_s: float = 5.0,
     ) -> None:
         if axis not in AXIS_FIELDS:
             raise InputError(f"axis {axis!r} not understood; use {' or '.join(AXIS_FIELDS)} (or auto)")
@@ -127,6 +128,7 @@ class ReleaseDetector:
         self.fit_before_s = fit_before_s
         self.scan_back_s = scan_back_s
         self.fit_quarters = fit_quarters
+        self.still_mean_s = still_mean_s
         self.reset()
 
     def reset(self) -> ReleaseDetector:
@@ -249,7 +251,8 @@ class ReleaseDetector:
 
     def _trim(self) -> None:
         """Drop history no state can look back to (the release fit reaches at most a few s back)."""
-        keep_s = max(10.0, self.settle_window_s + 1.0, self.fit_before_s + self.confirm_timeout_s + 1.0)
+        reach_s = max(self.settle_window_s, self.still_mean_s, self.fit_before_s + self.confirm_timeout_s)
+        keep_s = max(10.0, reach_s + 1.0)
         cut = self._t.size - self._n(keep_s)
         if self.state_ in (LEAVING, SWUNG):
             cut = min(cut, self._local(self._leave_index) - self._n(self.fit_before_s) - 1)
@@ -276,7 +279,24 @@ class ReleaseDetector:
 
     def _step_still(self) -> bool:
         j = _first(np.abs(self._offset()) > math.radians(self.tilt_min_deg), self._local(self._pos))
-        return self._wait() if j is None else self._go(TILTED, j)
+        if j is None:
+            return self._wait()
+        self._refine_baseline(j)
+        return self._go(TILTED, j)
+
+    def _refine_baseline(self, tilt: int) -> None:
+        """Re-read the still-water angle from the calm water just before the tilt.
+
+        The angle learnt when the last decay settled is the mean of a window that starts at a
+        peak of the dying oscillation, a few hundredths of a degree off; the initial angle of the
+        coming release is measured from this one. Kept only if that stretch is truly still.
+        """
+        lo, hi = tilt - self._n(self.still_mean_s), tilt - self._n(1.0)
+        if lo < 0:
+            return
+        quiet = np.abs(self._offset()[lo:hi]) < math.radians(self.settle_deg)
+        if np.all(quiet & self._calm[lo:hi]):
+            self.baseline_rad_ = float(np.mean(self._x[lo:hi]))
 
     def _step_tilted(self) -> bool:
         n = self._n(self.hold_min_s)
@@ -378,7 +398,7 @@ class ReleaseDetector:
                               rate_rad_s=float(self._r[leave]), release_t=float(self._t[leave]))  # fmt: skip
         window = slice(lo, end + 1)
         physics = _DecayFit(self._t[window], self._x[window], self._r[window], leave - lo,
-                            hold_rad=self._hold_angle, rest_rad=self.baseline_rad_)  # fmt: skip
+                            rest_rad=self.baseline_rad_)  # fmt: skip
         dt = 1.0 / float(self.rate_hz or 1.0)
         earliest = float(self._t[lo + 2])
         first = max(lo + 2, leave - self._n(self.scan_back_s))
@@ -396,14 +416,18 @@ class _DecayFit:
 
     After release x'' = -(k0 + c1 y + c2 y^2 + c3 y^3 + b1 x' + b2 |x'|x' + b3 x'^3), y = x - rest.
     Integrating once (rate rows) and twice (angle rows) from tau with the *measured* signals
-    inside the integrals makes the model linear in k0 ... b3. Before tau a cubic in time (the
-    hand's slow sway) with a free gyro bias; the state at tau is shared, so the decay must start
-    where the hand left the model. Rows are weighted by each channel's noise, estimated from
+    inside the integrals makes the model linear in k0 ... b3. Every term is such an integral,
+    b1's too (of the measured rate, not the angle's change since tau): the angle sample read at
+    tau would shift all rate rows by b1 times its noise, which trades one for one against the
+    instant (a heavily damped pitch, b1 ~ 2, lost a sample to it at 400 Hz); b1 times the gyro
+    bias is a constant acceleration, taken up by k0. Before tau a cubic in time (the hand's slow
+    sway) with a free gyro bias; the state at tau is shared, so the decay must start where the
+    hand left the model. Rows are weighted by each channel's noise, estimated from
     sample-to-sample differences during the hold. Parameter 0 is the angle at tau, 2 its rate.
     """
 
     def __init__(
-        self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray, hold: int, hold_rad: float, rest_rad: float
+        self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray, hold: int, rest_rad: float
     ) -> None:
         self.t = t
         held = slice(0, max(hold, 3))
@@ -411,12 +435,10 @@ class _DecayFit:
         self.w_rate = 1.0 / max(float(np.std(np.diff(rate[held]))) / math.sqrt(2), 1e-5)
         self.y = np.concatenate((angle * self.w_angle, rate * self.w_rate))
         from_rest = angle - rest_rad
-        # the canonical polynomial terms c1, c2, c3, b2, b3 (b1 below)
-        integrands = [from_rest, from_rest**2, from_rest**3, np.abs(rate) * rate, rate**3]
-        self.from_hold = angle - hold_rad  # b1 term: the integral of the rate, anchored at the hold
+        # the canonical polynomial terms c1, c2, c3, b1, b2, b3
+        integrands = [from_rest, from_rest**2, from_rest**3, rate, np.abs(rate) * rate, rate**3]
         self.once = [self._cumulative(f) for f in integrands]
         self.twice = [self._cumulative(c) for c in self.once]
-        self.once_hold = self._cumulative(self.from_hold)
 
     def _cumulative(self, f: np.ndarray) -> np.ndarray:
         steps = 0.5 * (f[1:] + f[:-1]) * np.diff(self.t)
@@ -438,8 +460,6 @@ class _DecayFit:
             start_value = np.interp(tau, self.t, once)
             angle_cols.append(-np.where(after, self._from(tau, twice) - start_value * u, 0.0))
             rate_cols.append(-np.where(after, self._from(tau, once), 0.0))
-        angle_cols.append(-np.where(after, self._from(tau, self.once_hold), 0.0))
-        rate_cols.append(-np.where(after, self.from_hold - np.interp(tau, self.t, self.from_hold), 0.0))
         return np.vstack(
             (np.column_stack(angle_cols) * self.w_angle, np.column_stack(rate_cols) * self.w_rate)
         )
