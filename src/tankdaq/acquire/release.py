@@ -390,19 +390,23 @@ class ReleaseDetector:
         coefficients, so every candidate instant is one least-squares solve), jointly on angle
         and rate over several quarter cycles: the instant that explains both best is the release.
         Scanned in 10 ms steps over the stretch before the departure, then refined down to a
-        quarter sample.
+        quarter sample, with the asymmetric restoring term c2 kept only where the data ask for it.
         """
         lo = max(0, leave - self._n(self.fit_before_s))
         if leave - lo < 4:  # streamed in while already moving: no hold to fit, report the departure
             return self._emit("released", leave, end, angle_rad=float(self._x[leave]),
                               rate_rad_s=float(self._r[leave]), release_t=float(self._t[leave]))  # fmt: skip
         window = slice(lo, end + 1)
-        physics = _DecayFit(self._t[window], self._x[window], self._r[window], leave - lo,
-                            rest_rad=self.baseline_rad_)  # fmt: skip
+        full, symmetric = (_DecayFit(self._t[window], self._x[window], self._r[window], leave - lo,
+                                     rest_rad=self.baseline_rad_, asymmetric=asymmetric)
+                           for asymmetric in (True, False))  # fmt: skip
         dt = 1.0 / float(self.rate_hz or 1.0)
         earliest = float(self._t[lo + 2])
         first = max(lo + 2, leave - self._n(self.scan_back_s))
-        tau = min((float(self._t[k]) for k in range(first, leave + 1, self._n(0.01))), key=physics.sse)
+        tau = min((float(self._t[k]) for k in range(first, leave + 1, self._n(0.01))), key=full.sse)
+        # c2 only if it earns its place (BIC on noise-weighted rows): when the hull is nearly symmetric
+        # it is almost collinear with k0 and the odd terms over one swing, and its noise costs the instant.
+        physics = full if symmetric.sse(tau) - full.sse(tau) > math.log(full.y.size) else symmetric
         for step, reach in ((2.0, 6), (1.0, 2), (0.25, 3)):  # +-12, then +-2 samples, then quarter samples
             candidates = (tau + dt * step * j for j in range(-reach, reach + 1))
             tau = min((c for c in candidates if c > earliest), key=physics.sse)
@@ -416,18 +420,19 @@ class _DecayFit:
 
     After release x'' = -(k0 + c1 y + c2 y^2 + c3 y^3 + b1 x' + b2 |x'|x' + b3 x'^3), y = x - rest.
     Integrating once (rate rows) and twice (angle rows) from tau with the *measured* signals
-    inside the integrals makes the model linear in k0 ... b3. Every term is such an integral,
-    b1's too (of the measured rate, not the angle's change since tau): the angle sample read at
-    tau would shift all rate rows by b1 times its noise, which trades one for one against the
-    instant (a heavily damped pitch, b1 ~ 2, lost a sample to it at 400 Hz); b1 times the gyro
-    bias is a constant acceleration, taken up by k0. Before tau a cubic in time (the hand's slow
-    sway) with a free gyro bias; the state at tau is shared, so the decay must start where the
-    hand left the model. Rows are weighted by each channel's noise, estimated from
-    sample-to-sample differences during the hold. Parameter 0 is the angle at tau, 2 its rate.
+    inside the integrals makes the model linear in k0 ... b3 (c2 only when ``asymmetric``).
+    Every term is such an integral, b1's too (of the measured rate, not the angle's change since
+    tau): the angle sample read at tau would shift all rate rows by b1 times its noise, which
+    trades one for one against the instant (a heavily damped pitch, b1 ~ 2, lost a sample to it
+    at 400 Hz); b1 times the gyro bias is a constant acceleration, taken up by k0. Before tau a
+    cubic in time (the hand's slow sway) with a free gyro bias; the state at tau is shared, so
+    the decay must start where the hand left the model. Rows are weighted by each channel's
+    noise, estimated from sample-to-sample differences during the hold. Parameter 0 is the
+    angle at tau, 2 its rate.
     """
 
     def __init__(
-        self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray, hold: int, rest_rad: float
+        self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray, hold: int, rest_rad: float, asymmetric: bool
     ) -> None:
         self.t = t
         held = slice(0, max(hold, 3))
@@ -435,8 +440,9 @@ class _DecayFit:
         self.w_rate = 1.0 / max(float(np.std(np.diff(rate[held]))) / math.sqrt(2), 1e-5)
         self.y = np.concatenate((angle * self.w_angle, rate * self.w_rate))
         from_rest = angle - rest_rad
-        # the canonical polynomial terms c1, c2, c3, b1, b2, b3
-        integrands = [from_rest, from_rest**2, from_rest**3, rate, np.abs(rate) * rate, rate**3]
+        # the canonical polynomial terms c1, c2 (if asymmetric), c3, b1, b2, b3
+        restoring = [from_rest, from_rest**2, from_rest**3] if asymmetric else [from_rest, from_rest**3]
+        integrands = [*restoring, rate, np.abs(rate) * rate, rate**3]
         self.once = [self._cumulative(f) for f in integrands]
         self.twice = [self._cumulative(c) for c in self.once]
 
