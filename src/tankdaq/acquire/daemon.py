@@ -53,6 +53,7 @@ class RecordSettings:
     reconnect_timeout_s: float = 120.0
     sim_speed: float = 1.0
     sim_seed: int = 0
+    sim_legacy: bool = False  # the built-in sensor plays a 2007-era MTi-G (legacy MTData)
     extra: dict[str, object] = field(default_factory=dict)
 
 
@@ -143,7 +144,9 @@ class RecordDaemon:
             seed=s.sim_seed,
         )
         baud = s.baud or _sim_baud(s.rate_hz)
-        self.simulator = SimulatedMTi(scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed).start()
+        self.simulator = SimulatedMTi(
+            scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed, legacy=s.sim_legacy
+        ).start()
         self.on_event(f"simulated MTi-G on {self.simulator.link} ({s.hull} {format_draft(s.draft)} {axis})")
         return self.simulator.link
 

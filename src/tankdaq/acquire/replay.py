@@ -13,12 +13,11 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from ..device.decoding import SampleDecoder
+from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
 from ..store.reader import read_recording
 from ..viz.live import LiveView
-from ..xsens.batch import to_samples
-from ..xsens.stream import StreamDecoder
-from ..xsens.timebase import SampleTimeUnwrapper
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 
 #: At full speed, serial reads are merged into blocks spanning this much arrival time: the
@@ -58,10 +57,6 @@ def replay_recording(
     path = Path(path)
     recording = read_recording(path)
     meta = recording.metadata
-    if str(meta.get("legacy_protocol", "False")) == "True":
-        raise BadRecordingInput(
-            f"{path}: replay of legacy MTData recordings is not supported yet; use identify"
-        )
     axis = recording.axis
     nominal = float(meta.get("angle_nominal_deg", "nan"))
     settings = SessionSettings(
@@ -74,15 +69,16 @@ def replay_recording(
     )
     view = LiveView(viewer, axis=axis)
     session = DecaySession(settings, view, on_event=on_event)
-    decoder = StreamDecoder()
-    unwrapper = SampleTimeUnwrapper()
+    legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
+    rate_hz = float(meta.get("sample_rate_hz", "100"))
+    decoder = SampleDecoder(LegacyOutput.for_decay(rate_hz) if legacy else None)  # as the driver asked for
     chunks = coalesce(recording.raw_chunks, COALESCE_S if speed is None else 0.0)
     if not chunks:
         raise BadRecordingInput(f"{path}: the recording holds no raw device bytes to replay")
     wall0: float | None = None
     t0 = 0.0
     for i, (host_ns, raw) in enumerate(chunks):
-        samples = to_samples(decoder.feed(raw), unwrapper, host_ns / 1e9)
+        samples, _ = decoder.feed(raw, host_ns / 1e9)
         if speed is not None and samples.size:
             if wall0 is None:
                 wall0, t0 = time.monotonic(), float(samples["t"][0])

@@ -28,9 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import serial
 
-from ..errors import DeviceError, DeviceGone, DeviceNotFound, InputError, ProtocolError
-from ..samples import SAMPLE_DTYPE, empty_samples
-from ..xsens.batch import to_samples
+from ..errors import DeviceError, DeviceGone, DeviceNotFound, InputError
+from ..samples import SAMPLE_DTYPE
 from ..xsens.constants import BAUD_CODES, MID
 from ..xsens.control import (
     BITS_PER_BYTE,
@@ -46,10 +45,9 @@ from ..xsens.control import (
 )
 from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
-from ..xsens.legacy import decode_mtdata
 from ..xsens.mtdata2 import describe_xdi
-from ..xsens.stream import StreamDecoder
-from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, CounterTracker, SampleTimeUnwrapper
+from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, CounterTracker
+from .decoding import SampleDecoder
 from .legacy_output import LegacyOutput
 from .ports import describe_missing, path_exists
 
@@ -138,12 +136,9 @@ class MTiDriver:
         self._framer = StreamFramer()
         self._reset_stream_state()
 
-    def _reset_stream_state(self) -> None:
-        self._decoder = StreamDecoder()
-        self._unwrapper = SampleTimeUnwrapper(self.modulus)
+    def _reset_stream_state(self, legacy: LegacyOutput | None = None) -> None:
+        self._samples = SampleDecoder(legacy, self.modulus)
         self._tracker = CounterTracker()
-        self._legacy_output: LegacyOutput | None = None
-        self._legacy_counter = SampleTimeUnwrapper(1 << 16)
         self._carry: StreamBlock | None = None
 
     # ---- opening ----------------------------------------
@@ -280,9 +275,7 @@ class MTiDriver:
         firmware = parse_fw_rev(self.request(MID.REQ_FW_REV).payload)
         configuration, legacy = self._configure_outputs()
         self.request(MID.GOTO_MEASUREMENT)
-        self._reset_stream_state()
-        if legacy:
-            self._legacy_output = LegacyOutput.for_decay(self.rate_hz)
+        self._reset_stream_state(LegacyOutput.for_decay(self.rate_hz) if legacy else None)
         self.counters = StreamCounters()
         self._last_data = time.monotonic()
         self.info = DeviceInfo(self.port, self.baud, device_id, product, firmware, legacy, self.rate_hz,
@@ -357,11 +350,7 @@ class MTiDriver:
                 f"no data from {self.port} for {self.silence_timeout_s:g} s "
                 "(cable unplugged or device powered off?)"
             )
-        decoded = self._decoder.feed(raw)
-        if self._legacy_output is not None:
-            samples = self._legacy_samples(decoded.other_frames, host_t)
-        else:
-            samples = to_samples(decoded, self._unwrapper, host_t)
+        samples, decoded = self._samples.feed(raw, host_t)
         for frame in decoded.other_frames:
             if frame.mid == MID.ERROR:
                 self.counters.device_errors.append(parse_error(frame.payload))
@@ -369,7 +358,7 @@ class MTiDriver:
         return StreamBlock(samples, raw, host_t, decoded.frames)
 
     def _count(self, raw: bytes, frames: int, samples: np.ndarray) -> None:
-        c, d = self.counters, self._decoder
+        c, d = self.counters, self._samples.stream
         c.bytes += len(raw)
         c.frames += frames
         c.samples += samples.size
@@ -378,38 +367,6 @@ class MTiDriver:
         if samples.size:
             self._tracker.update_many(samples["counter"])
             c.gaps, c.lost = self._tracker.gap_count, self._tracker.lost
-
-    def _legacy_samples(self, frames: list[Frame], host_t: float) -> np.ndarray:
-        """Samples from legacy MTData: time is the unwrapped sample counter times the period."""
-        output = self._legacy_output
-        assert output is not None
-        rows = []
-        for frame in frames:
-            if frame.mid != MID.MTDATA:
-                continue
-            try:
-                rows.append(decode_mtdata(frame.payload, output.mode, output.settings))
-            except ProtocolError:  # a frame that does not fit the layout is counted, not fatal
-                self._decoder.malformed += 1
-        out = empty_samples(len(rows))
-        if not rows:
-            return out
-        counters = np.array([r["PacketCounter"] for r in rows])
-        counts = self._legacy_counter.update_many(counters)
-        out["ticks"] = np.round(counts * (TICKS_PER_SECOND / output.rate_hz)).astype(np.int64)
-        out["t"] = out["ticks"] / TICKS_PER_SECOND
-        out["host_t"] = host_t
-        out["counter"] = counters
-        columns = {"EulerAngles": ("roll", "pitch", "yaw"), "RateOfTurn": ("p", "q", "r"),
-                   "Acceleration": ("ax", "ay", "az")}  # fmt: skip
-        for block, names in columns.items():
-            values = np.array([r[block] for r in rows], dtype=float)
-            if block == "EulerAngles":
-                values = np.radians(values)
-            for column, name in enumerate(names):
-                out[name] = values[:, column]
-        out["status"] = [r.get("StatusByte", 0) for r in rows]
-        return out
 
     def stream(
         self, duration_s: float | None = None, max_samples: int | None = None

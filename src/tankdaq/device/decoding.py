@@ -1,0 +1,69 @@
+"""Serial bytes to samples, MTData2 or legacy MTData: one decoder for the driver and for replay.
+
+The driver feeds what it reads from the port; replay feeds the raw channel of a recording.
+Both must turn the same bytes into the same samples, so the code that does it lives once, here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ProtocolError
+from ..samples import empty_samples
+from ..xsens.batch import DecodedBlock, to_samples
+from ..xsens.constants import MID
+from ..xsens.legacy import decode_mtdata
+from ..xsens.stream import StreamDecoder
+from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrapper
+from .legacy_output import LegacyOutput
+
+
+class SampleDecoder:
+    """``feed(raw, host_t)`` -> (``SAMPLE_DTYPE`` samples, the decoded block with its other frames).
+
+    MTData2: device time from unwrapped SampleTimeFine (``modulus`` of the device family).
+    Legacy (``legacy`` given): time is the unwrapped sample counter times the output period.
+    """
+
+    def __init__(self, legacy: LegacyOutput | None = None, modulus: int = MODULUS_ONE_DAY) -> None:
+        self.legacy = legacy
+        self.stream = StreamDecoder()
+        self._unwrapper = SampleTimeUnwrapper(modulus)
+        self._legacy_counter = SampleTimeUnwrapper(1 << 16)
+
+    def feed(self, raw: bytes, host_t: float) -> tuple[np.ndarray, DecodedBlock]:
+        decoded = self.stream.feed(raw)
+        if self.legacy is None:
+            return to_samples(decoded, self._unwrapper, host_t), decoded
+        return self._legacy_samples(decoded, host_t), decoded
+
+    def _legacy_samples(self, decoded: DecodedBlock, host_t: float) -> np.ndarray:
+        output = self.legacy
+        assert output is not None
+        rows = []
+        for frame in decoded.other_frames:
+            if frame.mid != MID.MTDATA:
+                continue
+            try:
+                rows.append(decode_mtdata(frame.payload, output.mode, output.settings))
+            except ProtocolError:  # a frame that does not fit the layout is counted, not fatal
+                self.stream.malformed += 1
+        out = empty_samples(len(rows))
+        if not rows:
+            return out
+        counters = np.array([r["PacketCounter"] for r in rows])
+        counts = self._legacy_counter.update_many(counters)
+        out["ticks"] = np.round(counts * (TICKS_PER_SECOND / output.rate_hz)).astype(np.int64)
+        out["t"] = out["ticks"] / TICKS_PER_SECOND
+        out["host_t"] = host_t
+        out["counter"] = counters
+        columns = {"EulerAngles": ("roll", "pitch", "yaw"), "RateOfTurn": ("p", "q", "r"),
+                   "Acceleration": ("ax", "ay", "az")}  # fmt: skip
+        for block, names in columns.items():
+            values = np.array([r[block] for r in rows], dtype=float)
+            if block == "EulerAngles":
+                values = np.radians(values)
+            for column, name in enumerate(names):
+                out[name] = values[:, column]
+        out["status"] = [r.get("StatusByte", 0) for r in rows]
+        return out
