@@ -37,7 +37,7 @@ def reference_decode(stream: bytes) -> tuple[list[MTData2Message], list[Frame], 
     """What the sequential framer and the per-message decoder make of ``stream``."""
     framer = StreamFramer()
     messages, others, malformed = [], [], 0
-    for frame in framer.feed(stream):
+    for frame in framer.feed(stream) + framer.flush():  # a capture: nothing follows its last byte
         if frame.mid != MID.MTDATA2:
             others.append(frame)
             continue
@@ -57,13 +57,11 @@ def assert_same_as_reference(block: DecodedBlock, stream: bytes) -> None:
         assert got.xdis == expected.xdis, index
         assert got.unknown_count == expected.unknown_count, index
     assert block.other_frames == others
-    assert (block.frames, block.bad_checksums, block.skipped_bytes, block.pending_bytes, block.malformed) == (
-        framer.frames,
-        framer.bad_checksums,
-        framer.skipped_bytes,
-        framer.pending,
-        malformed,
-    )
+    assert (
+        block.frames, block.bad_checksums, block.skipped_bytes, block.pending_bytes, block.malformed,
+        block.false_syncs,
+    ) == (framer.frames, framer.bad_checksums, framer.skipped_bytes, framer.pending, malformed,
+          framer.false_syncs)  # fmt: skip
     order = np.sort(np.concatenate([block.frame_index, block.other_index]))
     assert len(order) == framer.frames - malformed
 
@@ -72,7 +70,7 @@ def stream_in_chunks(stream: bytes, cuts: list[int]) -> DecodedBlock:
     decoder = StreamDecoder()
     points = sorted({min(c, len(stream)) for c in cuts})
     edges = [0, *points, len(stream)]
-    blocks = [decoder.feed(stream[a:b]) for a, b in itertools.pairwise(edges)]
+    blocks = [decoder.feed(stream[a:b]) for a, b in itertools.pairwise(edges)] + [decoder.flush()]
     merged = DecodedBlock.concat(blocks)
     assert decoder.pending == merged.pending_bytes
     assert decoder.messages == merged.n_messages
@@ -86,12 +84,13 @@ def assert_blocks_equal(a: DecodedBlock, b: DecodedBlock) -> None:
                for i in range(a.n_messages))  # fmt: skip
     assert a.other_frames == b.other_frames
     assert np.array_equal(a.frame_index, b.frame_index) and np.array_equal(a.other_index, b.other_index)
-    assert (a.frames, a.bad_checksums, a.skipped_bytes, a.malformed, a.unknown_ids) == (
+    assert (a.frames, a.bad_checksums, a.skipped_bytes, a.malformed, a.unknown_ids, a.false_syncs) == (
         b.frames,
         b.bad_checksums,
         b.skipped_bytes,
         b.malformed,
         b.unknown_ids,
+        b.false_syncs,
     )
 
 
@@ -222,9 +221,9 @@ def test_samples_from_a_known_decay_across_the_day_wrap() -> None:
     truth = decay_signals(500, 100.0, 4, start_ticks=start)
     unwrapper = SampleTimeUnwrapper()
     decoder = StreamDecoder()
-    samples = np.concatenate(
-        [to_samples(decoder.feed(data[i : i + 1000]), unwrapper) for i in range(0, len(data), 1000)]
-    )
+    blocks = [decoder.feed(data[i : i + 1000]) for i in range(0, len(data), 1000)]
+    assert decoder.pending == 69  # the last frame waits for the byte after it ...
+    samples = np.concatenate([to_samples(b, unwrapper) for b in [*blocks, decoder.flush()]])  # ... or a flush
     assert samples.dtype == SAMPLE_DTYPE and samples.size == 500
     assert np.array_equal(samples["ticks"], start + 100 * np.arange(500))
     assert np.allclose(np.diff(samples["t"]), 0.01, rtol=0, atol=1e-9)

@@ -33,7 +33,8 @@ def test_jsonl_has_one_object_per_message_with_the_decoded_values(tmp_path: Path
     result = runner.invoke(app, ["decode", str(capture), "--out", str(out)])
     assert result.exit_code == 0, result.output
     lines = [json.loads(line) for line in out.read_text().splitlines()]
-    frames = StreamFramer().feed(capture.read_bytes())
+    framer = StreamFramer()
+    frames = framer.feed(capture.read_bytes()) + framer.flush()
     assert len(lines) == len(frames) == 100
     for line, frame in zip(lines, frames, strict=True):
         msg = decode_mtdata2(frame.payload)

@@ -83,7 +83,7 @@ def test_frame_name_for_known_and_unknown_ids() -> None:
 
 frame_specs = st.tuples(
     st.sampled_from([0xFF, 0x01]),
-    st.integers(0, 255),
+    st.integers(0, 255).filter(lambda mid: mid != MID.MTDATA2),  # random data is no MTData2 payload
     st.one_of(st.binary(max_size=40), st.binary(min_size=255, max_size=600)),
 )
 # Garbage and corrupted frames never contain a stray 0xFA after the preamble, so no byte
@@ -93,12 +93,11 @@ no_preamble = st.binary(max_size=30).map(lambda b: b.replace(b"\xfa", b"\x00"))
 
 @st.composite
 def noisy_streams(draw: st.DrawFn) -> tuple[bytes, list[Frame], int]:
-    """A stream of intact frames with garbage and checksum-corrupted frames between them."""
-    stream = bytearray()
+    """A stream opened mid-frame (garbage first), then intact and checksum-corrupted frames."""
+    stream = bytearray(draw(no_preamble))
     sent: list[Frame] = []
     corrupted = 0
     for bid, mid, payload in draw(st.lists(frame_specs, max_size=12)):
-        stream += draw(no_preamble)
         if draw(st.booleans()) or b"\xfa" in build_frame(mid, payload, bid)[1:]:
             sent.append(Frame(bid, mid, payload))
             stream += build_frame(mid, payload, bid)
@@ -123,8 +122,9 @@ def test_framer_recovers_every_intact_frame_under_any_chunking(
 ) -> None:
     stream, sent, corrupted = case
     framer = StreamFramer()
-    got = [frame for chunk in split(stream, cuts) for frame in framer.feed(chunk)]
+    got = [frame for chunk in split(stream, cuts) for frame in framer.feed(chunk)] + framer.flush()
     assert got == sent
+    assert framer.false_syncs == 0
     assert framer.frames == len(sent)
     assert framer.bad_checksums == corrupted
     assert framer.pending == 0
@@ -143,17 +143,17 @@ def test_framer_never_raises_and_accounts_for_every_byte(garbage: bytes, cuts: l
 
 def test_framer_resyncs_on_a_preamble_inside_a_corrupted_frame() -> None:
     good = build_frame(MID.GOTO_CONFIG_ACK)
-    # A frame header whose length swallows the real frame; its checksum is wrong, so the
-    # framer must step one byte and find the real preamble inside it.
-    bogus = bytes.fromhex("FA FF 36 08") + good + b"\x00\x00\x00\x13"
+    # A frame header whose length swallows the real frames behind it; its checksum is wrong, so
+    # the framer must step one byte and find the real preamble inside it.
+    bogus = bytes.fromhex("FA FF 36 08") + good * 3
     framer = StreamFramer()
-    assert framer.feed(bogus) == [Frame(0xFF, MID.GOTO_CONFIG_ACK, b"")]
+    assert framer.feed(bogus) + framer.flush() == [Frame(0xFF, MID.GOTO_CONFIG_ACK, b"")] * 3
     assert framer.bad_checksums == 1
 
 
 def test_framer_skips_lengths_over_the_bound_without_waiting() -> None:
     good = build_frame(MID.WAKEUP)
     framer = StreamFramer(max_length=100)
-    frames = framer.feed(bytes.fromhex("FA FF 36 FF 10 00") + good)
+    frames = framer.feed(bytes.fromhex("FA FF 36 FF 10 00") + good) + framer.flush()
     assert frames == [Frame(0xFF, MID.WAKEUP, b"")]
     assert framer.skipped_bytes == 6

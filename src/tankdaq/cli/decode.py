@@ -119,7 +119,7 @@ def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
     for start in range(0, len(data), CHUNK_BYTES):
         blocks.append(decoder.feed(data[start : start + CHUNK_BYTES]))
         bar.advance(task, CHUNK_BYTES // 1024)
-    return DecodedBlock.concat(blocks)
+    return DecodedBlock.concat([*blocks, decoder.flush()])  # the capture ends: nothing follows its last frame
 
 
 def decode_legacy(block: DecodedBlock, mode: int, settings: int) -> list[tuple[int, MTData2Message]]:
@@ -193,6 +193,7 @@ def summary_line(block: DecodedBlock, legacy: int, tracker: CounterTracker) -> s
         f"{len(block.other_frames) - legacy} other frames",
         f"{block.bad_checksums} bad checksums",
         f"{block.skipped_bytes} skipped bytes",
+        f"{block.false_syncs} false syncs rejected",
         f"{block.unknown_ids} unknown identifiers",
         f"{tracker.gap_count} counter gaps ({tracker.lost} packets lost)",
     ]

@@ -32,7 +32,8 @@ class SampleDecoder:
         self._legacy_counter = SampleTimeUnwrapper(1 << 16)
 
     def feed(self, raw: bytes, host_t: float) -> tuple[np.ndarray, DecodedBlock]:
-        decoded = self.stream.feed(raw)
+        """Samples completed by ``raw``; an empty read (a quiet line) confirms a held frame."""
+        decoded = self.stream.feed(raw) if raw else self.stream.flush()
         if self.legacy is None:
             return to_samples(decoded, self._unwrapper, host_t), decoded
         return self._legacy_samples(decoded, host_t), decoded

@@ -452,7 +452,7 @@ class SimulatedMTi:
             raise
         if not self._line_matches():
             return  # at the wrong baud rate the device sees noise
-        for frame in self._framer.feed(data):
+        for frame in self._framer.feed(data) + self._framer.flush():  # a host writes whole commands
             self.commands_seen.append(frame.mid)
             self._handle(frame)
 

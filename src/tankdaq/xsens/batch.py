@@ -27,6 +27,7 @@ from ..errors import ProtocolError
 from ..samples import empty_samples
 from .constants import EXTENDED_LENGTH, MAX_DATA_LENGTH, MID, PREAMBLE
 from .frame import Frame, frame_length
+from .framer import RESYNC_BIDS
 from .mtdata2 import (
     FP1220_SCALE,
     FP1632_SCALE,
@@ -43,6 +44,7 @@ from .mtdata2 import (
     decode_satinfo,
     item_size,
     item_spans,
+    payload_well_formed,
 )
 from .timebase import TICKS_PER_SECOND, SampleTimeUnwrapper
 
@@ -94,24 +96,42 @@ class FrameScan:
     lengths: np.ndarray  # data bytes
     bad_checksums: int
     skipped_bytes: int
-    consumed: int  # bytes before the first incomplete frame: the rest waits for more data
+    consumed: int  # bytes before the first incomplete (or unconfirmed) frame: the rest waits for more data
+    false_syncs: int = 0
+    sync: bytes | None = b""  # the framer's sync state at ``consumed`` (``StreamFramer.sync``)
     regular_rows: np.ndarray | None = None  # (frames, frame bytes) view when all frames are one regular run
 
 
-def scan_frames(buf: np.ndarray, max_length: int = MAX_DATA_LENGTH) -> FrameScan:
-    """All frames ``StreamFramer`` would accept from ``buf`` (uint8), found with array operations."""
-    count, total, header_size = _regular_run(buf, max_length)
+def scan_frames(
+    buf: np.ndarray, max_length: int = MAX_DATA_LENGTH, sync: bytes | None = b"", final: bool = False
+) -> FrameScan:
+    """All frames ``StreamFramer`` would accept from ``buf`` (uint8), found with array operations.
+
+    ``sync``: the framer's state at byte 0 (``StreamFramer.sync``); ``final``: no more bytes
+    will come (``StreamFramer.flush``).
+    """
+    count, total, header_size = _regular_run(buf, max_length, sync)
     if not count:
-        return _scan_general(buf, max_length)
+        return _scan_general(buf, max_length, sync, final)
+    rows_header = buf[:header_size].tobytes()
+    rest = buf[count * total :]
+    follows = _next_frame_starts(rest, buf[1], buf[2])
+    if follows is None and final:
+        follows = True
+    if follows is False:  # the last row is not confirmed (rare): let the general scan sort it out
+        return _scan_general(buf, max_length, sync, final)
+    if follows is None:  # the last row waits for the byte after it
+        count -= 1
+        rest = buf[count * total :]
+        if not count:
+            return FrameScan(*_NO_FRAMES, 0, 0, 0, sync=sync)
     offset = count * total
     starts = np.arange(0, offset, total)
     lengths = np.full(count, total - header_size - 1)
-    rest = buf[offset:]
-    if _waits_at_start(rest, max_length):  # the usual stream tail: the next frame's first bytes
-        return FrameScan(
-            starts, starts + header_size, lengths, 0, 0, offset, buf[:offset].reshape(count, total)
-        )
-    tail = _scan_general(rest, max_length)
+    if follows is None or _waits_at_start(rest, max_length):  # the usual tail: the next frame's start
+        return FrameScan(starts, starts + header_size, lengths, 0, 0, offset, sync=rows_header,
+                         regular_rows=buf[:offset].reshape(count, total))  # fmt: skip
+    tail = _scan_general(rest, max_length, rows_header, final)
     return FrameScan(
         starts=np.concatenate((starts, tail.starts + offset)),
         payload_starts=np.concatenate((starts + header_size, tail.payload_starts + offset)),
@@ -119,21 +139,39 @@ def scan_frames(buf: np.ndarray, max_length: int = MAX_DATA_LENGTH) -> FrameScan
         bad_checksums=tail.bad_checksums,
         skipped_bytes=tail.skipped_bytes,
         consumed=offset + tail.consumed,
+        false_syncs=tail.false_syncs,
+        sync=tail.sync,
     )
 
 
-def _regular_run(buf: np.ndarray, max_length: int) -> tuple[int, int, int]:
+_NO_FRAMES = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+
+
+def _next_frame_starts(rest: np.ndarray, bid: int, mid: int) -> bool | None:
+    """``confirm``'s successor test on the bytes after a frame (None: not decided yet)."""
+    if rest.size and rest[0] == PREAMBLE:
+        return True
+    if rest.size >= 3:
+        return bool(rest[1] == bid and rest[2] == mid)
+    return None
+
+
+def _regular_run(buf: np.ndarray, max_length: int, sync: bytes | None) -> tuple[int, int, int]:
     """(count, total, header size) of the valid frames that repeat back-to-back from byte 0.
 
     A live stream is mostly one frame shape after another: when the bytes at 0, L, 2L, ...
-    are all the same header and every row checks out, the sequential framer accepts exactly
-    those rows, and a reshape verifies them in a few array operations.
+    are all the same header and every row checks out, each row after the first is trusted (in
+    sync, same header) and confirmed by the preamble of the next, and a reshape verifies them
+    in a few array operations. The first row must continue the sync state (or pass the bus-id
+    test); the last row's successor is the caller's to check.
     """
-    total = frame_length(buf[:6].tobytes()) if buf.size and buf[0] == PREAMBLE else None
+    total = frame_length(buf[:6].tobytes()) if sync is not None and buf.size and buf[0] == PREAMBLE else None
     if total is None or total > buf.size:
         return 0, 0, 0
     header_size = 6 if buf[3] == EXTENDED_LENGTH else 4
     if total - header_size - 1 > max_length:
+        return 0, 0, 0
+    if buf[:header_size].tobytes() != sync and buf[1] not in RESYNC_BIDS:
         return 0, 0, 0
     if buf.size >= 2 * total and buf[total : total + header_size].tobytes() != buf[:header_size].tobytes():
         return 0, 0, 0  # the next frame has another shape (a mixed stream): leave it to the general scan
@@ -163,8 +201,24 @@ def _waits_at_start(rest: np.ndarray, max_length: int) -> bool:
     return total is None or (total - header_size - 1 <= max_length and total > rest.size)
 
 
-def _scan_general(buf: np.ndarray, max_length: int) -> FrameScan:
-    """The general scan: any mix of frames, garbage and corrupted frames."""
+@dataclass
+class _Candidates:
+    """Complete candidate frames of a buffer and what is known about each (see ``_scan_general``)."""
+
+    starts: np.ndarray
+    totals: np.ndarray
+    header_sizes: np.ndarray
+    checked: np.ndarray  # checksum computed
+    ok: np.ndarray  # checksum holds
+    follows: np.ndarray  # the next frame starts right after it (or the capture ends there)
+    waits: np.ndarray  # whether the next frame starts is not decided yet
+    bid_ok: np.ndarray  # a bus id a resync may land on
+    sizes_ok: np.ndarray  # MTData2 payload sizes add up (assumed until ``verified``)
+    verified: np.ndarray
+
+
+def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: bool) -> FrameScan:
+    """The general scan: any mix of frames, garbage, corrupted frames and false headers."""
     n = buf.size
     cand = np.flatnonzero(buf == PREAMBLE)
     last = max(n - 1, 0)
@@ -179,46 +233,166 @@ def _scan_general(buf: np.ndarray, max_length: int) -> FrameScan:
     incomplete = (cand + header_size > n) | (fits & (cand + total > n))
     complete = ~incomplete & fits
 
+    complete_at = np.flatnonzero(complete)
+    c_starts, c_totals = cand[complete_at], total[complete_at]
+    ends = c_starts + c_totals
+    bid = buf[c_starts + 1]
+    next_preamble = (ends < n) & (buf[np.minimum(ends, last)] == PREAMBLE)
+    have_ids = ends + 3 <= n
+    same_mid = buf[np.minimum(ends + 2, last)] == buf[c_starts + 2]
+    repeated = have_ids & (buf[np.minimum(ends + 1, last)] == bid) & same_mid
+    undecided = ~next_preamble & ~have_ids
+    size = complete_at.size
+    c = _Candidates(
+        c_starts, c_totals, header_size[complete_at], np.zeros(size, bool), np.zeros(size, bool),
+        next_preamble | repeated | (undecided & final), undecided & (not final),
+        np.isin(bid, tuple(RESYNC_BIDS)), np.ones(size, bool), buf[c_starts + 2] != MTDATA2,
+    )  # fmt: skip
+
     # Checksums are needed only where the sequential framer looks: at candidates no accepted
     # frame covers. Check the most common length first (the real frames), follow the chain,
     # then check whatever it leaves uncovered, until nothing unchecked is left uncovered.
-    complete_at = np.flatnonzero(complete)
-    c_starts, c_totals = cand[complete_at], total[complete_at]
-    checked = np.zeros(complete_at.size, dtype=bool)
-    ok = np.zeros(complete_at.size, dtype=bool)
+    # Payload sizes are verified the same way: only for the resyncs the framer meets.
     if n <= RUNNING_SUM_LIMIT or not c_totals.size:
-        to_check = np.arange(complete_at.size)
+        to_check = np.arange(size)
     else:
         to_check = np.flatnonzero(c_totals == np.bincount(c_totals).argmax())
     while True:
-        ok[to_check] = _checksums_ok(buf, c_starts[to_check], c_totals[to_check])
-        checked[to_check] = True
-        valid = np.flatnonzero(ok)
-        chosen = complete_at[valid[_follow_chain(c_starts[valid], c_starts[valid] + c_totals[valid])]]
-        starts, ends = cand[chosen], cand[chosen] + total[chosen]
-        unchecked = np.flatnonzero(~checked)
-        to_check = unchecked[~_covered(starts, ends, c_starts[unchecked])]
-        if not to_check.size:
+        c.ok[to_check] = _checksums_ok(buf, c_starts[to_check], c_totals[to_check])
+        c.checked[to_check] = True
+        chosen, resyncs = _follow_chain(buf, c, sync)
+        starts, chosen_ends = c_starts[chosen], c_starts[chosen] + c_totals[chosen]
+        unchecked = np.flatnonzero(~c.checked)
+        to_check = unchecked[~_covered(starts, chosen_ends, c_starts[unchecked])]
+        if to_check.size:
+            continue
+        consumed, suspect = _first_stop(buf, cand[incomplete], c, chosen, sync)
+        suspects = resyncs[~c.verified[resyncs]]
+        suspects = suspects[c_starts[suspects] < consumed]
+        if suspect >= 0:
+            suspects = np.append(suspects, suspect)
+        if not suspects.size:
             break
+        for k in suspects.tolist():
+            payload = buf[c_starts[k] + c.header_sizes[k] : c_starts[k] + c_totals[k] - 1]
+            c.sizes_ok[k] = payload_well_formed(payload.tobytes())
+        c.verified[suspects] = True
 
-    consumed = n
-    waiting = cand[incomplete]  # all within the last max_length + 7 bytes: few
-    if waiting.size:
-        free = waiting[~_covered(starts, ends, waiting)]
-        if free.size:
-            consumed = int(free[0])
-            keep = starts < consumed
-            chosen, starts, ends = chosen[keep], starts[keep], ends[keep]
-    bad = c_starts[checked & ~ok]
-    bad = bad[bad < consumed]
+    keep = starts < consumed
+    chosen, starts, chosen_ends = chosen[keep], starts[keep], chosen_ends[keep]
+    looked_at = ~_covered(starts, chosen_ends, c_starts) & (c_starts < consumed)
+    if chosen.size and consumed == chosen_ends[-1]:
+        last_header = buf[starts[-1] : starts[-1] + c.header_sizes[chosen[-1]]].tobytes()
+        sync = last_header
+    elif chosen.size or consumed:
+        sync = None
     return FrameScan(
         starts=starts,
-        payload_starts=starts + header_size[chosen],
-        lengths=length[chosen],
-        bad_checksums=int(np.count_nonzero(~_covered(starts, ends, bad))),
-        skipped_bytes=consumed - int(np.sum(ends - starts)),
+        payload_starts=starts + c.header_sizes[chosen],
+        lengths=c_totals[chosen] - c.header_sizes[chosen] - 1,
+        bad_checksums=int(np.count_nonzero(looked_at & c.checked & ~c.ok)),
+        skipped_bytes=consumed - int(np.sum(chosen_ends - starts)),
         consumed=consumed,
+        false_syncs=int(np.count_nonzero(looked_at & c.ok)),
+        sync=sync,
     )
+
+
+def _accepts(buf: np.ndarray, c: _Candidates, k: np.ndarray, previous: np.ndarray, sync_header: bytes | None,
+             wait: bool) -> np.ndarray:  # fmt: skip
+    """Whether in-sync candidates ``k`` (after chosen ``previous``; -1: the stream's sync header) are
+    accepted (``wait``: are waited for) once their checksum holds: trusted with the previous
+    header, or a bus id a resync may land on; and confirmed by a successor (or waiting for one)."""
+    same = np.zeros(k.size, dtype=bool)
+    for width in (4, 6):
+        rows = (c.header_sizes[k] == width) & (previous >= 0)
+        if rows.any():
+            here = buf[c.starts[k[rows]][:, None] + np.arange(width)]
+            there = buf[c.starts[previous[rows]][:, None] + np.arange(width)]
+            same[rows] = (c.header_sizes[previous[rows]] == width) & (here == there).all(axis=1)
+    first = previous < 0
+    if first.any() and sync_header:
+        same[first] = [buf[s : s + len(sync_header)].tobytes() == sync_header for s in c.starts[k[first]]]
+    return (same | c.bid_ok[k]) & (c.waits[k] if wait else c.follows[k])
+
+
+def _follow_chain(buf: np.ndarray, c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.ndarray]:
+    """(candidates the sequential framer accepts, those of them it accepts as resyncs).
+
+    After an accepted frame the next one is the valid candidate starting exactly at its end if
+    that is accepted in sync (``_accepts``), else the first confirmed resync after it. Where that
+    is simply the next valid candidate the chain is followed in bulk; only the "breaks" are
+    walked one by one.
+    """
+    valid = np.flatnonzero(c.ok)
+    count = valid.size
+    if not count:
+        return valid, valid
+    v_starts = c.starts[valid]
+    v_ends = v_starts + c.totals[valid]
+    strong = np.flatnonzero(c.bid_ok[valid] & c.follows[valid] & c.sizes_ok[valid])  # positions in ``valid``
+    after = np.searchsorted(v_starts, v_ends)
+    has_next = (after < count) & (v_starts[np.minimum(after, count - 1)] == v_ends)
+    in_sync_next = np.zeros(count, dtype=bool)
+    followers = np.flatnonzero(has_next)
+    in_sync_next[followers] = _accepts(buf, c, valid[after[followers]], valid[followers], sync, wait=False)
+    following = np.where(in_sync_next, after, count)
+    if strong.size:
+        resync_next = strong[np.minimum(np.searchsorted(v_starts[strong], v_ends), strong.size - 1)]
+        following = np.where(~in_sync_next & (v_starts[resync_next] >= v_ends), resync_next, following)
+    starts_sync = sync is not None and v_starts[0] == 0
+    if starts_sync and _accepts(buf, c, valid[:1], np.array([-1]), sync, wait=False)[0]:
+        first = 0
+    else:  # the first resync (after byte 0 when the candidate there was met in sync and refused)
+        at = int(np.searchsorted(v_starts[strong], 1 if starts_sync else 0))
+        first = int(strong[at]) if at < strong.size else count
+    breaks = np.flatnonzero(following != np.arange(1, count + 1))
+    marks = np.zeros(count + 1, dtype=np.int64)
+    k = first
+    while k < count:
+        at = int(np.searchsorted(breaks, k))
+        if at == breaks.size:
+            marks[k] += 1
+            marks[count] -= 1
+            break
+        marks[k] += 1
+        marks[breaks[at] + 1] -= 1
+        k = int(following[breaks[at]])
+    taken = np.flatnonzero(np.cumsum(marks[:-1]) > 0)
+    previous_end = np.concatenate(([0 if sync is not None else -1], v_ends[taken[:-1]]))
+    return valid[taken], valid[taken[v_starts[taken] != previous_end]]
+
+
+def _first_stop(
+    buf: np.ndarray, waiting: np.ndarray, c: _Candidates, chosen: np.ndarray, sync: bytes | None
+) -> tuple[int, int]:
+    """(where the framer stops, a held resync whose payload sizes must be verified first, else -1).
+
+    It stops at the first candidate no accepted frame covers that is incomplete, or that is
+    valid and would be accepted but for the successor test, which waits for bytes to come.
+    """
+    starts, ends = c.starts[chosen], c.starts[chosen] + c.totals[chosen]
+    free = waiting[~_covered(starts, ends, waiting)]
+    stop = int(free[0]) if free.size else buf.size
+    held = np.flatnonzero(c.ok & c.waits & (c.starts < stop))  # all within the last bytes: few
+    for k in held[~_covered(starts, ends, c.starts[held])].tolist():
+        position = int(c.starts[k])
+        previous = chosen[np.flatnonzero(ends == position)]
+        if previous.size or (position == 0 and sync is not None):
+            before = np.array([previous[0] if previous.size else -1])
+            if _accepts(buf, c, np.array([k]), before, sync, wait=True)[0]:
+                return position, -1
+        elif c.bid_ok[k] and c.sizes_ok[k]:
+            return position, (-1 if c.verified[k] else k)
+    return stop, -1
+
+
+def _covered(starts: np.ndarray, ends: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """True where a position lies inside an accepted frame (a frame's own start counts as inside)."""
+    idx = np.searchsorted(starts, positions, side="right") - 1
+    inside = idx >= 0
+    inside[inside] = ends[idx[inside]] > positions[inside]
+    return inside
 
 
 def _checksums_ok(buf: np.ndarray, starts: np.ndarray, totals: np.ndarray) -> np.ndarray:
@@ -235,39 +409,6 @@ def _checksums_ok(buf: np.ndarray, starts: np.ndarray, totals: np.ndarray) -> np
             rows = np.lib.stride_tricks.sliding_window_view(buf, int(totals[group[0]]) - 1)[starts[group] + 1]
             ok[group] = rows.sum(axis=1, dtype=np.uint8) == 0
     return ok
-
-
-def _follow_chain(valid_starts: np.ndarray, valid_ends: np.ndarray) -> np.ndarray:
-    """Indices of the valid candidates the sequential framer accepts (first valid at/after each end).
-
-    The next frame after valid candidate k is k + 1 unless candidate k + 1 starts inside k
-    (then it is found by search): only those breaks are walked one by one.
-    """
-    count = valid_starts.size
-    breaks = np.flatnonzero(valid_starts[1:] < valid_ends[:-1])
-    if breaks.size == 0:
-        return np.arange(count)
-    following = np.searchsorted(valid_starts, valid_ends[breaks])
-    marks = np.zeros(count + 1, dtype=np.int64)
-    k = 0
-    while k < count:
-        at = int(np.searchsorted(breaks, k))
-        if at == breaks.size:
-            marks[k] += 1
-            marks[count] -= 1
-            break
-        marks[k] += 1
-        marks[breaks[at] + 1] -= 1
-        k = int(following[at])
-    return np.flatnonzero(np.cumsum(marks[:-1]) > 0)
-
-
-def _covered(starts: np.ndarray, ends: np.ndarray, positions: np.ndarray) -> np.ndarray:
-    """True where a position lies inside an accepted frame (no position tested here starts one)."""
-    idx = np.searchsorted(starts, positions, side="right") - 1
-    inside = idx >= 0
-    inside[inside] = ends[idx[inside]] > positions[inside]
-    return inside
 
 
 # ---------------------------------------------------------------------------------- 3: MTData2 items
@@ -486,7 +627,9 @@ class DecodedBlock:
     bad_checksums: int = 0
     skipped_bytes: int = 0
     malformed: int = 0  # MTData2 frames whose item sizes do not add up (rejected)
-    pending_bytes: int = 0  # trailing bytes that may start a frame still incomplete
+    false_syncs: int = 0  # checksum-valid candidates the framer could not confirm
+    pending_bytes: int = 0  # trailing bytes that may start a frame still incomplete (or unconfirmed)
+    sync: bytes | None = b""  # the framer's sync state where the pending bytes start
 
     @property
     def unknown_ids(self) -> int:
@@ -540,9 +683,10 @@ class DecodedBlock:
         out.unknown_counts = np.concatenate([out.unknown_counts, *(b.unknown_counts for b in blocks)])
         for block in blocks:
             out.other_frames += block.other_frames
-        for counter in ("n_messages", "frames", "bad_checksums", "skipped_bytes", "malformed"):
+        for counter in ("n_messages", "frames", "bad_checksums", "skipped_bytes", "malformed", "false_syncs"):
             setattr(out, counter, sum(getattr(b, counter) for b in blocks))
         out.pending_bytes = blocks[-1].pending_bytes if blocks else 0
+        out.sync = blocks[-1].sync if blocks else b""
         return out
 
 
@@ -569,16 +713,26 @@ def _python_column(name: str, column: np.ndarray) -> list[object]:
 
 
 def decode_buffer(
-    buf: np.ndarray, max_length: int = MAX_DATA_LENGTH, layouts: LayoutCache | None = None
+    buf: np.ndarray,
+    max_length: int = MAX_DATA_LENGTH,
+    layouts: LayoutCache | None = None,
+    *,
+    sync: bytes | None = b"",
+    final: bool = False,
 ) -> DecodedBlock:
-    """Decode every complete frame of ``buf`` (uint8); bytes from ``consumed`` on are left pending."""
-    scan = scan_frames(buf, max_length)
+    """Decode every complete frame of ``buf`` (uint8); bytes from ``consumed`` on are left pending.
+
+    ``sync`` and ``final`` as in ``scan_frames``.
+    """
+    scan = scan_frames(buf, max_length, sync, final)
     layouts = LayoutCache() if layouts is None else layouts
     block = DecodedBlock(
         frames=int(scan.starts.size),
         bad_checksums=scan.bad_checksums,
         skipped_bytes=scan.skipped_bytes,
+        false_syncs=scan.false_syncs,
         pending_bytes=buf.size - scan.consumed,
+        sync=scan.sync,
     )
     if scan.regular_rows is not None and scan.regular_rows[0, 2] == MTDATA2:  # one frame shape throughout
         header_size = int(scan.payload_starts[0])
@@ -702,8 +856,8 @@ def _payload_rows(buf: np.ndarray, starts: np.ndarray, length: int) -> np.ndarra
 
 
 def decode_capture(data: bytes, max_length: int = MAX_DATA_LENGTH) -> DecodedBlock:
-    """Batch-decode a whole raw capture (bytes as read from the serial port)."""
-    return decode_buffer(np.frombuffer(data, dtype=np.uint8), max_length)
+    """Batch-decode a whole raw capture (bytes as read from the serial port; nothing follows them)."""
+    return decode_buffer(np.frombuffer(data, dtype=np.uint8), max_length, final=True)
 
 
 # ----------------------------------------------------------------------------------- to samples

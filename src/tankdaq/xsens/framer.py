@@ -4,12 +4,53 @@ Rules (reference §5, after xspublic ``findMessage``): look for 0xFA; read the l
 (bounded by ``max_length``); wait while the frame is incomplete; on a bad checksum or an
 impossible length advance ONE byte and rescan, so a real preamble inside a corrupted
 frame is not lost. Bytes that end up in no frame are counted as skipped. Never raises.
+
+Confirmation (an 8-bit checksum passes one false frame in 256): a frame that starts where
+the previous one ended, with the same header (bus id, message id, length), is *trusted*: its
+checksum is enough, so a steady stream is framed without delay. Any other candidate must be
+confirmed: a master-device bus id and the next frame starting right after it; after a loss
+of sync (bad checksum, skipped bytes) a *resync* must also be an MTData2 payload whose item
+sizes add up (``confirm``). A candidate that fails is a *false sync* (counted) and the framer
+steps one byte on, so a false header (a stray ``FA FF 36``, a corrupted length) never swallows
+the intact frames behind it. While the bytes that decide have not arrived, the framer waits;
+``flush`` (the line went quiet, or the capture ended) accepts such a frame on what it has.
 """
 
 from __future__ import annotations
 
-from .constants import EXTENDED_LENGTH, MAX_DATA_LENGTH, PREAMBLE
+from .constants import EXTENDED_LENGTH, MAX_DATA_LENGTH, MID, PREAMBLE
 from .frame import Frame
+from .mtdata2 import payload_well_formed
+
+#: Bus ids a resync may land on: tankdaq addresses the device as master (0xFF); a stand-alone
+#: MT also answers 0x01 with the id it was sent (reference §1.1).
+RESYNC_BIDS = frozenset((0xFF, 0x01))
+MTDATA2 = int(MID.MTDATA2)
+
+
+def confirm(
+    buf: bytes | bytearray, start: int, header: int, stop: int, sync: bytes | None, final: bool
+) -> bool | None:
+    """Is the checksum-valid candidate ``buf[start:stop]`` a real frame, in sync state ``sync``?
+
+    True/False, or None while the bytes that decide are still to come (``final``: they never
+    will, so a candidate that passes everything else is accepted). The next frame starts at
+    ``stop`` when the byte there is a preamble, or when the two after it repeat this frame's
+    bus and message ids (a corrupted preamble still leaves those).
+    """
+    bid, mid = buf[start + 1], buf[start + 2]
+    trusted = sync is not None and buf[start : start + header] == sync
+    if not trusted and bid not in RESYNC_BIDS:
+        return False
+    resync = sync is None
+    if resync and mid == MTDATA2 and not payload_well_formed(bytes(buf[start + header : stop - 1])):
+        return False
+    end = len(buf)
+    if stop < end and buf[stop] == PREAMBLE:
+        return True
+    if stop + 3 <= end:
+        return buf[stop + 1] == bid and buf[stop + 2] == mid
+    return True if final else None
 
 
 class StreamFramer:
@@ -20,28 +61,40 @@ class StreamFramer:
         self.frames = 0
         self.bad_checksums = 0
         self.skipped_bytes = 0
+        self.false_syncs = 0
         self._buffer = bytearray()
+        #: Sync state where the buffer starts: the header of the accepted frame that ended there,
+        #: b"" at the start of a stream, None after a loss of sync.
+        self.sync: bytes | None = b""
 
     @property
     def pending(self) -> int:
-        """Bytes held back because they may start a frame that is not complete yet."""
+        """Bytes held back because they may start a frame that is not complete (or confirmed) yet."""
         return len(self._buffer)
 
     def feed(self, chunk: bytes) -> list[Frame]:
         """Append ``chunk`` and return every frame completed by it, in stream order."""
+        self._buffer += chunk
+        return self._scan(final=False)
+
+    def flush(self) -> list[Frame]:
+        """The line went quiet (or the capture ended): accept a held frame that only lacks a successor."""
+        return self._scan(final=True)
+
+    def _scan(self, final: bool) -> list[Frame]:
         buf = self._buffer
-        buf += chunk
         out: list[Frame] = []
         pos = 0
         end = len(buf)
+        sync = self.sync
         while True:
             start = buf.find(PREAMBLE, pos)
             if start < 0:
-                self.skipped_bytes += end - pos
-                pos = end
-                break
-            self.skipped_bytes += start - pos
-            pos = start
+                start = end
+            if start > pos:
+                self.skipped_bytes += start - pos
+                sync = None
+                pos = start
             if end - pos < 4:
                 break
             length = buf[pos + 3]
@@ -54,6 +107,7 @@ class StreamFramer:
             if length > self.max_length:
                 self.skipped_bytes += 1
                 pos += 1
+                sync = None
                 continue
             stop = pos + header + length + 1
             if stop > end:
@@ -62,9 +116,21 @@ class StreamFramer:
                 self.bad_checksums += 1
                 self.skipped_bytes += 1
                 pos += 1
+                sync = None
+                continue
+            confirmed = confirm(buf, pos, header, stop, sync, final)
+            if confirmed is None:
+                break
+            if not confirmed:
+                self.false_syncs += 1
+                self.skipped_bytes += 1
+                pos += 1
+                sync = None
                 continue
             out.append(Frame(bid=buf[pos + 1], mid=buf[pos + 2], payload=bytes(buf[pos + header : stop - 1])))
+            sync = bytes(buf[pos : pos + header])
             pos = stop
         del buf[:pos]
+        self.sync = sync
         self.frames += len(out)
         return out

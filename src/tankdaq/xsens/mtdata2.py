@@ -416,6 +416,15 @@ def item_spans(payload: bytes) -> list[tuple[int, int, int]]:
     return spans
 
 
+def payload_well_formed(payload: bytes) -> bool:
+    """True when an MTData2 payload decodes: item sizes add up, and known items have their sizes."""
+    try:
+        decode_mtdata2(payload)
+    except ProtocolError:
+        return False
+    return True
+
+
 def decode_mtdata2(payload: bytes) -> MTData2Message:
     """Decode one MTData2 payload; unknown identifiers are skipped by size and counted, never fatal."""
     values: dict[str, object] = {}

@@ -2,8 +2,8 @@
 
 Each ``feed`` decodes the complete frames of (held-back tail + new chunk) with
 ``batch.decode_buffer`` and keeps the bytes that may start an incomplete frame, exactly as
-``StreamFramer`` does, so any chunking of a stream gives the same frames, counters and values
-as decoding it in one piece.
+``StreamFramer`` does (including whether they start in sync), so any chunking of a stream
+gives the same frames, counters and values as decoding it in one piece (then ``flush``).
 """
 
 from __future__ import annotations
@@ -25,7 +25,9 @@ class StreamDecoder:
         self.skipped_bytes = 0
         self.malformed = 0
         self.unknown_ids = 0
+        self.false_syncs = 0
         self._tail = np.empty(0, dtype=np.uint8)
+        self._sync: bytes | None = b""
         self._layouts = LayoutCache()
 
     @property
@@ -36,13 +38,21 @@ class StreamDecoder:
     def feed(self, chunk: bytes) -> DecodedBlock:
         """Decode what ``chunk`` completes; frame indices in the block count from this call."""
         incoming = np.frombuffer(chunk, dtype=np.uint8)
-        buf = np.concatenate((self._tail, incoming)) if self._tail.size else incoming
-        block = decode_buffer(buf, self.max_length, self._layouts)
+        return self._decode(np.concatenate((self._tail, incoming)) if self._tail.size else incoming, False)
+
+    def flush(self) -> DecodedBlock:
+        """The line went quiet (or the recording ended): decode a held frame that only lacks a successor."""
+        return self._decode(self._tail, True)
+
+    def _decode(self, buf: np.ndarray, final: bool) -> DecodedBlock:
+        block = decode_buffer(buf, self.max_length, self._layouts, sync=self._sync, final=final)
         self._tail = buf[buf.size - block.pending_bytes :].copy()
+        self._sync = block.sync
         self.frames += block.frames
         self.messages += block.n_messages
         self.bad_checksums += block.bad_checksums
         self.skipped_bytes += block.skipped_bytes
+        self.false_syncs += block.false_syncs
         self.malformed += block.malformed
         self.unknown_ids += block.unknown_ids
         return block

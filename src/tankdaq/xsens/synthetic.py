@@ -68,3 +68,31 @@ def decay_capture(n_frames: int, rate_hz: float = 100.0, seed: int = 0, start_ti
     checksum = (-(head[:, 1:].sum(axis=1) + payload.sum(axis=1, dtype=np.int64))) % 256
     frames = np.concatenate([head, payload, checksum.astype(np.uint8)[:, None]], axis=1)
     return frames.tobytes()
+
+
+#: A header that looks like the start of a data frame: what line noise most often fakes.
+STRAY_HEADER = bytes((PREAMBLE, MASTER_BID, MID.MTDATA2))
+
+
+def noisy_capture(
+    n_frames: int, corrupt_fraction: float = 0.03, stray_fraction: float = 0.03, seed: int = 0
+) -> tuple[bytes, np.ndarray]:
+    """A decay capture with one byte corrupted in ``corrupt_fraction`` of the frames and stray
+    ``FA FF 36`` headers inserted at random byte positions (``stray_fraction`` per frame), plus
+    the mask of frames that arrive intact (untouched, no stray header inside them).
+    """
+    rng = np.random.default_rng([seed, 7])
+    frames = np.frombuffer(decay_capture(n_frames, seed=seed), np.uint8).reshape(n_frames, -1).copy()
+    size = frames.shape[1]
+    corrupt = rng.random(n_frames) < corrupt_fraction
+    rows = np.flatnonzero(corrupt)
+    frames[rows, rng.integers(0, size, rows.size)] ^= rng.integers(1, 256, rows.size, dtype=np.uint8)
+    positions = np.sort(rng.integers(0, frames.size, int(n_frames * stray_fraction)))
+    # A stray header before a frame's preamble leaves that frame whole; so does one right after
+    # the frame's own FA FF 36 (the stray's copy of them then starts the intact frame).
+    inside = (positions % size != 0) & (positions % size != len(STRAY_HEADER))
+    intact = ~corrupt
+    intact[positions[inside] // size] = False
+    stream = np.insert(frames.ravel(), np.repeat(positions, len(STRAY_HEADER)),
+                       np.tile(np.frombuffer(STRAY_HEADER, np.uint8), positions.size))  # fmt: skip
+    return stream.tobytes(), intact
