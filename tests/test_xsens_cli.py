@@ -67,7 +67,8 @@ def test_summary_reports_corruption_and_counter_gaps(tmp_path: Path) -> None:
     frames = decay_capture(50)
     damaged = bytearray(frames[: 69 * 10] + frames[69 * 13 :])  # three messages lost
     damaged[69 * 20 + 30] ^= 0xFF  # one bad checksum
-    damaged += build_frame(MID.ERROR, b"\x04") + b"\x01\x02\x03"
+    damaged[69 * 21 : 69 * 21] = b"\x01\x02\x03"  # stray bytes after it
+    damaged += build_frame(MID.ERROR, b"\x04")
     capture = tmp_path / "damaged.bin"
     capture.write_bytes(bytes(damaged))
     result = runner.invoke(app, ["decode", str(capture)])
@@ -76,7 +77,7 @@ def test_summary_reports_corruption_and_counter_gaps(tmp_path: Path) -> None:
     summary = result.stderr
     assert "46 MTData2 messages" in summary and "1 other frames" in summary and "1 bad checksums" in summary
     assert "2 counter gaps (4 packets lost)" in summary  # the 3 cut out and the one with the bad checksum
-    assert "72 skipped bytes" in summary  # the corrupted frame (69) and the 3 trailing bytes
+    assert "72 skipped bytes" in summary  # the corrupted frame (69) and the 3 stray bytes
 
 
 @pytest.mark.parametrize(
