@@ -10,8 +10,8 @@ import pytest
 import serial
 
 from tankdaq.device.driver import MTiDriver
-from tankdaq.device.simulator import Faults, SimulatedMTi
-from tankdaq.errors import DeviceError, DeviceGone, InputError
+from tankdaq.device.simulator import Behaviour, Faults, SimulatedMTi
+from tankdaq.errors import DeviceGone, InputError
 from tankdaq.physics.scenario import DecayScenario
 from tankdaq.xsens.constants import MID, baud_code
 from tankdaq.xsens.control import output_configuration_payload, parse_output_configuration
@@ -34,7 +34,8 @@ class Client:
         frames: list[Frame] = []
         deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
-            frames += self.framer.feed(self.serial.read(4096))
+            data = self.serial.read(4096)
+            frames += self.framer.feed(data) if data else self.framer.flush()  # a quiet line confirms
             if until is not None and any(f.mid == until for f in frames):
                 break
         return frames
@@ -114,19 +115,23 @@ def test_unknown_messages_get_error_0x04(sim: SimulatedMTi) -> None:
     assert (reply.mid, reply.payload) == (MID.ERROR, b"\x04")
 
 
-def test_baud_rate_change_applies_after_reset_which_wakes_the_device_up(sim: SimulatedMTi) -> None:
-    client = Client(sim.link)
-    client.ask(MID.GOTO_CONFIG)
-    assert client.ask(MID.REQ_BAUDRATE).payload == bytes((baud_code(115200),))
-    assert client.ask(MID.SET_BAUDRATE, bytes((baud_code(460800),))).mid == MID.BAUDRATE_ACK
-    assert client.ask(MID.GOTO_CONFIG).mid == MID.GOTO_CONFIG_ACK  # still at the old rate until reset
-    client.send(MID.RESET)
-    assert [f.mid for f in client.collect(0.5, until=MID.RESET_ACK)][-1] == MID.RESET_ACK
-    client.serial.close()
-    with MTiDriver(sim.link, baud=115200, config_attempts=3) as driver, pytest.raises(DeviceError):
-        driver.configure()
-    with MTiDriver(sim.link, baud=460800) as driver:
-        assert driver.configure().baud == 460800
+def test_baud_rate_change_applies_after_reset_which_wakes_the_device_up() -> None:
+    booting = Behaviour(boot_s=0.3)  # a quiet boot after the Reset ack, as on hardware
+    with SimulatedMTi(DecayScenario(rate_hz=100), speed=10.0, behaviour=booting) as sim:
+        client = Client(sim.link)
+        client.ask(MID.GOTO_CONFIG)
+        assert client.ask(MID.REQ_BAUDRATE).payload == bytes((baud_code(115200),))
+        assert client.ask(MID.SET_BAUDRATE, bytes((baud_code(460800),))).mid == MID.BAUDRATE_ACK
+        assert client.ask(MID.GOTO_CONFIG).mid == MID.GOTO_CONFIG_ACK  # still at the old rate until reset
+        client.send(MID.RESET)
+        assert [f.mid for f in client.collect(0.5, until=MID.RESET_ACK)][-1] == MID.RESET_ACK
+        client.serial.baudrate = 460800  # reopen at the new rate: the WakeUp comes there
+        client.framer = StreamFramer()
+        assert MID.WAKEUP in [f.mid for f in client.collect(2.0, until=MID.WAKEUP)]
+        client.serial.close()
+        with MTiDriver(sim.link) as driver:  # looks at 115200 first, finds the device at 460800
+            info = driver.configure()
+    assert info.baud == 460800 and info.baud_changed_from is None
 
 
 def test_legacy_device_refuses_output_configuration() -> None:
@@ -152,7 +157,7 @@ def test_silence_longer_than_the_timeout_is_a_vanished_device(sim: SimulatedMTi)
     with MTiDriver(sim.link, silence_timeout_s=0.3) as driver:
         driver.configure()
         driver.samples(0.5)
-        sim.stall(2.0)
+        sim.stall(20.0)  # device seconds: two wall seconds at speed 10
         with pytest.raises(DeviceGone, match="no data"):
             driver.samples(5.0)
 

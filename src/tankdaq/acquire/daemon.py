@@ -27,6 +27,9 @@ from .session import Block, DecayOutcome, DecaySession, SessionSettings
 #: per-block work (decode, detect, write, view) is shared; 20 ms is invisible in a live view.
 READ_INTERVAL_S = 0.02
 
+#: What the driver learnt that each recording keeps (``describe_run``).
+DEVICE_METADATA = ("device_id", "product_code", "firmware", "baud", "baud_changed_from")
+
 #: Standard baud rates tried, smallest first, when the simulated sensor needs a faster line.
 SIM_BAUDS = (115200, 230400, 460800, 921600)
 
@@ -41,7 +44,7 @@ class RecordSettings:
     hull: str = "swath"
     axis: str = "roll"  # roll, pitch, auto
     rate_hz: float = 100.0
-    baud: int | None = None  # None: 115200 on hardware, the smallest that carries the rate on sim
+    baud: int | None = None  # None: the device's rate if it carries the output, else the slowest that does
     out_dir: Path = Path("recordings")
     runs: int | None = None
     viewer: str = "none"
@@ -153,8 +156,8 @@ class RecordDaemon:
     def _driver(self) -> MTiDriver:
         s = self.settings
         port = self._start_simulator() if s.port == "sim" else s.port
-        baud = s.baud or (self.simulator.baud if self.simulator else 115200)
-        return MTiDriver(port, baud=baud, rate_hz=s.rate_hz)
+        probe_first = self.simulator.baud if self.simulator else 115200
+        return MTiDriver(port, baud=s.baud, rate_hz=s.rate_hz, probe_first=probe_first)
 
     def _session(self, driver: MTiDriver) -> DecaySession:
         from ..store.writer import describe_run
@@ -168,12 +171,11 @@ class RecordDaemon:
             hull=self.hull,
             draft=s.draft,
             sample_rate_hz=s.rate_hz,
-            device={k: device.get(k) for k in ("device_id", "product_code", "firmware")},
+            device={k: device.get(k) for k in DEVICE_METADATA},
             operator=s.operator,
             note=s.note,
         )
         metadata["port"] = info.port if info else s.port
-        metadata["baud"] = info.baud if info else s.baud
         metadata["legacy_protocol"] = bool(info.legacy) if info else False
         config = {"record": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(s).items()}}
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
@@ -191,6 +193,7 @@ class RecordDaemon:
             draft=s.draft,
             run_metadata=metadata,
             run_config=config,
+            closing_metadata=lambda: driver.counters.metadata(),
         )
         return DecaySession(session_settings, view, on_event=self.on_event)
 

@@ -59,6 +59,8 @@ class SessionSettings:
     run_metadata: dict[str, object] = field(default_factory=dict)
     run_config: dict[str, object] = field(default_factory=dict)
     detector_settings: dict[str, float] = field(default_factory=dict)
+    #: Metadata known only when a file closes (the driver's link counters), added to it then.
+    closing_metadata: Callable[[], dict[str, object]] = dict
 
 
 @dataclass
@@ -394,7 +396,7 @@ class _ActiveDecay:
 
         def close(writer: RecordingWriter) -> None:
             writer.write_event("settled", f"decay ended ({reason})", None, {"reason": reason})
-            writer.update_metadata(extra)
+            writer.update_metadata({**extra, **self.session.settings.closing_metadata()})
             writer.close()
 
         self.session.view.log_event("settled", f"decay ended ({reason})", self._last_t)

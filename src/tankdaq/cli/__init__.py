@@ -12,6 +12,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 # isort: off
 from . import record  # noqa: F401  (record, replay, demo)
 from . import simulate  # noqa: F401
+from . import device  # noqa: F401  (device ports, info, reset, restore-defaults)
 from . import decode  # noqa: F401
 from . import store  # noqa: F401  (recover)
 from . import identify  # noqa: F401

@@ -51,6 +51,23 @@ def _rate(value: float) -> float:
     return value
 
 
+def _baud(ctx: typer.Context, value: int | None) -> int | None:
+    """--baud: an MTi serial rate that carries the decay output at --rate (checked before the port opens)."""
+    from ..xsens.constants import SERIAL_BAUDS
+    from ..xsens.control import decay_bits_per_second, line_refusal
+
+    if value is None:
+        return None
+    if value not in SERIAL_BAUDS:
+        known = ", ".join(map(str, SERIAL_BAUDS))
+        raise typer.BadParameter(f"{value} is not an MTi serial rate; use one of {known}")
+    rate = ctx.params.get("rate", 100.0)
+    refusal = line_refusal(decay_bits_per_second(rate), rate, value)
+    if refusal is not None:
+        raise typer.BadParameter(refusal)
+    return value
+
+
 def _default_viewer() -> str:
     from ..viz.live import default_viewer_mode
 
@@ -135,7 +152,9 @@ def run_record(
 @handles_errors
 def record_command(
     port: str = typer.Option(
-        ..., "--port", help="Device path, pyserial URL, or 'sim' for the built-in simulated MTi-G."
+        ...,
+        "--port",
+        help="Device path, pyserial URL, 'auto' (the one Xsens device), or 'sim' (built-in simulated MTi-G).",
     ),
     draft: float = typer.Option(
         ..., "--draft", parser=parse_draft_option, help="Draft as a factor of design: 0.9T, T, 1.1T."
@@ -151,7 +170,11 @@ def record_command(
     ),
     rate: float = typer.Option(100.0, "--rate", callback=_rate, help="Output rate (Hz): 100, 200 or 400."),
     baud: int = typer.Option(
-        None, "--baud", help="Serial baud rate (default 115200; sim picks one that fits)."
+        None,
+        "--baud",
+        callback=_baud,
+        help="Line rate to record at; tankdaq moves the device there (default: keep its rate if it "
+        "carries --rate, else the slowest that does).",
     ),
     out: Path = typer.Option(Path("recordings"), "--out", help="Folder for the MCAP files (one per decay)."),
     runs: int = typer.Option(

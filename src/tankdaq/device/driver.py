@@ -3,18 +3,25 @@
 The driver talks to hardware and to ``SimulatedMTi`` the same way: through pyserial on a
 path (or a pyserial URL). What it does, in order:
 
-1. open exclusively (a second program on the port gets a clear "busy" error);
-2. take the device to Config (GoToConfig repeated: it may be streaming; WakeUp answered);
+1. open exclusively (``--port auto`` is resolved to the one Xsens device first); remember the
+   device's USB serial number, to find it again after a re-plug under another name;
+2. take the device to Config (docs/protocol.md has the state machine): GoToConfig every 0.1 s
+   (a streaming device may need several), answering a WakeUp within 500 ms; if unanswered, the
+   standard baud rates in turn; a device that streams but ignores GoToConfig gets a Reset, and
+   GoToConfig goes on through its boot (the field report: acked ~1.7 s after the Reset);
 3. read device id, product code and firmware;
-4. check the output rate fits the baud rate, then SetOutputConfiguration for the decay
-   channels and diff the echoed (effective) configuration; a device answering Error 0x04 is
-   a 2007-era MTi-G and is configured with OutputMode/OutputSettings/Period instead;
-5. GoToMeasurement, then yield ``StreamBlock``s: ``SAMPLE_DTYPE`` samples with device time
+4. SetOutputConfiguration for the decay channels, diffing the echoed (effective) configuration
+   (each flash write has its own, longer timeout); a device answering Error 0x04 is a 2007-era
+   MTi-G and is configured with OutputMode/OutputSettings/Period instead;
+5. if the line cannot carry the output (or ``baud`` asks for another rate): SetBaudrate (600-series:
+   PortConfig), Reset, reopen the port at the new rate and hand-shake again;
+6. GoToMeasurement, then yield ``StreamBlock``s: ``SAMPLE_DTYPE`` samples with device time
    from unwrapped SampleTimeFine (legacy: the sample counter times the period), host time
    beside, the raw bytes exactly as received (the recorder stores them) and running counters.
 
 A vanished device (read fails, the pts is gone, or silence) raises ``DeviceGone``;
-``reconnect()`` waits for the path to come back with back-off and configures again.
+``reconnect()`` waits for it to come back (at its path, or under a new name with the same USB
+serial number) with back-off and configures again.
 """
 
 from __future__ import annotations
@@ -22,7 +29,8 @@ from __future__ import annotations
 import contextlib
 import errno
 import time
-from collections.abc import Iterator
+from collections import Counter
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,18 +38,24 @@ import serial
 
 from ..errors import DeviceError, DeviceGone, DeviceNotFound, InputError
 from ..samples import SAMPLE_DTYPE
-from ..xsens.constants import BAUD_CODES, MID
+from ..xsens.constants import FLASH_WRITES, MID, SEARCH_BAUDS, SERIAL_BAUDS
 from ..xsens.control import (
     BITS_PER_BYTE,
     FRAME_OVERHEAD,
+    baudrate_payload,
     check_bandwidth,
     decay_output_configuration,
+    is_600_series,
+    line_refusal,
     output_configuration_payload,
     parse_device_id,
     parse_error,
     parse_fw_rev,
     parse_output_configuration,
+    parse_port_config,
     parse_product_code,
+    port_config_payload,
+    slowest_baud_carrying,
 )
 from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
@@ -49,11 +63,34 @@ from ..xsens.mtdata2 import describe_xdi
 from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, CounterTracker
 from .decoding import SampleDecoder
 from .legacy_output import LegacyOutput
-from .ports import describe_missing, path_exists
+from .ports import describe_missing, find_by_serial, path_exists, resolve_port, usb_serial_of
 
-#: Baud rates tried by ``scan_baud`` (most common first).
-SCAN_BAUDS = (115200, 460800, 921600, 230400, 57600, 38400, 19200, 9600)
 ERROR_NOT_IMPLEMENTED = 0x04
+#: GoToConfig is repeated this often while unanswered (the field report's 100 ms).
+RESEND_S = 0.1
+#: A read returns after this long without bytes: a quiet line, which confirms the frame the framer
+#: holds back until it sees what follows (an ack is not delayed by more than this).
+READ_TIMEOUT_S = 0.01
+#: Share of a line's bit rate the data may use (acks and bursts need the rest).
+HEADROOM = 0.9
+MODEMMANAGER_HINT = (
+    "if ModemManager runs it may hold the port: sudo systemctl stop ModemManager, or add the udev rule "
+    'ATTRS{idVendor}=="2639", ENV{ID_MM_DEVICE_IGNORE}="1" (see docs/protocol.md)'
+)
+
+
+def open_error_message(port: str, exc: BaseException) -> str:
+    """One line for a port that exists but cannot be opened: what is wrong and the command that fixes it."""
+    code = getattr(exc, "errno", None)
+    text = str(exc)
+    if code == errno.EACCES or "Permission denied" in text:
+        return (
+            f"no permission to open {port}: add yourself to the dialout group "
+            "(sudo usermod -aG dialout $USER), then log out and in again"
+        )
+    if code in (errno.EAGAIN, errno.EBUSY) or "exclusively lock" in text or "busy" in text:
+        return f"port {port} is busy: another program has it open (tankdaq? a terminal?); {MODEMMANAGER_HINT}"
+    return f"cannot open {port}: {text}"
 
 
 @dataclass(frozen=True)
@@ -68,13 +105,45 @@ class DeviceInfo:
     legacy: bool
     rate_hz: float
     configuration: tuple[tuple[int, int], ...] = ()
+    baud_changed_from: int | None = None  # the device's rate before tankdaq moved it
+    usb_serial: str | None = None
 
     def describe(self) -> str:
         kind = "legacy MTData" if self.legacy else "MTData2"
+        moved = f" (moved from {self.baud_changed_from})" if self.baud_changed_from else ""
         return (
             f"{self.product_code} id {self.device_id:08X} fw {self.firmware} on {self.port} "
-            f"at {self.baud} baud, {self.rate_hz:g} Hz {kind}"
+            f"at {self.baud} baud{moved}, {self.rate_hz:g} Hz {kind}"
         )
+
+
+@dataclass(frozen=True)
+class DeviceReport:
+    """What ``tankdaq device info`` shows."""
+
+    port: str
+    baud: int
+    device_id: int
+    product_code: str
+    firmware: str
+    legacy: bool  # a 2007-era MTi-G: no MTData2 output configuration
+    configuration: tuple[tuple[int, int], ...]
+    was_measuring: bool
+    usb_serial: str | None
+
+    def lines(self) -> list[str]:
+        outputs = [f"  {describe_xdi(xdi)} at {'max' if hz in (0, 0xFFFF) else f'{hz} Hz'}"
+                   for xdi, hz in self.configuration]  # fmt: skip
+        return [
+            f"port: {self.port}" + (f" (USB serial {self.usb_serial})" if self.usb_serial else ""),
+            f"device id: {self.device_id:08X}",
+            f"product: {self.product_code}",
+            f"firmware: {self.firmware}",
+            f"baud: {self.baud}",
+            f"state found: {'measuring' if self.was_measuring else 'config'} (left so)",
+            "output configuration: " + ("legacy MTData (no MTData2 configuration)" if self.legacy else ""),
+            *outputs,
+        ]
 
 
 @dataclass
@@ -85,10 +154,17 @@ class StreamCounters:
     frames: int = 0
     samples: int = 0
     bad_frames: int = 0  # bad checksums + malformed messages
+    bad_checksums: int = 0
     skipped_bytes: int = 0
+    false_syncs: int = 0  # checksum-valid false frames the framer turned away
     gaps: int = 0  # PacketCounter jumps
     lost: int = 0  # packets missing in those jumps
     device_errors: list[tuple[int, str]] = field(default_factory=list)
+
+    def metadata(self) -> dict[str, object]:
+        """The link counters a recording keeps (names prefixed ``link_``)."""
+        names = ("bytes", "frames", "bad_checksums", "skipped_bytes", "false_syncs", "gaps", "lost")
+        return {f"link_{name}": getattr(self, name) for name in names}
 
 
 @dataclass
@@ -101,39 +177,79 @@ class StreamBlock:
     frames: int
 
 
+@dataclass
+class LineLog:
+    """What arrived while looking for the device: the one-line error says it."""
+
+    bytes: int = 0
+    head: bytearray = field(default_factory=bytearray)
+    frames: Counter[str] = field(default_factory=Counter)
+    wakeup: bool = False
+
+    def add(self, data: bytes, frames: list[Frame]) -> None:
+        self.bytes += len(data)
+        self.head += data[: max(0, 12 - len(self.head))]
+        self.frames.update(frame.name for frame in frames)
+        self.wakeup |= any(frame.mid == MID.WAKEUP for frame in frames)
+
+    def describe(self) -> str:
+        if not self.bytes:
+            return "nothing"
+        frames = ", ".join(f"{name} x{n}" for name, n in self.frames.most_common(4)) or "no Xbus frame"
+        return f"{self.bytes} bytes ({frames}; first {self.head.hex(' ')})"
+
+
 class MTiDriver:
-    """Xsens MTi-G over a serial port (path or pyserial URL); see the module docstring."""
+    """Xsens MTi-G over a serial port (path, pyserial URL or ``auto``); see the module docstring.
+
+    ``baud``: the line rate to run at (None: keep the device's rate if it carries the output,
+    else move it to the slowest standard rate that does). ``probe_first``: where to look for the
+    device first when ``baud`` is None (factory default 115200).
+    """
 
     def __init__(
         self,
         port: str,
-        baud: int = 115200,
+        baud: int | None = None,
         rate_hz: float = 100,
         *,
-        reply_timeout_s: float = 1.0,
-        config_attempts: int = 20,
+        probe_first: int = 115200,
+        step_timeout_s: float = 1.0,
+        flash_timeout_s: float = 3.0,
+        goto_config_s: float = 2.0,
+        probe_s: float = 0.6,
+        boot_s: float = 6.0,
         silence_timeout_s: float = 3.0,
-        scan_baud: bool = False,
         modulus: int = MODULUS_ONE_DAY,
+        by_id_dirs: Sequence[str] | None = None,
     ) -> None:
-        if baud not in BAUD_CODES.values():
-            raise InputError(f"baud {baud} is not an MTi rate; use one of {sorted(set(BAUD_CODES.values()))}")
+        for rate in (baud, probe_first):
+            if rate is not None and rate not in SERIAL_BAUDS:
+                raise InputError(f"baud {rate} is not an MTi serial rate; use one of {list(SERIAL_BAUDS)}")
         if not (rate_hz > 0 and TICKS_PER_SECOND % rate_hz == 0 and rate_hz <= 400):
             raise InputError(
                 f"rate {rate_hz:g} Hz is not an MTi output rate; use a divisor of 400 Hz (100, 200, 400)"
             )
         self.port = port
+        self.path = port  # where the device is now (``auto`` resolved; a re-plug may move it)
         self.baud = baud
+        self.line_baud = baud or probe_first  # the rate the port is opened at
         self.rate_hz = float(rate_hz)
-        self.reply_timeout_s = reply_timeout_s
-        self.config_attempts = config_attempts
+        self.step_timeout_s = step_timeout_s
+        self.flash_timeout_s = flash_timeout_s
+        self.goto_config_s = goto_config_s
+        self.probe_s = probe_s
+        self.boot_s = boot_s
         self.silence_timeout_s = silence_timeout_s
-        self.scan_baud = scan_baud
         self.modulus = modulus
+        self.by_id_dirs = by_id_dirs
+        self.usb_serial: str | None = None
         self.info: DeviceInfo | None = None
         self.counters = StreamCounters()
+        self.was_measuring = False  # data frames arrived before the device reached Config
         self._serial: serial.SerialBase | None = None
         self._framer = StreamFramer()
+        self._log = LineLog()
         self._reset_stream_state()
 
     def _reset_stream_state(self, legacy: LegacyOutput | None = None) -> None:
@@ -151,34 +267,26 @@ class MTiDriver:
         self.close()
 
     def open(self) -> MTiDriver:
-        """Open the port exclusively at ``baud`` (raises DeviceNotFound / DeviceError with what to do)."""
+        """Open the port exclusively at ``line_baud`` (DeviceNotFound / DeviceError say what to do)."""
         if self._serial is not None:
             return self
-        if not path_exists(self.port):
-            raise DeviceNotFound(describe_missing(self.port))
+        if self.path == "auto":
+            self.path = resolve_port("auto", self.by_id_dirs)
+        if not path_exists(self.path):
+            raise DeviceNotFound(describe_missing(self.path))
         try:
-            self._serial = serial.serial_for_url(self.port, self.baud, timeout=0.05, exclusive=True)
+            self._serial = serial.serial_for_url(
+                self.path, self.line_baud, timeout=READ_TIMEOUT_S, exclusive=True
+            )
         except serial.SerialException as exc:
-            raise self._open_error(exc) from None
+            code = getattr(exc, "errno", None)
+            if code == errno.ENOENT or "No such file" in str(exc):
+                raise DeviceNotFound(describe_missing(self.path)) from None
+            raise DeviceError(open_error_message(self.path, exc)) from None
         except ValueError as exc:
-            raise InputError(f"cannot open {self.port!r}: {exc}") from None
+            raise InputError(f"cannot open {self.path!r}: {exc}") from None
+        self.usb_serial = usb_serial_of(self.path, self.by_id_dirs) or self.usb_serial
         return self
-
-    def _open_error(self, exc: serial.SerialException) -> DeviceError:
-        code = getattr(exc, "errno", None)
-        text = str(exc)
-        if code == errno.ENOENT or "No such file" in text:
-            return DeviceNotFound(describe_missing(self.port))
-        if code in (errno.EAGAIN, errno.EBUSY) or "exclusively lock" in text:
-            return DeviceError(
-                f"port {self.port} is busy: another program has it open "
-                "(tankdaq record? a terminal? ModemManager?)"
-            )
-        if code == errno.EACCES:
-            return DeviceError(
-                f"no permission to open {self.port}: add yourself to the 'dialout' group, log in again"
-            )
-        return DeviceError(f"cannot open {self.port}: {text}")
 
     def close(self) -> None:
         """Close the port (safe to call twice; a vanished device closes quietly)."""
@@ -207,7 +315,7 @@ class MTiDriver:
                 data += port.read(port.in_waiting)
         except (serial.SerialException, OSError) as exc:
             self.close()
-            raise DeviceGone(f"{self.port} vanished ({exc}); reconnect() waits for it to come back") from None
+            raise DeviceGone(f"{self.path} vanished ({exc}); reconnect() waits for it to come back") from None
         return data
 
     def _write(self, data: bytes) -> None:
@@ -215,125 +323,218 @@ class MTiDriver:
             self._port().write(data)
         except (serial.SerialException, OSError) as exc:
             self.close()
-            raise DeviceGone(f"{self.port} vanished while writing ({exc})") from None
+            raise DeviceGone(f"{self.path} vanished while writing ({exc})") from None
 
-    def _frames_until(self, wanted: set[int], timeout_s: float, resend: bytes | None = None) -> Frame | None:
-        """Frames until one with a MID in ``wanted`` (or Error) arrives; ``resend`` goes out every 0.1 s."""
+    def _exchange(
+        self, wanted: set[int], timeout_s: float, resend: bytes | None = None, answer_wakeup: bool = True
+    ) -> Frame | None:
+        """Frames until one with a MID in ``wanted`` (or Error) arrives; ``resend`` goes out every 0.1 s.
+
+        A WakeUp is answered at once (the device stays in Config only if the ack comes within
+        500 ms) unless ``answer_wakeup`` is False; a quiet read confirms a frame the framer holds
+        (``StreamFramer.flush``).
+        """
         deadline = time.monotonic() + timeout_s
         next_send = 0.0
         while time.monotonic() < deadline:
             if resend is not None and time.monotonic() >= next_send:
                 self._write(resend)
-                next_send = time.monotonic() + 0.1
-            for frame in self._framer.feed(self._read()):
-                if frame.mid == MID.WAKEUP:
+                next_send = time.monotonic() + RESEND_S
+            data = self._read()
+            frames = self._framer.feed(data) if data else self._framer.flush()
+            self._log.add(data, frames)
+            for frame in frames:
+                if frame.mid == MID.WAKEUP and answer_wakeup:
                     self._write(build_frame(MID.WAKEUP_ACK))
+                self.was_measuring |= frame.mid in (MID.MTDATA2, MID.MTDATA)
                 if frame.mid in wanted or frame.mid == MID.ERROR:
                     return frame
         return None
 
     def request(self, mid: int, payload: bytes = b"", what: str = "") -> Frame:
-        """Send one message and return its reply (mid + 1); device errors become DeviceError."""
+        """Send one message and return its reply (mid + 1); device errors become DeviceError.
+
+        Flash-writing messages get ``flash_timeout_s``, the others ``step_timeout_s``.
+        """
         self._write(build_frame(mid, payload))
-        reply = self._frames_until({mid + 1}, self.reply_timeout_s)
+        timeout = self.flash_timeout_s if mid in FLASH_WRITES else self.step_timeout_s
+        reply = self._exchange({mid + 1}, timeout)
         label = what or MID(mid).name
         if reply is None:
-            raise DeviceError(f"no reply to {label} from {self.port} within {self.reply_timeout_s:g} s")
+            raise DeviceError(f"no reply to {label} from {self.path} within {timeout:g} s")
         if reply.mid == MID.ERROR:
             code, meaning = parse_error(reply.payload)
             raise DeviceError(f"the device answered {label} with error 0x{code:02X}: {meaning}")
         return reply
 
-    # ---- hand-shake and configuration ----------------------------------------
-
-    def go_to_config(self) -> None:
-        """GoToConfig until acknowledged (a streaming device may need several tries)."""
+    def _set_line(self, baud: int) -> None:
+        """Talk at ``baud`` from now on (a fresh framer: bytes at another rate were noise)."""
+        self._port().baudrate = baud
+        self.line_baud = baud
         self._framer = StreamFramer()
         with contextlib.suppress(serial.SerialException, OSError):
             self._port().reset_input_buffer()
-        ack = self._frames_until(
-            {MID.GOTO_CONFIG_ACK}, self.config_attempts * 0.1, resend=build_frame(MID.GOTO_CONFIG)
-        )
-        if ack is not None and ack.mid == MID.GOTO_CONFIG_ACK:
+
+    # ---- hand-shake and configuration ----------------------------------------
+
+    def go_to_config(self, rates: Sequence[int] | None = None) -> None:
+        """Take the device to Config (see the module docstring); DeviceError says what was tried."""
+        rates = list(dict.fromkeys(rates or (self.line_baud, *SEARCH_BAUDS)))
+        self._log = LineLog()
+        self.was_measuring = False
+        tried: list[int] = []
+        for rate in rates:
+            self._set_line(rate)
+            frames_before = sum(self._log.frames.values())
+            seconds = self.goto_config_s if not tried else self.probe_s
+            tried.append(rate)
+            if self._goto_config_for(seconds):
+                return
+            if sum(self._log.frames.values()) > frames_before:  # it talks at this rate but ignores us
+                self._recover(rate, tried)
+                return
+        self._set_line(rates[0])
+        self._recover(rates[0], tried)
+
+    def _goto_config_for(self, seconds: float) -> bool:
+        ack = self._exchange({MID.GOTO_CONFIG_ACK}, seconds, resend=build_frame(MID.GOTO_CONFIG))
+        return ack is not None and ack.mid == MID.GOTO_CONFIG_ACK
+
+    def _recover(self, rate: int, tried: list[int]) -> None:
+        """Reset, then GoToConfig through the boot (WakeUp answered) until acknowledged."""
+        self._write(build_frame(MID.RESET))
+        if self._goto_config_for(self.boot_s):
             return
-        others = ", ".join(str(b) for b in SCAN_BAUDS if b != self.baud)
-        seen = "garbage only" if self._framer.frames == 0 and self._framer.skipped_bytes else "nothing"
+        others = [r for r in tried if r != tried[0]]
+        scanned = f", {self.probe_s:g} s at each of {', '.join(map(str, others))}" if others else ""
+        if not self._log.bytes:
+            hint = f"nothing arrived: check power and cable; {MODEMMANAGER_HINT}"
+        elif not self._log.frames:
+            hint = "bytes but no Xbus frame at any standard rate: is it an Xsens device, at 8N1?"
+        else:
+            hint = "the device talks but ignores GoToConfig and Reset: power-cycle it"
         raise DeviceError(
-            f"no answer from {self.port} at {self.baud} baud ({seen} received): check power and cable, "
-            f"or try another --baud ({others}) or --scan-baud"
+            f"no answer from {self.path}: GoToConfig for {self.goto_config_s:g} s at {tried[0]} baud"
+            f"{scanned}, then Reset at {rate} baud and GoToConfig for {self.boot_s:g} s "
+            f"(WakeUp {'seen' if self._log.wakeup else 'not seen'}); received {self._log.describe()}; {hint}"
         )
 
-    def configure(self) -> DeviceInfo:
-        """Hand-shake and configure the decay outputs; the device is measuring afterwards."""
-        self.open()
-        if self.scan_baud:
-            self._find_baud()
-        else:
-            self.go_to_config()
+    def identify(self) -> tuple[int, str, str]:
+        """(device id, product code, firmware) of a device in Config."""
         device_id = parse_device_id(self.request(MID.REQ_DID).payload)
         product = parse_product_code(self.request(MID.REQ_PRODUCT_CODE).payload)
         firmware = parse_fw_rev(self.request(MID.REQ_FW_REV).payload)
-        configuration, legacy = self._configure_outputs()
+        return device_id, product, firmware
+
+    def inspect(self) -> DeviceReport:
+        """Hand-shake and read what the device is and how it is set up; it is left as found (measuring
+        again if it was)."""
+        self.open()
+        self.go_to_config()
+        device_id, product, firmware = self.identify()
+        self._write(build_frame(MID.OUTPUT_CONFIGURATION))  # empty: a request, the configuration stays
+        reply = self._exchange({MID.OUTPUT_CONFIGURATION_ACK}, self.step_timeout_s)
+        if reply is None:
+            raise DeviceError(f"no reply to ReqOutputConfiguration from {self.path}")
+        legacy = reply.mid == MID.ERROR
+        configuration = () if legacy else tuple(parse_output_configuration(reply.payload))
+        if self.was_measuring:
+            self.request(MID.GOTO_MEASUREMENT)
+        return DeviceReport(self.path, self.line_baud, device_id, product, firmware, legacy, configuration,
+                            self.was_measuring, self.usb_serial)  # fmt: skip
+
+    def reset_device(self, restore_defaults: bool = False) -> bool:
+        """Reset (after RestoreFactoryDefaults if asked); True when the WakeUp of the reboot was seen.
+
+        The WakeUp is not answered, so the device boots into measurement as after power-up.
+        """
+        self.open()
+        self.go_to_config()
+        if restore_defaults:
+            self.request(MID.RESTORE_FACTORY_DEF)
+        self._write(build_frame(MID.RESET))
+        self._log = LineLog()
+        self._exchange({MID.WAKEUP}, self.boot_s, answer_wakeup=False)
+        return self._log.wakeup
+
+    def configure(self) -> DeviceInfo:
+        """Hand-shake, configure the decay outputs and the baud rate; the device is measuring afterwards."""
+        self.open()
+        self.go_to_config()
+        device_id, product, firmware = self.identify()
+        configuration, legacy, bits_per_second = self._configure_outputs()
+        target = self._choose_baud(bits_per_second)
+        found = self.line_baud
+        if target != found:
+            self.move_baud(target, is_600_series(product))
         self.request(MID.GOTO_MEASUREMENT)
         self._reset_stream_state(LegacyOutput.for_decay(self.rate_hz) if legacy else None)
         self.counters = StreamCounters()
         self._last_data = time.monotonic()
-        self.info = DeviceInfo(self.port, self.baud, device_id, product, firmware, legacy, self.rate_hz,
-                               tuple(configuration))  # fmt: skip
+        self.info = DeviceInfo(self.path, self.line_baud, device_id, product, firmware, legacy, self.rate_hz,
+                               tuple(configuration), found if target != found else None,
+                               self.usb_serial)  # fmt: skip
         return self.info
 
-    def _find_baud(self) -> None:
-        """Try the standard baud rates until the device answers GoToConfig."""
-        for baud in dict.fromkeys((self.baud, *SCAN_BAUDS)):
-            self._port().baudrate = baud
-            self.baud = baud
-            with contextlib.suppress(DeviceError):
-                self.go_to_config()
-                return
-        raise DeviceError(f"no answer from {self.port} at any of {', '.join(map(str, SCAN_BAUDS))} baud")
+    def _choose_baud(self, bits_per_second: float) -> int:
+        """The line rate to measure at: ``baud`` if given (and it carries the data), else the current
+        one if it does, else the slowest standard rate that does; refused with the numbers otherwise."""
+        wanted = self.baud or self.line_baud
+        refusal = line_refusal(bits_per_second, self.rate_hz, wanted, HEADROOM)
+        if refusal is None:
+            return wanted
+        slowest = slowest_baud_carrying(bits_per_second, HEADROOM)
+        if self.baud is None and slowest is not None:
+            return slowest
+        raise InputError(refusal)
 
-    def _configure_outputs(self) -> tuple[list[tuple[int, int]], bool]:
-        """MTData2 output configuration, or the legacy settings if the device does not know it."""
+    def move_baud(self, target: int, family_600: bool) -> None:
+        """SetBaudrate (600-series: PortConfig), Reset, reopen at ``target`` and hand-shake again."""
+        old = self.line_baud
+        if family_600:
+            words = parse_port_config(self.request(MID.PORT_CONFIG, what="ReqPortConfig").payload)
+            self.request(MID.SET_PORT_CONFIG, port_config_payload(words, target), "SetPortConfig")
+        else:
+            self.request(MID.SET_BAUDRATE, baudrate_payload(target), "SetBaudrate")
+        # The new rate applies after a reset. Its ack comes at the old rate, the WakeUp at the new
+        # one: the boot is looked after by the hand-shake below, the ack only waited for briefly.
+        self._write(build_frame(MID.RESET))
+        self._exchange({MID.RESET_ACK}, self.step_timeout_s)
+        self.close()
+        self.line_baud = target
+        self.open()
+        try:
+            self.go_to_config([target])
+        except DeviceError as exc:
+            raise DeviceError(f"moved from {old} to {target} baud, then lost the device: {exc}") from None
+
+    def _configure_outputs(self) -> tuple[list[tuple[int, int]], bool, float]:
+        """(configuration, legacy?, bits/s it needs): MTData2, or the legacy settings if the device
+        does not know SetOutputConfiguration."""
         requested = decay_output_configuration(int(self.rate_hz))
-        budget = check_bandwidth(requested, self.rate_hz, self.baud)
-        if not budget.ok:
-            raise InputError(self._budget_message(budget.bits_per_second))
         self._write(build_frame(MID.OUTPUT_CONFIGURATION, output_configuration_payload(requested)))
-        reply = self._frames_until({MID.OUTPUT_CONFIGURATION_ACK}, self.reply_timeout_s)
+        reply = self._exchange({MID.OUTPUT_CONFIGURATION_ACK}, self.flash_timeout_s)
         if reply is None:
-            raise DeviceError(f"no reply to SetOutputConfiguration from {self.port}")
+            raise DeviceError(
+                f"no reply to SetOutputConfiguration from {self.path} within {self.flash_timeout_s:g} s"
+            )
         if reply.mid == MID.ERROR:
             code, meaning = parse_error(reply.payload)
             if code != ERROR_NOT_IMPLEMENTED:
                 raise DeviceError(
                     f"the device refused the output configuration: error 0x{code:02X}: {meaning}"
                 )
-            self._configure_legacy()
-            return [], True
+            output = LegacyOutput.for_decay(self.rate_hz)
+            self.request(MID.OUTPUT_MODE, output.mode.to_bytes(2, "big"), "SetOutputMode")
+            self.request(MID.OUTPUT_SETTINGS, output.settings.to_bytes(4, "big"), "SetOutputSettings")
+            self.request(MID.PERIOD, output.period.to_bytes(2, "big"), "SetPeriod")
+            return [], True, (output.layout.length + FRAME_OVERHEAD) * self.rate_hz * BITS_PER_BYTE
         echoed = parse_output_configuration(reply.payload)
         differences = [f"{describe_xdi(xdi)} at {hz} Hz" for xdi, hz in requested if (xdi, hz) not in echoed]
         if differences:
             got = ", ".join(f"{describe_xdi(x)} {h} Hz" for x, h in echoed)
             raise DeviceError(f"the device did not accept {'; '.join(differences)} (it will send: {got})")
-        return echoed, False
-
-    def _budget_message(self, bits_per_second: float) -> str:
-        faster = [b for b in sorted(set(BAUD_CODES.values())) if bits_per_second <= 0.9 * b]
-        hint = f"use --baud {faster[0]}" if faster else "lower the rate"
-        return (
-            f"{self.rate_hz:g} Hz needs {bits_per_second / 1000:.1f} kbit/s, {self.baud} baud carries "
-            f"{self.baud / 1000:.1f} kbit/s: {hint}"
-        )
-
-    def _configure_legacy(self) -> None:
-        """2007-era MTi-G: OutputMode, OutputSettings and Period (reference §4)."""
-        output = LegacyOutput.for_decay(self.rate_hz)
-        bits_per_second = (output.layout.length + FRAME_OVERHEAD) * self.rate_hz * BITS_PER_BYTE
-        if bits_per_second > 0.9 * self.baud:
-            raise InputError(self._budget_message(bits_per_second))
-        self.request(MID.OUTPUT_MODE, output.mode.to_bytes(2, "big"), "SetOutputMode")
-        self.request(MID.OUTPUT_SETTINGS, output.settings.to_bytes(4, "big"), "SetOutputSettings")
-        self.request(MID.PERIOD, output.period.to_bytes(2, "big"), "SetPeriod")
+        return echoed, False, check_bandwidth(requested, self.rate_hz, self.line_baud).bits_per_second
 
     # ---- streaming ----------------------------------------
 
@@ -347,7 +548,7 @@ class MTiDriver:
         elif now - self._last_data > self.silence_timeout_s:
             self.close()
             raise DeviceGone(
-                f"no data from {self.port} for {self.silence_timeout_s:g} s "
+                f"no data from {self.path} for {self.silence_timeout_s:g} s "
                 "(cable unplugged or device powered off?)"
             )
         samples, decoded = self._samples.feed(raw, host_t)
@@ -363,7 +564,7 @@ class MTiDriver:
         c.frames += frames
         c.samples += samples.size
         c.bad_frames = d.bad_checksums + d.malformed
-        c.skipped_bytes = d.skipped_bytes
+        c.bad_checksums, c.skipped_bytes, c.false_syncs = d.bad_checksums, d.skipped_bytes, d.false_syncs
         if samples.size:
             self._tracker.update_many(samples["counter"])
             c.gaps, c.lost = self._tracker.gap_count, self._tracker.lost
@@ -407,16 +608,24 @@ class MTiDriver:
 
     # ---- reconnecting ----------------------------------------
 
+    def _where_now(self) -> str | None:
+        """The device's path now: where it was, or where its USB serial number turned up after a re-plug."""
+        if path_exists(self.path):
+            return self.path
+        return find_by_serial(self.usb_serial, self.by_id_dirs) if self.usb_serial else None
+
     def reconnect(
         self, timeout_s: float = 30.0, first_delay_s: float = 0.05, max_delay_s: float = 1.0
     ) -> DeviceInfo:
-        """Wait for the port to come back (back-off doubling up to ``max_delay_s``) and configure again."""
+        """Wait for the device to come back (back-off doubling up to ``max_delay_s``) and configure again."""
         self.close()
         deadline = time.monotonic() + timeout_s
         delay = first_delay_s
         last_error = "the port did not reappear"
         while True:
-            if path_exists(self.port):
+            path = self._where_now()
+            if path is not None:
+                self.path = path
                 try:
                     self.open()
                     return self.configure()
@@ -427,6 +636,9 @@ class MTiDriver:
                     self.close()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                raise DeviceGone(f"{self.port} did not come back within {timeout_s:g} s ({last_error})")
+                serial_note = f" (USB serial {self.usb_serial})" if self.usb_serial else ""
+                raise DeviceGone(
+                    f"{self.port}{serial_note} did not come back within {timeout_s:g} s ({last_error})"
+                )
             time.sleep(min(delay, remaining))
             delay = min(delay * 2, max_delay_s)

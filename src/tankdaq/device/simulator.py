@@ -8,12 +8,20 @@ MTi. It answers the configuration messages a driver uses, honours SetOutputConfi
 baud rate, and speaks the 2007-era MTData (0x32) protocol when ``legacy=True``.
 
 Fault injection covers what goes wrong in a tank: corrupted and dropped bytes, a stall, an
-unplugged cable (the pty closes and its path vanishes) and a re-plug (a new pty behind the
-same stable symlink, like a ``/dev/serial/by-id`` link).
+unplugged cable (the pty closes and its path vanishes) and a re-plug (a new pty name behind the
+same stable symlink). Like udev's ``/dev/serial/by-id``, the device keeps a by-id folder with a
+``usb-Xsens_<product>_<serial>-if00-port0`` link to its pty, named in ``TANKDAQ_SERIAL_BY_ID``
+while it runs, so the driver finds it again by USB serial number after a re-plug.
+
+Device states a lab meets (``Behaviour``): stuck in measurement, ignoring GoToConfig until a
+Reset; slow flash writes; a boot of some seconds after Reset before the WakeUp; a baud rate
+that changes only after Reset (the host must reopen at the new rate: the simulator reads the
+slave's termios speed); a 600-series product that sets its baud rate with PortConfig.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import dataclasses
 import errno
@@ -22,6 +30,7 @@ import os
 import pty
 import queue
 import select
+import shutil
 import struct
 import tempfile
 import termios
@@ -43,7 +52,7 @@ from ..physics.scenario import (
     SensorModel,
     still_trace,
 )
-from ..xsens.constants import BAUD_CODES, MID
+from ..xsens.constants import BAUD_CODES, FLASH_WRITES, MID, SERIAL_BAUDS, baud_code
 from ..xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS, output_configuration_payload
 from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
@@ -51,6 +60,7 @@ from ..xsens.legacy import encode_mtdata
 from ..xsens.mtdata2 import FRAME_MASK, SPEC_BY_BASE, TYPE_MASK, encode_mtdata2, make_xdi
 from .attitude import quaternion
 from .legacy_output import LegacyOutput, sample_values
+from .ports import BY_ID_ENV, by_id_name
 
 #: Rates an MTi-G-710 can output: divisors of 400 Hz (the echo rounds a request down to one).
 DEVICE_RATES_HZ = (1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, 80, 100, 200, 400)
@@ -64,6 +74,12 @@ SUPPORTED_OUTPUTS = frozenset(
 WAKEUP_WINDOW_S = 0.5
 ERROR_INVALID_MESSAGE = 0x04
 ERROR_INVALID_PARAMETER = 0x21
+ERROR_INVALID_BAUD = 0x20
+#: Temporary folders of simulators: ``tankdaq-sim-<random>`` holding ``owner.pid``.
+TEMP_PREFIX = "tankdaq-sim-"
+OWNER_FILE = "owner.pid"
+#: Ports of a 600-series device (PortConfig words): the host port first.
+PORTS_600 = 3
 
 
 @dataclass(frozen=True)
@@ -82,6 +98,30 @@ class DeviceIdentity:
     def legacy_mti_g(cls) -> DeviceIdentity:
         """The public ethz issue #66 device: a 2007-era MTi-G (Mark III)."""
         return cls(0x01500618, "MTi-G-28A53G35", bytes((2, 4, 6)))
+
+    @classmethod
+    def mti_630(cls) -> DeviceIdentity:
+        """A 600-series unit: 8-byte device id, baud rate through PortConfig."""
+        return cls(0x0880_0000_0000_1A2C, "MTi-630-2A8G4", struct.pack(">3BII", 1, 12, 0, 100, 0))
+
+    @property
+    def serial_number(self) -> str:
+        """The USB serial number (Xsens put the device id there)."""
+        return f"{self.device_id:08X}"
+
+    @property
+    def family_600(self) -> bool:
+        return self.product_code.startswith("MTi-6")
+
+
+@dataclass(frozen=True)
+class Behaviour:
+    """How the device behaves beyond the protocol's letter (all off: an obliging MTi)."""
+
+    stuck: bool = False  # measuring, it ignores GoToConfig until a Reset (MTi-G-700 field report)
+    flash_write_s: float = 0.0  # wall seconds before a flash-writing message is acknowledged
+    boot_s: float = 0.0  # wall seconds of silence after a Reset before the WakeUp
+    measuring_at_start: bool = False  # powered up before the host came: already streaming
 
 
 @dataclass(frozen=True)
@@ -215,19 +255,24 @@ class SimulatedMTi:
         faults: Faults | None = None,
         link: str | Path | None = None,
         identity: DeviceIdentity | None = None,
+        behaviour: Behaviour | None = None,
         seed: int = 0,
     ) -> None:
         if speed <= 0:
             raise InputError(f"speed must be positive, got {speed:g}")
-        if baud not in BAUD_CODES.values():
-            raise InputError(f"baud {baud} is not an MTi rate; use one of {sorted(set(BAUD_CODES.values()))}")
+        if baud not in SERIAL_BAUDS:
+            raise InputError(f"baud {baud} is not an MTi serial rate; use one of {list(SERIAL_BAUDS)}")
         self.scenario = scenario or DecayScenario(runs=1)
         self.speed = speed
         self.legacy = legacy
         self.baud = baud
         self.faults = faults or Faults()
         self.identity = identity or (DeviceIdentity.legacy_mti_g() if legacy else DeviceIdentity.mti_g_710())
-        self._own_link_dir: str | None = None
+        self.behaviour = behaviour or Behaviour()
+        self._own_dir: str | None = None
+        self.by_id_dir = ""  # made at start()
+        self._by_id_link = ""
+        self._last_port = ""
         self.link = str(link) if link else ""  # a temporary one is made at start()
         self._rng = np.random.default_rng([seed, 99])
         self._sources: dict[float, SampleSource] = {}
@@ -246,13 +291,15 @@ class SimulatedMTi:
         self.pending_baud = baud
         self._epoch = time.monotonic()
         self._next_sample = 0
-        self._stall_until = 0.0
+        self._stalled = (0, 0)  # sample indices [first, stop) that are never sent
         self._fired: set[str] = set()
         self._outbox = bytearray()
         self._budget = 0.0
         self._budget_at = 0.0
         self._framer = StreamFramer()
         self._wakeup_sent_at: float | None = None
+        self._booting_until: float | None = None
+        self._stuck = self.behaviour.stuck
         # counters people and tests look at
         self.frames_sent = 0
         self.bytes_corrupted = 0
@@ -272,10 +319,24 @@ class SimulatedMTi:
         """Open the pty, power the device up (WakeUp) and start serving in a background thread."""
         if self._thread is not None:
             return self
+        sweep_stale_folders()
+        self._source(self.scenario.rate_hz)  # prepare the scenario now, not in the first sample's turn
+        self._own_dir = tempfile.mkdtemp(prefix=TEMP_PREFIX)
+        Path(self._own_dir, OWNER_FILE).write_text(f"{os.getpid()}\n")
+        atexit.register(self._remove_own_dir)
+        self.by_id_dir = os.path.join(self._own_dir, "by-id")
+        os.mkdir(self.by_id_dir)
+        self._by_id_link = os.path.join(
+            self.by_id_dir, by_id_name("Xsens", self.identity.product_code, self.identity.serial_number)
+        )
+        _register_by_id(self.by_id_dir)
         if not self.link:
-            self._own_link_dir = tempfile.mkdtemp(prefix="tankdaq-sim-")
-            self.link = os.path.join(self._own_link_dir, "ttyMTi0")
+            self.link = os.path.join(self._own_dir, "ttyMTi0")
         self._open_pty()
+        if self.behaviour.measuring_at_start or self.behaviour.stuck:
+            self._wakeup_sent_at = None
+            self._start_measuring()
+            self._stuck = self.behaviour.stuck
         self._running.set()
         self._thread = threading.Thread(target=self._serve, name="SimulatedMTi", daemon=True)
         self._thread.start()
@@ -293,9 +354,15 @@ class SimulatedMTi:
             with contextlib.suppress(OSError):
                 os.close(fd)
         self._wake_r = self._wake_w = -1
-        if self._own_link_dir:
-            with contextlib.suppress(OSError):
-                os.rmdir(self._own_link_dir)
+        self._remove_own_dir()
+
+    def _remove_own_dir(self) -> None:
+        """Remove the temporary folder (links, by-id, owner file); also runs at interpreter exit."""
+        if self._own_dir:
+            _unregister_by_id(self.by_id_dir)
+            shutil.rmtree(self._own_dir, ignore_errors=True)
+            atexit.unregister(self._remove_own_dir)
+            self._own_dir = None
 
     @property
     def plugged(self) -> bool:
@@ -310,8 +377,12 @@ class SimulatedMTi:
         self._call(self._open_pty)
 
     def stall(self, seconds: float) -> None:
-        """The device goes silent for ``seconds`` of wall time (data is lost, not queued)."""
-        self._call(lambda: setattr(self, "_stall_until", time.monotonic() + seconds))
+        """The device goes silent for ``seconds`` of device time from its next sample (that data is lost,
+        not queued): exactly ``seconds`` times the output rate samples, however the threads are scheduled."""
+        self._call(lambda: self._stall_from(self._next_sample, seconds))
+
+    def _stall_from(self, first: int, seconds: float) -> None:
+        self._stalled = (first, first + round(seconds * self._rate_hz()))
 
     def set_faults(self, faults: Faults) -> None:
         self._call(lambda: setattr(self, "faults", faults))
@@ -357,22 +428,29 @@ class SimulatedMTi:
         if self._master >= 0:
             return
         master, slave = pty.openpty()
+        if os.ttyname(slave) == self._last_port:  # a re-plugged USB device comes back under a new name
+            held = (master, slave)
+            master, slave = pty.openpty()
+            for fd in held:
+                os.close(fd)
         tty.setraw(slave)  # a cooked slave would echo and mangle the binary stream
         os.set_blocking(master, False)
         self._master, self._slave = master, slave
-        self.port = os.ttyname(slave)
-        tmp = f"{self.link}.new"
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        os.symlink(self.port, tmp)
-        os.replace(tmp, self.link)
+        self.port = self._last_port = os.ttyname(slave)
+        for link in (self.link, self._by_id_link):
+            tmp = f"{link}.new"
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+            os.symlink(self.port, tmp)
+            os.replace(tmp, link)
         self._power_up()
         self._plugged.set()
 
     def _close_pty(self) -> None:
         self._plugged.clear()
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(self.link)
+        for link in (self.link, self._by_id_link):
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(link)
         for fd in (self._master, self._slave):
             if fd >= 0:
                 with contextlib.suppress(OSError):
@@ -380,17 +458,26 @@ class SimulatedMTi:
         self._master = self._slave = -1
         self.measuring = False
 
-    def _power_up(self) -> None:
-        """Boot: the clock restarts, the stored configuration stays (it lives in flash), WakeUp goes out."""
+    def _power_up(self, boot_s: float = 0.0) -> None:
+        """Boot: the clock restarts, the stored configuration stays (it lives in flash), a pending baud
+        rate takes effect, and after ``boot_s`` of silence the WakeUp goes out."""
         self._epoch = time.monotonic()
         self._next_sample = 0
         self._outbox.clear()
         self._framer = StreamFramer()
         self.baud = self.pending_baud
         self.measuring = False
+        self._stuck = False
         self._budget, self._budget_at = 0.0, time.monotonic()
-        self._send(build_frame(MID.WAKEUP))
-        self._wakeup_sent_at = time.monotonic()
+        self._wakeup_sent_at = None
+        self._booting_until = time.monotonic() + boot_s
+        self._finish_boot()
+
+    def _finish_boot(self) -> None:
+        if self._booting_until is not None and time.monotonic() >= self._booting_until:
+            self._booting_until = None
+            self._send(build_frame(MID.WAKEUP))
+            self._wakeup_sent_at = time.monotonic()
 
     # ---- the device loop ----------------------------------------
 
@@ -403,6 +490,7 @@ class SimulatedMTi:
                 self._drain_wake()
                 continue
             self._fire_scheduled_faults()
+            self._finish_boot()
             if self._wakeup_sent_at is not None and time.monotonic() - self._wakeup_sent_at > WAKEUP_WINDOW_S:
                 self._wakeup_sent_at = None  # no WakeUpAck: the device starts measuring on its own
                 self._start_measuring()
@@ -425,6 +513,8 @@ class SimulatedMTi:
             os.read(self._wake_r, 4096)
 
     def _next_due_s(self) -> float:
+        if self._booting_until is not None:
+            return min(0.02, max(0.0, self._booting_until - time.monotonic()))
         if not self.measuring:
             return 0.02
         due = self._epoch + self._next_sample / (self._rate_hz() * self.speed)
@@ -434,7 +524,7 @@ class SimulatedMTi:
         f, now = self.faults, self.device_time()
         if f.stall_at_s >= 0 and now >= f.stall_at_s and "stall" not in self._fired:
             self._fired.add("stall")
-            self._stall_until = time.monotonic() + f.stall_s / self.speed
+            self._stall_from(math.ceil(f.stall_at_s * self._rate_hz()), f.stall_s)
         if f.unplug_at_s >= 0 and now >= f.unplug_at_s and "unplug" not in self._fired:
             self._fired.add("unplug")
             self._close_pty()
@@ -450,9 +540,11 @@ class SimulatedMTi:
             if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
                 return
             raise
-        if not self._line_matches():
-            return  # at the wrong baud rate the device sees noise
+        if not self._line_matches() or self._booting_until is not None:
+            return  # at the wrong baud rate the device sees noise; booting, it hears nothing
         for frame in self._framer.feed(data) + self._framer.flush():  # a host writes whole commands
+            if self._booting_until is not None:
+                break  # a Reset among them: the rest went to a rebooting device
             self.commands_seen.append(frame.mid)
             self._handle(frame)
 
@@ -478,6 +570,8 @@ class SimulatedMTi:
             self._wakeup_sent_at = None
             return
         if mid == MID.GOTO_CONFIG:
+            if self._stuck:
+                return  # the field report's MTi-G-700: only a Reset gets through
             self._wakeup_sent_at = None
             self.measuring = False
             self._reply(MID.GOTO_CONFIG_ACK)
@@ -485,24 +579,30 @@ class SimulatedMTi:
         if mid == MID.RESET:
             self._reply(MID.RESET_ACK)
             self._flush()
-            self._power_up()
+            self._power_up(self.behaviour.boot_s)
             return
         if self.measuring:
             return  # a measuring device ignores all but GoToConfig and Reset
         handlers: dict[int, Callable[[bytes], None]] = {
             MID.GOTO_MEASUREMENT: self._on_goto_measurement,
-            MID.REQ_DID: lambda _: self._reply(MID.DEVICE_ID, struct.pack(">I", self.identity.device_id)),
+            MID.REQ_DID: lambda _: self._reply(MID.DEVICE_ID, self._device_id_bytes()),
             MID.REQ_PRODUCT_CODE: lambda _: self._reply(
                 MID.PRODUCT_CODE, self.identity.product_code.encode()
             ),
             MID.REQ_FW_REV: lambda _: self._reply(MID.FW_REV, self.identity.firmware),
             MID.REQ_BAUDRATE: self._on_baudrate,
+            MID.RESTORE_FACTORY_DEF: self._on_restore_defaults,
         }
         handlers.update(self._legacy_handlers() if self.legacy else self._mkiv_handlers())
+        if self.identity.family_600:
+            handlers[MID.PORT_CONFIG] = self._on_port_config
+            del handlers[MID.REQ_BAUDRATE]  # 600-series: PortConfig instead
         handler = handlers.get(mid)
         if handler is None:
             self._error(ERROR_INVALID_MESSAGE)
             return
+        if (data and mid in FLASH_WRITES) or mid == MID.RESTORE_FACTORY_DEF:
+            time.sleep(self.behaviour.flash_write_s)  # writing flash: nothing else happens meanwhile
         handler(data)
 
     def _mkiv_handlers(self) -> dict[int, Callable[[bytes], None]]:
@@ -530,13 +630,35 @@ class SimulatedMTi:
             MID.PERIOD: setter("period", ">H", MID.PERIOD_ACK),
         }
 
+    def _device_id_bytes(self) -> bytes:
+        return struct.pack(">Q" if self.identity.family_600 else ">I", self.identity.device_id)
+
+    def _on_restore_defaults(self, _: bytes) -> None:
+        """Factory settings (output, legacy mode, 115200 baud) apply from the next power-up."""
+        self.config = default_configuration()
+        self.legacy_mode = LegacyOutput.default()
+        self.pending_baud = 115200
+        self._reply(MID.RESTORE_FACTORY_DEF_ACK)
+
+    def _on_port_config(self, data: bytes) -> None:
+        """600-series: one U32 per port, the baud code in the low byte; applies after a reset."""
+        if not data:
+            words = [baud_code(self.baud)] + [baud_code(115200)] * (PORTS_600 - 1)
+            self._reply(MID.PORT_CONFIG_ACK, struct.pack(f">{PORTS_600}I", *words))
+            return
+        if len(data) != 4 * PORTS_600 or data[3] not in BAUD_CODES:
+            self._error(ERROR_INVALID_BAUD)
+            return
+        self.pending_baud = BAUD_CODES[data[3]]
+        self._reply(MID.PORT_CONFIG_ACK)
+
     def _on_baudrate(self, data: bytes) -> None:
         if not data:
             code = next(c for c, rate in BAUD_CODES.items() if rate == self.baud)
             self._reply(MID.BAUDRATE_ACK, bytes((code,)))
             return
         if data[0] not in BAUD_CODES:
-            self._error(0x20)
+            self._error(ERROR_INVALID_BAUD)
             return
         self.pending_baud = BAUD_CODES[data[0]]  # applies after Reset / power cycle
         self._reply(MID.BAUDRATE_ACK)
@@ -600,8 +722,11 @@ class SimulatedMTi:
         block = self._source().block(self._next_sample, due)
         indices = np.arange(self._next_sample, due)
         self._next_sample = due
-        if now < self._stall_until:
-            return
+        sent = (indices < self._stalled[0]) | (indices >= self._stalled[1])
+        if not sent.all():
+            block, indices = block[sent], indices[sent]
+            if not block.size:
+                return
         encoded = self._encode_legacy(block) if self.legacy else self._encode(block, indices, rate)
         self.frames_sent += block.size
         self._send(self._inject(encoded))
@@ -689,3 +814,44 @@ class SimulatedMTi:
             return  # nobody reads (or the pty went away): keep the bytes, the buffer limit applies
         del self._outbox[:written]
         self._budget -= written
+
+
+def _register_by_id(folder: str) -> None:
+    """Name ``folder`` in ``TANKDAQ_SERIAL_BY_ID`` so this process's port finder sees the device."""
+    dirs = [d for d in os.environ.get(BY_ID_ENV, "").split(os.pathsep) if d]
+    os.environ[BY_ID_ENV] = os.pathsep.join([*dirs, folder])
+
+
+def _unregister_by_id(folder: str) -> None:
+    dirs = [d for d in os.environ.get(BY_ID_ENV, "").split(os.pathsep) if d and d != folder]
+    if dirs:
+        os.environ[BY_ID_ENV] = os.pathsep.join(dirs)
+    else:
+        os.environ.pop(BY_ID_ENV, None)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def sweep_stale_folders(root: str | None = None) -> list[Path]:
+    """Remove simulator folders whose owner process is dead (a kill -9 leaves them); returns them.
+
+    Folders without an owner file are left alone (they may be being created right now).
+    """
+    removed = []
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{TEMP_PREFIX}*"):
+        try:
+            pid = int((folder / OWNER_FILE).read_text())
+        except (OSError, ValueError):
+            continue
+        if not _pid_alive(pid):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed

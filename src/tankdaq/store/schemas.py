@@ -147,6 +147,10 @@ RUN_METADATA_KEYS: dict[str, str] = {
     "device_id": "Xsens device id",
     "product_code": "Xsens product code",
     "firmware": "device firmware revision",
+    "baud": "serial line rate the device streamed at (bit/s)",
+    "baud_changed": "true when tankdaq moved the device to that rate (baud_before: the rate it was at)",
+    "link_<counter>": "serial link counters at close: bytes, frames, bad_checksums, skipped_bytes, "
+    "false_syncs (false frames turned away), gaps, lost",
     "software_version": "tankdaq version that wrote the file",
     "operator": "who ran the test",
     "note": "free text",

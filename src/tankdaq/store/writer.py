@@ -79,7 +79,8 @@ def describe_run(
     """The ``run_metadata`` a recording starts with, under the keys of ``schemas.RUN_METADATA_KEYS``.
 
     ``device`` holds what the driver read from the instrument (device_id,
-    product_code, firmware). Hull dimensions are copied so the file stands alone
+    product_code, firmware) and the line it used (baud; baud_changed_from when tankdaq
+    moved the device to that rate). Hull dimensions are copied so the file stands alone
     when the hull configuration changes later.
     """
     described: dict[str, object] = {"axis": axis, "angle_nominal_deg": float(angle_nominal_deg)}
@@ -91,9 +92,13 @@ def describe_run(
         described["draft"] = format_draft(draft)
     if sample_rate_hz is not None:
         described["sample_rate_hz"] = float(sample_rate_hz)
-    for key in ("device_id", "product_code", "firmware"):
+    for key in ("device_id", "product_code", "firmware", "baud"):
         if device and device.get(key) is not None:
             described[key] = device[key]
+    if device and device.get("baud") is not None:
+        described["baud_changed"] = device.get("baud_changed_from") is not None
+        if described["baud_changed"]:
+            described["baud_before"] = device["baud_changed_from"]
     if operator:
         described["operator"] = operator
     if note:

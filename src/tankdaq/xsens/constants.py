@@ -65,6 +65,8 @@ class MID(IntEnum):
     GNSS_PLATFORM_ACK = 0x77
     LOCATION_ID = 0x84
     LOCATION_ID_ACK = 0x85
+    PORT_CONFIG = 0x8C
+    PORT_CONFIG_ACK = 0x8D
     STRING_OUTPUT_TYPE = 0x8E
     STRING_OUTPUT_TYPE_ACK = 0x8F
     RESET_ORIENTATION = 0xA4
@@ -86,6 +88,7 @@ class MID(IntEnum):
     SET_OUTPUT_MODE = 0xD0
     SET_OUTPUT_SETTINGS = 0xD2
     SET_PERIOD = 0x04
+    SET_PORT_CONFIG = 0x8C
 
 
 #: Device error codes carried by an Error (0x42) message (LLCP Table 5; xspublic ``xsresultvalue.h``).
@@ -119,6 +122,16 @@ BAUD_CODES: dict[int, int] = {
     0x0E: 3_686_400,
     0x80: 921600,
 }
+
+#: Rates of the serial interface (LLCP §7.2.1: 4800..921600), slowest first.
+SERIAL_BAUDS: tuple[int, ...] = tuple(sorted(rate for rate in set(BAUD_CODES.values()) if rate <= 921600))
+#: The order the driver looks for a device in: factory default first, then the fast rates tests use.
+SEARCH_BAUDS: tuple[int, ...] = (115200, 921600, 460800, 230400, 57600, 38400, 19200, 9600)
+#: Messages that write the device's flash: their ack can take hundreds of milliseconds.
+FLASH_WRITES = frozenset(
+    (MID.OUTPUT_CONFIGURATION, MID.SET_BAUDRATE, MID.SET_PORT_CONFIG, MID.RESTORE_FACTORY_DEF,
+     MID.OUTPUT_MODE, MID.OUTPUT_SETTINGS, MID.PERIOD)
+)  # fmt: skip
 
 # 0x80 is the legacy 921600 code every firmware accepts; 0x0A needs FW >= 2.4.6.
 _CODE_FOR_RATE: dict[int, int] = {rate: code for code, rate in BAUD_CODES.items() if code != 0x0A}

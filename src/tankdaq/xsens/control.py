@@ -5,12 +5,13 @@ The driver composes these with ``build_frame``; nothing here touches a port.
 
 from __future__ import annotations
 
+import re
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..errors import ProtocolError
-from .constants import BAUD_CODES, baud_code, error_name
+from .constants import BAUD_CODES, SERIAL_BAUDS, baud_code, error_name
 from .mtdata2 import SPEC_BY_BASE, TYPE_MASK, item_size, make_xdi
 
 #: Frequency that means "as fast as possible"; counters, time and status always read back as this.
@@ -120,10 +121,8 @@ class Bandwidth:
         need = f"{self.bits_per_second / 1000:.1f} kbit/s ({self.utilisation:.0%} of {self.baud} baud)"
         if self.ok:
             return f"output needs {need}"
-        faster = [
-            rate for rate in sorted(set(BAUD_CODES.values())) if self.bits_per_second <= rate * self.headroom
-        ]
-        hint = f"use at least {faster[0]} baud" if faster else "lower the rate or drop outputs"
+        faster = slowest_baud_carrying(self.bits_per_second, self.headroom)
+        hint = f"use at least {faster} baud" if faster else "lower the rate or drop outputs"
         return f"output needs {need}, over the {self.headroom:.0%} budget: {hint}"
 
 
@@ -132,6 +131,60 @@ def check_bandwidth(
 ) -> Bandwidth:
     """Bits per second (8N1) the configuration needs at ``rate_hz`` against ``baud``."""
     return Bandwidth(frame_bytes_per_second(entries, rate_hz) * BITS_PER_BYTE, baud, headroom)
+
+
+def slowest_baud_carrying(bits_per_second: float, headroom: float = 0.9) -> int | None:
+    """The slowest serial rate that carries ``bits_per_second`` within the headroom (None: none does)."""
+    return next((rate for rate in SERIAL_BAUDS if bits_per_second <= rate * headroom), None)
+
+
+def line_refusal(bits_per_second: float, rate_hz: float, baud: int, headroom: float = 0.9) -> str | None:
+    """Why ``baud`` cannot carry ``bits_per_second`` at ``rate_hz``, with the numbers (None: it can)."""
+    if bits_per_second <= headroom * baud:
+        return None
+    need = f"{rate_hz:g} Hz needs {bits_per_second / 1000:.1f} kbit/s"
+    slowest = slowest_baud_carrying(bits_per_second, headroom)
+    if slowest is None:
+        top = SERIAL_BAUDS[-1]
+        return f"{need}; no serial rate carries it ({top} baud: {top / 1000:.1f} kbit/s): lower the rate"
+    return f"{need}, {baud} baud carries {baud / 1000:.1f} kbit/s: use --baud {slowest}"
+
+
+def decay_bits_per_second(rate_hz: float) -> float:
+    """Serial bits per second of the decay output set at ``rate_hz`` (8N1)."""
+    return frame_bytes_per_second(decay_output_configuration(int(rate_hz)), rate_hz) * BITS_PER_BYTE
+
+
+def is_600_series(product_code: str) -> bool:
+    """MTi 600-series (MTi-610/620/630/670/680...): they set baud rates with PortConfig, not SetBaudrate."""
+    return re.match(r"MTi-6\d0", product_code) is not None
+
+
+def port_config_payload(words: Sequence[int], rate: int) -> bytes:
+    """SetPortConfig data: the device's port words with the first (host) port's baud code set to ``rate``.
+
+    One U32 per port, the baud code in the low byte, the other bits (flow control, stop bits,
+    parity) kept as the device reported them [inference from xspublic ``XsPortConfig``].
+    """
+    if not words:
+        raise ProtocolError("the device reported no ports in its port configuration")
+    first = (words[0] & ~0xFF) | baud_code(rate)
+    return struct.pack(f">{len(words)}I", first, *words[1:])
+
+
+def parse_port_config(payload: bytes) -> list[int]:
+    """Port words of a ReqPortConfig reply (one U32 per port)."""
+    if not payload or len(payload) % 4:
+        raise ProtocolError(f"port configuration of {len(payload)} bytes is not whole 4-byte words")
+    return list(struct.unpack(f">{len(payload) // 4}I", payload))
+
+
+def port_config_baud(words: Sequence[int]) -> int:
+    """The first port's rate in bit/s."""
+    code = words[0] & 0xFF
+    if code not in BAUD_CODES:
+        raise ProtocolError(f"port configuration baud code 0x{code:02X} is not a known code")
+    return BAUD_CODES[code]
 
 
 def baudrate_payload(rate: int) -> bytes:
