@@ -333,7 +333,8 @@ class SimulatedMTi:
         if not self.link:
             self.link = os.path.join(self._own_dir, "ttyMTi0")
         self._open_pty()
-        if self.behaviour.measuring_at_start or self.behaviour.stuck:
+        if self.behaviour.measuring_at_start or self.behaviour.stuck:  # powered long before: no WakeUp
+            self._outbox.clear()
             self._wakeup_sent_at = None
             self._start_measuring()
             self._stuck = self.behaviour.stuck
