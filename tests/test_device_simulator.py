@@ -3,14 +3,18 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
 import serial
 
 from tankdaq.device.driver import MTiDriver
-from tankdaq.device.simulator import Behaviour, Faults, SimulatedMTi
+from tankdaq.device.simulator import OWNER_FILE, TEMP_PREFIX, Behaviour, Faults, SimulatedMTi
 from tankdaq.errors import DeviceGone, InputError
 from tankdaq.physics.scenario import DecayScenario
 from tankdaq.xsens.constants import MID, baud_code
@@ -18,6 +22,9 @@ from tankdaq.xsens.control import output_configuration_payload, parse_output_con
 from tankdaq.xsens.frame import Frame, build_frame
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import decode_mtdata2, make_xdi
+
+
+TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))  # the installed console script
 
 
 class Client:
@@ -185,3 +192,36 @@ def test_fault_spec_parses() -> None:
     assert Faults.parse("corrupt=0.001,drop=1e-4,stall=2@30,unplug=60,replug=5") == Faults(
         corrupt_rate=0.001, drop_rate=1e-4, stall_at_s=30.0, stall_s=2.0, unplug_at_s=60.0, replug_after_s=5.0
     )
+
+
+def _folders_of(pid: int) -> list[Path]:
+    """Simulator folders in the temp dir whose owner file names ``pid``."""
+    root = Path(tempfile.gettempdir())
+    return [f for f in root.glob(f"{TEMP_PREFIX}*") if (f / OWNER_FILE).is_file()
+            and (f / OWNER_FILE).read_text().strip() == str(pid)]  # fmt: skip
+
+
+def test_a_folder_left_by_kill_9_is_swept_at_the_next_start() -> None:
+    process = subprocess.Popen(
+        [TANKDAQ, "simulate", "--speed", "5"], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    try:
+        folder = Path(process.stdout.readline().decode().strip()).parent  # type: ignore[union-attr]
+        assert folder.is_dir() and _folders_of(process.pid) == [folder]
+    finally:
+        process.kill()  # SIGKILL: no clean-up runs
+        process.communicate(timeout=10)
+    assert folder.is_dir()  # left behind, as a killed process leaves it
+    with SimulatedMTi(speed=10.0) as sim:
+        assert not folder.exists()  # swept: its owner is dead
+        assert Path(sim.by_id_dir).is_dir()
+    assert not Path(sim.by_id_dir).parent.exists()  # and this one cleaned on stop
+
+
+def test_an_error_exit_of_simulate_leaves_no_folder(tmp_path: Path) -> None:
+    bad_truth = tmp_path / "missing-dir" / "truth.json"  # fails after the simulator has started
+    process = subprocess.Popen([TANKDAQ, "simulate", "--truth", str(bad_truth)], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)  # fmt: skip
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 2 and "truth" in err and "Traceback" not in err
+    assert _folders_of(process.pid) == []
