@@ -71,6 +71,8 @@ RESEND_S = 0.1
 #: A read returns after this long without bytes: a quiet line, which confirms the frame the framer
 #: holds back until it sees what follows (an ack is not delayed by more than this).
 READ_TIMEOUT_S = 0.01
+#: How long a baud move waits for the Reset ack before reopening (it comes at once, if it can be read).
+RESET_ACK_WAIT_S = 0.2
 #: Share of a line's bit rate the data may use (acks and bursts need the rest).
 HEADROOM = 0.9
 MODEMMANAGER_HINT = (
@@ -499,7 +501,7 @@ class MTiDriver:
         # The new rate applies after a reset. Its ack comes at the old rate, the WakeUp at the new
         # one: the boot is looked after by the hand-shake below, the ack only waited for briefly.
         self._write(build_frame(MID.RESET))
-        self._exchange({MID.RESET_ACK}, self.step_timeout_s)
+        self._exchange({MID.RESET_ACK}, RESET_ACK_WAIT_S)
         self.close()
         self.line_baud = target
         self.open()
