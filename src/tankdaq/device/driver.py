@@ -71,6 +71,8 @@ RESEND_S = 0.1
 #: A read returns after this long without bytes: a quiet line, which confirms the frame the framer
 #: holds back until it sees what follows (an ack is not delayed by more than this).
 READ_TIMEOUT_S = 0.01
+#: How long ``inspect`` listens before GoToConfig: a measuring device sends frames by then.
+LISTEN_S = 0.25
 #: How long a baud move waits for the Reset ack before reopening (it comes at once, if it can be read).
 RESET_ACK_WAIT_S = 0.2
 #: Share of a line's bit rate the data may use (acks and bursts need the rest).
@@ -383,7 +385,6 @@ class MTiDriver:
         """Take the device to Config (see the module docstring); DeviceError says what was tried."""
         rates = list(dict.fromkeys(rates or (self.line_baud, *SEARCH_BAUDS)))
         self._log = LineLog()
-        self.was_measuring = False
         tried: list[int] = []
         for rate in rates:
             self._set_line(rate)
@@ -432,6 +433,8 @@ class MTiDriver:
         """Hand-shake and read what the device is and how it is set up; it is left as found (measuring
         again if it was)."""
         self.open()
+        self.was_measuring = False
+        self._exchange({MID.MTDATA2, MID.MTDATA}, LISTEN_S)  # does it stream before we ask anything?
         self.go_to_config()
         device_id, product, firmware = self.identify()
         self._write(build_frame(MID.OUTPUT_CONFIGURATION))  # empty: a request, the configuration stays
