@@ -5,22 +5,36 @@ Captures: (a) 1 million decay frames (PacketCounter, SampleTimeFine, EulerAngles
 Acceleration, StatusWord, float32: 69 bytes each), generated with array code; (b) the real
 einride-1 capture (100 frames, 6 layouts incl. GNSS PVT messages) repeated to 1 million frames.
 Streaming is fed in 4 KiB chunks. Best of several runs; CPU time is the figure (the machine is shared).
+
+Confirmation cost: the same decoders as they were before the framer confirmed frames (the
+``tankdaq`` tree of commit ``BASELINE``, extracted with ``git archive`` and imported under another
+name) against the current ones, in the same run, on the clean decay capture, the mixed einride
+capture and a noisy one (3 % of frames with a corrupted byte, stray ``FA FF 36`` headers in 3 %).
 """
 
 from __future__ import annotations
 
+import importlib
 import os
+import subprocess
+import sys
+import tarfile
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 
 from tankdaq.xsens.batch import decode_capture
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import decode_mtdata2
 from tankdaq.xsens.stream import StreamDecoder
-from tankdaq.xsens.synthetic import decay_capture
+from tankdaq.xsens.synthetic import decay_capture, noisy_capture
 
 FRAMES = 1_000_000
+#: The last commit before the framer confirmed frames (issue 9).
+BASELINE = "9a26490"
+REPO = Path(__file__).resolve().parents[1]
 CHUNK = 4096
 EINRIDE = (
     Path(__file__).resolve().parents[2] / "shared" / "data" / "xsens-captures" / "einride-1" / "output.bin"
@@ -47,8 +61,7 @@ def batch(data: bytes) -> int:
 
 
 def streaming(data: bytes) -> int:
-    decoder = StreamDecoder()
-    return sum(decoder.feed(data[i : i + CHUNK]).n_messages for i in range(0, len(data), CHUNK))
+    return _stream(StreamDecoder(), data)
 
 
 def per_message(data: bytes) -> int:
@@ -66,14 +79,51 @@ def report(label: str, data: bytes) -> None:
               f"({frames / wall / 1e6:.2f} wall; {frames} frames, {cpu:.3f} s CPU)", flush=True)  # fmt: skip
 
 
+def baseline_package(folder: Path) -> ModuleType:
+    """``tankdaq`` as of ``BASELINE``, importable as ``tankdaq_baseline`` (its imports are relative)."""
+    archive = subprocess.run(["git", "-C", str(REPO), "archive", BASELINE, "src/tankdaq"], check=True,
+                             capture_output=True).stdout  # fmt: skip
+    with tarfile.open(fileobj=__import__("io").BytesIO(archive)) as tar:
+        tar.extractall(folder, filter="data")
+    (folder / "src" / "tankdaq").rename(folder / "tankdaq_baseline")
+    sys.path.insert(0, str(folder))
+    return importlib.import_module("tankdaq_baseline")
+
+
+def confirmation_cost(captures: dict[str, bytes]) -> None:
+    """Batch and streaming throughput before and after the confirmation step, same run, same captures."""
+    with tempfile.TemporaryDirectory() as folder:
+        baseline_package(Path(folder))
+        old_batch = importlib.import_module("tankdaq_baseline.xsens.batch")
+        old_stream = importlib.import_module("tankdaq_baseline.xsens.stream")
+        for label, data in captures.items():
+            for name, old, new, repeats in (
+                ("batch", lambda d: old_batch.decode_capture(d).n_messages, batch, 5),
+                ("streaming 4 KiB", lambda d: _stream(old_stream.StreamDecoder(), d), streaming, 3),
+            ):
+                before, _, n_old = timed(lambda old=old: old(data), repeats)
+                after, _, n_new = timed(lambda new=new: new(data), repeats)
+                print(f"{label:27s} {name:16s} before {n_old / before / 1e6:6.2f} M/s ({n_old} msgs), "
+                      f"after {n_new / after / 1e6:6.2f} M/s ({n_new} msgs): cost {after / before - 1:+.1%} "
+                      "CPU time", flush=True)  # fmt: skip
+
+
+def _stream(decoder: StreamDecoder, data: bytes) -> int:
+    return sum(decoder.feed(data[i : i + CHUNK]).n_messages for i in range(0, len(data), CHUNK))
+
+
 def main() -> None:
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     decay = decay_capture(FRAMES)
     report("decay, 69-byte frames", decay)
+    captures = {"decay, 69-byte frames": decay, "noisy decay (3 %/3 %)": noisy_capture(FRAMES)[0]}
     if EINRIDE.is_file():
-        report("einride-1 x 10000 (mixed)", EINRIDE.read_bytes() * (FRAMES // 100))
+        mixed = EINRIDE.read_bytes() * (FRAMES // 100)
+        report("einride-1 x 10000 (mixed)", mixed)
+        captures["einride-1 x 10000 (mixed)"] = mixed
     else:
         print(f"einride-1 not found at {EINRIDE}: mixed-capture figures skipped")
+    confirmation_cost(captures)
 
 
 if __name__ == "__main__":

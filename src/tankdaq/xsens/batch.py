@@ -208,6 +208,7 @@ class _Candidates:
     starts: np.ndarray
     totals: np.ndarray
     header_sizes: np.ndarray
+    keys: np.ndarray  # bus id, message id, length byte and total in one number: equal keys, equal headers
     checked: np.ndarray  # checksum computed
     ok: np.ndarray  # checksum holds
     follows: np.ndarray  # the next frame starts right after it (or the capture ends there)
@@ -244,7 +245,8 @@ def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: b
     undecided = ~next_preamble & ~have_ids
     size = complete_at.size
     c = _Candidates(
-        c_starts, c_totals, header_size[complete_at], np.zeros(size, bool), np.zeros(size, bool),
+        c_starts, c_totals, header_size[complete_at], _header_keys(buf[c_starts + 1], buf[c_starts + 2],
+        buf[c_starts + 3], c_totals), np.zeros(size, bool), np.zeros(size, bool),
         next_preamble | repeated | (undecided & final), undecided & (not final),
         np.isin(bid, tuple(RESYNC_BIDS)), np.ones(size, bool), buf[c_starts + 2] != MTDATA2,
     )  # fmt: skip
@@ -260,7 +262,7 @@ def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: b
     while True:
         c.ok[to_check] = _checksums_ok(buf, c_starts[to_check], c_totals[to_check])
         c.checked[to_check] = True
-        chosen, resyncs = _follow_chain(buf, c, sync)
+        chosen, resyncs = _follow_chain(c, sync)
         starts, chosen_ends = c_starts[chosen], c_starts[chosen] + c_totals[chosen]
         unchecked = np.flatnonzero(~c.checked)
         to_check = unchecked[~_covered(starts, chosen_ends, c_starts[unchecked])]
@@ -273,9 +275,8 @@ def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: b
             suspects = np.append(suspects, suspect)
         if not suspects.size:
             break
-        for k in suspects.tolist():
-            payload = buf[c_starts[k] + c.header_sizes[k] : c_starts[k] + c_totals[k] - 1]
-            c.sizes_ok[k] = payload_well_formed(payload.tobytes())
+        c.sizes_ok[suspects] = _well_formed(buf, c_starts[suspects] + c.header_sizes[suspects],
+                                            c_totals[suspects] - c.header_sizes[suspects] - 1)  # fmt: skip
         c.verified[suspects] = True
 
     keep = starts < consumed
@@ -298,25 +299,50 @@ def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: b
     )
 
 
-def _accepts(buf: np.ndarray, c: _Candidates, k: np.ndarray, previous: np.ndarray, sync_header: bytes | None,
-             wait: bool) -> np.ndarray:  # fmt: skip
-    """Whether in-sync candidates ``k`` (after chosen ``previous``; -1: the stream's sync header) are
+def _header_keys(bid: np.ndarray, mid: np.ndarray, length_byte: np.ndarray, totals: np.ndarray) -> np.ndarray:
+    """One integer per header: equal bus id, message id, length byte and frame length, equal key (and
+    then equal header bytes, the extended length included)."""
+    return ((bid.astype(np.int64) << 16 | mid.astype(np.int64) << 8 | length_byte) << 16) | totals
+
+
+def _sync_key(sync: bytes | None) -> int:
+    """The key of the header in the sync state (-1: none to be trusted with)."""
+    total = frame_length(sync) if sync else None
+    if total is None:
+        return -1
+    return int(_header_keys(*(np.array([v]) for v in (sync[1], sync[2], sync[3], total)))[0])
+
+
+def _accepts(
+    c: _Candidates, k: np.ndarray, previous: np.ndarray, sync: bytes | None, wait: bool
+) -> np.ndarray:
+    """Whether in-sync candidates ``k`` (after chosen ``previous``; -1: after the sync state's header) are
     accepted (``wait``: are waited for) once their checksum holds: trusted with the previous
     header, or a bus id a resync may land on; and confirmed by a successor (or waiting for one)."""
-    same = np.zeros(k.size, dtype=bool)
-    for width in (4, 6):
-        rows = (c.header_sizes[k] == width) & (previous >= 0)
-        if rows.any():
-            here = buf[c.starts[k[rows]][:, None] + np.arange(width)]
-            there = buf[c.starts[previous[rows]][:, None] + np.arange(width)]
-            same[rows] = (c.header_sizes[previous[rows]] == width) & (here == there).all(axis=1)
-    first = previous < 0
-    if first.any() and sync_header:
-        same[first] = [buf[s : s + len(sync_header)].tobytes() == sync_header for s in c.starts[k[first]]]
+    previous_keys = np.where(previous >= 0, c.keys[np.maximum(previous, 0)], _sync_key(sync))
+    same = c.keys[k] == previous_keys
     return (same | c.bid_ok[k]) & (c.waits[k] if wait else c.follows[k])
 
 
-def _follow_chain(buf: np.ndarray, c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.ndarray]:
+def _well_formed(buf: np.ndarray, payload_starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """``payload_well_formed`` of many MTData2 payloads: one walk per item layout, not per payload."""
+    ok = np.zeros(lengths.size, dtype=bool)
+    for length in np.unique(lengths).tolist():
+        members = np.flatnonzero(lengths == length)
+        rows = _payload_rows(buf, payload_starts[members], length)
+        left = np.arange(members.size)
+        while left.size:
+            first = rows[left[0]].tobytes()
+            if not payload_well_formed(first):
+                left = left[1:]
+                continue
+            same = learn_layout(first).matches(rows[left])  # same length and item headers: same walk
+            ok[members[left[same]]] = True
+            left = left[~same]
+    return ok
+
+
+def _follow_chain(c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.ndarray]:
     """(candidates the sequential framer accepts, those of them it accepts as resyncs).
 
     After an accepted frame the next one is the valid candidate starting exactly at its end if
@@ -335,13 +361,13 @@ def _follow_chain(buf: np.ndarray, c: _Candidates, sync: bytes | None) -> tuple[
     has_next = (after < count) & (v_starts[np.minimum(after, count - 1)] == v_ends)
     in_sync_next = np.zeros(count, dtype=bool)
     followers = np.flatnonzero(has_next)
-    in_sync_next[followers] = _accepts(buf, c, valid[after[followers]], valid[followers], sync, wait=False)
+    in_sync_next[followers] = _accepts(c, valid[after[followers]], valid[followers], sync, wait=False)
     following = np.where(in_sync_next, after, count)
     if strong.size:
         resync_next = strong[np.minimum(np.searchsorted(v_starts[strong], v_ends), strong.size - 1)]
         following = np.where(~in_sync_next & (v_starts[resync_next] >= v_ends), resync_next, following)
     starts_sync = sync is not None and v_starts[0] == 0
-    if starts_sync and _accepts(buf, c, valid[:1], np.array([-1]), sync, wait=False)[0]:
+    if starts_sync and _accepts(c, valid[:1], np.array([-1]), sync, wait=False)[0]:
         first = 0
     else:  # the first resync (after byte 0 when the candidate there was met in sync and refused)
         at = int(np.searchsorted(v_starts[strong], 1 if starts_sync else 0))
@@ -380,7 +406,7 @@ def _first_stop(
         previous = chosen[np.flatnonzero(ends == position)]
         if previous.size or (position == 0 and sync is not None):
             before = np.array([previous[0] if previous.size else -1])
-            if _accepts(buf, c, np.array([k]), before, sync, wait=True)[0]:
+            if _accepts(c, np.array([k]), before, sync, wait=True)[0]:
                 return position, -1
         elif c.bid_ok[k] and c.sizes_ok[k]:
             return position, (-1 if c.verified[k] else k)
