@@ -40,23 +40,31 @@ def simulate_command(
     speed: float = typer.Option(1.0, "--speed", help="Play the device clock this many times faster."),
     baud: int = typer.Option(115200, "--baud", help="Device baud rate."),
     link: str = typer.Option(None, "--link", help="Stable symlink to the pty (default: a temporary path)."),
+    stuck: bool = typer.Option(False, "--stuck", help="Measuring, ignoring GoToConfig until a Reset."),
+    boot_s: float = typer.Option(0.0, "--boot", min=0.0, help="Seconds of silence after a Reset."),
+    flash_write_s: float = typer.Option(0.0, "--flash-write", min=0.0, help="Seconds a flash write takes."),
+    mti_600: bool = typer.Option(False, "--mti-600", help="Be an MTi-630 (baud rate through PortConfig)."),
 ) -> None:
     """Serve a simulated MTi-G on a pty; the first stdout line is the port to open."""
-    from ..device.simulator import Faults, SimulatedMTi
+    from ..device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
     from ..physics.scenario import DecayScenario
 
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood; use roll or pitch")
     if speed <= 0:
         raise InputError(f"--speed must be positive, got {speed:g}")
+    if legacy and mti_600:
+        raise InputError("--legacy and --mti-600 exclude each other: a 600-series device speaks MTData2")
     scenario = DecayScenario(
         hull=hull, draft=draft, axis=axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
         release_after_s=release_after_s, decay_s=decay_s,
     )  # fmt: skip
     fault_set = Faults.parse(faults)
     sim = SimulatedMTi(
-        scenario, speed=speed, legacy=legacy, baud=baud, faults=fault_set, link=link, seed=seed
-    )
+        scenario, speed=speed, legacy=legacy, baud=baud, faults=fault_set, link=link, seed=seed,
+        behaviour=Behaviour(stuck=stuck, flash_write_s=flash_write_s, boot_s=boot_s),
+        identity=DeviceIdentity.mti_630() if mti_600 else None,
+    )  # fmt: skip
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
@@ -69,6 +77,11 @@ def simulate_command(
             f"simulated {sim.identity.product_code} on {sim.port} (link {sim.link}), {baud} baud, "
             f"{hull} {format_draft(draft)} {axis} {angle_deg:g} deg, {runs} runs, speed x{speed:g}; "
             "Ctrl-C stops",
+            markup=False,
+            highlight=False,
+        )
+        err_console.print(
+            f"for --port auto and re-plugs elsewhere: export TANKDAQ_SERIAL_BY_ID={sim.by_id_dir}",
             markup=False,
             highlight=False,
         )
