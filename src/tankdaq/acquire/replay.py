@@ -59,15 +59,16 @@ def replay_recording(
     meta = recording.metadata
     axis = recording.axis
     nominal = float(meta.get("angle_nominal_deg", "nan"))
+    note = None if on_event is None else (lambda line: on_event(f"viewer: {line}"))
+    view = LiveView(viewer, axis=axis, on_note=note)
     settings = SessionSettings(
         axis=axis,
         angle_deg=nominal if math.isfinite(nominal) else 0.0,
         angle_tolerance_deg=math.inf if not math.isfinite(nominal) else 1.0,
         model=model or str(meta.get("model_terms", "ittc-quadratic-restoring")),
         out_dir=None,
-        rrd_base=path.with_name(path.stem + ".replay") if viewer == "save" else None,
+        rrd_base=path.with_name(path.stem + ".replay") if view.mode == "save" else None,  # spawn falls back
     )
-    view = LiveView(viewer, axis=axis)
     session = DecaySession(settings, view, on_event=on_event)
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))

@@ -51,10 +51,13 @@ def _rate(value: float) -> float:
     return value
 
 
-def _default_viewer() -> str:
-    from ..viz.live import default_viewer_mode
+def _viewer_mode(asked: str | None) -> str:
+    """The viewer mode to use (the default when none was asked), printed in one line at start."""
+    from ..viz.live import default_viewer_mode, describe_mode
 
-    return default_viewer_mode()
+    mode = asked or default_viewer_mode()
+    err_console.print(describe_mode(mode, default=asked is None), markup=False, highlight=False)
+    return mode
 
 
 class _StatusLine:
@@ -100,6 +103,7 @@ def run_record(
     model: str,
     sim_speed: float = 1.0,
     sim_seed: int = 0,
+    viewer_bind: str = "127.0.0.1",
 ) -> list:
     """Build the daemon from command-line values, run it with a status line, print what it saved."""
     from ..acquire.daemon import RecordDaemon, RecordSettings
@@ -116,7 +120,8 @@ def run_record(
         baud=baud,
         out_dir=out,
         runs=runs,
-        viewer=viewer or _default_viewer(),
+        viewer=_viewer_mode(viewer),
+        viewer_bind=viewer_bind,
         operator=operator,
         note=note,
         model=model,
@@ -163,6 +168,9 @@ def record_command(
         callback=lambda v: v if v is None else _viewer(v),
         help="spawn, save (an .rrd beside each MCAP), none, or a rerun URL.",
     ),
+    viewer_bind: str = typer.Option(
+        "127.0.0.1", "--viewer-bind", help="Address a spawned viewer listens on (0.0.0.0: every network)."
+    ),
     operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
     note: str = typer.Option("", "--note", help="A note stored in the file."),
     model: str = typer.Option(
@@ -188,6 +196,7 @@ def record_command(
         model,
         sim_speed,
         sim_seed,
+        viewer_bind,
     )
 
 
@@ -219,7 +228,7 @@ def replay_command(
     from ..acquire.replay import replay_recording
 
     pace = _speed(speed)
-    mode = viewer or _default_viewer()
+    mode = _viewer_mode(viewer)
     for path in files:
         outcomes = replay_recording(
             path,
