@@ -48,6 +48,7 @@ class RecordSettings:
     runs: int | None = None
     viewer: str = "none"
     viewer_bind: str = "127.0.0.1"  # where a spawned viewer listens; 0.0.0.0 only when asked
+    viewer_port: int = 9876
     disk_reserve_bytes: int = RESERVE_BYTES  # the .rrd stops with less free space than this
     operator: str = ""
     note: str = ""
@@ -188,6 +189,7 @@ class RecordDaemon:
             s.viewer,
             axis="roll" if s.axis == "auto" else s.axis,
             bind=s.viewer_bind,
+            spawn_port=s.viewer_port,
             on_note=lambda line: self.on_event(f"viewer: {line}"),
             rrd_reserve_bytes=s.disk_reserve_bytes,
         )

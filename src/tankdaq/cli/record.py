@@ -56,7 +56,9 @@ def _viewer_mode(asked: str | None) -> str:
     from ..viz.live import default_viewer_mode, describe_mode
 
     mode = asked or default_viewer_mode()
-    err_console.print(describe_mode(mode, default=asked is None), markup=False, highlight=False)
+    err_console.print(
+        describe_mode(mode, default=asked is None), markup=False, highlight=False, soft_wrap=True
+    )
     return mode
 
 
@@ -104,6 +106,7 @@ def run_record(
     sim_speed: float = 1.0,
     sim_seed: int = 0,
     viewer_bind: str = "127.0.0.1",
+    viewer_port: int = 9876,
 ) -> list:
     """Build the daemon from command-line values, run it with a status line, print what it saved."""
     from ..acquire.daemon import RecordDaemon, RecordSettings
@@ -122,6 +125,7 @@ def run_record(
         runs=runs,
         viewer=_viewer_mode(viewer),
         viewer_bind=viewer_bind,
+        viewer_port=viewer_port,
         operator=operator,
         note=note,
         model=model,
@@ -171,6 +175,9 @@ def record_command(
     viewer_bind: str = typer.Option(
         "127.0.0.1", "--viewer-bind", help="Address a spawned viewer listens on (0.0.0.0: every network)."
     ),
+    viewer_port: int = typer.Option(
+        9876, "--viewer-port", min=1, max=65535, help="Port a spawned viewer listens on."
+    ),
     operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
     note: str = typer.Option("", "--note", help="A note stored in the file."),
     model: str = typer.Option(
@@ -197,6 +204,7 @@ def record_command(
         sim_speed,
         sim_seed,
         viewer_bind,
+        viewer_port,
     )
 
 

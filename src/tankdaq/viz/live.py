@@ -29,6 +29,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Self
+from urllib.parse import urlsplit
 
 import numpy as np
 import rerun as rr
@@ -121,6 +122,12 @@ def term_title(term: str) -> str:
     """``b1 (1/s)``: a coefficient named with its unit from the one term registry."""
     spec = TERM_REGISTRY.get(term)
     return f"{term} ({spec.unit})" if spec else term
+
+
+def _url_listening(url: str) -> bool:
+    """True when something accepts connections at a rerun URL's host and port."""
+    parts = urlsplit(url)
+    return _listening(parts.hostname or "127.0.0.1", parts.port or 9876)
 
 
 def _listening(host: str, port: int) -> bool:
@@ -265,6 +272,7 @@ class LiveView:
         self._noted: set[str] = set()
         # state below is touched only by the view thread
         self._live_url: str | None = self.mode if self.mode.startswith(URL_SCHEMES) else None
+        self._streaming = False  # this run goes to the viewer at ``_live_url``
         self._rec: rr.RecordingStream | None = None
         self._rrd_writing: Path | None = None
         self._origin = 0.0
@@ -293,6 +301,8 @@ class LiveView:
         if self._feed is None:
             return
         if not self._run_open:
+            if self.mode == "save" and self._first_rrd_path is None:
+                raise InputError("viewer mode 'save' needs a path for the .rrd file")
             self.new_run(rrd_path=self._first_rrd_path)
         if not self._feed.put(job, droppable):
             self._note_once("behind", "the view is behind: dropping view updates (the MCAP has every sample)")
@@ -311,9 +321,7 @@ class LiveView:
         """
         if terms is not None:
             self.terms = tuple(terms)
-        path = None if rrd_path is None else Path(rrd_path)
-        if self.mode == "save" and path is None:
-            raise InputError("viewer mode 'save' needs a path for the .rrd file")
+        path = None if rrd_path is None else Path(rrd_path)  # None: no .rrd this run (a low disk)
         self.rrd_path = path
         if self._feed is None:
             return
@@ -441,11 +449,12 @@ class LiveView:
             f"the rerun viewer exited (code {process.returncode}); the recording goes on, the .rrd too"
         )
         self._live_url = None
+        self._streaming = False
         return True
 
     def _sinks(self) -> list[rr.GrpcSink | rr.FileSink]:
         sinks: list[rr.GrpcSink | rr.FileSink] = []
-        if self._live_url is not None:
+        if self._streaming and self._live_url is not None:
             sinks.append(rr.GrpcSink(self._live_url))
         if self._rrd_writing is not None:
             sinks.append(rr.FileSink(str(self._rrd_writing)))
@@ -470,6 +479,9 @@ class LiveView:
         self._measured_angle: list[np.ndarray] = []
         self._styled_terms: set[str] = set()
         self._rrd_writing = rrd_path if rrd_path is not None and self._room_for_rrd(rrd_path) else None
+        self._streaming = self._live_url is not None and _url_listening(self._live_url)
+        if self._live_url is not None and not self._streaming:
+            self.on_note(f"no viewer listening at {self._live_url}: this decay goes to the .rrd only")
         sinks = self._sinks()
         if not sinks:
             return
