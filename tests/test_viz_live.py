@@ -173,6 +173,8 @@ def test_url_mode_streams_to_a_local_server(tmp_path: Path) -> None:
     finally:
         server.terminate()
         server.wait(timeout=10)
+    with socket.socket() as probe:  # the server itself was stopped, not a wrapper around it (issue 13)
+        assert probe.connect_ex(("127.0.0.1", port)) != 0
 
 
 def test_none_mode_logs_nothing_and_costs_nothing(tmp_path: Path) -> None:

@@ -93,8 +93,10 @@ def test_a_view_that_is_behind_drops_updates_and_returns_at_once(tmp_path: Path)
     assert _rrd_rows(tmp_path / "behind.rrd", "/angle/measured") == 5 * (1 + QUEUE_LIMIT)
 
 
-def test_record_keeps_its_read_cadence_while_the_view_saves(tmp_path: Path) -> None:
-    """The default viewer (save) with the default open-ended scenario: no false unplug, no gap.
+def test_record_keeps_its_read_cadence_while_the_view_saves(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The default viewer (save: no display) with the default open-ended scenario: no false unplug, no gap.
 
     Before the fix every such run reported "device gone ... back after 4.5 s" before the first
     release: the simulator computed its 21-run scenario in its serving thread, seconds of silence
@@ -108,8 +110,12 @@ def test_record_keeps_its_read_cadence_while_the_view_saves(tmp_path: Path) -> N
         if line.startswith("run 1:") and " -> " in line:
             daemon.stop()
 
-    daemon = RecordDaemon(_settings(tmp_path, runs=None, sim_speed=8.0), on_event=on_event)
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    daemon = RecordDaemon(_settings(tmp_path, runs=None, sim_speed=8.0, viewer=None), on_event=on_event)
     outcomes = daemon.run()
+    (mode,) = [line for line in lines if line.startswith("viewer: ")]
+    assert mode.startswith("viewer: save") and "default (no display)" in mode and "--viewer" in mode
     assert not [line for line in lines if "device gone" in line or "device back" in line], lines
     assert daemon.status.gaps == 0 and daemon.status.bad_frames == 0
     (outcome,) = outcomes
@@ -177,7 +183,8 @@ def test_a_viewer_killed_at_any_moment_costs_no_decay(tmp_path: Path, seed: int)
         assert outcome.settle_reason in ("amplitude", "timeout")
         assert _complete(outcome.path), outcome.path
     assert not [line for line in lines if "device gone" in line]
-    viewer_lines = [line for line in lines if line.startswith("viewer:")]
+    mode, *viewer_lines = [line for line in lines if line.startswith("viewer:")]
+    assert mode.startswith("viewer: stream to rerun+http://127.0.0.1")
     assert len(viewer_lines) <= 2, viewer_lines  # at most: the end of that run, the next run goes to the .rrd
 
 
@@ -215,15 +222,6 @@ def test_spawn_without_the_venv_on_path_or_a_display_records_and_saves(tmp_path:
     (mcap,) = tmp_path.glob("*.mcap")
     assert _complete(mcap)
     assert _rrd_rows(mcap.with_suffix(".rrd"), "/angle/measured") > 0
-
-
-def test_the_default_viewer_mode_is_printed_at_start(tmp_path: Path) -> None:
-    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
-    result = _run_tankdaq(
-        ["record", "--port", "/dev/ttyNOPE0", "--draft", "T", "--angle", "8", "--out", str(tmp_path)], env
-    )
-    first = result.stderr.splitlines()[0]
-    assert first.startswith("viewer: save") and "default" in first and "--viewer" in first
 
 
 # ---- a full disk: the .rrd gives way ----------------------------------------

@@ -21,7 +21,7 @@ from ..config import Hull, format_draft, load_hull
 from ..device.driver import MTiDriver
 from ..errors import DeviceGone, InputError, RecordingError
 from ..store.disk import RESERVE_BYTES
-from ..viz.live import LiveView
+from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 
@@ -46,7 +46,7 @@ class RecordSettings:
     baud: int | None = None  # None: 115200 on hardware, the smallest that carries the rate on sim
     out_dir: Path = Path("recordings")
     runs: int | None = None
-    viewer: str = "none"
+    viewer: str | None = "none"  # None: the default (spawn with a display, save without)
     viewer_bind: str = "127.0.0.1"  # where a spawned viewer listens; 0.0.0.0 only when asked
     viewer_port: int = 9876
     disk_reserve_bytes: int = RESERVE_BYTES  # the .rrd stops with less free space than this
@@ -185,8 +185,10 @@ class RecordDaemon:
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
         json.dumps(config, default=str)  # refuse unserialisable settings early
+        mode = s.viewer or default_viewer_mode()
+        self.on_event(describe_mode(mode, default=s.viewer is None))
         view = LiveView(
-            s.viewer,
+            mode,
             axis="roll" if s.axis == "auto" else s.axis,
             bind=s.viewer_bind,
             spawn_port=s.viewer_port,

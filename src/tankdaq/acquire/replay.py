@@ -17,7 +17,7 @@ from ..device.decoding import SampleDecoder
 from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
 from ..store.reader import read_recording
-from ..viz.live import LiveView
+from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 
 #: At full speed, serial reads are merged into blocks spanning this much arrival time: the
@@ -48,7 +48,7 @@ def coalesce(chunks: list[tuple[int, bytes]], span_s: float) -> list[tuple[int, 
 def replay_recording(
     path: str | Path,
     speed: float | None = None,
-    viewer: str = "none",
+    viewer: str | None = "none",
     model: str | None = None,
     on_event: Callable[[str], None] | None = None,
     on_progress: Callable[[int, int], None] | None = None,
@@ -60,7 +60,10 @@ def replay_recording(
     axis = recording.axis
     nominal = float(meta.get("angle_nominal_deg", "nan"))
     note = None if on_event is None else (lambda line: on_event(f"viewer: {line}"))
-    view = LiveView(viewer, axis=axis, on_note=note)
+    mode = viewer or default_viewer_mode()
+    if on_event is not None:
+        on_event(describe_mode(mode, default=viewer is None))
+    view = LiveView(mode, axis=axis, on_note=note)
     settings = SessionSettings(
         axis=axis,
         angle_deg=nominal if math.isfinite(nominal) else 0.0,

@@ -51,17 +51,6 @@ def _rate(value: float) -> float:
     return value
 
 
-def _viewer_mode(asked: str | None) -> str:
-    """The viewer mode to use (the default when none was asked), printed in one line at start."""
-    from ..viz.live import default_viewer_mode, describe_mode
-
-    mode = asked or default_viewer_mode()
-    err_console.print(
-        describe_mode(mode, default=asked is None), markup=False, highlight=False, soft_wrap=True
-    )
-    return mode
-
-
 class _StatusLine:
     """One status line on stderr, refreshed in place on a terminal; event lines above it."""
 
@@ -123,7 +112,7 @@ def run_record(
         baud=baud,
         out_dir=out,
         runs=runs,
-        viewer=_viewer_mode(viewer),
+        viewer=viewer,  # None: the default; the daemon prints the mode in use at start
         viewer_bind=viewer_bind,
         viewer_port=viewer_port,
         operator=operator,
@@ -236,12 +225,11 @@ def replay_command(
     from ..acquire.replay import replay_recording
 
     pace = _speed(speed)
-    mode = _viewer_mode(viewer)
     for path in files:
         outcomes = replay_recording(
             path,
             speed=pace,
-            viewer=mode,
+            viewer=viewer,
             on_event=lambda line: err_console.print(line, markup=False, highlight=False),
         )
         for o in outcomes:
