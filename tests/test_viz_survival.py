@@ -160,9 +160,11 @@ def _grpc_server(port: int) -> Iterator[subprocess.Popen[bytes]]:
         server.wait(timeout=10)
 
 
-@pytest.mark.parametrize("seed", [1, 2])
-def test_a_viewer_killed_at_any_moment_costs_no_decay(tmp_path: Path, seed: int) -> None:
-    """The viewer's server is killed (SIGKILL) at a random read of a two-decay session."""
+@pytest.mark.parametrize(
+    ("how", "seed"), [(signal.SIGKILL, 1), (signal.SIGKILL, 2), (signal.SIGSTOP, 3)], ids=["kill", "kill", "stall"]
+)
+def test_a_viewer_killed_or_stalled_at_any_moment_costs_no_decay(tmp_path: Path, how: int, seed: int) -> None:
+    """The viewer's server is killed (SIGKILL) or stalls (SIGSTOP) at a random read of a two-decay session."""
     kill_at = random.Random(seed).randrange(20, 400)  # reads: before, during or after the first decay
     port = _free_port()
     lines: list[str] = []
@@ -173,7 +175,7 @@ def test_a_viewer_killed_at_any_moment_costs_no_decay(tmp_path: Path, seed: int)
             nonlocal reads
             reads += 1
             if reads == kill_at:
-                server.send_signal(signal.SIGKILL)
+                server.send_signal(how)
 
         settings = _settings(tmp_path, runs=2, viewer=f"rerun+http://127.0.0.1:{port}/proxy")
         outcomes = RecordDaemon(settings, on_event=lines.append, on_status=on_status).run()
@@ -303,5 +305,5 @@ def test_an_rrd_refused_by_the_file_system_is_one_line_and_the_mcaps_finish(tmp_
     mcaps = sorted(tmp_path.glob("*.mcap"))
     assert len(mcaps) == 2 and all(_complete(p) for p in mcaps)
     lines = result.stderr.splitlines()
-    viewer_lines = [line for line in lines if line.startswith("viewer: the view could not")]
+    viewer_lines = [line for line in lines if line.startswith("viewer: the .rrd could not be finished")]
     assert 1 <= len(viewer_lines) <= 2, result.stderr

@@ -54,7 +54,7 @@ QUEUE_LIMIT = 256
 #: At the end of a run rerun gets this long to take what was logged (file and viewer).
 FLUSH_TIMEOUT_S = 5.0
 #: Closing the view waits at most this long for the view thread to finish its queue.
-CLOSE_TIMEOUT_S = 30.0
+CLOSE_TIMEOUT_S = 15.0
 #: A spawned viewer must be listening within this long.
 SPAWN_TIMEOUT_S = 20.0
 
@@ -501,9 +501,19 @@ class LiveView:
         try:
             rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
         except RuntimeError as exc:  # a viewer that died or stalls, a file the disk refused
-            self.on_note(f"the view could not take the end of this run ({exc}); the recording goes on")
+            self.on_note(self._flush_failed(str(exc)))
         finally:
             self._drop_recording()
+
+    def _flush_failed(self, error: str) -> str:
+        """The line for a run whose end rerun could not deliver; a viewer that failed is not used again."""
+        if "File-writer" in error:
+            return f"the .rrd could not be finished ({error}); the recording goes on"
+        if self._streaming:
+            self._live_url, self._streaming = None, False
+        if "timed out" in error:
+            error = f"no answer within {FLUSH_TIMEOUT_S:g} s: stalled or gone"
+        return f"the viewer could not take the end of this run ({error}); the recording goes on, .rrd only"
 
     def _recording(self) -> rr.RecordingStream | None:
         """The stream to log to now, after dropping what cannot take more (a dead viewer, a full disk)."""
