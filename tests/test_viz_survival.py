@@ -161,7 +161,9 @@ def _grpc_server(port: int) -> Iterator[subprocess.Popen[bytes]]:
 
 
 @pytest.mark.parametrize(
-    ("how", "seed"), [(signal.SIGKILL, 1), (signal.SIGKILL, 2), (signal.SIGSTOP, 3)], ids=["kill", "kill", "stall"]
+    ("how", "seed"),
+    [(signal.SIGKILL, 1), (signal.SIGKILL, 2), (signal.SIGSTOP, 3)],
+    ids=["kill-1", "kill-2", "stall"],
 )
 def test_a_viewer_killed_or_stalled_at_any_moment_costs_no_decay(tmp_path: Path, how: int, seed: int) -> None:
     """The viewer's server is killed (SIGKILL) or stalls (SIGSTOP) at a random read of a two-decay session."""
