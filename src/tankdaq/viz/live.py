@@ -276,19 +276,23 @@ class LiveView:
         self._rec: rr.RecordingStream | None = None
         self._rrd_writing: Path | None = None
         self._origin = 0.0
-        self._feed: ViewFeed | None = None
+        self._feed: ViewFeed | None = None  # started at the first job, ended by close()
+        self._dropped_before = 0
         if self.mode == "spawn" and not display_available():
             self.on_note("no display (DISPLAY and WAYLAND_DISPLAY unset): no window; saving an .rrd instead")
             self.mode = "save"
-        if self.mode != "none":
-            self._feed = ViewFeed(on_error=self._job_failed)
         if self.mode == "spawn":
-            self._feed.put(self._spawn_viewer, droppable=False)
+            self._jobs().put(self._spawn_viewer, droppable=False)
 
     @property
     def dropped(self) -> int:
         """Updates dropped because the view fell behind (the MCAP has them all)."""
-        return self._feed.dropped if self._feed else 0
+        return self._dropped_before + (self._feed.dropped if self._feed else 0)
+
+    def _jobs(self) -> ViewFeed:
+        if self._feed is None:
+            self._feed = ViewFeed(on_error=self._job_failed)
+        return self._feed
 
     # -- the caller's side: queue and return ------------------------------------------------------------
 
@@ -298,13 +302,11 @@ class LiveView:
             self.on_note(line)
 
     def _submit(self, job: Callable[[], None], droppable: bool = False) -> None:
-        if self._feed is None:
-            return
         if not self._run_open:
             if self.mode == "save" and self._first_rrd_path is None:
                 raise InputError("viewer mode 'save' needs a path for the .rrd file")
             self.new_run(rrd_path=self._first_rrd_path)
-        if not self._feed.put(job, droppable):
+        if not self._jobs().put(job, droppable):
             self._note_once("behind", "the view is behind: dropping view updates (the MCAP has every sample)")
 
     def new_run(
@@ -323,12 +325,12 @@ class LiveView:
             self.terms = tuple(terms)
         path = None if rrd_path is None else Path(rrd_path)  # None: no .rrd this run (a low disk)
         self.rrd_path = path
-        if self._feed is None:
+        if self.mode == "none":
             return
         self._run_open = True
         self._noted.discard("behind")
         terms_now, origin = self.terms, float(time_origin_s)
-        self._feed.put(lambda: self._open_run(name, path, terms_now, origin), droppable=False)
+        self._jobs().put(lambda: self._open_run(name, path, terms_now, origin), droppable=False)
 
     def end_run(self) -> None:
         """Finish the current recording on the view thread (returns at once)."""
@@ -337,22 +339,16 @@ class LiveView:
             self._feed.put(self._end_run, droppable=False)
 
     def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
-        """End the run and wait (at most ``timeout_s``) for the view thread: the .rrd is complete after."""
-        self.end_run()
-        if self._feed is not None and not self._feed.wait_idle(timeout_s):
-            self._note_once("slow", f"the view did not finish in {timeout_s:g} s; the last .rrd may be cut")
+        """End the run and the view thread (waiting at most ``timeout_s``): the .rrd is complete after.
 
-    def stop_viewer(self) -> None:
-        """Close the window this view spawned (a viewer left running belongs to the operator)."""
-        self.close()
-        process, self.viewer_process = self.viewer_process, None
-        if process is not None and process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(timeout=10)
+        A spawned viewer stays open: the window belongs to the operator now.
+        """
+        self.end_run()
+        feed, self._feed = self._feed, None
+        if feed is not None:
+            if not feed.stop(timeout_s):
+                self.on_note(f"the view did not finish in {timeout_s:g} s; the last .rrd may be cut")
+            self._dropped_before += feed.dropped
 
     def __enter__(self) -> Self:
         return self
@@ -364,7 +360,7 @@ class LiveView:
 
     def log_samples(self, samples: np.ndarray) -> None:
         """Measured angle and rate of the view's axis, in degrees, against time from the run's origin."""
-        if samples.size and self._feed is not None:
+        if samples.size and self.mode != "none":
             block = samples.copy()
             self._submit(lambda: self._log_samples(block), droppable=True)
 
@@ -383,14 +379,14 @@ class LiveView:
         plotted at ``t_fit`` (default: the last time of ``t``) so they converge
         along the same time axis as the decay.
         """
-        if self._feed is not None:
+        if self.mode != "none":
             args = (np.array(t, dtype=float), np.array(predicted_angle), np.array(predicted_rate))
             fit = (dict(coefficients), dict(ci95 or {}), t_fit)
             self._submit(lambda: self._log_fit(*args, *fit), droppable=True)
 
     def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
         """A run event (release, settled, warning, ...) in the Events panel, at its time."""
-        if self._feed is not None:
+        if self.mode != "none":
             self._submit(lambda: self._log_event(kind, message, t_s))
 
     # -- the view thread's side --------------------------------------------------------------------------
