@@ -102,3 +102,23 @@ def test_campaign_uses_the_user_hulls_gm(tmp_path, user_folder):
     fields = dict(zip(header, values, strict=True))
     assert float(fields["gm_m"]) == 0.1 and float(fields["total_inertia_kg_m2"]) > 0
     assert "free decay" in fields["cuts"]
+
+
+def test_a_hull_without_coefficients_records_from_a_real_port(tmp_path):
+    """The lab's own hull on a real serial port (the simulated MTi-G's pty, opened by path like hardware):
+    the recording is labelled with it, and its dimensions travel in the file."""
+    from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+    from tankdaq.device.simulator import SimulatedMTi
+    from tankdaq.physics.scenario import DecayScenario
+    from tankdaq.store.reader import read_recording
+
+    own = tmp_path / "mymodel.toml"
+    own.write_text(MY_HULL)
+    scenario = DecayScenario(hull="swath", draft=1.0, angle_deg=8.0, runs=2, seed=5)
+    with SimulatedMTi(scenario, speed=8.0, seed=5) as sim:
+        settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, hull=str(own), out_dir=tmp_path,
+                                  runs=1, viewer="none")  # fmt: skip
+        (outcome,) = RecordDaemon(settings).run()
+    assert outcome.path is not None and outcome.path.name.startswith("mymodel_T_roll_8deg_")
+    metadata = read_recording(outcome.path).metadata
+    assert metadata["hull"] == "mymodel" and float(metadata["hull_displacement_kg"]) == 40.0
