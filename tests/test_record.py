@@ -223,10 +223,27 @@ def _tankdaq(*args: str, **kwargs) -> subprocess.Popen:
     )
 
 
+def record_args(port: str, out: Path, *extra: str) -> list[str]:
+    """``tankdaq record`` arguments for the swath at T from 8 deg on ``port``, writing into ``out``."""
+    return [
+        "record",
+        "--port",
+        port,
+        "--hull",
+        "swath",
+        "--draft",
+        "T",
+        "--angle",
+        "8",
+        "--out",
+        str(out),
+        *extra,
+    ]
+
+
 def _recording_after_release(out: Path, *extra: str) -> subprocess.Popen:
     """``tankdaq record --port sim`` in a subprocess, returned once it has reported a release."""
-    args = ["record", "--port", "sim", "--hull", "swath", "--draft", "T", "--angle", "8", "--out", str(out),
-            "--viewer", "none"]  # fmt: skip
+    args = record_args("sim", out, "--viewer", "none")
     proc = _tankdaq(*args, *extra)
     assert proc.stderr is not None
     deadline = time.monotonic() + 60
@@ -300,19 +317,7 @@ def test_bad_record_input_exit_2_one_line(args: list[str], mentions: str) -> Non
 
 
 def test_missing_port_in_a_real_process_is_one_line_no_traceback(tmp_path: Path) -> None:
-    proc = _tankdaq(
-        "record",
-        "--port",
-        "/dev/ttyNOPE0",
-        "--hull",
-        "swath",
-        "--draft",
-        "T",
-        "--angle",
-        "8",
-        "--out",
-        str(tmp_path),
-    )
+    proc = _tankdaq(*record_args("/dev/ttyNOPE0", tmp_path))
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 2
     lines = [line for line in err.splitlines() if line.strip()]
@@ -350,21 +355,7 @@ def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> 
         resource.setrlimit(resource.RLIMIT_FSIZE, (120_000, 120_000))
 
     exe = str(Path(sys.executable).with_name("tankdaq"))
-    args = [
-        "record",
-        "--port",
-        "sim",
-        "--hull",
-        "swath",
-        "--draft",
-        "T",
-        "--angle",
-        "8",
-        "--out",
-        str(tmp_path),
-        "--viewer",
-        "none",
-    ]
+    args = record_args("sim", tmp_path, "--viewer", "none")
     proc = subprocess.run(
         [exe, *args, "--runs", "2", "--sim-speed", "8"],
         capture_output=True,
