@@ -6,12 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 from tankdaq.errors import InputError
 from tankdaq.ident.free_decay import cut_free_decay, find_free_end
 from tankdaq.ident.output_error import OutputError
-from tankdaq.physics.decay import acceleration
+from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 from tankdaq.store.csv_import import read_csv_runs
 from test_ident_helpers import KVLCC2_21338
@@ -25,15 +24,9 @@ def forced_decay(forcing, duration_s: float = 30.0, angle0_deg: float = 8.0, see
     """(t, angle, rate) of the decay equation from rest at ``angle0_deg`` plus ``forcing(t)`` (rad/s²),
     with white noise like an MTi-G's."""
     t = np.arange(0.0, duration_s, 1 / RATE_HZ)
-
-    def rhs(tt: float, y: np.ndarray) -> list[float]:
-        acc = acceleration(TRUTH, np.array([y[0]]), np.array([y[1]]))[0]
-        return [y[1], float(acc) + forcing(tt)]
-
-    sol = solve_ivp(rhs, (0, t[-1]), [math.radians(angle0_deg), 0.0], t_eval=t, rtol=1e-9, atol=1e-11,
-                    method="DOP853", max_step=0.01)  # fmt: skip
+    angle, rate = simulate_decay(TRUTH, t, math.radians(angle0_deg), rtol=1e-9, atol=1e-11, forcing=forcing)
     rng = np.random.default_rng(seed)
-    return t, sol.y[0] + rng.normal(0, 3e-4, t.size), sol.y[1] + rng.normal(0, 2e-3, t.size)
+    return t, angle + rng.normal(0, 3e-4, t.size), rate + rng.normal(0, 2e-3, t.size)
 
 
 def half_sine(start_s: float, length_s: float, peak: float):
