@@ -101,14 +101,9 @@ def _peaks(run: DecayRun) -> _Peaks | None:
     index = half_cycle_peaks(angle - guess)
     if index.size < 3:
         return None
-    value = np.array([_parabola_peak(angle, i, _half_width(run, index)) for i in index])
+    width = max(2, round(0.1 * float(np.median(np.diff(index)))))  # a tenth of a half-period
+    value = np.array([_parabola_peak(angle, i, width) for i in index])
     return _Peaks(index, run.t[index], value, sigma)
-
-
-def _half_width(run: DecayRun, index: np.ndarray) -> int:
-    """Samples either side of a peak for its parabola: a tenth of the median half-period."""
-    half_period = float(np.median(np.diff(index))) if index.size > 1 else 10.0
-    return max(2, round(0.1 * half_period))
 
 
 def _parabola_peak(y: np.ndarray, i: int, w: int) -> float:
