@@ -511,8 +511,9 @@ def write_simulated_campaign(
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     written = []
-    for hull_name in hulls:
-        model = load_hull(hull_name).simulation_model(axis)
+    for hull_spec in hulls:
+        hull = load_hull(hull_spec)  # a name or a .toml path; files are labelled with the hull's name
+        hull_name, model = hull.name, hull.simulation_model(axis)
         for draft in drafts:
             coefficients = model.coefficients(draft)
             for angle_deg in angles_deg:
