@@ -37,6 +37,7 @@ from tankdaq.viz.live import QUEUE_LIMIT, LiveView, rerun_executable
 pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
 
 TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
+SIM_RECORD = ["record", "--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "8"]
 
 
 def _settings(out: Path, **overrides: object) -> RecordSettings:
@@ -213,7 +214,7 @@ def test_spawn_without_the_venv_on_path_or_a_display_records_and_saves(tmp_path:
     env["PATH"] = "/usr/bin:/bin"
     if display == "broken":
         env["DISPLAY"] = _free_display()
-    args = ["record", "--port", "sim", "--draft", "T", "--angle", "8", "--runs", "1", "--sim-speed", "16"]
+    args = [*SIM_RECORD, "--runs", "1", "--sim-speed", "16"]
     result = _run_tankdaq(
         [*args, "--viewer", "spawn", "--viewer-port", str(_free_port()), "--out", str(tmp_path)], env
     )
@@ -302,7 +303,7 @@ def test_an_rrd_refused_by_the_file_system_is_one_line_and_the_mcaps_finish(tmp_
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))
 
-    args = ["record", "--port", "sim", "--draft", "T", "--angle", "8", "--runs", "2", "--sim-speed", "16"]
+    args = [*SIM_RECORD, "--runs", "2", "--sim-speed", "16"]
     result = _run_tankdaq([*args, "--viewer", "save", "--out", str(tmp_path)], dict(os.environ),
                           preexec_fn=small_files)  # fmt: skip
     assert result.returncode == 0, result.stderr

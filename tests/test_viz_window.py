@@ -110,8 +110,8 @@ def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_deca
         env = {k: v for k, v in os.environ.items() if k != "WAYLAND_DISPLAY"}
         env["DISPLAY"] = display
         record = [
-            str(Path(sys.executable).with_name("tankdaq")), "record", "--port", "sim", "--draft", "T",
-            "--angle", "8", "--runs", "2", "--sim-speed", "8", "--viewer", "spawn",
+            str(Path(sys.executable).with_name("tankdaq")), "record", "--hull", "swath", "--port", "sim",
+            "--draft", "T", "--angle", "8", "--runs", "2", "--sim-speed", "8", "--viewer", "spawn",
             "--viewer-port", str(port), "--out", str(tmp_path),
         ]  # fmt: skip
         proc = subprocess.Popen(record, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)

@@ -12,9 +12,11 @@ from .app import app, err_console, handles_errors, progress_bar
 from .identify import (
     AngleColumn,
     AngleUnit,
+    EndS,
     KeepAll,
     RateColumn,
     SkipHalfCycles,
+    StartS,
     TimeColumn,
     load_runs,
 )
@@ -44,6 +46,8 @@ def diagnose_command(
     angle_unit: AngleUnit = "deg",
     keep_all: KeepAll = False,
     skip_half_cycles: SkipHalfCycles = 0,
+    start: StartS = None,
+    end: EndS = None,
 ) -> None:
     """Fit a baseline, find where it disagrees with the decays, name and add the missing effects."""
     from ..diagnose.effects import LIBRARY
@@ -56,7 +60,9 @@ def diagnose_command(
         raise InputError(f"--max-steps must be 0 or more, not {max_steps}")
     if rrd is not None and not rrd.parent.is_dir():  # say so before minutes of fitting, not after
         raise InputError(f"cannot write {rrd}: folder {rrd.parent} does not exist")
-    runs = load_runs(inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles)
+    runs = load_runs(
+        inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
+    )
     with progress_bar() as progress:
         # per step: every candidate, plus the two refits of the late-disturbance test
         task = progress.add_task("baseline", total=1 + max_steps * (len(LIBRARY) + 2))

@@ -36,10 +36,14 @@ def _viewer(value: str) -> str:
 
 
 def _hull(value: str) -> str:
-    from ..config import list_hulls
+    """A hull name (user folder, then shipped) or a .toml path; an unknown one lists the known ones."""
+    from ..config import load_hull
+    from ..errors import InputError
 
-    if value not in list_hulls():
-        raise typer.BadParameter(f"unknown hull {value!r}; known hulls: {', '.join(list_hulls())}")
+    try:
+        load_hull(value)
+    except InputError as exc:
+        raise typer.BadParameter(str(exc)) from None
     return value
 
 
@@ -142,7 +146,7 @@ def record_command(
         ..., "--angle", callback=_positive_angle, help="Nominal release angle (deg)."
     ),
     hull: str = typer.Option(
-        "swath", "--hull", callback=_hull, help="Hull name from configs/hulls (see tankdaq hulls)."
+        ..., "--hull", callback=_hull, help="The model tested: a hull name (tankdaq hulls) or a .toml file."
     ),
     axis: AxisChoice = typer.Option(
         AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
@@ -271,6 +275,7 @@ def identify_recordings(
 #: The demo's simulated hull rolls by seed 001 eq. (8); the demo identifies that equation's terms
 #: (b1 b2 b3 c1 c2 c3) and shows the truth inside the intervals, and the warnings a real lab would see.
 DEMO_MODEL = "seed001-eq1"
+DEMO_HULL = "swath"
 
 
 @app.command("demo")
@@ -284,14 +289,15 @@ def demo_command(
     from ..config import load_hull
 
     err_console.print(
-        f"recording {runs} simulated decays (swath, T, roll, 8 deg) into {out}; live model {DEMO_MODEL}",
+        f"recording {runs} simulated decays (hull {DEMO_HULL}, T, roll, 8 deg) into {out}; "
+        f"live model {DEMO_MODEL}",
         markup=False,
     )
     outcomes = run_record(
         "sim",
         1.0,
         8.0,
-        "swath",
+        DEMO_HULL,
         "roll",
         100.0,
         None,
@@ -304,5 +310,5 @@ def demo_command(
         sim_speed,
     )
     paths = [o.path for o in outcomes if o.path is not None]
-    truth = load_hull("swath").axis_model("roll").coefficients(1.0)
+    truth = load_hull(DEMO_HULL).simulation_model("roll").coefficients(1.0)
     identify_recordings(paths, out, DEMO_MODEL, truth)
