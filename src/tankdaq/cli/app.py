@@ -11,6 +11,7 @@ import functools
 from collections.abc import Callable
 from typing import Any, TypeVar
 
+import click
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -55,15 +56,40 @@ def handles_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+class UsageLine(click.ClickException):
+    """A bad parameter value: one ``error:`` line on stderr and exit 2 (no usage block)."""
+
+    exit_code = 2
+
+    def show(self, file: object = None) -> None:
+        err_console.print(f"error: {self.message}", markup=False, highlight=False, soft_wrap=True)
+
+
+def checked(rule: Callable[..., Any], **settings: Any) -> Callable[[Any], Any]:
+    """A typer callback/parser applying a ``tankdaq.validation`` rule; None (not given) passes.
+
+    A list option is checked item by item. The rule's InputError becomes one line and exit 2,
+    while the command line is parsed: before any device is opened or any work starts.
+    """
+
+    def apply(value: Any) -> Any:
+        if value is None:
+            return None
+        try:
+            if isinstance(value, list | tuple):
+                return [rule(item, **settings) for item in value]
+            return rule(value, **settings)
+        except TankdaqError as exc:
+            raise UsageLine(str(exc)) from None
+
+    return apply
+
+
 def parse_draft_option(value: str) -> float:
     """typer parser for --draft: '0.9T', 'T', '1.1T' -> factor (bad values exit 2)."""
-    from ..config import parse_draft
-    from ..errors import InputError
+    from ..validation import draft_factor
 
-    try:
-        return parse_draft(value)
-    except InputError as exc:
-        raise typer.BadParameter(str(exc)) from None
+    return checked(draft_factor)(value)
 
 
 def _print_version(value: bool) -> None:
