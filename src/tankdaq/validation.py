@@ -107,8 +107,8 @@ def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str,
     offline = [term for term in terms if term not in LIVE_TERMS]
     if offline:
         raise InputError(
-            f"{option}: term(s) {', '.join(offline)} cannot be fitted live (the live view and the recording's "
-            f"/fit carry {' '.join(LIVE_TERMS)}); record with those, then fit "
+            f"{option}: term(s) {', '.join(offline)} cannot be fitted live (the live view and the "
+            f"recording's /fit carry {' '.join(LIVE_TERMS)}); record with those, then fit "
             f"{', '.join(offline)} offline with tankdaq diagnose or tankdaq identify"
         )
     return terms
@@ -119,7 +119,9 @@ def _probe_writable(folder: Path, what: str) -> None:
     try:
         fd, name = tempfile.mkstemp(prefix=".tankdaq-probe-", dir=folder)
     except OSError as exc:
-        raise InputError(f"cannot write {what} in {folder}: {exc.strerror}; choose a writable folder") from None
+        raise InputError(
+            f"cannot write {what} in {folder}: {exc.strerror}; choose a writable folder"
+        ) from None
     os.close(fd)
     os.unlink(name)
 

@@ -11,7 +11,6 @@ import functools
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-import click
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -56,29 +55,32 @@ def handles_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
-class UsageLine(click.ClickException):
+class UsageLine(typer.BadParameter):
     """A bad parameter value: one ``error:`` line on stderr and exit 2 (no usage block)."""
-
-    exit_code = 2
 
     def show(self, file: object = None) -> None:
         err_console.print(f"error: {self.message}", markup=False, highlight=False, soft_wrap=True)
 
 
-def checked(rule: Callable[..., Any], **settings: Any) -> Callable[[Any], Any]:
+def checked(rule: Callable[..., Any], keep_input: bool = False, **settings: Any) -> Callable[[Any], Any]:
     """A typer callback/parser applying a ``tankdaq.validation`` rule; None (not given) passes.
 
-    A list option is checked item by item. The rule's InputError becomes one line and exit 2,
-    while the command line is parsed: before any device is opened or any work starts.
+    A list option is checked item by item; ``keep_input`` passes the value on as given (a model
+    alias stays an alias) instead of the rule's normalised form. The rule's InputError becomes one
+    line and exit 2 while the command line is parsed: before any device is opened or work starts.
     """
+
+    def one(value: Any) -> Any:
+        normalised = rule(value, **settings)
+        return value if keep_input else normalised
 
     def apply(value: Any) -> Any:
         if value is None:
             return None
         try:
             if isinstance(value, list | tuple):
-                return [rule(item, **settings) for item in value]
-            return rule(value, **settings)
+                return [one(item) for item in value]
+            return one(value)
         except TankdaqError as exc:
             raise UsageLine(str(exc)) from None
 
