@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from .. import validation
 from ..config import Hull, format_draft, load_hull
 from ..device.driver import MTiDriver
 from ..errors import DeviceGone, InputError, RecordingError
@@ -118,8 +119,12 @@ class RecordDaemon:
         self.hull: Hull | None = load_hull(settings.hull) if settings.hull else None
         if settings.axis not in ("roll", "pitch", "auto"):
             raise InputError(f"axis {settings.axis!r} not understood; use roll, pitch or auto")
-        if not settings.angle_deg > 0:
-            raise InputError(f"angle must be a positive number of degrees, got {settings.angle_deg:g}")
+        # everything checkable is checked here, before a simulator starts or the port opens
+        validation.release_angle_deg(settings.angle_deg, option="angle")
+        validation.output_rate_hz(settings.rate_hz, option="rate")
+        validation.baud_rate(settings.baud, option="baud")
+        validation.live_model(settings.model, option="model")
+        validation.output_dir(settings.out_dir, option="output folder")
         self.simulator = None
         self.outcomes: list[DecayOutcome] = []
         self._next_read = 0.0
