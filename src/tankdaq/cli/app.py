@@ -8,7 +8,7 @@ purpose (``TankdaqError``) become one line on stderr and the error's exit code.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
 import typer
@@ -92,6 +92,14 @@ def parse_draft_option(value: str) -> float:
     from ..validation import draft_factor
 
     return checked(draft_factor)(value)
+
+
+def warn_truncated(runs: Iterable[Any]) -> list[str]:
+    """One warning line per recording cut short among the decays read; the files, for ``--json``."""
+    notices = {str(run.meta["file"]): run.meta["truncation"] for run in runs if run.meta.get("truncation")}
+    for notice in notices.values():
+        err_console.print(notice, markup=False, highlight=False, soft_wrap=True)
+    return list(notices)
 
 
 def _print_version(value: bool) -> None:
