@@ -99,6 +99,13 @@ def bootstrap_replicas(value: int, option: str = "--bootstrap") -> int:
     return value
 
 
+def percent(value: float, option: str, low: float = 0.0, high: float = 100.0) -> float:
+    """A percentage strictly between ``low`` and ``high`` (given and checked in %, not as a fraction)."""
+    if not (math.isfinite(value) and low < value < high):
+        raise InputError(f"{option} {value:g} %: give a percentage between {low:g} and {high:g}, e.g. 10")
+    return float(value)
+
+
 def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str, ...]:
     """A model the live identifier, view and recording all carry: decay-equation terms only."""
     from .ident.models import resolve_model
@@ -154,20 +161,23 @@ def output_file(path: Path, option: str = "--out") -> Path:
     return path
 
 
-def input_file(path: Path, what: str = "file") -> Path:
-    """An existing, readable regular file (a folder or a missing path says which it is)."""
+def input_file(path: Path, what: str = "file", error: type[InputError] = InputError) -> Path:
+    """An existing, readable regular file (a folder or a missing path says which it is).
+
+    ``error`` is the InputError subclass the caller's domain raises (BadRecordingInput for readers).
+    """
     path = Path(path)
     if path.is_dir():
-        raise InputError(f"{path} is a folder, not a {what}; give the {what} itself")
+        raise error(f"{path} is a folder, not a {what}; give the {what} itself")
     if not path.exists():
-        raise InputError(f"{path}: no such {what}")
+        raise error(f"{path}: no such {what}")
     if not path.is_file():
-        raise InputError(f"{path} is not a regular file; give the {what} itself")
+        raise error(f"{path} is not a regular file; give the {what} itself")
     try:
         with path.open("rb"):
             pass
     except OSError as exc:
-        raise InputError(f"cannot read {path}: {exc.strerror}") from None
+        raise error(f"cannot read {path}: {exc.strerror}") from None
     return path
 
 
@@ -186,5 +196,6 @@ __all__ = [
     "output_dir",
     "output_file",
     "output_rate_hz",
+    "percent",
     "release_angle_deg",
 ]

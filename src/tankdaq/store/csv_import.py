@@ -19,6 +19,7 @@ import numpy as np
 from ..errors import BadIdentificationInput, InputError
 from ..ident.signals import white_noise_level
 from ..records import DecayRun
+from ..validation import input_file
 
 ANGLE_UNITS: dict[str, float] = {"deg": math.pi / 180.0, "rad": 1.0}
 #: Fraction of the largest excursion a peak must reach to count as the release.
@@ -75,8 +76,7 @@ def read_csv_runs(
 
 
 def _read_columns(path: Path) -> dict[str, np.ndarray]:
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    input_file(path)
     try:
         with path.open(newline="") as fh:
             rows = list(csv.reader(line for line in fh if line.strip() and not line.startswith("#")))
