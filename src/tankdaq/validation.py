@@ -76,7 +76,7 @@ def hull_draft(hull: Hull, draft: float, axis: str | None = None) -> float:
         try:
             hull.axis_model(name).coefficients(draft)
         except InputError as exc:
-            raise InputError(f"hull {hull.name} ({name}): {exc}; give one of those drafts") from None
+            raise InputError(f"hull {hull.name} ({name}): {exc}; give a draft in that range") from None
     return draft
 
 

@@ -131,10 +131,11 @@ def identify_command(
     if axis not in (None, "roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     hull_config = load_hull(hull) if hull else None
-    if hull_config is not None:
-        validation.hull_draft(hull_config, draft, axis)
     terms = resolve_model(model)
     runs = load_runs(inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles)
+    if hull_config is not None:  # the draft must be one the hull has on the decays' axes, before any fit
+        for run_axis in sorted({run.axis for run in runs}):
+            validation.hull_draft(hull_config, draft, run_axis)
     truncated = {"truncated": bool(cut := warn_truncated(runs)), "truncated_files": cut}
 
     if compare:
