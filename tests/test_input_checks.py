@@ -147,3 +147,23 @@ def test_the_record_daemon_applies_the_same_rules_as_the_command_line(tmp_path: 
         (tmp_path / "a-file").write_text("")
         with pytest.raises(InputError, match=match):
             RecordDaemon(RecordSettings(**{**base, **bad}))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("args", "mentions"),
+    [
+        (["record", "--draft", "T", "--angle", "8"], "Missing option '--port'"),
+        (["record", "--port", "sim", "--draft", "T", "--angle", "8", "--scan-bauds"], "No such option"),
+        (["identify", "x.csv", "--skip-half-cycles", "-1"], "--skip-half-cycles"),
+        (["decode", "x.bin", "--format", "xml"], "--format"),
+        (["nosuch"], "No such command"),
+    ],
+)
+def test_click_usage_errors_are_one_line_too(args: list[str], mentions: str) -> None:
+    line = _refused(args, mentions)
+    assert "--help lists the options" in line
+
+
+def test_no_arguments_still_shows_the_help() -> None:
+    result = runner.invoke(app, [])
+    assert "Commands" in result.output and "record" in result.output and "Traceback" not in result.output

@@ -8,16 +8,59 @@ purpose (``TankdaqError``) become one line on stderr and the error's exit code.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Iterable
+import sys
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, TypeVar
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from typer.core import TyperGroup
+from typer.exceptions import TyperException
 
 from ..errors import TankdaqError
 
+
+class OneLineUsageErrors(TyperGroup):
+    """The root command: a usage error (missing option, unknown option, bad value) is one line, exit 2.
+
+    Click's form (usage, hint, blank line, error) is four lines; a person at the tank reads one.
+    """
+
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        windows_expand_args: bool = True,
+        **extra: Any,
+    ) -> Any:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, windows_expand_args, **extra)
+        try:
+            code = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
+        except TyperException as exc:  # click's usage errors and bad parameters
+            message = exc.format_message()
+            if "\n" in message:  # the help text, for a command given without arguments
+                exc.show()  # type: ignore[attr-defined]
+                sys.exit(exc.exit_code)
+            ctx = getattr(exc, "ctx", None)
+            hint = ""
+            if ctx is not None and not isinstance(exc, UsageLine):  # ours already say what to do
+                hint = f" ({ctx.command_path} --help lists the options)"
+            err_console.print(
+                f"error: {message.rstrip('.')}{hint}", markup=False, highlight=False, soft_wrap=True
+            )
+            sys.exit(exc.exit_code)
+        except typer.Abort:
+            err_console.print("aborted", markup=False)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
 app = typer.Typer(
+    cls=OneLineUsageErrors,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -56,10 +99,10 @@ def handles_errors(fn: F) -> F:
 
 
 class UsageLine(typer.BadParameter):
-    """A bad parameter value: one ``error:`` line on stderr and exit 2 (no usage block)."""
+    """A bad parameter value whose message already names the option (no "Invalid value for" prefix)."""
 
-    def show(self, file: object = None) -> None:
-        err_console.print(f"error: {self.message}", markup=False, highlight=False, soft_wrap=True)
+    def format_message(self) -> str:
+        return self.message
 
 
 def checked(rule: Callable[..., Any], keep_input: bool = False, **settings: Any) -> Callable[[Any], Any]:
