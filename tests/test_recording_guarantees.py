@@ -160,7 +160,7 @@ def test_model_terms_the_live_view_cannot_carry_are_refused_before_the_device_op
     from tankdaq.errors import InputError
 
     out = tmp_path / "out"
-    with pytest.raises(InputError, match="fc cannot be fitted live"):
+    with pytest.raises(InputError, match=r"carry only .* not fc"):
         RecordDaemon(_settings(out, model="b1,c1,fc"))
     assert not out.exists() or not any(out.iterdir())
 

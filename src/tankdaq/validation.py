@@ -39,11 +39,6 @@ MAX_RELEASE_ANGLE_DEG = 45.0
 #: Bootstrap replicas beyond this add nothing to a 95 % interval and take hours.
 MAX_BOOTSTRAP_REPLICAS = 10_000
 
-#: Terms the live view and the recording's /fit channel carry: the decay equation's (physics.decay).
-#: ``fc`` (Coulomb friction) and ``ku`` (exogenous coupling) are fitted offline (identify, diagnose).
-LIVE_TERMS: tuple[str, ...] = TERMS
-
-
 def output_rate_hz(value: float, option: str = "--rate") -> float:
     """An MTi output rate: a whole divisor of 400 Hz (1, 2, 4, 5 ... 100, 200, 400)."""
     if not (math.isfinite(value) and value >= 1 and value == int(value) and MTI_BASE_RATE_HZ % value == 0):
@@ -106,19 +101,25 @@ def percent(value: float, option: str, low: float = 0.0, high: float = 100.0) ->
     return float(value)
 
 
-def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str, ...]:
-    """A model the live identifier, view and recording all carry: decay-equation terms only."""
+def equation_model(spec: str | Sequence[str], use: str, instead: str) -> tuple[str, ...]:
+    """A model of decay-equation terms only (b1 ... s3), for the uses that cannot take friction (``fc``)
+    or coupling (``ku``): ``use`` names who refuses, ``instead`` says what to do."""
     from .ident.models import resolve_model
 
     terms = resolve_model(spec)
-    offline = [term for term in terms if term not in LIVE_TERMS]
-    if offline:
-        raise InputError(
-            f"{option}: term(s) {', '.join(offline)} cannot be fitted live (the live view and the "
-            f"recording's /fit carry {' '.join(LIVE_TERMS)}); record with those, then fit "
-            f"{', '.join(offline)} offline with tankdaq diagnose or tankdaq identify"
-        )
+    outside = [term for term in terms if term not in TERMS]
+    if outside:
+        raise InputError(f"{use} only {' '.join(TERMS)}, not {', '.join(outside)}; {instead}")
     return terms
+
+
+def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str, ...]:
+    """A model the live identifier, view and recording all carry: decay-equation terms only."""
+    return equation_model(
+        spec,
+        f"{option}: the live view and the recording's /fit carry",
+        "record with those, then fit the others offline with tankdaq diagnose or tankdaq identify",
+    )
 
 
 def _probe_writable(folder: Path, what: str) -> None:
@@ -182,7 +183,6 @@ def input_file(path: Path, what: str = "file", error: type[InputError] = InputEr
 
 
 __all__ = [
-    "LIVE_TERMS",
     "MAX_BOOTSTRAP_REPLICAS",
     "MAX_RELEASE_ANGLE_DEG",
     "MTI_BASE_RATE_HZ",
@@ -190,6 +190,7 @@ __all__ = [
     "baud_rate",
     "bootstrap_replicas",
     "draft_factor",
+    "equation_model",
     "hull_draft",
     "input_file",
     "live_model",
