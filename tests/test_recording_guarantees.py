@@ -213,3 +213,10 @@ def test_campaign_says_which_file_is_cut_short(recorded: Path, cut_in_half: Path
     assert result.exit_code == 0, result.output
     _assert_one_notice(result.stderr, folder / "cut.mcap")
     assert np.isfinite(float(read_recording(folder / "whole.mcap").metadata["fit_b1"]))
+
+
+def test_export_says_the_file_is_cut_short(cut_in_half: Path, tmp_path: Path) -> None:
+    result = runner.invoke(app, ["export", str(cut_in_half), "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    _assert_one_notice(result.stderr, cut_in_half)
+    assert (tmp_path / f"{cut_in_half.stem}.csv").is_file()

@@ -65,11 +65,22 @@ def draft_factor(text: str) -> float:
     return parse_draft(text)
 
 
+def hull(spec: str) -> Hull:
+    """A hull by name (the user's hull folder, then the shipped ones) or by .toml path."""
+    from .config import load_hull
+
+    return load_hull(spec)
+
+
 def hull_draft(hull: Hull, draft: float, axis: str | None = None) -> float:
-    """A draft the hull's configuration covers on ``axis`` (every configured axis when None)."""
-    for name in [axis] if axis else sorted(hull.axes):
+    """A draft the hull is described at on ``axis`` (every axis when None): within the drafts of its
+    ``[simulation]`` part when it has one there; a hull without simulated drafts is described at its
+    design draft only, and any draft ``draft_factor`` accepts is taken (scaled wall-sided)."""
+    for name in [axis] if axis else sorted(hull.simulation):
+        if name not in hull.simulation:
+            continue
         try:
-            hull.axis_model(name).coefficients(draft)
+            hull.simulation[name].coefficients(draft)
         except InputError as exc:
             raise InputError(f"hull {hull.name} ({name}): {exc}; give a draft in that range") from None
     return draft
@@ -122,30 +133,29 @@ def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str,
     )
 
 
-def _probe_writable(folder: Path, what: str) -> None:
-    """Create and remove a file in ``folder``: the only check that holds for root and read-only mounts."""
+def _cannot_write_in(folder: Path) -> str | None:
+    """Why a file cannot be created in ``folder`` (None: it can). Tries it: the only check that holds
+    for root and for read-only or pseudo file systems. The probe file is removed at once."""
     try:
         fd, name = tempfile.mkstemp(prefix=".tankdaq-probe-", dir=folder)
     except OSError as exc:
-        raise InputError(
-            f"cannot write {what} in {folder}: {exc.strerror}; choose a writable folder"
-        ) from None
+        return exc.strerror or str(exc)
     os.close(fd)
     os.unlink(name)
+    return None
 
 
 def output_dir(path: Path, option: str = "--out") -> Path:
-    """A folder files can be written into; created (with its parents) when missing."""
+    """A folder files can be written into, or one that can be created: nothing is left behind by the
+    check (the command creates the folder when it writes), so a refused command leaves no trace."""
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise InputError(f"{option} {path} is a file, not a folder; give a folder (it is created if missing)")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(
-            f"{option} {path}: cannot create the folder ({exc.strerror}); choose a writable folder"
-        ) from None
-    _probe_writable(path, f"{option} files")
+    existing = next(p for p in (path, *path.parents) if p.exists() or p == Path(p.anchor) or p == Path("."))
+    if not existing.is_dir():
+        raise InputError(f"{option} {path}: {existing} is a file, not a folder; give a folder")
+    why = _cannot_write_in(existing)
+    if why is not None:
+        action = "write files there" if existing == path else f"create it in {existing}"
+        raise InputError(f"{option} {path}: cannot {action} ({why}); choose a writable folder")
     return path
 
 
@@ -158,7 +168,9 @@ def output_file(path: Path, option: str = "--out") -> Path:
     if not folder.is_dir():
         state = "is not a folder" if folder.exists() else "does not exist"
         raise InputError(f"{option} {path}: the folder {folder} {state}; create it or choose another")
-    _probe_writable(folder, f"{option} {path.name}")
+    why = _cannot_write_in(folder)
+    if why is not None:
+        raise InputError(f"{option} {path}: cannot write in {folder} ({why}); choose a writable folder")
     return path
 
 
@@ -191,6 +203,7 @@ __all__ = [
     "bootstrap_replicas",
     "draft_factor",
     "equation_model",
+    "hull",
     "hull_draft",
     "input_file",
     "live_model",

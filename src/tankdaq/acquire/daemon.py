@@ -39,7 +39,7 @@ class RecordSettings:
     port: str
     draft: float
     angle_deg: float
-    hull: str = "swath"
+    hull: str | None = None  # name or .toml path; required by the simulator, never assumed
     axis: str = "roll"  # roll, pitch, auto
     rate_hz: float = 100.0
     baud: int | None = None  # None: 115200 on hardware, the smallest that carries the rate on sim
@@ -124,6 +124,11 @@ class RecordDaemon:
         validation.output_rate_hz(settings.rate_hz, option="rate")
         validation.baud_rate(settings.baud, option="baud")
         validation.live_model(settings.model, option="model")
+        if settings.port == "sim":  # refuse a hull the simulator cannot play before anything opens
+            if self.hull is None:
+                raise InputError("the simulated sensor needs a hull to play: give --hull")
+            sim_axis = "roll" if settings.axis == "auto" else settings.axis
+            self.hull.simulation_model(sim_axis).coefficients(settings.draft)
         validation.output_dir(settings.out_dir, option="output folder")
         self.simulator = None
         self.outcomes: list[DecayOutcome] = []
@@ -137,10 +142,10 @@ class RecordDaemon:
 
         s = self.settings
         axis = "roll" if s.axis == "auto" else s.axis
-        if self.hull is not None:
-            self.hull.axis_model(axis).coefficients(s.draft)  # refuse an unknown draft before starting
+        assert self.hull is not None  # __init__ refuses the simulator without one
         scenario = DecayScenario(
-            hull=s.hull,
+            hull=self.hull.name,
+            coefficients=self.hull.simulation_model(axis).coefficients(s.draft),
             draft=s.draft,
             axis=axis,
             angle_deg=s.angle_deg,
@@ -152,7 +157,9 @@ class RecordDaemon:
         self.simulator = SimulatedMTi(
             scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed, legacy=s.sim_legacy
         ).start()
-        self.on_event(f"simulated MTi-G on {self.simulator.link} ({s.hull} {format_draft(s.draft)} {axis})")
+        self.on_event(
+            f"simulated MTi-G on {self.simulator.link} ({self.hull.name} {format_draft(s.draft)} {axis})"
+        )
         return self.simulator.link
 
     def _driver(self) -> MTiDriver:

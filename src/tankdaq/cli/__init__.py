@@ -14,6 +14,7 @@ from . import record  # noqa: F401  (record, replay, demo)
 from . import simulate  # noqa: F401
 from . import decode  # noqa: F401
 from . import store  # noqa: F401  (recover)
+from . import export  # noqa: F401
 from . import identify  # noqa: F401
 from . import campaign  # noqa: F401
 from . import diagnose  # noqa: F401

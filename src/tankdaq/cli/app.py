@@ -137,11 +137,16 @@ def parse_draft_option(value: str) -> float:
     return checked(draft_factor)(value)
 
 
+def say(line: str) -> None:
+    """One line on stderr as written: no markup, no highlighting, never wrapped into two."""
+    err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
 def warn_truncated(runs: Iterable[Any]) -> list[str]:
     """One warning line per recording cut short among the decays read; the files, for ``--json``."""
     notices = {str(run.meta["file"]): run.meta["truncation"] for run in runs if run.meta.get("truncation")}
     for notice in notices.values():
-        err_console.print(notice, markup=False, highlight=False, soft_wrap=True)
+        say(notice)
     return list(notices)
 
 

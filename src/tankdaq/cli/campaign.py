@@ -9,6 +9,7 @@ import typer
 
 from .. import validation
 from .app import app, checked, err_console, handles_errors, progress_bar, warn_truncated
+from .identify import EndS, StartS
 
 
 @app.command("campaign")
@@ -26,6 +27,12 @@ def campaign_command(
     model: Annotated[
         str, typer.Option("--model", help="Terms (b1,b2,c1,c3) or an alias (docs/models.md).")
     ] = "ittc-quadratic-restoring",
+    hulls: Annotated[
+        list[str] | None,
+        typer.Option("--hull", help="Hull files or names for dimensional results (repeat; else by name)."),
+    ] = None,
+    start: StartS = None,
+    end: EndS = None,
 ) -> None:
     """Group decays by hull, axis, draft and initial angle; fit each group jointly (output error).
 
@@ -34,6 +41,7 @@ def campaign_command(
     stdout.
     """
     from ..ident.campaign import (
+        find_campaign_hulls,
         find_recordings,
         group_runs,
         identify_groups,
@@ -41,21 +49,28 @@ def campaign_command(
         read_campaign_runs,
     )
     from ..ident.models import resolve_model
+    from .identify import echo_cuts
 
     resolve_model(model)  # a typo fails before any file is read
+    given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs)
     with progress_bar() as progress:
         reading = progress.add_task("reading", total=len(paths))
         runs = []
         for path in paths:
-            runs.extend(read_campaign_runs(path))
+            runs.extend(read_campaign_runs(path, start, end))
             progress.update(reading, advance=1, description=f"reading {path.name}")
         groups = group_runs(runs)
+        known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
         fitting = progress.add_task("fitting", total=len(groups))
         results = identify_groups(
-            groups, model, progress=lambda key: progress.update(fitting, advance=1, description=key.label)
+            groups,
+            model,
+            progress=lambda key: progress.update(fitting, advance=1, description=key.label),
+            hulls=known,
         )
     warn_truncated(runs)
+    echo_cuts(runs)
     typer.echo(markdown_table(results), nl=False)
     failed = [r for r in results if r.fit is None]
     for result in failed:

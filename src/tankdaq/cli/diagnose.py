@@ -14,9 +14,11 @@ from .app import app, checked, err_console, handles_errors, progress_bar, warn_t
 from .identify import (
     AngleColumn,
     AngleUnit,
+    EndS,
     KeepAll,
     RateColumn,
     SkipHalfCycles,
+    StartS,
     TimeColumn,
     load_runs,
 )
@@ -60,6 +62,8 @@ def diagnose_command(
     angle_unit: AngleUnit = "deg",
     keep_all: KeepAll = False,
     skip_half_cycles: SkipHalfCycles = 0,
+    start: StartS = None,
+    end: EndS = None,
 ) -> None:
     """Fit a baseline, find where it disagrees with the decays, name and add the missing effects."""
     from ..diagnose.effects import LIBRARY
@@ -70,7 +74,9 @@ def diagnose_command(
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     if max_steps < 0:
         raise InputError(f"--max-steps must be 0 or more, not {max_steps}")
-    runs = load_runs(inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles)
+    runs = load_runs(
+        inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
+    )
     truncated = warn_truncated(runs)
     with progress_bar() as progress:
         # per step: every candidate, plus the two refits of the late-disturbance test

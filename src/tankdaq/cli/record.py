@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from .. import validation
-from .app import app, checked, err_console, handles_errors, parse_draft_option
+from .app import app, checked, err_console, handles_errors, parse_draft_option, say
 
 
 class AxisChoice(StrEnum):
@@ -26,14 +26,6 @@ def _viewer(value: str) -> str:
         return check_mode(value)
     except InputError as exc:
         raise typer.BadParameter(str(exc)) from None
-
-
-def _hull(value: str) -> str:
-    from ..config import list_hulls
-
-    if value not in list_hulls():
-        raise typer.BadParameter(f"unknown hull {value!r}; known hulls: {', '.join(list_hulls())}")
-    return value
 
 
 def _default_viewer() -> str:
@@ -63,7 +55,7 @@ class _StatusLine:
             self._live.__exit__(None, None, None)
 
     def event(self, line: str) -> None:
-        err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+        say(line)
 
     def status(self, status: object) -> None:
         self._text.plain = status.line(self.runs)  # type: ignore[attr-defined]
@@ -127,7 +119,10 @@ def record_command(
         ..., "--angle", callback=checked(validation.release_angle_deg), help="Nominal release angle (deg)."
     ),
     hull: str = typer.Option(
-        "swath", "--hull", callback=_hull, help="Hull name from configs/hulls (see tankdaq hulls)."
+        ...,
+        "--hull",
+        callback=checked(validation.hull, keep_input=True),
+        help="The model tested: a hull name (tankdaq hulls) or a .toml file.",
     ),
     axis: AxisChoice = typer.Option(
         AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
@@ -226,7 +221,7 @@ def replay_command(
             path,
             speed=pace,
             viewer=mode,
-            on_event=lambda line: err_console.print(line, markup=False, highlight=False, soft_wrap=True),
+            on_event=say,
         )
         for o in outcomes:
             fit = o.fit
@@ -267,6 +262,7 @@ def identify_recordings(
 #: The demo's simulated hull rolls by seed 001 eq. (8); the demo identifies that equation's terms
 #: (b1 b2 b3 c1 c2 c3) and shows the truth inside the intervals, and the warnings a real lab would see.
 DEMO_MODEL = "seed001-eq1"
+DEMO_HULL = "swath"
 
 
 @app.command("demo")
@@ -285,14 +281,15 @@ def demo_command(
     from ..config import load_hull
 
     err_console.print(
-        f"recording {runs} simulated decays (swath, T, roll, 8 deg) into {out}; live model {DEMO_MODEL}",
+        f"recording {runs} simulated decays (hull {DEMO_HULL}, T, roll, 8 deg) into {out}; "
+        f"live model {DEMO_MODEL}",
         markup=False,
     )
     outcomes = run_record(
         "sim",
         1.0,
         8.0,
-        "swath",
+        DEMO_HULL,
         "roll",
         100.0,
         None,
@@ -305,5 +302,5 @@ def demo_command(
         sim_speed,
     )
     paths = [o.path for o in outcomes if o.path is not None]
-    truth = load_hull("swath").axis_model("roll").coefficients(1.0)
+    truth = load_hull(DEMO_HULL).simulation_model("roll").coefficients(1.0)
     identify_recordings(paths, out, DEMO_MODEL, truth)
