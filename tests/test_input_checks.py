@@ -57,7 +57,7 @@ def _refused(args: list[str], mentions: str) -> str:
 
 def _nothing_started(places: dict[str, Path]) -> None:
     assert not list(places["tmp"].iterdir()), "a simulator (or something else) was started"
-    assert not places["out"].exists(), "a recording was started"
+    assert not places["out"].exists(), "a refused command left a folder (or a recording) behind"
 
 
 DEVICE_CASES = [
@@ -76,15 +76,6 @@ DEVICE_CASES = [
     (["simulate", "--link", UNWRITABLE], "--link"),
     (["simulate", "--link", "{dir}"], "is a folder"),
 ]
-
-
-@pytest.mark.parametrize(("args", "mentions"), DEVICE_CASES)
-def test_what_needs_a_device_is_refused_before_it_starts(
-    places: dict[str, Path], args: list[str], mentions: str
-) -> None:
-    _refused([a.format(**places) for a in args], mentions)
-    _nothing_started(places)
-
 
 WORK_CASES = [
     (["campaign", "{dir}", "--report", UNWRITABLE], "--report"),
@@ -109,12 +100,12 @@ WORK_CASES = [
 ]
 
 
-@pytest.mark.parametrize(("args", "mentions"), WORK_CASES)
-def test_bad_paths_and_values_are_refused_before_any_work(
+@pytest.mark.parametrize(("args", "mentions"), DEVICE_CASES + WORK_CASES)
+def test_refused_in_one_line_before_a_device_opens_or_work_starts(
     places: dict[str, Path], args: list[str], mentions: str
 ) -> None:
     _refused([a.format(**places) for a in args], mentions)
-    assert not places["out"].exists(), "a refused command left a folder behind"
+    _nothing_started(places)
 
 
 def test_checking_an_output_folder_leaves_nothing_behind(tmp_path: Path) -> None:
