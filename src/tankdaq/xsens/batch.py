@@ -349,7 +349,8 @@ def _item_field(xdi: int, size: int) -> tuple[np.dtype, Field] | None:
 
 
 def _to_float(view: np.ndarray) -> np.ndarray:
-    return view.astype(np.float64)
+    with np.errstate(invalid="ignore"):  # a signalling NaN in the bytes is a NaN, not a warning
+        return view.astype(np.float64)
 
 
 def _to_int(view: np.ndarray) -> np.ndarray:
