@@ -3,8 +3,8 @@
 Each validator takes a value as the user gave it and returns it (normalised) or
 raises ``InputError`` with a message that says what to give instead. They run
 before a device is opened or any work starts, so a bad flag costs nothing: no
-port opened, no simulator started, no file created except the output folder
-itself. The CLI wraps them as typer parameter callbacks (``cli/app.py``).
+port opened, no simulator started, no file or folder left behind. The CLI wraps
+them as typer parameter callbacks (``cli/app.py``).
 
 Path checks try the operation instead of asking ``os.access``: tankdaq often
 runs as root in the lab (where ``access`` says yes to everything) and on
@@ -39,6 +39,7 @@ MAX_RELEASE_ANGLE_DEG = 45.0
 #: Bootstrap replicas beyond this add nothing to a 95 % interval and take hours.
 MAX_BOOTSTRAP_REPLICAS = 10_000
 
+
 def output_rate_hz(value: float, option: str = "--rate") -> float:
     """An MTi output rate: a whole divisor of 400 Hz (1, 2, 4, 5 ... 100, 200, 400)."""
     if not (math.isfinite(value) and value >= 1 and value == int(value) and MTI_BASE_RATE_HZ % value == 0):
@@ -65,7 +66,7 @@ def draft_factor(text: str) -> float:
     return parse_draft(text)
 
 
-def hull(spec: str) -> Hull:
+def known_hull(spec: str) -> Hull:
     """A hull by name (the user's hull folder, then the shipped ones) or by .toml path."""
     from .config import load_hull
 
@@ -149,7 +150,7 @@ def output_dir(path: Path, option: str = "--out") -> Path:
     """A folder files can be written into, or one that can be created: nothing is left behind by the
     check (the command creates the folder when it writes), so a refused command leaves no trace."""
     path = Path(path)
-    existing = next(p for p in (path, *path.parents) if p.exists() or p == Path(p.anchor) or p == Path("."))
+    existing = next((p for p in (path, *path.parents) if p.exists()), Path.cwd())
     if not existing.is_dir():
         raise InputError(f"{option} {path}: {existing} is a file, not a folder; give a folder")
     why = _cannot_write_in(existing)
@@ -203,9 +204,9 @@ __all__ = [
     "bootstrap_replicas",
     "draft_factor",
     "equation_model",
-    "hull",
     "hull_draft",
     "input_file",
+    "known_hull",
     "live_model",
     "output_dir",
     "output_file",

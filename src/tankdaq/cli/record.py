@@ -121,7 +121,7 @@ def record_command(
     hull: str = typer.Option(
         ...,
         "--hull",
-        callback=checked(validation.hull, keep_input=True),
+        callback=checked(validation.known_hull, keep_input=True),
         help="The model tested: a hull name (tankdaq hulls) or a .toml file.",
     ),
     axis: AxisChoice = typer.Option(
