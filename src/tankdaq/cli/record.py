@@ -136,12 +136,6 @@ def record_command(
         "--baud",
         callback=checked(validation.baud_rate),
         help="Serial baud rate (default 115200; sim picks one that fits).",
-    viewer_bind: str = typer.Option(
-        "127.0.0.1", "--viewer-bind", help="Address a spawned viewer listens on (0.0.0.0: every network)."
-    ),
-    viewer_port: int = typer.Option(
-        9876, "--viewer-port", min=1, max=65535, help="Port a spawned viewer listens on."
-    ),
     ),
     out: Path = typer.Option(
         Path("recordings"),
@@ -158,6 +152,12 @@ def record_command(
         callback=lambda v: v if v is None else _viewer(v),
         help="spawn, save (an .rrd beside each MCAP), none, or a rerun URL.",
     ),
+    viewer_bind: str = typer.Option(
+        "127.0.0.1", "--viewer-bind", help="Address a spawned viewer listens on (0.0.0.0: every network)."
+    ),
+    viewer_port: int = typer.Option(
+        9876, "--viewer-port", min=1, max=65535, help="Port a spawned viewer listens on."
+    ),
     operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
     note: str = typer.Option("", "--note", help="A note stored in the file."),
     model: str = typer.Option(
@@ -167,8 +167,6 @@ def record_command(
         help="Live model: terms (b1,b2,c1,c3) or alias.",
     ),
     sim_speed: float = typer.Option(1.0, "--sim-speed", min=0.1, max=50.0, hidden=True),
-        viewer_bind,
-        viewer_port,
     sim_seed: int = typer.Option(0, "--sim-seed", hidden=True),
 ) -> None:
     """Record decays: detect each release, write one MCAP per decay, fit and show it live."""
@@ -188,6 +186,8 @@ def record_command(
         model,
         sim_speed,
         sim_seed,
+        viewer_bind,
+        viewer_port,
     )
 
 
