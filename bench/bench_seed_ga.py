@@ -60,7 +60,7 @@ def evaluation_only_s(run: DecayRun, population: int, generations: int) -> float
 
 
 def main() -> None:
-    truth = load_hull("swath").axis_model("roll").coefficients(1.0)
+    truth = load_hull("swath").simulation_model("roll").coefficients(1.0)
     run = noisy_decay(truth)
     OutputError(MODEL).fit(run)  # compile the numba kernels outside the timing
     oe_times = []

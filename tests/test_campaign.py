@@ -37,7 +37,7 @@ runner = CliRunner()
 
 
 def truth(key: GroupKey) -> dict[str, float]:
-    return load_hull(key.hull).axis_model(key.axis).coefficients(key.draft)
+    return load_hull(key.hull).simulation_model(key.axis).coefficients(key.draft)
 
 
 @pytest.fixture(scope="module")
@@ -212,7 +212,7 @@ def test_every_campaign_plan_loads_and_names_real_hulls_and_drafts():
     for name in plans:
         plan = load_campaign_plan(name)
         for hull in plan.hulls:
-            model = load_hull(hull).axis_model(plan.axis)
+            model = load_hull(hull).simulation_model(plan.axis)
             for draft in plan.drafts:
                 model.coefficients(parse_draft(draft))  # raises if the hull has no such draft
         assert plan.angles_deg and all(0 < a <= 30 for a in plan.angles_deg)

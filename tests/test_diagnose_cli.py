@@ -56,13 +56,22 @@ def test_json_tells_the_story_of_a_hidden_heave_coupling(tmp_path: Path) -> None
     assert out["final"]["terms"] == ["b1", "c1", "k_heave_m"]
     assert 0 < out["gap_reduction"] < 1 and out["gap_reduction_all_outputs"] > 0.5
     assert "coupling with heave" in out["verdict"]
+    assert [cut["run"] for cut in out["cuts"]] == out["runs"]  # where each free decay ends, and why
+    assert all(cut["line"].startswith(f"{cut['run']}: free decay") for cut in out["cuts"])
+
+
+def split_cut_lines(lines: list[str]) -> tuple[list[str], list[str]]:
+    """The story's leading ``cut:`` lines (one per run), and the rest."""
+    cuts = [line for line in lines if line.startswith("cut: ")]
+    return cuts, lines[len(cuts) :]
 
 
 def test_text_and_report(tmp_path: Path) -> None:
     report = tmp_path / "report"
     result = invoke(*write_csvs(tmp_path, ("damping.quadratic",), seed=22), "--report", report)
     assert result.exit_code == 0, result.output
-    lines = result.stdout.strip().splitlines()
+    cuts, lines = split_cut_lines(result.stdout.strip().splitlines())
+    assert cuts and all(": free decay " in cut for cut in cuts)  # one line per run: where its free decay ends
     assert lines[0].startswith("baseline b1,c1: RMS") and "not white" in lines[0]
     assert any(line.startswith("added quadratic damping (amplitude-dependent damping)") for line in lines)
     assert lines[-1].startswith("missing: quadratic damping")

@@ -229,7 +229,7 @@ def test_simulated_campaign_recordings_reveal_the_hull_model(tmp_path: Path) -> 
 
     paths = write_simulated_campaign(tmp_path, ["swath"], "roll", [1.0], [4.0, 8.0, 12.0], "mcap", seed=1)
     runs = [run for path in paths for run in read_decay_runs(path)]
-    truth = load_hull("swath").axis_model("roll").coefficients(1.0)
+    truth = load_hull("swath").simulation_model("roll").coefficients(1.0)
     diagnoser = Diagnoser().fit(runs)
     families = {s.effect.family for s in diagnoser.steps_}
     assert families == {"amplitude-dependent damping", "nonlinear restoring"}

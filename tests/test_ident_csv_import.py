@@ -98,7 +98,7 @@ def test_a_strongly_damped_decay_is_still_a_decay(tmp_path):
     """Seed 001 SWATH roll at 15 deg swings back only a few degrees: still a decay, cut at the release."""
     from tankdaq.config import load_hull
 
-    c = load_hull("swath").axis_model("roll").coefficients(1.0)
+    c = load_hull("swath").simulation_model("roll").coefficients(1.0)
     t = np.arange(1700) / 100.0
     angle = np.full(t.size, math.radians(15.0))
     free = t >= 2.0

@@ -30,7 +30,7 @@ CASES = [
 
 @pytest.mark.parametrize(("hull", "axis", "angle_deg"), CASES)
 def test_published_equations_are_identified_back(hull, axis, angle_deg):
-    truth = load_hull(hull).axis_model(axis).coefficients(1.0)
+    truth = load_hull(hull).simulation_model(axis).coefficients(1.0)
     terms = canonical_order(list(truth))
     run = synthetic_run(truth, seed=31, angle0=math.radians(angle_deg), duration_s=12.0)
     fit = OutputError(terms).fit([run])

@@ -223,9 +223,27 @@ def _tankdaq(*args: str, **kwargs) -> subprocess.Popen:
     )
 
 
+def record_args(port: str, out: Path, *extra: str) -> list[str]:
+    """``tankdaq record`` arguments for the swath at T from 8 deg on ``port``, writing into ``out``."""
+    return [
+        "record",
+        "--port",
+        port,
+        "--hull",
+        "swath",
+        "--draft",
+        "T",
+        "--angle",
+        "8",
+        "--out",
+        str(out),
+        *extra,
+    ]
+
+
 def _recording_after_release(out: Path, *extra: str) -> subprocess.Popen:
     """``tankdaq record --port sim`` in a subprocess, returned once it has reported a release."""
-    args = ["record", "--port", "sim", "--draft", "T", "--angle", "8", "--out", str(out), "--viewer", "none"]
+    args = record_args("sim", out, "--viewer", "none")
     proc = _tankdaq(*args, *extra)
     assert proc.stderr is not None
     deadline = time.monotonic() + 60
@@ -273,17 +291,20 @@ def test_sigterm_closes_the_file_properly(tmp_path: Path) -> None:
 
 
 BAD_INPUTS = [
-    (["--port", "sim", "--draft", "1.1X", "--angle", "8"], "draft"),
-    (["--port", "sim", "--draft", "T", "--angle", "-3"], "angle"),
-    (["--port", "sim", "--draft", "T", "--angle", "abc"], "angle"),
+    (["--hull", "swath", "--port", "sim", "--draft", "1.1X", "--angle", "8"], "draft"),
+    (["--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "-3"], "angle"),
+    (["--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "abc"], "angle"),
     (["--port", "sim", "--draft", "T", "--angle", "8", "--hull", "titanic"], "hull"),
-    (["--port", "sim", "--draft", "T", "--angle", "8", "--axis", "yaw"], "axis"),
-    (["--port", "sim", "--draft", "T", "--angle", "8", "--rate", "150"], "rate"),
-    (["--port", "sim", "--draft", "T", "--angle", "8", "--viewer", "hologram"], "viewer"),
-    (["--port", "sim", "--draft", "T", "--angle", "8", "--model", "b9,c1"], "b9"),
-    (["--port", "sim", "--draft", "3T", "--angle", "8"], "draft"),
+    (["--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "8", "--axis", "yaw"], "axis"),
+    (["--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "8", "--rate", "150"], "rate"),
+    (["--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "8", "--viewer", "hologram"], "viewer"),
+    (["--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "8", "--model", "b9,c1"], "b9"),
+    (["--hull", "swath", "--port", "sim", "--draft", "3T", "--angle", "8"], "draft"),
     (["--draft", "T", "--angle", "8"], "port"),
-    (["--port", "/dev/ttyNOPE0", "--draft", "T", "--angle", "8", "--viewer", "none"], "/dev/ttyNOPE0"),
+    (
+        ["--hull", "swath", "--port", "/dev/ttyNOPE0", "--draft", "T", "--angle", "8", "--viewer", "none"],
+        "/dev/ttyNOPE0",
+    ),
 ]
 
 
@@ -296,9 +317,7 @@ def test_bad_record_input_exit_2_one_line(args: list[str], mentions: str) -> Non
 
 
 def test_missing_port_in_a_real_process_is_one_line_no_traceback(tmp_path: Path) -> None:
-    proc = _tankdaq(
-        "record", "--port", "/dev/ttyNOPE0", "--draft", "T", "--angle", "8", "--out", str(tmp_path)
-    )
+    proc = _tankdaq(*record_args("/dev/ttyNOPE0", tmp_path))
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 2
     lines = [line for line in err.splitlines() if line.strip()]
@@ -336,19 +355,7 @@ def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> 
         resource.setrlimit(resource.RLIMIT_FSIZE, (120_000, 120_000))
 
     exe = str(Path(sys.executable).with_name("tankdaq"))
-    args = [
-        "record",
-        "--port",
-        "sim",
-        "--draft",
-        "T",
-        "--angle",
-        "8",
-        "--out",
-        str(tmp_path),
-        "--viewer",
-        "none",
-    ]
+    args = record_args("sim", tmp_path, "--viewer", "none")
     proc = subprocess.run(
         [exe, *args, "--runs", "2", "--sim-speed", "8"],
         capture_output=True,

@@ -37,7 +37,7 @@ def test_same_seed_same_data_other_seed_other_data() -> None:
 
 def test_truth_matches_the_reference_integrator_after_release(roll_runs) -> None:
     scenario, _, trace = roll_runs
-    coeffs = load_hull("swath").axis_model("roll").coefficients(1.0)
+    coeffs = load_hull("swath").simulation_model("roll").coefficients(1.0)
     for run in trace.runs:
         assert run.kind == "release"
         assert run.coefficients == coeffs
@@ -116,7 +116,7 @@ def test_truth_in_seconds_does_not_depend_on_the_rate() -> None:
 
 def test_pitch_scenario_moves_the_pitch_channel_with_pitch_coefficients() -> None:
     samples, trace = DecayScenario(runs=1, axis="pitch", seed=3, noise=SensorNoise.none()).samples()
-    assert trace.runs[0].coefficients == load_hull("swath").axis_model("pitch").coefficients(1.0)
+    assert trace.runs[0].coefficients == load_hull("swath").simulation_model("pitch").coefficients(1.0)
     assert np.ptp(samples["pitch"]) > math.radians(10)
     assert np.ptp(samples["roll"]) < math.radians(1)
 

@@ -25,7 +25,7 @@ from tankdaq.ident.seed_methods import (
 from tankdaq.physics.decay import acceleration, simulate_decay
 from tankdaq.records import DecayRun
 
-SWATH_ROLL_T = load_hull("swath").axis_model("roll").coefficients(1.0)
+SWATH_ROLL_T = load_hull("swath").simulation_model("roll").coefficients(1.0)
 QUICK_GA = GeneticSettings(population=200, generations=150)
 
 

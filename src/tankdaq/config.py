@@ -1,7 +1,9 @@
 """Configuration files under ``configs/``: hulls, vehicles, campaigns (TOML).
 
 Configuration is data, not code. This module finds the folder, parses drafts
-written as people write them (``0.9T``, ``T``, ``1.1T``) and loads hulls.
+written as people write them (``0.9T``, ``T``, ``1.1T``) and loads hulls: a path
+given to ``--hull``, else the user's hull folder, else the shipped ones
+(docs/hulls.md).
 """
 
 from __future__ import annotations
@@ -50,12 +52,21 @@ def format_draft(factor: float) -> str:
 
 
 @dataclass
-class AxisModel:
-    """Decay coefficients of one axis of one hull, per draft factor."""
+class AxisParticulars:
+    """What the model is about one axis: metacentric height and (dry) radius of gyration, if known."""
+
+    axis: str
+    gm_m: float | None = None
+    radius_of_gyration_m: float | None = None
+    note: str = ""
+
+
+@dataclass
+class SimulationModel:
+    """Decay coefficients of one axis per draft factor: what the simulator plays (``[simulation]``)."""
 
     axis: str
     drafts: dict[float, dict[str, float]]
-    gm_m: float | None = None
     source: str = ""
 
     def coefficients(self, draft: float) -> dict[str, float]:
@@ -74,62 +85,233 @@ class AxisModel:
         return {n: (1 - w) * self.drafts[lo].get(n, 0.0) + w * self.drafts[hi].get(n, 0.0) for n in names}
 
 
+#: Where a hull file was found, in lookup order.
+ORIGIN_PATH, ORIGIN_USER, ORIGIN_SHIPPED = "path", "user", "shipped"
+
+
 @dataclass
 class Hull:
-    """A model hull: main dimensions and the decay model of each axis."""
+    """A model hull: what it is (dimensions, GM, gyradius per axis) and, optionally, how it decays.
+
+    ``simulation`` holds decay coefficients only the simulator needs; a lab's own hull usually has none
+    (the coefficients are what the lab is about to measure).
+    """
 
     name: str
     description: str
     dimensions: dict[str, float]
-    axes: dict[str, AxisModel]
+    axes: dict[str, AxisParticulars]
+    simulation: dict[str, SimulationModel] = field(default_factory=dict)
     sources: dict[str, str] = field(default_factory=dict)
     path: Path | None = None
+    origin: str = ORIGIN_SHIPPED
 
     @property
     def displacement_kg(self) -> float | None:
         return self.dimensions.get("displacement_kg")
 
-    def axis_model(self, axis: str) -> AxisModel:
-        if axis not in self.axes:
-            raise InputError(
-                f"hull {self.name!r} has no {axis} model; it has: {', '.join(sorted(self.axes))}"
+    def particulars(self, axis: str) -> AxisParticulars:
+        """GM and gyradius of an axis (both None when the file does not give them)."""
+        return self.axes.get(axis, AxisParticulars(axis))
+
+    def dry_inertia_kg_m2(self, axis: str) -> float | None:
+        """m k^2 from the displacement and the axis' radius of gyration, when both are known."""
+        k = self.particulars(axis).radius_of_gyration_m
+        return None if k is None or self.displacement_kg is None else self.displacement_kg * k * k
+
+    def simulation_model(self, axis: str) -> SimulationModel:
+        """The decay coefficients the simulator plays; a hull without them is refused in one line."""
+        if axis not in self.simulation:
+            has = (
+                f"it has [simulation] for {', '.join(sorted(self.simulation))}"
+                if self.simulation
+                else ("it has no [simulation] part")
             )
-        return self.axes[axis]
+            raise InputError(
+                f"hull {self.name!r} has no simulation coefficients for {axis} ({has}): the simulator needs "
+                f'them; record from a real port, or add [simulation.{axis}.drafts."T"] to {self.path}'
+            )
+        return self.simulation[axis]
+
+
+def user_hulls_dir() -> Path:
+    """The user's hull folder: $TANKDAQ_HULLS_DIR, else $XDG_CONFIG_HOME/tankdaq/hulls (~/.config/...).
+
+    The XDG base-directory rule, as platformdirs applies it on Linux: a relative XDG_CONFIG_HOME is
+    ignored. On Windows, %APPDATA%\\tankdaq\\hulls.
+    """
+    env = os.environ.get("TANKDAQ_HULLS_DIR")
+    if env:
+        return Path(env).expanduser()
+    if os.name == "nt" and os.environ.get("APPDATA"):
+        return Path(os.environ["APPDATA"]) / "tankdaq" / "hulls"
+    xdg = os.environ.get("XDG_CONFIG_HOME", "")
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".config"
+    return base / "tankdaq" / "hulls"
+
+
+def shipped_hulls_dir() -> Path:
+    return config_dir() / "hulls"
+
+
+@dataclass(frozen=True)
+class HullEntry:
+    """One hull file found by name: where it lives and which folder it came from."""
+
+    name: str
+    path: Path
+    origin: str
+    shadows: Path | None = None  # a shipped hull of the same name that this user hull hides
+
+
+def find_hulls() -> list[HullEntry]:
+    """Every hull known by name: the user's first, then the shipped ones they do not shadow."""
+    user = {p.stem: p for p in sorted(user_hulls_dir().glob("*.toml"))}
+    shipped = {p.stem: p for p in sorted(shipped_hulls_dir().glob("*.toml"))}
+    entries = [HullEntry(n, p, ORIGIN_USER, shipped.get(n)) for n, p in user.items()]
+    entries += [HullEntry(n, p, ORIGIN_SHIPPED) for n, p in shipped.items() if n not in user]
+    return sorted(entries, key=lambda e: e.name)
 
 
 def list_hulls() -> list[str]:
-    """Names of the hulls in configs/hulls."""
-    return sorted(p.stem for p in (config_dir() / "hulls").glob("*.toml"))
+    """Names of the hulls found by name (user folder and shipped)."""
+    return [entry.name for entry in find_hulls()]
 
 
-def load_hull(name: str) -> Hull:
-    """Load ``configs/hulls/<name>.toml``; an unknown name lists the known ones."""
-    path = config_dir() / "hulls" / f"{name}.toml"
-    if not path.is_file():
-        raise InputError(f"unknown hull {name!r}; known hulls: {', '.join(list_hulls()) or 'none'}")
+def is_hull_path(spec: str) -> bool:
+    """``--hull`` names a file (a .toml, or anything with a folder in it) rather than a hull by name."""
+    return spec.endswith(".toml") or "/" in spec or os.sep in spec
+
+
+def locate_hull(spec: str) -> tuple[Path, str]:
+    """(file, origin) of a hull: a path given as is, else the user folder, else the shipped ones."""
+    if is_hull_path(spec):
+        path = Path(spec).expanduser()
+        if not path.is_file():
+            raise InputError(f"hull file {spec} does not exist; write one with: tankdaq hulls new NAME")
+        return path, ORIGIN_PATH
+    for entry in find_hulls():
+        if entry.name == spec:
+            return entry.path, entry.origin
+    known = ", ".join(list_hulls()) or "none"
+    raise InputError(
+        f"unknown hull {spec!r}; known hulls: {known} (a file path works too; tankdaq hulls new NAME "
+        f"writes a template to {user_hulls_dir()})"
+    )
+
+
+def load_hull(spec: str) -> Hull:
+    """A hull by path or name (lookup: a path, the user folder, the shipped ones); unknown names list all."""
+    path, origin = locate_hull(spec)
     try:
         data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, OSError) as exc:
-        raise ConfigError(f"{path}: {exc}") from exc
-    axes: dict[str, AxisModel] = {}
-    for axis, spec in data.get("axes", {}).items():
+    except (tomllib.TOMLDecodeError, OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    try:
+        return _parse_hull(data, path, origin)
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+def _parse_hull(data: dict, path: Path, origin: str) -> Hull:
+    if "axes" in data and any("drafts" in spec for spec in data["axes"].values()):
+        raise ConfigError(
+            f"{path}: decay coefficients belong under [simulation.<axis>.drafts], not [axes.<axis>.drafts] "
+            "(hull files now say what the model is; see docs/hulls.md)"
+        )
+    axes = {
+        axis: AxisParticulars(
+            axis=axis,
+            gm_m=_optional_float(spec, "gm_m"),
+            radius_of_gyration_m=_optional_float(spec, "radius_of_gyration_m"),
+            note=str(spec.get("note", "")),
+        )
+        for axis, spec in data.get("axes", {}).items()
+    }
+    simulation: dict[str, SimulationModel] = {}
+    for axis, spec in data.get("simulation", {}).items():
         drafts: dict[float, dict[str, float]] = {}
         for draft_text, coeffs in spec.get("drafts", {}).items():
             unknown = set(coeffs) - set(TERMS)
             if unknown:
-                raise ConfigError(f"{path}: unknown terms {sorted(unknown)} in {axis} {draft_text}")
+                raise ConfigError(
+                    f"{path}: unknown terms {sorted(unknown)} in simulation.{axis} {draft_text}"
+                )
             drafts[parse_draft(draft_text)] = {k: float(v) for k, v in coeffs.items()}
         if not drafts:
-            raise ConfigError(f"{path}: axis {axis} has no drafts")
-        axes[axis] = AxisModel(axis=axis, drafts=drafts, gm_m=spec.get("gm_m"), source=spec.get("source", ""))
+            raise ConfigError(f"{path}: [simulation.{axis}] has no drafts (or leave the part out)")
+        simulation[axis] = SimulationModel(axis=axis, drafts=drafts, source=str(spec.get("source", "")))
     return Hull(
-        name=data.get("name", name),
-        description=data.get("description", ""),
+        name=str(data.get("name", path.stem)),
+        description=str(data.get("description", "")),
         dimensions={k: float(v) for k, v in data.get("dimensions", {}).items()},
         axes=axes,
+        simulation=simulation,
         sources=dict(data.get("sources", {})),
         path=path,
+        origin=origin,
     )
+
+
+def _optional_float(spec: dict, key: str) -> float | None:
+    return float(spec[key]) if spec.get(key) is not None else None
+
+
+#: What ``tankdaq hulls new NAME`` writes: every field explained, the coefficients left out.
+HULL_TEMPLATE = """\
+# Hull file for tankdaq: what the model is. Units SI (m, kg). Lines starting with # are comments.
+# Used by: tankdaq record --hull {name}, identify --hull {name}, campaign (dimensional results).
+name = "{name}"
+description = "{name}: describe the model (scale, owner, loading condition)"
+
+[dimensions]
+# Main dimensions of the model as tested. Any key = number is kept in every recording's metadata.
+length_m = 1.0
+beam_m = 0.3
+draft_m = 0.1
+# Displacement (mass) at the design draft T: with GM it fixes the total inertia I = m g GM / c1.
+displacement_kg = 20.0
+
+[axes.roll]
+# Transverse metacentric height GM_T (m) at the design draft.
+gm_m = 0.05
+# Dry radius of gyration about the roll axis (m), if known: the added inertia fraction is then reported.
+# radius_of_gyration_m = 0.12
+
+[axes.pitch]
+# Longitudinal metacentric height GM_L (m).
+# gm_m = 1.5
+# radius_of_gyration_m = 0.25
+
+# [simulation] is optional: decay coefficients per unit total inertia (x'' + b1 x' + b2|x'|x' + c1 x
+# + c3 x^3 = 0, rad, s) that only the simulator (record --port sim, simulate) needs. Leave it out for a
+# real model: the coefficients are what you are about to measure.
+# [simulation.roll.drafts."T"]
+# b1 = 0.3
+# b2 = 0.02
+# c1 = 14.0
+# c3 = 60.0
+"""
+
+
+def write_hull_template(name: str, folder: Path | None = None) -> Path:
+    """Write a commented template ``<folder>/<name>.toml`` (default the user folder); never overwrite."""
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9-]*", name):
+        raise InputError(
+            f"hull name {name!r} not usable: letters, digits and '-' only (it becomes part of file names)"
+        )
+    folder = folder or user_hulls_dir()
+    path = folder / f"{name}.toml"
+    if path.exists():
+        raise InputError(f"{path} already exists; edit it, or choose another name")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        path.write_text(HULL_TEMPLATE.format(name=name))
+    except OSError as exc:
+        raise InputError(
+            f"cannot write {path}: {exc.strerror}; set TANKDAQ_HULLS_DIR to a writable folder"
+        ) from None
+    return path
 
 
 @dataclass

@@ -11,15 +11,18 @@ from __future__ import annotations
 import contextlib
 import json
 import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from .. import validation
 from ..config import Hull, format_draft, load_hull
 from ..device.driver import MTiDriver
 from ..errors import DeviceGone, InputError, RecordingError
-from ..viz.live import LiveView
+from ..store.disk import RESERVE_BYTES
+from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 
@@ -41,13 +44,16 @@ class RecordSettings:
     port: str
     draft: float
     angle_deg: float
-    hull: str = "swath"
+    hull: str | None = None  # name or .toml path; required by the simulator, never assumed
     axis: str = "roll"  # roll, pitch, auto
     rate_hz: float = 100.0
     baud: int | None = None  # None: the device's rate if it carries the output, else the slowest that does
     out_dir: Path = Path("recordings")
     runs: int | None = None
-    viewer: str = "none"
+    viewer: str | None = "none"  # None: the default (spawn with a display, save without)
+    viewer_bind: str = "127.0.0.1"  # where a spawned viewer listens; 0.0.0.0 only when asked
+    viewer_port: int = 9876
+    disk_reserve_bytes: int = RESERVE_BYTES  # the .rrd stops with less free space than this
     operator: str = ""
     note: str = ""
     model: str = "ittc-quadratic-restoring"
@@ -121,11 +127,21 @@ class RecordDaemon:
         self.hull: Hull | None = load_hull(settings.hull) if settings.hull else None
         if settings.axis not in ("roll", "pitch", "auto"):
             raise InputError(f"axis {settings.axis!r} not understood; use roll, pitch or auto")
-        if not settings.angle_deg > 0:
-            raise InputError(f"angle must be a positive number of degrees, got {settings.angle_deg:g}")
+        # everything checkable is checked here, before a simulator starts or the port opens
+        validation.release_angle_deg(settings.angle_deg, option="angle")
+        validation.output_rate_hz(settings.rate_hz, option="rate")
+        validation.baud_rate(settings.baud, option="baud")
+        validation.live_model(settings.model, option="model")
+        if settings.port == "sim":  # refuse a hull the simulator cannot play before anything opens
+            if self.hull is None:
+                raise InputError("the simulated sensor needs a hull to play: give --hull")
+            sim_axis = "roll" if settings.axis == "auto" else settings.axis
+            self.hull.simulation_model(sim_axis).coefficients(settings.draft)
+        validation.output_dir(settings.out_dir, option="output folder")
         self.simulator = None
         self.outcomes: list[DecayOutcome] = []
         self._next_read = 0.0
+        self._stop = threading.Event()
 
     # ---- the device ----------------------------------------
 
@@ -135,10 +151,10 @@ class RecordDaemon:
 
         s = self.settings
         axis = "roll" if s.axis == "auto" else s.axis
-        if self.hull is not None:
-            self.hull.axis_model(axis).coefficients(s.draft)  # refuse an unknown draft before starting
+        assert self.hull is not None  # __init__ refuses the simulator without one
         scenario = DecayScenario(
-            hull=s.hull,
+            hull=self.hull.name,
+            coefficients=self.hull.simulation_model(axis).coefficients(s.draft),
             draft=s.draft,
             axis=axis,
             angle_deg=s.angle_deg,
@@ -150,7 +166,9 @@ class RecordDaemon:
         self.simulator = SimulatedMTi(
             scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed, legacy=s.sim_legacy
         ).start()
-        self.on_event(f"simulated MTi-G on {self.simulator.link} ({s.hull} {format_draft(s.draft)} {axis})")
+        self.on_event(
+            f"simulated MTi-G on {self.simulator.link} ({self.hull.name} {format_draft(s.draft)} {axis})"
+        )
         return self.simulator.link
 
     def _driver(self) -> MTiDriver:
@@ -181,7 +199,16 @@ class RecordDaemon:
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
         json.dumps(config, default=str)  # refuse unserialisable settings early
-        view = LiveView(s.viewer, axis="roll" if s.axis == "auto" else s.axis)
+        mode = s.viewer or default_viewer_mode()
+        self.on_event(describe_mode(mode, default=s.viewer is None))
+        view = LiveView(
+            mode,
+            axis="roll" if s.axis == "auto" else s.axis,
+            bind=s.viewer_bind,
+            spawn_port=s.viewer_port,
+            on_note=lambda line: self.on_event(f"viewer: {line}"),
+            rrd_reserve_bytes=s.disk_reserve_bytes,
+        )
         session_settings = SessionSettings(
             axis=s.axis,
             angle_deg=s.angle_deg,
@@ -212,7 +239,7 @@ class RecordDaemon:
                 self.on_event(f"device: {self.status.device}")
                 session = self._session(driver)
                 self.status.state = "waiting"
-                while s.runs is None or len(self.outcomes) < s.runs:
+                while (s.runs is None or len(self.outcomes) < s.runs) and not self._stop.is_set():
                     try:
                         self._pump(driver, session)
                     except DeviceGone as exc:
@@ -225,6 +252,10 @@ class RecordDaemon:
         finally:
             self._shut_down(driver, session)
         return self.outcomes
+
+    def stop(self) -> None:
+        """Ask ``run`` to return after the current read (from a callback or another thread)."""
+        self._stop.set()
 
     def _shut_down(self, driver: MTiDriver, session: DecaySession | None) -> None:
         """Close the decay under way (its file stays readable), the viewer, the port, the simulator."""

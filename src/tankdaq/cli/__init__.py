@@ -15,6 +15,7 @@ from . import simulate  # noqa: F401
 from . import device  # noqa: F401  (device ports, info, reset, restore-defaults)
 from . import decode  # noqa: F401
 from . import store  # noqa: F401  (recover)
+from . import export  # noqa: F401
 from . import identify  # noqa: F401
 from . import campaign  # noqa: F401
 from . import diagnose  # noqa: F401

@@ -9,9 +9,10 @@ from typing import Annotated
 
 import typer
 
+from .. import validation
 from ..errors import InputError
 from ..records import DecayRun
-from .app import app, handles_errors, parse_draft_option, progress_bar
+from .app import app, checked, err_console, handles_errors, parse_draft_option, progress_bar, warn_truncated
 
 # Options every command that reads decays shares (identify, diagnose): how to read other labs' CSV.
 TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
@@ -22,6 +23,22 @@ KeepAll = Annotated[bool, typer.Option("--keep-all", help="Do not cut the CSV re
 SkipHalfCycles = Annotated[
     int, typer.Option("--skip-half-cycles", min=0, help="Half-cycles dropped after it.")
 ]
+# Where the free decay is taken from and to (identify, diagnose, campaign); automatic end by default.
+StartS = Annotated[
+    float | None, typer.Option("--start", min=0.0, help="Keep from S s after each release (default 0).")
+]
+EndS = Annotated[
+    float | None,
+    typer.Option("--end", min=0.0, help="End each free decay S s after its release (default: found)."),
+]
+
+
+def echo_cuts(runs: list[DecayRun]) -> None:
+    """One line per run on stderr: where its free decay was cut and why."""
+    from ..ident.free_decay import cut_lines
+
+    for line in cut_lines(runs):
+        err_console.print(f"cut: {line}", markup=False, highlight=False, soft_wrap=True)
 
 
 def load_runs(
@@ -33,11 +50,15 @@ def load_runs(
     angle_unit: str,
     keep_all: bool,
     skip_half_cycles: int,
+    start_s: float | None = None,
+    end_s: float | None = None,
 ) -> list[DecayRun]:
-    """Decay runs from every input: MCAP recordings through the store reader, anything else as CSV.
+    """The free decays of every input: MCAP recordings through the store reader, anything else as CSV,
+    each cut where its free part ends (``ident.free_decay``; ``start_s``/``end_s`` override).
 
     Without ``axis`` a recording's decays are read on the axis its metadata names.
     """
+    from ..ident.free_decay import cut_free_decays
     from ..store.csv_import import read_csv_runs
 
     runs: list[DecayRun] = []
@@ -61,7 +82,7 @@ def load_runs(
                     skip_half_cycles=skip_half_cycles,
                 )
             )
-    return runs
+    return cut_free_decays(runs, start_s, end_s)
 
 
 def _json_default(value: object) -> object:
@@ -83,7 +104,11 @@ def _clean(value: object) -> object:
 @handles_errors
 def identify_command(
     inputs: Annotated[
-        list[Path], typer.Argument(help="Decay recordings (.mcap) or CSV files, one decay each.")
+        list[Path],
+        typer.Argument(
+            callback=checked(validation.input_file),
+            help="Decay recordings (.mcap) or CSV files, one decay each.",
+        ),
     ],
     axis: str = typer.Option(
         None, "--axis", help="roll or pitch (default: a recording's own axis; roll for CSV)."
@@ -102,8 +127,13 @@ def identify_command(
     angle_unit: AngleUnit = "deg",
     keep_all: KeepAll = False,
     skip_half_cycles: SkipHalfCycles = 0,
+    start: StartS = None,
+    end: EndS = None,
     bootstrap: int = typer.Option(
-        0, "--bootstrap", min=0, help="Moving-block bootstrap replicas for intervals."
+        0,
+        "--bootstrap",
+        callback=checked(validation.bootstrap_replicas),
+        help=f"Moving-block bootstrap replicas for intervals (up to {validation.MAX_BOOTSTRAP_REPLICAS}).",
     ),
     repeats: bool = typer.Option(
         False, "--repeats", help="The runs are repeats: intervals from their spread (t, n-1 dof)."
@@ -124,9 +154,16 @@ def identify_command(
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     hull_config = load_hull(hull) if hull else None
     terms = resolve_model(model)
-    runs = load_runs(inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles)
+    runs = load_runs(
+        inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
+    )
+    if hull_config is not None:  # the draft must be one the hull has on the decays' axes, before any fit
+        for run_axis in sorted({run.axis for run in runs}):
+            validation.hull_draft(hull_config, draft, run_axis)
+    truncated = {"truncated": bool(cut := warn_truncated(runs)), "truncated_files": cut}
 
     if compare:
+        from ..ident.free_decay import cut_lines
         from ..ident.models import COMPARE_MODELS
 
         with progress_bar() as progress:
@@ -135,8 +172,10 @@ def identify_command(
                 runs, COMPARE_MODELS, method, lambda name: progress.update(task, advance=1, description=name)
             )
         if as_json:
-            typer.echo(json.dumps(_clean({"compare": rows}), default=_json_default))
+            document = {"compare": rows, "cuts": cut_lines(runs), **truncated}
+            typer.echo(json.dumps(_clean(document), default=_json_default))
         else:
+            echo_cuts(runs)
             typer.echo(compare_text(rows))
         return
 
@@ -165,6 +204,6 @@ def identify_command(
             interval_method = f"{spread.method}, {len(runs)} runs"
     summary = summarize(estimator, runs, method, hull_config, draft, interval_method)
     if as_json:
-        typer.echo(json.dumps(_clean(summary), default=_json_default))
+        typer.echo(json.dumps(_clean({**summary, **truncated}), default=_json_default))
     else:
         typer.echo(text_report(summary))

@@ -2,27 +2,20 @@
 
 from __future__ import annotations
 
-import math
 from enum import StrEnum
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
-from .app import app, err_console, handles_errors, parse_draft_option
+from .. import validation
+from .app import app, checked, err_console, handles_errors, parse_draft_option, say
 
 
 class AxisChoice(StrEnum):
     roll = "roll"
     pitch = "pitch"
     auto = "auto"
-
-
-def _positive_angle(value: float) -> float:
-    if not (math.isfinite(value) and 0 < value <= 45):
-        raise typer.BadParameter(
-            f"{value:g} is not a release angle; give a positive number of degrees up to 45"
-        )
-    return value
 
 
 def _viewer(value: str) -> str:
@@ -33,45 +26,6 @@ def _viewer(value: str) -> str:
         return check_mode(value)
     except InputError as exc:
         raise typer.BadParameter(str(exc)) from None
-
-
-def _hull(value: str) -> str:
-    from ..config import list_hulls
-
-    if value not in list_hulls():
-        raise typer.BadParameter(f"unknown hull {value!r}; known hulls: {', '.join(list_hulls())}")
-    return value
-
-
-def _rate(value: float) -> float:
-    if not (value > 0 and 400 % value == 0):
-        raise typer.BadParameter(
-            f"{value:g} Hz is not an MTi output rate; use a divisor of 400 (100, 200, 400)"
-        )
-    return value
-
-
-def _baud(ctx: typer.Context, value: int | None) -> int | None:
-    """--baud: an MTi serial rate that carries the decay output at --rate (checked before the port opens)."""
-    from ..xsens.constants import SERIAL_BAUDS
-    from ..xsens.control import decay_bits_per_second, line_refusal
-
-    if value is None:
-        return None
-    if value not in SERIAL_BAUDS:
-        known = ", ".join(map(str, SERIAL_BAUDS))
-        raise typer.BadParameter(f"{value} is not an MTi serial rate; use one of {known}")
-    rate = ctx.params.get("rate", 100.0)
-    refusal = line_refusal(decay_bits_per_second(rate), rate, value)
-    if refusal is not None:
-        raise typer.BadParameter(refusal)
-    return value
-
-
-def _default_viewer() -> str:
-    from ..viz.live import default_viewer_mode
-
-    return default_viewer_mode()
 
 
 class _StatusLine:
@@ -95,7 +49,7 @@ class _StatusLine:
             self._live.__exit__(None, None, None)
 
     def event(self, line: str) -> None:
-        err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+        say(line)
 
     def status(self, status: object) -> None:
         self._text.plain = status.line(self.runs)  # type: ignore[attr-defined]
@@ -117,12 +71,18 @@ def run_record(
     model: str,
     sim_speed: float = 1.0,
     sim_seed: int = 0,
+    viewer_bind: str = "127.0.0.1",
+    viewer_port: int = 9876,
 ) -> list:
     """Build the daemon from command-line values, run it with a status line, print what it saved."""
     from ..acquire.daemon import RecordDaemon, RecordSettings
-    from ..ident.models import resolve_model
+    from ..errors import InputError
+    from ..xsens.control import decay_bits_per_second, line_refusal
 
-    resolve_model(model)  # refuse a bad model before the port is opened
+    refusal = None if baud is None else line_refusal(decay_bits_per_second(rate), rate, baud)
+    if refusal is not None:  # checked before the port opens
+        raise InputError(f"--baud {baud}: {refusal}")
+
     settings = RecordSettings(
         port=port,
         draft=draft,
@@ -133,7 +93,9 @@ def run_record(
         baud=baud,
         out_dir=out,
         runs=runs,
-        viewer=viewer or _default_viewer(),
+        viewer=viewer,  # None: the default; the daemon prints the mode in use at start
+        viewer_bind=viewer_bind,
+        viewer_port=viewer_port,
         operator=operator,
         note=note,
         model=model,
@@ -160,23 +122,36 @@ def record_command(
         ..., "--draft", parser=parse_draft_option, help="Draft as a factor of design: 0.9T, T, 1.1T."
     ),
     angle: float = typer.Option(
-        ..., "--angle", callback=_positive_angle, help="Nominal release angle (deg)."
+        ..., "--angle", callback=checked(validation.release_angle_deg), help="Nominal release angle (deg)."
     ),
     hull: str = typer.Option(
-        "swath", "--hull", callback=_hull, help="Hull name from configs/hulls (see tankdaq hulls)."
+        ...,
+        "--hull",
+        callback=checked(validation.known_hull, keep_input=True),
+        help="The model tested: a hull name (tankdaq hulls) or a .toml file.",
     ),
     axis: AxisChoice = typer.Option(
         AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
     ),
-    rate: float = typer.Option(100.0, "--rate", callback=_rate, help="Output rate (Hz): 100, 200 or 400."),
+    rate: float = typer.Option(
+        100.0,
+        "--rate",
+        callback=checked(validation.output_rate_hz),
+        help="Output rate (Hz): 100, 200 or 400.",
+    ),
     baud: int = typer.Option(
         None,
         "--baud",
-        callback=_baud,
+        callback=checked(validation.baud_rate),
         help="Line rate to record at; tankdaq moves the device there (default: keep its rate if it "
         "carries --rate, else the slowest that does).",
     ),
-    out: Path = typer.Option(Path("recordings"), "--out", help="Folder for the MCAP files (one per decay)."),
+    out: Path = typer.Option(
+        Path("recordings"),
+        "--out",
+        callback=checked(validation.output_dir),
+        help="Folder for the MCAP files (one per decay).",
+    ),
     runs: int = typer.Option(
         None, "--runs", min=1, help="Stop after this many decays (default: until Ctrl-C)."
     ),
@@ -186,10 +161,19 @@ def record_command(
         callback=lambda v: v if v is None else _viewer(v),
         help="spawn, save (an .rrd beside each MCAP), none, or a rerun URL.",
     ),
+    viewer_bind: str = typer.Option(
+        "127.0.0.1", "--viewer-bind", help="Address a spawned viewer listens on (0.0.0.0: every network)."
+    ),
+    viewer_port: int = typer.Option(
+        9876, "--viewer-port", min=1, max=65535, help="Port a spawned viewer listens on."
+    ),
     operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
     note: str = typer.Option("", "--note", help="A note stored in the file."),
     model: str = typer.Option(
-        "ittc-quadratic-restoring", "--model", help="Live model: terms (b1,b2,c1,c3) or alias."
+        "ittc-quadratic-restoring",
+        "--model",
+        callback=checked(validation.live_model, keep_input=True),
+        help="Live model: terms (b1,b2,c1,c3) or alias.",
     ),
     sim_speed: float = typer.Option(1.0, "--sim-speed", min=0.1, max=50.0, hidden=True),
     sim_seed: int = typer.Option(0, "--sim-seed", hidden=True),
@@ -211,6 +195,8 @@ def record_command(
         model,
         sim_speed,
         sim_seed,
+        viewer_bind,
+        viewer_port,
     )
 
 
@@ -229,7 +215,9 @@ def _speed(value: str) -> float | None:
 @app.command("replay")
 @handles_errors
 def replay_command(
-    files: list[Path] = typer.Argument(..., help="tankdaq MCAP recordings."),
+    files: Annotated[
+        list[Path], typer.Argument(callback=checked(validation.input_file), help="tankdaq MCAP recordings.")
+    ],
     speed: str = typer.Option("1", "--speed", help="Playback speed factor, or 'max'."),
     viewer: str = typer.Option(
         None,
@@ -242,13 +230,12 @@ def replay_command(
     from ..acquire.replay import replay_recording
 
     pace = _speed(speed)
-    mode = viewer or _default_viewer()
     for path in files:
         outcomes = replay_recording(
             path,
             speed=pace,
-            viewer=mode,
-            on_event=lambda line: err_console.print(line, markup=False, highlight=False),
+            viewer=viewer,
+            on_event=say,
         )
         for o in outcomes:
             fit = o.fit
@@ -289,12 +276,18 @@ def identify_recordings(
 #: The demo's simulated hull rolls by seed 001 eq. (8); the demo identifies that equation's terms
 #: (b1 b2 b3 c1 c2 c3) and shows the truth inside the intervals, and the warnings a real lab would see.
 DEMO_MODEL = "seed001-eq1"
+DEMO_HULL = "swath"
 
 
 @app.command("demo")
 @handles_errors
 def demo_command(
-    out: Path = typer.Option(Path("recordings/demo"), "--out", help="Folder for the demo recordings."),
+    out: Path = typer.Option(
+        Path("recordings/demo"),
+        "--out",
+        callback=checked(validation.output_dir),
+        help="Folder for the demo recordings.",
+    ),
     runs: int = typer.Option(3, "--runs", min=1, help="How many decays to record."),
     sim_speed: float = typer.Option(4.0, "--sim-speed", min=0.1, max=50.0, help="Simulated clock speed-up."),
 ) -> None:
@@ -302,14 +295,15 @@ def demo_command(
     from ..config import load_hull
 
     err_console.print(
-        f"recording {runs} simulated decays (swath, T, roll, 8 deg) into {out}; live model {DEMO_MODEL}",
+        f"recording {runs} simulated decays (hull {DEMO_HULL}, T, roll, 8 deg) into {out}; "
+        f"live model {DEMO_MODEL}",
         markup=False,
     )
     outcomes = run_record(
         "sim",
         1.0,
         8.0,
-        "swath",
+        DEMO_HULL,
         "roll",
         100.0,
         None,
@@ -322,5 +316,5 @@ def demo_command(
         sim_speed,
     )
     paths = [o.path for o in outcomes if o.path is not None]
-    truth = load_hull("swath").axis_model("roll").coefficients(1.0)
+    truth = load_hull(DEMO_HULL).simulation_model("roll").coefficients(1.0)
     identify_recordings(paths, out, DEMO_MODEL, truth)

@@ -16,6 +16,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..errors import InputError, RecordingError
+from ..ident.free_decay import cut_lines
 from .fitting import Fit
 from .residuals import SPECTRUM_MEANING
 from .workflow import Diagnoser, Diagnostics, Step, signature_seen
@@ -98,6 +99,7 @@ def summary(diagnoser: Diagnoser) -> dict[str, Any]:
     trend = diagnoser.cycle_trend_
     return {
         "runs": [p.name for p in base.runs],
+        "cuts": [run.meta.get("cut") for run in diagnoser.runs_],
         "baseline": {**_fit_summary(base), "diagnostics": _diagnostics_summary(diagnoser.diagnostics_[0])},
         "cycle_trend": {
             "zeta_slope_per_rad": trend.zeta_slope_per_rad,
@@ -175,7 +177,7 @@ def story(diagnoser: Diagnoser) -> list[str]:
         lines.append("cycle by cycle: " + "; ".join(hints))
     lines += [_step_line(s, diagnoser) for s in diagnoser.steps_]
     lines.append(diagnoser.verdict_)
-    return lines
+    return [f"cut: {line}" for line in cut_lines(diagnoser.runs_)] + lines
 
 
 # ---------------------------------------------------------------------------------------------- figures

@@ -21,12 +21,13 @@ from typing import Any
 
 import numpy as np
 
-from ..config import format_draft, load_hull, parse_draft
+from ..config import Hull, format_draft, load_hull, parse_draft
 from ..errors import IdentificationError, InputError
 from ..physics.decay import simulate_decay
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, empty_samples
 from .derived import amplitude_table, damping_ratio, extinction_curve, natural_period
+from .free_decay import cut_free_decays, cut_lines
 from .kernels import TERM_REGISTRY
 from .output_error import OutputError
 
@@ -60,6 +61,7 @@ class GroupResult:
     fit: OutputError | None = None
     error: str | None = None
     extra: dict[str, float] = field(default_factory=dict)
+    hull: Hull | None = None  # the hull file found for key.hull: dimensional results from its GM
 
     def summary(self) -> dict[str, Any]:
         """One row of the campaign table (angles in deg, coefficients per unit inertia, SI)."""
@@ -70,6 +72,7 @@ class GroupResult:
             "angle_deg": self.key.angle_deg,
             "runs": len(self.runs),
             "files": " ".join(str(run.meta.get("file", run.name)) for run in self.runs),
+            "cuts": " | ".join(cut_lines(self.runs)),
         }
         if self.fit is None:
             return row | {"error": self.error}
@@ -78,6 +81,7 @@ class GroupResult:
             row[term] = value
             row[f"{term}_std"] = self.fit.std_[term]
         (at_release,) = amplitude_table(coefficients, self.fit.covariance_, [self.key.angle_deg])
+        row |= self._dimensional(coefficients, at_release.b_eq)
         return row | {
             "natural_period_s": natural_period(coefficients),
             "damping_ratio": damping_ratio(coefficients),
@@ -88,6 +92,18 @@ class GroupResult:
             "seed_objective_rad_s": self.fit.seed_objective_,
             "error": "",
         }
+
+    def _dimensional(self, coefficients: dict[str, float], b_eq_per_s: float) -> dict[str, Any]:
+        """Total inertia and B_eq in N m s/rad from the hull's displacement and GM (empty without a hull)."""
+        if self.hull is None:
+            return {}
+        from .report import dimensional_summary
+
+        found = dimensional_summary(coefficients, self.hull, self.key.axis, self.key.draft)
+        if "total_inertia_kg_m2" not in found:
+            return {}
+        inertia = found["total_inertia_kg_m2"]
+        return {"gm_m": found["gm_m"], "total_inertia_kg_m2": inertia, "b_eq_n_m_s": b_eq_per_s * inertia}
 
 
 # --------------------------------------------------------------------------------------------------
@@ -142,8 +158,15 @@ def csv_labels(path: Path) -> dict[str, Any]:
     }
 
 
-def read_campaign_runs(path: Path) -> list[DecayRun]:
-    """The decays of one file, with hull, axis, draft and nominal angle in ``meta``."""
+def read_campaign_runs(
+    path: Path, start_s: float | None = None, end_s: float | None = None
+) -> list[DecayRun]:
+    """The free decays of one file, with hull, axis, draft and nominal angle in ``meta``, each cut where
+    its free part ends (``free_decay.cut_free_decay``; ``start_s``/``end_s`` override)."""
+    return cut_free_decays(_labelled_runs(path), start_s, end_s)
+
+
+def _labelled_runs(path: Path) -> list[DecayRun]:
     if path.suffix.lower() == ".mcap":
         from ..store.reader import read_decay_runs
 
@@ -187,21 +210,37 @@ def group_runs(runs: Iterable[DecayRun]) -> dict[GroupKey, list[DecayRun]]:
 # --------------------------------------------------------------------------------------------------
 
 
+def find_campaign_hulls(names: Iterable[str], given: Sequence[str] = ()) -> dict[str, Hull]:
+    """The hull file of each name: ``given`` (paths or names, e.g. ``campaign --hull``) first, then the
+    user folder and the shipped ones; a name with no file is left out (its groups get no dimensional
+    results, nothing else changes)."""
+    hulls = {hull.name: hull for hull in map(load_hull, given)}
+    for name in set(names) - set(hulls):
+        try:
+            hulls[name] = load_hull(name)
+        except InputError:
+            continue
+    return hulls
+
+
 def identify_groups(
     groups: dict[GroupKey, list[DecayRun]],
     model: str = "ittc-quadratic-restoring",
     progress: Callable[[GroupKey], None] | None = None,
+    hulls: dict[str, Hull] | None = None,
 ) -> list[GroupResult]:
     """One joint output-error fit per group; a group that cannot be fitted keeps its reason instead.
 
-    ``progress`` is called after each group, so a long campaign shows where it is.
+    ``progress`` is called after each group, so a long campaign shows where it is. ``hulls`` (by name)
+    give the groups' dimensional results (GM, displacement); see ``find_campaign_hulls``.
     """
     results = []
     for key, runs in groups.items():
+        hull = (hulls or {}).get(key.hull)
         try:
-            results.append(GroupResult(key, runs, fit=OutputError(model).fit(runs)))
+            results.append(GroupResult(key, runs, fit=OutputError(model).fit(runs), hull=hull))
         except IdentificationError as exc:
-            results.append(GroupResult(key, runs, error=str(exc)))
+            results.append(GroupResult(key, runs, error=str(exc), hull=hull))
         if progress is not None:
             progress(key)
     return results
@@ -249,7 +288,11 @@ def write_report(results: Sequence[GroupResult], folder: Path) -> list[Path]:
     folder.mkdir(parents=True, exist_ok=True)
     written = [write_csv(results, folder / "campaign.csv")]
     md = folder / "campaign.md"
-    md.write_text("# Decay campaign\n\nCoefficients per unit total inertia (SI, rad), ± 1 sigma.\n\n")
+    cuts = "".join(f"- {line}\n" for r in results for line in cut_lines(r.runs))
+    md.write_text(
+        "# Decay campaign\n\nWhere each record's free decay was cut, and why:\n\n"
+        f"{cuts}\nCoefficients per unit total inertia (SI, rad), ± 1 sigma.\n\n"
+    )
     with md.open("a") as fh:
         fh.write(markdown_table(results))
     written.append(md)
@@ -468,8 +511,9 @@ def write_simulated_campaign(
     folder.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     written = []
-    for hull_name in hulls:
-        model = load_hull(hull_name).axis_model(axis)
+    for hull_spec in hulls:
+        hull = load_hull(hull_spec)  # a name or a .toml path; files are labelled with the hull's name
+        hull_name, model = hull.name, hull.simulation_model(axis)
         for draft in drafts:
             coefficients = model.coefficients(draft)
             for angle_deg in angles_deg:

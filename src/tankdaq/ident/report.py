@@ -106,6 +106,7 @@ def summarize(
                 "initial_angle_deg": math.degrees(float(run.angle[0] - offset)),
                 "offset_deg": math.degrees(offset),
                 "r2_angle": _r2(run.angle, pred),
+                "cut": run.meta.get("cut"),
             }
             for run, pred, offset in zip(runs, predicted, estimator.offsets_, strict=True)
         ],
@@ -132,17 +133,17 @@ def dimensional_summary(coefficients: dict[str, float], hull: Any, axis: str, dr
     The displacement is scaled with the draft factor (wall-sided approximation):
     the configs give it at the design draft only.
     """
-    axis_model = hull.axis_model(axis)
-    if hull.displacement_kg is None or axis_model.gm_m is None:
+    gm_m = hull.particulars(axis).gm_m
+    if hull.displacement_kg is None or gm_m is None:
         return {"note": f"hull {hull.name!r} lacks displacement_kg or the {axis} gm_m"}
     displacement = hull.displacement_kg * draft
-    dry = hull.dimensions.get(f"dry_inertia_{axis}_kg_m2")
-    result = dimensional(coefficients, displacement, axis_model.gm_m, dry)
+    dry = hull.dry_inertia_kg_m2(axis)
+    result = dimensional(coefficients, displacement, gm_m, None if dry is None else dry * draft)
     return {
         "hull": hull.name,
         "draft_factor": draft,
         "displacement_kg": displacement,
-        "gm_m": axis_model.gm_m,
+        "gm_m": gm_m,
         "total_inertia_kg_m2": result.total_inertia_kg_m2,
         "coefficients_si": result.coefficients,
         "added_inertia_fraction": result.added_inertia_fraction,
@@ -209,6 +210,8 @@ def text_report(summary: dict[str, Any]) -> str:
             f"offset {run['offset_deg']:+.4f} deg, "
             f"R^2 {run['r2_angle']:.5f}, {run['samples']} samples"
         )
+        if run.get("cut"):
+            lines.append(f"    cut: {run['cut']['line']}")
     if "dimensional" in summary and "total_inertia_kg_m2" in summary["dimensional"]:
         dim = summary["dimensional"]
         lines.append(f"  total inertia {dim['total_inertia_kg_m2']:.4g} kg m^2 ({dim['note']})")

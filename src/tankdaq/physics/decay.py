@@ -11,7 +11,7 @@ s rad^-2 for damping; s^-2 ... for restoring).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -90,11 +90,14 @@ def simulate_decay(
     rate0: float = 0.0,
     rtol: float = 1e-10,
     atol: float = 1e-12,
+    forcing: Callable[[float], float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Integrate the decay equation from (angle0, rate0) at t[0]; return (angle, rate) at t.
 
     A reference integrator (adaptive, tight tolerance) for making known-truth data
     and for the simulated sensor; the estimators use their own fast kernels.
+    ``forcing(t)`` (rad/s², per unit inertia) makes records that stop being free decays
+    (a second push, a carriage stop); steps are then at most one sample long so no pulse is missed.
     """
     from scipy.integrate import solve_ivp  # scipy.integrate costs a second to import: only when simulating
 
@@ -104,11 +107,21 @@ def simulate_decay(
 
     def rhs(_t: float, y: np.ndarray) -> list[float]:
         acc = -(regressors(np.array([y[0]]), np.array([y[1]]), names)[0] @ theta) if names else 0.0
-        return [y[1], float(acc)]
+        return [y[1], float(acc) + (forcing(_t) if forcing is not None else 0.0)]
 
     if t.size == 1:
         return np.array([angle0]), np.array([rate0])
-    sol = solve_ivp(rhs, (t[0], t[-1]), [angle0, rate0], t_eval=t, rtol=rtol, atol=atol, method="DOP853")
+    max_step = float(np.min(np.diff(t))) if forcing is not None else np.inf
+    sol = solve_ivp(
+        rhs,
+        (t[0], t[-1]),
+        [angle0, rate0],
+        t_eval=t,
+        rtol=rtol,
+        atol=atol,
+        method="DOP853",
+        max_step=max_step,
+    )
     if not sol.success:  # pragma: no cover - only on absurd coefficients
         raise RuntimeError(f"decay simulation failed: {sol.message}")
     return sol.y[0], sol.y[1]

@@ -226,7 +226,7 @@ class DecayScenario:
         if self.coefficients is None:
             from ..config import load_hull
 
-            self.coefficients = load_hull(self.hull).axis_model(self.axis).coefficients(self.draft)
+            self.coefficients = load_hull(self.hull).simulation_model(self.axis).coefficients(self.draft)
         if self.start_ticks is None:
             self.start_ticks = int(np.random.default_rng([self.seed, 1]).integers(0, TICK_MODULUS // 2))
 

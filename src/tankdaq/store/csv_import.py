@@ -1,8 +1,16 @@
 """Decay runs from CSV files (other labs' data, spreadsheets, the KVLCC2 reference run).
 
-One file is one run. The decay is cut from the release, taken as the first
-extremum of large amplitude (a held tilt ends where the model starts to move;
-a run driven to amplitude, like KVLCC2, starts at its first big peak). Extra
+A decay is cut from the release, taken as the first extremum of large
+amplitude (a held tilt ends where the model starts to move; a run driven to
+amplitude, like KVLCC2, starts at its first big peak). A long record with
+several releases becomes several runs, as a recording with several release
+events does: where a free decay ends by a new excitation, or dies into the
+noise with more to come, the rest of the file is searched for the next
+release (``ident.free_decay``; not after a carriage stop, which ends the
+test). A file written by ``tankdaq export`` (``store.export``) is read back
+exactly: SI columns (``angle_rad``, ``rate_rad_s``) are taken without a
+``--angle-col``, the units row is skipped, the ``# key = value`` block becomes
+``meta`` and its ``release_t_s`` cuts the runs where the recording did. Extra
 numeric columns become ``DecayRun.channels`` in SI units (``*_deg`` columns are
 converted to rad and lose the suffix, so ``other_angle_deg`` -> ``other_angle``).
 """
@@ -11,14 +19,17 @@ from __future__ import annotations
 
 import csv
 import itertools
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import BadIdentificationInput, InputError
+from ..ident.free_decay import SPLIT_AFTER, find_free_end
 from ..ident.signals import white_noise_level
 from ..records import DecayRun
+from ..validation import input_file
 
 ANGLE_UNITS: dict[str, float] = {"deg": math.pi / 180.0, "rad": 1.0}
 #: Fraction of the largest excursion a peak must reach to count as the release.
@@ -26,6 +37,10 @@ RELEASE_FRACTION = 0.5
 MIN_SAMPLES = 20
 #: The rate column looked for by default; any other name given must exist.
 DEFAULT_RATE_COL = "rate_deg_s"
+#: The first line of a ``tankdaq export`` CSV (``store.export.CSV_MARK``).
+EXPORT_MARK = "# tankdaq export"
+#: A later release counts when its swing clears the noise by this factor.
+NEXT_RELEASE_NOISES = 20.0
 
 
 def read_csv_runs(
@@ -38,24 +53,27 @@ def read_csv_runs(
     keep_all: bool = False,
     skip_half_cycles: int = 0,
 ) -> list[DecayRun]:
-    """Read one decay from a CSV file; without the default rate column the angle is the only output.
+    """Read the decays of a CSV file; without the default rate column the angle is the only output.
 
-    ``keep_all`` keeps the record from its first sample; otherwise it starts at
-    the release, then ``skip_half_cycles`` more half-cycles are dropped.
+    ``keep_all`` keeps the record whole from its first sample (one run); otherwise each run starts
+    at a release, then ``skip_half_cycles`` more half-cycles are dropped.
     """
     path = Path(path)
     if angle_unit not in ANGLE_UNITS:
         raise InputError(f"angle unit {angle_unit!r} not understood: use deg or rad")
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
-    columns = _read_columns(path)
+    columns, header = _read_columns(path)
+    if angle_col == "angle_deg" and "angle_deg" not in columns and "angle_rad" in columns:  # SI (export)
+        angle_col, angle_unit = "angle_rad", "rad"
+        rate_col = "rate_rad_s" if rate_col == DEFAULT_RATE_COL else rate_col
     for label, name in (("time", time_col), ("angle", angle_col)):
         if name not in columns:
             raise InputError(
                 f"{path}: no {label} column {name!r}; columns are {', '.join(columns)} "
                 f"(choose with --{label}-col)"
             )
-    if rate_col not in (None, DEFAULT_RATE_COL) and rate_col not in columns:
+    if rate_col not in (None, DEFAULT_RATE_COL, "rate_rad_s") and rate_col not in columns:
         raise InputError(f"{path}: no rate column {rate_col!r}; columns are {', '.join(columns)}")
     to_rad = ANGLE_UNITS[angle_unit]
     t = columns.pop(time_col)
@@ -65,35 +83,108 @@ def read_csv_runs(
     run = DecayRun(
         t=t, angle=angle, rate=rate, axis=axis, name=path.stem, channels=channels, meta={"file": str(path)}
     )
+    run.meta.update(header)
     _check_motion(run, angle_unit)
-    if not keep_all:
-        run = run.window(release_index(run.angle, skip_half_cycles))
+    if keep_all:
+        runs = [run]
+    elif header.get("release_t_s"):
+        runs = _exported_releases(run, [float(r) for r in header["release_t_s"]])  # type: ignore[union-attr]
+    else:
+        runs = _releases(run, skip_half_cycles)
+    for number, part in enumerate(runs, start=1):
+        part.meta["initial_angle_rad"] = float(part.angle[0])
+        if len(runs) > 1:
+            part.name = f"{path.stem}#{number}"
+    return runs
+
+
+def _releases(record: DecayRun, skip_half_cycles: int) -> list[DecayRun]:
+    """Every released decay in a record: the first must exist, later ones where a free decay ends in a
+    new excitation (or in the noise) and a swing well clear of the noise follows."""
+    noise = white_noise_level(record.angle)
+    runs: list[DecayRun] = []
+    rest = record
+    while True:
+        try:
+            run = rest.window(release_index(rest.angle, skip_half_cycles))
+        except BadIdentificationInput:
+            if not runs:
+                raise
+            return runs
         if run.t.size < MIN_SAMPLES:
-            raise BadIdentificationInput(f"{path}: too few samples left after the release")
-    run.meta["initial_angle_rad"] = float(run.angle[0])
-    return [run]
+            if not runs:
+                raise BadIdentificationInput(f"{record.meta['file']}: too few samples left after the release")
+            return runs
+        end = find_free_end(run)
+        if end.kind not in SPLIT_AFTER or run.t.size - end.index < MIN_SAMPLES:
+            return [*runs, run]
+        later = run.window(end.index)
+        if not _swings(later, noise):
+            return [*runs, run]
+        run = run.window(0, end.index)
+        run.meta["split"] = [end.kind, end.reason]
+        runs.append(run)
+        rest = later
 
 
-def _read_columns(path: Path) -> dict[str, np.ndarray]:
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+def _exported_releases(record: DecayRun, releases: list[float]) -> list[DecayRun]:
+    """The runs of an exported recording: from each release to the next, as ``store.reader`` cuts them."""
+    starts = np.searchsorted(record.t, [*releases, math.inf], side="left")
+    return [record.window(int(a), int(b)) for a, b in itertools.pairwise(starts)]
+
+
+def _swings(record: DecayRun, noise: float) -> bool:
+    """The record moves well clear of the noise: a release may be in it."""
+    return float(np.ptp(record.angle)) > NEXT_RELEASE_NOISES * max(noise, 1e-9)
+
+
+def _read_columns(path: Path) -> tuple[dict[str, np.ndarray], dict[str, object]]:
+    """The numeric columns, and the ``# key = value`` metadata block of a ``tankdaq export`` file."""
+    input_file(path)
     try:
         with path.open(newline="") as fh:
-            rows = list(csv.reader(line for line in fh if line.strip() and not line.startswith("#")))
+            lines = [line for line in fh if line.strip()]
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read it as CSV text ({exc})") from None
+    header = _metadata(lines) if lines and lines[0].startswith(EXPORT_MARK) else {}
+    rows = list(csv.reader(line for line in lines if not line.startswith("#")))
+    if len(rows) > 1 and header and not _numeric(rows[1]):
+        del rows[1]  # the units row of an export
     if len(rows) < 1 + MIN_SAMPLES:
         raise BadIdentificationInput(
             f"{path}: {max(len(rows) - 1, 0)} data rows; a decay needs at least {MIN_SAMPLES}"
         )
-    header = [name.strip() for name in rows[0]]
+    names = [name.strip() for name in rows[0]]
     try:
         data = np.array([[float(cell) if cell.strip() else math.nan for cell in row] for row in rows[1:]])
     except ValueError as exc:
         raise InputError(f"{path}: a value is not a number ({exc}); only numeric columns are read") from None
-    if data.ndim != 2 or data.shape[1] != len(header):
+    if data.ndim != 2 or data.shape[1] != len(names):
         raise InputError(f"{path}: rows have a different number of fields from the header")
-    return {name: data[:, i] for i, name in enumerate(header)}
+    return {name: data[:, i] for i, name in enumerate(names)}, header
+
+
+def _metadata(lines: list[str]) -> dict[str, object]:
+    """``# key = <JSON>`` comment lines; a value that is not JSON stays text."""
+    meta: dict[str, object] = {}
+    for line in lines:
+        if not line.startswith("#"):
+            break
+        key, sep, value = line[1:].partition(" = ")
+        if sep:
+            try:
+                meta[key.strip()] = json.loads(value)
+            except json.JSONDecodeError:
+                meta[key.strip()] = value.strip()
+    return meta
+
+
+def _numeric(row: list[str]) -> bool:
+    try:
+        [float(cell) for cell in row if cell.strip()]
+    except ValueError:
+        return False
+    return True
 
 
 def _channel_name(column: str) -> str:
