@@ -101,8 +101,8 @@ def confirmation_cost(captures: dict[str, bytes]) -> None:
                 ("batch", lambda d: old_batch.decode_capture(d).n_messages, batch, 5),
                 ("streaming 4 KiB", lambda d: _stream(old_stream.StreamDecoder(), d), streaming, 3),
             ):
-                before, _, n_old = timed(lambda old=old: old(data), repeats)
-                after, _, n_new = timed(lambda new=new: new(data), repeats)
+                before, _, n_old = timed(lambda old=old, data=data: old(data), repeats)
+                after, _, n_new = timed(lambda new=new, data=data: new(data), repeats)
                 print(f"{label:27s} {name:16s} before {n_old / before / 1e6:6.2f} M/s ({n_old} msgs), "
                       f"after {n_new / after / 1e6:6.2f} M/s ({n_new} msgs): cost {after / before - 1:+.1%} "
                       "CPU time", flush=True)  # fmt: skip

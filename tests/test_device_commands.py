@@ -67,7 +67,8 @@ def test_restore_defaults_asks_first_and_yes_skips_the_question(sim: SimulatedMT
     [
         (["device", "info", "/dev/ttyNOPE0"], 2, "no such port"),
         (["device", "info", "/dev/ttyNOPE0", "--baud", "12345"], 2, "not an MTi serial rate"),
-        (["record", "--port", "sim", "--draft", "T", "--angle", "8", "--rate", "400", "--baud", "115200"], 2,
+        (["record", "--port", "sim", "--draft", "T", "--angle", "8", "--hull", "swath", "--rate", "400",
+          "--baud", "115200"], 2,
          "use --baud 460800"),
     ],
 )  # fmt: skip

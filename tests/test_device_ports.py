@@ -65,9 +65,12 @@ def test_the_simulator_is_listed_found_by_serial_and_picked_by_auto() -> None:
 
 
 def test_auto_with_two_xsens_devices_lists_both() -> None:
-    with SimulatedMTi(speed=10.0) as one, SimulatedMTi(speed=10.0, identity=DeviceIdentity.mti_630()) as two:
-        with pytest.raises(InputError) as caught:
-            resolve_port("auto")
+    with (
+        SimulatedMTi(speed=10.0) as one,
+        SimulatedMTi(speed=10.0, identity=DeviceIdentity.mti_630()) as two,
+        pytest.raises(InputError) as caught,
+    ):
+        resolve_port("auto")
     message = str(caught.value)
     assert "2 Xsens devices" in message and "077B1A2C" in message and "MTi-630" in message
     assert caught.value.exit_code == 2 and one.port and two.port

@@ -23,7 +23,6 @@ from tankdaq.xsens.frame import Frame, build_frame
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import decode_mtdata2, make_xdi
 
-
 TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))  # the installed console script
 
 

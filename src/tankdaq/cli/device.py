@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import typer
 
 from .app import app, err_console, handles_errors
+
+if TYPE_CHECKING:
+    from ..device.driver import MTiDriver
 
 device_app = typer.Typer(
     no_args_is_help=True,
@@ -18,7 +23,8 @@ BAUD_OPTION = typer.Option(
 )
 
 
-def _driver(port: str, baud: int):  # noqa: ANN202 (MTiDriver is imported lazily: a fast --help)
+def _driver(port: str, baud: int) -> MTiDriver:
+    """The driver, imported here: ``tankdaq --help`` stays fast."""
     from ..device.driver import MTiDriver
 
     return MTiDriver(port, probe_first=baud)
