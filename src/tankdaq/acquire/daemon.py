@@ -279,7 +279,7 @@ class RecordDaemon:
             time.sleep(wait)
         self._next_read = time.monotonic() + READ_INTERVAL_S
         block = driver.read_block()
-        finished = session.feed(Block(block.samples, block.raw, block.host_t))
+        finished = session.feed(Block(block.samples, block.raw, block.host_t, block.carried))
         self.outcomes.extend(finished)
         c = driver.counters
         st = self.status

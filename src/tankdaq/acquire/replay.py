@@ -84,13 +84,13 @@ def replay_recording(
     wall0: float | None = None
     t0 = 0.0
     for i, (host_ns, raw) in enumerate(chunks):
-        samples, _ = decoder.feed(raw, host_ns / 1e9)
+        samples, decoded = decoder.feed(raw, host_ns / 1e9)
         if speed is not None and samples.size:
             if wall0 is None:
                 wall0, t0 = time.monotonic(), float(samples["t"][0])
             due = wall0 + (float(samples["t"][-1]) - t0) / speed
             time.sleep(max(0.0, due - time.monotonic()))
-        session.feed(Block(samples, raw, host_ns / 1e9))
+        session.feed(Block(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
         if on_progress is not None:
             on_progress(i + 1, len(chunks))
     session.abort("note", "end of recording")

@@ -27,7 +27,6 @@ from ..samples import AXIS_FIELDS
 from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter
 from ..viz.live import LiveView
-from ..xsens.framer import StreamFramer
 from .release import ReleaseDetector, ReleaseEvent
 
 #: How much history (device seconds) is kept while waiting for a release: the pre-trigger plus
@@ -42,6 +41,7 @@ class Block:
     samples: np.ndarray
     raw: bytes
     host_t: float
+    carried: int = 0  # leading samples whose bytes are in earlier blocks' raw (the decoder held them)
 
 
 @dataclass
@@ -77,13 +77,6 @@ class DecayOutcome:
     settle_reason: str
     fit: OnlineResult | None
     warnings: list[str]
-
-
-def starts_on_frame(raw: bytes) -> bool:
-    """True when ``raw`` begins at an Xbus frame boundary (a fresh decoder loses nothing of it)."""
-    framer = StreamFramer()
-    frames = framer.feed(raw)
-    return bool(frames) and framer.skipped_bytes == 0
 
 
 class DecaySession:
@@ -219,9 +212,9 @@ class DecaySession:
                 first = i
                 break
         chosen = blocks[first:]
-        if chosen and not starts_on_frame(chosen[0].raw) and chosen[0].samples.size:
+        if chosen and chosen[0].carried:  # the file's raw bytes must hold every sample it stores
             head = chosen[0]
-            chosen[0] = Block(head.samples[1:], head.raw, head.host_t)
+            chosen[0] = Block(head.samples[head.carried :], head.raw, head.host_t)
         return chosen
 
     def _finish_decay(self, reason: str) -> DecayOutcome:

@@ -179,6 +179,7 @@ class StreamBlock:
     raw: bytes
     host_t: float
     frames: int
+    carried: int = 0  # leading samples whose bytes came in earlier reads (a frame held for its successor)
 
 
 @dataclass
@@ -561,7 +562,7 @@ class MTiDriver:
             if frame.mid == MID.ERROR:
                 self.counters.device_errors.append(parse_error(frame.payload))
         self._count(raw, decoded.frames, samples)
-        return StreamBlock(samples, raw, host_t, decoded.frames)
+        return StreamBlock(samples, raw, host_t, decoded.frames, min(decoded.carried, samples.size))
 
     def _count(self, raw: bytes, frames: int, samples: np.ndarray) -> None:
         c, d = self.counters, self._samples.stream

@@ -56,6 +56,7 @@ UTC_DTYPE = np.dtype(
 RAW_IMU_DTYPE = np.dtype([("counts", ">u2", (9,)), ("temp", ">i2")])
 FP1632_DTYPE = np.dtype([("fraction", ">u4"), ("integer", ">i2")])
 MTDATA2 = int(MID.MTDATA2)  # a plain int: enum attribute access is slow in a per-chunk path
+MTDATA = int(MID.MTDATA)
 #: Channels that make a message a sample (GNSS-only messages are not).
 INERTIAL_OUTPUTS = ("EulerAngles", "RateOfTurn", "Acceleration")
 #: Below this many bytes a running sum is the cheaper checksum; above, row sums per frame length.
@@ -103,23 +104,28 @@ class FrameScan:
 
 
 def scan_frames(
-    buf: np.ndarray, max_length: int = MAX_DATA_LENGTH, sync: bytes | None = b"", final: bool = False
+    buf: np.ndarray,
+    max_length: int = MAX_DATA_LENGTH,
+    sync: bytes | None = b"",
+    final: bool = False,
+    layouts: LayoutCache | None = None,
 ) -> FrameScan:
     """All frames ``StreamFramer`` would accept from ``buf`` (uint8), found with array operations.
 
     ``sync``: the framer's state at byte 0 (``StreamFramer.sync``); ``final``: no more bytes
-    will come (``StreamFramer.flush``).
+    will come (``StreamFramer.flush``); ``layouts``: item layouts known to be well formed.
     """
+    layouts = LayoutCache() if layouts is None else layouts
     count, total, header_size = _regular_run(buf, max_length, sync)
     if not count:
-        return _scan_general(buf, max_length, sync, final)
+        return _scan_general(buf, max_length, sync, final, layouts)
     rows_header = buf[:header_size].tobytes()
     rest = buf[count * total :]
     follows = _next_frame_starts(rest, buf[1], buf[2])
     if follows is None and final:
         follows = True
     if follows is False:  # the last row is not confirmed (rare): let the general scan sort it out
-        return _scan_general(buf, max_length, sync, final)
+        return _scan_general(buf, max_length, sync, final, layouts)
     if follows is None:  # the last row waits for the byte after it
         count -= 1
         rest = buf[count * total :]
@@ -131,7 +137,7 @@ def scan_frames(
     if follows is None or _waits_at_start(rest, max_length):  # the usual tail: the next frame's start
         return FrameScan(starts, starts + header_size, lengths, 0, 0, offset, sync=rows_header,
                          regular_rows=buf[:offset].reshape(count, total))  # fmt: skip
-    tail = _scan_general(rest, max_length, rows_header, final)
+    tail = _scan_general(rest, max_length, rows_header, final, layouts)
     return FrameScan(
         starts=np.concatenate((starts, tail.starts + offset)),
         payload_starts=np.concatenate((starts + header_size, tail.payload_starts + offset)),
@@ -208,17 +214,20 @@ class _Candidates:
     starts: np.ndarray
     totals: np.ndarray
     header_sizes: np.ndarray
-    keys: np.ndarray  # bus id, message id, length byte and total in one number: equal keys, equal headers
+    keys: np.ndarray  # BID, MID, length byte and frame length in one number: equal keys, equal headers
     checked: np.ndarray  # checksum computed
     ok: np.ndarray  # checksum holds
     follows: np.ndarray  # the next frame starts right after it (or the capture ends there)
     waits: np.ndarray  # whether the next frame starts is not decided yet
+    waiting: np.ndarray  # where ``waits`` holds: all within the last bytes, so few
     bid_ok: np.ndarray  # a bus id a resync may land on
     sizes_ok: np.ndarray  # MTData2 payload sizes add up (assumed until ``verified``)
     verified: np.ndarray
 
 
-def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: bool) -> FrameScan:
+def _scan_general(
+    buf: np.ndarray, max_length: int, sync: bytes | None, final: bool, layouts: LayoutCache
+) -> FrameScan:
     """The general scan: any mix of frames, garbage, corrupted frames and false headers."""
     n = buf.size
     cand = np.flatnonzero(buf == PREAMBLE)
@@ -237,19 +246,27 @@ def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: b
     complete_at = np.flatnonzero(complete)
     c_starts, c_totals = cand[complete_at], total[complete_at]
     ends = c_starts + c_totals
-    bid = buf[c_starts + 1]
-    next_preamble = (ends < n) & (buf[np.minimum(ends, last)] == PREAMBLE)
-    have_ids = ends + 3 <= n
-    same_mid = buf[np.minimum(ends + 2, last)] == buf[c_starts + 2]
-    repeated = have_ids & (buf[np.minimum(ends + 1, last)] == bid) & same_mid
-    undecided = ~next_preamble & ~have_ids
+    # FA BID MID LEN of every complete candidate as one big-endian word (a complete frame has >= 5 bytes)
+    words = np.ndarray((max(n - 3, 0),), dtype=">u4", buffer=buf, strides=(1,))[c_starts].astype(np.int64)
+    bid, mid = words >> 16 & 0xFF, words >> 8 & 0xFF
+    follows = (ends < n) & (buf[np.minimum(ends, last)] == PREAMBLE)
+    waits = np.zeros(follows.size, dtype=bool)
+    other = np.flatnonzero(~follows)  # few: the byte after a frame is nearly always the next preamble
+    if other.size:
+        after = ends[other]
+        have_ids = after + 3 <= n
+        repeated = have_ids & (buf[np.minimum(after + 1, last)] == bid[other])
+        repeated &= buf[np.minimum(after + 2, last)] == mid[other]
+        follows[other] = repeated | (~have_ids & final)
+        waits[other] = ~have_ids & (not final)
     size = complete_at.size
-    c = _Candidates(
-        c_starts, c_totals, header_size[complete_at], _header_keys(buf[c_starts + 1], buf[c_starts + 2],
-        buf[c_starts + 3], c_totals), np.zeros(size, bool), np.zeros(size, bool),
-        next_preamble | repeated | (undecided & final), undecided & (not final),
-        np.isin(bid, tuple(RESYNC_BIDS)), np.ones(size, bool), buf[c_starts + 2] != MTDATA2,
-    )  # fmt: skip
+    bid_ok = np.zeros(size, dtype=bool)
+    for resync_bid in RESYNC_BIDS:
+        bid_ok |= bid == resync_bid
+    keys = (words & 0xFFFFFF) << 16 | c_totals
+    no = np.zeros(size, dtype=bool)
+    c = _Candidates(c_starts, c_totals, header_size[complete_at], keys, no, no.copy(), follows, waits,
+                    np.flatnonzero(waits), bid_ok, np.ones(size, bool), mid != MTDATA2)  # fmt: skip
 
     # Checksums are needed only where the sequential framer looks: at candidates no accepted
     # frame covers. Check the most common length first (the real frames), follow the chain,
@@ -275,9 +292,12 @@ def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: b
             suspects = np.append(suspects, suspect)
         if not suspects.size:
             break
-        c.sizes_ok[suspects] = _well_formed(buf, c_starts[suspects] + c.header_sizes[suspects],
-                                            c_totals[suspects] - c.header_sizes[suspects] - 1)  # fmt: skip
+        payload_starts = c_starts[suspects] + c.header_sizes[suspects]
+        lengths = c_totals[suspects] - c.header_sizes[suspects] - 1
+        c.sizes_ok[suspects] = _well_formed(buf, payload_starts, lengths, layouts)
         c.verified[suspects] = True
+        if c.sizes_ok[suspects].all():
+            break  # nothing the chain took is refused: it stands
 
     keep = starts < consumed
     chosen, starts, chosen_ends = chosen[keep], starts[keep], chosen_ends[keep]
@@ -299,18 +319,12 @@ def _scan_general(buf: np.ndarray, max_length: int, sync: bytes | None, final: b
     )
 
 
-def _header_keys(bid: np.ndarray, mid: np.ndarray, length_byte: np.ndarray, totals: np.ndarray) -> np.ndarray:
-    """One integer per header: equal bus id, message id, length byte and frame length, equal key (and
-    then equal header bytes, the extended length included)."""
-    return ((bid.astype(np.int64) << 16 | mid.astype(np.int64) << 8 | length_byte) << 16) | totals
-
-
 def _sync_key(sync: bytes | None) -> int:
-    """The key of the header in the sync state (-1: none to be trusted with)."""
+    """The key of the header in the sync state, as ``_Candidates.keys`` (-1: none to be trusted with)."""
     total = frame_length(sync) if sync else None
     if total is None:
         return -1
-    return int(_header_keys(*(np.array([v]) for v in (sync[1], sync[2], sync[3], total)))[0])
+    return (int.from_bytes(sync[1:4], "big") << 16) | total
 
 
 def _accepts(
@@ -324,13 +338,22 @@ def _accepts(
     return (same | c.bid_ok[k]) & (c.waits[k] if wait else c.follows[k])
 
 
-def _well_formed(buf: np.ndarray, payload_starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-    """``payload_well_formed`` of many MTData2 payloads: one walk per item layout, not per payload."""
+def _well_formed(
+    buf: np.ndarray, payload_starts: np.ndarray, lengths: np.ndarray, layouts: LayoutCache
+) -> np.ndarray:
+    """``payload_well_formed`` of many MTData2 payloads: one walk per item layout, not per payload
+    (a payload with a layout already known, same length and item headers, walks the same way)."""
     ok = np.zeros(lengths.size, dtype=bool)
     for length in np.unique(lengths).tolist():
         members = np.flatnonzero(lengths == length)
         rows = _payload_rows(buf, payload_starts[members], length)
         left = np.arange(members.size)
+        for known in layouts.by_length.get(length, []):
+            if not left.size:
+                break
+            same = known.matches(rows[left])
+            ok[members[left[same]]] = True
+            left = left[~same]
         while left.size:
             first = rows[left[0]].tobytes()
             if not payload_well_formed(first):
@@ -357,15 +380,22 @@ def _follow_chain(c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.nd
     v_starts = c.starts[valid]
     v_ends = v_starts + c.totals[valid]
     strong = np.flatnonzero(c.bid_ok[valid] & c.follows[valid] & c.sizes_ok[valid])  # positions in ``valid``
-    after = np.searchsorted(v_starts, v_ends)
-    has_next = (after < count) & (v_starts[np.minimum(after, count - 1)] == v_ends)
+    # the valid candidate starting where each ends: usually simply the next one
+    after = np.arange(1, count + 1)
+    has_next = np.zeros(count, dtype=bool)
+    has_next[:-1] = v_starts[1:] == v_ends[:-1]
+    odd = np.flatnonzero(~has_next)
+    after[odd] = np.searchsorted(v_starts, v_ends[odd])
+    has_next[odd] = (after[odd] < count) & (v_starts[np.minimum(after[odd], count - 1)] == v_ends[odd])
     in_sync_next = np.zeros(count, dtype=bool)
     followers = np.flatnonzero(has_next)
     in_sync_next[followers] = _accepts(c, valid[after[followers]], valid[followers], sync, wait=False)
     following = np.where(in_sync_next, after, count)
-    if strong.size:
-        resync_next = strong[np.minimum(np.searchsorted(v_starts[strong], v_ends), strong.size - 1)]
-        following = np.where(~in_sync_next & (v_starts[resync_next] >= v_ends), resync_next, following)
+    rest = np.flatnonzero(~in_sync_next)
+    if strong.size and rest.size:  # no frame accepted in sync there: the first confirmed resync after it
+        resync_next = strong[np.minimum(np.searchsorted(v_starts[strong], v_ends[rest]), strong.size - 1)]
+        found = v_starts[resync_next] >= v_ends[rest]
+        following[rest[found]] = resync_next[found]
     starts_sync = sync is not None and v_starts[0] == 0
     if starts_sync and _accepts(c, valid[:1], np.array([-1]), sync, wait=False)[0]:
         first = 0
@@ -400,7 +430,7 @@ def _first_stop(
     starts, ends = c.starts[chosen], c.starts[chosen] + c.totals[chosen]
     free = waiting[~_covered(starts, ends, waiting)]
     stop = int(free[0]) if free.size else buf.size
-    held = np.flatnonzero(c.ok & c.waits & (c.starts < stop))  # all within the last bytes: few
+    held = c.waiting[c.ok[c.waiting] & (c.starts[c.waiting] < stop)]
     for k in held[~_covered(starts, ends, c.starts[held])].tolist():
         position = int(c.starts[k])
         previous = chosen[np.flatnonzero(ends == position)]
@@ -656,6 +686,7 @@ class DecodedBlock:
     malformed: int = 0  # MTData2 frames whose item sizes do not add up (rejected)
     false_syncs: int = 0  # checksum-valid candidates the framer could not confirm
     pending_bytes: int = 0  # trailing bytes that may start a frame still incomplete (or unconfirmed)
+    carried: int = 0  # data messages (MTData2, legacy MTData) whose bytes began before this block's input
     sync: bytes | None = b""  # the framer's sync state where the pending bytes start
 
     @property
@@ -746,14 +777,19 @@ def decode_buffer(
     *,
     sync: bytes | None = b"",
     final: bool = False,
+    carried_below: int = 0,
 ) -> DecodedBlock:
     """Decode every complete frame of ``buf`` (uint8); bytes from ``consumed`` on are left pending.
 
-    ``sync`` and ``final`` as in ``scan_frames``.
+    ``sync`` and ``final`` as in ``scan_frames``; ``carried_below``: bytes of ``buf`` held over from
+    earlier input (the data messages starting there are counted in ``carried``).
     """
-    scan = scan_frames(buf, max_length, sync, final)
     layouts = LayoutCache() if layouts is None else layouts
+    scan = scan_frames(buf, max_length, sync, final, layouts)
+    data_at = scan.starts[buf[scan.starts + 2] == MTDATA2] if scan.starts.size else scan.starts
+    legacy_at = scan.starts[buf[scan.starts + 2] == MTDATA] if scan.starts.size else scan.starts
     block = DecodedBlock(
+        carried=int(np.count_nonzero(data_at < carried_below) + np.count_nonzero(legacy_at < carried_below)),
         frames=int(scan.starts.size),
         bad_checksums=scan.bad_checksums,
         skipped_bytes=scan.skipped_bytes,

@@ -45,7 +45,9 @@ class StreamDecoder:
         return self._decode(self._tail, True)
 
     def _decode(self, buf: np.ndarray, final: bool) -> DecodedBlock:
-        block = decode_buffer(buf, self.max_length, self._layouts, sync=self._sync, final=final)
+        block = decode_buffer(
+            buf, self.max_length, self._layouts, sync=self._sync, final=final, carried_below=self._tail.size
+        )
         self._tail = buf[buf.size - block.pending_bytes :].copy()
         self._sync = block.sync
         self.frames += block.frames
