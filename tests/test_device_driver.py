@@ -263,7 +263,7 @@ def test_a_replug_under_a_new_name_is_found_by_usb_serial_number() -> None:
         sim.replug()
         info = driver.reconnect(timeout_s=5.0)
         samples = driver.samples(1.0)
-        assert sim.port != first_name and not os.path.exists(first_name)
+        assert sim.port != first_name  # (another program may own that pts number by now)
         assert os.path.realpath(info.port) == sim.port
         assert os.path.basename(info.port).startswith("usb-Xsens_MTi-G-710-2A8G4_077B1A2C")
     assert samples.size == 100
