@@ -121,7 +121,7 @@ def scan_frames(
         return _scan_general(buf, max_length, sync, final, layouts)
     rows_header = buf[:header_size].tobytes()
     rest = buf[count * total :]
-    follows = _next_frame_starts(rest, buf[1], buf[2])
+    follows = _next_frame_starts(rest, int(buf[1]), int(buf[2]))
     if follows is None and final:
         follows = True
     if follows is False:  # the last row is not confirmed (rare): let the general scan sort it out
@@ -155,10 +155,11 @@ _NO_FRAMES = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64
 
 def _next_frame_starts(rest: np.ndarray, bid: int, mid: int) -> bool | None:
     """``confirm``'s successor test on the bytes after a frame (None: not decided yet)."""
-    if rest.size and rest[0] == PREAMBLE:
+    head = rest[:3].tobytes()
+    if head and head[0] == PREAMBLE:
         return True
-    if rest.size >= 3:
-        return bool(rest[1] == bid and rest[2] == mid)
+    if len(head) == 3:
+        return head[1] == bid and head[2] == mid
     return None
 
 
@@ -786,10 +787,9 @@ def decode_buffer(
     """
     layouts = LayoutCache() if layouts is None else layouts
     scan = scan_frames(buf, max_length, sync, final, layouts)
-    data_at = scan.starts[buf[scan.starts + 2] == MTDATA2] if scan.starts.size else scan.starts
-    legacy_at = scan.starts[buf[scan.starts + 2] == MTDATA] if scan.starts.size else scan.starts
+    held_over = scan.starts[: int(np.searchsorted(scan.starts, carried_below))].tolist()  # 0, 1 or 2 frames
     block = DecodedBlock(
-        carried=int(np.count_nonzero(data_at < carried_below) + np.count_nonzero(legacy_at < carried_below)),
+        carried=sum(int(buf[start + 2]) in (MTDATA2, MTDATA) for start in held_over),
         frames=int(scan.starts.size),
         bad_checksums=scan.bad_checksums,
         skipped_bytes=scan.skipped_bytes,

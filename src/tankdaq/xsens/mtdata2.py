@@ -438,11 +438,29 @@ def item_spans(payload: bytes) -> list[tuple[int, int, int]]:
 
 
 def payload_well_formed(payload: bytes) -> bool:
-    """True when an MTData2 payload decodes: item sizes add up, and known items have their sizes."""
-    try:
-        decode_mtdata2(payload)
-    except ProtocolError:
-        return False
+    """True when an MTData2 payload decodes (``decode_mtdata2`` would not raise): item sizes add up and
+    every known item has a size its identifier allows. Only sizes are looked at (decoding a value
+    never fails on its bytes), so this is cheap enough for every candidate frame that needs it."""
+    pos, end = 0, len(payload)
+    while pos < end:
+        if end - pos < 3:
+            return False
+        xdi, size = payload[pos] << 8 | payload[pos + 1], payload[pos + 2]
+        pos += 3 + size
+        if pos > end:
+            return False
+        spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
+        if spec is None:
+            continue
+        expected = item_size(spec, xdi)
+        if expected is not None:
+            if size != expected:
+                return False
+        elif spec.kind == "deviceid":
+            if size not in (4, 8):
+                return False
+        elif size < SATINFO_HEADER.size or (size - SATINFO_HEADER.size) % SATELLITE_STRUCT.size:
+            return False
     return True
 
 
