@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from tankdaq.device.driver import MTiDriver
-from tankdaq.device.simulator import SimulatedMTi
+from tankdaq.device.simulator import Behaviour, DeviceIdentity, SimulatedMTi
 from tankdaq.physics.scenario import DecayScenario
 
 
@@ -25,6 +25,29 @@ def handshake(legacy: bool) -> None:
             times.append(time.perf_counter() - start)
     kind = "legacy" if legacy else "MTData2"
     print(f"hand-shake + configure ({kind}): median {np.median(times) * 1e3:.1f} ms over 5")
+
+
+def hard_connects() -> None:
+    """Hand-shakes that need more than GoToConfig: a stuck device (Reset, ~1.7 s boot), a baud move."""
+    cases = {
+        "stuck until Reset, 1.7 s boot": ({"behaviour": Behaviour(stuck=True, boot_s=1.7)}, {}),
+        "move 115200 -> 921600 (SetBaudrate)": ({}, {"baud": 921600, "rate_hz": 400}),
+        "move 115200 -> 921600 (600-series PortConfig)": (
+            {"identity": DeviceIdentity.mti_630()}, {"baud": 921600, "rate_hz": 400}
+        ),
+        "found at 460800 by the search": ({"baud": 460800}, {}),
+    }
+    for label, (device, driver_options) in cases.items():
+        times = []
+        for _ in range(3):
+            with (
+                SimulatedMTi(DecayScenario(rate_hz=driver_options.get("rate_hz", 100)), **device) as sim,
+                MTiDriver(sim.link, **driver_options) as driver,
+            ):
+                start = time.perf_counter()
+                driver.configure()
+                times.append(time.perf_counter() - start)
+        print(f"hand-shake + configure, {label}: median {np.median(times):.2f} s over 3")
 
 
 def throughput(rate_hz: int, baud: int) -> None:
@@ -76,6 +99,7 @@ def reconnect() -> None:
 def main() -> None:
     handshake(legacy=False)
     handshake(legacy=True)
+    hard_connects()
     throughput(100, 115200)
     throughput(400, 921600)
     latency()

@@ -238,6 +238,7 @@ class MTiDriver:
         self.port = port
         self.path = port  # where the device is now (``auto`` resolved; a re-plug may move it)
         self.baud = baud
+        self.probe_first = probe_first
         self.line_baud = baud or probe_first  # the rate the port is opened at
         self.rate_hz = float(rate_hz)
         self.step_timeout_s = step_timeout_s
@@ -384,33 +385,34 @@ class MTiDriver:
 
     def go_to_config(self, rates: Sequence[int] | None = None) -> None:
         """Take the device to Config (see the module docstring); DeviceError says what was tried."""
-        rates = list(dict.fromkeys(rates or (self.line_baud, *SEARCH_BAUDS)))
+        rates = list(dict.fromkeys(rates or (self.line_baud, self.probe_first, *SEARCH_BAUDS)))
+        main = self.probe_first if self.probe_first in rates else rates[0]  # where the device most likely is
         self._log = LineLog()
-        tried: list[int] = []
+        tried: list[tuple[int, float]] = []
         for rate in rates:
             self._set_line(rate)
             frames_before = sum(self._log.frames.values())
-            seconds = self.goto_config_s if not tried else self.probe_s
-            tried.append(rate)
+            seconds = self.goto_config_s if rate == main else self.probe_s  # a quick look elsewhere
+            tried.append((rate, seconds))
             if self._goto_config_for(seconds):
                 return
             if sum(self._log.frames.values()) > frames_before:  # it talks at this rate but ignores us
                 self._recover(rate, tried)
                 return
-        self._set_line(rates[0])
-        self._recover(rates[0], tried)
+        self._set_line(main)
+        self._recover(main, tried)
 
     def _goto_config_for(self, seconds: float) -> bool:
         ack = self._exchange({MID.GOTO_CONFIG_ACK}, seconds, resend=build_frame(MID.GOTO_CONFIG))
         return ack is not None and ack.mid == MID.GOTO_CONFIG_ACK
 
-    def _recover(self, rate: int, tried: list[int]) -> None:
+    def _recover(self, rate: int, tried: list[tuple[int, float]]) -> None:
         """Reset, then GoToConfig through the boot (WakeUp answered) until acknowledged."""
         self._write(build_frame(MID.RESET))
         if self._goto_config_for(self.boot_s):
             return
-        others = [r for r in tried if r != tried[0]]
-        scanned = f", {self.probe_s:g} s at each of {', '.join(map(str, others))}" if others else ""
+        (main, main_s), *others = sorted(tried, key=lambda tried_rate: -tried_rate[1])  # the long look first
+        scanned = f", {self.probe_s:g} s at each of {', '.join(str(r) for r, _ in others)}" if others else ""
         if not self._log.bytes:
             hint = f"nothing arrived: check power and cable; {MODEMMANAGER_HINT}"
         elif not self._log.frames:
@@ -418,7 +420,7 @@ class MTiDriver:
         else:
             hint = "the device talks but ignores GoToConfig and Reset: power-cycle it"
         raise DeviceError(
-            f"no answer from {self.path}: GoToConfig for {self.goto_config_s:g} s at {tried[0]} baud"
+            f"no answer from {self.path}: GoToConfig for {main_s:g} s at {main} baud"
             f"{scanned}, then Reset at {rate} baud and GoToConfig for {self.boot_s:g} s "
             f"(WakeUp {'seen' if self._log.wakeup else 'not seen'}); received {self._log.describe()}; {hint}"
         )
