@@ -281,24 +281,15 @@ def _scan_general(
         c.ok[to_check] = _checksums_ok(buf, c_starts[to_check], c_totals[to_check])
         c.checked[to_check] = True
         chosen, resyncs = _follow_chain(c, sync)
+        refused = _verify_sizes(buf, c, resyncs[~c.verified[resyncs]], layouts)
         starts, chosen_ends = c_starts[chosen], c_starts[chosen] + c_totals[chosen]
         unchecked = np.flatnonzero(~c.checked)
         to_check = unchecked[~_covered(starts, chosen_ends, c_starts[unchecked])]
-        if to_check.size:
+        if to_check.size or refused:
             continue
         consumed, suspect = _first_stop(buf, cand[incomplete], c, chosen, sync)
-        suspects = resyncs[~c.verified[resyncs]]
-        suspects = suspects[c_starts[suspects] < consumed]
-        if suspect >= 0:
-            suspects = np.append(suspects, suspect)
-        if not suspects.size:
+        if suspect < 0 or not _verify_sizes(buf, c, np.array([suspect]), layouts):
             break
-        payload_starts = c_starts[suspects] + c.header_sizes[suspects]
-        lengths = c_totals[suspects] - c.header_sizes[suspects] - 1
-        c.sizes_ok[suspects] = _well_formed(buf, payload_starts, lengths, layouts)
-        c.verified[suspects] = True
-        if c.sizes_ok[suspects].all():
-            break  # nothing the chain took is refused: it stands
 
     keep = starts < consumed
     chosen, starts, chosen_ends = chosen[keep], starts[keep], chosen_ends[keep]
@@ -337,6 +328,17 @@ def _accepts(
     previous_keys = np.where(previous >= 0, c.keys[np.maximum(previous, 0)], _sync_key(sync))
     same = c.keys[k] == previous_keys
     return (same | c.bid_ok[k]) & (c.waits[k] if wait else c.follows[k])
+
+
+def _verify_sizes(buf: np.ndarray, c: _Candidates, suspects: np.ndarray, layouts: LayoutCache) -> bool:
+    """Check the payload sizes of the MTData2 resyncs not verified yet; True if one is refused."""
+    if not suspects.size:
+        return False
+    payload_starts = c.starts[suspects] + c.header_sizes[suspects]
+    lengths = c.totals[suspects] - c.header_sizes[suspects] - 1
+    c.sizes_ok[suspects] = _well_formed(buf, payload_starts, lengths, layouts)
+    c.verified[suspects] = True
+    return not c.sizes_ok[suspects].all()
 
 
 def _well_formed(
