@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tankdaq.errors import ProtocolError
 from tankdaq.xsens.batch import decode_capture
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.frame import Frame, build_frame
 from tankdaq.xsens.framer import StreamFramer
+from tankdaq.xsens.mtdata2 import decode_mtdata2, make_xdi, payload_well_formed
 from tankdaq.xsens.stream import StreamDecoder
 from tankdaq.xsens.synthetic import decay_capture, noisy_capture
 
@@ -67,3 +69,26 @@ def test_a_frame_waits_for_its_successor_and_a_quiet_line_releases_it() -> None:
     assert framer.pending == 0 and framer.false_syncs == 0
     assert framer.feed(b"\x13" + ack + ack) == [Frame(0xFF, MID.GOTO_CONFIG_ACK, b"")]  # the next confirms it
     assert framer.pending == len(ack)  # which itself waits for its own successor
+
+
+def test_the_sizes_check_agrees_with_the_decoder_on_random_payloads() -> None:
+    rng = np.random.default_rng(4)
+    names = ("PacketCounter", "EulerAngles", "DeviceId", "GnssSatInfo", "UtcTime")
+    known = [make_xdi(name) for name in names]
+    outcomes = set()
+    for _ in range(20_000):
+        items = []
+        for _ in range(rng.integers(0, 4)):
+            xdi = int(rng.choice(known)) if rng.random() < 0.8 else int(rng.integers(0, 1 << 16))
+            size = int(rng.integers(0, 40))
+            items.append(xdi.to_bytes(2, "big") + bytes((size,)) + rng.bytes(size))
+        payload = b"".join(items)
+        payload = payload[: rng.integers(0, len(payload) + 1)]  # often cut inside an item
+        try:
+            decode_mtdata2(payload)
+            decodes = True
+        except ProtocolError:
+            decodes = False
+        assert payload_well_formed(payload) == decodes, payload.hex()
+        outcomes.add(decodes)
+    assert outcomes == {True, False}
