@@ -1,9 +1,13 @@
 """Read tankdaq recordings back: samples in SI, raw bytes for re-decoding, events, fits, metadata.
 
-Every reader goes through ``RecordScan``, which reads the file front to back
-with mcap's StreamReader. That path does not need the summary at the end of
-the file, so a file whose writer was killed (no summary, maybe a torn last
-chunk) reads up to its last complete chunk instead of failing.
+``read_recording`` first tries the index: a complete file with sample blocks
+(``/samples/blocks``, written beside the per-sample JSON since tankdaq 0.1)
+reads only its small chunks of blocks, events and fits, through the summary.
+Every other file goes through ``RecordScan``, which reads the file front to
+back with mcap's StreamReader. That path does not need the summary at the end
+of the file, so a file whose writer was killed (no summary, maybe a torn last
+chunk) reads up to its last complete chunk instead of failing, and a file
+recorded before the blocks reads its per-sample JSON.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from typing import Any
 import numpy as np
 import zstandard
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.reader import SeekingReader
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader, breakup_chunk
 
@@ -92,12 +97,16 @@ class RecordScan:
 
 @dataclass
 class Recording:
-    """Everything in one tankdaq recording, samples already back in SI units."""
+    """Everything in one tankdaq recording, samples already back in SI units.
+
+    ``raw_chunks`` (``(host ns, bytes)`` of ``/xsens/raw``) is read on first use when
+    the samples came from the blocks: most readers never need the raw bytes.
+    """
 
     path: Path
     metadata: dict[str, str]
     samples: np.ndarray
-    raw_chunks: list[tuple[int, bytes]]
+    _raw_chunks: list[tuple[int, bytes]] | None
     events: list[dict[str, Any]]
     fits: list[dict[str, Any]]
     attachments: dict[str, bytes]
@@ -105,6 +114,12 @@ class Recording:
     complete: bool
     release_index: int | None = None
     metadata_history: list[dict[str, str]] = field(default_factory=list)
+
+    @property
+    def raw_chunks(self) -> list[tuple[int, bytes]]:
+        if self._raw_chunks is None:
+            self._raw_chunks = list(iter_raw_chunks(self.path))
+        return self._raw_chunks
 
     @property
     def axis(self) -> str:
@@ -144,6 +159,71 @@ def _release_index(samples: np.ndarray, events: list[dict[str, Any]]) -> int | N
 
 def read_recording(path: str | Path) -> Recording:
     """Read a whole recording (also a truncated one); raise BadRecordingInput if it is not one."""
+    return _read_indexed(Path(path)) or _read_scanned(path)
+
+
+def _read_indexed(path: Path) -> Recording | None:
+    """The recording from its summary and sample blocks; None when the file has no complete blocks.
+
+    Blocks count as complete when they hold as many samples as ``/samples`` has
+    messages (the summary's statistics): a file rewritten by ``recover`` after a
+    kill may have lost a block whose samples survived, and then reads by scan.
+    """
+    if not path.is_file():
+        return None
+    with path.open("rb") as stream:
+        try:  # anything not plainly a complete MCAP file is left to the scan, which says what is wrong
+            reader = SeekingReader(stream, validate_crcs=True)
+            summary = reader.get_summary()
+        except (*_DAMAGE, InvalidMagic):
+            return None
+        if summary is None or summary.statistics is None:
+            return None
+        topics = {channel.topic: channel.id for channel in summary.channels.values()}
+        if schemas.TOPIC_SAMPLE_BLOCKS not in topics:
+            return None
+        blocks: list[bytes] = []
+        events: list[dict[str, Any]] = []
+        fits: list[dict[str, Any]] = []
+        try:
+            for _, channel, message in reader.iter_messages(
+                topics=[schemas.TOPIC_SAMPLE_BLOCKS, schemas.TOPIC_EVENTS, schemas.TOPIC_FIT],
+                log_time_order=False,
+            ):
+                if channel.topic == schemas.TOPIC_SAMPLE_BLOCKS:
+                    blocks.append(message.data)
+                else:
+                    (events if channel.topic == schemas.TOPIC_EVENTS else fits).append(
+                        json.loads(message.data)
+                    )
+            history = [
+                dict(m.metadata) for m in reader.iter_metadata() if m.name == schemas.RUN_METADATA_NAME
+            ]
+            attachments = {a.name: a.data for a in reader.iter_attachments()}
+        except _DAMAGE:
+            return None
+    samples = schemas.samples_from_blocks(blocks)
+    if samples.size != summary.statistics.channel_message_counts.get(
+        topics.get(schemas.TOPIC_SAMPLES, -1), 0
+    ):
+        return None
+    return Recording(
+        path=path,
+        metadata=history[-1] if history else {},
+        samples=samples,
+        _raw_chunks=None,
+        events=events,
+        fits=fits,
+        attachments=attachments,
+        channel_metadata={c.topic: dict(c.metadata) for c in summary.channels.values()},
+        complete=True,
+        release_index=_release_index(samples, events),
+        metadata_history=history,
+    )
+
+
+def _read_scanned(path: str | Path) -> Recording:
+    """The recording read front to back: files cut short, and files without sample blocks."""
     scan = RecordScan(path)
     channels: dict[int, Channel] = {}
     sample_payloads: list[bytes] = []
@@ -181,7 +261,7 @@ def read_recording(path: str | Path) -> Recording:
         path=path,
         metadata=history[-1] if history else {},
         samples=samples,
-        raw_chunks=raw_chunks,
+        _raw_chunks=raw_chunks,
         events=events,
         fits=fits,
         attachments=attachments,
