@@ -173,6 +173,8 @@ def test_url_mode_streams_to_a_local_server(tmp_path: Path) -> None:
     finally:
         server.terminate()
         server.wait(timeout=10)
+    with socket.socket() as probe:  # the server itself was stopped, not a wrapper around it (issue 13)
+        assert probe.connect_ex(("127.0.0.1", port)) != 0
 
 
 def test_none_mode_logs_nothing_and_costs_nothing(tmp_path: Path) -> None:
@@ -211,3 +213,29 @@ def test_a_forecast_beyond_the_measurement_has_no_residual_there(tmp_path: Path)
     t_residual, residual = series(rows["/residual/model/fit_001"])
     assert t_model.size == 500 and t_residual.size == 300
     np.testing.assert_allclose(residual[:, 0], 0.0, atol=1e-9)  # the truth fits its own samples
+
+
+def test_any_registered_term_renders_with_its_unit(tmp_path: Path) -> None:
+    """``record --model b1,c1,fc``: fc is not a physics.decay term; its title comes from the one registry."""
+    samples = decay_samples(200)
+    angle, rate = simulate_decay(TRUTH, samples["t"], np.radians(6.0))
+    with LiveView("save", rrd_path=tmp_path / "fc.rrd", terms=["b1", "c1", "fc"]) as view:
+        view.log_samples(samples)
+        view.log_fit(samples["t"], angle, rate, {**TRUTH, "fc": 0.002}, ci95={"fc": 0.001})
+    rows, static, views = read_rrd(tmp_path / "fc.rrd")
+    assert "fc (rad/s^2)" in views
+    assert static["/coefficients/fc"]["SeriesLines:names"][0] == "fc (rad/s^2)"
+    (fc,) = series(rows["/coefficients/fc"])[1]
+    np.testing.assert_allclose(fc, [0.002, 0.001, 0.003])
+
+
+def test_the_viewer_of_the_installed_rerun_sdk_is_found_off_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Run as .venv/bin/tankdaq with nothing on PATH: the viewer binary shipped with rerun-sdk."""
+    import rerun
+    import rerun_cli
+
+    monkeypatch.setenv("PATH", "")
+    executable = rerun_executable()
+    assert executable is not None and Path(executable).parent == Path(rerun_cli.__file__).parent
+    version = subprocess.run([executable, "--version"], capture_output=True, text=True, timeout=60)
+    assert f"rerun-cli {rerun.__version__}" in version.stdout

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import signal
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
@@ -19,7 +20,8 @@ from pathlib import Path
 from ..config import Hull, format_draft, load_hull
 from ..device.driver import MTiDriver
 from ..errors import DeviceGone, InputError, RecordingError
-from ..viz.live import LiveView
+from ..store.disk import RESERVE_BYTES
+from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 
@@ -44,7 +46,10 @@ class RecordSettings:
     baud: int | None = None  # None: 115200 on hardware, the smallest that carries the rate on sim
     out_dir: Path = Path("recordings")
     runs: int | None = None
-    viewer: str = "none"
+    viewer: str | None = "none"  # None: the default (spawn with a display, save without)
+    viewer_bind: str = "127.0.0.1"  # where a spawned viewer listens; 0.0.0.0 only when asked
+    viewer_port: int = 9876
+    disk_reserve_bytes: int = RESERVE_BYTES  # the .rrd stops with less free space than this
     operator: str = ""
     note: str = ""
     model: str = "ittc-quadratic-restoring"
@@ -128,6 +133,7 @@ class RecordDaemon:
         self.simulator = None
         self.outcomes: list[DecayOutcome] = []
         self._next_read = 0.0
+        self._stop = threading.Event()
 
     # ---- the device ----------------------------------------
 
@@ -186,7 +192,16 @@ class RecordDaemon:
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
         json.dumps(config, default=str)  # refuse unserialisable settings early
-        view = LiveView(s.viewer, axis="roll" if s.axis == "auto" else s.axis)
+        mode = s.viewer or default_viewer_mode()
+        self.on_event(describe_mode(mode, default=s.viewer is None))
+        view = LiveView(
+            mode,
+            axis="roll" if s.axis == "auto" else s.axis,
+            bind=s.viewer_bind,
+            spawn_port=s.viewer_port,
+            on_note=lambda line: self.on_event(f"viewer: {line}"),
+            rrd_reserve_bytes=s.disk_reserve_bytes,
+        )
         session_settings = SessionSettings(
             axis=s.axis,
             angle_deg=s.angle_deg,
@@ -216,7 +231,7 @@ class RecordDaemon:
                 self.on_event(f"device: {self.status.device}")
                 session = self._session(driver)
                 self.status.state = "waiting"
-                while s.runs is None or len(self.outcomes) < s.runs:
+                while (s.runs is None or len(self.outcomes) < s.runs) and not self._stop.is_set():
                     try:
                         self._pump(driver, session)
                     except DeviceGone as exc:
@@ -229,6 +244,10 @@ class RecordDaemon:
         finally:
             self._shut_down(driver, session)
         return self.outcomes
+
+    def stop(self) -> None:
+        """Ask ``run`` to return after the current read (from a callback or another thread)."""
+        self._stop.set()
 
     def _shut_down(self, driver: MTiDriver, session: DecaySession | None) -> None:
         """Close the decay under way (its file stays readable), the viewer, the port, the simulator."""

@@ -17,7 +17,7 @@ from ..device.decoding import SampleDecoder
 from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
 from ..store.reader import read_recording
-from ..viz.live import LiveView
+from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 
 #: At full speed, serial reads are merged into blocks spanning this much arrival time: the
@@ -48,7 +48,7 @@ def coalesce(chunks: list[tuple[int, bytes]], span_s: float) -> list[tuple[int, 
 def replay_recording(
     path: str | Path,
     speed: float | None = None,
-    viewer: str = "none",
+    viewer: str | None = "none",
     model: str | None = None,
     on_event: Callable[[str], None] | None = None,
     on_progress: Callable[[int, int], None] | None = None,
@@ -59,15 +59,19 @@ def replay_recording(
     meta = recording.metadata
     axis = recording.axis
     nominal = float(meta.get("angle_nominal_deg", "nan"))
+    note = None if on_event is None else (lambda line: on_event(f"viewer: {line}"))
+    mode = viewer or default_viewer_mode()
+    if on_event is not None:
+        on_event(describe_mode(mode, default=viewer is None))
+    view = LiveView(mode, axis=axis, on_note=note)
     settings = SessionSettings(
         axis=axis,
         angle_deg=nominal if math.isfinite(nominal) else 0.0,
         angle_tolerance_deg=math.inf if not math.isfinite(nominal) else 1.0,
         model=model or str(meta.get("model_terms", "ittc-quadratic-restoring")),
         out_dir=None,
-        rrd_base=path.with_name(path.stem + ".replay") if viewer == "save" else None,
+        rrd_base=path.with_name(path.stem + ".replay") if view.mode == "save" else None,  # spawn falls back
     )
-    view = LiveView(viewer, axis=axis)
     session = DecaySession(settings, view, on_event=on_event)
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))

@@ -24,6 +24,7 @@ from ..errors import RecordingError, TankdaqError
 from ..ident.models import resolve_model
 from ..ident.online import OnlineIdentifier, OnlineResult
 from ..samples import AXIS_FIELDS
+from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter
 from ..viz.live import LiveView
 from ..xsens.framer import StreamFramer
@@ -263,7 +264,7 @@ class _ActiveDecay:
         rrd = None if self.path is None else self.path.with_suffix(".rrd")
         if rrd is None and s.rrd_base is not None:
             rrd = s.rrd_base.with_name(s.rrd_base.name + (f"-{run}" if run > 1 else "") + ".rrd")
-        if session.view.mode == "none":
+        if session.view.mode == "none" or (rrd is not None and not self._room_for_rrd(rrd)):
             rrd = None
         session.view.axis = axis
         session.view.new_run(
@@ -273,6 +274,19 @@ class _ActiveDecay:
             time_origin_s=release_t,  # the view reads in seconds since the release
         )
         self.rrd_path = session.view.rrd_path
+
+    def _room_for_rrd(self, rrd: Path) -> bool:
+        """Free space checked before each decay: below the reserve, no .rrd (the MCAP comes first)."""
+        reserve = self.session.view.rrd_reserve_bytes
+        free = free_bytes(rrd.parent)
+        if free >= reserve:
+            return True
+        line = (
+            f"only {megabytes(free)} free under {rrd.parent} (keeping {megabytes(reserve)} for recordings): "
+            "this decay is recorded without an .rrd; free some space"
+        )
+        self.warnings.append(line)
+        return False
 
     def _open_writer(self) -> None:
         from ..store.naming import next_run_number, recording_name
@@ -398,8 +412,8 @@ class _ActiveDecay:
             writer.close()
 
         self.session.view.log_event("settled", f"decay ended ({reason})", self._last_t)
-        self.session.view.close()
         self._write(close)
+        self.session.view.end_run()  # the file is closed first; the view finishes on its own thread
         return DecayOutcome(
             run=self.run,
             axis=self.axis,

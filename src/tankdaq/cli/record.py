@@ -55,12 +55,6 @@ def _rate(value: float) -> float:
     return value
 
 
-def _default_viewer() -> str:
-    from ..viz.live import default_viewer_mode
-
-    return default_viewer_mode()
-
-
 class _StatusLine:
     """One status line on stderr, refreshed in place on a terminal; event lines above it."""
 
@@ -104,6 +98,8 @@ def run_record(
     model: str,
     sim_speed: float = 1.0,
     sim_seed: int = 0,
+    viewer_bind: str = "127.0.0.1",
+    viewer_port: int = 9876,
 ) -> list:
     """Build the daemon from command-line values, run it with a status line, print what it saved."""
     from ..acquire.daemon import RecordDaemon, RecordSettings
@@ -120,7 +116,9 @@ def run_record(
         baud=baud,
         out_dir=out,
         runs=runs,
-        viewer=viewer or _default_viewer(),
+        viewer=viewer,  # None: the default; the daemon prints the mode in use at start
+        viewer_bind=viewer_bind,
+        viewer_port=viewer_port,
         operator=operator,
         note=note,
         model=model,
@@ -167,6 +165,12 @@ def record_command(
         callback=lambda v: v if v is None else _viewer(v),
         help="spawn, save (an .rrd beside each MCAP), none, or a rerun URL.",
     ),
+    viewer_bind: str = typer.Option(
+        "127.0.0.1", "--viewer-bind", help="Address a spawned viewer listens on (0.0.0.0: every network)."
+    ),
+    viewer_port: int = typer.Option(
+        9876, "--viewer-port", min=1, max=65535, help="Port a spawned viewer listens on."
+    ),
     operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
     note: str = typer.Option("", "--note", help="A note stored in the file."),
     model: str = typer.Option(
@@ -192,6 +196,8 @@ def record_command(
         model,
         sim_speed,
         sim_seed,
+        viewer_bind,
+        viewer_port,
     )
 
 
@@ -223,12 +229,11 @@ def replay_command(
     from ..acquire.replay import replay_recording
 
     pace = _speed(speed)
-    mode = viewer or _default_viewer()
     for path in files:
         outcomes = replay_recording(
             path,
             speed=pace,
-            viewer=mode,
+            viewer=viewer,
             on_event=lambda line: err_console.print(line, markup=False, highlight=False),
         )
         for o in outcomes:

@@ -275,6 +275,7 @@ class SimulatedMTi:
         if not self.link:
             self._own_link_dir = tempfile.mkdtemp(prefix="tankdaq-sim-")
             self.link = os.path.join(self._own_link_dir, "ttyMTi0")
+        self._source(self.scenario.rate_hz)  # computed now: seconds of work once streaming would be silence
         self._open_pty()
         self._running.set()
         self._thread = threading.Thread(target=self._serve, name="SimulatedMTi", daemon=True)

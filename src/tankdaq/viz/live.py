@@ -6,32 +6,57 @@ new values at old timestamps draws a zig-zag between the old and new curve.
 So each fit revision is its own entity (``angle/model/fit_007``): the newest is
 drawn bold, the one before it faint (to show what changed), older ones are
 hidden. Nothing is drawn twice at one timestamp in one series.
+
+The recording is what must survive, so the view never holds up acquisition: every call
+only queues a job for one background thread (``ViewFeed``), sample blocks and refits are
+dropped when the thread falls behind, and anything rerun raises (a viewer that died, a
+flush that timed out, a full disk under the .rrd) becomes one line for the operator.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
+import socket
+import subprocess
 import sys
+import threading
+import time
 import uuid
-from collections.abc import Mapping, Sequence
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import Self
+from urllib.parse import urlsplit
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
 from ..errors import InputError
-from ..physics.decay import TERM_UNITS
+from ..ident.kernels import TERM_REGISTRY
 from ..samples import AXIS_FIELDS
+from ..store.disk import RESERVE_BYTES, free_bytes, megabytes
 from ..store.schemas import interval_pairs
 
 APPLICATION_ID = "tankdaq"
 TIMELINE = "t"
 URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 MODES = ("spawn", "save", "none")
+
+#: A spawned viewer and its gRPC server listen here unless the operator asks otherwise.
+DEFAULT_BIND = "127.0.0.1"
+#: Updates (sample blocks, refits) waiting for the view thread beyond this many are dropped:
+#: at 50 reads a second the view is then about five seconds behind.
+QUEUE_LIMIT = 256
+#: At the end of a run rerun gets this long to take what was logged (file and viewer).
+FLUSH_TIMEOUT_S = 5.0
+#: Closing the view waits at most this long for the view thread to finish its queue.
+CLOSE_TIMEOUT_S = 15.0
+#: A spawned viewer must be listening within this long.
+SPAWN_TIMEOUT_S = 20.0
 
 MEASURED_COLOR = (31, 119, 180)
 MODEL_COLOR = (214, 39, 40)
@@ -41,15 +66,47 @@ EVENT_LEVELS = {"warning": "WARN", "unplug": "ERROR", "gap": "WARN"}
 
 
 def rerun_executable() -> str | None:
-    """The ``rerun`` viewer: on PATH, or beside this Python (a venv that is not activated)."""
+    """The viewer of the installed rerun-sdk: its ``rerun_cli`` binary, else beside this Python, else PATH.
+
+    The binary inside ``rerun_cli`` is found wherever tankdaq runs from (``.venv/bin/tankdaq`` with
+    the venv not on PATH), and it is the viewer process itself, not a Python wrapper around it.
+    """
+    try:
+        import rerun_cli
+    except ImportError:
+        bundled = None
+    else:
+        bundled = Path(rerun_cli.__file__).with_name("rerun.exe" if sys.platform == "win32" else "rerun")
     beside = Path(sys.executable).parent / "rerun"
-    return shutil.which("rerun") or (str(beside) if beside.is_file() else None)
+    for candidate in (bundled, beside):
+        if candidate is not None and candidate.is_file() and os.access(candidate, os.X_OK):
+            return str(candidate)
+    return shutil.which("rerun")
+
+
+def display_available() -> bool:
+    """True when a window can be opened: an X or Wayland display is named."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 def default_viewer_mode() -> str:
     """``spawn`` when there is a display and a viewer to show on it, ``save`` (an .rrd) otherwise."""
-    has_display = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-    return "spawn" if has_display and rerun_executable() else "save"
+    return "spawn" if display_available() and rerun_executable() else "save"
+
+
+def describe_mode(mode: str, default: bool) -> str:
+    """The one line ``record`` and ``replay`` print at start: which view, and how to choose another."""
+    what = {
+        "spawn": "spawn (a rerun window; an .rrd is saved as well)",
+        "save": "save (an .rrd per decay; open it with rerun FILE.rrd)",
+        "none": "none (no live view)",
+    }.get(mode, f"stream to {mode}")
+    chosen = (
+        f"default ({'a display is available' if mode == 'spawn' else 'no display'}); choose with --viewer"
+        if default
+        else "as asked"
+    )
+    return f"viewer: {what}, {chosen}"
 
 
 def check_mode(mode: str) -> str:
@@ -61,14 +118,104 @@ def check_mode(mode: str) -> str:
     )
 
 
+def term_title(term: str) -> str:
+    """``b1 (1/s)``: a coefficient named with its unit from the one term registry."""
+    spec = TERM_REGISTRY.get(term)
+    return f"{term} ({spec.unit})" if spec else term
+
+
+def _url_listening(url: str) -> bool:
+    """True when something accepts connections at a rerun URL's host and port."""
+    parts = urlsplit(url)
+    return _listening(parts.hostname or "127.0.0.1", parts.port or 9876)
+
+
+def _listening(host: str, port: int) -> bool:
+    address = "127.0.0.1" if host in ("0.0.0.0", "::", "") else host
+    with socket.socket(socket.AF_INET6 if ":" in address else socket.AF_INET) as probe:
+        probe.settimeout(0.5)
+        return probe.connect_ex((address, port)) == 0
+
+
+class ViewFeed:
+    """Jobs run in order on one background thread; ``put`` never waits.
+
+    Droppable jobs (sample blocks, refits) beyond ``limit`` waiting are dropped and counted;
+    the others (a new run, its end, events) are always kept: a few per decay. A job that
+    raises is handed to ``on_error`` and the thread goes on.
+    """
+
+    def __init__(self, on_error: Callable[[BaseException], None], limit: int = QUEUE_LIMIT) -> None:
+        self.limit = limit
+        self.on_error = on_error
+        self.dropped = 0
+        self.done = 0
+        self._jobs: deque[tuple[Callable[[], None], bool]] = deque()
+        self._waiting_droppable = 0
+        self._busy = False
+        self._stopping = False
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._work, name="tankdaq-view", daemon=True)
+        self._thread.start()
+
+    def put(self, job: Callable[[], None], droppable: bool) -> bool:
+        """Queue ``job``; False when it was dropped (the view is behind)."""
+        with self._cond:
+            if self._stopping or (droppable and self._waiting_droppable >= self.limit):
+                self.dropped += droppable
+                return False
+            self._jobs.append((job, droppable))
+            self._waiting_droppable += droppable
+            self._cond.notify_all()
+            return True
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait until every queued job has run; False if that took longer than ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while self._jobs or self._busy:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+            return True
+
+    def stop(self, timeout_s: float) -> bool:
+        """Run what is queued (within ``timeout_s``), then end the thread; False if it did not finish."""
+        idle = self.wait_idle(timeout_s)
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        if idle:
+            self._thread.join(timeout=1.0)
+        return idle
+
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                while not self._jobs and not self._stopping:
+                    self._cond.wait()
+                if not self._jobs:
+                    return
+                job, droppable = self._jobs.popleft()
+                self._waiting_droppable -= droppable
+                self._busy = True
+            try:
+                job()
+            except Exception as exc:  # whatever rerun raises, acquisition goes on
+                self.on_error(exc)
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self.done += 1
+                    self._cond.notify_all()
+
+
 def decay_blueprint(terms: Sequence[str] = ()) -> rrb.Blueprint:
     """Four plots a person reads without clicking, events underneath; side panels collapsed."""
     if terms:
         coefficients: rrb.Container | rrb.TimeSeriesView = rrb.Grid(
-            *(
-                rrb.TimeSeriesView(origin=f"/coefficients/{term}", name=f"{term} ({TERM_UNITS[term]})")
-                for term in terms
-            ),
+            *(rrb.TimeSeriesView(origin=f"/coefficients/{term}", name=term_title(term)) for term in terms),
             name="Coefficients",
         )
     else:
@@ -92,7 +239,10 @@ class LiveView:
 
     ``save`` writes one .rrd per run (``rrd_path`` here or in ``new_run``); with
     spawn or a URL an ``rrd_path`` is written as well. ``terms`` gives each
-    coefficient its own plot with its unit.
+    coefficient its own plot with its unit. Every call returns at once; the logging
+    itself runs on the view's thread (see the module docstring). ``on_note`` gets one
+    line per thing the operator should know (viewer started, gone, the .rrd stopped).
+    Spawn with no display falls back to save at once; ``mode`` is the mode in effect.
     """
 
     def __init__(
@@ -102,6 +252,9 @@ class LiveView:
         axis: str = "roll",
         terms: Sequence[str] = (),
         spawn_port: int = 9876,
+        bind: str = DEFAULT_BIND,
+        on_note: Callable[[str], None] | None = None,
+        rrd_reserve_bytes: int = RESERVE_BYTES,
     ) -> None:
         self.mode = check_mode(mode)
         if axis not in AXIS_FIELDS:
@@ -109,13 +262,52 @@ class LiveView:
         self.axis = axis
         self.terms = tuple(terms)
         self.spawn_port = spawn_port
-        self._first_rrd_path = None if rrd_path is None else Path(rrd_path)
-        self._spawned = False
-        self._rec: rr.RecordingStream | None = None
-        self._origin = 0.0
+        self.bind = bind
+        self.on_note = on_note or (lambda line: print(f"viewer: {line}", file=sys.stderr))
+        self.rrd_reserve_bytes = rrd_reserve_bytes
+        self.viewer_process: subprocess.Popen[bytes] | None = None
         self.rrd_path: Path | None = None
+        self._first_rrd_path = None if rrd_path is None else Path(rrd_path)
+        self._run_open = False
+        self._noted: set[str] = set()
+        # state below is touched only by the view thread
+        self._live_url: str | None = self.mode if self.mode.startswith(URL_SCHEMES) else None
+        self._streaming = False  # this run goes to the viewer at ``_live_url``
+        self._rec: rr.RecordingStream | None = None
+        self._rrd_writing: Path | None = None
+        self._origin = 0.0
+        self._feed: ViewFeed | None = None  # started at the first job, ended by close()
+        self._dropped_before = 0
+        if self.mode == "spawn" and not display_available():
+            self.on_note("no display (DISPLAY and WAYLAND_DISPLAY unset): no window; saving an .rrd instead")
+            self.mode = "save"
+        if self.mode == "spawn":
+            self._jobs().put(self._spawn_viewer, droppable=False)
 
-    # -- runs -------------------------------------------------------------------------------------------
+    @property
+    def dropped(self) -> int:
+        """Updates dropped because the view fell behind (the MCAP has them all)."""
+        return self._dropped_before + (self._feed.dropped if self._feed else 0)
+
+    def _jobs(self) -> ViewFeed:
+        if self._feed is None:
+            self._feed = ViewFeed(on_error=self._job_failed)
+        return self._feed
+
+    # -- the caller's side: queue and return ------------------------------------------------------------
+
+    def _note_once(self, key: str, line: str) -> None:
+        if key not in self._noted:
+            self._noted.add(key)
+            self.on_note(line)
+
+    def _submit(self, job: Callable[[], None], droppable: bool = False) -> None:
+        if not self._run_open:
+            if self.mode == "save" and self._first_rrd_path is None:
+                raise InputError("viewer mode 'save' needs a path for the .rrd file")
+            self.new_run(rrd_path=self._first_rrd_path)
+        if not self._jobs().put(job, droppable):
+            self._note_once("behind", "the view is behind: dropping view updates (the MCAP has every sample)")
 
     def new_run(
         self,
@@ -129,50 +321,34 @@ class LiveView:
         ``time_origin_s`` (device time, e.g. the release) becomes zero on the view's timeline, so a
         person reads "seconds since release" instead of the sensor's hours since power-up.
         """
-        self.close()
-        self._origin = float(time_origin_s)
         if terms is not None:
             self.terms = tuple(terms)
-        self.rrd_path = None if rrd_path is None else Path(rrd_path)
-        if self.mode == "save" and self.rrd_path is None:
-            raise InputError("viewer mode 'save' needs a path for the .rrd file")
-        self._revision = 0
-        self._measured_t: list[np.ndarray] = []
-        self._measured_angle: list[np.ndarray] = []
-        self._styled_terms: set[str] = set()
-        if self.mode == "none":  # no stream at all: a disabled one still warns when flushed or collected
+        path = None if rrd_path is None else Path(rrd_path)  # None: no .rrd this run (a low disk)
+        self.rrd_path = path
+        if self.mode == "none":
             return
-        rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
-        self._rec = rec
-        blueprint = decay_blueprint(self.terms)
-        sinks: list[rr.GrpcSink | rr.FileSink] = []
-        if self.mode == "spawn":
-            if not self._spawned:
-                if rerun_executable() is None:
-                    raise InputError("no rerun viewer found to spawn; use --viewer save (an .rrd per run)")
-                rec.spawn(port=self.spawn_port, connect=False, hide_welcome_screen=True)
-                self._spawned = True
-            sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{self.spawn_port}/proxy"))
-        elif self.mode.startswith(URL_SCHEMES):
-            sinks.append(rr.GrpcSink(self.mode))
-        if self.rrd_path is not None:
-            sinks.append(rr.FileSink(str(self.rrd_path)))
-        rec.set_sinks(*sinks, default_blueprint=blueprint)
-        rec.send_recording_name(name)
-        self._style_static(rec)
+        self._run_open = True
+        self._noted.discard("behind")
+        terms_now, origin = self.terms, float(time_origin_s)
+        self._jobs().put(lambda: self._open_run(name, path, terms_now, origin), droppable=False)
 
-    def _recording(self) -> rr.RecordingStream:
-        if self._rec is None:
-            self.new_run(rrd_path=self._first_rrd_path)
-        assert self._rec is not None
-        return self._rec
+    def end_run(self) -> None:
+        """Finish the current recording on the view thread (returns at once)."""
+        if self._feed is not None and self._run_open:
+            self._run_open = False
+            self._feed.put(self._end_run, droppable=False)
 
-    def close(self) -> None:
-        """Flush and close the current recording (the .rrd is complete afterwards)."""
-        if self._rec is not None:
-            self._rec.flush(timeout_sec=10.0)
-            self._rec.disconnect()
-            self._rec = None
+    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+        """End the run and the view thread (waiting at most ``timeout_s``): the .rrd is complete after.
+
+        A spawned viewer stays open: the window belongs to the operator now.
+        """
+        self.end_run()
+        feed, self._feed = self._feed, None
+        if feed is not None:
+            if not feed.stop(timeout_s):
+                self.on_note(f"the view did not finish in {timeout_s:g} s; the last .rrd may be cut")
+            self._dropped_before += feed.dropped
 
     def __enter__(self) -> Self:
         return self
@@ -182,31 +358,11 @@ class LiveView:
     ) -> None:
         self.close()
 
-    # -- logging ----------------------------------------------------------------------------------------
-
-    def _style_static(self, rec: rr.RecordingStream) -> None:
-        for entity in ("angle/measured", "rate/measured"):
-            rec.log(
-                entity, rr.SeriesLines(colors=[MEASURED_COLOR], widths=[1.5], names=["measured"]), static=True
-            )
-
-    def _columns(self, entity: str, t: np.ndarray, values: np.ndarray) -> None:
-        self._recording().send_columns(
-            entity,
-            indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float) - self._origin)],
-            columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=float)),
-        )
-
     def log_samples(self, samples: np.ndarray) -> None:
         """Measured angle and rate of the view's axis, in degrees, against time from the run's origin."""
-        if samples.size == 0 or self.mode == "none":
-            return
-        angle_field, rate_field = AXIS_FIELDS[self.axis]
-        self._recording()
-        self._measured_t.append(samples["t"].copy())
-        self._measured_angle.append(samples[angle_field].copy())
-        self._columns("angle/measured", samples["t"], np.degrees(samples[angle_field]))
-        self._columns("rate/measured", samples["t"], np.degrees(samples[rate_field]))
+        if samples.size and self.mode != "none":
+            block = samples.copy()
+            self._submit(lambda: self._log_samples(block), droppable=True)
 
     def log_fit(
         self,
@@ -223,10 +379,184 @@ class LiveView:
         plotted at ``t_fit`` (default: the last time of ``t``) so they converge
         along the same time axis as the decay.
         """
-        if self.mode == "none":
+        if self.mode != "none":
+            args = (np.array(t, dtype=float), np.array(predicted_angle), np.array(predicted_rate))
+            fit = (dict(coefficients), dict(ci95 or {}), t_fit)
+            self._submit(lambda: self._log_fit(*args, *fit), droppable=True)
+
+    def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
+        """A run event (release, settled, warning, ...) in the Events panel, at its time."""
+        if self.mode != "none":
+            self._submit(lambda: self._log_event(kind, message, t_s))
+
+    # -- the view thread's side --------------------------------------------------------------------------
+
+    def _job_failed(self, exc: BaseException) -> None:
+        self._note_once(f"failed:{type(exc).__name__}", f"view update failed ({exc}); the recording goes on")
+        self._drop_recording()
+
+    def _drop_recording(self) -> None:
+        rec, self._rec, self._rrd_writing = self._rec, None, None
+        if rec is not None:
+            with contextlib.suppress(Exception):  # already reported; nothing more to save of this view
+                rec.disconnect()
+
+    def _spawn_viewer(self) -> None:
+        """Start the viewer (bound to ``bind``) unless one already listens on the port; else fall back."""
+        url = f"rerun+http://127.0.0.1:{self.spawn_port}/proxy"
+        if _listening(self.bind, self.spawn_port):
+            self.on_note(f"a viewer already listens on port {self.spawn_port}: the view goes there")
+            self._live_url = url
             return
+        executable = rerun_executable()
+        if executable is None:
+            self.on_note("no rerun viewer found (is rerun-sdk installed?): saving an .rrd instead")
+            return
+        process = subprocess.Popen(
+            [executable, "--bind", self.bind, "--port", str(self.spawn_port), "--hide-welcome-screen",
+             "--expect-data-soon"],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,  # the window outlives tankdaq for the operator; Ctrl-C spares it
+            env={**os.environ, "RERUN_APP_ONLY": "true"},
+        )  # fmt: skip
+        self.viewer_process = process
+        deadline = time.monotonic() + SPAWN_TIMEOUT_S
+        while process.poll() is None and time.monotonic() < deadline:
+            if _listening(self.bind, self.spawn_port):
+                self._live_url = url
+                self.on_note(f"rerun viewer pid {process.pid} listening on {self.bind}:{self.spawn_port}")
+                return
+            time.sleep(0.05)
+        code = process.poll()
+        if code is None:
+            process.kill()
+            process.wait(timeout=10)
+        why = f"exited with code {code}" if code is not None else f"did not listen in {SPAWN_TIMEOUT_S:g} s"
+        self.on_note(f"the rerun viewer {why} (no working display?): saving an .rrd instead")
+
+    def _viewer_gone(self) -> bool:
+        """True (once noted) when the spawned viewer has exited: its sink is dropped from then on."""
+        process = self.viewer_process
+        if self._live_url is None or process is None or process.poll() is None:
+            return False
+        self.on_note(
+            f"the rerun viewer exited (code {process.returncode}); the recording goes on, the .rrd too"
+        )
+        self._live_url = None
+        self._streaming = False
+        return True
+
+    def _sinks(self) -> list[rr.GrpcSink | rr.FileSink]:
+        sinks: list[rr.GrpcSink | rr.FileSink] = []
+        if self._streaming and self._live_url is not None:
+            sinks.append(rr.GrpcSink(self._live_url))
+        if self._rrd_writing is not None:
+            sinks.append(rr.FileSink(str(self._rrd_writing)))
+        return sinks
+
+    def _room_for_rrd(self, path: Path) -> bool:
+        free = free_bytes(path.parent)
+        if free >= self.rrd_reserve_bytes:
+            return True
+        self.on_note(
+            f"only {megabytes(free)} free under {path.parent} (keeping {megabytes(self.rrd_reserve_bytes)} "
+            f"for recordings): the .rrd stops here, {path.name} is cut short; the MCAP goes on"
+        )
+        return False
+
+    def _open_run(self, name: str, rrd_path: Path | None, terms: Sequence[str], origin: float) -> None:
+        self._end_run()
+        self._viewer_gone()
+        self._origin = origin
+        self._revision = 0
+        self._measured_t: list[np.ndarray] = []
+        self._measured_angle: list[np.ndarray] = []
+        self._styled_terms: set[str] = set()
+        self._rrd_writing = rrd_path if rrd_path is not None and self._room_for_rrd(rrd_path) else None
+        self._streaming = self._live_url is not None and _url_listening(self._live_url)
+        if self._live_url is not None and not self._streaming:
+            self.on_note(f"no viewer listening at {self._live_url}: this decay goes to the .rrd only")
+        sinks = self._sinks()
+        if not sinks:
+            return
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
+        self._rec = rec  # kept referenced: a collected stream closes its sinks
+        rec.set_sinks(*sinks, default_blueprint=decay_blueprint(terms))
+        rec.send_recording_name(name)
+        for entity in ("angle/measured", "rate/measured"):
+            rec.log(
+                entity, rr.SeriesLines(colors=[MEASURED_COLOR], widths=[1.5], names=["measured"]), static=True
+            )
+
+    def _end_run(self) -> None:
+        rec = self._rec
+        if rec is None:
+            return
+        try:
+            rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except RuntimeError as exc:  # a viewer that died or stalls, a file the disk refused
+            self.on_note(self._flush_failed(str(exc)))
+        finally:
+            self._drop_recording()
+
+    def _flush_failed(self, error: str) -> str:
+        """The line for a run whose end rerun could not deliver; a viewer that failed is not used again."""
+        if "File-writer" in error:
+            return f"the .rrd could not be finished ({error}); the recording goes on"
+        if self._streaming:
+            self._live_url, self._streaming = None, False
+        if "timed out" in error:
+            error = f"no answer within {FLUSH_TIMEOUT_S:g} s: stalled or gone"
+        return f"the viewer could not take the end of this run ({error}); the recording goes on, .rrd only"
+
+    def _recording(self) -> rr.RecordingStream | None:
+        """The stream to log to now, after dropping what cannot take more (a dead viewer, a full disk)."""
+        rec = self._rec
+        if rec is None:
+            return None
+        viewer_gone = self._viewer_gone()
+        rrd_full = self._rrd_writing is not None and not self._room_for_rrd(self._rrd_writing)
+        if rrd_full:
+            self._rrd_writing = None
+        if viewer_gone or rrd_full:
+            sinks = self._sinks()
+            if not sinks:
+                self._end_run()
+                return None
+            rec.set_sinks(*sinks)
+        return rec
+
+    def _columns(self, rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray) -> None:
+        rec.send_columns(
+            entity,
+            indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float) - self._origin)],
+            columns=rr.Scalars.columns(scalars=np.asarray(values, dtype=float)),
+        )
+
+    def _log_samples(self, samples: np.ndarray) -> None:
         rec = self._recording()
-        t = np.asarray(t, dtype=float)
+        if rec is None:
+            return
+        angle_field, rate_field = AXIS_FIELDS[self.axis]
+        self._measured_t.append(samples["t"])
+        self._measured_angle.append(samples[angle_field])
+        self._columns(rec, "angle/measured", samples["t"], np.degrees(samples[angle_field]))
+        self._columns(rec, "rate/measured", samples["t"], np.degrees(samples[rate_field]))
+
+    def _log_fit(
+        self,
+        t: np.ndarray,
+        predicted_angle: np.ndarray,
+        predicted_rate: np.ndarray,
+        coefficients: Mapping[str, float],
+        ci95: Mapping[str, object],
+        t_fit: float | None,
+    ) -> None:
+        rec = self._recording()
+        if rec is None:
+            return
         self._revision += 1
         fit = f"fit_{self._revision:03d}"
         stamp = float(t[-1]) if t_fit is None else float(t_fit)
@@ -246,7 +576,7 @@ class LiveView:
                 rr.SeriesLines(colors=[MODEL_COLOR], widths=[2.0], names=[name]),
                 static=True,
             )
-            self._columns(f"{group}/model/{fit}", times, values)
+            self._columns(rec, f"{group}/model/{fit}", times, values)
             if self._revision >= 2:
                 previous = f"{group}/model/fit_{self._revision - 1:03d}"
                 rec.log(
@@ -258,7 +588,7 @@ class LiveView:
                 older = f"{group}/model/fit_{self._revision - 2:03d}"
                 rec.log(older, rr.SeriesLines(visible_series=[False]), static=True)
         rec.set_time(TIMELINE, duration=stamp - self._origin)
-        intervals = interval_pairs(coefficients, ci95)
+        intervals = interval_pairs(coefficients, ci95 or None)
         for term, value in coefficients.items():
             entity = f"coefficients/{term}"
             if term not in self._styled_terms:
@@ -267,11 +597,7 @@ class LiveView:
                     rr.SeriesLines(
                         colors=[MEASURED_COLOR, INTERVAL_COLOR, INTERVAL_COLOR],
                         widths=[2.0, 1.0, 1.0],
-                        names=[
-                            f"{term} ({TERM_UNITS.get(term, '')})",
-                            f"{term} 95 % low",
-                            f"{term} 95 % high",
-                        ],
+                        names=[term_title(term), f"{term} 95 % low", f"{term} 95 % high"],
                     ),
                     static=True,
                 )
@@ -279,11 +605,10 @@ class LiveView:
             low, high = intervals.get(term, [np.nan, np.nan])
             rec.log(entity, rr.Scalars([float(value), low, high]))
 
-    def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
-        """A run event (release, settled, warning, ...) in the Events panel, at its time."""
-        if self.mode == "none":
-            return
+    def _log_event(self, kind: str, message: str, t_s: float | None) -> None:
         rec = self._recording()
+        if rec is None:
+            return
         if t_s is not None:
             rec.set_time(TIMELINE, duration=float(t_s) - self._origin)
         rec.log("events", rr.TextLog(f"{kind}: {message}", level=EVENT_LEVELS.get(kind, "INFO")))

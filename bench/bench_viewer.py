@@ -1,0 +1,78 @@
+"""The read loop with and without the live view, and the silence that made the false unplug.
+
+1. Scenario: how long the built-in simulator takes to compute its default open-ended scenario
+   (21 decays at 100 Hz). Before the fix this ran in the simulator's serving thread once
+   streaming began: that long without a byte on the line, against the driver's 3 s silence limit.
+2. Read loop: ``record --port sim`` (in-process, default scenario, sim speed 4) until the first
+   decay is saved, with ``--viewer none`` (the baseline, same run) and ``--viewer save``: time
+   per read (median, 99th percentile, max), device-gone events, view updates dropped.
+"""
+
+from __future__ import annotations
+
+import platform
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.device.simulator import SampleSource
+from tankdaq.physics.scenario import DecayScenario
+
+
+def scenario_seconds() -> float:
+    scenario = DecayScenario(hull="swath", draft=1.0, axis="roll", angle_deg=8.0, rate_hz=100, runs=21)
+    started = time.perf_counter()
+    SampleSource(scenario)
+    return time.perf_counter() - started
+
+
+class TimedDaemon(RecordDaemon):
+    """The record daemon with each read timed; it stops after the first decay."""
+
+    def __init__(self, settings: RecordSettings) -> None:
+        super().__init__(settings, on_event=self._event)
+        self.read_s: list[float] = []
+        self.gone = 0
+        self.dropped = 0
+
+    def _event(self, line: str) -> None:
+        self.gone += "device gone" in line
+        if line.startswith("run 1:") and " -> " in line:
+            self.stop()
+
+    def _pump(self, driver, session) -> None:  # type: ignore[no-untyped-def]
+        started = time.perf_counter()
+        super()._pump(driver, session)
+        self.read_s.append(time.perf_counter() - started)
+        self.dropped = session.view.dropped
+
+
+def read_loop(viewer: str, out: Path) -> tuple[np.ndarray, int, int]:
+    settings = RecordSettings(
+        port="sim", draft=1.0, angle_deg=8.0, hull="swath", out_dir=out / viewer, viewer=viewer, sim_speed=4.0
+    )
+    daemon = TimedDaemon(settings)
+    daemon.run()
+    return np.array(daemon.read_s), daemon.gone, daemon.dropped
+
+
+def main() -> None:
+    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    seconds = scenario_seconds()
+    print(f"scenario of 21 decays at 100 Hz computed in {seconds:.2f} s (driver silence limit 3 s)")
+    with tempfile.TemporaryDirectory() as tmp:
+        rows = {viewer: read_loop(viewer, Path(tmp)) for viewer in ("none", "save")}
+    base = np.median(rows["none"][0])
+    print("| viewer | reads | median ms | p99 ms | max ms | median vs none | device gone | view dropped |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    for viewer, (reads, gone, dropped) in rows.items():
+        ms = reads * 1e3
+        spread = f"{np.median(ms):.2f} | {np.percentile(ms, 99):.2f} | {ms.max():.1f}"
+        print(f"| {viewer} | {reads.size} | {spread} | {np.median(reads) / base:.2f} | {gone} | {dropped} |")
+
+
+if __name__ == "__main__":
+    main()

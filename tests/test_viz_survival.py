@@ -1,0 +1,317 @@
+"""The recording survives the view: a slow, dead or missing viewer, a full disk under the .rrd.
+
+All real: the simulated MTi-G on a pty, the record daemon, MCAP files read back with the mcap
+reader, a real rerun gRPC server killed mid-run, a size-limited tmpfs mounted for the disk tests
+(skipped with the reason where this machine cannot mount one), tankdaq in a subprocess for the
+command-line cases.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import random
+import re
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from rerun.chunk import RrdReader
+
+from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.errors import RecordingError
+from tankdaq.samples import empty_samples
+from tankdaq.store.reader import read_recording
+from tankdaq.store.recover import recover
+from tankdaq.viz.live import QUEUE_LIMIT, LiveView, rerun_executable
+
+pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
+
+TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
+SIM_RECORD = ["record", "--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "8"]
+
+
+def _settings(out: Path, **overrides: object) -> RecordSettings:
+    base: dict[str, object] = {
+        "port": "sim", "draft": 1.0, "angle_deg": 8.0, "hull": "swath", "out_dir": out, "viewer": "save",
+        "sim_speed": 16.0, "sim_seed": 4,
+    }  # fmt: skip
+    return RecordSettings(**{**base, **overrides})  # type: ignore[arg-type]
+
+
+def _complete(path: Path) -> bool:
+    """A finished MCAP: its summary (written at close) reads back, and so does every message."""
+    with path.open("rb") as f:
+        reader = make_reader(f)
+        try:
+            summary = reader.get_summary()
+        except McapError:  # a cut file: its tail is not a footer
+            return False
+        if summary is None:
+            return False
+        return sum(1 for _ in reader.iter_messages()) == summary.statistics.message_count
+
+
+def _rrd_rows(path: Path, entity: str) -> int:
+    reader = RrdReader(path)
+    (recording,) = reader.recordings()
+    chunks = reader.stream(store=recording).to_chunks()
+    return sum(c.num_rows for c in chunks if c.entity_path == entity and not c.is_static)
+
+
+# ---- the view never holds up acquisition ----------------------------------------
+
+
+def test_a_view_that_is_behind_drops_updates_and_returns_at_once(tmp_path: Path) -> None:
+    """The view thread is held; the caller logs far more than the queue holds and is never made to wait."""
+    notes: list[str] = []
+    view = LiveView("save", rrd_path=tmp_path / "behind.rrd", on_note=notes.append)
+    held, release = threading.Event(), threading.Event()
+    samples = empty_samples(5)
+    try:
+        view.log_samples(samples)  # opens the run
+        assert view._feed is not None
+        view._feed.put(lambda: (held.set(), release.wait()), droppable=False)
+        assert held.wait(timeout=30)
+        blocks = 3 * QUEUE_LIMIT
+        for k in range(blocks):
+            samples = empty_samples(5)
+            samples["t"] = 1.0 + k * 0.05 + np.arange(5) * 0.01
+            view.log_samples(samples)  # a blocking put would hang here with the thread held
+        assert view.dropped == blocks - QUEUE_LIMIT
+        assert sum("dropping view updates" in line for line in notes) == 1
+    finally:
+        release.set()
+        view.close()
+    assert _rrd_rows(tmp_path / "behind.rrd", "/angle/measured") == 5 * (1 + QUEUE_LIMIT)
+
+
+def test_record_keeps_its_read_cadence_while_the_view_saves(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The default viewer (save: no display) with the default open-ended scenario: no false unplug, no gap.
+
+    Before the fix every such run reported "device gone ... back after 4.5 s" before the first
+    release: the simulator computed its 21-run scenario in its serving thread, seconds of silence
+    on the line. The view's logging runs on its own thread and is not in the read loop either.
+    """
+    lines: list[str] = []
+    daemon: RecordDaemon
+
+    def on_event(line: str) -> None:
+        lines.append(line)
+        if line.startswith("run 1:") and " -> " in line:
+            daemon.stop()
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    daemon = RecordDaemon(_settings(tmp_path, runs=None, sim_speed=8.0, viewer=None), on_event=on_event)
+    outcomes = daemon.run()
+    (mode,) = [line for line in lines if line.startswith("viewer: ")]
+    assert mode.startswith("viewer: save") and "default (no display)" in mode and "--viewer" in mode
+    assert not [line for line in lines if "device gone" in line or "device back" in line], lines
+    assert daemon.status.gaps == 0 and daemon.status.bad_frames == 0
+    (outcome,) = outcomes
+    assert outcome.settle_reason in ("amplitude", "timeout") and _complete(outcome.path)
+    recording = read_recording(outcome.path)
+    counters = recording.samples["counter"].astype(np.int64)
+    assert np.all(np.diff(counters) % 65536 == 1), "every sample of the decay reached the file"
+    assert outcome.rrd_path is not None and _rrd_rows(outcome.rrd_path, "/angle/measured") > 0
+
+
+# ---- a viewer that dies, stalls or cannot start ----------------------------------------
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@contextlib.contextmanager
+def _grpc_server(port: int) -> Iterator[subprocess.Popen[bytes]]:
+    """A real rerun gRPC server on 127.0.0.1 (the viewer's server without a window); always stopped."""
+    executable = rerun_executable()
+    assert executable is not None
+    server = subprocess.Popen(
+        [executable, "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            with socket.socket() as probe:
+                if probe.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            assert server.poll() is None, "the rerun server did not start"
+            time.sleep(0.05)
+        yield server
+    finally:
+        if server.poll() is None:
+            server.kill()
+        server.wait(timeout=10)
+
+
+@pytest.mark.parametrize(
+    ("how", "seed"),
+    [(signal.SIGKILL, 1), (signal.SIGKILL, 2), (signal.SIGSTOP, 3)],
+    ids=["kill-1", "kill-2", "stall"],
+)
+def test_a_viewer_killed_or_stalled_at_any_moment_costs_no_decay(tmp_path: Path, how: int, seed: int) -> None:
+    """The viewer's server is killed (SIGKILL) or stalls (SIGSTOP) at a random read of a two-decay session."""
+    kill_at = random.Random(seed).randrange(20, 400)  # reads: before, during or after the first decay
+    port = _free_port()
+    lines: list[str] = []
+    with _grpc_server(port) as server:
+        reads = 0
+
+        def on_status(_status: object) -> None:
+            nonlocal reads
+            reads += 1
+            if reads == kill_at:
+                server.send_signal(how)
+
+        settings = _settings(tmp_path, runs=2, viewer=f"rerun+http://127.0.0.1:{port}/proxy")
+        outcomes = RecordDaemon(settings, on_event=lines.append, on_status=on_status).run()
+        assert reads >= kill_at, "the server was killed while recording"
+    assert len(outcomes) == 2
+    for outcome in outcomes:
+        assert outcome.settle_reason in ("amplitude", "timeout")
+        assert _complete(outcome.path), outcome.path
+    assert not [line for line in lines if "device gone" in line]
+    mode, *viewer_lines = [line for line in lines if line.startswith("viewer:")]
+    assert mode.startswith("viewer: stream to rerun+http://127.0.0.1")
+    assert len(viewer_lines) <= 2, viewer_lines  # at most: the end of that run, the next run goes to the .rrd
+
+
+def _run_tankdaq(args: list[str], env: dict[str, str], **kwargs) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([TANKDAQ, *args], capture_output=True, text=True, timeout=240, env=env, **kwargs)
+
+
+def _free_display() -> str:
+    number = next(n for n in range(150, 400) if not Path(f"/tmp/.X11-unix/X{n}").exists())
+    return f":{number}"
+
+
+@pytest.mark.parametrize("display", ["none", "broken"])
+def test_spawn_without_the_venv_on_path_or_a_display_records_and_saves(tmp_path: Path, display: str) -> None:
+    """``.venv/bin/tankdaq record --viewer spawn``, the venv not on PATH: no display, or a dead one.
+
+    No display: one line says so and the .rrd is saved. A display nobody serves: the viewer of the
+    installed rerun-sdk is found (not on PATH), starts, dies; one line, and the decay is recorded.
+    """
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "VIRTUAL_ENV")}
+    env["PATH"] = "/usr/bin:/bin"
+    if display == "broken":
+        env["DISPLAY"] = _free_display()
+    args = [*SIM_RECORD, "--runs", "1", "--sim-speed", "16"]
+    result = _run_tankdaq(
+        [*args, "--viewer", "spawn", "--viewer-port", str(_free_port()), "--out", str(tmp_path)], env
+    )
+    for pid in re.findall(r"rerun viewer pid (\d+)", result.stderr):  # one that outlived its display
+        with contextlib.suppress(OSError):
+            if b"rerun" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                os.kill(int(pid), signal.SIGKILL)
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr and "Flush timed out" not in result.stderr
+    viewer_lines = [line for line in result.stderr.splitlines() if line.startswith("viewer:")]
+    assert viewer_lines[0].startswith("viewer: spawn")
+    expected = "no display" if display == "none" else "the rerun viewer exited"
+    assert any(expected in line for line in viewer_lines[1:]), result.stderr
+    assert len(viewer_lines) <= 3, result.stderr  # a dead display may first let the viewer listen, then die
+    (mcap,) = tmp_path.glob("*.mcap")
+    assert _complete(mcap)
+    assert _rrd_rows(mcap.with_suffix(".rrd"), "/angle/measured") > 0
+
+
+# ---- a full disk: the .rrd gives way ----------------------------------------
+
+
+@contextlib.contextmanager
+def _small_disk(root: Path, size_kb: int) -> Iterator[Path]:
+    """A real file system of ``size_kb`` (tmpfs); skipped where this machine cannot mount one."""
+    where = root / f"disk{size_kb}k"
+    where.mkdir()
+    if os.geteuid() != 0:
+        pytest.skip("mounting a size-limited tmpfs needs root; the RLIMIT_FSIZE tests cover file limits")
+    mount = ["mount", "-t", "tmpfs", "-o", f"size={size_kb}k", "tmpfs", str(where)]
+    mounted = subprocess.run(mount, capture_output=True, text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({mounted.stderr.strip()})")
+    try:
+        yield where
+    finally:
+        subprocess.run(["umount", "-l", str(where)], check=False)
+
+
+RESERVE = 1_500_000  # the .rrd stops with less than this free (the default is far larger than these disks)
+
+
+@pytest.mark.parametrize("size_kb", [320, 3072])
+def test_a_full_disk_takes_the_rrd_never_a_finished_mcap(tmp_path: Path, size_kb: int) -> None:
+    """Two decays on a tiny disk. 3 MB holds two MCAPs but not their .rrd files as well (each several
+    times the MCAP's size): without the free-space budget the second MCAP is cut; with it the .rrd
+    stops (mid-decay, or before a decay) and every MCAP finishes. 320 kB cannot hold two MCAPs: the
+    one cut recovers (into another folder), and no .rrd was ever begun."""
+    lines: list[str] = []
+    with _small_disk(tmp_path, size_kb) as disk:
+        daemon = RecordDaemon(_settings(disk, runs=2, disk_reserve_bytes=RESERVE), on_event=lines.append)
+        try:
+            daemon.run()
+            stopped = None
+        except RecordingError as exc:
+            stopped = exc
+        finished = [o for o in daemon.outcomes if o.settle_reason in ("amplitude", "timeout")]
+        for outcome in finished:
+            assert _complete(outcome.path), outcome.path
+            assert read_recording(outcome.path).samples.size > 1000
+        mcaps = sorted(disk.glob("*.mcap"))
+        cut = [p for p in mcaps if not _complete(p)]
+        gave_way = [line for line in lines if "the .rrd stops here" in line or "without an .rrd" in line]
+        if size_kb >= 3072:
+            assert stopped is None and len(finished) == 2, lines
+            assert gave_way, lines
+        else:
+            assert stopped is not None and len(cut) == 1, lines
+            report = recover(cut[0], tmp_path / "recovered.mcap")
+            assert report.messages > 0
+            assert _events_of(tmp_path / "recovered.mcap", "release")
+        if size_kb < 3072:
+            assert not list(disk.glob("*.rrd")), "no room for an .rrd from the start: none was begun"
+            assert any("without an .rrd" in line for line in gave_way), lines
+
+
+def _events_of(path: Path, kind: str) -> list[dict]:
+    return [e for e in read_recording(path).events if e["kind"] == kind]
+
+
+def test_an_rrd_refused_by_the_file_system_is_one_line_and_the_mcaps_finish(tmp_path: Path) -> None:
+    """RLIMIT_FSIZE 1 MB: each MCAP fits, the .rrd hits EFBIG mid-decay (rerun's file writer dies)."""
+    import resource
+
+    def small_files() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (1_000_000, 1_000_000))
+
+    args = [*SIM_RECORD, "--runs", "2", "--sim-speed", "16"]
+    result = _run_tankdaq([*args, "--viewer", "save", "--out", str(tmp_path)], dict(os.environ),
+                          preexec_fn=small_files)  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    rerun_said = [line for line in result.stderr.splitlines() if "File-writer thread" in line]
+    assert all(line.startswith("viewer: ") for line in rerun_said), result.stderr  # ours, not rerun's log
+    mcaps = sorted(tmp_path.glob("*.mcap"))
+    assert len(mcaps) == 2 and all(_complete(p) for p in mcaps)
+    lines = result.stderr.splitlines()
+    viewer_lines = [line for line in lines if line.startswith("viewer: the .rrd could not be finished")]
+    assert 1 <= len(viewer_lines) <= 2, result.stderr
