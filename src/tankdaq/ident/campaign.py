@@ -282,8 +282,20 @@ def campaign_executor(jobs: int = 1, scheduler: str | None = None) -> Iterator[E
     elif jobs <= 1:
         yield None
     else:
+        _warm_up()
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             yield pool
+
+
+def _warm_up() -> None:
+    """Load the compiled kernels and matplotlib here, before the pool forks its workers from this
+    process: each worker then starts with them instead of loading them again."""
+    import matplotlib.backends.backend_agg  # noqa: F401 (imported for the workers)
+    from matplotlib.figure import Figure  # noqa: F401
+
+    t = np.linspace(0.0, 4.0, 200)
+    angle, rate = simulate_decay({"b1": 0.2, "c1": 10.0}, t, 0.1)
+    OutputError("b1,c1").fit(DecayRun(t=t, angle=angle + 1e-4 * np.sin(37 * t), rate=rate))
 
 
 # --------------------------------------------------------------------------------------------------
