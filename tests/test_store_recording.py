@@ -321,7 +321,7 @@ def test_not_mcap_and_foreign_mcap_are_refused(tmp_path: Path) -> None:
         (text, "not an MCAP file"),
         (empty, "is empty"),
         (foreign, "not a tankdaq recording .*?/camera/image"),
-        (tmp_path / "missing.mcap", "does not exist"),
+        (tmp_path / "missing.mcap", "no such recording"),
     ):
         with pytest.raises(BadRecordingInput, match=message) as info:
             read_recording(path)

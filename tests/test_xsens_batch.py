@@ -249,7 +249,13 @@ def test_samples_skip_gnss_messages_and_take_status_byte() -> None:
     assert np.isnan(samples["roll"][0]) and samples["p"][0] == np.float32(0.1)
 
 
-def test_samples_refuse_euler_angles_in_another_frame() -> None:
-    payload = encode_mtdata2([(0x1060, 1), (make_xdi("EulerAngles", "float32", "NED"), (1.0, 2.0, 3.0))])
-    with pytest.raises(ProtocolError, match="ENU"):
-        to_samples(decode_capture(build_frame(MID.MTDATA2, payload)), SampleTimeUnwrapper())
+def test_samples_leave_out_messages_that_cannot_be_samples_and_never_raise() -> None:
+    """Euler angles in another frame, or a time beyond the one-day clock: a corrupted frame, left out."""
+    def message(counter: int, ticks: int, frame: str = "ENU") -> list[tuple[int, object]]:
+        euler = make_xdi("EulerAngles", "float32", frame)
+        return [(make_xdi("PacketCounter"), counter), (0x1060, ticks), (euler, (1.0, 2.0, 3.0))]
+
+    messages = (message(1, 1000), message(2, 1100, "NED"), message(3, MODULUS_ONE_DAY + 5), message(4, 1300))
+    stream = b"".join(build_frame(MID.MTDATA2, encode_mtdata2(items)) for items in messages)
+    samples = to_samples(decode_capture(stream), SampleTimeUnwrapper())
+    assert samples["counter"].tolist() == [1, 4] and samples["ticks"].tolist() == [1000, 1300]

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 from pathlib import Path
 
 import pytest
+from mcap.writer import Writer
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
@@ -78,11 +80,21 @@ def test_summary_reports_corruption_and_counter_gaps(tmp_path: Path) -> None:
     assert "72 skipped bytes" in summary  # the corrupted frame (69) and the 3 trailing bytes
 
 
+def _empty_mcap() -> bytes:
+    """A real (empty) MCAP file, as the mcap library writes it."""
+    buffer = io.BytesIO()
+    writer = Writer(buffer)
+    writer.start()
+    writer.finish()
+    return buffer.getvalue()
+
+
 @pytest.mark.parametrize(
     ("name", "content", "message"),
     [
-        ("missing.bin", None, "does not exist"),
-        (".", None, "is a directory"),
+        ("recording.mcap", _empty_mcap(), "is an MCAP recording, not a raw capture"),
+        ("missing.bin", None, "no such raw capture"),
+        (".", None, "is a folder"),
         ("empty.bin", b"", "is empty"),
         ("text.txt", b"hello, not a capture", "no Xbus frames"),
     ],

@@ -17,6 +17,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from .. import validation
 from ..config import Hull, format_draft, load_hull
 from ..device.driver import MTiDriver
 from ..errors import DeviceGone, InputError, RecordingError
@@ -123,13 +124,17 @@ class RecordDaemon:
         self.hull: Hull | None = load_hull(settings.hull) if settings.hull else None
         if settings.axis not in ("roll", "pitch", "auto"):
             raise InputError(f"axis {settings.axis!r} not understood; use roll, pitch or auto")
-        if not settings.angle_deg > 0:
-            raise InputError(f"angle must be a positive number of degrees, got {settings.angle_deg:g}")
+        # everything checkable is checked here, before a simulator starts or the port opens
+        validation.release_angle_deg(settings.angle_deg, option="angle")
+        validation.output_rate_hz(settings.rate_hz, option="rate")
+        validation.baud_rate(settings.baud, option="baud")
+        validation.live_model(settings.model, option="model")
         if settings.port == "sim":  # refuse a hull the simulator cannot play before anything opens
             if self.hull is None:
                 raise InputError("the simulated sensor needs a hull to play: give --hull")
             sim_axis = "roll" if settings.axis == "auto" else settings.axis
             self.hull.simulation_model(sim_axis).coefficients(settings.draft)
+        validation.output_dir(settings.out_dir, option="output folder")
         self.simulator = None
         self.outcomes: list[DecayOutcome] = []
         self._next_read = 0.0

@@ -16,7 +16,7 @@ from pathlib import Path
 from ..device.decoding import SampleDecoder
 from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
-from ..store.reader import read_recording
+from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 
@@ -56,6 +56,8 @@ def replay_recording(
     """Replay one tankdaq MCAP; returns the decays found (normally the one it holds)."""
     path = Path(path)
     recording = read_recording(path)
+    if recording.truncated and on_event is not None:
+        on_event(truncation_notice(path, recording.damage))
     meta = recording.metadata
     axis = recording.axis
     nominal = float(meta.get("angle_nominal_deg", "nan"))

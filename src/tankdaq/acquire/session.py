@@ -114,7 +114,27 @@ class DecaySession:
     # ---- feeding ----------------------------------------
 
     def feed(self, block: Block) -> list[DecayOutcome]:
-        """Process one block; return the decays it finished."""
+        """Process one block; return the decays it finished.
+
+        Whatever goes wrong while a decay is recorded (a view, an identifier, a bug), its file is
+        closed with what arrived before the error is passed on: a decay is never left unfinished.
+        """
+        try:
+            return self._feed(block)
+        except Exception as exc:
+            self._close_after_error(exc)
+            raise
+
+    def _close_after_error(self, exc: Exception) -> None:
+        active, self._active = self._active, None
+        if active is None:
+            return
+        self.state = "waiting"
+        outcome = active.close_after_error(exc)
+        self.outcomes.append(outcome)
+        self.on_event(active.summary(outcome))
+
+    def _feed(self, block: Block) -> list[DecayOutcome]:
         finished: list[DecayOutcome] = []
         if self._active is not None:
             self._active.append(block)
@@ -203,10 +223,9 @@ class DecaySession:
         return chosen
 
     def _finish_decay(self, reason: str) -> DecayOutcome:
-        active = self._active
+        active, self._active = self._active, None
         assert active is not None
-        outcome = active.finish(reason)
-        self._active = None
+        outcome = active.finish(reason)  # closes its file whatever happens
         self.outcomes.append(outcome)
         self.state = "settled"
         self.on_event(active.summary(outcome))
@@ -221,9 +240,11 @@ class DecaySession:
         self.state = "waiting"
         if active is None:
             return None
-        active.event(kind, message)
-        outcome = active.finish(kind)
         self._active = None
+        try:
+            active.event(kind, message)
+        finally:
+            outcome = active.finish(kind)  # closes the file even when the event could not be written
         self.outcomes.append(outcome)
         self.on_event(active.summary(outcome))
         return outcome
@@ -257,21 +278,26 @@ class _ActiveDecay:
         self._last_t = release_t
         self.writer: RecordingWriter | None = None
         self.path: Path | None = None
-        s = session.settings
+        self.rrd_path: Path | None = None
         self.identifier = OnlineIdentifier(self.session.terms, axis=axis, callback=self._on_fit)
+
+    def _open(self) -> None:
+        """Open the recording, then the view (its .rrd is named after the recording)."""
+        s = self.session.settings
+        session = self.session
         if s.out_dir is not None:
             self._open_writer()
         rrd = None if self.path is None else self.path.with_suffix(".rrd")
         if rrd is None and s.rrd_base is not None:
-            rrd = s.rrd_base.with_name(s.rrd_base.name + (f"-{run}" if run > 1 else "") + ".rrd")
+            rrd = s.rrd_base.with_name(s.rrd_base.name + (f"-{self.run}" if self.run > 1 else "") + ".rrd")
         if session.view.mode == "none" or (rrd is not None and not self._room_for_rrd(rrd)):
             rrd = None
-        session.view.axis = axis
+        session.view.axis = self.axis
         session.view.new_run(
-            name=self.path.stem if self.path else f"run {run}",
+            name=self.path.stem if self.path else f"run {self.run}",
             rrd_path=rrd,
             terms=session.terms,
-            time_origin_s=release_t,  # the view reads in seconds since the release
+            time_origin_s=self.release_t,  # the view reads in seconds since the release
         )
         self.rrd_path = session.view.rrd_path
 
@@ -304,7 +330,8 @@ class _ActiveDecay:
         self.path = self.writer.path
 
     def begin(self, blocks: list[Block]) -> None:
-        """Write the pre-trigger history, mark the release, and feed the identifier."""
+        """Open the file and view, write the pre-trigger history, mark the release, feed the identifier."""
+        self._open()
         for block in blocks:
             self.append(block)
         ev = self.release_event
@@ -391,29 +418,54 @@ class _ActiveDecay:
         )
 
     def finish(self, reason: str) -> DecayOutcome:
+        """The final fit, then close the file: closed even when the fit or the view raise."""
         started = time.perf_counter()
+        final: OnlineResult | None = None
+        try:
+            final = self._final_fit()
+            self.session.view.log_event("settled", f"decay ended ({reason})", self._last_t)
+        finally:
+            extra: dict[str, object] = {"settle_reason": reason, "final_fit_s": time.perf_counter() - started}
+            if final is not None:
+                extra.update({f"fit_{k}": v for k, v in final.coefficients.items()})
+                extra["fit_r2_angle"] = final.r2_angle
+                extra["natural_period_s"] = final.natural_period_s
+            self._close_file(reason, extra)
+        self.session.view.end_run()  # the file is closed first; the view finishes on its own thread
+        return self._outcome(reason, final)
+
+    def _final_fit(self) -> OnlineResult | None:
         try:
             final = self.identifier.finish()
         except TankdaqError as exc:  # an unfittable decay (too short, cut by an unplug) is a warning
-            final = None
             self.warnings.append(f"no final fit: {exc}")
             self.event("warning", f"no final fit: {exc}")
-        else:
-            self._on_fit(final)
-        extra: dict[str, object] = {"settle_reason": reason, "final_fit_s": time.perf_counter() - started}
-        if final is not None:
-            extra.update({f"fit_{k}": v for k, v in final.coefficients.items()})
-            extra["fit_r2_angle"] = final.r2_angle
-            extra["natural_period_s"] = final.natural_period_s
+            return None
+        self._on_fit(final)
+        return final
 
+    def close_after_error(self, exc: Exception) -> DecayOutcome:
+        """Close the file with what arrived, saying why; no final fit (the error may be in it)."""
+        message = f"recording closed after an error: {type(exc).__name__}: {exc}"
+        self.warnings.append(message)
+        try:
+            self._write(lambda writer: writer.write_event("warning", message, self._last_t))
+        finally:
+            self._close_file("error", {"settle_reason": "error", "error": message})
+        return self._outcome("error", self.fit)
+
+    def _close_file(self, reason: str, extra: dict[str, object]) -> None:
         def close(writer: RecordingWriter) -> None:
-            writer.write_event("settled", f"decay ended ({reason})", None, {"reason": reason})
-            writer.update_metadata(extra)
-            writer.close()
+            try:
+                writer.write_event("settled", f"decay ended ({reason})", None, {"reason": reason})
+                writer.update_metadata(extra)
+            finally:
+                writer.close()
 
-        self.session.view.log_event("settled", f"decay ended ({reason})", self._last_t)
         self._write(close)
-        self.session.view.end_run()  # the file is closed first; the view finishes on its own thread
+        self.writer = None
+
+    def _outcome(self, reason: str, final: OnlineResult | None) -> DecayOutcome:
         return DecayOutcome(
             run=self.run,
             axis=self.axis,

@@ -8,16 +8,59 @@ purpose (``TankdaqError``) become one line on stderr and the error's exit code.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, TypeVar
 
 import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from typer.core import TyperGroup
+from typer.exceptions import TyperException
 
 from ..errors import TankdaqError
 
+
+class OneLineUsageErrors(TyperGroup):
+    """The root command: a usage error (missing option, unknown option, bad value) is one line, exit 2.
+
+    Click's form (usage, hint, blank line, error) is four lines; a person at the tank reads one.
+    """
+
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        windows_expand_args: bool = True,
+        **extra: Any,
+    ) -> Any:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, windows_expand_args, **extra)
+        try:
+            code = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
+        except TyperException as exc:  # click's usage errors and bad parameters
+            message = exc.format_message()
+            if "\n" in message:  # the help text, for a command given without arguments
+                exc.show()  # type: ignore[attr-defined]
+                sys.exit(exc.exit_code)
+            ctx = getattr(exc, "ctx", None)
+            hint = ""
+            if ctx is not None and not isinstance(exc, UsageLine):  # ours already say what to do
+                hint = f" ({ctx.command_path} --help lists the options)"
+            err_console.print(
+                f"error: {message.rstrip('.')}{hint}", markup=False, highlight=False, soft_wrap=True
+            )
+            sys.exit(exc.exit_code)
+        except typer.Abort:
+            err_console.print("aborted", markup=False)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
 app = typer.Typer(
+    cls=OneLineUsageErrors,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -55,15 +98,56 @@ def handles_errors(fn: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+class UsageLine(typer.BadParameter):
+    """A bad parameter value whose message already names the option (no "Invalid value for" prefix)."""
+
+    def format_message(self) -> str:
+        return self.message
+
+
+def checked(rule: Callable[..., Any], keep_input: bool = False, **settings: Any) -> Callable[[Any], Any]:
+    """A typer callback/parser applying a ``tankdaq.validation`` rule; None (not given) passes.
+
+    A list option is checked item by item; ``keep_input`` passes the value on as given (a model
+    alias stays an alias) instead of the rule's normalised form. The rule's InputError becomes one
+    line and exit 2 while the command line is parsed: before any device is opened or work starts.
+    """
+
+    def one(value: Any) -> Any:
+        normalised = rule(value, **settings)
+        return value if keep_input else normalised
+
+    def apply(value: Any) -> Any:
+        if value is None:
+            return None
+        try:
+            if isinstance(value, list | tuple):
+                return [one(item) for item in value]
+            return one(value)
+        except TankdaqError as exc:
+            raise UsageLine(str(exc)) from None
+
+    return apply
+
+
 def parse_draft_option(value: str) -> float:
     """typer parser for --draft: '0.9T', 'T', '1.1T' -> factor (bad values exit 2)."""
-    from ..config import parse_draft
-    from ..errors import InputError
+    from ..validation import draft_factor
 
-    try:
-        return parse_draft(value)
-    except InputError as exc:
-        raise typer.BadParameter(str(exc)) from None
+    return checked(draft_factor)(value)
+
+
+def say(line: str) -> None:
+    """One line on stderr as written: no markup, no highlighting, never wrapped into two."""
+    err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+
+
+def warn_truncated(runs: Iterable[Any]) -> list[str]:
+    """One warning line per recording cut short among the decays read; the files, for ``--json``."""
+    notices = {str(run.meta["file"]): run.meta["truncation"] for run in runs if run.meta.get("truncation")}
+    for notice in notices.values():
+        say(notice)
+    return list(notices)
 
 
 def _print_version(value: bool) -> None:

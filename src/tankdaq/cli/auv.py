@@ -12,6 +12,7 @@ import numpy as np
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from .. import validation
 from ..errors import InputError
 from ..maneuver.identify import SeparateIdentifier, default_window_s, relative_errors
 from ..maneuver.io import read_record, read_vehicle_attachment, write_record
@@ -19,7 +20,7 @@ from ..maneuver.model import StateRecord, add_noise, simulate_zigzag
 from ..maneuver.sensitivity import OUTPUTS, SensitivityResult, sensitivity_analysis
 from ..maneuver.validate import MODES, SCORED_STATES, default_mode, plot_validation, resimulate
 from ..maneuver.vehicle import TERM_BY_NAME, Vehicle, list_vehicles, load_vehicle
-from .app import app, err_console, handles_errors
+from .app import app, checked, err_console, handles_errors
 
 auv_app = typer.Typer(
     no_args_is_help=True,
@@ -102,7 +103,12 @@ def _sensitivity(vehicle: Vehicle, delta_rad: float, theta_rad: float, step: flo
 @auv_app.command("simulate")
 @handles_errors
 def simulate_command(
-    out: Annotated[Path, typer.Option("--out", help="Output: .mcap or .csv, by suffix.")],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out", callback=checked(validation.output_file), help="Output: .mcap or .csv, by suffix."
+        ),
+    ],
     vehicle_name: str = typer.Option(DEFAULT_VEHICLE, "--vehicle", help="Vehicle in configs/vehicles."),
     manoeuvre: str = typer.Option("zigzag", "--manoeuvre", help="Manoeuvre: zigzag (stern plane +/-delta, "
                                   "switched when pitch reaches -/+theta)."),
@@ -225,7 +231,12 @@ def sensitivity_command(
     vehicle_name: str = typer.Option(DEFAULT_VEHICLE, "--vehicle", help="Vehicle in configs/vehicles."),
     delta_deg: float = typer.Option(DEFAULT_DELTA_DEG, "--delta", help=DELTA_HELP),
     theta_deg: float = typer.Option(DEFAULT_THETA_DEG, "--theta", help=THETA_HELP),
-    step_percent: float = typer.Option(10.0, "--step", help="Perturbation of each derivative [%]."),
+    step_percent: float = typer.Option(
+        10.0,
+        "--step",
+        callback=checked(validation.percent, option="--step"),
+        help="Perturbation of each derivative [%], between 0 and 100.",
+    ),
     threshold: float = typer.Option(0.10, "--threshold", help="Index at which a derivative is dominant."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
@@ -255,7 +266,14 @@ def validate_command(
     test: Annotated[Path | None, typer.Option("--test", help="Held-out record (default: FILE).")] = None,
     vehicle_name: str = typer.Option(None, "--vehicle", help=RECORD_VEHICLE_HELP),
     method: str = typer.Option("lssvm", "--method", help="lssvm or ols."),
-    plot: Annotated[Path | None, typer.Option("--plot", help="PNG: measured vs re-simulated.")] = None,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            callback=checked(validation.output_file, option="--plot"),
+            help="PNG: measured vs re-simulated.",
+        ),
+    ] = None,
     mode: str = typer.Option(None, "--mode", help="zigzag (re-run the manoeuvre; default for zigzag records) "
                              "or replay (driven by the measured plane)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),

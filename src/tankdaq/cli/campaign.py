@@ -7,7 +7,8 @@ from typing import Annotated
 
 import typer
 
-from .app import app, err_console, handles_errors, progress_bar
+from .. import validation
+from .app import app, checked, err_console, handles_errors, progress_bar, warn_truncated
 from .identify import EndS, StartS
 
 
@@ -16,7 +17,12 @@ from .identify import EndS, StartS
 def campaign_command(
     inputs: Annotated[list[Path], typer.Argument(help="Recordings (.mcap, .csv) or folders of them.")],
     report: Annotated[
-        Path | None, typer.Option("--report", help="Write campaign.csv, campaign.md and PNG plots here.")
+        Path | None,
+        typer.Option(
+            "--report",
+            callback=checked(validation.output_dir, option="--report"),
+            help="Write campaign.csv, campaign.md and PNG plots here.",
+        ),
     ] = None,
     model: Annotated[
         str, typer.Option("--model", help="Terms (b1,b2,c1,c3) or an alias (docs/models.md).")
@@ -86,6 +92,7 @@ def campaign_command(
             hulls=known,
             executor=pool,
         )
+        warn_truncated(runs)
         echo_cuts(runs)
         typer.echo(markdown_table(results), nl=False)
         failed = [r for r in results if r.fit is None]
@@ -101,7 +108,13 @@ def campaign_command(
 @app.command("simulate-campaign")
 @handles_errors
 def simulate_campaign_command(
-    folder: Annotated[Path, typer.Argument(help="Folder for the simulated recordings (created).")],
+    folder: Annotated[
+        Path,
+        typer.Argument(
+            callback=checked(validation.output_dir, option="FOLDER"),
+            help="Folder for the simulated recordings (created).",
+        ),
+    ],
     plan: Annotated[
         str, typer.Option("--plan", help="Test matrix from configs/campaigns (hulls, axis, drafts, angles).")
     ] = "seed000-trimaran-catamaran-pitch",
@@ -110,17 +123,27 @@ def simulate_campaign_command(
     ] = None,
     axis: Annotated[str | None, typer.Option("--axis", help="roll or pitch (overrides the plan).")] = None,
     drafts: Annotated[
-        list[str] | None, typer.Option("--draft", help="Drafts (repeat; overrides the plan).")
+        list[str] | None,
+        typer.Option(
+            "--draft",
+            callback=checked(validation.draft_factor, keep_input=True),
+            help="Drafts (repeat; overrides the plan).",
+        ),
     ] = None,
     angles_deg: Annotated[
-        list[float] | None, typer.Option("--angle", help="Initial angles, deg (repeat; overrides the plan).")
+        list[float] | None,
+        typer.Option(
+            "--angle",
+            callback=checked(validation.release_angle_deg),
+            help="Initial angles, deg (repeat; overrides the plan).",
+        ),
     ] = None,
     file_format: Annotated[str, typer.Option("--format", help="csv or mcap.")] = "csv",
     seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,
 ) -> None:
     """Simulate a decay campaign from configs/hulls, following a test matrix from configs/campaigns
     (default: seed 000's trimaran and catamaran pitch decays at 0.9T, T, 1.1T from 2, 4, 6, 8 deg)."""
-    from ..config import load_campaign_plan, parse_draft
+    from ..config import load_campaign_plan, load_hull
     from ..errors import InputError
     from ..ident.campaign import write_simulated_campaign
 
@@ -128,11 +151,15 @@ def simulate_campaign_command(
     axis = axis or matrix.axis
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
+    draft_factors = [validation.draft_factor(d) for d in drafts or matrix.drafts]
+    for hull in hulls or matrix.hulls:  # every condition is checked before the first file is written
+        for draft in draft_factors:
+            validation.hull_draft(load_hull(hull), draft, axis)
     written = write_simulated_campaign(
         folder,
         hulls or matrix.hulls,
         axis,
-        [parse_draft(d) for d in drafts or matrix.drafts],
+        draft_factors,
         angles_deg or matrix.angles_deg,
         file_format,
         seed=seed,

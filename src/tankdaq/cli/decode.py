@@ -16,16 +16,18 @@ from typing import IO, Annotated
 
 import numpy as np
 import typer
+from mcap.writer import MCAP0_MAGIC
 from rich.progress import Progress
 
 from ..errors import InputError, ProtocolError
+from ..validation import input_file, output_file
 from ..xsens.batch import DecodedBlock
 from ..xsens.constants import MID
 from ..xsens.legacy import decode_mtdata, legacy_layout
 from ..xsens.mtdata2 import SPEC_BY_NAME, MTData2Message, UtcTime, to_jsonable
 from ..xsens.stream import StreamDecoder
 from ..xsens.timebase import CounterTracker
-from .app import app, err_console, handles_errors, progress_bar
+from .app import app, checked, err_console, handles_errors, progress_bar
 
 CHUNK_BYTES = 1 << 20
 WRITE_BATCH = 10_000
@@ -66,16 +68,18 @@ class OutputFormat(StrEnum):
 
 def read_capture(path: Path) -> bytes:
     """The capture's bytes; a one-line InputError when it cannot be used."""
-    if not path.exists():
-        raise InputError(f"capture {path} does not exist")
-    if path.is_dir():
-        raise InputError(f"capture {path} is a directory; give the raw capture file (e.g. output.bin)")
+    input_file(path, "raw capture file (e.g. output.bin)")
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read capture {path}: {exc.strerror}") from None
     if not data:
         raise InputError(f"capture {path} is empty")
+    if data.startswith(MCAP0_MAGIC):  # its bytes would only be counted as hundreds of bad checksums
+        raise InputError(
+            f"{path} is an MCAP recording, not a raw capture; its serial bytes are replayed by "
+            f"tankdaq replay {path} (read them with tankdaq.store.reader.iter_raw_chunks)"
+        )
     return data
 
 
@@ -225,7 +229,10 @@ def decode_command(
     output_format: Annotated[
         OutputFormat, typer.Option("--format", help="jsonl or csv.")
     ] = OutputFormat.jsonl,
-    out: Annotated[Path | None, typer.Option("--out", help="Write here instead of stdout.")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", callback=checked(output_file), help="Write here instead of stdout."),
+    ] = None,
     legacy_mode: Annotated[
         int | None,
         typer.Option("--legacy-mode", parser=parse_register, help="Legacy MTi-G OutputMode, e.g. 0x0006."),

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
+from .. import validation
 from ..errors import InputError
-from .app import app, err_console, handles_errors, progress_bar
+from .app import app, checked, err_console, handles_errors, progress_bar, warn_truncated
 from .identify import (
     AngleColumn,
     AngleUnit,
@@ -26,7 +28,11 @@ from .identify import (
 @handles_errors
 def diagnose_command(
     inputs: Annotated[
-        list[Path], typer.Argument(help="Decay recordings (.mcap) or CSV files, one decay each.")
+        list[Path],
+        typer.Argument(
+            callback=checked(validation.input_file),
+            help="Decay recordings (.mcap) or CSV files, one decay each.",
+        ),
     ],
     axis: str = typer.Option("roll", "--axis", help="roll or pitch."),
     baseline: str = typer.Option(
@@ -35,10 +41,20 @@ def diagnose_command(
     max_steps: int = typer.Option(4, "--max-steps", help="At most this many effects added."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
     report: Annotated[
-        Path | None, typer.Option("--report", help="Write a Markdown report with PNG figures into DIR.")
+        Path | None,
+        typer.Option(
+            "--report",
+            callback=checked(validation.output_dir, option="--report"),
+            help="Write a Markdown report with PNG figures into DIR.",
+        ),
     ] = None,
     rrd: Annotated[
-        Path | None, typer.Option("--rrd", help="Also write the story to a rerun .rrd file for the viewer.")
+        Path | None,
+        typer.Option(
+            "--rrd",
+            callback=checked(validation.output_file, option="--rrd"),
+            help="Also write the story to a rerun .rrd file for the viewer.",
+        ),
     ] = None,
     time_col: TimeColumn = "time_s",
     angle_col: AngleColumn = "angle_deg",
@@ -58,11 +74,10 @@ def diagnose_command(
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     if max_steps < 0:
         raise InputError(f"--max-steps must be 0 or more, not {max_steps}")
-    if rrd is not None and not rrd.parent.is_dir():  # say so before minutes of fitting, not after
-        raise InputError(f"cannot write {rrd}: folder {rrd.parent} does not exist")
     runs = load_runs(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
     )
+    truncated = warn_truncated(runs)
     with progress_bar() as progress:
         # per step: every candidate, plus the two refits of the late-disturbance test
         task = progress.add_task("baseline", total=1 + max_steps * (len(LIBRARY) + 2))
@@ -79,7 +94,8 @@ def diagnose_command(
         save_rrd(diagnoser, rrd)
         err_console.print(f"rerun recording: {rrd}", markup=False, highlight=False)
     if as_json:
-        typer.echo(summary_json(diagnoser))
+        document = json.loads(summary_json(diagnoser))
+        typer.echo(json.dumps({**document, "truncated": bool(truncated), "truncated_files": truncated}))
     else:
         for line in story(diagnoser):
             typer.echo(line)

@@ -7,16 +7,25 @@ from typing import Annotated
 
 import typer
 
-from .app import app, handles_errors
+from .. import validation
+from .app import app, checked, handles_errors, say
 
 
 @app.command("export")
 @handles_errors
 def export_command(
-    recordings: Annotated[list[Path], typer.Argument(help="tankdaq recordings (.mcap).")],
+    recordings: Annotated[
+        list[Path],
+        typer.Argument(callback=checked(validation.input_file), help="tankdaq recordings (.mcap)."),
+    ],
     file_format: Annotated[str, typer.Option("--format", help="csv or mat.")] = "csv",
     out: Annotated[
-        Path | None, typer.Option("--out", help="Folder for the files (default: beside each).")
+        Path | None,
+        typer.Option(
+            "--out",
+            callback=checked(validation.output_dir),
+            help="Folder for the files (default: beside each).",
+        ),
     ] = None,
     frame: Annotated[
         str, typer.Option("--frame", help="Time origin: device (the sensor clock) or release (t = 0 there).")
@@ -35,4 +44,4 @@ def export_command(
         if path.suffix.lower() != ".mcap":
             raise InputError(f"{path}: not a tankdaq recording (.mcap)")
     for path in recordings:
-        typer.echo(str(export_recording(path, file_format, out, frame)))
+        typer.echo(str(export_recording(path, file_format, out, frame, on_notice=say)))

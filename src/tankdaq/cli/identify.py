@@ -9,9 +9,10 @@ from typing import Annotated
 
 import typer
 
+from .. import validation
 from ..errors import InputError
 from ..records import DecayRun
-from .app import app, err_console, handles_errors, parse_draft_option, progress_bar
+from .app import app, checked, err_console, handles_errors, parse_draft_option, progress_bar, warn_truncated
 
 # Options every command that reads decays shares (identify, diagnose): how to read other labs' CSV.
 TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
@@ -103,7 +104,11 @@ def _clean(value: object) -> object:
 @handles_errors
 def identify_command(
     inputs: Annotated[
-        list[Path], typer.Argument(help="Decay recordings (.mcap) or CSV files, one decay each.")
+        list[Path],
+        typer.Argument(
+            callback=checked(validation.input_file),
+            help="Decay recordings (.mcap) or CSV files, one decay each.",
+        ),
     ],
     axis: str = typer.Option(
         None, "--axis", help="roll or pitch (default: a recording's own axis; roll for CSV)."
@@ -125,7 +130,10 @@ def identify_command(
     start: StartS = None,
     end: EndS = None,
     bootstrap: int = typer.Option(
-        0, "--bootstrap", min=0, help="Moving-block bootstrap replicas for intervals."
+        0,
+        "--bootstrap",
+        callback=checked(validation.bootstrap_replicas),
+        help=f"Moving-block bootstrap replicas for intervals (up to {validation.MAX_BOOTSTRAP_REPLICAS}).",
     ),
     repeats: bool = typer.Option(
         False, "--repeats", help="The runs are repeats: intervals from their spread (t, n-1 dof)."
@@ -149,6 +157,10 @@ def identify_command(
     runs = load_runs(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
     )
+    if hull_config is not None:  # the draft must be one the hull has on the decays' axes, before any fit
+        for run_axis in sorted({run.axis for run in runs}):
+            validation.hull_draft(hull_config, draft, run_axis)
+    truncated = {"truncated": bool(cut := warn_truncated(runs)), "truncated_files": cut}
 
     if compare:
         from ..ident.free_decay import cut_lines
@@ -160,7 +172,8 @@ def identify_command(
                 runs, COMPARE_MODELS, method, lambda name: progress.update(task, advance=1, description=name)
             )
         if as_json:
-            typer.echo(json.dumps(_clean({"compare": rows, "cuts": cut_lines(runs)}), default=_json_default))
+            document = {"compare": rows, "cuts": cut_lines(runs), **truncated}
+            typer.echo(json.dumps(_clean(document), default=_json_default))
         else:
             echo_cuts(runs)
             typer.echo(compare_text(rows))
@@ -191,6 +204,6 @@ def identify_command(
             interval_method = f"{spread.method}, {len(runs)} runs"
     summary = summarize(estimator, runs, method, hull_config, draft, interval_method)
     if as_json:
-        typer.echo(json.dumps(_clean(summary), default=_json_default))
+        typer.echo(json.dumps(_clean({**summary, **truncated}), default=_json_default))
     else:
         typer.echo(text_report(summary))

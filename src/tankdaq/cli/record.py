@@ -2,27 +2,20 @@
 
 from __future__ import annotations
 
-import math
 from enum import StrEnum
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
-from .app import app, err_console, handles_errors, parse_draft_option
+from .. import validation
+from .app import app, checked, err_console, handles_errors, parse_draft_option, say
 
 
 class AxisChoice(StrEnum):
     roll = "roll"
     pitch = "pitch"
     auto = "auto"
-
-
-def _positive_angle(value: float) -> float:
-    if not (math.isfinite(value) and 0 < value <= 45):
-        raise typer.BadParameter(
-            f"{value:g} is not a release angle; give a positive number of degrees up to 45"
-        )
-    return value
 
 
 def _viewer(value: str) -> str:
@@ -33,26 +26,6 @@ def _viewer(value: str) -> str:
         return check_mode(value)
     except InputError as exc:
         raise typer.BadParameter(str(exc)) from None
-
-
-def _hull(value: str) -> str:
-    """A hull name (user folder, then shipped) or a .toml path; an unknown one lists the known ones."""
-    from ..config import load_hull
-    from ..errors import InputError
-
-    try:
-        load_hull(value)
-    except InputError as exc:
-        raise typer.BadParameter(str(exc)) from None
-    return value
-
-
-def _rate(value: float) -> float:
-    if not (value > 0 and 400 % value == 0):
-        raise typer.BadParameter(
-            f"{value:g} Hz is not an MTi output rate; use a divisor of 400 (100, 200, 400)"
-        )
-    return value
 
 
 class _StatusLine:
@@ -76,7 +49,7 @@ class _StatusLine:
             self._live.__exit__(None, None, None)
 
     def event(self, line: str) -> None:
-        err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+        say(line)
 
     def status(self, status: object) -> None:
         self._text.plain = status.line(self.runs)  # type: ignore[attr-defined]
@@ -103,9 +76,7 @@ def run_record(
 ) -> list:
     """Build the daemon from command-line values, run it with a status line, print what it saved."""
     from ..acquire.daemon import RecordDaemon, RecordSettings
-    from ..ident.models import resolve_model
 
-    resolve_model(model)  # refuse a bad model before the port is opened
     settings = RecordSettings(
         port=port,
         draft=draft,
@@ -143,19 +114,35 @@ def record_command(
         ..., "--draft", parser=parse_draft_option, help="Draft as a factor of design: 0.9T, T, 1.1T."
     ),
     angle: float = typer.Option(
-        ..., "--angle", callback=_positive_angle, help="Nominal release angle (deg)."
+        ..., "--angle", callback=checked(validation.release_angle_deg), help="Nominal release angle (deg)."
     ),
     hull: str = typer.Option(
-        ..., "--hull", callback=_hull, help="The model tested: a hull name (tankdaq hulls) or a .toml file."
+        ...,
+        "--hull",
+        callback=checked(validation.known_hull, keep_input=True),
+        help="The model tested: a hull name (tankdaq hulls) or a .toml file.",
     ),
     axis: AxisChoice = typer.Option(
         AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
     ),
-    rate: float = typer.Option(100.0, "--rate", callback=_rate, help="Output rate (Hz): 100, 200 or 400."),
-    baud: int = typer.Option(
-        None, "--baud", help="Serial baud rate (default 115200; sim picks one that fits)."
+    rate: float = typer.Option(
+        100.0,
+        "--rate",
+        callback=checked(validation.output_rate_hz),
+        help="Output rate (Hz): 100, 200 or 400.",
     ),
-    out: Path = typer.Option(Path("recordings"), "--out", help="Folder for the MCAP files (one per decay)."),
+    baud: int = typer.Option(
+        None,
+        "--baud",
+        callback=checked(validation.baud_rate),
+        help="Serial baud rate (default 115200; sim picks one that fits).",
+    ),
+    out: Path = typer.Option(
+        Path("recordings"),
+        "--out",
+        callback=checked(validation.output_dir),
+        help="Folder for the MCAP files (one per decay).",
+    ),
     runs: int = typer.Option(
         None, "--runs", min=1, help="Stop after this many decays (default: until Ctrl-C)."
     ),
@@ -174,7 +161,10 @@ def record_command(
     operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
     note: str = typer.Option("", "--note", help="A note stored in the file."),
     model: str = typer.Option(
-        "ittc-quadratic-restoring", "--model", help="Live model: terms (b1,b2,c1,c3) or alias."
+        "ittc-quadratic-restoring",
+        "--model",
+        callback=checked(validation.live_model, keep_input=True),
+        help="Live model: terms (b1,b2,c1,c3) or alias.",
     ),
     sim_speed: float = typer.Option(1.0, "--sim-speed", min=0.1, max=50.0, hidden=True),
     sim_seed: int = typer.Option(0, "--sim-seed", hidden=True),
@@ -216,7 +206,9 @@ def _speed(value: str) -> float | None:
 @app.command("replay")
 @handles_errors
 def replay_command(
-    files: list[Path] = typer.Argument(..., help="tankdaq MCAP recordings."),
+    files: Annotated[
+        list[Path], typer.Argument(callback=checked(validation.input_file), help="tankdaq MCAP recordings.")
+    ],
     speed: str = typer.Option("1", "--speed", help="Playback speed factor, or 'max'."),
     viewer: str = typer.Option(
         None,
@@ -234,7 +226,7 @@ def replay_command(
             path,
             speed=pace,
             viewer=viewer,
-            on_event=lambda line: err_console.print(line, markup=False, highlight=False),
+            on_event=say,
         )
         for o in outcomes:
             fit = o.fit
@@ -281,7 +273,12 @@ DEMO_HULL = "swath"
 @app.command("demo")
 @handles_errors
 def demo_command(
-    out: Path = typer.Option(Path("recordings/demo"), "--out", help="Folder for the demo recordings."),
+    out: Path = typer.Option(
+        Path("recordings/demo"),
+        "--out",
+        callback=checked(validation.output_dir),
+        help="Folder for the demo recordings.",
+    ),
     runs: int = typer.Option(3, "--runs", min=1, help="How many decays to record."),
     sim_speed: float = typer.Option(4.0, "--sim-speed", min=0.1, max=50.0, help="Simulated clock speed-up."),
 ) -> None:

@@ -11,9 +11,10 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from ..config import format_draft
+from .. import validation
+from ..config import format_draft, load_hull
 from ..errors import InputError
-from .app import app, err_console, handles_errors, parse_draft_option
+from .app import app, checked, err_console, handles_errors, parse_draft_option
 
 if TYPE_CHECKING:
     from ..device.simulator import SimulatedMTi
@@ -25,9 +26,19 @@ if TYPE_CHECKING:
 def simulate_command(
     hull: str = typer.Option("swath", "--hull", help="Hull config whose decay model plays (tankdaq hulls)."),
     draft: float = typer.Option("T", "--draft", parser=parse_draft_option, help="Draft: 0.9T, T, 1.1T."),
-    angle_deg: float = typer.Option(8.0, "--angle", help="Tilt angle (deg) the engineer sets by hand."),
+    angle_deg: float = typer.Option(
+        8.0,
+        "--angle",
+        callback=checked(validation.release_angle_deg),
+        help="Tilt angle (deg) the engineer sets by hand.",
+    ),
     axis: str = typer.Option("roll", "--axis", help="Tilted axis: roll or pitch."),
-    rate_hz: int = typer.Option(100, "--rate", help="Output rate the scenario is prepared at (Hz)."),
+    rate_hz: float = typer.Option(
+        100,
+        "--rate",
+        callback=checked(validation.output_rate_hz),
+        help="Output rate the scenario is prepared at (Hz): 100, 200 or 400.",
+    ),
     seed: int = typer.Option(0, "--seed", help="Seed: the same seed plays the same test."),
     runs: int = typer.Option(3, "--runs", min=0, help="Decay runs before the water stays still."),
     release_after_s: float = typer.Option(10.0, "--release-after", help="Seconds from run start to release."),
@@ -36,10 +47,22 @@ def simulate_command(
     faults: str = typer.Option(
         "", "--faults", help="e.g. corrupt=0.001,drop=1e-4,stall=2@30,unplug=60,replug=5"
     ),
-    truth: str = typer.Option(None, "--truth", help="Write the true release instants and model here (JSON)."),
+    truth: Path = typer.Option(
+        None,
+        "--truth",
+        callback=checked(validation.output_file, option="--truth"),
+        help="Write the true release instants and model here (JSON).",
+    ),
     speed: float = typer.Option(1.0, "--speed", help="Play the device clock this many times faster."),
-    baud: int = typer.Option(115200, "--baud", help="Device baud rate."),
-    link: str = typer.Option(None, "--link", help="Stable symlink to the pty (default: a temporary path)."),
+    baud: int = typer.Option(
+        115200, "--baud", callback=checked(validation.baud_rate), help="Device baud rate."
+    ),
+    link: Path = typer.Option(
+        None,
+        "--link",
+        callback=checked(validation.output_file, option="--link"),
+        help="Stable symlink to the pty (default: a temporary path).",
+    ),
 ) -> None:
     """Serve a simulated MTi-G on a pty; the first stdout line is the port to open."""
     from ..device.simulator import Faults, SimulatedMTi
@@ -49,20 +72,27 @@ def simulate_command(
         raise InputError(f"axis {axis!r} not understood; use roll or pitch")
     if speed <= 0:
         raise InputError(f"--speed must be positive, got {speed:g}")
+    validation.hull_draft(load_hull(hull), draft, axis)
     scenario = DecayScenario(
         hull=hull, draft=draft, axis=axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
         release_after_s=release_after_s, decay_s=decay_s,
     )  # fmt: skip
     fault_set = Faults.parse(faults)
     sim = SimulatedMTi(
-        scenario, speed=speed, legacy=legacy, baud=baud, faults=fault_set, link=link, seed=seed
+        scenario,
+        speed=speed,
+        legacy=legacy,
+        baud=baud,
+        faults=fault_set,
+        link=None if link is None else str(link),
+        seed=seed,
     )
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
     with sim:
         if truth is not None:
-            _write_truth(Path(truth), sim, scenario)
+            _write_truth(truth, sim, scenario)
         typer.echo(sim.link)
         sys.stdout.flush()  # the first line is read by whoever started us, before we ever exit
         err_console.print(

@@ -8,8 +8,9 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
+from .. import validation
 from ..store.recover import recover
-from .app import app, err_console, handles_errors
+from .app import app, checked, err_console, handles_errors
 
 
 @app.command("recover")
@@ -18,7 +19,12 @@ def recover_command(
     file: Annotated[Path, typer.Argument(help="The damaged recording (.mcap).")],
     out: Annotated[
         Path | None,
-        typer.Option("--out", "-o", help="Where to write the repaired file (default: NAME.recovered.mcap)."),
+        typer.Option(
+            "--out",
+            "-o",
+            callback=checked(validation.output_file),
+            help="Where to write the repaired file (default: NAME.recovered.mcap).",
+        ),
     ] = None,
 ) -> None:
     """Rebuild a truncated recording. Exit 0: nothing lost; 3: damaged tail dropped; 1: nothing recovered."""

@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import BadIdentificationInput, InputError
-from ..physics.decay import TERMS
 from ..records import DecayRun
+from ..validation import equation_model
 from .effects import LIBRARY, Effect
 from .fitting import Fit, ModelSpec, fit_spec, predict
 from .residuals import (
@@ -45,16 +45,11 @@ MAX_CHECKED = 3
 
 def parse_baseline(text: str) -> tuple[str, ...]:
     """'b1,c1' or an ident alias ('ittc-linear', 'seed001-eq1') -> the canonical terms of the baseline."""
-    from ..ident.models import resolve_model
-
-    terms = resolve_model(text)
-    extra = [t for t in terms if t not in TERMS]
-    if extra:
-        raise InputError(
-            f"baseline {text!r} holds {', '.join(extra)}: start from canonical terms "
-            f"({', '.join(TERMS)}); friction and coupling are effects the workflow adds itself"
-        )
-    return terms
+    return equation_model(
+        text,
+        f"baseline {text!r}: a baseline takes",
+        "friction and coupling are effects the workflow adds itself",
+    )
 
 
 @dataclass

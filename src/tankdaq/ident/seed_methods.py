@@ -27,11 +27,11 @@ from pymoo.operators.mutation.pm import PM
 from pymoo.optimize import minimize
 
 from ..errors import InputError
-from ..physics.decay import TERMS
 from ..records import DecayRun
+from ..validation import equation_model
 from .equation_error import check_runs
 from .kernels import simulate, substeps, term_codes, term_matrix
-from .models import MODEL_ALIASES, resolve_model
+from .models import MODEL_ALIASES
 from .uncertainty import coefficient_warnings
 
 #: Lower bound of the total inertia. The papers write I in [0, 0.1]; 0 itself would divide by zero.
@@ -146,13 +146,7 @@ class SearchSpace:
     @classmethod
     def for_model(cls, model: str | Sequence[str], paper: str | None = None) -> SearchSpace:
         """The boxes of ``paper``; by default an alias's own paper's (``seed000-eq1``), else seed 001's."""
-        terms = resolve_model(model)
-        outside = [t for t in terms if t not in TERMS]
-        if outside:
-            raise InputError(
-                f"the seeds' GA/PSO search only {', '.join(TERMS)}; drop {', '.join(outside)} "
-                f"or use --method oe"
-            )
+        terms = equation_model(model, "the seeds' GA/PSO search", "drop them or use --method oe")
         if paper is None:
             alias = model.strip().lower() if isinstance(model, str) else ""
             paper = (

@@ -21,6 +21,7 @@ from mcap.writer import Writer
 
 from .. import __version__
 from ..errors import BadRecordingInput, InputError
+from ..validation import input_file
 from .model import STATE_COLUMNS, STATE_UNITS, StateRecord
 from .vehicle import Vehicle, vehicle_from_dict
 
@@ -100,9 +101,8 @@ def _write_mcap(path: Path, record: StateRecord, meta: dict[str, str], vehicle: 
 def read_record(path: str | Path) -> StateRecord:
     """Read a record written by ``write_record`` (or any file with the same layout)."""
     path = Path(path)
-    suffix = _suffix(path)
-    if not path.is_file():
-        raise BadRecordingInput(f"{path}: no such file")
+    suffix = None if path.is_dir() else _suffix(path)  # a folder is said to be one, not a bad suffix
+    input_file(path, error=BadRecordingInput)
     return _read_csv(path) if suffix == ".csv" else _read_mcap(path)
 
 

@@ -29,6 +29,7 @@ from ..errors import BadIdentificationInput, InputError
 from ..ident.free_decay import SPLIT_AFTER, find_free_end
 from ..ident.signals import white_noise_level
 from ..records import DecayRun
+from ..validation import input_file
 
 ANGLE_UNITS: dict[str, float] = {"deg": math.pi / 180.0, "rad": 1.0}
 #: Fraction of the largest excursion a peak must reach to count as the release.
@@ -139,8 +140,7 @@ def _swings(record: DecayRun, noise: float) -> bool:
 
 def _read_columns(path: Path) -> tuple[dict[str, np.ndarray], dict[str, object]]:
     """The numeric columns, and the ``# key = value`` metadata block of a ``tankdaq export`` file."""
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    input_file(path)
     try:
         with path.open(newline="") as fh:
             lines = [line for line in fh if line.strip()]

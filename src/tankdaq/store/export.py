@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
 from .csv_import import EXPORT_MARK as CSV_MARK
-from .reader import _finite_increasing, _release_times, read_recording
+from .reader import _finite_increasing, _release_times, read_recording, truncation_notice
 
 FRAMES = ("device", "release")
 #: Column suffix of each SI unit: the suffix ``csv_import`` reads the unit from.
@@ -102,13 +102,22 @@ WRITERS: dict[str, Callable[[ExportTable, Path], Path]] = {"csv": write_csv, "ma
 
 
 def export_recording(
-    path: str | Path, file_format: str, out_dir: Path | None = None, frame: str = "device"
+    path: str | Path,
+    file_format: str,
+    out_dir: Path | None = None,
+    frame: str = "device",
+    on_notice: Callable[[str], None] | None = None,
 ) -> Path:
-    """Write one recording as ``<out_dir>/<stem>.<format>`` (default beside it); returns the path written."""
+    """Write one recording as ``<out_dir>/<stem>.<format>`` (default beside it); returns the path written.
+
+    ``on_notice`` hears the one line that says the recording is cut short, when it is.
+    """
     writer = WRITERS.get(file_format)
     if writer is None:
         raise InputError(f"format {file_format!r} not understood: use {' or '.join(WRITERS)}")
     table = recording_table(path, frame)
+    if not table.metadata["complete_file"] and on_notice is not None:
+        on_notice(truncation_notice(path))
     folder = out_dir if out_dir is not None else Path(path).parent
     try:
         folder.mkdir(parents=True, exist_ok=True)

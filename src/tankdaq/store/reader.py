@@ -31,6 +31,7 @@ from ..config import parse_draft
 from ..errors import BadRecordingInput, InputError
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS
+from ..validation import input_file
 from . import schemas
 
 #: What a torn tail can raise inside mcap: short reads, bad lengths, CRC mismatches, broken zstd frames.
@@ -48,9 +49,7 @@ class RecordScan:
     """
 
     def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
-        if not self.path.is_file():
-            raise BadRecordingInput(f"{self.path} does not exist (or is not a file)")
+        self.path = input_file(Path(path), "recording", error=BadRecordingInput)
         self.size = self.path.stat().st_size
         if self.size == 0:
             raise BadRecordingInput(f"{self.path} is empty: the writer died before writing anything")
@@ -114,6 +113,12 @@ class Recording:
     complete: bool
     release_index: int | None = None
     metadata_history: list[dict[str, str]] = field(default_factory=list)
+    damage: str | None = None  # what stopped the reading early, when something did
+
+    @property
+    def truncated(self) -> bool:
+        """The file was never closed (no footer): what followed its last complete chunk is missing."""
+        return not self.complete
 
     @property
     def raw_chunks(self) -> list[tuple[int, bytes]]:
@@ -269,6 +274,16 @@ def _read_scanned(path: str | Path) -> Recording:
         complete=scan.complete,
         release_index=_release_index(samples, events),
         metadata_history=history,
+        damage=scan.damage,
+    )
+
+
+def truncation_notice(path: str | Path, damage: str | None = None) -> str:
+    """The one line every command that reads a recording prints when the recording is cut short."""
+    why = f" ({damage})" if damage and damage != "file ends early" else ""
+    return (
+        f"warning: {path} is cut short{why}: its writer never closed it, so the end of the test is "
+        f"missing and results cover only what is there; `tankdaq recover {path}` rewrites it as a valid file"
     )
 
 
@@ -360,6 +375,7 @@ def _run_meta(recording: Recording, axis: str, release_t_s: float, dropped: int)
         "release_t_s": release_t_s,
         "dropped_samples": dropped,
         "complete_file": recording.complete,
+        "truncation": truncation_notice(recording.path, recording.damage) if recording.truncated else None,
     }
     if "draft" in meta:
         out["draft"] = parse_draft(meta["draft"])
@@ -372,4 +388,11 @@ def _run_meta(recording: Recording, axis: str, release_t_s: float, dropped: int)
     return out
 
 
-__all__ = ["RecordScan", "Recording", "iter_raw_chunks", "read_decay_runs", "read_recording"]
+__all__ = [
+    "RecordScan",
+    "Recording",
+    "iter_raw_chunks",
+    "read_decay_runs",
+    "read_recording",
+    "truncation_notice",
+]

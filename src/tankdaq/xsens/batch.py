@@ -349,7 +349,8 @@ def _item_field(xdi: int, size: int) -> tuple[np.dtype, Field] | None:
 
 
 def _to_float(view: np.ndarray) -> np.ndarray:
-    return view.astype(np.float64)
+    with np.errstate(invalid="ignore"):  # a signalling NaN in the bytes is a NaN, not a warning
+        return view.astype(np.float64)
 
 
 def _to_int(view: np.ndarray) -> np.ndarray:
@@ -715,17 +716,22 @@ def to_samples(
     """``SAMPLE_DTYPE`` rows for the inertial messages of a block (Euler deg -> rad, time from ticks).
 
     GNSS-only messages are not samples; messages without SampleTimeFine cannot be placed in
-    time and are dropped. ``unwrapper`` carries the time base across consecutive blocks.
+    time and are dropped, and so are messages whose SampleTimeFine is beyond the device clock's
+    range or whose EulerAngles are not ENU (the driver configured ENU): a corrupted frame passes
+    the one-byte checksum once in 256, and one such frame must never stop a recording. Its
+    PacketCounter is then missing, so it shows as a lost packet. Never raises on bytes.
+    ``unwrapper`` carries the time base across consecutive blocks.
     """
     none = np.zeros(block.n_messages, dtype=bool)
     inertial = none.copy()
     for name in INERTIAL_OUTPUTS:
         inertial |= block.present.get(name, none)
     rows = np.flatnonzero(inertial & block.present.get("SampleTimeFine", none))
-    if "EulerAngles" in block.xdis:
-        with_euler = rows[block.present["EulerAngles"][rows]]
-        if np.any(block.xdis["EulerAngles"][with_euler] & FRAME_MASK != FRAMES["ENU"]):
-            raise ProtocolError("EulerAngles are not in ENU: configure the device for ENU orientation output")
+    if rows.size:
+        rows = rows[block.columns["SampleTimeFine"][rows].astype(np.int64) < unwrapper.modulus]
+    if "EulerAngles" in block.xdis and rows.size:
+        euler = block.present["EulerAngles"][rows]
+        rows = rows[~(euler & (block.xdis["EulerAngles"][rows] & FRAME_MASK != FRAMES["ENU"]))]
     out = empty_samples(rows.size)
     if not rows.size:
         return out

@@ -46,11 +46,32 @@ class UtcTime:
     second: int
     flags: int
 
-    def isoformat(self) -> str:
-        """RFC 3339 text with trailing zeros of the fraction dropped ('2019-01-20T13:47:24.1219Z')."""
-        stamp = datetime(self.year, self.month, self.day, self.hour, self.minute, self.second, tzinfo=UTC)
+    @property
+    def valid(self) -> bool:
+        """True when the fields form a real UTC instant (before a GNSS fix a device sends zeros).
+
+        A leap second (second 60) is a valid UTC instant; the flags are the device's own verdict.
+        """
+        if not (1 <= self.year <= 9999 and 0 <= self.ns < 1_000_000_000):
+            return False
+        if not (0 <= self.hour < 24 and 0 <= self.minute < 60 and 0 <= self.second <= 60):
+            return False
+        try:
+            datetime(self.year, self.month, self.day, tzinfo=UTC)
+        except ValueError:
+            return False
+        return True
+
+    def isoformat(self) -> str | None:
+        """RFC 3339 text with trailing zeros of the fraction dropped ('2019-01-20T13:47:24.1219Z');
+        None when the fields are not a time (``valid`` is False): kept as invalid, never an error."""
+        if not self.valid:
+            return None
         fraction = f"{self.ns:09d}".rstrip("0")
-        return stamp.strftime("%Y-%m-%dT%H:%M:%S") + (f".{fraction}" if fraction else "") + "Z"
+        return (
+            f"{self.year:04d}-{self.month:02d}-{self.day:02d}T{self.hour:02d}:{self.minute:02d}:"
+            f"{self.second:02d}" + (f".{fraction}" if fraction else "") + "Z"
+        )
 
 
 @dataclass(frozen=True)
@@ -434,7 +455,8 @@ def decode_mtdata2(payload: bytes) -> MTData2Message:
 def to_jsonable(value: object) -> object:
     """A JSON-ready form of a decoded value: tuples -> lists, structured outputs -> dicts."""
     if isinstance(value, UtcTime):
-        return {**{f.name: getattr(value, f.name) for f in fields(value)}, "iso": value.isoformat()}
+        fields_ = {f.name: getattr(value, f.name) for f in fields(value)}
+        return {**fields_, "iso": value.isoformat(), "valid": value.valid}
     if isinstance(value, GnssPvt | GnssSatellite):
         return {f.name: getattr(value, f.name) for f in fields(value)}
     if isinstance(value, GnssSatInfo):

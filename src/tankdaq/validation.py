@@ -1,0 +1,216 @@
+"""One rule per command-line parameter, in one place, shared by every command and by the library.
+
+Each validator takes a value as the user gave it and returns it (normalised) or
+raises ``InputError`` with a message that says what to give instead. They run
+before a device is opened or any work starts, so a bad flag costs nothing: no
+port opened, no simulator started, no file or folder left behind. The CLI wraps
+them as typer parameter callbacks (``cli/app.py``).
+
+Path checks try the operation instead of asking ``os.access``: tankdaq often
+runs as root in the lab (where ``access`` says yes to everything) and on
+read-only or pseudo file systems (``/proc``) only an attempt tells the truth.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from .errors import InputError
+from .physics.decay import TERMS
+from .xsens.constants import BAUD_CODES
+
+if TYPE_CHECKING:
+    from .config import Hull
+
+#: The MTi's output clock: every output rate is an integer divisor of it (LLCP, SetOutputConfiguration).
+MTI_BASE_RATE_HZ = 400
+
+#: Serial line rates an MTi accepts (the SetBaudrate codes).
+STANDARD_BAUDS: tuple[int, ...] = tuple(sorted(set(BAUD_CODES.values())))
+
+#: A hand-set release beyond this is not a decay test (and beyond the models' validity).
+MAX_RELEASE_ANGLE_DEG = 45.0
+
+#: Bootstrap replicas beyond this add nothing to a 95 % interval and take hours.
+MAX_BOOTSTRAP_REPLICAS = 10_000
+
+
+def output_rate_hz(value: float, option: str = "--rate") -> float:
+    """An MTi output rate: a whole divisor of 400 Hz (1, 2, 4, 5 ... 100, 200, 400)."""
+    if not (math.isfinite(value) and value >= 1 and value == int(value) and MTI_BASE_RATE_HZ % value == 0):
+        raise InputError(
+            f"{option} {value:g} Hz is not an MTi output rate; use a whole divisor of 400 Hz (100, 200, 400)"
+        )
+    return float(value)
+
+
+def release_angle_deg(value: float, option: str = "--angle") -> float:
+    """A nominal release angle: positive degrees up to 45 (the side is found from the data)."""
+    if not (math.isfinite(value) and 0 < value <= MAX_RELEASE_ANGLE_DEG):
+        raise InputError(
+            f"{option} {value:g} is not a release angle; give a positive number of degrees up to "
+            f"{MAX_RELEASE_ANGLE_DEG:g}"
+        )
+    return float(value)
+
+
+def draft_factor(text: str) -> float:
+    """A draft as people write it: ``0.9T``, ``T``, ``1.1T`` -> factor of the design draft."""
+    from .config import parse_draft
+
+    return parse_draft(text)
+
+
+def known_hull(spec: str) -> Hull:
+    """A hull by name (the user's hull folder, then the shipped ones) or by .toml path."""
+    from .config import load_hull
+
+    return load_hull(spec)
+
+
+def hull_draft(hull: Hull, draft: float, axis: str | None = None) -> float:
+    """A draft the hull is described at on ``axis`` (every axis when None): within the drafts of its
+    ``[simulation]`` part when it has one there; a hull without simulated drafts is described at its
+    design draft only, and any draft ``draft_factor`` accepts is taken (scaled wall-sided)."""
+    for name in [axis] if axis else sorted(hull.simulation):
+        if name not in hull.simulation:
+            continue
+        try:
+            hull.simulation[name].coefficients(draft)
+        except InputError as exc:
+            raise InputError(f"hull {hull.name} ({name}): {exc}; give a draft in that range") from None
+    return draft
+
+
+def baud_rate(value: int | None, option: str = "--baud") -> int | None:
+    """A standard MTi baud rate, or None (the command picks one)."""
+    if value is not None and value not in STANDARD_BAUDS:
+        raise InputError(
+            f"{option} {value} is not an MTi baud rate; use one of {', '.join(map(str, STANDARD_BAUDS))}"
+        )
+    return value
+
+
+def bootstrap_replicas(value: int, option: str = "--bootstrap") -> int:
+    """0 (no bootstrap) up to MAX_BOOTSTRAP_REPLICAS replicas."""
+    if not 0 <= value <= MAX_BOOTSTRAP_REPLICAS:
+        raise InputError(
+            f"{option} {value}: give 0 (no bootstrap) up to {MAX_BOOTSTRAP_REPLICAS} replicas "
+            "(1000 is plenty for a 95 % interval)"
+        )
+    return value
+
+
+def percent(value: float, option: str, low: float = 0.0, high: float = 100.0) -> float:
+    """A percentage strictly between ``low`` and ``high`` (given and checked in %, not as a fraction)."""
+    if not (math.isfinite(value) and low < value < high):
+        raise InputError(f"{option} {value:g} %: give a percentage between {low:g} and {high:g}, e.g. 10")
+    return float(value)
+
+
+def equation_model(spec: str | Sequence[str], use: str, instead: str) -> tuple[str, ...]:
+    """A model of decay-equation terms only (b1 ... s3), for the uses that cannot take friction (``fc``)
+    or coupling (``ku``): ``use`` names who refuses, ``instead`` says what to do."""
+    from .ident.models import resolve_model
+
+    terms = resolve_model(spec)
+    outside = [term for term in terms if term not in TERMS]
+    if outside:
+        raise InputError(f"{use} only {' '.join(TERMS)}, not {', '.join(outside)}; {instead}")
+    return terms
+
+
+def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str, ...]:
+    """A model the live identifier, view and recording all carry: decay-equation terms only."""
+    return equation_model(
+        spec,
+        f"{option}: the live view and the recording's /fit carry",
+        "record with those, then fit the others offline with tankdaq diagnose or tankdaq identify",
+    )
+
+
+def _cannot_write_in(folder: Path) -> str | None:
+    """Why a file cannot be created in ``folder`` (None: it can). Tries it: the only check that holds
+    for root and for read-only or pseudo file systems. The probe file is removed at once."""
+    try:
+        fd, name = tempfile.mkstemp(prefix=".tankdaq-probe-", dir=folder)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    os.close(fd)
+    os.unlink(name)
+    return None
+
+
+def output_dir(path: Path, option: str = "--out") -> Path:
+    """A folder files can be written into, or one that can be created: nothing is left behind by the
+    check (the command creates the folder when it writes), so a refused command leaves no trace."""
+    path = Path(path)
+    existing = next((p for p in (path, *path.parents) if p.exists()), Path.cwd())
+    if not existing.is_dir():
+        raise InputError(f"{option} {path}: {existing} is a file, not a folder; give a folder")
+    why = _cannot_write_in(existing)
+    if why is not None:
+        action = "write files there" if existing == path else f"create it in {existing}"
+        raise InputError(f"{option} {path}: cannot {action} ({why}); choose a writable folder")
+    return path
+
+
+def output_file(path: Path, option: str = "--out") -> Path:
+    """A file path that can be written: not a folder, in an existing writable folder."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{option} {path} is a folder; give a file name")
+    folder = path.parent
+    if not folder.is_dir():
+        state = "is not a folder" if folder.exists() else "does not exist"
+        raise InputError(f"{option} {path}: the folder {folder} {state}; create it or choose another")
+    why = _cannot_write_in(folder)
+    if why is not None:
+        raise InputError(f"{option} {path}: cannot write in {folder} ({why}); choose a writable folder")
+    return path
+
+
+def input_file(path: Path, what: str = "file", error: type[InputError] = InputError) -> Path:
+    """An existing, readable regular file (a folder or a missing path says which it is).
+
+    ``error`` is the InputError subclass the caller's domain raises (BadRecordingInput for readers).
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise error(f"{path} is a folder, not a {what}; give the {what} itself")
+    if not path.exists():
+        raise error(f"{path}: no such {what}")
+    if not path.is_file():
+        raise error(f"{path} is not a regular file; give the {what} itself")
+    try:
+        with path.open("rb"):
+            pass
+    except OSError as exc:
+        raise error(f"cannot read {path}: {exc.strerror}") from None
+    return path
+
+
+__all__ = [
+    "MAX_BOOTSTRAP_REPLICAS",
+    "MAX_RELEASE_ANGLE_DEG",
+    "MTI_BASE_RATE_HZ",
+    "STANDARD_BAUDS",
+    "baud_rate",
+    "bootstrap_replicas",
+    "draft_factor",
+    "equation_model",
+    "hull_draft",
+    "input_file",
+    "known_hull",
+    "live_model",
+    "output_dir",
+    "output_file",
+    "output_rate_hz",
+    "percent",
+    "release_angle_deg",
+]

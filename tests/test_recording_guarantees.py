@@ -1,0 +1,222 @@
+"""A decay is never lost: any error while a decay is recorded closes its file; readers say when a file is cut.
+
+One real recording (the simulated MTi-G on a pty, through the driver and the daemon) is made per
+module. Its raw bytes are fed again through a ``DecaySession`` that writes a new file, with a
+real failure injected (a view or a callback that raises) at the release, in the middle of the
+decay and at its end; every file must then be a complete MCAP (footer, summary) that holds the
+decay up to the failure. A copy cut in half stands for a recording whose writer was killed:
+every command that reads recordings must say so in one line, and --json carries the flag.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from typer.testing import CliRunner
+
+from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.session import Block, DecaySession, SessionSettings
+from tankdaq.cli import app
+from tankdaq.device.decoding import SampleDecoder
+from tankdaq.store.reader import read_recording
+from tankdaq.viz.live import LiveView
+
+runner = CliRunner()
+
+
+class Injected(RuntimeError):
+    """The failure a test injects (a dying viewer, a broken callback)."""
+
+
+def _settings(out: Path, **overrides: object) -> RecordSettings:
+    base: dict[str, object] = {
+        "port": "sim", "draft": 1.0, "angle_deg": 8.0, "hull": "swath", "out_dir": out, "viewer": "none",
+        "runs": 1, "sim_speed": 8.0, "sim_seed": 5,
+    }  # fmt: skip
+    return RecordSettings(**{**base, **overrides})  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One decay recorded end to end from the simulated MTi-G."""
+    (outcome,) = RecordDaemon(_settings(tmp_path_factory.mktemp("rec"))).run()
+    assert outcome.path is not None
+    return outcome.path
+
+
+@pytest.fixture(scope="module")
+def cut_in_half(recorded: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The recording as a killed writer leaves it: the first half of its bytes, no footer."""
+    path = tmp_path_factory.mktemp("cut") / recorded.name
+    data = recorded.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    return path
+
+
+def _is_complete_mcap(path: Path) -> bool:
+    with path.open("rb") as f:
+        return make_reader(f).get_summary() is not None  # a seeking reader needs the footer
+
+
+# ---- closing on error ---------------------------------------------------------------------------------
+
+
+class FailingView(LiveView):
+    """A view (mode none) whose ``method`` raises, as a dying viewer would: on its ``after``-th call,
+    or at the first call whose arguments satisfy ``when``."""
+
+    def __init__(self, method: str, after: int = 1, when: Callable[..., bool] | None = None) -> None:
+        super().__init__("none")
+        self.calls = 0
+        original: Callable[..., object] = getattr(self, method)
+
+        def failing(*args: object, **kwargs: object) -> object:
+            self.calls += 1
+            if (when(*args) if when is not None else self.calls >= after):
+                raise Injected(f"{method} failed")
+            return original(*args, **kwargs)
+
+        setattr(self, method, failing)
+
+
+def _feed_recording(source: Path, out: Path, view: LiveView, on_event=None) -> DecaySession:
+    """The source's raw bytes, re-decoded, through a session that writes into ``out``."""
+    recording = read_recording(source)
+    session = DecaySession(
+        SessionSettings(angle_deg=8.0, out_dir=out, run_metadata={"hull": "swath"}), view, on_event=on_event
+    )
+    decoder = SampleDecoder()
+    for host_ns, raw in recording.raw_chunks:
+        samples, _ = decoder.feed(raw, host_ns / 1e9)
+        session.feed(Block(samples, raw, host_ns / 1e9))
+    session.abort("note", "end of recording")
+    return session
+
+
+@pytest.mark.parametrize(
+    ("method", "after", "where"),
+    [
+        ("new_run", 1, "at the release, as the view opens (before any sample is written)"),
+        ("log_samples", None, "4 s into the decay"),
+        ("log_fit", 2, "at the second live fit"),
+    ],
+)
+def test_a_failure_while_recording_closes_the_file_with_what_arrived(
+    recorded: Path, tmp_path: Path, method: str, after: int | None, where: str
+) -> None:
+    release_t = float(read_recording(recorded).metadata["release_t_s"])
+    if after is None:
+        view = FailingView(method, when=lambda samples: float(samples["t"][-1]) > release_t + 4.0)
+    else:
+        view = FailingView(method, after)
+    with pytest.raises(Injected):
+        _feed_recording(recorded, tmp_path, view)
+    (path,) = tmp_path.glob("*.mcap")
+    assert _is_complete_mcap(path), where
+    recording = read_recording(path)
+    kinds = [event["kind"] for event in recording.events]
+    assert kinds[-1] == "settled"
+    assert any("recording closed after an error" in event["message"] for event in recording.events)
+    assert recording.metadata["settle_reason"] == "error"
+    if method != "new_run":
+        assert kinds.count("release") == 1 and recording.samples.size > 0 and recording.raw_chunks
+        assert recording.samples.size < len(read_recording(recorded).samples)  # cut where it failed
+
+
+# the second call of each is at the decay's end: new_run closes the previous run first; release, then settled
+@pytest.mark.parametrize(("method", "after"), [("close", 2), ("log_event", 2)])
+def test_a_view_that_fails_at_the_end_still_leaves_a_complete_file_with_the_final_fit(
+    recorded: Path, tmp_path: Path, method: str, after: int
+) -> None:
+    with pytest.raises(Injected):
+        _feed_recording(recorded, tmp_path, FailingView(method, after))
+    (path,) = tmp_path.glob("*.mcap")
+    assert _is_complete_mcap(path)
+    recording = read_recording(path)
+    assert recording.metadata["settle_reason"] != "error" and "fit_b1" in recording.metadata  # the final fit
+    assert recording.samples["t"][-1] == read_recording(recorded).samples["t"][-1]  # every sample to the end
+
+
+def test_a_callback_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Path) -> None:
+    def on_event(line: str) -> None:
+        if "released" in line:
+            raise Injected("the status display failed")
+
+    daemon = RecordDaemon(_settings(tmp_path), on_event=on_event)
+    with pytest.raises(Injected):
+        daemon.run()
+    (path,) = tmp_path.glob("*.mcap")
+    assert _is_complete_mcap(path)
+    assert read_recording(path).metadata["settle_reason"] == "error"
+
+
+def test_model_terms_the_live_view_cannot_carry_are_refused_before_the_device_opens(tmp_path: Path) -> None:
+    from tankdaq.errors import InputError
+
+    out = tmp_path / "out"
+    with pytest.raises(InputError, match=r"carry only .* not fc"):
+        RecordDaemon(_settings(out, model="b1,c1,fc"))
+    assert not out.exists() or not any(out.iterdir())
+
+
+# ---- readers know truncation --------------------------------------------------------------------------
+
+
+def _notices(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if "cut short" in line]
+
+
+def _assert_one_notice(stderr: str, path: Path) -> None:
+    notices = _notices(stderr)
+    assert len(notices) == 1, stderr
+    assert str(path) in notices[0] and f"tankdaq recover {path}" in notices[0]
+    assert "Traceback" not in stderr
+
+
+def test_the_reader_knows_a_file_is_cut_short(recorded: Path, cut_in_half: Path) -> None:
+    whole, cut = read_recording(recorded), read_recording(cut_in_half)
+    assert not whole.truncated and cut.truncated
+    assert 0 < cut.samples.size < whole.samples.size
+
+
+@pytest.mark.parametrize("command", ["identify", "diagnose"])
+def test_json_readers_flag_truncation(recorded: Path, cut_in_half: Path, command: str) -> None:
+    extra = ["--max-steps", "0"] if command == "diagnose" else []
+    result = runner.invoke(app, [command, str(cut_in_half), "--json", *extra])
+    assert result.exit_code == 0, result.output
+    _assert_one_notice(result.stderr, cut_in_half)
+    document = json.loads(result.stdout)
+    assert document["truncated"] is True and document["truncated_files"] == [str(cut_in_half)]
+    whole = runner.invoke(app, [command, str(recorded), "--json", *extra])
+    assert whole.exit_code == 0, whole.output
+    assert json.loads(whole.stdout)["truncated"] is False and not _notices(whole.stderr)
+
+
+def test_replay_says_the_file_is_cut_short(cut_in_half: Path) -> None:
+    result = runner.invoke(app, ["replay", str(cut_in_half), "--viewer", "none", "--speed", "max"])
+    assert result.exit_code == 0, result.output
+    _assert_one_notice(result.stderr, cut_in_half)
+
+
+def test_campaign_says_which_file_is_cut_short(recorded: Path, cut_in_half: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "campaign"
+    folder.mkdir()
+    shutil.copy(recorded, folder / "whole.mcap")
+    shutil.copy(cut_in_half, folder / "cut.mcap")
+    result = runner.invoke(app, ["campaign", str(folder)])
+    assert result.exit_code == 0, result.output
+    _assert_one_notice(result.stderr, folder / "cut.mcap")
+    assert np.isfinite(float(read_recording(folder / "whole.mcap").metadata["fit_b1"]))
+
+
+def test_export_says_the_file_is_cut_short(cut_in_half: Path, tmp_path: Path) -> None:
+    result = runner.invoke(app, ["export", str(cut_in_half), "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    _assert_one_notice(result.stderr, cut_in_half)
+    assert (tmp_path / f"{cut_in_half.stem}.csv").is_file()
