@@ -129,8 +129,8 @@ def test_a_failure_while_recording_closes_the_file_with_what_arrived(
         assert recording.samples.size < len(read_recording(recorded).samples)  # cut where it failed
 
 
-# the second call of each is at the decay's end: new_run closes the previous run first; release, then settled
-@pytest.mark.parametrize(("method", "after"), [("close", 2), ("log_event", 2)])
+# each call is at the decay's end: the view's run ends once, after the file; release, then settled events
+@pytest.mark.parametrize(("method", "after"), [("end_run", 1), ("log_event", 2)])
 def test_a_view_that_fails_at_the_end_still_leaves_a_complete_file_with_the_final_fit(
     recorded: Path, tmp_path: Path, method: str, after: int
 ) -> None:
