@@ -15,6 +15,7 @@ from __future__ import annotations
 import itertools
 import json
 import struct
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +23,9 @@ from typing import Any
 
 import numpy as np
 import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -289,6 +292,10 @@ def truncation_notice(path: str | Path, damage: str | None = None) -> str:
 
 def iter_raw_chunks(path: str | Path) -> Iterator[tuple[int, bytes]]:
     """``(host arrival ns, bytes)`` of ``/xsens/raw`` in file order, for replay through a decoder."""
+    indexed = _indexed_raw_chunks(Path(path))
+    if indexed is not None:
+        yield from indexed
+        return
     scan = RecordScan(path)
     raw_channels: set[int] = set()
     seen_channels: dict[int, Channel] = {}
@@ -302,6 +309,71 @@ def iter_raw_chunks(path: str | Path) -> Iterator[tuple[int, bytes]]:
         elif isinstance(record, Message) and record.channel_id in raw_channels:
             yield record.log_time, record.data
     _check_tankdaq(scan.path, seen_channels, has_run_metadata)
+
+
+_MESSAGE_HEADER = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+
+
+def _indexed_raw_chunks(path: Path) -> list[tuple[int, bytes]] | None:
+    """The raw messages of a complete file through its chunk index; None when it has no usable index.
+
+    Only the chunks holding raw bytes are opened, and their records are walked by
+    opcode and length, picking the raw channel's messages without building the
+    others (the per-sample JSON is most of every chunk).
+    """
+    if not path.is_file():
+        return None
+    with path.open("rb") as stream:
+        try:
+            summary = SeekingReader(stream, validate_crcs=True).get_summary()
+        except (*_DAMAGE, InvalidMagic):
+            return None
+        if summary is None:
+            return None
+        raw_ids = {c.id for c in summary.channels.values() if c.topic == schemas.TOPIC_RAW}
+        found: list[tuple[int, bytes]] = []
+        for index in sorted(summary.chunk_indexes, key=lambda i: i.chunk_start_offset):
+            if index.message_index_offsets and not raw_ids & set(index.message_index_offsets):
+                continue
+            stream.seek(index.chunk_start_offset + 1 + 8)  # past the record's opcode and length
+            try:
+                chunk = Chunk.read(ReadDataStream(stream))
+                data = _chunk_data(chunk)
+            except _DAMAGE:
+                return None
+            if data is None:
+                return None
+            found += _messages_of(data, raw_ids)
+    return found
+
+
+def _chunk_data(chunk: Chunk) -> bytes | None:
+    """The chunk's records, decompressed and CRC-checked (None for a compression tankdaq does not write)."""
+    if chunk.compression == "zstd":
+        data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+    elif chunk.compression == "":
+        data = chunk.data
+    else:
+        return None
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise ValueError("chunk CRC mismatch")
+    return data
+
+
+def _messages_of(records: bytes, channel_ids: set[int]) -> list[tuple[int, bytes]]:
+    """(log time, data) of the messages on ``channel_ids`` among a chunk's records."""
+    out = []
+    position, end = 0, len(records)
+    while position < end:
+        opcode = records[position]
+        (length,) = struct.unpack_from("<Q", records, position + 1)
+        body = position + 9
+        if opcode == Opcode.MESSAGE:
+            channel_id, _, log_time, _ = _MESSAGE_HEADER.unpack_from(records, body)
+            if channel_id in channel_ids:
+                out.append((log_time, records[body + _MESSAGE_HEADER.size : body + length]))
+        position = body + length
+    return out
 
 
 def _finite_increasing(t: np.ndarray, *columns: np.ndarray) -> np.ndarray:
