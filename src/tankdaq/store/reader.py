@@ -16,7 +16,7 @@ import itertools
 import json
 import struct
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -215,19 +215,8 @@ def _read_indexed(path: Path) -> Recording | None:
         topics.get(schemas.TOPIC_SAMPLES, -1), 0
     ):
         return None
-    return Recording(
-        path=path,
-        metadata=history[-1] if history else {},
-        samples=samples,
-        _raw_chunks=None,
-        events=events,
-        fits=fits,
-        attachments=attachments,
-        channel_metadata={c.topic: dict(c.metadata) for c in summary.channels.values()},
-        complete=True,
-        release_index=_release_index(samples, events),
-        metadata_history=history,
-    )
+    channels = summary.channels.values()
+    return _assemble(path, samples, None, events, fits, attachments, channels, history, complete=True)
 
 
 def _read_scanned(path: str | Path) -> Recording:
@@ -265,6 +254,25 @@ def _read_scanned(path: str | Path) -> Recording:
         samples = schemas.samples_from_json(sample_payloads, sample_stamps)
     except (json.JSONDecodeError, TypeError, ValueError) as exc:
         raise BadRecordingInput(f"{path}: {schemas.TOPIC_SAMPLES} holds malformed JSON ({exc})") from None
+    return _assemble(
+        path, samples, raw_chunks, events, fits, attachments, channels.values(), history, scan.complete,
+        scan.damage,
+    )  # fmt: skip
+
+
+def _assemble(
+    path: Path,
+    samples: np.ndarray,
+    raw_chunks: list[tuple[int, bytes]] | None,
+    events: list[dict[str, Any]],
+    fits: list[dict[str, Any]],
+    attachments: dict[str, bytes],
+    channels: Iterable[Channel],
+    history: list[dict[str, str]],
+    complete: bool,
+    damage: str | None = None,
+) -> Recording:
+    """The Recording from what either reading path found (the last ``tankdaq.run`` record is the metadata)."""
     return Recording(
         path=path,
         metadata=history[-1] if history else {},
@@ -273,11 +281,11 @@ def _read_scanned(path: str | Path) -> Recording:
         events=events,
         fits=fits,
         attachments=attachments,
-        channel_metadata={c.topic: dict(c.metadata) for c in channels.values()},
-        complete=scan.complete,
+        channel_metadata={c.topic: dict(c.metadata) for c in channels},
+        complete=complete,
         release_index=_release_index(samples, events),
         metadata_history=history,
-        damage=scan.damage,
+        damage=damage,
     )
 
 
