@@ -284,6 +284,7 @@ def campaign_executor(jobs: int = 1, scheduler: str | None = None) -> Iterator[E
     else:
         _warm_up()
         with ProcessPoolExecutor(max_workers=jobs) as pool:
+            pool.submit(int).result()  # the workers fork now, before the caller starts a progress thread
             yield pool
 
 
