@@ -9,6 +9,7 @@ simulated MTi-G in-process on a pseudo-terminal, opened like hardware.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import signal
 import threading
@@ -60,6 +61,7 @@ class RecordSettings:
     sim_speed: float = 1.0
     sim_seed: int = 0
     sim_legacy: bool = False  # the built-in sensor plays a 2007-era MTi-G (legacy MTData)
+    sim_overrides: dict[str, object] = field(default_factory=dict)  # DecayScenario settings of a session
     extra: dict[str, object] = field(default_factory=dict)
 
 
@@ -159,6 +161,7 @@ class RecordDaemon:
             runs=(s.runs or 20) + 1,
             seed=s.sim_seed,
         )
+        scenario = dataclasses.replace(scenario, **s.sim_overrides)  # type: ignore[arg-type]
         baud = s.baud or _sim_baud(s.rate_hz)
         self.simulator = SimulatedMTi(
             scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed, legacy=s.sim_legacy
