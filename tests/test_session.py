@@ -51,8 +51,24 @@ DEADLINE_S = 240.0
 
 
 def _session_args(plan: Path, out: Path, *extra: str) -> list[str]:
-    return [*EXE, "session", str(plan), "--port", "sim", "--hull", "swath", "--out", str(out),
-            "--viewer", "save", "--sim-speed", "20", "--sim-faults", "2:wrong-angle,6:double-push", *extra]  # fmt: skip
+    return [
+        *EXE,
+        "session",
+        str(plan),
+        "--port",
+        "sim",
+        "--hull",
+        "swath",
+        "--out",
+        str(out),
+        "--viewer",
+        "save",
+        "--sim-speed",
+        "20",
+        "--sim-faults",
+        "2:wrong-angle,6:double-push",
+        *extra,
+    ]
 
 
 def _records(out: Path) -> list[dict[str, Any]]:
@@ -244,9 +260,19 @@ def test_a_folder_with_a_session_needs_resume_and_the_same_plan(tmp_path: Path) 
 
 def test_a_hull_outside_the_plan_is_refused_before_anything_opens(tmp_path: Path) -> None:
     result = CliRunner().invoke(
-        app, ["session", "seed000-trimaran-catamaran-pitch", "--port", "sim", "--hull", "swath",
-              "--out", str(tmp_path), "--yes"],
-    )  # fmt: skip
+        app,
+        [
+            "session",
+            "seed000-trimaran-catamaran-pitch",
+            "--port",
+            "sim",
+            "--hull",
+            "swath",
+            "--out",
+            str(tmp_path),
+            "--yes",
+        ],
+    )
     assert result.exit_code == 2
     assert "covers trimaran, catamaran, not swath" in result.output
     assert not (tmp_path / LOG_NAME).exists()
@@ -269,9 +295,18 @@ def test_a_line_cut_by_a_crash_is_skipped_and_the_next_starts_fresh(tmp_path: Pa
 
 
 def _measured(**changes: Any) -> Measured:
-    base = dict(angle_deg=10.2, still_water_deg=0.1, settle_reason="amplitude", half_cycles=14, r2_angle=0.997,
-                coefficients={"b1": 0.02, "b2": 4.6}, natural_period_s=1.66, b_eq_per_s=2.6, max_rate_deg_s=30.0,
-                free_end="record")  # fmt: skip
+    base = dict(
+        angle_deg=10.2,
+        still_water_deg=0.1,
+        settle_reason="amplitude",
+        half_cycles=14,
+        r2_angle=0.997,
+        coefficients={"b1": 0.02, "b2": 4.6},
+        natural_period_s=1.66,
+        b_eq_per_s=2.6,
+        max_rate_deg_s=30.0,
+        free_end="record",
+    )
     return Measured(**{**base, **changes})
 
 
@@ -302,7 +337,9 @@ def test_the_scripted_double_push_is_a_second_excitation() -> None:
     (truth,) = trace.runs
     assert truth.pushed_again_s is not None and truth.pushed_again_s > truth.release_s
     start = truth.release_index
-    run = DecayRun(samples["t"][start:], samples["roll"][start:], samples["p"][start:], axis="roll", name="pushed")
+    run = DecayRun(
+        samples["t"][start:], samples["roll"][start:], samples["p"][start:], axis="roll", name="pushed"
+    )
     end = find_free_end(run)
     assert end.kind == "excitation"
     assert end.t_s < truth.pushed_again_s - truth.release_s + 2 * 1.7  # caught within two periods of the push

@@ -74,7 +74,7 @@ def read_responses(path: Path | None) -> list[str]:
 @handles_errors
 def session_command(
     plan: str = typer.Argument(..., help="Campaign plan: a name in configs/campaigns or a .toml file."),
-    port: str = typer.Option(..., "--port", help="Device path, pyserial URL, or 'sim' (the simulated MTi-G)."),
+    port: str = typer.Option(..., "--port", help="Device path, pyserial URL, or 'sim'."),
     hull: str = typer.Option(
         ...,
         "--hull",
@@ -93,7 +93,7 @@ def session_command(
         None, "--responses", help="Answers, one per line (empty = Enter), used before --yes or the terminal."
     ),
     rate: float = typer.Option(
-        100.0, "--rate", callback=checked(validation.output_rate_hz), help="Output rate (Hz): 100, 200 or 400."
+        100.0, "--rate", callback=checked(validation.output_rate_hz), help="Output rate (Hz): 100, 200, 400."
     ),
     viewer: str = typer.Option(
         None,
@@ -139,9 +139,11 @@ def session_command(
         settings,
         ScriptedOrTerminalOperator(answers, yes),
         on_line=say,
-        on_progress=lambda progress: err_console.rule(progress.line(), style="dim")
-        if err_console.is_terminal
-        else say(f"-- {progress.line()}"),
+        on_progress=lambda progress: (
+            err_console.rule(progress.line(), style="dim")
+            if err_console.is_terminal
+            else say(f"-- {progress.line()}")
+        ),
         resume=resume,
     )
     try:
