@@ -355,3 +355,20 @@ def test_fault_scripts_are_parsed_or_refused_in_one_line() -> None:
         with pytest.raises(InputError, match="DECAY:FAULT"):
             parse_fault_script(bad)
     assert json.dumps(scripted_run(None, 8.0)) == '{"angle_deg": 8.0}'
+
+
+def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
+    from tankdaq.acquire.campaign_session import plan_conditions
+    from tankdaq.config import list_campaign_plans, load_campaign_plan
+    from tankdaq.errors import ConfigError
+
+    for name in list_campaign_plans():
+        plan = load_campaign_plan(name)
+        Acceptance.from_plan(plan.acceptance, name)
+        conditions = plan_conditions(plan)
+        assert len(conditions) == len(plan.drafts) * len(plan.angles_deg)
+        drafts = [c.draft for c in conditions]  # drafts grouped: each draft's conditions are contiguous
+        assert drafts == sorted(drafts, key=[c.draft for c in conditions].index)
+    assert load_campaign_plan("seed001-swath-roll").repeats == 3
+    with pytest.raises(ConfigError, match="no angle_tol"):
+        Acceptance.from_plan({"angle_tol": 1.0}, "plan x")

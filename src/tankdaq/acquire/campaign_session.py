@@ -416,7 +416,7 @@ class SessionSettings:
 
     plan: CampaignPlan
     hull: str
-    record: RecordSettings  # the template of every decay (port, rate, viewer, model, sim settings)
+    record: dict[str, Any]  # RecordSettings of every decay (port, out_dir, rate, viewer, model, sim...)
     sim_faults: dict[int, str] = field(default_factory=dict)  # decay number -> scripted fault (port sim)
 
 
@@ -437,7 +437,11 @@ class CampaignSession:
         self.on_progress = on_progress or (lambda _p: None)
         self.resume = resume
         plan = settings.plan
-        self.folder = settings.record.out_dir
+        first = plan_conditions(plan)[0]  # a placeholder condition: each decay gets its own
+        self.record = RecordSettings(
+            **{"draft": first.draft_factor, "angle_deg": first.angle_deg} | settings.record
+        )
+        self.folder = self.record.out_dir
         self.acceptance = Acceptance.from_plan(plan.acceptance, f"plan {plan.name}")
         self.conditions = plan_conditions(plan)
         hull = load_hull(settings.hull)
@@ -457,7 +461,7 @@ class CampaignSession:
     def _record_settings(self, condition: Condition, decay: int) -> RecordSettings:
         from ..physics.scenario import scripted_run
 
-        base = self.settings.record
+        base = self.record
         overrides = (
             scripted_run(self.settings.sim_faults.get(decay), condition.angle_deg)
             if base.port == "sim"
@@ -513,7 +517,7 @@ class CampaignSession:
                     f"{self.folder} holds a session of another plan or hull; "
                     "resume it with the same PLAN and --hull"
                 )
-        self.log.append("start", resumed=bool(records), pid=os.getpid(), port=self.settings.record.port)
+        self.log.append("start", resumed=bool(records), pid=os.getpid(), port=self.record.port)
         state = SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
         self._adopt_orphans(state)
         return SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
@@ -546,7 +550,7 @@ class CampaignSession:
         from ..viz.campaign_view import CampaignView
         from ..viz.live import LiveView, default_viewer_mode
 
-        base = self.settings.record
+        base = self.record
         mode = base.viewer or default_viewer_mode()
         url = None
         if mode == "spawn":  # the decay views reuse this viewer: it listens before the first decay
@@ -723,7 +727,7 @@ class CampaignSession:
             self.on_line("no decay accepted: no report")
             return
         written = write_session_report(
-            accepted, self.folder / REPORT_DIR, self.settings.record.model, self.settings.hull
+            accepted, self.folder / REPORT_DIR, self.record.model, self.settings.hull
         )
         self.log.append(
             "report",

@@ -10,7 +10,14 @@ import typer
 from .. import validation
 from ..errors import InputError
 from .app import app, checked, err_console, handles_errors, say
-from .record import _viewer
+from .record import (
+    DEFAULT_LIVE_MODEL,
+    HullOption,
+    LiveModelOption,
+    SimSeedOption,
+    SimSpeedOption,
+    ViewerOption,
+)
 
 HELP = """Run a test session from a campaign PLAN, condition by condition, with the operator.
 
@@ -75,12 +82,7 @@ def read_responses(path: Path | None) -> list[str]:
 def session_command(
     plan: str = typer.Argument(..., help="Campaign plan: a name in configs/campaigns or a .toml file."),
     port: str = typer.Option(..., "--port", help="Device path, pyserial URL, or 'sim'."),
-    hull: str = typer.Option(
-        ...,
-        "--hull",
-        callback=checked(validation.known_hull, keep_input=True),
-        help="The model tested: a hull name of the plan or a .toml file.",
-    ),
+    hull: HullOption = ...,
     out: Path = typer.Option(
         Path("session"),
         "--out",
@@ -95,25 +97,14 @@ def session_command(
     rate: float = typer.Option(
         100.0, "--rate", callback=checked(validation.output_rate_hz), help="Output rate (Hz): 100, 200, 400."
     ),
-    viewer: str = typer.Option(
-        None,
-        "--viewer",
-        callback=lambda v: v if v is None else _viewer(v),
-        help="spawn, save (.rrd files), none, or a rerun URL.",
-    ),
-    model: str = typer.Option(
-        "ittc-quadratic-restoring",
-        "--model",
-        callback=checked(validation.live_model, keep_input=True),
-        help="Live model: terms (b1,b2,c1,c3) or alias.",
-    ),
+    viewer: ViewerOption = None,
+    model: LiveModelOption = DEFAULT_LIVE_MODEL,
     operator: str = typer.Option("", "--operator", help="Who runs the session (stored in every file)."),
-    sim_speed: float = typer.Option(1.0, "--sim-speed", min=0.1, max=50.0, hidden=True),
-    sim_seed: int = typer.Option(0, "--sim-seed", hidden=True),
+    sim_speed: SimSpeedOption = 1.0,
+    sim_seed: SimSeedOption = 0,
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
 ) -> None:
     from ..acquire.campaign_session import CampaignSession, SessionSettings
-    from ..acquire.daemon import RecordSettings
     from ..config import load_campaign_plan
     from ..physics.scenario import parse_fault_script
 
@@ -121,18 +112,16 @@ def session_command(
     settings = SessionSettings(
         plan=load_campaign_plan(plan),
         hull=hull,
-        record=RecordSettings(
-            port=port,
-            draft=1.0,
-            angle_deg=10.0,
-            out_dir=out,
-            rate_hz=rate,
-            viewer=viewer,
-            model=model,
-            operator=operator,
-            sim_speed=sim_speed,
-            sim_seed=sim_seed,
-        ),
+        record={
+            "port": port,
+            "out_dir": out,
+            "rate_hz": rate,
+            "viewer": viewer,
+            "model": model,
+            "operator": operator,
+            "sim_speed": sim_speed,
+            "sim_seed": sim_seed,
+        },
         sim_faults=parse_fault_script(sim_faults) if port == "sim" else {},
     )
     session = CampaignSession(
