@@ -319,7 +319,7 @@ def _measured(**changes: Any) -> Measured:
         ({"max_rate_deg_s": 299.0}, "rate saturated"),
         ({"half_cycles": 3}, "too short"),
         ({"r2_angle": 0.9}, "poor fit"),
-        ({"settle_reason": "unplug"}, "cut short"),
+        ({"settle_reason": "unplug"}, "cut short (the device went away)"),
         ({"b_eq_per_s": 3.4}, "not a repeat: B_eq"),
         ({"natural_period_s": 1.75}, "not a repeat: period"),
     ],

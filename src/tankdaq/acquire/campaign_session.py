@@ -46,6 +46,14 @@ LOG_NAME = "session.jsonl"
 LOCK_NAME = "session.lock"
 REPORT_DIR = "report"
 PANEL_NAME = "campaign.rrd"
+#: why a decay ended early, by its settle reason
+CUT_SHORT = {
+    "note": "stopped by the operator",
+    "unplug": "the device went away",
+    "error": "a recording error",
+}
+#: daemon lines shown for the first decay only (every decay opens the device again)
+ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
 #: settle reasons of a decay that ended by itself (anything else was cut short)
 COMPLETE_SETTLES = ("amplitude", "timeout")
 
@@ -232,7 +240,8 @@ def check_decay(
     a = acceptance
     reasons = []
     if measured.settle_reason not in COMPLETE_SETTLES:
-        reasons.append(f"cut short ({measured.settle_reason})")
+        why = CUT_SHORT.get(measured.settle_reason, measured.settle_reason)
+        reasons.append(f"cut short ({why})")
     off = measured.angle_deg - condition.angle_deg
     if abs(off) > a.angle_tolerance_deg:
         reasons.append(
@@ -454,6 +463,7 @@ class CampaignSession:
         self.log = SessionLog(self.folder)
         self._started = time.monotonic()
         self._decay_seconds: list[float] = []
+        self._shown: set[str] = set()
         self.view = None
 
     # ---- settings of one decay ----------------------------------------
@@ -660,7 +670,9 @@ class CampaignSession:
             condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
         )
         started = time.monotonic()
-        daemon = RecordDaemon(self._record_settings(condition, decay), on_event=self.on_line)
+        daemon = RecordDaemon(
+            self._record_settings(condition, decay), on_event=lambda line: self._daemon_line(line, decay)
+        )
         outcomes = [o for o in daemon.run() if o.path is not None]
         if not outcomes:
             raise KeyboardInterrupt  # stopped before a release: nothing recorded, nothing to log
@@ -683,6 +695,18 @@ class CampaignSession:
         self._decay_seconds.append(time.monotonic() - started)
         state = self._reload()
         return self._judge(state, state.runs[-1])
+
+    def _daemon_line(self, line: str, decay: int) -> None:
+        """The daemon's lines, its "run 1" named as the session's decay; the device and viewer lines
+        every decay repeats are shown once."""
+        if line.startswith("run 1:"):
+            line = f"decay {decay}:" + line[len("run 1:") :]
+        key = next((p for p in ONCE_PREFIXES if line.startswith(p)), line)
+        if key in self._shown:
+            return
+        if line.startswith(ONCE_PREFIXES) or line.startswith("viewer: "):
+            self._shown.add(key)
+        self.on_line(line)
 
     def _judge(self, state: SessionState, entry: RunEntry) -> SessionState:
         condition = entry.condition

@@ -64,9 +64,7 @@ class ScriptedOrTerminalOperator:
             return ""
         if not sys.stdin.isatty():
             raise InputError("a question needs an answer and none is left: give --yes or --responses FILE")
-        from rich.prompt import Prompt
-
-        return Prompt.ask(">", default="", show_default=False, console=err_console)
+        return err_console.input("> ")
 
 
 def read_responses(path: Path | None) -> list[str]:
