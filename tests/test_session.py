@@ -154,6 +154,9 @@ def test_every_recording_is_in_the_session_file_with_its_verdict(session: dict[s
     assert per_condition == {("T", 10.0): 2, ("T", 15.0): 2, ("1.1T", 10.0): 2, ("1.1T", 15.0): 2}
     starts = [r for r in records if r["type"] == "start"]
     assert [s["resumed"] for s in starts] == [False, True]
+    levels = [r for r in records if r["type"] == "level"]  # measured before each draft's first decay
+    assert {r["draft"] for r in levels} == {"T", "1.1T"} and all(r["ok"] for r in levels)
+    assert all(abs(r["angle_deg"]) < 0.5 and r["sd_deg"] < 0.3 for r in levels)
     notes = [r for r in records if r["type"] == "note"]
     assert [n["text"] for n in notes] == ["water calm, model trimmed"]
 

@@ -46,6 +46,10 @@ LOG_NAME = "session.jsonl"
 LOCK_NAME = "session.lock"
 REPORT_DIR = "report"
 PANEL_NAME = "campaign.rrd"
+#: device seconds of still water the level check averages after a draft change
+LEVEL_S = 2.0
+#: the still water moves less than this (standard deviation, deg) when the model is at rest
+STILL_SD_DEG = 0.3
 #: why a decay ended early, by its settle reason
 CUT_SHORT = {
     "note": "stopped by the operator",
@@ -641,11 +645,13 @@ class CampaignSession:
             self.on_line(f"'{answer}' not understood; keys: {_keys(question)}")
 
     def _set_draft(self, state: SessionState, condition: Condition) -> SessionState:
+        """The operator sets the draft and says when; the still water is then measured before the first
+        decay: off level (or still moving), the question comes again."""
         angles = ", ".join(f"{c.angle_deg:g}" for c in self.conditions if c.draft == condition.draft)
         question = Question(
             "draft",
             f"Set draft {condition.draft} and trim the model level (angles {angles} deg next); "
-            "the still water is checked on each release",
+            "leave it at rest for the level check",
             {"": "ready", "s": f"skip draft {condition.draft}"},
             "",
         )
@@ -655,9 +661,41 @@ class CampaignSession:
                 if c.draft == condition.draft and state.status(c) != "accepted":
                     self.log.append("skip", draft=c.draft, angle_deg=c.angle_deg)
                     self.view.set_status(c.draft, c.angle_deg, "skipped")
-        else:
+            return self._reload()
+        mean_deg, sd_deg = self._measure_level(condition)
+        level = abs(mean_deg) <= self.acceptance.level_tolerance_deg and sd_deg <= STILL_SD_DEG
+        self.log.append("level", draft=condition.draft, angle_deg=mean_deg, sd_deg=sd_deg, ok=level)
+        still = f"still water at {mean_deg:+.2f} deg (sd {sd_deg:.2f} over {LEVEL_S:g} s)"
+        if level:
+            self.on_line(f"{still}: level")
             self.log.append("draft", draft=condition.draft, action="ready")
+        else:
+            self.on_line(
+                f"{still}: not level or not at rest (tolerance {self.acceptance.level_tolerance_deg:g} deg, "
+                f"sd {STILL_SD_DEG:g}); re-trim, let it settle and confirm again"
+            )
+        self._adopt_orphans(self._reload())  # a decay the level check recorded is kept, rejected
         return self._reload()
+
+    def _measure_level(self, condition: Condition) -> tuple[float, float]:
+        """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time."""
+        from ..samples import AXIS_FIELDS
+
+        blocks: list[np.ndarray] = []
+
+        def collect(samples: np.ndarray) -> None:
+            if samples.size:
+                blocks.append(samples)
+            if blocks and float(blocks[-1]["t"][-1] - blocks[0]["t"][0]) >= LEVEL_S:
+                daemon.stop()
+
+        settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
+        daemon = RecordDaemon(settings, on_samples=collect)
+        daemon.run()
+        if not blocks or float(blocks[-1]["t"][-1] - blocks[0]["t"][0]) < LEVEL_S:
+            raise KeyboardInterrupt  # stopped during the level check
+        angle = np.degrees(np.concatenate([b[AXIS_FIELDS[self.settings.plan.axis][0]] for b in blocks]))
+        return float(angle.mean()), float(angle.std())
 
     def _record_one(self, state: SessionState, condition: Condition) -> SessionState:
         decay = state.decays + 1

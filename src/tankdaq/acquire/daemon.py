@@ -18,6 +18,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .. import validation
 from ..config import Hull, format_draft, load_hull
 from ..device.driver import MTiDriver
@@ -118,10 +120,12 @@ class RecordDaemon:
         settings: RecordSettings,
         on_event: Callable[[str], None] | None = None,
         on_status: Callable[[DaemonStatus], None] | None = None,
+        on_samples: Callable[[np.ndarray], None] | None = None,  # every block read (a session's level check)
     ) -> None:
         self.settings = settings
         self.on_event = on_event or (lambda _line: None)
         self.on_status = on_status or (lambda _status: None)
+        self.on_samples = on_samples or (lambda _samples: None)
         self.status = DaemonStatus()
         self.hull: Hull | None = load_hull(settings.hull) if settings.hull else None
         if settings.axis not in ("roll", "pitch", "auto"):
@@ -286,6 +290,7 @@ class RecordDaemon:
         st.samples, st.gaps, st.bad_frames = c.samples, c.gaps, c.bad_frames
         st.state, st.held_deg, st.runs_done = session.state, session.held_deg, len(self.outcomes)
         self.on_status(st)
+        self.on_samples(block.samples)
 
     def _device_gone(self, driver: MTiDriver, session: DecaySession, message: str) -> None:
         closed = session.abort("unplug", message)
