@@ -569,7 +569,7 @@ class CampaignSession:
         url = None
         if mode == "spawn":  # the decay views reuse this viewer: it listens before the first decay
             LiveView(
-                "spawn", bind=base.viewer_bind, spawn_port=base.viewer_port, on_note=self.on_line
+                "spawn", bind=base.viewer_bind, spawn_port=base.viewer_port, on_note=self._viewer_note
             ).close()
             url = f"rerun+http://127.0.0.1:{base.viewer_port}/proxy"
         plan = self.settings.plan
@@ -580,10 +580,13 @@ class CampaignSession:
             plan.angles_deg,
             _terms(base.model),
             viewer_url=url,
-            on_note=lambda line: self.on_line(f"viewer: {line}"),
+            on_note=self._viewer_note,
         )
         for condition in self.conditions:
             self._show_condition(state, condition)
+
+    def _viewer_note(self, line: str) -> None:
+        self.on_line(f"viewer: {line}")
 
     def _show_condition(self, state: SessionState, condition: Condition) -> None:
         kept = len(state.accepted(condition))

@@ -46,20 +46,38 @@ STATUS_COLORS = {
 DRAFT_COLORS = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189))
 
 
-def campaign_blueprint(terms: Sequence[str]) -> rrb.Blueprint:
-    """Coefficients and B_eq against the release angle, the matrix beside them."""
+def campaign_blueprint(terms: Sequence[str], angles_deg: Sequence[float], drafts: int) -> rrb.Blueprint:
+    """Coefficients and B_eq against the release angle (the plan's angles with a margin), the matrix
+    (angles x ``drafts``) beside them."""
+    low, high = round(min(angles_deg)), round(max(angles_deg))
+    margin = max(1, (high - low) // 5)
+    x_axis = rrb.TimeAxis(
+        view_range=rrb.components.TimeRange(
+            start=rr.TimeRangeBoundary.absolute(seq=low - margin),
+            end=rr.TimeRangeBoundary.absolute(seq=high + margin),
+        )
+    )
     plots = [
-        rrb.TimeSeriesView(origin=f"/campaign/coefficients/{term}", name=f"{term_title(term)} vs angle")
+        rrb.TimeSeriesView(
+            origin=f"/campaign/coefficients/{term}", name=f"{term_title(term)} vs angle", axis_x=x_axis
+        )
         for term in terms
     ]
-    plots.append(rrb.TimeSeriesView(origin="/campaign/b_eq", name="B_eq (1/s) vs amplitude (deg)"))
+    plots.append(
+        rrb.TimeSeriesView(origin="/campaign/b_eq", name="B_eq (1/s) vs amplitude (deg)", axis_x=x_axis)
+    )
+    angles = len(angles_deg)
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Grid(*plots, name="Campaign"),
-            rrb.Spatial2DView(origin="/campaign/matrix", name="Test matrix (angle x draft)"),
+            rrb.Spatial2DView(
+                origin="/campaign/matrix",
+                name="Test matrix (angle across, draft down)",
+                visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, angles - 0.4], y_range=[-0.6, drafts - 0.4]),
+            ),
             column_shares=[3, 2],
         ),
-        rrb.TimePanel(timeline=ANGLE_TIMELINE),
+        rrb.TimePanel(timeline=ANGLE_TIMELINE, state="collapsed"),
         collapse_panels=True,
     )
 
@@ -108,7 +126,10 @@ class CampaignView:
         if not sinks:
             return
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
-        rec.set_sinks(*sinks, default_blueprint=campaign_blueprint(self.terms))
+        rec.set_sinks(
+            *sinks,
+            default_blueprint=campaign_blueprint(self.terms, self.angles_deg, len(self.drafts)),
+        )
         rec.send_recording_name("campaign")
         self._rec = rec
         self._log_matrix()
