@@ -375,3 +375,47 @@ def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
     assert load_campaign_plan("seed001-swath-roll").repeats == 3
     with pytest.raises(ConfigError, match="no angle_tol"):
         Acceptance.from_plan({"angle_tol": 1.0}, "plan x")
+
+
+class _Answers:
+    """An operator with scripted answers who walks away (Ctrl-C) when they run out."""
+
+    def __init__(self, *answers: str) -> None:
+        self.answers = list(answers)
+        self.asked: list[str] = []
+
+    def ask(self, question: Any) -> str:
+        self.asked.append(question.kind)
+        if not self.answers:
+            raise KeyboardInterrupt
+        return self.answers.pop(0)
+
+
+def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Path) -> None:
+    import dataclasses
+
+    from tankdaq.acquire.campaign_session import CampaignSession, SessionSettings
+    from tankdaq.config import load_campaign_plan
+
+    plan_file = tmp_path / "plan.toml"
+    plan_file.write_text(PLAN)
+    plan = load_campaign_plan(str(plan_file))
+    out = tmp_path / "out"
+    out.mkdir()
+    log = SessionLog(out)
+    log.append("plan", plan=dataclasses.asdict(plan), hull="swath", conditions=[])
+    log.append("start", resumed=False)
+    log.append("draft", draft="T", action="ready")
+    measured = dataclasses.asdict(_measured())
+    log.append("run", decay=1, draft="T", angle_deg=10.0, file="a.mcap", reasons=[], measured=measured)
+    # the power went before the operator answered
+    settings = SessionSettings(plan, "swath", {"port": "sim", "out_dir": out, "viewer": "none"})
+    operator = _Answers("n judged after the restart", "a")
+    with pytest.raises(KeyboardInterrupt):
+        CampaignSession(settings, operator, resume=True).run()
+    assert operator.asked == ["verdict", "verdict", "draft"]  # the verdict first, then the draft again
+    records = log.read()
+    kinds = [r["type"] for r in records]
+    assert kinds[-3:] == ["start", "note", "verdict"]
+    assert records[-1]["decay"] == 1 and records[-1]["verdict"] == "accepted"
+    assert records[-2]["text"] == "judged after the restart"
