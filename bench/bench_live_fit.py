@@ -36,6 +36,7 @@ BASELINE = "948966e"
 def measure_decay(out: Path) -> dict[str, object]:
     """One decay through the record daemon; the loop's pauses from the release to the settle."""
     from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+    from tankdaq.store.reader import read_recording
 
     lines: list[str] = []
     passes: list[float] = []
@@ -60,7 +61,7 @@ def measure_decay(out: Path) -> dict[str, object]:
         sim_speed=4.0, sim_seed=4,
     )  # fmt: skip
     daemon = RecordDaemon(settings, on_event=on_event, on_status=on_status)
-    daemon.run()
+    (outcome,) = daemon.run()
     gaps = [b - a for a, b in itertools.pairwise(passes)]
     return {
         "longest_pause_s": max(gaps),
@@ -68,7 +69,7 @@ def measure_decay(out: Path) -> dict[str, object]:
         "device_gone": sum("device gone" in line for line in lines),
         "counter_gaps": daemon.status.gaps,
         "wall_s": time.monotonic() - started,
-        "fits": sum(1 for line in lines if "R2" in line),
+        "fits_in_file": len(read_recording(outcome.path).fits),
     }
 
 

@@ -127,13 +127,19 @@ def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_
     assert recording.fits[-1]["coefficients"] == pytest.approx(outcome.fit.coefficients)
 
 
-def test_refits_coalesce_on_the_latest_samples_while_one_runs() -> None:
+def _held_decay(
+    seconds: float,
+) -> tuple[threading.Event, HeldIdentifier, BackgroundFit, np.ndarray, np.ndarray, np.ndarray]:
+    """A worker whose first refit waits on the returned gate, and a clean decay (period 2 s) to feed it."""
     gate = threading.Event()
     identifier = HeldIdentifier("ittc-linear", gate=gate)
-    live = BackgroundFit(identifier)
-    t = np.arange(0.0, 20.0, 0.01)
+    t = np.arange(0.0, seconds, 0.01)
     angle = 0.1 * np.exp(-0.1 * t) * np.cos(np.pi * t)
-    rate = np.gradient(angle, t)
+    return gate, identifier, BackgroundFit(identifier), t, angle, np.gradient(angle, t)
+
+
+def test_refits_coalesce_on_the_latest_samples_while_one_runs() -> None:
+    gate, identifier, live, t, angle, rate = _held_decay(20.0)
     try:
         for start in range(0, t.size, 2):
             live.submit(t[start : start + 2], angle[start : start + 2], rate[start : start + 2])
@@ -151,13 +157,9 @@ def test_refits_coalesce_on_the_latest_samples_while_one_runs() -> None:
 
 
 def test_a_final_fit_that_cannot_finish_is_given_up_in_bounded_time() -> None:
-    gate = threading.Event()
-    identifier = HeldIdentifier("ittc-linear", gate=gate)
-    live = BackgroundFit(identifier)
-    t = np.arange(0.0, 8.0, 0.01)
-    angle = 0.1 * np.exp(-0.1 * t) * np.cos(np.pi * t)
+    gate, identifier, live, t, angle, rate = _held_decay(8.0)
     try:
-        live.submit(t, angle, np.gradient(angle, t))
+        live.submit(t, angle, rate)
         assert identifier.entered.wait(DEADLINE_S)
         with pytest.raises(IdentificationError, match=r"did not finish within 0\.1 s"):
             live.finish(timeout_s=0.1)

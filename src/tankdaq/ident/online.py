@@ -319,8 +319,8 @@ def prepare_kernels(terms: str | Sequence[str] = "ittc-quadratic-restoring") -> 
         identifier.finish()
 
 
-#: What compiling the kernels took on the benchmark machine (bench/bench_live_fit.py), for the notice.
-FIRST_RUN_S = 40
+#: What compiling the kernels took on the 2-core benchmark machine, quiet to loaded (bench_live_fit.py).
+FIRST_RUN_S = "10–40"
 
 
 def prepare_identifier(terms: str | Sequence[str], on_event: Callable[[str], None] | None = None) -> None:
