@@ -111,7 +111,7 @@ def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_deca
         env["DISPLAY"] = display
         record = [
             str(Path(sys.executable).with_name("tankdaq")), "record", "--hull", "swath", "--port", "sim",
-            "--draft", "T", "--angle", "8", "--runs", "2", "--sim-speed", "8", "--viewer", "spawn",
+            "--draft", "T", "--angle", "8", "--sim-speed", "8", "--viewer", "spawn",
             "--viewer-port", str(port), "--out", str(tmp_path),
         ]  # fmt: skip
         proc = subprocess.Popen(record, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
@@ -134,9 +134,11 @@ def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_deca
 
             os.kill(viewer_pid, signal.SIGKILL)  # the viewer crashes in the middle of the session
             _wait_for(lines, seen, "viewer: the rerun viewer exited")
+            _wait_for(lines, seen, "run 2: amplitude")  # the session goes on: a decay after the crash
+            proc.send_signal(signal.SIGTERM)  # the operator ends the session (as Ctrl-C)
             while (line := lines.get(timeout=240)) is not None:
                 seen.append(line)
-            assert proc.wait(timeout=60) == 0, "\n".join(seen)
+            assert proc.wait(timeout=60) in (0, 130), "\n".join(seen)
         finally:
             if proc.poll() is None:
                 proc.kill()
@@ -147,7 +149,7 @@ def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_deca
     output = "\n".join(seen)
     assert "Traceback" not in output and "Flush timed out" not in output
     mcaps = sorted(tmp_path.glob("*.mcap"))
-    assert len(mcaps) == 2, output
+    assert len(mcaps) >= 2, output
     for path in mcaps:
         with path.open("rb") as f:
             assert make_reader(f).get_summary() is not None, f"{path} was not finished"
