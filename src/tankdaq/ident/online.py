@@ -302,7 +302,7 @@ def kernels_cached() -> bool:
 def prepare_kernels(terms: str | Sequence[str] = "ittc-quadratic-restoring") -> None:
     """Compile (first run) or load (later runs) every kernel a live fit uses, on a made-up decay.
 
-    Run before a device opens: the first refit of a decay would otherwise spend 20-40 s
+    Run before a device opens: the first refit of a decay would otherwise spend 10-40 s
     compiling (0.6 s loading from the cache) wherever it runs.
     """
     t = np.arange(0.0, 12.0, 0.01)
