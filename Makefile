@@ -34,8 +34,9 @@ viewer-test-deps:
 		echo "make: apt-get could not install $(VIEWER_TEST_PACKAGES); the viewer window test skips"; \
 	fi
 
+# One pytest worker per core: most of the suite's wall time is the simulated MTi-G streaming in real time.
 test: $(STAMP) lint viewer-test-deps
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal
 
 bench: $(STAMP)
 	$(BIN)/python bench/run_all.py

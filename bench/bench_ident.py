@@ -1,6 +1,6 @@
 """Identification benchmarks: fit time, online refit time, Monte Carlo efficiency vs the Cramer-Rao bound.
 
-Run as ``.venv/bin/python bench/bench_ident.py`` (pinned to one core, BLAS single-threaded). Times are
+Run as ``.venv/bin/python bench/bench_ident.py [fit]`` (pinned to one core, BLAS single-threaded). Times are
 CPU time of this process (what one core spends; the shared machine's load inflates wall time) with the
 wall time beside it.
 """
@@ -15,6 +15,7 @@ os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import math
 import statistics
+import sys
 import time
 
 import numpy as np
@@ -116,5 +117,6 @@ if __name__ == "__main__":
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     bench_fit_time()
-    bench_online()
-    bench_cramer_rao()
+    if sys.argv[1:] != ["fit"]:  # "fit": the fit time alone (an A/B run against another checkout)
+        bench_online()
+        bench_cramer_rao()

@@ -18,6 +18,8 @@ from tankdaq.config import load_hull
 from tankdaq.errors import InputError
 from tankdaq.ident.campaign import (
     GroupKey,
+    GroupResult,
+    campaign_executor,
     csv_labels,
     find_recordings,
     group_runs,
@@ -88,6 +90,51 @@ def test_report_files_hold_the_table_and_the_plots(csv_results: list, tmp_path: 
         image = imread(png)
         assert image.ndim == 3 and image.shape[0] > 100 and image.shape[1] > 100
         assert float(np.std(image)) > 0.01, png.name  # something was drawn
+
+
+def assert_same_fits(results: list[GroupResult], expected: list[GroupResult]) -> None:
+    """Bit-identical fits: the same groups in the same order, same parameters and covariance."""
+    assert [r.key for r in results] == [r.key for r in expected]
+    for result, serial in zip(results, expected, strict=True):
+        assert result.error == serial.error
+        np.testing.assert_array_equal(result.fit.params_, serial.fit.params_)
+        np.testing.assert_array_equal(result.fit.param_covariance_, serial.fit.param_covariance_)
+
+
+def test_a_process_pool_gives_the_serial_results(
+    csv_campaign: Path, csv_results: list, tmp_path: Path
+) -> None:
+    """Reading, fits and plots spread over worker processes; tables and figures as from one process."""
+    serial_files = write_report(csv_results, tmp_path / "serial")
+    paths = find_recordings([csv_campaign])
+    with campaign_executor(jobs=2) as pool:
+        assert pool is not None
+        runs = [run for found in pool.map(read_campaign_runs, paths) for run in found]
+        results = identify_groups(group_runs(runs), executor=pool)
+        pool_files = write_report(results, tmp_path / "pool", pool)
+    assert_same_fits(results, csv_results)
+    assert [p.name for p in pool_files] == [p.name for p in serial_files]
+    for mine, serial in zip(pool_files, serial_files, strict=True):
+        if mine.suffix == ".png":
+            np.testing.assert_array_equal(imread(mine), imread(serial), err_msg=mine.name)
+        else:
+            assert mine.read_text() == serial.read_text()
+
+
+def test_a_dask_cluster_gives_the_serial_results(csv_campaign: Path, csv_results: list) -> None:
+    """``--executor dask``: the same units of work on a (here local, in-process) Dask cluster."""
+    distributed = pytest.importorskip(
+        "distributed", reason="the dask extra is not installed (pip install 'tankdaq[dask]')"
+    )
+    runs = [run for path in find_recordings([csv_campaign]) for run in read_campaign_runs(path)]
+    with (
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+        ) as cluster,
+        campaign_executor(scheduler=cluster.scheduler_address) as executor,
+    ):
+        results = identify_groups(group_runs(runs), executor=executor)
+    assert_same_fits(results, csv_results)
 
 
 def test_mcap_campaign_reads_back_like_the_csv_one(tmp_path: Path) -> None:
@@ -168,6 +215,8 @@ def test_cli_simulate_campaign_writes_the_seeds_matrix(tmp_path: Path) -> None:
         (["campaign", "{unnamed}"], "cannot tell hull, draft, axis and angle"),
         (["campaign", "{notes}"], "not a recording"),
         (["campaign", "{campaign}", "--model", "b1,zz"], "unknown model term"),
+        (["campaign", "{campaign}", "--executor", "dask"], "--executor dask needs --scheduler"),
+        (["campaign", "{campaign}", "--executor", "spark"], "--executor 'spark' not understood"),
         (["simulate-campaign", "{empty}", "--axis", "yaw"], "axis 'yaw' not understood"),
         (["simulate-campaign", "{empty}", "--draft", "deep"], "draft 'deep' not understood"),
         (["simulate-campaign", "{empty}", "--hull", "ferry"], "unknown hull 'ferry'"),

@@ -18,7 +18,9 @@ from tankdaq.physics.decay import TERMS, simulate_decay
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store import schemas
 from tankdaq.store.naming import create_exclusive, next_run_number, recording_name
-from tankdaq.store.reader import iter_raw_chunks, read_decay_runs, read_recording
+from tankdaq.store.reader import Recording, iter_raw_chunks, read_decay_runs, read_recording
+from tankdaq.store.reader import _read_indexed as read_recording_indexed
+from tankdaq.store.reader import _read_scanned as read_recording_scanned
 from tankdaq.store.writer import RecordingWriter, describe_run
 
 RATE_HZ = 200.0
@@ -189,6 +191,82 @@ def test_schemas_parse_in_foxglove_and_fit_terms_are_plottable() -> None:
         assert_foxglove_parses(schema, schema["title"])
     fit = json.loads(schemas.FIT_SCHEMA)
     assert set(fit["properties"]["coefficients"]["properties"]) == set(TERMS)  # /fit.coefficients.b1 plots
+
+
+def without_sample_blocks(source: Path, destination: Path) -> Path:
+    """The file as tankdaq wrote it before sample blocks: every record but the /samples/blocks channel."""
+    with source.open("rb") as stream, destination.open("wb") as out:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        assert summary is not None
+        writer = Writer(out)
+        writer.start()
+        channel_ids: dict[int, int] = {}
+        for channel in summary.channels.values():
+            if channel.topic == schemas.TOPIC_SAMPLE_BLOCKS:
+                continue
+            schema = summary.schemas.get(channel.schema_id)
+            schema_id = writer.register_schema(schema.name, schema.encoding, schema.data) if schema else 0
+            channel_ids[channel.id] = writer.register_channel(
+                channel.topic, channel.message_encoding, schema_id, dict(channel.metadata)
+            )
+        for metadata in reader.iter_metadata():
+            writer.add_metadata(metadata.name, dict(metadata.metadata))
+        for attachment in reader.iter_attachments():
+            writer.add_attachment(
+                attachment.log_time,
+                attachment.create_time,
+                attachment.name,
+                attachment.media_type,
+                attachment.data,
+            )
+        for _, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.id in channel_ids:
+                writer.add_message(
+                    channel_ids[channel.id], message.log_time, message.data, message.publish_time
+                )
+        writer.finish()
+    return destination
+
+
+def assert_same_recording(read: Recording, expected: Recording) -> None:
+    assert read.samples.dtype == expected.samples.dtype
+    for name in SAMPLE_DTYPE.names:  # bit for bit, NaN in the same places
+        np.testing.assert_array_equal(read.samples[name], expected.samples[name], err_msg=name)
+    assert read.events == expected.events and read.fits == expected.fits
+    assert read.metadata_history == expected.metadata_history and read.attachments == expected.attachments
+    assert read.release_index == expected.release_index and read.raw_chunks == expected.raw_chunks
+
+
+def test_sample_blocks_read_the_same_as_the_per_sample_messages(
+    recording: tuple[Path, np.ndarray, list], tmp_path: Path
+) -> None:
+    """The fast path (index + blocks) and the front-to-back scan of the JSON give the same recording."""
+    path, _, _ = recording
+    assert read_recording_indexed(path) is not None  # this file does take the fast path
+    assert_same_recording(read_recording(path), read_recording_scanned(path))
+    samples = decay_samples(1.0)
+    samples["pitch"][[3, 4]] = np.nan
+    samples["yaw"][5] = -np.inf
+    gaps = write_recording(tmp_path / "gaps.mcap", samples, [(1, b"x")])
+    assert_same_recording(read_recording(gaps), read_recording_scanned(gaps))
+
+
+def test_files_recorded_before_sample_blocks_still_read(
+    recording: tuple[Path, np.ndarray, list], tmp_path: Path
+) -> None:
+    path, _, _ = recording
+    old = without_sample_blocks(path, tmp_path / "old.mcap")
+    with old.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    assert schemas.TOPIC_SAMPLE_BLOCKS not in {c.topic for c in summary.channels.values()}
+    assert read_recording_indexed(old) is None
+    back = read_recording(old)
+    assert_same_recording(back, read_recording(path))
+    assert [run.angle.size for run in read_decay_runs(old)] == [
+        run.angle.size for run in read_decay_runs(path)
+    ]
 
 
 def test_missing_values_become_null_and_come_back_as_nan(tmp_path: Path) -> None:

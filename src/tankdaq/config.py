@@ -316,7 +316,12 @@ def write_hull_template(name: str, folder: Path | None = None) -> Path:
 
 @dataclass
 class CampaignPlan:
-    """A test matrix: which hulls, axis, drafts and initial angles a campaign covers."""
+    """A test matrix: which hulls, axis, drafts and initial angles a campaign covers.
+
+    A guided session (``tankdaq session``) also reads ``repeats`` (decays kept per condition) and the
+    ``[acceptance]`` table (tolerances of its checks, ``acquire.campaign_session.Acceptance``). The
+    conditions run in the order written: all angles of the first draft, then the next draft.
+    """
 
     name: str
     description: str
@@ -324,6 +329,8 @@ class CampaignPlan:
     axis: str
     drafts: list[str]
     angles_deg: list[float]
+    repeats: int = 1
+    acceptance: dict[str, float] = field(default_factory=dict)
 
 
 def list_campaign_plans() -> list[str]:
@@ -332,21 +339,31 @@ def list_campaign_plans() -> list[str]:
 
 
 def load_campaign_plan(name: str) -> CampaignPlan:
-    """Load ``configs/campaigns/<name>.toml``; an unknown name lists the known ones."""
-    path = config_dir() / "campaigns" / f"{name}.toml"
+    """Load ``configs/campaigns/<name>.toml``, or a plan file given by path; an unknown name lists the
+    known ones."""
+    given = Path(name)
+    path = given if given.suffix == ".toml" else config_dir() / "campaigns" / f"{name}.toml"
     if not path.is_file():
         raise InputError(
-            f"unknown campaign plan {name!r}; known: {', '.join(list_campaign_plans()) or 'none'}"
+            f"unknown campaign plan {name!r}; known: {', '.join(list_campaign_plans()) or 'none'} "
+            "(or give a .toml file)"
         )
     try:
         data = tomllib.loads(path.read_text())
-        return CampaignPlan(
-            name=name,
+        plan = CampaignPlan(
+            name=path.stem,
             description=str(data.get("description", "")),
             hulls=[str(h) for h in data["hulls"]],
             axis=str(data["axis"]),
             drafts=[str(d) for d in data["drafts"]],
             angles_deg=[float(a) for a in data["angles_deg"]],
+            repeats=int(data.get("repeats", 1)),
+            acceptance={str(k): float(v) for k, v in data.get("acceptance", {}).items()},
         )
-    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError) as exc:
-        raise ConfigError(f"{path}: {exc} (needs hulls, axis, drafts, angles_deg)") from None
+    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ConfigError(
+            f"{path}: {exc} (needs hulls, axis, drafts, angles_deg; optional repeats, [acceptance])"
+        ) from None
+    if plan.repeats < 1:
+        raise ConfigError(f"{path}: repeats must be 1 or more, got {plan.repeats}")
+    return plan

@@ -9,6 +9,7 @@ simulated MTi-G in-process on a pseudo-terminal, opened like hardware.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import signal
 import threading
@@ -17,6 +18,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 from .. import validation
 from ..config import Hull, format_draft, load_hull
@@ -65,6 +68,7 @@ class RecordSettings:
     sim_speed: float = 1.0
     sim_seed: int = 0
     sim_legacy: bool = False  # the built-in sensor plays a 2007-era MTi-G (legacy MTData)
+    sim_overrides: dict[str, object] = field(default_factory=dict)  # DecayScenario settings of a session
     extra: dict[str, object] = field(default_factory=dict)
 
 
@@ -121,10 +125,12 @@ class RecordDaemon:
         settings: RecordSettings,
         on_event: Callable[[str], None] | None = None,
         on_status: Callable[[DaemonStatus], None] | None = None,
+        on_samples: Callable[[np.ndarray], None] | None = None,  # every block read (a session's level check)
     ) -> None:
         self.settings = settings
         self.on_event = on_event or (lambda _line: None)
         self.on_status = on_status or (lambda _status: None)
+        self.on_samples = on_samples or (lambda _samples: None)
         self.status = DaemonStatus()
         self.hull: Hull | None = load_hull(settings.hull) if settings.hull else None
         if settings.axis not in ("roll", "pitch", "auto"):
@@ -154,7 +160,7 @@ class RecordDaemon:
         s = self.settings
         axis = "roll" if s.axis == "auto" else s.axis
         assert self.hull is not None  # __init__ refuses the simulator without one
-        return DecayScenario(
+        scenario = DecayScenario(
             hull=self.hull.name,
             coefficients=self.hull.simulation_model(axis).coefficients(s.draft),
             draft=s.draft,
@@ -164,6 +170,7 @@ class RecordDaemon:
             runs=(s.runs or 20) + 1,
             seed=s.sim_seed,
         )
+        return dataclasses.replace(scenario, **s.sim_overrides)  # type: ignore[arg-type]
 
     def _start_simulator(self) -> str:
         from ..device.simulator import SimulatedMTi
@@ -294,6 +301,7 @@ class RecordDaemon:
         st.samples, st.gaps, st.bad_frames = c.samples, c.gaps, c.bad_frames
         st.state, st.held_deg, st.runs_done = session.state, session.held_deg, len(self.outcomes)
         self.on_status(st)
+        self.on_samples(block.samples)
 
     def _device_gone(self, driver: MTiDriver, session: DecaySession, message: str) -> None:
         closed = session.abort("unplug", message)

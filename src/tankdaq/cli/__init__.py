@@ -17,6 +17,7 @@ from . import store  # noqa: F401  (recover)
 from . import export  # noqa: F401
 from . import identify  # noqa: F401
 from . import campaign  # noqa: F401
+from . import session  # noqa: F401
 from . import diagnose  # noqa: F401
 from . import auv  # noqa: F401
 from . import hulls  # noqa: F401

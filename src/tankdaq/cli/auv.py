@@ -6,7 +6,7 @@ import json
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
@@ -14,13 +14,13 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from .. import validation
 from ..errors import InputError
-from ..maneuver.identify import SeparateIdentifier, default_window_s, relative_errors
-from ..maneuver.io import read_record, read_vehicle_attachment, write_record
-from ..maneuver.model import StateRecord, add_noise, simulate_zigzag
-from ..maneuver.sensitivity import OUTPUTS, SensitivityResult, sensitivity_analysis
-from ..maneuver.validate import MODES, SCORED_STATES, default_mode, plot_validation, resimulate
 from ..maneuver.vehicle import TERM_BY_NAME, Vehicle, list_vehicles, load_vehicle
 from .app import app, checked, err_console, handles_errors
+
+if TYPE_CHECKING:  # the maneuver models compile with numba: imported by the commands that run them
+    from ..maneuver.identify import SeparateIdentifier
+    from ..maneuver.model import StateRecord
+    from ..maneuver.sensitivity import SensitivityResult
 
 auv_app = typer.Typer(
     no_args_is_help=True,
@@ -73,6 +73,8 @@ def _check_method(method: str) -> None:
 
 def _vehicle_for(path: Path, record: StateRecord, name: str | None) -> Vehicle:
     """The vehicle named on the command line, else the one the record carries or names."""
+    from ..maneuver.io import read_vehicle_attachment
+
     if name:
         return load_vehicle(name)
     attached = read_vehicle_attachment(path)
@@ -95,6 +97,8 @@ def _manoeuvre_angles_rad(record: StateRecord) -> tuple[float, float]:
 
 def _sensitivity(vehicle: Vehicle, delta_rad: float, theta_rad: float, step: float = 0.10,
                  threshold: float = 0.10) -> SensitivityResult:
+    from ..maneuver.sensitivity import sensitivity_analysis
+
     with _progress("sensitivity: re-simulating the zigzag") as update:
         return sensitivity_analysis(vehicle, delta_rad, theta_rad, step=step, dominant_threshold=threshold,
                                     progress=update)
@@ -120,6 +124,9 @@ def simulate_command(
     seed: int = typer.Option(0, "--seed", help="Noise random seed."),
 ) -> None:
     """Simulate a diving-plane manoeuvre with the vehicle's standard derivatives and write it."""
+    from ..maneuver.io import write_record
+    from ..maneuver.model import add_noise, simulate_zigzag
+
     if manoeuvre != "zigzag":
         raise InputError(f"--manoeuvre {manoeuvre!r} unknown; the only manoeuvre is zigzag")
     if not 1 <= rate_hz <= 1000:
@@ -139,6 +146,8 @@ def simulate_command(
 
 def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle, sensitivity: SensitivityResult | None,
                      gamma_source: str) -> dict[str, object]:
+    from ..maneuver.identify import default_window_s, relative_errors
+
     errors = relative_errors(ident.derivatives_, vehicle.derivatives)
     rows = []
     for name, value in ident.derivatives_.items():
@@ -209,6 +218,9 @@ def identify_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Identify the surge, heave and pitch derivatives one equation at a time; compare with the standard."""
+    from ..maneuver.identify import SeparateIdentifier
+    from ..maneuver.io import read_record
+
     _check_method(method)
     if window_s is not None and window_s <= 0:
         raise InputError(f"--window {window_s:g} must be positive (seconds)")
@@ -241,6 +253,8 @@ def sensitivity_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Rank the derivatives by how much the zigzag changes when each is perturbed."""
+    from ..maneuver.sensitivity import OUTPUTS
+
     vehicle = load_vehicle(vehicle_name)
     delta_rad, theta_rad = np.radians(delta_deg), np.radians(theta_deg)
     result = _sensitivity(vehicle, delta_rad, theta_rad, step_percent / 100.0, threshold)
@@ -279,6 +293,10 @@ def validate_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""
+    from ..maneuver.identify import SeparateIdentifier
+    from ..maneuver.io import read_record
+    from ..maneuver.validate import MODES, SCORED_STATES, default_mode, plot_validation, resimulate
+
     _check_method(method)
     if mode is not None and mode not in MODES:
         raise InputError(f"--mode {mode!r} unknown; use {' or '.join(MODES)}")

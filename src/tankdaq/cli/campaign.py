@@ -33,6 +33,17 @@ def campaign_command(
     ] = None,
     start: StartS = None,
     end: EndS = None,
+    jobs: Annotated[
+        int | None,
+        typer.Option("--jobs", min=1, help="Worker processes for reading, fits and plots [default: cores]."),
+    ] = None,
+    executor: Annotated[
+        str, typer.Option("--executor", help="local (a process pool) or dask (needs --scheduler).")
+    ] = "local",
+    scheduler: Annotated[
+        str | None,
+        typer.Option("--scheduler", help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (tankdaq[dask])."),
+    ] = None,
 ) -> None:
     """Group decays by hull, axis, draft and initial angle; fit each group jointly (output error).
 
@@ -40,7 +51,11 @@ def campaign_command(
     hull, draft, axis, angle_deg); tankdaq recordings carry it in their metadata. The table goes to
     stdout.
     """
+    import os
+
+    from ..errors import InputError
     from ..ident.campaign import (
+        campaign_executor,
         find_campaign_hulls,
         find_recordings,
         group_runs,
@@ -51,14 +66,21 @@ def campaign_command(
     from ..ident.models import resolve_model
     from .identify import echo_cuts
 
+    if executor not in ("local", "dask"):
+        raise InputError(f"--executor {executor!r} not understood: use local or dask")
+    if (executor == "dask") != (scheduler is not None):
+        raise InputError("--executor dask needs --scheduler ADDRESS, and --scheduler needs --executor dask")
     resolve_model(model)  # a typo fails before any file is read
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs)
-    with progress_bar() as progress:
+    with campaign_executor(jobs or os.cpu_count() or 1, scheduler) as pool, progress_bar() as progress:
         reading = progress.add_task("reading", total=len(paths))
         runs = []
-        for path in paths:
-            runs.extend(read_campaign_runs(path, start, end))
+        read = map if pool is None else pool.map
+        for path, found in zip(
+            paths, read(read_campaign_runs, paths, [start] * len(paths), [end] * len(paths)), strict=True
+        ):
+            runs.extend(found)
             progress.update(reading, advance=1, description=f"reading {path.name}")
         groups = group_runs(runs)
         known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
@@ -68,18 +90,19 @@ def campaign_command(
             model,
             progress=lambda key: progress.update(fitting, advance=1, description=key.label),
             hulls=known,
+            executor=pool,
         )
-    warn_truncated(runs)
-    echo_cuts(runs)
-    typer.echo(markdown_table(results), nl=False)
-    failed = [r for r in results if r.fit is None]
-    for result in failed:
-        err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
-    if report is not None:
-        from ..ident.campaign import write_report
+        warn_truncated(runs)
+        echo_cuts(runs)
+        typer.echo(markdown_table(results), nl=False)
+        failed = [r for r in results if r.fit is None]
+        for result in failed:
+            err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
+        if report is not None:
+            from ..ident.campaign import write_report
 
-        written = write_report(results, report)
-        err_console.print(f"wrote {len(written)} files to {report}", markup=False)
+            written = write_report(results, report, pool)
+            err_console.print(f"wrote {len(written)} files to {report}", markup=False)
 
 
 @app.command("simulate-campaign")

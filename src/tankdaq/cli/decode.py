@@ -12,22 +12,21 @@ from dataclasses import fields, is_dataclass
 from enum import StrEnum
 from operator import itemgetter
 from pathlib import Path
-from typing import IO, Annotated
+from typing import IO, TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
-from mcap.writer import MCAP0_MAGIC
 from rich.progress import Progress
 
 from ..errors import InputError, ProtocolError
 from ..validation import input_file, output_file
-from ..xsens.batch import DecodedBlock
 from ..xsens.constants import MID
-from ..xsens.legacy import decode_mtdata, legacy_layout
-from ..xsens.mtdata2 import SPEC_BY_NAME, MTData2Message, UtcTime, to_jsonable
-from ..xsens.stream import StreamDecoder
-from ..xsens.timebase import CounterTracker
 from .app import app, checked, err_console, handles_errors, progress_bar
+
+if TYPE_CHECKING:  # the decoders (and mcap) are imported by the command itself: --help stays quick
+    from ..xsens.batch import DecodedBlock
+    from ..xsens.mtdata2 import MTData2Message
+    from ..xsens.timebase import CounterTracker
 
 CHUNK_BYTES = 1 << 20
 WRITE_BATCH = 10_000
@@ -68,6 +67,8 @@ class OutputFormat(StrEnum):
 
 def read_capture(path: Path) -> bytes:
     """The capture's bytes; a one-line InputError when it cannot be used."""
+    from mcap.writer import MCAP0_MAGIC
+
     input_file(path, "raw capture file (e.g. output.bin)")
     try:
         data = path.read_bytes()
@@ -85,6 +86,8 @@ def read_capture(path: Path) -> bytes:
 
 def flatten(name: str, value: object) -> dict[str, object]:
     """CSV columns of one output value: vectors and structured outputs become one column per part."""
+    from ..xsens.mtdata2 import SPEC_BY_NAME, UtcTime, to_jsonable
+
     suffix = UNIT_SUFFIXES.get(SPEC_BY_NAME[name].unit, "") if name in SPEC_BY_NAME else ""
     if isinstance(value, UtcTime):
         return {name: value.isoformat(), f"{name}.flags": value.flags}
@@ -117,6 +120,9 @@ def open_output(out: Path | None) -> Iterator[IO[str]]:
 
 def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
     """Stream-decode ``data`` in 1 MiB pieces (progress in KiB)."""
+    from ..xsens.batch import DecodedBlock
+    from ..xsens.stream import StreamDecoder
+
     decoder = StreamDecoder()
     task = bar.add_task(f"decoding {label} (KiB)", total=len(data) // 1024 + 1)
     blocks = []
@@ -128,6 +134,8 @@ def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
 
 def decode_legacy(block: DecodedBlock, mode: int, settings: int) -> list[tuple[int, MTData2Message]]:
     """(frame index, message) of every legacy MTData frame, decoded with the device's mode and settings."""
+    from ..xsens.legacy import decode_mtdata
+
     decoded = []
     for index, frame in zip(block.other_index.tolist(), block.other_frames, strict=True):
         if frame.mid == MID.MTDATA:
@@ -167,6 +175,8 @@ def write_messages(
     messages: Iterator[MTData2Message], total: int, handle: IO[str], header: list[str] | None, bar: Progress
 ) -> list[int]:
     """One JSON object (``header`` None) or CSV row per message; returns the PacketCounters seen, in order."""
+    from ..xsens.mtdata2 import to_jsonable
+
     task = bar.add_task("writing messages", total=total)
     writer = None
     if header is not None:
@@ -248,6 +258,9 @@ def decode_command(
 
     MTData2 messages always; legacy MTData (2007-era MTi-G) when its output mode and settings are given.
     """
+    from ..xsens.legacy import legacy_layout
+    from ..xsens.timebase import CounterTracker
+
     if (legacy_mode is None) != (legacy_settings is None):
         raise InputError("give both --legacy-mode and --legacy-settings (see the device configuration)")
     if legacy_mode is not None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -26,6 +26,29 @@ def _viewer(value: str) -> str:
         return check_mode(value)
     except InputError as exc:
         raise typer.BadParameter(str(exc)) from None
+
+
+#: Options ``record`` and ``session`` share: the hull, the view, the live model, the hidden simulator pace.
+def _checked_text(flag: str, rule: Any, text: str) -> Any:
+    """A text option checked by a ``tankdaq.validation`` rule and passed on as given."""
+    return Annotated[str, typer.Option(flag, callback=checked(rule, keep_input=True), help=text)]
+
+
+HullOption = _checked_text(
+    "--hull", validation.known_hull, "The model tested: a hull name (tankdaq hulls) or a .toml file."
+)
+LiveModelOption = _checked_text("--model", validation.live_model, "Live model: terms (b1,b2,c1,c3) or alias.")
+ViewerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--viewer",
+        callback=lambda v: v if v is None else _viewer(v),
+        help="spawn, save (an .rrd beside each MCAP), none, or a rerun URL.",
+    ),
+]
+SimSpeedOption = Annotated[float, typer.Option("--sim-speed", min=0.1, max=50.0, hidden=True)]
+SimSeedOption = Annotated[int, typer.Option("--sim-seed", hidden=True)]
+DEFAULT_LIVE_MODEL = "ittc-quadratic-restoring"
 
 
 class _StatusLine:
@@ -116,12 +139,7 @@ def record_command(
     angle: float = typer.Option(
         ..., "--angle", callback=checked(validation.release_angle_deg), help="Nominal release angle (deg)."
     ),
-    hull: str = typer.Option(
-        ...,
-        "--hull",
-        callback=checked(validation.known_hull, keep_input=True),
-        help="The model tested: a hull name (tankdaq hulls) or a .toml file.",
-    ),
+    hull: HullOption = ...,
     axis: AxisChoice = typer.Option(
         AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
     ),
@@ -146,12 +164,7 @@ def record_command(
     runs: int = typer.Option(
         None, "--runs", min=1, help="Stop after this many decays (default: until Ctrl-C)."
     ),
-    viewer: str = typer.Option(
-        None,
-        "--viewer",
-        callback=lambda v: v if v is None else _viewer(v),
-        help="spawn, save (an .rrd beside each MCAP), none, or a rerun URL.",
-    ),
+    viewer: ViewerOption = None,
     viewer_bind: str = typer.Option(
         "127.0.0.1", "--viewer-bind", help="Address a spawned viewer listens on (0.0.0.0: every network)."
     ),
@@ -160,14 +173,9 @@ def record_command(
     ),
     operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
     note: str = typer.Option("", "--note", help="A note stored in the file."),
-    model: str = typer.Option(
-        "ittc-quadratic-restoring",
-        "--model",
-        callback=checked(validation.live_model, keep_input=True),
-        help="Live model: terms (b1,b2,c1,c3) or alias.",
-    ),
-    sim_speed: float = typer.Option(1.0, "--sim-speed", min=0.1, max=50.0, hidden=True),
-    sim_seed: int = typer.Option(0, "--sim-seed", hidden=True),
+    model: LiveModelOption = DEFAULT_LIVE_MODEL,
+    sim_speed: SimSpeedOption = 1.0,
+    sim_seed: SimSeedOption = 0,
 ) -> None:
     """Record decays: detect each release, write one MCAP per decay, fit and show it live."""
     run_record(

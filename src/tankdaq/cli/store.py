@@ -9,7 +9,6 @@ import typer
 from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
 from .. import validation
-from ..store.recover import recover
 from .app import app, checked, err_console, handles_errors
 
 
@@ -28,6 +27,8 @@ def recover_command(
     ] = None,
 ) -> None:
     """Rebuild a truncated recording. Exit 0: nothing lost; 3: damaged tail dropped; 1: nothing recovered."""
+    from ..store.recover import recover
+
     columns = (TextColumn("recovering"), BarColumn(), DownloadColumn(), TimeRemainingColumn())
     progress = Progress(*columns, console=err_console, transient=True)
     task = progress.add_task("recover", total=None)

@@ -14,7 +14,9 @@ import json
 import math
 import re
 from collections import defaultdict
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -223,27 +225,78 @@ def find_campaign_hulls(names: Iterable[str], given: Sequence[str] = ()) -> dict
     return hulls
 
 
+def fit_group(key: GroupKey, runs: list[DecayRun], model: str, hull: Hull | None) -> GroupResult:
+    """The unit of work of a campaign: one group's runs in, its fit record out (pure, picklable).
+
+    A group that cannot be fitted keeps its reason instead of a fit.
+    """
+    try:
+        return GroupResult(key, runs, fit=OutputError(model).fit(runs), hull=hull)
+    except IdentificationError as exc:
+        return GroupResult(key, runs, error=str(exc), hull=hull)
+
+
 def identify_groups(
     groups: dict[GroupKey, list[DecayRun]],
     model: str = "ittc-quadratic-restoring",
     progress: Callable[[GroupKey], None] | None = None,
     hulls: dict[str, Hull] | None = None,
+    executor: Executor | None = None,
 ) -> list[GroupResult]:
-    """One joint output-error fit per group; a group that cannot be fitted keeps its reason instead.
+    """One joint output-error fit per group (``fit_group``), in key order.
 
     ``progress`` is called after each group, so a long campaign shows where it is. ``hulls`` (by name)
-    give the groups' dimensional results (GM, displacement); see ``find_campaign_hulls``.
+    give the groups' dimensional results (GM, displacement); see ``find_campaign_hulls``. ``executor``
+    (see ``campaign_executor``) spreads the groups over cores or machines; the results are the same.
     """
+    keys = list(groups)
+    found = [(hulls or {}).get(key.hull) for key in keys]
     results = []
-    for key, runs in groups.items():
-        hull = (hulls or {}).get(key.hull)
-        try:
-            results.append(GroupResult(key, runs, fit=OutputError(model).fit(runs), hull=hull))
-        except IdentificationError as exc:
-            results.append(GroupResult(key, runs, error=str(exc), hull=hull))
+    for key, result in zip(
+        keys,
+        _map(executor, fit_group, keys, [groups[k] for k in keys], [model] * len(keys), found),
+        strict=True,
+    ):
+        results.append(result)
         if progress is not None:
             progress(key)
     return results
+
+
+def _map(executor: Executor | None, function: Callable[..., Any], *arguments: Sequence[Any]) -> Iterable[Any]:
+    """``function`` over the argument lists, in order: in this process without an executor."""
+    return map(function, *arguments) if executor is None else executor.map(function, *arguments)
+
+
+@contextmanager
+def campaign_executor(jobs: int = 1, scheduler: str | None = None) -> Iterator[Executor | None]:
+    """Where a campaign's reading, fits and plots run: here (``jobs`` 1), a local process pool of
+    ``jobs`` workers, or a Dask cluster at ``scheduler`` (``pip install tankdaq[dask]``)."""
+    if scheduler is not None:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise InputError("--executor dask needs the dask extra: pip install 'tankdaq[dask]'") from None
+        with Client(scheduler) as client:
+            yield client.get_executor()
+    elif jobs <= 1:
+        yield None
+    else:
+        _warm_up()
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            pool.submit(int).result()  # the workers fork now, before the caller starts a progress thread
+            yield pool
+
+
+def _warm_up() -> None:
+    """Load the compiled kernels and matplotlib here, before the pool forks its workers from this
+    process: each worker then starts with them instead of loading them again."""
+    import matplotlib.backends.backend_agg  # noqa: F401 (imported for the workers)
+    from matplotlib.figure import Figure  # noqa: F401
+
+    t = np.linspace(0.0, 4.0, 200)
+    angle, rate = simulate_decay({"b1": 0.2, "c1": 10.0}, t, 0.1)
+    OutputError("b1,c1").fit(DecayRun(t=t, angle=angle + 1e-4 * np.sin(37 * t), rate=rate))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -283,8 +336,13 @@ def markdown_table(results: Sequence[GroupResult]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(results: Sequence[GroupResult], folder: Path) -> list[Path]:
-    """campaign.csv, campaign.md and the PNG plots into ``folder`` (created); returns the files written."""
+def write_report(
+    results: Sequence[GroupResult], folder: Path, executor: Executor | None = None
+) -> list[Path]:
+    """campaign.csv, campaign.md and the PNG plots into ``folder`` (created); returns the files written.
+
+    ``executor`` draws the plots in parallel (see ``campaign_executor``).
+    """
     folder.mkdir(parents=True, exist_ok=True)
     written = [write_csv(results, folder / "campaign.csv")]
     md = folder / "campaign.md"
@@ -296,31 +354,38 @@ def write_report(results: Sequence[GroupResult], folder: Path) -> list[Path]:
     with md.open("a") as fh:
         fh.write(markdown_table(results))
     written.append(md)
-    written += write_plots([r for r in results if r.fit is not None], folder)
+    written += write_plots([r for r in results if r.fit is not None], folder, executor)
     return written
 
 
-def write_plots(results: Sequence[GroupResult], folder: Path) -> list[Path]:
+def write_plots(results: Sequence[GroupResult], folder: Path, executor: Executor | None = None) -> list[Path]:
     """The seeds' figures and the ITTC ones, one PNG each, in tankdaq's report style (no display needed)."""
-    from ..viz.plots import report_style, save_png
-
-    figures = []
+    figures: list[tuple[str, list[GroupResult], str]] = []  # (plot, its groups, file name)
     by_series: dict[tuple[str, str], list[GroupResult]] = defaultdict(list)
     for result in results:
         by_series[(result.key.hull, result.key.axis)].append(result)
+    for (hull, axis), series in sorted(by_series.items()):
+        figures.append(("coefficients", series, f"coefficients_{hull}_{axis}.png"))
+        figures.append(("b_eq", series, f"b_eq_{hull}_{axis}.png"))
+        figures.append(("extinction", series, f"extinction_{hull}_{axis}.png"))
+    for axis in sorted({r.key.axis for r in results}):
+        on_axis = [r for r in results if r.key.axis == axis]
+        figures.append(("period", on_axis, f"period_vs_draft_{axis}.png"))
+        shared = _shared_draft(on_axis)
+        if shared is not None:
+            compared = [r for r in on_axis if r.key.draft == shared]
+            figures.append(("hulls", compared, f"hulls_{axis}_{format_draft(shared)}.png"))
+    plots, groups, names = zip(*figures, strict=True) if figures else ((), (), ())
+    return list(_map(executor, draw_plot, plots, groups, [folder / name for name in names]))
+
+
+def draw_plot(plot: str, results: Sequence[GroupResult], path: Path) -> Path:
+    """Draw one report figure and save it as PNG (a unit of work: groups in, file out)."""
+    from ..viz.plots import report_style, save_png
+
     with report_style():
-        for (hull, axis), series in sorted(by_series.items()):
-            figures.append((_plot_coefficients(series), f"coefficients_{hull}_{axis}.png"))
-            figures.append((_plot_b_eq(series), f"b_eq_{hull}_{axis}.png"))
-            figures.append((_plot_extinction(series), f"extinction_{hull}_{axis}.png"))
-        for axis in sorted({r.key.axis for r in results}):
-            on_axis = [r for r in results if r.key.axis == axis]
-            figures.append((_plot_period(on_axis), f"period_vs_draft_{axis}.png"))
-            shared = _shared_draft(on_axis)
-            if shared is not None:
-                compared = [r for r in on_axis if r.key.draft == shared]
-                figures.append((_plot_hulls(compared), f"hulls_{axis}_{format_draft(shared)}.png"))
-    return [save_png(fig, folder / name, dpi=110) for fig, name in figures]
+        figure = _PLOTS[plot](results)
+    return save_png(figure, path, dpi=110)
 
 
 def _figure(ncols: int, title: str) -> tuple[Any, Any]:
@@ -440,6 +505,15 @@ def _plot_period(results: Sequence[GroupResult]) -> Any:
     ax.set_ylabel("natural period (s)")
     ax.legend()
     return fig
+
+
+_PLOTS: dict[str, Callable[[Sequence[GroupResult]], Any]] = {
+    "coefficients": _plot_coefficients,
+    "b_eq": _plot_b_eq,
+    "extinction": _plot_extinction,
+    "period": _plot_period,
+    "hulls": _plot_hulls,
+}
 
 
 def _shared_draft(results: Sequence[GroupResult]) -> float | None:

@@ -41,22 +41,25 @@ def damping_ratio(coefficients: Mapping[str, float]) -> float:
     return coefficients.get("b1", 0.0) / (2.0 * natural_frequency(coefficients))
 
 
+#: cos(alpha) over a cycle (256 points) for the describing function, which B_eq bands call thousands of times.
+_COS_ALPHA = np.cos(np.linspace(0.0, 2.0 * math.pi, 257)[:-1])
+
+
 def equivalent_frequency(coefficients: Mapping[str, float], amplitude: float) -> float:
     """omega_eq(phi_a) of the restoring by the describing function (ITTC eq. 14), rad/s.
 
     The first Fourier coefficient of r(phi_a cos a) over phi_a: for c3 x^3 it adds
     (3/4) c3 phi_a^2; the sine terms are integrated numerically. Even terms drop out.
     """
-    alpha = np.linspace(0.0, 2.0 * math.pi, 257)[:-1]
-    x = amplitude * np.cos(alpha)
-    restoring = (
-        coefficients.get("c1", 0.0) * x
-        + coefficients.get("c3", 0.0) * x**3
-        + coefficients.get("s1", 0.0) * np.sin(x)
-        + coefficients.get("s3", 0.0) * np.sin(x) ** 3
-    )
+    x = amplitude * _COS_ALPHA
+    restoring = coefficients.get("c1", 0.0) * x
+    if "c3" in coefficients:  # an absent term adds exact zeros: skipping it changes nothing but the time
+        restoring = restoring + coefficients["c3"] * x**3
+    if "s1" in coefficients or "s3" in coefficients:
+        sin_x = np.sin(x)
+        restoring = restoring + coefficients.get("s1", 0.0) * sin_x + coefficients.get("s3", 0.0) * sin_x**3
     if amplitude > 0:
-        k_eq = float(np.mean(restoring * np.cos(alpha))) * 2.0 / amplitude
+        k_eq = float(np.mean(restoring * _COS_ALPHA)) * 2.0 / amplitude
     else:
         k_eq = linear_stiffness(coefficients)
     return math.sqrt(k_eq) if k_eq > 0 else math.nan

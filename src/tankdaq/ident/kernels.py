@@ -141,6 +141,17 @@ def _deriv(z: np.ndarray, dz: np.ndarray, theta: np.ndarray, codes: np.ndarray, 
         dz[3 + 2 * p] = ax * sx + av * sv + forcing
 
 
+@numba.njit(cache=True, inline="always")
+def _sane(z: np.ndarray) -> bool:
+    """State within range and every sensitivity finite (an element loop: no array per sample)."""
+    if not (abs(z[0]) < 1e3 and abs(z[1]) < 1e5):
+        return False
+    for m in range(z.size):  # noqa: SIM110 (numba compiles no generator inside all())
+        if not math.isfinite(z[m]):
+            return False
+    return True
+
+
 @numba.njit(cache=True)
 def simulate_with_sensitivities(
     t: np.ndarray,
@@ -196,8 +207,7 @@ def simulate_with_sensitivities(
                 _deriv(tmp, k4, theta, codes, u0 + du, eps)
                 for m in range(size):
                     z[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
-            if not (abs(z[0]) < 1e3 and abs(z[1]) < 1e5 and np.all(np.isfinite(z))):
-                ok = False
+            ok = _sane(z)
         if ok:
             xs[i] = z[0]
             vs[i] = z[1]

@@ -168,6 +168,7 @@ class OutputError:
         self._sigmas = [
             self._initial_sigmas(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
         ]
+        self._predictions: dict[int, tuple[bytes, dict[str, Any]]] = {}
 
         # with reweighting the first solve only has to get close: the second one polishes
         rough = 1e-6 if self.reweight else 1e-10
@@ -182,6 +183,7 @@ class OutputError:
             self._sigmas = self._residual_sigmas(params)
             params = self._solve(params, free, 1e-10)
         self._finish(params, free)
+        self._predictions = {}
         self.elapsed_s_ = time.perf_counter() - started
         return self
 
@@ -266,7 +268,23 @@ class OutputError:
         return out
 
     def _predict_run(self, params: np.ndarray, r: int, with_jacobian: bool) -> dict[str, Any]:
-        """Measured-frame angle and rate of run r, and their Jacobian rows over the full vector."""
+        """Measured-frame angle and rate of run r, and their Jacobian rows over the full vector.
+
+        The last prediction with Jacobian is kept per run: the solver's final point is asked
+        for again by the noise re-estimate, the second solve and the results (about a third of
+        a fit's integrations).
+        """
+        key = params.tobytes()
+        cached = self._predictions.get(r)
+        if cached is not None and cached[0] == key and (with_jacobian or cached[1]["ok"]):
+            return cached[1]
+        pred = self._integrate_run(params, r, with_jacobian)
+        if with_jacobian:
+            self._predictions[r] = (key, pred)
+        return pred
+
+    def _integrate_run(self, params: np.ndarray, r: int, with_jacobian: bool) -> dict[str, Any]:
+        """``_predict_run`` without the cache."""
         layout = self._layout
         run = self.runs_[r]
         theta = params[: layout.n_theta]

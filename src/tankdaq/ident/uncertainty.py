@@ -16,7 +16,7 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy import stats
+from scipy import special  # the two distribution functions needed, without scipy.stats' second of import
 
 from ..records import DecayRun
 
@@ -96,25 +96,67 @@ def _hac_meat(
     """
     n_out, n, p = jac.shape
     g = np.zeros((n, p))
-    info = np.zeros((n, p * p))
     for o in range(n_out):
         for t in range(n):
             for a in range(p):
                 g[t, a] += jac[o, t, a] * res[o, t]
-                for b in range(p):
-                    info[t, a * p + b] += jac[o, t, a] * jac[o, t, b]
     meat = g.T @ triangle_smooth(g, bandwidth)
     if correct:
-        smooth_info = triangle_smooth(info, bandwidth)
+        meat += _bias_correction(jac, bread, bandwidth)
+    return meat
+
+
+@numba.njit(cache=True, inline="always")
+def _add_information(jac: np.ndarray, t: int, sign: float, acc: np.ndarray) -> None:
+    """acc += sign * M_t, the information of instant t (p*p, row-major), summed over the outputs."""
+    n_out, _, p = jac.shape
+    for o in range(n_out):
+        for a in range(p):
+            for b in range(p):
+                acc[a * p + b] += sign * jac[o, t, a] * jac[o, t, b]
+
+
+@numba.njit(cache=True)
+def _bias_correction(jac: np.ndarray, bread: np.ndarray, bandwidth: int) -> np.ndarray:
+    """sum_t M_t A^-1 K_t, with K_t = triangle_smooth(M)_t computed as a stream.
+
+    The same two running boxcars as ``triangle_smooth``, but row by row with a
+    ring of the last L+1 first-boxcar rows: the (n, p*p) information arrays are
+    never built (allocating them cost more in page faults than all the arithmetic).
+    """
+    n_out, n, p = jac.shape
+    width = bandwidth + 1
+    first = np.zeros(p * p)  # running boxcar over M
+    second = np.zeros(p * p)  # running boxcar over the first one
+    ring = np.zeros((width, p * p))  # the last ``width`` rows of the first boxcar
+    spread = np.zeros(p)
+    meat = np.zeros((p, p))
+    for t in range(n + bandwidth):
+        if t < n:
+            _add_information(jac, t, 1.0, first)
+        if t >= width:
+            _add_information(jac, t - width, -1.0, first)
+        slot = t % width
+        for m in range(p * p):
+            second[m] += first[m]
+            if t >= width:
+                second[m] -= ring[slot, m]
+            ring[slot, m] = first[m]
+        i = t - bandwidth  # the instant whose smoothed information K_i = second / width is complete
+        if i < 0:
+            continue
         for o in range(n_out):
-            spread = jac[o] @ bread  # row t is (bread @ jac[o, t])': bread is symmetric
-            for t in range(n):
-                for b in range(p):
-                    w = 0.0  # (bread @ jac[o, t]) @ K_t, one column at a time: no allocation per sample
-                    for c in range(p):
-                        w += spread[t, c] * smooth_info[t, c * p + b]
-                    for a in range(p):
-                        meat[a, b] += jac[o, t, a] * w
+            for c in range(p):  # (bread @ jac[o, i])': bread is symmetric
+                s = 0.0
+                for d in range(p):
+                    s += jac[o, i, d] * bread[d, c]
+                spread[c] = s
+            for b in range(p):
+                w = 0.0  # (bread @ jac[o, i]) @ K_i, one column at a time
+                for c in range(p):
+                    w += spread[c] * (second[c * p + b] / width)
+                for a in range(p):
+                    meat[a, b] += jac[o, i, a] * w
     return meat
 
 
@@ -132,7 +174,7 @@ def residual_whiteness(residual: np.ndarray, lags: int = 20) -> tuple[float, flo
     acf = np.array([float(r[k:] @ r[:-k]) / denom for k in range(1, lags + 1)])
     n = r.size
     q = n * (n + 2) * np.sum(acf**2 / (n - np.arange(1, lags + 1)))
-    return float(acf[0]), float(stats.chi2.sf(q, lags))
+    return float(acf[0]), float(special.chdtrc(lags, q))  # chi-square survival function
 
 
 def coefficient_warnings(
@@ -250,7 +292,7 @@ def _summary(method: str, terms: Sequence[str], values: np.ndarray, percentile: 
         n = values.shape[0]
         spread = std / np.sqrt(n)
         mean = values.mean(axis=0)
-        half = stats.t.ppf(0.975, max(n - 1, 1)) * spread
+        half = special.stdtrit(max(n - 1, 1), 0.975) * spread  # Student t quantile
         lo, hi = mean - half, mean + half
     return IntervalSummary(
         method=method,

@@ -34,6 +34,16 @@ GRAVITY_M_S2 = 9.81
 #: The release falls this much (uniformly) after the scripted instant: off the sample grid at any rate.
 RELEASE_JITTER_S = 0.01
 
+#: A run scripted to push again gets its second push this long after the release: two cycles or so.
+PUSH_AGAIN_AFTER_S = 3.0
+#: The second push brings the amplitude back to this fraction of the initial angle.
+PUSH_AGAIN_FRACTION = 0.8
+#: What a scripted campaign run can do wrong (``scripted_run``): the hand tilts to the wrong angle, or
+#: pushes the model again mid-decay (the release is not clean).
+SCRIPTED_FAULTS = ("wrong-angle", "double-push")
+#: A wrong-angle run is tilted this much further than asked.
+WRONG_ANGLE_FACTOR = 1.5
+
 #: StatusWord of a healthy MTi-G streaming: self-test passed (bit 0), filter valid (bit 1).
 STATUS_OK = 0x00000003
 
@@ -102,6 +112,7 @@ class RunTruth:
     rate0_rad_s: float | None = None
     end_s: float = 0.0
     coefficients: dict[str, float] = field(default_factory=dict)
+    pushed_again_s: float | None = None  # the hand pushed the model again mid-decay (not a free decay)
 
     @property
     def terms(self) -> list[str]:
@@ -207,6 +218,7 @@ class DecayScenario:
     noise: SensorNoise = field(default_factory=SensorNoise)
     coefficients: dict[str, float] | None = None
     start_ticks: int | None = None
+    pushes_again: tuple[int, ...] = ()  # runs (from 0) in which the hand pushes the model again mid-decay
 
     def __post_init__(self) -> None:
         if self.axis not in ("roll", "pitch"):
@@ -287,6 +299,9 @@ class DecayScenario:
             # Integrated from the off-grid release instant; the first point is the release itself.
             free_x, free_v = simulate_decay(coeffs, np.concatenate(([release], t[free])), x0, v0)
             x[free], v[free] = free_x[1:], free_v[1:]
+            pushed_s = release + PUSH_AGAIN_AFTER_S if run in self.pushes_again else None
+            if pushed_s is not None:
+                self._push_again(coeffs, t, x, v, index(pushed_s), free.stop, x0)
             a[free] = acceleration(coeffs, x[free], v[free])
             ticks = (int(self.start_ticks or 0) + round(release * TICKS_PER_S)) % TICK_MODULUS
             truths.append(
@@ -302,6 +317,7 @@ class DecayScenario:
                     v0,
                     run_end,
                     coeffs,
+                    pushed_s,
                 )
             )
         # Cross-axis: a small coupled share of the motion plus a trim; heave: the hull sinks when heeled.
@@ -320,6 +336,27 @@ class DecayScenario:
             heave_acc_m_s2=-2 * heave_m_rad2 * (v**2 + x * a),
             runs=truths,
         )
+
+    @staticmethod
+    def _push_again(
+        coeffs: dict[str, float],
+        t: np.ndarray,
+        x: np.ndarray,
+        v: np.ndarray,
+        start: int,
+        stop: int,
+        x0: float,
+    ) -> None:
+        """The hand pushes the swinging model again at sample ``start``: the rate jumps (in the direction
+        of motion) enough to bring the amplitude back near ``PUSH_AGAIN_FRACTION`` of ``x0``, then the
+        model decays freely again up to ``stop``."""
+        if not 0 < start < stop:
+            return
+        omega = math.sqrt(max(coeffs.get("c1", 1.0), 1e-6))
+        before = start - 1
+        kick = math.copysign(PUSH_AGAIN_FRACTION * abs(x0) * omega, v[before] or 1.0)
+        again_x, again_v = simulate_decay(coeffs, t[before:stop], float(x[before]), float(v[before]) + kick)
+        x[start:stop], v[start:stop] = again_x[1:], again_v[1:]
 
     def sensor(self) -> SensorModel:
         """The scenario's sensor (its biases follow the seed)."""
@@ -357,6 +394,33 @@ class _Hand:
         x = base + span * s + grip * wobble_x
         v = span * ds / self.tilt_s + grip * wobble_v + dgrip / grip_time * wobble_x
         return x, v, span * dds / self.tilt_s**2
+
+
+def scripted_run(fault: str | None, angle_deg: float) -> dict[str, object]:
+    """``DecayScenario`` settings of one run of a scripted campaign at ``angle_deg``: a clean run
+    (``fault`` None), or one of ``SCRIPTED_FAULTS`` (the checks of a test session must catch it)."""
+    if fault is None:
+        return {"angle_deg": angle_deg}
+    if fault == "wrong-angle":
+        return {"angle_deg": min(angle_deg * WRONG_ANGLE_FACTOR, 30.0)}
+    if fault == "double-push":
+        return {"angle_deg": angle_deg, "pushes_again": (0,)}
+    raise InputError(f"scripted fault {fault!r} not understood; use {' or '.join(SCRIPTED_FAULTS)}")
+
+
+def parse_fault_script(text: str) -> dict[int, str]:
+    """``"2:wrong-angle,5:double-push"`` -> {2: "wrong-angle", 5: "double-push"}: which decays of a
+    simulated session (counted from 1) go wrong, and how."""
+    script: dict[int, str] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        number, _, fault = item.partition(":")
+        if not number.isdigit() or int(number) < 1 or fault not in SCRIPTED_FAULTS:
+            raise InputError(
+                f"fault script item {item!r} not understood: write DECAY:FAULT, e.g. 2:wrong-angle, "
+                f"with FAULT one of {', '.join(SCRIPTED_FAULTS)}"
+            )
+        script[int(number)] = fault
+    return script
 
 
 def still_trace(rate_hz: float, axis: str, start_ticks: int, start_index: int, n: int) -> ScenarioTrace:

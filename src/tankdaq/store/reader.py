@@ -1,9 +1,13 @@
 """Read tankdaq recordings back: samples in SI, raw bytes for re-decoding, events, fits, metadata.
 
-Every reader goes through ``RecordScan``, which reads the file front to back
-with mcap's StreamReader. That path does not need the summary at the end of
-the file, so a file whose writer was killed (no summary, maybe a torn last
-chunk) reads up to its last complete chunk instead of failing.
+``read_recording`` first tries the index: a complete file with sample blocks
+(``/samples/blocks``, written beside the per-sample JSON since tankdaq 0.1)
+reads only its small chunks of blocks, events and fits, through the summary.
+Every other file goes through ``RecordScan``, which reads the file front to
+back with mcap's StreamReader. That path does not need the summary at the end
+of the file, so a file whose writer was killed (no summary, maybe a torn last
+chunk) reads up to its last complete chunk instead of failing, and a file
+recorded before the blocks reads its per-sample JSON.
 """
 
 from __future__ import annotations
@@ -11,14 +15,18 @@ from __future__ import annotations
 import itertools
 import json
 import struct
-from collections.abc import Iterator
+import zlib
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.opcode import Opcode
+from mcap.reader import SeekingReader
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader, breakup_chunk
 
@@ -91,12 +99,16 @@ class RecordScan:
 
 @dataclass
 class Recording:
-    """Everything in one tankdaq recording, samples already back in SI units."""
+    """Everything in one tankdaq recording, samples already back in SI units.
+
+    ``raw_chunks`` (``(host ns, bytes)`` of ``/xsens/raw``) is read on first use when
+    the samples came from the blocks: most readers never need the raw bytes.
+    """
 
     path: Path
     metadata: dict[str, str]
     samples: np.ndarray
-    raw_chunks: list[tuple[int, bytes]]
+    _raw_chunks: list[tuple[int, bytes]] | None
     events: list[dict[str, Any]]
     fits: list[dict[str, Any]]
     attachments: dict[str, bytes]
@@ -110,6 +122,12 @@ class Recording:
     def truncated(self) -> bool:
         """The file was never closed (no footer): what followed its last complete chunk is missing."""
         return not self.complete
+
+    @property
+    def raw_chunks(self) -> list[tuple[int, bytes]]:
+        if self._raw_chunks is None:
+            self._raw_chunks = list(iter_raw_chunks(self.path))
+        return self._raw_chunks
 
     @property
     def axis(self) -> str:
@@ -149,6 +167,60 @@ def _release_index(samples: np.ndarray, events: list[dict[str, Any]]) -> int | N
 
 def read_recording(path: str | Path) -> Recording:
     """Read a whole recording (also a truncated one); raise BadRecordingInput if it is not one."""
+    return _read_indexed(Path(path)) or _read_scanned(path)
+
+
+def _read_indexed(path: Path) -> Recording | None:
+    """The recording from its summary and sample blocks; None when the file has no complete blocks.
+
+    Blocks count as complete when they hold as many samples as ``/samples`` has
+    messages (the summary's statistics): a file rewritten by ``recover`` after a
+    kill may have lost a block whose samples survived, and then reads by scan.
+    """
+    if not path.is_file():
+        return None
+    with path.open("rb") as stream:
+        try:  # anything not plainly a complete MCAP file is left to the scan, which says what is wrong
+            reader = SeekingReader(stream, validate_crcs=True)
+            summary = reader.get_summary()
+        except (*_DAMAGE, InvalidMagic):
+            return None
+        if summary is None or summary.statistics is None:
+            return None
+        topics = {channel.topic: channel.id for channel in summary.channels.values()}
+        if schemas.TOPIC_SAMPLE_BLOCKS not in topics:
+            return None
+        blocks: list[bytes] = []
+        events: list[dict[str, Any]] = []
+        fits: list[dict[str, Any]] = []
+        try:
+            for _, channel, message in reader.iter_messages(
+                topics=[schemas.TOPIC_SAMPLE_BLOCKS, schemas.TOPIC_EVENTS, schemas.TOPIC_FIT],
+                log_time_order=False,
+            ):
+                if channel.topic == schemas.TOPIC_SAMPLE_BLOCKS:
+                    blocks.append(message.data)
+                else:
+                    (events if channel.topic == schemas.TOPIC_EVENTS else fits).append(
+                        json.loads(message.data)
+                    )
+            history = [
+                dict(m.metadata) for m in reader.iter_metadata() if m.name == schemas.RUN_METADATA_NAME
+            ]
+            attachments = {a.name: a.data for a in reader.iter_attachments()}
+        except _DAMAGE:
+            return None
+    samples = schemas.samples_from_blocks(blocks)
+    if samples.size != summary.statistics.channel_message_counts.get(
+        topics.get(schemas.TOPIC_SAMPLES, -1), 0
+    ):
+        return None
+    channels = summary.channels.values()
+    return _assemble(path, samples, None, events, fits, attachments, channels, history, complete=True)
+
+
+def _read_scanned(path: str | Path) -> Recording:
+    """The recording read front to back: files cut short, and files without sample blocks."""
     scan = RecordScan(path)
     channels: dict[int, Channel] = {}
     sample_payloads: list[bytes] = []
@@ -182,19 +254,38 @@ def read_recording(path: str | Path) -> Recording:
         samples = schemas.samples_from_json(sample_payloads, sample_stamps)
     except (json.JSONDecodeError, TypeError, ValueError) as exc:
         raise BadRecordingInput(f"{path}: {schemas.TOPIC_SAMPLES} holds malformed JSON ({exc})") from None
+    return _assemble(
+        path, samples, raw_chunks, events, fits, attachments, channels.values(), history, scan.complete,
+        scan.damage,
+    )  # fmt: skip
+
+
+def _assemble(
+    path: Path,
+    samples: np.ndarray,
+    raw_chunks: list[tuple[int, bytes]] | None,
+    events: list[dict[str, Any]],
+    fits: list[dict[str, Any]],
+    attachments: dict[str, bytes],
+    channels: Iterable[Channel],
+    history: list[dict[str, str]],
+    complete: bool,
+    damage: str | None = None,
+) -> Recording:
+    """The Recording from what either reading path found (the last ``tankdaq.run`` record is the metadata)."""
     return Recording(
         path=path,
         metadata=history[-1] if history else {},
         samples=samples,
-        raw_chunks=raw_chunks,
+        _raw_chunks=raw_chunks,
         events=events,
         fits=fits,
         attachments=attachments,
-        channel_metadata={c.topic: dict(c.metadata) for c in channels.values()},
-        complete=scan.complete,
+        channel_metadata={c.topic: dict(c.metadata) for c in channels},
+        complete=complete,
         release_index=_release_index(samples, events),
         metadata_history=history,
-        damage=scan.damage,
+        damage=damage,
     )
 
 
@@ -209,6 +300,10 @@ def truncation_notice(path: str | Path, damage: str | None = None) -> str:
 
 def iter_raw_chunks(path: str | Path) -> Iterator[tuple[int, bytes]]:
     """``(host arrival ns, bytes)`` of ``/xsens/raw`` in file order, for replay through a decoder."""
+    indexed = _indexed_raw_chunks(Path(path))
+    if indexed is not None:
+        yield from indexed
+        return
     scan = RecordScan(path)
     raw_channels: set[int] = set()
     seen_channels: dict[int, Channel] = {}
@@ -222,6 +317,71 @@ def iter_raw_chunks(path: str | Path) -> Iterator[tuple[int, bytes]]:
         elif isinstance(record, Message) and record.channel_id in raw_channels:
             yield record.log_time, record.data
     _check_tankdaq(scan.path, seen_channels, has_run_metadata)
+
+
+_MESSAGE_HEADER = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+
+
+def _indexed_raw_chunks(path: Path) -> list[tuple[int, bytes]] | None:
+    """The raw messages of a complete file through its chunk index; None when it has no usable index.
+
+    Only the chunks holding raw bytes are opened, and their records are walked by
+    opcode and length, picking the raw channel's messages without building the
+    others (the per-sample JSON is most of every chunk).
+    """
+    if not path.is_file():
+        return None
+    with path.open("rb") as stream:
+        try:
+            summary = SeekingReader(stream, validate_crcs=True).get_summary()
+        except (*_DAMAGE, InvalidMagic):
+            return None
+        if summary is None:
+            return None
+        raw_ids = {c.id for c in summary.channels.values() if c.topic == schemas.TOPIC_RAW}
+        found: list[tuple[int, bytes]] = []
+        for index in sorted(summary.chunk_indexes, key=lambda i: i.chunk_start_offset):
+            if index.message_index_offsets and not raw_ids & set(index.message_index_offsets):
+                continue
+            stream.seek(index.chunk_start_offset + 1 + 8)  # past the record's opcode and length
+            try:
+                chunk = Chunk.read(ReadDataStream(stream))
+                data = _chunk_data(chunk)
+            except _DAMAGE:
+                return None
+            if data is None:
+                return None
+            found += _messages_of(data, raw_ids)
+    return found
+
+
+def _chunk_data(chunk: Chunk) -> bytes | None:
+    """The chunk's records, decompressed and CRC-checked (None for a compression tankdaq does not write)."""
+    if chunk.compression == "zstd":
+        data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+    elif chunk.compression == "":
+        data = chunk.data
+    else:
+        return None
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise ValueError("chunk CRC mismatch")
+    return data
+
+
+def _messages_of(records: bytes, channel_ids: set[int]) -> list[tuple[int, bytes]]:
+    """(log time, data) of the messages on ``channel_ids`` among a chunk's records."""
+    out = []
+    position, end = 0, len(records)
+    while position < end:
+        opcode = records[position]
+        (length,) = struct.unpack_from("<Q", records, position + 1)
+        body = position + 9
+        if opcode == Opcode.MESSAGE:
+            channel_id, _, log_time, _ = _MESSAGE_HEADER.unpack_from(records, body)
+            if channel_id in channel_ids:
+                out.append((log_time, records[body + _MESSAGE_HEADER.size : body + length]))
+        position = body + length
+    return out
 
 
 def _finite_increasing(t: np.ndarray, *columns: np.ndarray) -> np.ndarray:

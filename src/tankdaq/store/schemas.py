@@ -20,11 +20,15 @@ TOPIC_RAW = "/xsens/raw"
 TOPIC_SAMPLES = "/samples"
 TOPIC_EVENTS = "/events"
 TOPIC_FIT = "/fit"
-TANKDAQ_TOPICS = (TOPIC_RAW, TOPIC_SAMPLES, TOPIC_EVENTS, TOPIC_FIT)
+TOPIC_SAMPLE_BLOCKS = "/samples/blocks"
+TANKDAQ_TOPICS = (TOPIC_RAW, TOPIC_SAMPLES, TOPIC_EVENTS, TOPIC_FIT, TOPIC_SAMPLE_BLOCKS)
 
 RUN_METADATA_NAME = "tankdaq.run"
 CONFIG_ATTACHMENT_NAME = "run_config.json"
 RAW_MESSAGE_ENCODING = "xbus"
+BLOCK_MESSAGE_ENCODING = "tankdaq.sample-block"
+#: The ``/samples/blocks`` payload: packed little-endian records, SI units (the in-memory sample layout).
+BLOCK_DTYPE = SAMPLE_DTYPE.newbyteorder("<")
 
 EVENT_KINDS = ("release", "settled", "gap", "warning", "unplug", "note")
 
@@ -121,6 +125,15 @@ CHANNEL_METADATA: dict[str, dict[str, str]] = {
         "frame": SAMPLE_FRAME,
         "log_time": "host arrival of the sample, ns since epoch",
     },
+    TOPIC_SAMPLE_BLOCKS: {
+        "content": (
+            f"the {TOPIC_SAMPLES} messages written since the previous block, as packed little-endian "
+            "records in SI units (rad, rad/s); host_t is the log time of each sample's message; "
+            f"non-finite values are NaN (null in {TOPIC_SAMPLES})"
+        ),
+        "dtype": json.dumps([[name, BLOCK_DTYPE.fields[name][0].str] for name in BLOCK_DTYPE.names]),
+        "log_time": "host arrival of the block's first sample, ns since epoch",
+    },
     TOPIC_EVENTS: {"kinds": ",".join(EVENT_KINDS), "t_s": "device time, s"},
     TOPIC_FIT: {
         "equation": (
@@ -197,6 +210,30 @@ def samples_to_json(samples: np.ndarray) -> list[bytes]:
     if has_gaps:
         texts = [text.replace("nan", "null") for text in texts]
     return [text.encode() for text in texts]
+
+
+def sample_block(samples: np.ndarray, host_ns: np.ndarray) -> bytes:
+    """The ``/samples/blocks`` payload for samples whose messages are stamped ``host_ns``.
+
+    Holds bit for bit what reading the per-sample messages gives back (the degree
+    round trip, host_t from the stamps, non-finite as NaN), so a file reads the same
+    whichever of the two a reader takes.
+    """
+    block = samples.astype(BLOCK_DTYPE)
+    block["host_t"] = host_ns / 1e9
+    for name, (field, factor, _) in SAMPLE_FIELDS.items():
+        if name not in _INTEGER_FIELDS:
+            values = block[field] * factor / factor if factor != 1.0 else block[field]
+            block[field] = np.where(np.isfinite(values), values, np.nan)
+    return block.tobytes()
+
+
+def samples_from_blocks(payloads: Sequence[bytes]) -> np.ndarray:
+    """SAMPLE_DTYPE array from ``/samples/blocks`` messages, in order."""
+    blocks = [np.frombuffer(payload, dtype=BLOCK_DTYPE) for payload in payloads]
+    if not blocks:
+        return np.zeros(0, dtype=SAMPLE_DTYPE)
+    return np.concatenate(blocks).astype(SAMPLE_DTYPE)
 
 
 def samples_from_json(payloads: Sequence[bytes], host_ns: Sequence[int] | None = None) -> np.ndarray:

@@ -135,6 +135,8 @@ class RecordingWriter:
         self._axis = str(self._metadata.get("axis", "roll"))
         self._warnings: list[str] = []
         self._release: tuple[float, float] | None = None  # (device t, host epoch s)
+        self._block: list[tuple[np.ndarray, np.ndarray]] = []  # (samples, stamps) for the next block
+        self._side: list[tuple[str, bytes, int]] = []  # events and fits, written beside the blocks
         self._axis_time: list[np.ndarray] = []
         self._axis_angle: list[np.ndarray] = []
         self.samples_written = 0
@@ -155,6 +157,10 @@ class RecordingWriter:
         raw = schemas.TOPIC_RAW  # schemaless (schema id 0): the bytes are the device's own protocol
         self._channels[raw] = self._mcap.register_channel(
             raw, schemas.RAW_MESSAGE_ENCODING, 0, schemas.CHANNEL_METADATA[raw]
+        )
+        blocks = schemas.TOPIC_SAMPLE_BLOCKS  # schemaless: the dtype is in the channel metadata
+        self._channels[blocks] = self._mcap.register_channel(
+            blocks, schemas.BLOCK_MESSAGE_ENCODING, 0, schemas.CHANNEL_METADATA[blocks]
         )
         for topic, name, body in (
             (schemas.TOPIC_SAMPLES, "tankdaq.Sample", schemas.SAMPLES_SCHEMA),
@@ -183,7 +189,7 @@ class RecordingWriter:
             os.close(self._file.fd)
 
     def _finish(self) -> None:
-        self._mcap.flush()  # the last samples go before the final metadata, as they happened
+        self._close_chunks()  # the last samples go before the final metadata, as they happened
         self._mcap.add_metadata(schemas.RUN_METADATA_NAME, schemas.metadata_strings(self.final_metadata()))
         self._mcap.finish()
         os.fsync(self._file.fd)
@@ -216,6 +222,7 @@ class RecordingWriter:
         known = np.isfinite(host_ns) & (host_ns > 0)
         stamps = np.where(known, host_ns, float(time.time_ns())).astype(np.int64).tolist()
         self._add(schemas.TOPIC_SAMPLES, schemas.samples_to_json(samples), stamps)
+        self._block.append((samples.copy(), np.array(stamps, dtype=np.int64)))
         angle_field = AXIS_FIELDS.get(self._axis, AXIS_FIELDS["roll"])[0]
         self._axis_time.append(samples["t"].copy())
         self._axis_angle.append(samples[angle_field].copy())
@@ -296,22 +303,42 @@ class RecordingWriter:
             self.flush()
 
     def _sync(self) -> None:
-        self._mcap.flush()
+        self._close_chunks()
         os.fsync(self._file.fd)
         self._unflushed_since = None
+
+    def _close_chunks(self) -> None:
+        """Close the data chunk, then write events, fits and the sample block in a small chunk of their own.
+
+        A reader that wants samples, events and fits (``read_recording``) then
+        opens only the small chunks and skips the per-sample JSON and raw bytes.
+        """
+        self._mcap.flush()
+        for topic, payload, stamp in self._side:
+            self._mcap.add_message(self._channels[topic], stamp, payload, stamp)
+        if self._block:
+            stamps = np.concatenate([stamp for _, stamp in self._block])
+            block = schemas.sample_block(np.concatenate([samples for samples, _ in self._block]), stamps)
+            channel = self._channels[schemas.TOPIC_SAMPLE_BLOCKS]
+            self._mcap.add_message(channel, int(stamps[0]), block, int(stamps[0]))
+        self._side, self._block = [], []
+        self._mcap.flush()
 
     def _add(self, topic: str, payloads: list[bytes], stamps: list[int]) -> None:
         if self._failed:
             raise RecordingError(f"{self.path} stopped after a write error; run tankdaq recover {self.path}")
         if self._closed:
             raise RecordingError(f"{self.path} is already closed; start a new recording")
-        channel = self._channels[topic]
+        if topic in (schemas.TOPIC_EVENTS, schemas.TOPIC_FIT):
+            self._side += [(topic, payload, stamp) for payload, stamp in zip(payloads, stamps, strict=True)]
+        else:
+            channel = self._channels[topic]
 
-        def add_all() -> None:
-            for payload, stamp in zip(payloads, stamps, strict=True):
-                self._mcap.add_message(channel, stamp, payload, stamp)
+            def add_all() -> None:
+                for payload, stamp in zip(payloads, stamps, strict=True):
+                    self._mcap.add_message(channel, stamp, payload, stamp)
 
-        self._guarded(add_all)
+            self._guarded(add_all)
         if self._unflushed_since is None:
             self._unflushed_since = time.monotonic()
         self.maybe_flush()

@@ -1,0 +1,111 @@
+"""Campaign throughput: 36 recordings (3 hulls x 3 drafts x 4 angles, MCAP) read, fitted and reported.
+
+Run: .venv/bin/python bench/bench_campaign.py   (about a minute). Prints, for the whole pipeline (read,
+fit, report with plots): wall and CPU time (this process and its reaped workers) serially in one process,
+on a process pool of 1, 2 and N workers, on a local Dask cluster of 1, 2 and N worker processes, and the
+``tankdaq campaign --report`` command end to end (process start and imports included) with --jobs 1 and N.
+On a machine shared with other jobs wall time measures the neighbours too; the CPU column does not.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from concurrent.futures import Executor
+from contextlib import AbstractContextManager
+from pathlib import Path
+
+from tankdaq.ident.campaign import (
+    campaign_executor,
+    find_recordings,
+    group_runs,
+    identify_groups,
+    read_campaign_runs,
+    write_report,
+    write_simulated_campaign,
+)
+
+HULLS = ("trimaran", "catamaran", "swath")
+DRAFTS = (0.9, 1.0, 1.1)
+ANGLES_DEG = (2.0, 4.0, 6.0, 8.0)
+CORES = os.cpu_count() or 1
+
+
+def cpu_s() -> float:
+    """CPU seconds of this process and of its finished children (pool workers once the pool is shut)."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def pipeline(folder: Path, report: Path, executor: Executor | None) -> int:
+    paths = find_recordings([folder])
+    read = map if executor is None else executor.map
+    runs = [run for found in read(read_campaign_runs, paths) for run in found]
+    results = identify_groups(group_runs(runs), executor=executor)
+    write_report(results, report, executor)
+    return len(paths)
+
+
+def timed(
+    label: str, folder: Path, report: Path, make_executor: Callable[[], AbstractContextManager]
+) -> None:
+    wall, cpu = time.perf_counter(), cpu_s()
+    with make_executor() as executor:
+        n = pipeline(folder, report, executor)
+    wall, cpu = time.perf_counter() - wall, cpu_s() - cpu
+    print(f"{label:<28} {wall:6.2f} s wall {cpu:6.2f} s CPU  {n / wall:5.1f} recordings/s wall")
+
+
+def main() -> None:
+    print(f"machine: {CORES} cores, load {os.getloadavg()[0]:.1f}; {sys.version.split()[0]}")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "campaign"
+        write_simulated_campaign(folder, HULLS, "pitch", DRAFTS, ANGLES_DEG, "mcap", seed=0)
+        report = Path(tmp) / "report"
+        pipeline(folder, report, None)  # compiled kernels, font cache
+        timed("serial (one process)", folder, report, lambda: campaign_executor(1))
+        for jobs in sorted({1, 2, CORES}):
+            timed(f"process pool, {jobs} workers", folder, report, _pool(jobs))
+        try:
+            from distributed import LocalCluster
+        except ImportError:
+            print("dask: not installed (pip install 'tankdaq[dask]')")
+        else:
+            for workers in sorted({1, 2, CORES}):
+                with LocalCluster(n_workers=workers, threads_per_worker=1, dashboard_address=None) as cluster:
+                    address = cluster.scheduler_address
+                    timed(
+                        f"dask, {workers} worker processes",
+                        folder,
+                        report,
+                        lambda a=address: campaign_executor(scheduler=a),
+                    )
+        tankdaq = Path(sys.executable).with_name("tankdaq")
+        for jobs in sorted({1, CORES}):
+            wall, cpu = time.perf_counter(), cpu_s()
+            subprocess.run(
+                [tankdaq, "campaign", folder, "--report", report, "--jobs", str(jobs)],
+                check=True,
+                capture_output=True,
+            )
+            wall, cpu = time.perf_counter() - wall, cpu_s() - cpu
+            print(
+                f"tankdaq campaign --jobs {jobs:<4} {wall:6.2f} s wall {cpu:6.2f} s CPU (with process start)"
+            )
+
+
+def _pool(jobs: int) -> Callable[[], AbstractContextManager]:
+    return lambda: campaign_executor(jobs)
+
+
+if __name__ == "__main__":
+    main()

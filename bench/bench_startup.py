@@ -1,0 +1,67 @@
+"""Start-up: ``tankdaq --help`` and every ``tankdaq COMMAND --help`` against bare ``import numpy, typer``.
+
+Run: .venv/bin/python bench/bench_startup.py   (about a minute). Each command line is started REPEATS
+times in a fresh process; the figure is the median CPU time (user + system, of the child process), so the
+load of a shared machine does not count; the ratio is against the bare import measured in the same run,
+interleaved with the commands.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+import typer
+
+from tankdaq.cli import app
+
+REPEATS = 7
+PYTHON = sys.executable
+TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
+BASELINE = [PYTHON, "-c", "import numpy, typer"]
+
+
+def command_paths() -> list[list[str]]:
+    """Every command and sub-command of the typer app, as argument lists."""
+    paths: list[list[str]] = []
+
+    def walk(command: object, prefix: list[str]) -> None:
+        paths.append(prefix)
+        for name, sub in sorted(getattr(command, "commands", {}).items()):  # typer's own click
+            walk(sub, [*prefix, name])
+
+    walk(typer.main.get_command(app), [])
+    return paths
+
+
+def child_cpu_s(argv: list[str]) -> float:
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(argv, check=True, capture_output=True, env={**os.environ, "COLUMNS": "100"})
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def main() -> None:
+    print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}; {sys.version.split()[0]}")
+    lines = [BASELINE] + [[TANKDAQ, *path, "--help"] for path in command_paths()]
+    times: dict[int, list[float]] = {i: [] for i in range(len(lines))}
+    for _ in range(REPEATS):  # interleaved: a change in the machine's load touches every line alike
+        for i, argv in enumerate(lines):
+            times[i].append(child_cpu_s(argv))
+    base = statistics.median(times[0])
+    label = "python -c 'import numpy, typer'"
+    print(f"{label:<44} {base * 1e3:6.0f} ms CPU (baseline)")
+    worst = 0.0
+    for i, argv in enumerate(lines[1:], start=1):
+        cpu = statistics.median(times[i])
+        worst = max(worst, cpu / base)
+        print(f"{' '.join(['tankdaq', *argv[1:]]):<44} {cpu * 1e3:6.0f} ms CPU  {cpu / base:4.2f}x")
+    print(f"worst ratio to the baseline: {worst:.2f}x (target <= 1.5x)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,892 @@
+"""A guided test session: the campaign plan drives the recording, condition by condition.
+
+The plan (``config.CampaignPlan``: drafts, angles, repeats, acceptance tolerances) gives the
+conditions in order, drafts grouped (ballast changes are slow). For each condition the operator is
+told what to do; the record daemon records one decay (``RecordDaemon`` with ``runs=1``: the device
+is opened per decay, so a decay is a closed unit whatever happens next); the decay is checked as
+soon as it settles (``check_decay``) and the operator accepts it, repeats it, skips the condition or
+adds a note. When every condition has its repeats, the campaign report of the accepted decays is
+written.
+
+Everything that happens goes to ``session.jsonl`` in the output folder, one JSON object per line,
+flushed and fsynced before the session goes on (``SessionLog``). The session's state is only ever
+derived from that file (``SessionState``), so ``resume`` after Ctrl-C, a crash or a power cut
+continues exactly where it stopped: a decay recorded but not yet judged is judged first, and a
+recording the log never heard of (the session died mid-decay) is logged as rejected, never lost.
+A lock (``flock`` on ``session.lock``) keeps a second session out of the folder; the kernel drops it
+when its process dies, so a stale lock never blocks.
+
+The operator is an ``Operator``: ``ask(Question) -> answer``. The CLI asks on the terminal or takes
+answers from ``--yes`` / a responses file; tests script it the same way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import fcntl
+import json
+import math
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..config import CampaignPlan, format_draft, load_hull, parse_draft
+from ..errors import ConfigError, InputError
+from ..ident.derived import b_eq
+from .daemon import RecordDaemon, RecordSettings
+from .session import DecayOutcome
+
+LOG_NAME = "session.jsonl"
+LOCK_NAME = "session.lock"
+REPORT_DIR = "report"
+PANEL_NAME = "campaign.rrd"
+#: device seconds of still water the level check averages after a draft change
+LEVEL_S = 2.0
+#: the still water moves less than this (standard deviation, deg) when the model is at rest
+STILL_SD_DEG = 0.3
+#: why a decay ended early, by its settle reason
+CUT_SHORT = {
+    "note": "stopped by the operator",
+    "unplug": "the device went away",
+    "error": "a recording error",
+}
+#: daemon lines shown for the first decay only (every decay opens the device again)
+ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
+#: settle reasons of a decay that ended by itself (anything else was cut short)
+COMPLETE_SETTLES = ("amplitude", "timeout")
+
+
+@dataclass(frozen=True)
+class Acceptance:
+    """The checks' tolerances (the plan's ``[acceptance]`` table; degrees at this edge)."""
+
+    angle_tolerance_deg: float = 1.0  # |release angle - nominal|
+    level_tolerance_deg: float = 1.0  # |still-water angle| before the tilt (the model trimmed level)
+    min_half_cycles: float = 5  # a decay shorter than this says little
+    min_r2: float = 0.98  # the final fit's R² on the angle
+    rate_limit_deg_s: float = 290.0  # |rate| at or above this: the gyro saturated (MTi-G: ±300 deg/s)
+    repeat_tolerance: float = 0.2  # B_eq at the nominal angle vs the earlier repeats, relative
+    period_tolerance: float = 0.03  # natural period vs the earlier repeats, relative
+
+    @classmethod
+    def from_plan(cls, table: dict[str, float], where: str) -> Acceptance:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ConfigError(
+                f"{where}: [acceptance] has no {', '.join(unknown)}; known: {', '.join(sorted(known))}"
+            )
+        if any(not (v > 0) for v in table.values()):
+            raise ConfigError(f"{where}: [acceptance] tolerances must be positive")
+        return cls(**table)
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One cell of the test matrix."""
+
+    draft: str  # as people write it: 0.9T, T, 1.1T
+    angle_deg: float
+
+    @property
+    def draft_factor(self) -> float:
+        return parse_draft(self.draft)
+
+    @property
+    def label(self) -> str:
+        return f"{self.draft} {self.angle_deg:g} deg"
+
+
+def plan_conditions(plan: CampaignPlan) -> list[Condition]:
+    """The conditions in the order they are run: every angle of a draft, then the next draft."""
+    drafts = [format_draft(parse_draft(d)) for d in plan.drafts]
+    return [Condition(d, float(a)) for d in drafts for a in plan.angles_deg]
+
+
+# --------------------------------------------------------------------------------------------------
+# The session file and the lock
+# --------------------------------------------------------------------------------------------------
+
+
+class SessionLog:
+    """``session.jsonl``: append-only, one JSON object per line, each fsynced before ``append`` returns.
+
+    A line cut by a crash (the last one, without its newline) is ignored when read back.
+    """
+
+    def __init__(self, folder: Path) -> None:
+        self.path = folder / LOG_NAME
+
+    def exists(self) -> bool:
+        return self.path.is_file() and self.path.stat().st_size > 0
+
+    def read(self) -> list[dict[str, Any]]:
+        if not self.path.is_file():
+            return []
+        records = []
+        for line in self.path.read_text().splitlines():
+            try:
+                records.append(json.loads(line))
+            except json.JSONDecodeError:
+                continue  # the line a crash cut short
+        return records
+
+    def append(self, kind: str, **fields: Any) -> dict[str, Any]:
+        record = {"type": kind, "at": datetime.now(UTC).isoformat(timespec="milliseconds"), **fields}
+        data = (json.dumps(record, default=str) + "\n").encode()
+        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        try:
+            if os.lseek(fd, 0, os.SEEK_END) > 0 and not self._ends_with_newline():
+                data = b"\n" + data  # after a line cut by a crash: start a fresh line
+            os.write(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        return record
+
+    def _ends_with_newline(self) -> bool:
+        with self.path.open("rb") as fh:
+            fh.seek(-1, os.SEEK_END)
+            return fh.read(1) == b"\n"
+
+
+class SessionLock:
+    """An exclusive ``flock`` on ``session.lock`` for as long as the session runs (context manager)."""
+
+    def __init__(self, folder: Path) -> None:
+        self.path = folder / LOCK_NAME
+        self._fd = -1
+
+    def __enter__(self) -> SessionLock:
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise InputError(
+                f"another session (pid {holder}) is writing {self.path.parent}; "
+                "wait for it, or use another --out"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        self._fd = fd
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._fd >= 0:
+            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = -1
+
+
+# --------------------------------------------------------------------------------------------------
+# Checking a decay
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Measured:
+    """What the checks look at in one recorded decay (degrees, SI otherwise)."""
+
+    angle_deg: float
+    still_water_deg: float
+    settle_reason: str
+    half_cycles: int = 0
+    r2_angle: float = math.nan
+    coefficients: dict[str, float] = field(default_factory=dict)
+    natural_period_s: float = math.nan
+    b_eq_per_s: float = math.nan  # at the nominal angle
+    max_rate_deg_s: float = math.nan
+    free_end: str = ""  # how the free decay ends (``ident.free_decay``): "excitation" = pushed again
+    free_end_reason: str = ""
+    fit_error: str = ""
+
+
+def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
+    """Read the decay back from its file (what is checked is what was stored) and its final fit."""
+    from ..ident.free_decay import find_free_end
+    from ..store.reader import read_decay_runs, read_recording
+
+    assert outcome.path is not None
+    recording = read_recording(outcome.path)
+    release = next((e for e in recording.events if e.get("kind") == "release"), {})
+    still = (release.get("data") or {}).get("still_water_deg", math.nan)
+    measured = Measured(abs(outcome.angle_initial_deg), float(still), outcome.settle_reason)
+    runs = read_decay_runs(outcome.path)
+    if runs:
+        run = runs[0]
+        measured.max_rate_deg_s = float(np.degrees(np.max(np.abs(run.rate)))) if run.rate.size else math.nan
+        end = find_free_end(run)
+        measured.free_end, measured.free_end_reason = end.kind, end.reason
+    fit = outcome.fit
+    if fit is None:
+        measured.fit_error = "; ".join(w for w in outcome.warnings if "fit" in w) or "no fit"
+        return measured
+    measured.half_cycles = fit.half_cycles
+    measured.r2_angle = fit.r2_angle
+    measured.coefficients = dict(fit.coefficients)
+    measured.natural_period_s = fit.natural_period_s
+    measured.b_eq_per_s = b_eq(fit.coefficients, math.radians(nominal_deg))
+    return measured
+
+
+def check_decay(
+    measured: Measured, condition: Condition, acceptance: Acceptance, earlier: list[Measured]
+) -> list[str]:
+    """Why this decay should be repeated (empty: it passes). ``earlier``: the condition's accepted repeats."""
+    a = acceptance
+    reasons = []
+    if measured.settle_reason not in COMPLETE_SETTLES:
+        why = CUT_SHORT.get(measured.settle_reason, measured.settle_reason)
+        reasons.append(f"cut short ({why})")
+    off = measured.angle_deg - condition.angle_deg
+    if abs(off) > a.angle_tolerance_deg:
+        reasons.append(
+            f"released at {measured.angle_deg:.1f} deg, {off:+.1f} deg from the nominal "
+            f"{condition.angle_deg:g} "
+            f"(tolerance {a.angle_tolerance_deg:g})"
+        )
+    if abs(measured.still_water_deg) > a.level_tolerance_deg:
+        reasons.append(
+            f"not level: still water at {measured.still_water_deg:+.2f} deg "
+            f"(tolerance {a.level_tolerance_deg:g}); re-trim"
+        )
+    if measured.free_end == "excitation":
+        reasons.append(f"release not clean: {measured.free_end_reason}")
+    if measured.max_rate_deg_s >= a.rate_limit_deg_s:
+        reasons.append(f"rate saturated: {measured.max_rate_deg_s:.0f} deg/s (limit {a.rate_limit_deg_s:g})")
+    if measured.fit_error:
+        reasons.append(f"no fit: {measured.fit_error}")
+        return reasons
+    if measured.half_cycles < a.min_half_cycles:
+        reasons.append(f"too short: {measured.half_cycles} half-cycles (at least {a.min_half_cycles:g})")
+    if not measured.r2_angle >= a.min_r2:
+        reasons.append(f"poor fit: R² {measured.r2_angle:.4f} (at least {a.min_r2:g})")
+    if earlier:
+        reasons += _repeat_reasons(measured, earlier, a)
+    return reasons
+
+
+def _repeat_reasons(measured: Measured, earlier: list[Measured], a: Acceptance) -> list[str]:
+    reasons = []
+    b_ref = float(np.mean([m.b_eq_per_s for m in earlier]))
+    t_ref = float(np.mean([m.natural_period_s for m in earlier]))
+    if abs(measured.b_eq_per_s - b_ref) > a.repeat_tolerance * abs(b_ref):
+        reasons.append(
+            f"not a repeat: B_eq {measured.b_eq_per_s:.4g} 1/s vs {b_ref:.4g} of the earlier repeats "
+            f"(tolerance {a.repeat_tolerance:.0%})"
+        )
+    if abs(measured.natural_period_s - t_ref) > a.period_tolerance * t_ref:
+        reasons.append(
+            f"not a repeat: period {measured.natural_period_s:.3f} s vs {t_ref:.3f} s of the earlier repeats "
+            f"(tolerance {a.period_tolerance:.0%})"
+        )
+    return reasons
+
+
+# --------------------------------------------------------------------------------------------------
+# The state, derived from the log
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class RunEntry:
+    """A decay as the log knows it."""
+
+    decay: int
+    condition: Condition
+    file: str
+    reasons: list[str]
+    measured: dict[str, Any]
+    verdict: str | None = None  # accepted, rejected; None: not judged yet
+
+
+@dataclass
+class SessionState:
+    """Where the session stands, from its log alone."""
+
+    conditions: list[Condition]
+    repeats: int
+    runs: list[RunEntry] = field(default_factory=list)
+    skipped: set[Condition] = field(default_factory=set)
+    draft_ready: str | None = None  # the draft the operator last confirmed
+    report: list[str] = field(default_factory=list)
+
+    @classmethod
+    def from_log(
+        cls, records: list[dict[str, Any]], conditions: list[Condition], repeats: int
+    ) -> SessionState:
+        state = cls(conditions, repeats)
+        by_decay: dict[int, RunEntry] = {}
+        for r in records:
+            kind = r.get("type")
+            if kind == "run":
+                entry = RunEntry(
+                    r["decay"],
+                    Condition(r["draft"], float(r["angle_deg"])),
+                    r["file"],
+                    r["reasons"],
+                    r["measured"],
+                )
+                by_decay[entry.decay] = entry
+                state.runs.append(entry)
+            elif kind == "verdict":
+                by_decay[r["decay"]].verdict = r["verdict"]
+            elif kind == "skip":
+                state.skipped.add(Condition(r["draft"], float(r["angle_deg"])))
+            elif kind == "draft":
+                state.draft_ready = r["draft"]
+            elif kind == "report":
+                state.report = list(r["files"])
+            elif kind == "start":
+                state.draft_ready = None  # after a restart the level is checked again
+        return state
+
+    def accepted(self, condition: Condition) -> list[RunEntry]:
+        return [r for r in self.runs if r.condition == condition and r.verdict == "accepted"]
+
+    def status(self, condition: Condition) -> str:
+        """to do, under way, rejected (its last decay: to be repeated), accepted or skipped."""
+        if condition in self.skipped:
+            return "skipped"
+        if len(self.accepted(condition)) >= self.repeats:
+            return "accepted"
+        mine = [r for r in self.runs if r.condition == condition]
+        if not mine:
+            return "to do"
+        return "rejected" if mine[-1].verdict == "rejected" else "under way"
+
+    def next_condition(self) -> Condition | None:
+        return next((c for c in self.conditions if self.status(c) not in ("accepted", "skipped")), None)
+
+    def unjudged(self) -> RunEntry | None:
+        return next((r for r in self.runs if r.verdict is None), None)
+
+    @property
+    def decays(self) -> int:
+        return len(self.runs)
+
+    def runs_left(self) -> int:
+        return sum(
+            max(self.repeats - len(self.accepted(c)), 0) for c in self.conditions if c not in self.skipped
+        )
+
+
+# --------------------------------------------------------------------------------------------------
+# The operator and the runner
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Question:
+    """A prompt: ``kind`` (draft, verdict), the text, the keys understood and the default (Enter)."""
+
+    kind: str
+    text: str
+    choices: dict[str, str]
+    default: str
+
+
+class Operator(Protocol):
+    def ask(self, question: Question) -> str:
+        """The answer: a key of ``question.choices`` ("" = the default), or ``n <text>`` for a note."""
+        ...
+
+
+@dataclass
+class Progress:
+    """What the progress line shows."""
+
+    condition: Condition | None
+    repeat: int
+    done: int
+    total: int
+    decays: int
+    elapsed_s: float
+    left_s: float | None
+
+    def line(self) -> str:
+        left = "" if self.left_s is None else f", about {_minutes(self.left_s)} left"
+        where = f"{self.condition.label} repeat {self.repeat}" if self.condition else "done"
+        kept = f"{self.done}/{self.total} decays kept, {self.decays} recorded"
+        return f"{where} | {kept} | {_minutes(self.elapsed_s)} spent{left}"
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
+
+
+@dataclass
+class SessionSettings:
+    """A guided session: the plan, the hull, where, and how each decay is recorded."""
+
+    plan: CampaignPlan
+    hull: str
+    record: dict[str, Any]  # RecordSettings of every decay (port, out_dir, rate, viewer, model, sim...)
+    sim_faults: dict[int, str] = field(default_factory=dict)  # decay number -> scripted fault (port sim)
+
+
+class CampaignSession:
+    """``run()`` leads the operator through the plan; see the module docstring."""
+
+    def __init__(
+        self,
+        settings: SessionSettings,
+        operator: Operator,
+        on_line: Callable[[str], None] | None = None,
+        on_progress: Callable[[Progress], None] | None = None,
+        resume: bool = False,
+    ) -> None:
+        self.settings = settings
+        self.operator = operator
+        self.on_line = on_line or (lambda _line: None)
+        self.on_progress = on_progress or (lambda _p: None)
+        self.resume = resume
+        plan = settings.plan
+        first = plan_conditions(plan)[0]  # a placeholder condition: each decay gets its own
+        self.record = RecordSettings(
+            **{"draft": first.draft_factor, "angle_deg": first.angle_deg} | settings.record
+        )
+        self.folder = self.record.out_dir
+        self.acceptance = Acceptance.from_plan(plan.acceptance, f"plan {plan.name}")
+        self.conditions = plan_conditions(plan)
+        hull = load_hull(settings.hull)
+        if hull.name not in plan.hulls and settings.hull not in plan.hulls:
+            raise InputError(
+                f"plan {plan.name} covers {', '.join(plan.hulls)}, not {hull.name}; give one of them"
+            )
+        for condition in self.conditions:  # every condition checked before the device opens
+            RecordDaemon(self._record_settings(condition, 1))
+        self.log = SessionLog(self.folder)
+        self._started = time.monotonic()
+        self._decay_seconds: list[float] = []
+        self._shown: set[str] = set()
+        self.view = None
+
+    # ---- settings of one decay ----------------------------------------
+
+    def _record_settings(self, condition: Condition, decay: int) -> RecordSettings:
+        from ..physics.scenario import scripted_run
+
+        base = self.record
+        overrides = (
+            scripted_run(self.settings.sim_faults.get(decay), condition.angle_deg)
+            if base.port == "sim"
+            else {}
+        )
+        return dataclasses.replace(
+            base,
+            hull=self.settings.hull,
+            axis=self.settings.plan.axis,
+            draft=condition.draft_factor,
+            angle_deg=condition.angle_deg,
+            angle_tolerance_deg=self.acceptance.angle_tolerance_deg,
+            runs=1,
+            sim_seed=base.sim_seed + decay,
+            sim_overrides=overrides,
+            note=f"session {self.settings.plan.name}, decay {decay}",
+        )
+
+    # ---- the session ----------------------------------------
+
+    def run(self) -> SessionState:
+        """Lead the session to its end (or until interrupted); returns the final state."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        with SessionLock(self.folder):
+            state = self._open_log()
+            self._open_panel(state)
+            try:
+                return self._lead(state)
+            finally:
+                if self.view is not None:
+                    self.view.close()
+
+    def _open_log(self) -> SessionState:
+        records = self.log.read()
+        plan = dataclasses.asdict(self.settings.plan)
+        if records and not self.resume:
+            raise InputError(
+                f"{self.folder} already holds a session; give --resume to continue it, or another --out"
+            )
+        if not records:
+            if self.resume:
+                raise InputError(f"no session to resume in {self.folder} ({LOG_NAME} is missing)")
+            self.log.append(
+                "plan",
+                plan=plan,
+                hull=self.settings.hull,
+                conditions=[dataclasses.asdict(c) for c in self.conditions],
+            )
+        else:
+            logged = next((r for r in records if r.get("type") == "plan"), None)
+            if logged is None or logged["plan"] != plan or logged["hull"] != self.settings.hull:
+                raise InputError(
+                    f"{self.folder} holds a session of another plan or hull; "
+                    "resume it with the same PLAN and --hull"
+                )
+        self.log.append("start", resumed=bool(records), pid=os.getpid(), port=self.record.port)
+        state = SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
+        self._adopt_orphans(state)
+        return SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
+
+    def _adopt_orphans(self, state: SessionState) -> None:
+        """Recordings in the folder the log never heard of (the session died mid-decay): logged, rejected."""
+        known = {r.file for r in state.runs}
+        decay = state.decays
+        for path in sorted(self.folder.glob("*.mcap")):
+            if path.name in known:
+                continue
+            decay += 1
+            condition = self._condition_of(path) or state.next_condition() or self.conditions[-1]
+            reason = "the session stopped during this decay (recovered from the folder)"
+            self.log.append("run", decay=decay, draft=condition.draft, angle_deg=condition.angle_deg,
+                            file=path.name, reasons=[reason], measured={})  # fmt: skip
+            self.log.append("verdict", decay=decay, verdict="rejected", action="recovered")
+            self.on_line(f"decay {decay}: {path.name} was cut by the stop; kept, marked rejected")
+
+    def _condition_of(self, path: Path) -> Condition | None:
+        from ..store.reader import read_recording
+
+        try:
+            meta = read_recording(path).metadata
+            return Condition(format_draft(parse_draft(str(meta["draft"]))), float(meta["angle_nominal_deg"]))
+        except Exception:  # a file cut before its metadata: the condition under way is the best guess
+            return None
+
+    def _open_panel(self, state: SessionState) -> None:
+        from ..viz.campaign_view import CampaignView
+        from ..viz.live import LiveView, default_viewer_mode
+
+        base = self.record
+        mode = base.viewer or default_viewer_mode()
+        url = None
+        if mode == "spawn":  # the decay views reuse this viewer: it listens before the first decay
+            LiveView(
+                "spawn", bind=base.viewer_bind, spawn_port=base.viewer_port, on_note=self._viewer_note
+            ).close()
+            url = f"rerun+http://127.0.0.1:{base.viewer_port}/proxy"
+        plan = self.settings.plan
+        self.view = CampaignView(
+            mode,
+            self.folder / PANEL_NAME,
+            [format_draft(parse_draft(d)) for d in plan.drafts],
+            plan.angles_deg,
+            _terms(base.model),
+            viewer_url=url,
+            on_note=self._viewer_note,
+        )
+        for condition in self.conditions:
+            self._show_condition(state, condition)
+
+    def _viewer_note(self, line: str) -> None:
+        self.on_line(f"viewer: {line}")
+
+    def _show_condition(self, state: SessionState, condition: Condition) -> None:
+        kept = len(state.accepted(condition))
+        status = state.status(condition)
+        self.view.set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
+        if status == "accepted":
+            measured = [Measured(**r.measured) for r in state.accepted(condition)]
+            mean = {
+                k: float(np.mean([m.coefficients[k] for m in measured])) for k in measured[0].coefficients
+            }
+            self.view.accepted(
+                condition.draft, condition.angle_deg, mean, float(np.mean([m.b_eq_per_s for m in measured]))
+            )
+
+    def _lead(self, state: SessionState) -> SessionState:
+        pending = state.unjudged()
+        if pending is not None:  # recorded before the stop, never judged
+            state = self._judge(state, pending)
+        while (condition := state.next_condition()) is not None:
+            self._progress(state, condition)
+            if state.draft_ready != condition.draft:
+                state = self._set_draft(state, condition)
+                continue
+            state = self._record_one(state, condition)
+        self._progress(state, None)
+        if not state.report:
+            self._write_report(state)
+            state = SessionState.from_log(self.log.read(), self.conditions, state.repeats)
+        return state
+
+    def _reload(self) -> SessionState:
+        return SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
+
+    def _progress(self, state: SessionState, condition: Condition | None) -> None:
+        total = sum(state.repeats for c in self.conditions if c not in state.skipped)
+        done = sum(
+            min(len(state.accepted(c)), state.repeats) for c in self.conditions if c not in state.skipped
+        )
+        per_decay = float(np.mean(self._decay_seconds)) if self._decay_seconds else None
+        left = None if per_decay is None else per_decay * state.runs_left()
+        repeat = len(state.accepted(condition)) + 1 if condition else 0
+        self.on_progress(
+            Progress(condition, repeat, done, total, state.decays, time.monotonic() - self._started, left)
+        )
+
+    def _ask(self, question: Question, decay: int | None) -> str:
+        """Ask until the answer is a choice; notes are logged on the way."""
+        while True:
+            answer = self.operator.ask(question).strip()
+            if answer.startswith("n ") or answer == "n":
+                text = answer[2:].strip()
+                if text:
+                    self.log.append("note", decay=decay, text=text)
+                    self.on_line(f"note kept: {text}")
+                continue
+            key = answer.lower() or question.default
+            if key in question.choices:
+                return key
+            self.on_line(f"'{answer}' not understood; keys: {_keys(question)}")
+
+    def _set_draft(self, state: SessionState, condition: Condition) -> SessionState:
+        """The operator sets the draft and says when; the still water is then measured before the first
+        decay: off level (or still moving), the question comes again."""
+        angles = ", ".join(f"{c.angle_deg:g}" for c in self.conditions if c.draft == condition.draft)
+        question = Question(
+            "draft",
+            f"Set draft {condition.draft} and trim the model level (angles {angles} deg next); "
+            "leave it at rest for the level check",
+            {"": "ready", "s": f"skip draft {condition.draft}"},
+            "",
+        )
+        key = self._ask(question, None)
+        if key == "s":
+            for c in self.conditions:
+                if c.draft == condition.draft and state.status(c) != "accepted":
+                    self.log.append("skip", draft=c.draft, angle_deg=c.angle_deg)
+                    self.view.set_status(c.draft, c.angle_deg, "skipped")
+            return self._reload()
+        mean_deg, sd_deg = self._measure_level(condition)
+        level = abs(mean_deg) <= self.acceptance.level_tolerance_deg and sd_deg <= STILL_SD_DEG
+        self.log.append("level", draft=condition.draft, angle_deg=mean_deg, sd_deg=sd_deg, ok=level)
+        still = f"still water at {mean_deg:+.2f} deg (sd {sd_deg:.2f} over {LEVEL_S:g} s)"
+        if level:
+            self.on_line(f"{still}: level")
+            self.log.append("draft", draft=condition.draft, action="ready")
+        else:
+            self.on_line(
+                f"{still}: not level or not at rest (tolerance {self.acceptance.level_tolerance_deg:g} deg, "
+                f"sd {STILL_SD_DEG:g}); re-trim, let it settle and confirm again"
+            )
+        self._adopt_orphans(self._reload())  # a decay the level check recorded is kept, rejected
+        return self._reload()
+
+    def _measure_level(self, condition: Condition) -> tuple[float, float]:
+        """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time."""
+        from ..samples import AXIS_FIELDS
+
+        blocks: list[np.ndarray] = []
+
+        def collect(samples: np.ndarray) -> None:
+            if samples.size:
+                blocks.append(samples)
+            if blocks and float(blocks[-1]["t"][-1] - blocks[0]["t"][0]) >= LEVEL_S:
+                daemon.stop()
+
+        settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
+        daemon = RecordDaemon(settings, on_samples=collect)
+        daemon.run()
+        if not blocks or float(blocks[-1]["t"][-1] - blocks[0]["t"][0]) < LEVEL_S:
+            raise KeyboardInterrupt  # stopped during the level check
+        angle = np.degrees(np.concatenate([b[AXIS_FIELDS[self.settings.plan.axis][0]] for b in blocks]))
+        return float(angle.mean()), float(angle.std())
+
+    def _record_one(self, state: SessionState, condition: Condition) -> SessionState:
+        decay = state.decays + 1
+        repeat = len(state.accepted(condition)) + 1
+        self.on_line(
+            f"decay {decay}: {condition.label}, repeat {repeat}/{state.repeats}: "
+            f"tilt to {condition.angle_deg:g} deg and release"
+        )
+        self.view.set_status(
+            condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
+        )
+        started = time.monotonic()
+        daemon = RecordDaemon(
+            self._record_settings(condition, decay), on_event=lambda line: self._daemon_line(line, decay)
+        )
+        outcomes = [o for o in daemon.run() if o.path is not None]
+        if not outcomes:
+            raise KeyboardInterrupt  # stopped before a release: nothing recorded, nothing to log
+        outcome = outcomes[-1]
+        measured = measure_decay(outcome, condition.angle_deg)
+        earlier = [Measured(**r.measured) for r in state.accepted(condition)]
+        reasons = check_decay(measured, condition, self.acceptance, earlier)
+        self.log.append(
+            "run",
+            decay=decay,
+            draft=condition.draft,
+            angle_deg=condition.angle_deg,
+            file=outcome.path.name,
+            reasons=reasons,
+            measured=dataclasses.asdict(measured),
+        )
+        if outcome.settle_reason not in COMPLETE_SETTLES:
+            self.log.append("verdict", decay=decay, verdict="rejected", action="stopped")
+            raise KeyboardInterrupt  # the operator stopped mid-decay: the file is logged, the session ends
+        self._decay_seconds.append(time.monotonic() - started)
+        state = self._reload()
+        return self._judge(state, state.runs[-1])
+
+    def _daemon_line(self, line: str, decay: int) -> None:
+        """The daemon's lines, its "run 1" named as the session's decay; the device and viewer lines
+        every decay repeats are shown once."""
+        if line.startswith("run 1:"):
+            line = f"decay {decay}:" + line[len("run 1:") :]
+        key = next((p for p in ONCE_PREFIXES if line.startswith(p)), line)
+        if key in self._shown:
+            return
+        if line.startswith(ONCE_PREFIXES) or line.startswith("viewer: "):
+            self._shown.add(key)
+        self.on_line(line)
+
+    def _judge(self, state: SessionState, entry: RunEntry) -> SessionState:
+        condition = entry.condition
+        if entry.reasons:
+            for reason in entry.reasons:
+                self.on_line(f"decay {entry.decay} flagged: {reason}")
+            question = Question(
+                "verdict",
+                f"Decay {entry.decay} ({condition.label}) failed a check: repeat it?",
+                {"r": "reject and repeat", "a": "accept anyway", "s": "reject and skip the condition"},
+                "r",
+            )
+        else:
+            m = entry.measured
+            self.on_line(
+                f"decay {entry.decay} passes: {m['angle_deg']:.1f} deg, {m['half_cycles']} half-cycles, "
+                f"R² {m['r2_angle']:.4f}, T0 {m['natural_period_s']:.3f} s, B_eq {m['b_eq_per_s']:.4g} 1/s"
+            )
+            question = Question(
+                "verdict",
+                f"Keep decay {entry.decay} ({condition.label})?",
+                {"a": "accept", "r": "reject and repeat", "s": "reject and skip the condition"},
+                "a",
+            )
+        key = self._ask(question, entry.decay)
+        verdict = "accepted" if key == "a" else "rejected"
+        self.log.append(
+            "verdict", decay=entry.decay, verdict=verdict, action=question.choices[key], reasons=entry.reasons
+        )
+        if key == "s":
+            self.log.append("skip", draft=condition.draft, angle_deg=condition.angle_deg)
+        state = self._reload()
+        self.on_line(f"decay {entry.decay}: {verdict} ({question.choices[key]})")
+        self._show_condition(state, condition)
+        return state
+
+    # ---- the report ----------------------------------------
+
+    def _write_report(self, state: SessionState) -> None:
+        accepted = [self.folder / r.file for r in state.runs if r.verdict == "accepted"]
+        if not accepted:
+            self.on_line("no decay accepted: no report")
+            return
+        written = write_session_report(
+            accepted, self.folder / REPORT_DIR, self.record.model, self.settings.hull
+        )
+        self.log.append(
+            "report",
+            files=[str(p.relative_to(self.folder)) for p in written],
+            decays=[p.name for p in accepted],
+        )
+        self.on_line(f"campaign report of {len(accepted)} accepted decays: {self.folder / REPORT_DIR}")
+
+
+def _terms(model: str) -> tuple[str, ...]:
+    from ..ident.models import resolve_model
+
+    return resolve_model(model)
+
+
+def _keys(question: Question) -> str:
+    return (
+        ", ".join(f"{'Enter' if k == question.default else k}={v}" for k, v in question.choices.items())
+        + ", n TEXT=note"
+    )
+
+
+def describe_question(question: Question) -> str:
+    """The prompt line: text, then the keys (Enter = the default)."""
+    return f"{question.text} [{_keys(question)}]"
+
+
+# --------------------------------------------------------------------------------------------------
+# The report of the accepted decays
+# --------------------------------------------------------------------------------------------------
+
+
+def write_session_report(files: list[Path], folder: Path, model: str, hull: str) -> list[Path]:
+    """``tankdaq campaign``'s report of ``files``, plus each coefficient's repeat-to-repeat spread
+    (``repeat_spread.csv`` and a section of campaign.md) for the conditions with two or more repeats."""
+    from ..ident.campaign import (
+        find_campaign_hulls,
+        group_runs,
+        identify_groups,
+        read_campaign_runs,
+        write_report,
+    )
+
+    runs = [run for path in files for run in read_campaign_runs(path)]
+    groups = group_runs(runs)
+    results = identify_groups(groups, model, hulls=find_campaign_hulls({k.hull for k in groups}, [hull]))
+    written = write_report(results, folder)
+    spread = repeat_spreads(groups, model)
+    if spread:
+        written.append(_write_spread(spread, folder))
+    return written
+
+
+def repeat_spreads(groups: dict[Any, list[Any]], model: str) -> list[dict[str, Any]]:
+    """Per condition with repeats: each coefficient fitted on each repeat alone, their mean and spread."""
+    from ..ident.output_error import OutputError
+    from ..ident.uncertainty import repeat_spread
+
+    rows = []
+    for key, runs in groups.items():
+        if len(runs) < 2:
+            continue
+        summary = repeat_spread(lambda: OutputError(model), runs)
+        terms = list(summary.std)
+        row: dict[str, Any] = {"hull": key.hull, "axis": key.axis, "draft": format_draft(key.draft),
+                               "angle_deg": key.angle_deg, "repeats": len(runs)}  # fmt: skip
+        for i, term in enumerate(terms):
+            values = summary.samples[:, i]
+            row[f"{term}_mean"] = float(values.mean())
+            row[f"{term}_repeat_sd"] = float(values.std(ddof=1))
+        rows.append(row)
+    return rows
+
+
+def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
+    import csv
+
+    path = folder / "repeat_spread.csv"
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=columns, restval="")
+        writer.writeheader()
+        writer.writerows(rows)
+    terms = [c[: -len("_mean")] for c in columns if c.endswith("_mean")]
+    lines = [
+        "\n## Repeat-to-repeat spread\n",
+        "Each repeat fitted alone; mean ± sample standard deviation of the repeats.\n",
+        "| draft | angle deg | repeats | " + " | ".join(terms) + " |",
+        "|" + "---|" * (3 + len(terms)),
+    ]
+    for row in rows:
+        cells = [row["draft"], f"{row['angle_deg']:g}", str(row["repeats"])]
+        cells += [f"{row[t + '_mean']:.4g} ± {row[t + '_repeat_sd']:.2g}" for t in terms]
+        lines.append("| " + " | ".join(cells) + " |")
+    with (folder / "campaign.md").open("a") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return path

@@ -1,0 +1,142 @@
+"""``tankdaq session``: a guided test session, the campaign plan driving the recording run by run."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+
+from .. import validation
+from ..errors import InputError
+from .app import app, checked, err_console, handles_errors, say
+from .record import (
+    DEFAULT_LIVE_MODEL,
+    HullOption,
+    LiveModelOption,
+    SimSeedOption,
+    SimSpeedOption,
+    ViewerOption,
+)
+
+HELP = """Run a test session from a campaign PLAN, condition by condition, with the operator.
+
+PLAN is a name in configs/campaigns or a .toml file:
+
+  hulls = ["swath"]            # the hulls this matrix covers (--hull picks one)
+  axis = "roll"
+  drafts = ["T", "1.1T"]       # run in this order, all angles of a draft together
+  angles_deg = [10.0, 15.0]
+  repeats = 2                  # decays kept per condition (default 1)
+  [acceptance]                 # optional tolerances of the checks (defaults shown)
+  angle_tolerance_deg = 1.0    # release angle vs nominal
+  level_tolerance_deg = 1.0    # still water before the tilt
+  min_half_cycles = 5
+  min_r2 = 0.98
+  rate_limit_deg_s = 290.0     # gyro saturation
+  repeat_tolerance = 0.2       # B_eq vs the earlier repeats (relative)
+  period_tolerance = 0.03      # natural period vs the earlier repeats
+
+Each decay is checked as it settles; a failed check is flagged and the operator asked to repeat.
+Keys: Enter = the default, a accept, r reject and repeat, s skip, n TEXT adds a note.
+Everything goes to OUT/session.jsonl; --resume continues after Ctrl-C or a crash. When every
+condition is done, the campaign report of the accepted decays is written to OUT/report.
+"""
+
+
+class ScriptedOrTerminalOperator:
+    """Answers from the responses file first, then --yes (the default), then the terminal."""
+
+    def __init__(self, responses: list[str], yes: bool) -> None:
+        self.responses = responses
+        self.yes = yes
+
+    def ask(self, question: object) -> str:
+        from ..acquire.campaign_session import describe_question
+
+        say(f"? {describe_question(question)}")  # type: ignore[arg-type]
+        if self.responses:
+            answer = self.responses.pop(0)
+            say(f"> {answer or '(Enter)'}")
+            return answer
+        if self.yes:
+            say("> (Enter)")
+            return ""
+        if not sys.stdin.isatty():
+            raise InputError("a question needs an answer and none is left: give --yes or --responses FILE")
+        return err_console.input("> ")
+
+
+def read_responses(path: Path | None) -> list[str]:
+    """One answer per line (an empty line is Enter); lines starting with # are comments."""
+    if path is None:
+        return []
+    validation.input_file(path, what="responses file")
+    return [line.rstrip("\n") for line in path.read_text().splitlines() if not line.startswith("#")]
+
+
+@app.command("session", help=HELP)
+@handles_errors
+def session_command(
+    plan: str = typer.Argument(..., help="Campaign plan: a name in configs/campaigns or a .toml file."),
+    port: str = typer.Option(..., "--port", help="Device path, pyserial URL, or 'sim'."),
+    hull: HullOption = ...,
+    out: Path = typer.Option(
+        Path("session"),
+        "--out",
+        callback=checked(validation.output_dir),
+        help="Folder for the recordings, the session file and the report.",
+    ),
+    resume: bool = typer.Option(False, "--resume", help="Continue the session in --out where it stopped."),
+    yes: bool = typer.Option(False, "--yes", help="Answer every question with its default (Enter)."),
+    responses: Path = typer.Option(
+        None, "--responses", help="Answers, one per line (empty = Enter), used before --yes or the terminal."
+    ),
+    rate: float = typer.Option(
+        100.0, "--rate", callback=checked(validation.output_rate_hz), help="Output rate (Hz): 100, 200, 400."
+    ),
+    viewer: ViewerOption = None,
+    model: LiveModelOption = DEFAULT_LIVE_MODEL,
+    operator: str = typer.Option("", "--operator", help="Who runs the session (stored in every file)."),
+    sim_speed: SimSpeedOption = 1.0,
+    sim_seed: SimSeedOption = 0,
+    sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
+) -> None:
+    from ..acquire.campaign_session import CampaignSession, SessionSettings
+    from ..config import load_campaign_plan
+    from ..physics.scenario import parse_fault_script
+
+    answers = read_responses(responses)
+    settings = SessionSettings(
+        plan=load_campaign_plan(plan),
+        hull=hull,
+        record={
+            "port": port,
+            "out_dir": out,
+            "rate_hz": rate,
+            "viewer": viewer,
+            "model": model,
+            "operator": operator,
+            "sim_speed": sim_speed,
+            "sim_seed": sim_seed,
+        },
+        sim_faults=parse_fault_script(sim_faults) if port == "sim" else {},
+    )
+    session = CampaignSession(
+        settings,
+        ScriptedOrTerminalOperator(answers, yes),
+        on_line=say,
+        on_progress=lambda progress: (
+            err_console.rule(progress.line(), style="dim")
+            if err_console.is_terminal
+            else say(f"-- {progress.line()}")
+        ),
+        resume=resume,
+    )
+    try:
+        state = session.run()
+    except KeyboardInterrupt:
+        say(f"session stopped; nothing is lost: continue with --resume --out {out}")
+        raise
+    kept = sum(1 for r in state.runs if r.verdict == "accepted")
+    say(f"session done: {kept} decays accepted of {state.decays} recorded; log {out / 'session.jsonl'}")

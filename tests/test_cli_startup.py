@@ -1,0 +1,46 @@
+"""``tankdaq --help`` and every ``COMMAND --help`` start without the heavy libraries (issue 14).
+
+Not a timing: the help of every command is rendered in one fresh interpreter, and then the heavy
+libraries must be absent from ``sys.modules`` (the commands that use them import them when they run).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+HEAVY = ("scipy", "numba", "matplotlib", "rerun", "pymoo", "distributed", "dask")
+
+PROBE = """
+import contextlib, io, json, sys
+from typer.main import get_command
+from tankdaq.cli import app
+
+root = get_command(app)
+paths = []
+def walk(command, prefix):
+    paths.append(prefix)
+    for name, sub in sorted(getattr(command, "commands", {}).items()):
+        walk(sub, [*prefix, name])
+walk(root, [])
+for path in paths:
+    with contextlib.redirect_stdout(io.StringIO()) as shown:
+        try:
+            root.main([*path, "--help"], prog_name="tankdaq", standalone_mode=False)
+        except SystemExit:
+            pass
+    assert "Usage" in shown.getvalue(), path
+loaded = sorted({name.split(".")[0] for name in sys.modules} & set(json.loads(sys.argv[1])))
+print(json.dumps({"commands": [" ".join(p) for p in paths], "loaded": loaded}))
+"""
+
+
+def test_help_of_every_command_imports_no_heavy_library() -> None:
+    done = subprocess.run(
+        [sys.executable, "-c", PROBE, json.dumps(HEAVY)], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    found = json.loads(done.stdout.strip().splitlines()[-1])
+    assert {"", "record", "replay", "campaign", "auv", "auv identify", "decode"} <= set(found["commands"])
+    assert found["loaded"] == [], f"--help imported {found['loaded']}"

@@ -1,0 +1,421 @@
+"""The guided test session, end to end on the simulated MTi-G: a real subprocess, killed for real
+(SIGKILL) mid-decay, then resumed; the session file, the recordings, the report and the campaign
+panel (.rrd) read back."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import signal
+import subprocess
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+from typer.testing import CliRunner
+
+from tankdaq.acquire.campaign_session import (
+    LOG_NAME,
+    Acceptance,
+    Condition,
+    Measured,
+    SessionLock,
+    SessionLog,
+    check_decay,
+)
+from tankdaq.cli import app
+from tankdaq.errors import InputError
+from tankdaq.ident.free_decay import find_free_end
+from tankdaq.physics.scenario import DecayScenario, parse_fault_script, scripted_run
+from tankdaq.records import DecayRun
+
+pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
+
+PLAN = """description = "2 drafts x 2 angles x 2 repeats"
+hulls = ["swath"]
+axis = "roll"
+drafts = ["T", "1.1T"]
+angles_deg = [10.0, 15.0]
+repeats = 2
+[acceptance]
+angle_tolerance_deg = 1.5
+"""
+EXE = [str(Path(sys.executable).with_name("tankdaq"))]  # the installed command, as the operator runs it
+DEADLINE_S = 240.0
+
+
+def _session_args(plan: Path, out: Path, *extra: str) -> list[str]:
+    return [
+        *EXE,
+        "session",
+        str(plan),
+        "--port",
+        "sim",
+        "--hull",
+        "swath",
+        "--out",
+        str(out),
+        "--viewer",
+        "save",
+        "--sim-speed",
+        "20",
+        "--sim-faults",
+        "2:wrong-angle,6:double-push",
+        *extra,
+    ]
+
+
+def _records(out: Path) -> list[dict[str, Any]]:
+    return SessionLog(out).read()
+
+
+def _decay_under_way(out: Path) -> bool:
+    """After three decays, a recording with data on disk that the session file does not list yet: a
+    decay is being recorded."""
+    logged = {r["file"] for r in _records(out) if r["type"] == "run"}
+    return len(logged) >= 3 and any(p.name not in logged and p.stat().st_size > 0 for p in out.glob("*.mcap"))
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """Run the plan, SIGKILL the session mid-decay after the third decay, resume it to the end."""
+    folder = tmp_path_factory.mktemp("session")
+    plan = folder / "plan.toml"
+    plan.write_text(PLAN)
+    out = folder / "out"
+    responses = folder / "answers.txt"
+    responses.write_text("# the operator's first answers\nn water calm, model trimmed\n\n")
+    proc = subprocess.Popen(
+        _session_args(plan, out, "--responses", str(responses), "--yes"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + DEADLINE_S
+        while not (out.is_dir() and _decay_under_way(out)):
+            assert proc.poll() is None, f"the session ended before it was killed:\n{proc.stdout.read()}"
+            assert time.monotonic() < deadline, "no decay under way after three"
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=30)
+    first_output = proc.stdout.read()
+    proc.stdout.close()
+    killed_lock_pid = int((out / "session.lock").read_text().split()[0])
+    files_at_kill = sorted(p.name for p in out.glob("*.mcap"))
+    resumed = subprocess.run(
+        _session_args(plan, out, "--resume", "--yes"), capture_output=True, text=True, timeout=DEADLINE_S
+    )
+    return {
+        "out": out,
+        "plan": plan,
+        "killed_returncode": proc.returncode,
+        "killed_pid": proc.pid,
+        "killed_lock_pid": killed_lock_pid,
+        "files_at_kill": files_at_kill,
+        "first_output": first_output,
+        "resumed": resumed,
+    }
+
+
+def test_the_kill_is_real_and_the_resume_finishes(session: dict[str, Any]) -> None:
+    assert session["killed_returncode"] == -signal.SIGKILL
+    assert session["killed_lock_pid"] == session["killed_pid"]  # its lock was left behind, and did not block
+    resumed = session["resumed"]
+    assert resumed.returncode == 0, resumed.stderr
+    assert "session done: 8 decays accepted" in resumed.stderr
+
+
+def test_every_recording_is_in_the_session_file_with_its_verdict(session: dict[str, Any]) -> None:
+    out = session["out"]
+    records = _records(out)
+    runs = [r for r in records if r["type"] == "run"]
+    verdicts = {r["decay"]: r["verdict"] for r in records if r["type"] == "verdict"}
+    files = sorted(p.name for p in out.glob("*.mcap"))
+    assert sorted(r["file"] for r in runs) == files  # every file listed once, none missing
+    assert set(session["files_at_kill"]) <= set(files)  # nothing recorded before the kill is gone
+    assert [r["decay"] for r in runs] == list(range(1, len(runs) + 1))
+    assert set(verdicts) == {r["decay"] for r in runs}  # every decay judged
+    assert sum(v == "accepted" for v in verdicts.values()) == 8
+    per_condition = defaultdict(int)
+    for r in runs:
+        if verdicts[r["decay"]] == "accepted":
+            per_condition[(r["draft"], r["angle_deg"])] += 1
+    assert per_condition == {("T", 10.0): 2, ("T", 15.0): 2, ("1.1T", 10.0): 2, ("1.1T", 15.0): 2}
+    starts = [r for r in records if r["type"] == "start"]
+    assert [s["resumed"] for s in starts] == [False, True]
+    levels = [r for r in records if r["type"] == "level"]  # measured before each draft's first decay
+    assert {r["draft"] for r in levels} == {"T", "1.1T"} and all(r["ok"] for r in levels)
+    assert all(abs(r["angle_deg"]) < 0.5 and r["sd_deg"] < 0.3 for r in levels)
+    notes = [r for r in records if r["type"] == "note"]
+    assert [n["text"] for n in notes] == ["water calm, model trimmed"]
+
+
+def test_the_wrong_angle_is_flagged_and_repeated(session: dict[str, Any]) -> None:
+    records = _records(session["out"])
+    runs = {r["decay"]: r for r in records if r["type"] == "run"}
+    verdicts = {r["decay"]: r for r in records if r["type"] == "verdict"}
+    wrong = runs[2]
+    assert wrong["measured"]["angle_deg"] > 13.0  # the simulator tilted 1.5 x 10 deg
+    assert any("from the nominal 10" in reason for reason in wrong["reasons"])
+    assert verdicts[2]["verdict"] == "rejected" and verdicts[2]["action"] == "reject and repeat"
+    assert (runs[3]["draft"], runs[3]["angle_deg"]) == (wrong["draft"], wrong["angle_deg"])
+    assert runs[3]["reasons"] == [] and verdicts[3]["verdict"] == "accepted"
+
+
+def test_the_decay_cut_by_the_kill_is_kept_and_rejected(session: dict[str, Any]) -> None:
+    records = _records(session["out"])
+    recovered = [r for r in records if r["type"] == "verdict" and r["action"] == "recovered"]
+    assert len(recovered) == 1
+    (run,) = [r for r in records if r["type"] == "run" and r["decay"] == recovered[0]["decay"]]
+    assert run["file"] in session["files_at_kill"]
+    assert (session["out"] / run["file"]).stat().st_size > 0
+
+
+def test_the_double_push_is_flagged(session: dict[str, Any]) -> None:
+    records = _records(session["out"])
+    (pushed,) = [r for r in records if r["type"] == "run" and r["decay"] == 6]
+    assert any(reason.startswith("release not clean") for reason in pushed["reasons"])
+
+
+def test_the_report_covers_only_the_accepted_decays(session: dict[str, Any]) -> None:
+    out = session["out"]
+    records = _records(out)
+    verdicts = {r["decay"]: r["verdict"] for r in records if r["type"] == "verdict"}
+    accepted = {r["file"] for r in records if r["type"] == "run" and verdicts[r["decay"]] == "accepted"}
+    with (out / "report" / "campaign.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 4 and all(row["runs"] == "2" and row["error"] == "" for row in rows)
+    reported = {Path(name).name for row in rows for name in row["files"].split()}
+    assert reported == accepted
+    with (out / "report" / "repeat_spread.csv").open() as fh:
+        spread = list(csv.DictReader(fh))
+    assert len(spread) == 4 and all(float(row["c1_repeat_sd"]) > 0 for row in spread)
+    (report,) = [r for r in records if r["type"] == "report"]
+    assert sorted(report["decays"]) == sorted(accepted)
+    assert "## Repeat-to-repeat spread" in (out / "report" / "campaign.md").read_text()
+
+
+def _rrd_rows(path: Path) -> tuple[dict[str, int], dict[str, dict[str, Any]]]:
+    """Temporal rows per entity and the latest static components per entity of a .rrd."""
+    reader = RrdReader(path)
+    (recording,) = reader.recordings()
+    counts: dict[str, int] = defaultdict(int)
+    static: dict[str, dict[str, Any]] = defaultdict(dict)
+    for chunk in reader.stream(store=recording).to_chunks():
+        batch = chunk.to_record_batch()
+        if chunk.is_static:
+            for name in batch.schema.names:
+                if ":" in name:
+                    static[chunk.entity_path][name] = batch.column(name).to_pylist()[-1]
+        elif any(name.startswith("Scalars:") for name in batch.schema.names):
+            counts[chunk.entity_path] += batch.num_rows
+    return counts, static
+
+
+def test_the_campaign_panel_has_one_point_per_accepted_condition(session: dict[str, Any]) -> None:
+    counts, static = _rrd_rows(session["out"] / "campaign.rrd")
+    for draft in ("T", "1.1T"):
+        assert counts[f"/campaign/b_eq/{draft}"] == 2
+        for term in ("b1", "b2", "c1", "c3"):
+            assert counts[f"/campaign/coefficients/{term}/{draft}"] == 2
+    labels = static["/campaign/matrix"]["Points2D:labels"]
+    assert len(labels) == 4 and all(": accepted 2/2" in label for label in labels)
+
+
+# ---- the parts on their own ---------------------------------------------------------------------------
+
+
+def test_a_second_session_cannot_write_the_same_folder(tmp_path: Path) -> None:
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PLAN)
+    with SessionLock(tmp_path):
+        result = CliRunner().invoke(
+            app, ["session", str(plan), "--port", "sim", "--hull", "swath", "--out", str(tmp_path), "--yes"]
+        )
+    assert result.exit_code == 2
+    assert "another session (pid" in result.output
+
+
+def test_a_folder_with_a_session_needs_resume_and_the_same_plan(tmp_path: Path) -> None:
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PLAN)
+    base = ["session", str(plan), "--port", "sim", "--hull", "swath", "--out", str(tmp_path / "out"), "--yes"]
+    result = CliRunner().invoke(app, [*base, "--resume"])
+    assert result.exit_code == 2 and "no session to resume" in result.output
+    (tmp_path / "out").mkdir(exist_ok=True)
+    SessionLog(tmp_path / "out").append("plan", plan={}, hull="swath")
+    result = CliRunner().invoke(app, base)
+    assert result.exit_code == 2 and "give --resume" in result.output
+    result = CliRunner().invoke(app, [*base, "--resume"])
+    assert result.exit_code == 2 and "another plan or hull" in result.output
+
+
+def test_a_hull_outside_the_plan_is_refused_before_anything_opens(tmp_path: Path) -> None:
+    result = CliRunner().invoke(
+        app,
+        [
+            "session",
+            "seed000-trimaran-catamaran-pitch",
+            "--port",
+            "sim",
+            "--hull",
+            "swath",
+            "--out",
+            str(tmp_path),
+            "--yes",
+        ],
+    )
+    assert result.exit_code == 2
+    assert "covers trimaran, catamaran, not swath" in result.output
+    assert not (tmp_path / LOG_NAME).exists()
+
+
+def test_help_explains_the_plan_format() -> None:
+    result = CliRunner().invoke(app, ["session", "--help"], terminal_width=120)
+    assert result.exit_code == 0
+    for word in ("repeats", "[acceptance]", "angle_tolerance_deg", "--resume", "session.jsonl"):
+        assert word in result.output
+
+
+def test_a_line_cut_by_a_crash_is_skipped_and_the_next_starts_fresh(tmp_path: Path) -> None:
+    log = SessionLog(tmp_path)
+    log.append("plan", plan={"name": "x"})
+    with log.path.open("a") as fh:
+        fh.write('{"type": "run", "decay": 1, "fi')  # the power went here
+    log.append("note", text="after the crash")
+    assert [r["type"] for r in log.read()] == ["plan", "note"]
+
+
+def _measured(**changes: Any) -> Measured:
+    base = dict(
+        angle_deg=10.2,
+        still_water_deg=0.1,
+        settle_reason="amplitude",
+        half_cycles=14,
+        r2_angle=0.997,
+        coefficients={"b1": 0.02, "b2": 4.6},
+        natural_period_s=1.66,
+        b_eq_per_s=2.6,
+        max_rate_deg_s=30.0,
+        free_end="record",
+    )
+    return Measured(**{**base, **changes})
+
+
+@pytest.mark.parametrize(
+    ("changes", "phrase"),
+    [
+        ({"angle_deg": 12.0}, "from the nominal 10"),
+        ({"still_water_deg": -1.4}, "not level"),
+        ({"free_end": "excitation", "free_end_reason": "a second excitation"}, "release not clean"),
+        ({"max_rate_deg_s": 299.0}, "rate saturated"),
+        ({"half_cycles": 3}, "too short"),
+        ({"r2_angle": 0.9}, "poor fit"),
+        ({"settle_reason": "unplug"}, "cut short (the device went away)"),
+        ({"b_eq_per_s": 3.4}, "not a repeat: B_eq"),
+        ({"natural_period_s": 1.75}, "not a repeat: period"),
+    ],
+)
+def test_each_check_flags_its_fault_alone(changes: dict[str, Any], phrase: str) -> None:
+    condition, acceptance, earlier = Condition("T", 10.0), Acceptance(), [_measured()]
+    assert check_decay(_measured(), condition, acceptance, earlier) == []
+    reasons = check_decay(_measured(**changes), condition, acceptance, earlier)
+    assert len(reasons) == 1 and phrase in reasons[0]
+
+
+def test_the_scripted_double_push_is_a_second_excitation() -> None:
+    scenario = DecayScenario(hull="swath", runs=1, seed=3, **scripted_run("double-push", 12.0))
+    samples, trace = scenario.samples()
+    (truth,) = trace.runs
+    assert truth.pushed_again_s is not None and truth.pushed_again_s > truth.release_s
+    start = truth.release_index
+    run = DecayRun(
+        samples["t"][start:], samples["roll"][start:], samples["p"][start:], axis="roll", name="pushed"
+    )
+    end = find_free_end(run)
+    assert end.kind == "excitation"
+    assert end.t_s < truth.pushed_again_s - truth.release_s + 2 * 1.7  # caught within two periods of the push
+    clean = DecayScenario(hull="swath", angle_deg=12.0, runs=1, seed=3).samples()[0]
+    assert not np.allclose(clean["roll"][start:], samples["roll"][start:])
+    assert math.isclose(abs(math.degrees(truth.angle0_rad)), 12.0, abs_tol=1.5)
+
+
+def test_fault_scripts_are_parsed_or_refused_in_one_line() -> None:
+    assert parse_fault_script("2:wrong-angle, 5:double-push") == {2: "wrong-angle", 5: "double-push"}
+    assert scripted_run("wrong-angle", 10.0)["angle_deg"] == 15.0
+    for bad in ("0:wrong-angle", "x:double-push", "3:sideways"):
+        with pytest.raises(InputError, match="DECAY:FAULT"):
+            parse_fault_script(bad)
+    assert json.dumps(scripted_run(None, 8.0)) == '{"angle_deg": 8.0}'
+
+
+def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
+    from tankdaq.acquire.campaign_session import plan_conditions
+    from tankdaq.config import list_campaign_plans, load_campaign_plan
+    from tankdaq.errors import ConfigError
+
+    for name in list_campaign_plans():
+        plan = load_campaign_plan(name)
+        Acceptance.from_plan(plan.acceptance, name)
+        conditions = plan_conditions(plan)
+        assert len(conditions) == len(plan.drafts) * len(plan.angles_deg)
+        drafts = [c.draft for c in conditions]  # drafts grouped: each draft's conditions are contiguous
+        assert drafts == sorted(drafts, key=[c.draft for c in conditions].index)
+    assert load_campaign_plan("seed001-swath-roll").repeats == 3
+    with pytest.raises(ConfigError, match="no angle_tol"):
+        Acceptance.from_plan({"angle_tol": 1.0}, "plan x")
+
+
+class _Answers:
+    """An operator with scripted answers who walks away (Ctrl-C) when they run out."""
+
+    def __init__(self, *answers: str) -> None:
+        self.answers = list(answers)
+        self.asked: list[str] = []
+
+    def ask(self, question: Any) -> str:
+        self.asked.append(question.kind)
+        if not self.answers:
+            raise KeyboardInterrupt
+        return self.answers.pop(0)
+
+
+def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Path) -> None:
+    import dataclasses
+
+    from tankdaq.acquire.campaign_session import CampaignSession, SessionSettings
+    from tankdaq.config import load_campaign_plan
+
+    plan_file = tmp_path / "plan.toml"
+    plan_file.write_text(PLAN)
+    plan = load_campaign_plan(str(plan_file))
+    out = tmp_path / "out"
+    out.mkdir()
+    log = SessionLog(out)
+    log.append("plan", plan=dataclasses.asdict(plan), hull="swath", conditions=[])
+    log.append("start", resumed=False)
+    log.append("draft", draft="T", action="ready")
+    measured = dataclasses.asdict(_measured())
+    log.append("run", decay=1, draft="T", angle_deg=10.0, file="a.mcap", reasons=[], measured=measured)
+    # the power went before the operator answered
+    settings = SessionSettings(plan, "swath", {"port": "sim", "out_dir": out, "viewer": "none"})
+    operator = _Answers("n judged after the restart", "a")
+    with pytest.raises(KeyboardInterrupt):
+        CampaignSession(settings, operator, resume=True).run()
+    assert operator.asked == ["verdict", "verdict", "draft"]  # the verdict first, then the draft again
+    records = log.read()
+    kinds = [r["type"] for r in records]
+    assert kinds[-3:] == ["start", "note", "verdict"]
+    assert records[-1]["decay"] == 1 and records[-1]["verdict"] == "accepted"
+    assert records[-2]["text"] == "judged after the restart"
