@@ -88,9 +88,8 @@ class FailingView(LiveView):
 def _feed_recording(source: Path, out: Path, view: LiveView, on_event=None) -> DecaySession:
     """The source's raw bytes, re-decoded, through a session that writes into ``out``."""
     recording = read_recording(source)
-    session = DecaySession(
-        SessionSettings(angle_deg=8.0, out_dir=out, run_metadata={"hull": "swath"}), view, on_event=on_event
-    )
+    settings = SessionSettings(angle_deg=8.0, out_dir=out, run_metadata={"hull": "swath"}, wait_for_fits=True)
+    session = DecaySession(settings, view, on_event=on_event)  # fed from a file: each refit in its block
     decoder = SampleDecoder()
     for host_ns, raw in recording.raw_chunks:
         samples, _ = decoder.feed(raw, host_ns / 1e9)

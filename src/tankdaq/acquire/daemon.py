@@ -17,6 +17,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,10 +25,14 @@ from .. import validation
 from ..config import Hull, format_draft, load_hull
 from ..device.driver import MTiDriver
 from ..errors import DeviceGone, InputError, RecordingError
+from ..ident.online import prepare_identifier
 from ..store.disk import RESERVE_BYTES
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
+
+if TYPE_CHECKING:
+    from ..physics.scenario import DecayScenario
 
 #: Reads are spaced at least this far apart: blocks of a few samples instead of one, so the
 #: per-block work (decode, detect, write, view) is shared; 20 ms is invisible in a live view.
@@ -151,8 +156,8 @@ class RecordDaemon:
 
     # ---- the device ----------------------------------------
 
-    def _start_simulator(self) -> str:
-        from ..device.simulator import SimulatedMTi
+    def simulation_scenario(self) -> DecayScenario:
+        """What the built-in simulated sensor plays (deterministic: its runs are the truth)."""
         from ..physics.scenario import DecayScenario
 
         s = self.settings
@@ -168,14 +173,19 @@ class RecordDaemon:
             runs=(s.runs or 20) + 1,
             seed=s.sim_seed,
         )
-        scenario = dataclasses.replace(scenario, **s.sim_overrides)  # type: ignore[arg-type]
+        return dataclasses.replace(scenario, **s.sim_overrides)  # type: ignore[arg-type]
+
+    def _start_simulator(self) -> str:
+        from ..device.simulator import SimulatedMTi
+
+        s = self.settings
+        scenario = self.simulation_scenario()
         baud = s.baud or _sim_baud(s.rate_hz)
         self.simulator = SimulatedMTi(
             scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed, legacy=s.sim_legacy
         ).start()
-        self.on_event(
-            f"simulated MTi-G on {self.simulator.link} ({self.hull.name} {format_draft(s.draft)} {axis})"
-        )
+        label = f"{scenario.hull} {format_draft(s.draft)} {scenario.axis}"
+        self.on_event(f"simulated MTi-G on {self.simulator.link} ({label})")
         return self.simulator.link
 
     def _driver(self) -> MTiDriver:
@@ -236,6 +246,7 @@ class RecordDaemon:
     def run(self) -> list[DecayOutcome]:
         """Record until ``runs`` decays are done or stopped; returns what was recorded."""
         s = self.settings
+        prepare_identifier(s.model, self.on_event)  # before anything opens: no refit compiles mid-decay
         driver = self._driver()
         session: DecaySession | None = None
         try:

@@ -16,6 +16,7 @@ from pathlib import Path
 from ..device.decoding import SampleDecoder
 from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
+from ..ident.online import prepare_identifier
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
@@ -73,7 +74,9 @@ def replay_recording(
         model=model or str(meta.get("model_terms", "ittc-quadratic-restoring")),
         out_dir=None,
         rrd_base=path.with_name(path.stem + ".replay") if view.mode == "save" else None,  # spawn falls back
+        wait_for_fits=True,
     )
+    prepare_identifier(settings.model, on_event)
     session = DecaySession(settings, view, on_event=on_event)
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))

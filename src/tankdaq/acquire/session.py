@@ -5,7 +5,9 @@ blocks from the driver, replay feeds it blocks re-decoded from a file. For each
 block it runs release detection; at a confirmed release it opens a recording
 that starts a pre-trigger before the release (from its history of blocks),
 starts the online identifier, and a view; at settle it writes the final fit and
-metadata and closes the file.
+metadata and closes the file. The identifier refits on its own thread
+(``BackgroundFit``): a block only hands it samples, and finished refits are written
+from here, the one thread that touches the file.
 """
 
 from __future__ import annotations
@@ -22,12 +24,16 @@ import numpy as np
 from ..config import Hull
 from ..errors import RecordingError, TankdaqError
 from ..ident.models import resolve_model
-from ..ident.online import OnlineIdentifier, OnlineResult
+from ..ident.online import BackgroundFit, OnlineIdentifier, OnlineResult
 from ..samples import AXIS_FIELDS
 from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter
 from ..viz.live import LiveView
 from .release import ReleaseDetector, ReleaseEvent
+
+#: How long the final fit at settle may hold the loop (it normally takes well under 0.1 s once the
+#: kernels are prepared); past it the file is closed without it and says so.
+FINAL_FIT_WAIT_S = 5.0
 
 #: How much history (device seconds) is kept while waiting for a release: the pre-trigger plus
 #: the time the detector may need to confirm a release it dates back.
@@ -62,6 +68,9 @@ class SessionSettings:
     detector_settings: dict[str, float] = field(default_factory=dict)
     #: Metadata known only when a file closes (the driver's link counters), added to it then.
     closing_metadata: Callable[[], dict[str, object]] = dict
+    # replay: each block's refit is done before the next block (nothing is lost by waiting, and the
+    # refits are the same every time); live, the read loop never waits for a fit
+    wait_for_fits: bool = False
 
 
 @dataclass
@@ -91,10 +100,12 @@ class DecaySession:
         settings: SessionSettings,
         view: LiveView,
         on_event: Callable[[str], None] | None = None,
+        identifier: Callable[..., OnlineIdentifier] = OnlineIdentifier,
     ) -> None:
         self.settings = settings
         self.view = view
         self.on_event = on_event or (lambda _line: None)
+        self.make_identifier = identifier  # called as identifier(terms, axis=...) at each release
         self.terms = resolve_model(settings.model)
         axes = list(AXIS_FIELDS) if settings.axis == "auto" else [settings.axis]
         self._detectors = {axis: ReleaseDetector(axis=axis, **settings.detector_settings) for axis in axes}
@@ -274,7 +285,7 @@ class _ActiveDecay:
         self.writer: RecordingWriter | None = None
         self.path: Path | None = None
         self.rrd_path: Path | None = None
-        self.identifier = OnlineIdentifier(self.session.terms, axis=axis, callback=self._on_fit)
+        self.live_fit = BackgroundFit(session.make_identifier(session.terms, axis=axis))
 
     def _open(self) -> None:
         """Open the recording, then the view (its .rrd is named after the recording)."""
@@ -371,10 +382,18 @@ class _ActiveDecay:
             after = block.samples[block.samples["t"] >= self.release_t]
             if after.size:
                 angle_field, rate_field = AXIS_FIELDS[self.axis]
-                self.identifier.update(after["t"], after[angle_field], after[rate_field])
+                self.live_fit.submit(after["t"].copy(), after[angle_field].copy(), after[rate_field].copy())
+        if self.session.settings.wait_for_fits:
+            self.live_fit.wait_idle(FINAL_FIT_WAIT_S)
+        self._publish(self.live_fit.take())
 
     def idle(self) -> None:
         self._write(lambda writer: writer.maybe_flush())
+        self._publish(self.live_fit.take())
+
+    def _publish(self, results: list[OnlineResult]) -> None:
+        for result in results:
+            self._on_fit(result)
 
     def event(
         self, kind: str, message: str, t_s: float | None = None, data: Mapping[str, object] | None = None
@@ -431,16 +450,17 @@ class _ActiveDecay:
 
     def _final_fit(self) -> OnlineResult | None:
         try:
-            final = self.identifier.finish()
+            refits, final = self.live_fit.finish(FINAL_FIT_WAIT_S)
         except TankdaqError as exc:  # an unfittable decay (too short, cut by an unplug) is a warning
             self.warnings.append(f"no final fit: {exc}")
             self.event("warning", f"no final fit: {exc}")
             return None
-        self._on_fit(final)
+        self._publish([*refits, final])
         return final
 
     def close_after_error(self, exc: Exception) -> DecayOutcome:
         """Close the file with what arrived, saying why; no final fit (the error may be in it)."""
+        self.live_fit.close()
         message = f"recording closed after an error: {type(exc).__name__}: {exc}"
         self.warnings.append(message)
         try:

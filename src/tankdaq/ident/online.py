@@ -7,18 +7,27 @@ answer, so each refit costs a few Levenberg-Marquardt steps. Results go to a
 callback (the viewer, the recorder's /fit channel) and to ``results_``; a refit
 that fails (too little motion yet) is noted in ``failures_`` and skipped. At the
 end of the decay the last result is the offline OutputError fit of the same data.
+
+``BackgroundFit`` runs an identifier on a worker thread so that the acquisition
+loop only hands samples over: a refit (10-50 ms, more on a loaded machine) never
+holds up the reads. ``prepare_kernels`` compiles or loads the numba kernels before a
+device opens, so no refit pays for them during a decay.
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import IdentificationError
 from ..records import DecayRun
+from . import kernels
 from .output_error import OutputError
 from .signals import band_crossings, white_noise_level
 
@@ -162,3 +171,160 @@ class OnlineIdentifier:
         if self.callback is not None:
             self.callback(result)
         return result
+
+
+class BackgroundFit:
+    """An ``OnlineIdentifier`` run on its own thread: ``submit`` never waits, results come back by ``take``.
+
+    The caller (the read loop) hands over the samples after the release; the worker feeds
+    them to the identifier. While a refit runs, newer samples pile up and are given to the
+    identifier in one piece when it is done, so at most one refit is ever due, always on the
+    latest data (coalesced, never a queue of refits). Results wait in ``take`` for the
+    caller's thread, which alone writes them to the file and the view. ``finish`` waits, at
+    most ``timeout_s``, for the final fit on everything submitted.
+    """
+
+    def __init__(self, identifier: OnlineIdentifier) -> None:
+        self.identifier = identifier
+        self._wake = threading.Condition()
+        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []
+        self._busy = False  # the worker holds samples it has not finished with
+        self._results: list[OnlineResult] = []
+        self._finish_requested = False
+        self._closed = False
+        self._final: OnlineResult | None = None
+        self._error: BaseException | None = None
+        self._done = threading.Event()
+        # a daemon thread: a refit stuck past ``finish``'s bound must not keep the process alive
+        self._thread = threading.Thread(target=self._work, name="tankdaq-live-fit", daemon=True)
+        self._thread.start()
+
+    def submit(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray | None = None) -> None:
+        """Hand samples (rad, rad/s) to the worker; returns at once."""
+        with self._wake:
+            self._pending.append((t, angle, rate))
+            self._wake.notify_all()
+
+    def wait_idle(self, timeout_s: float) -> None:
+        """Wait (at most ``timeout_s``) until every sample submitted has been through the identifier.
+
+        For a caller that loses nothing by waiting (replay): the same refits every time.
+        """
+        with self._wake:
+            self._wake.wait_for(lambda: not (self._pending or self._busy) or self._done.is_set(), timeout_s)
+
+    def take(self) -> list[OnlineResult]:
+        """The refits finished since the last call; a failure of the worker is raised here."""
+        with self._wake:
+            results, self._results = self._results, []
+            error = self._error
+        if error is not None and not self._finish_requested:
+            raise error
+        return results
+
+    def finish(self, timeout_s: float) -> tuple[list[OnlineResult], OnlineResult]:
+        """Wait (at most ``timeout_s``) for the final fit; the refits not yet taken come with it.
+
+        Raises IdentificationError when the decay cannot be fitted or the fit does not finish
+        in time (the worker is then abandoned; the caller closes its file without a final fit).
+        """
+        with self._wake:
+            self._finish_requested = True
+            self._wake.notify_all()
+        if not self._done.wait(timeout_s):
+            self.close()
+            raise IdentificationError(
+                f"the final fit did not finish within {timeout_s:g} s; fit the file afterwards "
+                "(tankdaq identify)"
+            )
+        with self._wake:
+            results, self._results = self._results, []
+        if self._error is not None:
+            raise self._error
+        assert self._final is not None
+        return results, self._final
+
+    def close(self) -> None:
+        """Stop without a final fit (an aborted decay); a refit under way is left to end on its own."""
+        with self._wake:
+            self._closed = True
+            self._wake.notify_all()
+
+    def _work(self) -> None:
+        try:
+            while True:
+                with self._wake:
+                    while not (self._pending or self._finish_requested or self._closed):
+                        self._wake.wait()
+                    if self._closed:
+                        return
+                    pending, self._pending = self._pending, []
+                    finishing = self._finish_requested
+                    self._busy = True
+                if pending:
+                    self._update(pending)
+                with self._wake:
+                    self._busy = False
+                    self._wake.notify_all()
+                if finishing:
+                    self._final = self.identifier.finish()
+                    return
+        except BaseException as exc:  # handed to the caller's thread, where it is raised
+            with self._wake:
+                self._error = exc
+        finally:
+            self._done.set()
+            with self._wake:
+                self._wake.notify_all()
+
+    def _update(self, pending: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]) -> None:
+        rates = [rate for _, _, rate in pending]
+        result = self.identifier.update(
+            np.concatenate([t for t, _, _ in pending]),
+            np.concatenate([angle for _, angle, _ in pending]),
+            None if any(rate is None for rate in rates) else np.concatenate(rates),
+        )
+        if result is not None:
+            with self._wake:
+                self._results.append(result)
+
+
+def kernels_cached() -> bool:
+    """True when numba's on-disk cache already holds the fit's compiled kernels (not the first run)."""
+    dispatcher = kernels.simulate_with_sensitivities
+    try:  # numba keeps the index path in a private attribute; unknown means assume cached
+        index = dispatcher._cache._cache_file._index_path  # type: ignore[attr-defined]
+    except AttributeError:
+        return True
+    return Path(index).exists()
+
+
+def prepare_kernels(terms: str | Sequence[str] = "ittc-quadratic-restoring") -> None:
+    """Compile (first run) or load (later runs) every kernel a live fit uses, on a made-up decay.
+
+    Run before a device opens: the first refit of a decay would otherwise spend 10-40 s
+    compiling (0.6 s loading from the cache) wherever it runs.
+    """
+    t = np.arange(0.0, 12.0, 0.01)
+    omega, zeta = 2.0 * np.pi / 2.0, 0.05
+    envelope = 0.14 * np.exp(-zeta * omega * t)
+    angle = envelope * np.cos(omega * t)
+    rate = np.gradient(angle, t)
+    identifier = OnlineIdentifier(terms, min_half_cycles=2)
+    identifier.update(t[: t.size // 2], angle[: t.size // 2], rate[: t.size // 2])
+    identifier.update(t[t.size // 2 :], angle[t.size // 2 :], rate[t.size // 2 :])
+    with contextlib.suppress(
+        IdentificationError
+    ):  # a model this made-up decay does not suit: compiled anyway
+        identifier.finish()
+
+
+#: What compiling the kernels took on the 2-core benchmark machine, quiet to loaded (bench_live_fit.py).
+FIRST_RUN_S = "10–40"
+
+
+def prepare_identifier(terms: str | Sequence[str], on_event: Callable[[str], None] | None = None) -> None:
+    """``prepare_kernels``, saying so in one line when it means compiling (the first run after install)."""
+    if not kernels_cached() and on_event is not None:
+        on_event(f"preparing the identifier (first run after install; about {FIRST_RUN_S} s)")
+    prepare_kernels(terms)
