@@ -35,7 +35,9 @@ viewer-test-deps:
 	fi
 
 # One pytest worker per core: most of the suite's wall time is the simulated MTi-G streaming in real time.
+# The numba kernels are compiled first, in one process (see src/tankdaq/prepare.py).
 test: $(STAMP) lint viewer-test-deps
+	$(BIN)/python -m tankdaq.prepare
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal
 
 bench: $(STAMP)
