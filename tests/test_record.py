@@ -302,7 +302,9 @@ def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
         reader = make_reader(f)
         newest = max(m.log_time for _, c, m in reader.iter_messages(log_time_order=False))
         samples = sum(1 for _ in reader.iter_messages(topics=["/samples"]))
-        events = {json.loads(m.data)["kind"]: m.log_time for *_, m in reader.iter_messages(topics=["/events"])}
+        events = {
+            json.loads(m.data)["kind"]: m.log_time for *_, m in reader.iter_messages(topics=["/events"])
+        }
     assert "release" in events and samples > 0
     assert newest >= max(last for _, last in spans), "a flushed message was lost"
     # chunks that start before the release hold the pre-trigger history, written at once at the release
