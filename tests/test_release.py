@@ -102,6 +102,20 @@ def test_streaming_in_blocks_gives_the_same_events_as_offline() -> None:
     assert {e.kind for e in offline} >= {"held", "released", "settled"}
 
 
+def test_a_reset_detector_forgets_the_rate_it_learnt() -> None:
+    """A detector reused on 50 Hz data after 400 Hz data finds every release (it found 1 of 3)."""
+    detector = ReleaseDetector()
+    fast, _ = DecayScenario(runs=1, seed=3, rate_hz=400).samples()
+    detector.fit(fast)
+    assert detector.rate_hz is None and detector.rate_hz_ == pytest.approx(400)  # the setting is kept
+    slow, trace = DecayScenario(runs=3, seed=4, rate_hz=50).samples()
+    reused = [e for e in detector.fit(slow).events_ if e.kind == "released"]
+    fresh = [e for e in ReleaseDetector().fit(slow).events_ if e.kind == "released"]
+    assert detector.rate_hz_ == pytest.approx(50)
+    assert [e.index for e in reused] == [e.index for e in fresh]
+    assert len(reused) == sum(r.kind == "release" for r in trace.runs)
+
+
 @pytest.mark.parametrize("rate_hz", [100, 400])
 def test_no_false_release_in_an_hour_of_still_water_and_handling(rate_hz: float) -> None:
     """An hour of tilting, holding with tremor and putting back by hand, never letting go."""

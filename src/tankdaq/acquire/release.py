@@ -134,6 +134,7 @@ class ReleaseDetector:
     def reset(self) -> ReleaseDetector:
         """Forget everything fed so far."""
         self.state_ = UNKNOWN
+        self.rate_hz_: float | None = self.rate_hz  # as given, or learnt from the samples fed
         self.events_: list[ReleaseEvent] = []
         self.baseline_rad_: float = math.nan
         self.samples_seen_ = 0
@@ -176,9 +177,9 @@ class ReleaseDetector:
         self._x = np.concatenate((self._x, angle))
         self._r = np.concatenate((self._r, rate))
         self.samples_seen_ += t.size
-        if self.rate_hz is None and self._t.size > 10:
-            self.rate_hz = float(1.0 / np.median(np.diff(self._t)))
-        if self.rate_hz is None:
+        if self.rate_hz_ is None and self._t.size > 10:
+            self.rate_hz_ = float(1.0 / np.median(np.diff(self._t)))
+        if self.rate_hz_ is None:
             return
         steps: dict[str, Callable[[], bool]] = {
             UNKNOWN: self._step_unknown,
@@ -216,7 +217,7 @@ class ReleaseDetector:
     # ---- derived signals over the buffer ----------------------------------------
 
     def _n(self, seconds: float) -> int:
-        return max(1, round(seconds * float(self.rate_hz or 1.0)))
+        return max(1, round(seconds * float(self.rate_hz_ or 1.0)))
 
     def _derive(self) -> None:
         self._smooth = _trailing_mean(self._r, self._n(self.smooth_s))
@@ -400,7 +401,7 @@ class ReleaseDetector:
         full, symmetric = (_DecayFit(self._t[window], self._x[window], self._r[window], leave - lo,
                                      rest_rad=self.baseline_rad_, asymmetric=asymmetric)
                            for asymmetric in (True, False))  # fmt: skip
-        dt = 1.0 / float(self.rate_hz or 1.0)
+        dt = 1.0 / float(self.rate_hz_ or 1.0)
         earliest = float(self._t[lo + 2])
         first = max(lo + 2, leave - self._n(self.scan_back_s))
         tau = min((float(self._t[k]) for k in range(first, leave + 1, self._n(0.01))), key=full.sse)
