@@ -280,12 +280,11 @@ def _scan_general(
     while True:
         c.ok[to_check] = _checksums_ok(buf, c_starts[to_check], c_totals[to_check])
         c.checked[to_check] = True
-        chosen, resyncs = _follow_chain(c, sync)
-        refused = _verify_sizes(buf, c, resyncs[~c.verified[resyncs]], layouts)
+        chosen = _follow_chain(c, sync, lambda suspects: _verify_sizes(buf, c, suspects, layouts))
         starts, chosen_ends = c_starts[chosen], c_starts[chosen] + c_totals[chosen]
         unchecked = np.flatnonzero(~c.checked)
         to_check = unchecked[~_covered(starts, chosen_ends, c_starts[unchecked])]
-        if to_check.size or refused:
+        if to_check.size:
             continue
         consumed, suspect = _first_stop(buf, cand[incomplete], c, chosen, sync)
         if suspect < 0 or not _verify_sizes(buf, c, np.array([suspect]), layouts):
@@ -368,21 +367,22 @@ def _well_formed(
     return ok
 
 
-def _follow_chain(c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.ndarray]:
-    """(candidates the sequential framer accepts, those of them it accepts as resyncs).
+def _follow_chain(c: _Candidates, sync: bytes | None, verify: Callable[[np.ndarray], bool]) -> np.ndarray:
+    """The candidates the sequential framer accepts.
 
     After an accepted frame the next one is the valid candidate starting exactly at its end if
     that is accepted in sync (``_accepts``), else the first confirmed resync after it. Where that
     is simply the next valid candidate the chain is followed in bulk; only the "breaks" are
-    walked one by one.
+    walked one by one. Every candidate that may be taken as a resync (the first confirmed one
+    after each break, few) has its payload sizes verified (``verify``) before the walk, so the
+    chain is followed once.
     """
     valid = np.flatnonzero(c.ok)
     count = valid.size
     if not count:
-        return valid, valid
+        return valid
     v_starts = c.starts[valid]
     v_ends = v_starts + c.totals[valid]
-    strong = np.flatnonzero(c.bid_ok[valid] & c.follows[valid] & c.sizes_ok[valid])  # positions in ``valid``
     # the valid candidate starting where each ends: usually simply the next one
     after = np.arange(1, count + 1)
     has_next = np.zeros(count, dtype=bool)
@@ -395,16 +395,21 @@ def _follow_chain(c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.nd
     in_sync_next[followers] = _accepts(c, valid[after[followers]], valid[followers], sync, wait=False)
     following = np.where(in_sync_next, after, count)
     rest = np.flatnonzero(~in_sync_next)
-    if strong.size and rest.size:  # no frame accepted in sync there: the first confirmed resync after it
-        resync_next = strong[np.minimum(np.searchsorted(v_starts[strong], v_ends[rest]), strong.size - 1)]
-        found = v_starts[resync_next] >= v_ends[rest]
-        following[rest[found]] = resync_next[found]
     starts_sync = sync is not None and v_starts[0] == 0
-    if starts_sync and _accepts(c, valid[:1], np.array([-1]), sync, wait=False)[0]:
-        first = 0
-    else:  # the first resync (after byte 0 when the candidate there was met in sync and refused)
-        at = int(np.searchsorted(v_starts[strong], 1 if starts_sync else 0))
-        first = int(strong[at]) if at < strong.size else count
+    first_in_sync = starts_sync and bool(_accepts(c, valid[:1], np.array([-1]), sync, wait=False)[0])
+    resync_from = v_ends[rest]
+    if not first_in_sync:  # the first resync (after byte 0 when the candidate there was met in sync and refused)
+        resync_from = np.append(resync_from, 1 if starts_sync else 0)
+    strong = np.flatnonzero(c.bid_ok[valid] & c.follows[valid])  # positions in ``valid``
+    while True:  # the first confirmed resync after each break, until all of them pass the sizes check
+        strong = strong[c.sizes_ok[valid[strong]]]
+        at = np.searchsorted(v_starts[strong], resync_from)
+        resync_next = np.append(strong, count)[at]  # ``count``: none left
+        taken_as_resync = valid[np.unique(resync_next[resync_next < count])]
+        if not verify(taken_as_resync[~c.verified[taken_as_resync]]):
+            break
+    following[rest] = resync_next[: rest.size]
+    first = 0 if first_in_sync else int(resync_next[-1])
     breaks = np.flatnonzero(following != np.arange(1, count + 1))
     marks = np.zeros(count + 1, dtype=np.int64)
     k = first
@@ -417,9 +422,7 @@ def _follow_chain(c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.nd
         marks[k] += 1
         marks[breaks[at] + 1] -= 1
         k = int(following[breaks[at]])
-    taken = np.flatnonzero(np.cumsum(marks[:-1]) > 0)
-    previous_end = np.concatenate(([0 if sync is not None else -1], v_ends[taken[:-1]]))
-    return valid[taken], valid[taken[v_starts[taken] != previous_end]]
+    return valid[np.flatnonzero(np.cumsum(marks[:-1]) > 0)]
 
 
 def _first_stop(
