@@ -292,7 +292,10 @@ def _scan_general(
 
     keep = starts < consumed
     chosen, starts, chosen_ends = chosen[keep], starts[keep], chosen_ends[keep]
-    looked_at = ~_covered(starts, chosen_ends, c_starts) & (c_starts < consumed)
+    looked_at = c.checked.copy()  # unchecked candidates count for nothing; accepted ones are covered
+    looked_at[chosen] = False
+    at = np.flatnonzero(looked_at)
+    looked_at[at] = ~_covered(starts, chosen_ends, c_starts[at]) & (c_starts[at] < consumed)
     if chosen.size and consumed == chosen_ends[-1]:
         last_header = buf[starts[-1] : starts[-1] + c.header_sizes[chosen[-1]]].tobytes()
         sync = last_header
@@ -318,15 +321,12 @@ def _sync_key(sync: bytes | None) -> int:
     return (int.from_bytes(sync[1:4], "big") << 16) | total
 
 
-def _accepts(
-    c: _Candidates, k: np.ndarray, previous: np.ndarray, sync: bytes | None, wait: bool
-) -> np.ndarray:
-    """Whether in-sync candidates ``k`` (after chosen ``previous``; -1: after the sync state's header) are
-    accepted (``wait``: are waited for) once their checksum holds: trusted with the previous
-    header, or a bus id a resync may land on; and confirmed by a successor (or waiting for one)."""
-    previous_keys = np.where(previous >= 0, c.keys[np.maximum(previous, 0)], _sync_key(sync))
-    same = c.keys[k] == previous_keys
-    return (same | c.bid_ok[k]) & (c.waits[k] if wait else c.follows[k])
+def _accepts(c: _Candidates, k: int, previous_key: int, wait: bool) -> bool:
+    """Whether in-sync candidate ``k`` (after a header with key ``previous_key``) is accepted (``wait``:
+    is waited for) once its checksum holds: trusted with the previous header, or a bus id a
+    resync may land on; and confirmed by a successor (or waiting for one). ``_follow_chain``
+    applies the same rule to all candidates at once."""
+    return bool((c.keys[k] == previous_key or c.bid_ok[k]) and (c.waits[k] if wait else c.follows[k]))
 
 
 def _verify_sizes(buf: np.ndarray, c: _Candidates, suspects: np.ndarray, layouts: LayoutCache) -> bool:
@@ -390,22 +390,26 @@ def _follow_chain(c: _Candidates, sync: bytes | None, verify: Callable[[np.ndarr
     odd = np.flatnonzero(~has_next)
     after[odd] = np.searchsorted(v_starts, v_ends[odd])
     has_next[odd] = (after[odd] < count) & (v_starts[np.minimum(after[odd], count - 1)] == v_ends[odd])
-    in_sync_next = np.zeros(count, dtype=bool)
-    followers = np.flatnonzero(has_next)
-    in_sync_next[followers] = _accepts(c, valid[after[followers]], valid[followers], sync, wait=False)
+    # ``_accepts`` for every candidate that has a successor, in bulk
+    v_keys, v_follows = c.keys[valid], c.follows[valid]
+    v_strong = c.bid_ok[valid] & v_follows  # a resync may land there (payload sizes aside)
+    successor = np.minimum(after, count - 1)
+    in_sync_next = has_next & (((v_keys[successor] == v_keys) & v_follows[successor]) | v_strong[successor])
     following = np.where(in_sync_next, after, count)
     rest = np.flatnonzero(~in_sync_next)
     starts_sync = sync is not None and v_starts[0] == 0
-    first_in_sync = starts_sync and bool(_accepts(c, valid[:1], np.array([-1]), sync, wait=False)[0])
+    first_in_sync = starts_sync and _accepts(c, int(valid[0]), _sync_key(sync), wait=False)
     resync_from = v_ends[rest]
     if not first_in_sync:  # the first resync (after byte 0 when the candidate there was met in sync and refused)
         resync_from = np.append(resync_from, 1 if starts_sync else 0)
-    strong = np.flatnonzero(c.bid_ok[valid] & c.follows[valid])  # positions in ``valid``
+    strong = np.flatnonzero(v_strong)  # positions in ``valid``
     while True:  # the first confirmed resync after each break, until all of them pass the sizes check
         strong = strong[c.sizes_ok[valid[strong]]]
         at = np.searchsorted(v_starts[strong], resync_from)
         resync_next = np.append(strong, count)[at]  # ``count``: none left
-        taken_as_resync = valid[np.unique(resync_next[resync_next < count])]
+        marked = np.zeros(count + 1, dtype=bool)
+        marked[resync_next] = True
+        taken_as_resync = valid[np.flatnonzero(marked[:-1])]
         if not verify(taken_as_resync[~c.verified[taken_as_resync]]):
             break
     following[rest] = resync_next[: rest.size]
@@ -441,8 +445,8 @@ def _first_stop(
         position = int(c.starts[k])
         previous = chosen[np.flatnonzero(ends == position)]
         if previous.size or (position == 0 and sync is not None):
-            before = np.array([previous[0] if previous.size else -1])
-            if _accepts(c, np.array([k]), before, sync, wait=True)[0]:
+            before = int(c.keys[previous[0]]) if previous.size else _sync_key(sync)
+            if _accepts(c, k, before, wait=True):
                 return position, -1
         elif c.bid_ok[k] and c.sizes_ok[k]:
             return position, (-1 if c.verified[k] else k)
