@@ -344,24 +344,24 @@ def _well_formed(
     buf: np.ndarray, payload_starts: np.ndarray, lengths: np.ndarray, layouts: LayoutCache
 ) -> np.ndarray:
     """``payload_well_formed`` of many MTData2 payloads: one walk per item layout, not per payload
-    (a payload with a layout already known, same length and item headers, walks the same way)."""
+    (a payload with a layout already known, same length and item headers, walks the same way);
+    only the item header bytes are read."""
     ok = np.zeros(lengths.size, dtype=bool)
-    for length in np.unique(lengths).tolist():
+    for length in np.flatnonzero(np.bincount(lengths)).tolist():
         members = np.flatnonzero(lengths == length)
-        rows = _payload_rows(buf, payload_starts[members], length)
+        starts = payload_starts[members]
+        known = list(layouts.by_length.get(length, []))
         left = np.arange(members.size)
-        for known in layouts.by_length.get(length, []):
-            if not left.size:
-                break
-            same = known.matches(rows[left])
-            ok[members[left[same]]] = True
-            left = left[~same]
         while left.size:
-            first = rows[left[0]].tobytes()
-            if not payload_well_formed(first):
-                left = left[1:]
-                continue
-            same = learn_layout(first).matches(rows[left])  # same length and item headers: same walk
+            if known:
+                layout = known.pop(0)
+            else:
+                first = buf[starts[left[0]] : starts[left[0]] + length].tobytes()
+                if not payload_well_formed(first):
+                    left = left[1:]
+                    continue
+                layout = learn_layout(first)
+            same = layout.matches_at(buf, starts[left])  # same length and item headers: same walk
             ok[members[left[same]]] = True
             left = left[~same]
     return ok
@@ -502,6 +502,12 @@ class Layout:
     dtype: np.dtype  # structured view of the known items' data
     fields: tuple[Field, ...]
     unknown: int
+
+    def matches_at(self, buf: np.ndarray, payload_starts: np.ndarray) -> np.ndarray:
+        """``matches`` for the payloads of this layout's length starting at ``payload_starts`` in ``buf``."""
+        if not self.header_values:
+            return np.ones(payload_starts.size, dtype=bool)
+        return (buf[payload_starts[:, None] + self.header_offsets] == self.header_bytes).all(axis=1)
 
     def matches(self, payloads: np.ndarray) -> np.ndarray:
         """Rows of ``payloads`` (rows, length) with exactly this layout.
