@@ -65,6 +65,8 @@ RUNNING_SUM_LIMIT = 1 << 18
 FEW_ROWS = 4096
 #: Up to this many payload bytes, payload rows are gathered with an index matrix.
 SMALL_GATHER = 1 << 16
+#: A frame length held by at least 1/COMMON_LENGTH of the candidates is checked first (real frames).
+COMMON_LENGTH = 256
 #: Rows of a regular run checked before the whole buffer is (a mixed stream breaks off early).
 PROBE_ROWS = 64
 
@@ -270,13 +272,20 @@ def _scan_general(
                     np.flatnonzero(waits), bid_ok, np.ones(size, bool), mid != MTDATA2)  # fmt: skip
 
     # Checksums are needed only where the sequential framer looks: at candidates no accepted
-    # frame covers. Check the most common length first (the real frames), follow the chain,
-    # then check whatever it leaves uncovered, until nothing unchecked is left uncovered.
-    # Payload sizes are verified the same way: only for the resyncs the framer meets.
+    # frame covers. Check the common lengths first (the real frames: false candidates spread
+    # over all lengths, so no length holds 1/256 of them), then the candidates no valid frame
+    # of those covers (in gaps), follow the chain, then check whatever it leaves uncovered,
+    # until nothing unchecked is left uncovered: one pass, nearly always. Payload sizes are
+    # verified with the chain: only for the candidates it may take as resyncs.
     if n <= RUNNING_SUM_LIMIT or not c_totals.size:
         to_check = np.arange(size)
     else:
-        to_check = np.flatnonzero(c_totals == np.bincount(c_totals).argmax())
+        common = np.flatnonzero(np.bincount(c_totals)[c_totals] * COMMON_LENGTH >= size)
+        c.ok[common] = _checksums_ok(buf, c_starts[common], c_totals[common])
+        c.checked[common] = True
+        valid = common[c.ok[common] & c.follows[common]]
+        unchecked = np.flatnonzero(~c.checked)
+        to_check = unchecked[~_covered(c_starts[valid], ends[valid], c_starts[unchecked])]
     while True:
         c.ok[to_check] = _checksums_ok(buf, c_starts[to_check], c_totals[to_check])
         c.checked[to_check] = True
@@ -403,15 +412,18 @@ def _follow_chain(c: _Candidates, sync: bytes | None, verify: Callable[[np.ndarr
     if not first_in_sync:  # the first resync (after byte 0 when the candidate there was met in sync and refused)
         resync_from = np.append(resync_from, 1 if starts_sync else 0)
     strong = np.flatnonzero(v_strong)  # positions in ``valid``
+    strong_starts, strong_or_none = v_starts[strong], np.append(strong, count)  # ``count``: none left
+    resync_next = strong_or_none[np.searchsorted(strong_starts, resync_from)]
+    moved = np.arange(resync_next.size)
     while True:  # the first confirmed resync after each break, until all of them pass the sizes check
-        strong = strong[c.sizes_ok[valid[strong]]]
-        at = np.searchsorted(v_starts[strong], resync_from)
-        resync_next = np.append(strong, count)[at]  # ``count``: none left
         marked = np.zeros(count + 1, dtype=bool)
-        marked[resync_next] = True
+        marked[resync_next[moved]] = True
         taken_as_resync = valid[np.flatnonzero(marked[:-1])]
-        if not verify(taken_as_resync[~c.verified[taken_as_resync]]):
+        verify(taken_as_resync[~c.verified[taken_as_resync]])
+        moved = np.flatnonzero(~c.sizes_ok[np.append(valid, 0)[resync_next]] & (resync_next < count))
+        if not moved.size:
             break
+        resync_next[moved] = strong_or_none[np.searchsorted(strong_starts, v_starts[resync_next[moved]], "right")]
     following[rest] = resync_next[: rest.size]
     first = 0 if first_in_sync else int(resync_next[-1])
     breaks = np.flatnonzero(following != np.arange(1, count + 1))
