@@ -65,8 +65,6 @@ RUNNING_SUM_LIMIT = 1 << 18
 FEW_ROWS = 4096
 #: Up to this many payload bytes, payload rows are gathered with an index matrix.
 SMALL_GATHER = 1 << 16
-#: A frame length held by at least 1/COMMON_LENGTH of the candidates is checked first (real frames).
-COMMON_LENGTH = 256
 #: Rows of a regular run checked before the whole buffer is (a mixed stream breaks off early).
 PROBE_ROWS = 64
 
@@ -272,15 +270,15 @@ def _scan_general(
                     np.flatnonzero(waits), bid_ok, np.ones(size, bool), mid != MTDATA2)  # fmt: skip
 
     # Checksums are needed only where the sequential framer looks: at candidates no accepted
-    # frame covers. Check the common lengths first (the real frames: false candidates spread
-    # over all lengths, so no length holds 1/256 of them), then the candidates no valid frame
-    # of those covers (in gaps), follow the chain, then check whatever it leaves uncovered,
-    # until nothing unchecked is left uncovered: one pass, nearly always. Payload sizes are
+    # frame covers. Check the most common length first (the real frames), then the candidates
+    # no valid frame of that length covers (other frame shapes, gaps), follow the chain, then
+    # check whatever it leaves uncovered, until nothing unchecked is left uncovered: one pass,
+    # nearly always. Payload sizes are
     # verified with the chain: only for the candidates it may take as resyncs.
     if n <= RUNNING_SUM_LIMIT or not c_totals.size:
         to_check = np.arange(size)
     else:
-        common = np.flatnonzero(np.bincount(c_totals)[c_totals] * COMMON_LENGTH >= size)
+        common = np.flatnonzero(c_totals == np.bincount(c_totals).argmax())
         c.ok[common] = _checksums_ok(buf, c_starts[common], c_totals[common])
         c.checked[common] = True
         valid = common[c.ok[common] & c.follows[common]]
