@@ -215,7 +215,7 @@ class _Candidates:
     starts: np.ndarray
     totals: np.ndarray
     header_sizes: np.ndarray
-    keys: np.ndarray  # BID, MID, length byte and frame length in one number: equal keys, equal headers
+    keys: np.ndarray  # BID, MID, header size and frame length in one number: equal keys, equal headers
     checked: np.ndarray  # checksum computed
     ok: np.ndarray  # checksum holds
     follows: np.ndarray  # the next frame starts right after it (or the capture ends there)
@@ -247,26 +247,29 @@ def _scan_general(
     complete_at = np.flatnonzero(complete)
     c_starts, c_totals = cand[complete_at], total[complete_at]
     ends = c_starts + c_totals
-    # FA BID MID LEN of every complete candidate as one big-endian word (a complete frame has >= 5 bytes)
-    words = np.ndarray((max(n - 3, 0),), dtype=">u4", buffer=buf, strides=(1,))[c_starts].astype(np.int64)
-    bid, mid = words >> 16 & 0xFF, words >> 8 & 0xFF
-    follows = (ends < n) & (buf[np.minimum(ends, last)] == PREAMBLE)
+    c_headers = header_size[complete_at]
+    # BID and MID of every complete candidate as one big-endian 16-bit word (a complete frame has >= 5 bytes)
+    ids = np.ndarray((max(n - 2, 0),), dtype=">u2", buffer=buf[1:], strides=(1,))[c_starts]
+    bid, mid = ids >> 8, ids & 0xFF
+    follows = buf.take(ends, mode="clip") == PREAMBLE
+    if n and buf[last] == PREAMBLE:  # the clipped reads at the end of the buffer
+        follows &= ends < n
     waits = np.zeros(follows.size, dtype=bool)
     other = np.flatnonzero(~follows)  # few: the byte after a frame is nearly always the next preamble
     if other.size:
         after = ends[other]
         have_ids = after + 3 <= n
-        repeated = have_ids & (buf[np.minimum(after + 1, last)] == bid[other])
-        repeated &= buf[np.minimum(after + 2, last)] == mid[other]
+        repeated = have_ids & (buf.take(after + 1, mode="clip") == bid[other])
+        repeated &= buf.take(after + 2, mode="clip") == mid[other]
         follows[other] = repeated | (~have_ids & final)
         waits[other] = ~have_ids & (not final)
     size = complete_at.size
     bid_ok = np.zeros(size, dtype=bool)
     for resync_bid in RESYNC_BIDS:
         bid_ok |= bid == resync_bid
-    keys = (words & 0xFFFFFF) << 16 | c_totals
+    keys = ids.astype(np.int64) << 20 | c_headers << 17 | c_totals
     no = np.zeros(size, dtype=bool)
-    c = _Candidates(c_starts, c_totals, header_size[complete_at], keys, no, no.copy(), follows, waits,
+    c = _Candidates(c_starts, c_totals, c_headers, keys, no, no.copy(), follows, waits,
                     np.flatnonzero(waits), bid_ok, np.ones(size, bool), mid != MTDATA2)  # fmt: skip
 
     # Checksums are needed only where the sequential framer looks: at candidates no accepted
@@ -325,7 +328,7 @@ def _sync_key(sync: bytes | None) -> int:
     total = frame_length(sync) if sync else None
     if total is None:
         return -1
-    return (int.from_bytes(sync[1:4], "big") << 16) | total
+    return int.from_bytes(sync[1:3], "big") << 20 | len(sync) << 17 | total
 
 
 def _accepts(c: _Candidates, k: int, previous_key: int, wait: bool) -> bool:
