@@ -233,7 +233,13 @@ def _scan_general(
     n = buf.size
     cand = np.flatnonzero(buf == PREAMBLE)
     last = max(n - 1, 0)
-    length = buf[np.minimum(cand + 3, last)].astype(np.int64)  # clipped reads are caught by have_header
+    # FA BID MID LEN of every candidate as one big-endian word, read once (clipped reads at the end
+    # are caught by ``incomplete``: a complete frame has at least 5 bytes)
+    words = np.ndarray((max(n - 3, 0),), dtype=">u4", buffer=buf, strides=(1,))
+    head = np.zeros(cand.size, np.int64)
+    if words.size:
+        head = words[np.minimum(cand, words.size - 1)].astype(np.int64)
+    length = head & 0xFF
     extended = length == EXTENDED_LENGTH
     if extended.any():
         at = cand[extended]
@@ -248,26 +254,28 @@ def _scan_general(
     c_starts, c_totals = cand[complete_at], total[complete_at]
     ends = c_starts + c_totals
     c_headers = header_size[complete_at]
-    # BID and MID of every complete candidate as one big-endian 16-bit word (a complete frame has >= 5 bytes)
-    ids = np.ndarray((max(n - 2, 0),), dtype=">u2", buffer=buf[1:], strides=(1,))[c_starts]
+    ids = head[complete_at] >> 8 & 0xFFFF  # BID, MID
     bid, mid = ids >> 8, ids & 0xFF
-    follows = buf.take(ends, mode="clip") == PREAMBLE
+    follows = np.zeros(ends.size, dtype=bool)  # the byte after each is a preamble: usually the next one's
+    follows[:-1] = ends[:-1] == c_starts[1:]
+    elsewhere = np.flatnonzero(~follows)
+    follows[elsewhere] = buf[np.minimum(ends[elsewhere], last)] == PREAMBLE
     if n and buf[last] == PREAMBLE:  # the clipped reads at the end of the buffer
-        follows &= ends < n
+        follows[elsewhere] &= ends[elsewhere] < n
     waits = np.zeros(follows.size, dtype=bool)
     other = np.flatnonzero(~follows)  # few: the byte after a frame is nearly always the next preamble
     if other.size:
         after = ends[other]
         have_ids = after + 3 <= n
-        repeated = have_ids & (buf.take(after + 1, mode="clip") == bid[other])
-        repeated &= buf.take(after + 2, mode="clip") == mid[other]
+        repeated = have_ids & (buf[np.minimum(after + 1, last)] == bid[other])
+        repeated &= buf[np.minimum(after + 2, last)] == mid[other]
         follows[other] = repeated | (~have_ids & final)
         waits[other] = ~have_ids & (not final)
     size = complete_at.size
     bid_ok = np.zeros(size, dtype=bool)
     for resync_bid in RESYNC_BIDS:
         bid_ok |= bid == resync_bid
-    keys = ids.astype(np.int64) << 20 | c_headers << 17 | c_totals
+    keys = ids << 20 | c_headers << 17 | c_totals
     no = np.zeros(size, dtype=bool)
     c = _Candidates(c_starts, c_totals, c_headers, keys, no, no.copy(), follows, waits,
                     np.flatnonzero(waits), bid_ok, np.ones(size, bool), mid != MTDATA2)  # fmt: skip
@@ -410,7 +418,7 @@ def _follow_chain(c: _Candidates, sync: bytes | None, verify: Callable[[np.ndarr
     starts_sync = sync is not None and v_starts[0] == 0
     first_in_sync = starts_sync and _accepts(c, int(valid[0]), _sync_key(sync), wait=False)
     resync_from = v_ends[rest]
-    if not first_in_sync:  # the first resync (after byte 0 when the candidate there was met in sync and refused)
+    if not first_in_sync:  # the first resync (after byte 0 if the candidate there was met in sync, refused)
         resync_from = np.append(resync_from, 1 if starts_sync else 0)
     strong = np.flatnonzero(v_strong)  # positions in ``valid``
     strong_starts, strong_or_none = v_starts[strong], np.append(strong, count)  # ``count``: none left
@@ -424,7 +432,8 @@ def _follow_chain(c: _Candidates, sync: bytes | None, verify: Callable[[np.ndarr
         moved = np.flatnonzero(~c.sizes_ok[np.append(valid, 0)[resync_next]] & (resync_next < count))
         if not moved.size:
             break
-        resync_next[moved] = strong_or_none[np.searchsorted(strong_starts, v_starts[resync_next[moved]], "right")]
+        refused_at = v_starts[resync_next[moved]]
+        resync_next[moved] = strong_or_none[np.searchsorted(strong_starts, refused_at, "right")]
     following[rest] = resync_next[: rest.size]
     first = 0 if first_in_sync else int(resync_next[-1])
     breaks = np.flatnonzero(following != np.arange(1, count + 1))
