@@ -408,11 +408,16 @@ def _follow_chain(c: _Candidates, sync: bytes | None, verify: Callable[[np.ndarr
     odd = np.flatnonzero(~has_next)
     after[odd] = np.searchsorted(v_starts, v_ends[odd])
     has_next[odd] = (after[odd] < count) & (v_starts[np.minimum(after[odd], count - 1)] == v_ends[odd])
-    # ``_accepts`` for every candidate that has a successor, in bulk
+    # ``_accepts`` for every candidate that has a successor, in bulk (the successor is nearly always
+    # the next valid candidate: shifted arrays, read again only where it is not)
     v_keys, v_follows = c.keys[valid], c.follows[valid]
     v_strong = c.bid_ok[valid] & v_follows  # a resync may land there (payload sizes aside)
-    successor = np.minimum(after, count - 1)
-    in_sync_next = has_next & (((v_keys[successor] == v_keys) & v_follows[successor]) | v_strong[successor])
+    same, next_follows, next_strong = np.zeros(count, bool), np.zeros(count, bool), np.zeros(count, bool)
+    same[:-1], next_follows[:-1], next_strong[:-1] = v_keys[1:] == v_keys[:-1], v_follows[1:], v_strong[1:]
+    jumps = odd[has_next[odd]]
+    same[jumps] = v_keys[after[jumps]] == v_keys[jumps]
+    next_follows[jumps], next_strong[jumps] = v_follows[after[jumps]], v_strong[after[jumps]]
+    in_sync_next = has_next & ((same & next_follows) | next_strong)
     following = np.where(in_sync_next, after, count)
     rest = np.flatnonzero(~in_sync_next)
     starts_sync = sync is not None and v_starts[0] == 0
@@ -429,7 +434,8 @@ def _follow_chain(c: _Candidates, sync: bytes | None, verify: Callable[[np.ndarr
         marked[resync_next[moved]] = True
         taken_as_resync = valid[np.flatnonzero(marked[:-1])]
         verify(taken_as_resync[~c.verified[taken_as_resync]])
-        moved = np.flatnonzero(~c.sizes_ok[np.append(valid, 0)[resync_next]] & (resync_next < count))
+        taken = valid[np.minimum(resync_next, count - 1)]
+        moved = np.flatnonzero(~c.sizes_ok[taken] & (resync_next < count))
         if not moved.size:
             break
         refused_at = v_starts[resync_next[moved]]
