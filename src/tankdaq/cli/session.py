@@ -23,6 +23,7 @@ HELP = """Run a test session from a campaign PLAN, condition by condition, with 
 
 PLAN is a name in configs/campaigns or a .toml file:
 
+\b
   hulls = ["swath"]            # the hulls this matrix covers (--hull picks one)
   axis = "roll"
   drafts = ["T", "1.1T"]       # run in this order, all angles of a draft together
