@@ -215,7 +215,7 @@ class _Candidates:
     starts: np.ndarray
     totals: np.ndarray
     header_sizes: np.ndarray
-    keys: np.ndarray  # BID, MID, length byte and frame length in one number: equal keys, equal headers
+    keys: np.ndarray  # BID, MID, header size and frame length in one number: equal keys, equal headers
     checked: np.ndarray  # checksum computed
     ok: np.ndarray  # checksum holds
     follows: np.ndarray  # the next frame starts right after it (or the capture ends there)
@@ -233,7 +233,13 @@ def _scan_general(
     n = buf.size
     cand = np.flatnonzero(buf == PREAMBLE)
     last = max(n - 1, 0)
-    length = buf[np.minimum(cand + 3, last)].astype(np.int64)  # clipped reads are caught by have_header
+    # FA BID MID LEN of every candidate as one big-endian word, read once (clipped reads at the end
+    # are caught by ``incomplete``: a complete frame has at least 5 bytes)
+    words = np.ndarray((max(n - 3, 0),), dtype=">u4", buffer=buf, strides=(1,))
+    head = np.zeros(cand.size, np.int64)
+    if words.size:
+        head = words[np.minimum(cand, words.size - 1)].astype(np.int64)
+    length = head & 0xFF
     extended = length == EXTENDED_LENGTH
     if extended.any():
         at = cand[extended]
@@ -247,10 +253,15 @@ def _scan_general(
     complete_at = np.flatnonzero(complete)
     c_starts, c_totals = cand[complete_at], total[complete_at]
     ends = c_starts + c_totals
-    # FA BID MID LEN of every complete candidate as one big-endian word (a complete frame has >= 5 bytes)
-    words = np.ndarray((max(n - 3, 0),), dtype=">u4", buffer=buf, strides=(1,))[c_starts].astype(np.int64)
-    bid, mid = words >> 16 & 0xFF, words >> 8 & 0xFF
-    follows = (ends < n) & (buf[np.minimum(ends, last)] == PREAMBLE)
+    c_headers = header_size[complete_at]
+    ids = head[complete_at] >> 8 & 0xFFFF  # BID, MID
+    bid, mid = ids >> 8, ids & 0xFF
+    follows = np.zeros(ends.size, dtype=bool)  # the byte after each is a preamble: usually the next one's
+    follows[:-1] = ends[:-1] == c_starts[1:]
+    elsewhere = np.flatnonzero(~follows)
+    follows[elsewhere] = buf[np.minimum(ends[elsewhere], last)] == PREAMBLE
+    if n and buf[last] == PREAMBLE:  # the clipped reads at the end of the buffer
+        follows[elsewhere] &= ends[elsewhere] < n
     waits = np.zeros(follows.size, dtype=bool)
     other = np.flatnonzero(~follows)  # few: the byte after a frame is nearly always the next preamble
     if other.size:
@@ -264,28 +275,34 @@ def _scan_general(
     bid_ok = np.zeros(size, dtype=bool)
     for resync_bid in RESYNC_BIDS:
         bid_ok |= bid == resync_bid
-    keys = (words & 0xFFFFFF) << 16 | c_totals
+    keys = ids << 20 | c_headers << 17 | c_totals
     no = np.zeros(size, dtype=bool)
-    c = _Candidates(c_starts, c_totals, header_size[complete_at], keys, no, no.copy(), follows, waits,
+    c = _Candidates(c_starts, c_totals, c_headers, keys, no, no.copy(), follows, waits,
                     np.flatnonzero(waits), bid_ok, np.ones(size, bool), mid != MTDATA2)  # fmt: skip
 
     # Checksums are needed only where the sequential framer looks: at candidates no accepted
-    # frame covers. Check the most common length first (the real frames), follow the chain,
-    # then check whatever it leaves uncovered, until nothing unchecked is left uncovered.
-    # Payload sizes are verified the same way: only for the resyncs the framer meets.
+    # frame covers. Check the most common length first (the real frames), then the candidates
+    # no valid frame of that length covers (other frame shapes, gaps), follow the chain, then
+    # check whatever it leaves uncovered, until nothing unchecked is left uncovered: one pass,
+    # nearly always. Payload sizes are
+    # verified with the chain: only for the candidates it may take as resyncs.
     if n <= RUNNING_SUM_LIMIT or not c_totals.size:
         to_check = np.arange(size)
     else:
-        to_check = np.flatnonzero(c_totals == np.bincount(c_totals).argmax())
+        common = np.flatnonzero(c_totals == np.bincount(c_totals).argmax())
+        c.ok[common] = _checksums_ok(buf, c_starts[common], c_totals[common])
+        c.checked[common] = True
+        valid = common[c.ok[common] & c.follows[common]]
+        unchecked = np.flatnonzero(~c.checked)
+        to_check = unchecked[~_covered(c_starts[valid], ends[valid], c_starts[unchecked])]
     while True:
         c.ok[to_check] = _checksums_ok(buf, c_starts[to_check], c_totals[to_check])
         c.checked[to_check] = True
-        chosen, resyncs = _follow_chain(c, sync)
-        refused = _verify_sizes(buf, c, resyncs[~c.verified[resyncs]], layouts)
+        chosen = _follow_chain(c, sync, lambda suspects: _verify_sizes(buf, c, suspects, layouts))
         starts, chosen_ends = c_starts[chosen], c_starts[chosen] + c_totals[chosen]
         unchecked = np.flatnonzero(~c.checked)
         to_check = unchecked[~_covered(starts, chosen_ends, c_starts[unchecked])]
-        if to_check.size or refused:
+        if to_check.size:
             continue
         consumed, suspect = _first_stop(buf, cand[incomplete], c, chosen, sync)
         if suspect < 0 or not _verify_sizes(buf, c, np.array([suspect]), layouts):
@@ -293,7 +310,10 @@ def _scan_general(
 
     keep = starts < consumed
     chosen, starts, chosen_ends = chosen[keep], starts[keep], chosen_ends[keep]
-    looked_at = ~_covered(starts, chosen_ends, c_starts) & (c_starts < consumed)
+    looked_at = c.checked.copy()  # unchecked candidates count for nothing; accepted ones are covered
+    looked_at[chosen] = False
+    at = np.flatnonzero(looked_at)
+    looked_at[at] = ~_covered(starts, chosen_ends, c_starts[at]) & (c_starts[at] < consumed)
     if chosen.size and consumed == chosen_ends[-1]:
         last_header = buf[starts[-1] : starts[-1] + c.header_sizes[chosen[-1]]].tobytes()
         sync = last_header
@@ -316,18 +336,15 @@ def _sync_key(sync: bytes | None) -> int:
     total = frame_length(sync) if sync else None
     if total is None:
         return -1
-    return (int.from_bytes(sync[1:4], "big") << 16) | total
+    return int.from_bytes(sync[1:3], "big") << 20 | len(sync) << 17 | total
 
 
-def _accepts(
-    c: _Candidates, k: np.ndarray, previous: np.ndarray, sync: bytes | None, wait: bool
-) -> np.ndarray:
-    """Whether in-sync candidates ``k`` (after chosen ``previous``; -1: after the sync state's header) are
-    accepted (``wait``: are waited for) once their checksum holds: trusted with the previous
-    header, or a bus id a resync may land on; and confirmed by a successor (or waiting for one)."""
-    previous_keys = np.where(previous >= 0, c.keys[np.maximum(previous, 0)], _sync_key(sync))
-    same = c.keys[k] == previous_keys
-    return (same | c.bid_ok[k]) & (c.waits[k] if wait else c.follows[k])
+def _accepts(c: _Candidates, k: int, previous_key: int, wait: bool) -> bool:
+    """Whether in-sync candidate ``k`` (after a header with key ``previous_key``) is accepted (``wait``:
+    is waited for) once its checksum holds: trusted with the previous header, or a bus id a
+    resync may land on; and confirmed by a successor (or waiting for one). ``_follow_chain``
+    applies the same rule to all candidates at once."""
+    return bool((c.keys[k] == previous_key or c.bid_ok[k]) and (c.waits[k] if wait else c.follows[k]))
 
 
 def _verify_sizes(buf: np.ndarray, c: _Candidates, suspects: np.ndarray, layouts: LayoutCache) -> bool:
@@ -345,44 +362,45 @@ def _well_formed(
     buf: np.ndarray, payload_starts: np.ndarray, lengths: np.ndarray, layouts: LayoutCache
 ) -> np.ndarray:
     """``payload_well_formed`` of many MTData2 payloads: one walk per item layout, not per payload
-    (a payload with a layout already known, same length and item headers, walks the same way)."""
+    (a payload with a layout already known, same length and item headers, walks the same way);
+    only the item header bytes are read."""
     ok = np.zeros(lengths.size, dtype=bool)
-    for length in np.unique(lengths).tolist():
+    for length in np.flatnonzero(np.bincount(lengths)).tolist():
         members = np.flatnonzero(lengths == length)
-        rows = _payload_rows(buf, payload_starts[members], length)
+        starts = payload_starts[members]
+        known = list(layouts.by_length.get(length, []))
         left = np.arange(members.size)
-        for known in layouts.by_length.get(length, []):
-            if not left.size:
-                break
-            same = known.matches(rows[left])
-            ok[members[left[same]]] = True
-            left = left[~same]
         while left.size:
-            first = rows[left[0]].tobytes()
-            if not payload_well_formed(first):
-                left = left[1:]
-                continue
-            same = learn_layout(first).matches(rows[left])  # same length and item headers: same walk
+            if known:
+                layout = known.pop(0)
+            else:
+                first = buf[starts[left[0]] : starts[left[0]] + length].tobytes()
+                if not payload_well_formed(first):
+                    left = left[1:]
+                    continue
+                layout = learn_layout(first)
+            same = layout.matches_at(buf, starts[left])  # same length and item headers: same walk
             ok[members[left[same]]] = True
             left = left[~same]
     return ok
 
 
-def _follow_chain(c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.ndarray]:
-    """(candidates the sequential framer accepts, those of them it accepts as resyncs).
+def _follow_chain(c: _Candidates, sync: bytes | None, verify: Callable[[np.ndarray], bool]) -> np.ndarray:
+    """The candidates the sequential framer accepts.
 
     After an accepted frame the next one is the valid candidate starting exactly at its end if
     that is accepted in sync (``_accepts``), else the first confirmed resync after it. Where that
     is simply the next valid candidate the chain is followed in bulk; only the "breaks" are
-    walked one by one.
+    walked one by one. Every candidate that may be taken as a resync (the first confirmed one
+    after each break, few) has its payload sizes verified (``verify``) before the walk, so the
+    chain is followed once.
     """
     valid = np.flatnonzero(c.ok)
     count = valid.size
     if not count:
-        return valid, valid
+        return valid
     v_starts = c.starts[valid]
     v_ends = v_starts + c.totals[valid]
-    strong = np.flatnonzero(c.bid_ok[valid] & c.follows[valid] & c.sizes_ok[valid])  # positions in ``valid``
     # the valid candidate starting where each ends: usually simply the next one
     after = np.arange(1, count + 1)
     has_next = np.zeros(count, dtype=bool)
@@ -390,21 +408,40 @@ def _follow_chain(c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.nd
     odd = np.flatnonzero(~has_next)
     after[odd] = np.searchsorted(v_starts, v_ends[odd])
     has_next[odd] = (after[odd] < count) & (v_starts[np.minimum(after[odd], count - 1)] == v_ends[odd])
-    in_sync_next = np.zeros(count, dtype=bool)
-    followers = np.flatnonzero(has_next)
-    in_sync_next[followers] = _accepts(c, valid[after[followers]], valid[followers], sync, wait=False)
+    # ``_accepts`` for every candidate that has a successor, in bulk (the successor is nearly always
+    # the next valid candidate: shifted arrays, read again only where it is not)
+    v_keys, v_follows = c.keys[valid], c.follows[valid]
+    v_strong = c.bid_ok[valid] & v_follows  # a resync may land there (payload sizes aside)
+    same, next_follows, next_strong = np.zeros(count, bool), np.zeros(count, bool), np.zeros(count, bool)
+    same[:-1], next_follows[:-1], next_strong[:-1] = v_keys[1:] == v_keys[:-1], v_follows[1:], v_strong[1:]
+    jumps = odd[has_next[odd]]
+    same[jumps] = v_keys[after[jumps]] == v_keys[jumps]
+    next_follows[jumps], next_strong[jumps] = v_follows[after[jumps]], v_strong[after[jumps]]
+    in_sync_next = has_next & ((same & next_follows) | next_strong)
     following = np.where(in_sync_next, after, count)
     rest = np.flatnonzero(~in_sync_next)
-    if strong.size and rest.size:  # no frame accepted in sync there: the first confirmed resync after it
-        resync_next = strong[np.minimum(np.searchsorted(v_starts[strong], v_ends[rest]), strong.size - 1)]
-        found = v_starts[resync_next] >= v_ends[rest]
-        following[rest[found]] = resync_next[found]
     starts_sync = sync is not None and v_starts[0] == 0
-    if starts_sync and _accepts(c, valid[:1], np.array([-1]), sync, wait=False)[0]:
-        first = 0
-    else:  # the first resync (after byte 0 when the candidate there was met in sync and refused)
-        at = int(np.searchsorted(v_starts[strong], 1 if starts_sync else 0))
-        first = int(strong[at]) if at < strong.size else count
+    first_in_sync = starts_sync and _accepts(c, int(valid[0]), _sync_key(sync), wait=False)
+    resync_from = v_ends[rest]
+    if not first_in_sync:  # the first resync (after byte 0 if the candidate there was met in sync, refused)
+        resync_from = np.append(resync_from, 1 if starts_sync else 0)
+    strong = np.flatnonzero(v_strong)  # positions in ``valid``
+    strong_starts, strong_or_none = v_starts[strong], np.append(strong, count)  # ``count``: none left
+    resync_next = strong_or_none[np.searchsorted(strong_starts, resync_from)]
+    moved = np.arange(resync_next.size)
+    while True:  # the first confirmed resync after each break, until all of them pass the sizes check
+        marked = np.zeros(count + 1, dtype=bool)
+        marked[resync_next[moved]] = True
+        taken_as_resync = valid[np.flatnonzero(marked[:-1])]
+        verify(taken_as_resync[~c.verified[taken_as_resync]])
+        taken = valid[np.minimum(resync_next, count - 1)]
+        moved = np.flatnonzero(~c.sizes_ok[taken] & (resync_next < count))
+        if not moved.size:
+            break
+        refused_at = v_starts[resync_next[moved]]
+        resync_next[moved] = strong_or_none[np.searchsorted(strong_starts, refused_at, "right")]
+    following[rest] = resync_next[: rest.size]
+    first = 0 if first_in_sync else int(resync_next[-1])
     breaks = np.flatnonzero(following != np.arange(1, count + 1))
     marks = np.zeros(count + 1, dtype=np.int64)
     k = first
@@ -417,9 +454,7 @@ def _follow_chain(c: _Candidates, sync: bytes | None) -> tuple[np.ndarray, np.nd
         marks[k] += 1
         marks[breaks[at] + 1] -= 1
         k = int(following[breaks[at]])
-    taken = np.flatnonzero(np.cumsum(marks[:-1]) > 0)
-    previous_end = np.concatenate(([0 if sync is not None else -1], v_ends[taken[:-1]]))
-    return valid[taken], valid[taken[v_starts[taken] != previous_end]]
+    return valid[np.flatnonzero(np.cumsum(marks[:-1]) > 0)]
 
 
 def _first_stop(
@@ -438,8 +473,8 @@ def _first_stop(
         position = int(c.starts[k])
         previous = chosen[np.flatnonzero(ends == position)]
         if previous.size or (position == 0 and sync is not None):
-            before = np.array([previous[0] if previous.size else -1])
-            if _accepts(c, np.array([k]), before, sync, wait=True)[0]:
+            before = int(c.keys[previous[0]]) if previous.size else _sync_key(sync)
+            if _accepts(c, k, before, wait=True):
                 return position, -1
         elif c.bid_ok[k] and c.sizes_ok[k]:
             return position, (-1 if c.verified[k] else k)
@@ -495,6 +530,12 @@ class Layout:
     dtype: np.dtype  # structured view of the known items' data
     fields: tuple[Field, ...]
     unknown: int
+
+    def matches_at(self, buf: np.ndarray, payload_starts: np.ndarray) -> np.ndarray:
+        """``matches`` for the payloads of this layout's length starting at ``payload_starts`` in ``buf``."""
+        if not self.header_values:
+            return np.ones(payload_starts.size, dtype=bool)
+        return (buf[payload_starts[:, None] + self.header_offsets] == self.header_bytes).all(axis=1)
 
     def matches(self, payloads: np.ndarray) -> np.ndarray:
         """Rows of ``payloads`` (rows, length) with exactly this layout.
