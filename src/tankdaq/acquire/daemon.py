@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import signal
 import threading
 import time
@@ -215,7 +214,6 @@ class RecordDaemon:
         config = {"record": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(s).items()}}
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
-        json.dumps(config, default=str)  # refuse unserialisable settings early
         mode = s.viewer or default_viewer_mode()
         self.on_event(describe_mode(mode, default=s.viewer is None))
         view = LiveView(
