@@ -53,7 +53,13 @@ from ..physics.scenario import (
     still_trace,
 )
 from ..xsens.constants import BAUD_CODES, FLASH_WRITES, MID, SERIAL_BAUDS, baud_code
-from ..xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS, output_configuration_payload
+from ..xsens.control import (
+    MAX_FREQUENCY,
+    PER_MESSAGE_OUTPUTS,
+    output_configuration_payload,
+    parse_port_config,
+    port_config_baud,
+)
 from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
 from ..xsens.legacy import encode_mtdata
@@ -647,10 +653,14 @@ class SimulatedMTi:
             words = [baud_code(self.baud)] + [baud_code(115200)] * (PORTS_600 - 1)
             self._reply(MID.PORT_CONFIG_ACK, struct.pack(f">{PORTS_600}I", *words))
             return
-        if len(data) != 4 * PORTS_600 or data[3] not in BAUD_CODES:
+        try:
+            words = parse_port_config(data)
+            if len(words) != PORTS_600:
+                raise ProtocolError(f"{len(words)} port words, not {PORTS_600}")
+            self.pending_baud = port_config_baud(words)
+        except ProtocolError:
             self._error(ERROR_INVALID_BAUD)
             return
-        self.pending_baud = BAUD_CODES[data[3]]
         self._reply(MID.PORT_CONFIG_ACK)
 
     def _on_baudrate(self, data: bytes) -> None:
