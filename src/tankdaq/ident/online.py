@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import IdentificationError
 from ..records import DecayRun
 from . import kernels
+from .base import EstimatorMixin
 from .output_error import OutputError
 from .signals import band_crossings, white_noise_level
 
@@ -50,7 +51,7 @@ class OnlineResult:
     elapsed_s: float
 
 
-class OnlineIdentifier:
+class OnlineIdentifier(EstimatorMixin):
     """Feed samples with ``update``; a refit is published at every new half-cycle.
 
     ``min_half_cycles``: how many complete half-cycles before the first fit (the

@@ -29,6 +29,7 @@ from pymoo.optimize import minimize
 from ..errors import InputError
 from ..records import DecayRun
 from ..validation import equation_model
+from .base import EstimatorMixin
 from .equation_error import check_runs
 from .kernels import simulate, substeps, term_codes, term_matrix
 from .models import MODEL_ALIASES
@@ -253,7 +254,7 @@ class _Recorder(Callback):
             self.progress(algorithm.n_gen, self.total)
 
 
-class _SeedSearch:
+class _SeedSearch(EstimatorMixin):
     """Shared fit of GeneticSeed and SwarmSeed: the paper's box, a pymoo run, results as tankdaq terms.
 
     Settings: ``terms`` (term list or alias), ``paper`` (whose boxes and preset: ``seed000``,
