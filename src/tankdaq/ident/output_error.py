@@ -148,7 +148,8 @@ class OutputError(EstimatorMixin):
     second output), ``cov_type`` ("hac" or "classic"), ``hac_periods`` (HAC
     bandwidth in natural periods), ``reweight`` (re-estimate the noise levels
     from the residuals and refit once; without, the model-free noise levels
-    stay the weights and the BIC's noise model), ``max_nfev``,
+    stay the weights and the BIC's noise model), ``tol`` (the final solve's relative
+    tolerance on the parameters and the cost), ``max_nfev``,
     ``compute_diagnostics`` (warnings about terms and residuals).
 
     Fitted: ``coefficients_ std_ ci95_ covariance_ correlation_`` (the terms),
@@ -179,6 +180,7 @@ class OutputError(EstimatorMixin):
         cov_type: str = "hac",
         hac_periods: float = 1.0,
         reweight: bool = True,
+        tol: float = 1e-10,
         max_nfev: int = 200,
         compute_diagnostics: bool = True,
     ) -> None:
@@ -195,6 +197,7 @@ class OutputError(EstimatorMixin):
         self.cov_type = cov_type
         self.hac_periods = hac_periods
         self.reweight = reweight
+        self.tol = tol
         self.max_nfev = max_nfev
         self.compute_diagnostics = compute_diagnostics
 
@@ -239,9 +242,10 @@ class OutputError(EstimatorMixin):
             self._initial_sigmas(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
         ]
         self._predictions: dict[int, tuple[bytes, dict[str, Any]]] = {}
+        self._lag_ops: dict[int, tuple[float, LagOperator]] = {}
 
         # with reweighting the first solve only has to get close: the second one polishes
-        rough = 1e-6 if self.reweight else 1e-10
+        rough = max(1e-6, self.tol) if self.reweight else self.tol
         params = self._solve(p0, free, rough)
         if start is None and self._angle_r2(params) < FALLBACK_R2:
             linear = self._start_vector(runs, None, fixed_coefficients, guess or {}, linear_only=True)
@@ -250,9 +254,9 @@ class OutputError(EstimatorMixin):
                 params = fallback
         if self.reweight:
             self.sigmas_ = self._residual_sigmas(params)
-            params = self._solve(params, free, 1e-10)
+            params = self._solve(params, free, self.tol)
         self._finish(params, free)
-        self._predictions = {}
+        self._predictions, self._lag_ops = {}, {}
         self.elapsed_s_ = time.perf_counter() - started
         return self
 
@@ -442,7 +446,9 @@ class OutputError(EstimatorMixin):
         eps, n_sub = self.friction_eps, self._n_sub
         if not with_jacobian:
             x, v = simulate(t, angle0, rate0, theta, self._codes, forcing.u, eps, n_sub)
-            lagged = x if lag == 0.0 else LagOperator(t, lag).apply(x, v, self._end_acc(theta, x, v, forcing))
+            lagged = (
+                x if lag == 0.0 else self._lag(r, t, lag).apply(x, v, self._end_acc(theta, x, v, forcing))
+            )
             return {"angle": gain * lagged + offset, "rate": v + bias, "ok": True}
         x, v, sx, sv, ok = simulate_with_input_sensitivities(
             t, angle0, rate0, theta, self._codes, forcing.u, forcing.partials, eps, n_sub
@@ -459,7 +465,7 @@ class OutputError(EstimatorMixin):
         jv = np.zeros((t.size, layout.size))
         lagged = x
         if (li := layout.index("angle_lag_s")) is not None:
-            op = LagOperator(t, lag)
+            op = self._lag(r, t, lag)
             acc_ends, s_acc_ends = self._end_acc_sensitivities(theta, x, v, forcing, sx, sv, kernel_cols)
             lagged = op.apply(x, v, acc_ends)
             ja[:, li] = gain * op.apply_lag_derivative(x, v, acc_ends)
@@ -474,6 +480,15 @@ class OutputError(EstimatorMixin):
         if (bi := layout.index("gyro_bias_rad_s")) is not None:
             jv[:, bi] = 1.0
         return {"angle": gain * lagged + offset, "rate": v + bias, "ja": ja, "jv": jv, "ok": ok}
+
+    def _lag(self, r: int, t: np.ndarray, lag: float) -> LagOperator:
+        """The lag operator on run r's instants, kept while the solver tries other parameters."""
+        if t is not self.runs_[r].t:
+            return LagOperator(t, lag)
+        cached = self._lag_ops.get(r)
+        if cached is None or cached[0] != lag:
+            cached = self._lag_ops[r] = (lag, LagOperator(t, lag))
+        return cached[1]
 
     def _end_acc(self, theta: np.ndarray, x: np.ndarray, v: np.ndarray, forcing: _Forcing) -> np.ndarray:
         """x'' at the first and last instant: where the lagged angle leaves the simulated span."""
