@@ -147,6 +147,7 @@ def identify_command(
     from ..config import load_hull
     from ..ident.estimators import make_estimator
     from ..ident.models import resolve_model
+    from ..ident.output_error import OutputError
     from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
     from ..ident.uncertainty import moving_block_bootstrap, repeat_spread
 
@@ -180,7 +181,7 @@ def identify_command(
         return
 
     estimator = make_estimator(method, terms)
-    if bootstrap and not hasattr(estimator, "clone"):
+    if bootstrap and not isinstance(estimator, OutputError):  # it resamples the output-error residuals
         raise InputError(f"--bootstrap works with --method oe, not {method}")
     if repeats and (bootstrap or len(runs) < 3):
         raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")
