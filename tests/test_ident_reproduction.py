@@ -10,9 +10,9 @@ import pytest
 from tankdaq.config import load_hull
 from tankdaq.errors import BadIdentificationInput
 from tankdaq.ident.derived import amplitude_table
-from tankdaq.ident.models import canonical_order
 from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import simulate_decay
+from tankdaq.physics.models import canonical_order
 from tankdaq.records import DecayRun
 from tankdaq.store.csv_import import read_csv_runs
 from test_ident_helpers import KVLCC2_21338, synthetic_run

@@ -14,7 +14,8 @@ from mcap.writer import Writer
 
 from tankdaq.config import load_hull
 from tankdaq.errors import BadRecordingInput, InputError, RecordingError
-from tankdaq.physics.decay import TERMS, simulate_decay
+from tankdaq.physics.decay import simulate_decay
+from tankdaq.physics.terms import TERM_TABLE
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store import schemas
 from tankdaq.store.naming import create_exclusive, next_run_number, recording_name
@@ -190,7 +191,7 @@ def test_schemas_parse_in_foxglove_and_fit_terms_are_plottable() -> None:
         schema = json.loads(body)
         assert_foxglove_parses(schema, schema["title"])
     fit = json.loads(schemas.FIT_SCHEMA)
-    assert set(fit["properties"]["coefficients"]["properties"]) == set(TERMS)  # /fit.coefficients.b1 plots
+    assert set(fit["properties"]["coefficients"]["properties"]) == set(TERM_TABLE)  # .fc plots too
 
 
 def without_sample_blocks(source: Path, destination: Path) -> Path:

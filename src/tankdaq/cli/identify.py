@@ -146,9 +146,9 @@ def identify_command(
     """Identify the decay equation's coefficients from free-decay records."""
     from ..config import load_hull
     from ..ident.estimators import make_estimator
-    from ..ident.models import resolve_model
     from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
     from ..ident.uncertainty import moving_block_bootstrap, repeat_spread
+    from ..physics.models import resolve_model
 
     if axis not in (None, "roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
@@ -164,7 +164,7 @@ def identify_command(
 
     if compare:
         from ..ident.free_decay import cut_lines
-        from ..ident.models import COMPARE_MODELS
+        from ..physics.models import COMPARE_MODELS
 
         with progress_bar() as progress:
             task = progress.add_task("fitting models", total=len(group_models(COMPARE_MODELS)))

@@ -26,11 +26,11 @@ import numpy as np
 from ..config import Hull, format_draft, load_hull, parse_draft
 from ..errors import IdentificationError, InputError
 from ..physics.decay import simulate_decay
+from ..physics.terms import TERM_TABLE
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, empty_samples
 from .derived import amplitude_table, damping_ratio, extinction_curve, natural_period
 from .free_decay import cut_free_decays, cut_lines
-from .kernels import TERM_REGISTRY
 from .output_error import OutputError
 
 #: File-name pattern of a recording: ``swath_1.1T_roll_8deg_20261121-143015_run03``.
@@ -422,7 +422,7 @@ def _plot_coefficients(series: Sequence[GroupResult]) -> Any:
         for draft in sorted({r.key.draft for r in series}):
             _errorbar_series(ax, [r for r in series if r.key.draft == draft], term, format_draft(draft))
         ax.set_xlabel("initial angle (deg)")
-        ax.set_title(f"{term} ({TERM_REGISTRY[term].unit})")
+        ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
     axes[0].legend(title="draft")
     return fig
 
@@ -436,7 +436,7 @@ def _plot_hulls(results: Sequence[GroupResult]) -> Any:
         for hull in sorted({r.key.hull for r in results}):
             _errorbar_series(ax, [r for r in results if r.key.hull == hull], term, hull)
         ax.set_xlabel("initial angle (deg)")
-        ax.set_title(f"{term} ({TERM_REGISTRY[term].unit})")
+        ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
     axes[0].legend()
     return fig
 
