@@ -53,35 +53,22 @@ def load_runs(
     start_s: float | None = None,
     end_s: float | None = None,
 ) -> list[DecayRun]:
-    """The free decays of every input: MCAP recordings through the store reader, anything else as CSV,
-    each cut where its free part ends (``ident.free_decay``; ``start_s``/``end_s`` override).
+    """The free decays of every input, read through the one way in (``ident.inputs.read_decays``: the
+    reader by suffix, CSV releases found), each cut where its free part ends (``ident.free_decay``;
+    ``start_s``/``end_s`` override).
 
     Without ``axis`` a recording's decays are read on the axis its metadata names.
     """
     from ..ident.free_decay import cut_free_decays
-    from ..store.csv_import import read_csv_runs
+    from ..ident.inputs import read_decays
 
-    runs: list[DecayRun] = []
-    for path in inputs:
-        if path.suffix.lower() == ".mcap":
-            try:
-                from ..store.reader import read_decay_runs
-            except ImportError:
-                raise InputError(f"{path}: reading MCAP recordings is not available in this build") from None
-            runs.extend(read_decay_runs(path, axis))
-        else:
-            runs.extend(
-                read_csv_runs(
-                    path,
-                    time_col=time_col,
-                    angle_col=angle_col,
-                    rate_col=rate_col,
-                    angle_unit=angle_unit,
-                    axis=axis or "roll",
-                    keep_all=keep_all,
-                    skip_half_cycles=skip_half_cycles,
-                )
-            )
+    runs = [
+        run
+        for path in inputs
+        for run in read_decays(
+            path, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles
+        )
+    ]
     return cut_free_decays(runs, start_s, end_s)
 
 
