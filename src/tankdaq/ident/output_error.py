@@ -34,6 +34,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import BadIdentificationInput, InputError
+from ..physics.models import resolve_model
 from ..records import DecayRun
 from .base import EstimatorMixin
 from .derived import natural_period
@@ -46,7 +47,6 @@ from .kernels import (
     term_codes,
     term_matrix,
 )
-from .models import resolve_model
 from .signals import white_noise_level
 from .uncertainty import (
     bic,
