@@ -111,8 +111,14 @@ class ParameterLayout:
 
     def run_index(self, r: int, name: str) -> int | None:
         """Position of run r's own parameter (None when the model does not have it)."""
-        if name not in self.per_run:
-            return None
+        return self.run_at(r, name) if name in self.per_run else None
+
+    def at(self, name: str) -> int:
+        """Position of a shared parameter the model has."""
+        return self._shared_index[name]
+
+    def run_at(self, r: int, name: str) -> int:
+        """Position of run r's own parameter the model has."""
         return self.n_shared + len(self.per_run) * r + self.per_run.index(name)
 
     def run_slice(self, r: int) -> slice:
@@ -234,7 +240,7 @@ class OutputError(EstimatorMixin):
         p0 = self._start_vector(runs, start, fixed_coefficients, guess or {})
         free = np.ones(layout.size, dtype=bool)
         if fixed_coefficients is not None:
-            free[[layout.index(k) for k in self.terms_]] = False
+            free[[layout.at(k) for k in self.terms_]] = False
         amplitude = max(float(np.max(np.abs(run.angle - np.median(run.angle)))) for run in runs)
         dt_max = max(float(np.max(np.diff(run.t))) for run in runs)
         self._n_sub = substeps(dt_max, p0[: len(layout.dynamics)], layout.dynamics, amplitude)
@@ -338,13 +344,13 @@ class OutputError(EstimatorMixin):
             p0[i] = known.get(name, 0.0)
         for r, values in enumerate(per_run):
             for name in layout.per_run:
-                p0[layout.run_index(r, name)] = values.get(name, guess.get(name, 0.0))
+                p0[layout.run_at(r, name)] = values.get(name, guess.get(name, 0.0))
         return self._fix(p0, fixed)
 
     def _fix(self, p0: np.ndarray, fixed: dict[str, float] | None) -> np.ndarray:
         if fixed is not None:
             for k in self.terms_:
-                p0[self._layout.index(k)] = fixed.get(k, 0.0)
+                p0[self._layout.at(k)] = fixed.get(k, 0.0)
         return p0
 
     def _equation_error_start(self, runs: list[DecayRun], linear_only: bool) -> EquationError:
@@ -363,7 +369,7 @@ class OutputError(EstimatorMixin):
         """Noise levels from third differences, floored so a clean record does not get infinite weight."""
         floor_angle = 1e-4 * float(np.ptp(run.angle))
         sig = {"angle": max(white_noise_level(run.angle), floor_angle)}
-        if has_rate:
+        if has_rate and run.rate is not None:
             sig["rate"] = max(white_noise_level(run.rate), 1e-4 * float(np.ptp(run.rate)))
         return sig
 
@@ -393,13 +399,13 @@ class OutputError(EstimatorMixin):
         partials: list[np.ndarray] = []
         columns: list[int] = []
         for name, series in zip(layout.couplings, channels, strict=True):
-            i = layout.index(name)
+            i = layout.at(name)
             u = u + params[i] * series
             partials.append(series)
             columns.append(i)
         if layout.ringing:
-            omega_i, decay_i = (layout.index(n) for n in RING_PARAMS)
-            cos_i, sin_i = (layout.run_index(r, n) for n in RING_RUN_PARAMS)
+            omega_i, decay_i = (layout.at(n) for n in RING_PARAMS)
+            cos_i, sin_i = (layout.run_at(r, n) for n in RING_RUN_PARAMS)
             since = t - t[0]
             envelope = np.exp(-params[decay_i] * since)
             cos, sin = envelope * np.cos(params[omega_i] * since), envelope * np.sin(params[omega_i] * since)
@@ -575,7 +581,7 @@ class OutputError(EstimatorMixin):
         self.param_names_ = layout.names
         res_w, jac_w, blocks, _ = self._weighted(params)
         self.score_blocks_ = [([j[:, free] for j in js], rs) for js, rs in blocks]
-        term_index = [layout.index(k) for k in self.terms_]
+        term_index = [layout.at(k) for k in self.terms_]
         theta = params[term_index]
         self.coefficients_ = dict(zip(self.terms_, theta.tolist(), strict=True))
         self.natural_period_s_ = natural_period(self.coefficients_)
@@ -673,7 +679,7 @@ class OutputError(EstimatorMixin):
             t, channels = np.asarray(run, dtype=float), []
         params = self.params_.copy()
         if initial_state is not None:
-            params[[self._layout.run_index(run_index, n) for n in ("angle0", "rate0")]] = initial_state
+            params[[self._layout.run_at(run_index, n) for n in ("angle0", "rate0")]] = initial_state
         if offset is not None and (i := self._layout.run_index(run_index, "angle_offset_rad")) is not None:
             params[i] = offset
         pred = self._integrate(params, run_index, t, channels, with_jacobian=False)
