@@ -22,6 +22,7 @@ from typer.testing import CliRunner
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.session import Block, DecaySession, SessionSettings
+from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.store.reader import read_recording
@@ -88,8 +89,10 @@ class FailingView(LiveView):
 def _feed_recording(source: Path, out: Path, view: LiveView, on_event=None) -> DecaySession:
     """The source's raw bytes, re-decoded, through a session that writes into ``out``."""
     recording = read_recording(source)
-    settings = SessionSettings(angle_deg=8.0, out_dir=out, run_metadata={"hull": "swath"}, wait_for_fits=True)
-    session = DecaySession(settings, view, on_event=on_event)  # fed from a file: each refit in its block
+    sinks = [  # the daemon's pipeline; fed from a file: each refit in its block
+        IdentifierSink(wait_for_fits=True), RecordingSink(out, {"hull": "swath"}), ViewSink(view),
+    ]  # fmt: skip
+    session = DecaySession(SessionSettings(angle_deg=8.0), sinks, on_event=on_event)
     decoder = SampleDecoder()
     for host_ns, raw in recording.raw_chunks:
         samples, _ = decoder.feed(raw, host_ns / 1e9)
