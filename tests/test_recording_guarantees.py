@@ -25,6 +25,7 @@ from tankdaq.acquire.session import Block, DecaySession, SessionSettings
 from tankdaq.acquire.sinks import Decay, IdentifierSink, RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
+from tankdaq.ident.online import OnlineIdentifier, OnlineResult
 from tankdaq.store.reader import read_recording
 from tankdaq.viz.live import LiveView
 
@@ -86,13 +87,29 @@ class FailingView(LiveView):
         setattr(self, method, failing)
 
 
+class FailingIdentifier(OnlineIdentifier):
+    """An online identifier whose second refit raises, as a bug in a fit would (on the worker thread)."""
+
+    def update(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray | None = None) -> OnlineResult | None:
+        result = super().update(t, angle, rate)
+        if result is not None and len(self.results_) >= 2:
+            raise Injected("the second refit failed")
+        return result
+
+
 def _feed_recording(
-    source: Path, out: Path, view: LiveView, on_event=None, extra: Sequence[Sink] = ()
+    source: Path,
+    out: Path,
+    view: LiveView,
+    on_event=None,
+    identifier: type[OnlineIdentifier] = OnlineIdentifier,
+    extra: Sequence[Sink] = (),
 ) -> DecaySession:
     """The source's raw bytes, re-decoded, through a session that writes into ``out``."""
     recording = read_recording(source)
     sinks = [  # the daemon's pipeline; fed from a file: each refit in its block
-        IdentifierSink(wait_for_fits=True), RecordingSink(out, {"hull": "swath"}), ViewSink(view), *extra,
+        IdentifierSink(identifier, wait_for_fits=True), RecordingSink(out, {"hull": "swath"}), ViewSink(view),
+        *extra,
     ]  # fmt: skip
     session = DecaySession(SessionSettings(angle_deg=8.0), sinks, on_event=on_event)
     decoder = SampleDecoder()
@@ -131,6 +148,19 @@ def test_a_failure_while_recording_closes_the_file_with_what_arrived(
     if method != "new_run":
         assert kinds.count("release") == 1 and recording.samples.size > 0 and recording.raw_chunks
         assert recording.samples.size < len(read_recording(recorded).samples)  # cut where it failed
+
+
+def test_an_identifier_that_fails_mid_decay_closes_the_file_with_what_arrived(
+    recorded: Path, tmp_path: Path
+) -> None:
+    with pytest.raises(Injected):
+        _feed_recording(recorded, tmp_path, LiveView("none"), identifier=FailingIdentifier)
+    (path,) = tmp_path.glob("*.mcap")
+    assert _is_complete_mcap(path)
+    recording = read_recording(path)
+    assert recording.metadata["settle_reason"] == "error" and recording.events[-1]["kind"] == "settled"
+    assert len(recording.fits) >= 1  # the first refit was written before the second failed
+    assert 0 < recording.samples.size < len(read_recording(recorded).samples)
 
 
 # each call is at the decay's end: the view's run ends once, after the file; release, then settled events
@@ -219,12 +249,14 @@ def test_a_callback_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Pa
     assert read_recording(path).metadata["settle_reason"] == "error"
 
 
-def test_model_terms_the_live_view_cannot_carry_are_refused_before_the_device_opens(tmp_path: Path) -> None:
+def test_a_live_model_with_an_input_the_recorder_lacks_is_refused_before_the_device_opens(
+    tmp_path: Path,
+) -> None:
     from tankdaq.errors import InputError
 
     out = tmp_path / "out"
-    with pytest.raises(InputError, match=r"carry only .* not fc"):
-        RecordDaemon(_settings(out, model="b1,c1,fc"))
+    with pytest.raises(InputError, match=r"ku needs a measured input u\(t\)"):
+        RecordDaemon(_settings(out, model="b1,c1,ku"))
     assert not out.exists() or not any(out.iterdir())
 
 

@@ -20,8 +20,8 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from ..ident.models import resolve_model
 from ..ident.online import OnlineResult
+from ..physics.models import resolve_model
 from ..samples import AXIS_FIELDS
 from .release import ReleaseDetector, ReleaseEvent
 from .sinks import Block, Decay, DecayOutcome, DecaySink
