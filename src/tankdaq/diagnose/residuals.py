@@ -36,12 +36,11 @@ def residual_spectrum(residuals: Sequence[np.ndarray], rate_hz: float, omega0_ra
     period_samples = int(2 * np.pi / max(omega0_rad_s, 1e-3) * rate_hz)
     shortest = min(e.size for e in residuals)
     nperseg = int(min(shortest, max(4 * period_samples, 64)))
-    psd_sum = None
-    for e in residuals:
-        freqs, psd = welch(np.asarray(e, dtype=float), fs=rate_hz, nperseg=nperseg, detrend=False)
-        psd_sum = psd if psd_sum is None else psd_sum + psd
-    omega = 2 * np.pi * freqs
-    psd_mean = psd_sum / len(residuals)
+    spectra = [
+        welch(np.asarray(e, dtype=float), fs=rate_hz, nperseg=nperseg, detrend=False) for e in residuals
+    ]
+    omega = 2 * np.pi * spectra[0][0]
+    psd_mean = np.mean([psd for _, psd in spectra], axis=0)
     band = omega <= 6 * omega0_rad_s  # the physics lives here; above is sensor noise
     i_peak = int(np.argmax(np.where(band, psd_mean, -np.inf)))
     floor = float(np.median(psd_mean[omega > 0])) or 1e-300
@@ -227,7 +226,7 @@ def ringing_frequency(residuals: Sequence[np.ndarray], rate_hz: float, omega0_ra
     are left out: those are other effects' signatures.
     """
     n_fft = 8 * max(e.size for e in residuals)
-    power = sum(np.abs(np.fft.rfft(np.asarray(e) - np.mean(e), n_fft)) ** 2 for e in residuals)
+    power = np.sum([np.abs(np.fft.rfft(np.asarray(e) - np.mean(e), n_fft)) ** 2 for e in residuals], axis=0)
     omega = 2 * np.pi * np.fft.rfftfreq(n_fft, 1.0 / rate_hz)
     ratio = omega / omega0_rad_s
     allowed = (ratio > 0.3) & (ratio < 6.0) & (np.abs(ratio - np.round(ratio)) > 0.15)

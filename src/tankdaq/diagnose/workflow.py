@@ -173,7 +173,7 @@ def signature_seen(effect: Effect, diag: Diagnostics, trend: CycleTrend) -> list
         and bias is not None
         and abs(bias) > 0.5 * (diag.noise_rate_rad_s or 0)
     ):
-        seen.append(f"rate residual mean {np.degrees(diag.residual_mean_rate_rad_s):.3f} deg/s")
+        seen.append(f"rate residual mean {np.degrees(bias):.3f} deg/s")
     if effect.key == "sensor.lag" and diag.corr_with_rate > 0.5:
         seen.append(f"angle residual follows the rate (correlation {diag.corr_with_rate:.2f})")
     if effect.key == "sensor.gain" and diag.corr_with_angle > 0.5:
