@@ -13,7 +13,7 @@ unit) plus one branch of ``term_eval`` giving phi and its partial derivatives
 in x, x' and u; adding a term touches nothing else. This module holds only the
 kernel code. The input u may itself depend on parameters (measured channels
 with their coupling coefficients, a ringing forcing): their sensitivities are
-driven by du/dp, given at the samples (``simulate_with_input_sensitivities``).
+driven by du/dp, given at the samples (``simulate_with_sensitivities``).
 """
 
 from __future__ import annotations
@@ -144,7 +144,7 @@ def _sane(z: np.ndarray) -> bool:
 
 
 @numba.njit(cache=True)
-def simulate_with_input_sensitivities(
+def simulate_with_sensitivities(
     t: np.ndarray,
     x0: float,
     v0: float,
@@ -223,21 +223,6 @@ def simulate_with_input_sensitivities(
             sx[i, :] = 0.0
             sv[i, :] = 0.0
     return xs, vs, sx, sv, ok
-
-
-@numba.njit(cache=True)
-def simulate_with_sensitivities(
-    t: np.ndarray,
-    x0: float,
-    v0: float,
-    theta: np.ndarray,
-    codes: np.ndarray,
-    u: np.ndarray,
-    eps: float,
-    n_sub: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    """``simulate_with_input_sensitivities`` for a fixed input: p over theta, then x0, v0."""
-    return simulate_with_input_sensitivities(t, x0, v0, theta, codes, u, np.zeros((t.size, 0)), eps, n_sub)
 
 
 @numba.njit(cache=True)

@@ -42,7 +42,7 @@ from .equation_error import EquationError, check_runs, exogenous_input
 from .kernels import (
     acceleration_partials,
     simulate,
-    simulate_with_input_sensitivities,
+    simulate_with_sensitivities,
     substeps,
     term_codes,
     term_matrix,
@@ -456,7 +456,7 @@ class OutputError(EstimatorMixin):
                 x if lag == 0.0 else self._lag(r, t, lag).apply(x, v, self._end_acc(theta, x, v, forcing))
             )
             return {"angle": gain * lagged + offset, "rate": v + bias, "ok": True}
-        x, v, sx, sv, ok = simulate_with_input_sensitivities(
+        x, v, sx, sv, ok = simulate_with_sensitivities(
             t, angle0, rate0, theta, self._codes, forcing.u, forcing.partials, eps, n_sub
         )
         n_dyn = len(layout.dynamics)
