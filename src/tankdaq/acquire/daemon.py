@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import validation
-from ..config import Hull, format_draft, load_hull
+from ..config import Hull, format_draft, hull_scenario, load_hull
 from ..device.driver import MTiDriver
 from ..errors import DeviceGone, InputError, RecordingError
 from ..ident.online import prepare_identifier
@@ -157,21 +157,13 @@ class RecordDaemon:
 
     def simulation_scenario(self) -> DecayScenario:
         """What the built-in simulated sensor plays (deterministic: its runs are the truth)."""
-        from ..physics.scenario import DecayScenario
-
         s = self.settings
         axis = "roll" if s.axis == "auto" else s.axis
         assert self.hull is not None  # __init__ refuses the simulator without one
-        scenario = DecayScenario(
-            hull=self.hull.name,
-            coefficients=self.hull.simulation_model(axis).coefficients(s.draft),
-            draft=s.draft,
-            axis=axis,
-            angle_deg=s.angle_deg,
-            rate_hz=s.rate_hz,
-            runs=(s.runs or 20) + 1,
+        scenario = hull_scenario(
+            self.hull, s.draft, axis, angle_deg=s.angle_deg, rate_hz=s.rate_hz, runs=(s.runs or 20) + 1,
             seed=s.sim_seed,
-        )
+        )  # fmt: skip
         return dataclasses.replace(scenario, **s.sim_overrides)  # type: ignore[arg-type]
 
     def _start_simulator(self) -> str:

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from .. import validation
-from ..config import format_draft, load_hull
+from ..config import format_draft, hull_scenario, load_hull
 from ..errors import InputError
 from .app import app, checked, err_console, handles_errors, parse_draft_option
 
@@ -70,17 +70,17 @@ def simulate_command(
 ) -> None:
     """Serve a simulated MTi-G on a pty; the first stdout line is the port to open."""
     from ..device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
-    from ..physics.scenario import DecayScenario
 
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood; use roll or pitch")
     if speed <= 0:
         raise InputError(f"--speed must be positive, got {speed:g}")
-    validation.hull_draft(load_hull(hull), draft, axis)
+    hull_config = load_hull(hull)
+    validation.hull_draft(hull_config, draft, axis)
     if legacy and mti_600:
         raise InputError("--legacy and --mti-600 exclude each other: a 600-series device speaks MTData2")
-    scenario = DecayScenario(
-        hull=hull, draft=draft, axis=axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
+    scenario = hull_scenario(
+        hull_config, draft, axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
         release_after_s=release_after_s, decay_s=decay_s,
     )  # fmt: skip
     fault_set = Faults.parse(faults)
