@@ -3,7 +3,8 @@
 It runs until ``runs`` decays are recorded or it is stopped (Ctrl-C, SIGTERM). A
 device that vanishes mid-decay closes that file with what arrived, and the
 daemon waits for the device to come back. ``port="sim"`` starts the built-in
-simulated MTi-G in-process on a pseudo-terminal, opened like hardware.
+simulated MTi-G in-process on a pseudo-terminal, opened like hardware; ``port="sim:FILE.mcap"``
+plays the device of that recording (its raw bytes, at their pace) through the same pty.
 """
 
 from __future__ import annotations
@@ -23,9 +24,11 @@ import numpy as np
 from .. import validation
 from ..config import Hull, format_draft, hull_scenario, load_hull
 from ..device.driver import MTiDriver
+from ..device.simulator import RecordedSource, SimPort, SimulatedMTi
 from ..errors import DeviceGone, InputError, RecordingError
 from ..ident.online import prepare_identifier
 from ..store.disk import RESERVE_BYTES
+from ..store.playback import recorded_device
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
@@ -142,13 +145,21 @@ class RecordDaemon:
         validation.output_rate_hz(settings.rate_hz, option="rate")
         validation.baud_rate(settings.baud, option="baud")
         validation.live_model(settings.model, option="model")
-        if settings.port == "sim":  # refuse a hull the simulator cannot play before anything opens
+        self.sim_port = SimPort.parse(settings.port)
+        self.replayed: RecordedSource | None = None
+        if self.sim_port and self.sim_port.recording:  # a recording's device: its frames, its rate
+            self.replayed = recorded_device(self.sim_port.recording)
+            recorded_hz = self.replayed.nominal_rate_hz
+            if abs(recorded_hz - settings.rate_hz) > 0.01 * settings.rate_hz:
+                where = self.sim_port.recording
+                raise InputError(f"{where} was recorded at {recorded_hz:g} Hz: give --rate {recorded_hz:g}")
+        elif self.sim_port:  # refuse a hull the simulator cannot play before anything opens
             if self.hull is None:
                 raise InputError("the simulated sensor needs a hull to play: give --hull")
             sim_axis = "roll" if settings.axis == "auto" else settings.axis
             self.hull.simulation_model(sim_axis).coefficients(settings.draft)
         validation.output_dir(settings.out_dir, option="output folder")
-        self.simulator = None
+        self.simulator: SimulatedMTi | None = None
         self.outcomes: list[DecayOutcome] = []
         self._next_read = 0.0
         self._stop = threading.Event()
@@ -167,21 +178,23 @@ class RecordDaemon:
         return dataclasses.replace(scenario, **s.sim_overrides)  # type: ignore[arg-type]
 
     def _start_simulator(self) -> str:
-        from ..device.simulator import SimulatedMTi
-
         s = self.settings
-        scenario = self.simulation_scenario()
         baud = s.baud or _sim_baud(s.rate_hz)
-        self.simulator = SimulatedMTi(
-            scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed, legacy=s.sim_legacy
-        ).start()
-        label = f"{scenario.hull} {format_draft(s.draft)} {scenario.axis}"
+        if self.replayed is not None:
+            self.simulator = SimulatedMTi(source=self.replayed, speed=s.sim_speed, baud=baud).start()
+            label = f"playing the device of {self.replayed.name}: {len(self.replayed)} frames"
+        else:
+            scenario = self.simulation_scenario()
+            self.simulator = SimulatedMTi(
+                scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed, legacy=s.sim_legacy
+            ).start()
+            label = f"{scenario.hull} {format_draft(s.draft)} {scenario.axis}"
         self.on_event(f"simulated MTi-G on {self.simulator.link} ({label})")
         return self.simulator.link
 
     def _driver(self) -> MTiDriver:
         s = self.settings
-        port = self._start_simulator() if s.port == "sim" else s.port
+        port = self._start_simulator() if self.sim_port else s.port
         probe_first = self.simulator.baud if self.simulator else 115200
         return MTiDriver(port, baud=s.baud, rate_hz=s.rate_hz, probe_first=probe_first)
 

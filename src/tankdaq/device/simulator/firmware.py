@@ -351,7 +351,9 @@ class Firmware:
         self.measuring = True
         now = self.device_time()
         if self.source.plays_from_measurement and not self._rolling:
-            self._origin_s = now  # a recording starts rolling with the first measurement after power-up
+            # a recording starts rolling with the first measurement after power-up, its first frame
+            # one period after the ack (as a device's first sample comes), not glued to it
+            self._origin_s = now + 1 / self.source.rate_hz(self.output)
             self._rolling = True
         # Frames follow the device clock: the first one sent is the next one due from now on.
         self._next_frame = self.source.due(now - self._origin_s, self.output, strict=True)

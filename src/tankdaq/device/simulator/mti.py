@@ -16,6 +16,7 @@ import queue
 import select
 import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from ...config import hull_scenario
@@ -28,6 +29,28 @@ from .firmware import Behaviour, DeviceIdentity, Firmware
 from .output import OutputItem
 from .pty_link import PtyLink
 from .sources import FrameSource, RecordedSource, ScriptedSource
+
+#: The port name that starts the built-in simulator; ``sim:FILE.mcap`` plays a recording's device.
+SIM_PORT = "sim"
+
+
+@dataclass(frozen=True)
+class SimPort:
+    """A ``--port`` that names the simulator: the scripted scenario, or a recording to play again."""
+
+    recording: Path | None = None
+
+    @classmethod
+    def parse(cls, port: str) -> SimPort | None:
+        """``sim`` -> the scripted scenario; ``sim:FILE.mcap`` -> that file's device; other ports None."""
+        name, colon, rest = port.partition(":")
+        if name != SIM_PORT:
+            return None
+        if not colon:
+            return cls()
+        if not rest:
+            raise InputError("--port sim:FILE.mcap needs the recording to play after 'sim:'")
+        return cls(Path(rest))
 
 
 class SimulatedMTi:
@@ -61,9 +84,7 @@ class SimulatedMTi:
             raise InputError("give the simulator a scenario or a source, not both")
         if legacy and isinstance(source, RecordedSource):
             raise InputError("a recording plays MTData2 as recorded: it cannot be a legacy (MTData) device")
-        if source is None:
-            source = ScriptedSource(scenario or _default_scenario())
-        self.source = source
+        self.source: FrameSource = source or ScriptedSource(scenario or _default_scenario())
         self.speed = speed
         self.faults = faults or Faults()
         self.identity = identity or (DeviceIdentity.legacy_mti_g() if legacy else DeviceIdentity.mti_g_710())
@@ -71,7 +92,7 @@ class SimulatedMTi:
         name = by_id_name("Xsens", self.identity.product_code, self.identity.serial_number)
         self.line = PtyLink(name, link, seed)
         self.firmware = Firmware(
-            source, self.line, identity=self.identity, behaviour=self.behaviour, baud=baud, speed=speed,
+            self.source, self.line, identity=self.identity, behaviour=self.behaviour, baud=baud, speed=speed,
             legacy=legacy, faults=self.faults, seed=seed,
         )  # fmt: skip
         self._commands: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()

@@ -109,8 +109,8 @@ class ScenarioSamples:
 class ScriptedSource:
     """The scenario on the device clock from power-up, at the rate the output is configured to."""
 
-    plays_from_measurement = False
-    configuration = None
+    plays_from_measurement: bool = False
+    configuration: list[tuple[int, int]] | None = None
 
     def __init__(self, scenario: DecayScenario) -> None:
         self.scenario = scenario
@@ -159,7 +159,7 @@ class RecordedSource:
     others at the rate they appear.
     """
 
-    plays_from_measurement = True
+    plays_from_measurement: bool = True
 
     def __init__(
         self, raw: bytes, configuration: Sequence[tuple[int, int]] | None = None, name: str = "recording"
@@ -192,7 +192,7 @@ class RecordedSource:
         steps = np.diff(ticks[timed])
         steps = steps[steps > 0]
         self.nominal_rate_hz = TICKS_PER_SECOND / float(np.median(steps)) if steps.size else 100.0
-        self.configuration = (
+        self.configuration: list[tuple[int, int]] | None = (
             [(int(x), int(hz)) for x, hz in configuration]
             if configuration
             else _configuration_seen([m for m in messages if m], self.nominal_rate_hz)
