@@ -229,15 +229,30 @@ class ReleaseDetector:
     def _offset(self) -> np.ndarray:
         return self._x - self.baseline_rad_
 
-    def _emit(self, kind: str, local: int, confirmed_local: int, **values: float | str) -> ReleaseEvent:
+    def _emit(
+        self,
+        kind: str,
+        local: int,
+        confirmed_local: int,
+        *,
+        angle_rad: float = math.nan,
+        rate_rad_s: float = math.nan,
+        release_t: float = math.nan,
+        settle_s: float = math.nan,
+        reason: str = "",
+    ) -> ReleaseEvent:
         event = ReleaseEvent(
             kind,
             local + self._first,
             float(self._t[local]),
             confirmed_local + self._first,
+            angle_rad=angle_rad,
+            rate_rad_s=rate_rad_s,
             baseline_rad=self.baseline_rad_,
-            **values,
-        )  # type: ignore[arg-type]
+            release_t=release_t,
+            settle_s=settle_s,
+            reason=reason,
+        )
         self.events_.append(event)
         return event
 
@@ -499,7 +514,7 @@ class _DecayFit:
 def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: float) -> list[ReleaseEvent]:
     """Offline: all events in a whole array of samples (``axis='auto'`` picks the tilted axis)."""
     chosen = pick_axis(samples) if axis == "auto" else axis
-    return ReleaseDetector(axis=chosen, **settings).fit(samples).events_  # type: ignore[arg-type]
+    return ReleaseDetector(axis=chosen, **settings).fit(samples).events_
 
 
 def pick_axis(samples: np.ndarray) -> str:

@@ -12,7 +12,7 @@ from dataclasses import fields, is_dataclass
 from enum import StrEnum
 from operator import itemgetter
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Annotated
+from typing import IO, TYPE_CHECKING, Annotated, cast
 
 import numpy as np
 import typer
@@ -182,10 +182,10 @@ def write_messages(
     if header is not None:
         writer = csv.DictWriter(handle, fieldnames=header, restval="", lineterminator="\n")
         writer.writeheader()
-    counters = []
+    counters: list[int] = []
     for count, message in enumerate(messages, 1):
         if "PacketCounter" in message:
-            counters.append(message["PacketCounter"])
+            counters.append(cast(int, message["PacketCounter"]))
         if writer is None:
             values = {name: to_jsonable(value) for name, value in message.items()}
             handle.write(json.dumps(values, separators=(",", ":")) + "\n")

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def quaternion(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+def quaternion(roll: ArrayLike, pitch: ArrayLike, yaw: ArrayLike) -> np.ndarray:
     """Unit quaternions (q0, q1, q2, q3) along the last axis."""
     cr, sr = np.cos(np.multiply(roll, 0.5)), np.sin(np.multiply(roll, 0.5))
     cp, sp = np.cos(np.multiply(pitch, 0.5)), np.sin(np.multiply(pitch, 0.5))
@@ -21,7 +22,7 @@ def quaternion(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarr
     )
 
 
-def rotation_matrix(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+def rotation_matrix(roll: ArrayLike, pitch: ArrayLike, yaw: ArrayLike) -> np.ndarray:
     """Body-to-earth rotation matrices, row-major flattened (9 values) along the last axis."""
     cr, sr, cp, sp, cy, sy = (
         np.cos(roll),

@@ -186,22 +186,22 @@ class StreamBlock:
 class LineLog:
     """What arrived while looking for the device: the one-line error says it."""
 
-    bytes: int = 0
+    byte_count: int = 0
     head: bytearray = field(default_factory=bytearray)
     frames: Counter[str] = field(default_factory=Counter)
     wakeup: bool = False
 
     def add(self, data: bytes, frames: list[Frame]) -> None:
-        self.bytes += len(data)
+        self.byte_count += len(data)
         self.head += data[: max(0, 12 - len(self.head))]
         self.frames.update(frame.name for frame in frames)
         self.wakeup |= any(frame.mid == MID.WAKEUP for frame in frames)
 
     def describe(self) -> str:
-        if not self.bytes:
+        if not self.byte_count:
             return "nothing"
         frames = ", ".join(f"{name} x{n}" for name, n in self.frames.most_common(4)) or "no Xbus frame"
-        return f"{self.bytes} bytes ({frames}; first {self.head.hex(' ')})"
+        return f"{self.byte_count} bytes ({frames}; first {self.head.hex(' ')})"
 
 
 class MTiDriver:
@@ -413,7 +413,7 @@ class MTiDriver:
             return
         (main, main_s), *others = sorted(tried, key=lambda tried_rate: -tried_rate[1])  # the long look first
         scanned = f", {self.probe_s:g} s at each of {', '.join(str(r) for r, _ in others)}" if others else ""
-        if not self._log.bytes:
+        if not self._log.byte_count:
             hint = f"nothing arrived: check power and cable; {MODEMMANAGER_HINT}"
         elif not self._log.frames:
             hint = "bytes but no Xbus frame at any standard rate: is it an Xsens device, at 8N1?"

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -130,10 +131,10 @@ def amplitude_table(
             AmplitudePoint(
                 amplitude_deg=float(a_deg),
                 b_eq=value,
-                b_eq_std=delta_method(lambda c, a=a: b_eq(c, a), coefficients, covariance),
+                b_eq_std=delta_method(partial(b_eq, amplitude=a), coefficients, covariance),
                 mu_eq=0.5 * value,
                 bertin_n_per_deg=n,
-                bertin_n_std=delta_method(lambda c, a=a: bertin_n_per_deg(c, a), coefficients, covariance),
+                bertin_n_std=delta_method(partial(bertin_n_per_deg, amplitude=a), coefficients, covariance),
             )
         )
     return out

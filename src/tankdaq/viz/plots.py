@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import matplotlib as mpl
 import numpy as np
@@ -18,9 +19,12 @@ from matplotlib.figure import Figure
 
 from ..errors import RecordingError
 
+if TYPE_CHECKING:
+    from matplotlib.typing import RcKeyType
+
 MEASURED_COLOR = "#1f77b4"
 MODEL_COLOR = "#d62728"
-STYLE = {
+STYLE: dict[RcKeyType, Any] = {
     "axes.grid": True,
     "grid.alpha": 0.3,
     "axes.spines.top": False,

@@ -334,7 +334,7 @@ def _scan_general(
 def _sync_key(sync: bytes | None) -> int:
     """The key of the header in the sync state, as ``_Candidates.keys`` (-1: none to be trusted with)."""
     total = frame_length(sync) if sync else None
-    if total is None:
+    if sync is None or total is None:
         return -1
     return int.from_bytes(sync[1:3], "big") << 20 | len(sync) << 17 | total
 
@@ -549,7 +549,7 @@ class Layout:
             return (payloads[:, self.header_offsets] == self.header_bytes).all(axis=1)
         view = payloads.view(self.headers)[:, 0]
         hit = np.ones(payloads.shape[0], dtype=bool)
-        for name, value in zip(self.headers.names, self.header_values, strict=True):
+        for name, value in zip(self.headers.names or (), self.header_values, strict=True):
             hit &= view[name] == value
         return hit
 
@@ -620,7 +620,10 @@ def _satinfo(view: np.ndarray) -> np.ndarray:
 def learn_layout(payload: bytes) -> Layout:
     """The layout of one MTData2 payload; ProtocolError if its sizes do not add up or cannot be."""
     spans = item_spans(payload)
-    names, formats, offsets, fields = [], [], [], []
+    names: list[str] = []
+    formats: list[np.dtype] = []
+    offsets: list[int] = []
+    fields: list[Field] = []
     unknown = 0
     for xdi, offset, size in spans:
         found = _item_field(xdi, size)

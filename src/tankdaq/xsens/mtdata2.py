@@ -174,8 +174,10 @@ class DataSpec:
         return tuple(FRAMES) if self.has_frame else ("ENU",)
 
 
-def _real(name: str, base: int, count: int, unit: str, **kw: bool) -> DataSpec:
-    return DataSpec(name, base, "real", unit, count=count, **kw)
+def _real(
+    name: str, base: int, count: int, unit: str, has_frame: bool = False, fixed_point: bool = True
+) -> DataSpec:
+    return DataSpec(name, base, "real", unit, count=count, has_frame=has_frame, fixed_point=fixed_point)
 
 
 #: Every data identifier of LLCP Table 16 (reference §2.4), keyed by ``xdi & 0xFFF0``.
