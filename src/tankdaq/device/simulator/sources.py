@@ -22,10 +22,8 @@ import numpy as np
 
 from ...errors import InputError
 from ...physics.scenario import DecayScenario, RunTruth, SensorModel, still_trace
-from ...xsens.batch import scan_frames
-from ...xsens.constants import MID
+from ...xsens.batch import DecodedBlock, decode_buffer, scan_frames
 from ...xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS
-from ...xsens.mtdata2 import SPEC_BY_BASE, TYPE_MASK, decode_mtdata2
 from ...xsens.timebase import MODULUS_32_BIT, MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrapper
 from .output import DEVICE_RATES_HZ, Output
 
@@ -172,11 +170,11 @@ class RecordedSource:
         ends = scan.payload_starts + scan.lengths + 1
         cuts = np.concatenate(([0], ends[:-1], [len(raw)]))
         self.segments = [raw[a:b] for a, b in itertools.pairwise(cuts)]
-        messages = [
-            decode_mtdata2(raw[p : p + n]) if buf[s + 2] == MID.MTDATA2 else None
-            for s, p, n in zip(scan.starts, scan.payload_starts, scan.lengths, strict=True)
-        ]
-        raw_ticks = np.array([m["SampleTimeFine"] if m and "SampleTimeFine" in m else -1 for m in messages])
+        decoded = decode_buffer(buf, final=True)  # the same frames, as columns (``frame_index`` places them)
+        raw_ticks = np.full(scan.starts.size, -1, dtype=np.int64)
+        if "SampleTimeFine" in decoded.columns:
+            present = decoded.present["SampleTimeFine"]
+            raw_ticks[decoded.frame_index[present]] = decoded.columns["SampleTimeFine"][present]
         timed = raw_ticks >= 0
         if not timed.any():
             raise InputError(f"{name}: no frame carries SampleTimeFine, so there is no pace to play them at")
@@ -195,7 +193,7 @@ class RecordedSource:
         self.configuration: list[tuple[int, int]] | None = (
             [(int(x), int(hz)) for x, hz in configuration]
             if configuration
-            else _configuration_seen([m for m in messages if m], self.nominal_rate_hz)
+            else _configuration_seen(decoded, self.nominal_rate_hz)
         )
 
     def __len__(self) -> int:
@@ -226,17 +224,16 @@ class RecordedSource:
         return self.segments[start:stop]
 
 
-def _configuration_seen(messages: list, rate_hz: float) -> list[tuple[int, int]]:
-    """(xdi, Hz) of the outputs in ``messages`` (decoded MTData2) in first-seen order."""
-    counts: dict[int, int] = {}
-    for message in messages:
-        for xdi in message.xdis.values():
-            counts[xdi] = counts.get(xdi, 0) + 1
+def _configuration_seen(decoded: DecodedBlock, rate_hz: float) -> list[tuple[int, int]]:
+    """(xdi, Hz) of the outputs in the MTData2 messages, in message order: per-message outputs at
+    0xFFFF, the others at the device rate nearest to how often they appear."""
     entries = []
-    for xdi, count in counts.items():
-        if SPEC_BY_BASE[xdi & TYPE_MASK].name in PER_MESSAGE_OUTPUTS:
-            entries.append((xdi, MAX_FREQUENCY))
-        else:
-            seen_hz = rate_hz * count / len(messages)
-            entries.append((xdi, min(DEVICE_RATES_HZ, key=lambda hz: abs(hz - seen_hz))))
+    for name, present in decoded.present.items():
+        xdis, counts = np.unique(decoded.xdis[name][present], return_counts=True)
+        for xdi, count in zip(xdis.tolist(), counts.tolist(), strict=True):
+            if name in PER_MESSAGE_OUTPUTS:
+                entries.append((xdi, MAX_FREQUENCY))
+            else:
+                seen_hz = rate_hz * count / decoded.n_messages
+                entries.append((xdi, min(DEVICE_RATES_HZ, key=lambda hz: abs(hz - seen_hz))))
     return entries
