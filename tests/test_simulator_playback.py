@@ -139,6 +139,17 @@ def test_a_real_capture_plays_through_the_driver_to_its_reference_decode() -> No
             np.testing.assert_array_equal(euler, _values(fields["EulerAngles"]))
 
 
+#: Set 5's device was configured for BaroPressure at 100 Hz but sent it in every other message: read
+#: off the frames it is 50 Hz, what the device really did, so that set cannot match its configuration.
+@pytest.mark.parametrize("name", [f"einride-{n}" for n in range(1, 5)])
+def test_the_configuration_read_off_real_frames_is_the_one_the_device_reported(name: str) -> None:
+    path = capture_dir(name)
+    reported = parse_output_configuration((path / "outputconfig.bin").read_bytes())
+    source = RecordedSource((path / "output.bin").read_bytes(), name=name)
+    assert source.configuration is not None and sorted(source.configuration) == sorted(reported)
+    assert source.nominal_rate_hz == 100.0
+
+
 # ---- the command line ----------------------------------------
 
 

@@ -193,7 +193,7 @@ class RecordedSource:
         self.configuration: list[tuple[int, int]] | None = (
             [(int(x), int(hz)) for x, hz in configuration]
             if configuration
-            else _configuration_seen(decoded, self.nominal_rate_hz)
+            else _configuration_seen(decoded, ticks[decoded.frame_index])
         )
 
     def __len__(self) -> int:
@@ -224,16 +224,18 @@ class RecordedSource:
         return self.segments[start:stop]
 
 
-def _configuration_seen(decoded: DecodedBlock, rate_hz: float) -> list[tuple[int, int]]:
-    """(xdi, Hz) of the outputs in the MTData2 messages, in message order: per-message outputs at
-    0xFFFF, the others at the device rate nearest to how often they appear."""
+def _configuration_seen(decoded: DecodedBlock, ticks: np.ndarray) -> list[tuple[int, int]]:
+    """(xdi, Hz) of the outputs in the MTData2 messages (``ticks``: their device times), in message
+    order: per-message outputs at 0xFFFF, the others at the device rate nearest to their usual
+    spacing (a real MTi skips a fused output now and then: counting them would understate it)."""
     entries = []
     for name, present in decoded.present.items():
-        xdis, counts = np.unique(decoded.xdis[name][present], return_counts=True)
-        for xdi, count in zip(xdis.tolist(), counts.tolist(), strict=True):
+        for xdi in np.unique(decoded.xdis[name][present]).tolist():
             if name in PER_MESSAGE_OUTPUTS:
                 entries.append((xdi, MAX_FREQUENCY))
-            else:
-                seen_hz = rate_hz * count / decoded.n_messages
-                entries.append((xdi, min(DEVICE_RATES_HZ, key=lambda hz: abs(hz - seen_hz))))
+                continue
+            steps = np.diff(ticks[present & (decoded.xdis[name] == xdi)])
+            steps = steps[steps > 0]
+            seen_hz = TICKS_PER_SECOND / float(np.median(steps)) if steps.size else 1.0
+            entries.append((xdi, min(DEVICE_RATES_HZ, key=lambda hz: abs(hz - seen_hz))))
     return entries
