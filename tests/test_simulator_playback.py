@@ -22,7 +22,7 @@ from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
-from tankdaq.device.simulator import RecordedSource, SimPort, SimulatedMTi
+from tankdaq.device.simulator import DeviceIdentity, RecordedSource, SimPort, SimulatedMTi
 from tankdaq.errors import InputError
 from tankdaq.store.playback import recorded_device
 from tankdaq.store.reader import Recording, read_recording
@@ -77,7 +77,9 @@ def test_a_played_back_recording_records_the_same_samples(recorded: tuple[Record
 def test_the_played_back_device_is_the_recorded_one(recorded: tuple[Recording, Recording]) -> None:
     first, again = recorded
     assert again.metadata["port"].endswith("ttyMTi0") and again.metadata["product_code"] == "MTi-G-710-2A8G4"
-    assert again.run_config["device"]["configuration"] == first.run_config["device"]["configuration"]
+    for setting in ("configuration", "device_id", "product_code", "firmware"):
+        assert again.run_config["device"][setting] == first.run_config["device"][setting], setting
+    assert recorded_device(first.path).identity == DeviceIdentity.mti_g_710()  # the scripted device's
     assert again.metadata["link_gaps"] == "0" and again.metadata["link_lost"] == "0"
 
 

@@ -8,19 +8,21 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..device.simulator import RecordedSource
+from ..device.simulator import DeviceIdentity, RecordedSource
 from ..errors import BadRecordingInput
 from ..validation import input_file
 from .reader import read_recording
 
 
 def recorded_device(path: str | Path) -> RecordedSource:
-    """The frames of ``path``'s raw channel with the output configuration its device was in."""
+    """The frames of ``path``'s raw channel, with the output configuration and identity of its device."""
     recording = read_recording(input_file(Path(path), "recording", BadRecordingInput))
     raw = b"".join(chunk for _, chunk in recording.raw_chunks)
     if not raw:
         raise BadRecordingInput(f"{path} has no raw device bytes (/xsens/raw) to play")
     if str(recording.metadata.get("legacy_protocol", "false")).lower() == "true":
         raise BadRecordingInput(f"{path} holds legacy MTData: only MTData2 recordings can be played")
-    configuration = recording.run_config.get("device", {}).get("configuration") or None
-    return RecordedSource(raw, configuration, name=str(path))
+    device = recording.run_config.get("device", {})
+    return RecordedSource(
+        raw, device.get("configuration") or None, name=str(path), identity=DeviceIdentity.recorded(device)
+    )

@@ -2,7 +2,8 @@
 
 - ``sources``: where the data comes from (``ScriptedSource``: a scripted decay scenario;
   ``RecordedSource``: the raw bytes of a recording or capture, re-sent at their recorded pace);
-- ``firmware``: the MT messages and the device states (``Firmware``, ``Behaviour``, ``DeviceIdentity``);
+- ``firmware``: the MT messages and the device states (``Firmware``, ``Behaviour``); ``identity``: who it
+  says it is (``DeviceIdentity``);
 - ``output``: the output configuration in force and the encoding of samples into messages;
 - ``pty_link``: the pseudo-terminal the driver opens, its stable and by-id links, the baud rate;
 - ``faults``: line noise, stalls, unplugs;
@@ -10,7 +11,8 @@
 """
 
 from .faults import Faults
-from .firmware import Behaviour, DeviceIdentity
+from .firmware import Behaviour
+from .identity import DeviceIdentity
 from .mti import SIM_PORT, SimPort, SimulatedMTi
 from .output import default_configuration, effective_configuration
 from .pty_link import OWNER_FILE, TEMP_PREFIX, sweep_stale_folders

@@ -27,15 +27,18 @@ from ...errors import ProtocolError
 from ...xsens.constants import FLASH_WRITES, MID, baud_code
 from ...xsens.control import (
     baudrate_payload,
+    device_id_payload,
     output_configuration_payload,
     parse_baudrate,
     parse_output_configuration,
     parse_port_config,
     port_config_baud,
+    port_config_payload,
 )
 from ...xsens.frame import Frame, build_frame
 from ...xsens.framer import StreamFramer
 from .faults import Faults
+from .identity import DeviceIdentity
 from .output import Output, effective_configuration
 from .pty_link import PtyLink
 from .sources import FrameSource
@@ -48,43 +51,6 @@ ERROR_INVALID_BAUD = 0x20
 #: Ports of a 600-series device (PortConfig words): the host port first.
 PORTS_600 = 3
 FACTORY_BAUD = 115200
-
-
-@dataclass(frozen=True)
-class DeviceIdentity:
-    """What the device says about itself."""
-
-    device_id: int
-    product_code: str
-    firmware: bytes  # raw ReqFWRev payload (11 bytes MkIV+, 3 bytes legacy)
-
-    @classmethod
-    def mti_g_710(cls) -> DeviceIdentity:
-        return cls(0x077B1A2C, "MTi-G-710-2A8G4", struct.pack(">3BII", 1, 8, 2, 35, 0))
-
-    @classmethod
-    def legacy_mti_g(cls) -> DeviceIdentity:
-        """The public ethz issue #66 device: a 2007-era MTi-G (Mark III)."""
-        return cls(0x01500618, "MTi-G-28A53G35", bytes((2, 4, 6)))
-
-    @classmethod
-    def mti_630(cls) -> DeviceIdentity:
-        """A 600-series unit: 8-byte device id, baud rate through PortConfig."""
-        return cls(0x0880_0000_0000_1A2C, "MTi-630-2A8G4", struct.pack(">3BII", 1, 12, 0, 100, 0))
-
-    @property
-    def serial_number(self) -> str:
-        """The USB serial number (Xsens put the device id there)."""
-        return f"{self.device_id:08X}"
-
-    @property
-    def family_600(self) -> bool:
-        return self.product_code.startswith("MTi-6")
-
-    @property
-    def device_id_payload(self) -> bytes:
-        """The DeviceID reply: 8 bytes on a 600-series, 4 on the others."""
-        return self.device_id.to_bytes(8 if self.family_600 else 4, "big")
 
 
 @dataclass(frozen=True)
@@ -243,7 +209,9 @@ class Firmware:
             return  # a measuring device ignores all but GoToConfig and Reset
         handlers: dict[int, Callable[[bytes], None]] = {
             MID.GOTO_MEASUREMENT: self._on_goto_measurement,
-            MID.REQ_DID: lambda _: self._reply(MID.DEVICE_ID, self.identity.device_id_payload),
+            MID.REQ_DID: lambda _: self._reply(
+                MID.DEVICE_ID, device_id_payload(self.identity.device_id, self.identity.family_600)
+            ),
             MID.REQ_PRODUCT_CODE: lambda _: self._reply(
                 MID.PRODUCT_CODE, self.identity.product_code.encode()
             ),
@@ -298,8 +266,8 @@ class Firmware:
     def _on_port_config(self, data: bytes) -> None:
         """600-series: one U32 per port, the baud code in the low byte; applies after a reset."""
         if not data:
-            words = [baud_code(self.baud)] + [baud_code(FACTORY_BAUD)] * (PORTS_600 - 1)
-            self._reply(MID.PORT_CONFIG_ACK, struct.pack(f">{PORTS_600}I", *words))
+            others = [baud_code(FACTORY_BAUD)] * (PORTS_600 - 1)
+            self._reply(MID.PORT_CONFIG_ACK, port_config_payload([0, *others], self.baud))
             return
         try:
             words = parse_port_config(data)

@@ -25,7 +25,8 @@ from ...physics.scenario import DecayScenario, RunTruth
 from ...xsens.constants import SERIAL_BAUDS
 from ..ports import by_id_name
 from .faults import Faults
-from .firmware import Behaviour, DeviceIdentity, Firmware
+from .firmware import Behaviour, Firmware
+from .identity import DeviceIdentity
 from .output import OutputItem
 from .pty_link import PtyLink
 from .sources import FrameSource, RecordedSource, ScriptedSource
@@ -87,7 +88,11 @@ class SimulatedMTi:
         self.source: FrameSource = source or ScriptedSource(scenario or _default_scenario())
         self.speed = speed
         self.faults = faults or Faults()
-        self.identity = identity or (DeviceIdentity.legacy_mti_g() if legacy else DeviceIdentity.mti_g_710())
+        self.identity = (
+            identity
+            or self.source.identity
+            or (DeviceIdentity.legacy_mti_g() if legacy else DeviceIdentity.mti_g_710())
+        )
         self.behaviour = behaviour or Behaviour()
         name = by_id_name("Xsens", self.identity.product_code, self.identity.serial_number)
         self.line = PtyLink(name, link, seed)

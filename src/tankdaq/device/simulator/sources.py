@@ -25,6 +25,7 @@ from ...physics.scenario import DecayScenario, RunTruth, SensorModel, still_trac
 from ...xsens.batch import DecodedBlock, decode_buffer, scan_frames
 from ...xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS
 from ...xsens.timebase import MODULUS_32_BIT, MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrapper
+from .identity import DeviceIdentity
 from .output import DEVICE_RATES_HZ, Output
 
 
@@ -35,6 +36,8 @@ class FrameSource(Protocol):
     plays_from_measurement: bool
     #: The output configuration the frames carry whatever the host asks (None: the host configures it).
     configuration: list[tuple[int, int]] | None
+    #: The device that sent them (None: the simulator's own).
+    identity: DeviceIdentity | None
 
     @property
     def truth(self) -> list[RunTruth]:
@@ -109,6 +112,7 @@ class ScriptedSource:
 
     plays_from_measurement: bool = False
     configuration: list[tuple[int, int]] | None = None
+    identity: DeviceIdentity | None = None
 
     def __init__(self, scenario: DecayScenario) -> None:
         self.scenario = scenario
@@ -154,15 +158,20 @@ class RecordedSource:
     Every byte goes out as it was recorded, line noise included (bytes between frames travel with
     the frame after them). ``configuration`` is the output configuration the device was in (from
     the recording); without it, it is read off the frames: per-message outputs at 0xFFFF, the
-    others at the rate they appear.
+    others at the rate they appear. ``identity``: the device that sent them, when known.
     """
 
     plays_from_measurement: bool = True
 
     def __init__(
-        self, raw: bytes, configuration: Sequence[tuple[int, int]] | None = None, name: str = "recording"
+        self,
+        raw: bytes,
+        configuration: Sequence[tuple[int, int]] | None = None,
+        name: str = "recording",
+        identity: DeviceIdentity | None = None,
     ) -> None:
         self.name = name
+        self.identity = identity
         buf = np.frombuffer(raw, dtype=np.uint8)
         scan = scan_frames(buf, final=True)
         if not scan.starts.size:
