@@ -215,7 +215,6 @@ def load_hull(spec: str) -> Hull:
         raise ConfigError(f"{path}: {exc}") from None
 
 
-
 def hull_scenario(
     hull: str | Hull = "swath", draft: float = 1.0, axis: str = "roll", **settings: Any
 ) -> DecayScenario:
@@ -226,6 +225,7 @@ def hull_scenario(
     loaded = hull if isinstance(hull, Hull) else load_hull(hull)
     coefficients = loaded.simulation_model(axis).coefficients(draft)
     return DecayScenario(hull=loaded.name, draft=draft, axis=axis, coefficients=coefficients, **settings)
+
 
 def _parse_hull(data: dict, path: Path, origin: str) -> Hull:
     if "axes" in data and any("drafts" in spec for spec in data["axes"].values()):

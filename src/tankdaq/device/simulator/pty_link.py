@@ -202,4 +202,3 @@ def sweep_stale_folders(root: str | None = None) -> list[Path]:
             shutil.rmtree(folder, ignore_errors=True)
             removed.append(folder)
     return removed
-
