@@ -16,8 +16,8 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, InputError
-from .physics.decay import TERMS
 from .physics.scenario import DecayScenario
+from .physics.terms import TERMS
 
 
 def config_dir() -> Path:
