@@ -22,7 +22,8 @@ from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
-from tankdaq.device.simulator import DeviceIdentity, RecordedSource, SimPort, SimulatedMTi
+from tankdaq.device.factory import SimPort
+from tankdaq.device.simulator import DeviceIdentity, RecordedSource, SimulatedMTi
 from tankdaq.errors import InputError
 from tankdaq.store.playback import recorded_device
 from tankdaq.store.reader import Recording, read_recording

@@ -39,8 +39,10 @@ import numpy as np
 from ..config import CampaignPlan, format_draft, load_hull, parse_draft
 from ..errors import ConfigError, InputError
 from ..ident.derived import b_eq
+from ..samples import AXIS_FIELDS
 from .daemon import RecordDaemon, RecordSettings
 from .session import DecayOutcome
+from .sinks import Block, Decay, Sink
 
 LOG_NAME = "session.jsonl"
 LOCK_NAME = "session.lock"
@@ -423,6 +425,30 @@ def _minutes(seconds: float) -> str:
     return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
 
 
+class LevelCheck(Sink):
+    """A sink of the record pipeline: the still water of the decay axis over ``LEVEL_S`` of device
+    time, read from every block; ``on_full`` is called once that much has arrived."""
+
+    def __init__(self, axis: str, on_full: Callable[[], None] = lambda: None) -> None:
+        self.angle_field = AXIS_FIELDS[axis][0]
+        self.on_full = on_full
+        self._blocks: list[np.ndarray] = []
+
+    def on_block(self, block: Block, decay: Decay | None) -> None:
+        if block.samples.size:
+            self._blocks.append(block.samples)
+        if self.full:
+            self.on_full()
+
+    @property
+    def full(self) -> bool:
+        return bool(self._blocks) and float(self._blocks[-1]["t"][-1] - self._blocks[0]["t"][0]) >= LEVEL_S
+
+    def mean_sd_deg(self) -> tuple[float, float]:
+        angle = np.degrees(np.concatenate([b[self.angle_field] for b in self._blocks]))
+        return float(angle.mean()), float(angle.std())
+
+
 @dataclass
 class SessionSettings:
     """A guided session: the plan, the hull, where, and how each decay is recorded."""
@@ -682,23 +708,14 @@ class CampaignSession:
 
     def _measure_level(self, condition: Condition) -> tuple[float, float]:
         """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time."""
-        from ..samples import AXIS_FIELDS
-
-        blocks: list[np.ndarray] = []
-
-        def collect(samples: np.ndarray) -> None:
-            if samples.size:
-                blocks.append(samples)
-            if blocks and float(blocks[-1]["t"][-1] - blocks[0]["t"][0]) >= LEVEL_S:
-                daemon.stop()
-
         settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
-        daemon = RecordDaemon(settings, on_samples=collect)
+        level = LevelCheck(self.settings.plan.axis)
+        daemon = RecordDaemon(settings, sinks=[level])
+        level.on_full = daemon.stop
         daemon.run()
-        if not blocks or float(blocks[-1]["t"][-1] - blocks[0]["t"][0]) < LEVEL_S:
+        if not level.full:
             raise KeyboardInterrupt  # stopped during the level check
-        angle = np.degrees(np.concatenate([b[AXIS_FIELDS[self.settings.plan.axis][0]] for b in blocks]))
-        return float(angle.mean()), float(angle.std())
+        return level.mean_sd_deg()
 
     def _record_one(self, state: SessionState, condition: Condition) -> SessionState:
         decay = state.decays + 1

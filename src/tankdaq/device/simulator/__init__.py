@@ -13,21 +13,19 @@
 from .faults import Faults
 from .firmware import Behaviour
 from .identity import DeviceIdentity
-from .mti import SIM_PORT, SimPort, SimulatedMTi
+from .mti import SimulatedMTi
 from .output import default_configuration, effective_configuration
 from .pty_link import OWNER_FILE, TEMP_PREFIX, sweep_stale_folders
 from .sources import RecordedSource, ScriptedSource
 
 __all__ = [
     "OWNER_FILE",
-    "SIM_PORT",
     "TEMP_PREFIX",
     "Behaviour",
     "DeviceIdentity",
     "Faults",
     "RecordedSource",
     "ScriptedSource",
-    "SimPort",
     "SimulatedMTi",
     "default_configuration",
     "effective_configuration",

@@ -16,7 +16,6 @@ import queue
 import select
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 from ...config import hull_scenario
@@ -30,28 +29,6 @@ from .identity import DeviceIdentity
 from .output import OutputItem
 from .pty_link import PtyLink
 from .sources import FrameSource, RecordedSource, ScriptedSource
-
-#: The port name that starts the built-in simulator; ``sim:FILE.mcap`` plays a recording's device.
-SIM_PORT = "sim"
-
-
-@dataclass(frozen=True)
-class SimPort:
-    """A ``--port`` that names the simulator: the scripted scenario, or a recording to play again."""
-
-    recording: Path | None = None
-
-    @classmethod
-    def parse(cls, port: str) -> SimPort | None:
-        """``sim`` -> the scripted scenario; ``sim:FILE.mcap`` -> that file's device; other ports None."""
-        name, colon, rest = port.partition(":")
-        if name != SIM_PORT:
-            return None
-        if not colon:
-            return cls()
-        if not rest:
-            raise InputError("--port sim:FILE.mcap needs the recording to play after 'sim:'")
-        return cls(Path(rest))
 
 
 class SimulatedMTi:
