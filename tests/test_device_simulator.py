@@ -224,3 +224,13 @@ def test_an_error_exit_of_simulate_leaves_no_folder(tmp_path: Path) -> None:
     _, err = process.communicate(timeout=60)
     assert process.returncode == 2 and "truth" in err and "Traceback" not in err
     assert _folders_of(process.pid) == []
+
+
+def test_a_simulator_that_cannot_start_leaves_no_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with pytest.raises(FileNotFoundError):  # its link cannot be made: the pty opens, then the start fails
+        SimulatedMTi(link=tmp_path / "no-such-folder" / "ttyMTi0").start()
+    assert not list(tmp_path.glob(f"{TEMP_PREFIX}*"))
+    assert str(tmp_path) not in os.environ.get("TANKDAQ_SERIAL_BY_ID", "")
