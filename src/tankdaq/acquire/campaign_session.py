@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -43,6 +43,9 @@ from ..samples import AXIS_FIELDS
 from .daemon import RecordDaemon, RecordSettings
 from .session import DecayOutcome
 from .sinks import Block, Decay, Sink
+
+if TYPE_CHECKING:
+    from ..viz.campaign_view import CampaignView
 
 LOG_NAME = "session.jsonl"
 LOCK_NAME = "session.lock"
@@ -224,7 +227,10 @@ def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
     runs = read_decay_runs(outcome.path)
     if runs:
         run = runs[0]
-        measured.max_rate_deg_s = float(np.degrees(np.max(np.abs(run.rate)))) if run.rate.size else math.nan
+        rate = run.rate
+        measured.max_rate_deg_s = (
+            float(np.degrees(np.max(np.abs(rate)))) if rate is not None and rate.size else math.nan
+        )
         end = find_free_end(run)
         measured.free_end, measured.free_end_reason = end.kind, end.reason
     fit = outcome.fit
@@ -494,7 +500,7 @@ class CampaignSession:
         self._started = time.monotonic()
         self._decay_seconds: list[float] = []
         self._shown: set[str] = set()
-        self.view = None
+        self.view: CampaignView | None = None
 
     # ---- settings of one decay ----------------------------------------
 
@@ -611,19 +617,24 @@ class CampaignSession:
         for condition in self.conditions:
             self._show_condition(state, condition)
 
+    def _panel(self) -> CampaignView:
+        """The campaign panel, opened by ``run`` before the first condition is shown."""
+        assert self.view is not None, "the panel opens before the session leads any decay"
+        return self.view
+
     def _viewer_note(self, line: str) -> None:
         self.on_line(f"viewer: {line}")
 
     def _show_condition(self, state: SessionState, condition: Condition) -> None:
         kept = len(state.accepted(condition))
         status = state.status(condition)
-        self.view.set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
+        self._panel().set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
         if status == "accepted":
             measured = [Measured(**r.measured) for r in state.accepted(condition)]
             mean = {
                 k: float(np.mean([m.coefficients[k] for m in measured])) for k in measured[0].coefficients
             }
-            self.view.accepted(
+            self._panel().accepted(
                 condition.draft, condition.angle_deg, mean, float(np.mean([m.b_eq_per_s for m in measured]))
             )
 
@@ -689,7 +700,7 @@ class CampaignSession:
             for c in self.conditions:
                 if c.draft == condition.draft and state.status(c) != "accepted":
                     self.log.append("skip", draft=c.draft, angle_deg=c.angle_deg)
-                    self.view.set_status(c.draft, c.angle_deg, "skipped")
+                    self._panel().set_status(c.draft, c.angle_deg, "skipped")
             return self._reload()
         mean_deg, sd_deg = self._measure_level(condition)
         level = abs(mean_deg) <= self.acceptance.level_tolerance_deg and sd_deg <= STILL_SD_DEG
@@ -724,7 +735,7 @@ class CampaignSession:
             f"decay {decay}: {condition.label}, repeat {repeat}/{state.repeats}: "
             f"tilt to {condition.angle_deg:g} deg and release"
         )
-        self.view.set_status(
+        self._panel().set_status(
             condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
         )
         started = time.monotonic()
@@ -743,7 +754,7 @@ class CampaignSession:
             decay=decay,
             draft=condition.draft,
             angle_deg=condition.angle_deg,
-            file=outcome.path.name,
+            file=outcome.path.name if outcome.path else "",
             reasons=reasons,
             measured=dataclasses.asdict(measured),
         )

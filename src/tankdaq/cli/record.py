@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -33,15 +33,22 @@ def _viewer(value: str) -> str:
 
 
 #: Options ``record`` and ``session`` share: the hull, the view, the live model, the hidden simulator pace.
-def _checked_text(flag: str, rule: Any, text: str) -> Any:
-    """A text option checked by a ``tankdaq.validation`` rule and passed on as given."""
-    return Annotated[str, typer.Option(flag, callback=checked(rule, keep_input=True), help=text)]
-
-
-HullOption = _checked_text(
-    "--hull", validation.known_hull, "The model tested: a hull name (tankdaq hulls) or a .toml file."
-)
-LiveModelOption = _checked_text("--model", validation.live_model, "Live model: terms (b1,b2,c1,c3) or alias.")
+HullOption = Annotated[
+    str,
+    typer.Option(
+        "--hull",
+        callback=checked(validation.known_hull, keep_input=True),
+        help="The model tested: a hull name (tankdaq hulls) or a .toml file.",
+    ),
+]
+LiveModelOption = Annotated[
+    str,
+    typer.Option(
+        "--model",
+        callback=checked(validation.live_model, keep_input=True),
+        help="Live model: terms (b1,b2,c1,c3) or alias.",
+    ),
+]
 ViewerOption = Annotated[
     str | None,
     typer.Option(
@@ -97,6 +104,7 @@ def run_record(settings: RecordSettings) -> list[DecayOutcome]:
 @app.command("record")
 @handles_errors
 def record_command(
+    hull: HullOption,
     port: str = typer.Option(
         ...,
         "--port",
@@ -109,7 +117,6 @@ def record_command(
     angle: float = typer.Option(
         ..., "--angle", callback=checked(validation.release_angle_deg), help="Nominal release angle (deg)."
     ),
-    hull: HullOption = ...,
     axis: AxisChoice = typer.Option(
         AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
     ),
