@@ -108,7 +108,8 @@ def record_command(
     port: str = typer.Option(
         ...,
         "--port",
-        help="Device path, pyserial URL, 'auto' (the one Xsens device), or 'sim' (built-in simulated MTi-G).",
+        help="Device path, pyserial URL, 'auto' (the one Xsens device), 'sim' (built-in simulated MTi-G), "
+        "or 'sim:FILE.mcap' (the device of a recording, played again).",
     ),
     draft: float = typer.Option(
         ..., "--draft", parser=parse_draft_option, help="Draft as a factor of design: 0.9T, T, 1.1T."
