@@ -286,7 +286,8 @@ class _SeedSearch(EstimatorMixin):
 
     def _resolved_settings(self, paper: str) -> GeneticSettings | SwarmSettings:
         settings = self.settings
-        if isinstance(settings, GeneticSettings | SwarmSettings) and isinstance(settings, self._settings_type):
+        preset = (GeneticSettings, SwarmSettings)
+        if isinstance(settings, preset) and isinstance(settings, self._settings_type):
             return settings
         if self.settings is not None and not isinstance(self.settings, str):
             raise InputError(f"{type(self).__name__} takes {self._settings_type.__name__} or a preset name")
