@@ -285,8 +285,10 @@ class _SeedSearch(EstimatorMixin):
         self.progress = progress
 
     def _resolved_settings(self, paper: str) -> GeneticSettings | SwarmSettings:
-        if isinstance(self.settings, self._settings_type):
-            return self.settings
+        settings = self.settings
+        preset = (GeneticSettings, SwarmSettings)
+        if isinstance(settings, preset) and isinstance(settings, self._settings_type):
+            return settings
         if self.settings is not None and not isinstance(self.settings, str):
             raise InputError(f"{type(self).__name__} takes {self._settings_type.__name__} or a preset name")
         name = self.settings or (paper if paper in self._presets else next(iter(self._presets)))

@@ -55,9 +55,10 @@ def smoothed_derivatives(
     if y.size <= window:
         raise BadIdentificationInput(f"the record ({y.size} samples) is shorter than one smoothing window")
     padded = np.pad(y, window // 2, mode="edge")
-    return tuple(
+    value, first, second = (
         np.correlate(padded, _savgol_weights(window, polyorder, d), mode="valid") / dt**d for d in range(3)
     )
+    return value, first, second
 
 
 @functools.cache

@@ -297,6 +297,7 @@ class SeparateIdentifier(EstimatorMixin):
         self.bias_std_: dict[str, float] = {}
         self.equations_: dict[str, EquationFit] = {}
         for eq, reg in regressions.items():
+            estimator: LSSVMRegressor | LeastSquaresRegressor
             if self.method == "lssvm":
                 estimator = LSSVMRegressor().fit(
                     reg.X, reg.y, (held_out[eq].X, held_out[eq].y) if held_out is not None else None)
