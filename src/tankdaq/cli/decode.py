@@ -67,7 +67,7 @@ class OutputFormat(StrEnum):
 
 def read_capture(path: Path) -> bytes:
     """The capture's bytes; a one-line InputError when it cannot be used."""
-    from mcap.writer import MCAP0_MAGIC
+    from ..store.reader import is_mcap
 
     input_file(path, "raw capture file (e.g. output.bin)")
     try:
@@ -76,7 +76,7 @@ def read_capture(path: Path) -> bytes:
         raise InputError(f"cannot read capture {path}: {exc.strerror}") from None
     if not data:
         raise InputError(f"capture {path} is empty")
-    if data.startswith(MCAP0_MAGIC):  # its bytes would only be counted as hundreds of bad checksums
+    if is_mcap(data):  # its bytes would only be counted as hundreds of bad checksums
         raise InputError(
             f"{path} is an MCAP recording, not a raw capture; its serial bytes are replayed by "
             f"tankdaq replay {path} (read them with tankdaq.store.reader.iter_raw_chunks)"

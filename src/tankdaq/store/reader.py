@@ -29,6 +29,7 @@ from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata
 from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import MCAP0_MAGIC
 
 from ..config import parse_draft
 from ..errors import BadRecordingInput, InputError
@@ -287,6 +288,12 @@ def _assemble(
         metadata_history=history,
         damage=damage,
     )
+
+
+def is_mcap(data: bytes) -> bool:
+    """Whether these bytes (a file's start is enough) open an MCAP file: lets callers that read raw
+    captures send a recording to the commands that read recordings."""
+    return data.startswith(MCAP0_MAGIC)
 
 
 def truncation_notice(path: str | Path, damage: str | None = None) -> str:
