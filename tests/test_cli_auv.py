@@ -104,6 +104,8 @@ def test_bad_inputs_get_one_line_and_exit_code_2(records, tmp_path):
     partial = tmp_path / "partial.csv"
     partial.write_text("t_s,u_m_s,theta_rad\n0,1.5,0\n0.1,1.5,0\n")
     assert_one_line_error(run("identify", str(partial), "--vehicle", "nps_auv2"), "missing channels")
+    assert_one_line_error(run("validate", str(records["train"]), "--plot", str(tmp_path / "fit.svg")),
+                          "ending in .png")
 
 
 def test_installed_script_reports_bad_input_without_a_traceback(tmp_path):

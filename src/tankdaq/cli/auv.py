@@ -259,9 +259,11 @@ def validate_command(
     """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""
     from ..maneuver.io import read_record
     from ..maneuver.report import validate_models
-    from ..maneuver.validate import MODES, SCORED_STATES, default_mode, plot_validation
+    from ..maneuver.validate import MODES, SCORED_STATES, default_mode
 
     _check_method(method)
+    if plot is not None and plot.suffix.lower() != ".png":
+        raise InputError(f"--plot {plot}: the plot is written as PNG; give a file name ending in .png")
     if mode is not None and mode not in MODES:
         raise InputError(f"--mode {mode!r} unknown; use {' or '.join(MODES)}")
     record = read_record(file)
@@ -272,7 +274,10 @@ def validate_command(
     validation = validate_models(record, target, vehicle, sensitivity, method, mode, str(test or file))
     results, failures = validation.results, validation.failures
     if plot is not None:
-        plot_validation(target, results, plot)
+        from ..viz.maneuver_view import validation_figure
+        from ..viz.plots import save_png
+
+        save_png(validation_figure(target, results), plot, dpi=110)
     report = {"train": str(file), "test": str(test or file), "mode": mode,
               "dominant": validation.dominant, "r2": {r.label: r.r2 for r in results},
               "failed": failures, "plot": str(plot) if plot else None}

@@ -16,7 +16,6 @@ Fit measure per state: R^2 = 1 - sum (y - y_sim)^2 / sum (y - mean y)^2.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -88,35 +87,3 @@ def resimulate(record: StateRecord, model: Vehicle, label: str, mode: str | None
     simulated = _rerun_zigzag(record, model) if mode == "zigzag" else _replay(record, model)
     r2 = {c: r_squared(record[c], simulated[c]) for c in SCORED_STATES}
     return ValidationResult(label, simulated, r2)
-
-
-def plot_validation(record: StateRecord, results: list[ValidationResult], path: str | Path) -> Path:
-    """PNG of measured vs re-simulated pitch, pitch rate, heave velocity, depth and plane angle."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    if path.suffix.lower() != ".png":
-        raise InputError(f"{path}: the plot is written as PNG; give a file name ending in .png")
-    panels = (("theta", "pitch [deg]", True), ("q", "pitch rate [deg/s]", True),
-              ("w", "heave velocity [m/s]", False), ("z", "depth [m]", False),
-              ("delta_s", "stern plane [deg]", True))
-    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 11), sharex=True)
-    for ax, (column, label, in_degrees) in zip(axes, panels, strict=True):
-        scale = np.degrees(1.0) if in_degrees else 1.0
-        ax.plot(record.t, record[column] * scale, color="0.3", lw=1.0, label="measured")
-        for result in results:
-            score = f" (R² {result.r2[column]:.3f})" if column in result.r2 else ""
-            simulated = result.simulated
-            ax.plot(simulated.t, simulated[column] * scale, lw=1.2, label=f"{result.label}{score}")
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="upper right")
-    axes[-1].set_xlabel("time [s]")
-    fig.suptitle(f"{record.meta.get('vehicle', 'vehicle')}: re-simulated manoeuvre")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
