@@ -1,7 +1,7 @@
 """The story of a diagnosis, told four ways: terminal lines, JSON, a Markdown report with PNGs, rerun.
 
-All of them read a fitted ``Diagnoser``; angles are converted to degrees here
-and only here.
+All of them read a fitted ``Diagnoser``; angles are converted to degrees here (the figures and the
+rerun recording are drawn by ``viz.diagnose_view`` from the fits' runs, in rad).
 """
 
 from __future__ import annotations
@@ -12,11 +12,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
-from ..errors import InputError, RecordingError
+from ..errors import RecordingError
 from ..ident.free_decay import cut_lines
+from ..viz import diagnose_view
 from .fitting import Fit
 from .residuals import SPECTRUM_MEANING
 from .workflow import Diagnoser, Diagnostics, Step, signature_seen
@@ -180,80 +179,9 @@ def story(diagnoser: Diagnoser) -> list[str]:
     return [f"cut: {line}" for line in cut_lines(diagnoser.runs_)] + lines
 
 
-# ---------------------------------------------------------------------------------------------- figures
-
-
-def _new_figure(rows: int) -> tuple[Figure, np.ndarray]:
-    from ..viz.plots import report_style
-
-    with report_style():
-        fig = Figure(figsize=(9.0, 1.2 + 2.2 * rows), layout="constrained")
-        FigureCanvasAgg(fig)
-        axes = fig.subplots(rows, 1, squeeze=False)[:, 0]
-    return fig, axes
-
-
-def models_figure(diagnoser: Diagnoser) -> Figure:
-    """Per run: measurement, baseline model and final model, in degrees."""
-    from ..viz.plots import MEASURED_COLOR, MODEL_COLOR, report_style
-
-    base_runs, final_runs = diagnoser.baseline_.runs, diagnoser.final_.runs
-    with report_style():
-        fig, axes = _new_figure(len(base_runs))
-        for ax, base, final in zip(axes, base_runs, final_runs, strict=True):
-            measured = base.angle + base.residual_angle
-            ax.plot(base.t, np.degrees(measured), color=MEASURED_COLOR, linewidth=0.8, label="measured")
-            ax.plot(base.t, np.degrees(base.angle), color="0.5", linestyle=":", label="baseline")
-            ax.plot(final.t, np.degrees(final.angle), color=MODEL_COLOR, linestyle="--", label="final")
-            ax.set_ylabel(f"{base.name} (deg)")
-        axes[0].legend(loc="upper right", ncols=3)
-        axes[0].set_title("measurement, baseline and final model")
-        axes[-1].set_xlabel("time (s)")
-    return fig
-
-
-def residuals_figure(diagnoser: Diagnoser) -> Figure:
-    """Per run: the angle residual of the baseline and of the final model, in degrees."""
-    from ..viz.plots import MEASURED_COLOR, MODEL_COLOR, report_style
-
-    with report_style():
-        fig, axes = _new_figure(len(diagnoser.baseline_.runs))
-        for ax, base, final in zip(axes, diagnoser.baseline_.runs, diagnoser.final_.runs, strict=True):
-            ax.plot(
-                base.t, np.degrees(base.residual_angle), color=MEASURED_COLOR, linewidth=0.7, label="baseline"
-            )
-            ax.plot(
-                final.t, np.degrees(final.residual_angle), color=MODEL_COLOR, linewidth=0.7, label="final"
-            )
-            ax.axhline(0.0, color="0.4", linewidth=0.6)
-            ax.set_ylabel(f"{base.name} (deg)")
-        axes[0].legend(loc="upper right", ncols=2)
-        axes[0].set_title("residual before and after")
-        axes[-1].set_xlabel("time (s)")
-    return fig
-
-
-def spectrum_figure(diagnoser: Diagnoser) -> Figure:
-    """Welch spectrum of the residual, baseline against final, with the natural frequency marked."""
-    from ..viz.plots import MEASURED_COLOR, MODEL_COLOR, report_style
-
-    first, last = diagnoser.diagnostics_[0].spectrum, diagnoser.diagnostics_[-1].spectrum
-    omega0 = float(
-        np.sqrt(
-            max(diagnoser.final_.coefficients.get("c1", 0) + diagnoser.final_.coefficients.get("s1", 0), 0)
-        )
-    )
-    with report_style():
-        fig, (ax,) = _new_figure(1)
-        ax.semilogy(first.omega_rad_s, np.degrees(np.sqrt(first.psd)), color=MEASURED_COLOR, label="baseline")
-        ax.semilogy(last.omega_rad_s, np.degrees(np.sqrt(last.psd)), color=MODEL_COLOR, label="final")
-        for k in (1, 2, 3):
-            ax.axvline(k * omega0, color="0.6", linewidth=0.6, linestyle=":")
-        ax.set_xlim(0, 6 * omega0 if omega0 > 0 else None)
-        ax.set_xlabel("frequency (rad/s); dotted: 1, 2, 3 x natural")
-        ax.set_ylabel("residual ASD (deg/sqrt(Hz))")
-        ax.legend()
-    return fig
+def natural_frequency_rad_s(fit: Fit) -> float:
+    """The final model's undamped natural frequency (0 when its restoring terms give none)."""
+    return float(np.sqrt(max(fit.coefficients.get("c1", 0) + fit.coefficients.get("s1", 0), 0)))
 
 
 def _gap_cells(fit: Fit) -> str:
@@ -273,10 +201,12 @@ def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise RecordingError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
+    base_runs, final_runs = diagnoser.baseline_.runs, diagnoser.final_.runs
+    spectra = diagnoser.diagnostics_[0].spectrum, diagnoser.diagnostics_[-1].spectrum
     figures = {
-        "models.png": models_figure(diagnoser),
-        "residuals.png": residuals_figure(diagnoser),
-        "spectrum.png": spectrum_figure(diagnoser),
+        "models.png": diagnose_view.models_figure(base_runs, final_runs),
+        "residuals.png": diagnose_view.residuals_figure(base_runs, final_runs),
+        "spectrum.png": diagnose_view.spectrum_figure(*spectra, natural_frequency_rad_s(diagnoser.final_)),
     }
     for name, fig in figures.items():
         save_png(fig, out / name)
@@ -335,49 +265,13 @@ def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
 
 
 def log_to_rerun(diagnoser: Diagnoser, stream: Any) -> None:
-    """The same story in the rerun viewer: per run the measurement, baseline, final model and residuals
-    on the ``t`` timeline (degrees), and the story as a text log. ``stream`` is an rr.RecordingStream."""
-    import rerun as rr
-
-    from ..viz.live import MEASURED_COLOR, MODEL_COLOR, TIMELINE
-
-    styles = {
-        "measured": (MEASURED_COLOR, 1.0),
-        "baseline": ((150, 150, 150), 1.5),
-        "final": (MODEL_COLOR, 2.0),
-    }
-    for base, final in zip(diagnoser.baseline_.runs, diagnoser.final_.runs, strict=True):
-        series = {
-            f"diagnose/{base.name}/angle/measured": (base.t, base.angle + base.residual_angle, "measured"),
-            f"diagnose/{base.name}/angle/baseline": (base.t, base.angle, "baseline"),
-            f"diagnose/{base.name}/angle/final": (final.t, final.angle, "final"),
-            f"diagnose/{base.name}/residual/baseline": (base.t, base.residual_angle, "baseline"),
-            f"diagnose/{base.name}/residual/final": (final.t, final.residual_angle, "final"),
-        }
-        for entity, (t, values, style) in series.items():
-            color, width = styles[style]
-            stream.log(entity, rr.SeriesLines(colors=[color], widths=[width], names=[style]), static=True)
-            stream.send_columns(
-                entity,
-                indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float))],
-                columns=rr.Scalars.columns(scalars=np.degrees(np.asarray(values, dtype=float))),
-            )
-    for line in story(diagnoser):
-        stream.log("diagnose/story", rr.TextLog(line, level="INFO"))
+    """The same story in the rerun viewer (``viz.diagnose_view.log_diagnosis``): per run the
+    measurement, baseline, final model and residuals, and the story as a text log."""
+    diagnose_view.log_diagnosis(stream, diagnoser.baseline_.runs, diagnoser.final_.runs, story(diagnoser))
 
 
 def save_rrd(diagnoser: Diagnoser, path: str | Path) -> Path:
     """``log_to_rerun`` into a new .rrd file (open it with ``rerun path``)."""
-    import rerun as rr
-
-    from ..viz.live import APPLICATION_ID
-
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise InputError(f"cannot write {path}: folder {path.parent} does not exist")
-    stream = rr.RecordingStream(APPLICATION_ID)
-    stream.save(str(path))
-    log_to_rerun(diagnoser, stream)
-    stream.flush()
-    stream.disconnect()
-    return path
+    return diagnose_view.save_diagnosis_rrd(
+        path, diagnoser.baseline_.runs, diagnoser.final_.runs, story(diagnoser)
+    )
