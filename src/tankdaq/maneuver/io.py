@@ -87,7 +87,8 @@ def _columns_to_record(path: Path, columns: dict[str, list[float]], meta: dict[s
     missing = [f for f in FIELDS if f not in columns or not columns[f]]
     if missing:
         raise BadRecordingInput(
-            f"{path}: missing channels {missing}; a diving-plane record needs {', '.join(FIELDS)}")
+            f"{path}: missing channels {missing}; a diving-plane record needs {', '.join(FIELDS)}"
+        )
     arrays = {f: np.asarray(columns[f], dtype=float) for f in FIELDS}
     return StateRecord(t=arrays["t"], states={c: arrays[c] for c in STATE_COLUMNS}, meta=meta)
 
