@@ -29,9 +29,9 @@ from tankdaq.ident.campaign import (
     group_runs,
     identify_groups,
     read_campaign_runs,
-    write_report,
     write_simulated_campaign,
 )
+from tankdaq.viz.campaign_report import load_plotting, write_report
 
 HULLS = ("trimaran", "catamaran", "swath")
 DRAFTS = (0.9, 1.0, 1.1)
@@ -104,7 +104,7 @@ def main() -> None:
 
 
 def _pool(jobs: int) -> Callable[[], AbstractContextManager]:
-    return lambda: campaign_executor(jobs)
+    return lambda: campaign_executor(jobs, prepare=[load_plotting])
 
 
 if __name__ == "__main__":

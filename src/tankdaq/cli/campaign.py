@@ -64,6 +64,7 @@ def campaign_command(
         read_campaign_runs,
     )
     from ..ident.models import resolve_model
+    from ..viz.campaign_report import load_plotting, write_report
     from .identify import echo_cuts
 
     if executor not in ("local", "dask"):
@@ -73,7 +74,11 @@ def campaign_command(
     resolve_model(model)  # a typo fails before any file is read
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs)
-    with campaign_executor(jobs or os.cpu_count() or 1, scheduler) as pool, progress_bar() as progress:
+    prepare = [load_plotting] if report is not None else []
+    with (
+        campaign_executor(jobs or os.cpu_count() or 1, scheduler, prepare) as pool,
+        progress_bar() as progress,
+    ):
         reading = progress.add_task("reading", total=len(paths))
         runs = []
         read = map if pool is None else pool.map
@@ -99,8 +104,6 @@ def campaign_command(
         for result in failed:
             err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
         if report is not None:
-            from ..ident.campaign import write_report
-
             written = write_report(results, report, pool)
             err_console.print(f"wrote {len(written)} files to {report}", markup=False)
 
