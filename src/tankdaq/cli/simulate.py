@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING
 import typer
 
 from .. import validation
-from ..config import format_draft, load_hull
 from ..errors import InputError
 from .app import app, checked, err_console, handles_errors, parse_draft_option
 
@@ -69,6 +68,7 @@ def simulate_command(
     mti_600: bool = typer.Option(False, "--mti-600", help="Be an MTi-630 (baud rate through PortConfig)."),
 ) -> None:
     """Serve a simulated MTi-G on a pty; the first stdout line is the port to open."""
+    from ..config import format_draft, load_hull
     from ..device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
     from ..physics.scenario import DecayScenario
 
@@ -126,6 +126,8 @@ def simulate_command(
 
 def _write_truth(path: Path, sim: SimulatedMTi, scenario: DecayScenario) -> None:
     """The truth file: every run's release (s from power-up, SampleTimeFine), initial state, model."""
+    from ..config import format_draft
+
     document = {
         "hull": scenario.hull,
         "draft": format_draft(scenario.draft),
