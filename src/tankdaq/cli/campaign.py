@@ -64,7 +64,6 @@ def campaign_command(
         read_campaign_runs,
     )
     from ..ident.models import resolve_model
-    from ..viz.campaign_report import load_plotting, write_report
     from .identify import echo_cuts
 
     if executor not in ("local", "dask"):
@@ -74,7 +73,11 @@ def campaign_command(
     resolve_model(model)  # a typo fails before any file is read
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs)
-    prepare = [load_plotting] if report is not None else []
+    prepare = []
+    if report is not None:
+        from ..viz.campaign_report import load_plotting, write_report
+
+        prepare.append(load_plotting)  # loaded before the pool forks: its workers draw the figures
     with (
         campaign_executor(jobs or os.cpu_count() or 1, scheduler, prepare) as pool,
         progress_bar() as progress,

@@ -30,6 +30,8 @@ from .plots import report_style, save_png
 LEFT_IN, RIGHT_IN, BOTTOM_IN, TOP_IN, PANEL_TITLE_IN, GAP_IN = 0.8, 0.2, 0.55, 0.45, 0.25, 0.75
 PANEL_WIDTH_IN, HEIGHT_IN = 3.6, 3.2
 DPI = 110
+#: The figures with a panel per coefficient, which take longest to draw.
+MULTI_PANEL = ("coefficients", "hulls")
 
 
 def load_plotting() -> None:
@@ -66,6 +68,7 @@ def write_plots(results: Sequence[GroupResult], folder: Path, executor: Executor
         if shared is not None:
             compared = [r for r in on_axis if r.key.draft == shared]
             figures.append(("hulls", compared, f"hulls_{axis}_{format_draft(shared)}.png"))
+    figures.sort(key=lambda figure: figure[0] not in MULTI_PANEL)  # the longest first: no long last one
     plots = [plot for plot, _, _ in figures]
     groups = [series for _, series, _ in figures]
     paths = [folder / name for _, _, name in figures]
