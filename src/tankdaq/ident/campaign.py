@@ -10,6 +10,7 @@ MCAP files (their metadata says hull, draft, axis, angle) or CSV files (a JSON s
 from __future__ import annotations
 
 import csv
+import gc
 import json
 import math
 import re
@@ -295,7 +296,15 @@ def campaign_executor(
         for load in prepare:
             load()
         with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("fork")) as pool:
-            pool.submit(int).result()  # the workers fork now, before the caller starts a progress thread
+            # The workers fork now (before the caller starts a progress thread), with the objects
+            # loaded so far frozen out of the cyclic garbage collector: a worker's collections then
+            # leave the pages it shares with this process unwritten (bench_campaign: a pool of two
+            # spent 2.7 s CPU where one process spends 2.3 s; 2.3 s frozen). Thawed once forked.
+            gc.freeze()
+            try:
+                pool.submit(int).result()
+            finally:
+                gc.unfreeze()
             yield pool
 
 

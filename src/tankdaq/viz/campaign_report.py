@@ -152,43 +152,53 @@ def _plot_hulls(results: Sequence[GroupResult]) -> Figure:
 
 def _plot_b_eq(series: Sequence[GroupResult]) -> Figure:
     """B_eq(phi_a) of each group's fit over 0 ... its initial angle with its 95 % band; colour by draft."""
-    first = series[0].key
-    fig, (ax,) = _figure(1, f"{first.hull} {first.axis}: equivalent linear damping")
-    drafts = sorted({r.key.draft for r in series})
-    for result in series:
+
+    def draw(ax: Axes, result: GroupResult, colour: str) -> None:
         grid_deg = np.linspace(0.2, result.key.angle_deg, 25)
         values, std = b_eq_band(_fit(result).coefficients_, _fit(result).covariance_, grid_deg)
-        colour = f"C{drafts.index(result.key.draft)}"
         ax.plot(grid_deg, values, color=colour, alpha=0.8)
         ax.fill_between(grid_deg, values - 1.96 * std, values + 1.96 * std, color=colour, alpha=0.15)
         ax.plot(grid_deg[-1], values[-1], "o", color=colour)
-    _draft_legend(ax, drafts)
-    ax.set_xlabel("amplitude (deg)")
-    ax.set_ylabel("B_eq / I (1/s)")
-    return fig
+
+    return _per_draft(series, "equivalent linear damping", draw, "amplitude (deg)", "B_eq / I (1/s)")
 
 
 def _plot_extinction(series: Sequence[GroupResult]) -> Figure:
     """Measured decrement per half-cycle against mean amplitude, and each fit's curve (deg)."""
-    first = series[0].key
-    fig, (ax,) = _figure(1, f"{first.hull} {first.axis}: extinction curves")
-    drafts = sorted({r.key.draft for r in series})
-    for result in series:
+
+    def draw(ax: Axes, result: GroupResult, colour: str) -> None:
         curve = extinction_curve(result.runs, _fit(result).offsets_, _fit(result).coefficients_)
-        colour = f"C{drafts.index(result.key.draft)}"
         ax.plot(np.degrees(curve.mean_amplitude), np.degrees(curve.decrement), ".", color=colour, alpha=0.6)
         ax.plot(np.degrees(curve.model_amplitude), np.degrees(curve.model_decrement), color=colour, alpha=0.8)
-    _draft_legend(ax, drafts)
-    ax.set_xlabel("mean amplitude of successive peaks (deg)")
-    ax.set_ylabel("decrement per half-cycle (deg)")
-    return fig
+
+    return _per_draft(
+        series,
+        "extinction curves",
+        draw,
+        "mean amplitude of successive peaks (deg)",
+        "decrement per half-cycle (deg)",
+    )
 
 
-def _draft_legend(ax: Axes, drafts: list[float]) -> None:
-    """One legend entry per draft, in the colour its groups were drawn in."""
+def _per_draft(
+    series: Sequence[GroupResult],
+    title: str,
+    draw: Callable[[Axes, GroupResult, str], None],
+    xlabel: str,
+    ylabel: str,
+) -> Figure:
+    """One hull and axis in one panel: ``draw`` each group in its draft's colour, one legend entry a draft."""
+    first = series[0].key
+    fig, (ax,) = _figure(1, f"{first.hull} {first.axis}: {title}")
+    drafts = sorted({r.key.draft for r in series})
+    for result in series:
+        draw(ax, result, f"C{drafts.index(result.key.draft)}")
     for i, draft in enumerate(drafts):
         ax.plot([], [], color=f"C{i}", label=format_draft(draft))
     ax.legend(title="draft")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    return fig
 
 
 def _plot_period(results: Sequence[GroupResult]) -> Figure:
