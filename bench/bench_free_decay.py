@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from tankdaq.ident.free_decay import cut_free_decay, find_free_end
+from tankdaq.ident.inputs import read_decays
 from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
-from tankdaq.store.csv_import import read_csv_runs
 
 TRUTH = {"b1": 0.3, "b2": 0.4, "c1": 14.0, "c3": 20.0}
 PERIOD_S = 2 * math.pi / math.sqrt(TRUTH["c1"])
@@ -77,7 +77,7 @@ def main() -> None:
     if not KVLCC2.is_file():
         print(f"KVLCC2 not found at {KVLCC2}: cost figures skipped")
         return
-    (kvlcc2,) = read_csv_runs(KVLCC2, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
+    (kvlcc2,) = read_decays(KVLCC2, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
     start = time.perf_counter()
     for _ in range(10):
         end = find_free_end(kvlcc2)

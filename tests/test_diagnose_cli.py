@@ -124,12 +124,12 @@ def test_the_story_goes_to_rerun(tmp_path: Path) -> None:
 
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")
 def test_cli_writes_the_rrd(tmp_path: Path) -> None:
-    from tankdaq.store.csv_import import read_csv_runs
+    from tankdaq.ident.inputs import read_decays
 
     csvs = write_csvs(tmp_path, ("sensor.offset",), seed=27)
     result = invoke(*csvs, "--rrd", tmp_path / "story.rrd")
     assert result.exit_code == 0, result.output
-    runs = [run for path in csvs for run in read_csv_runs(path)]  # as the command read them (cut at release)
+    runs = [run for path in csvs for run in read_decays(path)]  # as the command read them (cut at release)
     noise = make_decay_set(("sensor.offset",), seed=27).noise_angle_rad
     assert_rrd_tells(tmp_path / "story.rrd", runs, noise, result.stdout.strip().splitlines())
     missing_folder = invoke(*csvs, "--rrd", tmp_path / "nowhere" / "story.rrd")

@@ -189,9 +189,9 @@ def test_bad_settings_are_refused_with_a_reason() -> None:
 
 @pytest.mark.skipif(not KVLCC2.is_file(), reason="KVLCC2 model test not available")
 def test_kvlcc2_run_is_diagnosed() -> None:
-    from tankdaq.store.csv_import import read_csv_runs
+    from tankdaq.ident.inputs import read_decays
 
-    runs = read_csv_runs(KVLCC2, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
+    runs = read_decays(KVLCC2, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
     diagnoser = Diagnoser().fit(runs)
     families = [s.effect.family for s in diagnoser.steps_]
     # the reference fits need nonlinear restoring and amplitude-dependent damping at 0 kn (§7)

@@ -9,10 +9,10 @@ import pytest
 
 from tankdaq.errors import InputError
 from tankdaq.ident.free_decay import cut_free_decay, find_free_end
+from tankdaq.ident.inputs import read_decays
 from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
-from tankdaq.store.csv_import import read_csv_runs
 from test_ident_helpers import KVLCC2_21338
 
 TRUTH = {"b1": 0.3, "b2": 0.4, "c1": 14.0, "c3": 20.0}
@@ -87,7 +87,7 @@ def test_a_second_push_is_an_excitation_and_a_csv_splits_there(tmp_path, clean_f
     path = tmp_path / "two.csv"
     np.savetxt(path, np.column_stack([t, np.degrees(angle), np.degrees(rate)]), delimiter=",",
                header="time_s,angle_deg,rate_deg_s", comments="")  # fmt: skip
-    first, second = read_csv_runs(path)
+    first, second = read_decays(path)
     assert (first.name, second.name) == ("two#1", "two#2")
     assert first.t[-1] <= PUSH_S + PERIOD_S and second.t[0] > PUSH_S
     assert "excitation" in cut_free_decay(first).meta["cut"]["reason"]
@@ -107,7 +107,7 @@ def test_start_and_end_override(tmp_path):
 def test_kvlcc2_at_zero_speed_is_not_cut_short():
     """A 0 kn decay ending at about 1.1 deg (reference §7): nothing stops it; the slow yaw drift of psi
     is not a carriage stop."""
-    (run,) = read_csv_runs(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
+    (run,) = read_decays(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
     end = find_free_end(run)
     assert end.kind == "record" and end.index == run.t.size, end
     assert "psi" in run.channels

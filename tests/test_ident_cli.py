@@ -70,13 +70,15 @@ def test_compare_ranks_every_model_with_held_out_error(tmp_path):
         ("{good}", "--hull", "titanic"),
         ("{good}", "--method", "ee", "--bootstrap", "3"),
         ("{flat}",),
+        ("{parquet}",),
     ],
 )
 def test_bad_input_exits_2_with_one_line_and_no_traceback(tmp_path, args):
     good = write_held_tilt_csv(tmp_path / "good.csv")
+    parquet = good.rename(tmp_path / "good.parquet") if "{parquet}" in args else None
     flat = tmp_path / "flat.csv"
     flat.write_text("time_s,angle_deg\n" + "".join(f"{i / 100},0.0001\n" for i in range(100)))
-    result = invoke(*(a.format(good=good, flat=flat) for a in args))
+    result = invoke(*(a.format(good=good, flat=flat, parquet=parquet) for a in args))
     assert result.exit_code == 2
     assert "Traceback" not in result.output
     lines = [line for line in result.stderr.splitlines() if line.strip()]

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from tankdaq.errors import BadIdentificationInput, InputError
+from tankdaq.ident.inputs import read_decays
 from tankdaq.physics.decay import simulate_decay
-from tankdaq.store.csv_import import read_csv_runs
 from test_ident_helpers import KVLCC2_21338
 
 
@@ -39,7 +39,7 @@ def write_held_tilt_csv(path, hold_s=2.0, angle0_deg=8.0, extra=True, noise_deg=
 
 
 def test_units_channels_and_release_cut(tmp_path):
-    (run,) = read_csv_runs(write_held_tilt_csv(tmp_path / "d.csv"))
+    (run,) = read_decays(write_held_tilt_csv(tmp_path / "d.csv"))
     assert run.t[0] == pytest.approx(2.0, abs=0.011)  # the end of the hold
     assert run.angle[0] == pytest.approx(math.radians(8.0), rel=1e-3)
     assert run.rate is not None and abs(run.rate[0]) < 0.05
@@ -48,8 +48,19 @@ def test_units_channels_and_release_cut(tmp_path):
     assert run.name == "d"
 
 
+def test_the_store_reads_a_plain_csv_whole_and_ident_finds_its_release(tmp_path):
+    from tankdaq.store.csv_import import FIND_RELEASES
+    from tankdaq.store.inputs import read_runs
+
+    path = write_held_tilt_csv(tmp_path / "d.csv")
+    (record,) = read_runs(path)
+    assert record.t[0] == 0.0 and record.meta[FIND_RELEASES] is True  # the store only reads
+    (run,) = read_decays(path)
+    assert run.t[0] > 1.9 and FIND_RELEASES not in run.meta
+
+
 def test_keep_all_keeps_the_hold(tmp_path):
-    (run,) = read_csv_runs(write_held_tilt_csv(tmp_path / "d.csv"), keep_all=True)
+    (run,) = read_decays(write_held_tilt_csv(tmp_path / "d.csv"), keep_all=True)
     assert run.t[0] == 0.0
 
 
@@ -82,12 +93,12 @@ def test_bad_files_give_one_clear_error(tmp_path, content, error, message):
     if content is not None:
         path.write_text(content)
     with pytest.raises(error, match=message):
-        read_csv_runs(path)
+        read_decays(path)
 
 
 @pytest.mark.skipif(not KVLCC2_21338.is_file(), reason=f"KVLCC2 reference run not found at {KVLCC2_21338}")
 def test_kvlcc2_starts_at_its_first_large_peak():
-    (run,) = read_csv_runs(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
+    (run,) = read_decays(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
     # reference §7: driven from ~6.5 s to -10.4 deg at 8.08 s, free from there
     assert 8.0 < run.t[0] < 8.2
     assert math.degrees(run.angle[0]) == pytest.approx(-10.4, abs=0.1)
@@ -108,6 +119,6 @@ def test_a_strongly_damped_decay_is_still_a_decay(tmp_path):
     np.savetxt(
         path, np.column_stack([t, np.degrees(angle)]), delimiter=",", header="time_s,angle_deg", comments=""
     )
-    (run,) = read_csv_runs(path, rate_col=None)
+    (run,) = read_decays(path, rate_col=None)
     assert abs(run.t[0] - 2.0) <= 0.011
     assert math.degrees(run.angle[0]) == pytest.approx(15.0, abs=0.01)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tankdaq.ident.kernels import TERM_REGISTRY, simulate, simulate_with_sensitivities, substeps, term_codes
+from tankdaq.ident.kernels import simulate, simulate_with_sensitivities, substeps, term_codes
 from tankdaq.physics.decay import TERMS, simulate_decay
+from tankdaq.physics.terms import TERM_TABLE
 
 T = np.arange(800) * 0.01
 EPS = 0.02
@@ -77,8 +78,8 @@ def test_divergence_is_reported_not_raised():
     assert not ok
 
 
-def test_substeps_grow_with_stiffness_and_the_registry_codes_are_unique():
+def test_substeps_grow_with_stiffness_and_the_term_table_codes_are_unique():
     assert substeps(0.01, np.array([14.0]), ("c1",), 0.1) == 1
     assert substeps(0.1, np.array([400.0]), ("c1",), 0.1) > 5
-    codes = [spec.code for spec in TERM_REGISTRY.values()]
+    codes = [spec.code for spec in TERM_TABLE.values()]
     assert len(set(codes)) == len(codes)

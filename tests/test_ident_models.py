@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from tankdaq.errors import InputError
-from tankdaq.ident.models import MODEL_ALIASES, resolve_model
+from tankdaq.physics.models import MODEL_ALIASES, resolve_model
 
 
 def test_terms_are_put_in_canonical_order():

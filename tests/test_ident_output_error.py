@@ -9,9 +9,9 @@ from scipy.integrate import solve_ivp
 
 from tankdaq.errors import BadIdentificationInput
 from tankdaq.ident.equation_error import EquationError
-from tankdaq.ident.models import MODEL_ALIASES
 from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import simulate_decay
+from tankdaq.physics.models import MODEL_ALIASES
 from tankdaq.records import DecayRun
 from test_ident_helpers import synthetic_run, truth_for
 

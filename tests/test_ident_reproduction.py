@@ -10,11 +10,11 @@ import pytest
 from tankdaq.config import load_hull
 from tankdaq.errors import BadIdentificationInput
 from tankdaq.ident.derived import amplitude_table
-from tankdaq.ident.models import canonical_order
+from tankdaq.ident.inputs import read_decays
 from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import simulate_decay
+from tankdaq.physics.models import canonical_order
 from tankdaq.records import DecayRun
-from tankdaq.store.csv_import import read_csv_runs
 from test_ident_helpers import KVLCC2_21338, synthetic_run
 
 Z999 = 3.29  # each term inside its 99.9 % interval in a single fixed-seed check
@@ -56,7 +56,7 @@ def test_seed000_eq_5_1_as_printed_does_not_oscillate_and_is_refused():
 def test_kvlcc2_run_21338():
     """Reference §5/§7: quadratic damping + cubic restoring, first half-cycle cut: R^2 0.9991, C1A ~ 6.06,
     B_eq/I at 5 deg 0.0258 (21338, offsets fitted), offset -0.016 deg, model roll period 2.53 s."""
-    runs = read_csv_runs(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
+    runs = read_decays(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
     fit = OutputError("ittc-quadratic-restoring").fit(runs)
     assert fit.r2_angle_ >= 0.999
     assert fit.coefficients_["c1"] == pytest.approx(6.06, abs=0.03)

@@ -65,8 +65,7 @@ DEVICE_CASES = [
     ([*RECORD, "--out", "{file}"], "is a file, not a folder"),
     (["demo", "--out", UNWRITABLE], "--out"),
     (["demo", "--out", "{file}"], "is a file, not a folder"),
-    ([*RECORD, "--out", "{out}", "--model", "b1,c1,fc"], "s3, not fc; record with those"),
-    ([*RECORD, "--out", "{out}", "--model", "b1,c1,ku"], "s3, not ku; record with those"),
+    ([*RECORD, "--out", "{out}", "--model", "b1,c1,ku"], "ku needs a measured input u(t)"),
     ([*RECORD, "--out", "{out}", "--baud", "0"], "--baud 0 is not an MTi baud rate"),
     ([*RECORD, "--out", "{out}", "--rate", "0.5"], "--rate 0.5 Hz is not an MTi output rate"),
     (["simulate", "--rate", "1000"], "--rate 1000 Hz is not an MTi output rate"),
@@ -134,7 +133,7 @@ def test_the_record_daemon_applies_the_same_rules_as_the_command_line(tmp_path: 
         ({"rate_hz": 0.5}, "output rate"),
         ({"baud": 0}, "baud rate"),
         ({"angle_deg": 60.0}, "release angle"),
-        ({"model": "b1,c1,fc"}, "not fc"),
+        ({"model": "b1,c1,ku"}, "ku needs a measured input"),
         ({"out_dir": tmp_path / "a-file"}, "not a folder"),
     ):
         (tmp_path / "a-file").write_text("")

@@ -444,3 +444,34 @@ def test_a_legacy_mti_g_is_recorded_and_replayed(tmp_path: Path) -> None:
     (again,) = replay_recording(outcome.path, speed=None)
     assert abs(again.release_t - outcome.release_t) < 0.011
     assert again.fit is not None and again.fit.r2_angle > 0.99
+
+
+def test_a_live_model_with_coulomb_friction_records_fits_and_views_it(tmp_path: Path) -> None:
+    """``record --model b1,c1,fc --viewer save`` (once a KeyError 'fc' in the view): every /fit message
+    carries fc with its interval, the channel says its unit, and the .rrd plots /coefficients/fc."""
+    from rerun.chunk import RrdReader
+
+    from tankdaq.physics.terms import TERM_TABLE
+
+    args = record_args("sim", tmp_path, "--model", "b1,c1,fc", "--viewer", "save", "--runs", "1")
+    result = CliRunner().invoke(app, [*args, "--sim-speed", "20", "--sim-seed", "4"])
+    assert result.exit_code == 0, result.output
+    (path,) = tmp_path.glob("*.mcap")
+    with path.open("rb") as f:
+        messages = make_reader(f).iter_messages(topics=["/fit"])
+        fits = [(channel, json.loads(message.data)) for _, channel, message in messages]
+    assert len(fits) >= 2  # the refits and the final fit
+    channel = fits[0][0]
+    assert json.loads(channel.metadata["term_units"])["fc"] == TERM_TABLE["fc"].unit
+    for _, fit in fits:
+        assert fit["terms"] == ["b1", "c1", "fc"]
+        low, high = fit["ci95"]["fc"]
+        assert np.isfinite(fit["coefficients"]["fc"]) and low <= fit["coefficients"]["fc"] <= high
+    assert "fit_fc" in read_recording(path).metadata
+    fc_values = [
+        value
+        for chunk in RrdReader(str(path.with_suffix(".rrd"))).stream().to_chunks()
+        if chunk.entity_path == "/coefficients/fc" and not chunk.is_static
+        for value in chunk.to_record_batch().column("Scalars:scalars").to_pylist()
+    ]
+    assert fc_values and all(np.isfinite(value).all() for value in fc_values)  # value, 95 % low, high

@@ -24,6 +24,7 @@ from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.session import Block, DecaySession, SessionSettings
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
+from tankdaq.ident.online import OnlineIdentifier, OnlineResult
 from tankdaq.store.reader import read_recording
 from tankdaq.viz.live import LiveView
 
@@ -85,11 +86,27 @@ class FailingView(LiveView):
         setattr(self, method, failing)
 
 
-def _feed_recording(source: Path, out: Path, view: LiveView, on_event=None) -> DecaySession:
+class FailingIdentifier(OnlineIdentifier):
+    """An online identifier whose second refit raises, as a bug in a fit would (on the worker thread)."""
+
+    def update(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray | None = None) -> OnlineResult | None:
+        result = super().update(t, angle, rate)
+        if result is not None and len(self.results_) >= 2:
+            raise Injected("the second refit failed")
+        return result
+
+
+def _feed_recording(
+    source: Path,
+    out: Path,
+    view: LiveView,
+    on_event=None,
+    identifier: type[OnlineIdentifier] = OnlineIdentifier,
+) -> DecaySession:
     """The source's raw bytes, re-decoded, through a session that writes into ``out``."""
     recording = read_recording(source)
     settings = SessionSettings(angle_deg=8.0, out_dir=out, run_metadata={"hull": "swath"}, wait_for_fits=True)
-    session = DecaySession(settings, view, on_event=on_event)  # fed from a file: each refit in its block
+    session = DecaySession(settings, view, on_event=on_event, identifier=identifier)  # refits in their block
     decoder = SampleDecoder()
     for host_ns, raw in recording.raw_chunks:
         samples, _ = decoder.feed(raw, host_ns / 1e9)
@@ -128,6 +145,19 @@ def test_a_failure_while_recording_closes_the_file_with_what_arrived(
         assert recording.samples.size < len(read_recording(recorded).samples)  # cut where it failed
 
 
+def test_an_identifier_that_fails_mid_decay_closes_the_file_with_what_arrived(
+    recorded: Path, tmp_path: Path
+) -> None:
+    with pytest.raises(Injected):
+        _feed_recording(recorded, tmp_path, LiveView("none"), identifier=FailingIdentifier)
+    (path,) = tmp_path.glob("*.mcap")
+    assert _is_complete_mcap(path)
+    recording = read_recording(path)
+    assert recording.metadata["settle_reason"] == "error" and recording.events[-1]["kind"] == "settled"
+    assert len(recording.fits) >= 1  # the first refit was written before the second failed
+    assert 0 < recording.samples.size < len(read_recording(recorded).samples)
+
+
 # each call is at the decay's end: the view's run ends once, after the file; release, then settled events
 @pytest.mark.parametrize(("method", "after"), [("end_run", 1), ("log_event", 2)])
 def test_a_view_that_fails_at_the_end_still_leaves_a_complete_file_with_the_final_fit(
@@ -155,12 +185,14 @@ def test_a_callback_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Pa
     assert read_recording(path).metadata["settle_reason"] == "error"
 
 
-def test_model_terms_the_live_view_cannot_carry_are_refused_before_the_device_opens(tmp_path: Path) -> None:
+def test_a_live_model_with_an_input_the_recorder_lacks_is_refused_before_the_device_opens(
+    tmp_path: Path,
+) -> None:
     from tankdaq.errors import InputError
 
     out = tmp_path / "out"
-    with pytest.raises(InputError, match=r"carry only .* not fc"):
-        RecordDaemon(_settings(out, model="b1,c1,fc"))
+    with pytest.raises(InputError, match=r"ku needs a measured input u\(t\)"):
+        RecordDaemon(_settings(out, model="b1,c1,ku"))
     assert not out.exists() or not any(out.iterdir())
 
 

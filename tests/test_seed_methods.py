@@ -225,7 +225,7 @@ def test_identify_cli_runs_the_ga(tmp_path: Path, noisy_run: DecayRun) -> None:
     from typer.testing import CliRunner
 
     from tankdaq.cli import app
-    from tankdaq.store.csv_import import read_csv_runs
+    from tankdaq.ident.inputs import read_decays
 
     path = tmp_path / "swath_T_roll_5deg.csv"
     run = noisy_run.window(0, 800)  # 8 s: the report's amplitude grid stays above the noise
@@ -235,6 +235,6 @@ def test_identify_cli_runs_the_ga(tmp_path: Path, noisy_run: DecayRun) -> None:
     assert result.exit_code == 0, result.output
     printed = json.loads(result.stdout)
     assert printed["method"] == "ga"
-    best, where = box_optimum(read_csv_runs(path)[0], "b1,c1")
+    best, where = box_optimum(read_decays(path)[0], "b1,c1")
     assert printed["seed_objective"] <= best * (1 + 1e-4)
     assert printed["coefficients"]["c1"]["value"] == pytest.approx(where["c1"], rel=1e-3)

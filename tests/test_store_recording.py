@@ -14,10 +14,17 @@ from mcap.writer import Writer
 
 from tankdaq.config import load_hull
 from tankdaq.errors import BadRecordingInput, InputError, RecordingError
-from tankdaq.physics.decay import TERMS, simulate_decay
+from tankdaq.physics.decay import simulate_decay
+from tankdaq.physics.terms import TERM_TABLE
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store import schemas
-from tankdaq.store.naming import create_exclusive, next_run_number, recording_name
+from tankdaq.store.naming import (
+    RecordingLabels,
+    create_exclusive,
+    next_run_number,
+    parse_recording_name,
+    recording_name,
+)
 from tankdaq.store.reader import Recording, iter_raw_chunks, read_decay_runs, read_recording
 from tankdaq.store.reader import _read_indexed as read_recording_indexed
 from tankdaq.store.reader import _read_scanned as read_recording_scanned
@@ -190,7 +197,7 @@ def test_schemas_parse_in_foxglove_and_fit_terms_are_plottable() -> None:
         schema = json.loads(body)
         assert_foxglove_parses(schema, schema["title"])
     fit = json.loads(schemas.FIT_SCHEMA)
-    assert set(fit["properties"]["coefficients"]["properties"]) == set(TERMS)  # /fit.coefficients.b1 plots
+    assert set(fit["properties"]["coefficients"]["properties"]) == set(TERM_TABLE)  # .fc plots too
 
 
 def without_sample_blocks(source: Path, destination: Path) -> Path:
@@ -354,6 +361,27 @@ def test_names_say_what_a_person_looks_for(tmp_path: Path) -> None:
     (tmp_path / "swath_1.1T_roll_8deg_20261121-143015_run07-2.mcap").touch()
     (tmp_path / recording_name("swath", 0.9, "roll", 8, 9, when)).touch()  # another draft: not counted
     assert next_run_number(tmp_path, "swath", 1.1, "roll") == 8
+
+
+def test_the_name_grammar_reads_back_what_it_writes() -> None:
+    when = datetime(2026, 11, 21, 14, 30, 15)
+    written = (("swath", 1.1, "roll", 8.0, 3), ("kvlcc2_model", 1.0, "pitch", 7.5, 12))
+    for hull, draft, axis, angle, run in written:
+        labels = parse_recording_name(recording_name(hull, draft, axis, angle, run, when))
+        assert labels == RecordingLabels(hull, draft, axis, angle, "20261121-143015", run)
+    by_hand = parse_recording_name("trimaran_0.9T_pitch_8deg.csv")
+    assert by_hand == RecordingLabels("trimaran", 0.9, "pitch", 8.0)
+    assert parse_recording_name("decay 17.csv") is None and parse_recording_name("swath_T_roll_8degx") is None
+
+
+def test_one_way_in_picks_the_reader_by_suffix_and_names_the_known_ones(tmp_path: Path) -> None:
+    from tankdaq.errors import InputError
+    from tankdaq.store.inputs import INPUT_FORMATS, read_runs
+
+    assert list(INPUT_FORMATS) == [".mcap", ".csv"]
+    known = r"unknown file type \.parquet; decays: use a \.mcap or \.csv file"
+    with pytest.raises(InputError, match=known):
+        read_runs(tmp_path / "x.parquet")
 
 
 def test_describe_run_fills_the_ittc_keys_from_the_hull() -> None:

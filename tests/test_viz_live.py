@@ -216,7 +216,7 @@ def test_a_forecast_beyond_the_measurement_has_no_residual_there(tmp_path: Path)
 
 
 def test_any_registered_term_renders_with_its_unit(tmp_path: Path) -> None:
-    """``record --model b1,c1,fc``: fc is not a physics.decay term; its title comes from the one registry."""
+    """``record --model b1,c1,fc``: fc is not a state term; its title comes from the one term table."""
     samples = decay_samples(200)
     angle, rate = simulate_decay(TRUTH, samples["t"], np.radians(6.0))
     with LiveView("save", rrd_path=tmp_path / "fc.rrd", terms=["b1", "c1", "fc"]) as view:

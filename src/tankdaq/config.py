@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .errors import ConfigError, InputError
-from .physics.decay import TERMS
+from .physics.terms import TERMS
 
 
 def config_dir() -> Path:

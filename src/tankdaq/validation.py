@@ -21,7 +21,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .errors import InputError
-from .physics.decay import TERMS
+from .physics.models import resolve_model
+from .physics.terms import TERM_TABLE, TERMS
 from .xsens.constants import BAUD_CODES
 
 if TYPE_CHECKING:
@@ -116,8 +117,6 @@ def percent(value: float, option: str, low: float = 0.0, high: float = 100.0) ->
 def equation_model(spec: str | Sequence[str], use: str, instead: str) -> tuple[str, ...]:
     """A model of decay-equation terms only (b1 ... s3), for the uses that cannot take friction (``fc``)
     or coupling (``ku``): ``use`` names who refuses, ``instead`` says what to do."""
-    from .ident.models import resolve_model
-
     terms = resolve_model(spec)
     outside = [term for term in terms if term not in TERMS]
     if outside:
@@ -125,13 +124,24 @@ def equation_model(spec: str | Sequence[str], use: str, instead: str) -> tuple[s
     return terms
 
 
+#: Kinds of term the live identifier cannot fit, and why: it is given the angle and rate alone.
+LIVE_REFUSED_KINDS: dict[str, str] = {
+    "exogenous": "needs a measured input u(t), and the live identifier is given the angle and rate only",
+}
+
+
 def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str, ...]:
-    """A model the live identifier, view and recording all carry: decay-equation terms only."""
-    return equation_model(
-        spec,
-        f"{option}: the live view and the recording's /fit carry",
-        "record with those, then fit the others offline with tankdaq diagnose or tankdaq identify",
-    )
+    """A model the live identifier, view and recording all carry: every term of the table but those that
+    need an input the live pipeline does not have (``ku``)."""
+    terms = resolve_model(spec)
+    for term in terms:
+        why = LIVE_REFUSED_KINDS.get(TERM_TABLE[term].kind)
+        if why is not None:
+            raise InputError(
+                f"{option}: {term} {why}; record without it, then fit it offline with tankdaq diagnose "
+                "or tankdaq identify"
+            )
+    return terms
 
 
 def _cannot_write_in(folder: Path) -> str | None:
@@ -196,6 +206,7 @@ def input_file(path: Path, what: str = "file", error: type[InputError] = InputEr
 
 
 __all__ = [
+    "LIVE_REFUSED_KINDS",
     "MAX_BOOTSTRAP_REPLICAS",
     "MAX_RELEASE_ANGLE_DEG",
     "MTI_BASE_RATE_HZ",

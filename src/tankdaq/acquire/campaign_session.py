@@ -803,7 +803,7 @@ class CampaignSession:
 
 
 def _terms(model: str) -> tuple[str, ...]:
-    from ..ident.models import resolve_model
+    from ..physics.models import resolve_model
 
     return resolve_model(model)
 

@@ -23,8 +23,8 @@ import numpy as np
 
 from ..config import Hull
 from ..errors import RecordingError, TankdaqError
-from ..ident.models import resolve_model
 from ..ident.online import BackgroundFit, OnlineIdentifier, OnlineResult
+from ..physics.models import resolve_model
 from ..samples import AXIS_FIELDS
 from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter

@@ -63,7 +63,7 @@ def campaign_command(
         markdown_table,
         read_campaign_runs,
     )
-    from ..ident.models import resolve_model
+    from ..physics.models import resolve_model
     from .identify import echo_cuts
 
     if executor not in ("local", "dask"):

@@ -53,35 +53,22 @@ def load_runs(
     start_s: float | None = None,
     end_s: float | None = None,
 ) -> list[DecayRun]:
-    """The free decays of every input: MCAP recordings through the store reader, anything else as CSV,
-    each cut where its free part ends (``ident.free_decay``; ``start_s``/``end_s`` override).
+    """The free decays of every input, read through the one way in (``ident.inputs.read_decays``: the
+    reader by suffix, CSV releases found), each cut where its free part ends (``ident.free_decay``;
+    ``start_s``/``end_s`` override).
 
     Without ``axis`` a recording's decays are read on the axis its metadata names.
     """
     from ..ident.free_decay import cut_free_decays
-    from ..store.csv_import import read_csv_runs
+    from ..ident.inputs import read_decays
 
-    runs: list[DecayRun] = []
-    for path in inputs:
-        if path.suffix.lower() == ".mcap":
-            try:
-                from ..store.reader import read_decay_runs
-            except ImportError:
-                raise InputError(f"{path}: reading MCAP recordings is not available in this build") from None
-            runs.extend(read_decay_runs(path, axis))
-        else:
-            runs.extend(
-                read_csv_runs(
-                    path,
-                    time_col=time_col,
-                    angle_col=angle_col,
-                    rate_col=rate_col,
-                    angle_unit=angle_unit,
-                    axis=axis or "roll",
-                    keep_all=keep_all,
-                    skip_half_cycles=skip_half_cycles,
-                )
-            )
+    runs = [
+        run
+        for path in inputs
+        for run in read_decays(
+            path, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles
+        )
+    ]
     return cut_free_decays(runs, start_s, end_s)
 
 
@@ -146,9 +133,9 @@ def identify_command(
     """Identify the decay equation's coefficients from free-decay records."""
     from ..config import load_hull
     from ..ident.estimators import make_estimator
-    from ..ident.models import resolve_model
     from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
     from ..ident.uncertainty import moving_block_bootstrap, repeat_spread
+    from ..physics.models import resolve_model
 
     if axis not in (None, "roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
@@ -164,7 +151,7 @@ def identify_command(
 
     if compare:
         from ..ident.free_decay import cut_lines
-        from ..ident.models import COMPARE_MODELS
+        from ..physics.models import COMPARE_MODELS
 
         with progress_bar() as progress:
             task = progress.add_task("fitting models", total=len(group_models(COMPARE_MODELS)))

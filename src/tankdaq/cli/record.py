@@ -257,9 +257,9 @@ def identify_recordings(
     paths: list[Path], report_dir: Path, model: str, truth: dict[str, float] | None = None
 ) -> None:
     """Fit all recordings jointly, print the table (and the truth when known), draw each decay (PNG)."""
-    from ..ident.models import resolve_model
     from ..ident.output_error import OutputError
     from ..ident.report import predicted_angles, summarize, text_report
+    from ..physics.models import resolve_model
     from ..store.reader import read_decay_runs
     from ..viz.plots import decay_fit_figure, save_png
 

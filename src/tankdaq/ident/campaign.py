@@ -13,7 +13,6 @@ import csv
 import gc
 import json
 import math
-import re
 from collections import defaultdict
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
@@ -30,15 +29,12 @@ from ..errors import IdentificationError, InputError
 from ..physics.decay import simulate_decay
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, empty_samples
+from ..store.inputs import INPUT_FORMATS, input_format
+from ..store.naming import parse_recording_name
 from .derived import amplitude_table, damping_ratio, natural_period
 from .free_decay import cut_free_decays, cut_lines
+from .inputs import read_decays
 from .output_error import OutputError
-
-#: File-name pattern of a recording: ``swath_1.1T_roll_8deg_20261121-143015_run03``.
-NAME_PATTERN = re.compile(
-    r"^(?P<hull>[A-Za-z0-9-]+)_(?P<draft>\d*\.?\d*T)_(?P<axis>roll|pitch)_(?P<angle>\d+(?:\.\d+)?)deg(?:_|$)"
-)
-RECORDING_SUFFIXES = (".mcap", ".csv")
 
 
 @dataclass(frozen=True, order=True)
@@ -115,19 +111,21 @@ class GroupResult:
 
 
 def find_recordings(inputs: Sequence[str | Path]) -> list[Path]:
-    """The .mcap and .csv files among ``inputs`` (folders searched recursively), sorted."""
+    """The files tankdaq reads decays from (``store.inputs.INPUT_FORMATS``: .mcap, .csv) among ``inputs``
+    (folders searched recursively), sorted."""
     found: list[Path] = []
+    known = " or ".join(INPUT_FORMATS)
     for item in map(Path, inputs):
         if item.is_dir():
-            found.extend(p for p in sorted(item.rglob("*")) if p.suffix.lower() in RECORDING_SUFFIXES)
+            found.extend(p for p in sorted(item.rglob("*")) if p.suffix.lower() in INPUT_FORMATS)
         elif item.is_file():
-            if item.suffix.lower() not in RECORDING_SUFFIXES:
-                raise InputError(f"{item}: not a recording; give .mcap or .csv files or a folder of them")
+            if item.suffix.lower() not in INPUT_FORMATS:
+                raise InputError(f"{item}: not a recording; give {known} files or a folder of them")
             found.append(item)
         else:
             raise InputError(f"{item}: no such file or folder")
     if not found:
-        raise InputError(f"no .mcap or .csv recordings in {', '.join(map(str, inputs))}")
+        raise InputError(f"no {known} recordings in {', '.join(map(str, inputs))}")
     return sorted(set(found))
 
 
@@ -147,18 +145,13 @@ def csv_labels(path: Path) -> dict[str, Any]:
             raise InputError(
                 f'{sidecar}: needs JSON with hull, axis, angle_deg (and draft, e.g. "1.1T"): {exc}'
             ) from None
-    match = NAME_PATTERN.match(path.stem)
-    if not match:
+    named = parse_recording_name(path.name)
+    if named is None:
         raise InputError(
             f"{path}: cannot tell hull, draft, axis and angle; name it like trimaran_0.9T_pitch_8deg.csv "
             f"or put {sidecar.name} beside it with hull, draft, axis, angle_deg"
         )
-    return {
-        "hull": match["hull"],
-        "draft": parse_draft(match["draft"]),
-        "axis": match["axis"],
-        "angle_deg": float(match["angle"]),
-    }
+    return {"hull": named.hull, "draft": named.draft, "axis": named.axis, "angle_deg": named.angle_deg}
 
 
 def read_campaign_runs(
@@ -170,10 +163,10 @@ def read_campaign_runs(
 
 
 def _labelled_runs(path: Path) -> list[DecayRun]:
-    if path.suffix.lower() == ".mcap":
-        from ..store.reader import read_decay_runs
-
-        runs = read_decay_runs(path)
+    """The decays of a file (``ident.inputs``), labelled from the recording's metadata or, for a file
+    that does not say, from its sidecar or name (``csv_labels``)."""
+    if input_format(path).self_labelled:
+        runs = read_decays(path)
         for run in runs:
             missing = [k for k in ("hull", "draft") if run.meta.get(k) is None]
             if missing:
@@ -181,12 +174,10 @@ def _labelled_runs(path: Path) -> list[DecayRun]:
             nominal = run.meta.get("angle_nominal_deg")
             run.meta["angle_deg"] = float(nominal) if nominal is not None else _rounded_first_peak_deg(run)
         return runs
-    from ..store.csv_import import read_csv_runs
-
     labels = csv_labels(path)
     if labels["axis"] not in AXIS_FIELDS:
         raise InputError(f"{path}: axis {labels['axis']!r} not understood; use roll or pitch")
-    runs = read_csv_runs(path, axis=labels["axis"])
+    runs = read_decays(path, axis=labels["axis"])
     for run in runs:
         run.meta.update(labels)
     return runs

@@ -13,10 +13,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import BadIdentificationInput
+from ..physics.models import resolve_model
 from ..records import DecayRun
 from .derived import linear_stiffness
 from .kernels import term_codes, term_matrix
-from .models import resolve_model
 from .signals import estimate_period, savgol_window, smoothed_derivatives, start_state
 
 

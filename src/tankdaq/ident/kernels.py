@@ -8,51 +8,26 @@ that is exact to the integration error and costs one pass, instead of the
 noisy finite differences that stall optimisers (reference §4).
 
 The equation is ``x'' = -sum_j theta_j * phi_j(x, x', u)``. Each term is one
-row of ``TERM_REGISTRY`` plus one branch of ``term_eval`` giving phi and its
-partial derivatives in x and x'; adding a term touches nothing else.
+row of the term table (``physics.terms.TERM_TABLE``: name, code, kind, label,
+unit) plus one branch of ``term_eval`` giving phi and its partial derivatives
+in x and x'; adding a term touches nothing else. This module holds only the
+kernel code.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numba
 import numpy as np
 
-
-@dataclass(frozen=True)
-class TermSpec:
-    """One term of the decay equation: its code in the kernel and how people read it."""
-
-    code: int
-    kind: str  # "damping", "restoring", "friction" or "exogenous"
-    label: str
-    unit: str
-
-
-#: The term vocabulary: the nine canonical terms, then the extra effects.
-#: ``fc``: Coulomb friction fc*tanh(x'/eps) (eps is an estimator setting);
-#: ``ku``: coupling k*u(t) to a measured exogenous channel u.
-TERM_REGISTRY: dict[str, TermSpec] = {
-    "b1": TermSpec(0, "damping", "linear damping  b1*x'", "1/s"),
-    "b2": TermSpec(1, "damping", "quadratic damping  b2*|x'|x'", "1/rad"),
-    "b3": TermSpec(2, "damping", "cubic damping  b3*x'^3", "s/rad^2"),
-    "c1": TermSpec(3, "restoring", "linear restoring  c1*x", "1/s^2"),
-    "c2": TermSpec(4, "restoring", "quadratic restoring  c2*x^2", "1/(rad s^2)"),
-    "c3": TermSpec(5, "restoring", "cubic restoring  c3*x^3", "1/(rad^2 s^2)"),
-    "s1": TermSpec(6, "restoring", "sine restoring  s1*sin(x)", "1/s^2"),
-    "s2": TermSpec(7, "restoring", "sine-squared restoring  s2*sin(x)^2", "1/s^2"),
-    "s3": TermSpec(8, "restoring", "sine-cubed restoring  s3*sin(x)^3", "1/s^2"),
-    "fc": TermSpec(9, "friction", "Coulomb friction  fc*tanh(x'/eps)", "rad/s^2"),
-    "ku": TermSpec(10, "exogenous", "exogenous coupling  ku*u(t)", "rad/(s^2 unit of u)"),
-}
+from ..physics.terms import TERM_TABLE
 
 
 def term_codes(terms: Sequence[str]) -> np.ndarray:
     """Kernel codes of the named terms (KeyError names the unknown one)."""
-    return np.array([TERM_REGISTRY[name].code for name in terms], dtype=np.int64)
+    return np.array([TERM_TABLE[name].code for name in terms], dtype=np.int64)
 
 
 @numba.njit(cache=True, inline="always")

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import BadIdentificationInput, InputError
+from ..physics.models import resolve_model
 from ..records import DecayRun
 from .derived import natural_period
 from .equation_error import EquationError, check_runs, exogenous_input
@@ -35,7 +36,6 @@ from .kernels import (
     term_codes,
     term_matrix,
 )
-from .models import resolve_model
 from .signals import white_noise_level
 from .uncertainty import (
     classic_covariance,

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from ..physics.models import MODEL_ALIASES, model_name, resolve_model
+from ..physics.terms import TERM_TABLE, equation_text
 from ..records import DecayRun
 from .derived import (
     amplitude_table,
@@ -24,8 +26,7 @@ from .derived import (
     tested_amplitudes_deg,
 )
 from .estimators import make_estimator
-from .kernels import TERM_REGISTRY, simulate, substeps, term_codes
-from .models import MODEL_ALIASES, model_name, resolve_model
+from .kernels import simulate, substeps, term_codes
 from .output_error import OutputError, seed_objective
 
 
@@ -86,7 +87,7 @@ def summarize(
                 "value": coefficients[k],
                 "std": estimator.std_[k],
                 "ci95": list(estimator.ci95_[k]),
-                "unit": TERM_REGISTRY[k].unit,
+                "unit": TERM_TABLE[k].unit,
             }
             for k in terms
         },
@@ -151,36 +152,15 @@ def dimensional_summary(coefficients: dict[str, float], hull: Any, axis: str, dr
     }
 
 
-def equation_text(coefficients: dict[str, float], axis: str = "roll") -> str:
-    """The identified equation written out, e.g. ``phi'' + 0.0144 phi' + ... = 0``."""
-    x = "phi" if axis == "roll" else "theta"
-    forms = {
-        "b1": f"{x}'",
-        "b2": f"|{x}'|{x}'",
-        "b3": f"{x}'^3",
-        "c1": x,
-        "c2": f"{x}^2",
-        "c3": f"{x}^3",
-        "s1": f"sin({x})",
-        "s2": f"sin({x})^2",
-        "s3": f"sin({x})^3",
-        "fc": f"tanh({x}'/eps)",
-        "ku": "u(t)",
-    }
-    text = f"{x}''"
-    for k, v in coefficients.items():
-        text += f" {'-' if v < 0 else '+'} {abs(v):.5g} {forms[k]}"
-    return text + " = 0"
-
-
 def text_report(summary: dict[str, Any]) -> str:
     """A readable report of ``summarize``'s output."""
+    angle_name = "phi" if summary["axis"] == "roll" else "theta"
     lines = [
         f"model {summary['model']['name']} ({', '.join(summary['model']['terms'])}), "
         f"method {summary['method']}, "
         f"{len(summary['runs'])} run(s), {summary['axis']}",
         "",
-        "  " + equation_text({k: v["value"] for k, v in summary["coefficients"].items()}, summary["axis"]),
+        "  " + equation_text({k: v["value"] for k, v in summary["coefficients"].items()}, angle_name),
         "",
         f"  {'term':<5}{'value':>13}{'std':>12}{'95 % interval':>28}  unit",
     ]

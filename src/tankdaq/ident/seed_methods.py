@@ -27,11 +27,11 @@ from pymoo.operators.mutation.pm import PM
 from pymoo.optimize import minimize
 
 from ..errors import InputError
+from ..physics.models import MODEL_ALIASES
 from ..records import DecayRun
 from ..validation import equation_model
 from .equation_error import check_runs
 from .kernels import simulate, substeps, term_codes, term_matrix
-from .models import MODEL_ALIASES
 from .uncertainty import coefficient_warnings
 
 #: Lower bound of the total inertia. The papers write I in [0, 0.1]; 0 itself would divide by zero.

@@ -1,4 +1,5 @@
-"""Diving-plane records on disk: MCAP (as the recorder writes) or CSV, the writer picked by the suffix.
+"""Diving-plane records on disk: MCAP (as the recorder writes) or CSV, the reader and writer picked by the
+suffix (``store.inputs.by_suffix`` over this module's tables).
 
 MCAP layout: one channel ``/auv/state`` of JSON messages (schema encoding "jsonschema", message encoding
 "json"), one message per sample with t, u, w, q, theta, z, x, delta_s in SI units and rad; channel
@@ -21,6 +22,7 @@ from mcap.writer import Writer
 
 from .. import __version__
 from ..errors import BadRecordingInput, InputError
+from ..store.inputs import by_suffix
 from ..validation import input_file
 from .model import STATE_COLUMNS, STATE_UNITS, StateRecord
 from .vehicle import Vehicle, vehicle_from_dict
@@ -31,7 +33,8 @@ SCHEMA_NAME = "tankdaq.auv.State"
 FIELDS: tuple[str, ...] = ("t", *STATE_COLUMNS)
 #: CSV header names: the field with its unit, e.g. ``q_rad_s``.
 CSV_NAMES: dict[str, str] = {f: f"{f}_{STATE_UNITS[f].replace('/', '_')}" for f in FIELDS}
-SUFFIXES: tuple[str, ...] = (".mcap", ".csv")
+#: What the suffix errors call these files.
+WHAT = "diving-plane records"
 
 _SCHEMA = {
     "title": SCHEMA_NAME,
@@ -42,28 +45,19 @@ _SCHEMA = {
 }
 
 
-def _suffix(path: Path) -> str:
-    suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise InputError(f"{path}: unknown file type {suffix or '(none)'}; use a .mcap or .csv file name")
-    return suffix
-
-
 def write_record(path: str | Path, record: StateRecord, vehicle: Vehicle | None = None) -> Path:
     """Write a record as MCAP or CSV according to the suffix; returns the path."""
     path = Path(path)
-    suffix = _suffix(path)
+    write = by_suffix(path, _WRITERS, WHAT)
     meta = {**record.meta, "software": f"tankdaq {__version__}"}
     if not path.parent.is_dir():
         raise InputError(f"{path}: the folder {path.parent} does not exist")
-    if suffix == ".csv":
-        _write_csv(path, record, meta)
-    else:
-        _write_mcap(path, record, meta, vehicle)
+    write(path, record, meta, vehicle)
     return path
 
 
-def _write_csv(path: Path, record: StateRecord, meta: dict[str, str]) -> None:
+def _write_csv(path: Path, record: StateRecord, meta: dict[str, str], _vehicle: Vehicle | None) -> None:
+    """CSV carries no attachment: the vehicle stays with the caller."""
     with path.open("w", newline="") as fh:
         for key, value in meta.items():
             fh.write(f"# {key}: {value}\n")
@@ -101,9 +95,11 @@ def _write_mcap(path: Path, record: StateRecord, meta: dict[str, str], vehicle: 
 def read_record(path: str | Path) -> StateRecord:
     """Read a record written by ``write_record`` (or any file with the same layout)."""
     path = Path(path)
-    suffix = None if path.is_dir() else _suffix(path)  # a folder is said to be one, not a bad suffix
+    if path.is_dir():  # said to be a folder, not a file of an unknown type
+        input_file(path, error=BadRecordingInput)
+    read = by_suffix(path, _READERS, WHAT)
     input_file(path, error=BadRecordingInput)
-    return _read_csv(path) if suffix == ".csv" else _read_mcap(path)
+    return read(path)
 
 
 def _columns_to_record(path: Path, columns: dict[str, list[float]], meta: dict[str, str]) -> StateRecord:
@@ -165,7 +161,7 @@ def _read_mcap(path: Path) -> StateRecord:
 def read_vehicle_attachment(path: str | Path) -> Vehicle | None:
     """The vehicle an MCAP record carries as an attachment (None for CSV or when absent)."""
     path = Path(path)
-    if _suffix(path) != ".mcap":
+    if by_suffix(path, _READERS, WHAT) is not _read_mcap:
         return None
     try:
         with path.open("rb") as fh:
@@ -177,3 +173,8 @@ def read_vehicle_attachment(path: str | Path) -> Vehicle | None:
     except (McapError, ValueError, tomllib.TOMLDecodeError, OSError) as exc:
         raise BadRecordingInput(f"{path}: the vehicle attachment cannot be read ({exc})") from None
     return None
+
+
+#: Suffix -> writer and reader (one table each, as ``store.inputs.INPUT_FORMATS`` for decays).
+_WRITERS = {".mcap": _write_mcap, ".csv": _write_csv}
+_READERS = {".mcap": _read_mcap, ".csv": _read_csv}

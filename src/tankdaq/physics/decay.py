@@ -4,9 +4,10 @@
         + s1 sin x + s2 sin^2 x + s3 sin^3 x = 0
 
 The term names b1 b2 b3 c1 c2 c3 s1 s2 s3 are tankdaq's public vocabulary (CLI,
-JSON, files). Only ratios to the total inertia are identifiable from a free
-decay, so every coefficient here is already divided by it (units s^-1, rad^-1,
-s rad^-2 for damping; s^-2 ... for restoring).
+JSON, files); their labels and units are in the one term table, ``physics.terms``.
+Only ratios to the total inertia are identifiable from a free decay, so every
+coefficient here is already divided by it (units s^-1, rad^-1, s rad^-2 for
+damping; s^-2 ... for restoring).
 """
 
 from __future__ import annotations
@@ -15,35 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-#: Canonical terms in their fixed order: damping first, then restoring.
-TERMS: tuple[str, ...] = ("b1", "b2", "b3", "c1", "c2", "c3", "s1", "s2", "s3")
-DAMPING_TERMS: tuple[str, ...] = ("b1", "b2", "b3")
-RESTORING_TERMS: tuple[str, ...] = ("c1", "c2", "c3", "s1", "s2", "s3")
-
-#: Human description of each term, used in tables and the written-out equation.
-TERM_LABELS: dict[str, str] = {
-    "b1": "linear damping  b1*x'",
-    "b2": "quadratic damping  b2*|x'|x'",
-    "b3": "cubic damping  b3*x'^3",
-    "c1": "linear restoring  c1*x",
-    "c2": "quadratic restoring  c2*x^2",
-    "c3": "cubic restoring  c3*x^3",
-    "s1": "sine restoring  s1*sin(x)",
-    "s2": "sine-squared restoring  s2*sin(x)^2",
-    "s3": "sine-cubed restoring  s3*sin(x)^3",
-}
-
-TERM_UNITS: dict[str, str] = {
-    "b1": "1/s",
-    "b2": "1/rad",
-    "b3": "s/rad^2",
-    "c1": "1/s^2",
-    "c2": "1/(rad s^2)",
-    "c3": "1/(rad^2 s^2)",
-    "s1": "1/s^2",
-    "s2": "1/s^2",
-    "s3": "1/s^2",
-}
+from .terms import TERMS
 
 
 def regressors(angle: np.ndarray, rate: np.ndarray, terms: Sequence[str] = TERMS) -> np.ndarray:

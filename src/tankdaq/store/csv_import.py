@@ -1,17 +1,12 @@
-"""Decay runs from CSV files (other labs' data, spreadsheets, the KVLCC2 reference run).
+"""Records from CSV files (other labs' data, spreadsheets, the KVLCC2 reference run), read as stored.
 
-A decay is cut from the release, taken as the first extremum of large
-amplitude (a held tilt ends where the model starts to move; a run driven to
-amplitude, like KVLCC2, starts at its first big peak). A long record with
-several releases becomes several runs, as a recording with several release
-events does: where a free decay ends by a new excitation, or dies into the
-noise with more to come, the rest of the file is searched for the next
-release (``ident.free_decay``; not after a carriage stop, which ends the
-test). A file written by ``tankdaq export`` (``store.export``) is read back
-exactly: SI columns (``angle_rad``, ``rate_rad_s``) are taken without a
-``--angle-col``, the units row is skipped, the ``# key = value`` block becomes
-``meta`` and its ``release_t_s`` cuts the runs where the recording did. Extra
-numeric columns become ``DecayRun.channels`` in SI units (``*_deg`` columns are
+The store only reads. A file written by ``tankdaq export`` (``store.export``) is read back exactly: SI
+columns (``angle_rad``, ``rate_rad_s``) are taken without a ``--angle-col``, the units row is skipped, the
+``# key = value`` block becomes ``meta`` and its ``release_t_s`` cuts the runs where the recording did. Any
+other CSV comes back whole, as one record marked ``meta[FIND_RELEASES]``: where its decays start (one or
+several releases in a long record) is found by ``ident.inputs`` on the way in, since finding a release is
+signal work of identification (noise levels, where a free decay ends) and data flows one way, store ->
+ident, never back. Extra numeric columns become ``DecayRun.channels`` in SI units (``*_deg`` columns are
 converted to rad and lose the suffix, so ``other_angle_deg`` -> ``other_angle``).
 """
 
@@ -21,44 +16,47 @@ import csv
 import itertools
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import BadIdentificationInput, InputError
-from ..ident.free_decay import SPLIT_AFTER, find_free_end
-from ..ident.signals import white_noise_level
 from ..records import DecayRun
 from ..validation import input_file
 
 ANGLE_UNITS: dict[str, float] = {"deg": math.pi / 180.0, "rad": 1.0}
-#: Fraction of the largest excursion a peak must reach to count as the release.
-RELEASE_FRACTION = 0.5
+#: A decay needs at least this many samples.
 MIN_SAMPLES = 20
 #: The rate column looked for by default; any other name given must exist.
 DEFAULT_RATE_COL = "rate_deg_s"
 #: The first line of a ``tankdaq export`` CSV (``store.export.CSV_MARK``).
 EXPORT_MARK = "# tankdaq export"
-#: A later release counts when its swing clears the noise by this factor.
-NEXT_RELEASE_NOISES = 20.0
+#: ``meta`` key of a record read whole whose releases are still to be found (``ident.inputs``).
+FIND_RELEASES = "find_releases"
 
 
-def read_csv_runs(
-    path: str | Path,
-    time_col: str = "time_s",
-    angle_col: str = "angle_deg",
-    rate_col: str | None = DEFAULT_RATE_COL,
-    angle_unit: str = "deg",
-    axis: str = "roll",
-    keep_all: bool = False,
-    skip_half_cycles: int = 0,
-) -> list[DecayRun]:
-    """Read the decays of a CSV file; without the default rate column the angle is the only output.
+@dataclass(frozen=True)
+class CsvOptions:
+    """How to read other labs' CSV: the columns, the angle unit, and ``keep_all`` (the record whole from
+    its first sample: no cut at its releases)."""
 
-    ``keep_all`` keeps the record whole from its first sample (one run); otherwise each run starts
-    at a release, then ``skip_half_cycles`` more half-cycles are dropped.
-    """
+    time_col: str = "time_s"
+    angle_col: str = "angle_deg"
+    rate_col: str | None = DEFAULT_RATE_COL
+    angle_unit: str = "deg"
+    keep_all: bool = False
+
+
+DEFAULT_CSV = CsvOptions()
+
+
+def read_csv_file(path: str | Path, options: CsvOptions = DEFAULT_CSV, axis: str = "roll") -> list[DecayRun]:
+    """The runs of a CSV file as stored: an export's runs from each recorded release, else the record
+    whole (marked ``FIND_RELEASES`` unless ``keep_all``); without the rate column the angle is the only
+    output."""
     path = Path(path)
+    angle_col, angle_unit, rate_col = options.angle_col, options.angle_unit, options.rate_col
     if angle_unit not in ANGLE_UNITS:
         raise InputError(f"angle unit {angle_unit!r} not understood: use deg or rad")
     if axis not in ("roll", "pitch"):
@@ -67,7 +65,7 @@ def read_csv_runs(
     if angle_col == "angle_deg" and "angle_deg" not in columns and "angle_rad" in columns:  # SI (export)
         angle_col, angle_unit = "angle_rad", "rad"
         rate_col = "rate_rad_s" if rate_col == DEFAULT_RATE_COL else rate_col
-    for label, name in (("time", time_col), ("angle", angle_col)):
+    for label, name in (("time", options.time_col), ("angle", angle_col)):
         if name not in columns:
             raise InputError(
                 f"{path}: no {label} column {name!r}; columns are {', '.join(columns)} "
@@ -76,7 +74,7 @@ def read_csv_runs(
     if rate_col not in (None, DEFAULT_RATE_COL, "rate_rad_s") and rate_col not in columns:
         raise InputError(f"{path}: no rate column {rate_col!r}; columns are {', '.join(columns)}")
     to_rad = ANGLE_UNITS[angle_unit]
-    t = columns.pop(time_col)
+    t = columns.pop(options.time_col)
     angle = columns.pop(angle_col) * to_rad
     rate = columns.pop(rate_col) * to_rad if rate_col is not None and rate_col in columns else None
     channels = {_channel_name(name): _to_si(name, values) for name, values in columns.items()}
@@ -85,57 +83,29 @@ def read_csv_runs(
     )
     run.meta.update(header)
     _check_motion(run, angle_unit)
-    if keep_all:
-        runs = [run]
-    elif header.get("release_t_s"):
-        runs = _exported_releases(run, [float(r) for r in header["release_t_s"]])  # type: ignore[union-attr]
-    else:
-        runs = _releases(run, skip_half_cycles)
-    for number, part in enumerate(runs, start=1):
-        part.meta["initial_angle_rad"] = float(part.angle[0])
-        if len(runs) > 1:
-            part.name = f"{path.stem}#{number}"
-    return runs
-
-
-def _releases(record: DecayRun, skip_half_cycles: int) -> list[DecayRun]:
-    """Every released decay in a record: the first must exist, later ones where a free decay ends in a
-    new excitation (or in the noise) and a swing well clear of the noise follows."""
-    noise = white_noise_level(record.angle)
-    runs: list[DecayRun] = []
-    rest = record
-    while True:
-        try:
-            run = rest.window(release_index(rest.angle, skip_half_cycles))
-        except BadIdentificationInput:
-            if not runs:
-                raise
-            return runs
-        if run.t.size < MIN_SAMPLES:
-            if not runs:
-                raise BadIdentificationInput(f"{record.meta['file']}: too few samples left after the release")
-            return runs
-        end = find_free_end(run)
-        if end.kind not in SPLIT_AFTER or run.t.size - end.index < MIN_SAMPLES:
-            return [*runs, run]
-        later = run.window(end.index)
-        if not _swings(later, noise):
-            return [*runs, run]
-        run = run.window(0, end.index)
-        run.meta["split"] = [end.kind, end.reason]
-        runs.append(run)
-        rest = later
+    if options.keep_all:
+        return [run]
+    releases = header.get("release_t_s")
+    if isinstance(releases, list) and releases:
+        return _exported_releases(run, [float(r) for r in releases])
+    run.meta[FIND_RELEASES] = True
+    return [run]
 
 
 def _exported_releases(record: DecayRun, releases: list[float]) -> list[DecayRun]:
-    """The runs of an exported recording: from each release to the next, as ``store.reader`` cuts them."""
+    """The runs of an exported recording: from each release to the next, as ``store.reader`` cuts (and
+    names) them."""
     starts = np.searchsorted(record.t, [*releases, math.inf], side="left")
-    return [record.window(int(a), int(b)) for a, b in itertools.pairwise(starts)]
+    runs = [record.window(int(a), int(b)) for a, b in itertools.pairwise(starts)]
+    return number_parts(runs)
 
 
-def _swings(record: DecayRun, noise: float) -> bool:
-    """The record moves well clear of the noise: a release may be in it."""
-    return float(np.ptp(record.angle)) > NEXT_RELEASE_NOISES * max(noise, 1e-9)
+def number_parts(runs: list[DecayRun]) -> list[DecayRun]:
+    """Several runs of one file are named ``stem#1``, ``stem#2`` ... (one run keeps the stem)."""
+    if len(runs) > 1:
+        for number, run in enumerate(runs, start=1):
+            run.name = f"{run.name}#{number}"
+    return runs
 
 
 def _read_columns(path: Path) -> tuple[dict[str, np.ndarray], dict[str, object]]:
@@ -206,36 +176,3 @@ def _check_motion(run: DecayRun, angle_unit: str) -> None:
             f"{run.name}: the {run.axis} angle does not move (range {span_deg:.3g} deg); "
             f"wrong axis or wrong column? (angle unit {angle_unit})"
         )
-
-
-def release_index(angle: np.ndarray, skip_half_cycles: int = 0) -> int:
-    """Index of the release: the end of the first extremum reaching half the largest excursion.
-
-    The equilibrium is the median of the last quarter (where the decay has
-    settled). Within the first large half-wave the release is the last sample
-    still within the noise (3 sigma) of its peak: the end of a held tilt, or
-    just past the top of a peak.
-    """
-    excursion = angle - np.median(angle[-max(angle.size // 4, 1) :])
-    peak = float(np.max(np.abs(excursion)))
-    sign = np.sign(excursion)
-    boundaries = np.concatenate([[0], np.flatnonzero(sign[1:] != sign[:-1]) + 1, [angle.size]])
-    waves = [
-        (a, b, float(np.max(np.abs(excursion[a:b]))))
-        for a, b in itertools.pairwise(boundaries)
-        if b < angle.size or int(np.argmax(np.abs(excursion[a:b]))) < b - a - 1  # it turns back: a swing
-    ]
-    tall = [i for i, (_, _, height) in enumerate(waves) if height >= RELEASE_FRACTION * peak]
-    first = tall[0] if tall else len(waves)
-    # a strongly damped decay may swing back only a little: any later half-wave clear of the noise counts
-    swing = max(0.05 * peak, 5.0 * white_noise_level(angle))
-    later = [w for w in waves[first:] if w[2] >= swing]
-    if len(later) < 2 + skip_half_cycles:
-        raise BadIdentificationInput(
-            "no decay found: the record does not swing through equilibrium after its largest tilt"
-        )
-    large = [(a, b) for a, b, _ in later]
-    a, b = large[skip_half_cycles]
-    segment = np.abs(excursion[a:b])
-    tolerance = 3.0 * white_noise_level(angle) + 1e-6 * segment.max()
-    return int(a + np.flatnonzero(segment >= segment.max() - tolerance)[-1])

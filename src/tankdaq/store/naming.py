@@ -1,21 +1,45 @@
 """Recording file names a person can find, and files that are never overwritten.
 
 A tank campaign produces hundreds of decays; the name says what a person looks
-for first (hull, draft, axis, angle, when, which run). Files are created with
-O_EXCL so two runs (or a rerun of a command) can never clobber a recording.
+for first (hull, draft, axis, angle, when, which run). The grammar is written
+once, here, and read back here too (``parse_recording_name``: a campaign labels
+CSV files named like recordings by it). Files are created with O_EXCL so two
+runs (or a rerun of a command) can never clobber a recording.
 """
 
 from __future__ import annotations
 
+import glob
 import os
 import re
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-from ..config import format_draft
+from ..config import format_draft, parse_draft
 from ..errors import RecordingError
 
 _MAX_SUFFIX = 999
+_STAMP_FORMAT = "%Y%m%d-%H%M%S"
+#: ``hull_draft_axis_<angle>deg[_<stamp>][_run<NN>[-<k>]]``, then anything (a suffix, a note): the
+#: name ``recording_name`` writes, read back. A shorter hand-made name (``trimaran_0.9T_pitch_8deg``)
+#: has the same head.
+NAME_GRAMMAR = re.compile(
+    r"^(?P<hull>.+?)_(?P<draft>\d*\.?\d*T)_(?P<axis>roll|pitch)_(?P<angle>\d+(?:\.\d+)?)deg"
+    r"(?:_(?P<stamp>\d{8}-\d{6}))?(?:_run(?P<run>\d+)(?:-\d+)?)?(?:[_.]|$)"
+)
+
+
+@dataclass(frozen=True)
+class RecordingLabels:
+    """What a recording's name says: the test condition, and when and which run when it has them."""
+
+    hull: str
+    draft: float  # factor of the design draft
+    axis: str
+    angle_deg: float
+    stamp: str | None = None  # UTC, as recording_name writes it
+    run: int | None = None
 
 
 def _format_draft(draft: float | str) -> str:
@@ -34,17 +58,37 @@ def recording_name(
     hull: str, draft: float | str, axis: str, angle_deg: float, run: int, when: datetime | None = None
 ) -> str:
     """``swath_1.1T_roll_8deg_20261121-143015_run03.mcap`` (time in UTC unless ``when`` says otherwise)."""
-    stamp = (when or datetime.now(UTC)).strftime("%Y%m%d-%H%M%S")
+    stamp = (when or datetime.now(UTC)).strftime(_STAMP_FORMAT)
     return f"{_series_prefix(hull, draft, axis)}{_format_angle(angle_deg)}_{stamp}_run{run:02d}.mcap"
+
+
+def parse_recording_name(name: str) -> RecordingLabels | None:
+    """The labels in a file name (or stem) written in the recording grammar; None when it is not (a
+    draft outside 0.3T..2.0T raises ``InputError``, as ``parse_draft`` does)."""
+    match = NAME_GRAMMAR.match(name)
+    if match is None:
+        return None
+    return RecordingLabels(
+        hull=match["hull"],
+        draft=parse_draft(match["draft"]),
+        axis=match["axis"],
+        angle_deg=float(match["angle"]),
+        stamp=match["stamp"],
+        run=None if match["run"] is None else int(match["run"]),
+    )
 
 
 def next_run_number(folder: str | Path, hull: str, draft: float | str, axis: str) -> int:
     """One more than the highest run number of this hull, draft and axis already in ``folder``."""
-    pattern = re.compile(re.escape(_series_prefix(hull, draft, axis)) + r".*_run(\d+)(?:-\d+)?\.mcap$")
     folder = Path(folder)
     if not folder.is_dir():
         return 1
-    runs = [int(m.group(1)) for p in folder.glob("*.mcap") if (m := pattern.match(p.name))]
+    prefix = _series_prefix(hull, draft, axis)
+    runs = [
+        labels.run
+        for path in folder.glob(f"{glob.escape(prefix)}*.mcap")
+        if (labels := parse_recording_name(path.name)) is not None and labels.run is not None
+    ]
     return max(runs, default=0) + 1
 
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..physics.decay import TERM_UNITS, TERMS
+from ..physics.terms import TERM_TABLE, equation_text
 from ..samples import SAMPLE_DTYPE
 
 TOPIC_RAW = "/xsens/raw"
@@ -71,8 +71,9 @@ def _number(unit: str, description: str = "") -> dict[str, Any]:
 
 
 def _per_term(item: dict[str, Any], description: str) -> dict[str, Any]:
-    """An object with one optional property per decay term (Foxglove needs named properties to plot)."""
-    return {"type": "object", "description": description, "properties": {term: item for term in TERMS}}
+    """An object with one optional property per term of the term table (Foxglove needs named properties
+    to plot): the nine of the equation and the extra effects (``fc``) a live model may hold."""
+    return {"type": "object", "description": description, "properties": {term: item for term in TERM_TABLE}}
 
 
 SAMPLES_SCHEMA = _schema(
@@ -103,7 +104,7 @@ FIT_SCHEMA = _schema(
     "tankdaq.Fit",
     {
         "t_s": _number("s", "device time of the fit"),
-        "terms": {"type": "array", "items": {"type": "string", "enum": list(TERMS)}},
+        "terms": {"type": "array", "items": {"type": "string", "enum": list(TERM_TABLE)}},
         "coefficients": _per_term({"type": "number"}, "fitted value per term (units in channel metadata)"),
         "std": _per_term({"type": "number"}, "standard error per term"),
         "ci95": _per_term(
@@ -136,12 +137,9 @@ CHANNEL_METADATA: dict[str, dict[str, str]] = {
     },
     TOPIC_EVENTS: {"kinds": ",".join(EVENT_KINDS), "t_s": "device time, s"},
     TOPIC_FIT: {
-        "equation": (
-            "x'' + b1 x' + b2|x'|x' + b3 x'^3 + c1 x + c2 x^2 + c3 x^3"
-            " + s1 sin x + s2 sin^2 x + s3 sin^3 x = 0"
-        ),
+        "equation": equation_text(),
         "angle_unit": "rad (coefficients per unit total inertia)",
-        "term_units": json.dumps(TERM_UNITS),
+        "term_units": json.dumps({name: spec.unit for name, spec in TERM_TABLE.items()}),
     },
 }
 
@@ -281,10 +279,10 @@ def fit_record(
     extra: Mapping[str, object] | None = None,
 ) -> dict[str, Any]:
     """The ``/fit`` message for one set of coefficients (terms in canonical order)."""
-    unknown = sorted(set(coefficients) - set(TERMS))
+    unknown = sorted(set(coefficients) - set(TERM_TABLE))
     if unknown:
-        raise ValueError(f"unknown decay terms {unknown}; known: {', '.join(TERMS)}")
-    terms = [term for term in TERMS if term in coefficients]
+        raise ValueError(f"unknown decay terms {unknown}; known: {', '.join(TERM_TABLE)}")
+    terms = [term for term in TERM_TABLE if term in coefficients]
     record: dict[str, Any] = {
         "t_s": float(t_s),
         "terms": terms,

@@ -21,8 +21,8 @@ from matplotlib.figure import Figure
 from ..config import format_draft
 from ..ident.campaign import GroupResult, executor_map, write_tables
 from ..ident.derived import b_eq_band, extinction_curve, natural_period
-from ..ident.kernels import TERM_REGISTRY
 from ..ident.output_error import OutputError
+from ..physics.terms import TERM_TABLE
 from .plots import report_style, save_png
 
 #: Margins in inches: room for the tick labels and axis label (left, bottom), the figure's title
@@ -131,7 +131,7 @@ def _plot_coefficients(series: Sequence[GroupResult]) -> Figure:
         for draft in sorted({r.key.draft for r in series}):
             _errorbar_series(ax, [r for r in series if r.key.draft == draft], term, format_draft(draft))
         ax.set_xlabel("initial angle (deg)")
-        ax.set_title(f"{term} ({TERM_REGISTRY[term].unit})")
+        ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
     axes[0].legend(title="draft")
     return fig
 
@@ -145,7 +145,7 @@ def _plot_hulls(results: Sequence[GroupResult]) -> Figure:
         for hull in sorted({r.key.hull for r in results}):
             _errorbar_series(ax, [r for r in results if r.key.hull == hull], term, hull)
         ax.set_xlabel("initial angle (deg)")
-        ax.set_title(f"{term} ({TERM_REGISTRY[term].unit})")
+        ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
     axes[0].legend()
     return fig
 

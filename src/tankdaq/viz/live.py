@@ -34,7 +34,7 @@ from urllib.parse import urlsplit
 import numpy as np
 
 from ..errors import InputError
-from ..ident.kernels import TERM_REGISTRY
+from ..physics.terms import TERM_TABLE
 from ..samples import AXIS_FIELDS
 from ..store.disk import RESERVE_BYTES, free_bytes, megabytes
 from ..store.schemas import interval_pairs
@@ -121,8 +121,8 @@ def check_mode(mode: str) -> str:
 
 
 def term_title(term: str) -> str:
-    """``b1 (1/s)``: a coefficient named with its unit from the one term registry."""
-    spec = TERM_REGISTRY.get(term)
+    """``b1 (1/s)``: a coefficient named with its unit from the one term table."""
+    spec = TERM_TABLE.get(term)
     return f"{term} ({spec.unit})" if spec else term
 
 

@@ -1,6 +1,6 @@
 """Decay models as ordered sets of terms, and the aliases people use for them.
 
-A model is a tuple of term names in the registry order (damping, restoring,
+A model is a tuple of term names in the term table's order (damping, restoring,
 then the extra effects), e.g. ``("b1", "b2", "c1", "c3")``. ``resolve_model``
 accepts a comma list of terms or an alias: the ITTC forms and every formula of
 the seed papers, read as documented in docs/models.md.
@@ -8,10 +8,11 @@ the seed papers, read as documented in docs/models.md.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from ..errors import InputError
-from .kernels import TERM_REGISTRY
+from .terms import RESTORING_TERMS, TERM_TABLE
 
 
 @dataclass(frozen=True)
@@ -57,12 +58,12 @@ COMPARE_MODELS: tuple[str, ...] = tuple(MODEL_ALIASES)
 
 
 def canonical_order(terms: set[str] | list[str] | tuple[str, ...]) -> tuple[str, ...]:
-    """Terms sorted into the registry order, so equal models compare equal."""
-    order = list(TERM_REGISTRY)
+    """Terms sorted into the term table's order, so equal models compare equal."""
+    order = list(TERM_TABLE)
     return tuple(sorted(set(terms), key=order.index))
 
 
-def resolve_model(spec: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
+def resolve_model(spec: str | Sequence[str]) -> tuple[str, ...]:
     """``'b1,b2,c1,c3'``, ``'ittc-cubic'`` or ``'seed001-eq1'`` -> ordered term tuple.
 
     Unknown names raise InputError listing what is accepted, so a typo on the
@@ -77,16 +78,16 @@ def resolve_model(spec: str | tuple[str, ...] | list[str]) -> tuple[str, ...]:
         names = [str(part).strip().lower() for part in spec]
     if not names:
         raise InputError("empty model: give terms like b1,b2,c1,c3 or an alias such as ittc-quadratic")
-    unknown = [n for n in names if n not in TERM_REGISTRY]
+    unknown = [n for n in names if n not in TERM_TABLE]
     if unknown:
         raise InputError(
-            f"unknown model term(s) {', '.join(unknown)}: use terms {', '.join(TERM_REGISTRY)} "
+            f"unknown model term(s) {', '.join(unknown)}: use terms {', '.join(TERM_TABLE)} "
             f"or an alias ({', '.join(MODEL_ALIASES)})"
         )
     if len(set(names)) != len(names):
         raise InputError(f"model {spec!r} names a term twice")
     terms = canonical_order(names)
-    if not any(TERM_REGISTRY[n].kind == "restoring" for n in terms):
+    if not set(terms) & set(RESTORING_TERMS):
         raise InputError(f"model {spec!r} has no restoring term: a decay needs one of c1, c3, s1 ...")
     return terms
 

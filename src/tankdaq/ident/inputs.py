@@ -1,0 +1,122 @@
+"""Decays on the way in: the store reads a file, ident finds where its decays start.
+
+``read_decays`` is the one entry point the fitting commands read files through (identify, diagnose,
+campaign): ``store.inputs.read_runs`` picks the reader by suffix, and a record the store returned whole
+(a plain CSV, ``FIND_RELEASES``) is cut here at its release, or split at each release when it holds
+several. A decay is cut from the release, taken as the first extremum of large amplitude (a held tilt ends
+where the model starts to move; a run driven to amplitude, like KVLCC2, starts at its first big peak). A
+long record with several releases becomes several runs, as a recording with several release events does:
+where a free decay ends by a new excitation, or dies into the noise with more to come, the rest of the
+record is searched for the next release (``ident.free_decay``; not after a carriage stop, which ends the
+test). This is signal work of identification, so it lives here and the store never imports ident.
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import BadIdentificationInput
+from ..records import DecayRun
+from ..store.csv_import import DEFAULT_RATE_COL, FIND_RELEASES, MIN_SAMPLES, CsvOptions, number_parts
+from ..store.inputs import read_runs
+from .free_decay import SPLIT_AFTER, find_free_end
+from .signals import white_noise_level
+
+#: Fraction of the largest excursion a peak must reach to count as the release.
+RELEASE_FRACTION = 0.5
+#: A later release counts when its swing clears the noise by this factor.
+NEXT_RELEASE_NOISES = 20.0
+
+
+def read_decays(
+    path: str | Path,
+    axis: str | None = None,
+    time_col: str = "time_s",
+    angle_col: str = "angle_deg",
+    rate_col: str | None = DEFAULT_RATE_COL,
+    angle_unit: str = "deg",
+    keep_all: bool = False,
+    skip_half_cycles: int = 0,
+) -> list[DecayRun]:
+    """The decays of one file, each from its release. The CSV settings (columns, unit, ``keep_all``: the
+    record whole from its first sample; ``skip_half_cycles`` more half-cycles dropped after a release
+    found in the data) apply to CSV files; a recording's runs start at its release events."""
+    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all)
+    return [
+        decay
+        for run in read_runs(path, axis, options)
+        for decay in (split_releases(run, skip_half_cycles) if run.meta.pop(FIND_RELEASES, False) else [run])
+    ]
+
+
+def split_releases(record: DecayRun, skip_half_cycles: int = 0) -> list[DecayRun]:
+    """Every released decay in a record: the first must exist, later ones where a free decay ends in a
+    new excitation (or in the noise) and a swing well clear of the noise follows."""
+    noise = white_noise_level(record.angle)
+    runs: list[DecayRun] = []
+    rest = record
+    while True:
+        try:
+            run = rest.window(release_index(rest.angle, skip_half_cycles))
+        except BadIdentificationInput:
+            if not runs:
+                raise
+            break
+        if run.t.size < MIN_SAMPLES:
+            if not runs:
+                raise BadIdentificationInput(f"{record.meta['file']}: too few samples left after the release")
+            break
+        end = find_free_end(run)
+        if end.kind not in SPLIT_AFTER or run.t.size - end.index < MIN_SAMPLES:
+            runs.append(run)
+            break
+        later = run.window(end.index)
+        if not _swings(later, noise):
+            runs.append(run)
+            break
+        run = run.window(0, end.index)
+        run.meta["split"] = [end.kind, end.reason]
+        runs.append(run)
+        rest = later
+    return number_parts(runs)
+
+
+def _swings(record: DecayRun, noise: float) -> bool:
+    """The record moves well clear of the noise: a release may be in it."""
+    return float(np.ptp(record.angle)) > NEXT_RELEASE_NOISES * max(noise, 1e-9)
+
+
+def release_index(angle: np.ndarray, skip_half_cycles: int = 0) -> int:
+    """Index of the release: the end of the first extremum reaching half the largest excursion.
+
+    The equilibrium is the median of the last quarter (where the decay has
+    settled). Within the first large half-wave the release is the last sample
+    still within the noise (3 sigma) of its peak: the end of a held tilt, or
+    just past the top of a peak.
+    """
+    excursion = angle - np.median(angle[-max(angle.size // 4, 1) :])
+    peak = float(np.max(np.abs(excursion)))
+    sign = np.sign(excursion)
+    boundaries = np.concatenate([[0], np.flatnonzero(sign[1:] != sign[:-1]) + 1, [angle.size]])
+    waves = [
+        (a, b, float(np.max(np.abs(excursion[a:b]))))
+        for a, b in itertools.pairwise(boundaries)
+        if b < angle.size or int(np.argmax(np.abs(excursion[a:b]))) < b - a - 1  # it turns back: a swing
+    ]
+    tall = [i for i, (_, _, height) in enumerate(waves) if height >= RELEASE_FRACTION * peak]
+    first = tall[0] if tall else len(waves)
+    # a strongly damped decay may swing back only a little: any later half-wave clear of the noise counts
+    swing = max(0.05 * peak, 5.0 * white_noise_level(angle))
+    later = [w for w in waves[first:] if w[2] >= swing]
+    if len(later) < 2 + skip_half_cycles:
+        raise BadIdentificationInput(
+            "no decay found: the record does not swing through equilibrium after its largest tilt"
+        )
+    large = [(a, b) for a, b, _ in later]
+    a, b = large[skip_half_cycles]
+    segment = np.abs(excursion[a:b])
+    tolerance = 3.0 * white_noise_level(angle) + 1e-6 * segment.max()
+    return int(a + np.flatnonzero(segment >= segment.max() - tolerance)[-1])
