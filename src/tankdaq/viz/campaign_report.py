@@ -19,7 +19,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..config import format_draft
-from ..ident.campaign import GroupResult, executor_map, write_tables
+from ..ident.campaign import GroupKey, GroupResult, executor_map, write_tables
 from ..ident.derived import b_eq_band, extinction_curve, natural_period
 from ..ident.output_error import OutputError
 from ..physics.terms import TERM_TABLE
@@ -124,29 +124,35 @@ def _errorbar_series(ax: Axes, points: Sequence[GroupResult], term: str, label: 
 
 def _plot_coefficients(series: Sequence[GroupResult]) -> Figure:
     """Each coefficient against the initial angle, one line per draft (the seeds' Fig. 5), 95 % bars."""
-    terms = _terms(series)
     first = series[0].key
-    fig, axes = _figure(len(terms), f"{first.hull} {first.axis}: coefficients vs initial angle", True)
-    for ax, term in zip(axes, terms, strict=True):
-        for draft in sorted({r.key.draft for r in series}):
-            _errorbar_series(ax, [r for r in series if r.key.draft == draft], term, format_draft(draft))
-        ax.set_xlabel("initial angle (deg)")
-        ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
-    axes[0].legend(title="draft")
-    return fig
+    title = f"{first.hull} {first.axis}: coefficients vs initial angle"
+    return _per_coefficient(series, title, lambda key: (key.draft, format_draft(key.draft)), "draft")
 
 
 def _plot_hulls(results: Sequence[GroupResult]) -> Figure:
     """Hulls side by side at one draft: each coefficient against the initial angle (seed 000 Fig. 7)."""
-    terms = _terms(results)
     key = results[0].key
-    fig, axes = _figure(len(terms), f"{key.axis} at {format_draft(key.draft)}: hulls compared", True)
+    title = f"{key.axis} at {format_draft(key.draft)}: hulls compared"
+    return _per_coefficient(results, title, lambda key: (key.hull, key.hull), None)
+
+
+def _per_coefficient(
+    results: Sequence[GroupResult],
+    title: str,
+    line_of: Callable[[GroupKey], tuple[float | str, str]],
+    legend_title: str | None,
+) -> Figure:
+    """A panel per coefficient against the initial angle, one line per ``line_of(key)`` (its sort key and
+    label), 95 % bars."""
+    terms = _terms(results)
+    fig, axes = _figure(len(terms), title, True)
+    lines = sorted({line_of(r.key) for r in results})
     for ax, term in zip(axes, terms, strict=True):
-        for hull in sorted({r.key.hull for r in results}):
-            _errorbar_series(ax, [r for r in results if r.key.hull == hull], term, hull)
+        for line in lines:
+            _errorbar_series(ax, [r for r in results if line_of(r.key) == line], term, line[1])
         ax.set_xlabel("initial angle (deg)")
         ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
-    axes[0].legend()
+    axes[0].legend(title=legend_title)
     return fig
 
 
