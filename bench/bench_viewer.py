@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.sinks import ViewSink
 from tankdaq.device.simulator import SampleSource
 from tankdaq.physics.scenario import DecayScenario
 
@@ -47,7 +48,7 @@ class TimedDaemon(RecordDaemon):
         started = time.perf_counter()
         super()._pump(driver, session)
         self.read_s.append(time.perf_counter() - started)
-        self.dropped = session.view.dropped
+        self.dropped = next(sink.view.dropped for sink in session.sinks if isinstance(sink, ViewSink))
 
 
 def read_loop(viewer: str, out: Path) -> tuple[np.ndarray, int, int]:

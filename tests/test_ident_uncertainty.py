@@ -5,8 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tankdaq.errors import InputError
+from tankdaq.ident.equation_error import EquationError
 from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.report import summarize
 from tankdaq.ident.uncertainty import (
+    fit_with_intervals,
     hac_covariance,
     moving_block_bootstrap,
     repeat_spread,
@@ -37,6 +41,46 @@ def test_repeat_runs_give_a_t_interval_around_the_truth():
     for k, value in truth.items():
         lo, hi = spread.ci95[k]
         assert lo < value < hi, k
+
+
+def test_intervals_are_returned_beside_the_fit_which_keeps_its_own() -> None:
+    """Repeat-run intervals come back as data; the fitted estimator's std_/ci95_ stay the fit's, and
+    the report reads the intervals it is given."""
+    truth = truth_for(TERMS)
+    runs = [synthetic_run(truth, seed=60 + i, duration_s=8.0) for i in range(3)]
+    steps: list[int] = []
+    fitted, intervals = fit_with_intervals(
+        OutputError(TERMS), runs, repeats_of=lambda: OutputError(TERMS, compute_diagnostics=False),
+        progress=steps.append,
+    )  # fmt: skip
+    alone = OutputError(TERMS).fit(runs)
+    assert steps == [1] and intervals is not None and intervals.description == "repeat runs, 3 runs"
+    assert fitted.std_ == pytest.approx(alone.std_) and fitted.ci95_ == alone.ci95_
+    assert intervals.std != pytest.approx(fitted.std_)  # the spread of three repeats is another number
+    summary = summarize(fitted, runs, intervals=intervals)
+    assert summary["intervals"] == "repeat runs, 3 runs"
+    for k in TERMS:
+        assert summary["coefficients"][k]["std"] == intervals.std[k]
+        assert summary["coefficients"][k]["ci95"] == list(intervals.ci95[k])
+
+
+@pytest.mark.parametrize(
+    ("method", "bootstrap", "n_runs", "mentions"),
+    [
+        ("ee", 10, 3, "--bootstrap works with --method oe, not ee"),
+        ("oe", 10, 3, "--repeats needs at least three runs .* and no --bootstrap"),
+        ("oe", 0, 2, "--repeats needs at least three runs"),
+    ],
+)
+def test_intervals_that_cannot_work_are_refused_before_any_fit(
+    method: str, bootstrap: int, n_runs: int, mentions: str
+) -> None:
+    estimator = EquationError(TERMS) if method == "ee" else OutputError(TERMS)
+    runs = [synthetic_run(truth_for(TERMS), seed=70 + i, duration_s=8.0) for i in range(n_runs)]
+    repeats_of = None if method == "ee" else (lambda: OutputError(TERMS))
+    with pytest.raises(InputError, match=mentions):
+        fit_with_intervals(estimator, runs, bootstrap, repeats_of, method=method)
+    assert not hasattr(estimator, "coefficients_")  # nothing was fitted
 
 
 def test_hac_widens_intervals_when_residuals_are_correlated():

@@ -20,6 +20,7 @@ import pytest
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.session import Block, DecaySession, SessionSettings
+from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
 from tankdaq.config import load_hull
 from tankdaq.errors import IdentificationError
 from tankdaq.ident.online import BackgroundFit, OnlineIdentifier, OnlineResult, prepare_kernels
@@ -76,28 +77,27 @@ def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_
         identifiers.append(HeldIdentifier(*args, gate=gate, **kwargs))
         return identifiers[-1]
 
+    recording = RecordingSink(
+        tmp_path, describe_run("roll", 8.0, hull=hull, draft=1.0, sample_rate_hz=100.0), draft=1.0
+    )
     session = DecaySession(
-        SessionSettings(
-            out_dir=tmp_path, hull=hull, draft=1.0,
-            run_metadata=describe_run("roll", 8.0, hull=hull, draft=1.0, sample_rate_hz=100.0),
-        ),
-        LiveView("none"),
-        identifier=make_identifier,
-    )  # fmt: skip
+        SessionSettings(), [IdentifierSink(make_identifier), recording, ViewSink(LiveView("none"))]
+    )
     blocks = (samples[i : i + 2] for i in range(0, samples.size, 2))  # 20 ms reads at 100 Hz
     outcomes = []
     try:
         for block in blocks:  # up to the release and the first refit, which is then held
             outcomes += session.feed(Block(block, b"", 0.0))
-            active = session._active
+            active = session.decay
             if active is not None and block["t"][-1] > active.release_t + 8.0:  # 4 periods: a refit is due
                 assert identifiers[0].entered.wait(DEADLINE_S), "the first refit never started"
                 break
         else:
             pytest.fail("the decay was not detected")
         (held,) = identifiers
-        assert active.writer is not None
-        written = active.writer.samples_written
+        writer = recording.writer
+        assert writer is not None
+        written = writer.samples_written
         fed = 0
         for block in blocks:  # 3 s of the decay while the refit is held
             outcomes += session.feed(Block(block, b"", 0.0))
@@ -105,7 +105,7 @@ def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_
             if fed >= 300:
                 break
         assert not held.left.is_set(), "each block returned while the refit was still held"
-        assert active.writer.samples_written == written + fed
+        assert writer.samples_written == written + fed
         assert active.fit is None  # nothing published yet
         gate.set()
         for block in blocks:

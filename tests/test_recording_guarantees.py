@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +22,7 @@ from typer.testing import CliRunner
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.session import Block, DecaySession, SessionSettings
+from tankdaq.acquire.sinks import Decay, IdentifierSink, RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.ident.online import OnlineIdentifier, OnlineResult
@@ -102,11 +103,15 @@ def _feed_recording(
     view: LiveView,
     on_event=None,
     identifier: type[OnlineIdentifier] = OnlineIdentifier,
+    extra: Sequence[Sink] = (),
 ) -> DecaySession:
     """The source's raw bytes, re-decoded, through a session that writes into ``out``."""
     recording = read_recording(source)
-    settings = SessionSettings(angle_deg=8.0, out_dir=out, run_metadata={"hull": "swath"}, wait_for_fits=True)
-    session = DecaySession(settings, view, on_event=on_event, identifier=identifier)  # refits in their block
+    sinks = [  # the daemon's pipeline; fed from a file: each refit in its block
+        IdentifierSink(identifier, wait_for_fits=True), RecordingSink(out, {"hull": "swath"}), ViewSink(view),
+        *extra,
+    ]  # fmt: skip
+    session = DecaySession(SessionSettings(angle_deg=8.0), sinks, on_event=on_event)
     decoder = SampleDecoder()
     for host_ns, raw in recording.raw_chunks:
         samples, _ = decoder.feed(raw, host_ns / 1e9)
@@ -170,6 +175,65 @@ def test_a_view_that_fails_at_the_end_still_leaves_a_complete_file_with_the_fina
     recording = read_recording(path)
     assert recording.metadata["settle_reason"] != "error" and "fit_b1" in recording.metadata  # the final fit
     assert recording.samples["t"][-1] == read_recording(recorded).samples["t"][-1]  # every sample to the end
+
+
+class Listener(Sink):
+    """One more sink, as a session runner would be: it notes what it hears, and raises ``Injected``
+    at the first call named ``fail_at``."""
+
+    def __init__(self, fail_at: str = "") -> None:
+        self.heard: list[str] = []
+        self.fail_at = fail_at
+        self.path_at_release: Path | None = None
+
+    def _hear(self, name: str) -> None:
+        self.heard.append(name)
+        if name == self.fail_at:
+            raise Injected(f"{name} failed")
+
+    def on_block(self, block: Block, decay: Decay | None) -> None:
+        self._hear("block" if decay is None else "decay block")
+
+    def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
+        self.path_at_release = decay.path
+        self._hear("release")
+
+    def on_fit(self, decay: Decay, result: object) -> None:
+        self._hear("fit")
+
+    def on_settle(self, decay: Decay) -> None:
+        self._hear(f"settle {decay.settle_reason}")
+
+    def close(self) -> None:
+        self._hear("close")
+
+
+def test_one_more_sink_hears_the_decay_in_order_after_the_file_is_open(
+    recorded: Path, tmp_path: Path
+) -> None:
+    listener = Listener()
+    session = _feed_recording(recorded, tmp_path, LiveView("none"), extra=[listener])
+    session.close()
+    (outcome,) = session.outcomes
+    heard = listener.heard
+    release, settle = heard.index("release"), next(i for i, h in enumerate(heard) if h.startswith("settle"))
+    assert set(heard[:release]) == {"block"} and heard[-1] == "close" and heard.count("close") == 1
+    assert heard[settle] == f"settle {outcome.settle_reason}" and heard.count(heard[settle]) == 1
+    assert "fit" in heard[release:settle] and heard[settle - 1] == "fit"  # the final fit, then the settle
+    assert listener.path_at_release == outcome.path  # the file (before it in the pipeline) was open
+    assert read_recording(outcome.path).metadata["settle_reason"] == outcome.settle_reason
+
+
+@pytest.mark.parametrize("fail_at", ["release", "fit", "decay block"])
+def test_a_sink_that_fails_never_takes_the_file_down(recorded: Path, tmp_path: Path, fail_at: str) -> None:
+    with pytest.raises(Injected):
+        _feed_recording(recorded, tmp_path, LiveView("none"), extra=[Listener(fail_at)])
+    (path,) = tmp_path.glob("*.mcap")
+    assert _is_complete_mcap(path)
+    recording = read_recording(path)
+    assert recording.metadata["settle_reason"] == "error"
+    assert [e["kind"] for e in recording.events][:1] == ["release"]  # the file took what it was given
+    assert recording.samples.size > 0 and recording.raw_chunks
 
 
 def test_a_callback_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Path) -> None:

@@ -97,6 +97,16 @@ def baud_rate(value: int | None, option: str = "--baud") -> int | None:
     return value
 
 
+def baud_carries_rate(baud: int | None, rate_hz: float, option: str = "--baud") -> int | None:
+    """A line rate that carries the decay outputs at ``rate_hz`` (None: the recorder picks one)."""
+    from .xsens.control import decay_bits_per_second, line_refusal
+
+    refusal = None if baud is None else line_refusal(decay_bits_per_second(rate_hz), rate_hz, baud)
+    if refusal is not None:
+        raise InputError(f"{option} {baud}: {refusal}")
+    return baud
+
+
 def bootstrap_replicas(value: int, option: str = "--bootstrap") -> int:
     """0 (no bootstrap) up to MAX_BOOTSTRAP_REPLICAS replicas."""
     if not 0 <= value <= MAX_BOOTSTRAP_REPLICAS:

@@ -32,15 +32,20 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from ..config import CampaignPlan, format_draft, load_hull, parse_draft
 from ..errors import ConfigError, InputError
 from ..ident.derived import b_eq
+from ..samples import AXIS_FIELDS
 from .daemon import RecordDaemon, RecordSettings
 from .session import DecayOutcome
+from .sinks import Block, Decay, Sink
+
+if TYPE_CHECKING:
+    from ..viz.campaign_view import CampaignView
 
 LOG_NAME = "session.jsonl"
 LOCK_NAME = "session.lock"
@@ -222,7 +227,10 @@ def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
     runs = read_decay_runs(outcome.path)
     if runs:
         run = runs[0]
-        measured.max_rate_deg_s = float(np.degrees(np.max(np.abs(run.rate)))) if run.rate.size else math.nan
+        rate = run.rate
+        measured.max_rate_deg_s = (
+            float(np.degrees(np.max(np.abs(rate)))) if rate is not None and rate.size else math.nan
+        )
         end = find_free_end(run)
         measured.free_end, measured.free_end_reason = end.kind, end.reason
     fit = outcome.fit
@@ -423,6 +431,30 @@ def _minutes(seconds: float) -> str:
     return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
 
 
+class LevelCheck(Sink):
+    """A sink of the record pipeline: the still water of the decay axis over ``LEVEL_S`` of device
+    time, read from every block; ``on_full`` is called once that much has arrived."""
+
+    def __init__(self, axis: str, on_full: Callable[[], None] = lambda: None) -> None:
+        self.angle_field = AXIS_FIELDS[axis][0]
+        self.on_full = on_full
+        self._blocks: list[np.ndarray] = []
+
+    def on_block(self, block: Block, decay: Decay | None) -> None:
+        if block.samples.size:
+            self._blocks.append(block.samples)
+        if self.full:
+            self.on_full()
+
+    @property
+    def full(self) -> bool:
+        return bool(self._blocks) and float(self._blocks[-1]["t"][-1] - self._blocks[0]["t"][0]) >= LEVEL_S
+
+    def mean_sd_deg(self) -> tuple[float, float]:
+        angle = np.degrees(np.concatenate([b[self.angle_field] for b in self._blocks]))
+        return float(angle.mean()), float(angle.std())
+
+
 @dataclass
 class SessionSettings:
     """A guided session: the plan, the hull, where, and how each decay is recorded."""
@@ -468,7 +500,7 @@ class CampaignSession:
         self._started = time.monotonic()
         self._decay_seconds: list[float] = []
         self._shown: set[str] = set()
-        self.view = None
+        self.view: CampaignView | None = None
 
     # ---- settings of one decay ----------------------------------------
 
@@ -585,19 +617,24 @@ class CampaignSession:
         for condition in self.conditions:
             self._show_condition(state, condition)
 
+    def _panel(self) -> CampaignView:
+        """The campaign panel, opened by ``run`` before the first condition is shown."""
+        assert self.view is not None, "the panel opens before the session leads any decay"
+        return self.view
+
     def _viewer_note(self, line: str) -> None:
         self.on_line(f"viewer: {line}")
 
     def _show_condition(self, state: SessionState, condition: Condition) -> None:
         kept = len(state.accepted(condition))
         status = state.status(condition)
-        self.view.set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
+        self._panel().set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
         if status == "accepted":
             measured = [Measured(**r.measured) for r in state.accepted(condition)]
             mean = {
                 k: float(np.mean([m.coefficients[k] for m in measured])) for k in measured[0].coefficients
             }
-            self.view.accepted(
+            self._panel().accepted(
                 condition.draft, condition.angle_deg, mean, float(np.mean([m.b_eq_per_s for m in measured]))
             )
 
@@ -663,7 +700,7 @@ class CampaignSession:
             for c in self.conditions:
                 if c.draft == condition.draft and state.status(c) != "accepted":
                     self.log.append("skip", draft=c.draft, angle_deg=c.angle_deg)
-                    self.view.set_status(c.draft, c.angle_deg, "skipped")
+                    self._panel().set_status(c.draft, c.angle_deg, "skipped")
             return self._reload()
         mean_deg, sd_deg = self._measure_level(condition)
         level = abs(mean_deg) <= self.acceptance.level_tolerance_deg and sd_deg <= STILL_SD_DEG
@@ -682,23 +719,14 @@ class CampaignSession:
 
     def _measure_level(self, condition: Condition) -> tuple[float, float]:
         """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time."""
-        from ..samples import AXIS_FIELDS
-
-        blocks: list[np.ndarray] = []
-
-        def collect(samples: np.ndarray) -> None:
-            if samples.size:
-                blocks.append(samples)
-            if blocks and float(blocks[-1]["t"][-1] - blocks[0]["t"][0]) >= LEVEL_S:
-                daemon.stop()
-
         settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
-        daemon = RecordDaemon(settings, on_samples=collect)
+        level = LevelCheck(self.settings.plan.axis)
+        daemon = RecordDaemon(settings, sinks=[level])
+        level.on_full = daemon.stop
         daemon.run()
-        if not blocks or float(blocks[-1]["t"][-1] - blocks[0]["t"][0]) < LEVEL_S:
+        if not level.full:
             raise KeyboardInterrupt  # stopped during the level check
-        angle = np.degrees(np.concatenate([b[AXIS_FIELDS[self.settings.plan.axis][0]] for b in blocks]))
-        return float(angle.mean()), float(angle.std())
+        return level.mean_sd_deg()
 
     def _record_one(self, state: SessionState, condition: Condition) -> SessionState:
         decay = state.decays + 1
@@ -707,7 +735,7 @@ class CampaignSession:
             f"decay {decay}: {condition.label}, repeat {repeat}/{state.repeats}: "
             f"tilt to {condition.angle_deg:g} deg and release"
         )
-        self.view.set_status(
+        self._panel().set_status(
             condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
         )
         started = time.monotonic()
@@ -726,7 +754,7 @@ class CampaignSession:
             decay=decay,
             draft=condition.draft,
             angle_deg=condition.angle_deg,
-            file=outcome.path.name,
+            file=outcome.path.name if outcome.path else "",
             reasons=reasons,
             measured=dataclasses.asdict(measured),
         )

@@ -3,7 +3,9 @@
 It runs until ``runs`` decays are recorded or it is stopped (Ctrl-C, SIGTERM). A
 device that vanishes mid-decay closes that file with what arrived, and the
 daemon waits for the device to come back. ``port="sim"`` starts the built-in
-simulated MTi-G in-process on a pseudo-terminal, opened like hardware.
+simulated MTi-G in-process on a pseudo-terminal, opened like hardware
+(``device.factory.open_device``). The decay pipeline is a ``DecaySession`` with three sinks:
+the online identifier, the recording, the live view (``acquire.sinks``).
 """
 
 from __future__ import annotations
@@ -13,24 +15,24 @@ import dataclasses
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from .. import validation
-from ..config import Hull, format_draft, load_hull
+from ..config import Hull, load_hull
 from ..device.driver import MTiDriver
+from ..device.factory import OpenDevice, SimulatedSensor, is_simulated, open_device
 from ..errors import DeviceGone, InputError, RecordingError
 from ..ident.online import prepare_identifier
 from ..store.disk import RESERVE_BYTES
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
-from ..xsens.control import check_bandwidth, decay_output_configuration
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
+from .sinks import DecaySink, IdentifierSink, RecordingSink, ViewSink
 
 if TYPE_CHECKING:
+    from ..device.simulator import SimulatedMTi
     from ..physics.scenario import DecayScenario
 
 #: Reads are spaced at least this far apart: blocks of a few samples instead of one, so the
@@ -40,13 +42,10 @@ READ_INTERVAL_S = 0.02
 #: What the driver learnt that each recording keeps (``describe_run``).
 DEVICE_METADATA = ("device_id", "product_code", "firmware", "baud", "baud_changed_from")
 
-#: Standard baud rates tried, smallest first, when the simulated sensor needs a faster line.
-SIM_BAUDS = (115200, 230400, 460800, 921600)
 
-
-@dataclass
+@dataclass(frozen=True)
 class RecordSettings:
-    """Everything ``tankdaq record`` is told (degrees at this edge)."""
+    """Everything ``tankdaq record`` is told (degrees at this edge); ``check()`` before anything opens."""
 
     port: str
     draft: float
@@ -73,6 +72,29 @@ class RecordSettings:
     sim_overrides: dict[str, object] = field(default_factory=dict)  # DecayScenario settings of a session
     extra: dict[str, object] = field(default_factory=dict)
 
+    def check(self) -> Hull | None:
+        """Apply every rule the settings must pass before a simulator starts or a port opens (one
+        ``InputError`` line each); returns the hull they name."""
+        hull = load_hull(self.hull) if self.hull else None
+        if self.axis not in ("roll", "pitch", "auto"):
+            raise InputError(f"axis {self.axis!r} not understood; use roll, pitch or auto")
+        validation.release_angle_deg(self.angle_deg, option="angle")
+        validation.output_rate_hz(self.rate_hz, option="rate")
+        validation.baud_rate(self.baud, option="baud")
+        validation.baud_carries_rate(self.baud, self.rate_hz, option="--baud")
+        validation.live_model(self.model, option="model")
+        if is_simulated(self.port):  # refuse a hull the simulator cannot play before anything opens
+            if hull is None:
+                raise InputError("the simulated sensor needs a hull to play: give --hull")
+            hull.simulation_model(self.simulated_axis).coefficients(self.draft)
+        validation.output_dir(self.out_dir, option="output folder")
+        return hull
+
+    @property
+    def simulated_axis(self) -> str:
+        """The axis the simulated sensor decays on (roll for an auto session)."""
+        return "roll" if self.axis == "auto" else self.axis
+
 
 @dataclass
 class DaemonStatus:
@@ -93,12 +115,6 @@ class DaemonStatus:
             f"state: {state} | runs {self.runs_done}{wanted} | samples {self.samples} | "
             f"gaps {self.gaps} | bad frames {self.bad_frames}"
         )
-
-
-def _sim_baud(rate_hz: float) -> int:
-    """The slowest standard line that carries the decay outputs at ``rate_hz``."""
-    entries = decay_output_configuration(int(rate_hz))
-    return next((b for b in SIM_BAUDS if check_bandwidth(entries, rate_hz, b).ok), SIM_BAUDS[-1])
 
 
 @contextlib.contextmanager
@@ -127,46 +143,37 @@ class RecordDaemon:
         settings: RecordSettings,
         on_event: Callable[[str], None] | None = None,
         on_status: Callable[[DaemonStatus], None] | None = None,
-        on_samples: Callable[[np.ndarray], None] | None = None,  # every block read (a session's level check)
+        sinks: Sequence[DecaySink] = (),  # more listeners of the pipeline (a session's level check)
     ) -> None:
         self.settings = settings
         self.on_event = on_event or (lambda _line: None)
         self.on_status = on_status or (lambda _status: None)
-        self.on_samples = on_samples or (lambda _samples: None)
         self.status = DaemonStatus()
-        self.hull: Hull | None = load_hull(settings.hull) if settings.hull else None
-        if settings.axis not in ("roll", "pitch", "auto"):
-            raise InputError(f"axis {settings.axis!r} not understood; use roll, pitch or auto")
-        # everything checkable is checked here, before a simulator starts or the port opens
-        validation.release_angle_deg(settings.angle_deg, option="angle")
-        validation.output_rate_hz(settings.rate_hz, option="rate")
-        validation.baud_rate(settings.baud, option="baud")
-        validation.live_model(settings.model, option="model")
-        if settings.port == "sim":  # refuse a hull the simulator cannot play before anything opens
-            if self.hull is None:
-                raise InputError("the simulated sensor needs a hull to play: give --hull")
-            sim_axis = "roll" if settings.axis == "auto" else settings.axis
-            self.hull.simulation_model(sim_axis).coefficients(settings.draft)
-        validation.output_dir(settings.out_dir, option="output folder")
-        self.simulator = None
+        self.hull: Hull | None = settings.check()  # before a simulator starts or the port opens
+        self.extra_sinks = list(sinks)
+        self.device: OpenDevice | None = None
         self.outcomes: list[DecayOutcome] = []
         self._next_read = 0.0
         self._stop = threading.Event()
 
     # ---- the device ----------------------------------------
 
+    @property
+    def simulator(self) -> SimulatedMTi | None:
+        """The simulated sensor behind port ``sim`` once started (its ``truth``, ``unplug()``)."""
+        return self.device.simulator if self.device else None
+
     def simulation_scenario(self) -> DecayScenario:
         """What the built-in simulated sensor plays (deterministic: its runs are the truth)."""
         from ..physics.scenario import DecayScenario
 
         s = self.settings
-        axis = "roll" if s.axis == "auto" else s.axis
-        assert self.hull is not None  # __init__ refuses the simulator without one
+        assert self.hull is not None  # check() refuses the simulator without one
         scenario = DecayScenario(
             hull=self.hull.name,
-            coefficients=self.hull.simulation_model(axis).coefficients(s.draft),
+            coefficients=self.hull.simulation_model(s.simulated_axis).coefficients(s.draft),
             draft=s.draft,
-            axis=axis,
+            axis=s.simulated_axis,
             angle_deg=s.angle_deg,
             rate_hz=s.rate_hz,
             runs=(s.runs or 20) + 1,
@@ -174,24 +181,13 @@ class RecordDaemon:
         )
         return dataclasses.replace(scenario, **s.sim_overrides)  # type: ignore[arg-type]
 
-    def _start_simulator(self) -> str:
-        from ..device.simulator import SimulatedMTi
-
+    def _open_device(self) -> MTiDriver:
         s = self.settings
-        scenario = self.simulation_scenario()
-        baud = s.baud or _sim_baud(s.rate_hz)
-        self.simulator = SimulatedMTi(
-            scenario, speed=s.sim_speed, baud=baud, seed=s.sim_seed, legacy=s.sim_legacy
-        ).start()
-        label = f"{scenario.hull} {format_draft(s.draft)} {scenario.axis}"
-        self.on_event(f"simulated MTi-G on {self.simulator.link} ({label})")
-        return self.simulator.link
-
-    def _driver(self) -> MTiDriver:
-        s = self.settings
-        port = self._start_simulator() if s.port == "sim" else s.port
-        probe_first = self.simulator.baud if self.simulator else 115200
-        return MTiDriver(port, baud=s.baud, rate_hz=s.rate_hz, probe_first=probe_first)
+        sim = SimulatedSensor(
+            self.simulation_scenario, speed=s.sim_speed, seed=s.sim_seed, legacy=s.sim_legacy
+        )
+        self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=self.on_event)
+        return self.device.driver
 
     def _session(self, driver: MTiDriver) -> DecaySession:
         from ..store.writer import describe_run
@@ -230,14 +226,17 @@ class RecordDaemon:
             angle_tolerance_deg=s.angle_tolerance_deg,
             pretrigger_s=s.pretrigger_s,
             model=s.model,
-            out_dir=s.out_dir,
-            hull=self.hull,
+        )
+        recording = RecordingSink(
+            s.out_dir,
+            metadata,
+            config,
             draft=s.draft,
-            run_metadata=metadata,
-            run_config=config,
+            nominal_angle_deg=s.angle_deg,
             closing_metadata=lambda: driver.counters.metadata(),
         )
-        return DecaySession(session_settings, view, on_event=self.on_event)
+        sinks = [IdentifierSink(), recording, ViewSink(view), *self.extra_sinks]
+        return DecaySession(session_settings, sinks, on_event=self.on_event)
 
     # ---- the loop ----------------------------------------
 
@@ -245,12 +244,10 @@ class RecordDaemon:
         """Record until ``runs`` decays are done or stopped; returns what was recorded."""
         s = self.settings
         prepare_identifier(s.model, self.on_event)  # before anything opens: no refit compiles mid-decay
-        driver = self._driver()
         session: DecaySession | None = None
         try:
             with _sigterm_as_interrupt():
-                driver.open()
-                driver.configure()
+                driver = self._open_device()
                 self.status.device = driver.info.describe() if driver.info else s.port
                 self.on_event(f"device: {self.status.device}")
                 session = self._session(driver)
@@ -266,15 +263,15 @@ class RecordDaemon:
             self.on_event("recording stopped: a file could not be written (files already closed are intact)")
             raise
         finally:
-            self._shut_down(driver, session)
+            self._shut_down(session)
         return self.outcomes
 
     def stop(self) -> None:
         """Ask ``run`` to return after the current read (from a callback or another thread)."""
         self._stop.set()
 
-    def _shut_down(self, driver: MTiDriver, session: DecaySession | None) -> None:
-        """Close the decay under way (its file stays readable), the viewer, the port, the simulator."""
+    def _shut_down(self, session: DecaySession | None) -> None:
+        """Close the decay under way (its file stays readable), the sinks (the viewer), the device."""
         try:
             if session is not None:
                 closed = session.abort("note", "recording stopped by the operator")
@@ -283,11 +280,12 @@ class RecordDaemon:
         except RecordingError as exc:  # the disk is full: the file is left for tankdaq recover
             self.on_event(str(exc))
         finally:
-            if session is not None:
-                session.view.close()
-            driver.close()
-            if self.simulator is not None:
-                self.simulator.stop()
+            try:
+                if session is not None:
+                    session.close()
+            finally:
+                if self.device is not None:
+                    self.device.close()
 
     def _pump(self, driver: MTiDriver, session: DecaySession) -> None:
         wait = self._next_read - time.monotonic()
@@ -302,7 +300,6 @@ class RecordDaemon:
         st.samples, st.gaps, st.bad_frames = c.samples, c.gaps, c.bad_frames
         st.state, st.held_deg, st.runs_done = session.state, session.held_deg, len(self.outcomes)
         self.on_status(st)
-        self.on_samples(block.samples)
 
     def _device_gone(self, driver: MTiDriver, session: DecaySession, message: str) -> None:
         closed = session.abort("unplug", message)

@@ -1,8 +1,8 @@
 """Replay a recording as it happened: re-decode the raw bytes, re-detect, re-identify, re-show.
 
 The raw channel is fed, chunk by chunk with its arrival time, through the same
-stream decoder and the same ``DecaySession`` as the live daemon (with writing
-off), so the viewer shows what it showed live. ``speed`` paces by device time
+stream decoder and the same pipeline as the live daemon without its recording sink
+(identifier and view), so the viewer shows what it showed live. ``speed`` paces by device time
 (1.0 = real time); ``None`` runs as fast as possible.
 """
 
@@ -20,6 +20,7 @@ from ..ident.online import prepare_identifier
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
+from .sinks import IdentifierSink, ViewSink
 
 #: At full speed, serial reads are merged into blocks spanning this much arrival time: the
 #: per-block work is shared and the result is the same (the decoder is a stream decoder).
@@ -62,6 +63,9 @@ def replay_recording(
     meta = recording.metadata
     axis = recording.axis
     nominal = float(meta.get("angle_nominal_deg", "nan"))
+    chunks = coalesce(recording.raw_chunks, COALESCE_S if speed is None else 0.0)
+    if not chunks:
+        raise BadRecordingInput(f"{path}: the recording holds no raw device bytes to replay")
     note = None if on_event is None else (lambda line: on_event(f"viewer: {line}"))
     mode = viewer or default_viewer_mode()
     if on_event is not None:
@@ -72,30 +76,29 @@ def replay_recording(
         angle_deg=nominal if math.isfinite(nominal) else 0.0,
         angle_tolerance_deg=math.inf if not math.isfinite(nominal) else 1.0,
         model=model or str(meta.get("model_terms", "ittc-quadratic-restoring")),
-        out_dir=None,
-        rrd_base=path.with_name(path.stem + ".replay") if view.mode == "save" else None,  # spawn falls back
-        wait_for_fits=True,
     )
     prepare_identifier(settings.model, on_event)
-    session = DecaySession(settings, view, on_event=on_event)
+    rrd_base = path.with_name(path.stem + ".replay") if view.mode == "save" else None  # spawn falls back
+    # the daemon's pipeline without the recording; each block's refit is done before the next block
+    sinks = [IdentifierSink(wait_for_fits=True), ViewSink(view, rrd_base)]
+    session = DecaySession(settings, sinks, on_event=on_event)
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))
     decoder = SampleDecoder(LegacyOutput.for_decay(rate_hz) if legacy else None)  # as the driver asked for
-    chunks = coalesce(recording.raw_chunks, COALESCE_S if speed is None else 0.0)
-    if not chunks:
-        raise BadRecordingInput(f"{path}: the recording holds no raw device bytes to replay")
     wall0: float | None = None
     t0 = 0.0
-    for i, (host_ns, raw) in enumerate(chunks):
-        samples, decoded = decoder.feed(raw, host_ns / 1e9)
-        if speed is not None and samples.size:
-            if wall0 is None:
-                wall0, t0 = time.monotonic(), float(samples["t"][0])
-            due = wall0 + (float(samples["t"][-1]) - t0) / speed
-            time.sleep(max(0.0, due - time.monotonic()))
-        session.feed(Block(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
-        if on_progress is not None:
-            on_progress(i + 1, len(chunks))
-    session.abort("note", "end of recording")
-    view.close()
+    try:
+        for i, (host_ns, raw) in enumerate(chunks):
+            samples, decoded = decoder.feed(raw, host_ns / 1e9)
+            if speed is not None and samples.size:
+                if wall0 is None:
+                    wall0, t0 = time.monotonic(), float(samples["t"][0])
+                due = wall0 + (float(samples["t"][-1]) - t0) / speed
+                time.sleep(max(0.0, due - time.monotonic()))
+            session.feed(Block(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
+            if on_progress is not None:
+                on_progress(i + 1, len(chunks))
+        session.abort("note", "end of recording")
+    finally:
+        session.close()  # the view (and a decay cut by an error)
     return session.outcomes

@@ -1,39 +1,32 @@
-"""The decay pipeline: samples in, one recording, live fit and view per decay out.
+"""The decay pipeline: samples in, release detection, and the sinks that record, fit and show each decay.
 
-``DecaySession`` knows nothing about serial ports: the record daemon feeds it
-blocks from the driver, replay feeds it blocks re-decoded from a file. For each
-block it runs release detection; at a confirmed release it opens a recording
-that starts a pre-trigger before the release (from its history of blocks),
-starts the online identifier, and a view; at settle it writes the final fit and
-metadata and closes the file. The identifier refits on its own thread
-(``BackgroundFit``): a block only hands it samples, and finished refits are written
-from here, the one thread that touches the file.
+``DecaySession`` knows nothing about serial ports or files: the record daemon feeds it blocks from
+the driver, replay feeds it blocks re-decoded from a file. For each block it runs release
+detection and tells its sinks (``acquire.sinks``): every block, a confirmed release (with the
+pre-trigger from its history of blocks), the notes of the decay, and its settle. What a decay
+leaves (an MCAP, a live fit, a view) is made by the sinks; the daemon's pipeline is identifier,
+recording, view, replay's the same without the recording.
+
+A decay is never lost: whatever a sink or callback raises while a decay is open, every sink is
+still told (the file takes the block), then the decay is closed (``settle_reason`` ``error``,
+the file closed with what arrived) before the error is passed on.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
-import time
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
-import numpy as np
-
-from ..config import Hull
-from ..errors import RecordingError, TankdaqError
-from ..ident.online import BackgroundFit, OnlineIdentifier, OnlineResult
+from ..ident.online import OnlineResult
 from ..physics.models import resolve_model
 from ..samples import AXIS_FIELDS
-from ..store.disk import free_bytes, megabytes
-from ..store.writer import RecordingWriter
-from ..viz.live import LiveView
 from .release import ReleaseDetector, ReleaseEvent
+from .sinks import Block, Decay, DecayOutcome, DecaySink
 
-#: How long the final fit at settle may hold the loop (it normally takes well under 0.1 s once the
-#: kernels are prepared); past it the file is closed without it and says so.
-FINAL_FIT_WAIT_S = 5.0
+__all__ = ["HISTORY_S", "Block", "DecayOutcome", "DecaySession", "SessionSettings"]
 
 #: How much history (device seconds) is kept while waiting for a release: the pre-trigger plus
 #: the time the detector may need to confirm a release it dates back.
@@ -41,88 +34,70 @@ HISTORY_S = 30.0
 
 
 @dataclass
-class Block:
-    """One read from the device: the samples it completed and the raw bytes as they arrived."""
-
-    samples: np.ndarray
-    raw: bytes
-    host_t: float
-    carried: int = 0  # leading samples whose bytes are in earlier blocks' raw (the decoder held them)
-
-
-@dataclass
 class SessionSettings:
-    """What a decay session needs to know beyond the samples (degrees at this edge)."""
+    """What release detection needs to know beyond the samples (degrees at this edge)."""
 
     axis: str = "roll"  # roll, pitch or auto
     angle_deg: float = 8.0
     angle_tolerance_deg: float = 1.0
     pretrigger_s: float = 2.0
     model: str = "ittc-quadratic-restoring"
-    out_dir: Path | None = Path("recordings")  # None: do not write (replay)
-    rrd_base: Path | None = None  # where .rrd files go when not beside a recording (replay)
-    hull: Hull | None = None
-    draft: float | None = None
-    run_metadata: dict[str, object] = field(default_factory=dict)
-    run_config: dict[str, object] = field(default_factory=dict)
     detector_settings: dict[str, float] = field(default_factory=dict)
-    #: Metadata known only when a file closes (the driver's link counters), added to it then.
-    closing_metadata: Callable[[], dict[str, object]] = dict
-    # replay: each block's refit is done before the next block (nothing is lost by waiting, and the
-    # refits are the same every time); live, the read loop never waits for a fit
-    wait_for_fits: bool = False
-
-
-@dataclass
-class DecayOutcome:
-    """What one recorded decay left behind."""
-
-    run: int
-    axis: str
-    path: Path | None
-    rrd_path: Path | None
-    release_t: float
-    angle_initial_deg: float
-    settle_reason: str
-    fit: OnlineResult | None
-    warnings: list[str]
 
 
 class DecaySession:
-    """Feed ``Block``s with ``feed``; decays are detected, recorded, fitted and shown.
+    """Feed ``Block``s with ``feed``; decays are detected and handed to the ``sinks`` in order.
 
-    ``view`` is a LiveView (mode none for no viewer). ``on_event`` receives one
-    line of text per thing a person wants to know (release, settle, warnings, file).
+    ``on_event`` receives one line of text per thing a person wants to know (release, settle,
+    warnings, file).
     """
 
     def __init__(
         self,
         settings: SessionSettings,
-        view: LiveView,
+        sinks: Sequence[DecaySink],
         on_event: Callable[[str], None] | None = None,
-        identifier: Callable[..., OnlineIdentifier] = OnlineIdentifier,
     ) -> None:
         self.settings = settings
-        self.view = view
+        self.sinks = list(sinks)
         self.on_event = on_event or (lambda _line: None)
-        self.make_identifier = identifier  # called as identifier(terms, axis=...) at each release
         self.terms = resolve_model(settings.model)
         axes = list(AXIS_FIELDS) if settings.axis == "auto" else [settings.axis]
         self._detectors = {axis: ReleaseDetector(axis=axis, **settings.detector_settings) for axis in axes}
         self._history: deque[Block] = deque()
-        self._samples_fed = 0
         self.outcomes: list[DecayOutcome] = []
         self.state = "waiting"
         self.held_deg = math.nan
         self._run_no = 0
-        self._active: _ActiveDecay | None = None
+        self.decay: Decay | None = None  # the decay under way
+
+    # ---- telling the sinks ----------------------------------------
+
+    def _tell(self, call: Callable[[DecaySink], object]) -> None:
+        """Every sink gets the call, whatever an earlier one raised; the first failure is raised after."""
+        failure: Exception | None = None
+        for sink in self.sinks:
+            try:
+                call(sink)
+            except Exception as exc:
+                failure = failure or exc
+        if failure is not None:
+            raise failure
+
+    def _publish_fit(self, decay: Decay, result: OnlineResult) -> None:
+        self._tell(lambda sink: sink.on_fit(decay, result))
+
+    def _publish_note(
+        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
+    ) -> None:
+        self._tell(lambda sink: sink.on_note(decay, kind, message, t_s, data))
 
     # ---- feeding ----------------------------------------
 
     def feed(self, block: Block) -> list[DecayOutcome]:
         """Process one block; return the decays it finished.
 
-        Whatever goes wrong while a decay is recorded (a view, an identifier, a bug), its file is
+        Whatever goes wrong while a decay is recorded (a sink, a callback, a bug), its file is
         closed with what arrived before the error is passed on: a decay is never left unfinished.
         """
         try:
@@ -132,31 +107,42 @@ class DecaySession:
             raise
 
     def _close_after_error(self, exc: Exception) -> None:
-        active, self._active = self._active, None
-        if active is None:
+        """Close the decay under way with what arrived, saying why; no final fit (the error may be in it).
+
+        Every sink is told even when one fails again (a dead view): the file must close.
+        """
+        decay, self.decay = self.decay, None
+        if decay is None:
             return
         self.state = "waiting"
-        outcome = active.close_after_error(exc)
+        message = f"recording closed after an error: {type(exc).__name__}: {exc}"
+        decay.settle_reason, decay.error = "error", message
+        decay.warnings.append(message)
+        for sink in self.sinks:  # a sink failing again here is not news: the first error is passed on
+            with contextlib.suppress(Exception):
+                sink.on_note(decay, "warning", message, decay.last_t, None)
+            with contextlib.suppress(Exception):
+                sink.on_settle(decay)
+        outcome = decay.outcome()
         self.outcomes.append(outcome)
-        self.on_event(active.summary(outcome))
+        self.on_event(self._summary(outcome))
 
     def _feed(self, block: Block) -> list[DecayOutcome]:
         finished: list[DecayOutcome] = []
-        if self._active is not None:
-            self._active.append(block)
-        else:
+        decay = self.decay
+        if decay is None:
             self._history.append(block)
             self._trim_history()
+        elif block.samples.size:
+            decay.last_t = float(block.samples["t"][-1])
+        self._tell(lambda sink: sink.on_block(block, decay))
         if block.samples.size == 0:
-            if self._active is not None:
-                self._active.idle()
             return finished
         for axis, detector in self._detectors.items():
             for event in detector.feed(block.samples):
                 outcome = self._on_detector_event(axis, event)
                 if outcome is not None:
                     finished.append(outcome)
-        self._samples_fed += block.samples.size
         return finished
 
     def _trim_history(self) -> None:
@@ -171,19 +157,19 @@ class DecaySession:
         return float(block.samples["t"][-1]) if block.samples.size else -math.inf
 
     def _on_detector_event(self, axis: str, event: ReleaseEvent) -> DecayOutcome | None:
-        active = self._active
-        if active is not None and axis != active.axis:
+        decay = self.decay
+        if decay is not None and axis != decay.axis:
             return None  # the other axis of an auto session moves along; it is not this decay
-        if event.kind == "held" and active is None:
+        if event.kind == "held" and decay is None:
             self.state = "held"
             self.held_deg = math.degrees(event.angle_rad - event.baseline_rad)
             self.on_event(f"held at {self.held_deg:+.2f} deg ({axis})")
-        elif event.kind == "put_back" and active is None:
+        elif event.kind == "put_back" and decay is None:
             self.state = "waiting"
             self.on_event("put back without a release")
-        elif event.kind == "released" and active is None:
+        elif event.kind == "released" and decay is None:
             self._start_decay(axis, event)
-        elif event.kind == "settled" and active is not None:
+        elif event.kind == "settled" and decay is not None:
             return self._finish_decay(event.reason or "amplitude")
         return None
 
@@ -205,9 +191,21 @@ class DecaySession:
         for other in self._detectors.values():
             if other.axis != axis:
                 other.reset()
-        self._active = _ActiveDecay(self, axis, self._run_no, release_t, angle_deg, event, warnings)
-        self._active.begin(blocks)
+        decay = Decay(
+            run=self._run_no,
+            axis=axis,
+            terms=self.terms,
+            release_t=release_t,
+            angle_deg=angle_deg,
+            release_event=event,
+            warnings=warnings,
+            publish_fit=self._publish_fit,
+            publish_note=self._publish_note,
+            last_t=max([release_t, *(self._last_time(b) for b in blocks)]),
+        )
+        self.decay = decay
         self.state = "decaying"
+        self._tell(lambda sink: sink.on_release(decay, blocks))
         self.on_event(
             f"run {self._run_no}: released at {abs(angle_deg):.2f} deg ({axis}), t = {release_t:.3f} s"
         )
@@ -229,271 +227,45 @@ class DecaySession:
         return chosen
 
     def _finish_decay(self, reason: str) -> DecayOutcome:
-        active, self._active = self._active, None
-        assert active is not None
-        outcome = active.finish(reason)  # closes its file whatever happens
-        self.outcomes.append(outcome)
+        """The final fit, then the file closed, then the view told: every sink hears the settle even when
+        one raises (the failure is passed on after, the decay already closed)."""
+        decay, self.decay = self.decay, None
+        assert decay is not None
+        decay.settle_reason = reason
         self.state = "settled"
-        self.on_event(active.summary(outcome))
+        try:
+            self._tell(lambda sink: sink.on_settle(decay))
+        finally:
+            outcome = decay.outcome()
+            self.outcomes.append(outcome)
+        self.on_event(self._summary(outcome))
         return outcome
 
     def abort(self, kind: str, message: str) -> DecayOutcome | None:
         """The stream ended mid-decay (unplug, Ctrl-C): close the file with what arrived."""
-        active = self._active
+        decay = self.decay
         for detector in self._detectors.values():
             detector.reset()
         self._history.clear()
         self.state = "waiting"
-        if active is None:
+        if decay is None:
             return None
-        self._active = None
         try:
-            active.event(kind, message)
+            decay.note(kind, message)
         finally:
-            outcome = active.finish(kind)  # closes the file even when the event could not be written
-        self.outcomes.append(outcome)
-        self.on_event(active.summary(outcome))
+            outcome = self._finish_decay(kind)  # closes the file even when the note could not be written
+        self.state = "waiting"
         return outcome
 
     def close(self) -> None:
-        self.abort("note", "session closed")
-        self.view.close()
-
-
-class _ActiveDecay:
-    """The recording, identifier and view of the decay under way."""
-
-    def __init__(
-        self,
-        session: DecaySession,
-        axis: str,
-        run: int,
-        release_t: float,
-        angle_deg: float,
-        event: ReleaseEvent,
-        warnings: list[str],
-    ) -> None:
-        self.session = session
-        self.axis = axis
-        self.run = run
-        self.release_t = release_t
-        self.angle_deg = angle_deg
-        self.release_event = event
-        self.warnings = warnings
-        self.fit: OnlineResult | None = None
-        self._last_t = release_t
-        self.writer: RecordingWriter | None = None
-        self.path: Path | None = None
-        self.rrd_path: Path | None = None
-        self.live_fit = BackgroundFit(session.make_identifier(session.terms, axis=axis))
-
-    def _open(self) -> None:
-        """Open the recording, then the view (its .rrd is named after the recording)."""
-        s = self.session.settings
-        session = self.session
-        if s.out_dir is not None:
-            self._open_writer()
-        rrd = None if self.path is None else self.path.with_suffix(".rrd")
-        if rrd is None and s.rrd_base is not None:
-            rrd = s.rrd_base.with_name(s.rrd_base.name + (f"-{self.run}" if self.run > 1 else "") + ".rrd")
-        if session.view.mode == "none" or (rrd is not None and not self._room_for_rrd(rrd)):
-            rrd = None
-        session.view.axis = self.axis
-        session.view.new_run(
-            name=self.path.stem if self.path else f"run {self.run}",
-            rrd_path=rrd,
-            terms=session.terms,
-            time_origin_s=self.release_t,  # the view reads in seconds since the release
-        )
-        self.rrd_path = session.view.rrd_path
-
-    def _room_for_rrd(self, rrd: Path) -> bool:
-        """Free space checked before each decay: below the reserve, no .rrd (the MCAP comes first)."""
-        reserve = self.session.view.rrd_reserve_bytes
-        free = free_bytes(rrd.parent)
-        if free >= reserve:
-            return True
-        line = (
-            f"only {megabytes(free)} free under {rrd.parent} (keeping {megabytes(reserve)} for recordings): "
-            "this decay is recorded without an .rrd; free some space"
-        )
-        self.warnings.append(line)
-        return False
-
-    def _open_writer(self) -> None:
-        from ..store.naming import next_run_number, recording_name
-
-        s = self.session.settings
-        hull = s.hull.name if s.hull else str(s.run_metadata.get("hull", "hull"))
-        draft = s.draft if s.draft is not None else 1.0
-        assert s.out_dir is not None
-        s.out_dir.mkdir(parents=True, exist_ok=True)
-        number = next_run_number(s.out_dir, hull, draft, self.axis)
-        name = recording_name(hull, draft, self.axis, s.angle_deg, number)
-        metadata = dict(s.run_metadata)
-        metadata.update({"axis": self.axis, "run": self.run, "model_terms": ",".join(self.session.terms)})
-        self.writer = RecordingWriter(s.out_dir / name, metadata, s.run_config)
-        self.path = self.writer.path
-
-    def begin(self, blocks: list[Block]) -> None:
-        """Open the file and view, write the pre-trigger history, mark the release, feed the identifier."""
-        self._open()
-        for block in blocks:
-            self.append(block)
-        ev = self.release_event
-        self.event(
-            "release",
-            f"released at {abs(self.angle_deg):.3f} deg",
-            self.release_t,
-            {
-                "angle_initial_deg": self.angle_deg,
-                "rate_initial_deg_s": math.degrees(ev.rate_rad_s) if math.isfinite(ev.rate_rad_s) else None,
-                "still_water_deg": math.degrees(ev.baseline_rad),
-                "first_free_sample_t_s": ev.t,
-            },
-        )
-        for line in self.warnings:
-            self.event("warning", line, self.release_t)
-
-    def _write(self, action: Callable[[RecordingWriter], object]) -> None:
-        """Do ``action`` on the file; a failed write (disk full) closes it and stops the recording."""
-        if self.writer is None:
-            return
+        """Close the decay under way, then every sink (each one, whatever another raised)."""
         try:
-            action(self.writer)
-        except RecordingError:
-            self.writer.close()
-            self.writer = None
-            raise
-
-    def append(self, block: Block) -> None:
-        """Write a block to the file and view; samples after the release go to the identifier."""
-        host_ns = int(block.host_t * 1e9)
-
-        def write(writer: RecordingWriter) -> None:
-            writer.write_raw(block.raw, host_ns)
-            writer.write_samples(block.samples)
-            writer.maybe_flush()
-
-        self._write(write)
-        if block.samples.size:
-            self._last_t = float(block.samples["t"][-1])
-            self.session.view.log_samples(block.samples)
-            after = block.samples[block.samples["t"] >= self.release_t]
-            if after.size:
-                angle_field, rate_field = AXIS_FIELDS[self.axis]
-                self.live_fit.submit(after["t"].copy(), after[angle_field].copy(), after[rate_field].copy())
-        if self.session.settings.wait_for_fits:
-            self.live_fit.wait_idle(FINAL_FIT_WAIT_S)
-        self._publish(self.live_fit.take())
-
-    def idle(self) -> None:
-        self._write(lambda writer: writer.maybe_flush())
-        self._publish(self.live_fit.take())
-
-    def _publish(self, results: list[OnlineResult]) -> None:
-        for result in results:
-            self._on_fit(result)
-
-    def event(
-        self, kind: str, message: str, t_s: float | None = None, data: Mapping[str, object] | None = None
-    ):
-        self._write(lambda writer: writer.write_event(kind, message, t_s, data))
-        self.session.view.log_event(kind, message, t_s)
-
-    def _on_fit(self, result: OnlineResult) -> None:
-        self.fit = result
-        rate = (
-            np.gradient(result.predicted_angle, result.predicted_t) if result.predicted_t.size > 1 else None
-        )
-        self.session.view.log_fit(
-            result.predicted_t,
-            result.predicted_angle,
-            rate if rate is not None else np.zeros_like(result.predicted_angle),
-            result.coefficients,
-            result.ci95,
-            t_fit=result.t_end,
-        )
-        self._write(
-            lambda writer: writer.write_fit(
-                result.t_end,
-                result.coefficients,
-                result.std,
-                result.ci95,
-                result.r2_angle,
-                {
-                    "half_cycles": result.half_cycles,
-                    "samples": result.n_samples,
-                    "natural_period_s": result.natural_period_s,
-                    "offset_deg": math.degrees(result.offset),
-                    "elapsed_s": result.elapsed_s,
-                },
-            )
-        )
-
-    def finish(self, reason: str) -> DecayOutcome:
-        """The final fit, then close the file: closed even when the fit or the view raise."""
-        started = time.perf_counter()
-        final: OnlineResult | None = None
-        try:
-            final = self._final_fit()
-            self.session.view.log_event("settled", f"decay ended ({reason})", self._last_t)
+            self.abort("note", "session closed")
         finally:
-            extra: dict[str, object] = {"settle_reason": reason, "final_fit_s": time.perf_counter() - started}
-            if final is not None:
-                extra.update({f"fit_{k}": v for k, v in final.coefficients.items()})
-                extra["fit_r2_angle"] = final.r2_angle
-                extra["natural_period_s"] = final.natural_period_s
-            self._close_file(reason, extra)
-        self.session.view.end_run()  # the file is closed first; the view finishes on its own thread
-        return self._outcome(reason, final)
+            self._tell(lambda sink: sink.close())
 
-    def _final_fit(self) -> OnlineResult | None:
-        try:
-            refits, final = self.live_fit.finish(FINAL_FIT_WAIT_S)
-        except TankdaqError as exc:  # an unfittable decay (too short, cut by an unplug) is a warning
-            self.warnings.append(f"no final fit: {exc}")
-            self.event("warning", f"no final fit: {exc}")
-            return None
-        self._publish([*refits, final])
-        return final
-
-    def close_after_error(self, exc: Exception) -> DecayOutcome:
-        """Close the file with what arrived, saying why; no final fit (the error may be in it)."""
-        self.live_fit.close()
-        message = f"recording closed after an error: {type(exc).__name__}: {exc}"
-        self.warnings.append(message)
-        try:
-            self._write(lambda writer: writer.write_event("warning", message, self._last_t))
-        finally:
-            self._close_file("error", {"settle_reason": "error", "error": message})
-        return self._outcome("error", self.fit)
-
-    def _close_file(self, reason: str, extra: dict[str, object]) -> None:
-        def close(writer: RecordingWriter) -> None:
-            try:
-                writer.write_event("settled", f"decay ended ({reason})", None, {"reason": reason})
-                writer.update_metadata({**extra, **self.session.settings.closing_metadata()})
-            finally:
-                writer.close()
-
-        self._write(close)
-        self.writer = None
-
-    def _outcome(self, reason: str, final: OnlineResult | None) -> DecayOutcome:
-        return DecayOutcome(
-            run=self.run,
-            axis=self.axis,
-            path=self.path,
-            rrd_path=self.rrd_path,
-            release_t=self.release_t,
-            angle_initial_deg=self.angle_deg,
-            settle_reason=reason,
-            fit=final,
-            warnings=list(self.warnings),
-        )
-
-    def summary(self, outcome: DecayOutcome) -> str:
+    @staticmethod
+    def _summary(outcome: DecayOutcome) -> str:
         fit = outcome.fit
         coeffs = "  ".join(f"{k}={v:.4g}" for k, v in fit.coefficients.items()) if fit else "no fit"
         where = f" -> {outcome.path}" if outcome.path else ""

@@ -16,7 +16,6 @@ from ..errors import InputError
 from .app import app, checked, err_console, handles_errors
 
 if TYPE_CHECKING:  # the maneuver models compile with numba: imported by the commands that run them
-    from ..maneuver.identify import SeparateIdentifier
     from ..maneuver.model import StateRecord
     from ..maneuver.sensitivity import SensitivityResult
     from ..maneuver.vehicle import Vehicle
@@ -147,43 +146,6 @@ def simulate_command(
                f"noise {record.meta['noise']}")
 
 
-def _identify_report(ident: SeparateIdentifier, vehicle: Vehicle, sensitivity: SensitivityResult | None,
-                     gamma_source: str) -> dict[str, object]:
-    from ..maneuver.identify import default_window_s, relative_errors
-    from ..maneuver.vehicle import TERM_BY_NAME
-
-    errors = relative_errors(ident.derivatives_, vehicle.derivatives)
-    rows = []
-    for name, value in ident.derivatives_.items():
-        rows.append({
-            "derivative": name, "multiplies": TERM_BY_NAME[name].multiplies,
-            "standard": vehicle.coefficient(name), "identified": value,
-            "std_error": ident.std_[name], "relative_error": errors.get(name),
-            "sensitivity_index": sensitivity.index.get(name) if sensitivity else None,
-            "dominant": (name in sensitivity.dominant) if sensitivity else None,
-        })
-    report: dict[str, object] = {
-        "vehicle": vehicle.name, "method": ident.method,
-        "window_s": ident.window_s if ident.window_s is not None else default_window_s(vehicle),
-        "derivatives": rows,
-        "bias": ident.bias_, "bias_std": ident.bias_std_,
-        "gamma": {eq: fit.gamma for eq, fit in ident.equations_.items()},
-        "gamma_chosen_on": gamma_source if ident.method == "lssvm" else None,
-        "r2_equation": {eq: fit.r2 for eq, fit in ident.equations_.items()},
-    }
-    ranked = [n for n in (sensitivity.ranking if sensitivity else []) if n in errors]
-    if len(ranked) >= 4:
-        half = len(ranked) // 2
-        from scipy.stats import spearmanr  # scipy.stats is slow to import: only here
-        rho, p_value = spearmanr([sensitivity.index[n] for n in ranked], [errors[n] for n in ranked])
-        report["sensitivity_vs_error"] = {
-            "spearman_rho": float(rho), "p_value": float(p_value),
-            "mean_error_top_half": float(np.mean([errors[n] for n in ranked[:half]])),
-            "mean_error_bottom_half": float(np.mean([errors[n] for n in ranked[half:]])),
-        }
-    return report
-
-
 def _print_identify(report: dict) -> None:
     typer.echo(f"{report['vehicle']}: separate identification by {report['method']} "
                f"(weak-form window {report['window_s']:.2f} s); prime-system derivatives")
@@ -224,6 +186,7 @@ def identify_command(
     """Identify the surge, heave and pitch derivatives one equation at a time; compare with the standard."""
     from ..maneuver.identify import SeparateIdentifier
     from ..maneuver.io import read_record
+    from ..maneuver.report import identification_report
 
     _check_method(method)
     if window_s is not None and window_s <= 0:
@@ -234,7 +197,7 @@ def identify_command(
     ident = SeparateIdentifier(vehicle, method=method, window_s=window_s).fit(record, held_out)
     sensitivity = _sensitivity(vehicle, *_manoeuvre_angles_rad(record)) if with_sensitivity else None
     gamma_source = f"held-out record {holdout}" if holdout is not None else "5 blocked folds of the record"
-    report = _identify_report(ident, vehicle, sensitivity, gamma_source)
+    report = identification_report(ident, vehicle, sensitivity, gamma_source)
     if as_json:
         typer.echo(json.dumps(report, indent=1))
     else:
@@ -298,9 +261,9 @@ def validate_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""
-    from ..maneuver.identify import SeparateIdentifier
     from ..maneuver.io import read_record
-    from ..maneuver.validate import MODES, SCORED_STATES, default_mode, plot_validation, resimulate
+    from ..maneuver.report import validate_models
+    from ..maneuver.validate import MODES, SCORED_STATES, default_mode, plot_validation
 
     _check_method(method)
     if mode is not None and mode not in MODES:
@@ -310,33 +273,19 @@ def validate_command(
     target = read_record(test) if test is not None else record
     mode = mode or default_mode(target)
     sensitivity = _sensitivity(vehicle, *_manoeuvre_angles_rad(record))
-    others = {n: vehicle.coefficient(n) for n in vehicle.present_terms() if n not in sensitivity.dominant}
-    models = {
-        "identified, all derivatives": SeparateIdentifier(vehicle, method=method).fit(record).model(),
-        "identified dominant, others standard": SeparateIdentifier(
-            vehicle, method=method, terms=sensitivity.dominant, fixed=others).fit(record).model(),
-        "identified dominant, others dropped": SeparateIdentifier(
-            vehicle, method=method, terms=sensitivity.dominant).fit(record).model(),
-    }
-    results, failures = [], {}
-    for label, model in models.items():
-        try:
-            results.append(resimulate(target, model, label, mode))
-        except InputError as exc:  # e.g. a reduced model whose pitch never reaches the switching angle
-            failures[label] = str(exc)
-    if not results:
-        raise InputError(f"no model could re-simulate {test or file}: {next(iter(failures.values()))}")
+    validation = validate_models(record, target, vehicle, sensitivity, method, mode, str(test or file))
+    results, failures = validation.results, validation.failures
     if plot is not None:
         plot_validation(target, results, plot)
     report = {"train": str(file), "test": str(test or file), "mode": mode,
-              "dominant": sensitivity.dominant, "r2": {r.label: r.r2 for r in results},
+              "dominant": validation.dominant, "r2": {r.label: r.r2 for r in results},
               "failed": failures, "plot": str(plot) if plot else None}
     if as_json:
         typer.echo(json.dumps(report, indent=1))
         return
     how = "the zigzag re-run with each model" if mode == "zigzag" else "driven by its measured stern plane"
     typer.echo(f"identified from {file}, re-simulated {test or file} ({how})")
-    typer.echo(f"dominant derivatives: {', '.join(sensitivity.dominant)}")
+    typer.echo(f"dominant derivatives: {', '.join(validation.dominant)}")
     typer.echo(f"{'model':<38}" + "".join(f"{'R2 ' + s:>10}" for s in SCORED_STATES))
     for result in results:
         typer.echo(f"{result.label:<38}" + "".join(f"{result.r2[s]:>10.4f}" for s in SCORED_STATES))

@@ -61,7 +61,7 @@ def campaign_command(
         group_runs,
         identify_groups,
         markdown_table,
-        read_campaign_runs,
+        read_campaign,
     )
     from ..physics.models import resolve_model
     from .identify import echo_cuts
@@ -83,13 +83,11 @@ def campaign_command(
         progress_bar() as progress,
     ):
         reading = progress.add_task("reading", total=len(paths))
-        runs = []
-        read = map if pool is None else pool.map
-        for path, found in zip(
-            paths, read(read_campaign_runs, paths, [start] * len(paths), [end] * len(paths)), strict=True
-        ):
-            runs.extend(found)
+
+        def advance_reading(path: Path) -> None:
             progress.update(reading, advance=1, description=f"reading {path.name}")
+
+        runs = read_campaign(paths, start, end, pool, advance_reading)
         groups = group_runs(runs)
         known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
         fitting = progress.add_task("fitting", total=len(groups))

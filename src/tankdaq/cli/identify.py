@@ -134,7 +134,7 @@ def identify_command(
     from ..config import load_hull
     from ..ident.estimators import make_estimator
     from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
-    from ..ident.uncertainty import moving_block_bootstrap, repeat_spread
+    from ..ident.uncertainty import fit_with_intervals
     from ..physics.models import resolve_model
 
     if axis not in (None, "roll", "pitch"):
@@ -167,29 +167,21 @@ def identify_command(
         return
 
     estimator = make_estimator(method, terms)
-    if bootstrap and not hasattr(estimator, "clone"):
-        raise InputError(f"--bootstrap works with --method oe, not {method}")
-    if repeats and (bootstrap or len(runs) < 3):
-        raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")
+    repeats_of = (lambda: make_estimator(method, terms)) if repeats else None
     with progress_bar() as progress:
         task = progress.add_task(f"fitting {method}", total=1 + bootstrap)
         if hasattr(estimator, "progress"):  # the seeds' GA/PSO report their generations
             generations = progress.add_task("generations", total=None)
             estimator.progress = lambda done, total: progress.update(generations, completed=done, total=total)
-        estimator.fit(runs)
-        progress.update(task, advance=1)
-        interval_method = None
-        if bootstrap:
-            spread = moving_block_bootstrap(
-                estimator, bootstrap, progress=lambda done: progress.update(task, completed=1 + done)
-            )
-            estimator.std_, estimator.ci95_ = spread.std, spread.ci95
-            interval_method = f"{spread.method}, {bootstrap} replicas"
-        if repeats:
-            spread = repeat_spread(lambda: make_estimator(method, terms), runs)
-            estimator.std_, estimator.ci95_ = spread.std, spread.ci95
-            interval_method = f"{spread.method}, {len(runs)} runs"
-    summary = summarize(estimator, runs, method, hull_config, draft, interval_method)
+        estimator, intervals = fit_with_intervals(
+            estimator,
+            runs,
+            bootstrap,
+            repeats_of,
+            progress=lambda done: progress.update(task, completed=done),
+            method=method,
+        )
+    summary = summarize(estimator, runs, method, hull_config, draft, intervals)
     if as_json:
         typer.echo(json.dumps(_clean({**summary, **truncated}), default=_json_default))
     else:

@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from .. import validation
 from .app import app, checked, err_console, handles_errors, parse_draft_option, say
+
+if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
+    from ..acquire.daemon import RecordSettings
+    from ..acquire.session import DecayOutcome
 
 
 class AxisChoice(StrEnum):
@@ -29,15 +33,22 @@ def _viewer(value: str) -> str:
 
 
 #: Options ``record`` and ``session`` share: the hull, the view, the live model, the hidden simulator pace.
-def _checked_text(flag: str, rule: Any, text: str) -> Any:
-    """A text option checked by a ``tankdaq.validation`` rule and passed on as given."""
-    return Annotated[str, typer.Option(flag, callback=checked(rule, keep_input=True), help=text)]
-
-
-HullOption = _checked_text(
-    "--hull", validation.known_hull, "The model tested: a hull name (tankdaq hulls) or a .toml file."
-)
-LiveModelOption = _checked_text("--model", validation.live_model, "Live model: terms (b1,b2,c1,c3) or alias.")
+HullOption = Annotated[
+    str,
+    typer.Option(
+        "--hull",
+        callback=checked(validation.known_hull, keep_input=True),
+        help="The model tested: a hull name (tankdaq hulls) or a .toml file.",
+    ),
+]
+LiveModelOption = Annotated[
+    str,
+    typer.Option(
+        "--model",
+        callback=checked(validation.live_model, keep_input=True),
+        help="Live model: terms (b1,b2,c1,c3) or alias.",
+    ),
+]
 ViewerOption = Annotated[
     str | None,
     typer.Option(
@@ -78,64 +89,22 @@ class _StatusLine:
         self._text.plain = status.line(self.runs)  # type: ignore[attr-defined]
 
 
-def run_record(
-    port: str,
-    draft: float,
-    angle: float,
-    hull: str,
-    axis: str,
-    rate: float,
-    baud: int | None,
-    out: Path,
-    runs: int | None,
-    viewer: str | None,
-    operator: str,
-    note: str,
-    model: str,
-    sim_speed: float = 1.0,
-    sim_seed: int = 0,
-    viewer_bind: str = "127.0.0.1",
-    viewer_port: int = 9876,
-) -> list:
-    """Build the daemon from command-line values, run it with a status line, print what it saved."""
-    from ..acquire.daemon import RecordDaemon, RecordSettings
-    from ..errors import InputError
-    from ..xsens.control import decay_bits_per_second, line_refusal
+def run_record(settings: RecordSettings) -> list[DecayOutcome]:
+    """Run the daemon with a status line, print what it saved."""
+    from ..acquire.daemon import RecordDaemon
 
-    refusal = None if baud is None else line_refusal(decay_bits_per_second(rate), rate, baud)
-    if refusal is not None:  # checked before the port opens
-        raise InputError(f"--baud {baud}: {refusal}")
-
-    settings = RecordSettings(
-        port=port,
-        draft=draft,
-        angle_deg=angle,
-        hull=hull,
-        axis=axis,
-        rate_hz=rate,
-        baud=baud,
-        out_dir=out,
-        runs=runs,
-        viewer=viewer,  # None: the default; the daemon prints the mode in use at start
-        viewer_bind=viewer_bind,
-        viewer_port=viewer_port,
-        operator=operator,
-        note=note,
-        model=model,
-        sim_speed=sim_speed,
-        sim_seed=sim_seed,
-    )
-    with _StatusLine(runs) as line:
+    with _StatusLine(settings.runs) as line:
         daemon = RecordDaemon(settings, on_event=line.event, on_status=line.status)
         outcomes = daemon.run()
     saved = [o for o in outcomes if o.path is not None]
-    err_console.print(f"{len(saved)} decay(s) recorded under {out}", markup=False)
+    err_console.print(f"{len(saved)} decay(s) recorded under {settings.out_dir}", markup=False)
     return outcomes
 
 
 @app.command("record")
 @handles_errors
 def record_command(
+    hull: HullOption,
     port: str = typer.Option(
         ...,
         "--port",
@@ -147,7 +116,6 @@ def record_command(
     angle: float = typer.Option(
         ..., "--angle", callback=checked(validation.release_angle_deg), help="Nominal release angle (deg)."
     ),
-    hull: HullOption = ...,
     axis: AxisChoice = typer.Option(
         AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
     ),
@@ -187,25 +155,28 @@ def record_command(
     sim_seed: SimSeedOption = 0,
 ) -> None:
     """Record decays: detect each release, write one MCAP per decay, fit and show it live."""
-    run_record(
-        port,
-        draft,
-        angle,
-        hull,
-        axis.value,
-        rate,
-        baud,
-        out,
-        runs,
-        viewer,
-        operator,
-        note,
-        model,
-        sim_speed,
-        sim_seed,
-        viewer_bind,
-        viewer_port,
+    from ..acquire.daemon import RecordSettings
+
+    settings = RecordSettings(
+        port=port,
+        draft=draft,
+        angle_deg=angle,
+        hull=hull,
+        axis=axis.value,
+        rate_hz=rate,
+        baud=baud,
+        out_dir=out,
+        runs=runs,
+        viewer=viewer,  # None: the default; the daemon prints the mode in use at start
+        viewer_bind=viewer_bind,
+        viewer_port=viewer_port,
+        operator=operator,
+        note=note,
+        model=model,
+        sim_speed=sim_speed,
+        sim_seed=sim_seed,
     )
+    run_record(settings)
 
 
 def _speed(value: str) -> float | None:
@@ -256,28 +227,19 @@ def replay_command(
 def identify_recordings(
     paths: list[Path], report_dir: Path, model: str, truth: dict[str, float] | None = None
 ) -> None:
-    """Fit all recordings jointly, print the table (and the truth when known), draw each decay (PNG)."""
-    from ..ident.output_error import OutputError
-    from ..ident.report import predicted_angles, summarize, text_report
-    from ..physics.models import resolve_model
+    """Fit all recordings jointly; print the table (and the truth when known) and each decay's PNG."""
+    from ..ident.report import identify_jointly, text_report
     from ..store.reader import read_decay_runs
-    from ..viz.plots import decay_fit_figure, save_png
+    from ..viz.plots import save_decay_fits
 
-    runs = [run for path in paths for run in read_decay_runs(path)]
-    estimator = OutputError(resolve_model(model)).fit(runs)
-    typer.echo(text_report(summarize(estimator, runs)))
-    if truth:
+    fit = identify_jointly([run for path in paths for run in read_decay_runs(path)], model, truth)
+    typer.echo(text_report(fit.summary))
+    if fit.truth:
         typer.echo("  identified vs the simulator's truth (hull config):")
-        for term, value in estimator.coefficients_.items():
-            low, high = estimator.ci95_[term]
-            inside = "inside" if low <= truth.get(term, 0.0) <= high else "OUTSIDE"
-            typer.echo(f"    {term}: {value:.5g} vs {truth.get(term, 0.0):.5g} ({inside} the 95 % interval)")
-    for run, predicted in zip(runs, predicted_angles(estimator, runs), strict=True):
-        stem = Path(str(run.meta.get("file", run.name))).stem
-        png = save_png(
-            decay_fit_figure(run.t - run.t[0], run.angle, predicted, axis=run.axis, title=stem),
-            report_dir / f"{stem}.png",
-        )
+    for check in fit.truth:
+        inside = "inside" if check.inside else "OUTSIDE"
+        typer.echo(f"    {check.term}: {check.value:.5g} vs {check.truth:.5g} ({inside} the 95 % interval)")
+    for png in save_decay_fits(fit.runs, fit.predicted, report_dir):
         typer.echo(f"plot: {png}")
 
 
@@ -300,6 +262,7 @@ def demo_command(
     sim_speed: float = typer.Option(4.0, "--sim-speed", min=0.1, max=50.0, help="Simulated clock speed-up."),
 ) -> None:
     """The whole chain on the built-in simulated MTi-G: record decays, then identify them jointly."""
+    from ..acquire.daemon import RecordSettings
     from ..config import load_hull
 
     err_console.print(
@@ -307,22 +270,20 @@ def demo_command(
         f"live model {DEMO_MODEL}",
         markup=False,
     )
-    outcomes = run_record(
-        "sim",
-        1.0,
-        8.0,
-        DEMO_HULL,
-        "roll",
-        100.0,
-        None,
-        out,
-        runs,
-        "save",
-        "demo",
-        "make demo",
-        DEMO_MODEL,
-        sim_speed,
+    settings = RecordSettings(
+        port="sim",
+        draft=1.0,
+        angle_deg=8.0,
+        hull=DEMO_HULL,
+        out_dir=out,
+        runs=runs,
+        viewer="save",
+        operator="demo",
+        note="make demo",
+        model=DEMO_MODEL,
+        sim_speed=sim_speed,
     )
+    outcomes = run_record(settings)
     paths = [o.path for o in outcomes if o.path is not None]
     truth = load_hull(DEMO_HULL).simulation_model("roll").coefficients(1.0)
     identify_recordings(paths, out, DEMO_MODEL, truth)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
@@ -79,9 +80,9 @@ def read_responses(path: Path | None) -> list[str]:
 @app.command("session", help=HELP)
 @handles_errors
 def session_command(
-    plan: str = typer.Argument(..., help="Campaign plan: a name in configs/campaigns or a .toml file."),
+    plan: Annotated[str, typer.Argument(help="Campaign plan: a name in configs/campaigns or a .toml file.")],
+    hull: HullOption,
     port: str = typer.Option(..., "--port", help="Device path, pyserial URL, or 'sim'."),
-    hull: HullOption = ...,
     out: Path = typer.Option(
         Path("session"),
         "--out",

@@ -255,6 +255,25 @@ def identify_groups(
     return results
 
 
+def read_campaign(
+    paths: Sequence[Path],
+    start_s: float | None = None,
+    end_s: float | None = None,
+    executor: Executor | None = None,
+    progress: Callable[[Path], None] | None = None,
+) -> list[DecayRun]:
+    """Every recording's free decays (``read_campaign_runs``), in path order; ``executor`` spreads the
+    files over cores or machines, ``progress`` is called after each file."""
+    runs: list[DecayRun] = []
+    n = len(paths)
+    found_per_file = executor_map(executor, read_campaign_runs, paths, [start_s] * n, [end_s] * n)
+    for path, found in zip(paths, found_per_file, strict=True):
+        runs.extend(found)
+        if progress is not None:
+            progress(path)
+    return runs
+
+
 def executor_map(
     executor: Executor | None, function: Callable[..., Any], *arguments: Sequence[Any]
 ) -> Iterable[Any]:

@@ -9,7 +9,8 @@ offsets, so every method is scored the same way.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,7 @@ from .derived import (
 from .estimators import make_estimator
 from .kernels import simulate, substeps, term_codes
 from .output_error import OutputError, seed_objective
+from .uncertainty import IntervalSummary
 
 
 def predicted_angles(estimator: Any, runs: Sequence[DecayRun]) -> list[np.ndarray]:
@@ -48,12 +50,14 @@ def _r2(measured: np.ndarray, predicted: np.ndarray) -> float:
     return float(1.0 - np.sum((measured - predicted) ** 2) / np.sum((measured - measured.mean()) ** 2))
 
 
-def covariance_of(estimator: Any) -> np.ndarray:
-    """The coefficient covariance, or a diagonal one from ``std_`` for estimators that give only that."""
+def covariance_of(estimator: Any, std: Mapping[str, float] | None = None) -> np.ndarray:
+    """The coefficient covariance, or a diagonal one from ``std`` (default ``std_``) for estimators that
+    give only that."""
     cov = getattr(estimator, "covariance_", None)
     if cov is not None:
         return cov
-    return np.diag([estimator.std_.get(k, 0.0) ** 2 for k in estimator.terms_])
+    std = estimator.std_ if std is None else std
+    return np.diag([std.get(k, 0.0) ** 2 for k in estimator.terms_])
 
 
 def summarize(
@@ -62,11 +66,15 @@ def summarize(
     method: str = "oe",
     hull: Any = None,
     draft: float = 1.0,
-    interval_method: str | None = None,
+    intervals: IntervalSummary | None = None,
 ) -> dict[str, Any]:
-    """The one JSON object ``tankdaq identify --json`` prints (angles in deg at this edge)."""
+    """The one JSON object ``tankdaq identify --json`` prints (angles in deg at this edge).
+
+    ``intervals`` (a bootstrap or the repeats' spread) replace the fit's own std and 95 % interval.
+    """
     terms = estimator.terms_
     coefficients = dict(estimator.coefficients_)
+    std, ci95 = (intervals.std, intervals.ci95) if intervals else (estimator.std_, estimator.ci95_)
     predicted = predicted_angles(estimator, runs)
     all_measured = np.concatenate([run.angle for run in runs])
     all_predicted = np.concatenate(predicted)
@@ -76,7 +84,7 @@ def summarize(
     if seed_obj is None:
         seed_obj = seed_objective(terms, theta, runs, estimator.offsets_)
     amplitudes = tested_amplitudes_deg(runs, estimator.offsets_)
-    table = amplitude_table(coefficients, covariance_of(estimator), amplitudes)
+    table = amplitude_table(coefficients, covariance_of(estimator, std), amplitudes)
     extinction = extinction_curve(runs, estimator.offsets_, coefficients)
     summary: dict[str, Any] = {
         "model": {"name": model_name(terms), "terms": list(terms)},
@@ -85,13 +93,13 @@ def summarize(
         "coefficients": {
             k: {
                 "value": coefficients[k],
-                "std": estimator.std_[k],
-                "ci95": list(estimator.ci95_[k]),
+                "std": std[k],
+                "ci95": list(ci95[k]),
                 "unit": TERM_TABLE[k].unit,
             }
             for k in terms
         },
-        "intervals": interval_method or getattr(estimator, "cov_type", "classic"),
+        "intervals": intervals.description if intervals else getattr(estimator, "cov_type", "classic"),
         "offset_deg": [math.degrees(o) for o in estimator.offsets_],
         "natural_period_s": natural_period(coefficients),
         "damping_ratio": damping_ratio(coefficients),
@@ -264,3 +272,45 @@ def compare_text(rows: list[dict[str, Any]]) -> str:
             f"{row['r2_angle']:>11.6f}{bic:>13}{held:>14}"
         )
     return "\n".join(lines)
+
+
+@dataclass
+class TruthCheck:
+    """One identified coefficient against a known truth (a simulated hull's)."""
+
+    term: str
+    value: float
+    truth: float
+    ci95: tuple[float, float]
+
+    @property
+    def inside(self) -> bool:
+        """Whether the truth lies inside the 95 % interval."""
+        return self.ci95[0] <= self.truth <= self.ci95[1]
+
+
+@dataclass
+class JointFit:
+    """Decays fitted jointly by output error, with what a report of them needs."""
+
+    estimator: OutputError
+    runs: list[DecayRun]
+    summary: dict[str, Any]
+    predicted: list[np.ndarray]  # each run's model angle (rad)
+    truth: list[TruthCheck]  # empty without a truth
+
+
+def identify_jointly(
+    runs: Sequence[DecayRun], model: str, truth: Mapping[str, float] | None = None
+) -> JointFit:
+    """Fit ``runs`` jointly by output error; compare with ``truth`` (a term absent from it is 0)."""
+    runs = list(runs)
+    estimator = OutputError(resolve_model(model)).fit(runs)
+    truth = truth or {}
+    checks = [
+        TruthCheck(term, value, truth.get(term, 0.0), estimator.ci95_[term])
+        for term, value in estimator.coefficients_.items()
+        if truth
+    ]
+    summary = summarize(estimator, runs)
+    return JointFit(estimator, runs, summary, predicted_angles(estimator, runs), checks)

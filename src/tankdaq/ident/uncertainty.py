@@ -216,6 +216,12 @@ class IntervalSummary:
     std: dict[str, float]
     ci95: dict[str, tuple[float, float]]
     samples: np.ndarray  # (n_samples, n_terms)
+    counted: str = "replicas"  # what the samples are: bootstrap replicas, repeat runs
+
+    @property
+    def description(self) -> str:
+        """How the intervals were found, as the report says it ("repeat runs, 3 runs")."""
+        return f"{self.method}, {self.samples.shape[0]} {self.counted}"
 
 
 def moving_block_bootstrap(
@@ -280,10 +286,46 @@ def repeat_spread(make_estimator: Callable[[], Any], runs: Sequence[DecayRun]) -
     fits = [make_estimator().fit([run]) for run in runs]
     terms = fits[0].terms_
     values = np.array([[f.coefficients_[k] for k in terms] for f in fits])
-    return _summary("repeat runs", terms, values, percentile=False)
+    return _summary("repeat runs", terms, values, percentile=False, counted="runs")
 
 
-def _summary(method: str, terms: Sequence[str], values: np.ndarray, percentile: bool) -> IntervalSummary:
+def fit_with_intervals(
+    estimator: Any,
+    runs: Sequence[DecayRun],
+    bootstrap: int = 0,
+    repeats_of: Callable[[], Any] | None = None,
+    progress: Callable[[int], None] | None = None,
+    method: str = "oe",
+) -> tuple[Any, IntervalSummary | None]:
+    """Fit ``estimator``, then the intervals asked for beside it: a moving-block bootstrap of
+    ``bootstrap`` replicas, or (``repeats_of``, a factory of unfitted estimators) the spread of the
+    runs fitted one by one as repeats. The fitted estimator keeps its own ``std_``/``ci95_``; the
+    report reads the returned intervals instead (``report.summarize(..., intervals=)``).
+
+    ``progress(done)`` counts the fit as 1 and each replica after it. The combinations that cannot
+    work are refused before any fit (``method`` names the estimator in the message).
+    """
+    from ..errors import InputError
+
+    if bootstrap and not hasattr(estimator, "clone"):
+        raise InputError(f"--bootstrap works with --method oe, not {method}")
+    if repeats_of is not None and (bootstrap or len(runs) < 3):
+        raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")
+    estimator.fit(runs)
+    if progress is not None:
+        progress(1)
+    intervals = None
+    if bootstrap:
+        on_replica = None if progress is None else (lambda done: progress(1 + done))
+        intervals = moving_block_bootstrap(estimator, bootstrap, progress=on_replica)
+    elif repeats_of is not None:
+        intervals = repeat_spread(repeats_of, runs)
+    return estimator, intervals
+
+
+def _summary(
+    method: str, terms: Sequence[str], values: np.ndarray, percentile: bool, counted: str = "replicas"
+) -> IntervalSummary:
     std = values.std(axis=0, ddof=1) if values.shape[0] > 1 else np.full(values.shape[1], np.nan)
     if percentile:
         lo, hi = np.percentile(values, [2.5, 97.5], axis=0)
@@ -299,4 +341,5 @@ def _summary(method: str, terms: Sequence[str], values: np.ndarray, percentile: 
         std=dict(zip(terms, spread.tolist(), strict=True)),
         ci95={k: (float(a), float(b)) for k, a, b in zip(terms, lo, hi, strict=True)},
         samples=values,
+        counted=counted,
     )

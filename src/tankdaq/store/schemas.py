@@ -132,7 +132,7 @@ CHANNEL_METADATA: dict[str, dict[str, str]] = {
             "records in SI units (rad, rad/s); host_t is the log time of each sample's message; "
             f"non-finite values are NaN (null in {TOPIC_SAMPLES})"
         ),
-        "dtype": json.dumps([[name, BLOCK_DTYPE.fields[name][0].str] for name in BLOCK_DTYPE.names]),
+        "dtype": json.dumps([[name, BLOCK_DTYPE[name].str] for name in BLOCK_DTYPE.names or ()]),
         "log_time": "host arrival of the block's first sample, ns since epoch",
     },
     TOPIC_EVENTS: {"kinds": ",".join(EVENT_KINDS), "t_s": "device time, s"},
@@ -261,11 +261,12 @@ def interval_pairs(
     """ci95 as ``{term: [low, high]}``; a single number per term is read as the half-width."""
     pairs: dict[str, list[float]] = {}
     for term, value in (ci95 or {}).items():
-        if np.ndim(value) == 0:
-            centre, half = float(coefficients[term]), float(value)  # type: ignore[arg-type]
+        bounds = np.asarray(value, dtype=float)
+        if bounds.ndim == 0:
+            centre, half = float(coefficients[term]), float(bounds)
             pairs[term] = [centre - half, centre + half]
         else:
-            low, high = (float(v) for v in value)  # type: ignore[union-attr]
+            low, high = (float(v) for v in bounds)
             pairs[term] = [low, high]
     return pairs
 

@@ -18,6 +18,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..errors import RecordingError
+from ..records import DecayRun
 
 if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType
@@ -120,3 +121,13 @@ def save_png(fig: Figure, path: str | Path, dpi: int = 150) -> Path:
     except OSError as exc:
         raise RecordingError(f"cannot write {path}: {exc.strerror or exc}") from None
     return path
+
+
+def save_decay_fits(runs: Sequence[DecayRun], predicted: Sequence[np.ndarray], folder: Path) -> list[Path]:
+    """One PNG per decay (measured, model, residual), named after the decay's file, in ``folder``."""
+    written = []
+    for run, model_angle in zip(runs, predicted, strict=True):
+        stem = Path(str(run.meta.get("file", run.name))).stem
+        figure = decay_fit_figure(run.t - run.t[0], run.angle, model_angle, axis=run.axis, title=stem)
+        written.append(save_png(figure, folder / f"{stem}.png"))
+    return written

@@ -1,0 +1,106 @@
+"""``open_device(port, ...)``: the one way a recorder gets an opened, configured MTi.
+
+The port ``sim`` is the built-in simulated MTi-G: it is started on a pseudo-terminal and opened by
+path like hardware; any other port is the real driver on that path (or pyserial URL). Whoever
+records (the daemon, a guided session) never tests for ``sim`` to get a device.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from ..config import format_draft
+from ..errors import InputError
+from ..xsens.control import check_bandwidth, decay_output_configuration
+from .driver import MTiDriver
+
+if TYPE_CHECKING:
+    from ..physics.scenario import DecayScenario
+    from .simulator import SimulatedMTi
+
+#: The port name that starts the built-in simulated MTi-G.
+SIM_PORT = "sim"
+
+#: Standard baud rates tried, smallest first, when the simulated sensor needs a faster line.
+SIM_BAUDS = (115200, 230400, 460800, 921600)
+
+
+def is_simulated(port: str) -> bool:
+    """Whether ``port`` names the built-in simulated sensor (which needs a hull to play)."""
+    return port == SIM_PORT
+
+
+@dataclass(frozen=True)
+class SimulatedSensor:
+    """What the simulated MTi-G plays when the port is ``sim``: the scenario is built only then."""
+
+    scenario: Callable[[], DecayScenario]
+    speed: float = 1.0
+    seed: int = 0
+    legacy: bool = False  # a 2007-era MTi-G (legacy MTData)
+
+
+@dataclass
+class OpenDevice:
+    """An opened, configured device: the driver, and the simulator behind it for port ``sim``."""
+
+    driver: MTiDriver
+    simulator: SimulatedMTi | None = None
+
+    def close(self) -> None:
+        """Close the port, then stop the simulator (the link first, as an unplugged cable)."""
+        try:
+            self.driver.close()
+        finally:
+            if self.simulator is not None:
+                self.simulator.stop()
+
+
+def sim_baud(rate_hz: float) -> int:
+    """The slowest standard line that carries the decay outputs at ``rate_hz``."""
+    entries = decay_output_configuration(int(rate_hz))
+    return next((b for b in SIM_BAUDS if check_bandwidth(entries, rate_hz, b).ok), SIM_BAUDS[-1])
+
+
+def open_device(
+    port: str,
+    rate_hz: float = 100.0,
+    baud: int | None = None,
+    sim: SimulatedSensor | None = None,
+    on_event: Callable[[str], None] | None = None,
+) -> OpenDevice:
+    """Start the simulator for ``sim``, open the driver on the port and configure it for ``rate_hz``.
+
+    ``baud`` None keeps the device's rate when it carries the output. Whatever fails on the way,
+    what was started is stopped before the error is passed on.
+    """
+    say = on_event or (lambda _line: None)
+    simulator = None
+    if is_simulated(port):
+        if sim is None:
+            raise InputError("port sim needs a scenario for the simulated sensor to play")
+        simulator = _start_simulator(sim, baud or sim_baud(rate_hz), say)
+        port = simulator.link
+    device = OpenDevice(
+        MTiDriver(port, baud=baud, rate_hz=rate_hz, probe_first=simulator.baud if simulator else 115200),
+        simulator,
+    )
+    try:
+        device.driver.open()
+        device.driver.configure()
+    except BaseException:  # Ctrl-C while opening too: nothing started is left running
+        device.close()
+        raise
+    return device
+
+
+def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[str], None]) -> SimulatedMTi:
+    from .simulator import SimulatedMTi
+
+    scenario = sim.scenario()
+    simulator = SimulatedMTi(scenario, speed=sim.speed, baud=baud, seed=sim.seed, legacy=sim.legacy).start()
+    label = f"{scenario.hull} {format_draft(scenario.draft)} {scenario.axis}"
+    say(f"simulated MTi-G on {simulator.link} ({label})")
+    return simulator

@@ -1,0 +1,60 @@
+"""``device.open_device``: the port ``sim`` is the simulated MTi-G on a real pty, any other the driver on that
+path; whatever fails while opening stops what was started."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from tankdaq.device.factory import SimulatedSensor, open_device, sim_baud
+from tankdaq.errors import DeviceNotFound, InputError
+from tankdaq.physics.scenario import DecayScenario
+
+#: Generous deadline for the first samples (reads, not timings, decide the test).
+DEADLINE_READS = 500
+
+
+def _sim(**scenario: object) -> SimulatedSensor:
+    """The default decay scenario (with ``scenario``'s settings), played four times faster."""
+    return SimulatedSensor(lambda: DecayScenario(runs=1, **scenario), speed=4.0, seed=2)  # type: ignore[arg-type]
+
+
+def _link(lines: list[str]) -> Path:
+    (line,) = [line for line in lines if line.startswith("simulated MTi-G on ")]
+    return Path(line.removeprefix("simulated MTi-G on ").split(" (")[0])
+
+
+def test_port_sim_is_the_simulated_sensor_opened_by_path_and_close_stops_it() -> None:
+    lines: list[str] = []
+    device = open_device("sim", rate_hz=100.0, sim=_sim(), on_event=lines.append)
+    try:
+        assert device.simulator is not None
+        assert device.driver.port == device.simulator.link == str(_link(lines))
+        assert device.simulator.baud == sim_baud(100.0)
+        samples = 0
+        for _ in range(DEADLINE_READS):
+            samples += device.driver.read_block().samples.size
+            if samples:
+                break
+        assert samples > 0, "the configured device streams"
+    finally:
+        device.close()
+    assert not _link(lines).exists(), "the simulator stopped: its link is gone"
+
+
+def test_port_sim_without_a_scenario_is_refused() -> None:
+    with pytest.raises(InputError, match="port sim needs a scenario"):
+        open_device("sim")
+
+
+def test_a_device_that_cannot_be_configured_leaves_no_simulator_running() -> None:
+    lines: list[str] = []
+    with pytest.raises(InputError, match="400 Hz needs"):  # 400 Hz does not fit through 115200 baud
+        open_device("sim", rate_hz=400.0, baud=115200, sim=_sim(rate_hz=400.0), on_event=lines.append)
+    assert not _link(lines).exists()
+
+
+def test_any_other_port_is_the_driver_on_that_path(tmp_path: Path) -> None:
+    with pytest.raises(DeviceNotFound):
+        open_device(str(tmp_path / "ttyUSB9"))
