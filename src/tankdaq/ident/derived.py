@@ -13,6 +13,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -52,22 +53,32 @@ def equivalent_frequency(coefficients: Mapping[str, float], amplitude: float) ->
     The first Fourier coefficient of r(phi_a cos a) over phi_a: for c3 x^3 it adds
     (3/4) c3 phi_a^2; the sine terms are integrated numerically. Even terms drop out.
     """
-    return float(_equivalent_frequencies(coefficients, np.array([amplitude]))[0])
+    if amplitude > 0:
+        k_eq = float(np.mean(_restoring(coefficients, amplitude * _COS_ALPHA) * _COS_ALPHA)) * 2.0 / amplitude
+    else:
+        k_eq = linear_stiffness(coefficients)
+    return math.sqrt(k_eq) if k_eq > 0 else math.nan
 
 
 def _equivalent_frequencies(coefficients: Mapping[str, float], amplitudes: np.ndarray) -> np.ndarray:
-    """``equivalent_frequency`` at many amplitudes (rad) in one pass, one row of the cycle per amplitude."""
-    x = amplitudes[:, None] * _COS_ALPHA
+    """``equivalent_frequency`` at many amplitudes (rad) in one pass, a row of the cycle per amplitude."""
+    moving = amplitudes > 0
+    k_eq = np.full(amplitudes.shape, linear_stiffness(coefficients))
+    x = amplitudes[moving, None] * _COS_ALPHA
+    k_eq[moving] = np.mean(_restoring(coefficients, x) * _COS_ALPHA, axis=1) * 2.0 / amplitudes[moving]
+    return np.sqrt(np.where(k_eq > 0, k_eq, np.nan))
+
+
+def _restoring(coefficients: Mapping[str, float], x: np.ndarray) -> np.ndarray:
+    """The restoring terms' r(x) at the angles ``x`` (any shape); even terms are left out (they drop
+    out of the describing function)."""
     restoring = coefficients.get("c1", 0.0) * x
     if "c3" in coefficients:  # an absent term adds exact zeros: skipping it changes nothing but the time
         restoring = restoring + coefficients["c3"] * x**3
     if "s1" in coefficients or "s3" in coefficients:
         sin_x = np.sin(x)
         restoring = restoring + coefficients.get("s1", 0.0) * sin_x + coefficients.get("s3", 0.0) * sin_x**3
-    moving = amplitudes > 0
-    k_eq = np.full(amplitudes.shape, linear_stiffness(coefficients))
-    k_eq[moving] = np.mean(restoring[moving] * _COS_ALPHA, axis=1) * 2.0 / amplitudes[moving]
-    return np.sqrt(np.where(k_eq > 0, k_eq, np.nan))
+    return restoring
 
 
 def b_eq(coefficients: Mapping[str, float], amplitude: float) -> float:
@@ -75,16 +86,20 @@ def b_eq(coefficients: Mapping[str, float], amplitude: float) -> float:
 
     Uses omega_E = omega_eq(phi_a); ``mu_eq = b_eq / 2``.
     """
-    return float(_b_eqs(coefficients, np.array([amplitude]))[0])
+    return _b_eq_at(coefficients, equivalent_frequency(coefficients, amplitude), amplitude)
 
 
 def _b_eqs(coefficients: Mapping[str, float], amplitudes: np.ndarray) -> np.ndarray:
     """``b_eq`` at many amplitudes (rad) in one pass."""
-    omega = _equivalent_frequencies(coefficients, amplitudes)
+    return _b_eq_at(coefficients, _equivalent_frequencies(coefficients, amplitudes), amplitudes)
+
+
+def _b_eq_at(coefficients: Mapping[str, float], omega: Any, amplitude: Any) -> Any:
+    """ITTC eq. 15 / I at equivalent frequency ``omega`` and amplitude (floats, or arrays alike)."""
     return (
         coefficients.get("b1", 0.0)
-        + 8.0 / (3.0 * math.pi) * omega * amplitudes * coefficients.get("b2", 0.0)
-        + 0.75 * (omega * amplitudes) ** 2 * coefficients.get("b3", 0.0)
+        + 8.0 / (3.0 * math.pi) * omega * amplitude * coefficients.get("b2", 0.0)
+        + 0.75 * (omega * amplitude) ** 2 * coefficients.get("b3", 0.0)
     )
 
 
