@@ -11,15 +11,15 @@ import time
 
 import numpy as np
 
+from tankdaq.config import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, SimulatedMTi
-from tankdaq.physics.scenario import DecayScenario
 
 
 def handshake(legacy: bool) -> None:
     times = []
     for _ in range(5):
-        with SimulatedMTi(DecayScenario(rate_hz=100), legacy=legacy) as sim, MTiDriver(sim.link) as driver:
+        with SimulatedMTi(hull_scenario(rate_hz=100), legacy=legacy) as sim, MTiDriver(sim.link) as driver:
             start = time.perf_counter()
             driver.configure()
             times.append(time.perf_counter() - start)
@@ -41,7 +41,7 @@ def hard_connects() -> None:
         times = []
         for _ in range(3):
             with (
-                SimulatedMTi(DecayScenario(rate_hz=driver_options.get("rate_hz", 100)), **device) as sim,
+                SimulatedMTi(hull_scenario(rate_hz=driver_options.get("rate_hz", 100)), **device) as sim,
                 MTiDriver(sim.link, **driver_options) as driver,
             ):
                 start = time.perf_counter()
@@ -55,7 +55,7 @@ def throughput(rate_hz: int, baud: int) -> None:
     for speed in (1, 5, 10, 20, 40):
         device_s = 5.0
         with (
-            SimulatedMTi(DecayScenario(rate_hz=rate_hz), speed=speed, baud=baud) as sim,
+            SimulatedMTi(hull_scenario(rate_hz=rate_hz), speed=speed, baud=baud) as sim,
             MTiDriver(sim.link, baud=baud, rate_hz=rate_hz) as driver,
         ):
             driver.configure()
@@ -73,7 +73,7 @@ def throughput(rate_hz: int, baud: int) -> None:
 
 def latency() -> None:
     """How late samples reach the caller, relative to the device clock (real time, 100 Hz)."""
-    with SimulatedMTi(DecayScenario(rate_hz=100)) as sim, MTiDriver(sim.link) as driver:
+    with SimulatedMTi(hull_scenario(rate_hz=100)) as sim, MTiDriver(sim.link) as driver:
         driver.configure()
         samples = driver.samples(5.0)
     lag = (samples["host_t"] - samples["host_t"][0]) - (samples["t"] - samples["t"][0])
@@ -85,7 +85,7 @@ def latency() -> None:
 def reconnect() -> None:
     times = []
     for _ in range(5):
-        with SimulatedMTi(DecayScenario(rate_hz=100), speed=10) as sim, MTiDriver(sim.link) as driver:
+        with SimulatedMTi(hull_scenario(rate_hz=100), speed=10) as sim, MTiDriver(sim.link) as driver:
             driver.configure()
             sim.unplug()
             sim.replug()

@@ -29,9 +29,9 @@ import numpy as np
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.replay import replay_recording
+from tankdaq.config import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import SimulatedMTi
-from tankdaq.physics.scenario import DecayScenario
 from tankdaq.store.writer import RecordingWriter
 
 #: ``tankdaq`` of whichever tankdaq PYTHONPATH gives (the venv's console script ignores it).
@@ -84,7 +84,7 @@ def cpu_share(rate_hz: int, seconds: float, out: Path) -> tuple[float, int, int]
 def ten_minute_file(folder: Path, seconds: float = 600.0, runs: int = 18) -> Path:
     """Record 10 minutes of simulated decay tests (raw bytes and samples) into one MCAP (18 x 35 s = 10.5
     min of scenario); or ``seconds`` of ``runs`` decays."""
-    scenario = DecayScenario(hull="swath", draft=1.0, angle_deg=8.0, runs=runs, seed=7)
+    scenario = hull_scenario(hull="swath", draft=1.0, angle_deg=8.0, runs=runs, seed=7)
     path = folder / f"simulated_{seconds:g}s.mcap"
     with SimulatedMTi(scenario, speed=40.0) as sim, MTiDriver(sim.link) as driver:
         driver.configure()

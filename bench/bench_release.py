@@ -13,7 +13,8 @@ import time
 import numpy as np
 
 from tankdaq.acquire.release import ReleaseDetector
-from tankdaq.physics.scenario import DecayScenario, Handling
+from tankdaq.config import hull_scenario
+from tankdaq.physics.scenario import Handling
 
 CASES = [
     # (axis, rate Hz, angle deg, runs)
@@ -27,7 +28,7 @@ CASES = [
 
 
 def accuracy(axis: str, rate_hz: float, angle_deg: float, runs: int) -> None:
-    scenario = DecayScenario(axis=axis, rate_hz=rate_hz, angle_deg=angle_deg, runs=runs, seed=101)
+    scenario = hull_scenario(axis=axis, rate_hz=rate_hz, angle_deg=angle_deg, runs=runs, seed=101)
     start = time.perf_counter()
     samples, trace = scenario.samples()
     generated = time.perf_counter() - start
@@ -56,7 +57,7 @@ def accuracy(axis: str, rate_hz: float, angle_deg: float, runs: int) -> None:
 def handling_hour() -> None:
     """An hour of tilting, holding and putting back (no release): generation and scan speed."""
     for rate_hz in (100, 400):
-        scenario = DecayScenario(runs=110, seed=7, rate_hz=rate_hz, handling=Handling(put_back_fraction=1.0),
+        scenario = hull_scenario(runs=110, seed=7, rate_hz=rate_hz, handling=Handling(put_back_fraction=1.0),
                                  release_after_s=12.0, decay_s=21.0)  # fmt: skip
         start = time.perf_counter()
         samples, _ = scenario.samples()

@@ -19,14 +19,14 @@ import numpy as np
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.sinks import ViewSink
-from tankdaq.device.simulator import SampleSource
-from tankdaq.physics.scenario import DecayScenario
+from tankdaq.config import hull_scenario
+from tankdaq.device.simulator import ScriptedSource
 
 
 def scenario_seconds() -> float:
-    scenario = DecayScenario(hull="swath", draft=1.0, axis="roll", angle_deg=8.0, rate_hz=100, runs=21)
+    scenario = hull_scenario(hull="swath", draft=1.0, axis="roll", angle_deg=8.0, rate_hz=100, runs=21)
     started = time.perf_counter()
-    SampleSource(scenario)
+    ScriptedSource(scenario).prepare()
     return time.perf_counter() - started
 
 

@@ -10,9 +10,9 @@ import pytest
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
+from tankdaq.config import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import SimulatedMTi
-from tankdaq.physics.scenario import DecayScenario
 from tankdaq.xsens.constants import MID
 
 runner = CliRunner()
@@ -20,7 +20,7 @@ runner = CliRunner()
 
 @pytest.fixture
 def sim():
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=10.0) as device:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=10.0) as device:
         yield device
 
 

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.release import ReleaseDetector
+from tankdaq.config import hull_scenario
 from tankdaq.device.driver import MTiDriver, open_error_message
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
 from tankdaq.errors import DeviceError, DeviceGone, DeviceNotFound, InputError
-from tankdaq.physics.scenario import TICK_MODULUS, DecayScenario
+from tankdaq.physics.scenario import TICK_MODULUS
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.control import decay_output_configuration
 
@@ -29,7 +30,7 @@ def _assert_contiguous(samples: np.ndarray, rate_hz: float) -> None:
 @pytest.mark.parametrize(("rate_hz", "baud"), [(100, 115200), (400, 460800)])
 def test_configure_and_stream_ten_seconds_without_a_gap(rate_hz: int, baud: int) -> None:
     with (
-        SimulatedMTi(DecayScenario(rate_hz=rate_hz), speed=SPEED, baud=baud) as sim,
+        SimulatedMTi(hull_scenario(rate_hz=rate_hz), speed=SPEED, baud=baud) as sim,
         MTiDriver(sim.link, baud=baud, rate_hz=rate_hz) as driver,
     ):
         info = driver.configure()
@@ -45,7 +46,7 @@ def test_configure_and_stream_ten_seconds_without_a_gap(rate_hz: int, baud: int)
 
 
 def test_samples_are_the_scenario_in_si_units() -> None:
-    scenario = DecayScenario(rate_hz=100, seed=3)
+    scenario = hull_scenario(rate_hz=100, seed=3)
     expected, _ = scenario.samples()
     with SimulatedMTi(scenario, speed=SPEED) as sim, MTiDriver(sim.link) as driver:
         driver.configure()
@@ -58,7 +59,7 @@ def test_samples_are_the_scenario_in_si_units() -> None:
 
 
 def test_unplug_raises_device_gone_and_replug_reconnects() -> None:
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
         driver.configure()
         assert driver.samples(1.0).size == 100
         old_port = sim.port
@@ -76,7 +77,7 @@ def test_unplug_raises_device_gone_and_replug_reconnects() -> None:
 
 
 def test_reconnect_gives_up_with_device_gone_when_nothing_comes_back() -> None:
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
         driver.configure()
         sim.unplug()
         with pytest.raises(DeviceGone, match="did not come back"):
@@ -85,7 +86,7 @@ def test_reconnect_gives_up_with_device_gone_when_nothing_comes_back() -> None:
 
 def test_legacy_device_is_driven_with_mtdata() -> None:
     with (
-        SimulatedMTi(DecayScenario(rate_hz=100, seed=4), speed=SPEED, legacy=True) as sim,
+        SimulatedMTi(hull_scenario(rate_hz=100, seed=4), speed=SPEED, legacy=True) as sim,
         MTiDriver(sim.link) as driver,
     ):
         info = driver.configure()
@@ -104,7 +105,7 @@ def test_corrupted_bytes_are_survived_and_counted() -> None:
     # stay out of this test: one faulty byte per frame is always caught.
     faults = Faults(corrupt_rate=5e-4, drop_rate=2e-5)
     with (
-        SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED, faults=faults) as sim,
+        SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED, faults=faults) as sim,
         MTiDriver(sim.link) as driver,
     ):
         driver.configure()
@@ -121,7 +122,7 @@ def test_corrupted_bytes_are_survived_and_counted() -> None:
 
 
 def test_a_stall_shows_up_as_a_counter_gap() -> None:
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
         driver.configure()
         before = driver.samples(1.0)
         sim.stall(3.0)  # device seconds from the next sample: exactly 300 samples, whatever the scheduling
@@ -194,7 +195,7 @@ def test_a_silent_port_says_what_was_tried_and_what_to_check() -> None:
 def test_a_device_stuck_in_measurement_is_reset_and_its_wakeup_answered() -> None:
     stuck = Behaviour(stuck=True, boot_s=1.7)  # the field report: GoToConfig acked ~1.7 s after Reset
     with (
-        SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED, behaviour=stuck) as sim,
+        SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED, behaviour=stuck) as sim,
         MTiDriver(sim.link) as driver,
     ):
         info = driver.configure()
@@ -208,7 +209,7 @@ def test_a_device_stuck_in_measurement_is_reset_and_its_wakeup_answered() -> Non
 
 def test_slow_flash_writes_get_their_own_timeout() -> None:
     slow = Behaviour(flash_write_s=0.5)
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED, behaviour=slow) as sim:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED, behaviour=slow) as sim:
         with MTiDriver(sim.link, flash_timeout_s=0.2) as hasty, pytest.raises(DeviceError) as caught:
             hasty.configure()
         assert "no reply to SetOutputConfiguration" in str(caught.value) and "0.2 s" in str(caught.value)
@@ -219,7 +220,7 @@ def test_slow_flash_writes_get_their_own_timeout() -> None:
 
 
 def test_record_rate_400_from_115200_moves_the_device_to_921600_without_gaps() -> None:
-    with SimulatedMTi(DecayScenario(rate_hz=400), speed=SPEED, baud=115200) as sim:
+    with SimulatedMTi(hull_scenario(rate_hz=400), speed=SPEED, baud=115200) as sim:
         with MTiDriver(sim.link, baud=921600, rate_hz=400) as driver:
             info = driver.configure()
             samples = driver.samples(5.0)
@@ -231,7 +232,7 @@ def test_record_rate_400_from_115200_moves_the_device_to_921600_without_gaps() -
 
 def test_without_baud_the_slowest_rate_that_carries_the_output_is_chosen() -> None:
     with (
-        SimulatedMTi(DecayScenario(rate_hz=400), speed=SPEED) as sim,
+        SimulatedMTi(hull_scenario(rate_hz=400), speed=SPEED) as sim,
         MTiDriver(sim.link, rate_hz=400) as driver,
     ):
         info = driver.configure()
@@ -240,7 +241,7 @@ def test_without_baud_the_slowest_rate_that_carries_the_output_is_chosen() -> No
 
 
 def test_a_600_series_device_is_moved_with_port_config() -> None:
-    with SimulatedMTi(DecayScenario(rate_hz=400), speed=SPEED, identity=DeviceIdentity.mti_630()) as sim:
+    with SimulatedMTi(hull_scenario(rate_hz=400), speed=SPEED, identity=DeviceIdentity.mti_630()) as sim:
         with MTiDriver(sim.link, baud=921600, rate_hz=400) as driver:
             info = driver.configure()
             samples = driver.samples(2.0)
@@ -253,7 +254,7 @@ def test_a_600_series_device_is_moved_with_port_config() -> None:
 
 
 def test_a_replug_under_a_new_name_is_found_by_usb_serial_number() -> None:
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.port) as driver:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.port) as driver:
         driver.configure()  # opened by its /dev/pts name, which will not come back
         first_name = sim.port
         assert driver.usb_serial == sim.identity.serial_number
@@ -278,7 +279,7 @@ def test_device_error_replies_carry_their_names() -> None:
 
 
 def test_release_found_through_the_driver_within_one_sample() -> None:
-    scenario = DecayScenario(rate_hz=100, seed=8, runs=2, release_after_s=6.0, decay_s=14.0)
+    scenario = hull_scenario(rate_hz=100, seed=8, runs=2, release_after_s=6.0, decay_s=14.0)
     with SimulatedMTi(scenario, speed=20.0) as sim, MTiDriver(sim.link) as driver:
         driver.configure()
         detector = ReleaseDetector(axis="roll")

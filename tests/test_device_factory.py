@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from tankdaq.config import hull_scenario
 from tankdaq.device.factory import SimulatedSensor, open_device, sim_baud
 from tankdaq.errors import DeviceNotFound, InputError
-from tankdaq.physics.scenario import DecayScenario
 
 #: Generous deadline for the first samples (reads, not timings, decide the test).
 DEADLINE_READS = 500
@@ -17,7 +17,7 @@ DEADLINE_READS = 500
 
 def _sim(**scenario: object) -> SimulatedSensor:
     """The default decay scenario (with ``scenario``'s settings), played four times faster."""
-    return SimulatedSensor(lambda: DecayScenario(runs=1, **scenario), speed=4.0, seed=2)  # type: ignore[arg-type]
+    return SimulatedSensor(lambda: hull_scenario(runs=1, **scenario), speed=4.0, seed=2)
 
 
 def _link(lines: list[str]) -> Path:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.config import hull_scenario
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
 from tankdaq.physics.scenario import DecayScenario
 from tankdaq.store.reader import read_recording
@@ -38,7 +39,7 @@ def _record(tmp_path: Path, sim: SimulatedMTi, port: str, rate_hz: float, baud: 
 
 
 def _scenario(rate_hz: float, release_after_s: float) -> DecayScenario:
-    return DecayScenario(rate_hz=rate_hz, runs=2, seed=5, release_after_s=release_after_s, decay_s=12.0)
+    return hull_scenario(rate_hz=rate_hz, runs=2, seed=5, release_after_s=release_after_s, decay_s=12.0)
 
 
 @pytest.mark.parametrize(

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import serial
 
+from tankdaq.config import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import OWNER_FILE, TEMP_PREFIX, Behaviour, Faults, SimulatedMTi
 from tankdaq.errors import DeviceGone, InputError
-from tankdaq.physics.scenario import DecayScenario
 from tankdaq.xsens.constants import MID, baud_code
 from tankdaq.xsens.control import output_configuration_payload, parse_output_configuration
 from tankdaq.xsens.frame import Frame, build_frame
@@ -55,7 +55,7 @@ class Client:
 
 @pytest.fixture
 def sim():
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=10.0) as device:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=10.0) as device:
         yield device
 
 
@@ -123,7 +123,7 @@ def test_unknown_messages_get_error_0x04(sim: SimulatedMTi) -> None:
 
 def test_baud_rate_change_applies_after_reset_which_wakes_the_device_up() -> None:
     booting = Behaviour(boot_s=0.3)  # a quiet boot after the Reset ack, as on hardware
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=10.0, behaviour=booting) as sim:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=10.0, behaviour=booting) as sim:
         client = Client(sim.link)
         client.ask(MID.GOTO_CONFIG)
         assert client.ask(MID.REQ_BAUDRATE).payload == bytes((baud_code(115200),))
@@ -170,7 +170,7 @@ def test_silence_longer_than_the_timeout_is_a_vanished_device(sim: SimulatedMTi)
 
 def test_scheduled_unplug_and_replug_keep_the_link() -> None:
     faults = Faults(unplug_at_s=3.0, replug_after_s=2.0)
-    with SimulatedMTi(DecayScenario(rate_hz=100), speed=10.0, faults=faults) as device:
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=10.0, faults=faults) as device:
         link = device.link
         deadline = time.monotonic() + 2.0
         while device.plugged and time.monotonic() < deadline:
@@ -224,3 +224,13 @@ def test_an_error_exit_of_simulate_leaves_no_folder(tmp_path: Path) -> None:
     _, err = process.communicate(timeout=60)
     assert process.returncode == 2 and "truth" in err and "Traceback" not in err
     assert _folders_of(process.pid) == []
+
+
+def test_a_simulator_that_cannot_start_leaves_no_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with pytest.raises(FileNotFoundError):  # its link cannot be made: the pty opens, then the start fails
+        SimulatedMTi(link=tmp_path / "no-such-folder" / "ttyMTi0").start()
+    assert not list(tmp_path.glob(f"{TEMP_PREFIX}*"))
+    assert str(tmp_path) not in os.environ.get("TANKDAQ_SERIAL_BY_ID", "")

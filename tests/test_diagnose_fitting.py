@@ -1,77 +1,17 @@
-"""The workflow's refit engine against independent references and known truth."""
+"""The workflow's model variants, fitted by ident's output-error engine, against known truth.
+
+The engine itself (integrator, sensitivities, lag interpolation) is tested in test_ident_kernels and
+test_ident_output_error."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
-from tankdaq.diagnose.fitting import COULOMB_EPS_RAD_S, ModelSpec, fit_spec, lagged, predict, simulate_rk4
+from tankdaq.diagnose.fitting import ModelSpec, fit_spec, predict
 from tankdaq.diagnose.synthetic import make_decay_set
 from tankdaq.errors import BadIdentificationInput
-from tankdaq.physics.decay import TERMS, simulate_decay
 from tankdaq.records import DecayRun
-
-T = np.arange(1501) / 100.0  # odd count: the last step is a single one
-
-
-def _coef(values: dict[str, float]) -> np.ndarray:
-    return np.array([values.get(k, 0.0) for k in TERMS])
-
-
-@pytest.mark.parametrize(
-    "coefficients",
-    [
-        {"b1": 0.2, "c1": 10.0},
-        {"b1": 0.1, "b2": 0.4, "b3": 0.3, "c1": 9.0, "c2": 3.0, "c3": -6.0},
-        {"b1": 0.15, "s1": 12.0, "s2": 1.0, "s3": 4.0},
-    ],
-)
-def test_rk4_matches_the_reference_integrator(coefficients: dict[str, float]) -> None:
-    angle_ref, rate_ref = simulate_decay(coefficients, T, 0.4)
-    angle, rate = simulate_rk4(T, np.zeros(T.size), _coef(coefficients), 0.0, 0.4, 0.0)
-    assert np.max(np.abs(angle - angle_ref)) < 2e-6
-    assert np.max(np.abs(rate - rate_ref)) < 1e-5
-
-
-def test_rk4_with_friction_and_forcing_matches_scipy() -> None:
-    coefficients = {"b1": 0.1, "c1": 10.0}
-    fc, k = 0.02, 3.0
-
-    def u(t: float) -> float:
-        return 0.01 * np.cos(6.0 * t)
-
-    def rhs(t: float, y: np.ndarray) -> list[float]:
-        x, v = y
-        return [v, -(0.1 * v + 10.0 * x + fc * np.tanh(v / COULOMB_EPS_RAD_S) + k * u(t))]
-
-    ref = solve_ivp(rhs, (0, T[-1]), [0.2, 0.0], t_eval=T, method="DOP853", rtol=1e-10, atol=1e-12)
-    angle, rate = simulate_rk4(T, k * u(T), _coef(coefficients), fc, 0.2, 0.0)
-    # the friction switch (|x'| < eps) lasts ~5 ms, shorter than a step: a tenth of the sensor noise is left
-    assert np.max(np.abs(angle - ref.y[0])) < 1e-4
-    assert np.max(np.abs(rate - ref.y[1])) < 1e-3
-    angle, rate = simulate_rk4(T, k * u(T), _coef(coefficients), 0.0, 0.2, 0.0)
-    ref = solve_ivp(
-        lambda t, y: [y[1], -(0.1 * y[1] + 10.0 * y[0] + k * u(t))],
-        (0, T[-1]),
-        [0.2, 0.0],
-        t_eval=T,
-        method="DOP853",
-        rtol=1e-10,
-        atol=1e-12,
-    )
-    assert np.max(np.abs(angle - ref.y[0])) < 2e-6
-
-
-def test_lagged_interpolates_and_extrapolates_a_known_function() -> None:
-    omega = 3.0
-    x, v = np.sin(omega * T + 0.3), omega * np.cos(omega * T + 0.3)
-    for lag in (0.004, 0.037, -0.021):
-        expected = np.sin(omega * (T - lag) + 0.3)
-        # beyond the ends a second-order Taylor step: error below |lag|^3 w^3 / 6
-        assert np.max(np.abs(lagged(T, x, v, lag) - expected)) < abs(lag) ** 3 * omega**3 / 6 * 1.1
-        inside = slice(10, -10)
-        assert np.max(np.abs(lagged(T, x, v, lag)[inside] - expected[inside])) < 1e-7
 
 
 def test_observation_parameters_are_recovered_together() -> None:

@@ -9,7 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
-from tankdaq.config import load_hull, user_hulls_dir
+from tankdaq.config import hull_scenario, load_hull, user_hulls_dir
 from test_ident_csv_import import write_held_tilt_csv
 
 runner = CliRunner()
@@ -109,12 +109,11 @@ def test_a_hull_without_coefficients_records_from_a_real_port(tmp_path):
     the recording is labelled with it, and its dimensions travel in the file."""
     from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
     from tankdaq.device.simulator import SimulatedMTi
-    from tankdaq.physics.scenario import DecayScenario
     from tankdaq.store.reader import read_recording
 
     own = tmp_path / "mymodel.toml"
     own.write_text(MY_HULL)
-    scenario = DecayScenario(hull="swath", draft=1.0, angle_deg=8.0, runs=2, seed=5)
+    scenario = hull_scenario(hull="swath", draft=1.0, angle_deg=8.0, runs=2, seed=5)
     with SimulatedMTi(scenario, speed=8.0, seed=5) as sim:
         settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, hull=str(own), out_dir=tmp_path,
                                   runs=1, viewer="none")  # fmt: skip

@@ -16,7 +16,8 @@ EPS = 0.02
 
 def _run(terms, theta, x0=0.25, v0=0.1, u=None, n_sub=1):
     u = np.zeros_like(T) if u is None else u
-    return simulate_with_sensitivities(T, x0, v0, np.asarray(theta, float), term_codes(terms), u, EPS, n_sub)
+    theta, codes, no_input_params = np.asarray(theta, float), term_codes(terms), np.zeros((T.size, 0))
+    return simulate_with_sensitivities(T, x0, v0, theta, codes, u, no_input_params, EPS, n_sub)
 
 
 def test_every_canonical_term_matches_the_reference_integrator():

@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 from tankdaq.errors import BadIdentificationInput
 from tankdaq.ident.equation_error import EquationError
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import LagOperator, OutputError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.models import MODEL_ALIASES
 from tankdaq.records import DecayRun
@@ -91,8 +91,8 @@ def test_equation_error_gives_usable_starting_values():
 
 
 def test_observation_gain_lag_and_gyro_bias_are_recovered():
-    """The lag model is second order, x(t - lag) ~ x - lag x' + lag^2 x''/2: its error (omega lag)^3 / 6
-    ~ 2e-4 of the angle at a 30 ms lag stays below the gain's standard error."""
+    """angle = (1 + gain error) x(t - lag) + offset, rate = x' + bias, with x(t - lag) interpolated
+    (cubic Hermite) on the simulated angle and rate."""
     truth = truth_for(("b1", "b2", "c1", "c3"))
     clean = synthetic_run(truth, seed=6, offset=0.0)
     gain, lag, bias = 1.05, 0.03, 0.004
@@ -105,12 +105,8 @@ def test_observation_gain_lag_and_gyro_bias_are_recovered():
     fit = OutputError(tuple(truth), fit_gain=True, fit_lag=True, fit_gyro_bias=True).fit([run])
     se = np.sqrt(np.diag(fit.param_covariance_))
     names = fit.param_names_
-    for name, value, attr in (
-        ("gain", gain, "gain_"),
-        ("lag_s", lag, "lag_s_"),
-        ("gyro_bias", bias, "gyro_bias_"),
-    ):
-        assert abs(getattr(fit, attr) - value) < Z999 * se[names.index(name)], name
+    for name, value in (("angle_gain_error", gain - 1), ("angle_lag_s", lag), ("gyro_bias_rad_s", bias)):
+        assert abs(getattr(fit, f"{name}_") - value) < Z999 * se[names.index(name)], name
 
 
 def test_observation_effects_need_a_gyro():
@@ -173,13 +169,8 @@ def test_a_record_cut_mid_swing_after_two_cycles_is_still_fitted():
     assert fit.std_["b1"] > OutputError(tuple(truth)).fit([full]).std_["b1"]
 
 
-def test_the_full_jacobian_with_observation_parameters_equals_central_differences():
-    truth = truth_for(("b1", "b2", "c1", "c3"))
-    fit = OutputError(tuple(truth), fit_gain=True, fit_lag=True, fit_gyro_bias=True).fit(
-        [synthetic_run(truth, seed=13, duration_s=5.0)]
-    )
-    params = fit.params_.copy()
-    params[fit.param_names_.index("lag_s")] = 0.03  # away from zero so the second-order lag terms count
+def assert_jacobian_is_central_differences(fit: OutputError, params: np.ndarray) -> None:
+    """The weighted Jacobian at ``params`` column by column against central differences."""
     _, jac, _, _ = fit._weighted(params)
     for k, name in enumerate(fit.param_names_):
         step = 1e-6 * max(1.0, abs(params[k]))
@@ -188,3 +179,61 @@ def test_the_full_jacobian_with_observation_parameters_equals_central_difference
         down[k] -= step
         numeric = (fit._weighted(up)[0] - fit._weighted(down)[0]) / (2 * step)
         assert np.max(np.abs(numeric - jac[:, k])) < 1e-6 * np.max(np.abs(jac[:, k])), name
+
+
+def test_the_full_jacobian_with_observation_parameters_equals_central_differences():
+    truth = truth_for(("b1", "b2", "c1", "c3"))
+    fit = OutputError(tuple(truth), fit_gain=True, fit_lag=True, fit_gyro_bias=True).fit(
+        [synthetic_run(truth, seed=13, duration_s=5.0)]
+    )
+    params = fit.params_.copy()
+    params[fit.param_names_.index("angle_lag_s")] = 0.03  # away from zero so the lag's own terms count
+    assert_jacobian_is_central_differences(fit, params)
+
+
+def test_the_full_jacobian_with_forcing_channels_and_ringing_equals_central_differences():
+    """Input parameters (channel couplings, the ringing's frequency, decay and amplitudes) reach the
+    kernel as du/dp; the lag sits between samples, so the Hermite weights and the Taylor ends count."""
+    truth = truth_for(("b1", "c1"))
+    run = synthetic_run(truth, seed=14, duration_s=5.0)
+    run.channels = {"heave_m": 0.02 * np.sin(4.1 * run.t), "other_angle": 0.01 * np.cos(5.3 * run.t)}
+    fit = OutputError(
+        ("b1", "c1", "fc"),
+        exogenous=("heave_m", "other_angle"),
+        ringing=True,
+        fit_lag=True,
+        fit_gain=True,
+        friction_eps=0.005,
+        reweight=False,
+        compute_diagnostics=False,
+    ).fit([run], guess={"ring_omega_rad_s": 7.0, "ring_decay_1_s": 0.1})
+    assert {"k_heave_m", "k_other_angle", "ring_omega_rad_s", "ring_cos[0]"} <= set(fit.param_names_)
+    params = fit.params_.copy()
+    for name, value in (("angle_lag_s", 0.037), ("ring_cos[0]", 0.3), ("ring_sin[0]", -0.2), ("fc", 0.01)):
+        params[fit.param_names_.index(name)] = value
+    params[fit.param_names_.index("ring_decay_1_s")] = 0.1
+    params[fit.param_names_.index("ring_omega_rad_s")] = 7.0
+    assert_jacobian_is_central_differences(fit, params)
+
+
+def test_the_lag_interpolates_inside_and_extrapolates_beyond_the_ends():
+    t = np.arange(1501) / 100.0
+    omega = 3.0
+    x, v = np.sin(omega * t + 0.3), omega * np.cos(omega * t + 0.3)
+    acc_ends = -(omega**2) * x[[0, -1]]
+    for lag in (0.004, 0.037, -0.021):
+        expected = np.sin(omega * (t - lag) + 0.3)
+        lagged = LagOperator(t, lag).apply(x, v, acc_ends)
+        # beyond the ends a second-order Taylor step: error below |lag|^3 w^3 / 6
+        assert np.max(np.abs(lagged - expected)) < abs(lag) ** 3 * omega**3 / 6 * 1.1
+        inside = slice(10, -10)
+        assert np.max(np.abs(lagged[inside] - expected[inside])) < 1e-7
+
+
+def test_predict_before_fit_says_to_fit_first():
+    from tankdaq.errors import NotFittedError
+
+    with pytest.raises(NotFittedError, match="fit"):
+        OutputError().predict(np.arange(10) / 100.0)
+    with pytest.raises(NotFittedError, match="fit"):
+        _ = OutputError().coefficients_

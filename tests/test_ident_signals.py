@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.signal import savgol_filter
 
-from tankdaq.ident.signals import smoothed_derivatives
+from tankdaq.ident.signals import smoothed_derivatives, white_noise_level
+from tankdaq.physics.decay import simulate_decay
 
 
 @pytest.mark.parametrize(("n", "window", "dt"), [(1500, 25, 0.01), (300, 7, 0.0025), (50, 9, 0.1)])
@@ -18,3 +19,14 @@ def test_smoothed_derivatives_are_scipys_savgol_filter(n: int, window: int, dt: 
     for deriv, mine in enumerate(smoothed_derivatives(y, dt, window, polyorder=3)):
         expected = savgol_filter(y, window, 3, deriv=deriv, delta=dt, mode="nearest")
         np.testing.assert_allclose(mine, expected, rtol=0, atol=1e-12 * np.max(np.abs(expected)))
+
+
+def test_white_noise_level_recovers_white_noise_on_a_decay() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(1500) / 100.0
+    angle, _ = simulate_decay({"b1": 0.2, "c1": 10.0}, t, 0.3)
+    for sigma in (1e-4, 1e-3, 1e-2):
+        assert white_noise_level(angle + rng.normal(0, sigma, t.size)) == pytest.approx(sigma, rel=0.08)
+    # a quantised record (MAD of the third differences zero) falls back to their plain spread
+    steps = np.round(angle / 0.05) * 0.05
+    assert white_noise_level(steps) > 0

@@ -10,8 +10,10 @@ from tankdaq.ident.equation_error import EquationError
 from tankdaq.ident.output_error import OutputError
 from tankdaq.ident.report import summarize
 from tankdaq.ident.uncertainty import (
+    bic,
     fit_with_intervals,
     hac_covariance,
+    ljung_box,
     moving_block_bootstrap,
     repeat_spread,
     residual_whiteness,
@@ -104,3 +106,30 @@ def test_whiteness_statistics():
     assert abs(acf1) < 0.06 and p > 1e-3
     acf1, p = residual_whiteness(np.sin(np.arange(3000) / 20.0))
     assert acf1 > 0.9 and p < 1e-6
+
+
+def test_ljung_box_accepts_white_noise_and_rejects_coloured() -> None:
+    rng = np.random.default_rng(2)
+    white = [rng.normal(size=1500) for _ in range(3)]
+    p_values = [ljung_box([rng.normal(size=1500) for _ in range(3)]) for _ in range(200)]
+    # under H0 the p-value is uniform: about 5 % below 0.05
+    assert 0.01 <= np.mean(np.array(p_values) < 0.05) <= 0.11
+    assert ljung_box(white) > 1e-3
+    coloured = [np.convolve(w, np.ones(5) / 5, mode="same") for w in white]
+    assert ljung_box(coloured) < 1e-12
+
+
+def test_bic_is_minus_twice_the_gaussian_log_likelihood_plus_the_parameter_penalty() -> None:
+    rng = np.random.default_rng(5)
+    blocks = [rng.normal(0, 2.0, 400), rng.normal(0, 0.5, 600)]
+    n = 1000
+    # each block its own variance, profiled out
+    expected = sum(b.size * (np.log(2 * np.pi * np.mean(b**2)) + 1) for b in blocks) + 3 * np.log(n)
+    assert bic(blocks, 3) == pytest.approx(expected)
+    # known relative noise levels, one common scale profiled out
+    sigmas = [2.0, 0.5]
+    scale = sum(float(np.sum((b / s) ** 2)) for b, s in zip(blocks, sigmas, strict=True)) / n
+    log_det = sum(b.size * np.log(s**2 * scale) for b, s in zip(blocks, sigmas, strict=True))
+    assert bic(blocks, 3, sigmas) == pytest.approx(log_det + n * (np.log(2 * np.pi) + 1) + 3 * np.log(n))
+    # the right levels given: both agree closely
+    assert bic(blocks, 3, sigmas) == pytest.approx(bic(blocks, 3), abs=5.0)

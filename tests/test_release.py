@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.release import ReleaseDetector, detect_releases, pick_axis
+from tankdaq.config import hull_scenario
 from tankdaq.errors import InputError
-from tankdaq.physics.scenario import DecayScenario, Handling, SensorNoise, still_trace
+from tankdaq.physics.scenario import Handling, SensorNoise, still_trace
 
 WITH_PUT_BACKS = Handling(put_back_fraction=0.2)
 
@@ -25,7 +26,7 @@ def _match(events, truth):
 
 
 def _check_one_sample(rate_hz: float, runs: int, seed: int, **scenario: object) -> None:
-    samples, trace = DecayScenario(runs=runs, seed=seed, rate_hz=rate_hz, handling=WITH_PUT_BACKS,
+    samples, trace = hull_scenario(runs=runs, seed=seed, rate_hz=rate_hz, handling=WITH_PUT_BACKS,
                                    **scenario).samples()  # fmt: skip
     events = ReleaseDetector(axis=trace.axis).fit(samples).events_
     truth = [r for r in trace.runs if r.kind == "release"]
@@ -64,7 +65,7 @@ def test_heavily_damped_pitch_at_400_hz_mostly_within_one_sample() -> None:
     Measured 40/40 on this seed (96 % over 160 runs of other seeds; 85 % here and 80 % over those
     before b1 was fitted on the integrated rate instead of the angle sample at the instant).
     """
-    samples, trace = DecayScenario(axis="pitch", rate_hz=400, runs=40, seed=33).samples()
+    samples, trace = hull_scenario(axis="pitch", rate_hz=400, runs=40, seed=33).samples()
     released = [e for e in ReleaseDetector(axis="pitch").fit(samples).events_ if e.kind == "released"]
     pairs, _ = _match(released, trace.runs)
     assert len(released) == len(trace.runs) and all(found is not None for _, found in pairs)
@@ -73,7 +74,7 @@ def test_heavily_damped_pitch_at_400_hz_mostly_within_one_sample() -> None:
 
 
 def test_settling_follows_the_ittc_threshold() -> None:
-    samples, trace = DecayScenario(runs=3, seed=25, decay_s=30).samples()
+    samples, trace = hull_scenario(runs=3, seed=25, decay_s=30).samples()
     events = ReleaseDetector(settle_deg=0.5, settle_window_s=3.0).fit(samples).events_
     settled = [e for e in events if e.kind == "settled"]
     assert len(settled) == 3
@@ -88,7 +89,7 @@ def test_settling_follows_the_ittc_threshold() -> None:
 
 
 def test_streaming_in_blocks_gives_the_same_events_as_offline() -> None:
-    samples, _ = DecayScenario(runs=3, seed=26, handling=WITH_PUT_BACKS).samples()
+    samples, _ = hull_scenario(runs=3, seed=26, handling=WITH_PUT_BACKS).samples()
     offline = ReleaseDetector().fit(samples).events_
     detector = ReleaseDetector()
     streamed = []
@@ -105,10 +106,10 @@ def test_streaming_in_blocks_gives_the_same_events_as_offline() -> None:
 def test_a_reset_detector_forgets_the_rate_it_learnt() -> None:
     """A detector reused on 50 Hz data after 400 Hz data finds every release (it found 1 of 3)."""
     detector = ReleaseDetector()
-    fast, _ = DecayScenario(runs=1, seed=3, rate_hz=400).samples()
+    fast, _ = hull_scenario(runs=1, seed=3, rate_hz=400).samples()
     detector.fit(fast)
     assert detector.rate_hz is None and detector.rate_hz_ == pytest.approx(400)  # the setting is kept
-    slow, trace = DecayScenario(runs=3, seed=4, rate_hz=50).samples()
+    slow, trace = hull_scenario(runs=3, seed=4, rate_hz=50).samples()
     reused = [e for e in detector.fit(slow).events_ if e.kind == "released"]
     fresh = [e for e in ReleaseDetector().fit(slow).events_ if e.kind == "released"]
     assert detector.rate_hz_ == pytest.approx(50)
@@ -120,7 +121,7 @@ def test_a_reset_detector_forgets_the_rate_it_learnt() -> None:
 def test_no_false_release_in_an_hour_of_still_water_and_handling(rate_hz: float) -> None:
     """An hour of tilting, holding with tremor and putting back by hand, never letting go."""
     handling = Handling(put_back_fraction=1.0)
-    scenario = DecayScenario(runs=110, seed=27, rate_hz=rate_hz, handling=handling, release_after_s=12.0,
+    scenario = hull_scenario(runs=110, seed=27, rate_hz=rate_hz, handling=handling, release_after_s=12.0,
                              decay_s=21.0)  # fmt: skip
     assert scenario.duration_s >= 3600
     samples, trace = scenario.samples()
@@ -131,13 +132,13 @@ def test_no_false_release_in_an_hour_of_still_water_and_handling(rate_hz: float)
 
 def test_no_false_release_in_still_water_only() -> None:
     """An hour of still water at 100 Hz: no event at all (not even a hold)."""
-    still = DecayScenario(runs=0, seed=28).sensor().measure(still_trace(100, "roll", 0, 0, 360_000))
+    still = hull_scenario(runs=0, seed=28).sensor().measure(still_trace(100, "roll", 0, 0, 360_000))
     assert ReleaseDetector().fit(still).events_ == []
 
 
 def test_pick_axis_finds_the_tilted_one() -> None:
-    pitch, _ = DecayScenario(runs=1, axis="pitch", seed=29).samples()
-    roll, _ = DecayScenario(runs=1, axis="roll", seed=29).samples()
+    pitch, _ = hull_scenario(runs=1, axis="pitch", seed=29).samples()
+    roll, _ = hull_scenario(runs=1, axis="roll", seed=29).samples()
     assert pick_axis(pitch) == "pitch"
     assert pick_axis(roll) == "roll"
     events = detect_releases(pitch, axis="auto")
@@ -145,7 +146,7 @@ def test_pick_axis_finds_the_tilted_one() -> None:
 
 
 def test_perfect_data_gives_the_exact_first_free_sample() -> None:
-    samples, trace = DecayScenario(runs=4, seed=30, noise=SensorNoise.none(),
+    samples, trace = hull_scenario(runs=4, seed=30, noise=SensorNoise.none(),
                                    handling=Handling(sway_deg=0.0, tremor_deg=0.0)).samples()  # fmt: skip
     released = [e for e in ReleaseDetector().fit(samples).events_ if e.kind == "released"]
     assert [e.index for e in released] == [r.release_index for r in trace.runs]
@@ -153,7 +154,7 @@ def test_perfect_data_gives_the_exact_first_free_sample() -> None:
 
 def test_samples_without_angle_or_rate_do_not_shift_indices() -> None:
     """A message missing an output decodes to NaN; the detector bridges it and keeps counting."""
-    samples, trace = DecayScenario(runs=2, seed=31).samples()
+    samples, trace = hull_scenario(runs=2, seed=31).samples()
     holes = samples.copy()
     rng = np.random.default_rng(1)
     holes["roll"][rng.choice(holes.size, 200, replace=False)] = np.nan

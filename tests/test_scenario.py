@@ -7,13 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from tankdaq.config import load_hull
+from tankdaq.config import hull_scenario, load_hull
 from tankdaq.errors import InputError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.scenario import (
     TICK_MODULUS,
     TICKS_PER_S,
-    DecayScenario,
     Handling,
     SensorModel,
     SensorNoise,
@@ -22,15 +21,15 @@ from tankdaq.physics.scenario import (
 
 @pytest.fixture(scope="module")
 def roll_runs():
-    scenario = DecayScenario(runs=3, seed=11, noise=SensorNoise.none())
+    scenario = hull_scenario(runs=3, seed=11, noise=SensorNoise.none())
     samples, trace = scenario.samples()
     return scenario, samples, trace
 
 
 def test_same_seed_same_data_other_seed_other_data() -> None:
-    a, _ = DecayScenario(runs=1, seed=5).samples()
-    b, _ = DecayScenario(runs=1, seed=5).samples()
-    c, _ = DecayScenario(runs=1, seed=6).samples()
+    a, _ = hull_scenario(runs=1, seed=5).samples()
+    b, _ = hull_scenario(runs=1, seed=5).samples()
+    c, _ = hull_scenario(runs=1, seed=6).samples()
     assert np.array_equal(a, b)
     assert not np.allclose(a["roll"], c["roll"])
 
@@ -96,7 +95,7 @@ def test_perfect_sensor_reports_the_true_motion(roll_runs) -> None:
 
 @pytest.mark.parametrize(("rate_hz", "gyro_rms_deg_s"), [(100, 0.2), (400, 0.4)])
 def test_sensor_noise_levels_are_those_documented(rate_hz: float, gyro_rms_deg_s: float) -> None:
-    scenario = DecayScenario(runs=1, seed=2, rate_hz=rate_hz)
+    scenario = hull_scenario(runs=1, seed=2, rate_hz=rate_hz)
     samples, trace = scenario.samples()
     sensor = scenario.sensor()
     angle_error = np.degrees(samples["roll"] - trace.angle - sensor.angle_bias[0])
@@ -106,8 +105,8 @@ def test_sensor_noise_levels_are_those_documented(rate_hz: float, gyro_rms_deg_s
 
 
 def test_truth_in_seconds_does_not_depend_on_the_rate() -> None:
-    slow = DecayScenario(runs=2, seed=4, rate_hz=100).trace().runs
-    fast = DecayScenario(runs=2, seed=4, rate_hz=400).trace().runs
+    slow = hull_scenario(runs=2, seed=4, rate_hz=100).trace().runs
+    fast = hull_scenario(runs=2, seed=4, rate_hz=400).trace().runs
     assert [r.release_s for r in slow] == [r.release_s for r in fast]
     assert [r.release_ticks for r in slow] == [r.release_ticks for r in fast]
     for run in fast:
@@ -115,14 +114,14 @@ def test_truth_in_seconds_does_not_depend_on_the_rate() -> None:
 
 
 def test_pitch_scenario_moves_the_pitch_channel_with_pitch_coefficients() -> None:
-    samples, trace = DecayScenario(runs=1, axis="pitch", seed=3, noise=SensorNoise.none()).samples()
+    samples, trace = hull_scenario(runs=1, axis="pitch", seed=3, noise=SensorNoise.none()).samples()
     assert trace.runs[0].coefficients == load_hull("swath").simulation_model("pitch").coefficients(1.0)
     assert np.ptp(samples["pitch"]) > math.radians(10)
     assert np.ptp(samples["roll"]) < math.radians(1)
 
 
 def test_put_back_runs_have_no_release() -> None:
-    trace = DecayScenario(runs=4, seed=1, handling=Handling(put_back_fraction=1.0)).trace()
+    trace = hull_scenario(runs=4, seed=1, handling=Handling(put_back_fraction=1.0)).trace()
     assert {r.kind for r in trace.runs} == {"put_back"}
     assert all(r.release_s is None for r in trace.runs)
     assert np.max(np.abs(trace.angle[-100:])) == 0.0
@@ -140,4 +139,4 @@ def test_put_back_runs_have_no_release() -> None:
 )
 def test_bad_settings_are_input_errors(kwargs: dict) -> None:
     with pytest.raises(InputError):
-        DecayScenario(**kwargs)
+        hull_scenario(**kwargs)

@@ -30,9 +30,10 @@ from tankdaq.acquire.campaign_session import (
     check_decay,
 )
 from tankdaq.cli import app
+from tankdaq.config import hull_scenario
 from tankdaq.errors import InputError
 from tankdaq.ident.free_decay import find_free_end
-from tankdaq.physics.scenario import DecayScenario, parse_fault_script, scripted_run
+from tankdaq.physics.scenario import parse_fault_script, scripted_run
 from tankdaq.records import DecayRun
 
 pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
@@ -335,7 +336,7 @@ def test_each_check_flags_its_fault_alone(changes: dict[str, Any], phrase: str) 
 
 
 def test_the_scripted_double_push_is_a_second_excitation() -> None:
-    scenario = DecayScenario(hull="swath", runs=1, seed=3, **scripted_run("double-push", 12.0))
+    scenario = hull_scenario(hull="swath", runs=1, seed=3, **scripted_run("double-push", 12.0))
     samples, trace = scenario.samples()
     (truth,) = trace.runs
     assert truth.pushed_again_s is not None and truth.pushed_again_s > truth.release_s
@@ -346,7 +347,7 @@ def test_the_scripted_double_push_is_a_second_excitation() -> None:
     end = find_free_end(run)
     assert end.kind == "excitation"
     assert end.t_s < truth.pushed_again_s - truth.release_s + 2 * 1.7  # caught within two periods of the push
-    clean = DecayScenario(hull="swath", angle_deg=12.0, runs=1, seed=3).samples()[0]
+    clean = hull_scenario(hull="swath", angle_deg=12.0, runs=1, seed=3).samples()[0]
     assert not np.allclose(clean["roll"][start:], samples["roll"][start:])
     assert math.isclose(abs(math.degrees(truth.angle0_rad)), 12.0, abs_tol=1.5)
 

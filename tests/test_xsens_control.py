@@ -11,7 +11,9 @@ from tankdaq.xsens.control import (
     baudrate_payload,
     check_bandwidth,
     decay_output_configuration,
+    device_id_payload,
     frame_bytes_per_second,
+    fw_rev_payload,
     output_configuration_payload,
     parse_baudrate,
     parse_device_id,
@@ -125,3 +127,18 @@ def test_mid_values_named_in_the_interface() -> None:
     assert MID.REQ_BAUDRATE == MID.SET_BAUDRATE == 0x18
     assert MID.OUTPUT_CONFIGURATION_ACK == 0xC1 and MID.OUTPUT_SETTINGS_ACK == 0xD3
     assert ERROR_NAMES[0x04] == "message invalid or not implemented"
+
+
+@pytest.mark.parametrize("text", ["2.4.6", "1.8.2 build 35 scm 0", "1.12.0 build 100 scm 71000"])
+def test_a_firmware_revision_payload_reads_back_as_its_text(text: str) -> None:
+    assert parse_fw_rev(fw_rev_payload(text)) == text
+
+
+def test_a_firmware_revision_that_is_not_one_is_refused() -> None:
+    with pytest.raises(ProtocolError):
+        fw_rev_payload("v1.8")
+
+
+def test_device_id_payloads_are_4_bytes_or_8_on_a_600_series() -> None:
+    assert device_id_payload(0x077B1A2C) == bytes.fromhex("077B1A2C")
+    assert parse_device_id(device_id_payload(0x0880_0000_0000_1A2C, family_600=True)) == 0x0880_0000_0000_1A2C

@@ -13,8 +13,10 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from .errors import ConfigError, InputError
+from .physics.scenario import DecayScenario
 from .physics.terms import TERMS
 
 
@@ -211,6 +213,18 @@ def load_hull(spec: str) -> Hull:
         return _parse_hull(data, path, origin)
     except (TypeError, ValueError, AttributeError) as exc:
         raise ConfigError(f"{path}: {exc}") from None
+
+
+def hull_scenario(
+    hull: str | Hull = "swath", draft: float = 1.0, axis: str = "roll", **settings: Any
+) -> DecayScenario:
+    """A scripted decay test of ``hull`` (name, .toml path or loaded hull) at ``draft`` factor: the
+    scenario plays the hull's ``[simulation]`` coefficients for ``axis``; ``settings`` go to
+    ``DecayScenario`` (angle_deg, rate_hz, runs, seed...). Physics knows no hull files: this is
+    where the two meet."""
+    loaded = hull if isinstance(hull, Hull) else load_hull(hull)
+    coefficients = loaded.simulation_model(axis).coefficients(draft)
+    return DecayScenario(hull=loaded.name, draft=draft, axis=axis, coefficients=coefficients, **settings)
 
 
 def _parse_hull(data: dict, path: Path, origin: str) -> Hull:

@@ -58,3 +58,7 @@ class BadIdentificationInput(IdentificationError, InputError):
     """The data handed to an estimator cannot be fitted (empty, NaN, no motion)."""
 
     exit_code = 2
+
+
+class NotFittedError(TankdaqError, AttributeError):
+    """A result of an estimator was asked for before ``fit`` made it (an AttributeError too, as it is one)."""

@@ -4,8 +4,9 @@ It runs until ``runs`` decays are recorded or it is stopped (Ctrl-C, SIGTERM). A
 device that vanishes mid-decay closes that file with what arrived, and the
 daemon waits for the device to come back. ``port="sim"`` starts the built-in
 simulated MTi-G in-process on a pseudo-terminal, opened like hardware
-(``device.factory.open_device``). The decay pipeline is a ``DecaySession`` with three sinks:
-the online identifier, the recording, the live view (``acquire.sinks``).
+(``device.factory.open_device``); ``port="sim:FILE.mcap"`` plays the device of that recording
+(its raw bytes, at their pace) through the same pty. The decay pipeline is a ``DecaySession``
+with three sinks: the online identifier, the recording, the live view (``acquire.sinks``).
 """
 
 from __future__ import annotations
@@ -21,18 +22,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .. import validation
-from ..config import Hull, load_hull
+from ..config import Hull, hull_scenario, load_hull
 from ..device.driver import MTiDriver
-from ..device.factory import OpenDevice, SimulatedSensor, is_simulated, open_device
+from ..device.factory import OpenDevice, SimPort, SimulatedSensor, open_device
 from ..errors import DeviceGone, InputError, RecordingError
 from ..ident.online import prepare_identifier
 from ..store.disk import RESERVE_BYTES
+from ..store.playback import recorded_device
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
 from .sinks import DecaySink, IdentifierSink, RecordingSink, ViewSink
 
 if TYPE_CHECKING:
-    from ..device.simulator import SimulatedMTi
+    from ..device.simulator import RecordedSource, SimulatedMTi
     from ..physics.scenario import DecayScenario
 
 #: Reads are spaced at least this far apart: blocks of a few samples instead of one, so the
@@ -83,12 +85,24 @@ class RecordSettings:
         validation.baud_rate(self.baud, option="baud")
         validation.baud_carries_rate(self.baud, self.rate_hz, option="--baud")
         validation.live_model(self.model, option="model")
-        if is_simulated(self.port):  # refuse a hull the simulator cannot play before anything opens
+        sim_port = SimPort.parse(self.port)
+        if sim_port and sim_port.recording is None:  # refuse a hull the simulator cannot play
             if hull is None:
                 raise InputError("the simulated sensor needs a hull to play: give --hull")
             hull.simulation_model(self.simulated_axis).coefficients(self.draft)
         validation.output_dir(self.out_dir, option="output folder")
         return hull
+
+    def recorded_device(self) -> RecordedSource | None:
+        """The recording port ``sim:FILE.mcap`` plays, read and checked (its rate is the one asked)."""
+        sim_port = SimPort.parse(self.port)
+        if sim_port is None or sim_port.recording is None:
+            return None
+        recorded = recorded_device(sim_port.recording)
+        if abs(recorded.nominal_rate_hz - self.rate_hz) > 0.01 * self.rate_hz:
+            hz = recorded.nominal_rate_hz
+            raise InputError(f"{sim_port.recording} was recorded at {hz:g} Hz: give --rate {hz:g}")
+        return recorded
 
     @property
     def simulated_axis(self) -> str:
@@ -150,6 +164,7 @@ class RecordDaemon:
         self.on_status = on_status or (lambda _status: None)
         self.status = DaemonStatus()
         self.hull: Hull | None = settings.check()  # before a simulator starts or the port opens
+        self.replayed = settings.recorded_device()  # port sim:FILE.mcap: read and checked now, too
         self.extra_sinks = list(sinks)
         self.device: OpenDevice | None = None
         self.outcomes: list[DecayOutcome] = []
@@ -165,26 +180,19 @@ class RecordDaemon:
 
     def simulation_scenario(self) -> DecayScenario:
         """What the built-in simulated sensor plays (deterministic: its runs are the truth)."""
-        from ..physics.scenario import DecayScenario
-
         s = self.settings
         assert self.hull is not None  # check() refuses the simulator without one
-        scenario = DecayScenario(
-            hull=self.hull.name,
-            coefficients=self.hull.simulation_model(s.simulated_axis).coefficients(s.draft),
-            draft=s.draft,
-            axis=s.simulated_axis,
-            angle_deg=s.angle_deg,
-            rate_hz=s.rate_hz,
-            runs=(s.runs or 20) + 1,
-            seed=s.sim_seed,
-        )
+        scenario = hull_scenario(
+            self.hull, s.draft, s.simulated_axis, angle_deg=s.angle_deg, rate_hz=s.rate_hz,
+            runs=(s.runs or 20) + 1, seed=s.sim_seed,
+        )  # fmt: skip
         return dataclasses.replace(scenario, **s.sim_overrides)  # type: ignore[arg-type]
 
     def _open_device(self) -> MTiDriver:
         s = self.settings
         sim = SimulatedSensor(
-            self.simulation_scenario, speed=s.sim_speed, seed=s.sim_seed, legacy=s.sim_legacy
+            self.simulation_scenario, speed=s.sim_speed, seed=s.sim_seed, legacy=s.sim_legacy,
+            recorded=self.replayed,
         )
         self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=self.on_event)
         return self.device.driver

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..ident.base import EstimatorMixin
 from ..samples import AXIS_FIELDS
 
 STILL, TILTED, HELD, LEAVING, SWUNG, DECAYING = "still", "tilted", "held", "leaving", "swung", "decaying"
@@ -85,7 +86,7 @@ def _trailing_mean(values: np.ndarray, width: int) -> np.ndarray:
     return (sums[idx + 1] - sums[lo]) / (idx + 1 - lo)
 
 
-class ReleaseDetector:
+class ReleaseDetector(EstimatorMixin):
     """Streaming release/settle detector for one axis (scikit-learn style settings, results in ``_``).
 
     Angles and rates in the samples are rad and rad/s; thresholds are given in degrees because

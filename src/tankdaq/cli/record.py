@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -33,14 +33,16 @@ def _viewer(value: str) -> str:
 
 
 #: Options ``record`` and ``session`` share: the hull, the view, the live model, the hidden simulator pace.
-HullOption = Annotated[
-    str,
-    typer.Option(
+def hull_option() -> Any:
+    """The required ``--hull`` option of the commands that record (a typer default, hence ``Any``)."""
+    return typer.Option(
+        ...,
         "--hull",
         callback=checked(validation.known_hull, keep_input=True),
         help="The model tested: a hull name (tankdaq hulls) or a .toml file.",
-    ),
-]
+    )
+
+
 LiveModelOption = Annotated[
     str,
     typer.Option(
@@ -104,11 +106,11 @@ def run_record(settings: RecordSettings) -> list[DecayOutcome]:
 @app.command("record")
 @handles_errors
 def record_command(
-    hull: HullOption,
     port: str = typer.Option(
         ...,
         "--port",
-        help="Device path, pyserial URL, 'auto' (the one Xsens device), or 'sim' (built-in simulated MTi-G).",
+        help="Device path, pyserial URL, 'auto' (the one Xsens device), 'sim' (built-in simulated MTi-G), "
+        "or 'sim:FILE.mcap' (the device of a recording, played again).",
     ),
     draft: float = typer.Option(
         ..., "--draft", parser=parse_draft_option, help="Draft as a factor of design: 0.9T, T, 1.1T."
@@ -116,6 +118,7 @@ def record_command(
     angle: float = typer.Option(
         ..., "--angle", callback=checked(validation.release_angle_deg), help="Nominal release angle (deg)."
     ),
+    hull: str = hull_option(),
     axis: AxisChoice = typer.Option(
         AxisChoice.roll, "--axis", case_sensitive=False, help="Decay axis, or auto."
     ),

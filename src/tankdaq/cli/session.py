@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated
 
 import typer
 
@@ -13,11 +12,11 @@ from ..errors import InputError
 from .app import app, checked, err_console, handles_errors, say
 from .record import (
     DEFAULT_LIVE_MODEL,
-    HullOption,
     LiveModelOption,
     SimSeedOption,
     SimSpeedOption,
     ViewerOption,
+    hull_option,
 )
 
 HELP = """Run a test session from a campaign PLAN, condition by condition, with the operator.
@@ -80,9 +79,9 @@ def read_responses(path: Path | None) -> list[str]:
 @app.command("session", help=HELP)
 @handles_errors
 def session_command(
-    plan: Annotated[str, typer.Argument(help="Campaign plan: a name in configs/campaigns or a .toml file.")],
-    hull: HullOption,
+    plan: str = typer.Argument(..., help="Campaign plan: a name in configs/campaigns or a .toml file."),
     port: str = typer.Option(..., "--port", help="Device path, pyserial URL, or 'sim'."),
+    hull: str = hull_option(),
     out: Path = typer.Option(
         Path("session"),
         "--out",

@@ -66,26 +66,40 @@ def simulate_command(
     boot_s: float = typer.Option(0.0, "--boot", min=0.0, help="Seconds of silence after a Reset."),
     flash_write_s: float = typer.Option(0.0, "--flash-write", min=0.0, help="Seconds a flash write takes."),
     mti_600: bool = typer.Option(False, "--mti-600", help="Be an MTi-630 (baud rate through PortConfig)."),
+    replay: Path = typer.Option(
+        None,
+        "--replay",
+        help="Play the device of this recording (its /xsens/raw bytes at their pace), not a scripted decay.",
+    ),
 ) -> None:
     """Serve a simulated MTi-G on a pty; the first stdout line is the port to open."""
-    from ..config import format_draft, load_hull
-    from ..device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
-    from ..physics.scenario import DecayScenario
+    from ..config import format_draft, hull_scenario, load_hull
+    from ..device.simulator import Behaviour, DeviceIdentity, Faults, ScriptedSource, SimulatedMTi
+    from ..store.playback import recorded_device
 
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood; use roll or pitch")
     if speed <= 0:
         raise InputError(f"--speed must be positive, got {speed:g}")
-    validation.hull_draft(load_hull(hull), draft, axis)
+    hull_config = load_hull(hull)
+    validation.hull_draft(hull_config, draft, axis)
     if legacy and mti_600:
         raise InputError("--legacy and --mti-600 exclude each other: a 600-series device speaks MTData2")
-    scenario = DecayScenario(
-        hull=hull, draft=draft, axis=axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
+    if replay is not None and (legacy or truth is not None):
+        raise InputError("--replay plays the recorded MTData2 as it was: no --legacy, no scripted --truth")
+    scenario = hull_scenario(
+        hull_config, draft, axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
         release_after_s=release_after_s, decay_s=decay_s,
     )  # fmt: skip
     fault_set = Faults.parse(faults)
+    source = recorded_device(replay) if replay is not None else ScriptedSource(scenario)
+    playing = (
+        f"playing the device of {replay}"
+        if replay is not None
+        else f"{hull} {format_draft(draft)} {axis} {angle_deg:g} deg, {runs} runs"
+    )
     sim = SimulatedMTi(
-        scenario,
+        source=source,
         speed=speed,
         legacy=legacy,
         baud=baud,
@@ -105,8 +119,7 @@ def simulate_command(
         sys.stdout.flush()  # the first line is read by whoever started us, before we ever exit
         err_console.print(
             f"simulated {sim.identity.product_code} on {sim.port} (link {sim.link}), {baud} baud, "
-            f"{hull} {format_draft(draft)} {axis} {angle_deg:g} deg, {runs} runs, speed x{speed:g}; "
-            "Ctrl-C stops",
+            f"{playing}, speed x{speed:g}; Ctrl-C stops",
             markup=False,
             highlight=False,
         )

@@ -1,7 +1,9 @@
 """``open_device(port, ...)``: the one way a recorder gets an opened, configured MTi.
 
 The port ``sim`` is the built-in simulated MTi-G: it is started on a pseudo-terminal and opened by
-path like hardware; any other port is the real driver on that path (or pyserial URL). Whoever
+path like hardware; ``sim:FILE.mcap`` is the same simulator playing the device of a recording (the
+caller reads the file: ``store.playback.recorded_device``); any other port is the real driver on
+that path (or pyserial URL). Whoever
 records (the daemon, a guided session) never tests for ``sim`` to get a device.
 """
 
@@ -9,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..config import format_draft
@@ -18,28 +21,49 @@ from .driver import MTiDriver
 
 if TYPE_CHECKING:
     from ..physics.scenario import DecayScenario
-    from .simulator import SimulatedMTi
+    from .simulator import RecordedSource, SimulatedMTi
 
-#: The port name that starts the built-in simulated MTi-G.
+#: The port name that starts the built-in simulated MTi-G (``sim:FILE.mcap``: playing a recording).
 SIM_PORT = "sim"
 
 #: Standard baud rates tried, smallest first, when the simulated sensor needs a faster line.
 SIM_BAUDS = (115200, 230400, 460800, 921600)
 
 
+@dataclass(frozen=True)
+class SimPort:
+    """A port that names the simulator: the scripted scenario, or a recording whose device plays again."""
+
+    recording: Path | None = None
+
+    @classmethod
+    def parse(cls, port: str) -> SimPort | None:
+        """``sim`` -> the scripted scenario; ``sim:FILE.mcap`` -> that file's device; other ports None."""
+        name, colon, rest = port.partition(":")
+        if name != SIM_PORT:
+            return None
+        if not colon:
+            return cls()
+        if not rest:
+            raise InputError("--port sim:FILE.mcap needs the recording to play after 'sim:'")
+        return cls(Path(rest))
+
+
 def is_simulated(port: str) -> bool:
-    """Whether ``port`` names the built-in simulated sensor (which needs a hull to play)."""
-    return port == SIM_PORT
+    """Whether ``port`` names the built-in simulated sensor (scripted or playing a recording)."""
+    return SimPort.parse(port) is not None
 
 
 @dataclass(frozen=True)
 class SimulatedSensor:
-    """What the simulated MTi-G plays when the port is ``sim``: the scenario is built only then."""
+    """What the simulated MTi-G plays when the port is ``sim``: the scenario is built only then;
+    ``recorded`` (port ``sim:FILE.mcap``): a recording's device instead."""
 
     scenario: Callable[[], DecayScenario]
     speed: float = 1.0
     seed: int = 0
     legacy: bool = False  # a 2007-era MTi-G (legacy MTData)
+    recorded: RecordedSource | None = None
 
 
 @dataclass
@@ -99,8 +123,14 @@ def open_device(
 def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[str], None]) -> SimulatedMTi:
     from .simulator import SimulatedMTi
 
-    scenario = sim.scenario()
-    simulator = SimulatedMTi(scenario, speed=sim.speed, baud=baud, seed=sim.seed, legacy=sim.legacy).start()
-    label = f"{scenario.hull} {format_draft(scenario.draft)} {scenario.axis}"
+    if sim.recorded is not None:
+        simulator = SimulatedMTi(source=sim.recorded, speed=sim.speed, baud=baud).start()
+        label = f"playing the device of {sim.recorded.name}: {len(sim.recorded)} frames"
+    else:
+        scenario = sim.scenario()
+        simulator = SimulatedMTi(
+            scenario, speed=sim.speed, baud=baud, seed=sim.seed, legacy=sim.legacy
+        ).start()
+        label = f"{scenario.hull} {format_draft(scenario.draft)} {scenario.axis}"
     say(f"simulated MTi-G on {simulator.link} ({label})")
     return simulator

@@ -1,11 +1,13 @@
 """Where and how a fitted decay disagrees with the measurement: residual and model-free diagnostics.
 
-Each function answers one question a lab engineer asks of a residual: is it
-white (Ljung-Box), at what frequency does it live (Welch), does damping or the
-period change with amplitude (cycle-by-cycle peaks), does it start late (a
-change point in its variance: reflected tank waves), does it follow another
-measured channel (coupling). The selection itself is decided by refits; these
-diagnostics say why, and name the signature in the report.
+Each function answers one question a lab engineer asks of a residual: at
+what frequency does it live (Welch), does damping or the period change with
+amplitude (cycle-by-cycle peaks), does it start late (a change point in its
+variance: reflected tank waves), does it follow another measured channel
+(coupling). Whiteness (Ljung-Box) and the noise level are ident's
+(``ident.uncertainty.ljung_box``, ``ident.signals.white_noise_level``). The
+selection itself is decided by refits; these diagnostics say why, and name the
+signature in the report.
 """
 
 from __future__ import annotations
@@ -15,41 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import find_peaks, welch
-from scipy.stats import chi2, theilslopes
-
-
-def noise_level(signal: np.ndarray) -> float:
-    """Model-free white-noise std of a smooth signal sampled fast, from its third differences.
-
-    The third difference of a decay at 100 Hz is ~1e-5 of its amplitude, so what
-    is left is noise: var(d3) = 20 sigma^2. The MAD makes it robust to the release
-    transient; quantised signals (MAD = 0) fall back to the plain std.
-    """
-    d3 = np.diff(np.asarray(signal, dtype=float), 3)
-    if d3.size < 4:
-        return 0.0
-    mad = float(np.median(np.abs(d3 - np.median(d3))))
-    spread = 1.4826 * mad if mad > 0 else float(np.std(d3))
-    return spread / np.sqrt(20.0)
-
-
-def ljung_box_p(residuals: Sequence[np.ndarray], lags: int = 20, model_df: int = 0) -> float:
-    """Ljung-Box p of 'no autocorrelation up to ``lags``'; Q summed over runs, chi2 with runs*lags dof."""
-    q_total = 0.0
-    dof = -model_df
-    for e in residuals:
-        e = np.asarray(e, dtype=float) - np.mean(e)
-        n = e.size
-        h = min(lags, n // 5)
-        if h < 1:
-            continue
-        denom = float(np.dot(e, e))
-        if denom == 0.0:
-            continue
-        acf = np.array([np.dot(e[:-k], e[k:]) / denom for k in range(1, h + 1)])
-        q_total += n * (n + 2) * float(np.sum(acf**2 / (n - np.arange(1, h + 1))))
-        dof += h
-    return float(chi2.sf(q_total, max(dof, 1)))
+from scipy.stats import theilslopes
 
 
 @dataclass
@@ -68,12 +36,11 @@ def residual_spectrum(residuals: Sequence[np.ndarray], rate_hz: float, omega0_ra
     period_samples = int(2 * np.pi / max(omega0_rad_s, 1e-3) * rate_hz)
     shortest = min(e.size for e in residuals)
     nperseg = int(min(shortest, max(4 * period_samples, 64)))
-    psd_sum = None
-    for e in residuals:
-        freqs, psd = welch(np.asarray(e, dtype=float), fs=rate_hz, nperseg=nperseg, detrend=False)
-        psd_sum = psd if psd_sum is None else psd_sum + psd
-    omega = 2 * np.pi * freqs
-    psd_mean = psd_sum / len(residuals)
+    spectra = [
+        welch(np.asarray(e, dtype=float), fs=rate_hz, nperseg=nperseg, detrend=False) for e in residuals
+    ]
+    omega = 2 * np.pi * spectra[0][0]
+    psd_mean = np.mean([psd for _, psd in spectra], axis=0)
     band = omega <= 6 * omega0_rad_s  # the physics lives here; above is sensor noise
     i_peak = int(np.argmax(np.where(band, psd_mean, -np.inf)))
     floor = float(np.median(psd_mean[omega > 0])) or 1e-300
@@ -259,7 +226,7 @@ def ringing_frequency(residuals: Sequence[np.ndarray], rate_hz: float, omega0_ra
     are left out: those are other effects' signatures.
     """
     n_fft = 8 * max(e.size for e in residuals)
-    power = sum(np.abs(np.fft.rfft(np.asarray(e) - np.mean(e), n_fft)) ** 2 for e in residuals)
+    power = np.sum([np.abs(np.fft.rfft(np.asarray(e) - np.mean(e), n_fft)) ** 2 for e in residuals], axis=0)
     omega = 2 * np.pi * np.fft.rfftfreq(n_fft, 1.0 / rate_hz)
     ratio = omega / omega0_rad_s
     allowed = (ratio > 0.3) & (ratio < 6.0) & (np.abs(ratio - np.round(ratio)) > 0.15)

@@ -104,7 +104,7 @@ def _forcing(
     onset, wave_force = truth.get("onset_s", np.inf), truth.get("wave_force", 0.0)
 
     def force(t: float) -> float:
-        total = sum(k * float(channels[name](t)) for name, k in gains.items())
+        total = float(sum(k * channels[name](np.asarray(t)) for name, k in gains.items()))
         if t > onset:  # reflected waves at the radiated (natural) frequency, building up over 0.5 s
             total += wave_force * (1 - np.exp(-(t - onset) / 0.5)) * np.sin(omega0 * (t - onset))
         return total

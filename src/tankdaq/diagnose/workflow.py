@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import BadIdentificationInput, InputError
+from ..ident.base import EstimatorMixin
+from ..ident.signals import white_noise_level
 from ..records import DecayRun
 from ..validation import equation_model
 from .effects import LIBRARY, Effect
@@ -27,7 +29,6 @@ from .residuals import (
     channel_correlation,
     cycle_trend,
     late_onset,
-    noise_level,
     residual_spectrum,
     ringing_frequency,
 )
@@ -108,7 +109,7 @@ def diagnose_fit(fit: Fit, runs: Sequence[DecayRun]) -> Diagnostics:
     """All residual diagnostics of one fit."""
     omega0 = natural_frequency(fit)
     residuals = [p.residual_angle for p in fit.runs]
-    noise = float(np.sqrt(np.mean([noise_level(r.angle) ** 2 for r in runs])))
+    noise = float(np.sqrt(np.mean([white_noise_level(r.angle) ** 2 for r in runs])))
     rate_res = [p.residual_rate for p in fit.runs if p.residual_rate is not None]
     e = np.concatenate(residuals)
     corr_rate = float(abs(np.corrcoef(e, np.concatenate([p.rate for p in fit.runs]))[0, 1]))
@@ -133,7 +134,7 @@ def diagnose_fit(fit: Fit, runs: Sequence[DecayRun]) -> Diagnostics:
         residual_mean_angle_rad=float(np.mean(e)),
         residual_mean_rate_rad_s=float(np.mean(np.concatenate(rate_res))) if rate_res else None,
         noise_rate_rad_s=float(
-            np.sqrt(np.mean([noise_level(r.rate) ** 2 for r in runs if r.rate is not None]))
+            np.sqrt(np.mean([white_noise_level(r.rate) ** 2 for r in runs if r.rate is not None]))
         )
         if rate_res
         else None,
@@ -172,7 +173,7 @@ def signature_seen(effect: Effect, diag: Diagnostics, trend: CycleTrend) -> list
         and bias is not None
         and abs(bias) > 0.5 * (diag.noise_rate_rad_s or 0)
     ):
-        seen.append(f"rate residual mean {np.degrees(diag.residual_mean_rate_rad_s):.3f} deg/s")
+        seen.append(f"rate residual mean {np.degrees(bias):.3f} deg/s")
     if effect.key == "sensor.lag" and diag.corr_with_rate > 0.5:
         seen.append(f"angle residual follows the rate (correlation {diag.corr_with_rate:.2f})")
     if effect.key == "sensor.gain" and diag.corr_with_angle > 0.5:
@@ -187,7 +188,7 @@ def signature_seen(effect: Effect, diag: Diagnostics, trend: CycleTrend) -> list
     return seen
 
 
-class Diagnoser:
+class Diagnoser(EstimatorMixin):
     """Find what a decay model is missing, add it, and show the gap shrink.
 
     ``Diagnoser(baseline="b1,c1").fit(runs)`` sets ``baseline_``, ``steps_``,
@@ -332,9 +333,9 @@ class Diagnoser:
         squares: list[np.ndarray] = []
         for part, whole, pred in zip(first, runs, predict(fit, runs), strict=True):
             held = slice(part.t.size, None)
-            squares.append((pred.residual_angle[held] / max(noise_level(whole.angle), 1e-12)) ** 2)
+            squares.append((pred.residual_angle[held] / max(white_noise_level(whole.angle), 1e-12)) ** 2)
             if pred.residual_rate is not None and whole.rate is not None:
-                squares.append((pred.residual_rate[held] / max(noise_level(whole.rate), 1e-12)) ** 2)
+                squares.append((pred.residual_rate[held] / max(white_noise_level(whole.rate), 1e-12)) ** 2)
         return float(np.sqrt(np.mean(np.concatenate(squares))))
 
     def _verdict(self) -> str:

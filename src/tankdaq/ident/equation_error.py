@@ -15,28 +15,42 @@ import numpy as np
 from ..errors import BadIdentificationInput
 from ..physics.models import resolve_model
 from ..records import DecayRun
+from .base import EstimatorMixin
 from .derived import linear_stiffness
 from .kernels import term_codes, term_matrix
 from .signals import estimate_period, savgol_window, smoothed_derivatives, start_state
 
 
-def exogenous_input(run: DecayRun, channel: str | None) -> np.ndarray:
-    """The run's exogenous channel (zeros when the model has none); a missing channel is an input error."""
+def exogenous_input(run: DecayRun, channel: str | None, cutoff_hz: float | None = None) -> np.ndarray:
+    """The run's exogenous channel (zeros when the model has none); a missing channel is an input error.
+
+    With ``cutoff_hz`` the channel is taken about its mean (a static part, such as
+    gravity in acc_z or the tracker's zero, is an offset, not a forcing) and
+    low-passed without phase shift: its sensor noise would otherwise enter as a
+    random forcing, a process noise the model cannot have.
+    """
     if channel is None:
         return np.zeros_like(run.t)
     if channel not in run.channels:
         known = ", ".join(run.channels) or "none"
-        raise BadIdentificationInput(
-            f"{run.name}: no channel {channel!r} for the ku term (channels: {known})"
-        )
-    return np.asarray(run.channels[channel], dtype=float)
+        raise BadIdentificationInput(f"{run.name}: no channel {channel!r} to couple (channels: {known})")
+    values = np.asarray(run.channels[channel], dtype=float)
+    if cutoff_hz is None:
+        return values
+    centred = values - np.mean(values)
+    if centred.size < 30:
+        return centred
+    from scipy.signal import butter, sosfiltfilt  # about a second to import: only when asked for
+
+    sos = butter(4, min(cutoff_hz, 0.4 * run.sample_rate), fs=run.sample_rate, output="sos")
+    return sosfiltfilt(sos, centred)
 
 
 def check_runs(runs: Sequence[DecayRun] | DecayRun) -> list[DecayRun]:
     """A non-empty list of runs, each long enough to hold one oscillation."""
     runs = [runs] if isinstance(runs, DecayRun) else list(runs)
     if not runs:
-        raise BadIdentificationInput("no decay runs given")
+        raise BadIdentificationInput("no runs to fit")
     for run in runs:
         if run.t.size < 20:
             raise BadIdentificationInput(f"{run.name}: {run.t.size} samples are too few to identify a decay")
@@ -45,7 +59,7 @@ def check_runs(runs: Sequence[DecayRun] | DecayRun) -> list[DecayRun]:
     return runs
 
 
-class EquationError:
+class EquationError(EstimatorMixin):
     """Least squares of x'' on the model's regressors, pooled over runs.
 
     Derivatives come from Savitzky-Golay filters over ``window_periods`` of the

@@ -314,4 +314,4 @@ def cut_free_decays(
 
 def cut_lines(runs: Sequence[DecayRun]) -> list[str]:
     """The one-line cut of every run that was cut."""
-    return [str(run.meta["cut"]["line"]) for run in runs if isinstance(run.meta.get("cut"), dict)]
+    return [str(cut["line"]) for run in runs if isinstance(cut := run.meta.get("cut"), dict)]

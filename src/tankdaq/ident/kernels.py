@@ -10,8 +10,10 @@ noisy finite differences that stall optimisers (reference §4).
 The equation is ``x'' = -sum_j theta_j * phi_j(x, x', u)``. Each term is one
 row of the term table (``physics.terms.TERM_TABLE``: name, code, kind, label,
 unit) plus one branch of ``term_eval`` giving phi and its partial derivatives
-in x and x'; adding a term touches nothing else. This module holds only the
-kernel code.
+in x, x' and u; adding a term touches nothing else. This module holds only the
+kernel code. The input u may itself depend on parameters (measured channels
+with their coupling coefficients, a ringing forcing): their sensitivities are
+driven by du/dp, given at the samples (``simulate_with_sensitivities``).
 """
 
 from __future__ import annotations
@@ -31,33 +33,33 @@ def term_codes(terms: Sequence[str]) -> np.ndarray:
 
 
 @numba.njit(cache=True, inline="always")
-def term_eval(code: int, x: float, v: float, u: float, eps: float) -> tuple[float, float, float]:
-    """phi, dphi/dx, dphi/dv of one term at the state (x, v) and input u."""
+def term_eval(code: int, x: float, v: float, u: float, eps: float) -> tuple[float, float, float, float]:
+    """phi, dphi/dx, dphi/dv, dphi/du of one term at the state (x, v) and input u."""
     if code == 0:
-        return v, 0.0, 1.0
+        return v, 0.0, 1.0, 0.0
     if code == 1:
-        return abs(v) * v, 0.0, 2.0 * abs(v)
+        return abs(v) * v, 0.0, 2.0 * abs(v), 0.0
     if code == 2:
-        return v * v * v, 0.0, 3.0 * v * v
+        return v * v * v, 0.0, 3.0 * v * v, 0.0
     if code == 3:
-        return x, 1.0, 0.0
+        return x, 1.0, 0.0, 0.0
     if code == 4:
-        return x * x, 2.0 * x, 0.0
+        return x * x, 2.0 * x, 0.0, 0.0
     if code == 5:
-        return x * x * x, 3.0 * x * x, 0.0
+        return x * x * x, 3.0 * x * x, 0.0, 0.0
     s = math.sin(x)
     if code == 6:
-        return s, math.cos(x), 0.0
+        return s, math.cos(x), 0.0, 0.0
     if code == 7:
-        return s * s, 2.0 * s * math.cos(x), 0.0
+        return s * s, 2.0 * s * math.cos(x), 0.0, 0.0
     if code == 8:
-        return s * s * s, 3.0 * s * s * math.cos(x), 0.0
+        return s * s * s, 3.0 * s * s * math.cos(x), 0.0, 0.0
     if code == 9:
         th = math.tanh(v / eps)
-        return th, 0.0, (1.0 - th * th) / eps
+        return th, 0.0, (1.0 - th * th) / eps, 0.0
     if code == 10:
-        return u, 0.0, 0.0
-    return math.nan, math.nan, math.nan
+        return u, 0.0, 0.0, 1.0
+    return math.nan, math.nan, math.nan, math.nan
 
 
 @numba.njit(cache=True)
@@ -73,46 +75,60 @@ def term_matrix(codes: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray, 
 @numba.njit(cache=True)
 def acceleration_partials(
     codes: np.ndarray, theta: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray, eps: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """x'' and its partials in x, x' and theta at every sample: what a lagged observation needs."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """x'' and its partials in x, x', u and theta at every sample: what a lagged observation needs."""
     n = x.size
     acc = np.zeros(n)
     acc_x = np.zeros(n)
     acc_v = np.zeros(n)
+    acc_u = np.zeros(n)
     phi = np.empty((n, codes.size))
     for i in range(n):
         for j in range(codes.size):
-            value, dx, dv = term_eval(codes[j], x[i], v[i], u[i], eps)
+            value, dx, dv, du = term_eval(codes[j], x[i], v[i], u[i], eps)
             phi[i, j] = value
             acc[i] -= theta[j] * value
             acc_x[i] -= theta[j] * dx
             acc_v[i] -= theta[j] * dv
-    return acc, acc_x, acc_v, phi
+            acc_u[i] -= theta[j] * du
+    return acc, acc_x, acc_v, acc_u, phi
 
 
 @numba.njit(cache=True, inline="always")
-def _deriv(z: np.ndarray, dz: np.ndarray, theta: np.ndarray, codes: np.ndarray, u: float, eps: float) -> None:
-    """Time derivative of the state and its sensitivities (theta first, then x0, v0)."""
+def _deriv(
+    z: np.ndarray,
+    dz: np.ndarray,
+    theta: np.ndarray,
+    codes: np.ndarray,
+    u: float,
+    du_dp: np.ndarray,
+    eps: float,
+) -> None:
+    """Time derivative of the state and its sensitivities (theta, then x0, v0, then the input's)."""
     x = z[0]
     v = z[1]
     acc = 0.0
     ax = 0.0
     av = 0.0
+    au = 0.0
     n_theta = codes.size
     n_par = (z.size - 2) // 2
     for j in range(n_theta):
-        phi, phx, phv = term_eval(codes[j], x, v, u, eps)
+        phi, phx, phv, phu = term_eval(codes[j], x, v, u, eps)
         acc -= theta[j] * phi
         ax -= theta[j] * phx
         av -= theta[j] * phv
+        au -= theta[j] * phu
         dz[2 + 2 * j + 1] = -phi
+    for k in range(du_dp.size):
+        dz[3 + 2 * (n_theta + 2 + k)] = au * du_dp[k]
     dz[0] = v
     dz[1] = acc
     for p in range(n_par):
         sx = z[2 + 2 * p]
         sv = z[3 + 2 * p]
         dz[2 + 2 * p] = sv
-        forcing = dz[3 + 2 * p] if p < n_theta else 0.0
+        forcing = 0.0 if n_theta <= p < n_theta + 2 else dz[3 + 2 * p]
         dz[3 + 2 * p] = ax * sx + av * sv + forcing
 
 
@@ -135,19 +151,23 @@ def simulate_with_sensitivities(
     theta: np.ndarray,
     codes: np.ndarray,
     u: np.ndarray,
+    du_dp: np.ndarray,
     eps: float,
     n_sub: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
     """Angle, rate and their sensitivities at every t, integrating from (x0, v0) at t[0].
 
     Returns ``(x, v, sx, sv, ok)`` with ``sx[i, p] = dx(t_i)/dp`` for p over
-    theta then x0, v0. ``u`` is the exogenous input at the sample times, linear
-    inside a step. ``ok`` is False when the solution left any sane range (the
-    rest is then filled with the last finite values so an optimiser can back off).
+    theta, then x0, v0, then the m parameters of the input whose partials
+    ``du_dp`` (n, m) are given at the samples. ``u`` is the exogenous input at
+    the sample times, linear inside a step (and so are its partials). ``ok`` is
+    False when the solution left any sane range (the rest is then filled with
+    the last finite values so an optimiser can back off).
     """
     n = t.size
     n_theta = codes.size
-    n_par = n_theta + 2
+    n_in = du_dp.shape[1]
+    n_par = n_theta + 2 + n_in
     size = 2 + 2 * n_par
     z = np.zeros(size)
     z[0] = x0
@@ -159,6 +179,9 @@ def simulate_with_sensitivities(
     k3 = np.empty(size)
     k4 = np.empty(size)
     tmp = np.empty(size)
+    g0 = np.empty(n_in)
+    g_mid = np.empty(n_in)
+    g1 = np.empty(n_in)
     xs = np.empty(n)
     vs = np.empty(n)
     sx = np.empty((n, n_par))
@@ -170,16 +193,21 @@ def simulate_with_sensitivities(
             du = (u[i] - u[i - 1]) / n_sub
             for s in range(n_sub):
                 u0 = u[i - 1] + s * du
-                _deriv(z, k1, theta, codes, u0, eps)
+                for k in range(n_in):
+                    dg = (du_dp[i, k] - du_dp[i - 1, k]) / n_sub
+                    g0[k] = du_dp[i - 1, k] + s * dg
+                    g_mid[k] = g0[k] + 0.5 * dg
+                    g1[k] = g0[k] + dg
+                _deriv(z, k1, theta, codes, u0, g0, eps)
                 for m in range(size):
                     tmp[m] = z[m] + 0.5 * h * k1[m]
-                _deriv(tmp, k2, theta, codes, u0 + 0.5 * du, eps)
+                _deriv(tmp, k2, theta, codes, u0 + 0.5 * du, g_mid, eps)
                 for m in range(size):
                     tmp[m] = z[m] + 0.5 * h * k2[m]
-                _deriv(tmp, k3, theta, codes, u0 + 0.5 * du, eps)
+                _deriv(tmp, k3, theta, codes, u0 + 0.5 * du, g_mid, eps)
                 for m in range(size):
                     tmp[m] = z[m] + h * k3[m]
-                _deriv(tmp, k4, theta, codes, u0 + du, eps)
+                _deriv(tmp, k4, theta, codes, u0 + du, g1, eps)
                 for m in range(size):
                     z[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
             ok = _sane(z)

@@ -22,12 +22,14 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import IdentificationError
 from ..records import DecayRun
 from . import kernels
+from .base import EstimatorMixin
 from .output_error import OutputError
 from .signals import band_crossings, white_noise_level
 
@@ -50,7 +52,7 @@ class OnlineResult:
     elapsed_s: float
 
 
-class OnlineIdentifier:
+class OnlineIdentifier(EstimatorMixin):
     """Feed samples with ``update``; a refit is published at every new half-cycle.
 
     ``min_half_cycles``: how many complete half-cycles before the first fit (the
@@ -69,7 +71,7 @@ class OnlineIdentifier:
         horizon_s: float = 0.0,
         axis: str = "roll",
         check_interval_s: float = 0.05,
-        **estimator_settings: object,
+        **estimator_settings: Any,
     ) -> None:
         self.terms = terms
         self.callback = callback
@@ -278,11 +280,11 @@ class BackgroundFit:
                 self._wake.notify_all()
 
     def _update(self, pending: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]) -> None:
-        rates = [rate for _, _, rate in pending]
+        rates = [rate for _, _, rate in pending if rate is not None]
         result = self.identifier.update(
             np.concatenate([t for t, _, _ in pending]),
             np.concatenate([angle for _, angle, _ in pending]),
-            None if any(rate is None for rate in rates) else np.concatenate(rates),
+            np.concatenate(rates) if len(rates) == len(pending) else None,
         )
         if result is not None:
             with self._wake:

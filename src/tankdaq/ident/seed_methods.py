@@ -30,6 +30,7 @@ from ..errors import InputError
 from ..physics.models import MODEL_ALIASES
 from ..records import DecayRun
 from ..validation import equation_model
+from .base import EstimatorMixin
 from .equation_error import check_runs
 from .kernels import simulate, substeps, term_codes, term_matrix
 from .uncertainty import coefficient_warnings
@@ -253,7 +254,7 @@ class _Recorder(Callback):
             self.progress(algorithm.n_gen, self.total)
 
 
-class _SeedSearch:
+class _SeedSearch(EstimatorMixin):
     """Shared fit of GeneticSeed and SwarmSeed: the paper's box, a pymoo run, results as tankdaq terms.
 
     Settings: ``terms`` (term list or alias), ``paper`` (whose boxes and preset: ``seed000``,
@@ -284,8 +285,10 @@ class _SeedSearch:
         self.progress = progress
 
     def _resolved_settings(self, paper: str) -> GeneticSettings | SwarmSettings:
-        if isinstance(self.settings, self._settings_type):
-            return self.settings
+        settings = self.settings
+        preset = (GeneticSettings, SwarmSettings)
+        if isinstance(settings, preset) and isinstance(settings, self._settings_type):
+            return settings
         if self.settings is not None and not isinstance(self.settings, str):
             raise InputError(f"{type(self).__name__} takes {self._settings_type.__name__} or a preset name")
         name = self.settings or (paper if paper in self._presets else next(iter(self._presets)))

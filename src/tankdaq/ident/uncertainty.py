@@ -10,6 +10,7 @@ coefficients that trade off, residuals far from white (reference §5).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -26,9 +27,36 @@ CORRELATION_WARN = 0.95
 ACF1_WARN = 0.5
 
 
-def classic_covariance(jac_w: np.ndarray) -> np.ndarray:
-    """(J'J)^-1 for a Jacobian of residuals already divided by their noise levels."""
-    return np.linalg.pinv(jac_w.T @ jac_w)
+def classic_covariance(jac_w: np.ndarray, res_w: np.ndarray, n_free: int) -> np.ndarray:
+    """(J'J)^-1 s^2 for residuals already divided by their noise levels, s^2 = RSS / (n - k).
+
+    The noise levels need only be right relative to each other: their common
+    scale is estimated from the residual (about 1 when they were re-estimated).
+    """
+    scale = float(res_w @ res_w) / max(res_w.size - n_free, 1)
+    return np.linalg.pinv(jac_w.T @ jac_w) * scale
+
+
+def bic(residuals: Sequence[np.ndarray], n_params: int, sigmas: Sequence[float] | None = None) -> float:
+    """Bayesian information criterion -2 ln L + k ln n of Gaussian residual blocks (run and output).
+
+    The likelihood is the one the fit maximised: with ``sigmas`` (fixed noise
+    levels as weights) the blocks' variances are those levels times one unknown
+    common scale; without, every block has its own unknown variance. Either way
+    the unknown variances are profiled out, so fits of the same data compare
+    whatever their number of parameters.
+    """
+    sizes = np.array([r.size for r in residuals], dtype=float)
+    n = float(sizes.sum())
+    squares = np.array([float(r @ r) for r in residuals])
+    if sigmas is None:
+        variances = np.maximum(squares / sizes, 1e-300)
+        log_det = float(sizes @ np.log(variances))
+    else:
+        sig2 = np.square(np.asarray(sigmas, dtype=float))
+        scale = max(float(np.sum(squares / sig2)) / n, 1e-300)
+        log_det = float(sizes @ np.log(sig2)) + n * math.log(scale)
+    return log_det + n * (math.log(2 * math.pi) + 1) + n_params * math.log(n)
 
 
 ScoreBlocks = Sequence[tuple[list[np.ndarray], list[np.ndarray]]]
@@ -165,16 +193,37 @@ def correlation_from_covariance(cov: np.ndarray) -> np.ndarray:
     return np.clip(cov / np.outer(std, std), -1.0, 1.0)
 
 
+def autocorrelation(residual: np.ndarray, lags: int) -> np.ndarray:
+    """Sample autocorrelation of a residual about its mean at lags 1..``lags`` (zeros when it is flat)."""
+    r = np.asarray(residual, dtype=float) - np.mean(residual)
+    denom = float(r @ r)
+    if denom <= 0:
+        return np.zeros(lags)
+    return np.array([float(r[k:] @ r[:-k]) / denom for k in range(1, lags + 1)])
+
+
+def ljung_box(residuals: Sequence[np.ndarray], lags: int = 20) -> float:
+    """Ljung-Box p of 'no autocorrelation up to ``lags``', Q summed over independent series (runs).
+
+    A short series is tested up to a fifth of its length; chi-square with the
+    lags summed over series as degrees of freedom.
+    """
+    q_total = 0.0
+    dof = 0
+    for e in residuals:
+        n = e.size
+        h = min(lags, n // 5)
+        if h < 1:
+            continue
+        acf = autocorrelation(e, h)
+        q_total += n * (n + 2) * float(np.sum(acf**2 / (n - np.arange(1, h + 1))))
+        dof += h
+    return float(special.chdtrc(max(dof, 1), q_total))  # chi-square survival function
+
+
 def residual_whiteness(residual: np.ndarray, lags: int = 20) -> tuple[float, float]:
     """Lag-1 autocorrelation and the Ljung-Box p-value over ``lags`` lags."""
-    r = residual - residual.mean()
-    denom = float(r @ r)
-    if denom <= 0 or r.size <= lags + 1:
-        return 0.0, 1.0
-    acf = np.array([float(r[k:] @ r[:-k]) / denom for k in range(1, lags + 1)])
-    n = r.size
-    q = n * (n + 2) * np.sum(acf**2 / (n - np.arange(1, lags + 1)))
-    return float(acf[0]), float(special.chdtrc(lags, q))  # chi-square survival function
+    return float(autocorrelation(residual, 1)[0]), ljung_box([residual], lags)
 
 
 def coefficient_warnings(
@@ -262,8 +311,7 @@ def moving_block_bootstrap(
             replicas.append(
                 DecayRun(t=run.t, angle=angle, rate=rate, axis=run.axis, name=run.name, channels=run.channels)
             )
-        clone = estimator.clone()
-        clone.compute_diagnostics = False
+        clone = estimator.clone(compute_diagnostics=False)
         clone.fit(replicas, start=estimator)
         samples.append([clone.coefficients_[k] for k in estimator.terms_])
         if progress is not None:
@@ -306,8 +354,9 @@ def fit_with_intervals(
     work are refused before any fit (``method`` names the estimator in the message).
     """
     from ..errors import InputError
+    from .output_error import OutputError  # it imports this module
 
-    if bootstrap and not hasattr(estimator, "clone"):
+    if bootstrap and not isinstance(estimator, OutputError):  # it resamples the output-error residuals
         raise InputError(f"--bootstrap works with --method oe, not {method}")
     if repeats_of is not None and (bootstrap or len(runs) < 3):
         raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")

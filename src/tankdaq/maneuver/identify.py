@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import BadIdentificationInput, InputError
+from ..ident.base import EstimatorMixin
 from .model import STATE_COLUMNS, StateRecord
 from .vehicle import TERM_BY_NAME, VISCOUS_TERMS, Vehicle
 
@@ -169,7 +170,7 @@ def _with_intercept(X: np.ndarray) -> np.ndarray:
     return np.column_stack([np.ones(X.shape[0]), X])
 
 
-class LeastSquaresRegressor:
+class LeastSquaresRegressor(EstimatorMixin):
     """Ordinary least squares with intercept; ``std_`` from s^2 (X^T X)^-1 (intercept first in ``cov_``)."""
 
     def fit(self, X: np.ndarray, y: np.ndarray) -> LeastSquaresRegressor:
@@ -194,7 +195,7 @@ def _ridge_solve(X: np.ndarray, y: np.ndarray, gamma: float) -> tuple[float, np.
     return float(y_mean - x_mean @ w), w
 
 
-class LSSVMRegressor:
+class LSSVMRegressor(EstimatorMixin):
     """LS-SVM regression with a linear kernel; gamma chosen on held-out data.
 
     ``gammas``: the candidates (a single value fixes gamma). Held-out data: ``fit(..., validation=(X, y))``
@@ -263,7 +264,7 @@ class EquationFit:
     n_samples: int
 
 
-class SeparateIdentifier:
+class SeparateIdentifier(EstimatorMixin):
     """Identify the viscous derivatives one equation at a time (seed 003's separate identification).
 
     Settings: the vehicle (known mass, inertia, hydrostatics, added mass and the model's term set),
@@ -296,6 +297,7 @@ class SeparateIdentifier:
         self.bias_std_: dict[str, float] = {}
         self.equations_: dict[str, EquationFit] = {}
         for eq, reg in regressions.items():
+            estimator: LSSVMRegressor | LeastSquaresRegressor
             if self.method == "lssvm":
                 estimator = LSSVMRegressor().fit(
                     reg.X, reg.y, (held_out[eq].X, held_out[eq].y) if held_out is not None else None)

@@ -202,7 +202,8 @@ class DecayScenario:
     Each run lasts ``release_after_s + decay_s``: still water, a tilt to about ``angle_deg``
     (random sign), a hold with tremor, the release ``release_after_s`` (plus up to 10 ms) after
     the run starts, and a free decay by ``physics.decay`` that carries on into the next run's still water.
-    ``coefficients`` overrides the hull's model (``hull``/``draft`` then only label the data).
+    ``coefficients`` are the decay equation's terms the model follows (``hull``/``draft`` only label
+    the data); ``config.hull_scenario`` reads them from a hull's ``[simulation]`` part.
     """
 
     hull: str = "swath"
@@ -216,7 +217,7 @@ class DecayScenario:
     decay_s: float = 25.0
     handling: Handling = field(default_factory=Handling)
     noise: SensorNoise = field(default_factory=SensorNoise)
-    coefficients: dict[str, float] | None = None
+    coefficients: dict[str, float] = field(kw_only=True)
     start_ticks: int | None = None
     pushes_again: tuple[int, ...] = ()  # runs (from 0) in which the hand pushes the model again mid-decay
 
@@ -235,10 +236,6 @@ class DecayScenario:
             )
         if self.decay_s <= 0:
             raise InputError("decay time must be positive")
-        if self.coefficients is None:
-            from ..config import load_hull
-
-            self.coefficients = load_hull(self.hull).simulation_model(self.axis).coefficients(self.draft)
         if self.start_ticks is None:
             self.start_ticks = int(np.random.default_rng([self.seed, 1]).integers(0, TICK_MODULUS // 2))
 
@@ -257,7 +254,7 @@ class DecayScenario:
         t = np.arange(n) / self.rate_hz
         x, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
         h = self.handling
-        coeffs = dict(self.coefficients or {})
+        coeffs = dict(self.coefficients)
         truths: list[RunTruth] = []
         tilt_starts = []
         hands = []

@@ -229,3 +229,19 @@ def parse_error(payload: bytes) -> tuple[int, str]:
     if not payload:
         raise ProtocolError("device error message without an error code")
     return payload[0], error_name(payload[0])
+
+
+def fw_rev_payload(text: str) -> bytes:
+    """The FWRev reply that ``parse_fw_rev`` reads as ``text`` ('2.4.6' or '1.8.2 build 35 scm 0')."""
+    match = re.fullmatch(r"(\d+)\.(\d+)\.(\d+)(?: build (\d+) scm (\d+))?", text.strip())
+    if match is None:
+        raise ProtocolError(f"firmware revision {text!r} is not 'major.minor.rev [build B scm S]'")
+    major, minor, rev, build, scm = match.groups()
+    if build is None:
+        return bytes((int(major), int(minor), int(rev)))
+    return struct.pack(">3BII", int(major), int(minor), int(rev), int(build), int(scm))
+
+
+def device_id_payload(device_id: int, family_600: bool = False) -> bytes:
+    """The DeviceID reply: 8 bytes on a 600-series, 4 on the others (``parse_device_id`` reads both)."""
+    return device_id.to_bytes(8 if family_600 else 4, "big")

@@ -1,0 +1,129 @@
+"""What the simulated device sends: its output configuration, and samples encoded into messages.
+
+An MTi-G-710 sends MTData2 as SetOutputConfiguration asked (rates rounded down to a divisor of
+400 Hz, frames forced to ENU); the 2007-era MTi-G sends legacy MTData from OutputMode,
+OutputSettings and Period. ``Output`` holds whichever of the two is in force and turns sample
+rows into the frames that carry them, through the ``tankdaq.xsens`` encoders.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...physics.scenario import TICK_MODULUS, TICKS_PER_S
+from ...xsens.constants import MID
+from ...xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS
+from ...xsens.frame import build_frame
+from ...xsens.legacy import encode_mtdata
+from ...xsens.mtdata2 import FRAME_MASK, SPEC_BY_BASE, TYPE_MASK, encode_mtdata2, make_xdi
+from ..attitude import quaternion
+from ..legacy_output import LegacyOutput, sample_values
+
+#: Rates an MTi-G-710 can output: divisors of 400 Hz (the echo rounds a request down to one).
+DEVICE_RATES_HZ = (1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, 80, 100, 200, 400)
+MAX_RATE_HZ = 400
+#: Outputs the simulator can produce (a request for others is dropped from the echoed configuration).
+SUPPORTED_OUTPUTS = frozenset(
+    {"PacketCounter", "SampleTimeFine", "SampleTimeCoarse", "EulerAngles", "Quaternion", "RateOfTurn",
+     "Acceleration", "StatusWord", "StatusByte"}
+)  # fmt: skip
+
+
+@dataclass
+class OutputItem:
+    """One configured output: identifier and the frequency the device will really use (Hz)."""
+
+    xdi: int
+    hz: int  # MAX_FREQUENCY for outputs that ride along with every message
+
+    @property
+    def name(self) -> str:
+        return SPEC_BY_BASE[self.xdi & TYPE_MASK].name
+
+
+def effective_configuration(requested: list[tuple[int, int]]) -> list[OutputItem]:
+    """What the device makes of a requested configuration: unsupported outputs dropped, frames
+    forced to ENU, rates rounded down to a divisor of 400 Hz, per-message outputs at 0xFFFF."""
+    items: list[OutputItem] = []
+    for xdi, hz in requested:
+        spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
+        if spec is None or spec.name not in SUPPORTED_OUTPUTS:
+            continue
+        if spec.name in PER_MESSAGE_OUTPUTS:
+            items.append(OutputItem(xdi, MAX_FREQUENCY))
+            continue
+        rate = MAX_RATE_HZ if hz in (0, MAX_FREQUENCY) else max(r for r in DEVICE_RATES_HZ if r <= max(hz, 1))
+        items.append(OutputItem(xdi & ~FRAME_MASK, rate))
+    return items
+
+
+def default_configuration(rate_hz: int = 100) -> list[OutputItem]:
+    """MTi-G-710 factory-like default: counter, time, quaternion, status at 100 Hz."""
+    names = ("PacketCounter", "SampleTimeFine", "Quaternion", "StatusWord")
+    return effective_configuration([(make_xdi(n), rate_hz) for n in names])
+
+
+@dataclass
+class Output:
+    """The output settings in force: MTData2 items, or (``legacy``) the Mark III's legacy settings."""
+
+    legacy: bool = False
+    items: list[OutputItem] = field(default_factory=default_configuration)
+    legacy_mode: LegacyOutput = field(default_factory=LegacyOutput.default)
+
+    def restore_defaults(self) -> None:
+        self.items = default_configuration()
+        self.legacy_mode = LegacyOutput.default()
+
+    @property
+    def entries(self) -> list[tuple[int, int]]:
+        """(xdi, Hz) pairs, as an OutputConfiguration ack carries them."""
+        return [(item.xdi, item.hz) for item in self.items]
+
+    @property
+    def rate_hz(self) -> float:
+        """Messages per second: the fastest configured output (legacy: the period's rate)."""
+        if self.legacy:
+            return self.legacy_mode.rate_hz
+        rates = [item.hz for item in self.items if item.hz != MAX_FREQUENCY]
+        return float(max(rates) if rates else 100)
+
+    def encode(self, block: np.ndarray, indices: np.ndarray) -> list[bytes]:
+        """One frame per sample row (``indices`` on the device's sample grid pick the slower outputs)."""
+        if self.legacy:
+            mode, settings = self.legacy_mode.mode, self.legacy_mode.settings
+            return [build_frame(MID.MTDATA, encode_mtdata(sample_values(s), mode, settings)) for s in block]
+        rate = self.rate_hz
+        quats = None
+        frames = []
+        for row, (sample, k) in enumerate(zip(block, indices, strict=True)):
+            items: list[tuple[int, object]] = []
+            for item in self.items:
+                if item.hz != MAX_FREQUENCY and k % max(1, round(rate / item.hz)):
+                    continue
+                if item.name == "Quaternion" and quats is None:
+                    quats = quaternion(block["roll"], block["pitch"], block["yaw"])
+                items.append((item.xdi, _value(item.name, sample, None if quats is None else quats[row])))
+            frames.append(build_frame(MID.MTDATA2, encode_mtdata2(items)))
+        return frames
+
+
+def _value(name: str, sample: np.void, quaternion: np.ndarray | None) -> object:
+    """The MTData2 value of output ``name`` for one sample (Euler angles in degrees, as on the wire)."""
+    ticks = int(sample["ticks"])
+    values: dict[str, Callable[[], object]] = {
+        "PacketCounter": lambda: int(sample["counter"]),
+        "SampleTimeFine": lambda: ticks % TICK_MODULUS,
+        "SampleTimeCoarse": lambda: (ticks // TICKS_PER_S) & 0xFFFFFFFF,
+        "EulerAngles": lambda: tuple(math.degrees(float(sample[f])) for f in ("roll", "pitch", "yaw")),
+        "Quaternion": lambda: tuple(float(q) for q in quaternion),  # type: ignore[union-attr]
+        "RateOfTurn": lambda: tuple(float(sample[f]) for f in ("p", "q", "r")),
+        "Acceleration": lambda: tuple(float(sample[f]) for f in ("ax", "ay", "az")),
+        "StatusWord": lambda: int(sample["status"]),
+        "StatusByte": lambda: int(sample["status"]) & 0xFF,
+    }
+    return values[name]()

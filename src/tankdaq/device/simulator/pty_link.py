@@ -1,0 +1,204 @@
+"""The simulated device's cable: a pseudo-terminal the driver opens by path, like a USB serial port.
+
+The link owns the master side of a pty (raw mode, slave kept open so reads never hit EIO) and
+a temporary folder ``/tmp/tankdaq-sim-<random>`` (with ``owner.pid``) holding a stable symlink to
+the pty and, like udev's ``/dev/serial/by-id``, a ``usb-Xsens_<product>_<serial>-if00-port0``
+link, named in ``TANKDAQ_SERIAL_BY_ID`` while the link exists. Unplugging closes the pty (its
+path and links vanish); plugging back opens a new pty under a new ``/dev/pts`` name behind the
+same links. The pty has no speed: the slave's termios speed is what the host set, and bytes are
+paced to the device's baud rate here; at the wrong speed the host reads garbage.
+
+The folder goes on every exit path (``remove``, interpreter exit); one left by ``kill -9`` is
+swept by the next link made (its owner process is dead).
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import errno
+import os
+import pty
+import shutil
+import tempfile
+import termios
+import time
+import tty
+from pathlib import Path
+
+import numpy as np
+
+from ..ports import BY_ID_ENV
+
+#: Temporary folders of simulators: ``tankdaq-sim-<random>`` holding ``owner.pid``.
+TEMP_PREFIX = "tankdaq-sim-"
+OWNER_FILE = "owner.pid"
+#: A device's output buffer: beyond it, data is lost (as on a link that is too slow).
+OUTBOX_LIMIT = 1 << 18
+
+
+class PtyLink:
+    """A pty behind a stable link and a by-id link; ``port`` is the current /dev/pts/N ("" unplugged)."""
+
+    def __init__(self, by_id_name: str, link: str | Path | None = None, seed: int = 0) -> None:
+        self._by_id_name = by_id_name
+        self.link = str(link) if link else ""  # a temporary one is made by ``create``
+        self.by_id_dir = ""
+        self._by_id_link = ""
+        self._own_dir: str | None = None
+        self.port = ""
+        self._last_port = ""
+        self.master = -1
+        self._slave = -1
+        self._budget = 0.0
+        self._budget_at = 0.0
+        self._rng = np.random.default_rng([seed, 98])
+        self.bytes_overflowed = 0
+
+    def create(self) -> None:
+        """Make the folder and its by-id entry (the pty itself opens with ``plug``)."""
+        sweep_stale_folders()
+        self._own_dir = tempfile.mkdtemp(prefix=TEMP_PREFIX)
+        atexit.register(self.remove)
+        Path(self._own_dir, OWNER_FILE).write_text(f"{os.getpid()}\n")
+        self.by_id_dir = os.path.join(self._own_dir, "by-id")
+        os.mkdir(self.by_id_dir)
+        self._by_id_link = os.path.join(self.by_id_dir, self._by_id_name)
+        _register_by_id(self.by_id_dir)
+        if not self.link:
+            self.link = os.path.join(self._own_dir, "ttyMTi0")
+
+    def remove(self) -> None:
+        """Unplug and remove the folder (links, by-id, owner file); also runs at interpreter exit."""
+        self.unplug()
+        if self._own_dir:
+            _unregister_by_id(self.by_id_dir)
+            shutil.rmtree(self._own_dir, ignore_errors=True)
+            atexit.unregister(self.remove)
+            self._own_dir = None
+
+    @property
+    def plugged(self) -> bool:
+        return self.master >= 0
+
+    def plug(self) -> None:
+        """Open a pty (a re-plugged device comes back under a new name) and point the links at it."""
+        if self.master >= 0:
+            return
+        master, slave = pty.openpty()
+        if os.ttyname(slave) == self._last_port:
+            held = (master, slave)
+            master, slave = pty.openpty()
+            for fd in held:
+                os.close(fd)
+        tty.setraw(slave)  # a cooked slave would echo and mangle the binary stream
+        os.set_blocking(master, False)
+        self.master, self._slave = master, slave
+        self.port = self._last_port = os.ttyname(slave)
+        for link in (self.link, self._by_id_link):
+            tmp = f"{link}.new"
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+            os.symlink(self.port, tmp)
+            os.replace(tmp, link)
+        self.restart_pacing()
+
+    def unplug(self) -> None:
+        """Close the pty; its path and the links vanish."""
+        for link in (self.link, self._by_id_link):
+            if link:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(link)
+        for fd in (self.master, self._slave):
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self.master = self._slave = -1
+
+    def speed_matches(self, baud: int) -> bool:
+        """True when the host set the pty to ``baud`` (pty speeds are only labels)."""
+        if self._slave < 0:
+            return False
+        speed = termios.tcgetattr(self._slave)[5]
+        wanted = getattr(termios, f"B{baud}", None)
+        return wanted is None or speed == wanted
+
+    def read(self) -> bytes:
+        """What the host wrote (b"" when nothing is waiting)."""
+        try:
+            return os.read(self.master, 4096)
+        except OSError as exc:
+            if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):
+                return b""
+            raise
+
+    def restart_pacing(self) -> None:
+        """A device that boots starts with an empty line."""
+        self._budget, self._budget_at = 0.0, time.monotonic()
+
+    def send(self, outbox: bytearray, baud: int, speed: float) -> None:
+        """Write from ``outbox`` what ``baud`` carries since the last write (``speed``: device clock
+        speed-up); bytes beyond the device's buffer are lost, at the wrong line speed they are garbage."""
+        if len(outbox) > OUTBOX_LIMIT:
+            excess = len(outbox) - OUTBOX_LIMIT
+            del outbox[:excess]
+            self.bytes_overflowed += excess
+        if not outbox or self.master < 0:
+            return
+        now = time.monotonic()
+        bytes_per_s = baud / 10 * speed
+        self._budget = min(self._budget + (now - self._budget_at) * bytes_per_s, max(bytes_per_s * 0.05, 256))
+        self._budget_at = now
+        n = min(len(outbox), int(self._budget))
+        if n <= 0:
+            return
+        chunk = bytes(outbox[:n])
+        if not self.speed_matches(baud):  # read at the wrong baud rate, every byte comes out garbled
+            chunk = self._rng.integers(0, 256, n, dtype=np.uint8).tobytes()
+        try:
+            written = os.write(self.master, chunk)
+        except OSError:
+            return  # nobody reads (or the pty went away): keep the bytes, the buffer limit applies
+        del outbox[:written]
+        self._budget -= written
+
+
+def _register_by_id(folder: str) -> None:
+    """Name ``folder`` in ``TANKDAQ_SERIAL_BY_ID`` so this process's port finder sees the device."""
+    dirs = [d for d in os.environ.get(BY_ID_ENV, "").split(os.pathsep) if d]
+    os.environ[BY_ID_ENV] = os.pathsep.join([*dirs, folder])
+
+
+def _unregister_by_id(folder: str) -> None:
+    dirs = [d for d in os.environ.get(BY_ID_ENV, "").split(os.pathsep) if d and d != folder]
+    if dirs:
+        os.environ[BY_ID_ENV] = os.pathsep.join(dirs)
+    else:
+        os.environ.pop(BY_ID_ENV, None)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def sweep_stale_folders(root: str | None = None) -> list[Path]:
+    """Remove simulator folders whose owner process is dead (a kill -9 leaves them); returns them.
+
+    Folders without an owner file are left alone (they may be being created right now).
+    """
+    removed = []
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{TEMP_PREFIX}*"):
+        try:
+            pid = int((folder / OWNER_FILE).read_text())
+        except (OSError, ValueError):
+            continue
+        if not _pid_alive(pid):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
