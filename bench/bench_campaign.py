@@ -3,8 +3,10 @@
 Run: .venv/bin/python bench/bench_campaign.py   (about a minute). Prints, for the whole pipeline (read,
 fit, report with plots): wall and CPU time (this process and its reaped workers) serially in one process,
 on a process pool of 1, 2 and N workers, on a local Dask cluster of 1, 2 and N worker processes, and the
-``tankdaq campaign --report`` command end to end (process start and imports included) with --jobs 1 and N.
-On a machine shared with other jobs wall time measures the neighbours too; the CPU column does not.
+``tankdaq campaign --report`` command end to end (process start and imports included) with --jobs 1 and N,
+and beside it the same command of an earlier commit when BASELINE_SRC names its src/ folder
+(``git archive COMMIT src | tar -x -C /tmp/base``; BASELINE_SRC=/tmp/base/src). On a machine shared with
+other jobs wall time measures the neighbours too; the CPU column does not.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -29,14 +32,17 @@ from tankdaq.ident.campaign import (
     group_runs,
     identify_groups,
     read_campaign_runs,
-    write_report,
     write_simulated_campaign,
 )
+from tankdaq.viz.campaign_report import load_plotting, write_report
 
 HULLS = ("trimaran", "catamaran", "swath")
 DRAFTS = (0.9, 1.0, 1.1)
 ANGLES_DEG = (2.0, 4.0, 6.0, 8.0)
 CORES = os.cpu_count() or 1
+REPEATS = 3
+#: ``tankdaq`` of whichever tankdaq PYTHONPATH gives (the venv's console script ignores it).
+TANKDAQ = [sys.executable, "-c", "from tankdaq.cli import main; main()"]
 
 
 def cpu_s() -> float:
@@ -89,22 +95,41 @@ def main() -> None:
                         report,
                         lambda a=address: campaign_executor(scheduler=a),
                     )
-        tankdaq = Path(sys.executable).with_name("tankdaq")
-        for jobs in sorted({1, CORES}):
+        command_lines(folder, Path(tmp) / "cli-report")
+
+
+def command_lines(folder: Path, report: Path) -> None:
+    """``tankdaq campaign --report`` end to end (process start and imports included), --jobs 1 and N,
+    REPEATS times interleaved; with BASELINE_SRC (a ``git archive`` of an earlier commit's src/) the
+    same command lines of that code beside them, in the same run."""
+    trees = [("this tree", os.environ.get("PYTHONPATH"))]
+    if os.environ.get("BASELINE_SRC"):
+        trees.append(("baseline", os.environ["BASELINE_SRC"]))
+    lines = [(tree, path, jobs) for tree, path in trees for jobs in sorted({1, CORES})]
+    walls: dict[int, list[float]] = {i: [] for i in range(len(lines))}
+    cpus: dict[int, list[float]] = {i: [] for i in range(len(lines))}
+    for _ in range(REPEATS):
+        for i, (_, path, jobs) in enumerate(lines):
+            env = {**os.environ, "PYTHONPATH": path} if path else dict(os.environ)
             wall, cpu = time.perf_counter(), cpu_s()
             subprocess.run(
-                [tankdaq, "campaign", folder, "--report", report, "--jobs", str(jobs)],
+                [*TANKDAQ, "campaign", folder, "--report", report, "--jobs", str(jobs)],
                 check=True,
                 capture_output=True,
+                env=env,
             )
-            wall, cpu = time.perf_counter() - wall, cpu_s() - cpu
-            print(
-                f"tankdaq campaign --jobs {jobs:<4} {wall:6.2f} s wall {cpu:6.2f} s CPU (with process start)"
-            )
+            walls[i].append(time.perf_counter() - wall)
+            cpus[i].append(cpu_s() - cpu)
+    for i, (tree, _, jobs) in enumerate(lines):
+        wall, cpu = statistics.median(walls[i]), statistics.median(cpus[i])
+        print(
+            f"tankdaq campaign --jobs {jobs} ({tree}): median {wall:5.2f} s wall "
+            f"(best {min(walls[i]):5.2f}), {cpu:5.2f} s CPU, process start included"
+        )
 
 
 def _pool(jobs: int) -> Callable[[], AbstractContextManager]:
-    return lambda: campaign_executor(jobs)
+    return lambda: campaign_executor(jobs, prepare=[load_plotting])
 
 
 if __name__ == "__main__":

@@ -7,15 +7,18 @@ while it records decays with release detection, MCAP writing, live refits and no
 Replay: a 10-minute capture (a decay test every 35 s) is recorded into one MCAP, then
 ``replay_recording(speed=None)`` re-decodes, re-detects and re-identifies all of it (CPU time: the
 machine is shared), twice: the first run includes loading the compiled kernels. And the command
-``tankdaq replay`` of one 17 s decay end to end (process start and imports included).
+``tankdaq replay`` of one 17 s decay end to end (process start and imports included), beside the
+same command of an earlier commit when BASELINE_SRC names its src/ folder (``git archive COMMIT src``).
 
 Run: .venv/bin/python bench/bench_record.py [replay]   ("replay": skip the two 75 s CPU-share runs)
 """
 
 from __future__ import annotations
 
+import os
 import platform
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -31,14 +34,15 @@ from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import SimulatedMTi
 from tankdaq.store.writer import RecordingWriter
 
-TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
+#: ``tankdaq`` of whichever tankdaq PYTHONPATH gives (the venv's console script ignores it).
+TANKDAQ = [sys.executable, "-c", "from tankdaq.cli import main; main()"]
 
 
 def cpu_share(rate_hz: int, seconds: float, out: Path) -> tuple[float, int, int]:
     """Record for ``seconds`` of wall time against a real-time simulator in another process."""
     baud = 115200 if rate_hz <= 100 else 460800
     sim = subprocess.Popen(
-        [TANKDAQ, "simulate", "--rate", str(rate_hz), "--baud", str(baud), "--runs", "50", "--seed", "4"],
+        [*TANKDAQ, "simulate", "--rate", str(rate_hz), "--baud", str(baud), "--runs", "50", "--seed", "4"],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,
@@ -98,19 +102,33 @@ def ten_minute_file(folder: Path, seconds: float = 600.0, runs: int = 18) -> Pat
 
 
 def replay_command(path: Path, seconds: float) -> None:
-    """``tankdaq replay FILE --speed max --viewer none`` end to end, process start and imports included."""
-    for _ in range(3):
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        wall = time.perf_counter()
-        subprocess.run(
-            [TANKDAQ, "replay", path, "--speed", "max", "--viewer", "none"], check=True, capture_output=True
-        )
-        wall = time.perf_counter() - wall
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+    """``tankdaq replay FILE --speed max --viewer none`` end to end, process start and imports included,
+    5 times; with BASELINE_SRC (the src/ folder of a ``git archive`` of an earlier commit) that code's
+    command in turn with it, in the same run."""
+    trees = [("this tree", os.environ.get("PYTHONPATH"))]
+    if os.environ.get("BASELINE_SRC"):
+        trees.append(("baseline", os.environ["BASELINE_SRC"]))
+    cpus: dict[str, list[float]] = {tree: [] for tree, _ in trees}
+    walls: dict[str, list[float]] = {tree: [] for tree, _ in trees}
+    for _ in range(5):
+        for tree, src in trees:
+            env = {**os.environ, "PYTHONPATH": src} if src else dict(os.environ)
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            wall = time.perf_counter()
+            subprocess.run(
+                [*TANKDAQ, "replay", path, "--speed", "max", "--viewer", "none"],
+                check=True,
+                capture_output=True,
+                env=env,
+            )
+            walls[tree].append(time.perf_counter() - wall)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpus[tree].append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
+    for tree, _ in trees:
+        cpu, wall = statistics.median(cpus[tree]), statistics.median(walls[tree])
         print(
-            f"tankdaq replay of one {seconds:g} s decay: {cpu:.2f} s CPU = {seconds / cpu:.1f}x real time "
-            f"(wall {wall:.2f} s = {seconds / wall:.1f}x)"
+            f"tankdaq replay of one {seconds:g} s decay ({tree}): median {cpu:.2f} s CPU = "
+            f"{seconds / cpu:.1f}x real time (wall {wall:.2f} s = {seconds / wall:.1f}x)"
         )
 
 

@@ -26,11 +26,11 @@ from tankdaq.ident.campaign import (
     identify_groups,
     markdown_table,
     read_campaign_runs,
-    write_report,
     write_simulated_campaign,
 )
 from tankdaq.ident.derived import b_eq
 from tankdaq.records import DecayRun
+from tankdaq.viz.campaign_report import load_plotting, write_report
 
 HULLS = ("trimaran", "catamaran")
 DRAFTS = (0.9, 1.1)
@@ -107,7 +107,7 @@ def test_a_process_pool_gives_the_serial_results(
     """Reading, fits and plots spread over worker processes; tables and figures as from one process."""
     serial_files = write_report(csv_results, tmp_path / "serial")
     paths = find_recordings([csv_campaign])
-    with campaign_executor(jobs=2) as pool:
+    with campaign_executor(jobs=2, prepare=[load_plotting]) as pool:
         assert pool is not None
         runs = [run for found in pool.map(read_campaign_runs, paths) for run in found]
         results = identify_groups(group_runs(runs), executor=pool)

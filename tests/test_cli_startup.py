@@ -10,7 +10,10 @@ import json
 import subprocess
 import sys
 
-HEAVY = ("scipy", "numba", "matplotlib", "rerun", "pymoo", "distributed", "dask")
+HEAVY = ("scipy", "numba", "matplotlib", "rerun", "pymoo", "distributed", "dask", "mcap")
+#: Not heavy, but each was a tenth of a ``--help``: typer's pydantic coercion of an absent root
+#: ``--help`` (cli.app.OneLineUsageErrors), rich before the first line printed (cli.app.err_console).
+SLOW_TO_IMPORT = ("pydantic", "rich")
 
 PROBE = """
 import contextlib, io, json, sys
@@ -38,9 +41,38 @@ print(json.dumps({"commands": [" ".join(p) for p in paths], "loaded": loaded}))
 
 def test_help_of_every_command_imports_no_heavy_library() -> None:
     done = subprocess.run(
-        [sys.executable, "-c", PROBE, json.dumps(HEAVY)], capture_output=True, text=True, timeout=120
+        [sys.executable, "-c", PROBE, json.dumps(HEAVY + SLOW_TO_IMPORT)],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert done.returncode == 0, done.stderr
     found = json.loads(done.stdout.strip().splitlines()[-1])
     assert {"", "record", "replay", "campaign", "auv", "auv identify", "decode"} <= set(found["commands"])
     assert found["loaded"] == [], f"--help imported {found['loaded']}"
+
+
+def test_every_command_is_registered_by_the_module_named_for_it() -> None:
+    """``COMMAND_MODULES`` is what ``main`` imports for ``tankdaq COMMAND``: it must name the right module."""
+    from tankdaq.cli import COMMAND_MODULES, app
+
+    found = {info.name: info.callback.__module__ for info in app.registered_commands if info.callback}
+    for group in app.registered_groups:
+        (module,) = {
+            info.callback.__module__ for info in group.typer_instance.registered_commands if info.callback
+        }
+        found[group.name] = module
+    assert {name: module.rsplit(".", 1)[1] for name, module in found.items()} == COMMAND_MODULES
+
+
+def test_a_command_imports_only_its_own_module() -> None:
+    """``tankdaq replay --help`` through the console entry point: the record room only, and its help."""
+    probe = (
+        "import sys\nsys.argv = ['tankdaq', 'replay', '--help']\nfrom tankdaq.cli import main\n"
+        "try:\n    main()\nexcept SystemExit as exc:\n    assert exc.code in (0, None), exc.code\n"
+        "print(sorted(m for m in sys.modules if m.startswith('tankdaq.cli.')))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "Usage: tankdaq replay" in done.stdout
+    assert done.stdout.strip().splitlines()[-1] == "['tankdaq.cli.app', 'tankdaq.cli.record']"

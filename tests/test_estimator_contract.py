@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.release import ReleaseDetector
+from tankdaq.config import hull_scenario
 from tankdaq.diagnose.synthetic import make_decay_set
 from tankdaq.diagnose.workflow import Diagnoser
 from tankdaq.errors import NotFittedError
@@ -21,7 +22,6 @@ from tankdaq.ident.seed_methods import GeneticSeed, GeneticSettings, SwarmSeed, 
 from tankdaq.maneuver.identify import LeastSquaresRegressor, LSSVMRegressor, SeparateIdentifier
 from tankdaq.maneuver.model import simulate_zigzag
 from tankdaq.maneuver.vehicle import load_vehicle
-from tankdaq.physics.scenario import DecayScenario
 
 RUNS = make_decay_set([], seed=21, duration_s=8.0).runs
 RNG = np.random.default_rng(0)
@@ -65,7 +65,7 @@ CASES: list[tuple[type, dict[str, Any], Callable[[Any], object]]] = [
     (
         ReleaseDetector,
         {"axis": "roll", "settle_deg": 0.4},
-        lambda e: e.fit(DecayScenario(runs=1, seed=3, rate_hz=100).samples()[0]),
+        lambda e: e.fit(hull_scenario(runs=1, seed=3, rate_hz=100).samples()[0]),
     ),
     (Diagnoser, {"baseline": "b1,c1", "max_steps": 0}, lambda e: e.fit(RUNS)),
 ]

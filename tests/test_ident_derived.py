@@ -10,6 +10,7 @@ import pytest
 from tankdaq.ident.derived import (
     amplitude_table,
     b_eq,
+    b_eq_band,
     bertin_n_per_deg,
     damping_ratio,
     dimensional,
@@ -60,6 +61,19 @@ def test_delta_method_matches_monte_carlo_spread():
     draws = rng.multivariate_normal([0.2, 0.6, 14.0], cov, size=4000)
     values = [b_eq(dict(zip(c, d, strict=True)), math.radians(8.0)) for d in draws]
     assert point.b_eq_std == pytest.approx(np.std(values), rel=0.05)
+
+
+def test_b_eq_band_is_the_amplitude_tables_b_eq_at_every_amplitude():
+    """The report's band (one array pass) gives the table's B_eq and its delta-method spread."""
+    c = {"b1": 0.2, "b2": 0.6, "b3": 1.5, "c1": 14.0, "c3": -30.0, "s1": 0.5}
+    cov = np.diag([1e-4, 4e-3, 1e-2, 1e-2, 4.0, 1e-3])
+    cov[0, 1] = cov[1, 0] = -0.8 * math.sqrt(1e-4 * 4e-3)
+    amplitudes_deg = np.linspace(0.0, 25.0, 26)
+    values, std = b_eq_band(c, cov, amplitudes_deg)
+    table = amplitude_table(c, cov, amplitudes_deg)
+    np.testing.assert_allclose(values, [p.b_eq for p in table], rtol=1e-12)
+    np.testing.assert_allclose(std, [p.b_eq_std for p in table], rtol=1e-9)
+    assert std[10] > 0 and values[25] > values[1]
 
 
 def test_dimensional_inertia_from_displacement_and_gm():

@@ -861,8 +861,8 @@ def write_session_report(files: list[Path], folder: Path, model: str, hull: str)
         group_runs,
         identify_groups,
         read_campaign_runs,
-        write_report,
     )
+    from ..viz.campaign_report import write_report
 
     runs = [run for path in files for run in read_campaign_runs(path)]
     groups = group_runs(runs)

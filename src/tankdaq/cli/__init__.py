@@ -1,34 +1,67 @@
-"""Command-line interface: ``tankdaq <command>``; one module per room registers its commands."""
+"""Command-line interface: ``tankdaq <command>``; one module per room registers its commands.
+
+``tankdaq COMMAND ...`` imports only the module that registers COMMAND (``COMMAND_MODULES``): a command
+and its ``--help`` do not pay for the other rooms' modules nor typer's building of their parameters.
+``tankdaq --help``, an unknown command and ``from tankdaq.cli import app`` register every command.
+"""
 
 from __future__ import annotations
 
+import importlib
 import os
+import sys
+from typing import TYPE_CHECKING, Any
 
 # tankdaq's linear algebra is many small problems: BLAS threads only add start-up and contention
 # (a 0.4 ms QR took 38 ms on a loaded 2-core machine). Set before numpy is first imported.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-# each module registers its commands on ``app``; this order is the order of ``tankdaq --help``
-# isort: off
-from . import record  # noqa: F401  (record, replay, demo)
-from . import simulate  # noqa: F401
-from . import device  # noqa: F401  (device ports, info, reset, restore-defaults)
-from . import decode  # noqa: F401
-from . import store  # noqa: F401  (recover)
-from . import export  # noqa: F401
-from . import identify  # noqa: F401
-from . import campaign  # noqa: F401
-from . import session  # noqa: F401
-from . import diagnose  # noqa: F401
-from . import auv  # noqa: F401
-from . import hulls  # noqa: F401
-# isort: on
-from .app import app
+from .app import app as _app
+
+if TYPE_CHECKING:
+    import typer
+
+# ``app`` is served by ``__getattr__`` (every command registered); importing the submodule bound the name
+del app  # type: ignore[name-defined]  # noqa: F821
+
+#: The module that registers each command (a group counts as one), in the order of ``tankdaq --help``.
+COMMAND_MODULES = {
+    "record": "record",
+    "replay": "record",
+    "demo": "record",
+    "simulate": "simulate",
+    "device": "device",
+    "decode": "decode",
+    "recover": "store",
+    "export": "export",
+    "identify": "identify",
+    "campaign": "campaign",
+    "simulate-campaign": "campaign",
+    "session": "session",
+    "diagnose": "diagnose",
+    "auv": "auv",
+    "hulls": "hulls",
+}
+
+
+def registered_app(command: str | None = None) -> typer.Typer:
+    """The app with ``command``'s module imported, or every command module (None, or a name that no
+    module registers: click then lists the commands it knows)."""
+    module = COMMAND_MODULES.get(command or "")
+    for name in [module] if module else dict.fromkeys(COMMAND_MODULES.values()):
+        importlib.import_module(f"{__name__}.{name}")
+    return _app
+
+
+def __getattr__(name: str) -> Any:
+    if name == "app":
+        return registered_app()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def main() -> None:
-    """Console-script entry point."""
-    app()
+    """Console-script entry point: only the module of the command asked for is imported."""
+    registered_app(sys.argv[1] if len(sys.argv) > 1 else None)()
 
 
-__all__ = ["app", "main"]
+__all__ = ["COMMAND_MODULES", "app", "main", "registered_app"]

@@ -10,15 +10,19 @@ from __future__ import annotations
 import functools
 import sys
 from collections.abc import Callable, Iterable, Sequence
-from typing import Any, TypeVar
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-from typer.core import TyperGroup
+from typer import _click
+from typer.core import TyperGroup, TyperOption
 from typer.exceptions import TyperException
 
 from ..errors import TankdaqError
+
+if TYPE_CHECKING:  # rich is imported at the first line printed: it was a seventh of ``tankdaq --help``
+    from rich.console import Console
+    from rich.progress import Progress
 
 
 class OneLineUsageErrors(TyperGroup):
@@ -58,6 +62,23 @@ class OneLineUsageErrors(TyperGroup):
             sys.exit(1)
         sys.exit(code if isinstance(code, int) else 0)
 
+    def get_help_option(self, ctx: _click.Context) -> TyperOption | None:
+        return _absent_is_false(super().get_help_option(ctx))
+
+    def get_command(self, ctx: _click.Context, cmd_name: str) -> _click.Command | None:
+        command = super().get_command(ctx, cmd_name)
+        if command is not None:  # a sub-group (auv, device, hulls) is parsed before its command's --help
+            _absent_is_false(command.get_help_option(ctx))
+        return command
+
+
+def _absent_is_false(help_option: TyperOption | None) -> TyperOption | None:
+    """``--help`` not given reads as False, not None: typer 0.29 passes a None through a pydantic
+    TypeAdapter, and importing pydantic for that was 0.1 s of every ``tankdaq COMMAND --help``."""
+    if help_option is not None:
+        help_option.default = False
+    return help_option
+
 
 app = typer.Typer(
     cls=OneLineUsageErrors,
@@ -68,8 +89,31 @@ app = typer.Typer(
     help="tankdaq: record towing-tank decay tests from an Xsens MTi-G and identify damping and restoring.",
 )
 
+
+class _StderrConsole:
+    """rich's Console on stderr, made when first used (a command's first line, never for --help)."""
+
+    def __init__(self) -> None:
+        self._console: Console | None = None
+
+    def __getattr__(self, name: str) -> Any:
+        if self._console is None:
+            from rich.console import Console
+
+            self._console = Console(stderr=True)
+        return getattr(self._console, name)
+
+    def __enter__(self) -> Console:  # rich's Live holds its console with ``with``
+        return cast("Console", self.__getattr__("__enter__")())
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.__getattr__("__exit__")(exc_type, exc, tb)
+
+
 #: Progress bars and status lines go to stderr so stdout stays machine-readable.
-err_console = Console(stderr=True)
+err_console = cast("Console", _StderrConsole())
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -170,6 +214,8 @@ def root(
 def progress_bar() -> Progress:
     """The progress display every long command uses: on stderr (stdout stays machine-readable), transient
     (an error after it stays the one line printed), counting done/total with the elapsed time."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
     return Progress(
         TextColumn("{task.description}"),
         BarColumn(),

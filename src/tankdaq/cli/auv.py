@@ -10,16 +10,15 @@ from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 import typer
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from .. import validation
 from ..errors import InputError
-from ..maneuver.vehicle import Vehicle, list_vehicles, load_vehicle
 from .app import app, checked, err_console, handles_errors
 
 if TYPE_CHECKING:  # the maneuver models compile with numba: imported by the commands that run them
     from ..maneuver.model import StateRecord
     from ..maneuver.sensitivity import SensitivityResult
+    from ..maneuver.vehicle import Vehicle
 
 auv_app = typer.Typer(
     no_args_is_help=True,
@@ -54,6 +53,8 @@ def parse_noise(text: str) -> float:
 @contextmanager
 def _progress(description: str) -> Iterator[Callable[[int, int], None]]:
     """A rich progress bar on stderr, advanced by the callback it yields."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
     columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                TimeElapsedColumn())
     with Progress(*columns, console=err_console, transient=True) as bar:
@@ -73,6 +74,7 @@ def _check_method(method: str) -> None:
 def _vehicle_for(path: Path, record: StateRecord, name: str | None) -> Vehicle:
     """The vehicle named on the command line, else the one the record carries or names."""
     from ..maneuver.io import read_vehicle_attachment
+    from ..maneuver.vehicle import list_vehicles, load_vehicle
 
     if name:
         return load_vehicle(name)
@@ -125,6 +127,7 @@ def simulate_command(
     """Simulate a diving-plane manoeuvre with the vehicle's standard derivatives and write it."""
     from ..maneuver.io import write_record
     from ..maneuver.model import add_noise, simulate_zigzag
+    from ..maneuver.vehicle import load_vehicle
 
     if manoeuvre != "zigzag":
         raise InputError(f"--manoeuvre {manoeuvre!r} unknown; the only manoeuvre is zigzag")
@@ -218,6 +221,7 @@ def sensitivity_command(
 ) -> None:
     """Rank the derivatives by how much the zigzag changes when each is perturbed."""
     from ..maneuver.sensitivity import OUTPUTS
+    from ..maneuver.vehicle import load_vehicle
 
     vehicle = load_vehicle(vehicle_name)
     delta_rad, theta_rad = np.radians(delta_deg), np.radians(theta_deg)

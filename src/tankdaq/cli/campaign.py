@@ -73,7 +73,15 @@ def campaign_command(
     resolve_model(model)  # a typo fails before any file is read
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs)
-    with campaign_executor(jobs or os.cpu_count() or 1, scheduler) as pool, progress_bar() as progress:
+    prepare = []
+    if report is not None:
+        from ..viz.campaign_report import load_plotting, write_report
+
+        prepare.append(load_plotting)  # loaded before the pool forks: its workers draw the figures
+    with (
+        campaign_executor(jobs or os.cpu_count() or 1, scheduler, prepare) as pool,
+        progress_bar() as progress,
+    ):
         reading = progress.add_task("reading", total=len(paths))
 
         def advance_reading(path: Path) -> None:
@@ -97,8 +105,6 @@ def campaign_command(
         for result in failed:
             err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
         if report is not None:
-            from ..ident.campaign import write_report
-
             written = write_report(results, report, pool)
             err_console.print(f"wrote {len(written)} files to {report}", markup=False)
 

@@ -16,7 +16,6 @@ from typing import IO, TYPE_CHECKING, Annotated, cast
 
 import numpy as np
 import typer
-from rich.progress import Progress
 
 from ..errors import InputError, ProtocolError
 from ..validation import input_file, output_file
@@ -24,6 +23,8 @@ from ..xsens.constants import MID
 from .app import app, checked, err_console, handles_errors, progress_bar
 
 if TYPE_CHECKING:  # the decoders (and mcap) are imported by the command itself: --help stays quick
+    from rich.progress import Progress
+
     from ..xsens.batch import DecodedBlock
     from ..xsens.mtdata2 import MTData2Message
     from ..xsens.timebase import CounterTracker

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from ..config import Hull, find_hulls, format_draft, load_hull, user_hulls_dir, write_hull_template
 from .app import app, handles_errors
+
+if TYPE_CHECKING:  # the hull files are read by the commands: --help of every command skips config
+    from ..config import Hull
 
 hulls_app = typer.Typer(
     no_args_is_help=False,
@@ -23,6 +25,8 @@ def list_command(ctx: typer.Context) -> None:
     """List every hull found by name and where it came from (the user's folder shadows shipped ones)."""
     if ctx.invoked_subcommand is not None:
         return
+    from ..config import find_hulls, load_hull, user_hulls_dir
+
     typer.echo(f"user hull folder: {user_hulls_dir()} (set TANKDAQ_HULLS_DIR to move it)")
     for entry in find_hulls():
         hull = load_hull(str(entry.path))
@@ -43,6 +47,8 @@ def _particulars_line(hull: Hull) -> str:
 @handles_errors
 def show_command(name: Annotated[str, typer.Argument(help="Hull name or .toml path.")]) -> None:
     """Show one hull in full: origin, dimensions, GM and gyradius, simulation coefficients."""
+    from ..config import format_draft, load_hull
+
     hull = load_hull(name)
     typer.echo(f"{hull.name}: {hull.description}")
     typer.echo(f"  from {hull.origin}: {hull.path}")
@@ -64,4 +70,6 @@ def new_command(
     name: Annotated[str, typer.Argument(help="Name of the new hull (letters, digits, -).")],
 ) -> None:
     """Write a commented hull template to the user's hull folder and print its path."""
+    from ..config import write_hull_template
+
     typer.echo(str(write_hull_template(name)))

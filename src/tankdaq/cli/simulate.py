@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING
 import typer
 
 from .. import validation
-from ..config import format_draft, hull_scenario, load_hull
 from ..errors import InputError
 from .app import app, checked, err_console, handles_errors, parse_draft_option
 
@@ -74,6 +73,7 @@ def simulate_command(
     ),
 ) -> None:
     """Serve a simulated MTi-G on a pty; the first stdout line is the port to open."""
+    from ..config import format_draft, hull_scenario, load_hull
     from ..device.simulator import Behaviour, DeviceIdentity, Faults, ScriptedSource, SimulatedMTi
     from ..store.playback import recorded_device
 
@@ -139,6 +139,8 @@ def simulate_command(
 
 def _write_truth(path: Path, sim: SimulatedMTi, scenario: DecayScenario) -> None:
     """The truth file: every run's release (s from power-up, SampleTimeFine), initial state, model."""
+    from ..config import format_draft
+
     document = {
         "hull": scenario.hull,
         "draft": format_draft(scenario.draft),

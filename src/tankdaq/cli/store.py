@@ -6,7 +6,6 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
 
 from .. import validation
 from .app import app, checked, err_console, handles_errors
@@ -27,6 +26,8 @@ def recover_command(
     ] = None,
 ) -> None:
     """Rebuild a truncated recording. Exit 0: nothing lost; 3: damaged tail dropped; 1: nothing recovered."""
+    from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn
+
     from ..store.recover import recover
 
     columns = (TextColumn("recovering"), BarColumn(), DownloadColumn(), TimeRemainingColumn())

@@ -13,6 +13,7 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -52,18 +53,32 @@ def equivalent_frequency(coefficients: Mapping[str, float], amplitude: float) ->
     The first Fourier coefficient of r(phi_a cos a) over phi_a: for c3 x^3 it adds
     (3/4) c3 phi_a^2; the sine terms are integrated numerically. Even terms drop out.
     """
-    x = amplitude * _COS_ALPHA
+    if amplitude > 0:
+        k_eq = float(np.mean(_restoring(coefficients, amplitude * _COS_ALPHA) * _COS_ALPHA)) * 2.0 / amplitude
+    else:
+        k_eq = linear_stiffness(coefficients)
+    return math.sqrt(k_eq) if k_eq > 0 else math.nan
+
+
+def _equivalent_frequencies(coefficients: Mapping[str, float], amplitudes: np.ndarray) -> np.ndarray:
+    """``equivalent_frequency`` at many amplitudes (rad) in one pass, a row of the cycle per amplitude."""
+    moving = amplitudes > 0
+    k_eq = np.full(amplitudes.shape, linear_stiffness(coefficients))
+    x = amplitudes[moving, None] * _COS_ALPHA
+    k_eq[moving] = np.mean(_restoring(coefficients, x) * _COS_ALPHA, axis=1) * 2.0 / amplitudes[moving]
+    return np.sqrt(np.where(k_eq > 0, k_eq, np.nan))
+
+
+def _restoring(coefficients: Mapping[str, float], x: np.ndarray) -> np.ndarray:
+    """The restoring terms' r(x) at the angles ``x`` (any shape); even terms are left out (they drop
+    out of the describing function)."""
     restoring = coefficients.get("c1", 0.0) * x
     if "c3" in coefficients:  # an absent term adds exact zeros: skipping it changes nothing but the time
         restoring = restoring + coefficients["c3"] * x**3
     if "s1" in coefficients or "s3" in coefficients:
         sin_x = np.sin(x)
         restoring = restoring + coefficients.get("s1", 0.0) * sin_x + coefficients.get("s3", 0.0) * sin_x**3
-    if amplitude > 0:
-        k_eq = float(np.mean(restoring * _COS_ALPHA)) * 2.0 / amplitude
-    else:
-        k_eq = linear_stiffness(coefficients)
-    return math.sqrt(k_eq) if k_eq > 0 else math.nan
+    return restoring
 
 
 def b_eq(coefficients: Mapping[str, float], amplitude: float) -> float:
@@ -71,12 +86,33 @@ def b_eq(coefficients: Mapping[str, float], amplitude: float) -> float:
 
     Uses omega_E = omega_eq(phi_a); ``mu_eq = b_eq / 2``.
     """
-    omega = equivalent_frequency(coefficients, amplitude)
+    return _b_eq_at(coefficients, equivalent_frequency(coefficients, amplitude), amplitude)
+
+
+def _b_eqs(coefficients: Mapping[str, float], amplitudes: np.ndarray) -> np.ndarray:
+    """``b_eq`` at many amplitudes (rad) in one pass."""
+    return _b_eq_at(coefficients, _equivalent_frequencies(coefficients, amplitudes), amplitudes)
+
+
+def _b_eq_at(coefficients: Mapping[str, float], omega: Any, amplitude: Any) -> Any:
+    """ITTC eq. 15 / I at equivalent frequency ``omega`` and amplitude (floats, or arrays alike)."""
     return (
         coefficients.get("b1", 0.0)
         + 8.0 / (3.0 * math.pi) * omega * amplitude * coefficients.get("b2", 0.0)
         + 0.75 * (omega * amplitude) ** 2 * coefficients.get("b3", 0.0)
     )
+
+
+def b_eq_band(
+    coefficients: Mapping[str, float], covariance: np.ndarray, amplitudes_deg: Sequence[float] | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """B_eq (1/s) and its delta-method standard deviation at many amplitudes (deg): the ``b_eq`` and
+    ``b_eq_std`` of ``amplitude_table``, for a plotted band, in one array pass per coefficient step
+    instead of one describing function per amplitude and step (a report's band drew in 0.9 s)."""
+    amplitudes = np.radians(np.asarray(amplitudes_deg, dtype=float))
+    grad = _central_gradient(partial(_b_eqs, amplitudes=amplitudes), coefficients)
+    variance = np.einsum("pn,pq,qn->n", grad, covariance, grad)
+    return _b_eqs(coefficients, amplitudes), np.sqrt(np.maximum(variance, 0.0))
 
 
 def bertin_n_per_deg(coefficients: Mapping[str, float], amplitude: float) -> float:
@@ -92,18 +128,27 @@ def delta_method(
     fn: Callable[[Mapping[str, float]], float], coefficients: Mapping[str, float], covariance: np.ndarray
 ) -> float:
     """Standard deviation of fn(coefficients) from the coefficient covariance (central differences)."""
+    grad = _central_gradient(fn, coefficients)
+    return float(math.sqrt(max(grad @ covariance @ grad, 0.0)))
+
+
+def _central_gradient(
+    fn: Callable[[Mapping[str, float]], float | np.ndarray], coefficients: Mapping[str, float]
+) -> np.ndarray:
+    """d fn / d coefficient by central differences, one row per coefficient (fn may return an array)."""
     names = list(coefficients)
     values = np.array([coefficients[k] for k in names])
-    grad = np.empty(len(names))
+    rows = []
     for i, value in enumerate(values):
         step = 1e-6 * max(abs(value), 1e-3)
         up, down = values.copy(), values.copy()
         up[i] += step
         down[i] -= step
-        grad[i] = (fn(dict(zip(names, up, strict=True))) - fn(dict(zip(names, down, strict=True)))) / (
-            2 * step
+        rows.append(
+            (np.asarray(fn(dict(zip(names, up, strict=True)))) - fn(dict(zip(names, down, strict=True))))
+            / (2 * step)
         )
-    return float(math.sqrt(max(grad @ covariance @ grad, 0.0)))
+    return np.array(rows)
 
 
 @dataclass

@@ -28,18 +28,20 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Self
+from typing import TYPE_CHECKING, Self
 from urllib.parse import urlsplit
 
 import numpy as np
-import rerun as rr
-import rerun.blueprint as rrb
 
 from ..errors import InputError
 from ..physics.terms import TERM_TABLE
 from ..samples import AXIS_FIELDS
 from ..store.disk import RESERVE_BYTES, free_bytes, megabytes
 from ..store.schemas import interval_pairs
+
+if TYPE_CHECKING:  # rerun is imported where a view logs, not for --viewer none (0.6 s of start-up)
+    import rerun as rr
+    import rerun.blueprint as rrb
 
 APPLICATION_ID = "tankdaq"
 TIMELINE = "t"
@@ -213,6 +215,8 @@ class ViewFeed:
 
 def decay_blueprint(terms: Sequence[str] = ()) -> rrb.Blueprint:
     """Four plots a person reads without clicking, events underneath; side panels collapsed."""
+    import rerun.blueprint as rrb
+
     if terms:
         coefficients: rrb.Container | rrb.TimeSeriesView = rrb.Grid(
             *(rrb.TimeSeriesView(origin=f"/coefficients/{term}", name=term_title(term)) for term in terms),
@@ -278,6 +282,11 @@ class LiveView:
         self._origin = 0.0
         self._feed: ViewFeed | None = None  # started at the first job, ended by close()
         self._dropped_before = 0
+        if self.mode != "none":
+            # imported here, before a device opens, not by the view thread's first job in the middle
+            # of a decay; without a view rerun is never imported (0.6 s of a replay's start-up)
+            import rerun  # noqa: F401
+
         if self.mode == "spawn" and not display_available():
             self.on_note("no display (DISPLAY and WAYLAND_DISPLAY unset): no window; saving an .rrd instead")
             self.mode = "save"
@@ -449,6 +458,8 @@ class LiveView:
         return True
 
     def _sinks(self) -> list[rr.GrpcSink | rr.FileSink]:
+        import rerun as rr
+
         sinks: list[rr.GrpcSink | rr.FileSink] = []
         if self._streaming and self._live_url is not None:
             sinks.append(rr.GrpcSink(self._live_url))
@@ -467,6 +478,8 @@ class LiveView:
         return False
 
     def _open_run(self, name: str, rrd_path: Path | None, terms: Sequence[str], origin: float) -> None:
+        import rerun as rr
+
         self._end_run()
         self._viewer_gone()
         self._origin = origin
@@ -529,6 +542,8 @@ class LiveView:
         return rec
 
     def _columns(self, rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray) -> None:
+        import rerun as rr
+
         rec.send_columns(
             entity,
             indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float) - self._origin)],
@@ -554,6 +569,8 @@ class LiveView:
         ci95: Mapping[str, object],
         t_fit: float | None,
     ) -> None:
+        import rerun as rr
+
         rec = self._recording()
         if rec is None:
             return
@@ -606,6 +623,8 @@ class LiveView:
             rec.log(entity, rr.Scalars([float(value), low, high]))
 
     def _log_event(self, kind: str, message: str, t_s: float | None) -> None:
+        import rerun as rr
+
         rec = self._recording()
         if rec is None:
             return

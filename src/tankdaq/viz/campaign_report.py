@@ -1,0 +1,248 @@
+"""A campaign's report: its tables (``ident.campaign``) and its figures, one PNG each, drawn here.
+
+``ident.campaign`` returns data (group fits, tables); this module draws the seeds' figures and the
+ITTC ones from it. Each figure is one unit of work (``draw_plot``: groups in, PNG out), so a report's
+figures are drawn in parallel on the campaign's executor. Figures have fixed margins (no layout
+engine): constrained layout drew every figure twice, a layout pass and the real one, for 40 % of
+the report's time.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor
+from pathlib import Path
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+
+from ..config import format_draft
+from ..ident.campaign import GroupKey, GroupResult, executor_map, write_tables
+from ..ident.derived import b_eq_band, extinction_curve, natural_period
+from ..ident.output_error import OutputError
+from ..physics.terms import TERM_TABLE
+from .plots import report_style, save_png
+
+#: Margins in inches: room for the tick labels and axis label (left, bottom), the figure's title
+#: (top) and the panels' titles above their axes, and the tick labels between panels (gap).
+LEFT_IN, RIGHT_IN, BOTTOM_IN, TOP_IN, PANEL_TITLE_IN, GAP_IN = 0.8, 0.2, 0.55, 0.45, 0.25, 0.75
+PANEL_WIDTH_IN, HEIGHT_IN = 3.6, 3.2
+DPI = 110
+#: The figures with a panel per coefficient, which take longest to draw.
+MULTI_PANEL = ("coefficients", "hulls")
+
+
+def load_plotting() -> None:
+    """Import matplotlib's figure and Agg canvas now (``campaign_executor(prepare=...)``: before a
+    process pool forks, so its workers do not import them once each)."""
+    import matplotlib.backends.backend_agg  # noqa: F401  (loaded for the workers)
+
+
+def write_report(
+    results: Sequence[GroupResult], folder: Path, executor: Executor | None = None
+) -> list[Path]:
+    """campaign.csv, campaign.md and the PNG figures into ``folder`` (created); the files written.
+
+    ``executor`` (``ident.campaign.campaign_executor``) draws the figures in parallel.
+    """
+    fitted = [r for r in results if r.fit is not None]
+    return write_tables(results, folder) + write_plots(fitted, folder, executor)
+
+
+def write_plots(results: Sequence[GroupResult], folder: Path, executor: Executor | None = None) -> list[Path]:
+    """The seeds' figures and the ITTC ones, one PNG each, in tankdaq's report style (no display needed)."""
+    figures: list[tuple[str, list[GroupResult], str]] = []  # (plot, its groups, file name)
+    by_series: dict[tuple[str, str], list[GroupResult]] = defaultdict(list)
+    for result in results:
+        by_series[(result.key.hull, result.key.axis)].append(result)
+    for (hull, axis), series in sorted(by_series.items()):
+        figures.append(("coefficients", series, f"coefficients_{hull}_{axis}.png"))
+        figures.append(("b_eq", series, f"b_eq_{hull}_{axis}.png"))
+        figures.append(("extinction", series, f"extinction_{hull}_{axis}.png"))
+    for axis in sorted({r.key.axis for r in results}):
+        on_axis = [r for r in results if r.key.axis == axis]
+        figures.append(("period", on_axis, f"period_vs_draft_{axis}.png"))
+        shared = _shared_draft(on_axis)
+        if shared is not None:
+            compared = [r for r in on_axis if r.key.draft == shared]
+            figures.append(("hulls", compared, f"hulls_{axis}_{format_draft(shared)}.png"))
+    figures.sort(key=lambda figure: figure[0] not in MULTI_PANEL)  # the longest first: no long last one
+    plots = [plot for plot, _, _ in figures]
+    groups = [series for _, series, _ in figures]
+    paths = [folder / name for _, _, name in figures]
+    return list(executor_map(executor, draw_plot, plots, groups, paths))
+
+
+def draw_plot(plot: str, results: Sequence[GroupResult], path: Path) -> Path:
+    """Draw one report figure and save it as PNG (a unit of work: groups in, file out)."""
+    with report_style():
+        figure = _PLOTS[plot](results)
+    return save_png(figure, path, dpi=DPI)
+
+
+def _figure(ncols: int, title: str, panel_titles: bool = False) -> tuple[Figure, list[Axes]]:
+    width = PANEL_WIDTH_IN * ncols
+    top = TOP_IN + (PANEL_TITLE_IN if panel_titles else 0.0)
+    panel = (width - LEFT_IN - RIGHT_IN - GAP_IN * (ncols - 1)) / ncols
+    fig = Figure(figsize=(width, HEIGHT_IN))
+    fig.subplots_adjust(
+        left=LEFT_IN / width,
+        right=1.0 - RIGHT_IN / width,
+        bottom=BOTTOM_IN / HEIGHT_IN,
+        top=1.0 - top / HEIGHT_IN,
+        wspace=GAP_IN / panel,
+    )
+    axes = list(fig.subplots(1, ncols, squeeze=False)[0])
+    fig.suptitle(title)
+    return fig, axes
+
+
+def _fit(result: GroupResult) -> OutputError:
+    """The group's fit (the report draws fitted groups only)."""
+    if result.fit is None:
+        raise ValueError(f"{result.key.label} has no fit to draw")
+    return result.fit
+
+
+def _terms(results: Sequence[GroupResult]) -> list[str]:
+    return list(dict.fromkeys(t for r in results for t in _fit(r).terms_))
+
+
+def _errorbar_series(ax: Axes, points: Sequence[GroupResult], term: str, label: str) -> None:
+    points = sorted((r for r in points if term in _fit(r).coefficients_), key=lambda r: r.key.angle_deg)
+    ax.errorbar(
+        [r.key.angle_deg for r in points],
+        [_fit(r).coefficients_[term] for r in points],
+        yerr=[1.96 * _fit(r).std_[term] for r in points],
+        marker="o",
+        capsize=3,
+        label=label,
+    )
+
+
+def _plot_coefficients(series: Sequence[GroupResult]) -> Figure:
+    """Each coefficient against the initial angle, one line per draft (the seeds' Fig. 5), 95 % bars."""
+    first = series[0].key
+    title = f"{first.hull} {first.axis}: coefficients vs initial angle"
+    return _per_coefficient(series, title, lambda key: (key.draft, format_draft(key.draft)), "draft")
+
+
+def _plot_hulls(results: Sequence[GroupResult]) -> Figure:
+    """Hulls side by side at one draft: each coefficient against the initial angle (seed 000 Fig. 7)."""
+    key = results[0].key
+    title = f"{key.axis} at {format_draft(key.draft)}: hulls compared"
+    return _per_coefficient(results, title, lambda key: (key.hull, key.hull), None)
+
+
+def _per_coefficient(
+    results: Sequence[GroupResult],
+    title: str,
+    line_of: Callable[[GroupKey], tuple[float | str, str]],
+    legend_title: str | None,
+) -> Figure:
+    """A panel per coefficient against the initial angle, one line per ``line_of(key)`` (its sort key and
+    label), 95 % bars."""
+    terms = _terms(results)
+    fig, axes = _figure(len(terms), title, True)
+    lines = sorted({line_of(r.key) for r in results})
+    for ax, term in zip(axes, terms, strict=True):
+        for line in lines:
+            _errorbar_series(ax, [r for r in results if line_of(r.key) == line], term, line[1])
+        ax.set_xlabel("initial angle (deg)")
+        ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
+    axes[0].legend(title=legend_title)
+    return fig
+
+
+def _plot_b_eq(series: Sequence[GroupResult]) -> Figure:
+    """B_eq(phi_a) of each group's fit over 0 ... its initial angle with its 95 % band; colour by draft."""
+
+    def draw(ax: Axes, result: GroupResult, colour: str) -> None:
+        grid_deg = np.linspace(0.2, result.key.angle_deg, 25)
+        values, std = b_eq_band(_fit(result).coefficients_, _fit(result).covariance_, grid_deg)
+        ax.plot(grid_deg, values, color=colour, alpha=0.8)
+        ax.fill_between(grid_deg, values - 1.96 * std, values + 1.96 * std, color=colour, alpha=0.15)
+        ax.plot(grid_deg[-1], values[-1], "o", color=colour)
+
+    return _per_draft(series, "equivalent linear damping", draw, "amplitude (deg)", "B_eq / I (1/s)")
+
+
+def _plot_extinction(series: Sequence[GroupResult]) -> Figure:
+    """Measured decrement per half-cycle against mean amplitude, and each fit's curve (deg)."""
+
+    def draw(ax: Axes, result: GroupResult, colour: str) -> None:
+        curve = extinction_curve(result.runs, _fit(result).offsets_, _fit(result).coefficients_)
+        ax.plot(np.degrees(curve.mean_amplitude), np.degrees(curve.decrement), ".", color=colour, alpha=0.6)
+        ax.plot(np.degrees(curve.model_amplitude), np.degrees(curve.model_decrement), color=colour, alpha=0.8)
+
+    return _per_draft(
+        series,
+        "extinction curves",
+        draw,
+        "mean amplitude of successive peaks (deg)",
+        "decrement per half-cycle (deg)",
+    )
+
+
+def _per_draft(
+    series: Sequence[GroupResult],
+    title: str,
+    draw: Callable[[Axes, GroupResult, str], None],
+    xlabel: str,
+    ylabel: str,
+) -> Figure:
+    """One hull and axis in one panel: ``draw`` each group in its draft's colour, one legend entry a draft."""
+    first = series[0].key
+    fig, (ax,) = _figure(1, f"{first.hull} {first.axis}: {title}")
+    drafts = sorted({r.key.draft for r in series})
+    for result in series:
+        draw(ax, result, f"C{drafts.index(result.key.draft)}")
+    for i, draft in enumerate(drafts):
+        ax.plot([], [], color=f"C{i}", label=format_draft(draft))
+    ax.legend(title="draft")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    return fig
+
+
+def _plot_period(results: Sequence[GroupResult]) -> Figure:
+    """Natural period against draft, one line per hull (mean over initial angles, bars = spread)."""
+    fig, (ax,) = _figure(1, f"{results[0].key.axis}: natural period vs draft")
+    for hull in sorted({r.key.hull for r in results}):
+        drafts = sorted({r.key.draft for r in results if r.key.hull == hull})
+        periods = [
+            [natural_period(_fit(r).coefficients_) for r in results if (r.key.hull, r.key.draft) == (hull, d)]
+            for d in drafts
+        ]
+        ax.errorbar(
+            drafts,
+            [np.mean(p) for p in periods],
+            yerr=[np.ptp(p) / 2 for p in periods],
+            marker="o",
+            capsize=3,
+            label=hull,
+        )
+    ax.set_xlabel("draft / design draft")
+    ax.set_ylabel("natural period (s)")
+    ax.legend()
+    return fig
+
+
+_PLOTS: dict[str, Callable[[Sequence[GroupResult]], Figure]] = {
+    "coefficients": _plot_coefficients,
+    "b_eq": _plot_b_eq,
+    "extinction": _plot_extinction,
+    "period": _plot_period,
+    "hulls": _plot_hulls,
+}
+
+
+def _shared_draft(results: Sequence[GroupResult]) -> float | None:
+    """The draft nearest to T that two or more hulls were tested at (None when only one hull)."""
+    hulls_at: dict[float, set[str]] = defaultdict(set)
+    for r in results:
+        hulls_at[r.key.draft].add(r.key.hull)
+    shared = [d for d, hulls in hulls_at.items() if len(hulls) >= 2]
+    return min(shared, key=lambda d: abs(d - 1.0)) if shared else None
