@@ -19,6 +19,8 @@ demo: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench
+	$(BIN)/ruff format --check src tests bench
+	$(BIN)/mypy
 
 # The live-view window test runs the real viewer under Xvfb with Mesa's software Vulkan driver
 # (Debian packages). Installed where this machine allows (root and apt-get); otherwise say why:

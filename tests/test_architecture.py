@@ -1,0 +1,129 @@
+"""The layer order in docs/architecture.md holds in the code: checked by reading every import in src/.
+
+The table in the doc is the rule. Its rows are in layer order, and each row's "may import" column names
+the tankdaq parts and the third-party libraries that package may use.
+Imports inside functions count: a lazy import is still a dependency.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src" / "tankdaq"
+DOC = ROOT / "docs" / "architecture.md"
+
+#: Third-party distributions whose use is a design decision (the rest of site-packages never appears).
+THIRD_PARTY = {
+    "numpy": "numpy",
+    "scipy": "scipy",
+    "numba": "numba",
+    "mcap": "mcap",
+    "rerun": "rerun-sdk",
+    "matplotlib": "matplotlib",
+    "serial": "pyserial",
+    "typer": "typer",
+    "rich": "rich",
+    "pymoo": "pymoo",
+    "distributed": "dask",
+    "dask": "dask",
+}
+EVERYTHING = "everything"
+
+
+def layer_table() -> dict[str, set[str]]:
+    """``{part: allowed}`` in the doc's row order; part is "errors", "ident", ... (no "tankdaq." prefix)."""
+    rows: dict[str, set[str]] = {}
+    for line in DOC.read_text().splitlines():
+        match = re.match(r"\| `tankdaq\.([a-z_]+)` \|.*\| ([^|]*) \|$", line)
+        if match:
+            allowed = {name.strip() for name in match.group(2).split(",") if name.strip() not in ("", "—")}
+            rows[match.group(1)] = allowed
+    return rows
+
+
+def part_of(path: Path, root: Path = SRC) -> str:
+    relative = path.relative_to(root)
+    return relative.parts[0] if len(relative.parts) > 1 else relative.stem
+
+
+def imports_of(path: Path, root: Path = SRC) -> set[str]:
+    """Dotted names imported by one source file (relative imports resolved), lazy ones included."""
+    package = ["tankdaq", *path.relative_to(root).parent.parts]
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = package[: len(package) - node.level + 1] if node.level else []
+            module = ".".join([*base, node.module] if node.module else base)
+            names.add(module)
+            if node.module is None:  # from . import name: the name is a module
+                names.update(f"{module}.{alias.name}" for alias in node.names)
+    return names
+
+
+def dependencies(path: Path, root: Path = SRC) -> set[str]:
+    """What one file depends on, in the table's words: "ident", "store", "numpy", "rerun-sdk", ...
+
+    A name from ``tankdaq/__init__`` (``__version__``) is no dependency.
+    """
+    found: set[str] = set()
+    for name in imports_of(path, root):
+        parts = name.split(".")
+        if parts[0] == "tankdaq" and len(parts) > 1:
+            if (SRC / parts[1]).is_dir() or (SRC / f"{parts[1]}.py").is_file():
+                found.add(parts[1])
+        elif parts[0] in THIRD_PARTY:
+            found.add(THIRD_PARTY[parts[0]])
+    return found
+
+
+def allowed(dependency: str, own: str, rule: set[str]) -> bool:
+    """A package uses itself freely; ``everything`` is the command line's rule."""
+    return dependency == own or EVERYTHING in rule or dependency in rule
+
+
+def test_the_doc_table_is_a_layer_order() -> None:
+    """Each row may name only rows above it: the table itself has no cycle."""
+    table = layer_table()
+    assert {"errors", "xsens", "ident", "cli"} <= set(table), "the may-import table was not found in the doc"
+    seen: list[str] = []
+    for part, rule in table.items():
+        upward = sorted(name for name in rule if name in table and name not in seen)
+        assert not upward, f"tankdaq.{part} may import {upward}, which sit below it in the table"
+        seen.append(part)
+
+
+def test_every_part_of_src_has_a_row() -> None:
+    table = layer_table()
+    parts = {part_of(path) for path in SRC.rglob("*.py")} - {"__init__"}
+    assert parts <= set(table), f"no row in docs/architecture.md for {sorted(parts - set(table))}"
+
+
+@pytest.mark.parametrize("path", sorted(SRC.rglob("*.py")), ids=lambda p: str(p.relative_to(SRC)))
+def test_imports_follow_the_table(path: Path) -> None:
+    table = layer_table()
+    own = part_of(path)
+    if own == "__init__":
+        return
+    wrong = sorted(dep for dep in dependencies(path) if not allowed(dep, own, table[own]))
+    rule = sorted(table[own])
+    assert not wrong, (
+        f"{path.relative_to(ROOT)} imports {wrong}; docs/architecture.md lets tankdaq.{own} use {rule}"
+    )
+
+
+def test_the_check_sees_a_lazy_upward_import(tmp_path: Path) -> None:
+    """The analysis itself: imports inside a function, relative and absolute, are found and refused."""
+    probe = tmp_path / "xsens" / "probe.py"
+    probe.parent.mkdir()
+    probe.write_text("import struct\n\ndef f():\n    from ..ident import kernels\n    import numba\n")
+    found = dependencies(probe, root=tmp_path)
+    assert found == {"ident", "numba"}
+    refused = [dep for dep in sorted(found) if not allowed(dep, "xsens", {"errors", "numpy"})]
+    assert refused == ["ident", "numba"]
