@@ -7,6 +7,7 @@ so estimators and the discrepancy workflow never care where data came from.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,7 @@ class DecayRun:
     axis: str = "roll"
     name: str = "run"
     channels: dict[str, np.ndarray] = field(default_factory=dict)
-    meta: dict[str, object] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)  # free-form: JSON values from files and settings
 
     def __post_init__(self) -> None:
         self.t = np.asarray(self.t, dtype=float)

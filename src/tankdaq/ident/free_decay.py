@@ -289,7 +289,7 @@ def cut_free_decay(run: DecayRun, start_s: float | None = None, end_s: float | N
         found = find_free_end(run)
         stop, kind, reason = found.index, found.kind, found.reason
         if found.kind == "record" and "split" in run.meta:  # the reader ended it at the next release
-            kind, reason = run.meta["split"]  # type: ignore[misc]
+            kind, reason = run.meta["split"]
     if start_s is not None:
         reason += f"; --start {start_s:g} s"
     if stop - first < 20:
