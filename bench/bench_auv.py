@@ -100,8 +100,10 @@ def main() -> None:
     print(f"  {'first run (numba cache load or compile)':<45} {warm_up:8.3f} s")
     if cli is not None:
         wall, cpu = cli
-        print(f"  {'CLI: simulate + identify + sensitivity':<45} {wall:8.3f} s   wall, {cpu:.3f} s CPU "
-              "(3 processes, imports included)")
+        print(
+            f"  {'CLI: simulate + identify + sensitivity':<45} {wall:8.3f} s   wall, {cpu:.3f} s CPU "
+            "(3 processes, imports included)"
+        )
 
 
 if __name__ == "__main__":

@@ -113,8 +113,10 @@ def main() -> None:
     print(f"  per-message path: {per_message_s * 1e3:.0f} ms ({rate:,.0f} messages/s)")
     frames = block.frames if block is not None else 0
     kept = samples.size if samples is not None else 0
-    print(f"  stream path (SampleDecoder, {frames} frames, {kept} samples): crash {stream_crash}, "
-          f"{stream_s * 1e3:.1f} ms")
+    print(
+        f"  stream path (SampleDecoder, {frames} frames, {kept} samples): crash {stream_crash}, "
+        f"{stream_s * 1e3:.1f} ms"
+    )
 
 
 if __name__ == "__main__":

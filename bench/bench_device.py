@@ -33,7 +33,8 @@ def hard_connects() -> None:
         "stuck until Reset, 1.7 s boot": ({"behaviour": Behaviour(stuck=True, boot_s=1.7)}, {}),
         "move 115200 -> 921600 (SetBaudrate)": ({}, {"baud": 921600, "rate_hz": 400}),
         "move 115200 -> 921600 (600-series PortConfig)": (
-            {"identity": DeviceIdentity.mti_630()}, {"baud": 921600, "rate_hz": 400}
+            {"identity": DeviceIdentity.mti_630()},
+            {"baud": 921600, "rate_hz": 400},
         ),
         "found at 460800 by the search": ({"baud": 460800}, {}),
     }

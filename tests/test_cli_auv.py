@@ -32,8 +32,23 @@ def assert_one_line_error(result, *fragments: str) -> None:
 def records(tmp_path_factory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("auv")
     paths = {"train": folder / "train.mcap", "test": folder / "heldout.csv"}
-    result = run("simulate", "--vehicle", "nps_auv2", "--manoeuvre", "zigzag", "--delta", "15",
-                 "--theta", "10", "--noise", "realistic", "--seed", "7", "--out", str(paths["train"]))
+    result = run(
+        "simulate",
+        "--vehicle",
+        "nps_auv2",
+        "--manoeuvre",
+        "zigzag",
+        "--delta",
+        "15",
+        "--theta",
+        "10",
+        "--noise",
+        "realistic",
+        "--seed",
+        "7",
+        "--out",
+        str(paths["train"]),
+    )
     assert result.exit_code == 0, result.output
     assert "8 plane reversals" in result.output and "noise 1 x realistic" in result.output
     result = run("simulate", "--delta", "10", "--theta", "5", "--noise", "none", "--out", str(paths["test"]))
@@ -79,8 +94,9 @@ def test_sensitivity_ranks_and_marks_dominant_derivatives():
 
 def test_validate_scores_a_held_out_manoeuvre_and_writes_a_plot(records, tmp_path):
     plot = tmp_path / "validation.png"
-    result = run("validate", str(records["train"]), "--test", str(records["test"]), "--plot", str(plot),
-                 "--json")
+    result = run(
+        "validate", str(records["train"]), "--test", str(records["test"]), "--plot", str(plot), "--json"
+    )
     assert result.exit_code == 0, result.output
     report = json.loads(result.stdout)
     r2 = report["r2"]["identified, all derivatives"]
@@ -89,29 +105,40 @@ def test_validate_scores_a_held_out_manoeuvre_and_writes_a_plot(records, tmp_pat
 
 
 def test_bad_inputs_get_one_line_and_exit_code_2(records, tmp_path):
-    assert_one_line_error(run("simulate", "--vehicle", "seaglider", "--out", str(tmp_path / "x.mcap")),
-                          "unknown vehicle 'seaglider'", "nps_auv2", "remus100")
+    assert_one_line_error(
+        run("simulate", "--vehicle", "seaglider", "--out", str(tmp_path / "x.mcap")),
+        "unknown vehicle 'seaglider'",
+        "nps_auv2",
+        "remus100",
+    )
     assert_one_line_error(run("simulate", "--manoeuvre", "turn", "--out", str(tmp_path / "x.mcap")), "zigzag")
     assert_one_line_error(run("simulate", "--noise", "loud", "--out", str(tmp_path / "x.mcap")), "--noise")
     assert_one_line_error(run("simulate", "--out", str(tmp_path / "x.txt")), ".mcap or .csv")
     assert_one_line_error(run("identify", str(tmp_path / "absent.mcap")), "no such file")
     assert_one_line_error(run("identify", str(records["train"]), "--method", "svr"), "lssvm or ols")
     flat = tmp_path / "flat.csv"
-    flat.write_text("t_s,u_m_s,w_m_s,q_rad_s,theta_rad,z_m,x_m,delta_s_rad\n"
-                    + "".join(f"{0.1 * i},1.5,0,0,0,0,{0.15 * i},0\n" for i in range(300)))
+    flat.write_text(
+        "t_s,u_m_s,w_m_s,q_rad_s,theta_rad,z_m,x_m,delta_s_rad\n"
+        + "".join(f"{0.1 * i},1.5,0,0,0,0,{0.15 * i},0\n" for i in range(300))
+    )
     assert_one_line_error(run("identify", str(flat), "--vehicle", "nps_auv2"), "no stern-plane activity")
     assert_one_line_error(run("identify", str(flat)), "--vehicle")
     partial = tmp_path / "partial.csv"
     partial.write_text("t_s,u_m_s,theta_rad\n0,1.5,0\n0.1,1.5,0\n")
     assert_one_line_error(run("identify", str(partial), "--vehicle", "nps_auv2"), "missing channels")
-    assert_one_line_error(run("validate", str(records["train"]), "--plot", str(tmp_path / "fit.svg")),
-                          "ending in .png")
+    assert_one_line_error(
+        run("validate", str(records["train"]), "--plot", str(tmp_path / "fit.svg")), "ending in .png"
+    )
 
 
 def test_installed_script_reports_bad_input_without_a_traceback(tmp_path):
     script = Path(sys.executable).with_name("tankdaq")
-    completed = subprocess.run([str(script), "auv", "identify", str(tmp_path / "absent.mcap")],
-                               capture_output=True, text=True, timeout=120)
+    completed = subprocess.run(
+        [str(script), "auv", "identify", str(tmp_path / "absent.mcap")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert completed.returncode == 2
     assert "Traceback" not in completed.stderr and completed.stdout == ""
     assert completed.stderr.strip().count("\n") == 0 and "no such file" in completed.stderr

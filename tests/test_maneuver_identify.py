@@ -48,8 +48,12 @@ def sensitivity(nps):
 
 
 @settings(max_examples=25, deadline=None, derandomize=True)
-@given(n_samples=st.integers(8, 60), n_features=st.integers(1, 5), log_gamma=st.floats(-2, 4),
-       seed=st.integers(0, 2**16))
+@given(
+    n_samples=st.integers(8, 60),
+    n_features=st.integers(1, 5),
+    log_gamma=st.floats(-2, 4),
+    seed=st.integers(0, 2**16),
+)
 def test_lssvm_primal_solution_equals_the_dual_system(n_samples, n_features, log_gamma, seed):
     rng = np.random.default_rng(seed)
     X = rng.normal(size=(n_samples, n_features))

@@ -17,8 +17,15 @@ def test_outputs_of_a_known_synthetic_zigzag():
     theta = -amplitude * np.sin(2 * np.pi * t / period)
     z = 0.7 * (1 - np.cos(2 * np.pi * t / period))  # depth swings 1.4 m between extremes
     reversals = np.arange(3.0, 60.0, period / 2)
-    states = {"theta": theta, "z": z, "u": np.full_like(t, 1.4), "q": np.gradient(theta, t),
-              "w": np.zeros_like(t), "x": 1.4 * t, "delta_s": np.zeros_like(t)}
+    states = {
+        "theta": theta,
+        "z": z,
+        "u": np.full_like(t, 1.4),
+        "q": np.gradient(theta, t),
+        "w": np.zeros_like(t),
+        "x": 1.4 * t,
+        "delta_s": np.zeros_like(t),
+    }
     record = StateRecord(t, states, switch_times=reversals)
     out = manoeuvre_outputs(record, switch)
     assert out["overshoot"] == pytest.approx(amplitude - switch, rel=1e-4)

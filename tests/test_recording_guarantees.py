@@ -80,7 +80,7 @@ class FailingView(LiveView):
 
         def failing(*args: object, **kwargs: object) -> object:
             self.calls += 1
-            if (when(*args) if when is not None else self.calls >= after):
+            if when(*args) if when is not None else self.calls >= after:
                 raise Injected(f"{method} failed")
             return original(*args, **kwargs)
 

@@ -250,6 +250,7 @@ def test_samples_skip_gnss_messages_and_take_status_byte() -> None:
 
 def test_samples_leave_out_messages_that_cannot_be_samples_and_never_raise() -> None:
     """Euler angles in another frame, or a time beyond the one-day clock: a corrupted frame, left out."""
+
     def message(counter: int, ticks: int, frame: str = "ENU") -> list[tuple[int, object]]:
         euler = make_xdi("EulerAngles", "float32", frame)
         return [(make_xdi("PacketCounter"), counter), (0x1060, ticks), (euler, (1.0, 2.0, 3.0))]

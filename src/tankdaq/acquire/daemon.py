@@ -191,7 +191,10 @@ class RecordDaemon:
     def _open_device(self) -> MTiDriver:
         s = self.settings
         sim = SimulatedSensor(
-            self.simulation_scenario, speed=s.sim_speed, seed=s.sim_seed, legacy=s.sim_legacy,
+            self.simulation_scenario,
+            speed=s.sim_speed,
+            seed=s.sim_seed,
+            legacy=s.sim_legacy,
             recorded=self.replayed,
         )
         self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=self.on_event)

@@ -44,7 +44,8 @@ def parse_noise(text: str) -> float:
         scale = float(text)
     except ValueError:
         raise InputError(
-            f"--noise {text!r} not understood: use none, realistic or a factor such as 0.5") from None
+            f"--noise {text!r} not understood: use none, realistic or a factor such as 0.5"
+        ) from None
     if not 0 <= scale <= 100:
         raise InputError(f"--noise {text!r}: the factor must be between 0 and 100")
     return scale
@@ -55,8 +56,12 @@ def _progress(description: str) -> Iterator[Callable[[int, int], None]]:
     """A rich progress bar on stderr, advanced by the callback it yields."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-               TimeElapsedColumn())
+    columns = (
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TimeElapsedColumn(),
+    )
     with Progress(*columns, console=err_console, transient=True) as bar:
         task = bar.add_task(description, total=None)
 
@@ -90,19 +95,23 @@ def _vehicle_for(path: Path, record: StateRecord, name: str | None) -> Vehicle:
 def _manoeuvre_angles_rad(record: StateRecord) -> tuple[float, float]:
     """The zigzag's plane and switching angles from the record's metadata, else the defaults."""
     try:
-        return (np.radians(float(record.meta.get("delta_deg", DEFAULT_DELTA_DEG))),
-                np.radians(float(record.meta.get("theta_deg", DEFAULT_THETA_DEG))))
+        return (
+            np.radians(float(record.meta.get("delta_deg", DEFAULT_DELTA_DEG))),
+            np.radians(float(record.meta.get("theta_deg", DEFAULT_THETA_DEG))),
+        )
     except ValueError:
         raise InputError("the record's delta_deg/theta_deg metadata are not numbers") from None
 
 
-def _sensitivity(vehicle: Vehicle, delta_rad: float, theta_rad: float, step: float = 0.10,
-                 threshold: float = 0.10) -> SensitivityResult:
+def _sensitivity(
+    vehicle: Vehicle, delta_rad: float, theta_rad: float, step: float = 0.10, threshold: float = 0.10
+) -> SensitivityResult:
     from ..maneuver.sensitivity import sensitivity_analysis
 
     with _progress("sensitivity: re-simulating the zigzag") as update:
-        return sensitivity_analysis(vehicle, delta_rad, theta_rad, step=step, dominant_threshold=threshold,
-                                    progress=update)
+        return sensitivity_analysis(
+            vehicle, delta_rad, theta_rad, step=step, dominant_threshold=threshold, progress=update
+        )
 
 
 @auv_app.command("simulate")
@@ -115,8 +124,11 @@ def simulate_command(
         ),
     ],
     vehicle_name: str = typer.Option(DEFAULT_VEHICLE, "--vehicle", help="Vehicle in configs/vehicles."),
-    manoeuvre: str = typer.Option("zigzag", "--manoeuvre", help="Manoeuvre: zigzag (stern plane +/-delta, "
-                                  "switched when pitch reaches -/+theta)."),
+    manoeuvre: str = typer.Option(
+        "zigzag",
+        "--manoeuvre",
+        help="Manoeuvre: zigzag (stern plane +/-delta, switched when pitch reaches -/+theta).",
+    ),
     delta_deg: float = typer.Option(DEFAULT_DELTA_DEG, "--delta", help=DELTA_HELP),
     theta_deg: float = typer.Option(DEFAULT_THETA_DEG, "--theta", help=THETA_HELP),
     switches: int = typer.Option(8, "--switches", help="Plane reversals to record."),
@@ -135,39 +147,57 @@ def simulate_command(
         raise InputError(f"--rate-hz {rate_hz:g} must be between 1 and 1000")
     scale = parse_noise(noise)
     vehicle = load_vehicle(vehicle_name)
-    record = simulate_zigzag(vehicle, np.radians(delta_deg), np.radians(theta_deg), switches=switches,
-                             rate_hz=rate_hz)
+    record = simulate_zigzag(
+        vehicle, np.radians(delta_deg), np.radians(theta_deg), switches=switches, rate_hz=rate_hz
+    )
     record = add_noise(record, scale, seed) if scale > 0 else record
-    record.meta.update({"noise": "none" if scale == 0 else f"{scale:g} x realistic", "seed": str(seed),
-                        "rate_hz": f"{rate_hz:g}"})
+    record.meta.update(
+        {
+            "noise": "none" if scale == 0 else f"{scale:g} x realistic",
+            "seed": str(seed),
+            "rate_hz": f"{rate_hz:g}",
+        }
+    )
     path = write_record(out, record, vehicle)
-    typer.echo(f"wrote {path}: {vehicle.name} zigzag {delta_deg:g}/{theta_deg:g} deg, "
-               f"{record.t.size} samples over {record.t[-1]:.1f} s, {switches} plane reversals, "
-               f"noise {record.meta['noise']}")
+    typer.echo(
+        f"wrote {path}: {vehicle.name} zigzag {delta_deg:g}/{theta_deg:g} deg, "
+        f"{record.t.size} samples over {record.t[-1]:.1f} s, {switches} plane reversals, "
+        f"noise {record.meta['noise']}"
+    )
 
 
 def _print_identify(report: dict) -> None:
-    typer.echo(f"{report['vehicle']}: separate identification by {report['method']} "
-               f"(weak-form window {report['window_s']:.2f} s); prime-system derivatives")
-    typer.echo(f"{'derivative':<10} {'standard':>11} {'identified':>11} {'std err':>10} {'rel err':>9} "
-               f"{'sensitivity':>11}")
+    typer.echo(
+        f"{report['vehicle']}: separate identification by {report['method']} "
+        f"(weak-form window {report['window_s']:.2f} s); prime-system derivatives"
+    )
+    typer.echo(
+        f"{'derivative':<10} {'standard':>11} {'identified':>11} {'std err':>10} {'rel err':>9} "
+        f"{'sensitivity':>11}"
+    )
     for row in report["derivatives"]:
         err = f"{100 * row['relative_error']:.2f} %" if row["relative_error"] is not None else "-"
         sens = f"{row['sensitivity_index']:.3f}" if row["sensitivity_index"] is not None else "-"
         mark = " *" if row["dominant"] else ""
-        typer.echo(f"{row['derivative']:<10} {row['standard']:>11.4g} {row['identified']:>11.4g} "
-                   f"{row['std_error']:>10.2g} {err:>9} {sens:>11}{mark}")
+        typer.echo(
+            f"{row['derivative']:<10} {row['standard']:>11.4g} {row['identified']:>11.4g} "
+            f"{row['std_error']:>10.2g} {err:>9} {sens:>11}{mark}"
+        )
     for eq, bias in report["bias"].items():
         gamma = report["gamma"][eq]
         gamma_text = f", gamma {gamma:.3g} (on {report['gamma_chosen_on']})" if gamma is not None else ""
-        typer.echo(f"{eq} equation: bias {bias:.3g} +/- {report['bias_std'][eq]:.2g}, "
-                   f"R^2 {report['r2_equation'][eq]:.5f}{gamma_text}")
+        typer.echo(
+            f"{eq} equation: bias {bias:.3g} +/- {report['bias_std'][eq]:.2g}, "
+            f"R^2 {report['r2_equation'][eq]:.5f}{gamma_text}"
+        )
     summary = report.get("sensitivity_vs_error")
     if summary:
-        typer.echo("* dominant (sensitivity index >= 0.1). Sensitivity vs identification error: Spearman rho "
-                   f"{summary['spearman_rho']:.2f} (p {summary['p_value']:.3f}); mean error of the more "
-                   f"sensitive half {100 * summary['mean_error_top_half']:.2f} %, of the less sensitive half "
-                   f"{100 * summary['mean_error_bottom_half']:.2f} %")
+        typer.echo(
+            "* dominant (sensitivity index >= 0.1). Sensitivity vs identification error: Spearman rho "
+            f"{summary['spearman_rho']:.2f} (p {summary['p_value']:.3f}); mean error of the more "
+            f"sensitive half {100 * summary['mean_error_top_half']:.2f} %, of the less sensitive half "
+            f"{100 * summary['mean_error_bottom_half']:.2f} %"
+        )
 
 
 @auv_app.command("identify")
@@ -177,10 +207,17 @@ def identify_command(
     vehicle_name: str = typer.Option(None, "--vehicle", help=RECORD_VEHICLE_HELP),
     method: str = typer.Option("lssvm", "--method", help="lssvm (linear kernel, gamma) or ols."),
     window_s: float = typer.Option(None, "--window", help="Weak-form filter width [s] (default: L/U)."),
-    holdout: Annotated[Path | None, typer.Option(
-        "--holdout", help="A second manoeuvre on which LS-SVM picks gamma (default: blocked folds).")] = None,
-    with_sensitivity: bool = typer.Option(True, "--sensitivity/--no-sensitivity",
-                                          help="Rank the derivatives by sensitivity next to their errors."),
+    holdout: Annotated[
+        Path | None,
+        typer.Option(
+            "--holdout", help="A second manoeuvre on which LS-SVM picks gamma (default: blocked folds)."
+        ),
+    ] = None,
+    with_sensitivity: bool = typer.Option(
+        True,
+        "--sensitivity/--no-sensitivity",
+        help="Rank the derivatives by sensitivity next to their errors.",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Identify the surge, heave and pitch derivatives one equation at a time; compare with the standard."""
@@ -230,10 +267,14 @@ def sensitivity_command(
         typer.echo(json.dumps(result.to_dict(), indent=1))
         return
     base = result.baseline
-    typer.echo(f"{vehicle.name}: zigzag {delta_deg:g}/{theta_deg:g} deg, each derivative perturbed by "
-               f"+/-{step_percent:g} %; S = relative output change per relative derivative change")
-    typer.echo(f"baseline: overshoot {np.degrees(base['overshoot']):.2f} deg, depth change "
-               f"{base['depth_change']:.2f} m, period {base['period']:.1f} s, speed {base['speed']:.3f} m/s")
+    typer.echo(
+        f"{vehicle.name}: zigzag {delta_deg:g}/{theta_deg:g} deg, each derivative perturbed by "
+        f"+/-{step_percent:g} %; S = relative output change per relative derivative change"
+    )
+    typer.echo(
+        f"baseline: overshoot {np.degrees(base['overshoot']):.2f} deg, depth change "
+        f"{base['depth_change']:.2f} m, period {base['period']:.1f} s, speed {base['speed']:.3f} m/s"
+    )
     typer.echo(f"{'rank':<5}{'derivative':<11}" + "".join(f"{o:>13}" for o in OUTPUTS) + f"{'index':>9}")
     for rank, name in enumerate(result.ranking, start=1):
         cells = "".join(f"{result.sensitivities[name][o]:>13.4f}" for o in OUTPUTS)
@@ -256,8 +297,12 @@ def validate_command(
             help="PNG: measured vs re-simulated.",
         ),
     ] = None,
-    mode: str = typer.Option(None, "--mode", help="zigzag (re-run the manoeuvre; default for zigzag records) "
-                             "or replay (driven by the measured plane)."),
+    mode: str = typer.Option(
+        None,
+        "--mode",
+        help="zigzag (re-run the manoeuvre; default for zigzag records) "
+        "or replay (driven by the measured plane).",
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""
@@ -282,9 +327,15 @@ def validate_command(
         from ..viz.plots import save_png
 
         save_png(validation_figure(target, results), plot, dpi=110)
-    report = {"train": str(file), "test": str(test or file), "mode": mode,
-              "dominant": validation.dominant, "r2": {r.label: r.r2 for r in results},
-              "failed": failures, "plot": str(plot) if plot else None}
+    report = {
+        "train": str(file),
+        "test": str(test or file),
+        "mode": mode,
+        "dominant": validation.dominant,
+        "r2": {r.label: r.r2 for r in results},
+        "failed": failures,
+        "plot": str(plot) if plot else None,
+    }
     if as_json:
         typer.echo(json.dumps(report, indent=1))
         return

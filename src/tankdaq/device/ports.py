@@ -168,4 +168,3 @@ def describe_missing(port: str) -> str:
         f"no such port {port!r}; ports here: {listing}{hint}. "
         "A running `tankdaq simulate` prints its port path on start; `tankdaq device ports` lists them all."
     )
-

@@ -84,7 +84,8 @@ def check_record(record: StateRecord) -> None:
     missing = [c for c in ("u", "w", "q", "theta", "delta_s") if c not in record.states]
     if missing:
         raise BadIdentificationInput(
-            f"the record lacks the channels {missing}; it needs u, w, q, theta, delta_s")
+            f"the record lacks the channels {missing}; it needs u, w, q, theta, delta_s"
+        )
     if record.t.size < 50:
         raise BadIdentificationInput(f"the record has only {record.t.size} samples; a zigzag needs hundreds")
     dt = np.diff(record.t)
@@ -97,7 +98,8 @@ def check_record(record: StateRecord) -> None:
     if np.ptp(delta) < MIN_PLANE_RANGE_RAD:
         raise BadIdentificationInput(
             f"no stern-plane activity (delta_s spans {np.degrees(np.ptp(delta)):.2f} deg); "
-            "identification needs a manoeuvre such as a zigzag")
+            "identification needs a manoeuvre such as a zigzag"
+        )
 
 
 def weak_form_kernels(window_s: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -116,9 +118,13 @@ def _filter(values: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return np.convolve(values, kernel, mode="valid")
 
 
-def build_regressions(records: Sequence[StateRecord], vehicle: Vehicle, window_s: float | None = None,
-                      terms: Sequence[str] | None = None,
-                      fixed: dict[str, float] | None = None) -> dict[str, Regression]:
+def build_regressions(
+    records: Sequence[StateRecord],
+    vehicle: Vehicle,
+    window_s: float | None = None,
+    terms: Sequence[str] | None = None,
+    fixed: dict[str, float] | None = None,
+) -> dict[str, Regression]:
     """Filtered targets and regressors of the three equations, stacked over the records.
 
     ``terms``: derivatives to estimate (default: the vehicle's non-zero viscous ones); ``fixed``:
@@ -141,16 +147,19 @@ def build_regressions(records: Sequence[StateRecord], vehicle: Vehicle, window_s
         h, dh = weak_form_kernels(window_s, dt)
         if h.size >= record.t.size:
             raise BadIdentificationInput(
-                f"the record ({record.t.size} samples) is shorter than the filter window")
+                f"the record ({record.t.size} samples) is shorter than the filter window"
+            )
         u, w, q, theta, ds = (record[c] for c in ("u", "w", "q", "theta", "delta_s"))
         du, dw, dq = (_filter(x, dh) for x in (u, w, q))
         excess = v.weight_n - v.buoyancy_n
         forces = {
             "X": (mass - r3 * v.coefficient("X_udot")) * du
             + _filter(mass * w * q - v.thrust_n + excess * np.sin(theta), h),
-            "Z": (mass - r3 * v.coefficient("Z_wdot")) * dw - r4 * v.coefficient("Z_qdot") * dq
+            "Z": (mass - r3 * v.coefficient("Z_wdot")) * dw
+            - r4 * v.coefficient("Z_qdot") * dq
             - _filter(mass * u * q + excess * np.cos(theta), h),
-            "M": (v.iy_kg_m2 - r5 * v.coefficient("M_qdot")) * dq - r4 * v.coefficient("M_wdot") * dw
+            "M": (v.iy_kg_m2 - r5 * v.coefficient("M_qdot")) * dq
+            - r4 * v.coefficient("M_wdot") * dw
             + _filter(v.bg_m * v.buoyancy_n * np.sin(theta), h),
         }
         up, wp, qp = u / speed, w / speed, q * length / speed
@@ -162,8 +171,12 @@ def build_regressions(records: Sequence[StateRecord], vehicle: Vehicle, window_s
             columns = [_filter(_REGRESSORS[n](up, wp, qp, ds), h) for n in names[eq]]
             X = np.column_stack(columns) if columns else np.empty((y.size, 0))
             rows[eq].append((y, X))
-    return {eq: Regression(eq, np.concatenate([r[0] for r in rows[eq]]), np.vstack([r[1] for r in rows[eq]]),
-                           names[eq]) for eq in EQUATIONS}
+    return {
+        eq: Regression(
+            eq, np.concatenate([r[0] for r in rows[eq]]), np.vstack([r[1] for r in rows[eq]]), names[eq]
+        )
+        for eq in EQUATIONS
+    }
 
 
 def _with_intercept(X: np.ndarray) -> np.ndarray:
@@ -208,15 +221,19 @@ class LSSVMRegressor(EstimatorMixin):
         self.gammas = gammas
         self.n_folds = n_folds
 
-    def fit(self, X: np.ndarray, y: np.ndarray,
-            validation: tuple[np.ndarray, np.ndarray] | None = None) -> LSSVMRegressor:
+    def fit(
+        self, X: np.ndarray, y: np.ndarray, validation: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> LSSVMRegressor:
         candidates = np.atleast_1d(np.asarray(self.gammas, dtype=float))
         if candidates.size == 1 or X.shape[1] == 0:
             self.gamma_ = float(candidates[-1])
             self.cv_errors_ = np.array([np.nan])
         else:
-            splits = ([(np.ones(y.size, bool), validation)] if validation is not None
-                      else self._blocked_splits(X, y))
+            splits = (
+                [(np.ones(y.size, bool), validation)]
+                if validation is not None
+                else self._blocked_splits(X, y)
+            )
             errors = np.zeros(candidates.size)
             for train, (X_held, y_held) in splits:
                 for i, gamma in enumerate(candidates):
@@ -275,16 +292,25 @@ class SeparateIdentifier(EstimatorMixin):
     LS-SVM intercept of each equation), ``equations_`` (EquationFit each).
     """
 
-    def __init__(self, vehicle: Vehicle, method: str = "lssvm", window_s: float | None = None,
-                 terms: Sequence[str] | None = None, fixed: dict[str, float] | None = None):
+    def __init__(
+        self,
+        vehicle: Vehicle,
+        method: str = "lssvm",
+        window_s: float | None = None,
+        terms: Sequence[str] | None = None,
+        fixed: dict[str, float] | None = None,
+    ):
         self.vehicle = vehicle
         self.method = method
         self.window_s = window_s
         self.terms = terms
         self.fixed = fixed
 
-    def fit(self, records: StateRecord | Sequence[StateRecord],
-            holdout: StateRecord | Sequence[StateRecord] | None = None) -> SeparateIdentifier:
+    def fit(
+        self,
+        records: StateRecord | Sequence[StateRecord],
+        holdout: StateRecord | Sequence[StateRecord] | None = None,
+    ) -> SeparateIdentifier:
         """Identify from ``records``; LS-SVM picks gamma on ``holdout`` records if given (OLS ignores it)."""
         if self.method not in ("lssvm", "ols"):
             raise InputError(f"unknown method {self.method!r}; use lssvm or ols")
@@ -300,13 +326,21 @@ class SeparateIdentifier(EstimatorMixin):
             estimator: LSSVMRegressor | LeastSquaresRegressor
             if self.method == "lssvm":
                 estimator = LSSVMRegressor().fit(
-                    reg.X, reg.y, (held_out[eq].X, held_out[eq].y) if held_out is not None else None)
+                    reg.X, reg.y, (held_out[eq].X, held_out[eq].y) if held_out is not None else None
+                )
             else:
                 estimator = LeastSquaresRegressor().fit(reg.X, reg.y)
             resid = reg.y - estimator.predict(reg.X)
             r2 = 1.0 - float(resid @ resid) / float(np.sum((reg.y - reg.y.mean()) ** 2))
-            self.equations_[eq] = EquationFit(eq, reg.terms, estimator.coef_, estimator.std_,
-                                              getattr(estimator, "gamma_", None), r2, reg.y.size)
+            self.equations_[eq] = EquationFit(
+                eq,
+                reg.terms,
+                estimator.coef_,
+                estimator.std_,
+                getattr(estimator, "gamma_", None),
+                r2,
+                reg.y.size,
+            )
             self.derivatives_.update(zip(reg.terms, estimator.coef_.tolist(), strict=True))
             self.std_.update(zip(reg.terms, estimator.std_.tolist(), strict=True))
             self.bias_[eq], self.bias_std_[eq] = estimator.intercept_, estimator.intercept_std_

@@ -27,11 +27,30 @@ from .vehicle import Vehicle
 #: Recorded state columns, in order (SI units, angles in rad).
 STATE_COLUMNS: tuple[str, ...] = ("u", "w", "q", "theta", "z", "x", "delta_s")
 STATE_UNITS: dict[str, str] = {
-    "t": "s", "u": "m/s", "w": "m/s", "q": "rad/s", "theta": "rad", "z": "m", "x": "m", "delta_s": "rad",
+    "t": "s",
+    "u": "m/s",
+    "w": "m/s",
+    "q": "rad/s",
+    "theta": "rad",
+    "z": "m",
+    "x": "m",
+    "delta_s": "rad",
 }
 _PARAM_DERIVATIVES: tuple[str, ...] = (
-    "X_wq", "X_u|u|", "X_dsds", "Z_uq", "Z_uu", "Z_uw", "Z_w|w|", "Z_ds",
-    "M_q|q|", "M_uq", "M_uu", "M_uw", "M_w|w|", "M_ds",
+    "X_wq",
+    "X_u|u|",
+    "X_dsds",
+    "Z_uq",
+    "Z_uu",
+    "Z_uw",
+    "Z_w|w|",
+    "Z_ds",
+    "M_q|q|",
+    "M_uq",
+    "M_uu",
+    "M_uw",
+    "M_w|w|",
+    "M_ds",
 )
 #: Longest manoeuvre simulated before giving up on reaching the pitch threshold.
 MAX_DURATION_S = 900.0
@@ -59,11 +78,13 @@ def pack_parameters(vehicle: Vehicle) -> np.ndarray:
     v = vehicle
     mass = v.mass_kg
     r2, r3, r4, r5 = (v.scale(n) for n in (2, 3, 4, 5))
-    mass_matrix = np.array([
-        [mass - r3 * v.coefficient("X_udot"), 0.0, 0.0],
-        [0.0, mass - r3 * v.coefficient("Z_wdot"), -r4 * v.coefficient("Z_qdot")],
-        [0.0, -r4 * v.coefficient("M_wdot"), v.iy_kg_m2 - r5 * v.coefficient("M_qdot")],
-    ])
+    mass_matrix = np.array(
+        [
+            [mass - r3 * v.coefficient("X_udot"), 0.0, 0.0],
+            [0.0, mass - r3 * v.coefficient("Z_wdot"), -r4 * v.coefficient("Z_qdot")],
+            [0.0, -r4 * v.coefficient("M_wdot"), v.iy_kg_m2 - r5 * v.coefficient("M_qdot")],
+        ]
+    )
     head = [mass, v.weight_n, v.buoyancy_n, v.bg_m, v.thrust_n, r2, r3, r4, r5, v.plane_time_constant_s]
     derivs = [v.coefficient(n) for n in _PARAM_DERIVATIVES]
     return np.array(head + derivs + list(np.linalg.inv(mass_matrix).ravel()), dtype=float)
@@ -77,14 +98,25 @@ def _rhs(p, s, delta, command):  # pragma: no cover - compiled
     xwq, xuu, xdd, zuq, zuu, zuw, zww, zds = p[10], p[11], p[12], p[13], p[14], p[15], p[16], p[17]
     mqq, muq, muu, muw, mww, mds = p[18], p[19], p[20], p[21], p[22], p[23]
     sin_t, cos_t = np.sin(theta), np.cos(theta)
-    fx = (-mass * w * q + r3 * xwq * w * q + r2 * (xuu * u * abs(u) + xdd * u * u * delta * delta)
-          + thrust - (weight - buoy) * sin_t)
-    fz = (mass * u * q + r3 * zuq * u * q
-          + r2 * (zuu * u * u + zuw * u * w + zww * w * abs(w) + zds * u * u * delta)
-          + (weight - buoy) * cos_t)
-    fm = (r5 * mqq * q * abs(q) + r4 * muq * u * q
-          + r3 * (muu * u * u + muw * u * w + mww * w * abs(w) + mds * u * u * delta)
-          - bg * buoy * sin_t)
+    fx = (
+        -mass * w * q
+        + r3 * xwq * w * q
+        + r2 * (xuu * u * abs(u) + xdd * u * u * delta * delta)
+        + thrust
+        - (weight - buoy) * sin_t
+    )
+    fz = (
+        mass * u * q
+        + r3 * zuq * u * q
+        + r2 * (zuu * u * u + zuw * u * w + zww * w * abs(w) + zds * u * u * delta)
+        + (weight - buoy) * cos_t
+    )
+    fm = (
+        r5 * mqq * q * abs(q)
+        + r4 * muq * u * q
+        + r3 * (muu * u * u + muw * u * w + mww * w * abs(w) + mds * u * u * delta)
+        - bg * buoy * sin_t
+    )
     out = np.empty(7)
     out[0] = p[24] * fx + p[25] * fz + p[26] * fm
     out[1] = p[27] * fx + p[28] * fz + p[29] * fm
@@ -122,10 +154,18 @@ def _crossing_fraction(theta0, q0, theta1, q1, h, level):  # pragma: no cover - 
     f = (theta0 - level) / (theta0 - theta1)
     for _ in range(6):
         f2, f3 = f * f, f * f * f
-        value = ((2 * f3 - 3 * f2 + 1) * theta0 + (f3 - 2 * f2 + f) * h * q0
-                 + (-2 * f3 + 3 * f2) * theta1 + (f3 - f2) * h * q1) - level
-        slope = ((6 * f2 - 6 * f) * theta0 + (3 * f2 - 4 * f + 1) * h * q0
-                 + (-6 * f2 + 6 * f) * theta1 + (3 * f2 - 2 * f) * h * q1)
+        value = (
+            (2 * f3 - 3 * f2 + 1) * theta0
+            + (f3 - 2 * f2 + f) * h * q0
+            + (-2 * f3 + 3 * f2) * theta1
+            + (f3 - f2) * h * q1
+        ) - level
+        slope = (
+            (6 * f2 - 6 * f) * theta0
+            + (3 * f2 - 4 * f + 1) * h * q0
+            + (-6 * f2 + 6 * f) * theta1
+            + (3 * f2 - 2 * f) * h * q1
+        )
         if slope == 0.0:
             break
         f = min(max(f - value / slope, 0.0), 1.0)
@@ -133,8 +173,9 @@ def _crossing_fraction(theta0, q0, theta1, q1, h, level):  # pragma: no cover - 
 
 
 @njit(cache=True)
-def _integrate(p, s0, h, n_sub, n_samples, t_execute, delta_amp, theta_switch, max_switches,
-               table_t, table_delta):  # pragma: no cover - compiled
+def _integrate(
+    p, s0, h, n_sub, n_samples, t_execute, delta_amp, theta_switch, max_switches, table_t, table_delta
+):  # pragma: no cover - compiled
     """Fixed-step RK4 with zigzag switching about the initial (trim) state, or replay of a plane table.
 
     Samples every n_sub steps. The plane command is trim + direction * delta_amp; the switch levels are
@@ -168,8 +209,9 @@ def _integrate(p, s0, h, n_sub, n_samples, t_execute, delta_amp, theta_switch, m
                     out[k] = mid
                     return out[: k + 1], switches[:n_switch]
                 direction = -direction
-                new = _rk4(p, mid, (1.0 - f) * h, delta_trim + direction * delta_amp,
-                           table_t, table_delta, t + f * h)
+                new = _rk4(
+                    p, mid, (1.0 - f) * h, delta_trim + direction * delta_amp, table_t, table_delta, t + f * h
+                )
             s = new
             t += h
         out[k] = s
@@ -195,10 +237,12 @@ def trim_state(vehicle: Vehicle) -> np.ndarray:
         return np.array([rates[0], rates[1], rates[2], rates[4]])
 
     from scipy.optimize import fsolve  # imported here: scipy.optimize is slow to import
+
     solution, info, ok, _ = fsolve(residual, [vehicle.nominal_speed_m_s, 0.0, 0.0, 0.0], full_output=True)
     if ok != 1 or np.max(np.abs(info["fvec"])) > 1e-8:
         raise InputError(
-            f"{vehicle.name}: no steady level flight found at the nominal speed; check the vehicle file")
+            f"{vehicle.name}: no steady level flight found at the nominal speed; check the vehicle file"
+        )
     u, w, theta, delta = solution
     return np.array([u, w, 0.0, theta, 0.0, 0.0, delta])
 
@@ -221,32 +265,55 @@ def simulate_zigzag(
     if not 0 < delta_rad < np.pi / 2 or not 0 < theta_rad < np.pi / 2:
         raise InputError("zigzag angles must be between 0 and 90 deg (e.g. --delta 15 --theta 10)")
     if vehicle.plane_limit_deg is not None and np.degrees(delta_rad) > vehicle.plane_limit_deg + 1e-9:
-        raise InputError(f"--delta {np.degrees(delta_rad):g} deg exceeds {vehicle.name}'s plane limit "
-                         f"of {vehicle.plane_limit_deg:g} deg")
+        raise InputError(
+            f"--delta {np.degrees(delta_rad):g} deg exceeds {vehicle.name}'s plane limit "
+            f"of {vehicle.plane_limit_deg:g} deg"
+        )
     if switches < 1:
         raise InputError("the zigzag needs at least one plane reversal")
     h, n_sub = _time_step(rate_hz, max_step_s)
     n_max = int(MAX_DURATION_S * rate_hz) + 1
     empty = np.empty(0)
-    samples, switch_times = _integrate(pack_parameters(vehicle), trim_state(vehicle), h, n_sub, n_max,
-                                       approach_s, delta_rad, theta_rad, switches, empty, empty)
+    samples, switch_times = _integrate(
+        pack_parameters(vehicle),
+        trim_state(vehicle),
+        h,
+        n_sub,
+        n_max,
+        approach_s,
+        delta_rad,
+        theta_rad,
+        switches,
+        empty,
+        empty,
+    )
     if switch_times.size < switches + 2:
         raise InputError(
             f"{vehicle.name}: pitch did not reach {np.degrees(theta_rad):g} deg often enough within "
             f"{MAX_DURATION_S:g} s with a {np.degrees(delta_rad):g} deg stern plane; "
-            "increase --delta or lower --theta")
+            "increase --delta or lower --theta"
+        )
     samples = samples[:-1]  # the last row is the state at the final (unapplied) switch, off the sample grid
     t = np.arange(samples.shape[0]) / rate_hz
-    record = StateRecord(t=t, states=dict(zip(STATE_COLUMNS, samples.T, strict=True)),
-                         switch_times=switch_times[1:])
-    record.meta.update({"vehicle": vehicle.name, "manoeuvre": "zigzag",
-                        "delta_deg": f"{np.degrees(delta_rad):g}", "theta_deg": f"{np.degrees(theta_rad):g}",
-                        "switches": str(switches), "approach_s": f"{approach_s:g}"})
+    record = StateRecord(
+        t=t, states=dict(zip(STATE_COLUMNS, samples.T, strict=True)), switch_times=switch_times[1:]
+    )
+    record.meta.update(
+        {
+            "vehicle": vehicle.name,
+            "manoeuvre": "zigzag",
+            "delta_deg": f"{np.degrees(delta_rad):g}",
+            "theta_deg": f"{np.degrees(theta_rad):g}",
+            "switches": str(switches),
+            "approach_s": f"{approach_s:g}",
+        }
+    )
     return record
 
 
-def replay(vehicle: Vehicle, t: np.ndarray, delta_s: np.ndarray, state0: np.ndarray,
-           max_step_s: float = 0.01) -> StateRecord:
+def replay(
+    vehicle: Vehicle, t: np.ndarray, delta_s: np.ndarray, state0: np.ndarray, max_step_s: float = 0.01
+) -> StateRecord:
     """Simulate the vehicle driven by a given plane-angle history (validation against a record)."""
     t = np.asarray(t, dtype=float)
     dt = np.diff(t)
@@ -256,8 +323,19 @@ def replay(vehicle: Vehicle, t: np.ndarray, delta_s: np.ndarray, state0: np.ndar
     h, n_sub = _time_step(rate_hz, max_step_s)
     start = np.asarray(state0, dtype=float).copy()
     start[6] = delta_s[0]
-    samples, _ = _integrate(pack_parameters(vehicle), start, h, n_sub, t.size, 0.0, 0.0, 0.0, 0,
-                            t - t[0], np.asarray(delta_s, dtype=float))
+    samples, _ = _integrate(
+        pack_parameters(vehicle),
+        start,
+        h,
+        n_sub,
+        t.size,
+        0.0,
+        0.0,
+        0.0,
+        0,
+        t - t[0],
+        np.asarray(delta_s, dtype=float),
+    )
     grid = t[0] + np.arange(samples.shape[0]) / rate_hz
     states = {c: np.interp(t, grid, samples[:, i]) for i, c in enumerate(STATE_COLUMNS)}
     return StateRecord(t=t.copy(), states=states, meta={"vehicle": vehicle.name, "manoeuvre": "replay"})
@@ -267,14 +345,26 @@ def replay(vehicle: Vehicle, t: np.ndarray, delta_s: np.ndarray, state0: np.ndar
 #: MTi-G-class gyro rate (0.002 rad/s = 0.11 deg/s) and pitch (0.002 rad), a pressure depth sensor (1 cm),
 #: position (5 cm) and the stern-plane potentiometer (0.002 rad).
 REALISTIC_NOISE_STD: dict[str, float] = {
-    "u": 0.003, "w": 0.003, "q": 0.002, "theta": 0.002, "z": 0.01, "x": 0.05, "delta_s": 0.002,
+    "u": 0.003,
+    "w": 0.003,
+    "q": 0.002,
+    "theta": 0.002,
+    "z": 0.01,
+    "x": 0.05,
+    "delta_s": 0.002,
 }
 
 
 def add_noise(record: StateRecord, scale: float, seed: int | None = 0) -> StateRecord:
     """A copy with Gaussian noise of ``scale`` times REALISTIC_NOISE_STD on every state column."""
     rng = np.random.default_rng(seed)
-    states = {c: values + scale * REALISTIC_NOISE_STD[c] * rng.standard_normal(values.size)
-              for c, values in record.states.items()}
-    return StateRecord(t=record.t.copy(), states=states, meta={**record.meta, "noise": f"{scale:g}"},
-                       switch_times=record.switch_times.copy())
+    states = {
+        c: values + scale * REALISTIC_NOISE_STD[c] * rng.standard_normal(values.size)
+        for c, values in record.states.items()
+    }
+    return StateRecord(
+        t=record.t.copy(),
+        states=states,
+        meta={**record.meta, "noise": f"{scale:g}"},
+        switch_times=record.switch_times.copy(),
+    )

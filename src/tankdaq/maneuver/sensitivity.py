@@ -38,8 +38,9 @@ def _extremum(values: np.ndarray, t: np.ndarray, index: int) -> float:
     return float(y1 - 0.125 * (y2 - y0) ** 2 / curvature) if curvature != 0 else float(y1)
 
 
-def manoeuvre_outputs(record: StateRecord, theta_switch_rad: float,
-                      theta_trim_rad: float = 0.0) -> dict[str, float]:
+def manoeuvre_outputs(
+    record: StateRecord, theta_switch_rad: float, theta_trim_rad: float = 0.0
+) -> dict[str, float]:
     """Pitch overshoot (rad), depth change (m), period (s) and mean speed (m/s) of a zigzag record."""
     t, theta, z = record.t, record["theta"] - theta_trim_rad, record["z"]
     reversals = record.switch_times
@@ -83,10 +84,17 @@ class SensitivityResult:
 
     def to_dict(self) -> dict[str, object]:
         return {
-            "vehicle": self.vehicle, "step": self.step, "delta_deg": float(np.degrees(self.delta_rad)),
-            "theta_deg": float(np.degrees(self.theta_rad)), "baseline": self.baseline,
-            "output_units": OUTPUT_UNITS, "sensitivities": self.sensitivities, "index": self.index,
-            "ranking": self.ranking, "dominant": self.dominant, "dominant_threshold": self.dominant_threshold,
+            "vehicle": self.vehicle,
+            "step": self.step,
+            "delta_deg": float(np.degrees(self.delta_rad)),
+            "theta_deg": float(np.degrees(self.theta_rad)),
+            "baseline": self.baseline,
+            "output_units": OUTPUT_UNITS,
+            "sensitivities": self.sensitivities,
+            "index": self.index,
+            "ranking": self.ranking,
+            "dominant": self.dominant,
+            "dominant_threshold": self.dominant_threshold,
         }
 
 
@@ -122,8 +130,18 @@ def sensitivity_analysis(
         sensitivities[name] = {o: (up[o] - down[o]) / (2 * step * baseline[o]) for o in OUTPUTS}
         if progress is not None:
             progress(2 * (k + 1), total)
-    index = {n: float(np.sqrt(np.mean([s ** 2 for s in sensitivities[n].values()]))) for n in names}
+    index = {n: float(np.sqrt(np.mean([s**2 for s in sensitivities[n].values()]))) for n in names}
     ranking = sorted(names, key=lambda n: -index[n])
     dominant = [n for n in ranking if index[n] >= dominant_threshold]
-    return SensitivityResult(vehicle.name, step, delta_rad, theta_rad, baseline, sensitivities, index,
-                             ranking, dominant, dominant_threshold)
+    return SensitivityResult(
+        vehicle.name,
+        step,
+        delta_rad,
+        theta_rad,
+        baseline,
+        sensitivities,
+        index,
+        ranking,
+        dominant,
+        dominant_threshold,
+    )

@@ -49,8 +49,11 @@ def r_squared(measured: np.ndarray, simulated: np.ndarray) -> float:
 def default_mode(record: StateRecord) -> str:
     """zigzag when the record says it is one (with its angles), else replay."""
     meta = record.meta
-    return "zigzag" if meta.get("manoeuvre") == "zigzag" and "delta_deg" in meta and "theta_deg" in meta \
+    return (
+        "zigzag"
+        if meta.get("manoeuvre") == "zigzag" and "delta_deg" in meta and "theta_deg" in meta
         else "replay"
+    )
 
 
 def _replay(record: StateRecord, model: Vehicle) -> StateRecord:
@@ -67,11 +70,14 @@ def _rerun_zigzag(record: StateRecord, model: Vehicle) -> StateRecord:
         approach_s = float(meta.get("approach_s", 5.0))
         switches = int(meta.get("switches", 8))
     except (KeyError, ValueError):
-        raise InputError("the record does not say which zigzag it is (delta_deg, theta_deg metadata); "
-                         "re-simulate it by replay instead") from None
+        raise InputError(
+            "the record does not say which zigzag it is (delta_deg, theta_deg metadata); "
+            "re-simulate it by replay instead"
+        ) from None
     # twice the reversals, so the re-run covers the record even if the model's period is much shorter
-    rerun = simulate_zigzag(model, delta_rad, theta_rad, switches=2 * switches + 2, rate_hz=record.rate_hz,
-                            approach_s=approach_s)
+    rerun = simulate_zigzag(
+        model, delta_rad, theta_rad, switches=2 * switches + 2, rate_hz=record.rate_hz, approach_s=approach_s
+    )
     t = record.t - record.t[0]
     if rerun.t[-1] < t[-1]:
         raise InputError(f"{model.name}'s zigzag is much slower than the record's; it cannot be compared")

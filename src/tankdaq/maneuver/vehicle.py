@@ -54,7 +54,14 @@ TERM_BY_NAME: dict[str, Term] = {t.name: t for t in TERMS}
 VISCOUS_TERMS: tuple[str, ...] = tuple(t.name for t in TERMS if not t.inertia)
 
 _REQUIRED_CONSTANTS = (
-    "length_m", "rho_kg_m3", "weight_n", "buoyancy_n", "bg_m", "iy_kg_m2", "nominal_speed_m_s")
+    "length_m",
+    "rho_kg_m3",
+    "weight_n",
+    "buoyancy_n",
+    "bg_m",
+    "iy_kg_m2",
+    "nominal_speed_m_s",
+)
 GRAVITY_M_S2 = 9.81
 
 
@@ -149,11 +156,13 @@ def vehicle_from_dict(data: dict, default_name: str = "vehicle") -> Vehicle:
     unknown = sorted(set(raw) - set(TERM_BY_NAME))
     if unknown:
         raise ConfigError(
-            f"vehicle {default_name!r}: unknown derivatives {unknown}; known: {', '.join(TERM_BY_NAME)}")
+            f"vehicle {default_name!r}: unknown derivatives {unknown}; known: {', '.join(TERM_BY_NAME)}"
+        )
     system = data.get("system", "prime")
     if system not in ("prime", "dimensional"):
         raise ConfigError(
-            f"vehicle {default_name!r}: system must be 'prime' or 'dimensional', not {system!r}")
+            f"vehicle {default_name!r}: system must be 'prime' or 'dimensional', not {system!r}"
+        )
     length_m = float(constants["length_m"])
     rho = float(constants["rho_kg_m3"])
     derivatives = {}
