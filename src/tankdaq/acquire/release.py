@@ -459,33 +459,42 @@ class _DecayFit:
         from_rest = angle - rest_rad
         # the canonical polynomial terms c1, c2 (if asymmetric), c3, b1, b2, b3
         restoring = [from_rest, from_rest**2, from_rest**3] if asymmetric else [from_rest, from_rest**3]
-        integrands = [*restoring, rate, np.abs(rate) * rate, rate**3]
-        self.once = [self._cumulative(f) for f in integrands]
-        self.twice = [self._cumulative(c) for c in self.once]
+        integrands = np.array([*restoring, rate, np.abs(rate) * rate, rate**3])
+        # running integrals from the window's start, one row per term (once, and twice)
+        self.once = self._cumulative(integrands)
+        self.twice = self._cumulative(self.once)
 
     def _cumulative(self, f: np.ndarray) -> np.ndarray:
-        steps = 0.5 * (f[1:] + f[:-1]) * np.diff(self.t)
-        return np.concatenate(([0.0], np.cumsum(steps)))
-
-    def _from(self, tau: float, cum: np.ndarray) -> np.ndarray:
-        """Integral from tau to t of the function whose running integral is ``cum``."""
-        return cum - np.interp(tau, self.t, cum)
+        steps = 0.5 * (f[:, 1:] + f[:, :-1]) * np.diff(self.t)
+        return np.concatenate((np.zeros((f.shape[0], 1)), np.cumsum(steps, axis=1)), axis=1)
 
     def _design(self, tau: float) -> np.ndarray:
-        u = self.t - tau
-        after = u >= 0
-        zero, one = np.zeros_like(u), np.ones_like(u)
-        ub = np.where(after, 0.0, u)
-        ua = np.where(after, u, 0.0)
-        angle_cols = [one, zero, u, ub**2 / 2, ub**3 / 3, ua**2 / 2]
-        rate_cols = [zero, one, one, ub, ub**2, ua]
-        for once, twice in zip(self.once, self.twice, strict=True):
-            start_value = np.interp(tau, self.t, once)
-            angle_cols.append(-np.where(after, self._from(tau, twice) - start_value * u, 0.0))
-            rate_cols.append(-np.where(after, self._from(tau, once), 0.0))
-        return np.vstack(
-            (np.column_stack(angle_cols) * self.w_angle, np.column_stack(rate_cols) * self.w_rate)
-        )
+        """The weighted design matrix at tau: angle rows over rate rows, one column per parameter.
+
+        Built in place (one candidate instant is one call, and a release scans about seventy): the
+        running integrals are read at tau by one linear interpolation shared by every term.
+        """
+        t, n, terms = self.t, self.t.size, self.once.shape[0]
+        u = t - tau
+        first_after = int(np.searchsorted(t, tau, side="left"))  # rows from here on are after tau
+        right = min(max(int(np.searchsorted(t, tau, side="right")), 1), n - 1)
+        frac = (tau - t[right - 1]) / (t[right] - t[right - 1])
+        once_at = self.once[:, right - 1] + frac * (self.once[:, right] - self.once[:, right - 1])
+        twice_at = self.twice[:, right - 1] + frac * (self.twice[:, right] - self.twice[:, right - 1])
+        design = np.zeros((2 * n, 6 + terms))
+        angle, rate = design[:n], design[n:]
+        before, after = u[:first_after], u[first_after:]
+        angle[:, 0], angle[:, 2], rate[:, 1], rate[:, 2] = 1.0, u, 1.0, 1.0
+        angle[:first_after, 3], angle[:first_after, 4] = before**2 / 2, before**3 / 3
+        rate[:first_after, 3], rate[:first_after, 4] = before, before**2
+        angle[first_after:, 5], rate[first_after:, 5] = after**2 / 2, after
+        angle[first_after:, 6:] = (
+            once_at[:, None] * after + twice_at[:, None] - self.twice[:, first_after:]
+        ).T
+        rate[first_after:, 6:] = (once_at[:, None] - self.once[:, first_after:]).T
+        angle *= self.w_angle
+        rate *= self.w_rate
+        return design
 
     def _solve(self, tau: float) -> tuple[np.ndarray, float]:
         """Coefficients and residual sum of squares.
