@@ -92,3 +92,16 @@ def test_the_sizes_check_agrees_with_the_decoder_on_random_payloads() -> None:
         assert payload_well_formed(payload) == decodes, payload.hex()
         outcomes.add(decodes)
     assert outcomes == {True, False}
+
+
+def test_a_framer_hands_its_held_bytes_to_the_decoder_that_takes_the_stream_over() -> None:
+    """The driver's hand-shake framer passes on a half-read frame: the stream decoder completes it."""
+    ack, data = build_frame(MID.GOTO_MEASUREMENT + 1), build_frame(MID.MTDATA2, bytes(10))
+    framer = StreamFramer()
+    assert [f.mid for f in framer.feed(ack + data[:7])] == [MID.GOTO_MEASUREMENT + 1]
+    held = framer.take_pending()
+    assert held == data[:7] and framer.pending == 0
+    decoder = StreamFramer()
+    assert decoder.feed(held) == [] and decoder.feed(data[7:]) + decoder.flush() == [
+        Frame(0xFF, MID.MTDATA2, bytes(10))
+    ]

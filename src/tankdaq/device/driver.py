@@ -255,6 +255,8 @@ class MTiDriver:
         self.was_measuring = False  # data frames arrived before the device reached Config
         self._serial: serial.SerialBase | None = None
         self._framer = StreamFramer()
+        self._after_reply: list[Frame] = []  # frames that came after the last reply, in the same read
+        self._unread = b""  # the stream's first bytes, read with GoToMeasurement's ack
         self._log = LineLog()
         self._reset_stream_state()
 
@@ -349,11 +351,12 @@ class MTiDriver:
             data = self._read()
             frames = self._framer.feed(data) if data else self._framer.flush()
             self._log.add(data, frames)
-            for frame in frames:
+            for i, frame in enumerate(frames):
                 if frame.mid == MID.WAKEUP and answer_wakeup:
                     self._write(build_frame(MID.WAKEUP_ACK))
                 self.was_measuring |= frame.mid in (MID.MTDATA2, MID.MTDATA)
                 if frame.mid in wanted or frame.mid == MID.ERROR:
+                    self._after_reply = frames[i + 1 :]
                     return frame
         return None
 
@@ -477,6 +480,8 @@ class MTiDriver:
             self.move_baud(target, is_600_series(product))
         self.request(MID.GOTO_MEASUREMENT)
         self._reset_stream_state(LegacyOutput.for_decay(self.rate_hz) if legacy else None)
+        # a device streams at once: what came with the ack is the stream's start, not hand-shake noise
+        self._unread = b"".join(f.to_bytes() for f in self._after_reply) + self._framer.take_pending()
         self.counters = StreamCounters()
         self._last_data = time.monotonic()
         self.info = DeviceInfo(self.path, self.line_baud, device_id, product, firmware, legacy, self.rate_hz,
@@ -549,6 +554,8 @@ class MTiDriver:
     def read_block(self) -> StreamBlock:
         """One read: the samples it completed (maybe none). Raises DeviceGone if the device vanished."""
         raw = self._read()
+        if self._unread:
+            raw, self._unread = self._unread + raw, b""
         host_t = time.time()
         now = time.monotonic()
         if raw:

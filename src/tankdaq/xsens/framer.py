@@ -72,6 +72,12 @@ class StreamFramer:
         """Bytes held back because they may start a frame that is not complete (or confirmed) yet."""
         return len(self._buffer)
 
+    def take_pending(self) -> bytes:
+        """Hand over the held-back bytes (another decoder takes the stream from here); the buffer empties."""
+        held = bytes(self._buffer)
+        self._buffer.clear()
+        return held
+
     def feed(self, chunk: bytes) -> list[Frame]:
         """Append ``chunk`` and return every frame completed by it, in stream order."""
         self._buffer += chunk
