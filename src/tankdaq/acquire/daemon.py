@@ -31,7 +31,7 @@ from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
 from .session import Block, DecayOutcome, DecaySession, SessionSettings
-from .sinks import DecaySink, IdentifierSink, RecordingSink, ViewSink
+from .sinks import IdentifierSink, RecordingSink, Sink, ViewSink
 
 if TYPE_CHECKING:
     from ..device.simulator import RecordedSource, SimulatedMTi
@@ -157,7 +157,7 @@ class RecordDaemon:
         settings: RecordSettings,
         on_event: Callable[[str], None] | None = None,
         on_status: Callable[[DaemonStatus], None] | None = None,
-        sinks: Sequence[DecaySink] = (),  # more listeners of the pipeline (a session's level check)
+        sinks: Sequence[Sink] = (),  # more listeners of the pipeline (a session's level check)
     ) -> None:
         self.settings = settings
         self.on_event = on_event or (lambda _line: None)

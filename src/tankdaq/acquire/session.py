@@ -24,7 +24,7 @@ from ..ident.online import OnlineResult
 from ..physics.models import resolve_model
 from ..samples import AXIS_FIELDS
 from .release import ReleaseDetector, ReleaseEvent
-from .sinks import Block, Decay, DecayOutcome, DecaySink
+from .sinks import Block, Decay, DecayOutcome, Sink
 
 __all__ = ["HISTORY_S", "Block", "DecayOutcome", "DecaySession", "SessionSettings"]
 
@@ -55,7 +55,7 @@ class DecaySession:
     def __init__(
         self,
         settings: SessionSettings,
-        sinks: Sequence[DecaySink],
+        sinks: Sequence[Sink],
         on_event: Callable[[str], None] | None = None,
     ) -> None:
         self.settings = settings
@@ -73,7 +73,7 @@ class DecaySession:
 
     # ---- telling the sinks ----------------------------------------
 
-    def _tell(self, call: Callable[[DecaySink], object]) -> None:
+    def _tell(self, call: Callable[[Sink], object]) -> None:
         """Every sink gets the call, whatever an earlier one raised; the first failure is raised after."""
         failure: Exception | None = None
         for sink in self.sinks:

@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -143,8 +143,8 @@ class Decay:
         )
 
 
-class DecaySink(Protocol):
-    """One listener of a decay pipeline; ``Sink`` gives each method a do-nothing default."""
+class Sink:
+    """One listener of a decay pipeline; each method does nothing here: a sink overrides what it hears."""
 
     def on_block(self, block: Block, decay: Decay | None) -> None:
         """Every block fed (``decay``: the decay under way, None while waiting for a release)."""
@@ -165,30 +165,6 @@ class DecaySink(Protocol):
 
     def close(self) -> None:
         """The pipeline ends: release what the sink holds."""
-
-
-class Sink:
-    """A sink that ignores everything: subclasses override what they listen to."""
-
-    def on_block(self, block: Block, decay: Decay | None) -> None:
-        pass
-
-    def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
-        pass
-
-    def on_note(
-        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
-    ) -> None:
-        pass
-
-    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
-        pass
-
-    def on_settle(self, decay: Decay) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
 
 
 class IdentifierSink(Sink):
