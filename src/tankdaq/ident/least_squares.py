@@ -1,0 +1,190 @@
+"""Levenberg-Marquardt for the output-error fit, in numpy alone.
+
+scipy.optimize costs about 0.4 s to import (it pulls linprog, scipy.linalg, scipy.special, ...), a
+third of a whole ``tankdaq replay``; the fit needs only this. It follows MINPACK's lmder (Moré 1978,
+"The Levenberg-Marquardt algorithm: implementation and theory"), the engine behind
+``scipy.optimize.least_squares(method="lm", x_scale="jac")``, which the tests compare it against:
+
+- a trust region on the scaled step ``||D p|| <= delta``, with Marquardt's scaling ``D`` the Jacobian's
+  column norms kept as a running maximum (a parameter's scale never shrinks back: no oscillation);
+- one QR of the Jacobian per accepted point. Every damped step solves
+  ``(J'J + par D^2) p = -J'f`` in closed form from the SVD of the small triangle ``R D^-1`` (p x p),
+  so a trial costs O(p^2) beside its residual evaluation, and a rank-deficient Jacobian needs no
+  column pivoting (which numpy's QR lacks);
+- the damping ``par`` found as in MINPACK's lmpar: Newton's method on ``1/||D p|| = 1/delta``, kept
+  within bounds, accurate to 10 %;
+- a step kept when the actual reduction is at least 1e-4 of the predicted one; the radius shrinks on a
+  poor ratio (by a quadratic fit to the directional derivative) and doubles on a good one;
+- MINPACK's stopping tests: ``ftol`` on both the actual and the predicted relative reduction of the
+  sum of squares (with ratio <= 2), ``xtol`` on the radius against the scaled ``||D x||``, ``gtol``
+  on the largest cosine between the residuals and a Jacobian column, and ``max_nfev`` evaluations.
+
+Residuals that are not finite (a simulation that diverged) or far larger than the current ones (a
+penalty) count as no reduction at all: the step is refused and the radius shrinks tenfold.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+#: ``status`` as scipy.optimize.least_squares reports it.
+STATUS_MESSAGES = {
+    0: "the number of evaluations reached max_nfev",
+    1: "gtol: the residuals are orthogonal to the Jacobian's columns",
+    2: "ftol: the relative reduction of the sum of squares is below ftol",
+    3: "xtol: the relative step is below xtol",
+    4: "ftol and xtol are both satisfied",
+}
+#: The initial radius relative to ``||D x0||`` (MINPACK's ``factor``, scipy's choice).
+_FACTOR = 100.0
+_EPS = float(np.finfo(float).eps)
+_TINY = float(np.finfo(float).tiny)
+
+Evaluate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class LeastSquaresResult:
+    """The best point found, its cost ``0.5 * ||f||^2``, evaluations used, and why it stopped."""
+
+    x: np.ndarray
+    cost: float
+    nfev: int
+    status: int
+    message: str
+
+
+def levenberg_marquardt(
+    evaluate: Evaluate,
+    x0: np.ndarray,
+    *,
+    xtol: float = 1e-8,
+    ftol: float = 1e-8,
+    gtol: float = 1e-8,
+    max_nfev: int = 200,
+) -> LeastSquaresResult:
+    """Minimise ``||f(x)||^2``; ``evaluate(x)`` returns ``(f, J)`` together (one simulation gives both).
+
+    Each call counts as one evaluation (``nfev``), the Jacobian of a refused trial is simply unused.
+    Tolerances as in scipy.optimize.least_squares(method="lm", x_scale="jac").
+    """
+    x = np.array(x0, dtype=float)
+    f, jac = evaluate(x)
+    nfev = 1
+    fnorm = float(np.linalg.norm(f))
+    if not np.isfinite(fnorm) or not np.all(np.isfinite(jac)):
+        raise ValueError("the residuals or the Jacobian are not finite at the starting point")
+    col_norms = np.linalg.norm(jac, axis=0)
+    scale = np.where(col_norms > 0.0, col_norms, 1.0)
+    xnorm = float(np.linalg.norm(scale * x))
+    delta = _FACTOR * xnorm or _FACTOR
+    par = 0.0
+    first = True  # until a step is accepted the radius also shrinks to the first step
+    while True:
+        q, r = np.linalg.qr(jac)
+        qtf = q.T @ f
+        col_norms = np.linalg.norm(jac, axis=0)
+        if fnorm == 0.0 or _largest_cosine(r, qtf, fnorm, col_norms) <= gtol:
+            return _result(x, fnorm, nfev, 1)
+        scale = np.maximum(scale, col_norms)
+        u, sv, vt = np.linalg.svd(r / scale, full_matrices=False)
+        g = u.T @ qtf
+        while True:  # trials from this Jacobian until one is accepted
+            par, c = _damping(sv, g, delta, par)
+            step = -(vt.T @ c) / scale
+            pnorm = float(np.linalg.norm(c))  # ||D step||
+            if first:
+                delta = min(delta, pnorm)
+            trial = x + step
+            f_trial, jac_trial = evaluate(trial)
+            nfev += 1
+            fnorm_trial = float(np.linalg.norm(f_trial))
+            if not np.isfinite(fnorm_trial) or not np.all(np.isfinite(jac_trial)):
+                fnorm_trial = np.inf
+            worse = 0.1 * fnorm_trial >= fnorm  # refused outright: no reduction to speak of
+            actual = -1.0 if worse else 1.0 - (fnorm_trial / fnorm) ** 2
+            model = (float(np.linalg.norm(sv * c)) / fnorm) ** 2  # ||J step||^2 / ||f||^2
+            damped = par * (pnorm / fnorm) ** 2
+            predicted = model + 2.0 * damped
+            slope = -(model + damped)
+            ratio = actual / predicted if predicted != 0.0 else 0.0
+            if ratio <= 0.25:
+                shrink = 0.5 if actual >= 0.0 else 0.5 * slope / (slope + 0.5 * actual)
+                if worse or shrink < 0.1:
+                    shrink = 0.1
+                delta = shrink * min(delta, pnorm / 0.1)
+                par /= shrink
+            elif par == 0.0 or ratio >= 0.75:
+                delta = pnorm / 0.5
+                par *= 0.5
+            accepted = ratio >= 1e-4
+            if accepted:
+                x, f, jac, fnorm = trial, f_trial, jac_trial, fnorm_trial
+                xnorm = float(np.linalg.norm(scale * x))
+                first = False
+            f_converged = abs(actual) <= ftol and predicted <= ftol and ratio <= 2.0
+            x_converged = delta <= xtol * xnorm
+            if f_converged or x_converged:
+                return _result(x, fnorm, nfev, 4 if f_converged and x_converged else 2 if f_converged else 3)
+            if nfev >= max_nfev:
+                return _result(x, fnorm, nfev, 0)
+            if accepted:
+                break
+
+
+def _largest_cosine(r: np.ndarray, qtf: np.ndarray, fnorm: float, col_norms: np.ndarray) -> float:
+    """max_j |J_j . f| / (||J_j|| ||f||): zero at a stationary point, whatever the scales."""
+    cosines = np.abs(r.T @ qtf) / fnorm
+    nonzero = col_norms > 0.0
+    return float(np.max(cosines[nonzero] / col_norms[nonzero], initial=0.0))
+
+
+def _damping(sv: np.ndarray, g: np.ndarray, delta: float, par: float) -> tuple[float, np.ndarray]:
+    """MINPACK's lmpar in the SVD basis: the damping ``par`` and the scaled step as ``-V' D p``.
+
+    With ``R D^-1 = U S V'`` and ``g = U' Q' f`` the damped scaled step is ``c = S g / (S^2 + par)``; par
+    is 0 when the Gauss-Newton step fits in the radius, else ``||c|| = delta`` within 10 % by Newton's
+    method on ``1/||c||`` (converges fast: nearly linear in par), safeguarded by the bounds
+    ``[parl, paru]``. ``par`` on entry is the previous value, a good first guess.
+    """
+    nonsingular = sv > sv[0] * _EPS * sv.size
+    gauss_newton = np.where(nonsingular, g / np.where(nonsingular, sv, 1.0), 0.0)
+    norm = float(np.linalg.norm(gauss_newton))
+    excess = norm - delta
+    if excess <= 0.1 * delta:
+        return 0.0, gauss_newton
+
+    def newton_correction(c: np.ndarray, damping: float) -> float:
+        """(||c|| - delta) / (delta * w), w = c' (S^2 + par)^-1 c / ||c||^2: MINPACK's parc."""
+        c_norm = float(np.linalg.norm(c))
+        inverse = c / np.sqrt(sv**2 + damping)  # damping 0: only asked when every sv > 0
+        weight = float(inverse @ inverse) / c_norm**2
+        return (c_norm - delta) / (delta * weight)
+
+    lower = newton_correction(gauss_newton, 0.0) if np.all(nonsingular) else 0.0
+    gradient_norm = float(np.linalg.norm(sv * g))
+    upper = gradient_norm / delta or _TINY / min(delta, 0.1)
+    par = min(max(par, lower), upper)
+    if par == 0.0:
+        par = gradient_norm / norm
+    for iteration in range(10):
+        if par == 0.0:
+            par = max(_TINY, 0.001 * upper)
+        c = sv * g / (sv**2 + par)
+        previous, excess = excess, float(np.linalg.norm(c)) - delta
+        stalled = lower == 0.0 and previous < 0.0 and excess <= previous  # rank-deficient: no better
+        if abs(excess) <= 0.1 * delta or stalled or iteration == 9:
+            return par, c
+        if excess > 0.0:
+            lower = max(lower, par)
+        elif excess < 0.0:
+            upper = min(upper, par)
+        par = max(lower, par + newton_correction(c, par))
+    raise AssertionError("unreachable: the loop returns at its tenth iteration")
+
+
+def _result(x: np.ndarray, fnorm: float, nfev: int, status: int) -> LeastSquaresResult:
+    return LeastSquaresResult(x, 0.5 * fnorm**2, nfev, status, STATUS_MESSAGES[status])
