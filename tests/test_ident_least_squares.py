@@ -1,7 +1,10 @@
-"""The fit's own Levenberg-Marquardt against scipy's MINPACK one."""
+"""The fit's own Levenberg-Marquardt against scipy's MINPACK one, and the fit path without scipy.optimize."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from collections.abc import Callable
 
 import numpy as np
@@ -129,3 +132,14 @@ def test_zero_residual_nonlinear_problem_stops_at_the_root() -> None:
     assert result.status > 0, result.message
     np.testing.assert_allclose(result.x, [1.0, 1.0], rtol=1e-10)
     assert result.cost < 1e-25
+
+
+def test_fit_path_does_not_import_scipy_optimize() -> None:
+    """scipy.optimize costs ~0.4 s to import: the output-error fit (and replay's path) must not pull it."""
+    probe = (
+        "import json, sys\n"
+        "import tankdaq.ident.output_error, tankdaq.ident.online, tankdaq.acquire.replay\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('scipy.optimize'))))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout) == []

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..errors import BadIdentificationInput, InputError
 from ..physics.models import resolve_model
@@ -47,6 +46,7 @@ from .kernels import (
     term_codes,
     term_matrix,
 )
+from .least_squares import levenberg_marquardt
 from .signals import white_noise_level
 from .uncertainty import (
     bic,
@@ -545,31 +545,18 @@ class OutputError(EstimatorMixin):
         return np.concatenate(res), np.vstack(jac), blocks, ok_all
 
     def _solve(self, p0: np.ndarray, free: np.ndarray, tol: float) -> np.ndarray:
-        cache: dict[str, Any] = {}
-
         def evaluate(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            if cache.get("q") is None or not np.array_equal(cache["q"], q):
-                p = p0.copy()
-                p[free] = q
-                res, jac, _, ok = self._weighted(p)
-                if not ok:  # diverged: a large, smooth-enough penalty makes LM back off
-                    res = np.full_like(res, 1e6)
-                cache.update(q=q.copy(), res=res, jac=jac[:, free])
-            return cache["res"], cache["jac"]
+            p = p0.copy()
+            p[free] = q
+            res, jac, _, ok = self._weighted(p)
+            if not ok:  # diverged: a large penalty makes LM refuse the step and back off
+                res = np.full_like(res, 1e6)
+            return res, jac[:, free]
 
-        result = least_squares(
-            lambda q: evaluate(q)[0],
-            p0[free],
-            jac=lambda q: evaluate(q)[1],
-            method="lm",
-            x_scale="jac",
-            xtol=tol,
-            ftol=tol,
-            max_nfev=self.max_nfev,
-        )
+        result = levenberg_marquardt(evaluate, p0[free], xtol=tol, ftol=tol, max_nfev=self.max_nfev)
         params = p0.copy()
         params[free] = result.x
-        self.nfev_ = int(result.nfev)
+        self.nfev_ = result.nfev
         return params
 
     # ------------------------------------------------------------------ results
