@@ -109,7 +109,7 @@ def levenberg_marquardt(
             model = (float(np.linalg.norm(sv * c)) / fnorm) ** 2  # ||J step||^2 / ||f||^2
             damped = par * (pnorm / fnorm) ** 2
             predicted = model + 2.0 * damped
-            slope = -(model + damped)
+            slope = -(model + damped)  # the model's directional derivative along the step
             ratio = actual / predicted if predicted != 0.0 else 0.0
             if ratio <= 0.25:
                 shrink = 0.5 if actual >= 0.0 else 0.5 * slope / (slope + 0.5 * actual)
