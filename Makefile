@@ -10,6 +10,7 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m tankdaq.prepare
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -37,7 +38,8 @@ viewer-test-deps:
 	fi
 
 # One pytest worker per core: most of the suite's wall time is the simulated MTi-G streaming in real time.
-# The numba kernels are compiled first, in one process (see src/tankdaq/prepare.py).
+# The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
+# because the source may have changed since the install.
 test: $(STAMP) lint viewer-test-deps
 	$(BIN)/python -m tankdaq.prepare
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal

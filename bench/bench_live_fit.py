@@ -6,8 +6,9 @@ daemon's status callback) from the release to the first pass after the settle. T
 gap between passes is how long acquisition was held up.
 
 "before" is the baseline commit's source (``git archive``, default: the commit this branch
-started from), run in the same session as "after" (this tree). "cold": ``NUMBA_CACHE_DIR``
-is a fresh folder (a first run after install); "warm": the same folder again.
+started from), run in the same session as "after" (this tree). "cold": ``NUMBA_CACHE_DIR`` and
+``TANKDAQ_KERNEL_DIR`` (where the native kernels are built) are a fresh folder (a first run after
+install); "warm": the same folder again.
 
 Third figure: the same 20 ms loop, bare, while the kernels compile (cold) on another thread:
 what warming up in the background during the device's opening would cost the loop.
@@ -129,7 +130,12 @@ def measure_fits_beside_a_loop() -> dict[str, float]:
 
 
 def _child(what: str, source: Path, cache: Path) -> dict[str, object]:
-    env = {**os.environ, "PYTHONPATH": str(source), "NUMBA_CACHE_DIR": str(cache)}
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(source),
+        "NUMBA_CACHE_DIR": str(cache),
+        "TANKDAQ_KERNEL_DIR": str(cache),
+    }
     with tempfile.TemporaryDirectory() as out:
         done = subprocess.run(
             [sys.executable, __file__, "--child", what, "--out", out],

@@ -6,7 +6,8 @@ while it records decays with release detection, MCAP writing, live refits and no
 
 Replay: a 10-minute capture (a decay test every 35 s) is recorded into one MCAP, then
 ``replay_recording(speed=None)`` re-decodes, re-detects and re-identifies all of it (CPU time: the
-machine is shared), twice: the first run includes loading the compiled kernels. And the command
+machine is shared), twice in a fresh process: the first run includes loading the compiled kernels;
+beside the same of an earlier commit when BASELINE_SRC names its src/ folder. And the command
 ``tankdaq replay`` of one 17 s decay end to end (process start and imports included), beside the
 same command of an earlier commit when BASELINE_SRC names its src/ folder (``git archive COMMIT src``).
 
@@ -15,6 +16,7 @@ Run: .venv/bin/python bench/bench_record.py [replay]   ("replay": skip the two 7
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import resource
@@ -25,10 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.acquire.replay import replay_recording
 from tankdaq.config import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import SimulatedMTi
@@ -132,6 +131,49 @@ def replay_command(path: Path, seconds: float) -> None:
         )
 
 
+#: ``replay_recording`` of a file twice in one fresh process: CPU time of each (the first includes
+#: loading the kernels), decays re-detected and refitted, median R2.
+IN_PROCESS = """
+import sys, time, json
+import numpy as np
+from tankdaq.acquire.replay import replay_recording
+out = []
+for _ in range(2):
+    cpu, wall = time.process_time(), time.perf_counter()
+    outcomes = replay_recording(sys.argv[1], speed=None)
+    cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+    fits = [o.fit for o in outcomes if o.fit is not None]
+    out.append([cpu, wall, len(outcomes), len(fits), float(np.median([f.r2_angle for f in fits]))])
+print(json.dumps(out))
+"""
+
+
+def replay_in_process(path: Path, seconds: float, repeats: int = 3) -> None:
+    """``replay_recording(speed=None)`` of the whole file, in a fresh process per tree (this one and,
+    with BASELINE_SRC, an earlier commit's), interleaved ``repeats`` times: cold (kernels loaded in
+    the run) and warm (the same process again)."""
+    trees = [("this tree", os.environ.get("PYTHONPATH"))]
+    if os.environ.get("BASELINE_SRC"):
+        trees.append(("baseline", os.environ["BASELINE_SRC"]))
+    runs: dict[str, list[list[list[float]]]] = {tree: [] for tree, _ in trees}
+    for _ in range(repeats):
+        for tree, src in trees:
+            env = {**os.environ, "PYTHONPATH": src} if src else dict(os.environ)
+            command = [sys.executable, "-c", IN_PROCESS, str(path)]
+            done = subprocess.run(command, check=True, capture_output=True, text=True, env=env)
+            runs[tree].append(json.loads(done.stdout.strip().splitlines()[-1]))
+    for tree, _ in trees:
+        for index, label in ((0, "cold: kernels loaded in the run"), (1, "warm: the same process again")):
+            cpu = statistics.median(run[index][0] for run in runs[tree])
+            wall = statistics.median(run[index][1] for run in runs[tree])
+            _, _, decays, fitted, r2 = runs[tree][0][index]
+            print(
+                f"replay of {seconds:g} s at max speed in-process ({tree}, {label}): "
+                f"median {cpu:.2f} s CPU = {seconds / cpu:.0f}x real time (wall {wall:.2f} s), "
+                f"{decays} decays re-detected, {fitted} refitted (median R2 {r2:.4f})"
+            )
+
+
 def main() -> None:
     print(f"machine: {platform.processor() or platform.machine()}, {platform.python_version()}")
     with tempfile.TemporaryDirectory() as tmp:
@@ -144,17 +186,7 @@ def main() -> None:
         started = time.perf_counter()
         path = ten_minute_file(folder)
         print(f"10-minute recording made in {time.perf_counter() - started:.1f} s (simulator at 40x)")
-        for label in ("first, compiled kernels loaded from numba's cache", "again, kernels loaded"):
-            cpu, wall = time.process_time(), time.perf_counter()
-            outcomes = replay_recording(path, speed=None)
-            cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
-            fits = [o for o in outcomes if o.fit is not None]
-            r2 = np.median([o.fit.r2_angle for o in fits]) if fits else float("nan")
-            print(
-                f"replay of 600 s at max speed ({label}): {cpu:.2f} s CPU = {600.0 / cpu:.0f}x real time "
-                f"(wall {wall:.2f} s), {len(outcomes)} decays re-detected, {len(fits)} refitted "
-                f"(median R2 {r2:.4f})"
-            )
+        replay_in_process(path, 600.0)
 
 
 if __name__ == "__main__":

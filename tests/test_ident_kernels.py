@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from tankdaq.ident.kernels import simulate, simulate_with_sensitivities, substeps, term_codes
+from tankdaq.ident.compiled import simulate, simulate_with_sensitivities, substeps, term_codes
 from tankdaq.physics.decay import TERMS, simulate_decay
 from tankdaq.physics.terms import TERM_TABLE
 

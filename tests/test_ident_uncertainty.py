@@ -133,3 +133,16 @@ def test_bic_is_minus_twice_the_gaussian_log_likelihood_plus_the_parameter_penal
     assert bic(blocks, 3, sigmas) == pytest.approx(log_det + n * (np.log(2 * np.pi) + 1) + 3 * np.log(n))
     # the right levels given: both agree closely
     assert bic(blocks, 3, sigmas) == pytest.approx(bic(blocks, 3), abs=5.0)
+
+
+@pytest.mark.parametrize("dof", [1, 2, 3, 4, 19, 20, 21, 101, 720])
+def test_the_closed_form_chi_square_survival_is_scipys(dof: int) -> None:
+    """Ljung-Box's p without scipy.special: the same to 1e-11 from the far left tail to the far right."""
+    from scipy.special import chdtrc
+
+    from tankdaq.ident.uncertainty import chi_square_survival
+
+    for q in [0.0, 1e-9, 0.01, 0.5, 1.0, dof / 2, dof, dof + 3 * (2 * dof) ** 0.5, 3 * dof, 1e3, 5e4]:
+        want = float(chdtrc(dof, q))
+        got = chi_square_survival(dof, q)
+        assert got == pytest.approx(want, rel=1e-11, abs=1e-300), (dof, q)

@@ -170,14 +170,17 @@ def test_a_final_fit_that_cannot_finish_is_given_up_in_bounded_time() -> None:
 def test_a_first_run_after_install_prepares_the_kernels_before_the_device_and_loses_nothing(
     tmp_path: Path,
 ) -> None:
-    """Cold numba cache: compiling happens before the device opens, with one line saying so."""
+    """No kernels built yet (an empty kernel folder): the build happens before the device opens, with
+    one line saying so, and leaves the native module for the next run."""
     seed = 5
     out = tmp_path / "rec"
     args = ["record", "--port", "sim", "--hull", "swath", "--draft", "T", "--angle", "8", "--runs", "1"]
     args += ["--viewer", "none", "--sim-speed", "8", "--sim-seed", str(seed), "--out", str(out)]
     with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        env = {**os.environ, "TANKDAQ_KERNEL_DIR": cache}
         done = subprocess.run([TANKDAQ, *args], env=env, capture_output=True, text=True, timeout=600)
+        built = list(Path(cache).glob("tankdaq_kernels-*"))
+    assert len(built) == 1, built
     lines = done.stderr.splitlines() + done.stdout.splitlines()
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr

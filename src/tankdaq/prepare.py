@@ -1,9 +1,12 @@
-"""Compile every numba kernel once, in one process, before anything runs them side by side.
+"""Build and compile every kernel once, in one process, before anything runs them side by side.
 
-numba's on-disk cache is written by whichever process compiles a kernel first; processes that
-compile the same kernel at the same moment can read each other's half-written cache files (a
-``SystemError`` from numba's unpickler). ``make test`` runs ``python -m tankdaq.prepare`` before its
-parallel workers start. ``record`` and ``replay`` prepare the identifier's kernels themselves.
+The identification kernels are built ahead of time into a native module (``ident.compiled``:
+later processes load them in a millisecond, without numba) and compiled by numba's JIT too (the
+fallback, and what the native module is tested against). numba's on-disk cache is written by
+whichever process compiles a kernel first; processes that compile the same kernel at the same
+moment can read each other's half-written cache files (a ``SystemError`` from numba's unpickler).
+``make`` runs ``python -m tankdaq.prepare`` after installing and before the test workers start.
+``record`` and ``replay`` prepare the identifier's kernels themselves.
 """
 
 from __future__ import annotations
@@ -12,12 +15,16 @@ import math
 
 
 def prepare() -> None:
-    """Compile (or load from the cache) the identification and diving-plane kernels."""
+    """Build (or find) the native kernels, and compile (or load) the JIT and diving-plane kernels."""
+    from .ident.compiled import warm_jit
     from .ident.online import prepare_kernels
     from .maneuver.model import simulate_zigzag
     from .maneuver.vehicle import load_vehicle
 
-    prepare_kernels()
+    reason = prepare_kernels()
+    if reason is not None:
+        print(f"tankdaq.prepare: identifier kernels on numba's JIT, slower to start: {reason}")
+    warm_jit()
     simulate_zigzag(load_vehicle("nps_auv2"), math.radians(10), math.radians(10), switches=1)
 
 

@@ -34,6 +34,7 @@ from ..store.naming import parse_recording_name
 from .derived import amplitude_table, damping_ratio, natural_period
 from .free_decay import cut_free_decays, cut_lines
 from .inputs import read_decays
+from .online import prepare_kernels
 from .output_error import OutputError
 
 
@@ -302,7 +303,7 @@ def campaign_executor(
     elif jobs <= 1:
         yield None
     else:
-        _load_kernels()
+        prepare_kernels()
         for load in prepare:
             load()
         with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("fork")) as pool:
@@ -316,13 +317,6 @@ def campaign_executor(
             finally:
                 gc.unfreeze()
             yield pool
-
-
-def _load_kernels() -> None:
-    """One tiny fit: the fit's compiled kernels are loaded (from numba's cache) in this process."""
-    t = np.linspace(0.0, 4.0, 200)
-    angle, rate = simulate_decay({"b1": 0.2, "c1": 10.0}, t, 0.1)
-    OutputError("b1,c1").fit(DecayRun(t=t, angle=angle + 1e-4 * np.sin(37 * t), rate=rate))
 
 
 # --------------------------------------------------------------------------------------------------

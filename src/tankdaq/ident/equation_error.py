@@ -16,8 +16,8 @@ from ..errors import BadIdentificationInput
 from ..physics.models import resolve_model
 from ..records import DecayRun
 from .base import EstimatorMixin
+from .compiled import term_codes, term_matrix
 from .derived import linear_stiffness
-from .kernels import term_codes, term_matrix
 from .signals import estimate_period, savgol_window, smoothed_derivatives, start_state
 
 

@@ -1,4 +1,5 @@
-"""Compiled decay integration with exact forward sensitivities (numba, cached).
+"""The numba source of every identification kernel: decay integration with exact forward
+sensitivities, and the HAC covariance's sums.
 
 The output-error fit needs the simulated angle and rate at the sample instants
 *and* their derivatives with respect to every coefficient and the initial
@@ -10,26 +11,23 @@ noisy finite differences that stall optimisers (reference §4).
 The equation is ``x'' = -sum_j theta_j * phi_j(x, x', u)``. Each term is one
 row of the term table (``physics.terms.TERM_TABLE``: name, code, kind, label,
 unit) plus one branch of ``term_eval`` giving phi and its partial derivatives
-in x, x' and u; adding a term touches nothing else. This module holds only the
-kernel code. The input u may itself depend on parameters (measured channels
-with their coupling coefficients, a ringing forcing): their sensitivities are
-driven by du/dp, given at the samples (``simulate_with_sensitivities``).
+in x, x' and u; adding a term touches nothing else. The input u may itself
+depend on parameters (measured channels with their coupling coefficients, a
+ringing forcing): their sensitivities are driven by du/dp, given at the samples
+(``simulate_with_sensitivities``).
+
+This module holds only kernel code and is imported only to compile it. Callers
+go through ``ident.compiled``, which loads the kernels built ahead of time into
+a native module (no numba import, about a millisecond) or else this module's
+numba JIT (its import and first cached call cost about 0.8 s).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numba
 import numpy as np
-
-from ..physics.terms import TERM_TABLE
-
-
-def term_codes(terms: Sequence[str]) -> np.ndarray:
-    """Kernel codes of the named terms (KeyError names the unknown one)."""
-    return np.array([TERM_TABLE[name].code for name in terms], dtype=np.int64)
 
 
 @numba.njit(cache=True, inline="always")
@@ -283,14 +281,113 @@ def _rk4_state_step(
     )
 
 
-def substeps(dt: float, theta: np.ndarray, terms: Sequence[str], amplitude: float) -> int:
-    """RK4 sub-steps per sample so that omega*h stays below 0.1 (phase error ~1e-7 per step)."""
-    coeff = dict(zip(terms, np.abs(theta), strict=True))
-    stiffness = (
-        coeff.get("c1", 0.0)
-        + coeff.get("s1", 0.0)
-        + 3 * (coeff.get("c3", 0.0) + coeff.get("s3", 0.0)) * amplitude**2
-        + 2 * (coeff.get("c2", 0.0) + coeff.get("s2", 0.0)) * amplitude
-    )
-    rate_scale = math.sqrt(max(stiffness, 1e-12)) + coeff.get("b1", 0.0)
-    return max(1, math.ceil(2.0 * rate_scale * dt / 0.1))
+@numba.njit(cache=True)
+def _box_full(x: np.ndarray, width: int) -> np.ndarray:
+    """Full convolution of each column of x (n, k) with a boxcar of ``width`` ones."""
+    n, k = x.shape
+    out = np.zeros((n + width - 1, k))
+    acc = np.zeros(k)
+    for t in range(n + width - 1):
+        if t < n:
+            acc += x[t]
+        if t >= width:
+            acc -= x[t - width]
+        out[t] = acc
+    return out
+
+
+@numba.njit(cache=True)
+def triangle_smooth(x: np.ndarray, bandwidth: int) -> np.ndarray:
+    """sum_s w(|t-s|) x_s with Bartlett weights w(l) = 1 - l/(L+1), |l| <= L, down the rows of x (n, k).
+
+    The triangle is two boxcars of L+1 samples convolved: O(n k) whatever the bandwidth.
+    """
+    width = bandwidth + 1
+    return _box_full(_box_full(x, width), width)[bandwidth : bandwidth + x.shape[0]] / width
+
+
+@numba.njit(cache=True)
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a' b for (n, p) columns, as loops: BLAS is not there for the ahead-of-time build."""
+    n, p = a.shape
+    out = np.zeros((p, b.shape[1]))
+    for t in range(n):
+        for i in range(p):
+            ai = a[t, i]
+            for j in range(b.shape[1]):
+                out[i, j] += ai * b[t, j]
+    return out
+
+
+@numba.njit(cache=True)
+def hac_meat(
+    jac: np.ndarray, res: np.ndarray, bread: np.ndarray, bandwidth: int, correct: bool
+) -> np.ndarray:
+    """One run's HAC meat: sum_t g_t (smoothed g)_t' plus, if ``correct``, sum_t M_t A^-1 K_t.
+
+    ``jac`` (outputs, n, p) and ``res`` (outputs, n) are noise-weighted.
+    """
+    n_out, n, p = jac.shape
+    g = np.zeros((n, p))
+    for o in range(n_out):
+        for t in range(n):
+            for a in range(p):
+                g[t, a] += jac[o, t, a] * res[o, t]
+    meat = _cross(g, triangle_smooth(g, bandwidth))
+    if correct:
+        meat += _bias_correction(jac, bread, bandwidth)
+    return meat
+
+
+@numba.njit(cache=True, inline="always")
+def _add_information(jac: np.ndarray, t: int, sign: float, acc: np.ndarray) -> None:
+    """acc += sign * M_t, the information of instant t (p*p, row-major), summed over the outputs."""
+    n_out, _, p = jac.shape
+    for o in range(n_out):
+        for a in range(p):
+            for b in range(p):
+                acc[a * p + b] += sign * jac[o, t, a] * jac[o, t, b]
+
+
+@numba.njit(cache=True)
+def _bias_correction(jac: np.ndarray, bread: np.ndarray, bandwidth: int) -> np.ndarray:
+    """sum_t M_t A^-1 K_t, with K_t = triangle_smooth(M)_t computed as a stream.
+
+    The same two running boxcars as ``triangle_smooth``, but row by row with a
+    ring of the last L+1 first-boxcar rows: the (n, p*p) information arrays are
+    never built (allocating them cost more in page faults than all the arithmetic).
+    """
+    n_out, n, p = jac.shape
+    width = bandwidth + 1
+    first = np.zeros(p * p)  # running boxcar over M
+    second = np.zeros(p * p)  # running boxcar over the first one
+    ring = np.zeros((width, p * p))  # the last ``width`` rows of the first boxcar
+    spread = np.zeros(p)
+    meat = np.zeros((p, p))
+    for t in range(n + bandwidth):
+        if t < n:
+            _add_information(jac, t, 1.0, first)
+        if t >= width:
+            _add_information(jac, t - width, -1.0, first)
+        slot = t % width
+        for m in range(p * p):
+            second[m] += first[m]
+            if t >= width:
+                second[m] -= ring[slot, m]
+            ring[slot, m] = first[m]
+        i = t - bandwidth  # the instant whose smoothed information K_i = second / width is complete
+        if i < 0:
+            continue
+        for o in range(n_out):
+            for c in range(p):  # (bread @ jac[o, i])': bread is symmetric
+                s = 0.0
+                for d in range(p):
+                    s += jac[o, i, d] * bread[d, c]
+                spread[c] = s
+            for b in range(p):
+                w = 0.0  # (bread @ jac[o, i]) @ K_i, one column at a time
+                for c in range(p):
+                    w += spread[c] * (second[c * p + b] / width)
+                for a in range(p):
+                    meat[a, b] += jac[o, i, a] * w
+    return meat

@@ -10,7 +10,7 @@ end of the decay the last result is the offline OutputError fit of the same data
 
 ``BackgroundFit`` runs an identifier on a worker thread so that the acquisition
 loop only hands samples over: a refit (10-50 ms, more on a loaded machine) never
-holds up the reads. ``prepare_kernels`` compiles or loads the numba kernels before a
+holds up the reads. ``prepare_kernels`` builds or loads the compiled kernels before a
 device opens, so no refit pays for them during a decay.
 """
 
@@ -21,14 +21,13 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import IdentificationError
 from ..records import DecayRun
-from . import kernels
+from . import compiled
 from .base import EstimatorMixin
 from .output_error import OutputError
 from .signals import band_crossings, white_noise_level
@@ -291,22 +290,17 @@ class BackgroundFit:
                 self._results.append(result)
 
 
-def kernels_cached() -> bool:
-    """True when numba's on-disk cache already holds the fit's compiled kernels (not the first run)."""
-    dispatcher = kernels.simulate_with_sensitivities
-    try:  # numba keeps the index path in a private attribute; unknown means assume cached
-        index = dispatcher._cache._cache_file._index_path  # type: ignore[attr-defined]
-    except AttributeError:
-        return True
-    return Path(index).exists()
+def prepare_kernels(terms: str | Sequence[str] = "ittc-quadratic-restoring") -> str | None:
+    """Make every kernel a live fit uses ready before a device opens; None, or why not native.
 
-
-def prepare_kernels(terms: str | Sequence[str] = "ittc-quadratic-restoring") -> None:
-    """Compile (first run) or load (later runs) every kernel a live fit uses, on a made-up decay.
-
-    Run before a device opens: the first refit of a decay would otherwise spend 10-40 s
-    compiling (0.6 s loading from the cache) wherever it runs.
+    The native module is built on the first run (``ident.compiled``) and then loads in a
+    millisecond. Where it cannot be, numba's JIT compiles (first run) or loads the kernels on a
+    made-up decay: the first refit of a decay would otherwise spend 10-40 s compiling (0.6 s
+    loading from the cache) wherever it runs.
     """
+    reason = compiled.ensure_native()
+    if reason is None:
+        return None
     t = np.arange(0.0, 12.0, 0.01)
     omega, zeta = 2.0 * np.pi / 2.0, 0.05
     envelope = 0.14 * np.exp(-zeta * omega * t)
@@ -319,6 +313,7 @@ def prepare_kernels(terms: str | Sequence[str] = "ittc-quadratic-restoring") -> 
         IdentificationError
     ):  # a model this made-up decay does not suit: compiled anyway
         identifier.finish()
+    return reason
 
 
 #: What compiling the kernels took on the 2-core benchmark machine, quiet to loaded (bench_live_fit.py).
@@ -326,7 +321,10 @@ FIRST_RUN_S = "10–40"
 
 
 def prepare_identifier(terms: str | Sequence[str], on_event: Callable[[str], None] | None = None) -> None:
-    """``prepare_kernels``, saying so in one line when it means compiling (the first run after install)."""
-    if not kernels_cached() and on_event is not None:
+    """``prepare_kernels``, saying so in one line when it means compiling (the first run after install)
+    and in another when the kernels run on numba's JIT (slower to start) and why."""
+    if not compiled.ahead_of_time() and not compiled.build_failed() and on_event is not None:
         on_event(f"preparing the identifier (first run after install; about {FIRST_RUN_S} s)")
-    prepare_kernels(terms)
+    reason = prepare_kernels(terms)
+    if reason is not None and on_event is not None:
+        on_event(f"identifier kernels on numba's JIT, slower to start: {reason}")

@@ -36,9 +36,7 @@ from ..errors import BadIdentificationInput, InputError
 from ..physics.models import resolve_model
 from ..records import DecayRun
 from .base import EstimatorMixin
-from .derived import natural_period
-from .equation_error import EquationError, check_runs, exogenous_input
-from .kernels import (
+from .compiled import (
     acceleration_partials,
     simulate,
     simulate_with_sensitivities,
@@ -46,6 +44,8 @@ from .kernels import (
     term_codes,
     term_matrix,
 )
+from .derived import natural_period
+from .equation_error import EquationError, check_runs, exogenous_input
 from .least_squares import levenberg_marquardt
 from .signals import white_noise_level
 from .uncertainty import (

@@ -18,6 +18,7 @@ import numpy as np
 from ..physics.models import MODEL_ALIASES, model_name, resolve_model
 from ..physics.terms import TERM_TABLE, equation_text
 from ..records import DecayRun
+from .compiled import simulate, substeps, term_codes
 from .derived import (
     amplitude_table,
     damping_ratio,
@@ -27,7 +28,6 @@ from .derived import (
     tested_amplitudes_deg,
 )
 from .estimators import make_estimator
-from .kernels import simulate, substeps, term_codes
 from .output_error import OutputError, seed_objective
 from .uncertainty import IntervalSummary
 

@@ -31,8 +31,8 @@ from ..physics.models import MODEL_ALIASES
 from ..records import DecayRun
 from ..validation import equation_model
 from .base import EstimatorMixin
+from .compiled import simulate, substeps, term_codes, term_matrix
 from .equation_error import check_runs
-from .kernels import simulate, substeps, term_codes, term_matrix
 from .uncertainty import coefficient_warnings
 
 #: Lower bound of the total inertia. The papers write I in [0, 0.1]; 0 itself would divide by zero.

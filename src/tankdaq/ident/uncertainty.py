@@ -15,11 +15,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numba
 import numpy as np
-from scipy import special  # the two distribution functions needed, without scipy.stats' second of import
 
 from ..records import DecayRun
+from .compiled import hac_meat
 
 #: |correlation| above which two coefficients are reported as trading off.
 CORRELATION_WARN = 0.95
@@ -84,108 +83,9 @@ def hac_covariance(blocks: ScoreBlocks, bandwidth: int, bias_correction: bool = 
     bread = np.linalg.pinv(sum(np.einsum("otp,otq->pq", jac, jac) for jac, _ in stacked))
     meat = np.zeros_like(bread)
     for jac, res in stacked:
-        meat += _hac_meat(jac, res, bread, bandwidth, bias_correction)
+        meat += hac_meat(jac, res, bread, bandwidth, bias_correction)
     meat = 0.5 * (meat + meat.T)
     return bread @ meat @ bread
-
-
-@numba.njit(cache=True)
-def _box_full(x: np.ndarray, width: int) -> np.ndarray:
-    """Full convolution of each column of x (n, k) with a boxcar of ``width`` ones."""
-    n, k = x.shape
-    out = np.zeros((n + width - 1, k))
-    acc = np.zeros(k)
-    for t in range(n + width - 1):
-        if t < n:
-            acc += x[t]
-        if t >= width:
-            acc -= x[t - width]
-        out[t] = acc
-    return out
-
-
-@numba.njit(cache=True)
-def triangle_smooth(x: np.ndarray, bandwidth: int) -> np.ndarray:
-    """sum_s w(|t-s|) x_s with Bartlett weights w(l) = 1 - l/(L+1), |l| <= L, down the rows of x (n, k).
-
-    The triangle is two boxcars of L+1 samples convolved: O(n k) whatever the bandwidth.
-    """
-    width = bandwidth + 1
-    return _box_full(_box_full(x, width), width)[bandwidth : bandwidth + x.shape[0]] / width
-
-
-@numba.njit(cache=True)
-def _hac_meat(
-    jac: np.ndarray, res: np.ndarray, bread: np.ndarray, bandwidth: int, correct: bool
-) -> np.ndarray:
-    """One run's HAC meat: sum_t g_t (smoothed g)_t' plus, if ``correct``, sum_t M_t A^-1 K_t.
-
-    ``jac`` (outputs, n, p) and ``res`` (outputs, n) are noise-weighted.
-    """
-    n_out, n, p = jac.shape
-    g = np.zeros((n, p))
-    for o in range(n_out):
-        for t in range(n):
-            for a in range(p):
-                g[t, a] += jac[o, t, a] * res[o, t]
-    meat = g.T @ triangle_smooth(g, bandwidth)
-    if correct:
-        meat += _bias_correction(jac, bread, bandwidth)
-    return meat
-
-
-@numba.njit(cache=True, inline="always")
-def _add_information(jac: np.ndarray, t: int, sign: float, acc: np.ndarray) -> None:
-    """acc += sign * M_t, the information of instant t (p*p, row-major), summed over the outputs."""
-    n_out, _, p = jac.shape
-    for o in range(n_out):
-        for a in range(p):
-            for b in range(p):
-                acc[a * p + b] += sign * jac[o, t, a] * jac[o, t, b]
-
-
-@numba.njit(cache=True)
-def _bias_correction(jac: np.ndarray, bread: np.ndarray, bandwidth: int) -> np.ndarray:
-    """sum_t M_t A^-1 K_t, with K_t = triangle_smooth(M)_t computed as a stream.
-
-    The same two running boxcars as ``triangle_smooth``, but row by row with a
-    ring of the last L+1 first-boxcar rows: the (n, p*p) information arrays are
-    never built (allocating them cost more in page faults than all the arithmetic).
-    """
-    n_out, n, p = jac.shape
-    width = bandwidth + 1
-    first = np.zeros(p * p)  # running boxcar over M
-    second = np.zeros(p * p)  # running boxcar over the first one
-    ring = np.zeros((width, p * p))  # the last ``width`` rows of the first boxcar
-    spread = np.zeros(p)
-    meat = np.zeros((p, p))
-    for t in range(n + bandwidth):
-        if t < n:
-            _add_information(jac, t, 1.0, first)
-        if t >= width:
-            _add_information(jac, t - width, -1.0, first)
-        slot = t % width
-        for m in range(p * p):
-            second[m] += first[m]
-            if t >= width:
-                second[m] -= ring[slot, m]
-            ring[slot, m] = first[m]
-        i = t - bandwidth  # the instant whose smoothed information K_i = second / width is complete
-        if i < 0:
-            continue
-        for o in range(n_out):
-            for c in range(p):  # (bread @ jac[o, i])': bread is symmetric
-                s = 0.0
-                for d in range(p):
-                    s += jac[o, i, d] * bread[d, c]
-                spread[c] = s
-            for b in range(p):
-                w = 0.0  # (bread @ jac[o, i]) @ K_i, one column at a time
-                for c in range(p):
-                    w += spread[c] * (second[c * p + b] / width)
-                for a in range(p):
-                    meat[a, b] += jac[o, i, a] * w
-    return meat
 
 
 def correlation_from_covariance(cov: np.ndarray) -> np.ndarray:
@@ -218,7 +118,27 @@ def ljung_box(residuals: Sequence[np.ndarray], lags: int = 20) -> float:
         acf = autocorrelation(e, h)
         q_total += n * (n + 2) * float(np.sum(acf**2 / (n - np.arange(1, h + 1))))
         dof += h
-    return float(special.chdtrc(max(dof, 1), q_total))  # chi-square survival function
+    return chi_square_survival(max(dof, 1), q_total)
+
+
+def chi_square_survival(dof: int, q: float) -> float:
+    """P(chi-square with ``dof`` degrees of freedom > q), the closed form for whole ``dof``.
+
+    A finite series of Poisson terms (plus erfc for odd ``dof``), summed in logarithms so that
+    neither a large ``q`` nor many degrees of freedom overflow: what every live fit's Ljung-Box
+    test needs, without scipy.special's 0.1 s import.
+    """
+    if q <= 0.0:
+        return 1.0
+    half = 0.5 * q
+    odd = dof % 2 == 1
+    total = math.erfc(math.sqrt(half)) if odd else 0.0
+    shift = 0.5 if odd else 0.0  # the Poisson terms' exponents: i + 1/2 for odd dof, i for even
+    log_half = math.log(half)
+    for i in range(dof // 2):
+        exponent = i + shift
+        total += math.exp(exponent * log_half - half - math.lgamma(exponent + 1.0))
+    return min(total, 1.0)
 
 
 def residual_whiteness(residual: np.ndarray, lags: int = 20) -> tuple[float, float]:
@@ -383,6 +303,8 @@ def _summary(
         n = values.shape[0]
         spread = std / np.sqrt(n)
         mean = values.mean(axis=0)
+        from scipy import special  # scipy.special costs 0.1 s to import: only for repeat runs
+
         half = special.stdtrit(max(n - 1, 1), 0.975) * spread  # Student t quantile
         lo, hi = mean - half, mean + half
     return IntervalSummary(

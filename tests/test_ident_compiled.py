@@ -1,0 +1,154 @@
+"""The kernels built ahead of time (``ident.compiled``, issue 14: replay >= 20x real time with start-up).
+
+The native module must compute what numba's JIT computes, must not crash on a wrong argument, and
+must be what a replay runs on: a ``tankdaq replay`` process imports no numba. A replay that cannot
+build it still replays, on the JIT, with the same fit, and says why in one line.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tankdaq.config import hull_scenario
+from tankdaq.device.driver import MTiDriver
+from tankdaq.device.simulator import SimulatedMTi
+from tankdaq.ident import compiled, kernels
+from tankdaq.store.writer import RecordingWriter
+
+TERMS = ("b1", "b2", "b3", "c1", "c2", "c3", "fc")
+THETA = np.array([0.3, 0.4, 0.5, 14.0, 0.8, 60.0, 0.002])
+
+
+@pytest.fixture(scope="module")
+def native() -> object:
+    """The native module of this kernel source (``make test``'s prepare built it; else built here)."""
+    assert compiled.ensure_native() is None, "the native kernels could not be built here"
+    module = compiled.load_native(compiled.native_path())
+    assert module is not None
+    return module
+
+
+def _inputs() -> dict[str, object]:
+    rng = np.random.default_rng(3)
+    t = np.arange(1500) / 100.0
+    u = 0.02 * np.sin(2.1 * t)
+    du_dp = np.column_stack([np.sin(2.1 * t), np.cos(2.1 * t)])
+    x = 0.2 * np.exp(-0.1 * t) * np.cos(3.7 * t)
+    v = np.gradient(x, t)
+    jac = rng.normal(size=(2, t.size, 9))
+    return {"t": t, "u": u, "du_dp": du_dp, "x": x, "v": v, "jac": jac, "res": rng.normal(size=(2, t.size))}
+
+
+def test_the_native_kernels_compute_what_the_jit_computes(native: object) -> None:
+    a = _inputs()
+    codes = compiled.term_codes(TERMS)
+    calls = {
+        "simulate": (a["t"], 0.2, 0.0, THETA, codes, a["u"], 0.02, 2),
+        "simulate_with_sensitivities": (a["t"], 0.2, 0.0, THETA, codes, a["u"], a["du_dp"], 0.02, 2),
+        "acceleration_partials": (codes, THETA, a["x"], a["v"], a["u"], 0.02),
+        "term_matrix": (codes, a["x"], a["v"], a["u"], 0.02),
+        "hac_meat": (a["jac"], a["res"], np.eye(9) * 1e-3, 150, True),
+    }
+    assert set(calls) == set(compiled.KERNELS)
+    for name, args in calls.items():
+        from_native = getattr(native, name)(*args)
+        from_jit = getattr(kernels, name)(*args)
+        pairs = (
+            zip(from_native, from_jit, strict=True)
+            if isinstance(from_jit, tuple)
+            else [(from_native, from_jit)]
+        )
+        for got, want in pairs:
+            np.testing.assert_allclose(got, want, rtol=1e-12, atol=0, err_msg=name)
+    angle = native.simulate(*calls["simulate"])[0]
+    assert angle.size == 1500 and np.ptp(angle) > 0.1  # a real decay was compared, not zeros
+
+
+def test_a_wrong_argument_is_a_type_error_not_a_crash(native: object) -> None:
+    """The native module does not check types (a list where it wants an array would crash the process)."""
+    compiled.use_native(compiled.native_path())
+    assert compiled.ahead_of_time()
+    t = np.arange(200) / 100.0
+    as_arrays = compiled.simulate(
+        t, 0.1, 0.0, np.array([0.2, 9.0]), compiled.term_codes(["b1", "c1"]), 0 * t, 0.0, 1
+    )
+    as_lists = compiled.simulate(list(t), 0.1, 0, [0.2, 9], [0, 3], [0.0] * 200, 0, 1)  # ints and lists too
+    np.testing.assert_array_equal(as_arrays[0], as_lists[0])
+    with pytest.raises(TypeError, match="1-d array"):
+        compiled.simulate(t[None, :], 0.1, 0.0, np.array([0.2, 9.0]), np.array([0, 3]), 0 * t, 0.0, 1)
+    with pytest.raises(TypeError, match="takes 8 arguments"):
+        compiled.simulate(t, 0.1)
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One simulated roll decay recorded to MCAP (raw bytes and samples), through the real pty and driver."""
+    path = tmp_path_factory.mktemp("compiled") / "decay.mcap"
+    scenario = hull_scenario(hull="swath", draft=1.0, angle_deg=8.0, runs=1, seed=7)
+    with SimulatedMTi(scenario, speed=40.0) as sim, MTiDriver(sim.link) as driver:
+        driver.configure()
+        with RecordingWriter(path, {"axis": "roll", "angle_nominal_deg": 8.0, "hull": "swath"}, {}) as writer:
+            first = last = None
+            while first is None or last is None or last - first < 17.0:
+                block = driver.read_block()
+                writer.write_raw(block.raw, int(block.host_t * 1e9))
+                writer.write_samples(block.samples)
+                if block.samples.size:
+                    first = float(block.samples["t"][0]) if first is None else first
+                    last = float(block.samples["t"][-1])
+    return path
+
+
+#: ``tankdaq replay``, then which of the heavy start-up libraries the process had imported.
+REPLAY = """
+import atexit, sys
+heavy = {"numba"}
+atexit.register(lambda: print("loaded:", sorted(heavy & set(sys.modules)), file=sys.stderr))
+from tankdaq.cli import main
+main()
+"""
+
+
+def _replay(path: Path, kernel_dir: str | None) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ)
+    if kernel_dir is not None:
+        env["TANKDAQ_KERNEL_DIR"] = kernel_dir
+    return subprocess.run(
+        [sys.executable, "-c", REPLAY, "replay", str(path), "--speed", "max", "--viewer", "none"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+
+
+def _fit_lines(output: str) -> list[str]:
+    return [line for line in output.splitlines() if "b1=" in line]
+
+
+def test_a_replay_runs_on_the_native_kernels_without_numba(native: object, recording: Path) -> None:
+    done = _replay(recording, None)
+    assert done.returncode == 0, done.stderr
+    assert len(_fit_lines(done.stdout)) == 1, done.stdout
+    assert "loaded: []" in done.stderr, done.stderr
+
+
+def test_a_replay_that_cannot_build_the_kernels_uses_the_jit_says_why_and_fits_the_same(
+    native: object, recording: Path, tmp_path: Path
+) -> None:
+    blocked = tmp_path / "not-a-folder"
+    blocked.write_text("a file where the kernel folder would be: the build cannot write there\n")
+    on_jit = _replay(recording, str(blocked))
+    on_native = _replay(recording, None)
+    assert on_jit.returncode == 0, on_jit.stderr
+    said = on_jit.stdout + on_jit.stderr
+    assert "numba's JIT" in said and "not-a-folder" in said, said
+    assert "Traceback" not in said
+    assert "'numba'" in on_jit.stderr  # it did run on the JIT
+    assert _fit_lines(on_jit.stdout) == _fit_lines(on_native.stdout) != []
