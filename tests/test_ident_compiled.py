@@ -108,7 +108,7 @@ def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 #: ``tankdaq replay``, then which of the heavy start-up libraries the process had imported.
 REPLAY = """
 import atexit, sys
-heavy = {"numba"}
+heavy = {"numba", "scipy.optimize"}
 atexit.register(lambda: print("loaded:", sorted(heavy & set(sys.modules)), file=sys.stderr))
 from tankdaq.cli import main
 main()
