@@ -12,12 +12,19 @@ beside the same of an earlier commit when BASELINE_SRC names its src/ folder. An
 same command of an earlier commit when BASELINE_SRC names its src/ folder (``git archive COMMIT src``).
 
 Run: .venv/bin/python bench/bench_record.py [replay]   ("replay": skip the two 75 s CPU-share runs)
+
+BLAS runs single-threaded here, as the ``tankdaq`` command sets it (``tankdaq.cli``): the fit's
+small QRs on a threaded OpenBLAS leave its threads spinning, which doubles the CPU time of an
+in-process replay (1.55 s against 0.87 s) for about the same wall time.
 """
 
 from __future__ import annotations
 
-import json
 import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import json
 import platform
 import resource
 import statistics

@@ -7,10 +7,10 @@ third of a whole ``tankdaq replay``; the fit needs only this. It follows MINPACK
 
 - a trust region on the scaled step ``||D p|| <= delta``, with Marquardt's scaling ``D`` the Jacobian's
   column norms kept as a running maximum (a parameter's scale never shrinks back: no oscillation);
-- one QR of the Jacobian per accepted point. Every damped step solves
-  ``(J'J + par D^2) p = -J'f`` in closed form from the SVD of the small triangle ``R D^-1`` (p x p),
-  so a trial costs O(p^2) beside its residual evaluation, and a rank-deficient Jacobian needs no
-  column pivoting (which numpy's QR lacks);
+- one QR of the Jacobian per accepted point (R of ``[J f]``: Q'f is its last column, Q is never
+  formed). Every damped step solves ``(J'J + par D^2) p = -J'f`` in closed form from the SVD of the
+  small triangle ``R D^-1`` (p x p), so a trial costs O(p^2) beside its residual evaluation, and a
+  rank-deficient Jacobian needs no column pivoting (which numpy's QR lacks);
 - the damping ``par`` found as in MINPACK's lmpar: Newton's method on ``1/||D p|| = 1/delta``, kept
   within bounds, accurate to 10 %;
 - a step kept when the actual reduction is at least 1e-4 of the predicted one; the radius shrinks on a
@@ -84,8 +84,11 @@ def levenberg_marquardt(
     par = 0.0
     first = True  # until a step is accepted the radius also shrinks to the first step
     while True:
-        q, r = np.linalg.qr(jac)
-        qtf = q.T @ f
+        # R of [J f] holds J's R and Q'f in its last column: Q itself (n x p) is never formed,
+        # five times cheaper than np.linalg.qr(jac) and the one tall operation of a step.
+        r_aug = np.linalg.qr(np.column_stack([jac, f]), mode="r")
+        p = jac.shape[1]
+        r, qtf = r_aug[:p, :p], r_aug[:p, p]
         col_norms = np.linalg.norm(jac, axis=0)
         if fnorm == 0.0 or _largest_cosine(r, qtf, fnorm, col_norms) <= gtol:
             return _result(x, fnorm, nfev, 1)
