@@ -152,3 +152,23 @@ def test_a_replay_that_cannot_build_the_kernels_uses_the_jit_says_why_and_fits_t
     assert "Traceback" not in said
     assert "'numba'" in on_jit.stderr  # it did run on the JIT
     assert _fit_lines(on_jit.stdout) == _fit_lines(on_native.stdout) != []
+
+
+def test_a_build_without_a_c_compiler_falls_back_and_is_not_retried(tmp_path: Path) -> None:
+    """No working C compiler (CC=/bin/false): the JIT serves, the reason is kept, the next run does not
+    try again and says how to make it."""
+    env = {**os.environ, "TANKDAQ_KERNEL_DIR": str(tmp_path), "CC": "/bin/false"}
+    probe = [
+        sys.executable,
+        "-c",
+        "from tankdaq.ident import compiled as c; print(c.ensure_native()); print(c.ahead_of_time())",
+    ]
+    first = subprocess.run(probe, env=env, capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    reason, native = first.stdout.strip().splitlines()
+    assert native == "False" and reason != "None" and "compiler" in reason, first.stdout
+    (note,) = tmp_path.glob("tankdaq_kernels-*.failed")
+    assert not list(tmp_path.glob("tankdaq_kernels-*.so"))
+    again = subprocess.run(probe, env=env, capture_output=True, text=True, timeout=300)
+    said, native = again.stdout.strip().splitlines()
+    assert native == "False" and said.startswith(reason) and f"delete {note} to retry" in said, said

@@ -191,7 +191,7 @@ def ensure_native() -> str | None:
     try:
         path = build()
     except Exception as error:  # any failure leaves the JIT, which always works
-        reason = f"{type(error).__name__}: {error}".splitlines()[0]
+        reason = f"{type(error).__name__}: {error}".splitlines()[0].split(". ")[0]  # its first sentence
         with contextlib.suppress(OSError):  # remembered, so that every later run does not retry
             failed.write_text(reason + "\n")
         return reason
