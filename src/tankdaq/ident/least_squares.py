@@ -86,7 +86,7 @@ def levenberg_marquardt(
     while True:
         # R of [J f] holds J's R and Q'f in its last column: Q itself (n x p) is never formed,
         # five times cheaper than np.linalg.qr(jac) and the one tall operation of a step.
-        r_aug = np.linalg.qr(np.column_stack([jac, f]), mode="r")
+        r_aug = np.asarray(np.linalg.qr(np.column_stack([jac, f]), mode="r"))  # asarray: the stubs say tuple
         p = jac.shape[1]
         r, qtf = r_aug[:p, :p], r_aug[:p, p]
         col_norms = np.linalg.norm(jac, axis=0)
