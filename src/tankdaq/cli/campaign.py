@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from .. import validation
-from .app import app, checked, err_console, handles_errors, progress_bar, warn_truncated
+from .app import app, checked, err_console, handles_errors, progress_bar, say, warn_truncated
 from .identify import EndS, StartS
 
 
@@ -63,6 +63,7 @@ def campaign_command(
         markdown_table,
         read_campaign,
     )
+    from ..ident.online import prepare_identifier
     from ..physics.models import resolve_model
     from .identify import echo_cuts
 
@@ -73,6 +74,7 @@ def campaign_command(
     resolve_model(model)  # a typo fails before any file is read
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs)
+    prepare_identifier(model, say)  # the native kernels: built once, on the first run after install
     prepare = []
     if report is not None:
         from ..viz.campaign_report import load_plotting, write_report

@@ -10,7 +10,7 @@ import typer
 
 from .. import validation
 from ..errors import InputError
-from .app import app, checked, err_console, handles_errors, progress_bar, warn_truncated
+from .app import app, checked, err_console, handles_errors, progress_bar, say, warn_truncated
 from .identify import (
     AngleColumn,
     AngleUnit,
@@ -69,6 +69,7 @@ def diagnose_command(
     from ..diagnose.effects import LIBRARY
     from ..diagnose.report import save_rrd, story, summary_json, write_report
     from ..diagnose.workflow import Diagnoser
+    from ..ident.online import prepare_identifier
 
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
@@ -78,6 +79,7 @@ def diagnose_command(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
     )
     truncated = warn_truncated(runs)
+    prepare_identifier(baseline, say)  # the native kernels: built once, on the first run after install
     with progress_bar() as progress:
         # per step: every candidate, plus the two refits of the late-disturbance test
         task = progress.add_task("baseline", total=1 + max_steps * (len(LIBRARY) + 2))

@@ -12,7 +12,16 @@ import typer
 from .. import validation
 from ..errors import InputError
 from ..records import DecayRun
-from .app import app, checked, err_console, handles_errors, parse_draft_option, progress_bar, warn_truncated
+from .app import (
+    app,
+    checked,
+    err_console,
+    handles_errors,
+    parse_draft_option,
+    progress_bar,
+    say,
+    warn_truncated,
+)
 
 # Options every command that reads decays shares (identify, diagnose): how to read other labs' CSV.
 TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
@@ -133,6 +142,7 @@ def identify_command(
     """Identify the decay equation's coefficients from free-decay records."""
     from ..config import load_hull
     from ..ident.estimators import make_estimator
+    from ..ident.online import prepare_identifier
     from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
     from ..ident.uncertainty import fit_with_intervals
     from ..physics.models import resolve_model
@@ -148,6 +158,7 @@ def identify_command(
         for run_axis in sorted({run.axis for run in runs}):
             validation.hull_draft(hull_config, draft, run_axis)
     truncated = {"truncated": bool(cut := warn_truncated(runs)), "truncated_files": cut}
+    prepare_identifier(terms, say)  # the native kernels: built once, on the first run after install
 
     if compare:
         from ..ident.free_decay import cut_lines
