@@ -34,6 +34,10 @@ STYLE: dict[RcKeyType, Any] = {
     "axes.titlesize": 11,
     "legend.frameon": False,
     "lines.linewidth": 1.2,
+    # Titles sit just above their axes (none of ours has top tick labels): matplotlib's automatic
+    # placement measured every axes' tight box at each draw, 5-10 % of a campaign report's drawing,
+    # for the same pixels.
+    "axes.titley": 1.0,
 }
 
 
