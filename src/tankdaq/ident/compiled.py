@@ -5,9 +5,10 @@ JIT costs about 0.8 s in every process (numba's import, then its first cached ca
 scipy.linalg for BLAS): more than a whole ``tankdaq replay`` of one decay may take. ``build``
 compiles the same source ahead of time (numba.pycc) into one native module, named by a hash of
 the kernel source and the signatures below: loading it takes about a millisecond and imports
-nothing. ``python -m tankdaq.prepare`` (run by ``make``) and the first ``record`` or ``replay``
-build it. Where it cannot be built (no C compiler, a numba without pycc) or is stale, numba's JIT
-serves the very same functions: slower to start, equal in results (a test holds them equal).
+nothing. ``python -m tankdaq.prepare`` (run by ``make``) or the first command that fits (record,
+replay, identify, campaign, diagnose) builds it. Where it cannot be built (no C compiler, a numba
+without pycc) or is stale, numba's JIT serves the very same functions: slower to start, equal in
+results (a test holds them equal).
 
 The native module does not check its arguments (a list where it expects an array crashes the
 process), so every kernel is called through a wrapper that converts each argument to the exact
@@ -90,7 +91,7 @@ def cpu_identity() -> str:
 
     A native module tuned for this CPU must never load on another one (an install shared over
     NFS by different machines): the identity is part of its name, and without one the build is
-    generic (about 15 % slower fits).
+    generic (fits about 25 % slower, measured).
     """
     try:
         first_cpu = Path("/proc/cpuinfo").read_text().split("\n\n", 1)[0]
@@ -123,7 +124,7 @@ def load_native(path: Path) -> ModuleType | None:
 
 
 def build(folder: Path | None = None) -> Path:
-    """Compile every kernel ahead of time into the native module (a C compiler is needed; ~1 min).
+    """Compile every kernel ahead of time into the native module (a C compiler is needed; 10-15 s).
 
     Written under a temporary name and renamed: a process loading it never sees half a file.
     """
