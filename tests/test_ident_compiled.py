@@ -21,9 +21,6 @@ from tankdaq.device.simulator import SimulatedMTi
 from tankdaq.ident import compiled, kernels
 from tankdaq.store.writer import RecordingWriter
 
-TERMS = ("b1", "b2", "b3", "c1", "c2", "c3", "fc")
-THETA = np.array([0.3, 0.4, 0.5, 14.0, 0.8, 60.0, 0.002])
-
 
 @pytest.fixture(scope="module")
 def native() -> object:
@@ -34,27 +31,8 @@ def native() -> object:
     return module
 
 
-def _inputs() -> dict[str, object]:
-    rng = np.random.default_rng(3)
-    t = np.arange(1500) / 100.0
-    u = 0.02 * np.sin(2.1 * t)
-    du_dp = np.column_stack([np.sin(2.1 * t), np.cos(2.1 * t)])
-    x = 0.2 * np.exp(-0.1 * t) * np.cos(3.7 * t)
-    v = np.gradient(x, t)
-    jac = rng.normal(size=(2, t.size, 9))
-    return {"t": t, "u": u, "du_dp": du_dp, "x": x, "v": v, "jac": jac, "res": rng.normal(size=(2, t.size))}
-
-
 def test_the_native_kernels_compute_what_the_jit_computes(native: object) -> None:
-    a = _inputs()
-    codes = compiled.term_codes(TERMS)
-    calls = {
-        "simulate": (a["t"], 0.2, 0.0, THETA, codes, a["u"], 0.02, 2),
-        "simulate_with_sensitivities": (a["t"], 0.2, 0.0, THETA, codes, a["u"], a["du_dp"], 0.02, 2),
-        "acceleration_partials": (codes, THETA, a["x"], a["v"], a["u"], 0.02),
-        "term_matrix": (codes, a["x"], a["v"], a["u"], 0.02),
-        "hac_meat": (a["jac"], a["res"], np.eye(9) * 1e-3, 150, True),
-    }
+    calls = compiled.example_calls()
     assert set(calls) == set(compiled.KERNELS)
     for name, args in calls.items():
         from_native = getattr(native, name)(*args)
@@ -172,3 +150,12 @@ def test_a_build_without_a_c_compiler_falls_back_and_is_not_retried(tmp_path: Pa
     again = subprocess.run(probe, env=env, capture_output=True, text=True, timeout=300)
     said, native = again.stdout.strip().splitlines()
     assert native == "False" and said.startswith(reason) and f"delete {note} to retry" in said, said
+
+
+def test_a_built_module_that_does_not_run_here_is_refused_before_it_is_used(tmp_path: Path) -> None:
+    """A module that dies on this CPU (an illegal instruction) must fail the build, not a recording."""
+    broken = tmp_path / f"{compiled.MODULE_NAME}.so"
+    broken.write_bytes(b"\x7fELF not really a shared object")
+    with pytest.raises(RuntimeError, match="does not run on this CPU"):
+        compiled.check_runs_here(broken)
+    compiled.check_runs_here(compiled.native_path())  # the module in use passes the same trial

@@ -24,9 +24,11 @@ import importlib.util
 import math
 import os
 import platform
+import subprocess
+import sys
 import tempfile
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from types import ModuleType
 from typing import Any
@@ -37,6 +39,8 @@ from ..physics.terms import TERM_TABLE
 
 KERNEL_SOURCE = Path(__file__).with_name("kernels.py")
 MODULE_NAME = "tankdaq_kernels"
+#: How the native module is built; part of its name, so that a module built another way is never loaded.
+BUILD_RECIPE = "pycc, host CPU with the features the host has, tried in a child process"
 
 #: numba type of each argument kind, and how a call's argument is made exactly that.
 ARGUMENT_KINDS: dict[str, tuple[str, Callable[[Any], Any]]] = {
@@ -105,7 +109,7 @@ def native_path(folder: Path | None = None) -> Path:
     """The native module's file for this kernel source, these signatures, numpy and CPU."""
     key = hashlib.sha256(KERNEL_SOURCE.read_bytes())
     key.update(repr([signature(name) for name in sorted(KERNELS)]).encode())
-    key.update(f"{np.__version__} {platform.machine()} {cpu_identity()}".encode())
+    key.update(f"{np.__version__} {platform.machine()} {cpu_identity()} {BUILD_RECIPE}".encode())
     suffix = importlib.machinery.EXTENSION_SUFFIXES[0]
     return (folder or kernel_folder()) / f"{MODULE_NAME}-{key.hexdigest()[:16]}{suffix}"
 
@@ -126,7 +130,9 @@ def load_native(path: Path) -> ModuleType | None:
 def build(folder: Path | None = None) -> Path:
     """Compile every kernel ahead of time into the native module (a C compiler is needed; 10-15 s).
 
-    Written under a temporary name and renamed: a process loading it never sees half a file.
+    Written under a temporary name, tried in a child process (a module that dies on this CPU raises
+    ``RuntimeError`` here instead of killing a recording later) and only then renamed: a process
+    loading it never sees half a file or an untried one.
     """
     from numba.pycc import CC  # numba only here, and where the native module is missing
 
@@ -134,17 +140,86 @@ def build(folder: Path | None = None) -> Path:
 
     target = native_path(folder)
     target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent) as tmp, warnings.catch_warnings():
+    tuned = bool(cpu_identity())
+    with (
+        tempfile.TemporaryDirectory(dir=target.parent) as tmp,
+        warnings.catch_warnings(),
+        _host_features(tuned),
+    ):
         warnings.simplefilter("ignore")  # pycc's pending deprecation: the JIT is the way back
         compiler = CC(MODULE_NAME)
         compiler.output_dir = tmp
         compiler.output_file = target.name
-        compiler.target_cpu = "host" if cpu_identity() else ""
+        compiler.target_cpu = "host" if tuned else ""
         for name in KERNELS:
             compiler.export(name, signature(name))(getattr(kernels, name).py_func)
         compiler.compile()
+        check_runs_here(Path(tmp) / target.name)
         os.replace(Path(tmp) / target.name, target)
     return target
+
+
+@contextlib.contextmanager
+def _host_features(tuned: bool) -> Iterator[None]:
+    """Give numba's ahead-of-time code generator the instruction sets this CPU really has.
+
+    numba names the host CPU model but passes no features, so LLVM assumes the model's full set: on
+    a virtual machine that hides some of them (AVX-512 on an EPYC guest reporting znver4) the module
+    dies with an illegal instruction at its first call. Restored on the way out.
+    """
+    from numba.core import codegen
+
+    original = codegen.AOTCPUCodegen._customize_tm_features
+    if tuned:
+        codegen.AOTCPUCodegen._customize_tm_features = lambda self: codegen.get_host_cpu_features()  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        codegen.AOTCPUCodegen._customize_tm_features = original  # type: ignore[method-assign]
+
+
+def check_runs_here(path: Path) -> None:
+    """Load ``path`` and run every kernel once in a child process; raise where that does not work."""
+    script = (
+        "import sys; from pathlib import Path; from tankdaq.ident import compiled as c; "
+        "m = c.load_native(Path(sys.argv[1])); assert m is not None, 'it does not load'; "
+        "[getattr(m, name)(*args) for name, args in c.example_calls().items()]"
+    )
+    child = subprocess.run(
+        [sys.executable, "-c", script, str(path)], capture_output=True, text=True, timeout=120, check=False
+    )
+    if child.returncode != 0:
+        said = (child.stderr.strip().splitlines() or [f"exit status {child.returncode}"])[-1]
+        raise RuntimeError(f"the native module built here does not run on this CPU ({said})")
+
+
+def example_calls() -> dict[str, tuple[Any, ...]]:
+    """One call of every kernel on a small made-up decay (the arguments exactly as the kernels take them).
+
+    What a new build is tried with, and what the test holding native and JIT equal compares.
+    """
+    rng = np.random.default_rng(3)
+    t = np.arange(1500) / 100.0
+    u = 0.02 * np.sin(2.1 * t)
+    du_dp = np.column_stack([np.sin(2.1 * t), np.cos(2.1 * t)])
+    x = 0.2 * np.exp(-0.1 * t) * np.cos(3.7 * t)
+    v = np.gradient(x, t)
+    jac = rng.normal(size=(2, t.size, 9))
+    residuals = rng.normal(size=(2, t.size))
+    codes = term_codes(EXAMPLE_TERMS)
+    theta = np.array(EXAMPLE_THETA)
+    return {
+        "simulate": (t, 0.2, 0.0, theta, codes, u, 0.02, 2),
+        "simulate_with_sensitivities": (t, 0.2, 0.0, theta, codes, u, du_dp, 0.02, 2),
+        "acceleration_partials": (codes, theta, x, v, u, 0.02),
+        "term_matrix": (codes, x, v, u, 0.02),
+        "hac_meat": (jac, residuals, np.eye(9) * 1e-3, 150, True),
+    }
+
+
+#: The example decay's terms and coefficients (every kind of term: damping, restoring, friction).
+EXAMPLE_TERMS = ("b1", "b2", "b3", "c1", "c2", "c3", "fc")
+EXAMPLE_THETA = (0.3, 0.4, 0.5, 14.0, 0.8, 60.0, 0.002)
 
 
 class _Loaded:
