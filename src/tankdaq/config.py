@@ -18,6 +18,7 @@ from typing import Any
 
 from .errors import ConfigError, InputError
 from .physics.ikeda import IkedaInputs, IkedaPrediction
+from .physics.scaling import FroudeScale
 from .physics.scenario import DecayScenario
 from .physics.terms import TERMS
 
@@ -401,6 +402,21 @@ def ikeda_prediction(
         inertia = mass * k * k * (1.0 + p["added_inertia_fraction"])
         omega = math.sqrt(mass * inputs.g_m_s2 * gm / inertia)
     return IkedaPrediction.at(inputs, omega, inertia)
+
+
+def full_scale_of(hull: Hull | None, asked: bool) -> FroudeScale | None:
+    """The hull's Froude scale when ``--full-scale`` is asked (checked before any work), else None."""
+    if not asked:
+        return None
+    if hull is None:
+        raise InputError("--full-scale needs --hull (a hull file with scale_factor under [particulars])")
+    scale = hull.main_particulars.values.get("scale_factor")
+    if scale is None:
+        raise InputError(
+            f"--full-scale needs scale_factor under [particulars] in {hull.path or hull.name} "
+            "(ship length / model length)"
+        )
+    return FroudeScale(scale)
 
 
 def _ikeda_inputs(p: dict[str, float], speed_m_s: float) -> IkedaInputs:

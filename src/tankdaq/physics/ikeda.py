@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
+from .scaling import FRICTION_NOTE, FroudeScale
 
 #: The components, in the order they are shown: key -> (symbol, what it is, linear or quadratic).
 COMPONENTS: dict[str, tuple[str, str, str]] = {
@@ -355,3 +357,77 @@ class IkedaPrediction:
                 f"{labels} would have to change {factor} ({predicted:.4g} -> {need:.4g} {unit})"
             )
         return lines
+
+    def summary(self, amplitudes_rad: Sequence[float], scale: FroudeScale | None = None) -> dict[str, Any]:
+        """What ``tankdaq predict --json`` prints: the components and B44 at each amplitude (deg at this
+        edge), the equivalent model, the validity findings and, with ``scale``, the ship's values."""
+        rows = []
+        for amplitude in amplitudes_rad:
+            found = self.components(amplitude)
+            b44 = found[TOTAL] / self.inputs.hat_factor
+            rows.append(
+                {"amplitude_deg": math.degrees(amplitude), **found, "b44_n_m_s": b44,
+                 "b_eq_per_s": b44 / self.total_inertia_kg_m2}
+            )  # fmt: skip
+        model = self.equivalent_model(amplitudes_rad)
+        out: dict[str, Any] = {
+            "omega_rad_s": self.omega_rad_s,
+            "period_s": 2 * math.pi / self.omega_rad_s,
+            "omega_hat": self.inputs.omega_hat(self.omega_rad_s),
+            "total_inertia_kg_m2": self.total_inertia_kg_m2,
+            "inputs": asdict(self.inputs),
+            "amplitudes": rows,
+            "equivalent_model": model,
+            "validity": [finding.line for finding in self.findings],
+        }
+        if scale is not None:
+            out["full_scale"] = {
+                "scale_factor": scale.scale,
+                "period_s": scale.time_s(out["period_s"]),
+                "equivalent_model": scale.coefficients(model),
+                "amplitudes": [
+                    {
+                        "amplitude_deg": r["amplitude_deg"],
+                        "B_44": r[TOTAL],
+                        "b44_n_m_s": scale.damping_n_m_s(r["b44_n_m_s"]),
+                    }
+                    for r in rows
+                ],
+                "note": FRICTION_NOTE,
+            }
+        return out
+
+
+def summary_lines(summary: dict[str, Any]) -> list[str]:
+    """``summary`` as text: one row per amplitude, the equivalent model, a warning line per finding."""
+    head = "".join(f"{COMPONENTS[k][0]:>11}" for k in COMPONENTS)
+    lines = [
+        f"roll frequency {summary['omega_rad_s']:.4g} rad/s (period {summary['period_s']:.4g} s, "
+        f"ω̂ {summary['omega_hat']:.3g}), total inertia {summary['total_inertia_kg_m2']:.4g} kg m^2",
+        "",
+        f"  {'amplitude':>10}{head}{'B̂44':>11}{'B44 N·m·s':>12}{'B_eq/I 1/s':>12}",
+    ]
+    for row in summary["amplitudes"]:
+        cells = "".join(f"{row[k]:>11.4g}" for k in (*COMPONENTS, TOTAL))
+        lines.append(
+            f"  {row['amplitude_deg']:>6.2f} deg{cells}{row['b44_n_m_s']:>12.4g}{row['b_eq_per_s']:>12.4g}"
+        )
+    model = summary["equivalent_model"]
+    lines += [
+        "",
+        f"  equivalent model per unit inertia: b1 {model['b1']:.5g} 1/s, b2 {model['b2']:.5g} 1/rad, "
+        f"c1 {model['c1']:.5g} 1/s^2",
+    ]
+    ship = summary.get("full_scale")
+    if ship is not None:
+        scaled = ship["equivalent_model"]
+        lines += [
+            f"  full scale (1:{ship['scale_factor']:g}): period {ship['period_s']:.4g} s (B̂44 unchanged), "
+            f"b1 {scaled['b1']:.5g} 1/s, b2 {scaled['b2']:.5g} 1/rad, c1 {scaled['c1']:.5g} 1/s^2",
+            *(
+                f"  {r['amplitude_deg']:>6.2f} deg  B44 {r['b44_n_m_s']:.4g} N·m·s/rad"
+                for r in ship["amplitudes"]
+            ),
+            f"  note: {ship['note']}",
+        ]
+    return lines + [f"warning: {line}" for line in summary["validity"]]
