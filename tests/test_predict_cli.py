@@ -196,7 +196,7 @@ def test_kvlcc2_21338_b44_hat_matches_a_hand_calculation() -> None:
     ship = out["full_scale"]
     assert ship["natural_period_s"] == pytest.approx(out["natural_period_s"] * math.sqrt(lam), rel=1e-12)
     for model, full in zip(out["b_eq"], ship["b_eq"], strict=True):
-        assert full["b44_n_m_s"] == pytest.approx(model["value_per_s"] * inertia * lam**4.5, rel=1e-5)
+        assert full["b_eq_n_m_s"] == pytest.approx(model["value_per_s"] * inertia * lam**4.5, rel=1e-5)
     text = runner.invoke(app, args)
     assert text.exit_code == 0 and "B̂44" in text.stdout and "full scale (1:68)" in text.stdout
 

@@ -274,11 +274,11 @@ def b44_hat_factor(hull: Any, draft: float = 1.0) -> float | None:
 
 
 def scale_results(summary: dict[str, Any], hull: Any, draft: float, scale: FroudeScale | None) -> list[str]:
-    """Adds B̂44 beside B_eq/I (where the hull gives beam and displacement) and, with ``scale``, the
-    full-scale results to an identify summary; returns the lines the text report prints for them."""
-    dim = summary.get("dimensional", {})
-    inertia = dim.get("total_inertia_kg_m2")
-    factor = b44_hat_factor(hull, draft) if hull is not None else None
+    """Adds B̂44 beside B_eq/I (roll, where the hull gives beam and displacement) and, with ``scale``,
+    the full-scale results to an identify summary; returns the lines the text report prints for them."""
+    inertia = summary.get("dimensional", {}).get("total_inertia_kg_m2")
+    roll = summary["axis"] == "roll"
+    factor = b44_hat_factor(hull, draft) if hull is not None and roll else None
     lines: list[str] = []
     if factor is not None and inertia is not None:
         for row in summary["b_eq"]:
@@ -289,6 +289,7 @@ def scale_results(summary: dict[str, Any], hull: Any, draft: float, scale: Froud
         coefficients = {k: v["value"] for k, v in summary["coefficients"].items()}
         ship: dict[str, Any] = {
             "scale_factor": scale.scale,
+            "axis": summary["axis"],
             "natural_period_s": scale.time_s(summary["natural_period_s"]),
             "coefficients": scale.coefficients(coefficients),
             "b_eq": [
@@ -302,23 +303,30 @@ def scale_results(summary: dict[str, Any], hull: Any, draft: float, scale: Froud
         }
         if inertia is not None:
             for row, model in zip(ship["b_eq"], summary["b_eq"], strict=True):
-                row["b44_n_m_s"] = scale.damping_n_m_s(model["value_per_s"] * inertia)
+                row["b_eq_n_m_s"] = scale.damping_n_m_s(model["value_per_s"] * inertia)
         summary["full_scale"] = ship
         lines += full_scale_lines(ship)
     return lines
 
 
 def full_scale_lines(ship: dict[str, Any]) -> list[str]:
-    """The text of a ``full_scale`` part: period, coefficients, B_eq/I and B44 per amplitude, the note."""
+    """The text of a ``full_scale`` part: period, coefficients, B_eq/I and B_eq (B44 for roll, B55 for
+    pitch) per amplitude, the note."""
+    name = damping_name(ship["axis"])
     coefficients = "  ".join(f"{k}={v:.5g}" for k, v in ship["coefficients"].items())
     lines = [
         f"  full scale (1:{ship['scale_factor']:g}): natural period {ship['natural_period_s']:.4g} s",
         f"  {coefficients}",
     ]
     for row in ship["b_eq"]:
-        b44 = f", B44 {row['b44_n_m_s']:.4g} N·m·s/rad" if "b44_n_m_s" in row else ""
+        b44 = f", {name} {row['b_eq_n_m_s']:.4g} N·m·s/rad" if "b_eq_n_m_s" in row else ""
         lines.append(f"  {row['amplitude_deg']:>8.2f} deg  B_eq/I {row['value_per_s']:.5g} 1/s{b44}")
     return [*lines, f"  note: {FRICTION_NOTE}"]
+
+
+def damping_name(axis: str) -> str:
+    """What people call the dimensional damping of an axis: B44 (roll), B55 (pitch)."""
+    return "B44" if axis == "roll" else "B55"
 
 
 def campaign_full_scale(results: Sequence[Any]) -> list[str]:
@@ -341,9 +349,11 @@ def campaign_full_scale(results: Sequence[Any]) -> list[str]:
             f"B_eq/I {row['b_eq_per_s'] / math.sqrt(scale):.4g} 1/s"
         )
         if "b_eq_n_m_s" in row:
-            text += f", B44 {froude.damping_n_m_s(row['b_eq_n_m_s']):.4g} N·m·s/rad"
+            text += (
+                f", {damping_name(result.key.axis)} {froude.damping_n_m_s(row['b_eq_n_m_s']):.4g} N·m·s/rad"
+            )
             factor = b44_hat_factor(result.hull, result.key.draft)
-            if factor is not None:
+            if factor is not None and result.key.axis == "roll":
                 text += f", B̂44 {row['b_eq_n_m_s'] * factor:.4g}"
         lines.append(text)
     return lines
