@@ -153,6 +153,12 @@ def test_the_template_documents_every_particulars_key(tmp_path: Path) -> None:
 
 
 def test_kvlcc2_is_shipped_at_model_scale_from_the_parameters_file() -> None:
+    shown = runner.invoke(app, ["hulls", "show", "kvlcc2"])
+    assert (
+        shown.exit_code == 0
+        and "particulars: lpp_m=4.70588" in shown.stdout
+        and "scale_factor=68" in shown.stdout
+    )
     hull = load_hull("kvlcc2")
     p = hull.main_particulars.values
     assert p["bilge_keel_length_m"] == 0.0 and "assumed" in hull.sources["bilge_keel"]
@@ -222,3 +228,20 @@ def test_campaign_full_scale_uses_each_hulls_scale_factor(tmp_path: Path, monkey
 def test_library_errors_are_input_errors() -> None:
     with pytest.raises(InputError, match="lacks"):
         ikeda_prediction(load_hull("trimaran"), 1.0)
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        ([], "--full-scale needs --hull"),
+        (["--hull", "swath"], "--full-scale needs scale_factor under [particulars]"),
+    ],
+)
+def test_identify_full_scale_is_refused_before_any_work(
+    tmp_path: Path, extra: list[str], message: str
+) -> None:
+    data = tmp_path / "never-read.csv"
+    data.write_text("not a decay\n")
+    result = runner.invoke(app, ["identify", str(data), "--full-scale", *extra])
+    assert result.exit_code == 2, result.output
+    assert message in result.output and len(result.output.strip().splitlines()) == 1
