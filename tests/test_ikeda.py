@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tankdaq.errors import InputError
 from tankdaq.ident.derived import b_eq, natural_period
@@ -177,3 +179,36 @@ def test_a_simulated_model_decay_is_the_ship_decay_on_a_stretched_clock() -> Non
     period_ship = float(np.mean(np.diff(scale.time_s(t_model)[crossings])))
     assert period_ship == pytest.approx(period_model * math.sqrt(68.0), rel=1e-12)
     assert period_model == pytest.approx(natural_period(model), rel=0.02)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    cb=st.floats(0.5, 0.85),
+    bd=st.floats(2.5, 4.5),
+    ogd=st.floats(-1.5, 0.2),
+    cm=st.floats(0.9, 0.99),
+    bbkb=st.floats(0.01, 0.06),
+    lbkl=st.floats(0.05, 0.4),
+    omega_hat=st.floats(0.2, 1.0),
+    amplitude_deg=st.floats(1.0, 30.0),
+)
+def test_inside_the_limits_every_component_is_finite_and_no_finding(
+    cb: float,
+    bd: float,
+    ogd: float,
+    cm: float,
+    bbkb: float,
+    lbkl: float,
+    omega_hat: float,
+    amplitude_deg: float,
+) -> None:
+    draft = BEAM / bd
+    inputs = IkedaInputs(
+        lpp_m=LPP, beam_m=BEAM, draft_m=draft, block_coefficient=cb, midship_coefficient=cm, og_m=ogd * draft,
+        bilge_keel_length_m=lbkl * LPP, bilge_keel_breadth_m=bbkb * BEAM,
+    )  # fmt: skip
+    omega = omega_hat / math.sqrt(BEAM / (2 * 9.81))
+    found = components(inputs, omega, math.radians(amplitude_deg))
+    assert all(math.isfinite(v) for v in found.values())
+    assert found["B_F"] > 0 and found["B_W"] >= 0 and found["B_L"] == 0.0
+    assert validity(inputs, omega) == []

@@ -245,3 +245,13 @@ def test_identify_full_scale_is_refused_before_any_work(
     result = runner.invoke(app, ["identify", str(data), "--full-scale", *extra])
     assert result.exit_code == 2, result.output
     assert message in result.output and len(result.output.strip().splitlines()) == 1
+
+
+def test_a_draft_of_its_own_overrides_the_design_particulars(tmp_path: Path) -> None:
+    extra = PARTICULARS + '[particulars.drafts."1.1T"]\ndraft_m = 0.0917\nog_m = -0.01\n'
+    out = json.loads(predict("--hull", hull_file(tmp_path, extra), "--draft", "1.1T", "--json").stdout)
+    assert out["draft_factor"] == pytest.approx(1.1)
+    assert out["inputs"]["draft_m"] == 0.0917 and out["inputs"]["og_m"] == -0.01
+    assert out["inputs"]["lpp_m"] == 2.0  # the rest from the design draft
+    inertia = 36.1 * 1.1 * 0.13**2 * 1.2  # displacement scaled with the draft factor
+    assert out["total_inertia_kg_m2"] == pytest.approx(inertia, rel=1e-12)
