@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ..physics.ikeda import hat_factor
 from ..physics.scaling import FRICTION_NOTE, FroudeScale
 from ..records import DecayRun
 from .signals import half_cycle_peaks
@@ -269,8 +270,7 @@ def b44_hat_factor(hull: Any, draft: float = 1.0) -> float | None:
     beam = particulars.get("beam_m", hull.dimensions.get("beam_m"))
     if beam is None or hull.displacement_kg is None:
         return None
-    mass = hull.displacement_kg * draft  # rho * volume
-    return math.sqrt(beam / (2.0 * G)) / (mass * beam**2)
+    return hat_factor(beam, hull.displacement_kg * draft, G)  # rho * volume = the displacement
 
 
 def scale_results(summary: dict[str, Any], hull: Any, draft: float, scale: FroudeScale | None) -> list[str]:

@@ -52,6 +52,11 @@ LIMITS: dict[str, tuple[float, float, str]] = {
 QUADRATIC_EQUIVALENT = 8.0 / (3.0 * math.pi)
 
 
+def hat_factor(beam_m: float, displaced_mass_kg: float, g_m_s2: float = 9.81) -> float:
+    """B̂44 per B44 (per N·m·s/rad): √(B/2g) / (ρ ∇ B²), ρ∇ the displaced mass (lab-practice §1)."""
+    return math.sqrt(beam_m / (2 * g_m_s2)) / (displaced_mass_kg * beam_m**2)
+
+
 @dataclass(frozen=True)
 class IkedaInputs:
     """What the formulas need, SI. ``og_m``: still water level O to roll axis G, downward positive
@@ -99,7 +104,7 @@ class IkedaInputs:
     @property
     def hat_factor(self) -> float:
         """B̂ per B44 (per N·m·s): √(B/2g) / (ρ ∇ B²)."""
-        return math.sqrt(self.beam_m / (2 * self.g_m_s2)) / (self.rho_kg_m3 * self.volume_m3 * self.beam_m**2)
+        return hat_factor(self.beam_m, self.rho_kg_m3 * self.volume_m3, self.g_m_s2)
 
     def omega_hat(self, omega_rad_s: float) -> float:
         return omega_rad_s * math.sqrt(self.beam_m / (2 * self.g_m_s2))
