@@ -8,6 +8,7 @@ given to ``--hull``, else the user's hull folder, else the shipped ones
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import tomllib
@@ -16,6 +17,9 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, InputError
+from .particulars import IKEDA_KEYS, MainParticulars, ikeda_inputs, parse_particulars
+from .physics.ikeda import IkedaPrediction
+from .physics.scaling import FroudeScale
 from .physics.scenario import DecayScenario
 from .physics.terms import TERMS
 
@@ -107,6 +111,7 @@ class Hull:
     sources: dict[str, str] = field(default_factory=dict)
     path: Path | None = None
     origin: str = ORIGIN_SHIPPED
+    main_particulars: MainParticulars = field(default_factory=lambda: MainParticulars({}))
 
     @property
     def displacement_kg(self) -> float | None:
@@ -264,11 +269,78 @@ def _parse_hull(data: dict, path: Path, origin: str) -> Hull:
         sources=dict(data.get("sources", {})),
         path=path,
         origin=origin,
+        main_particulars=parse_particulars(data.get("particulars", {}), path, parse_draft),
     )
 
 
 def _optional_float(spec: dict, key: str) -> float | None:
     return float(spec[key]) if spec.get(key) is not None else None
+
+
+def ikeda_prediction(
+    hull: Hull, draft: float, speed_m_s: float = 0.0, period_s: float | None = None
+) -> IkedaPrediction:
+    """The simplified Ikeda prediction of a hull's roll damping at a draft factor and carriage speed.
+
+    The roll frequency is 2 pi / ``period_s`` when given, else sqrt(m g GM / I) with the total inertia
+    I = m k^2 (1 + added_inertia_fraction) from the roll gyradius; m is the displacement (scaled with
+    the draft factor, as the dimensional results do). Missing particulars are named in one line.
+    """
+    p = hull.main_particulars.at(draft)
+    where = f"[particulars] of {hull.path or hull.name}"
+    missing = [k for k in IKEDA_KEYS if k not in p] + (
+        [] if {"kg_m", "og_m"} & set(p) else ["kg_m (or og_m)"]
+    )
+    if missing:
+        raise InputError(
+            f"hull {hull.name!r} lacks {', '.join(missing)} for an Ikeda prediction: add them to {where}"
+        )
+    if abs(draft - 1.0) > 1e-9 and not any(abs(f - draft) < 1e-9 for f in hull.main_particulars.drafts):
+        raise InputError(
+            f"hull {hull.name!r} gives its particulars at T only: add "
+            f'[particulars.drafts."{format_draft(draft)}"] (draft_m, kg_m, ...) to {hull.path or hull.name}'
+        )
+    inputs = ikeda_inputs(p, speed_m_s)
+    gm = hull.particulars("roll").gm_m
+    mass = (
+        hull.displacement_kg * draft
+        if hull.displacement_kg
+        else p.get("water_density_kg_m3", 1000.0) * inputs.volume_m3
+    )
+    if gm is None:
+        raise InputError(
+            f"hull {hull.name!r} lacks gm_m under [axes.roll]: the damping per unit inertia needs it"
+        )
+    if period_s is not None:
+        if not (math.isfinite(period_s) and period_s > 0):
+            raise InputError(f"--period {period_s} must be a positive number of seconds")
+        omega = 2 * math.pi / period_s
+        inertia = mass * inputs.g_m_s2 * gm / omega**2
+    else:
+        k = hull.particulars("roll").radius_of_gyration_m
+        if k is None or "added_inertia_fraction" not in p:
+            raise InputError(
+                f"hull {hull.name!r} needs radius_of_gyration_m under [axes.roll] and added_inertia_fraction "
+                f"in {where} for the natural roll frequency; or give the roll period (--period)"
+            )
+        inertia = mass * k * k * (1.0 + p["added_inertia_fraction"])
+        omega = math.sqrt(mass * inputs.g_m_s2 * gm / inertia)
+    return IkedaPrediction.at(inputs, omega, inertia)
+
+
+def full_scale_of(hull: Hull | None, asked: bool) -> FroudeScale | None:
+    """The hull's Froude scale when ``--full-scale`` is asked (checked before any work), else None."""
+    if not asked:
+        return None
+    if hull is None:
+        raise InputError("--full-scale needs --hull (a hull file with scale_factor under [particulars])")
+    scale = hull.main_particulars.values.get("scale_factor")
+    if scale is None:
+        raise InputError(
+            f"--full-scale needs scale_factor under [particulars] in {hull.path or hull.name} "
+            "(ship length / model length)"
+        )
+    return FroudeScale(scale)
 
 
 #: What ``tankdaq hulls new NAME`` writes: every field explained, the coefficients left out.
@@ -296,6 +368,21 @@ gm_m = 0.05
 # Longitudinal metacentric height GM_L (m).
 # gm_m = 1.5
 # radius_of_gyration_m = 0.25
+
+# [particulars] is optional: the main particulars for tankdaq predict (simplified Ikeda roll damping)
+# and for --full-scale results. At the design draft T; other drafts in [particulars.drafts."1.1T"].
+# [particulars]
+# lpp_m = 1.0                     # length between perpendiculars Lpp
+# beam_m = 0.3                    # beam B
+# draft_m = 0.1                   # draft d
+# block_coefficient = 0.65        # CB = volume / (Lpp B d)
+# midship_coefficient = 0.98      # CMID = midship section area / (B d)
+# kg_m = 0.09                     # KG above the keel; or og_m = d - KG (waterline to roll axis, down +)
+# bilge_keel_length_m = 0.25      # lBK (0 or leave out: no bilge keel)
+# bilge_keel_breadth_m = 0.008    # bBK, the bilge keel's height (breadth)
+# speed_m_s = 0.0                 # carriage speed of the decay tests
+# scale_factor = 40.0             # lambda = ship length / model length
+# added_inertia_fraction = 0.15   # added / dry roll inertia (with radius_of_gyration_m: the roll period)
 
 # [simulation] is optional: decay coefficients per unit total inertia (x'' + b1 x' + b2|x'|x' + c1 x
 # + c3 x^3 = 0, rad, s) that only the simulator (record --port sim, simulate) needs. Leave it out for a

@@ -39,6 +39,7 @@ COMMAND_MODULES = {
     "simulate-campaign": "campaign",
     "session": "session",
     "diagnose": "diagnose",
+    "predict": "predict",
     "auv": "auv",
     "hulls": "hulls",
 }

@@ -44,6 +44,10 @@ def campaign_command(
         str | None,
         typer.Option("--scheduler", help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (tankdaq[dask])."),
     ] = None,
+    full_scale: Annotated[
+        bool,
+        typer.Option("--full-scale", help="Also report at full scale (Froude; each hull's scale_factor)."),
+    ] = False,
 ) -> None:
     """Group decays by hull, axis, draft and initial angle; fit each group jointly (output error).
 
@@ -103,6 +107,10 @@ def campaign_command(
         warn_truncated(runs)
         echo_cuts(runs)
         typer.echo(markdown_table(results), nl=False)
+        if full_scale:
+            from ..ident.derived import campaign_full_scale
+
+            typer.echo("\n".join(campaign_full_scale(results)))
         failed = [r for r in results if r.fit is None]
         for result in failed:
             err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)

@@ -57,6 +57,10 @@ def show_command(name: Annotated[str, typer.Argument(help="Hull name or .toml pa
     for axis, p in sorted(hull.axes.items()):
         known = {"gm_m": p.gm_m, "radius_of_gyration_m": p.radius_of_gyration_m}
         typer.echo(f"  {axis}: " + "  ".join(f"{k}={v:g}" for k, v in known.items() if v is not None))
+    if hull.main_particulars.values:
+        typer.echo(
+            "  particulars: " + "  ".join(f"{k}={v:g}" for k, v in hull.main_particulars.values.items())
+        )
     for axis, model in sorted(hull.simulation.items()):
         typer.echo(f"  simulation {axis}:")
         for d in sorted(model.drafts):

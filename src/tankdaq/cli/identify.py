@@ -138,9 +138,13 @@ def identify_command(
     draft: float = typer.Option(
         "T", "--draft", parser=parse_draft_option, help="Draft with --hull: 0.9T, T, 1.1T."
     ),
+    full_scale: bool = typer.Option(
+        False, "--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."
+    ),
 ) -> None:
     """Identify the decay equation's coefficients from free-decay records."""
-    from ..config import load_hull
+    from ..config import full_scale_of, load_hull
+    from ..ident.derived import scale_results
     from ..ident.estimators import make_estimator
     from ..ident.online import prepare_identifier
     from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
@@ -150,6 +154,7 @@ def identify_command(
     if axis not in (None, "roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     hull_config = load_hull(hull) if hull else None
+    scale = full_scale_of(hull_config, full_scale)
     terms = resolve_model(model)
     runs = load_runs(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
@@ -193,7 +198,8 @@ def identify_command(
             method=method,
         )
     summary = summarize(estimator, runs, method, hull_config, draft, intervals)
+    scaled = scale_results(summary, hull_config, draft, scale)  # B̂44; with --full-scale the ship's
     if as_json:
         typer.echo(json.dumps(_clean({**summary, **truncated}), default=_json_default))
     else:
-        typer.echo(text_report(summary))
+        typer.echo("\n".join([text_report(summary), *scaled]))

@@ -1,0 +1,66 @@
+"""``tankdaq predict``: roll damping predicted from a hull's particulars (simplified Ikeda; docs/ikeda.md)."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Annotated
+
+import typer
+
+from .. import validation
+from .app import app, checked, handles_errors, parse_draft_option
+
+#: Amplitudes shown when no --angle is given (deg): the band a decay test covers.
+DEFAULT_ANGLES_DEG = (5.0, 10.0, 15.0, 20.0)
+
+
+@app.command("predict")
+@handles_errors
+def predict_command(
+    hull: Annotated[
+        str, typer.Option("--hull", help="Hull name or .toml with [particulars] (docs/hulls.md).")
+    ],
+    draft: float = typer.Option("T", "--draft", parser=parse_draft_option, help="Draft: 0.9T, T, 1.1T."),
+    speed: Annotated[
+        float | None,
+        typer.Option("--speed", help="Carriage speed, m/s (default: the hull's speed_m_s, else 0)."),
+    ] = None,
+    angles_deg: Annotated[
+        list[float] | None,
+        typer.Option(
+            "--angle", callback=checked(validation.release_angle_deg), help="Roll amplitude, deg (repeat)."
+        ),
+    ] = None,
+    period: Annotated[
+        float | None,
+        typer.Option("--period", help="Roll period, s (default: from GM, gyradius and added inertia)."),
+    ] = None,
+    full_scale: Annotated[
+        bool,
+        typer.Option("--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."),
+    ] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
+) -> None:
+    """Predict the roll damping components at the natural roll frequency (simplified Ikeda method)."""
+    from ..config import full_scale_of, ikeda_prediction, load_hull
+    from ..errors import InputError
+    from ..physics.ikeda import summary_lines
+
+    if speed is not None and not (math.isfinite(speed) and speed >= 0):
+        raise InputError(f"--speed {speed:g} must be zero or a positive speed in m/s")
+    if period is not None and not (math.isfinite(period) and period > 0):
+        raise InputError(f"--period {period:g} must be a positive roll period in s")
+    loaded = load_hull(hull)
+    scale = full_scale_of(loaded, full_scale)
+    if speed is None:
+        speed = loaded.main_particulars.at(draft).get("speed_m_s", 0.0)
+    prediction = ikeda_prediction(loaded, draft, speed, period)
+    amplitudes = [math.radians(a) for a in sorted(set(angles_deg or DEFAULT_ANGLES_DEG))]
+    summary = {"hull": loaded.name, "draft_factor": draft, **prediction.summary(amplitudes, scale)}
+    if as_json:
+        typer.echo(json.dumps(summary))
+        return
+    typer.echo(f"hull {loaded.name}, draft factor {draft:g}, speed {speed:g} m/s: simplified Ikeda")
+    for line in summary_lines(summary):
+        typer.echo(line)
