@@ -14,21 +14,34 @@ test). This is signal work of identification, so it lives here and the store nev
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d, minimum_filter1d, uniform_filter1d
 
 from ..errors import BadIdentificationInput
 from ..records import DecayRun
-from ..store.csv_import import DEFAULT_RATE_COL, FIND_RELEASES, MIN_SAMPLES, CsvOptions, number_parts
+from ..store.csv_import import (
+    DEFAULT_RATE_COL,
+    FIND_RELEASES,
+    MIN_SAMPLES,
+    NOTICES,
+    CsvOptions,
+    number_parts,
+)
 from ..store.inputs import read_runs
 from .free_decay import SPLIT_AFTER, find_free_end
-from .signals import white_noise_level
+from .signals import band_crossings, half_cycle_peaks, white_noise_level
 
 #: Fraction of the largest excursion a peak must reach to count as the release.
 RELEASE_FRACTION = 0.5
 #: A later release counts when its swing clears the noise by this factor.
 NEXT_RELEASE_NOISES = 20.0
+#: The model rests (stopped by hand, or settled) where the angle stays within this many noise sigmas
+#: (peak to peak) for a natural period, near the equilibrium (``REST_LEVEL`` of the largest excursion).
+REST_NOISES = 12.0
+REST_LEVEL = 0.1
 
 
 def read_decays(
@@ -37,14 +50,17 @@ def read_decays(
     time_col: str = "time_s",
     angle_col: str = "angle_deg",
     rate_col: str | None = DEFAULT_RATE_COL,
-    angle_unit: str = "deg",
+    angle_unit: str | None = None,
     keep_all: bool = False,
     skip_half_cycles: int = 0,
+    time_unit: str | None = None,
 ) -> list[DecayRun]:
-    """The decays of one file, each from its release. The CSV settings (columns, unit, ``keep_all``: the
-    record whole from its first sample; ``skip_half_cycles`` more half-cycles dropped after a release
-    found in the data) apply to CSV files; a recording's runs start at its release events."""
-    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all)
+    """The decays of one file, each from its release. The CSV settings (columns, units (None: decided
+    from the data), ``keep_all``: the record whole from its first sample; ``skip_half_cycles`` more
+    half-cycles dropped after a release found in the data) apply to CSV files; a recording's runs start
+    at its release events. What the reading decided or left out is in each run's ``meta[NOTICES]``
+    (``input_notices``)."""
+    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all, time_unit)
     return [
         decay
         for run in read_runs(path, axis, options)
@@ -52,10 +68,67 @@ def read_decays(
     ]
 
 
+def input_notices(runs: Iterable[DecayRun]) -> list[str]:
+    """The reading's lines for the user (dialect, units, parts not used), each once, in order."""
+    return list(dict.fromkeys(line for run in runs for line in run.meta.get(NOTICES, ())))
+
+
 def split_releases(record: DecayRun, skip_half_cycles: int = 0) -> list[DecayRun]:
-    """Every released decay in a record: the first must exist, later ones where a free decay ends in a
-    new excitation (or in the noise) and a swing well clear of the noise follows."""
+    """Every released decay in a record: the record is cut where the model rests at its equilibrium
+    (stopped by hand or settled: ``rest_cuts``), and in each part the first release must exist, later
+    ones where a free decay ends in a new excitation (or in the noise) and a swing well clear of the
+    noise follows. A part that swings through its equilibrium but holds no decay is named in a notice."""
     noise = white_noise_level(record.angle)
+    runs: list[DecayRun] = []
+    unused: list[str] = []
+    failure: BadIdentificationInput | None = None
+    bounds = [0, *rest_cuts(record.angle, noise), record.t.size]
+    for a, b in itertools.pairwise(bounds):
+        part = record.window(a, b)
+        if not _swings(part, noise):
+            continue
+        try:
+            runs += _releases_in(part, noise, skip_half_cycles)
+        except BadIdentificationInput as exc:
+            failure = failure or exc
+            excursion = part.angle - np.median(record.angle)
+            if band_crossings(excursion, REST_LEVEL * float(np.ptp(part.angle))) >= 2:
+                unused.append(f"{part.t[0]:.2f}..{part.t[-1]:.2f} s not used ({exc})")
+    if not runs:
+        raise failure or BadIdentificationInput(
+            f"{record.meta.get('file', record.name)}: no decay found: the angle never swings clear of "
+            "the noise"
+        )
+    lines = [f"{record.name}: {line}" for line in unused]
+    if len(runs) > 1:
+        starts = ", ".join(f"{run.t[0]:.1f}" for run in runs)
+        lines.insert(0, f"{record.name}: {len(runs)} decays found, released at {starts} s")
+    for run in runs:
+        run.meta[NOTICES] = [*run.meta.get(NOTICES, ()), *lines]
+    return number_parts(runs)
+
+
+def rest_cuts(angle: np.ndarray, noise: float) -> list[int]:
+    """Sample indices where the model rests at its equilibrium between decays: the middle of every
+    stretch where a natural period around each sample stays within ``REST_NOISES`` noise sigmas, near
+    the record's median (a held tilt is not a rest: it belongs to the release that follows)."""
+    excursion = angle - np.median(angle)
+    peaks = half_cycle_peaks(excursion)
+    if peaks.size < 3 or noise <= 0:
+        return []
+    window = max(2 * int(np.median(np.diff(peaks))), 3)
+    if angle.size < 3 * window:
+        return []
+    spread = maximum_filter1d(angle, window) - minimum_filter1d(angle, window)
+    level = np.abs(uniform_filter1d(excursion, window))
+    quiet = (spread < REST_NOISES * noise) & (level < REST_LEVEL * float(np.max(np.abs(excursion))))
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], quiet.view(np.int8), [0]])))
+    return [int((a + b) // 2) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def _releases_in(record: DecayRun, noise: float, skip_half_cycles: int) -> list[DecayRun]:
+    """The releases of one part of a record (between rests): the first, then one after each free decay
+    that ends in a new excitation or in the noise with a swing to follow."""
     runs: list[DecayRun] = []
     rest = record
     while True:
@@ -81,7 +154,7 @@ def split_releases(record: DecayRun, skip_half_cycles: int = 0) -> list[DecayRun
         run.meta["split"] = [end.kind, end.reason]
         runs.append(run)
         rest = later
-    return number_parts(runs)
+    return runs
 
 
 def _swings(record: DecayRun, noise: float) -> bool:
