@@ -83,12 +83,12 @@ def split_releases(record: DecayRun, skip_half_cycles: int = 0) -> list[DecayRun
     unused: list[str] = []
     failure: BadIdentificationInput | None = None
     bounds = [0, *rest_cuts(record.angle, noise), record.t.size]
-    for a, b in itertools.pairwise(bounds):
+    for a, b, c in zip(bounds[:-1], bounds[1:], [*bounds[2:], record.t.size], strict=True):
         part = record.window(a, b)
         if not _swings(part, noise):
             continue
         try:
-            runs += _releases_in(part, noise, skip_half_cycles)
+            runs += _releases_in(record, (a, b, c), noise, skip_half_cycles)
         except BadIdentificationInput as exc:
             failure = failure or exc
             excursion = part.angle - np.median(record.angle)
@@ -126,34 +126,39 @@ def rest_cuts(angle: np.ndarray, noise: float) -> list[int]:
     return [int((a + b) // 2) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
-def _releases_in(record: DecayRun, noise: float, skip_half_cycles: int) -> list[DecayRun]:
-    """The releases of one part of a record (between rests): the first, then one after each free decay
-    that ends in a new excitation or in the noise with a swing to follow."""
+def _releases_in(
+    record: DecayRun, bounds: tuple[int, int, int], noise: float, skip_half_cycles: int
+) -> list[DecayRun]:
+    """The releases in ``record[a:b]`` (a part between rests): the first, then one after each free
+    decay that ends in a new excitation or in the noise with a swing to follow. Where a free decay
+    ends is judged on the record up to ``c`` (through the next part): a model stopped by hand shows as
+    a disturbance only against the swings after it. A run ended early says why in ``meta["split"]``."""
+    a, b, c = bounds
     runs: list[DecayRun] = []
-    rest = record
+    start = a
     while True:
         try:
-            run = rest.window(release_index(rest.angle, skip_half_cycles))
+            release = start + release_index(record.angle[start:b], skip_half_cycles)
         except BadIdentificationInput:
             if not runs:
                 raise
             break
-        if run.t.size < MIN_SAMPLES:
+        if b - release < MIN_SAMPLES:
             if not runs:
                 raise BadIdentificationInput(f"{record.meta['file']}: too few samples left after the release")
             break
-        end = find_free_end(run)
-        if end.kind not in SPLIT_AFTER or run.t.size - end.index < MIN_SAMPLES:
-            runs.append(run)
+        end = find_free_end(record.window(release, c))
+        stop = release + end.index
+        more = end.kind in SPLIT_AFTER and b - stop >= MIN_SAMPLES and _swings(record.window(stop, b), noise)
+        if stop >= b or not (more or c > b):  # the part's end, or the record's end: cut_free_decay's
+            runs.append(record.window(release, b))
             break
-        later = run.window(end.index)
-        if not _swings(later, noise):
-            runs.append(run)
-            break
-        run = run.window(0, end.index)
+        run = record.window(release, stop)
         run.meta["split"] = [end.kind, end.reason]
         runs.append(run)
-        rest = later
+        if not more:
+            break
+        start = stop
     return runs
 
 

@@ -13,11 +13,10 @@ from __future__ import annotations
 
 import codecs
 import csv
-import itertools
 import math
 import re
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -154,6 +153,9 @@ def read_table(path: Path, wanted: Sequence[str] = (), skip_rows: int = 0) -> Ta
         if name in wanted or all(_is_number(row[i], dialect.decimal_comma) for row in rows if i < len(row))
     ]
     data = _load_fast(path, dialect, len(comments) + 1 + skip_rows, numeric)
+    if data is None and dialect.separator != "," and not dialect.decimal_comma:  # commas after the sniff
+        dialect = replace(dialect, decimal_comma=True)
+        data = _load_fast(path, dialect, len(comments) + 1 + skip_rows, numeric)
     if data is None:
         data, numeric = _load_checked(path, dialect, header, 1 + skip_rows, numeric, wanted)
     columns = {header[i]: data[:, j] for j, i in enumerate(numeric)}
@@ -161,27 +163,28 @@ def read_table(path: Path, wanted: Sequence[str] = (), skip_rows: int = 0) -> Ta
     return Table(columns, comments, dialect, ignored)
 
 
-def _data_lines(path: Path, dialect: Dialect, skip: int) -> Iterator[str]:
-    """The data lines after ``skip`` non-blank lines (comments, header, units row), blank ones left out."""
-    lines = (line for line in _open(path, dialect.encoding) if line.strip())
-    rest = itertools.islice(lines, skip, None)
-    return (line.replace(",", ".") for line in rest) if dialect.decimal_comma else rest
-
-
 def _load_fast(path: Path, dialect: Dialect, skip: int, columns: list[int]) -> np.ndarray | None:
-    """numpy's C reader over the streamed lines; None when a row needs the careful reading."""
-    try:
-        return np.loadtxt(
-            _data_lines(path, dialect, skip),
-            delimiter=dialect.separator,
-            usecols=columns,
-            dtype=float,
-            comments="#",
-            ndmin=2,
-            quotechar='"',
-        ).reshape(-1, len(columns))
-    except (ValueError, IndexError):
-        return None
+    """numpy's C reader on the file from its first data row (``skip`` non-blank lines in: comments,
+    header, units row); None when a row needs the careful reading."""
+    with path.open(encoding=dialect.encoding, newline=None) as fh:
+        while skip:
+            line = fh.readline()
+            if not line:
+                break
+            skip -= bool(line.strip())
+        lines = (line.replace(",", ".") for line in fh) if dialect.decimal_comma else fh
+        try:
+            return np.loadtxt(
+                lines,
+                delimiter=dialect.separator,
+                usecols=columns,
+                dtype=float,
+                comments="#",
+                ndmin=2,
+                quotechar='"',
+            ).reshape(-1, len(columns))
+        except (ValueError, IndexError):
+            return None
 
 
 def _load_checked(
