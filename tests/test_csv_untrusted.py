@@ -15,7 +15,6 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
-from tankdaq.ident.inputs import input_notices, read_decays
 from tankdaq.physics.decay import simulate_decay
 from test_ident_helpers import KVLCC2_21338
 
@@ -120,6 +119,7 @@ def test_time_in_milliseconds_is_read_as_milliseconds(tmp_path):
             ("--time-col", "t", "--time-unit", "s"),
             "--time-unit ms",
         ),
+        ({"time_s": 1.0, "angle_deg": 180 / math.pi}, ("--time-unit", "ms"), "use --time-unit s"),
         ({"time_s": 1.0, "angle_deg": 1e3 * 180 / math.pi}, (), "no decay angle"),
         ({"time_s": 1.0, "angle_deg": 1e30}, (), "no decay angle"),
         ({"time_s": 1.0, "angle_deg": 180 / math.pi}, ("--angle-unit", "grad"), "use deg or rad"),
@@ -134,6 +134,21 @@ def test_a_unit_that_makes_no_decay_is_refused_in_one_line(tmp_path, columns, ar
     result = identify(write_csv(tmp_path / "d.csv", data), *args, "--model", "b1,c1")
     assert result.exit_code == 2
     assert says in one_error_line(result)
+
+
+def test_a_european_excel_file_is_read_and_its_dialect_said(tmp_path):
+    t, angle, _ = held_tilt()
+    columns = {"Zeit_s": t, "angle_deg": np.degrees(angle), "Kommentar": np.array(["gut"] * t.size)}
+    path = write_csv(tmp_path / "excel.csv", columns, sep=";", comma=True, bom=True, crlf=True)
+    result = identify(path, "--time-col", "Zeit_s", "--model", "ittc-quadratic", "--json")
+    for term, value in coefficients(result).items():
+        assert value == pytest.approx(TRUTH[term], rel=1e-3), term
+    lines = result.stderr.splitlines()
+    assert (
+        "excel.csv: read as semicolon-separated, decimal commas, UTF-8 byte-order mark, CRLF line ends"
+        in lines
+    )
+    assert "excel.csv: text columns not read: Kommentar" in lines
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -163,10 +178,26 @@ def test_a_long_record_gives_every_decay(tmp_path):
     angle = np.concatenate([np.concatenate([*(a * p for p in one), np.zeros(300)]) for a in angles])
     angle += rng.normal(0, 0.01, angle.size)
     path = write_csv(tmp_path / "long.csv", {"time_s": np.arange(angle.size) / RATE_HZ, "angle_deg": angle})
+    from tankdaq.ident.inputs import input_notices, read_decays
+
     runs = read_decays(path)
     assert len(runs) == 55
     assert [math.degrees(run.angle[0]) for run in runs] == pytest.approx(angles, abs=0.05)
     assert input_notices(runs)[0].startswith("long: 55 decays found")
+
+
+def test_a_part_without_a_decay_is_named(tmp_path):
+    """Between two decays the model is tilted by hand and put back without a release: that part is not
+    used, and one line says where and why."""
+    t, angle = hand_stopped([8.0, 6.0])
+    rock = np.concatenate([np.linspace(0, 5, 100), np.full(200, 5.0), np.linspace(5, 0, 100)])
+    middle = int(t.size / 2)
+    angle = np.concatenate([angle[:middle], rock, np.zeros(300), angle[middle:]])
+    path = write_csv(tmp_path / "rocked.csv", {"time_s": np.arange(angle.size) / RATE_HZ, "angle_deg": angle})
+    result = identify(path, "--model", "ittc-quadratic", "--json")
+    assert [round(run["initial_angle_deg"]) for run in json.loads(result.stdout)["runs"]] == [8, 6]
+    (line,) = [line for line in result.stderr.splitlines() if "not used" in line]
+    assert line.startswith("rocked: ") and "no decay found" in line
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -32,7 +32,7 @@ from ..store.csv_import import (
 )
 from ..store.inputs import read_runs
 from .free_decay import SPLIT_AFTER, find_free_end
-from .signals import band_crossings, half_cycle_peaks, white_noise_level
+from .signals import half_cycle_peaks, white_noise_level
 
 #: Fraction of the largest excursion a peak must reach to count as the release.
 RELEASE_FRACTION = 0.5
@@ -77,7 +77,7 @@ def split_releases(record: DecayRun, skip_half_cycles: int = 0) -> list[DecayRun
     """Every released decay in a record: the record is cut where the model rests at its equilibrium
     (stopped by hand or settled: ``rest_cuts``), and in each part the first release must exist, later
     ones where a free decay ends in a new excitation (or in the noise) and a swing well clear of the
-    noise follows. A part that swings through its equilibrium but holds no decay is named in a notice."""
+    noise follows. A part that moves clear of the noise but holds no decay is named in a notice."""
     noise = white_noise_level(record.angle)
     runs: list[DecayRun] = []
     unused: list[str] = []
@@ -91,9 +91,7 @@ def split_releases(record: DecayRun, skip_half_cycles: int = 0) -> list[DecayRun
             runs += _releases_in(record, (a, b, c), noise, skip_half_cycles)
         except BadIdentificationInput as exc:
             failure = failure or exc
-            excursion = part.angle - np.median(record.angle)
-            if band_crossings(excursion, REST_LEVEL * float(np.ptp(part.angle))) >= 2:
-                unused.append(f"{part.t[0]:.2f}..{part.t[-1]:.2f} s not used ({exc})")
+            unused.append(f"{part.t[0]:.2f}..{part.t[-1]:.2f} s not used ({exc})")
     if not runs:
         raise failure or BadIdentificationInput(
             f"{record.meta.get('file', record.name)}: no decay found: the angle never swings clear of "
