@@ -51,7 +51,8 @@ class Dialect:
         if self.decimal_comma:
             parts.append("decimal commas")
         if self.encoding != "utf-8":
-            parts.append("UTF-8 byte-order mark" if self.encoding == "utf-8-sig" else "UTF-16")
+            names = {"utf-8-sig": "UTF-8 byte-order mark", "utf-16": "UTF-16", "cp1252": "Windows-1252 text"}
+            parts.append(names[self.encoding])
         if self.crlf:
             parts.append("CRLF line ends")
         return ", ".join(parts)
@@ -68,7 +69,16 @@ class Table:
 
 
 def _encoding(head: bytes) -> str:
-    return next((name for bom, name in _BOMS if head.startswith(bom)), "utf-8")
+    """A byte-order mark's encoding; else UTF-8, or Windows-1252 where the bytes are not UTF-8 (Excel's
+    plain "CSV" on Windows writes ``°`` as one byte)."""
+    marked = next((name for bom, name in _BOMS if head.startswith(bom)), None)
+    if marked is not None:
+        return marked
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return "utf-8" if exc.start >= len(head) - 3 else "cp1252"  # a character cut by the 64 kB read
+    return "utf-8"
 
 
 def _open(path: Path, encoding: str) -> Iterator[str]:
@@ -152,12 +162,15 @@ def read_table(path: Path, wanted: Sequence[str] = (), skip_rows: int = 0) -> Ta
         for i, name in enumerate(header)
         if name in wanted or all(_is_number(row[i], dialect.decimal_comma) for row in rows if i < len(row))
     ]
-    data = _load_fast(path, dialect, len(comments) + 1 + skip_rows, numeric)
-    if data is None and dialect.separator != "," and not dialect.decimal_comma:  # commas after the sniff
-        dialect = replace(dialect, decimal_comma=True)
+    try:
         data = _load_fast(path, dialect, len(comments) + 1 + skip_rows, numeric)
-    if data is None:
-        data, numeric = _load_checked(path, dialect, header, 1 + skip_rows, numeric, wanted)
+        if data is None and dialect.separator != "," and not dialect.decimal_comma:  # commas after the sniff
+            dialect = replace(dialect, decimal_comma=True)
+            data = _load_fast(path, dialect, len(comments) + 1 + skip_rows, numeric)
+        if data is None:
+            data, numeric = _load_checked(path, dialect, header, 1 + skip_rows, numeric, wanted)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read it as CSV text ({exc})") from None
     columns = {header[i]: data[:, j] for j, i in enumerate(numeric)}
     ignored = [name for i, name in enumerate(header) if i not in numeric]
     return Table(columns, comments, dialect, ignored)
