@@ -60,7 +60,8 @@ def write_csv(path: Path, columns: dict[str, np.ndarray], sep: str = ",", comma:
 
     n = len(next(iter(columns.values())))
     lines = [sep.join(columns)] + [sep.join(cell(col[i]) for col in columns.values()) for i in range(n)]
-    path.write_bytes(("\ufeff" if kw.get("bom") else "").encode() + (end.join(lines) + end).encode())
+    text = ("\ufeff" if kw.get("bom") else "") + end.join(lines) + end
+    path.write_bytes(text.encode(kw.get("encoding", "utf-8")))
     return path
 
 
@@ -136,18 +137,21 @@ def test_a_unit_that_makes_no_decay_is_refused_in_one_line(tmp_path, columns, ar
     assert says in one_error_line(result)
 
 
-def test_a_european_excel_file_is_read_and_its_dialect_said(tmp_path):
+@pytest.mark.parametrize(
+    ("written", "said"),
+    [({"bom": True}, "UTF-8 byte-order mark"), ({"encoding": "cp1252"}, "Windows-1252 text")],
+)
+def test_a_european_excel_file_is_read_and_its_dialect_said(tmp_path, written, said):
     t, angle, _ = held_tilt()
-    columns = {"Zeit_s": t, "angle_deg": np.degrees(angle), "Kommentar": np.array(["gut"] * t.size)}
-    path = write_csv(tmp_path / "excel.csv", columns, sep=";", comma=True, bom=True, crlf=True)
-    result = identify(path, "--time-col", "Zeit_s", "--model", "ittc-quadratic", "--json")
+    columns = {"Zeit_s": t, "Winkel [°]": np.degrees(angle), "Kommentar": np.array(["gut"] * t.size)}
+    path = write_csv(tmp_path / "excel.csv", columns, sep=";", comma=True, crlf=True, **written)
+    result = identify(
+        path, "--time-col", "Zeit_s", "--angle-col", "Winkel [°]", "--model", "ittc-quadratic", "--json"
+    )
     for term, value in coefficients(result).items():
         assert value == pytest.approx(TRUTH[term], rel=1e-3), term
     lines = result.stderr.splitlines()
-    assert (
-        "excel.csv: read as semicolon-separated, decimal commas, UTF-8 byte-order mark, CRLF line ends"
-        in lines
-    )
+    assert f"excel.csv: read as semicolon-separated, decimal commas, {said}, CRLF line ends" in lines
     assert "excel.csv: text columns not read: Kommentar" in lines
 
 
