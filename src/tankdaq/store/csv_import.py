@@ -28,7 +28,7 @@ from ..errors import BadIdentificationInput, InputError
 from ..records import DecayRun
 from ..validation import input_file
 from .csv_dialect import Table, read_table
-from .csv_units import ANGLE_UNITS, TIME_UNITS, angle_unit, time_unit
+from .csv_units import ANGLE_UNITS, TIME_UNITS, UnitChoice, angle_unit, time_unit
 
 #: A decay needs at least this many samples.
 MIN_SAMPLES = 20
@@ -82,10 +82,13 @@ def read_csv_file(path: str | Path, options: CsvOptions = DEFAULT_CSV, axis: str
     if table.ignored:
         notices.append(f"{path.name}: text columns not read: {', '.join(table.ignored)}")
     t_raw, angle_raw = columns.pop(options.time_col), columns.pop(angle_col)
-    units = (
-        angle_unit(angle_col, angle_raw, given_unit),
-        time_unit(options.time_col, t_raw, angle_raw, options.time_unit),
-    )
+    if header and angle_col == "angle_rad" and options.time_col == "time_s":  # an export says its units
+        units = (UnitChoice("rad"), UnitChoice("s"))
+    else:
+        units = (
+            angle_unit(angle_col, angle_raw, given_unit),
+            time_unit(options.time_col, t_raw, angle_raw, options.time_unit),
+        )
     notices += [f"{path.name}: {choice.line}" for choice in units if choice.line]
     to_rad, to_s = ANGLE_UNITS[units[0].unit], TIME_UNITS[units[1].unit]
     rate = columns.pop(rate_col) * to_rad if rate_col is not None and rate_col in columns else None
