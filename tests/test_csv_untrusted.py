@@ -293,20 +293,23 @@ def test_a_short_or_foreign_mcap_is_one_line(recordings, tmp_path, command, name
 
 
 def test_a_campaign_goes_on_past_bad_files(recordings, tmp_path):
-    """A dangling (cut) and a foreign .mcap beside good ones: listed, the others fitted, exit 1."""
+    """A recording cut to 20 bytes, a dangling link and another tool's .mcap beside a good one: listed,
+    the good one fitted and its table written, exit 1."""
     import shutil
 
     folder = tmp_path / "campaign"
     folder.mkdir()
     for name in ("good", "cut20", "foreign"):
         shutil.copy(recordings[name], folder)
+    (folder / "dangling.mcap").symlink_to(tmp_path / "moved-away.mcap")
     result = runner.invoke(app, ["campaign", str(folder), "--jobs", "1", "--model", "b1,c1"])
     assert result.exit_code == 1, result.output
     assert "Traceback" not in result.output
     skipped = [line for line in result.stderr.splitlines() if line.startswith("skipped: ")]
-    assert len(skipped) == 2
-    assert "cut20.mcap is an MCAP file cut short" in skipped[0] and "foreign.mcap" in skipped[1]
-    assert "error: 2 of 3 files skipped" in result.stderr
+    assert len(skipped) == 3
+    assert "cut20.mcap is an MCAP file cut short" in skipped[0]
+    assert "dangling.mcap is a dangling link" in skipped[1] and "foreign.mcap" in skipped[2]
+    assert "error: 3 of 4 files skipped" in result.stderr
     assert "| trimaran |" in result.stdout  # the good recording's group is in the table
 
 

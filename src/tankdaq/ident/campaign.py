@@ -282,6 +282,8 @@ def read_campaign_file(
 ) -> list[DecayRun] | SkippedFile:
     """``read_campaign_runs``, or why the file cannot be read: one bad file (a recording cut to nothing,
     another tool's MCAP, a CSV with no decay) must not stop a campaign of many (pure, picklable)."""
+    if path.is_symlink() and not path.exists():
+        return SkippedFile(path, f"{path} is a dangling link (to {path.readlink()}, which does not exist)")
     try:
         return read_campaign_runs(path, start_s, end_s)
     except TankdaqError as exc:
