@@ -51,8 +51,9 @@ def hand_stopped(angles_deg, free_s: float = 5.0, noise_deg: float = 0.01, seed:
 
 
 def write_csv(path: Path, columns: dict[str, np.ndarray], sep: str = ",", comma: bool = False, **kw) -> Path:
-    """Columns as text the way a spreadsheet writes them (``comma``: decimal commas; ``bom``, ``crlf``)."""
-    end = "\r\n" if kw.get("crlf") else "\n"
+    """Columns as text the way a spreadsheet writes them (``comma``: decimal commas; ``bom``, ``crlf``,
+    ``trailing``: a separator ending every line, as Excel writes it, ``encoding``)."""
+    end = (sep if kw.get("trailing") else "") + ("\r\n" if kw.get("crlf") else "\n")
 
     def cell(value: object) -> str:
         text = value if isinstance(value, str) else f"{value:.9g}"
@@ -326,6 +327,7 @@ def dialects(draw):
         "comma": sep != "," and draw(st.booleans()),
         "bom": draw(st.booleans()),
         "crlf": draw(st.booleans()),
+        "trailing": draw(st.booleans()),
         "text": draw(st.booleans()),
         "order": draw(st.permutations(["t", "angle", "rate", "note"])),
         "angle_unit": draw(st.sampled_from(["deg", "rad"])),

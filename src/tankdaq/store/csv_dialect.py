@@ -157,10 +157,14 @@ def read_table(path: Path, wanted: Sequence[str] = (), skip_rows: int = 0) -> Ta
     are left out and listed); ``skip_rows`` data rows after the header are not read (an export's units)."""
     dialect, comments, header, rows = sniff(path)
     rows = rows[skip_rows:]
+    # a nameless empty column is the separator Excel puts at the end of every row: not a column at all
+    blank = [not any(row[i].strip() for row in rows if i < len(row)) for i in range(len(header))]
+    empty = {i for i, name in enumerate(header) if not name and blank[i]}
     numeric = [
         i
         for i, name in enumerate(header)
-        if name in wanted or all(_is_number(row[i], dialect.decimal_comma) for row in rows if i < len(row))
+        if i not in empty
+        and (name in wanted or all(_is_number(row[i], dialect.decimal_comma) for row in rows if i < len(row)))
     ]
     try:
         data = _load_fast(path, dialect, len(comments) + 1 + skip_rows, numeric)
@@ -172,7 +176,7 @@ def read_table(path: Path, wanted: Sequence[str] = (), skip_rows: int = 0) -> Ta
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read it as CSV text ({exc})") from None
     columns = {header[i]: data[:, j] for j, i in enumerate(numeric)}
-    ignored = [name for i, name in enumerate(header) if i not in numeric]
+    ignored = [name for i, name in enumerate(header) if i not in numeric and i not in empty]
     return Table(columns, comments, dialect, ignored)
 
 
