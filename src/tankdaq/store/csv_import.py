@@ -56,6 +56,12 @@ class CsvOptions:
     keep_all: bool = False
     time_unit: str | None = None
 
+    def __post_init__(self) -> None:  # checked whatever the files are: a typo fails on a recording too
+        if self.angle_unit not in (None, *ANGLE_UNITS):
+            raise InputError(f"angle unit {self.angle_unit!r} not understood: use deg or rad")
+        if self.time_unit not in (None, *TIME_UNITS):
+            raise InputError(f"time unit {self.time_unit!r} not understood: use s or ms")
+
 
 DEFAULT_CSV = CsvOptions()
 
@@ -65,10 +71,6 @@ def read_csv_file(path: str | Path, options: CsvOptions = DEFAULT_CSV, axis: str
     whole (marked ``FIND_RELEASES`` unless ``keep_all``); without the rate column the angle is the only
     output. What the reader decided (dialect, units) is in ``meta[NOTICES]``."""
     path = Path(path)
-    if options.angle_unit not in (None, *ANGLE_UNITS):
-        raise InputError(f"angle unit {options.angle_unit!r} not understood: use deg or rad")
-    if options.time_unit not in (None, *TIME_UNITS):
-        raise InputError(f"time unit {options.time_unit!r} not understood: use s or ms")
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     table, header = _read_columns(path, options)
