@@ -6,9 +6,11 @@ campaign): ``store.inputs.read_runs`` picks the reader by suffix, and a record t
 several. A decay is cut from the release, taken as the first extremum of large amplitude (a held tilt ends
 where the model starts to move; a run driven to amplitude, like KVLCC2, starts at its first big peak). A
 long record with several releases becomes several runs, as a recording with several release events does:
-where a free decay ends by a new excitation, or dies into the noise with more to come, the rest of the
-record is searched for the next release (``ident.free_decay``; not after a carriage stop, which ends the
-test). This is signal work of identification, so it lives here and the store never imports ident.
+it is cut where the model rests at its equilibrium (stopped by hand, or settled), and within each part,
+where a free decay ends by a new excitation, or dies into the noise with more to come, the rest is searched
+for the next release (``ident.free_decay``; not after a carriage stop, which ends the test). Every part
+that moves but holds no decay is named in a notice: a decay is found or reported, never dropped quietly.
+This is signal work of identification, so it lives here and the store never imports ident.
 """
 
 from __future__ import annotations
