@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from .. import validation
-from .app import app, checked, err_console, handles_errors, progress_bar, say, warn_truncated
+from .app import app, checked, err_console, fail, handles_errors, progress_bar, say, warn_truncated
 from .identify import EndS, StartS
 
 
@@ -53,7 +53,8 @@ def campaign_command(
 
     CSV files name their condition like trimaran_0.9T_pitch_8deg.csv (or carry a JSON sidecar with
     hull, draft, axis, angle_deg); tankdaq recordings carry it in their metadata. The table goes to
-    stdout.
+    stdout. A file that cannot be read is skipped with one line; the exit code is then 1 (results
+    written for the others).
     """
     import os
 
@@ -67,6 +68,7 @@ def campaign_command(
         markdown_table,
         read_campaign,
     )
+    from ..ident.inputs import input_notices
     from ..ident.online import prepare_identifier
     from ..physics.models import resolve_model
     from .identify import echo_cuts
@@ -93,7 +95,16 @@ def campaign_command(
         def advance_reading(path: Path) -> None:
             progress.update(reading, advance=1, description=f"reading {path.name}")
 
-        runs = read_campaign(paths, start, end, pool, advance_reading)
+        found = read_campaign(paths, start, end, pool, advance_reading)
+        if not found.runs:  # nothing to fit: the one file's own line, or every file's and a count
+            if len(found.skipped) == 1:
+                raise InputError(found.skipped[0].reason)
+            for skipped in found.skipped:
+                say(skipped.line)
+            raise InputError(f"no decays read: all {len(paths)} files were skipped (listed above)")
+        for line in [*(skipped.line for skipped in found.skipped), *input_notices(found.runs)]:
+            say(line)  # one bad file does not stop the campaign: listed, and exit 1 at the end
+        runs = found.runs
         groups = group_runs(runs)
         known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
         fitting = progress.add_task("fitting", total=len(groups))
@@ -117,6 +128,9 @@ def campaign_command(
         if report is not None:
             written = write_report(results, report, pool)
             err_console.print(f"wrote {len(written)} files to {report}", markup=False)
+    if found.skipped:
+        count = f"{len(found.skipped)} of {len(paths)} files skipped (listed above)"
+        raise fail(f"{count}; the results cover the others", 1)
 
 
 @app.command("simulate-campaign")

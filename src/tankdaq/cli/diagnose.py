@@ -20,6 +20,7 @@ from .identify import (
     SkipHalfCycles,
     StartS,
     TimeColumn,
+    TimeUnit,
     load_runs,
 )
 
@@ -59,7 +60,8 @@ def diagnose_command(
     time_col: TimeColumn = "time_s",
     angle_col: AngleColumn = "angle_deg",
     rate_col: RateColumn = "rate_deg_s",
-    angle_unit: AngleUnit = "deg",
+    angle_unit: AngleUnit = None,
+    time_unit: TimeUnit = None,
     keep_all: KeepAll = False,
     skip_half_cycles: SkipHalfCycles = 0,
     start: StartS = None,
@@ -76,8 +78,9 @@ def diagnose_command(
     if max_steps < 0:
         raise InputError(f"--max-steps must be 0 or more, not {max_steps}")
     runs = load_runs(
-        inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
-    )
+        inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end,
+        time_unit,
+    )  # fmt: skip
     truncated = warn_truncated(runs)
     prepare_identifier(baseline, say)  # the native kernels: built once, on the first run after install
     with progress_bar() as progress:

@@ -27,7 +27,13 @@ from .app import (
 TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
 AngleColumn = Annotated[str, typer.Option("--angle-col", help="CSV angle column.")]
 RateColumn = Annotated[str, typer.Option("--rate-col", help="CSV rate column (ignored when absent).")]
-AngleUnit = Annotated[str, typer.Option("--angle-unit", help="Unit of the CSV angle and rate: deg or rad.")]
+AngleUnit = Annotated[
+    str | None,
+    typer.Option("--angle-unit", help="Unit of the CSV angle and rate: deg or rad [default: from the data]."),
+]
+TimeUnit = Annotated[
+    str | None, typer.Option("--time-unit", help="Unit of the CSV time: s or ms [default: from the data].")
+]
 KeepAll = Annotated[bool, typer.Option("--keep-all", help="Do not cut the CSV record at the release.")]
 SkipHalfCycles = Annotated[
     int, typer.Option("--skip-half-cycles", min=0, help="Half-cycles dropped after it.")
@@ -56,28 +62,32 @@ def load_runs(
     time_col: str,
     angle_col: str,
     rate_col: str | None,
-    angle_unit: str,
+    angle_unit: str | None,
     keep_all: bool,
     skip_half_cycles: int,
     start_s: float | None = None,
     end_s: float | None = None,
+    time_unit: str | None = None,
 ) -> list[DecayRun]:
     """The free decays of every input, read through the one way in (``ident.inputs.read_decays``: the
     reader by suffix, CSV releases found), each cut where its free part ends (``ident.free_decay``;
     ``start_s``/``end_s`` override).
 
-    Without ``axis`` a recording's decays are read on the axis its metadata names.
+    Without ``axis`` a recording's decays are read on the axis its metadata names. What the reading
+    decided (a CSV's dialect and units, decays found, parts not used) is said in one line each.
     """
     from ..ident.free_decay import cut_free_decays
-    from ..ident.inputs import read_decays
+    from ..ident.inputs import input_notices, read_decays
 
     runs = [
         run
         for path in inputs
         for run in read_decays(
-            path, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles
+            path, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, time_unit
         )
     ]
+    for line in input_notices(runs):
+        say(line)
     return cut_free_decays(runs, start_s, end_s)
 
 
@@ -120,7 +130,8 @@ def identify_command(
     time_col: TimeColumn = "time_s",
     angle_col: AngleColumn = "angle_deg",
     rate_col: RateColumn = "rate_deg_s",
-    angle_unit: AngleUnit = "deg",
+    angle_unit: AngleUnit = None,
+    time_unit: TimeUnit = None,
     keep_all: KeepAll = False,
     skip_half_cycles: SkipHalfCycles = 0,
     start: StartS = None,
@@ -157,8 +168,9 @@ def identify_command(
     scale = full_scale_of(hull_config, full_scale)
     terms = resolve_model(model)
     runs = load_runs(
-        inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
-    )
+        inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end,
+        time_unit,
+    )  # fmt: skip
     if hull_config is not None:  # the draft must be one the hull has on the decays' axes, before any fit
         for run_axis in sorted({run.axis for run in runs}):
             validation.hull_draft(hull_config, draft, run_axis)

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Hull, format_draft, load_hull, parse_draft
-from ..errors import IdentificationError, InputError
+from ..errors import IdentificationError, InputError, TankdaqError
 from ..physics.decay import simulate_decay
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, empty_samples
@@ -256,23 +256,60 @@ def identify_groups(
     return results
 
 
+@dataclass(frozen=True)
+class SkippedFile:
+    """A file a campaign could not read, and why (one line: what to do about it)."""
+
+    path: Path
+    reason: str
+
+    @property
+    def line(self) -> str:
+        named = str(self.path) in self.reason
+        return f"skipped: {self.reason}" if named else f"skipped: {self.path}: {self.reason}"
+
+
+@dataclass
+class CampaignRead:
+    """The free decays of every file read, and the files skipped (the campaign goes on without them)."""
+
+    runs: list[DecayRun]
+    skipped: list[SkippedFile]
+
+
+def read_campaign_file(
+    path: Path, start_s: float | None = None, end_s: float | None = None
+) -> list[DecayRun] | SkippedFile:
+    """``read_campaign_runs``, or why the file cannot be read: one bad file (a recording cut to nothing,
+    another tool's MCAP, a CSV with no decay) must not stop a campaign of many (pure, picklable)."""
+    if path.is_symlink() and not path.exists():
+        return SkippedFile(path, f"{path} is a dangling link (to {path.readlink()}, which does not exist)")
+    try:
+        return read_campaign_runs(path, start_s, end_s)
+    except TankdaqError as exc:
+        return SkippedFile(path, str(exc))
+
+
 def read_campaign(
     paths: Sequence[Path],
     start_s: float | None = None,
     end_s: float | None = None,
     executor: Executor | None = None,
     progress: Callable[[Path], None] | None = None,
-) -> list[DecayRun]:
-    """Every recording's free decays (``read_campaign_runs``), in path order; ``executor`` spreads the
-    files over cores or machines, ``progress`` is called after each file."""
-    runs: list[DecayRun] = []
+) -> CampaignRead:
+    """Every recording's free decays (``read_campaign_file``), in path order, and the files skipped;
+    ``executor`` spreads the files over cores or machines, ``progress`` is called after each file."""
+    found = CampaignRead([], [])
     n = len(paths)
-    found_per_file = executor_map(executor, read_campaign_runs, paths, [start_s] * n, [end_s] * n)
-    for path, found in zip(paths, found_per_file, strict=True):
-        runs.extend(found)
+    found_per_file = executor_map(executor, read_campaign_file, paths, [start_s] * n, [end_s] * n)
+    for path, runs in zip(paths, found_per_file, strict=True):
+        if isinstance(runs, SkippedFile):
+            found.skipped.append(runs)
+        else:
+            found.runs.extend(runs)
         if progress is not None:
             progress(path)
-    return runs
+    return found
 
 
 def executor_map(

@@ -6,29 +6,44 @@ campaign): ``store.inputs.read_runs`` picks the reader by suffix, and a record t
 several. A decay is cut from the release, taken as the first extremum of large amplitude (a held tilt ends
 where the model starts to move; a run driven to amplitude, like KVLCC2, starts at its first big peak). A
 long record with several releases becomes several runs, as a recording with several release events does:
-where a free decay ends by a new excitation, or dies into the noise with more to come, the rest of the
-record is searched for the next release (``ident.free_decay``; not after a carriage stop, which ends the
-test). This is signal work of identification, so it lives here and the store never imports ident.
+it is cut where the model rests at its equilibrium (stopped by hand, or settled), and within each part,
+where a free decay ends by a new excitation, or dies into the noise with more to come, the rest is searched
+for the next release (``ident.free_decay``; not after a carriage stop, which ends the test). Every part
+that moves but holds no decay is named in a notice: a decay is found or reported, never dropped quietly.
+This is signal work of identification, so it lives here and the store never imports ident.
 """
 
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import maximum_filter1d, minimum_filter1d, uniform_filter1d
 
 from ..errors import BadIdentificationInput
 from ..records import DecayRun
-from ..store.csv_import import DEFAULT_RATE_COL, FIND_RELEASES, MIN_SAMPLES, CsvOptions, number_parts
+from ..store.csv_import import (
+    DEFAULT_RATE_COL,
+    FIND_RELEASES,
+    MIN_SAMPLES,
+    NOTICES,
+    CsvOptions,
+    number_parts,
+)
 from ..store.inputs import read_runs
 from .free_decay import SPLIT_AFTER, find_free_end
-from .signals import white_noise_level
+from .signals import half_cycle_peaks, white_noise_level
 
 #: Fraction of the largest excursion a peak must reach to count as the release.
 RELEASE_FRACTION = 0.5
 #: A later release counts when its swing clears the noise by this factor.
 NEXT_RELEASE_NOISES = 20.0
+#: The model rests (stopped by hand, or settled) where the angle stays within this many noise sigmas
+#: (peak to peak) for a natural period, near the equilibrium (``REST_LEVEL`` of the largest excursion).
+REST_NOISES = 12.0
+REST_LEVEL = 0.1
 
 
 def read_decays(
@@ -37,14 +52,17 @@ def read_decays(
     time_col: str = "time_s",
     angle_col: str = "angle_deg",
     rate_col: str | None = DEFAULT_RATE_COL,
-    angle_unit: str = "deg",
+    angle_unit: str | None = None,
     keep_all: bool = False,
     skip_half_cycles: int = 0,
+    time_unit: str | None = None,
 ) -> list[DecayRun]:
-    """The decays of one file, each from its release. The CSV settings (columns, unit, ``keep_all``: the
-    record whole from its first sample; ``skip_half_cycles`` more half-cycles dropped after a release
-    found in the data) apply to CSV files; a recording's runs start at its release events."""
-    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all)
+    """The decays of one file, each from its release. The CSV settings (columns, units (None: decided
+    from the data), ``keep_all``: the record whole from its first sample; ``skip_half_cycles`` more
+    half-cycles dropped after a release found in the data) apply to CSV files; a recording's runs start
+    at its release events. What the reading decided or left out is in each run's ``meta[NOTICES]``
+    (``input_notices``)."""
+    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all, time_unit)
     return [
         decay
         for run in read_runs(path, axis, options)
@@ -52,36 +70,96 @@ def read_decays(
     ]
 
 
+def input_notices(runs: Iterable[DecayRun]) -> list[str]:
+    """The reading's lines for the user (dialect, units, parts not used), each once, in order."""
+    return list(dict.fromkeys(line for run in runs for line in run.meta.get(NOTICES, ())))
+
+
 def split_releases(record: DecayRun, skip_half_cycles: int = 0) -> list[DecayRun]:
-    """Every released decay in a record: the first must exist, later ones where a free decay ends in a
-    new excitation (or in the noise) and a swing well clear of the noise follows."""
+    """Every released decay in a record: the record is cut where the model rests at its equilibrium
+    (stopped by hand or settled: ``rest_cuts``), and in each part the first release must exist, later
+    ones where a free decay ends in a new excitation (or in the noise) and a swing well clear of the
+    noise follows. A part that moves clear of the noise but holds no decay is named in a notice."""
     noise = white_noise_level(record.angle)
     runs: list[DecayRun] = []
-    rest = record
+    unused: list[str] = []
+    failure: BadIdentificationInput | None = None
+    bounds = [0, *rest_cuts(record.angle, noise), record.t.size]
+    for a, b, c in zip(bounds[:-1], bounds[1:], [*bounds[2:], record.t.size], strict=True):
+        part = record.window(a, b)
+        if not _swings(part, noise):
+            continue
+        try:
+            runs += _releases_in(record, (a, b, c), noise, skip_half_cycles)
+        except BadIdentificationInput as exc:
+            failure = failure or exc
+            unused.append(f"{part.t[0]:.2f}..{part.t[-1]:.2f} s not used ({exc})")
+    if not runs:
+        raise failure or BadIdentificationInput(
+            f"{record.meta.get('file', record.name)}: no decay found: the angle never swings clear of "
+            "the noise"
+        )
+    lines = [f"{record.name}: {line}" for line in unused]
+    if len(runs) > 1:
+        starts = ", ".join(f"{run.t[0]:.1f}" for run in runs)
+        lines.insert(0, f"{record.name}: {len(runs)} decays found, released at {starts} s")
+    for run in runs:
+        run.meta[NOTICES] = [*run.meta.get(NOTICES, ()), *lines]
+    return number_parts(runs)
+
+
+def rest_cuts(angle: np.ndarray, noise: float) -> list[int]:
+    """Sample indices where the model rests at its equilibrium between decays: the middle of every
+    stretch where a natural period around each sample stays within ``REST_NOISES`` noise sigmas, near
+    the record's median (a held tilt is not a rest: it belongs to the release that follows)."""
+    excursion = angle - np.median(angle)
+    peaks = half_cycle_peaks(excursion)
+    if peaks.size < 3 or noise <= 0:
+        return []
+    window = max(2 * int(np.median(np.diff(peaks))), 3)
+    if angle.size < 3 * window:
+        return []
+    spread = maximum_filter1d(angle, window) - minimum_filter1d(angle, window)
+    level = np.abs(uniform_filter1d(excursion, window))
+    quiet = (spread < REST_NOISES * noise) & (level < REST_LEVEL * float(np.max(np.abs(excursion))))
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], quiet.view(np.int8), [0]])))
+    return [int((a + b) // 2) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def _releases_in(
+    record: DecayRun, bounds: tuple[int, int, int], noise: float, skip_half_cycles: int
+) -> list[DecayRun]:
+    """The releases in ``record[a:b]`` (a part between rests): the first, then one after each free
+    decay that ends in a new excitation or in the noise with a swing to follow. Where a free decay
+    ends is judged on the record up to ``c`` (through the next part): a model stopped by hand shows as
+    a disturbance only against the swings after it. A run ended early says why in ``meta["split"]``."""
+    a, b, c = bounds
+    runs: list[DecayRun] = []
+    start = a
     while True:
         try:
-            run = rest.window(release_index(rest.angle, skip_half_cycles))
+            release = start + release_index(record.angle[start:b], skip_half_cycles)
         except BadIdentificationInput:
             if not runs:
                 raise
             break
-        if run.t.size < MIN_SAMPLES:
+        if b - release < MIN_SAMPLES:
             if not runs:
                 raise BadIdentificationInput(f"{record.meta['file']}: too few samples left after the release")
             break
-        end = find_free_end(run)
-        if end.kind not in SPLIT_AFTER or run.t.size - end.index < MIN_SAMPLES:
-            runs.append(run)
+        end = find_free_end(record.window(release, c))
+        stop = release + end.index
+        more = end.kind in SPLIT_AFTER and b - stop >= MIN_SAMPLES and _swings(record.window(stop, b), noise)
+        if stop >= b or not (more or c > b):  # the part's end, or the record's end: cut_free_decay's
+            runs.append(record.window(release, b))
             break
-        later = run.window(end.index)
-        if not _swings(later, noise):
-            runs.append(run)
-            break
-        run = run.window(0, end.index)
+        run = record.window(release, stop)
         run.meta["split"] = [end.kind, end.reason]
         runs.append(run)
-        rest = later
-    return number_parts(runs)
+        if not more:
+            break
+        start = stop
+    return runs
 
 
 def _swings(record: DecayRun, noise: float) -> bool:

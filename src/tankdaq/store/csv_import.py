@@ -8,11 +8,14 @@ several releases in a long record) is found by ``ident.inputs`` on the way in, s
 signal work of identification (noise levels, where a free decay ends) and data flows one way, store ->
 ident, never back. Extra numeric columns become ``DecayRun.channels`` in SI units (``*_deg`` columns are
 converted to rad and lose the suffix, so ``other_angle_deg`` -> ``other_angle``).
+
+Any dialect a spreadsheet writes is read (``store.csv_dialect``: BOM, comma, semicolon or tab, decimal
+commas, CRLF, text columns left out), and the angle and time units are decided from the data where not
+given (``store.csv_units``); what was decided travels with the runs as one line each (``meta[NOTICES]``).
 """
 
 from __future__ import annotations
 
-import csv
 import itertools
 import json
 import math
@@ -24,8 +27,9 @@ import numpy as np
 from ..errors import BadIdentificationInput, InputError
 from ..records import DecayRun
 from ..validation import input_file
+from .csv_dialect import Table, read_table
+from .csv_units import ANGLE_UNITS, TIME_UNITS, UnitChoice, angle_unit, time_unit
 
-ANGLE_UNITS: dict[str, float] = {"deg": math.pi / 180.0, "rad": 1.0}
 #: A decay needs at least this many samples.
 MIN_SAMPLES = 20
 #: The rate column looked for by default; any other name given must exist.
@@ -34,18 +38,29 @@ DEFAULT_RATE_COL = "rate_deg_s"
 EXPORT_MARK = "# tankdaq export"
 #: ``meta`` key of a record read whole whose releases are still to be found (``ident.inputs``).
 FIND_RELEASES = "find_releases"
+#: ``meta`` key of the lines a reader has for the user (dialect, units decided from the data, parts
+#: of the file not used): the commands print them, once per file.
+NOTICES = "notices"
 
 
 @dataclass(frozen=True)
 class CsvOptions:
-    """How to read other labs' CSV: the columns, the angle unit, and ``keep_all`` (the record whole from
-    its first sample: no cut at its releases)."""
+    """How to read other labs' CSV: the columns, the units (None: decided from the data,
+    ``store.csv_units``), and ``keep_all`` (the record whole from its first sample: no cut at its
+    releases)."""
 
     time_col: str = "time_s"
     angle_col: str = "angle_deg"
     rate_col: str | None = DEFAULT_RATE_COL
-    angle_unit: str = "deg"
+    angle_unit: str | None = None
     keep_all: bool = False
+    time_unit: str | None = None
+
+    def __post_init__(self) -> None:  # checked whatever the files are: a typo fails on a recording too
+        if self.angle_unit not in (None, *ANGLE_UNITS):
+            raise InputError(f"angle unit {self.angle_unit!r} not understood: use deg or rad")
+        if self.time_unit not in (None, *TIME_UNITS):
+            raise InputError(f"time unit {self.time_unit!r} not understood: use s or ms")
 
 
 DEFAULT_CSV = CsvOptions()
@@ -54,42 +69,83 @@ DEFAULT_CSV = CsvOptions()
 def read_csv_file(path: str | Path, options: CsvOptions = DEFAULT_CSV, axis: str = "roll") -> list[DecayRun]:
     """The runs of a CSV file as stored: an export's runs from each recorded release, else the record
     whole (marked ``FIND_RELEASES`` unless ``keep_all``); without the rate column the angle is the only
-    output."""
+    output. What the reader decided (dialect, units) is in ``meta[NOTICES]``."""
     path = Path(path)
-    angle_col, angle_unit, rate_col = options.angle_col, options.angle_unit, options.rate_col
-    if angle_unit not in ANGLE_UNITS:
-        raise InputError(f"angle unit {angle_unit!r} not understood: use deg or rad")
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
-    columns, header = _read_columns(path)
+    table, header = _read_columns(path, options)
+    columns = table.columns
+    angle_col, given_unit, rate_col = options.angle_col, options.angle_unit, options.rate_col
     if angle_col == "angle_deg" and "angle_deg" not in columns and "angle_rad" in columns:  # SI (export)
-        angle_col, angle_unit = "angle_rad", "rad"
+        angle_col, given_unit = "angle_rad", "rad"
         rate_col = "rate_rad_s" if rate_col == DEFAULT_RATE_COL else rate_col
-    for label, name in (("time", options.time_col), ("angle", angle_col)):
-        if name not in columns:
-            raise InputError(
-                f"{path}: no {label} column {name!r}; columns are {', '.join(columns)} "
-                f"(choose with --{label}-col)"
-            )
-    if rate_col not in (None, DEFAULT_RATE_COL, "rate_rad_s") and rate_col not in columns:
-        raise InputError(f"{path}: no rate column {rate_col!r}; columns are {', '.join(columns)}")
-    to_rad = ANGLE_UNITS[angle_unit]
-    t = columns.pop(options.time_col)
-    angle = columns.pop(angle_col) * to_rad
+    _check_columns(path, table, options.time_col, angle_col, rate_col)
+    notices = [f"{path.name}: read as {table.dialect.describe()}"] if not table.dialect.plain else []
+    if table.ignored:
+        notices.append(f"{path.name}: text columns not read: {', '.join(table.ignored)}")
+    t_raw, angle_raw = columns.pop(options.time_col), columns.pop(angle_col)
+    if header and angle_col == "angle_rad" and options.time_col == "time_s":  # an export says its units
+        units = (UnitChoice("rad"), UnitChoice("s"))
+    else:
+        units = (
+            angle_unit(angle_col, angle_raw, given_unit),
+            time_unit(options.time_col, t_raw, angle_raw, options.time_unit),
+        )
+    notices += [f"{path.name}: {choice.line}" for choice in units if choice.line]
+    to_rad, to_s = ANGLE_UNITS[units[0].unit], TIME_UNITS[units[1].unit]
     rate = columns.pop(rate_col) * to_rad if rate_col is not None and rate_col in columns else None
     channels = {_channel_name(name): _to_si(name, values) for name, values in columns.items()}
     run = DecayRun(
-        t=t, angle=angle, rate=rate, axis=axis, name=path.stem, channels=channels, meta={"file": str(path)}
+        t=t_raw * to_s,
+        angle=angle_raw * to_rad,
+        rate=rate,
+        axis=axis,
+        name=path.stem,
+        channels=channels,
+        meta={"file": str(path)},
     )
     run.meta.update(header)
-    _check_motion(run, angle_unit)
+    run.meta[NOTICES] = notices
+    _check_motion(run, units[0].unit)
     if options.keep_all:
         return [run]
-    releases = header.get("release_t_s")
-    if isinstance(releases, list) and releases:
-        return _exported_releases(run, [float(r) for r in releases])
+    releases = _release_times(path, header["release_t_s"]) if "release_t_s" in header else []
+    if releases:
+        return _exported_releases(run, releases)
     run.meta[FIND_RELEASES] = True
     return [run]
+
+
+def _check_columns(path: Path, table: Table, time_col: str, angle_col: str, rate_col: str | None) -> None:
+    """The columns asked for exist, are numbers, and are not the same column twice."""
+    columns = table.columns
+    for label, name in (("time", time_col), ("angle", angle_col)):
+        if name not in columns:
+            text = name in table.ignored
+            what = f"the {label} column {name!r} holds text" if text else f"no {label} column {name!r}"
+            raise InputError(
+                f"{path}: {what}; numeric columns are {', '.join(columns)} (choose with --{label}-col)"
+            )
+    if time_col == angle_col:
+        raise InputError(f"{path}: --time-col and --angle-col both name {time_col!r}: give two columns")
+    if rate_col not in (None, DEFAULT_RATE_COL, "rate_rad_s") and rate_col not in columns:
+        raise InputError(f"{path}: no rate column {rate_col!r}; columns are {', '.join(columns)}")
+    if rate_col in (time_col, angle_col):
+        raise InputError(f"{path}: --rate-col {rate_col!r} is the time or angle column: give another one")
+
+
+def _release_times(path: Path, value: object) -> list[float]:
+    """An export's ``release_t_s``: a list of finite times, increasing (else one line naming it)."""
+    if isinstance(value, list) and all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value
+    ):
+        times = [float(v) for v in value]
+        if times == sorted(times):
+            return times
+    raise InputError(
+        f"{path}: its metadata line '# release_t_s = {json.dumps(value)[:60]}' is not a list of "
+        "increasing times in s; fix or delete that line"
+    )
 
 
 def _exported_releases(record: DecayRun, releases: list[float]) -> list[DecayRun]:
@@ -108,30 +164,19 @@ def number_parts(runs: list[DecayRun]) -> list[DecayRun]:
     return runs
 
 
-def _read_columns(path: Path) -> tuple[dict[str, np.ndarray], dict[str, object]]:
+def _read_columns(path: Path, options: CsvOptions) -> tuple[Table, dict[str, object]]:
     """The numeric columns, and the ``# key = value`` metadata block of a ``tankdaq export`` file."""
     input_file(path)
-    try:
-        with path.open(newline="") as fh:
-            lines = [line for line in fh if line.strip()]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read it as CSV text ({exc})") from None
-    header = _metadata(lines) if lines and lines[0].startswith(EXPORT_MARK) else {}
-    rows = list(csv.reader(line for line in lines if not line.startswith("#")))
-    if len(rows) > 1 and header and not _numeric(rows[1]):
-        del rows[1]  # the units row of an export
-    if len(rows) < 1 + MIN_SAMPLES:
-        raise BadIdentificationInput(
-            f"{path}: {max(len(rows) - 1, 0)} data rows; a decay needs at least {MIN_SAMPLES}"
-        )
-    names = [name.strip() for name in rows[0]]
-    try:
-        data = np.array([[float(cell) if cell.strip() else math.nan for cell in row] for row in rows[1:]])
-    except ValueError as exc:
-        raise InputError(f"{path}: a value is not a number ({exc}); only numeric columns are read") from None
-    if data.ndim != 2 or data.shape[1] != len(names):
-        raise InputError(f"{path}: rows have a different number of fields from the header")
-    return {name: data[:, i] for i, name in enumerate(names)}, header
+    wanted = [options.time_col, options.angle_col]
+    wanted += [options.rate_col] if options.rate_col not in (None, DEFAULT_RATE_COL) else []
+    with path.open("rb") as fh:
+        exported = fh.read(len(EXPORT_MARK) + 3).lstrip(b"\xef\xbb\xbf").startswith(EXPORT_MARK.encode())
+    table = read_table(path, wanted, skip_rows=1 if exported else 0)  # an export's units row
+    header = _metadata(table.comments) if exported else {}
+    rows = len(next(iter(table.columns.values()))) if table.columns else 0
+    if rows < MIN_SAMPLES:
+        raise BadIdentificationInput(f"{path}: {rows} data rows; a decay needs at least {MIN_SAMPLES}")
+    return table, header
 
 
 def _metadata(lines: list[str]) -> dict[str, object]:
@@ -147,14 +192,6 @@ def _metadata(lines: list[str]) -> dict[str, object]:
             except json.JSONDecodeError:
                 meta[key.strip()] = value.strip()
     return meta
-
-
-def _numeric(row: list[str]) -> bool:
-    try:
-        [float(cell) for cell in row if cell.strip()]
-    except ValueError:
-        return False
-    return True
 
 
 def _channel_name(column: str) -> str:

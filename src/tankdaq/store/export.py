@@ -17,10 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import BadRecordingInput, InputError
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
 from .csv_import import EXPORT_MARK as CSV_MARK
 from .reader import _finite_increasing, _release_times, read_recording, truncation_notice
+from .schemas import TOPIC_SAMPLES
 
 FRAMES = ("device", "release")
 #: Column suffix of each SI unit: the suffix ``csv_import`` reads the unit from.
@@ -46,6 +47,11 @@ def recording_table(path: str | Path, frame: str = "device") -> ExportTable:
     angle_field, rate_field = AXIS_FIELDS[axis]
     samples = recording.samples
     samples = samples[_finite_increasing(samples["t"], samples[angle_field], samples[rate_field])]
+    if samples.size == 0:
+        raise BadRecordingInput(
+            f"{recording.path}: no sample with a finite time, {axis} angle and rate: nothing to export "
+            f"(a tankdaq recording holds them on {TOPIC_SAMPLES})"
+        )
     releases = _release_times(recording.events)
     origin = releases[0] if frame == "release" and releases else 0.0
     columns = {

@@ -68,15 +68,21 @@ class RecordScan:
 
     def __iter__(self) -> Iterator[McapRecord]:
         with self.path.open("rb") as stream:
+            if not is_mcap(stream.read(len(MCAP0_MAGIC))):
+                raise BadRecordingInput(
+                    f"{self.path} is not an MCAP file (it does not start with the MCAP magic bytes)"
+                )
+            stream.seek(0)
             records = StreamReader(stream, emit_chunks=True, validate_crcs=True).records
             try:
                 first = next(records)
-            except (InvalidMagic, struct.error):  # wrong magic, or shorter than the magic itself
+            except (*_DAMAGE, InvalidMagic, EOFError) as exc:
+                short = isinstance(exc, EndOfFile | struct.error | EOFError) or not str(exc)
+                why = "" if short else f" ({exc})"
                 raise BadRecordingInput(
-                    f"{self.path} is not an MCAP file (it does not start with the MCAP magic bytes)"
+                    f"{self.path} is an MCAP file cut short at {self.size} bytes, before its first record "
+                    f"ended{why}: nothing to read"
                 ) from None
-            except _DAMAGE as exc:
-                raise BadRecordingInput(f"{self.path} is not a readable MCAP file: {exc}") from None
             if not isinstance(first, Header):
                 raise BadRecordingInput(f"{self.path} is not a readable MCAP file: no header record")
             yield first
@@ -152,6 +158,11 @@ def _check_tankdaq(path: Path, channels: dict[int, Channel], has_run_metadata: b
             f"{path} is an MCAP file but not a tankdaq recording (it has {found}, not "
             f"{schemas.TOPIC_SAMPLES} or {schemas.TOPIC_RAW})"
         )
+    if not has_run_metadata:  # tankdaq writes its run metadata before the first chunk reaches the disk
+        raise BadRecordingInput(
+            f"{path} is an MCAP file but not a tankdaq recording (it has {', '.join(sorted(topics))} but no "
+            f"{schemas.RUN_METADATA_NAME} metadata: written by another tool)"
+        )
 
 
 def _release_times(events: list[dict[str, Any]]) -> list[float]:
@@ -184,7 +195,7 @@ def _read_indexed(path: Path) -> Recording | None:
         try:  # anything not plainly a complete MCAP file is left to the scan, which says what is wrong
             reader = SeekingReader(stream, validate_crcs=True)
             summary = reader.get_summary()
-        except (*_DAMAGE, InvalidMagic):
+        except (*_DAMAGE, InvalidMagic, OSError):  # OSError: a file shorter than a footer seeks before 0
             return None
         if summary is None or summary.statistics is None:
             return None
@@ -341,7 +352,7 @@ def _indexed_raw_chunks(path: Path) -> list[tuple[int, bytes]] | None:
     with path.open("rb") as stream:
         try:
             summary = SeekingReader(stream, validate_crcs=True).get_summary()
-        except (*_DAMAGE, InvalidMagic):
+        except (*_DAMAGE, InvalidMagic, OSError):  # OSError: a file shorter than a footer seeks before 0
             return None
         if summary is None:
             return None
