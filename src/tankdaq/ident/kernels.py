@@ -39,9 +39,10 @@ import numpy as np
 MAX_ANGLE_RAD = 2.0 * math.pi
 #: Far beyond any model's rate (a 2 s roll period at 90 deg is 5 rad/s): beyond it, diverged.
 MAX_RATE_RAD_S = 1000.0
-#: RK4 steps one call may take, (samples - 1) * sub-steps: 20x a 5-minute decay at 400 Hz with 4
-#: sub-steps, 2-4 s with sensitivities (native, 2-core machine); a call asking more is refused.
-MAX_STEPS = 10_000_000
+#: RK4 steps one call may take, (samples - 1) * sub-steps: 4x a 5-minute decay at 400 Hz with 4
+#: sub-steps, about 1 s with 4 terms' sensitivities (native, loaded 2-core machine: bench_runaway);
+#: a call asking more is refused before it starts.
+MAX_STEPS = 2_000_000
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
