@@ -126,6 +126,14 @@ def test_the_kernels_release_the_interpreter_lock(source: Any) -> None:
     assert inside, f"no tick of the main thread in the middle of a {ended - started:.2f} s kernel call"
 
 
+def test_a_module_built_the_old_way_is_never_loaded(monkeypatch: pytest.MonkeyPatch) -> None:
+    """How the module is built (the lock released, the host's features) is part of its name, like the
+    kernel source: a module built before holding the lock is not picked up."""
+    built_now = compiled.native_path()
+    monkeypatch.setattr(compiled, "BUILD_SETTINGS", "")
+    assert compiled.native_path() != built_now
+
+
 def _rosenbrock_counted(calls: list[np.ndarray], after: Callable[[int], None] = lambda n: None) -> Any:
     def evaluate(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         calls.append(x.copy())
