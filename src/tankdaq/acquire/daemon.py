@@ -142,8 +142,8 @@ class _SignalStop:
     Inside the read loop a signal only asks the loop to end after the current read (an exception
     raised into the middle of a write could leave the file without its footer); anywhere else
     (preparing the kernels, opening the device, waiting for it to come back) it raises
-    KeyboardInterrupt at once. While the files close, further signals are noted and wait: the
-    closing is bounded (the final fit at most ``FINAL_FIT_WAIT_S``, the view 15 s).
+    KeyboardInterrupt at once. Only the first signal does anything: later ones wait for the files
+    to close, and the closing is bounded (the final fit at most ``FINAL_FIT_WAIT_S``, the view 15 s).
     """
 
     def __init__(self, stop: threading.Event) -> None:
@@ -153,10 +153,11 @@ class _SignalStop:
         self.closing = False
 
     def __call__(self, signum: int, _frame: object) -> None:
-        if self.stopped_by is None:
+        first = self.stopped_by is None
+        if first:
             self.stopped_by = signal.Signals(signum).name
         self.stop.set()
-        if not (self.in_loop or self.closing):
+        if first and not (self.in_loop or self.closing):  # a second signal never cuts the stop under way
             raise KeyboardInterrupt
 
     @contextlib.contextmanager
