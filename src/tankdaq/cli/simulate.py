@@ -72,7 +72,7 @@ def simulate_command(
         None,
         "--link",
         callback=checked(_free_link),
-        help="Stable symlink to the pty (default: a temporary path).",
+        help="Stable symlink to the pty (default: a temporary path); never put over an existing file.",
     ),
     stuck: bool = typer.Option(False, "--stuck", help="Measuring, ignoring GoToConfig until a Reset."),
     boot_s: float = typer.Option(0.0, "--boot", min=0.0, help="Seconds of silence after a Reset."),
