@@ -1,7 +1,8 @@
 """The record daemon: device -> release detection -> one MCAP per decay, live fit and view.
 
-It runs until ``runs`` decays are recorded or it is stopped (Ctrl-C, SIGTERM). A
-device that vanishes mid-decay closes that file with what arrived, and the
+It runs until ``runs`` decays are recorded or it is stopped: Ctrl-C, SIGTERM and SIGHUP (a
+closed terminal or SSH session) all close the decay under way as a complete file (``stopped_by``
+names the signal). A device that vanishes mid-decay closes that file with what arrived, and the
 daemon waits for the device to come back. ``port="sim"`` starts the built-in
 simulated MTi-G in-process on a pseudo-terminal, opened like hardware
 (``device.factory.open_device``); ``port="sim:FILE.mcap"`` plays the device of that recording
@@ -26,7 +27,7 @@ from ..config import Hull, hull_scenario, load_hull
 from ..device.driver import MTiDriver
 from ..device.factory import OpenDevice, SimPort, SimulatedSensor, open_device
 from ..errors import DeviceGone, InputError, RecordingError
-from ..ident.online import prepare_identifier
+from ..ident.online import OnlineIdentifier, prepare_identifier
 from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
@@ -131,22 +132,48 @@ class DaemonStatus:
         )
 
 
-@contextlib.contextmanager
-def _sigterm_as_interrupt() -> Iterator[None]:
-    """SIGTERM stops the daemon the way Ctrl-C does, so files are closed properly."""
+#: What stops a recording the way Ctrl-C does: the decay under way closes as a complete file.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
-    def handler(_signum: int, _frame: object) -> None:
-        raise KeyboardInterrupt
 
-    try:
-        previous = signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread (tests): leave signals alone
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+class _SignalStop:
+    """Ctrl-C, SIGTERM and SIGHUP stop the daemon, the open decay closed as a complete file.
+
+    Inside the read loop a signal only asks the loop to end after the current read (an exception
+    raised into the middle of a write could leave the file without its footer); anywhere else
+    (preparing the kernels, opening the device, waiting for it to come back) it raises
+    KeyboardInterrupt at once. Only the first signal does anything: later ones wait for the files
+    to close, and the closing is bounded (the final fit at most ``FINAL_FIT_WAIT_S``, the view 15 s).
+    """
+
+    def __init__(self, stop: threading.Event) -> None:
+        self.stop = stop
+        self.stopped_by: str | None = None  # the first signal's name
+        self.in_loop = False
+        self.closing = False
+
+    def __call__(self, signum: int, _frame: object) -> None:
+        first = self.stopped_by is None
+        if first:
+            self.stopped_by = signal.Signals(signum).name
+        self.stop.set()
+        if first and not (self.in_loop or self.closing):  # a second signal never cuts the stop under way
+            raise KeyboardInterrupt
+
+    @contextlib.contextmanager
+    def installed(self) -> Iterator[None]:
+        """The handler on every stop signal while the block runs (only the main thread can)."""
+        previous: dict[int, object] = {}
+        try:
+            for signum in STOP_SIGNALS:
+                previous[signum] = signal.signal(signum, self)
+        except ValueError:  # not the main thread (tests): leave signals alone
+            pass
+        try:
+            yield
+        finally:
+            for number, handler in previous.items():
+                signal.signal(number, handler)  # type: ignore[arg-type]
 
 
 class RecordDaemon:
@@ -158,6 +185,7 @@ class RecordDaemon:
         on_event: Callable[[str], None] | None = None,
         on_status: Callable[[DaemonStatus], None] | None = None,
         sinks: Sequence[Sink] = (),  # more listeners of the pipeline (a session's level check)
+        identifier: Callable[..., OnlineIdentifier] = OnlineIdentifier,  # the live fit (IdentifierSink's)
     ) -> None:
         self.settings = settings
         self.on_event = on_event or (lambda _line: None)
@@ -166,10 +194,24 @@ class RecordDaemon:
         self.hull: Hull | None = settings.check()  # before a simulator starts or the port opens
         self.replayed = settings.recorded_device()  # port sim:FILE.mcap: read and checked now, too
         self.extra_sinks = list(sinks)
+        self.make_identifier = identifier
         self.device: OpenDevice | None = None
         self.outcomes: list[DecayOutcome] = []
         self._next_read = 0.0
         self._stop = threading.Event()
+        self._signals = _SignalStop(self._stop)
+        self._recording: RecordingSink | None = None
+
+    @property
+    def stopped_by(self) -> str | None:
+        """The signal that stopped ``run`` (SIGINT, SIGTERM, SIGHUP), None when it ran to its end."""
+        return self._signals.stopped_by
+
+    @property
+    def recordings(self) -> list[Path]:
+        """The decay files this daemon wrote that exist: what a summary counts."""
+        paths = self._recording.paths if self._recording is not None else []
+        return [path for path in paths if path.exists()]
 
     # ---- the device ----------------------------------------
 
@@ -246,35 +288,50 @@ class RecordDaemon:
             nominal_angle_deg=s.angle_deg,
             closing_metadata=lambda: driver.counters.metadata(),
         )
-        sinks = [IdentifierSink(), recording, ViewSink(view), *self.extra_sinks]
+        self._recording = recording
+        sinks = [IdentifierSink(self.make_identifier), recording, ViewSink(view), *self.extra_sinks]
         return DecaySession(session_settings, sinks, on_event=self.on_event)
 
     # ---- the loop ----------------------------------------
 
     def run(self) -> list[DecayOutcome]:
         """Record until ``runs`` decays are done or stopped; returns what was recorded."""
+        with self._signals.installed():
+            return self._run()
+
+    def _run(self) -> list[DecayOutcome]:
         s = self.settings
-        prepare_identifier(s.model, self.on_event)  # before anything opens: no refit compiles mid-decay
         session: DecaySession | None = None
+        signals = self._signals
         try:
-            with _sigterm_as_interrupt():
-                driver = self._open_device()
-                self.status.device = driver.info.describe() if driver.info else s.port
-                self.on_event(f"device: {self.status.device}")
-                session = self._session(driver)
-                self.status.state = "waiting"
-                while (s.runs is None or len(self.outcomes) < s.runs) and not self._stop.is_set():
-                    try:
-                        self._pump(driver, session)
-                    except DeviceGone as exc:
-                        self._device_gone(driver, session, str(exc))
+            prepare_identifier(s.model, self.on_event)  # before anything opens: no refit compiles mid-decay
+            driver = self._open_device()
+            self.status.device = driver.info.describe() if driver.info else s.port
+            self.on_event(f"device: {self.status.device}")
+            session = self._session(driver)
+            self.status.state = "waiting"
+            while (s.runs is None or len(self.outcomes) < s.runs) and not self._stop.is_set():
+                try:
+                    signals.in_loop = True  # a signal now ends the loop after this read
+                    self._pump(driver, session)
+                except DeviceGone as exc:
+                    signals.in_loop = False
+                    self._device_gone(driver, session, str(exc))
+                finally:
+                    signals.in_loop = False
         except KeyboardInterrupt:
-            self.on_event("stopping: closing files")
+            signals.stopped_by = signals.stopped_by or "SIGINT"
         except RecordingError:
             self.on_event("recording stopped: a file could not be written (files already closed are intact)")
             raise
         finally:
-            self._shut_down(session)
+            signals.closing = True  # a second Ctrl-C must not cut the file being closed
+            if signals.stopped_by:
+                self.on_event(f"stopping ({signals.stopped_by}): closing files")
+            try:
+                self._shut_down(session)
+            finally:
+                signals.closing = False
         return self.outcomes
 
     def stop(self) -> None:

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import RecordingError, TankdaqError
-from ..ident.online import BackgroundFit, OnlineIdentifier, OnlineResult
+from ..ident.online import REFIT_BUDGET_S, BackgroundFit, OnlineIdentifier, OnlineResult
 from ..samples import AXIS_FIELDS
 from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter
@@ -172,18 +172,25 @@ class IdentifierSink(Sink):
 
     ``wait_for_fits`` (replay): each block's refit is done before the next block (the same refits
     every replay); live, a block only hands samples over and finished refits are published at the
-    next block. At settle the final fit waits at most ``FINAL_FIT_WAIT_S``.
+    next block. At settle the final fit waits at most ``FINAL_FIT_WAIT_S``. A refit past
+    ``refit_budget_s`` is abandoned on the worker (the loop never waits on it) and a warning event
+    says so.
     """
 
     def __init__(
-        self, identifier: Callable[..., OnlineIdentifier] = OnlineIdentifier, wait_for_fits: bool = False
+        self,
+        identifier: Callable[..., OnlineIdentifier] = OnlineIdentifier,
+        wait_for_fits: bool = False,
+        refit_budget_s: float = REFIT_BUDGET_S,
     ) -> None:
         self.make_identifier = identifier  # called as identifier(terms, axis=...) at each release
         self.wait_for_fits = wait_for_fits
+        self.refit_budget_s = refit_budget_s  # a live refit past it is abandoned (a warning event)
         self._live: BackgroundFit | None = None
 
     def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
-        self._live = BackgroundFit(self.make_identifier(decay.terms, axis=decay.axis))
+        identifier = self.make_identifier(decay.terms, axis=decay.axis)
+        self._live = BackgroundFit(identifier, refit_budget_s=self.refit_budget_s)
         for block in pretrigger:
             self._submit(block, decay)
 
@@ -195,6 +202,13 @@ class IdentifierSink(Sink):
             self._live.wait_idle(FINAL_FIT_WAIT_S)
         for result in self._live.take():
             decay.publish(result)
+        self._note_abandoned(self._live, decay)
+
+    @staticmethod
+    def _note_abandoned(live: BackgroundFit, decay: Decay) -> None:
+        """A refit past its budget was abandoned on the worker: the record says so (a warning event)."""
+        for line in live.take_notes():
+            decay.note("warning", line)
 
     def _submit(self, block: Block, decay: Decay) -> None:
         assert self._live is not None
@@ -214,12 +228,14 @@ class IdentifierSink(Sink):
         try:
             refits, final = live.finish(FINAL_FIT_WAIT_S)
         except TankdaqError as exc:  # an unfittable decay (too short, cut by an unplug) is a warning
+            self._note_abandoned(live, decay)
             decay.note("warning", f"no final fit: {exc}")
             return
         finally:
             decay.final_fit_s = time.perf_counter() - started
         for result in refits:
             decay.publish(result)
+        self._note_abandoned(live, decay)
         decay.publish(final)
         decay.final_fit = final
 
@@ -253,6 +269,7 @@ class RecordingSink(Sink):
         self.nominal_angle_deg = nominal_angle_deg
         self.closing_metadata = closing_metadata
         self.writer: RecordingWriter | None = None
+        self.paths: list[Path] = []  # every file opened, in order
 
     def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
         from ..store.naming import next_run_number, recording_name
@@ -270,6 +287,7 @@ class RecordingSink(Sink):
         }
         self.writer = RecordingWriter(self.out_dir / name, metadata, self.run_config)
         decay.path = self.writer.path
+        self.paths.append(self.writer.path)
         for block in pretrigger:
             self._write_block(block)
 

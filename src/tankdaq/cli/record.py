@@ -91,15 +91,24 @@ class _StatusLine:
         self._text.plain = status.line(self.runs)  # type: ignore[attr-defined]
 
 
+#: The exit code of a recording stopped by Ctrl-C, SIGTERM or SIGHUP (its files closed complete).
+STOPPED_EXIT_CODE = 130
+
+
 def run_record(settings: RecordSettings) -> list[DecayOutcome]:
-    """Run the daemon with a status line, print what it saved."""
+    """Run the daemon with a status line, print how many decay files it wrote (the files that exist).
+
+    Stopped by a signal, it exits 130 after the summary (typer.Exit), as Ctrl-C does anywhere.
+    """
     from ..acquire.daemon import RecordDaemon
 
     with _StatusLine(settings.runs) as line:
         daemon = RecordDaemon(settings, on_event=line.event, on_status=line.status)
         outcomes = daemon.run()
-    saved = [o for o in outcomes if o.path is not None]
+    saved = daemon.recordings
     err_console.print(f"{len(saved)} decay(s) recorded under {settings.out_dir}", markup=False)
+    if daemon.stopped_by is not None:
+        raise typer.Exit(STOPPED_EXIT_CODE)
     return outcomes
 
 

@@ -20,6 +20,18 @@ if TYPE_CHECKING:
     from ..physics.scenario import DecayScenario
 
 
+def _free_link(path: Path) -> Path:
+    """``--link``: a writable place where nothing is but, at most, a dead simulator's link (never a
+    file of the user's: the simulator would replace it, then delete it on exit)."""
+    from ..device.simulator.pty_link import link_refusal
+
+    validation.output_file(path, option="--link")
+    why = link_refusal(path)
+    if why is not None:
+        raise InputError(f"--link {why}")
+    return path
+
+
 @app.command("simulate")
 @handles_errors
 def simulate_command(
@@ -59,8 +71,8 @@ def simulate_command(
     link: Path = typer.Option(
         None,
         "--link",
-        callback=checked(validation.output_file, option="--link"),
-        help="Stable symlink to the pty (default: a temporary path).",
+        callback=checked(_free_link),
+        help="Stable symlink to the pty (default: a temporary path); never put over an existing file.",
     ),
     stuck: bool = typer.Option(False, "--stuck", help="Measuring, ignoring GoToConfig until a Reset."),
     boot_s: float = typer.Option(0.0, "--boot", min=0.0, help="Seconds of silence after a Reset."),

@@ -39,8 +39,9 @@ from ..physics.terms import TERM_TABLE
 
 KERNEL_SOURCE = Path(__file__).with_name("kernels.py")
 MODULE_NAME = "tankdaq_kernels"
-#: How the native module is built; part of its name, so that a module built another way is never loaded.
-BUILD_RECIPE = "pycc, host CPU with the features the host has, tried in a child process"
+#: How ``build`` compiles (``_pycc_as_the_jit``), part of the module's name: a module built the old
+#: way (holding the interpreter lock, the CPU model's features) is never loaded again.
+BUILD_SETTINGS = "release_gil host_features tried_in_a_child"
 
 #: numba type of each argument kind, and how a call's argument is made exactly that.
 ARGUMENT_KINDS: dict[str, tuple[str, Callable[[Any], Any]]] = {
@@ -109,7 +110,7 @@ def native_path(folder: Path | None = None) -> Path:
     """The native module's file for this kernel source, these signatures, numpy and CPU."""
     key = hashlib.sha256(KERNEL_SOURCE.read_bytes())
     key.update(repr([signature(name) for name in sorted(KERNELS)]).encode())
-    key.update(f"{np.__version__} {platform.machine()} {cpu_identity()} {BUILD_RECIPE}".encode())
+    key.update(f"{np.__version__} {platform.machine()} {cpu_identity()} {BUILD_SETTINGS}".encode())
     suffix = importlib.machinery.EXTENSION_SUFFIXES[0]
     return (folder or kernel_folder()) / f"{MODULE_NAME}-{key.hexdigest()[:16]}{suffix}"
 
@@ -140,17 +141,16 @@ def build(folder: Path | None = None) -> Path:
 
     target = native_path(folder)
     target.parent.mkdir(parents=True, exist_ok=True)
-    tuned = bool(cpu_identity())
     with (
         tempfile.TemporaryDirectory(dir=target.parent) as tmp,
         warnings.catch_warnings(),
-        _host_features(tuned),
+        _pycc_as_the_jit(),
     ):
         warnings.simplefilter("ignore")  # pycc's pending deprecation: the JIT is the way back
         compiler = CC(MODULE_NAME)
         compiler.output_dir = tmp
         compiler.output_file = target.name
-        compiler.target_cpu = "host" if tuned else ""
+        compiler.target_cpu = "host" if cpu_identity() else ""
         for name in KERNELS:
             compiler.export(name, signature(name))(getattr(kernels, name).py_func)
         compiler.compile()
@@ -160,22 +160,37 @@ def build(folder: Path | None = None) -> Path:
 
 
 @contextlib.contextmanager
-def _host_features(tuned: bool) -> Iterator[None]:
-    """Give numba's ahead-of-time code generator the instruction sets this CPU really has.
+def _pycc_as_the_jit() -> Iterator[None]:
+    """numba.pycc made to compile as the JIT does (``nogil=True`` and the host's own features), while
+    ``build`` runs.
 
-    numba names the host CPU model but passes no features, so LLVM assumes the model's full set: on
-    a virtual machine that hides some of them (AVX-512 on an EPYC guest reporting znver4) the module
-    dies with an illegal instruction at its first call. Restored on the way out.
+    pycc ignores the kernels' ``nogil``: its wrappers hold the interpreter lock for a whole call (a
+    runaway refit then stopped the read loop and Ctrl-C). And for ``target_cpu="host"`` it takes
+    every feature of the CPU model's name, not the host's: a virtual machine reporting an AMD
+    ``znver4`` without AVX-512 got AVX-512 instructions (SIGILL at the first call). Both are fixed
+    the way the JIT does it, on pycc's flags and its ahead-of-time code generator, put back after.
     """
     from numba.core import codegen
+    from numba.pycc import compiler as pycc_compiler
 
-    original = codegen.AOTCPUCodegen._customize_tm_features
-    if tuned:
-        codegen.AOTCPUCodegen._customize_tm_features = lambda self: codegen.get_host_cpu_features()  # type: ignore[method-assign]
+    plain_flags = pycc_compiler.Flags
+    model_features = codegen.AOTCPUCodegen._customize_tm_features
+
+    class ReleasingFlags(plain_flags):  # type: ignore[misc, valid-type]
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            self.release_gil = True
+
+    def host_features(self: Any) -> str:
+        return str(self._get_host_cpu_features()) if self._cpu_name == "host" else ""
+
+    pycc_compiler.Flags = ReleasingFlags  # type: ignore[misc]
+    codegen.AOTCPUCodegen._customize_tm_features = host_features  # type: ignore[method-assign]
     try:
         yield
     finally:
-        codegen.AOTCPUCodegen._customize_tm_features = original  # type: ignore[method-assign]
+        pycc_compiler.Flags = plain_flags  # type: ignore[misc]
+        codegen.AOTCPUCodegen._customize_tm_features = model_features  # type: ignore[method-assign]
 
 
 def check_runs_here(path: Path) -> None:
@@ -318,6 +333,10 @@ term_matrix = _checked("term_matrix")
 hac_meat = _checked("hac_meat")
 
 
+#: More sub-steps per sample than any decay needs (omega h < 0.1 at 100 Hz up to 10^4 rad/s).
+MAX_SUBSTEPS = 10_000
+
+
 def term_codes(terms: Sequence[str]) -> np.ndarray:
     """Kernel codes of the named terms (KeyError names the unknown one)."""
     return np.array([TERM_TABLE[name].code for name in terms], dtype=np.int64)
@@ -333,4 +352,7 @@ def substeps(dt: float, theta: np.ndarray, terms: Sequence[str], amplitude: floa
         + 2 * (coeff.get("c2", 0.0) + coeff.get("s2", 0.0)) * amplitude
     )
     rate_scale = math.sqrt(max(stiffness, 1e-12)) + coeff.get("b1", 0.0)
-    return max(1, math.ceil(2.0 * rate_scale * dt / 0.1))
+    wanted = 2.0 * rate_scale * dt / 0.1
+    # a start no decay has (inf, NaN, absurd stiffness) asks for more steps than a kernel takes: it is
+    # then refused by the kernel at once (``kernels.MAX_STEPS``), never integrated for minutes
+    return MAX_SUBSTEPS if not wanted < MAX_SUBSTEPS else max(1, math.ceil(wanted))

@@ -16,6 +16,12 @@ depend on parameters (measured channels with their coupling coefficients, a
 ringing forcing): their sensitivities are driven by du/dp, given at the samples
 (``simulate_with_sensitivities``).
 
+Every simulation is bounded, so that no set of coefficients an optimiser tries can hold a fit:
+it stops as soon as the state leaves the range a decay can have (|x| beyond ``MAX_ANGLE_RAD``, a
+capsize, or |x'| beyond ``MAX_RATE_RAD_S``, or anything not finite) and refuses outright a call
+asking for more than ``MAX_STEPS`` integration steps. Every kernel releases the interpreter lock
+(``nogil``): a refit on a worker thread never stops the thread that reads, writes and hears Ctrl-C.
+
 This module holds only kernel code and is imported only to compile it. Callers
 go through ``ident.compiled``, which loads the kernels built ahead of time into
 a native module (no numba import, about a millisecond) or else this module's
@@ -29,8 +35,17 @@ import math
 import numba
 import numpy as np
 
+#: A decay never leaves +-pi; a simulated state beyond a full turn has diverged (a capsize).
+MAX_ANGLE_RAD = 2.0 * math.pi
+#: Far beyond any model's rate (a 2 s roll period at 90 deg is 5 rad/s): beyond it, diverged.
+MAX_RATE_RAD_S = 1000.0
+#: RK4 steps one call may take, (samples - 1) * sub-steps: 4x a 5-minute decay at 400 Hz with 4
+#: sub-steps, about 1 s with 4 terms' sensitivities (native, loaded 2-core machine: bench_runaway);
+#: a call asking more is refused before it starts.
+MAX_STEPS = 2_000_000
 
-@numba.njit(cache=True, inline="always")
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def term_eval(code: int, x: float, v: float, u: float, eps: float) -> tuple[float, float, float, float]:
     """phi, dphi/dx, dphi/dv, dphi/du of one term at the state (x, v) and input u."""
     if code == 0:
@@ -60,7 +75,7 @@ def term_eval(code: int, x: float, v: float, u: float, eps: float) -> tuple[floa
     return math.nan, math.nan, math.nan, math.nan
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def term_matrix(codes: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray, eps: float) -> np.ndarray:
     """Regressor matrix phi_j(x_i, v_i, u_i), shape (n, len(codes)): x'' = -phi @ theta."""
     out = np.empty((x.size, codes.size))
@@ -70,7 +85,7 @@ def term_matrix(codes: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray, 
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def acceleration_partials(
     codes: np.ndarray, theta: np.ndarray, x: np.ndarray, v: np.ndarray, u: np.ndarray, eps: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -92,7 +107,7 @@ def acceleration_partials(
     return acc, acc_x, acc_v, acc_u, phi
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _deriv(
     z: np.ndarray,
     dz: np.ndarray,
@@ -130,10 +145,16 @@ def _deriv(
         dz[3 + 2 * p] = ax * sx + av * sv + forcing
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
+def _state_sane(x: float, v: float) -> bool:
+    """A state a decay can have (False for NaN too)."""
+    return abs(x) <= MAX_ANGLE_RAD and abs(v) <= MAX_RATE_RAD_S
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _sane(z: np.ndarray) -> bool:
     """State within range and every sensitivity finite (an element loop: no array per sample)."""
-    if not (abs(z[0]) < 1e3 and abs(z[1]) < 1e5):
+    if not _state_sane(z[0], z[1]):
         return False
     for m in range(z.size):  # noqa: SIM110 (numba compiles no generator inside all())
         if not math.isfinite(z[m]):
@@ -141,7 +162,7 @@ def _sane(z: np.ndarray) -> bool:
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def simulate_with_sensitivities(
     t: np.ndarray,
     x0: float,
@@ -159,8 +180,10 @@ def simulate_with_sensitivities(
     theta, then x0, v0, then the m parameters of the input whose partials
     ``du_dp`` (n, m) are given at the samples. ``u`` is the exogenous input at
     the sample times, linear inside a step (and so are its partials). ``ok`` is
-    False when the solution left any sane range (the rest is then filled with
-    the last finite values so an optimiser can back off).
+    False when the solution left any sane range (``_sane``) or the call asks for
+    more than ``MAX_STEPS`` steps: the integration stops there and the rest is
+    filled with the last sane values (zeros before any), always finite, so an
+    optimiser can back off.
     """
     n = t.size
     n_theta = codes.size
@@ -184,7 +207,7 @@ def simulate_with_sensitivities(
     vs = np.empty(n)
     sx = np.empty((n, n_par))
     sv = np.empty((n, n_par))
-    ok = True
+    ok = n_sub >= 1 and (n - 1) * n_sub <= MAX_STEPS and _sane(z)
     for i in range(n):
         if i > 0 and ok:
             h = (t[i] - t[i - 1]) / n_sub
@@ -216,14 +239,14 @@ def simulate_with_sensitivities(
                 sx[i, p] = z[2 + 2 * p]
                 sv[i, p] = z[3 + 2 * p]
         else:
-            xs[i] = xs[i - 1]
-            vs[i] = vs[i - 1]
+            xs[i] = xs[i - 1] if i > 0 else 0.0
+            vs[i] = vs[i - 1] if i > 0 else 0.0
             sx[i, :] = 0.0
             sv[i, :] = 0.0
     return xs, vs, sx, sv, ok
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def simulate(
     t: np.ndarray,
     x0: float,
@@ -234,26 +257,37 @@ def simulate(
     eps: float,
     n_sub: int,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Angle and rate only (RK4 without sensitivities): prediction and plotting."""
+    """Angle and rate only (RK4 without sensitivities): prediction and plotting.
+
+    NaN from the first sample where the state left the range a decay can have (``_state_sane``):
+    a prediction that diverged is no number, and it stops there. All NaN past x0 when the call
+    asks for more than ``MAX_STEPS`` steps.
+    """
     n = t.size
-    xs = np.empty(n)
-    vs = np.empty(n)
+    xs = np.full(n, np.nan)
+    vs = np.full(n, np.nan)
     x = x0
     v = v0
+    if n == 0:
+        return xs, vs
     xs[0] = x
     vs[0] = v
+    if n_sub < 1 or (n - 1) * n_sub > MAX_STEPS:
+        return xs, vs
     for i in range(1, n):
         h = (t[i] - t[i - 1]) / n_sub
         du = (u[i] - u[i - 1]) / n_sub
         for s in range(n_sub):
             u0 = u[i - 1] + s * du
             x, v = _rk4_state_step(x, v, h, theta, codes, u0, du, eps)
+        if not _state_sane(x, v):
+            break
         xs[i] = x
         vs[i] = v
     return xs, vs
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _acc(x: float, v: float, theta: np.ndarray, codes: np.ndarray, u: float, eps: float) -> float:
     acc = 0.0
     for j in range(codes.size):
@@ -261,7 +295,7 @@ def _acc(x: float, v: float, theta: np.ndarray, codes: np.ndarray, u: float, eps
     return acc
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _rk4_state_step(
     x: float, v: float, h: float, theta: np.ndarray, codes: np.ndarray, u0: float, du: float, eps: float
 ) -> tuple[float, float]:
@@ -281,7 +315,7 @@ def _rk4_state_step(
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _box_full(x: np.ndarray, width: int) -> np.ndarray:
     """Full convolution of each column of x (n, k) with a boxcar of ``width`` ones."""
     n, k = x.shape
@@ -296,7 +330,7 @@ def _box_full(x: np.ndarray, width: int) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def triangle_smooth(x: np.ndarray, bandwidth: int) -> np.ndarray:
     """sum_s w(|t-s|) x_s with Bartlett weights w(l) = 1 - l/(L+1), |l| <= L, down the rows of x (n, k).
 
@@ -306,7 +340,7 @@ def triangle_smooth(x: np.ndarray, bandwidth: int) -> np.ndarray:
     return _box_full(_box_full(x, width), width)[bandwidth : bandwidth + x.shape[0]] / width
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a' b for (n, p) columns, as loops: BLAS is not there for the ahead-of-time build."""
     n, p = a.shape
@@ -319,7 +353,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def hac_meat(
     jac: np.ndarray, res: np.ndarray, bread: np.ndarray, bandwidth: int, correct: bool
 ) -> np.ndarray:
@@ -339,7 +373,7 @@ def hac_meat(
     return meat
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _add_information(jac: np.ndarray, t: int, sign: float, acc: np.ndarray) -> None:
     """acc += sign * M_t, the information of instant t (p*p, row-major), summed over the outputs."""
     n_out, _, p = jac.shape
@@ -349,7 +383,7 @@ def _add_information(jac: np.ndarray, t: int, sign: float, acc: np.ndarray) -> N
                 acc[a * p + b] += sign * jac[o, t, a] * jac[o, t, b]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _bias_correction(jac: np.ndarray, bread: np.ndarray, bandwidth: int) -> np.ndarray:
     """sum_t M_t A^-1 K_t, with K_t = triangle_smooth(M)_t computed as a stream.
 

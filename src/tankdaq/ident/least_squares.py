@@ -21,14 +21,25 @@ third of a whole ``tankdaq replay``; the fit needs only this. It follows MINPACK
 
 Residuals that are not finite (a simulation that diverged) or far larger than the current ones (a
 penalty) count as no reduction at all: the step is refused and the radius shrinks tenfold.
+
+A solve may be given a budget (``solve_budget``: a deadline and a cancel flag, for the solves this
+thread runs inside the block): it is checked before every evaluation, and a solve past it raises
+``FitAbandoned``. A thread cannot be killed; with the kernels bounded (``ident.kernels``) this
+abandons a runaway fit at most one evaluation past its budget.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+import contextlib
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextvars import ContextVar
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from ..errors import IdentificationError
 
 #: ``status`` as scipy.optimize.least_squares reports it.
 STATUS_MESSAGES = {
@@ -44,6 +55,52 @@ _EPS = float(np.finfo(float).eps)
 _TINY = float(np.finfo(float).tiny)
 
 Evaluate = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+class FitAbandoned(IdentificationError):
+    """A solve ran past its budget or was cancelled (``solve_budget``)."""
+
+
+@dataclass
+class SolveBudget:
+    """Until when the solves inside ``solve_budget`` may run, and the flag that cancels them at once."""
+
+    seconds: float
+    cancel: threading.Event = field(default_factory=threading.Event)
+    started: float = field(default_factory=time.monotonic)
+    abandoned: bool = False  # a solve was stopped by this budget
+
+    def check(self) -> None:
+        """Raise ``FitAbandoned`` past the deadline or once cancelled."""
+        elapsed = time.monotonic() - self.started
+        if self.cancel.is_set() or elapsed > self.seconds:
+            self.abandoned = True
+            why = "cancelled" if self.cancel.is_set() else f"past its budget of {self.seconds:g} s"
+            raise FitAbandoned(f"the fit was abandoned after {elapsed:.1f} s ({why})")
+
+
+_BUDGET: ContextVar[SolveBudget | None] = ContextVar("tankdaq_solve_budget", default=None)
+
+
+@contextlib.contextmanager
+def solve_budget(seconds: float, cancel: threading.Event | None = None) -> Iterator[SolveBudget]:
+    """Every solve this thread runs inside the block stops past ``seconds`` or once ``cancel`` is set.
+
+    A context variable, so that the fits between (``OutputError``, ``OnlineIdentifier``) need no
+    setting: the caller that owns the thread (``BackgroundFit``) decides how long its fits may run.
+    """
+    budget = SolveBudget(seconds, cancel if cancel is not None else threading.Event())
+    token = _BUDGET.set(budget)
+    try:
+        yield budget
+    finally:
+        _BUDGET.reset(token)
+
+
+def _check_budget() -> None:
+    budget = _BUDGET.get()
+    if budget is not None:
+        budget.check()
 
 
 @dataclass(frozen=True)
@@ -69,14 +126,20 @@ def levenberg_marquardt(
     """Minimise ``||f(x)||^2``; ``evaluate(x)`` returns ``(f, J)`` together (one simulation gives both).
 
     Each call counts as one evaluation (``nfev``), the Jacobian of a refused trial is simply unused.
-    Tolerances as in scipy.optimize.least_squares(method="lm", x_scale="jac").
+    Tolerances as in scipy.optimize.least_squares(method="lm", x_scale="jac"). Raises
+    ``FitAbandoned`` before an evaluation past the budget of an enclosing ``solve_budget``.
     """
     x = np.array(x0, dtype=float)
+    _check_budget()
     f, jac = evaluate(x)
     nfev = 1
     fnorm = float(np.linalg.norm(f))
     if not np.isfinite(fnorm) or not np.all(np.isfinite(jac)):
-        raise ValueError("the residuals or the Jacobian are not finite at the starting point")
+        # an identification failure (a live refit skips it), not a crash: the model diverges from here
+        raise IdentificationError(
+            "the model diverges from its starting point (residuals or Jacobian not finite); "
+            "try a simpler model"
+        )
     col_norms = np.linalg.norm(jac, axis=0)
     scale = np.where(col_norms > 0.0, col_norms, 1.0)
     xnorm = float(np.linalg.norm(scale * x))
@@ -102,6 +165,7 @@ def levenberg_marquardt(
             if first:
                 delta = min(delta, pnorm)
             trial = x + step
+            _check_budget()
             f_trial, jac_trial = evaluate(trial)
             nfev += 1
             fnorm_trial = float(np.linalg.norm(f_trial))

@@ -10,7 +10,9 @@ end of the decay the last result is the offline OutputError fit of the same data
 
 ``BackgroundFit`` runs an identifier on a worker thread so that the acquisition
 loop only hands samples over: a refit (10-50 ms, more on a loaded machine) never
-holds up the reads. ``prepare_kernels`` builds or loads the compiled kernels before a
+holds up the reads (the kernels release the interpreter lock), and a refit that
+runs past its budget is abandoned (``least_squares.solve_budget``), with a note.
+``prepare_kernels`` builds or loads the compiled kernels before a
 device opens, so no refit pays for them during a decay.
 """
 
@@ -29,6 +31,7 @@ from ..errors import IdentificationError
 from ..records import DecayRun
 from . import compiled
 from .base import EstimatorMixin
+from .least_squares import solve_budget
 from .output_error import OutputError
 from .signals import band_crossings, white_noise_level
 
@@ -174,6 +177,11 @@ class OnlineIdentifier(EstimatorMixin):
         return result
 
 
+#: How long one live refit may run (they take 10-50 ms; 1 s on the JIT under load): past it, it is
+#: abandoned at its next evaluation and the next refit starts from the last good one.
+REFIT_BUDGET_S = 5.0
+
+
 class BackgroundFit:
     """An ``OnlineIdentifier`` run on its own thread: ``submit`` never waits, results come back by ``take``.
 
@@ -183,10 +191,18 @@ class BackgroundFit:
     latest data (coalesced, never a queue of refits). Results wait in ``take`` for the
     caller's thread, which alone writes them to the file and the view. ``finish`` waits, at
     most ``timeout_s``, for the final fit on everything submitted.
+
+    Every fit on the worker runs under a budget (``refit_budget_s``; the final fit ``finish``'s
+    ``timeout_s``): past it, the fit is abandoned at its next evaluation, and ``take_notes`` says
+    so. ``close`` (and a ``finish`` past its bound) cancels the fit under way the same way.
     """
 
-    def __init__(self, identifier: OnlineIdentifier) -> None:
+    def __init__(self, identifier: OnlineIdentifier, refit_budget_s: float = REFIT_BUDGET_S) -> None:
         self.identifier = identifier
+        self.refit_budget_s = refit_budget_s
+        self._cancel = threading.Event()
+        self._notes: list[str] = []
+        self._final_budget_s = refit_budget_s
         self._wake = threading.Condition()
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []
         self._busy = False  # the worker holds samples it has not finished with
@@ -214,6 +230,12 @@ class BackgroundFit:
         with self._wake:
             self._wake.wait_for(lambda: not (self._pending or self._busy) or self._done.is_set(), timeout_s)
 
+    def take_notes(self) -> list[str]:
+        """What happened on the worker that the record should say (abandoned refits) since the last call."""
+        with self._wake:
+            notes, self._notes = self._notes, []
+        return notes
+
     def take(self) -> list[OnlineResult]:
         """The refits finished since the last call; a failure of the worker is raised here."""
         with self._wake:
@@ -231,6 +253,7 @@ class BackgroundFit:
         """
         with self._wake:
             self._finish_requested = True
+            self._final_budget_s = timeout_s
             self._wake.notify_all()
         if not self._done.wait(timeout_s):
             self.close()
@@ -246,7 +269,8 @@ class BackgroundFit:
         return results, self._final
 
     def close(self) -> None:
-        """Stop without a final fit (an aborted decay); a refit under way is left to end on its own."""
+        """Stop without a final fit (an aborted decay); a refit under way stops at its next evaluation."""
+        self._cancel.set()
         with self._wake:
             self._closed = True
             self._wake.notify_all()
@@ -263,12 +287,16 @@ class BackgroundFit:
                     finishing = self._finish_requested
                     self._busy = True
                 if pending:
-                    self._update(pending)
+                    with solve_budget(self.refit_budget_s, self._cancel) as budget:
+                        self._update(pending)
+                    if budget.abandoned:  # the identifier noted it as a failed refit and goes on
+                        self._note_abandoned(budget.seconds)
                 with self._wake:
                     self._busy = False
                     self._wake.notify_all()
                 if finishing:
-                    self._final = self.identifier.finish()
+                    with solve_budget(self._final_budget_s, self._cancel):
+                        self._final = self.identifier.finish()
                     return
         except BaseException as exc:  # handed to the caller's thread, where it is raised
             with self._wake:
@@ -277,6 +305,15 @@ class BackgroundFit:
             self._done.set()
             with self._wake:
                 self._wake.notify_all()
+
+    def _note_abandoned(self, budget_s: float) -> None:
+        failures = self.identifier.failures_
+        at = failures[-1].split(":", 1)[0] if failures else "a refit"
+        with self._wake:
+            self._notes.append(
+                f"live refit at {at} abandoned past its {budget_s:g} s budget (the model cannot follow "
+                "this decay); the next refit starts from the last good one"
+            )
 
     def _update(self, pending: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]) -> None:
         rates = [rate for _, _, rate in pending if rate is not None]

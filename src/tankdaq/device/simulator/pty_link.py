@@ -9,7 +9,9 @@ same links. The pty has no speed: the slave's termios speed is what the host set
 paced to the device's baud rate here; at the wrong speed the host reads garbage.
 
 The folder goes on every exit path (``remove``, interpreter exit); one left by ``kill -9`` is
-swept by the next link made (its owner process is dead).
+swept by the next link made (its owner process is dead). A stable link at a path the caller names
+is never put over anything but a dead simulator's link (``link_refusal``), and only the link this
+simulator made is removed.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...errors import InputError
 from ..ports import BY_ID_ENV
 
 #: Temporary folders of simulators: ``tankdaq-sim-<random>`` holding ``owner.pid``.
@@ -35,6 +38,27 @@ TEMP_PREFIX = "tankdaq-sim-"
 OWNER_FILE = "owner.pid"
 #: A device's output buffer: beyond it, data is lost (as on a link that is too slow).
 OUTBOX_LIMIT = 1 << 18
+
+
+def link_refusal(path: str | Path) -> str | None:
+    """Why the simulator must not put its link at ``path``; None when nothing is there or only the
+    link of a simulator that is gone (to a ``/dev/pts`` entry that no longer exists)."""
+    path = str(path)
+    if not os.path.lexists(path):
+        return None
+    if os.path.islink(path):
+        target = os.readlink(path)
+        if target.startswith("/dev/pts/") and not os.path.exists(target):
+            return None
+        return f"{path} is a link to {target}, not a simulator's: remove it or choose another path"
+    return f"{path} exists and is not a simulator's link: choose another path (it is left untouched)"
+
+
+def _remove_own_link(link: str, target: str) -> None:
+    """Remove ``link`` only while it is still the link to ``target`` this simulator made."""
+    with contextlib.suppress(OSError):
+        if os.path.islink(link) and os.readlink(link) == target:
+            os.unlink(link)
 
 
 class PtyLink:
@@ -56,7 +80,10 @@ class PtyLink:
         self.bytes_overflowed = 0
 
     def create(self) -> None:
-        """Make the folder and its by-id entry (the pty itself opens with ``plug``)."""
+        """Make the folder and its by-id entry (the pty itself opens with ``plug``); a link path given
+        where something else is refuses (InputError) before anything is made."""
+        if self.link and (why := link_refusal(self.link)) is not None:
+            raise InputError(f"--link {why}")
         sweep_stale_folders()
         self._own_dir = tempfile.mkdtemp(prefix=TEMP_PREFIX)
         atexit.register(self.remove)
@@ -104,11 +131,10 @@ class PtyLink:
         self.restart_pacing()
 
     def unplug(self) -> None:
-        """Close the pty; its path and the links vanish."""
+        """Close the pty; its path and the links (the ones it made, still pointing at it) vanish."""
         for link in (self.link, self._by_id_link):
-            if link:
-                with contextlib.suppress(FileNotFoundError):
-                    os.unlink(link)
+            if link and self.port:
+                _remove_own_link(link, self.port)
         for fd in (self.master, self._slave):
             if fd >= 0:
                 with contextlib.suppress(OSError):
