@@ -18,6 +18,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -26,7 +27,7 @@ from ..config import Hull, hull_scenario, load_hull
 from ..device.driver import MTiDriver
 from ..device.factory import OpenDevice, SimPort, SimulatedSensor, open_device
 from ..errors import DeviceGone, InputError, RecordingError
-from ..ident.online import prepare_identifier
+from ..ident.online import OnlineIdentifier, prepare_identifier
 from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
@@ -246,7 +247,12 @@ class RecordDaemon:
             nominal_angle_deg=s.angle_deg,
             closing_metadata=lambda: driver.counters.metadata(),
         )
-        sinks = [IdentifierSink(), recording, ViewSink(view), *self.extra_sinks]
+        identifier = partial(  # the hull's GM and gyradius for the fits' plausibility checks
+            OnlineIdentifier,
+            particulars=self.hull.particulars(s.simulated_axis) if self.hull else None,
+            hull=self.hull.name if self.hull else "the hull",
+        )
+        sinks = [IdentifierSink(identifier), recording, ViewSink(view), *self.extra_sinks]
         return DecaySession(session_settings, sinks, on_event=self.on_event)
 
     # ---- the loop ----------------------------------------

@@ -89,6 +89,7 @@ class Decay:
     final_fit_s: float = math.nan
     settle_reason: str = ""
     error: str = ""
+    model: str = ""  # the live model as asked ("auto": chosen by the data); ``terms`` is what it may use
 
     def publish(self, result: OnlineResult) -> None:
         """A fit for every sink (the identifier's refits and its final fit)."""
@@ -181,9 +182,11 @@ class IdentifierSink(Sink):
         self.make_identifier = identifier  # called as identifier(terms, axis=...) at each release
         self.wait_for_fits = wait_for_fits
         self._live: BackgroundFit | None = None
+        self._implausible: list[str] = []  # the latest fit's implausibilities, each said once
 
     def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
-        self._live = BackgroundFit(self.make_identifier(decay.terms, axis=decay.axis))
+        self._live = BackgroundFit(self.make_identifier(decay.model or decay.terms, axis=decay.axis))
+        self._implausible = []
         for block in pretrigger:
             self._submit(block, decay)
 
@@ -194,7 +197,16 @@ class IdentifierSink(Sink):
         if self.wait_for_fits:
             self._live.wait_idle(FINAL_FIT_WAIT_S)
         for result in self._live.take():
-            decay.publish(result)
+            self._publish(decay, result)
+
+    def _publish(self, decay: Decay, result: OnlineResult) -> None:
+        """The fit to every sink; an implausibility it carries, new since the last fit, as a warning note
+        (the file's events, the view's event log, the record lines)."""
+        decay.publish(result)
+        new = [line for line in result.warnings if line not in self._implausible]
+        self._implausible = list(result.warnings)
+        for line in new:
+            decay.note("warning", f"fit at {result.t_end - decay.release_t:.1f} s: {line}", result.t_end)
 
     def _submit(self, block: Block, decay: Decay) -> None:
         assert self._live is not None
@@ -219,8 +231,9 @@ class IdentifierSink(Sink):
         finally:
             decay.final_fit_s = time.perf_counter() - started
         for result in refits:
-            decay.publish(result)
-        decay.publish(final)
+            self._publish(decay, result)
+        self._implausible = []  # the final fit's implausibilities are said again: they are the verdict's
+        self._publish(decay, final)
         decay.final_fit = final
 
     def close(self) -> None:
@@ -267,6 +280,7 @@ class RecordingSink(Sink):
             "axis": decay.axis,
             "run": decay.run,
             "model_terms": ",".join(decay.terms),
+            "model": decay.model or ",".join(decay.terms),  # "auto": the refits choose among the terms
         }
         self.writer = RecordingWriter(self.out_dir / name, metadata, self.run_config)
         decay.path = self.writer.path

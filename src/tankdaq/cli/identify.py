@@ -155,15 +155,17 @@ def identify_command(
     """
     from ..config import load_hull
     from ..ident.conditions import condition_of, group_conditions, grouping_line
-    from ..ident.model_choice import MODEL_FAMILY, is_auto
+    from ..ident.estimators import make_estimator
     from ..ident.online import prepare_identifier
     from ..ident.report import text_report
-    from ..physics.models import resolve_model
+    from ..ident.uncertainty import check_intervals
+    from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 
     if axis not in (None, "roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     hull_config = load_hull(hull) if hull else None
     terms = None if is_auto(model) else resolve_model(model)
+    probe = make_estimator(method, terms or MODEL_FAMILY[0])  # an unknown method fails before any reading
     runs = load_runs(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
     )
@@ -171,14 +173,16 @@ def identify_command(
         for run_axis in sorted({run.axis for run in runs}):
             validation.hull_draft(hull_config, draft, run_axis)
     truncated = {"truncated": bool(cut := warn_truncated(runs)), "truncated_files": cut}
-    prepare_identifier(terms or MODEL_FAMILY[-1], say)  # the native kernels: built once, on the first run
     groups = group_conditions(runs)
     pooled = grouping_line(groups, joint=True) if len(groups) > 1 and (joint or compare) else None
+    fits = [runs] if joint or len(groups) == 1 else list(groups.values())
+    for condition_runs in fits if not compare else []:  # impossible interval requests fail before any fit
+        check_intervals(probe, len(condition_runs), bootstrap, repeats, method)
+    prepare_identifier(terms or MODEL_FAMILY[-1], say)  # the native kernels: built once, on the first run
 
     if compare:
         _compare(runs, method, as_json, truncated, pooled)
         return
-    fits = [runs] if joint or len(groups) == 1 else list(groups.values())
     if len(fits) > 1:
         say(grouping_line(groups))
     summaries = []

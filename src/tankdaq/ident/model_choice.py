@@ -1,13 +1,14 @@
 """The default model, chosen by the data: the best of a small family on held-out data, physics first.
 
 A fixed default (b1,b2,c1,c3) fits a SWATH decay whose damping is cubic with b1 < 0: linear and
-quadratic damping trade off over the narrow amplitude band of one decay (reference §5). Here every
-model of ``MODEL_FAMILY`` is fitted twice by output error: on the whole decays (its values, checked by
-``ident.plausibility``) and on the first ``FIT_FRACTION`` of every run, which then predicts the rest
-(its held-out angle RMS, deg: the split-sample check ``diagnose`` uses, so a model that only bends the
-first cycles to its extra terms loses). The chosen model is the simplest plausible one within
-``PARSIMONY`` of the best plausible held-out RMS; when none is plausible, the best by held-out RMS, and
-its findings stay on the result as warnings.
+quadratic damping trade off over the narrow amplitude band of one decay (reference §5). Here
+every model of ``physics.models.MODEL_FAMILY`` is fitted twice by output error: on the whole
+decays (its values, checked by ``ident.plausibility``) and on the first ``FIT_FRACTION`` of every
+run, which then predicts the rest (its held-out angle RMS, deg: the split-sample check
+``diagnose`` uses, so a model that only bends the first cycles to its extra terms loses). The
+chosen model is the simplest plausible one within ``PARSIMONY`` of the best plausible held-out
+RMS; when none is plausible, the best by held-out RMS, and its findings stay on the result as
+warnings.
 """
 
 from __future__ import annotations
@@ -20,26 +21,15 @@ from typing import Any
 import numpy as np
 
 from ..errors import IdentificationError
-from ..physics.models import model_name, resolve_model
+from ..physics.models import MODEL_FAMILY, model_name, resolve_model
 from ..records import DecayRun
 from .output_error import OutputError
 from .plausibility import Finding, check_runs
 
-#: What ``identify``, sessions and the live refit choose from, simplest first: linear, + quadratic
-#: damping, + cubic restoring, cubic instead of quadratic damping (the seeds' SWATH and trimaran),
-#: both (docs/models.md). Larger sets (c2, sine restoring) are for ``--compare`` and ``diagnose``.
-MODEL_FAMILY: tuple[str, ...] = ("b1,c1", "b1,b2,c1", "b1,b2,c1,c3", "b1,b3,c1,c3", "b1,b2,b3,c1,c3")
-#: The word that asks for the model chosen by data (``--model auto``, the default).
-AUTO = "auto"
 #: Fraction of every run (in time) the split-sample fit sees; the rest is predicted.
 FIT_FRACTION = 0.6
 #: A larger model must predict the held-out part this much better (relative RMS) to be chosen.
 PARSIMONY = 0.05
-
-
-def is_auto(model: str | Sequence[str]) -> bool:
-    """Whether ``model`` asks for the data to choose."""
-    return isinstance(model, str) and model.strip().lower() == AUTO
 
 
 @dataclass
