@@ -282,7 +282,7 @@ def check_decay(
         reasons.append(f"too short: {measured.half_cycles} half-cycles (at least {a.min_half_cycles:g})")
     if not measured.r2_angle >= a.min_r2:
         reasons.append(f"poor fit: R² {measured.r2_angle:.4f} (at least {a.min_r2:g})")
-    reasons += [f"implausible fit: {line}" for line in measured.fit_warnings]  # never accepted silently
+    reasons += [f"fit: {line}" for line in measured.fit_warnings]  # never accepted silently
     if earlier:
         reasons += _repeat_reasons(measured, earlier, a)
     return reasons
