@@ -637,9 +637,10 @@ class CampaignSession:
         self._panel().set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
         if status == "accepted":
             measured = [Measured(**r.measured) for r in state.accepted(condition)]
+            terms = dict.fromkeys(k for m in measured for k in m.coefficients)  # repeats' models may differ:
             mean = {
-                k: float(np.mean([m.coefficients[k] for m in measured])) for k in measured[0].coefficients
-            }
+                k: float(np.mean([m.coefficients.get(k, 0.0) for m in measured])) for k in terms
+            }  # absent = 0
             self._panel().accepted(
                 condition.draft, condition.angle_deg, mean, float(np.mean([m.b_eq_per_s for m in measured]))
             )

@@ -182,7 +182,7 @@ class IdentifierSink(Sink):
         self.make_identifier = identifier  # called as identifier(terms, axis=...) at each release
         self.wait_for_fits = wait_for_fits
         self._live: BackgroundFit | None = None
-        self._implausible: list[str] = []  # the latest fit's implausibilities, each said once
+        self._implausible: list[str] = []  # the checks the latest fit failed: each said once in a row
 
     def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
         self._live = BackgroundFit(self.make_identifier(decay.model or decay.terms, axis=decay.axis))
@@ -200,13 +200,13 @@ class IdentifierSink(Sink):
             self._publish(decay, result)
 
     def _publish(self, decay: Decay, result: OnlineResult) -> None:
-        """The fit to every sink; an implausibility it carries, new since the last fit, as a warning note
-        (the file's events, the view's event log, the record lines)."""
+        """The fit to every sink; an implausibility it carries (a check the last fit passed) as a warning
+        note: the file's events, the view's event log, the record lines."""
         decay.publish(result)
-        new = [line for line in result.warnings if line not in self._implausible]
-        self._implausible = list(result.warnings)
-        for line in new:
-            decay.note("warning", f"fit at {result.t_end - decay.release_t:.1f} s: {line}", result.t_end)
+        new = [f for f in result.findings if f.check not in self._implausible]
+        self._implausible = [finding.check for finding in result.findings]
+        for finding in new:
+            decay.note("warning", f"fit at {result.t_end - decay.release_t:.1f} s: {finding}", result.t_end)
 
     def _submit(self, block: Block, decay: Decay) -> None:
         assert self._live is not None

@@ -31,7 +31,7 @@ from ..records import DecayRun
 from . import compiled
 from .base import EstimatorMixin
 from .output_error import OutputError
-from .plausibility import check_runs
+from .plausibility import Finding, check_runs
 from .signals import band_crossings, white_noise_level
 
 #: With ``terms="auto"`` a model of k terms is tried live once the decay has this many half-cycles per term.
@@ -56,7 +56,14 @@ class OnlineResult:
     predicted_t: np.ndarray
     predicted_angle: np.ndarray
     elapsed_s: float
-    warnings: list[str] = field(default_factory=list)  # the fit's implausibilities (``ident.plausibility``)
+    findings: list[Finding] = field(
+        default_factory=list
+    )  # the fit's implausibilities (``ident.plausibility``)
+
+    @property
+    def warnings(self) -> list[str]:
+        """The findings' one-line messages."""
+        return [finding.message for finding in self.findings]
 
 
 class OnlineIdentifier(EstimatorMixin):
@@ -212,7 +219,7 @@ class OnlineIdentifier(EstimatorMixin):
             predicted_t=t_pred,
             predicted_angle=angle_pred,
             elapsed_s=time.perf_counter() - started,
-            warnings=[finding.message for finding in findings],
+            findings=findings,
         )
         self.results_.append(result)
         if self.callback is not None:
