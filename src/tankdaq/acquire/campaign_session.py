@@ -775,8 +775,9 @@ class CampaignSession:
     def _daemon_line(self, line: str, decay: int) -> None:
         """The daemon's lines, its "run 1" named as the session's decay; the device and viewer lines
         every decay repeats are shown once."""
-        if line.startswith("run 1:"):
-            line = f"decay {decay}:" + line[len("run 1:") :]
+        for prefix, named in (("run 1:", f"decay {decay}:"), ("warning: run 1:", f"warning: decay {decay}:")):
+            if line.startswith(prefix):
+                line = named + line[len(prefix) :]
         key = next((p for p in ONCE_PREFIXES if line.startswith(p)), line)
         if key in self._shown:
             return

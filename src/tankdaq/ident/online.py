@@ -75,8 +75,8 @@ class OnlineIdentifier(EstimatorMixin):
     how often (device time) new half-cycles are looked for. ``terms="auto"``: the refits start
     with the family's simplest model and move up ``physics.models.MODEL_FAMILY`` as the half-cycles
     allow (``HALF_CYCLES_PER_TERM``) and a plausible larger model wins on BIC, the final fit too
-    (``identify``'s held-out choice costs ten fits, past the final fit's budget under load: 3.7 s
-    on a 15 s SWATH decay at load 8 on 2 cores). ``particulars`` (the hull's GM and
+    (``identify``'s held-out choice costs ten fits: on the JIT at load 8 they passed the final
+    fit's budget; docs/models.md). ``particulars`` (the hull's GM and
     gyradius) and ``hull`` feed the plausibility checks every result carries. Other keyword
     arguments go to the underlying ``OutputError``.
     """
