@@ -54,7 +54,7 @@ def test_damping_must_be_positive_from_rest_to_the_largest_amplitude() -> None:
     assert check_damping({"b1": 0.05, "b2": 4.0, "c1": 14.0}, amplitude) == []
     (finding,) = check_damping({"b1": -0.05, "b2": 4.0, "c1": 14.0}, amplitude)
     assert finding.check == "damping" and finding.value == pytest.approx(-0.05)
-    assert "B_eq" in finding.message and "no --model" in finding.message
+    assert "B_eq" in finding.message and "--model auto" in finding.message
     # negative only at large amplitude (negative cubic damping): caught at the top of the band
     (large,) = check_damping({"b1": 0.3, "b3": -10.0, "c1": 14.0}, amplitude)
     assert large.value < 0 and "10.0 deg" in large.message
@@ -213,3 +213,17 @@ def test_the_live_identifier_starts_simple_and_moves_up_the_family() -> None:
     forced = OnlineIdentifier("b1,b2,c1,c3")
     forced.update(t, angle, rate)
     assert "implausible damping" in forced.finish().warnings[0]
+
+
+def test_campaign_and_diagnose_say_an_implausible_fit(swath: list[Path]) -> None:
+    campaign = runner.invoke(app, ["campaign", str(swath[0]), "--model", "b1,b2,c1,c3", "--jobs", "1"])
+    assert campaign.exit_code == 0, campaign.output
+    assert "warning: swath roll T 10 deg: implausible damping: B_eq -" in campaign.stderr
+    assert "Warnings (physically implausible fits" in campaign.stdout
+    args = ["diagnose", str(swath[0]), "--baseline", "b1,b2,c1", "--max-steps", "0"]
+    diagnosed = runner.invoke(app, [*args, "--json"])
+    assert diagnosed.exit_code == 0, diagnosed.output
+    (warning,) = json.loads(diagnosed.stdout)["warnings"]
+    assert warning.startswith("implausible damping: B_eq -")
+    told = runner.invoke(app, args)
+    assert f"warning: {warning}" in told.output

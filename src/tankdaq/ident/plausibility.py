@@ -83,7 +83,8 @@ def check_damping(coefficients: Mapping[str, float], amplitude_rad: float) -> li
             "damping",
             f"implausible damping: B_eq {values[worst]:.3g} 1/s at {where} is not positive (a passive hull "
             "loses energy at every amplitude); linear and nonlinear damping are trading off in this "
-            "model: let the data choose the model (no --model) or fit more release angles together",
+            "model: let the data choose the model (--model auto, the default) or fit more release "
+            "angles together",
             float(values[worst]),
             (0.0, math.inf),
         )
@@ -112,7 +113,8 @@ def check_stiffness(coefficients: Mapping[str, float], amplitude_rad: float) -> 
             "stiffness",
             f"implausible restoring: slope {slope[worst]:.3g} 1/s^2 at {math.degrees(grid[worst]):+.1f} deg "
             "is not positive (the model would capsize inside the tested band); the cubic restoring is "
-            "trading off against damping: let the data choose the model or fit more release angles",
+            "trading off against damping: let the data choose the model (--model auto) or fit more "
+            "release angles",
             float(slope[worst]),
             (0.0, math.inf),
         )
