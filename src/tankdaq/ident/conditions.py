@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..config import format_draft
+from ..config import format_draft, parse_draft
 from ..records import DecayRun
 from ..store.naming import parse_recording_name
 
@@ -48,7 +48,9 @@ def condition_of(run: DecayRun) -> Condition:
             hull, draft = hull or named.hull, named.draft if draft is None else draft
     return Condition(
         str(hull) if hull is not None else UNKNOWN,
-        format_draft(float(draft)) if draft is not None else UNKNOWN,
+        format_draft(parse_draft(draft) if isinstance(draft, str) else float(draft))
+        if draft is not None
+        else UNKNOWN,
         run.axis,
         f"{float(speed):g}" if speed is not None else UNKNOWN,
     )
