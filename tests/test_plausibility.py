@@ -179,6 +179,9 @@ def test_two_drafts_give_two_results_and_say_so(swath: list[Path]) -> None:
     assert [g["condition"]["draft"] for g in out["groups"]] == ["T", "1.1T"]
     assert out["conditions"].startswith("2 conditions, one fit each: swath T roll (1 run); swath 1.1T")
     assert "2 conditions, one fit each" in result.stderr
+    assert all(g["plausibility"] == [] for g in out["groups"]) and out["warnings"] == [
+        f"{g['condition_label']}: {line}" for g in out["groups"] for line in g["warnings"]
+    ]
     c1 = [g["coefficients"]["c1"]["value"] for g in out["groups"]]
     assert c1 == pytest.approx([14.2185, 15.0], rel=0.01)  # each draft's own stiffness
     joint = identify(*swath, "--joint")

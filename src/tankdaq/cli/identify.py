@@ -187,7 +187,8 @@ def identify_command(
         say(grouping_line(groups))
     summaries = []
     for condition_runs in fits:
-        summary = _fit_condition(condition_runs, terms, method, bootstrap, repeats, hull_config, draft)
+        label = "all conditions (--joint)" if pooled else condition_of(condition_runs[0]).label
+        summary = _fit_condition(condition_runs, terms, method, bootstrap, repeats, hull_config, draft, label)
         summary["condition"] = None if pooled else condition_of(condition_runs[0]).as_dict()
         if pooled is not None:
             summary["warnings"].insert(0, pooled)
@@ -196,7 +197,13 @@ def identify_command(
     if len(summaries) == 1:
         document: dict[str, object] = {**summaries[0], **truncated}
     else:
-        document = {"conditions": grouping_line(groups), "groups": summaries, **truncated}
+        warnings = [f"{g['condition_label']}: {line}" for g in summaries for line in g["warnings"]]
+        document = {
+            "conditions": grouping_line(groups),
+            "groups": summaries,
+            "warnings": warnings,
+            **truncated,
+        }
     if as_json:
         typer.echo(json.dumps(_clean(document), default=_json_default))
         return
@@ -242,15 +249,14 @@ def _fit_condition(
     repeats: bool,
     hull_config: Hull | None,
     draft: float,
+    label: str,
 ) -> dict:
     """One fit of ``runs`` (the model chosen by data when ``terms`` is None) and its summary."""
-    from ..ident.conditions import condition_of
     from ..ident.estimators import make_estimator
     from ..ident.model_choice import choose_model
     from ..ident.report import summarize
     from ..ident.uncertainty import fit_with_intervals
 
-    label = condition_of(runs[0]).label
     choice = None
     if terms is None:
         with progress_bar() as progress:
