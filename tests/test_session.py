@@ -11,7 +11,7 @@ import signal
 import subprocess
 import sys
 import time
-from collections import defaultdict
+from collections import Counter, defaultdict
 from pathlib import Path
 from typing import Any
 
@@ -226,10 +226,25 @@ def _rrd_rows(path: Path) -> tuple[dict[str, int], dict[str, dict[str, Any]]]:
 
 def test_the_campaign_panel_has_one_point_per_accepted_condition(session: dict[str, Any]) -> None:
     counts, static = _rrd_rows(session["out"] / "campaign.rrd")
+    records = _records(session["out"])
+    accepted = {r["decay"] for r in records if r["type"] == "verdict" and r["verdict"] == "accepted"}
     for draft in ("T", "1.1T"):
         assert counts[f"/campaign/b_eq/{draft}"] == 2
-        for term in ("b1", "b2", "c1", "c3"):
-            assert counts[f"/campaign/coefficients/{term}/{draft}"] == 2
+        terms = Counter(  # per term, the conditions whose accepted repeats' chosen models hold it
+            term
+            for angle in (10.0, 15.0)
+            for term in {
+                term
+                for r in records
+                if r["type"] == "run"
+                and r["decay"] in accepted
+                and (r["draft"], r["angle_deg"]) == (draft, angle)
+                for term in r["measured"]["coefficients"]
+            }
+        )
+        assert terms["b1"] == terms["c1"] == 2
+        for term, count in terms.items():
+            assert counts[f"/campaign/coefficients/{term}/{draft}"] == count
     labels = static["/campaign/matrix"]["Points2D:labels"]
     assert len(labels) == 4 and all(": accepted 2/2" in label for label in labels)
 
@@ -326,6 +341,7 @@ def _measured(**changes: Any) -> Measured:
         ({"settle_reason": "unplug"}, "cut short (the device went away)"),
         ({"b_eq_per_s": 3.4}, "not a repeat: B_eq"),
         ({"natural_period_s": 1.75}, "not a repeat: period"),
+        ({"fit_warnings": ["implausible damping: B_eq -0.05 1/s at 0.0 deg"]}, "fit: implausible damping"),
     ],
 )
 def test_each_check_flags_its_fault_alone(changes: dict[str, Any], phrase: str) -> None:
@@ -420,3 +436,59 @@ def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Pat
     assert kinds[-3:] == ["start", "note", "verdict"]
     assert records[-1]["decay"] == 1 and records[-1]["verdict"] == "accepted"
     assert records[-2]["text"] == "judged after the restart"
+
+
+# ---- physics: an implausible fit is never accepted silently ------------------------------------------
+
+PLAN_15 = """hulls = ["swath"]
+axis = "roll"
+drafts = ["T"]
+angles_deg = [15.0]
+"""
+
+
+def _run_session(tmp_path: Path, *extra: str) -> tuple[Path, list[dict[str, Any]]]:
+    plan = tmp_path / "plan.toml"
+    plan.write_text(PLAN_15)
+    out = tmp_path / "out"
+    args = ["session", str(plan), "--port", "sim", "--hull", "swath", "--out", str(out), "--viewer", "save"]
+    result = CliRunner().invoke(app, [*args, "--sim-speed", "20", "--sim-faults", "", "--yes", *extra])
+    assert result.exit_code == 0, result.output
+    return out, _records(out)
+
+
+def test_a_swath_session_with_the_default_model_accepts_positive_damping(tmp_path: Path) -> None:
+    _, records = _run_session(tmp_path)
+    (run,) = [r for r in records if r["type"] == "run"]
+    (verdict,) = [r for r in records if r["type"] == "verdict"]
+    assert verdict["verdict"] == "accepted" and run["reasons"] == []
+    measured = run["measured"]
+    assert measured["fit_warnings"] == [] and measured["coefficients"]["b1"] > 0
+    assert measured["b_eq_per_s"] > 0
+
+
+def test_an_implausible_fit_asks_and_yes_gives_up_after_the_cap(tmp_path: Path) -> None:
+    from tankdaq.acquire.campaign_session import MAX_REJECTED
+
+    out, records = _run_session(tmp_path, "--model", "b1,b2,c1,c3")  # b1 < 0 on SWATH decays from 15 deg
+    verdicts = [r for r in records if r["type"] == "verdict"]
+    assert [v["action"] for v in verdicts] == ["reject and repeat"] * (MAX_REJECTED - 1) + [
+        "reject and skip the condition"
+    ]
+    for verdict in verdicts:
+        assert verdict["verdict"] == "rejected"
+        assert any(reason.startswith("fit: implausible damping: B_eq -") for reason in verdict["reasons"])
+    assert [r["type"] for r in records].count("skip") == 1
+    rrd = sorted(out.glob("*_run01.rrd"))[0]  # the live view says it too, in its event log
+    reader = RrdReader(rrd)
+    (recording,) = reader.recordings()
+    texts = []
+    for chunk in reader.stream(store=recording).to_chunks():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == "/events" and "TextLog:text" in batch.schema.names:
+            levels = batch.column("TextLog:level").to_pylist()
+            texts += [
+                (t[0], lv[0]) for t, lv in zip(batch.column("TextLog:text").to_pylist(), levels, strict=True)
+            ]
+    implausible = [(text, level) for text, level in texts if "implausible damping" in text]
+    assert implausible and all(level == "WARN" for _, level in implausible)

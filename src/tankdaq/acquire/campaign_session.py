@@ -65,6 +65,9 @@ CUT_SHORT = {
 ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
 #: settle reasons of a decay that ended by itself (anything else was cut short)
 COMPLETE_SETTLES = ("amplitude", "timeout")
+#: rejected decays of one condition after which the default answer is to skip it, not to repeat it
+#: (``--yes`` answers the default: a condition that keeps failing cannot loop forever)
+MAX_REJECTED = 3
 
 
 @dataclass(frozen=True)
@@ -212,6 +215,7 @@ class Measured:
     free_end: str = ""  # how the free decay ends (``ident.free_decay``): "excitation" = pushed again
     free_end_reason: str = ""
     fit_error: str = ""
+    fit_warnings: list[str] = field(default_factory=list)  # the final fit's implausibilities
 
 
 def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
@@ -238,6 +242,7 @@ def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
         measured.fit_error = "; ".join(w for w in outcome.warnings if "fit" in w) or "no fit"
         return measured
     measured.half_cycles = fit.half_cycles
+    measured.fit_warnings = list(fit.warnings)
     measured.r2_angle = fit.r2_angle
     measured.coefficients = dict(fit.coefficients)
     measured.natural_period_s = fit.natural_period_s
@@ -277,6 +282,7 @@ def check_decay(
         reasons.append(f"too short: {measured.half_cycles} half-cycles (at least {a.min_half_cycles:g})")
     if not measured.r2_angle >= a.min_r2:
         reasons.append(f"poor fit: R² {measured.r2_angle:.4f} (at least {a.min_r2:g})")
+    reasons += [f"fit: {line}" for line in measured.fit_warnings]  # never accepted silently
     if earlier:
         reasons += _repeat_reasons(measured, earlier, a)
     return reasons
@@ -631,9 +637,10 @@ class CampaignSession:
         self._panel().set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
         if status == "accepted":
             measured = [Measured(**r.measured) for r in state.accepted(condition)]
+            terms = dict.fromkeys(k for m in measured for k in m.coefficients)  # repeats' models may differ:
             mean = {
-                k: float(np.mean([m.coefficients[k] for m in measured])) for k in measured[0].coefficients
-            }
+                k: float(np.mean([m.coefficients.get(k, 0.0) for m in measured])) for k in terms
+            }  # absent = 0
             self._panel().accepted(
                 condition.draft, condition.angle_deg, mean, float(np.mean([m.b_eq_per_s for m in measured]))
             )
@@ -768,8 +775,9 @@ class CampaignSession:
     def _daemon_line(self, line: str, decay: int) -> None:
         """The daemon's lines, its "run 1" named as the session's decay; the device and viewer lines
         every decay repeats are shown once."""
-        if line.startswith("run 1:"):
-            line = f"decay {decay}:" + line[len("run 1:") :]
+        for prefix, named in (("run 1:", f"decay {decay}:"), ("warning: run 1:", f"warning: decay {decay}:")):
+            if line.startswith(prefix):
+                line = named + line[len(prefix) :]
         key = next((p for p in ONCE_PREFIXES if line.startswith(p)), line)
         if key in self._shown:
             return
@@ -782,11 +790,18 @@ class CampaignSession:
         if entry.reasons:
             for reason in entry.reasons:
                 self.on_line(f"decay {entry.decay} flagged: {reason}")
+            rejected = sum(1 for r in state.runs if r.condition == condition and r.verdict == "rejected")
+            give_up = rejected + 1 >= MAX_REJECTED
             question = Question(
                 "verdict",
-                f"Decay {entry.decay} ({condition.label}) failed a check: repeat it?",
+                f"Decay {entry.decay} ({condition.label}) failed a check"
+                + (
+                    f"; {rejected + 1} decays of this condition failed (limit {MAX_REJECTED}): skip it?"
+                    if give_up
+                    else ": repeat it?"
+                ),
                 {"r": "reject and repeat", "a": "accept anyway", "s": "reject and skip the condition"},
-                "r",
+                "s" if give_up else "r",
             )
         else:
             m = entry.measured
@@ -876,14 +891,19 @@ def write_session_report(files: list[Path], folder: Path, model: str, hull: str)
 
 def repeat_spreads(groups: dict[Any, list[Any]], model: str) -> list[dict[str, Any]]:
     """Per condition with repeats: each coefficient fitted on each repeat alone, their mean and spread."""
+    from functools import partial
+
+    from ..ident.model_choice import choose_model
     from ..ident.output_error import OutputError
     from ..ident.uncertainty import repeat_spread
+    from ..physics.models import is_auto
 
     rows = []
     for key, runs in groups.items():
         if len(runs) < 2:
             continue
-        summary = repeat_spread(lambda: OutputError(model), runs)
+        chosen = choose_model(runs).terms if is_auto(model) else model  # the condition's, as its fit's
+        summary = repeat_spread(partial(OutputError, chosen), runs)
         terms = list(summary.std)
         row: dict[str, Any] = {"hull": key.hull, "axis": key.axis, "draft": format_draft(key.draft),
                                "angle_deg": key.angle_deg, "repeats": len(runs)}  # fmt: skip

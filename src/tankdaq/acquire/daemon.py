@@ -19,6 +19,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -289,7 +290,12 @@ class RecordDaemon:
             closing_metadata=lambda: driver.counters.metadata(),
         )
         self._recording = recording
-        sinks = [IdentifierSink(self.make_identifier), recording, ViewSink(view), *self.extra_sinks]
+        identifier = partial(  # the hull's GM and gyradius for the fits' plausibility checks
+            self.make_identifier,
+            particulars=self.hull.particulars(s.simulated_axis) if self.hull else None,
+            hull=self.hull.name if self.hull else "the hull",
+        )
+        sinks = [IdentifierSink(identifier), recording, ViewSink(view), *self.extra_sinks]
         return DecaySession(session_settings, sinks, on_event=self.on_event)
 
     # ---- the loop ----------------------------------------

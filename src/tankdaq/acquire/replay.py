@@ -75,7 +75,7 @@ def replay_recording(
         axis=axis,
         angle_deg=nominal if math.isfinite(nominal) else 0.0,
         angle_tolerance_deg=math.inf if not math.isfinite(nominal) else 1.0,
-        model=model or str(meta.get("model_terms", "ittc-quadratic-restoring")),
+        model=model or str(meta.get("model", meta.get("model_terms", "ittc-quadratic-restoring"))),
     )
     prepare_identifier(settings.model, on_event)
     rrd_base = path.with_name(path.stem + ".replay") if view.mode == "save" else None  # spawn falls back

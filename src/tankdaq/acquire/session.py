@@ -90,6 +90,8 @@ class DecaySession:
     def _publish_note(
         self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
     ) -> None:
+        if kind == "warning":  # a warning a sink raises during the decay (an implausible fit) is a line too
+            self.on_event(f"warning: run {decay.run}: {message}")
         self._tell(lambda sink: sink.on_note(decay, kind, message, t_s, data))
 
     # ---- feeding ----------------------------------------
@@ -201,6 +203,7 @@ class DecaySession:
             warnings=warnings,
             publish_fit=self._publish_fit,
             publish_note=self._publish_note,
+            model=s.model,
             last_t=max([release_t, *(self._last_time(b) for b in blocks)]),
         )
         self.decay = decay

@@ -89,6 +89,7 @@ class Decay:
     final_fit_s: float = math.nan
     settle_reason: str = ""
     error: str = ""
+    model: str = ""  # the live model as asked ("auto": chosen by the data); ``terms`` is what it may use
 
     def publish(self, result: OnlineResult) -> None:
         """A fit for every sink (the identifier's refits and its final fit)."""
@@ -187,10 +188,12 @@ class IdentifierSink(Sink):
         self.wait_for_fits = wait_for_fits
         self.refit_budget_s = refit_budget_s  # a live refit past it is abandoned (a warning event)
         self._live: BackgroundFit | None = None
+        self._implausible: list[str] = []  # the checks the latest fit failed: each said once in a row
 
     def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
-        identifier = self.make_identifier(decay.terms, axis=decay.axis)
+        identifier = self.make_identifier(decay.model or decay.terms, axis=decay.axis)
         self._live = BackgroundFit(identifier, refit_budget_s=self.refit_budget_s)
+        self._implausible = []
         for block in pretrigger:
             self._submit(block, decay)
 
@@ -201,8 +204,17 @@ class IdentifierSink(Sink):
         if self.wait_for_fits:
             self._live.wait_idle(FINAL_FIT_WAIT_S)
         for result in self._live.take():
-            decay.publish(result)
+            self._publish(decay, result)
         self._note_abandoned(self._live, decay)
+
+    def _publish(self, decay: Decay, result: OnlineResult) -> None:
+        """The fit to every sink; an implausibility it carries (a check the last fit passed) as a warning
+        note: the file's events, the view's event log, the record lines."""
+        decay.publish(result)
+        new = [f for f in result.findings if f.check not in self._implausible]
+        self._implausible = [finding.check for finding in result.findings]
+        for finding in new:
+            decay.note("warning", f"fit at {result.t_end - decay.release_t:.1f} s: {finding}", result.t_end)
 
     @staticmethod
     def _note_abandoned(live: BackgroundFit, decay: Decay) -> None:
@@ -234,9 +246,10 @@ class IdentifierSink(Sink):
         finally:
             decay.final_fit_s = time.perf_counter() - started
         for result in refits:
-            decay.publish(result)
+            self._publish(decay, result)
         self._note_abandoned(live, decay)
-        decay.publish(final)
+        self._implausible = []  # the final fit's implausibilities are said again: they are the verdict's
+        self._publish(decay, final)
         decay.final_fit = final
 
     def close(self) -> None:
@@ -284,6 +297,7 @@ class RecordingSink(Sink):
             "axis": decay.axis,
             "run": decay.run,
             "model_terms": ",".join(decay.terms),
+            "model": decay.model or ",".join(decay.terms),  # "auto": the refits choose among the terms
         }
         self.writer = RecordingWriter(self.out_dir / name, metadata, self.run_config)
         decay.path = self.writer.path

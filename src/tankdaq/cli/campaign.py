@@ -125,6 +125,9 @@ def campaign_command(
         failed = [r for r in results if r.fit is None]
         for result in failed:
             err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
+        for result in results:  # a fit physics says is implausible: said here, in the table and the report
+            for line in result.warnings:
+                err_console.print(f"warning: {result.key.label}: {line}", markup=False, soft_wrap=True)
         if report is not None:
             written = write_report(results, report, pool)
             err_console.print(f"wrote {len(written)} files to {report}", markup=False)

@@ -5,13 +5,16 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from .. import validation
 from ..errors import InputError
 from ..records import DecayRun
+
+if TYPE_CHECKING:
+    from ..config import Hull
 from .app import (
     app,
     checked,
@@ -120,11 +123,17 @@ def identify_command(
         None, "--axis", help="roll or pitch (default: a recording's own axis; roll for CSV)."
     ),
     model: str = typer.Option(
-        "ittc-quadratic-restoring", "--model", help="Terms (b1,b2,c1,c3) or an alias (docs/models.md)."
+        "auto",
+        "--model",
+        help="auto (the best of a small family on held-out data), terms (b1,b2,c1,c3) or an alias "
+        "(docs/models.md).",
     ),
     method: str = typer.Option("oe", "--method", help="oe (output error), ee (equation error), ..."),
     compare: bool = typer.Option(
         False, "--compare", help="Fit every seed formula and ITTC form; print the table."
+    ),
+    joint: bool = typer.Option(
+        False, "--joint", help="Fit decays of different conditions (hull, draft, axis) together (warned)."
     ),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
     time_col: TimeColumn = "time_s",
@@ -153,20 +162,26 @@ def identify_command(
         False, "--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."
     ),
 ) -> None:
-    """Identify the decay equation's coefficients from free-decay records."""
+    """Identify the decay equation's coefficients from free-decay records.
+
+    Decays of different conditions (hull, draft, axis from the recordings' metadata or names) get one
+    fit each unless --joint; the default model is chosen by the data (docs/models.md).
+    """
     from ..config import full_scale_of, load_hull
+    from ..ident.conditions import condition_of, group_conditions, grouping_line
     from ..ident.derived import scale_results
     from ..ident.estimators import make_estimator
     from ..ident.online import prepare_identifier
-    from ..ident.report import compare_models, compare_text, group_models, summarize, text_report
-    from ..ident.uncertainty import fit_with_intervals
-    from ..physics.models import resolve_model
+    from ..ident.report import text_report
+    from ..ident.uncertainty import check_intervals
+    from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 
     if axis not in (None, "roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     hull_config = load_hull(hull) if hull else None
     scale = full_scale_of(hull_config, full_scale)
-    terms = resolve_model(model)
+    terms = None if is_auto(model) else resolve_model(model)
+    probe = make_estimator(method, terms or MODEL_FAMILY[0])  # an unknown method fails before any reading
     runs = load_runs(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end,
         time_unit,
@@ -175,25 +190,101 @@ def identify_command(
         for run_axis in sorted({run.axis for run in runs}):
             validation.hull_draft(hull_config, draft, run_axis)
     truncated = {"truncated": bool(cut := warn_truncated(runs)), "truncated_files": cut}
-    prepare_identifier(terms, say)  # the native kernels: built once, on the first run after install
+    groups = group_conditions(runs)
+    pooled = grouping_line(groups, joint=True) if len(groups) > 1 and (joint or compare) else None
+    fits = [runs] if joint or len(groups) == 1 else list(groups.values())
+    for condition_runs in fits if not compare else []:  # impossible interval requests fail before any fit
+        check_intervals(probe, len(condition_runs), bootstrap, repeats, method)
+    prepare_identifier(terms or MODEL_FAMILY[-1], say)  # the native kernels: built once, on the first run
 
     if compare:
-        from ..ident.free_decay import cut_lines
-        from ..physics.models import COMPARE_MODELS
-
-        with progress_bar() as progress:
-            task = progress.add_task("fitting models", total=len(group_models(COMPARE_MODELS)))
-            rows = compare_models(
-                runs, COMPARE_MODELS, method, lambda name: progress.update(task, advance=1, description=name)
-            )
-        if as_json:
-            document = {"compare": rows, "cuts": cut_lines(runs), **truncated}
-            typer.echo(json.dumps(_clean(document), default=_json_default))
-        else:
-            echo_cuts(runs)
-            typer.echo(compare_text(rows))
+        _compare(runs, method, as_json, truncated, pooled)
         return
+    if len(fits) > 1:
+        say(grouping_line(groups))
+    summaries, scaled_lines = [], []
+    for condition_runs in fits:
+        label = "all conditions (--joint)" if pooled else condition_of(condition_runs[0]).label
+        summary = _fit_condition(condition_runs, terms, method, bootstrap, repeats, hull_config, draft, label)
+        summary["condition"] = None if pooled else condition_of(condition_runs[0]).as_dict()
+        if pooled is not None:
+            summary["warnings"].insert(0, pooled)
+            summary["conditions"] = pooled
+        summaries.append(summary)
+        scaled_lines.append(scale_results(summary, hull_config, draft, scale))  # B̂44; the ship's
+    if len(summaries) == 1:
+        document: dict[str, object] = {**summaries[0], **truncated}
+    else:
+        warnings = [f"{g['condition_label']}: {line}" for g in summaries for line in g["warnings"]]
+        document = {
+            "conditions": grouping_line(groups),
+            "groups": summaries,
+            "warnings": warnings,
+            **truncated,
+        }
+    if as_json:
+        typer.echo(json.dumps(_clean(document), default=_json_default))
+        return
+    for summary, scaled in zip(summaries, scaled_lines, strict=True):
+        if len(summaries) > 1:
+            typer.echo(f"== {summary['condition_label']} ==")
+        typer.echo("\n".join([text_report(summary), *scaled]))
+        if len(summaries) > 1:
+            typer.echo("")
 
+
+def _compare(runs: list[DecayRun], method: str, as_json: bool, truncated: dict, pooled: str | None) -> None:
+    """``--compare``: every seed formula and ITTC form fitted to ``runs``, the table printed."""
+    from ..ident.free_decay import cut_lines
+    from ..ident.report import compare_models, compare_text, group_models
+    from ..physics.models import COMPARE_MODELS
+
+    if pooled is not None:
+        say(f"warning: {pooled}")
+    with progress_bar() as progress:
+        task = progress.add_task("fitting models", total=len(group_models(COMPARE_MODELS)))
+        rows = compare_models(
+            runs, COMPARE_MODELS, method, lambda name: progress.update(task, advance=1, description=name)
+        )
+    if as_json:
+        document = {
+            "compare": rows,
+            "cuts": cut_lines(runs),
+            "warnings": [pooled] if pooled else [],
+            **truncated,
+        }
+        typer.echo(json.dumps(_clean(document), default=_json_default))
+    else:
+        echo_cuts(runs)
+        typer.echo(compare_text(rows))
+
+
+def _fit_condition(
+    runs: list[DecayRun],
+    terms: tuple[str, ...] | None,
+    method: str,
+    bootstrap: int,
+    repeats: bool,
+    hull_config: Hull | None,
+    draft: float,
+    label: str,
+) -> dict:
+    """One fit of ``runs`` (the model chosen by data when ``terms`` is None) and its summary."""
+    from ..ident.estimators import make_estimator
+    from ..ident.model_choice import choose_model
+    from ..ident.report import summarize
+    from ..ident.uncertainty import fit_with_intervals
+
+    choice = None
+    if terms is None:
+        with progress_bar() as progress:
+            progress.add_task(f"choosing the model ({label})", total=None)
+            particulars = hull_config.particulars(runs[0].axis) if hull_config is not None else None
+            choice = choose_model(
+                runs, particulars=particulars, hull=getattr(hull_config, "name", "the hull")
+            )
+        terms = choice.terms
+        say(f"{label}: {choice.reason}")
     estimator = make_estimator(method, terms)
     repeats_of = (lambda: make_estimator(method, terms)) if repeats else None
     with progress_bar() as progress:
@@ -210,8 +301,7 @@ def identify_command(
             method=method,
         )
     summary = summarize(estimator, runs, method, hull_config, draft, intervals)
-    scaled = scale_results(summary, hull_config, draft, scale)  # B̂44; with --full-scale the ship's
-    if as_json:
-        typer.echo(json.dumps(_clean({**summary, **truncated}), default=_json_default))
-    else:
-        typer.echo("\n".join([text_report(summary), *scaled]))
+    summary["condition_label"] = label
+    given = {"chosen": ",".join(terms), "reason": "given by --model"}
+    summary["model_choice"] = choice.as_dict() if choice is not None else given
+    return summary

@@ -48,7 +48,7 @@ LiveModelOption = Annotated[
     typer.Option(
         "--model",
         callback=checked(validation.live_model, keep_input=True),
-        help="Live model: terms (b1,b2,c1,c3) or alias.",
+        help="Live model: auto (chosen by the data), terms (b1,b2,c1,c3) or alias.",
     ),
 ]
 ViewerOption = Annotated[
@@ -61,7 +61,7 @@ ViewerOption = Annotated[
 ]
 SimSpeedOption = Annotated[float, typer.Option("--sim-speed", min=0.1, max=50.0, hidden=True)]
 SimSeedOption = Annotated[int, typer.Option("--sim-seed", hidden=True)]
-DEFAULT_LIVE_MODEL = "ittc-quadratic-restoring"
+DEFAULT_LIVE_MODEL = "auto"  # the refits move up physics.models.MODEL_FAMILY as the data allow
 
 
 class _StatusLine:

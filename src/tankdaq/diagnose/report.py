@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import RecordingError
 from ..ident.free_decay import cut_lines
+from ..ident.plausibility import check_runs
 from ..viz import diagnose_view
 from .fitting import Fit
 from .residuals import SPECTRUM_MEANING
@@ -113,7 +114,15 @@ def summary(diagnoser: Diagnoser) -> dict[str, Any]:
         "gap_reduction": diagnoser.gap_reduction_,
         "gap_reduction_all_outputs": 1.0 - final.rms_noise_units / base.rms_noise_units,
         "verdict": diagnoser.verdict_,
+        "warnings": implausible(diagnoser),
     }
+
+
+def implausible(diagnoser: Diagnoser) -> list[str]:
+    """The final fit's implausibilities (``ident.plausibility``): in the JSON, the story and the report."""
+    final = diagnoser.final_
+    found = check_runs(final.coefficients, final.estimator.runs_, final.offsets or None)
+    return [finding.message for finding in found]
 
 
 def _finite(value: Any) -> Any:
@@ -176,6 +185,7 @@ def story(diagnoser: Diagnoser) -> list[str]:
         lines.append("cycle by cycle: " + "; ".join(hints))
     lines += [_step_line(s, diagnoser) for s in diagnoser.steps_]
     lines.append(diagnoser.verdict_)
+    lines += [f"warning: {line}" for line in implausible(diagnoser)]
     return [f"cut: {line}" for line in cut_lines(diagnoser.runs_)] + lines
 
 

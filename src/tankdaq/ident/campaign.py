@@ -27,6 +27,7 @@ import numpy as np
 from ..config import Hull, format_draft, load_hull, parse_draft
 from ..errors import IdentificationError, InputError, TankdaqError
 from ..physics.decay import simulate_decay
+from ..physics.models import is_auto
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, empty_samples
 from ..store.inputs import INPUT_FORMATS, input_format
@@ -34,8 +35,10 @@ from ..store.naming import parse_recording_name
 from .derived import amplitude_table, damping_ratio, natural_period
 from .free_decay import cut_free_decays, cut_lines
 from .inputs import read_decays
+from .model_choice import choose_model
 from .online import prepare_kernels
 from .output_error import OutputError
+from .plausibility import check_runs
 
 
 @dataclass(frozen=True, order=True)
@@ -62,6 +65,15 @@ class GroupResult:
     error: str | None = None
     extra: dict[str, float] = field(default_factory=dict)
     hull: Hull | None = None  # the hull file found for key.hull: dimensional results from its GM
+
+    @property
+    def warnings(self) -> list[str]:
+        """The fit's implausibilities (``ident.plausibility``), one line each; none without a fit."""
+        if self.fit is None:
+            return []
+        particulars = self.hull.particulars(self.key.axis) if self.hull is not None else None
+        found = check_runs(self.fit.coefficients_, self.runs, self.fit.offsets_, particulars, self.key.hull)
+        return [finding.message for finding in found]
 
     def summary(self) -> dict[str, Any]:
         """One row of the campaign table (angles in deg, coefficients per unit inertia, SI)."""
@@ -91,6 +103,7 @@ class GroupResult:
             "r2_angle": self.fit.r2_angle_,
             "seed_objective_rad_s": self.fit.seed_objective_,
             "error": "",
+            "warnings": " | ".join(self.warnings),
         }
 
     def _dimensional(self, coefficients: dict[str, float], b_eq_per_s: float) -> dict[str, Any]:
@@ -224,7 +237,8 @@ def fit_group(key: GroupKey, runs: list[DecayRun], model: str, hull: Hull | None
     A group that cannot be fitted keeps its reason instead of a fit.
     """
     try:
-        return GroupResult(key, runs, fit=OutputError(model).fit(runs), hull=hull)
+        terms = choose_model(runs).terms if is_auto(model) else model
+        return GroupResult(key, runs, fit=OutputError(terms).fit(runs), hull=hull)
     except IdentificationError as exc:
         return GroupResult(key, runs, error=str(exc), hull=hull)
 
@@ -390,6 +404,9 @@ def markdown_table(results: Sequence[GroupResult]) -> str:
                 f"{row['r2_angle']:.4f}",
             ]
         lines.append("| " + " | ".join(cells) + " |")
+    implausible = [f"- {r.key.label}: {line}" for r in results for line in r.warnings]
+    if implausible:
+        lines += ["", "Warnings (physically implausible fits, docs/models.md):", "", *implausible]
     return "\n".join(lines) + "\n"
 
 

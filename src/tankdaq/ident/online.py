@@ -22,18 +22,25 @@ import contextlib
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..errors import IdentificationError
+from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 from ..records import DecayRun
 from . import compiled
 from .base import EstimatorMixin
 from .least_squares import solve_budget
 from .output_error import OutputError
+from .plausibility import Finding, check_runs
 from .signals import band_crossings, white_noise_level
+
+#: With ``terms="auto"`` a model of k terms is tried live once the decay has this many half-cycles per term.
+HALF_CYCLES_PER_TERM = 2
+#: ... and replaces the current one when plausible and its BIC is lower by at least this much.
+LIVE_DELTA_BIC = 10.0
 
 
 @dataclass
@@ -52,6 +59,14 @@ class OnlineResult:
     predicted_t: np.ndarray
     predicted_angle: np.ndarray
     elapsed_s: float
+    findings: list[Finding] = field(
+        default_factory=list
+    )  # the fit's implausibilities (``ident.plausibility``)
+
+    @property
+    def warnings(self) -> list[str]:
+        """The findings' one-line messages."""
+        return [finding.message for finding in self.findings]
 
 
 class OnlineIdentifier(EstimatorMixin):
@@ -60,7 +75,12 @@ class OnlineIdentifier(EstimatorMixin):
     ``min_half_cycles``: how many complete half-cycles before the first fit (the
     model needs at least a period to see its stiffness). ``horizon_s``: how far
     past the last sample the published curve is predicted. ``check_interval_s``:
-    how often (device time) new half-cycles are looked for. Other keyword
+    how often (device time) new half-cycles are looked for. ``terms="auto"``: the refits start
+    with the family's simplest model and move up ``physics.models.MODEL_FAMILY`` as the half-cycles
+    allow (``HALF_CYCLES_PER_TERM``) and a plausible larger model wins on BIC, the final fit too
+    (``identify``'s held-out choice costs ten fits: on the JIT at load 8 they passed the final
+    fit's budget; docs/models.md). ``particulars`` (the hull's GM and
+    gyradius) and ``hull`` feed the plausibility checks every result carries. Other keyword
     arguments go to the underlying ``OutputError``.
     """
 
@@ -73,9 +93,13 @@ class OnlineIdentifier(EstimatorMixin):
         horizon_s: float = 0.0,
         axis: str = "roll",
         check_interval_s: float = 0.05,
+        particulars: Any = None,
+        hull: str = "the hull",
         **estimator_settings: Any,
     ) -> None:
         self.terms = terms
+        self.particulars = particulars
+        self.hull = hull
         self.callback = callback
         self.min_half_cycles = min_half_cycles
         self.horizon_s = horizon_s
@@ -92,6 +116,7 @@ class OnlineIdentifier(EstimatorMixin):
         self._fitted_half_cycles = 0
         self._checked_at = -np.inf
         self.estimator_: OutputError | None = None
+        self.level_ = 0  # with terms="auto": the family's model in use
         self.results_: list[OnlineResult] = []
         self.failures_: list[str] = []
 
@@ -129,6 +154,33 @@ class OnlineIdentifier(EstimatorMixin):
             raise IdentificationError("the decay ended before a full oscillation: nothing to identify")
         return self._refit(run, self._half_cycles(run))
 
+    @property
+    def _auto(self) -> bool:
+        return isinstance(self.terms, str) and is_auto(self.terms)
+
+    def _fit(self, terms: Sequence[str], run: DecayRun, start: OutputError | None) -> OutputError:
+        estimator = OutputError(terms, compute_diagnostics=False, **self.estimator_settings)
+        return estimator.fit([run], start=start)
+
+    def _live_fit(self, run: DecayRun, half_cycles: int) -> OutputError:
+        """The refit of the model in use; with ``terms="auto"``, a plausible larger model of the family
+        the half-cycles allow replaces it when its BIC is lower by ``LIVE_DELTA_BIC``."""
+        if not self._auto:
+            return self._fit(self.terms, run, self.estimator_)
+        family = [resolve_model(m) for m in MODEL_FAMILY]
+        current = self._fit(family[self.level_], run, self.estimator_)
+        for level in range(self.level_ + 1, len(family)):
+            if half_cycles < HALF_CYCLES_PER_TERM * len(family[level]):
+                break
+            try:
+                larger = self._fit(family[level], run, current)
+            except IdentificationError:
+                continue
+            plausible = not check_runs(larger.coefficients_, [run], larger.offsets_, self.particulars)
+            if plausible and larger.bic_ < current.bic_ - LIVE_DELTA_BIC:
+                current, self.level_ = larger, level
+        return current
+
     def _run(self) -> DecayRun | None:
         if not self._t:
             return None
@@ -149,9 +201,9 @@ class OnlineIdentifier(EstimatorMixin):
 
     def _refit(self, run: DecayRun, half_cycles: int) -> OnlineResult:
         started = time.perf_counter()
-        estimator = OutputError(self.terms, compute_diagnostics=False, **self.estimator_settings)
-        estimator.fit([run], start=self.estimator_)
+        estimator = self._live_fit(run, half_cycles)
         self.estimator_ = estimator
+        findings = check_runs(estimator.coefficients_, [run], estimator.offsets_, self.particulars, self.hull)
         t_pred = run.t
         if self.horizon_s > 0:
             dt = float(np.median(np.diff(run.t)))
@@ -170,6 +222,7 @@ class OnlineIdentifier(EstimatorMixin):
             predicted_t=t_pred,
             predicted_angle=angle_pred,
             elapsed_s=time.perf_counter() - started,
+            findings=findings,
         )
         self.results_.append(result)
         if self.callback is not None:

@@ -29,6 +29,7 @@ from .derived import (
 )
 from .estimators import make_estimator
 from .output_error import OutputError, seed_objective
+from .plausibility import check_runs
 from .uncertainty import IntervalSummary
 
 
@@ -86,6 +87,10 @@ def summarize(
     amplitudes = tested_amplitudes_deg(runs, estimator.offsets_)
     table = amplitude_table(coefficients, covariance_of(estimator, std), amplitudes)
     extinction = extinction_curve(runs, estimator.offsets_, coefficients)
+    particulars = hull.particulars(runs[0].axis) if hull is not None else None
+    findings = check_runs(
+        coefficients, runs, estimator.offsets_, particulars, getattr(hull, "name", "the hull")
+    )
     summary: dict[str, Any] = {
         "model": {"name": model_name(terms), "terms": list(terms)},
         "method": method,
@@ -128,7 +133,8 @@ def summarize(
             "mean_amplitude_deg": np.degrees(extinction.mean_amplitude).tolist(),
             "decrement_deg": np.degrees(extinction.decrement).tolist(),
         },
-        "warnings": list(getattr(estimator, "warnings_", [])),
+        "plausibility": [finding.as_dict() for finding in findings],
+        "warnings": [finding.message for finding in findings] + list(getattr(estimator, "warnings_", [])),
         "elapsed_s": float(getattr(estimator, "elapsed_s_", math.nan)),
     }
     if hull is not None:

@@ -257,6 +257,17 @@ def repeat_spread(make_estimator: Callable[[], Any], runs: Sequence[DecayRun]) -
     return _summary("repeat runs", terms, values, percentile=False, counted="runs")
 
 
+def check_intervals(estimator: Any, n_runs: int, bootstrap: int, repeats: bool, method: str = "oe") -> None:
+    """Refuse the interval requests that cannot work, before any fit (``InputError``, one line)."""
+    from ..errors import InputError
+    from .output_error import OutputError  # it imports this module
+
+    if bootstrap and not isinstance(estimator, OutputError):  # it resamples the output-error residuals
+        raise InputError(f"--bootstrap works with --method oe, not {method}")
+    if repeats and (bootstrap or n_runs < 3):
+        raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")
+
+
 def fit_with_intervals(
     estimator: Any,
     runs: Sequence[DecayRun],
@@ -273,13 +284,7 @@ def fit_with_intervals(
     ``progress(done)`` counts the fit as 1 and each replica after it. The combinations that cannot
     work are refused before any fit (``method`` names the estimator in the message).
     """
-    from ..errors import InputError
-    from .output_error import OutputError  # it imports this module
-
-    if bootstrap and not isinstance(estimator, OutputError):  # it resamples the output-error residuals
-        raise InputError(f"--bootstrap works with --method oe, not {method}")
-    if repeats_of is not None and (bootstrap or len(runs) < 3):
-        raise InputError("--repeats needs at least three runs (repeats of one condition) and no --bootstrap")
+    check_intervals(estimator, len(runs), bootstrap, repeats_of is not None, method)
     estimator.fit(runs)
     if progress is not None:
         progress(1)

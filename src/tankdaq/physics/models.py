@@ -56,6 +56,19 @@ MODEL_ALIASES: dict[str, ModelAlias] = {
 #: The models ``tankdaq identify --compare`` fits: every seed formula and ITTC form.
 COMPARE_MODELS: tuple[str, ...] = tuple(MODEL_ALIASES)
 
+#: What the data choose from (``identify``, sessions, the live refit; ``ident.model_choice``), simplest
+#: first: linear, + quadratic damping, + cubic restoring, cubic instead of quadratic damping (the seeds'
+#: SWATH), both (docs/models.md). Larger sets are for ``--compare`` and ``diagnose``.
+MODEL_FAMILY: tuple[str, ...] = ("b1,c1", "b1,b2,c1", "b1,b2,c1,c3", "b1,b3,c1,c3", "b1,b2,b3,c1,c3")
+#: The model word that asks for the data to choose; as a term set it is the family's union (what a
+#: recording's fit channel and the live view must be ready to carry).
+AUTO = "auto"
+
+
+def is_auto(model: str | Sequence[str]) -> bool:
+    """Whether ``model`` asks for the data to choose among ``MODEL_FAMILY``."""
+    return isinstance(model, str) and model.strip().lower() == AUTO
+
 
 def canonical_order(terms: set[str] | list[str] | tuple[str, ...]) -> tuple[str, ...]:
     """Terms sorted into the term table's order, so equal models compare equal."""
@@ -69,6 +82,8 @@ def resolve_model(spec: str | Sequence[str]) -> tuple[str, ...]:
     Unknown names raise InputError listing what is accepted, so a typo on the
     command line gets an answer rather than a traceback.
     """
+    if is_auto(spec):
+        return canonical_order({term for model in MODEL_FAMILY for term in model.split(",")})
     if isinstance(spec, str):
         key = spec.strip().lower()
         if key in MODEL_ALIASES:

@@ -1,0 +1,136 @@
+"""The default model, chosen by the data: the best of a small family on held-out data, physics first.
+
+A fixed default (b1,b2,c1,c3) fits a SWATH decay whose damping is cubic with b1 < 0: linear and
+quadratic damping trade off over the narrow amplitude band of one decay (reference §5). Here
+every model of ``physics.models.MODEL_FAMILY`` is fitted twice by output error: on the whole
+decays (its values, checked by ``ident.plausibility``) and on the first ``FIT_FRACTION`` of every
+run, which then predicts the rest (its held-out angle RMS, deg: the split-sample check
+``diagnose`` uses, so a model that only bends the first cycles to its extra terms loses). The
+chosen model is the simplest plausible one within ``PARSIMONY`` of the best plausible held-out
+RMS; when none is plausible, the best by held-out RMS, and its findings stay on the result as
+warnings.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import IdentificationError
+from ..physics.models import MODEL_FAMILY, model_name, resolve_model
+from ..records import DecayRun
+from .output_error import OutputError
+from .plausibility import Finding, check_runs
+
+#: Fraction of every run (in time) the split-sample fit sees; the rest is predicted.
+FIT_FRACTION = 0.6
+#: A larger model must predict the held-out part this much better (relative RMS) to be chosen.
+PARSIMONY = 0.05
+
+
+@dataclass
+class Candidate:
+    """One model of the family: its held-out score and whether its whole-data fit is plausible."""
+
+    terms: tuple[str, ...]
+    held_out_rms_deg: float = math.nan
+    findings: list[Finding] = field(default_factory=list)
+    error: str = ""
+
+    @property
+    def plausible(self) -> bool:
+        return not self.error and not self.findings
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "model": ",".join(self.terms),
+            "name": model_name(self.terms),
+            "held_out_rms_deg": self.held_out_rms_deg if math.isfinite(self.held_out_rms_deg) else None,
+            "plausible": self.plausible,
+            "warnings": [f.message for f in self.findings] + ([self.error] if self.error else []),
+        }
+
+
+@dataclass
+class ModelChoice:
+    """The chosen terms, the one line that says why, and every candidate's score."""
+
+    terms: tuple[str, ...]
+    reason: str
+    candidates: list[Candidate]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "chosen": ",".join(self.terms),
+            "reason": self.reason,
+            "held_out": f"angle RMS (deg) on the last {1 - FIT_FRACTION:.0%} of every run, fitted on "
+            "the rest",
+            "scores": [c.as_dict() for c in self.candidates],
+        }
+
+
+def split_runs(runs: Sequence[DecayRun], fraction: float = FIT_FRACTION) -> list[DecayRun]:
+    """Each run's first ``fraction`` of its duration."""
+    return [
+        run.window(0, int(np.searchsorted(run.t, run.t[0] + fraction * (run.t[-1] - run.t[0]))))
+        for run in runs
+    ]
+
+
+def score(
+    terms: tuple[str, ...], runs: Sequence[DecayRun], particulars: Any = None, hull: str = "the hull"
+) -> Candidate:
+    """Fit ``terms`` on the whole runs (plausibility) and on their first part (held-out RMS, deg)."""
+    candidate = Candidate(terms)
+    try:
+        whole = OutputError(terms, compute_diagnostics=False).fit(list(runs))
+        candidate.findings = check_runs(whole.coefficients_, runs, whole.offsets_, particulars, hull)
+        first = split_runs(runs)
+        early = OutputError(terms, compute_diagnostics=False).fit(first, start=whole)
+    except IdentificationError as exc:
+        candidate.error = f"not fitted: {exc}"
+        return candidate
+    squares, count = 0.0, 0
+    for r, (run, part) in enumerate(zip(runs, first, strict=True)):
+        predicted, _ = early.predict(run, run_index=r)
+        held = slice(part.t.size, None)
+        squares += float(np.sum((run.angle[held] - predicted[held]) ** 2))
+        count += run.t.size - part.t.size
+    candidate.held_out_rms_deg = math.degrees(math.sqrt(squares / count)) if count else math.nan
+    return candidate
+
+
+def choose_model(
+    runs: Sequence[DecayRun],
+    family: Sequence[str] = MODEL_FAMILY,
+    particulars: Any = None,
+    hull: str = "the hull",
+) -> ModelChoice:
+    """The family scored on ``runs``; see the module docstring for the rule."""
+    candidates = [score(resolve_model(m), runs, particulars, hull) for m in family]
+    scored = [c for c in candidates if math.isfinite(c.held_out_rms_deg)]
+    if not scored:
+        raise IdentificationError(
+            "no model of the family could be fitted: " + "; ".join(c.error for c in candidates if c.error)
+        )
+    plausible = [c for c in scored if c.plausible]
+    if plausible:
+        best = min(c.held_out_rms_deg for c in plausible)
+        chosen = next(c for c in plausible if c.held_out_rms_deg <= best * (1 + PARSIMONY))
+        dropped = [model_name(c.terms) for c in scored if not c.plausible]
+        reason = (
+            f"model {model_name(chosen.terms)} chosen by data: held-out RMS "
+            f"{chosen.held_out_rms_deg:.3g} deg, the simplest plausible model within {PARSIMONY:.0%} "
+            f"of the best ({best:.3g} deg)" + (f"; implausible: {', '.join(dropped)}" if dropped else "")
+        )
+    else:
+        chosen = min(scored, key=lambda c: c.held_out_rms_deg)
+        reason = (
+            f"model {model_name(chosen.terms)} chosen by data (held-out RMS "
+            f"{chosen.held_out_rms_deg:.3g} deg), but no model of the family is plausible: see the warnings"
+        )
+    return ModelChoice(chosen.terms, reason, candidates)
