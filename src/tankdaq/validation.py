@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .config_rules import MAX_RELEASE_ANGLE_DEG
 from .errors import InputError
 from .physics.models import resolve_model
 from .physics.terms import TERM_TABLE, TERMS
@@ -34,8 +35,6 @@ MTI_BASE_RATE_HZ = 400
 #: Serial line rates an MTi accepts (the SetBaudrate codes).
 STANDARD_BAUDS: tuple[int, ...] = tuple(sorted(set(BAUD_CODES.values())))
 
-#: A hand-set release beyond this is not a decay test (and beyond the models' validity).
-MAX_RELEASE_ANGLE_DEG = 45.0
 
 #: Bootstrap replicas beyond this add nothing to a 95 % interval and take hours.
 MAX_BOOTSTRAP_REPLICAS = 10_000
