@@ -153,6 +153,15 @@ def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str,
     return terms
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity, as a container or taskset sets it): the
+    most worker processes that can run at once (more only wait for a core, each with its memory)."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
 def _cannot_write_in(folder: Path) -> str | None:
     """Why a file cannot be created in ``folder`` (None: it can). Tries it: the only check that holds
     for root and for read-only or pseudo file systems. The probe file is removed at once."""
@@ -233,4 +242,5 @@ __all__ = [
     "output_rate_hz",
     "percent",
     "release_angle_deg",
+    "usable_cores",
 ]

@@ -35,7 +35,11 @@ def campaign_command(
     end: EndS = None,
     jobs: Annotated[
         int | None,
-        typer.Option("--jobs", min=1, help="Worker processes for reading, fits and plots [default: cores]."),
+        typer.Option(
+            "--jobs",
+            min=1,
+            help="Worker processes for reading, fits and plots [default and at most: the cores].",
+        ),
     ] = None,
     executor: Annotated[
         str, typer.Option("--executor", help="local (a process pool) or dask (needs --scheduler).")
@@ -51,8 +55,6 @@ def campaign_command(
     hull, draft, axis, angle_deg); tankdaq recordings carry it in their metadata. The table goes to
     stdout.
     """
-    import os
-
     from ..errors import InputError
     from ..ident.campaign import (
         campaign_executor,
@@ -80,8 +82,11 @@ def campaign_command(
         from ..viz.campaign_report import load_plotting, write_report
 
         prepare.append(load_plotting)  # loaded before the pool forks: its workers draw the figures
+    cores = validation.usable_cores()
+    if jobs is not None and jobs > cores and executor == "local":
+        say(f"--jobs {jobs}: this machine gives tankdaq {cores} cores; running {cores} workers")
     with (
-        campaign_executor(jobs or os.cpu_count() or 1, scheduler, prepare) as pool,
+        campaign_executor(min(jobs or cores, cores), scheduler, prepare) as pool,
         progress_bar() as progress,
     ):
         reading = progress.add_task("reading", total=len(paths))
