@@ -147,6 +147,17 @@ class Hull:
             )
         return self.simulation[axis]
 
+    def simulated_coefficients(
+        self, axis: str, draft: float, rate_hz: float | None = None
+    ) -> dict[str, float]:
+        """What the simulator plays on ``axis`` at ``draft``, checked to give a decay it can show at
+        ``rate_hz`` (``physics.decay.decay_refusal``): refused in one line before anything starts."""
+        coefficients = self.simulation_model(axis).coefficients(draft)
+        why = decay_refusal(coefficients, rate_hz)
+        if why is not None:
+            raise InputError(f"hull {self.name} {axis} at {format_draft(draft)}: {SIMULATION_RULE}: {why}")
+        return coefficients
+
 
 def user_hulls_dir() -> Path:
     """The user's hull folder: $TANKDAQ_HULLS_DIR, else $XDG_CONFIG_HOME/tankdaq/hulls (~/.config/...).
@@ -228,7 +239,7 @@ def hull_scenario(
     ``DecayScenario`` (angle_deg, rate_hz, runs, seed...). Physics knows no hull files: this is
     where the two meet."""
     loaded = hull if isinstance(hull, Hull) else load_hull(hull)
-    coefficients = loaded.simulation_model(axis).coefficients(draft)
+    coefficients = loaded.simulated_coefficients(axis, draft, settings.get("rate_hz"))
     return DecayScenario(hull=loaded.name, draft=draft, axis=axis, coefficients=coefficients, **settings)
 
 

@@ -58,6 +58,7 @@ def campaign_command(
     from ..errors import InputError
     from ..ident.campaign import (
         campaign_executor,
+        check_scheduler,
         find_campaign_hulls,
         find_recordings,
         group_runs,
@@ -74,6 +75,8 @@ def campaign_command(
     if (executor == "dask") != (scheduler is not None):
         raise InputError("--executor dask needs --scheduler ADDRESS, and --scheduler needs --executor dask")
     resolve_model(model)  # a typo fails before any file is read
+    if scheduler is not None:
+        check_scheduler(scheduler)  # an address not understood or not answering: one line, at once
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs)
     prepare_identifier(model, say)  # the native kernels: built once, on the first run after install

@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from .app import app, err_console, handles_errors
+from .app import app, handles_errors, say
 
 if TYPE_CHECKING:  # the hull files are read by the commands: --help of every command skips config
     from ..config import Hull
@@ -34,7 +34,7 @@ def list_command(ctx: typer.Context) -> None:
         try:
             hull = load_hull(str(entry.path))
         except InputError as exc:  # one bad file in the folder does not hide the others
-            err_console.print(f"skipped: {exc}", markup=False)
+            say(f"skipped: {exc}")
             skipped += 1
             continue
         hides = f"; hides the shipped {entry.shadows}" if entry.shadows else ""

@@ -328,16 +328,15 @@ def campaign_executor(
 DASK_CONNECT_TIMEOUT_S = 5.0
 
 
-@contextmanager
-def _dask_client(scheduler: str) -> Iterator[Any]:
-    """A Dask client of ``scheduler``: the address understood (else one line, exit 2), and the scheduler
-    answering within ``DASK_CONNECT_TIMEOUT_S`` (else one line, exit 1). The port is tried with a plain
-    socket first: a ``Client`` that failed to connect still tries to close itself at exit, loudly."""
+def check_scheduler(scheduler: str) -> None:
+    """A Dask scheduler address understood (else one line, exit 2) and answering within
+    ``DASK_CONNECT_TIMEOUT_S`` (else one line, exit 1): checked before the campaign starts any work. The
+    port is tried with a plain socket: a ``Client`` that failed to connect still tries to close itself
+    at exit, loudly."""
     import contextlib
     import socket
 
     try:
-        from distributed import Client
         from distributed.comm import get_address_host_port, parse_address
     except ImportError:
         raise InputError("--executor dask needs the dask extra: pip install 'tankdaq[dask]'") from None
@@ -347,16 +346,30 @@ def _dask_client(scheduler: str) -> Iterator[Any]:
         raise InputError(
             f"--scheduler {scheduler!r} not understood ({exc}); give e.g. tcp://10.0.0.5:8786"
         ) from None
-    unreachable = (
-        f"cannot reach the Dask scheduler at {scheduler} within {DASK_CONNECT_TIMEOUT_S:g} s; start it "
-        "(dask scheduler) or check --scheduler"
-    )
     try:
         with contextlib.suppress(ValueError):  # an address without host and port (inproc://) is not tried
             socket.create_connection(get_address_host_port(scheduler), timeout=DASK_CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise TankdaqError(_unreachable(scheduler, exc)) from None
+
+
+def _unreachable(scheduler: str, exc: BaseException) -> str:
+    return (
+        f"cannot reach the Dask scheduler at {scheduler} within {DASK_CONNECT_TIMEOUT_S:g} s ({exc}); "
+        "start it (dask scheduler) or check --scheduler"
+    )
+
+
+@contextmanager
+def _dask_client(scheduler: str) -> Iterator[Any]:
+    """A Dask client of ``scheduler`` (``check_scheduler`` first), connected within the bound."""
+    check_scheduler(scheduler)
+    from distributed import Client
+
+    try:
         client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT_S)
     except (OSError, TimeoutError) as exc:
-        raise TankdaqError(f"{unreachable} ({exc})") from None
+        raise TankdaqError(_unreachable(scheduler, exc)) from None
     with client:
         yield client
 
