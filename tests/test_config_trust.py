@@ -16,7 +16,6 @@ from typer.testing import CliRunner
 
 from tankdaq.cli import app
 from tankdaq.config import load_campaign_plan, load_hull
-from tankdaq.config_rules import path_in, safe_name
 from tankdaq.errors import InputError
 
 runner = CliRunner()
@@ -220,6 +219,8 @@ def test_a_hull_folder_with_a_bad_file_lists_the_good_ones(lab: Path, tmp_path: 
 
 
 def test_names_and_paths_stay_in_their_folder(tmp_path: Path) -> None:
+    from tankdaq.config_rules import path_in, safe_name
+
     assert safe_name("kvlcc2_model-3", "hull") == "kvlcc2_model-3"
     for bad in ("a/b", "..", "../x", "x" * 65, "a\0b", "", "-x", "a b", "a.b", 7):
         with pytest.raises(InputError, match="cannot be part of a file name"):
@@ -279,30 +280,59 @@ def test_an_unreachable_dask_scheduler_is_one_line(one_csv: Path, tmp_path: Path
 # Random files: load, or one line
 # --------------------------------------------------------------------------------------------------
 
-HULL_KEYS = ["name", "description", "dimensions", "axes", "simulation", "sources", "roll", "pitch", "drafts",
-             "T", "1.1T", "0.9T", "1.0T", "gm_m", "gm", "radius_of_gyration_m", "displacement_kg", "note",
-             "b1", "b2", "b3", "c1", "c3", "s1", "b9", "source", "length_m"]  # fmt: skip
 PLAN_KEYS = ["description", "hulls", "axis", "drafts", "angles_deg", "repeats", "repeat", "acceptance",
              "min_r2", "angle_tolerance_deg", "min_half_cycles", "period_tolerance", "angle"]  # fmt: skip
 
 scalars = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
     st.integers(min_value=-(10**450), max_value=10**450),
-    st.sampled_from([0.05, 14.0, 0.3, 1.0, 10.0, 20.0, -2.0, 1e6]),
+    st.sampled_from(
+        [0.05, 14.0, 0.3, 1.0, 10.0, 20.0, -2.0, 1e6, 1.5, 0, math.inf, math.nan, 10**400, 1e300]
+    ),
     st.booleans(),
     st.text(max_size=12),
-    st.sampled_from(["swath", "roll", "pitch", "auto", "T", "1.1T", "../x", "a/b"]),
+    st.sampled_from(["swath", "roll", "pitch", "auto", "T", "1.1T", "../x", "a/b", "x" * 70]),
 )
 
 
 def values(keys: list[str]) -> st.SearchStrategy[object]:
+    """A scalar, or lists and tables of them (keys from ``keys``) nested a few deep."""
     return st.recursive(
         scalars,
         lambda inner: st.one_of(
             st.lists(inner, max_size=4), st.dictionaries(st.sampled_from(keys), inner, max_size=5)
         ),
-        max_leaves=25,
+        max_leaves=12,
     )
+
+
+def tables(keys: list[str], leaf: st.SearchStrategy[object]) -> st.SearchStrategy[object]:
+    """Mostly a table of ``keys`` (known ones and typos) to ``leaf``; sometimes anything else."""
+    return st.dictionaries(st.sampled_from(keys), leaf, max_size=5) | values(keys)
+
+
+ANY = values(["x", "T", "b1"])
+#: Where a number belongs: the edge cases first (non-finite, huge, negative, not a number at all).
+EDGES = [math.inf, -math.inf, math.nan, 10**400, 1e300, -1.0, 0, 1.5, True, "0.1", [], {}]
+NUMBER = st.one_of(st.sampled_from(EDGES), st.sampled_from(EDGES), st.floats(), ANY)
+COEFFICIENTS = tables(["b1", "b2", "b3", "c1", "c3", "s1", "b9"], NUMBER)
+HULLS = st.fixed_dictionaries(
+    {},
+    optional={
+        "name": ANY,
+        "description": ANY,
+        "dimensions": tables(["displacement_kg", "length_m", "dispacement_kg"], NUMBER),
+        "axes": tables(
+            ["roll", "pitch", "yaw"], tables(["gm_m", "radius_of_gyration_m", "note", "gm"], NUMBER)
+        ),
+        "simulation": tables(
+            ["roll", "pitch", "heave"],
+            tables(["drafts", "source", "draft"], tables(["T", "1.0T", "1.1T", "0.1T", "x"], COEFFICIENTS)),
+        ),
+        "sources": ANY,
+        "nme": ANY,
+    },
+)
 
 
 def toml_value(value: object) -> str:
@@ -338,8 +368,8 @@ def loads_or_one_line(load, path: Path) -> None:  # type: ignore[no-untyped-def]
         assert "\n" not in str(exc) and str(exc)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(table=st.dictionaries(st.sampled_from(HULL_KEYS), values(HULL_KEYS), max_size=6))
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(table=HULLS)
 def test_random_hull_files_load_or_give_one_line(table: dict[str, object], tmp_path: Path) -> None:
     path = tmp_path / "random.toml"
     path.write_text(toml_file(table))
@@ -350,7 +380,12 @@ def test_random_hull_files_load_or_give_one_line(table: dict[str, object], tmp_p
 @given(
     table=st.fixed_dictionaries(
         {"hulls": values(PLAN_KEYS), "axis": values(PLAN_KEYS), "drafts": values(PLAN_KEYS)},
-        optional={k: values(PLAN_KEYS) for k in PLAN_KEYS if k not in ("hulls", "axis", "drafts")},
+        optional={
+            **{k: values(PLAN_KEYS) for k in ("description", "repeat", "angle")},
+            "repeats": NUMBER,
+            "angles_deg": st.lists(NUMBER, max_size=3) | NUMBER,
+            "acceptance": tables(["min_r2", "angle_tolerance_deg", "min_half_cycles", "min_r"], NUMBER),
+        },
     )
 )
 def test_random_plan_files_load_or_give_one_line(table: dict[str, object], tmp_path: Path) -> None:
@@ -372,3 +407,29 @@ def test_random_simulation_coefficients_load_or_give_one_line(coefficients: dict
     path = tmp_path / "random.toml"
     path.write_text(base + "".join(f"{k} = {toml_value(v)}\n" for k, v in coefficients.items()))
     loads_or_one_line(load_hull, path)
+
+
+HULL_VALUES = [
+    "gm_m = 0.05",
+    "radius_of_gyration_m = 0.12",
+    "displacement_kg = 20.0",
+    "b1 = 0.3",
+    "c1 = 14.0",
+]
+PLAN_VALUES = ['hulls = ["h"]', 'axis = "roll"', 'drafts = ["T"]', "angles_deg = [10.0]"]
+
+
+@pytest.mark.parametrize("edge", EDGES, ids=repr)
+def test_every_value_of_a_hull_and_a_plan_takes_any_edge_value(edge: object, tmp_path: Path) -> None:
+    """Each value of the hull and the plan replaced in turn by each edge value (a float too large, an
+    integer of 400 digits, nan, a string, a list, a table...): loads, or one line."""
+    path = tmp_path / "edge.toml"
+    for line in HULL_VALUES:
+        key = line.split(" = ")[0]
+        path.write_text(edited(HULL, line, f"{key} = {toml_value(edge)}"))
+        loads_or_one_line(load_hull, path)
+    for line in [*PLAN_VALUES, "repeats = 1", "min_r2 = 0.9"]:
+        key = line.split(" = ")[0]
+        plan = PLAN + "repeats = 1\n[acceptance]\nmin_r2 = 0.9\n"
+        path.write_text(edited(plan, line, f"{key} = {toml_value(edge)}"))
+        loads_or_one_line(load_campaign_plan, path)

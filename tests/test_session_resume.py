@@ -9,8 +9,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from tankdaq.acquire.campaign_session import CampaignSession, Measured, SessionSettings, SessionState
-from tankdaq.acquire.session_log import SessionLog
+from tankdaq.acquire.campaign_session import (
+    CampaignSession,
+    Measured,
+    SessionLog,
+    SessionSettings,
+    SessionState,
+)
 from tankdaq.config import load_campaign_plan
 
 PLAN = """description = "one condition, one repeat"
