@@ -446,13 +446,15 @@ def load_campaign_plan(name: str) -> CampaignPlan:
         description=text(data, "description", where),
         hulls=[
             _plan_text(h, f"{path}: hulls[{i}]")
-            for i, h in enumerate(listed(data["hulls"], f"{path}: hulls", "hull names"))
+            for i, h in enumerate(listed(data["hulls"], f"{path}: hulls", "hull names", '["swath"]'))
         ],
         axis=axis,
-        drafts=_plan_drafts(listed(data["drafts"], f"{path}: drafts", "drafts"), path),
+        drafts=_plan_drafts(listed(data["drafts"], f"{path}: drafts", "drafts", '["T", "1.1T"]'), path),
         angles_deg=[
             number(a, f"{path}: angles_deg[{i}]", 0.0, MAX_RELEASE_ANGLE_DEG)
-            for i, a in enumerate(listed(data["angles_deg"], f"{path}: angles_deg", "angles in degrees"))
+            for i, a in enumerate(
+                listed(data["angles_deg"], f"{path}: angles_deg", "angles in degrees", "[10.0, 15.0]")
+            )
         ],
         repeats=whole_number(data.get("repeats", 1), f"{path}: repeats", 1, MAX_REPEATS),
         acceptance=acceptance_values(table(data, "acceptance", where), f"{path}: [acceptance]"),

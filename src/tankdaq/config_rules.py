@@ -159,9 +159,8 @@ def whole_number(value: object, where: str, low: int, high: int) -> int:
     return value
 
 
-def listed(value: object, where: str, what: str) -> list[Any]:
+def listed(value: object, where: str, what: str, example: str) -> list[Any]:
     """A non-empty list (a string is refused, not split into its characters)."""
     if not isinstance(value, list) or not value:
-        example = "[...]" if not isinstance(value, str) else f"[{value!r}]"
         raise ConfigError(f"{where} must be a non-empty list of {what}, e.g. {example}; not {shown(value)}")
     return value
