@@ -127,7 +127,7 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], message: 
     "extra, message",
     [
         ("[particulars]\nlpp = 2.0\n", "unknown key(s) ['lpp']"),
-        ("[particulars]\nlpp_m = nan\n", "must be a finite number"),
+        ("[particulars]\nlpp_m = nan\n", "lpp_m = nan is not finite"),  # read_toml refuses it first
         ("[particulars]\nbeam_m = -0.3\n", "must be positive"),
         ("[particulars]\nbilge_keel_length_m = -1\n", "must be zero or more"),
         ("[particulars]\nkg_m = 0.1\nog_m = 0.0\n", "both kg_m and og_m"),

@@ -5,6 +5,7 @@ panel (.rrd) read back."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import signal
@@ -379,7 +380,7 @@ def test_fault_scripts_are_parsed_or_refused_in_one_line() -> None:
 
 def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
     from tankdaq.acquire.campaign_session import plan_conditions
-    from tankdaq.config import list_campaign_plans, load_campaign_plan
+    from tankdaq.config import ACCEPTANCE_RANGES, list_campaign_plans, load_campaign_plan
     from tankdaq.errors import ConfigError
 
     for name in list_campaign_plans():
@@ -390,8 +391,9 @@ def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
         drafts = [c.draft for c in conditions]  # drafts grouped: each draft's conditions are contiguous
         assert drafts == sorted(drafts, key=[c.draft for c in conditions].index)
     assert load_campaign_plan("seed001-swath-roll").repeats == 3
-    with pytest.raises(ConfigError, match="no angle_tol"):
+    with pytest.raises(ConfigError, match="unknown key 'angle_tol'; did you mean 'angle_tolerance_deg'"):
         Acceptance.from_plan({"angle_tol": 1.0}, "plan x")
+    assert {f.name for f in dataclasses.fields(Acceptance)} == set(ACCEPTANCE_RANGES)  # one table of ranges
 
 
 class _Answers:
@@ -425,6 +427,7 @@ def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Pat
     log.append("draft", draft="T", action="ready")
     measured = dataclasses.asdict(_measured())
     log.append("run", decay=1, draft="T", angle_deg=10.0, file="a.mcap", reasons=[], measured=measured)
+    (out / "a.mcap").write_bytes(b"")  # its file is in the folder (a decay whose file is gone is re-done)
     # the power went before the operator answered
     settings = SessionSettings(plan, "swath", {"port": "sim", "out_dir": out, "viewer": "none"})
     operator = _Answers("n judged after the restart", "a")

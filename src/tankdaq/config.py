@@ -11,16 +11,28 @@ from __future__ import annotations
 import math
 import os
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .config_rules import (
+    MAX_RELEASE_ANGLE_DEG,
+    listed,
+    number,
+    read_toml,
+    refuse_unknown,
+    safe_name,
+    shown,
+    table,
+    text,
+    whole_number,
+)
 from .errors import ConfigError, InputError
 from .particulars import IKEDA_KEYS, MainParticulars, ikeda_inputs, parse_particulars
+from .physics.decay import decay_refusal
 from .physics.ikeda import IkedaPrediction
 from .physics.scaling import FroudeScale
-from .physics.scenario import DecayScenario
+from .physics.scenario import SIMULATION_RULE, DecayScenario
 from .physics.terms import TERMS
 
 
@@ -140,6 +152,17 @@ class Hull:
             )
         return self.simulation[axis]
 
+    def simulated_coefficients(
+        self, axis: str, draft: float, rate_hz: float | None = None
+    ) -> dict[str, float]:
+        """What the simulator plays on ``axis`` at ``draft``, checked to give a decay it can show at
+        ``rate_hz`` (``physics.decay.decay_refusal``): refused in one line before anything starts."""
+        coefficients = self.simulation_model(axis).coefficients(draft)
+        why = decay_refusal(coefficients, rate_hz)
+        if why is not None:
+            raise InputError(f"hull {self.name} {axis} at {format_draft(draft)}: {SIMULATION_RULE}: {why}")
+        return coefficients
+
 
 def user_hulls_dir() -> Path:
     """The user's hull folder: $TANKDAQ_HULLS_DIR, else $XDG_CONFIG_HOME/tankdaq/hulls (~/.config/...).
@@ -210,14 +233,7 @@ def locate_hull(spec: str) -> tuple[Path, str]:
 def load_hull(spec: str) -> Hull:
     """A hull by path or name (lookup: a path, the user folder, the shipped ones); unknown names list all."""
     path, origin = locate_hull(spec)
-    try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: {exc}") from None
-    try:
-        return _parse_hull(data, path, origin)
-    except (TypeError, ValueError, AttributeError) as exc:
-        raise ConfigError(f"{path}: {exc}") from None
+    return _parse_hull(read_toml(path), path, origin)
 
 
 def hull_scenario(
@@ -228,53 +244,91 @@ def hull_scenario(
     ``DecayScenario`` (angle_deg, rate_hz, runs, seed...). Physics knows no hull files: this is
     where the two meet."""
     loaded = hull if isinstance(hull, Hull) else load_hull(hull)
-    coefficients = loaded.simulation_model(axis).coefficients(draft)
+    coefficients = loaded.simulated_coefficients(axis, draft, settings.get("rate_hz"))
     return DecayScenario(hull=loaded.name, draft=draft, axis=axis, coefficients=coefficients, **settings)
 
 
-def _parse_hull(data: dict, path: Path, origin: str) -> Hull:
-    if "axes" in data and any("drafts" in spec for spec in data["axes"].values()):
+#: Physical particulars of a hull and their sane ranges (above 0, at most): a model or a ship.
+PARTICULAR_RANGES = {"gm_m": 1000.0, "radius_of_gyration_m": 1000.0, "displacement_kg": 1e10}
+#: The axes a hull's [simulation] part may play.
+SIMULATED_AXES = ("roll", "pitch")
+
+
+def _parse_hull(data: dict[str, Any], path: Path, origin: str) -> Hull:
+    """A hull from its TOML, every value checked (names, ranges, drafts, the simulator's coefficients)."""
+    axes_table = table(data, "axes", str(path))
+    if any(isinstance(spec, dict) and "drafts" in spec for spec in axes_table.values()):
         raise ConfigError(
             f"{path}: decay coefficients belong under [simulation.<axis>.drafts], not [axes.<axis>.drafts] "
             "(hull files now say what the model is; see docs/hulls.md)"
         )
-    axes = {
-        axis: AxisParticulars(
-            axis=axis,
-            gm_m=_optional_float(spec, "gm_m"),
-            radius_of_gyration_m=_optional_float(spec, "radius_of_gyration_m"),
-            note=str(spec.get("note", "")),
-        )
-        for axis, spec in data.get("axes", {}).items()
-    }
-    simulation: dict[str, SimulationModel] = {}
-    for axis, spec in data.get("simulation", {}).items():
-        drafts: dict[float, dict[str, float]] = {}
-        for draft_text, coeffs in spec.get("drafts", {}).items():
-            unknown = set(coeffs) - set(TERMS)
-            if unknown:
-                raise ConfigError(
-                    f"{path}: unknown terms {sorted(unknown)} in simulation.{axis} {draft_text}"
-                )
-            drafts[parse_draft(draft_text)] = {k: float(v) for k, v in coeffs.items()}
-        if not drafts:
-            raise ConfigError(f"{path}: [simulation.{axis}] has no drafts (or leave the part out)")
-        simulation[axis] = SimulationModel(axis=axis, drafts=drafts, source=str(spec.get("source", "")))
+    dimensions = {
+        str(key): number(value, f"{path}: dimensions.{key}", -PARTICULAR_RANGES["displacement_kg"],
+                         PARTICULAR_RANGES["displacement_kg"])
+        for key, value in table(data, "dimensions", str(path)).items()
+    }  # fmt: skip
+    if "displacement_kg" in dimensions:
+        number(dimensions["displacement_kg"], f"{path}: dimensions.displacement_kg", 0.0, 1e10)
     return Hull(
-        name=str(data.get("name", path.stem)),
-        description=str(data.get("description", "")),
-        dimensions={k: float(v) for k, v in data.get("dimensions", {}).items()},
-        axes=axes,
-        simulation=simulation,
-        sources=dict(data.get("sources", {})),
+        name=safe_name(data.get("name", path.stem), f"{path}: hull name"),
+        description=text(data, "description", str(path)),
+        dimensions=dimensions,
+        axes={str(axis): _particulars(axis, spec, path) for axis, spec in axes_table.items()},
+        simulation={
+            str(axis): _simulation(str(axis), spec, path)
+            for axis, spec in table(data, "simulation", str(path)).items()
+        },
+        sources={str(k): str(v) for k, v in table(data, "sources", str(path)).items()},
         path=path,
         origin=origin,
         main_particulars=parse_particulars(data.get("particulars", {}), path, parse_draft),
     )
 
 
-def _optional_float(spec: dict, key: str) -> float | None:
-    return float(spec[key]) if spec.get(key) is not None else None
+def _particulars(axis: str, spec: object, path: Path) -> AxisParticulars:
+    where = f"{path}: axes.{axis}"
+    if not isinstance(spec, dict):
+        raise ConfigError(f"{where} must be a table ([axes.{axis}]), not {shown(spec)}")
+    values = {
+        key: number(spec[key], f"{where}.{key}", 0.0, PARTICULAR_RANGES[key])
+        for key in ("gm_m", "radius_of_gyration_m")
+        if spec.get(key) is not None
+    }
+    return AxisParticulars(
+        axis, values.get("gm_m"), values.get("radius_of_gyration_m"), text(spec, "note", where)
+    )
+
+
+def _simulation(axis: str, spec: object, path: Path) -> SimulationModel:
+    """One axis of [simulation]: known terms, finite numbers, one entry per draft, and a playable decay."""
+    where = f"{path}: simulation.{axis}"
+    if axis not in SIMULATED_AXES:
+        raise ConfigError(f"{where}: the simulator plays {' or '.join(SIMULATED_AXES)}, not {shown(axis)}")
+    if not isinstance(spec, dict):
+        raise ConfigError(f"{where} must be a table, not {shown(spec)}")
+    drafts: dict[float, dict[str, float]] = {}
+    written: dict[float, str] = {}
+    for draft_text, coeffs in table(spec, "drafts", where).items():
+        at = f"{where}.drafts.{shown(draft_text)}"
+        try:
+            factor = parse_draft(draft_text)
+        except InputError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+        if factor in written:
+            raise ConfigError(
+                f"{where}: drafts {written[factor]!r} and {draft_text!r} are the same draft; keep one"
+            )
+        if not isinstance(coeffs, dict):
+            raise ConfigError(f"{at} must be a table of coefficients, not {shown(coeffs)}")
+        refuse_unknown(coeffs, TERMS, at)
+        values = {k: number(v, f"{at}.{k}", -1e9, 1e9, low_open=False) for k, v in coeffs.items()}
+        why = decay_refusal(values)
+        if why is not None:
+            raise ConfigError(f"{at}: {SIMULATION_RULE}: {why}")
+        drafts[factor], written[factor] = values, draft_text
+    if not drafts:
+        raise ConfigError(f"{path}: [simulation.{axis}] has no drafts (or leave the part out)")
+    return SimulationModel(axis=axis, drafts=drafts, source=text(spec, "source", where))
 
 
 def ikeda_prediction(
@@ -397,10 +451,7 @@ gm_m = 0.05
 
 def write_hull_template(name: str, folder: Path | None = None) -> Path:
     """Write a commented template ``<folder>/<name>.toml`` (default the user folder); never overwrite."""
-    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9-]*", name):
-        raise InputError(
-            f"hull name {name!r} not usable: letters, digits and '-' only (it becomes part of file names)"
-        )
+    safe_name(name, "hull name")
     folder = folder or user_hulls_dir()
     path = folder / f"{name}.toml"
     if path.exists():
@@ -434,6 +485,25 @@ class CampaignPlan:
     acceptance: dict[str, float] = field(default_factory=dict)
 
 
+#: The keys of a plan file (docs/session.md).
+PLAN_KEYS = ("description", "hulls", "axis", "drafts", "angles_deg", "repeats", "acceptance")
+#: The axes a plan's decays are on (a session needs to know which one: no ``auto``).
+PLAN_AXES = ("roll", "pitch")
+#: Decays kept per condition, at the most (the seeds' labs ran three).
+MAX_REPEATS = 100
+#: ``[acceptance]`` tolerances and their ranges (above the first, at most the second): a tolerance at or
+#: beyond these could never be met (an R² of 1) or would pass anything, and ``--yes`` would repeat for ever.
+ACCEPTANCE_RANGES: dict[str, tuple[float, float]] = {
+    "angle_tolerance_deg": (0.0, 10.0),
+    "level_tolerance_deg": (0.0, 10.0),
+    "min_half_cycles": (0.0, 100.0),
+    "min_r2": (0.0, 0.9999),
+    "rate_limit_deg_s": (0.0, 2000.0),
+    "repeat_tolerance": (0.0, 10.0),
+    "period_tolerance": (0.0, 1.0),
+}
+
+
 def list_campaign_plans() -> list[str]:
     """Names of the test matrices in configs/campaigns."""
     return sorted(p.stem for p in (config_dir() / "campaigns").glob("*.toml"))
@@ -449,22 +519,53 @@ def load_campaign_plan(name: str) -> CampaignPlan:
             f"unknown campaign plan {name!r}; known: {', '.join(list_campaign_plans()) or 'none'} "
             "(or give a .toml file)"
         )
-    try:
-        data = tomllib.loads(path.read_text())
-        plan = CampaignPlan(
-            name=path.stem,
-            description=str(data.get("description", "")),
-            hulls=[str(h) for h in data["hulls"]],
-            axis=str(data["axis"]),
-            drafts=[str(d) for d in data["drafts"]],
-            angles_deg=[float(a) for a in data["angles_deg"]],
-            repeats=int(data.get("repeats", 1)),
-            acceptance={str(k): float(v) for k, v in data.get("acceptance", {}).items()},
-        )
-    except (tomllib.TOMLDecodeError, KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise ConfigError(
-            f"{path}: {exc} (needs hulls, axis, drafts, angles_deg; optional repeats, [acceptance])"
-        ) from None
-    if plan.repeats < 1:
-        raise ConfigError(f"{path}: repeats must be 1 or more, got {plan.repeats}")
-    return plan
+    data = read_toml(path)
+    where = str(path)
+    refuse_unknown(data, PLAN_KEYS, where)
+    missing = [key for key in ("hulls", "axis", "drafts", "angles_deg") if key not in data]
+    if missing:
+        raise ConfigError(f"{path}: needs {', '.join(missing)} (see docs/session.md for a plan's keys)")
+    axis = data["axis"]
+    if axis not in PLAN_AXES:
+        raise ConfigError(f"{path}: axis must be one of {', '.join(PLAN_AXES)}, not {shown(axis)}")
+    return CampaignPlan(
+        name=path.stem,
+        description=text(data, "description", where),
+        hulls=[
+            _plan_text(h, f"{path}: hulls[{i}]")
+            for i, h in enumerate(listed(data["hulls"], f"{path}: hulls", "hull names", '["swath"]'))
+        ],
+        axis=axis,
+        drafts=_plan_drafts(listed(data["drafts"], f"{path}: drafts", "drafts", '["T", "1.1T"]'), path),
+        angles_deg=[
+            number(a, f"{path}: angles_deg[{i}]", 0.0, MAX_RELEASE_ANGLE_DEG)
+            for i, a in enumerate(
+                listed(data["angles_deg"], f"{path}: angles_deg", "angles in degrees", "[10.0, 15.0]")
+            )
+        ],
+        repeats=whole_number(data.get("repeats", 1), f"{path}: repeats", 1, MAX_REPEATS),
+        acceptance=acceptance_values(table(data, "acceptance", where), f"{path}: [acceptance]"),
+    )
+
+
+def _plan_text(value: object, where: str) -> str:
+    if not isinstance(value, str) or not value:
+        raise ConfigError(f"{where} must be a name in quotes, not {shown(value)}")
+    return value
+
+
+def _plan_drafts(drafts: list[Any], path: Path) -> list[str]:
+    """The drafts as written, each understood and none twice (``T`` and ``1.0T`` are one draft)."""
+    seen: dict[float, str] = {}
+    for i, draft in enumerate(drafts):
+        factor = parse_draft(_plan_text(draft, f"{path}: drafts[{i}]"))
+        if factor in seen:
+            raise ConfigError(f"{path}: drafts {seen[factor]!r} and {draft!r} are the same draft; keep one")
+        seen[factor] = draft
+    return list(seen.values())
+
+
+def acceptance_values(values: dict[str, Any], where: str) -> dict[str, float]:
+    """A plan's ``[acceptance]`` tolerances: known keys (the nearest suggested), each in its range."""
+    refuse_unknown(values, ACCEPTANCE_RANGES, where)
+    return {key: number(v, f"{where} {key}", *ACCEPTANCE_RANGES[key]) for key, v in values.items()}

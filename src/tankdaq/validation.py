@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .config_rules import MAX_RELEASE_ANGLE_DEG
 from .errors import InputError
 from .physics.models import resolve_model
 from .physics.terms import TERM_TABLE, TERMS
@@ -34,8 +35,6 @@ MTI_BASE_RATE_HZ = 400
 #: Serial line rates an MTi accepts (the SetBaudrate codes).
 STANDARD_BAUDS: tuple[int, ...] = tuple(sorted(set(BAUD_CODES.values())))
 
-#: A hand-set release beyond this is not a decay test (and beyond the models' validity).
-MAX_RELEASE_ANGLE_DEG = 45.0
 
 #: Bootstrap replicas beyond this add nothing to a 95 % interval and take hours.
 MAX_BOOTSTRAP_REPLICAS = 10_000
@@ -154,6 +153,15 @@ def live_model(spec: str | Sequence[str], option: str = "--model") -> tuple[str,
     return terms
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity, as a container or taskset sets it): the
+    most worker processes that can run at once (more only wait for a core, each with its memory)."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:  # not Linux
+        return os.cpu_count() or 1
+
+
 def _cannot_write_in(folder: Path) -> str | None:
     """Why a file cannot be created in ``folder`` (None: it can). Tries it: the only check that holds
     for root and for read-only or pseudo file systems. The probe file is removed at once."""
@@ -234,4 +242,5 @@ __all__ = [
     "output_rate_hz",
     "percent",
     "release_angle_deg",
+    "usable_cores",
 ]

@@ -24,30 +24,29 @@ from __future__ import annotations
 
 import dataclasses
 import fcntl
-import json
 import math
 import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from ..config import CampaignPlan, format_draft, load_hull, parse_draft
-from ..errors import ConfigError, InputError
+from ..config import PLAN_AXES, CampaignPlan, acceptance_values, format_draft, load_hull, parse_draft
+from ..config_rules import path_in
+from ..errors import InputError
 from ..ident.derived import b_eq
 from ..samples import AXIS_FIELDS
 from .daemon import RecordDaemon, RecordSettings
 from .session import DecayOutcome
+from .session_log import LOG_NAME, SessionLog
 from .sinks import Block, Decay, Sink
 
 if TYPE_CHECKING:
     from ..viz.campaign_view import CampaignView
 
-LOG_NAME = "session.jsonl"
 LOCK_NAME = "session.lock"
 REPORT_DIR = "report"
 PANEL_NAME = "campaign.rrd"
@@ -84,15 +83,8 @@ class Acceptance:
 
     @classmethod
     def from_plan(cls, table: dict[str, float], where: str) -> Acceptance:
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(table) - known)
-        if unknown:
-            raise ConfigError(
-                f"{where}: [acceptance] has no {', '.join(unknown)}; known: {', '.join(sorted(known))}"
-            )
-        if any(not (v > 0) for v in table.values()):
-            raise ConfigError(f"{where}: [acceptance] tolerances must be positive")
-        return cls(**table)
+        """The plan's tolerances, each known and in its range (``config.ACCEPTANCE_RANGES``)."""
+        return cls(**acceptance_values(table, f"{where}: [acceptance]"))
 
 
 @dataclass(frozen=True)
@@ -118,50 +110,8 @@ def plan_conditions(plan: CampaignPlan) -> list[Condition]:
 
 
 # --------------------------------------------------------------------------------------------------
-# The session file and the lock
+# The lock (the session file is ``acquire.session_log``)
 # --------------------------------------------------------------------------------------------------
-
-
-class SessionLog:
-    """``session.jsonl``: append-only, one JSON object per line, each fsynced before ``append`` returns.
-
-    A line cut by a crash (the last one, without its newline) is ignored when read back.
-    """
-
-    def __init__(self, folder: Path) -> None:
-        self.path = folder / LOG_NAME
-
-    def exists(self) -> bool:
-        return self.path.is_file() and self.path.stat().st_size > 0
-
-    def read(self) -> list[dict[str, Any]]:
-        if not self.path.is_file():
-            return []
-        records = []
-        for line in self.path.read_text().splitlines():
-            try:
-                records.append(json.loads(line))
-            except json.JSONDecodeError:
-                continue  # the line a crash cut short
-        return records
-
-    def append(self, kind: str, **fields: Any) -> dict[str, Any]:
-        record = {"type": kind, "at": datetime.now(UTC).isoformat(timespec="milliseconds"), **fields}
-        data = (json.dumps(record, default=str) + "\n").encode()
-        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-        try:
-            if os.lseek(fd, 0, os.SEEK_END) > 0 and not self._ends_with_newline():
-                data = b"\n" + data  # after a line cut by a crash: start a fresh line
-            os.write(fd, data)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        return record
-
-    def _ends_with_newline(self) -> bool:
-        with self.path.open("rb") as fh:
-            fh.seek(-1, os.SEEK_END)
-            return fh.read(1) == b"\n"
 
 
 class SessionLock:
@@ -288,6 +238,32 @@ def check_decay(
     return reasons
 
 
+def _usable_measured(measured: dict[str, Any]) -> bool:
+    """Whether a logged ``measured`` makes a ``Measured`` (the checks of later repeats read it)."""
+    kinds = {
+        "float": (int, float),
+        "int": (int, float),
+        "str": (str,),
+        "dict[str, float]": (dict,),
+        "list[str]": (list,),
+    }
+    for f in dataclasses.fields(Measured):
+        value = measured.get(f.name)
+        if (
+            f.name not in measured
+            and f.default is dataclasses.MISSING
+            and f.default_factory is dataclasses.MISSING
+        ):
+            return False
+        if f.name in measured and (isinstance(value, bool) or not isinstance(value, kinds[str(f.type)])):
+            return False
+    coefficients = measured.get("coefficients", {})
+    warnings = measured.get("fit_warnings", [])
+    return all(isinstance(v, int | float) and not isinstance(v, bool) for v in coefficients.values()) and all(
+        isinstance(w, str) for w in warnings
+    )
+
+
 def _repeat_reasons(measured: Measured, earlier: list[Measured], a: Acceptance) -> list[str]:
     reasons = []
     b_ref = float(np.mean([m.b_eq_per_s for m in earlier]))
@@ -332,36 +308,55 @@ class SessionState:
     skipped: set[Condition] = field(default_factory=set)
     draft_ready: str | None = None  # the draft the operator last confirmed
     report: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)  # records left out, one line each
 
     @classmethod
     def from_log(
         cls, records: list[dict[str, Any]], conditions: list[Condition], repeats: int
     ) -> SessionState:
+        """The state the records say (each already checked by ``session_log.record_problem``); a record
+        that contradicts the ones before it is left out and listed in ``problems``."""
         state = cls(conditions, repeats)
         by_decay: dict[int, RunEntry] = {}
-        for r in records:
-            kind = r.get("type")
-            if kind == "run":
-                entry = RunEntry(
-                    r["decay"],
-                    Condition(r["draft"], float(r["angle_deg"])),
-                    r["file"],
-                    r["reasons"],
-                    r["measured"],
-                )
-                by_decay[entry.decay] = entry
-                state.runs.append(entry)
-            elif kind == "verdict":
-                by_decay[r["decay"]].verdict = r["verdict"]
-            elif kind == "skip":
-                state.skipped.add(Condition(r["draft"], float(r["angle_deg"])))
-            elif kind == "draft":
-                state.draft_ready = r["draft"]
-            elif kind == "report":
-                state.report = list(r["files"])
-            elif kind == "start":
-                state.draft_ready = None  # after a restart the level is checked again
+        for number, r in enumerate(records, 1):
+            why = state._apply(r, by_decay)
+            if why:
+                state.problems.append(f"{LOG_NAME} record {number} ({r.get('type')}) skipped: {why}")
         return state
+
+    def _apply(self, r: dict[str, Any], by_decay: dict[int, RunEntry]) -> str | None:
+        kind = r.get("type")
+        if kind == "run":
+            if r["decay"] in by_decay:
+                return f"decay {r['decay']} was logged before"
+            if r["measured"] and not _usable_measured(r["measured"]):
+                return "its measured values are incomplete"
+            entry = RunEntry(
+                r["decay"],
+                Condition(r["draft"], float(r["angle_deg"])),
+                r["file"],
+                r["reasons"],
+                r["measured"],
+            )
+            by_decay[entry.decay] = entry
+            self.runs.append(entry)
+        elif kind == "verdict":
+            judged = by_decay.get(r["decay"])
+            if judged is None:
+                return f"no decay {r['decay']} was logged"
+            if r["verdict"] == "accepted" and not judged.measured:
+                return f"decay {judged.decay} has nothing measured to accept"
+            judged.verdict = r["verdict"]
+            self.report = []  # a verdict after the report: the report no longer covers the accepted decays
+        elif kind == "skip":
+            self.skipped.add(Condition(r["draft"], float(r["angle_deg"])))
+        elif kind == "draft":
+            self.draft_ready = r["draft"]
+        elif kind == "report":
+            self.report = list(r["files"])
+        elif kind == "start":
+            self.draft_ready = None  # after a restart the level is checked again
+        return None
 
     def accepted(self, condition: Condition) -> list[RunEntry]:
         return [r for r in self.runs if r.condition == condition and r.verdict == "accepted"]
@@ -386,6 +381,11 @@ class SessionState:
     @property
     def decays(self) -> int:
         return len(self.runs)
+
+    @property
+    def next_decay(self) -> int:
+        """The number of the next decay (after the highest logged: a skipped record leaves a gap)."""
+        return max((r.decay for r in self.runs), default=0) + 1
 
     def runs_left(self) -> int:
         return sum(
@@ -488,6 +488,10 @@ class CampaignSession:
         self.on_progress = on_progress or (lambda _p: None)
         self.resume = resume
         plan = settings.plan
+        if plan.axis not in PLAN_AXES:  # a plan made in code: a file's is checked as it is read
+            raise InputError(
+                f"plan {plan.name}: axis must be one of {', '.join(PLAN_AXES)}, not {plan.axis!r}"
+            )
         first = plan_conditions(plan)[0]  # a placeholder condition: each decay gets its own
         self.record = RecordSettings(
             **{"draft": first.draft_factor, "angle_deg": first.angle_deg} | settings.record
@@ -564,20 +568,36 @@ class CampaignSession:
             )
         else:
             logged = next((r for r in records if r.get("type") == "plan"), None)
-            if logged is None or logged["plan"] != plan or logged["hull"] != self.settings.hull:
+            if logged is None or logged.get("plan") != plan or logged.get("hull") != self.settings.hull:
                 raise InputError(
                     f"{self.folder} holds a session of another plan or hull; "
                     "resume it with the same PLAN and --hull"
                 )
+        for line in self.log.skipped + SessionState.from_log(records, self.conditions, 1).problems:
+            self.on_line(line)  # each record left out, once, as the session opens
         self.log.append("start", resumed=bool(records), pid=os.getpid(), port=self.record.port)
-        state = SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
-        self._adopt_orphans(state)
-        return SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
+        self._adopt_orphans(self._reload())
+        self._mark_missing(self._reload())
+        return self._reload()
+
+    def _mark_missing(self, state: SessionState) -> None:
+        """Decays whose file is gone from the folder since: rejected, so their condition is recorded
+        again and the report covers only files that exist."""
+        for run in state.runs:
+            if run.verdict == "rejected" or (self.folder / run.file).is_file():
+                continue
+            reason = f"{run.file} is gone from {self.folder}"
+            self.log.append(
+                "verdict", decay=run.decay, verdict="rejected", action="missing", reasons=[reason]
+            )
+            self.on_line(
+                f"decay {run.decay}: {reason}; marked rejected, {run.condition.label} is recorded again"
+            )
 
     def _adopt_orphans(self, state: SessionState) -> None:
         """Recordings in the folder the log never heard of (the session died mid-decay): logged, rejected."""
         known = {r.file for r in state.runs}
-        decay = state.decays
+        decay = state.next_decay - 1
         for path in sorted(self.folder.glob("*.mcap")):
             if path.name in known:
                 continue
@@ -587,7 +607,9 @@ class CampaignSession:
             self.log.append("run", decay=decay, draft=condition.draft, angle_deg=condition.angle_deg,
                             file=path.name, reasons=[reason], measured={})  # fmt: skip
             self.log.append("verdict", decay=decay, verdict="rejected", action="recovered")
-            self.on_line(f"decay {decay}: {path.name} was cut by the stop; kept, marked rejected")
+            self.on_line(
+                f"decay {decay}: {path.name} is not in the log (cut by a stop); kept, marked rejected"
+            )
 
     def _condition_of(self, path: Path) -> Condition | None:
         from ..store.reader import read_recording
@@ -736,7 +758,7 @@ class CampaignSession:
         return level.mean_sd_deg()
 
     def _record_one(self, state: SessionState, condition: Condition) -> SessionState:
-        decay = state.decays + 1
+        decay = state.next_decay
         repeat = len(state.accepted(condition)) + 1
         self.on_line(
             f"decay {decay}: {condition.label}, repeat {repeat}/{state.repeats}: "
@@ -830,7 +852,7 @@ class CampaignSession:
     # ---- the report ----------------------------------------
 
     def _write_report(self, state: SessionState) -> None:
-        accepted = [self.folder / r.file for r in state.runs if r.verdict == "accepted"]
+        accepted = [path_in(self.folder, r.file) for r in state.runs if r.verdict == "accepted"]
         if not accepted:
             self.on_line("no decay accepted: no report")
             return

@@ -91,7 +91,7 @@ class RecordSettings:
         if sim_port and sim_port.recording is None:  # refuse a hull the simulator cannot play
             if hull is None:
                 raise InputError("the simulated sensor needs a hull to play: give --hull")
-            hull.simulation_model(self.simulated_axis).coefficients(self.draft)
+            hull.simulated_coefficients(self.simulated_axis, self.draft, self.rate_hz)
         validation.output_dir(self.out_dir, option="output folder")
         return hull
 

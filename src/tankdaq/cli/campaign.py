@@ -35,7 +35,11 @@ def campaign_command(
     end: EndS = None,
     jobs: Annotated[
         int | None,
-        typer.Option("--jobs", min=1, help="Worker processes for reading, fits and plots [default: cores]."),
+        typer.Option(
+            "--jobs",
+            min=1,
+            help="Worker processes for reading, fits and plots [default and at most: the cores].",
+        ),
     ] = None,
     executor: Annotated[
         str, typer.Option("--executor", help="local (a process pool) or dask (needs --scheduler).")
@@ -56,11 +60,10 @@ def campaign_command(
     stdout. A file that cannot be read is skipped with one line; the exit code is then 1 (results
     written for the others).
     """
-    import os
-
     from ..errors import InputError
     from ..ident.campaign import (
         campaign_executor,
+        check_scheduler,
         find_campaign_hulls,
         find_recordings,
         group_runs,
@@ -78,6 +81,8 @@ def campaign_command(
     if (executor == "dask") != (scheduler is not None):
         raise InputError("--executor dask needs --scheduler ADDRESS, and --scheduler needs --executor dask")
     resolve_model(model)  # a typo fails before any file is read
+    if scheduler is not None:
+        check_scheduler(scheduler)  # an address not understood or not answering: one line, at once
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs)
     prepare_identifier(model, say)  # the native kernels: built once, on the first run after install
@@ -86,8 +91,11 @@ def campaign_command(
         from ..viz.campaign_report import load_plotting, write_report
 
         prepare.append(load_plotting)  # loaded before the pool forks: its workers draw the figures
+    cores = validation.usable_cores()
+    if jobs is not None and jobs > cores and executor == "local":
+        say(f"--jobs {jobs}: this machine gives tankdaq {cores} cores; running {cores} workers")
     with (
-        campaign_executor(jobs or os.cpu_count() or 1, scheduler, prepare) as pool,
+        campaign_executor(min(jobs or cores, cores), scheduler, prepare) as pool,
         progress_bar() as progress,
     ):
         reading = progress.add_task("reading", total=len(paths))

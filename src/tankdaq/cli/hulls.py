@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from .app import app, handles_errors
+from .app import app, handles_errors, say
 
 if TYPE_CHECKING:  # the hull files are read by the commands: --help of every command skips config
     from ..config import Hull
@@ -26,14 +26,23 @@ def list_command(ctx: typer.Context) -> None:
     if ctx.invoked_subcommand is not None:
         return
     from ..config import find_hulls, load_hull, user_hulls_dir
+    from ..errors import InputError
 
     typer.echo(f"user hull folder: {user_hulls_dir()} (set TANKDAQ_HULLS_DIR to move it)")
+    skipped = 0
     for entry in find_hulls():
-        hull = load_hull(str(entry.path))
+        try:
+            hull = load_hull(str(entry.path))
+        except InputError as exc:  # one bad file in the folder does not hide the others
+            say(f"skipped: {exc}")
+            skipped += 1
+            continue
         hides = f"; hides the shipped {entry.shadows}" if entry.shadows else ""
         typer.echo(f"{entry.name}: {hull.description}")
         typer.echo(f"  from {entry.origin}: {entry.path}{hides}")
         typer.echo(f"  {_particulars_line(hull)}")
+    if skipped:
+        raise InputError(f"{skipped} hull file(s) skipped (each named above); fix or remove them")
 
 
 def _particulars_line(hull: Hull) -> str:

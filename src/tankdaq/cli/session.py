@@ -38,6 +38,9 @@ PLAN is a name in configs/campaigns or a .toml file:
   repeat_tolerance = 0.2       # B_eq vs the earlier repeats (relative)
   period_tolerance = 0.03      # natural period vs the earlier repeats
 
+Every key and range is checked as the plan is read (docs/session.md): a typo is named with the
+nearest known key, a value out of range is one line with its range.
+
 Each decay is checked as it settles; a failed check is flagged and the operator asked to repeat.
 Keys: Enter = the default, a accept, r reject and repeat, s skip, n TEXT adds a note.
 Everything goes to OUT/session.jsonl; --resume continues after Ctrl-C or a crash. When every

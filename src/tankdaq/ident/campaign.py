@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Hull, format_draft, load_hull, parse_draft
+from ..config_rules import safe_name
 from ..errors import IdentificationError, InputError, TankdaqError
 from ..physics.decay import simulate_decay
 from ..physics.models import is_auto
@@ -178,7 +179,15 @@ def read_campaign_runs(
 
 def _labelled_runs(path: Path) -> list[DecayRun]:
     """The decays of a file (``ident.inputs``), labelled from the recording's metadata or, for a file
-    that does not say, from its sidecar or name (``csv_labels``)."""
+    that does not say, from its sidecar or name (``csv_labels``); the hull name becomes part of report
+    file names, so it must pass ``config_rules.safe_name``."""
+    runs = _read_labelled_runs(path)
+    for run in runs:
+        safe_name(run.meta["hull"], f"{path}: hull")
+    return runs
+
+
+def _read_labelled_runs(path: Path) -> list[DecayRun]:
     if input_format(path).self_labelled:
         runs = read_decays(path)
         for run in runs:
@@ -345,11 +354,7 @@ def campaign_executor(
     starts with them instead of importing and loading them again, once per worker.
     """
     if scheduler is not None:
-        try:
-            from distributed import Client
-        except ImportError:
-            raise InputError("--executor dask needs the dask extra: pip install 'tankdaq[dask]'") from None
-        with Client(scheduler) as client:
+        with _dask_client(scheduler) as client:
             yield client.get_executor()
     elif jobs <= 1:
         yield None
@@ -368,6 +373,56 @@ def campaign_executor(
             finally:
                 gc.unfreeze()
             yield pool
+
+
+#: How long a Dask scheduler has to answer before the campaign gives up (one line, exit 1).
+DASK_CONNECT_TIMEOUT_S = 5.0
+
+
+def check_scheduler(scheduler: str) -> None:
+    """A Dask scheduler address understood (else one line, exit 2) and answering within
+    ``DASK_CONNECT_TIMEOUT_S`` (else one line, exit 1): checked before the campaign starts any work. The
+    port is tried with a plain socket: a ``Client`` that failed to connect still tries to close itself
+    at exit, loudly."""
+    import contextlib
+    import socket
+
+    try:
+        from distributed.comm import get_address_host_port, parse_address
+    except ImportError:
+        raise InputError("--executor dask needs the dask extra: pip install 'tankdaq[dask]'") from None
+    try:
+        parse_address(scheduler, strict=True)
+    except (ValueError, TypeError) as exc:
+        raise InputError(
+            f"--scheduler {scheduler!r} not understood ({exc}); give e.g. tcp://10.0.0.5:8786"
+        ) from None
+    try:
+        with contextlib.suppress(ValueError):  # an address without host and port (inproc://) is not tried
+            socket.create_connection(get_address_host_port(scheduler), timeout=DASK_CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise TankdaqError(_unreachable(scheduler, exc)) from None
+
+
+def _unreachable(scheduler: str, exc: BaseException) -> str:
+    return (
+        f"cannot reach the Dask scheduler at {scheduler} within {DASK_CONNECT_TIMEOUT_S:g} s ({exc}); "
+        "start it (dask scheduler) or check --scheduler"
+    )
+
+
+@contextmanager
+def _dask_client(scheduler: str) -> Iterator[Any]:
+    """A Dask client of ``scheduler`` (``check_scheduler`` first), connected within the bound."""
+    check_scheduler(scheduler)
+    from distributed import Client
+
+    try:
+        client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError) as exc:
+        raise TankdaqError(_unreachable(scheduler, exc)) from None
+    with client:
+        yield client
 
 
 # --------------------------------------------------------------------------------------------------

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..samples import SAMPLE_DTYPE
-from .decay import TERMS, acceleration, simulate_decay
+from .decay import TERMS, acceleration, decay_refusal, simulate_decay
 
 #: SampleTimeFine ticks per second, and the wrap of the 10/100-series (one day of ticks).
 TICKS_PER_S = 10_000
@@ -43,6 +43,12 @@ PUSH_AGAIN_FRACTION = 0.8
 SCRIPTED_FAULTS = ("wrong-angle", "double-push")
 #: A wrong-angle run is tilted this much further than asked.
 WRONG_ANGLE_FACTOR = 1.5
+
+#: What a hull's ``[simulation]`` part must give (the start of the line that refuses one).
+SIMULATION_RULE = (
+    "the simulator's coefficients must give a decay (damped, finite, positive stiffness, a period the "
+    "simulator can play)"
+)
 
 #: StatusWord of a healthy MTi-G streaming: self-test passed (bit 0), filter valid (bit 1).
 STATUS_OK = 0x00000003
@@ -236,6 +242,9 @@ class DecayScenario:
             )
         if self.decay_s <= 0:
             raise InputError("decay time must be positive")
+        why = decay_refusal(self.coefficients, self.rate_hz)  # before a thread integrates them
+        if why is not None:
+            raise InputError(f"{self.hull} {self.axis}: {SIMULATION_RULE}: {why}")
         if self.start_ticks is None:
             self.start_ticks = int(np.random.default_rng([self.seed, 1]).integers(0, TICK_MODULUS // 2))
 

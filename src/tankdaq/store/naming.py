@@ -17,6 +17,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from ..config import format_draft, parse_draft
+from ..config_rules import safe_name
 from ..errors import RecordingError
 
 _MAX_SUFFIX = 999
@@ -58,6 +59,7 @@ def recording_name(
     hull: str, draft: float | str, axis: str, angle_deg: float, run: int, when: datetime | None = None
 ) -> str:
     """``swath_1.1T_roll_8deg_20261121-143015_run03.mcap`` (time in UTC unless ``when`` says otherwise)."""
+    safe_name(hull, "hull name")  # checked as the hull was loaded: a second line of defence
     stamp = (when or datetime.now(UTC)).strftime(_STAMP_FORMAT)
     return f"{_series_prefix(hull, draft, axis)}{_format_angle(angle_deg)}_{stamp}_run{run:02d}.mcap"
 

@@ -19,6 +19,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..config import format_draft
+from ..config_rules import path_in
 from ..ident.campaign import GroupKey, GroupResult, executor_map, write_tables
 from ..ident.derived import b_eq_band, extinction_curve, natural_period
 from ..ident.output_error import OutputError
@@ -71,7 +72,7 @@ def write_plots(results: Sequence[GroupResult], folder: Path, executor: Executor
     figures.sort(key=lambda figure: figure[0] not in MULTI_PANEL)  # the longest first: no long last one
     plots = [plot for plot, _, _ in figures]
     groups = [series for _, series, _ in figures]
-    paths = [folder / name for _, _, name in figures]
+    paths = [path_in(folder, name) for _, _, name in figures]  # a name never leaves the report folder
     return list(executor_map(executor, draw_plot, plots, groups, paths))
 
 

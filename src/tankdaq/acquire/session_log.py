@@ -1,0 +1,131 @@
+"""``session.jsonl``: a guided session's append-only log, written fsynced and read back defensively.
+
+The log is the session's only state, and it is a file on a lab disk: a power cut leaves half a line,
+an editor or a copy can leave bytes that are not UTF-8 or lines that are not records. Reading it back
+never fails on such a line: every line that cannot be used is skipped and listed (``SessionLog.skipped``,
+one line each naming the line number and why), and the session goes on from the others. A decay whose
+record was skipped is not lost: its file is still in the folder, and the session adopts it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+LOG_NAME = "session.jsonl"
+#: The verdicts a decay can have.
+VERDICTS = ("accepted", "rejected")
+
+
+class SessionLog:
+    """``session.jsonl``: append-only, one JSON object per line, each fsynced before ``append`` returns.
+
+    ``read()`` returns the records that can be used; ``skipped`` then lists the others, one line each
+    (a line cut by a crash, bytes that are not UTF-8, JSON that is not a record or lacks what its
+    type needs), and ``lines`` the line number of each record returned.
+    """
+
+    def __init__(self, folder: Path) -> None:
+        self.path = folder / LOG_NAME
+        self.skipped: list[str] = []
+        self.lines: list[int] = []
+
+    def exists(self) -> bool:
+        return self.path.is_file() and self.path.stat().st_size > 0
+
+    def read(self) -> list[dict[str, Any]]:
+        self.skipped, self.lines = [], []
+        if not self.path.is_file():
+            return []
+        records = []
+        for number, raw in enumerate(self.path.read_bytes().split(b"\n"), 1):
+            if not raw.strip():
+                continue
+            record, why = _parse_line(raw)
+            if record is None:
+                self.skipped.append(f"{self.path.name} line {number} skipped: {why}")
+                continue
+            records.append(record)
+            self.lines.append(number)
+        return records
+
+    def append(self, kind: str, **fields: Any) -> dict[str, Any]:
+        record = {"type": kind, "at": datetime.now(UTC).isoformat(timespec="milliseconds"), **fields}
+        data = (json.dumps(record, default=str) + "\n").encode()
+        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        try:
+            if os.lseek(fd, 0, os.SEEK_END) > 0 and not self._ends_with_newline():
+                data = b"\n" + data  # after a line cut by a crash: start a fresh line
+            os.write(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        return record
+
+    def _ends_with_newline(self) -> bool:
+        with self.path.open("rb") as fh:
+            fh.seek(-1, os.SEEK_END)
+            return fh.read(1) == b"\n"
+
+
+def _parse_line(raw: bytes) -> tuple[dict[str, Any] | None, str]:
+    """The record on one line, or None and why it cannot be used."""
+    try:
+        record = json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        return None, "not UTF-8 text"
+    except (json.JSONDecodeError, RecursionError):
+        return None, "not a whole JSON line (cut by a crash, or edited)"
+    if not isinstance(record, dict):
+        return None, f"a JSON {type(record).__name__}, not a record"
+    why = record_problem(record)
+    return (None, why) if why else (record, "")
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_file_name(value: object) -> bool:
+    """A plain file name in the session folder (a path elsewhere is never followed)."""
+    return (
+        isinstance(value, str)
+        and value not in ("", ".", "..")
+        and not any(bad in value for bad in ("/", "\\", "\0"))
+    )
+
+
+#: What each record type needs to be used: field -> test, and what the test asks for.
+_NEEDS: dict[str, dict[str, tuple[Any, str]]] = {
+    "run": {
+        "decay": (lambda v: isinstance(v, int) and not isinstance(v, bool) and v >= 1, "a decay number"),
+        "draft": (lambda v: isinstance(v, str), "a draft"),
+        "angle_deg": (_is_number, "an angle"),
+        "file": (_is_file_name, "a file name in the session folder"),
+        "reasons": (
+            lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v),
+            "a list of reasons",
+        ),
+        "measured": (lambda v: isinstance(v, dict), "the measured values"),
+    },
+    "verdict": {
+        "decay": (lambda v: isinstance(v, int) and not isinstance(v, bool), "a decay number"),
+        "verdict": (lambda v: v in VERDICTS, "accepted or rejected"),
+    },
+    "skip": {"draft": (lambda v: isinstance(v, str), "a draft"), "angle_deg": (_is_number, "an angle")},
+    "draft": {"draft": (lambda v: isinstance(v, str), "a draft")},
+    "report": {"files": (lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v), "file names")},
+}
+
+
+def record_problem(record: dict[str, Any]) -> str | None:
+    """Why a record cannot be used (None: it can): each field its type needs, of the right kind."""
+    kind = record.get("type")
+    for name, (test, what) in _NEEDS.get(kind if isinstance(kind, str) else "", {}).items():
+        if name not in record or not test(record[name]):
+            return f"a {kind} record without {what} ({name})"
+    return None
