@@ -1,0 +1,389 @@
+"""Simulation meets measurement: where a lab's simulation and its model test disagree, what it misses.
+
+``SimulationComparison(simulation).fit(runs)`` identifies the simulation's own
+equation (a time series is fitted by ident's output-error engine; a model's
+coefficients are used as given), re-simulates it from every measured run's
+release state, and compares cycle by cycle: period, the decrement curve,
+B_eq(phi_a) with 95 % intervals on both sides, the residual's structure. Then
+it adds the missing effect from the library (``diagnose.effects``, plus a
+linear damping or stiffness that is only off in value) by fitting ONLY the added
+term(s) to the measurement with the simulation's own terms fixed, step by step
+while a step closes a real part of the gap, and refits everything free beside
+it. The gap is the RMS of the angle over the measured decay, simulation vs
+measured, every model started from the same measured release state.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from ..config import Hull
+from ..errors import BadIdentificationInput
+from ..ident.base import EstimatorMixin
+from ..ident.derived import (
+    b_eq,
+    delta_method,
+    equivalent_frequency,
+    linear_stiffness,
+    tested_amplitudes_deg,
+)
+from ..ident.output_error import OutputError
+from ..physics.models import canonical_order
+from ..records import DecayRun
+from .correction import correction
+from .effects import INCREMENTS, LIBRARY, Effect
+from .fitting import Fit, ModelSpec, RunPrediction, fit_spec
+from .residuals import Diagnostics, cycle_trend
+from .simulation import SERIES, Match, Simulation, check_time_scale, match_runs
+from .workflow import _ringing_guess, diagnose_fit
+
+#: The measured side's model: quadratic damping and cubic restoring (ITTC eq. 6 + 9), HAC intervals.
+REFERENCE_TERMS = ("b1", "b2", "c1", "c3")
+#: A simulated series is identified with these, the negligible ones then dropped.
+SERIES_TERMS = ("b1", "b2", "c1", "c3")
+#: Dropped when it adds less than this to B_eq (damping) or to the stiffness (restoring) at the top amplitude.
+NEGLIGIBLE_DAMPING, NEGLIGIBLE_RESTORING = 0.01, 0.001
+#: Nothing is missing once the gap is within this multiple of what a model fitted to the measurement leaves.
+FLOOR_FACTOR = 1.5
+#: A step must close at least this fraction of the gap left above that floor, and pass the BIC margin.
+MIN_CLOSED, DELTA_BIC = 0.25, -10.0
+#: Periods agree within this fraction; damping disagrees when its 95 % intervals part by more than 10 %.
+PERIOD_TOLERANCE, DAMPING_TOLERANCE = 0.005, 0.10
+#: Effects a comparison may add: increments of terms the simulation holds, then the library's.
+CANDIDATES: tuple[Effect, ...] = (*INCREMENTS, *(e for e in LIBRARY if e.kind != "truncation"))
+
+
+@dataclass
+class SimEquation:
+    """The simulation's own equation per unit inertia, with its covariance (zeros when given exactly)."""
+
+    terms: tuple[str, ...]
+    coefficients: dict[str, float]
+    covariance: np.ndarray
+    series_rms_rad: float | None  # how well it reproduces the simulated series (None: a model)
+
+
+@dataclass
+class DampingPoint:
+    """B_eq (1/s) of the measurement, the simulation and the corrected model at one amplitude, +-1.96 std."""
+
+    amplitude_deg: float
+    measured: tuple[float, float]  # value, std
+    simulation: tuple[float, float]
+    corrected: tuple[float, float]
+
+    @property
+    def ratio(self) -> float:
+        return self.simulation[0] / self.measured[0]
+
+    @property
+    def ratio_ci95(self) -> tuple[float, float]:
+        (bm, sm), (bs, ss) = self.measured, self.simulation
+        rel = math.hypot(sm / bm, ss / bs) if bm and bs else math.inf
+        return self.ratio * (1 - 1.96 * rel), self.ratio * (1 + 1.96 * rel)
+
+    @property
+    def disagrees(self) -> bool:
+        (bm, sm), (bs, ss) = self.measured, self.simulation
+        return abs(bs - bm) > max(1.96 * math.hypot(sm, ss), DAMPING_TOLERANCE * abs(bm))
+
+
+@dataclass
+class PeriodPoint:
+    """The undamped period (s) at one amplitude from each equation (describing function, ITTC eq. 14)."""
+
+    amplitude_deg: float
+    measured: float
+    simulation: float
+    corrected: float
+
+    @property
+    def simulation_error(self) -> float:
+        return self.simulation / self.measured - 1.0
+
+
+@dataclass
+class CorrectionStep:
+    """One effect added to the simulation: only its term(s) fitted, the simulation's own ones fixed."""
+
+    effect: Effect
+    after: Fit
+    fixed: dict[str, float]  # what stayed at the simulation's values
+    added: dict[str, float]  # the increments (value fitted minus the simulation's, or the new term)
+    delta_bic: float
+    rms_before_rad: float
+    rms_after_rad: float
+
+
+def identify_series(runs: Sequence[DecayRun]) -> SimEquation:
+    """The simulated decays' equation: ``SERIES_TERMS`` fitted by output error, negligible ones dropped."""
+    fit = OutputError(SERIES_TERMS, compute_diagnostics=False).fit(runs)
+    top = max(float(np.max(np.abs(run.angle))) for run in runs)
+    kept = tuple(t for t in SERIES_TERMS if t in ("b1", "c1") or _matters(fit.coefficients_, t, top))
+    if kept != SERIES_TERMS:
+        fit = OutputError(kept, compute_diagnostics=False).fit(runs, start=fit.coefficients_)
+    residual = np.concatenate([res["angle"] for res in fit.residuals_])
+    return SimEquation(kept, dict(fit.coefficients_), fit.covariance_, float(np.sqrt(np.mean(residual**2))))
+
+
+def _matters(coefficients: dict[str, float], term: str, amplitude: float) -> bool:
+    """Whether a term changes B_eq or the stiffness noticeably at the largest amplitude."""
+    alone = {"b1": 0.0, "c1": coefficients["c1"], term: coefficients[term]}
+    if term.startswith("b"):
+        return abs(b_eq(alone, amplitude)) > NEGLIGIBLE_DAMPING * abs(b_eq(coefficients, amplitude))
+    omega2 = equivalent_frequency(alone, amplitude) ** 2
+    return abs(omega2 / coefficients["c1"] - 1.0) > NEGLIGIBLE_RESTORING
+
+
+def total_b_eq(coefficients: Mapping[str, float], amplitude: float) -> float:
+    """B_eq (1/s) at amplitude phi_a (rad) with Coulomb friction's share, 4 fc / (pi omega phi_a) (equal
+    energy per cycle: friction takes 4 fc phi_a, linear damping pi b omega phi_a^2)."""
+    value = b_eq(coefficients, amplitude)
+    if coefficients.get("fc"):
+        value += (
+            4.0 * coefficients["fc"] / (math.pi * equivalent_frequency(coefficients, amplitude) * amplitude)
+        )
+    return value
+
+
+def damping_band(
+    coefficients: Mapping[str, float], covariance: np.ndarray, amplitudes_deg: Sequence[float]
+) -> list[tuple[float, float]]:
+    """``total_b_eq`` and its delta-method standard deviation at each amplitude (deg)."""
+    out = []
+    for a_deg in amplitudes_deg:
+        fn = partial(total_b_eq, amplitude=math.radians(a_deg))
+        out.append((fn(coefficients), delta_method(fn, coefficients, covariance)))
+    return out
+
+
+def from_release(
+    fit: Fit, runs: Sequence[DecayRun], states: Sequence[tuple[float, float]]
+) -> list[RunPrediction]:
+    """The fitted model simulated over each run from the given release state (angle, rate)."""
+    out = []
+    for r, (run, state) in enumerate(zip(runs, states, strict=True)):
+        angle, rate = fit.estimator.predict(run, run_index=r, initial_state=state)
+        residual_rate = None if run.rate is None else run.rate - rate
+        out.append(RunPrediction(run.name, run.t, angle, rate, run.angle - angle, residual_rate))
+    return out
+
+
+def rms_rad(curves: Sequence[RunPrediction]) -> float:
+    """RMS of the angle residual over every sample of every run."""
+    return float(np.sqrt(np.mean(np.concatenate([c.residual_angle for c in curves]) ** 2)))
+
+
+class SimulationComparison(EstimatorMixin):
+    """Compare a simulation with measured decays, name what it misses, add it, show the gap shrink.
+
+    Fitted: ``matches_`` (series), ``runs_`` (the measured runs compared), ``equation_``
+    (``SimEquation``), ``reference_`` (the measured side's fit), ``release_states_``,
+    ``amplitudes_deg_``, ``damping_`` (``DampingPoint`` per amplitude), ``periods_s_``
+    ({measured, simulation, corrected}: median cycle period of each curve), ``period_error_``,
+    ``disagrees_in_`` ("damping", "stiffness"), ``diagnostics_`` (the simulation's residual),
+    ``simulation_fit_``, ``steps_``, ``corrected_``, ``free_``, ``curves_`` and ``rms_rad_``
+    ({measured model, simulation, corrected, free refit}), ``gap_reduction_``, ``verdict_``.
+    """
+
+    def __init__(
+        self,
+        simulation: Simulation,
+        max_steps: int = 3,
+        hull: Hull | None = None,
+        progress: Callable[[str], None] | None = None,
+    ):
+        self.simulation = simulation
+        self.max_steps = max_steps
+        self.hull = hull
+        self.progress = progress
+
+    def _say(self, label: str) -> None:
+        if self.progress is not None:
+            self.progress(label)
+
+    def fit(self, runs: Sequence[DecayRun]) -> SimulationComparison:
+        if not runs:
+            raise BadIdentificationInput("no measured decay runs to compare with")
+        runs = self._matched(list(runs))
+        self.runs_ = runs
+        self._say("measured model")
+        self.reference_ = OutputError(REFERENCE_TERMS, compute_diagnostics=False).fit(runs)
+        self.release_states_ = list(self.reference_.initial_states_)
+        self.equation_ = self._equation()
+        sim = self.equation_.coefficients
+        spec = ModelSpec(terms=canonical_order(tuple(sim)))
+        self._say("simulation from the measured release")
+        self.simulation_fit_ = fit_spec(runs, spec, fixed=dict(sim))
+        self.diagnostics_: Diagnostics = diagnose_fit(self.simulation_fit_, runs)
+        self.steps_ = self._correct(runs)
+        self.corrected_ = self.steps_[-1].after if self.steps_ else self.simulation_fit_
+        self._say("free refit")
+        self.free_ = fit_spec(runs, self.corrected_.spec, start=self.corrected_)
+        self._compare_curves(runs)
+        self._compare_cycles(runs)
+        self.added_: dict[str, float] = {}
+        for step in self.steps_:
+            for term, value in step.added.items():
+                self.added_[term] = self.added_.get(term, 0.0) + value
+        stiffness = linear_stiffness(self.reference_.coefficients_)
+        self.correction_ = correction(self.added_, stiffness, self.hull, runs[0].axis)
+        self.verdict_ = self._verdict()
+        return self
+
+    def _matched(self, runs: list[DecayRun]) -> list[DecayRun]:
+        """The measured runs a series has a match for (all of them for a model)."""
+        self.matches_: list[Match] = []
+        if self.simulation.kind != SERIES:
+            return runs
+        simulated = list(self.simulation.runs)
+        check_time_scale(runs, simulated)
+        self.matches_ = match_runs(runs, simulated)
+        names = {m.measured for m in self.matches_}
+        used = list(dict.fromkeys(m.simulated for m in self.matches_))
+        self._series_runs = [next(r for r in simulated if r.name == name) for name in used]
+        return [run for run in runs if run.name in names]
+
+    def _equation(self) -> SimEquation:
+        if self.simulation.kind == SERIES:
+            self._say("the simulation's equation")
+            return identify_series(self._series_runs)
+        coefficients = dict(self.simulation.coefficients)
+        if not {"c1", "s1"} & set(coefficients):
+            raise BadIdentificationInput(
+                f"simulation {self.simulation.name} has no linear restoring (c1 or s1)"
+            )
+        terms = canonical_order(tuple(coefficients))
+        ordered = {t: coefficients[t] for t in terms}
+        return SimEquation(terms, ordered, np.zeros((len(terms), len(terms))), None)
+
+    def _correct(self, runs: list[DecayRun]) -> list[CorrectionStep]:
+        """Add effects one at a time while the gap is above the floor and a step closes a real part of it."""
+        floor = float(np.sqrt(np.mean(np.concatenate([r["angle"] for r in self.reference_.residuals_]) ** 2)))
+        self.floor_rad_ = floor
+        current, fixed = self.simulation_fit_, dict(self.equation_.coefficients)
+        steps: list[CorrectionStep] = []
+        while len(steps) < self.max_steps and current.rms_angle > FLOOR_FACTOR * floor:
+            diag = diagnose_fit(current, runs)
+            best: CorrectionStep | None = None
+            for effect in CANDIDATES:
+                step = self._try(effect, current, fixed, runs, diag, floor)
+                if step is not None and (best is None or step.rms_after_rad < best.rms_after_rad):
+                    best = step
+            if best is None:
+                break
+            steps.append(best)
+            current, fixed = best.after, best.fixed
+        return steps
+
+    def _try(
+        self,
+        effect: Effect,
+        current: Fit,
+        fixed: dict[str, float],
+        runs: list[DecayRun],
+        diag: Diagnostics,
+        floor: float,
+    ) -> CorrectionStep | None:
+        spec = effect.extend(current.spec, runs, diag)
+        freed = fixed
+        if spec is None:
+            if effect.increments not in fixed:
+                return None
+            spec, freed = current.spec, {k: v for k, v in fixed.items() if k != effect.increments}
+        self._say(effect.name)
+        try:
+            after = fit_spec(runs, spec, start=current, guess=_ringing_guess(diag), fixed=freed)
+        except BadIdentificationInput:
+            return None  # the candidate diverged: it is not what is missing
+        new = {k: v for k, v in after.coefficients.items() if k not in current.coefficients}
+        if not effect.plausible(after) or any(v < 0 for k, v in new.items() if k in ("b2", "b3")):
+            return None
+        delta_bic = after.bic - current.bic
+        closed = (current.rms_angle - after.rms_angle) / max(current.rms_angle - floor, 1e-12)
+        if delta_bic >= DELTA_BIC or closed < MIN_CLOSED:
+            return None
+        added = dict(new)
+        if effect.increments in fixed and effect.increments not in freed:
+            term = effect.increments
+            added[term] = after.coefficients[term] - fixed[term]
+        return CorrectionStep(effect, after, freed, added, delta_bic, current.rms_angle, after.rms_angle)
+
+    def _compare_curves(self, runs: list[DecayRun]) -> None:
+        states = self.release_states_
+        measured_model = Fit(ModelSpec(terms=REFERENCE_TERMS), self.reference_)
+        fits = {
+            "measured model": measured_model,
+            "simulation": self.simulation_fit_,
+            "corrected": self.corrected_,
+            "free refit": self.free_,
+        }
+        self.curves_ = {name: from_release(fit, runs, states) for name, fit in fits.items()}
+        self.rms_rad_ = {name: rms_rad(curves) for name, curves in self.curves_.items()}
+        self.gap_reduction_ = 1.0 - self.rms_rad_["corrected"] / self.rms_rad_["simulation"]
+
+    def _compare_cycles(self, runs: list[DecayRun]) -> None:
+        self.amplitudes_deg_ = tested_amplitudes_deg(runs, self.reference_.offsets_)
+        corrected = self.corrected_.estimator
+        sides = [
+            damping_band(self.reference_.coefficients_, self.reference_.covariance_, self.amplitudes_deg_),
+            damping_band(self.equation_.coefficients, self.equation_.covariance, self.amplitudes_deg_),
+            damping_band(corrected.coefficients_, corrected.covariance_, self.amplitudes_deg_),
+        ]
+        self.damping_ = [
+            DampingPoint(a, *points) for a, *points in zip(self.amplitudes_deg_, *sides, strict=True)
+        ]
+        omega0 = math.sqrt(max(self.reference_.coefficients_["c1"], 1e-6))
+        measured_trend = cycle_trend([r.t for r in runs], [r.angle for r in runs], omega0)
+        self.trends_ = {"measured": measured_trend}
+        for name in ("simulation", "corrected"):
+            curves = self.curves_[name]
+            self.trends_[name] = cycle_trend([c.t for c in curves], [c.angle for c in curves], omega0)
+        self.cycle_periods_s_ = {
+            name: float(np.median(trend.period_s)) if trend.period_s.size else math.nan
+            for name, trend in self.trends_.items()
+        }
+        models = {
+            "measured": self.reference_.coefficients_,
+            "simulation": self.equation_.coefficients,
+            "corrected": self.corrected_.estimator.coefficients_,
+        }
+        self.periods_ = [
+            PeriodPoint(a, *(2 * math.pi / equivalent_frequency(c, math.radians(a)) for c in models.values()))
+            for a in self.amplitudes_deg_
+        ]
+        errors = [p.simulation_error for p in self.periods_]
+        self.period_error_ = max(errors, key=abs) if errors else math.nan
+        self.disagrees_in_ = tuple(
+            name
+            for name, off in (
+                ("damping", any(p.disagrees for p in self.damping_)),
+                ("stiffness", not abs(self.period_error_) <= PERIOD_TOLERANCE),
+            )
+            if off
+        )
+
+    def _verdict(self) -> str:
+        before, after = (math.degrees(self.rms_rad_[k]) for k in ("simulation", "corrected"))
+        if not self.steps_:
+            if self.simulation_fit_.rms_angle <= FLOOR_FACTOR * self.floor_rad_:
+                return (
+                    f"nothing missing: the simulation matches the measurement (RMS {before:.3f} deg) "
+                    "as well as "
+                    f"a model fitted to it does ({math.degrees(self.floor_rad_):.3f} deg)"
+                )
+            return (
+                f"the simulation misses something outside the library: RMS {before:.3f} deg against "
+                f"{math.degrees(self.floor_rad_):.3f} deg for a model fitted to the measurement"
+            )
+        names = "; ".join(f"{s.effect.name} ({s.effect.family})" for s in self.steps_)
+        return (
+            f"missing: {names}; gap (RMS of the angle, simulation vs measured) "
+            f"{before:.3f} -> {after:.3f} deg, "
+            f"reduced by {100 * self.gap_reduction_:.0f} %"
+        )
