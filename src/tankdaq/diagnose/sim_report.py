@@ -17,7 +17,7 @@ from ..ident.derived import extinction_curve
 from ..physics.terms import TERM_TABLE
 from ..records import DecayRun
 from ..viz import diagnose_view
-from .compare import PERIOD_TOLERANCE, CorrectionStep, DampingPoint, SimulationComparison
+from .compare import CorrectionStep, DampingPoint, SimulationComparison
 from .correction import MOMENT_NAME, Correction
 from .fitting import RunPrediction
 from .report import diagnostics_summary, finite_json
@@ -46,17 +46,18 @@ def damping_sentence(points: list[DampingPoint]) -> str:
 
 
 def period_sentence(comparison: SimulationComparison) -> str:
-    """'period agrees to 0.1 % (2.551 s measured at 1.1 deg)' or 'simulation period is 3.1 % longer ...'."""
-    worst = max(comparison.periods_, key=lambda p: abs(p.simulation_error))
-    error = worst.simulation_error
+    """'period agrees to 0.1 % (...)' or 'simulation period is 3.1 % longer (...): stiffness disagrees'."""
+    check = comparison.period_check_
+    if check.cycles == 0:
+        return "period: too few measured cycles to compare"
     where = (
-        f"at {worst.amplitude_deg:.1f} deg (measured {worst.measured:.4g} s, "
-        f"simulation {worst.simulation:.4g} s)"
+        f"(measured {check.measured_s:.4g} s median over {check.cycles} cycles, "
+        f"simulation {check.simulation_s:.4g} s at their amplitude; 95 % +-{100 * check.ci95:.2f} %)"
     )
-    if abs(error) <= PERIOD_TOLERANCE:
-        return f"period agrees to {100 * abs(error):.1f} % {where}"
-    longer = "longer" if error > 0 else "shorter"
-    return f"simulation period is {100 * abs(error):.1f} % {longer} {where}: stiffness disagrees"
+    if not check.disagrees:
+        return f"period agrees to {100 * abs(check.error):.1f} % {where}"
+    longer = "longer" if check.error > 0 else "shorter"
+    return f"simulation period is {100 * abs(check.error):.1f} % {longer} {where}: stiffness disagrees"
 
 
 def _step_line(step: CorrectionStep) -> str:
@@ -207,8 +208,10 @@ def summary(comparison: SimulationComparison) -> dict[str, Any]:
                 }
                 for p in c.periods_
             ],
-            "max_error": c.period_error_,
-            "agrees": abs(c.period_error_) <= PERIOD_TOLERANCE,
+            "error": c.period_check_.error,
+            "error_ci95": c.period_check_.ci95,
+            "cycles": c.period_check_.cycles,
+            "agrees": not c.period_check_.disagrees,
             "cycle_periods_s": c.cycle_periods_s_,
             "sentence": period_sentence(c),
         },

@@ -168,11 +168,12 @@ def match_runs(measured: Sequence[DecayRun], simulated: Sequence[DecayRun]) -> l
             )
     if matches:
         return matches
-    ratio = float(np.median(sim_angles)) / max(float(np.median([abs(r.angle[0]) for r in measured])), 1e-12)
+    measured_angles = np.array([abs(float(r.angle[0])) for r in measured])
     for factor, unit in ((DEG_PER_RAD, "deg"), (1.0 / DEG_PER_RAD, "rad")):
-        if abs(ratio / factor - 1.0) < MATCH_TOLERANCE:
+        slip = np.abs(sim_angles[:, None] / factor - measured_angles) <= MATCH_TOLERANCE * measured_angles
+        if np.any(slip):
             raise InputError(
-                f"the simulation's angles are {ratio:.3g} times the measured: a unit slip; "
+                f"the simulation's angles are about {factor:.3g} times the measured: a unit slip; "
                 f"read the simulation with --sim-angle-unit {unit}"
             )
     degrees = ", ".join(f"{math.degrees(a):.1f}" for a in sim_angles)
