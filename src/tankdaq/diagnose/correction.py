@@ -30,8 +30,16 @@ SCALING: dict[str, tuple[str, float]] = {
     "s3": ("N m", 4.0),
     "fc": ("N m", 4.0),
 }
-#: What a code calls the damping coefficients of each axis.
-MOMENT_NAME = {"roll": "B44", "pitch": "B55"}
+#: What a code calls the damping and restoring coefficients of each axis.
+MOMENT_NAME = {"roll": ("B44", "C44"), "pitch": ("B55", "C55")}
+
+
+def moment_name(term: str, axis: str) -> str:
+    """``B44`` for a damping term of roll, ``C44`` for a restoring one, and the friction moment."""
+    damping, restoring = MOMENT_NAME.get(axis, ("B", "C"))
+    if term == "fc":
+        return "friction moment"
+    return damping if term.startswith("b") else restoring
 
 
 @dataclass

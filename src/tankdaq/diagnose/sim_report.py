@@ -18,7 +18,7 @@ from ..physics.terms import TERM_TABLE
 from ..records import DecayRun
 from ..viz import diagnose_view
 from .compare import CorrectionStep, DampingPoint, SimulationComparison
-from .correction import MOMENT_NAME, Correction
+from .correction import Correction, moment_name
 from .fitting import RunPrediction
 from .report import diagnostics_summary, finite_json
 from .residuals import SPECTRUM_MEANING
@@ -93,13 +93,12 @@ def correction_line(fix: Correction, axis: str) -> str:
     """The correction a simulation code takes, in SI at model and full scale when the hull allows."""
     if not fix.terms:
         return "correction for the simulation code: none"
-    moment = MOMENT_NAME.get(axis, "B")
     parts = []
     for term in fix.terms:
         spec = TERM_TABLE[term.term]
         text = f"{spec.description} {term.term} {term.per_unit_inertia:+.4g} {spec.unit}"
         if term.model_scale is not None:
-            text += f" = {moment} {term.model_scale:+.4g} {term.unit} at model scale"
+            text += f" = {moment_name(term.term, axis)} {term.model_scale:+.4g} {term.unit} at model scale"
         if term.full_scale is not None:
             text += f", {term.full_scale:+.4g} {term.unit} at full scale"
         parts.append(text)
