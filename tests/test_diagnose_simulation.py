@@ -308,3 +308,41 @@ def test_a_hull_without_simulation_coefficients_is_one_line(tmp_path: Path, swat
     hull.write_text('name = "bare"\n[dimensions]\ndisplacement_kg = 30.0\n[axes.roll]\ngm_m = 0.08\n')
     result = invoke(*swath_decays, "--simulation", "hull", "--hull", hull)
     assert result.exit_code == 2 and "has no simulation coefficients for roll" in result.stderr
+
+
+def write_sim_mcap(path: Path, angle_deg: float) -> Path:
+    """The SWATH's own [simulation] decay from ``angle_deg`` as a tankdaq recording (held, released)."""
+    from tankdaq.samples import SAMPLE_DTYPE
+    from tankdaq.store.writer import RecordingWriter
+
+    truth = load_hull("swath").simulation_model("roll").coefficients(1.0)
+    t = np.arange(0.0, 10.0, 0.01)
+    x, v = simulate_decay(truth, t, math.radians(angle_deg))
+    held = np.arange(-100, 0) / 100.0
+    t_all = np.concatenate([held, t]) + 5.0
+    samples = np.zeros(t_all.size, dtype=SAMPLE_DTYPE)
+    samples["t"], samples["ticks"] = t_all, np.round(t_all * 1e4).astype(np.int64)
+    samples["roll"] = np.concatenate([np.full(held.size, x[0]), x])
+    samples["p"] = np.concatenate([np.zeros(held.size), v])
+    samples["az"] = 9.81
+    with RecordingWriter(path, {"axis": "roll"}, {}) as writer:
+        writer.write_samples(samples)
+        writer.write_event("release", "released by the simulation", t_s=5.0)
+    return path
+
+
+def test_mcap_simulations_are_matched_by_initial_angle(tmp_path: Path, swath_decays) -> None:
+    """Two simulated recordings (12 and 8 deg) against three measured decays: the 4-deg one has no match
+    (said, not compared); the simulation is the truth, so nothing is missing."""
+    sims = [write_sim_mcap(tmp_path / f"sim_{a:g}.mcap", a) for a in (8.0, 12.0)]
+    result = invoke(*swath_decays, "--simulation", sims[0], "--simulation", sims[1], "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    pairs = {(m["measured"], m["simulated"]) for m in out["matches"]}
+    assert pairs == {("swath_12deg", "sim:sim_12"), ("swath_8deg", "sim:sim_8")}
+    assert out["runs"] == ["swath_12deg", "swath_8deg"]
+    assert out["warnings"] == [
+        "measured run swath_4deg has no simulated run near its initial angle: not compared"
+    ]
+    assert out["steps"] == [] and out["verdict"].startswith("nothing missing")
+    assert out["simulation"]["equation"]["coefficients"]["c1"] == pytest.approx(14.2185, rel=0.01)

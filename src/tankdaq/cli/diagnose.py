@@ -123,26 +123,19 @@ def diagnose_command(
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     if max_steps < 0:
         raise InputError(f"--max-steps must be 0 or more, not {max_steps}")
-    if simulation:
-        if baseline is not None:
-            raise InputError("--baseline does not apply with --simulation: the simulation is the baseline")
-        from ..diagnose.simulation import SeriesColumns
-
-        columns = SeriesColumns(
-            sim_time_col or time_col,
-            sim_angle_col or angle_col,
-            sim_rate_col or rate_col,
-            sim_angle_unit or angle_unit,
-        )
-        measured = load_runs(
-            inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
-        )
-        compare_with_simulation(measured, simulation, columns, hull, draft, max_steps, as_json, report, rrd)
-        return
-    baseline = baseline or DEFAULT_BASELINE
+    if simulation and baseline is not None:
+        raise InputError("--baseline does not apply with --simulation: the simulation is the baseline")
+    if hull is not None and not simulation:
+        raise InputError("--hull applies with --simulation (the hull's model, and the correction in SI)")
     runs = load_runs(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end
     )
+    if simulation:
+        columns = (sim_time_col or time_col, sim_angle_col or angle_col, sim_rate_col or rate_col)
+        sim_read = (*columns, sim_angle_unit or angle_unit)
+        compare_with_simulation(runs, simulation, sim_read, hull, draft, max_steps, as_json, report, rrd)
+        return
+    baseline = baseline or DEFAULT_BASELINE
     truncated = warn_truncated(runs)
     prepare_identifier(baseline, say)  # the native kernels: built once, on the first run after install
     with progress_bar() as progress:
@@ -171,7 +164,7 @@ def diagnose_command(
 def compare_with_simulation(
     runs: list[DecayRun],
     sources: list[str],
-    columns: Any,
+    sim_read: tuple[str, str, str, str],
     hull_name: str | None,
     draft: float,
     max_steps: int,
@@ -183,14 +176,14 @@ def compare_with_simulation(
     from ..config import load_hull
     from ..diagnose.compare import CANDIDATES, SimulationComparison
     from ..diagnose.sim_report import save_rrd, story, summary_json, write_report
-    from ..diagnose.simulation import SimulationRequest, resolve_simulation
+    from ..diagnose.simulation import SeriesColumns, SimulationRequest, resolve_simulation
     from ..ident.online import prepare_identifier
 
     hull = load_hull(hull_name) if hull_name else None
     axis = runs[0].axis if runs else "roll"
     if hull is not None:
         validation.hull_draft(hull, draft, axis)
-    request = SimulationRequest(tuple(runs), axis, hull, draft, columns)
+    request = SimulationRequest(tuple(runs), axis, hull, draft, SeriesColumns(*sim_read))
     sim = resolve_simulation(sources, request)
     truncated = warn_truncated(runs)
     prepare_identifier("b1,b2,c1,c3", say)

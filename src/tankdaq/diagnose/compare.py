@@ -35,7 +35,7 @@ from ..ident.derived import (
 from ..ident.output_error import OutputError
 from ..physics.models import canonical_order
 from ..records import DecayRun
-from .correction import correction
+from .correction import Correction, correction
 from .effects import INCREMENTS, LIBRARY, Effect
 from .fitting import Fit, ModelSpec, RunPrediction, fit_spec
 from .residuals import CycleTrend, Diagnostics, cycle_trend
@@ -54,6 +54,10 @@ FLOOR_FACTOR = 1.5
 MIN_CLOSED, DELTA_BIC = 0.25, -10.0
 #: Periods agree within this fraction; damping disagrees when its 95 % intervals part by more than 10 %.
 PERIOD_TOLERANCE, DAMPING_TOLERANCE = 0.005, 0.10
+#: A series' equation reproducing it worse than this fraction of its amplitude (RMS) is warned about.
+SERIES_FIT_LIMIT = 0.05
+#: Terms that take energy out of the motion: a negative one in a fit is not physical.
+DISSIPATIVE = ("b1", "b2", "b3", "fc")
 #: Effects a comparison may add: increments of terms the simulation holds, then the library's.
 CANDIDATES: tuple[Effect, ...] = (*INCREMENTS, *(e for e in LIBRARY if e.kind != "truncation"))
 
@@ -272,7 +276,8 @@ class SimulationComparison(EstimatorMixin):
             for term, value in step.added.items():
                 self.added_[term] = self.added_.get(term, 0.0) + value
         stiffness = linear_stiffness(self.reference_.coefficients_)
-        self.correction_ = correction(self.added_, stiffness, self.hull, runs[0].axis)
+        self.correction_: Correction = correction(self.added_, stiffness, self.hull, runs[0].axis)
+        self.warnings_ = self._warnings()
         self.verdict_ = self._verdict()
         return self
 
@@ -284,12 +289,14 @@ class SimulationComparison(EstimatorMixin):
     def _matched(self, runs: list[DecayRun]) -> list[DecayRun]:
         """The measured runs a series has a match for (all of them for a model)."""
         self.matches_: list[Match] = []
+        self.unmatched_: list[str] = []
         if self.simulation.kind != SERIES:
             return runs
         simulated = list(self.simulation.runs)
         check_time_scale(runs, simulated)
         self.matches_ = match_runs(runs, simulated)
         names = {m.measured for m in self.matches_}
+        self.unmatched_ = [run.name for run in runs if run.name not in names]
         used = list(dict.fromkeys(m.simulated for m in self.matches_))
         self._series_runs = [next(r for r in simulated if r.name == name) for name in used]
         return [run for run in runs if run.name in names]
@@ -419,6 +426,31 @@ class SimulationComparison(EstimatorMixin):
             )
             if off
         )
+
+    def _warnings(self) -> list[str]:
+        """What physics or the inputs say not to trust: shown wherever the comparison is."""
+        out = [
+            f"measured run {name} has no simulated run near its initial angle: not compared"
+            for name in self.unmatched_
+        ]
+        eq = self.equation_
+        if eq.series_rms_rad is not None and self.simulation.runs:
+            top = max(float(np.max(np.abs(run.angle))) for run in self._series_runs)
+            if eq.series_rms_rad > SERIES_FIT_LIMIT * top:
+                out.append(
+                    "the simulation's equation reproduces its series only to "
+                    f"{math.degrees(eq.series_rms_rad):.3g} deg RMS "
+                    f"({100 * eq.series_rms_rad / top:.0f} % of its amplitude): "
+                    "what is compared is that equation"
+                )
+        for label, fit in (("corrected", self.corrected_), ("free refit", self.free_)):
+            negative = [f"{k} = {v:.4g}" for k, v in fit.coefficients.items() if k in DISSIPATIVE and v < 0]
+            if negative:
+                out.append(
+                    f"{label}: {', '.join(negative)} < 0 is not physical (a damping that feeds energy in): "
+                    "its free terms trade off against each other"
+                )
+        return out
 
     def _verdict(self) -> str:
         before, after = (math.degrees(self.rms_rad_[k]) for k in ("simulation", "corrected"))

@@ -7,6 +7,7 @@ figures and the rerun recording are ``viz.diagnose_view``'s, given the curves (i
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -133,6 +134,7 @@ def story(comparison: SimulationComparison) -> list[str]:
     lines += [_step_line(step) for step in comparison.steps_]
     if comparison.steps_:
         lines += [_free_line(comparison), correction_line(comparison.correction_, comparison.runs_[0].axis)]
+    lines += [f"warning: {w}" for w in comparison.warnings_]
     lines.append(comparison.verdict_)
     return lines
 
@@ -159,71 +161,87 @@ def _band(points: list[DampingPoint], side: str) -> dict[str, Any]:
     }
 
 
+def _simulation_part(c: SimulationComparison) -> dict[str, Any]:
+    eq = c.equation_
+    std = np.sqrt(np.clip(np.diag(eq.covariance), 0, None)).tolist()
+    return {
+        "name": c.simulation.name,
+        "kind": c.simulation.kind,
+        "notes": list(c.simulation.notes),
+        "equation": {
+            "terms": list(eq.terms),
+            "coefficients": eq.coefficients,
+            "std": dict(zip(eq.terms, std, strict=True)),
+            "series_rms_deg": None if eq.series_rms_rad is None else _deg(eq.series_rms_rad),
+        },
+    }
+
+
+def _period_part(c: SimulationComparison) -> dict[str, Any]:
+    check = c.period_check_
+    return {
+        "points": [{**asdict(p), "simulation_error": p.simulation_error} for p in c.periods_],
+        "error": check.error,
+        "error_ci95": check.ci95,
+        "cycles": check.cycles,
+        "agrees": not check.disagrees,
+        "cycle_periods_s": c.cycle_periods_s_,
+        "sentence": period_sentence(c),
+    }
+
+
+def _damping_part(c: SimulationComparison) -> dict[str, Any]:
+    return {
+        "amplitudes_deg": c.amplitudes_deg_,
+        **{side: _band(c.damping_, side) for side in ("measured", "simulation", "corrected")},
+        "ratio": [p.ratio for p in c.damping_],
+        "ratio_ci95": [list(p.ratio_ci95) for p in c.damping_],
+        "disagrees": [p.disagrees for p in c.damping_],
+        "sentence": damping_sentence(c.damping_),
+    }
+
+
+def _step_part(s: CorrectionStep) -> dict[str, Any]:
+    effect = s.effect
+    return {
+        "effect": effect.name,
+        "key": effect.key,
+        "family": effect.family,
+        "physics": effect.physics,
+        "terms": effect.adds,
+        "added": s.added,
+        "fixed": s.fixed,
+        "delta_bic": s.delta_bic,
+        "rms_before_deg": _deg(s.rms_before_rad),
+        "rms_after_deg": _deg(s.rms_after_rad),
+    }
+
+
 def summary(comparison: SimulationComparison) -> dict[str, Any]:
     """The JSON document of ``tankdaq diagnose --simulation ... --json``."""
     c = comparison
-    eq = c.equation_
-    fix = c.correction_
+    matches = [
+        {
+            "measured": m.measured,
+            "simulated": m.simulated,
+            "measured_angle_deg": _deg(m.measured_angle_rad),
+            "simulated_angle_deg": _deg(m.simulated_angle_rad),
+        }
+        for m in c.matches_
+    ]
+    reference = c.reference_
     return {
-        "simulation": {
-            "name": c.simulation.name,
-            "kind": c.simulation.kind,
-            "notes": list(c.simulation.notes),
-            "equation": {
-                "terms": list(eq.terms),
-                "coefficients": eq.coefficients,
-                "std": dict(
-                    zip(eq.terms, np.sqrt(np.clip(np.diag(eq.covariance), 0, None)).tolist(), strict=True)
-                ),
-                "series_rms_deg": None if eq.series_rms_rad is None else _deg(eq.series_rms_rad),
-            },
-        },
-        "matches": [
-            {
-                "measured": m.measured,
-                "simulated": m.simulated,
-                "measured_angle_deg": _deg(m.measured_angle_rad),
-                "simulated_angle_deg": _deg(m.simulated_angle_rad),
-            }
-            for m in c.matches_
-        ]
-        if c.simulation.kind == SERIES
-        else None,
+        "simulation": _simulation_part(c),
+        "matches": matches if c.simulation.kind == SERIES else None,
         "runs": [run.name for run in c.runs_],
         "release_states": [{"angle_deg": _deg(a), "rate_deg_s": _deg(v)} for a, v in c.release_states_],
         "measured_model": {
-            "terms": list(c.reference_.terms_),
-            "coefficients": c.reference_.coefficients_,
-            "std": c.reference_.std_,
+            "terms": list(reference.terms_),
+            "coefficients": reference.coefficients_,
+            "std": reference.std_,
         },
-        "period": {
-            "points": [
-                {
-                    "amplitude_deg": p.amplitude_deg,
-                    "measured_s": p.measured,
-                    "simulation_s": p.simulation,
-                    "corrected_s": p.corrected,
-                    "simulation_error": p.simulation_error,
-                }
-                for p in c.periods_
-            ],
-            "error": c.period_check_.error,
-            "error_ci95": c.period_check_.ci95,
-            "cycles": c.period_check_.cycles,
-            "agrees": not c.period_check_.disagrees,
-            "cycle_periods_s": c.cycle_periods_s_,
-            "sentence": period_sentence(c),
-        },
-        "damping": {
-            "amplitudes_deg": c.amplitudes_deg_,
-            "measured": _band(c.damping_, "measured"),
-            "simulation": _band(c.damping_, "simulation"),
-            "corrected": _band(c.damping_, "corrected"),
-            "ratio": [p.ratio for p in c.damping_],
-            "ratio_ci95": [list(p.ratio_ci95) for p in c.damping_],
-            "disagrees": [p.disagrees for p in c.damping_],
-            "sentence": damping_sentence(c.damping_),
-        },
+        "period": _period_part(c),
+        "damping": _damping_part(c),
         "extinction": {
             name: {"mean_amplitude_deg": np.degrees(a).tolist(), "decrement_deg": np.degrees(d).tolist()}
             for name, (a, d) in decrements(c).items()
@@ -234,49 +252,15 @@ def summary(comparison: SimulationComparison) -> dict[str, Any]:
         },
         "residual": {**diagnostics_summary(c.diagnostics_), "ljung_box_p": c.diagnostics_.ljung_box_p},
         "disagrees_in": list(c.disagrees_in_),
-        "steps": [
-            {
-                "effect": s.effect.name,
-                "key": s.effect.key,
-                "family": s.effect.family,
-                "physics": s.effect.physics,
-                "terms": s.effect.adds,
-                "added": s.added,
-                "fixed": s.fixed,
-                "delta_bic": s.delta_bic,
-                "rms_before_deg": _deg(s.rms_before_rad),
-                "rms_after_deg": _deg(s.rms_after_rad),
-            }
-            for s in c.steps_
-        ],
+        "steps": [_step_part(s) for s in c.steps_],
         "corrected": {"terms": c.corrected_.spec.labels, "coefficients": c.corrected_.coefficients},
         "free_refit": {"coefficients": c.free_.coefficients, "std": c.free_.std},
         "gap": {
-            "simulation_deg": _deg(c.rms_rad_["simulation"]),
-            "corrected_deg": _deg(c.rms_rad_["corrected"]),
-            "free_refit_deg": _deg(c.rms_rad_["free refit"]),
-            "measured_model_deg": _deg(c.rms_rad_["measured model"]),
+            **{f"{name.replace(' ', '_')}_deg": _deg(value) for name, value in c.rms_rad_.items()},
             "reduction": c.gap_reduction_,
         },
-        "correction": {
-            "terms": [
-                {
-                    "term": t.term,
-                    "per_unit_inertia": t.per_unit_inertia,
-                    "unit_per_unit_inertia": TERM_TABLE[t.term].unit,
-                    "model_scale": t.model_scale,
-                    "full_scale": t.full_scale,
-                    "unit": t.unit,
-                    "froude_exponent": t.froude_exponent,
-                }
-                for t in fix.terms
-            ],
-            "total_inertia_kg_m2": fix.total_inertia_kg_m2,
-            "dry_inertia_kg_m2": fix.dry_inertia_kg_m2,
-            "added_inertia_fraction": fix.added_inertia_fraction,
-            "scale_factor": fix.scale_factor,
-            "notes": fix.notes,
-        },
+        "correction": asdict(c.correction_),
+        "warnings": c.warnings_,
         "verdict": c.verdict_,
     }
 
