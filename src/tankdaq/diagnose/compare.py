@@ -23,7 +23,7 @@ from functools import partial
 import numpy as np
 
 from ..config import Hull
-from ..errors import BadIdentificationInput
+from ..errors import BadIdentificationInput, InputError
 from ..ident.base import EstimatorMixin
 from ..ident.derived import (
     b_eq,
@@ -255,6 +255,11 @@ class SimulationComparison(EstimatorMixin):
     def fit(self, runs: Sequence[DecayRun]) -> SimulationComparison:
         if not runs:
             raise BadIdentificationInput("no measured decay runs to compare with")
+        if self.max_steps < 0:
+            raise InputError(f"--max-steps must be 0 or more, not {self.max_steps}")
+        axes = {run.axis for run in runs} | {run.axis for run in self.simulation.runs}
+        if len(axes) > 1:
+            raise BadIdentificationInput(f"runs mix axes {sorted(axes)}; compare one axis at a time")
         runs = self._matched(list(runs))
         self.runs_ = runs
         self.reference_ = self._measured_model(runs)

@@ -89,8 +89,10 @@ def correction(added: Mapping[str, float], stiffness_1_s2: float, hull: Hull | N
     result.scale_factor = scale
     for term in terms:
         term.model_scale = term.per_unit_inertia * dim.total_inertia_kg_m2
-        if scale is not None:
+        if scale is not None and term.term != "fc":
             term.full_scale = term.model_scale * scale**term.froude_exponent
+    if any(t.term == "fc" for t in terms):
+        result.notes.append("dry friction belongs to the model test's rig, not to the ship: no full scale")
     if scale is None:
         result.notes.append("no scale_factor in the hull's [dimensions]: model scale only")
     elif any(t.term == "b1" for t in terms):
