@@ -349,3 +349,12 @@ def test_mcap_simulations_are_matched_by_initial_angle(tmp_path: Path, swath_dec
     ]
     assert out["steps"] == [] and out["verdict"].startswith("nothing missing")
     assert out["simulation"]["equation"]["coefficients"]["c1"] == pytest.approx(14.2185, rel=0.01)
+
+
+def test_short_run_labels() -> None:
+    from tankdaq.viz.diagnose_view import short_labels
+
+    assert short_labels(["model_test_21338"]) == ["21338"]
+    assert short_labels(["model_test_21338#1", "model_test_21338#2"]) == ["21338_1", "21338_2"]
+    assert short_labels(["swath_12deg", "swath_8deg"]) == ["12deg", "8deg"]
+    assert short_labels(["x" * 40, "y" * 40]) == ["run1", "run2"]  # nothing short tells them apart

@@ -40,7 +40,7 @@ from .effects import INCREMENTS, LIBRARY, Effect
 from .fitting import Fit, ModelSpec, RunPrediction, fit_spec
 from .residuals import CycleTrend, Diagnostics, cycle_trend
 from .simulation import SERIES, Match, Simulation, check_time_scale, match_runs
-from .workflow import _ringing_guess, diagnose_fit
+from .workflow import diagnose_fit, ringing_guess
 
 #: The measured side's models: cubic restoring with quadratic or with cubic damping (ITTC eq. 6 + 9), HAC
 #: intervals; the better BIC is taken. A model with the other damping shape bends its B_eq at the ends of
@@ -362,7 +362,7 @@ class SimulationComparison(EstimatorMixin):
             spec, freed = current.spec, {k: v for k, v in fixed.items() if k != effect.increments}
         self._say(effect.name)
         try:
-            after = fit_spec(runs, spec, start=current, guess=_ringing_guess(diag), fixed=freed)
+            after = fit_spec(runs, spec, start=current, guess=ringing_guess(diag), fixed=freed)
         except BadIdentificationInput:
             return None  # the candidate diverged: it is not what is missing
         new = {k: v for k, v in after.coefficients.items() if k not in current.coefficients}

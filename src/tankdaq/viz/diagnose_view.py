@@ -176,14 +176,16 @@ LABEL_CHARS = 16
 
 
 def short_labels(names: Sequence[str]) -> list[str]:
-    """Labels that tell the runs apart in a panel: the shortest unique tail of their names' tokens
-    (``model_test_21338`` -> ``21338``), at most ``LABEL_CHARS`` long, else ``run N``."""
-    tokens = [[t for t in re.split(r"[\s_/\\:.-]+", name) if t] for name in names]
+    """Labels that tell the runs apart in a panel and name rerun entities: the shortest unique tail of
+    their names' tokens (``model_test_21338`` -> ``21338``, ``stem#2`` -> ``stem_2``, not a bare part
+    number), at most ``LABEL_CHARS`` long, else ``runN``."""
+    tokens = [[t for t in re.split(r"[\s_/\\:.#-]+", name) if t] for name in names]
     for count in range(1, max((len(t) for t in tokens), default=1) + 1):
         labels = ["_".join(t[-count:]) for t in tokens]
-        if len(set(labels)) == len(labels) and all(0 < len(lb) <= LABEL_CHARS for lb in labels):
+        readable = all(0 < len(lb) <= LABEL_CHARS and not (lb.isdigit() and len(lb) <= 2) for lb in labels)
+        if len(set(labels)) == len(labels) and readable:
             return labels
-    return [f"run {i + 1}" for i in range(len(names))]
+    return [f"run{i + 1}" for i in range(len(names))]
 
 
 def simulation_figure(
