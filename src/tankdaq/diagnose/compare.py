@@ -23,7 +23,7 @@ from functools import partial
 import numpy as np
 
 from ..config import Hull
-from ..errors import BadIdentificationInput, InputError
+from ..errors import BadIdentificationInput, IdentificationError, InputError
 from ..ident.base import EstimatorMixin
 from ..ident.derived import (
     b_eq,
@@ -40,7 +40,7 @@ from .effects import INCREMENTS, LIBRARY, Effect
 from .fitting import Fit, ModelSpec, RunPrediction, fit_spec
 from .residuals import CycleTrend, Diagnostics, cycle_trend
 from .simulation import SERIES, Match, Simulation, check_time_scale, match_runs
-from .workflow import diagnose_fit, ringing_guess
+from .workflow import diagnose_fit, initial_guess, ringing_guess
 
 #: The measured side's models: cubic restoring with quadratic or with cubic damping (ITTC eq. 6 + 9), HAC
 #: intervals; the better BIC is taken. A model with the other damping shape bends its B_eq at the ends of
@@ -157,16 +157,21 @@ class CorrectionStep:
     rms_after_rad: float
 
 
-def best_damping_form(runs: Sequence[DecayRun]) -> OutputError:
-    """The better (BIC) of ``REFERENCE_MODELS`` fitted by output error to ``runs``."""
-    fits = [OutputError(terms, compute_diagnostics=False).fit(runs) for terms in REFERENCE_MODELS]
+def best_damping_form(runs: Sequence[DecayRun], start: bool = False) -> OutputError:
+    """The better (BIC) of ``REFERENCE_MODELS`` fitted by output error to ``runs``; ``start``: from the
+    spectrum's frequency and the peaks' decrement (``workflow.initial_guess``), which a long, lightly damped
+    simulated decay needs (over tens of cycles a start off in frequency finds a wrong minimum)."""
+    fits = []
+    for terms in REFERENCE_MODELS:
+        guess = initial_guess(runs, terms) if start else None
+        fits.append(OutputError(terms, compute_diagnostics=False).fit(runs, start=guess))
     return min(fits, key=lambda fit: fit.bic_)
 
 
 def identify_series(runs: Sequence[DecayRun]) -> SimEquation:
     """The simulated decays' equation: the better damping form (``best_damping_form``), then the terms
     that change neither B_eq nor the stiffness noticeably at the largest amplitude dropped."""
-    fit = best_damping_form(runs)
+    fit = best_damping_form(runs, start=True)
     top = max(float(np.max(np.abs(run.angle))) for run in runs)
     terms = fit.terms_
     kept = tuple(t for t in terms if t in ("b1", "c1") or _matters(fit.coefficients_, t, top))
@@ -183,6 +188,10 @@ def _matters(coefficients: dict[str, float], term: str, amplitude: float) -> boo
         return abs(b_eq(alone, amplitude)) > NEGLIGIBLE_DAMPING * abs(b_eq(coefficients, amplitude))
     omega2 = equivalent_frequency(alone, amplitude) ** 2
     return abs(omega2 / coefficients["c1"] - 1.0) > NEGLIGIBLE_RESTORING
+
+
+def _text(coefficients: Mapping[str, float]) -> str:
+    return ", ".join(f"{k} = {v:.4g}" for k, v in coefficients.items())
 
 
 def total_b_eq(coefficients: Mapping[str, float], amplitude: float) -> float:
@@ -371,7 +380,8 @@ class SimulationComparison(EstimatorMixin):
         delta_bic = after.bic - current.bic
         gap, floor = gaps
         gap_after = self._gap(after, runs)
-        if delta_bic >= DELTA_BIC or (gap - gap_after) < MIN_CLOSED * (gap - floor):
+        closes = gap - gap_after >= MIN_CLOSED * (gap - floor)  # False for a diverging candidate (NaN)
+        if delta_bic >= DELTA_BIC or not closes:
             return None
         added = dict(new)
         if effect.increments in fixed and effect.increments not in freed:
@@ -390,6 +400,12 @@ class SimulationComparison(EstimatorMixin):
         }
         self.curves_ = {name: from_release(fit, runs, states) for name, fit in fits.items()}
         self.rms_rad_ = {name: rms_rad(curves) for name, curves in self.curves_.items()}
+        diverged = [name for name, value in self.rms_rad_.items() if not math.isfinite(value)]
+        if diverged:
+            raise IdentificationError(
+                f"the {' and '.join(diverged)} model does not stay finite from the measured release: "
+                f"check the simulation's equation ({_text(self.equation_.coefficients)})"
+            )
         self.gap_reduction_ = 1.0 - self.rms_rad_["corrected"] / self.rms_rad_["simulation"]
 
     def _compare_cycles(self, runs: list[DecayRun]) -> None:
