@@ -358,18 +358,3 @@ def test_short_run_labels() -> None:
     assert short_labels(["model_test_21338#1", "model_test_21338#2"]) == ["21338_1", "21338_2"]
     assert short_labels(["swath_12deg", "swath_8deg"]) == ["12deg", "8deg"]
     assert short_labels(["x" * 40, "y" * 40]) == ["run1", "run2"]  # nothing short tells them apart
-
-
-@needs_kvlcc2
-def test_a_long_lightly_damped_series_is_identified(kvlcc2) -> None:
-    """150 s of a nearly undamped simulation of 21338 (60 cycles): from the equation-error start alone
-    the output-error fit ends in a wrong minimum (c3 < 0, b2 < 0); the better of two starts does not."""
-    from tankdaq.diagnose.compare import identify_series
-
-    _, fit = kvlcc2
-    truth = {"b1": 1e-4, "c1": fit.coefficients_["c1"], "c3": fit.coefficients_["c3"]}
-    t, angle = simulate_from_release(fit, truth, 150.0)
-    equation = identify_series([DecayRun(t, angle, name="sim")])
-    assert set(equation.terms) == {"b1", "c1", "c3"}
-    for term, value in truth.items():
-        assert equation.coefficients[term] == pytest.approx(value, rel=0.01)
