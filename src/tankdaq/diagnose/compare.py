@@ -1,16 +1,12 @@
 """Simulation meets measurement: where a lab's simulation and its model test disagree, what it misses.
 
-``SimulationComparison(simulation).fit(runs)`` identifies the simulation's own
-equation (a time series is fitted by ident's output-error engine; a model's
-coefficients are used as given), re-simulates it from every measured run's
-release state, and compares cycle by cycle: period, the decrement curve,
-B_eq(phi_a) with 95 % intervals on both sides, the residual's structure. Then
-it adds the missing effect from the library (``diagnose.effects``, plus a
-linear damping or stiffness that is only off in value) by fitting ONLY the added
-term(s) to the measurement with the simulation's own terms fixed, step by step
-while a step closes a real part of the gap, and refits everything free beside
-it. The gap is the RMS of the angle over the measured decay, simulation vs
-measured, every model started from the same measured release state.
+``SimulationComparison(simulation).fit(runs)`` identifies the simulation's own equation (a series by
+ident's output-error engine; a model as given), re-simulates it from every measured release, compares
+cycle by cycle (period, decrement curve, B_eq(phi_a) with 95 % intervals on both sides, the residual),
+adds the missing effect (``diagnose.effects``, plus a linear damping or stiffness only off in value) by
+fitting ONLY its term(s) with the simulation's own fixed, step by step while a step closes a real part
+of the gap, and refits everything free beside it. The gap: RMS of the angle over the measured decay,
+every model started from the same measured release state.
 """
 
 from __future__ import annotations
