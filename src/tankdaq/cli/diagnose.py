@@ -2,15 +2,26 @@
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any, get_args
 
 import typer
 
 from .. import validation
 from ..errors import InputError
-from .app import app, checked, err_console, handles_errors, progress_bar, say, warn_truncated
+from ..records import DecayRun
+from .app import (
+    app,
+    checked,
+    err_console,
+    handles_errors,
+    parse_draft_option,
+    progress_bar,
+    say,
+    warn_truncated,
+)
 from .identify import (
     AngleColumn,
     AngleUnit,
@@ -23,6 +34,23 @@ from .identify import (
     TimeUnit,
     load_runs,
 )
+
+DEFAULT_BASELINE = "b1,c1"
+
+
+def for_simulation(option: Any, flag: str) -> Any:
+    """``identify``'s CSV option declared again for the simulation's file: the same help under its own
+    flag, default None (= as the measured files are read)."""
+    info = copy.copy(get_args(option)[1])
+    info.default = flag  # under Annotated the first argument of typer.Option is the flag
+    info.help = f"{info.help.rstrip('.')}, of the simulation (default: as the measured)."
+    return info
+
+
+SimTimeColumn = Annotated[str | None, for_simulation(TimeColumn, "--sim-time-col")]
+SimAngleColumn = Annotated[str | None, for_simulation(AngleColumn, "--sim-angle-col")]
+SimRateColumn = Annotated[str | None, for_simulation(RateColumn, "--sim-rate-col")]
+SimAngleUnit = Annotated[str | None, for_simulation(AngleUnit, "--sim-angle-unit")]
 
 
 @app.command("diagnose")
@@ -37,7 +65,9 @@ def diagnose_command(
     ],
     axis: str = typer.Option("roll", "--axis", help="roll or pitch."),
     baseline: str = typer.Option(
-        "b1,c1", "--baseline", help="Baseline terms (b1,c1) or an alias (ittc-linear)."
+        None,
+        "--baseline",
+        help=f"Baseline terms ({DEFAULT_BASELINE}, the default) or an alias (ittc-linear).",
     ),
     max_steps: int = typer.Option(4, "--max-steps", help="At most this many effects added."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
@@ -66,8 +96,26 @@ def diagnose_command(
     skip_half_cycles: SkipHalfCycles = 0,
     start: StartS = None,
     end: EndS = None,
+    simulation: list[str] = typer.Option(
+        None,
+        "--simulation",
+        help="Compare with a simulation: a CSV or MCAP file (repeatable), hull (--hull, --draft), or ikeda.",
+    ),
+    sim_time_col: SimTimeColumn = None,
+    sim_angle_col: SimAngleColumn = None,
+    sim_rate_col: SimRateColumn = None,
+    sim_angle_unit: SimAngleUnit = None,
+    hull: str = typer.Option(
+        None, "--hull", help="Hull config: --simulation hull, and the correction in SI."
+    ),
+    draft: float = typer.Option(
+        "T", "--draft", parser=parse_draft_option, help="Draft with --hull: 0.9T, T, 1.1T."
+    ),
 ) -> None:
-    """Fit a baseline, find where it disagrees with the decays, name and add the missing effects."""
+    """Fit a baseline, find where it disagrees with the decays, name and add the missing effects.
+
+    With --simulation: compare a simulation with the decays, name what it misses, add it, show the gap shrink.
+    """
     from ..diagnose.effects import LIBRARY
     from ..diagnose.report import save_rrd, story, summary_json, write_report
     from ..diagnose.workflow import Diagnoser
@@ -77,10 +125,20 @@ def diagnose_command(
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     if max_steps < 0:
         raise InputError(f"--max-steps must be 0 or more, not {max_steps}")
+    if simulation and baseline is not None:
+        raise InputError("--baseline does not apply with --simulation: the simulation is the baseline")
+    if hull is not None and not simulation:
+        raise InputError("--hull applies with --simulation (the hull's model, and the correction in SI)")
     runs = load_runs(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end,
         time_unit,
     )  # fmt: skip
+    if simulation:
+        columns = (sim_time_col or time_col, sim_angle_col or angle_col, sim_rate_col or rate_col)
+        sim_read = (*columns, sim_angle_unit or angle_unit)
+        compare_with_simulation(runs, simulation, sim_read, hull, draft, max_steps, as_json, report, rrd)
+        return
+    baseline = baseline or DEFAULT_BASELINE
     truncated = warn_truncated(runs)
     prepare_identifier(baseline, say)  # the native kernels: built once, on the first run after install
     with progress_bar() as progress:
@@ -103,4 +161,51 @@ def diagnose_command(
         typer.echo(json.dumps({**document, "truncated": bool(truncated), "truncated_files": truncated}))
     else:
         for line in story(diagnoser):
+            typer.echo(line)
+
+
+def compare_with_simulation(
+    runs: list[DecayRun],
+    sources: list[str],
+    sim_read: tuple[str, str, str, str | None],
+    hull_name: str | None,
+    draft: float,
+    max_steps: int,
+    as_json: bool,
+    report: Path | None,
+    rrd: Path | None,
+) -> None:
+    """``diagnose --simulation``: the simulation resolved and checked, compared, and told."""
+    from ..config import load_hull
+    from ..diagnose.compare import CANDIDATES, SimulationComparison
+    from ..diagnose.sim_report import save_rrd, story, summary_json, write_report
+    from ..diagnose.simulation import SeriesColumns, SimulationRequest, resolve_simulation
+    from ..ident.online import prepare_identifier
+
+    hull = load_hull(hull_name) if hull_name else None
+    axis = runs[0].axis if runs else "roll"
+    if hull is not None:
+        validation.hull_draft(hull, draft, axis)
+    request = SimulationRequest(tuple(runs), axis, hull, draft, SeriesColumns(*sim_read))
+    sim = resolve_simulation(sources, request)
+    truncated = warn_truncated(runs)
+    prepare_identifier("b1,b2,c1,c3", say)
+    with progress_bar() as progress:
+        task = progress.add_task("comparing", total=4 + max_steps * len(CANDIDATES))
+
+        def advance(label: str) -> None:
+            progress.update(task, advance=1, description=f"fit: {label}")
+
+        comparison = SimulationComparison(sim, max_steps=max_steps, hull=hull, progress=advance).fit(runs)
+        progress.update(task, completed=progress.tasks[0].total, description="done")
+    if report is not None:
+        err_console.print(f"report: {write_report(comparison, report)}", markup=False, highlight=False)
+    if rrd is not None:
+        save_rrd(comparison, rrd)
+        err_console.print(f"rerun recording: {rrd}", markup=False, highlight=False)
+    if as_json:
+        document = json.loads(summary_json(comparison))
+        typer.echo(json.dumps({**document, "truncated": bool(truncated), "truncated_files": truncated}))
+    else:
+        for line in story(comparison):
             typer.echo(line)

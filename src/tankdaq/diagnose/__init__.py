@@ -3,5 +3,8 @@
 ``workflow.Diagnoser`` fits a baseline, reads its residual (``residuals``), refits
 candidates from the effect library (``effects``) with its own fast output-error
 engine (``fitting``), and tells the story (``report``); ``synthetic`` makes
-known-truth decays with hidden effects to prove it. See docs/diagnose.md.
+known-truth decays with hidden effects to prove it. ``compare.SimulationComparison``
+does the same against a lab's own simulation (``simulation``: a time series, a
+hull's model, a prediction), with the correction in SI (``correction``) and its
+story (``sim_report``). See docs/diagnose.md.
 """

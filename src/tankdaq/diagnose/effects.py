@@ -48,6 +48,10 @@ class Effect:
     apply: Extend
     #: A parameter that must stay >= 0 for the fit to mean this effect (friction cannot feed energy in).
     non_negative: str | None = None
+    #: The term whose value this effect changes when a model holds it already (a simulation's b2 too small).
+    increments: str | None = None
+    #: What its absence says about the physics (a simulation that misses it leaves out this).
+    physics: str = ""
 
     def extend(self, spec: ModelSpec, runs: Sequence[DecayRun], diag: Diagnostics) -> ModelSpec | None:
         """The model with this effect added, or None when it is present already or cannot be fitted here."""
@@ -56,6 +60,10 @@ class Effect:
     def plausible(self, fit: Fit) -> bool:
         """Whether the refit describes this effect physically (else it is fitting something else)."""
         return self.non_negative is None or fit.coefficients[self.non_negative] >= 0.0
+
+
+#: What an amplitude-dependent damping a simulation lacks is, physically.
+VISCOUS = "viscous roll damping: eddy making at the bilges, bilge keels (what potential flow leaves out)"
 
 
 def _add_term(term: str) -> Extend:
@@ -104,6 +112,11 @@ def _ringing(spec: ModelSpec, runs: Sequence[DecayRun], diag: Diagnostics) -> Mo
     return spec.with_(ring=True)
 
 
+def _held(_spec: ModelSpec, _runs: Sequence[DecayRun], _diag: Diagnostics) -> ModelSpec | None:
+    """A term every model holds (b1, c1): only its value can be missing (``Effect.increments``)."""
+    return None
+
+
 def _never(_spec: ModelSpec, _runs: Sequence[DecayRun], _diag: Diagnostics) -> ModelSpec | None:
     """Truncation is not a model change; the workflow handles it by cutting the records."""
     return None
@@ -118,6 +131,8 @@ LIBRARY: tuple[Effect, ...] = (
         "damping ratio grows linearly with amplitude; envelope under-damped early, over-damped late",
         "dynamics",
         _add_term("b2"),
+        increments="b2",
+        physics=VISCOUS,
     ),
     Effect(
         "damping.cubic",
@@ -127,6 +142,8 @@ LIBRARY: tuple[Effect, ...] = (
         "damping ratio grows with amplitude squared; envelope mismatch like quadratic damping",
         "dynamics",
         _add_term("b3"),
+        increments="b3",
+        physics=VISCOUS,
     ),
     Effect(
         "restoring.cubic",
@@ -136,6 +153,8 @@ LIBRARY: tuple[Effect, ...] = (
         "period changes with amplitude; phase drift growing along the decay; residual peak at 3w",
         "dynamics",
         _add_term("c3"),
+        increments="c3",
+        physics="a restoring nonlinearity: the GZ curve away from its initial slope (flare, deck edge)",
     ),
     Effect(
         "restoring.sine",
@@ -145,6 +164,7 @@ LIBRARY: tuple[Effect, ...] = (
         "period grows with amplitude (softening); phase drift growing along the decay",
         "dynamics",
         _sine_restoring,
+        physics="a restoring nonlinearity: a wall-sided GZ curve",
     ),
     Effect(
         "sensor.offset",
@@ -154,6 +174,7 @@ LIBRARY: tuple[Effect, ...] = (
         "residual mean not zero; peak near zero frequency; unequal positive and negative peaks",
         "observation",
         _set_flag("offset", needs_rate=False),
+        physics="a heel of the model or a zero error of the sensor",
     ),
     Effect(
         "restoring.asymmetric",
@@ -163,6 +184,8 @@ LIBRARY: tuple[Effect, ...] = (
         "mean shift that shrinks with amplitude; residual peak at 2w and near zero",
         "dynamics",
         _add_term("c2"),
+        increments="c2",
+        physics="an asymmetric hull or loading (a list, an off-centre weight)",
     ),
     Effect(
         "sensor.gyro_bias",
@@ -172,6 +195,7 @@ LIBRARY: tuple[Effect, ...] = (
         "rate residual has a non-zero mean",
         "observation",
         _set_flag("gyro_bias", needs_rate=True),
+        physics="the gyro's bias: a measurement error",
     ),
     Effect(
         "sensor.lag",
@@ -181,6 +205,7 @@ LIBRARY: tuple[Effect, ...] = (
         "angle residual proportional to the rate (quarter period out of phase with the angle)",
         "observation",
         _set_flag("lag", needs_rate=True),
+        physics="the sensor's filter lag: a measurement error",
     ),
     Effect(
         "sensor.gain",
@@ -190,6 +215,7 @@ LIBRARY: tuple[Effect, ...] = (
         "angle residual proportional to the angle itself",
         "observation",
         _set_flag("gain", needs_rate=True),
+        physics="the sensor's scale: a measurement error",
     ),
     Effect(
         "friction.coulomb",
@@ -201,6 +227,7 @@ LIBRARY: tuple[Effect, ...] = (
         "dynamics",
         _set_flag("coulomb", needs_rate=False),
         non_negative="fc",
+        physics="dry friction of the rig (gimbals, cables): not the ship's, keep it out of its damping",
     ),
     Effect(
         "coupling.heave",
@@ -210,6 +237,7 @@ LIBRARY: tuple[Effect, ...] = (
         "residual peak at the heave frequency; residual correlated with the measured heave",
         "dynamics",
         _couple(HEAVE_CHANNELS),
+        physics="a coupled heave motion the simulation does not have",
     ),
     Effect(
         "coupling.other_rotation",
@@ -219,6 +247,7 @@ LIBRARY: tuple[Effect, ...] = (
         "residual peak at the other axis' frequency; residual correlated with the measured other angle",
         "dynamics",
         _couple(OTHER_ROTATION_CHANNELS),
+        physics="a coupled pitch or roll motion the simulation does not have",
     ),
     Effect(
         "coupling.unmeasured",
@@ -229,6 +258,7 @@ LIBRARY: tuple[Effect, ...] = (
         "dynamics",
         _ringing,
         non_negative="ring_decay_1_s",  # a motion released with the model rings down; a growing one is later
+        physics="a motion the simulation does not have (sloshing, the rig, another mode)",
     ),
     Effect(
         "disturbance.late",
@@ -238,6 +268,34 @@ LIBRARY: tuple[Effect, ...] = (
         "residual near noise level early, then a burst after the reflection time",
         "truncation",
         _never,
+        physics="the tank: reflected waves (no model term; cut the record before them)",
+    ),
+)
+
+#: Effects only a model that holds the term already can miss: a simulation whose linear damping or
+#: stiffness is off. The workflow's baselines always fit these, so they are not in ``LIBRARY``.
+INCREMENTS: tuple[Effect, ...] = (
+    Effect(
+        "damping.linear",
+        "linear damping",
+        "linear damping",
+        "more (or less) b1*x'",
+        "damping ratio off by the same amount at every amplitude; envelope off from the first cycle",
+        "dynamics",
+        _held,
+        increments="b1",
+        physics="linear damping: skin friction or wave radiation (or dry friction of the rig)",
+    ),
+    Effect(
+        "restoring.linear",
+        "stiffness",
+        "stiffness",
+        "another c1*x",
+        "period off at every amplitude; phase drift growing linearly along the decay",
+        "dynamics",
+        _held,
+        increments="c1",
+        physics="the stiffness: GM (or displacement, or the roll inertia the period implies) differs",
     ),
 )
 

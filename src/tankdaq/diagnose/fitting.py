@@ -215,14 +215,18 @@ def fit_spec(
     spec: ModelSpec,
     start: Fit | None = None,
     guess: dict[str, float] | None = None,
+    fixed: dict[str, float] | None = None,
 ) -> Fit:
     """Fit ``spec`` to all runs jointly by output error (angle, and rate when measured, noise-weighted).
 
     Warm-started from ``start`` (every parameter it has; new terms from zero),
     else from the equation-error fit with ``guess`` over its coefficients.
+    ``fixed`` holds terms at given values (a simulation's own); the rest is fitted.
     """
     estimator = spec.estimator()
-    estimator.fit(runs, start=guess if start is None else start.estimator, guess=guess)
+    estimator.fit(
+        runs, start=guess if start is None else start.estimator, guess=guess, fixed_coefficients=fixed
+    )
     return Fit(spec, estimator)
 
 

@@ -47,7 +47,7 @@ def _fit_summary(fit: Fit) -> dict[str, Any]:
     }
 
 
-def _diagnostics_summary(diag: Diagnostics) -> dict[str, Any]:
+def diagnostics_summary(diag: Diagnostics) -> dict[str, Any]:
     return {
         "noise_angle_deg": _deg(diag.noise_angle_rad),
         "residual_mean_angle_deg": _deg(diag.residual_mean_angle_rad),
@@ -89,7 +89,7 @@ def _step_summary(step: Step, diagnoser: Diagnoser) -> dict[str, Any]:
         "held_out_rms_noise_units": None if step.held_out is None else list(step.held_out),
         "signature": step.effect.signature,
         "signature_seen": signature_seen(step.effect, step.diagnostics, diagnoser.cycle_trend_),
-        "diagnostics_before": _diagnostics_summary(step.diagnostics),
+        "diagnostics_before": diagnostics_summary(step.diagnostics),
     }
 
 
@@ -100,7 +100,7 @@ def summary(diagnoser: Diagnoser) -> dict[str, Any]:
     return {
         "runs": [p.name for p in base.runs],
         "cuts": [run.meta.get("cut") for run in diagnoser.runs_],
-        "baseline": {**_fit_summary(base), "diagnostics": _diagnostics_summary(diagnoser.diagnostics_[0])},
+        "baseline": {**_fit_summary(base), "diagnostics": diagnostics_summary(diagnoser.diagnostics_[0])},
         "cycle_trend": {
             "zeta_slope_per_rad": trend.zeta_slope_per_rad,
             "zeta_intercept": trend.zeta_intercept,
@@ -125,20 +125,20 @@ def implausible(diagnoser: Diagnoser) -> list[str]:
     return [finding.message for finding in found]
 
 
-def _finite(value: Any) -> Any:
+def finite_json(value: Any) -> Any:
     """JSON has no NaN: undefined numbers (a std of a degenerate fit) become null."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
+        return {k: finite_json(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
+        return [finite_json(v) for v in value]
     return value
 
 
 def summary_json(diagnoser: Diagnoser) -> str:
     """``summary`` as one line of valid JSON."""
-    return json.dumps(_finite(summary(diagnoser)))
+    return json.dumps(finite_json(summary(diagnoser)))
 
 
 def _step_line(step: Step, diagnoser: Diagnoser) -> str:

@@ -306,7 +306,7 @@ class Diagnoser(EstimatorMixin):
             spec = effect.extend(current.spec, runs, diag)
             if spec is None:
                 continue
-            candidate = self._fit(runs, spec, effect.name, start=current, guess=_ringing_guess(diag))
+            candidate = self._fit(runs, spec, effect.name, start=current, guess=ringing_guess(diag))
             if effect.plausible(candidate):
                 scored.append((effect, candidate, candidate.bic - current.bic))
         passing = sorted((item for item in scored if item[2] < self.delta_bic), key=lambda item: item[2])
@@ -329,7 +329,7 @@ class Diagnoser(EstimatorMixin):
     def _held_out_rms(self, runs: list[DecayRun], spec: ModelSpec, start: Fit, diag: Diagnostics) -> float:
         """RMS of all outputs (noise units) on the last part of every run, from a fit to the first part."""
         first = _cut(runs, [FIT_FRACTION * r.duration for r in runs])
-        fit = self._fit(first, spec, "split-sample check", start=start, guess=_ringing_guess(diag))
+        fit = self._fit(first, spec, "split-sample check", start=start, guess=ringing_guess(diag))
         squares: list[np.ndarray] = []
         for part, whole, pred in zip(first, runs, predict(fit, runs), strict=True):
             held = slice(part.t.size, None)
@@ -353,7 +353,7 @@ class Diagnoser(EstimatorMixin):
         return f"missing: {names}; gap reduced by {100 * self.gap_reduction_:.0f} %; {tail}"
 
 
-def _ringing_guess(diag: Diagnostics) -> dict[str, float]:
+def ringing_guess(diag: Diagnostics) -> dict[str, float]:
     """Start of an unmeasured ringing: the residual's frequency, decaying over about ten periods."""
     if diag.ringing_rad_s is None:
         return {}

@@ -221,9 +221,10 @@ class OutputError(EstimatorMixin):
         name; each run's own when the runs match, else the equation-error ones)
         or a coefficient dict over the equation-error fit; default: the
         equation-error fit. ``guess`` gives parameters nothing else starts (the
-        ringing's frequency, say). ``fixed_coefficients`` freezes the
-        coefficients and fits only the per-run parameters (used to score
-        held-out runs).
+        ringing's frequency, say). ``fixed_coefficients`` freezes the terms it
+        names at its values and fits the rest: every term given, only the per-run
+        parameters (held-out runs are scored so); some, the others on top of them
+        (a simulation's own terms kept, only the added ones fitted).
         """
         started = time.perf_counter()
         runs = check_runs(runs)
@@ -240,7 +241,7 @@ class OutputError(EstimatorMixin):
         p0 = self._start_vector(runs, start, fixed_coefficients, guess or {})
         free = np.ones(layout.size, dtype=bool)
         if fixed_coefficients is not None:
-            free[[layout.at(k) for k in self.terms_]] = False
+            free[[layout.at(k) for k in self.terms_ if k in fixed_coefficients]] = False
         amplitude = max(float(np.max(np.abs(run.angle - np.median(run.angle)))) for run in runs)
         dt_max = max(float(np.max(np.diff(run.t))) for run in runs)
         self._n_sub = substeps(dt_max, p0[: len(layout.dynamics)], layout.dynamics, amplitude)
@@ -350,7 +351,8 @@ class OutputError(EstimatorMixin):
     def _fix(self, p0: np.ndarray, fixed: dict[str, float] | None) -> np.ndarray:
         if fixed is not None:
             for k in self.terms_:
-                p0[self._layout.at(k)] = fixed.get(k, 0.0)
+                if k in fixed:
+                    p0[self._layout.at(k)] = fixed[k]
         return p0
 
     def _equation_error_start(self, runs: list[DecayRun], linear_only: bool) -> EquationError:

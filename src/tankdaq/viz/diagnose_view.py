@@ -8,7 +8,8 @@ built like every report figure (``viz.plots``); rerun is imported only when a re
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import re
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -121,22 +122,38 @@ def log_diagnosis(
             f"diagnose/{base.name}/residual/baseline": (base.t, base.residual_angle, "baseline"),
             f"diagnose/{base.name}/residual/final": (last.t, last.residual_angle, "final"),
         }
-        for entity, (t, values, style) in series.items():
-            color, width = styles[style]
-            stream.log(entity, rr.SeriesLines(colors=[color], widths=[width], names=[style]), static=True)
-            stream.send_columns(
-                entity,
-                indexes=[rr.TimeColumn(live.TIMELINE, duration=np.asarray(t, dtype=float))],
-                columns=rr.Scalars.columns(scalars=np.degrees(np.asarray(values, dtype=float))),
-            )
+        _log_series(stream, series, styles)
     for line in story:
         stream.log("diagnose/story", rr.TextLog(line, level="INFO"))
+
+
+def _log_series(
+    stream: Any, series: dict[str, tuple[np.ndarray, np.ndarray, str]], styles: dict[str, tuple[Any, float]]
+) -> None:
+    """Each entity's (t, angle in rad, style) as a styled line of degrees on the ``t`` timeline."""
+    import rerun as rr
+
+    from .live import TIMELINE
+
+    for entity, (t, values, style) in series.items():
+        color, width = styles[style]
+        stream.log(entity, rr.SeriesLines(colors=[color], widths=[width], names=[style]), static=True)
+        stream.send_columns(
+            entity,
+            indexes=[rr.TimeColumn(TIMELINE, duration=np.asarray(t, dtype=float))],
+            columns=rr.Scalars.columns(scalars=np.degrees(np.asarray(values, dtype=float))),
+        )
 
 
 def save_diagnosis_rrd(
     path: str | Path, baseline: Sequence[PredictedRun], final: Sequence[PredictedRun], story: Sequence[str]
 ) -> Path:
     """``log_diagnosis`` into a new .rrd file (open it with ``rerun path``)."""
+    return _write_rrd(path, lambda stream: log_diagnosis(stream, baseline, final, story))
+
+
+def _write_rrd(path: str | Path, log: Callable[[Any], None]) -> Path:
+    """A new .rrd file at ``path`` holding what ``log`` logs to the stream it is given."""
     import rerun as rr
 
     from .live import APPLICATION_ID
@@ -146,7 +163,144 @@ def save_diagnosis_rrd(
         raise InputError(f"cannot write {path}: folder {path.parent} does not exist")
     stream = rr.RecordingStream(APPLICATION_ID)
     stream.save(str(path))
-    log_diagnosis(stream, baseline, final, story)
+    log(stream)
     stream.flush()
     stream.disconnect()
     return path
+
+
+#: The simulation's colour beside the measured (blue) and the corrected model (red).
+SIMULATION_COLOR = "#ff7f0e"
+#: The longest run label a figure or the viewer shows.
+LABEL_CHARS = 16
+
+
+def short_labels(names: Sequence[str]) -> list[str]:
+    """Labels that tell the runs apart in a panel and name rerun entities: the shortest unique tail of
+    their names' tokens (``model_test_21338`` -> ``21338``, ``stem#2`` -> ``stem_2``, not a bare part
+    number), at most ``LABEL_CHARS`` long, else ``runN``."""
+    tokens = [[t for t in re.split(r"[\s_/\\:.#-]+", name) if t] for name in names]
+    for count in range(1, max((len(t) for t in tokens), default=1) + 1):
+        labels = ["_".join(t[-count:]) for t in tokens]
+        readable = all(0 < len(lb) <= LABEL_CHARS and not (lb.isdigit() and len(lb) <= 2) for lb in labels)
+        if len(set(labels)) == len(labels) and readable:
+            return labels
+    return [f"run{i + 1}" for i in range(len(names))]
+
+
+def simulation_figure(
+    simulation: Sequence[PredictedRun],
+    corrected: Sequence[PredictedRun],
+    labels: Sequence[str],
+    gap_deg: tuple[float, float],
+) -> Figure:
+    """Per run, side by side: measured, simulation and corrected angle against the time since release,
+    and the gap of each to the measurement (``gap_deg``: RMS before and after, in the title)."""
+    with report_style():
+        fig = Figure(figsize=(11.0, 1.3 + 2.3 * len(simulation)), layout="constrained")
+        FigureCanvasAgg(fig)
+        axes = fig.subplots(len(simulation), 2, squeeze=False, sharex=True, width_ratios=(3, 2))
+        for (left, right), sim, fixed, label in zip(axes, simulation, corrected, labels, strict=True):
+            t = np.asarray(sim.t) - sim.t[0]
+            left.plot(t, np.degrees(sim.angle + sim.residual_angle), color=MEASURED_COLOR, linewidth=0.8)
+            left.plot(t, np.degrees(sim.angle), color=SIMULATION_COLOR, linestyle=":")
+            left.plot(t, np.degrees(fixed.angle), color=MODEL_COLOR, linestyle="--", linewidth=1.0)
+            left.set_ylabel(f"{label} (deg)")
+            right.plot(t, np.degrees(sim.residual_angle), color=SIMULATION_COLOR, linewidth=0.7)
+            right.plot(t, np.degrees(fixed.residual_angle), color=MODEL_COLOR, linewidth=0.7)
+            right.axhline(0.0, color="0.4", linewidth=0.6)
+            right.set_ylabel("gap (deg)")
+        axes[0, 0].set_title("angle from the measured release")
+        axes[0, 1].set_title(f"measured minus model: RMS {gap_deg[0]:.3g} -> {gap_deg[1]:.3g} deg")
+        for ax in axes[-1]:
+            ax.set_xlabel("time since release (s)")
+        fig.legend(
+            axes[0, 0].lines,
+            ["measured", "simulation", "corrected"],
+            loc="outside upper center",
+            ncols=3,
+        )
+    return fig
+
+
+def damping_figure(
+    amplitudes_deg: Sequence[float],
+    b_eq: dict[str, tuple[np.ndarray, np.ndarray]],
+    decrements: dict[str, tuple[np.ndarray, np.ndarray]],
+) -> Figure:
+    """B_eq(phi_a) with 95 % bands (``b_eq``: name -> value, std in 1/s) and the decrement per half
+    cycle against the mean amplitude (``decrements``: name -> amplitude, decrement in rad), side by side;
+    names are measured, simulation and corrected."""
+    colors = {"measured": MEASURED_COLOR, "simulation": SIMULATION_COLOR, "corrected": MODEL_COLOR}
+    markers = {"measured": "o", "simulation": "s", "corrected": "^"}
+    with report_style():
+        fig = Figure(figsize=(11.0, 3.8), layout="constrained")
+        FigureCanvasAgg(fig)
+        left, right = fig.subplots(1, 2)
+        amplitudes = np.asarray(amplitudes_deg, dtype=float)
+        for name, (value, std) in b_eq.items():
+            left.plot(amplitudes, value, color=colors[name], marker=markers[name], label=name)
+            left.fill_between(
+                amplitudes, value - 1.96 * std, value + 1.96 * std, color=colors[name], alpha=0.2
+            )
+        left.set_xlabel("amplitude (deg)")
+        left.set_ylabel("B_eq per unit inertia (1/s)")
+        left.set_title("equivalent linear damping, 95 % bands")
+        for name, (amplitude, decrement) in decrements.items():
+            right.plot(
+                np.degrees(amplitude),
+                np.degrees(decrement),
+                linestyle="none",
+                color=colors[name],
+                marker=markers[name],
+                markersize=3,
+                label=name,
+            )
+        right.set_xlabel("mean amplitude (deg)")
+        right.set_ylabel("decrement per half cycle (deg)")
+        right.set_title("extinction curve")
+        fig.legend(*left.get_legend_handles_labels(), loc="outside upper center", ncols=3)
+    return fig
+
+
+def log_simulation(
+    stream: Any,
+    simulation: Sequence[PredictedRun],
+    corrected: Sequence[PredictedRun],
+    labels: Sequence[str],
+    story: Sequence[str],
+) -> None:
+    """Per run the measured, simulated and corrected angle and the gaps, on the ``t`` timeline (time
+    since release, degrees), and the story as a text log. ``stream`` is an rr.RecordingStream."""
+    import rerun as rr
+
+    from . import live
+
+    styles = {
+        "measured": (live.MEASURED_COLOR, 1.0),
+        "simulation": ((255, 127, 14), 1.5),
+        "corrected": (live.MODEL_COLOR, 2.0),
+    }
+    for sim, fixed, label in zip(simulation, corrected, labels, strict=True):
+        t = np.asarray(sim.t, dtype=float) - sim.t[0]
+        series = {
+            f"simulate/{label}/angle/measured": (t, sim.angle + sim.residual_angle, "measured"),
+            f"simulate/{label}/angle/simulation": (t, sim.angle, "simulation"),
+            f"simulate/{label}/angle/corrected": (t, fixed.angle, "corrected"),
+            f"simulate/{label}/gap/simulation": (t, sim.residual_angle, "simulation"),
+            f"simulate/{label}/gap/corrected": (t, fixed.residual_angle, "corrected"),
+        }
+        _log_series(stream, series, styles)
+    for line in story:
+        stream.log("simulate/story", rr.TextLog(line, level="INFO"))
+
+
+def save_simulation_rrd(
+    path: str | Path,
+    simulation: Sequence[PredictedRun],
+    corrected: Sequence[PredictedRun],
+    labels: Sequence[str],
+    story: Sequence[str],
+) -> Path:
+    """``log_simulation`` into a new .rrd file (open it with ``rerun path``)."""
+    return _write_rrd(path, lambda stream: log_simulation(stream, simulation, corrected, labels, story))

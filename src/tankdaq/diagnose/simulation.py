@@ -1,0 +1,235 @@
+"""The simulation a lab compares its model test with: a time series from any code, a model, a prediction.
+
+``Simulation`` is what the comparison reads, whatever the source: a name, a kind
+(``series``: decays computed by some code, whose equation is identified here;
+``model``: coefficients per unit inertia, such as a hull's ``[simulation]``;
+``prediction``: coefficients a method predicts, such as simplified Ikeda), the
+coefficients or the runs, and notes for the report. A source is one small
+resolver (``RESOLVERS``: a name -> a function of the ``SimulationRequest``);
+anything else given to ``--simulation`` is a file. Files are untrusted: their
+runs are matched to the measured ones by initial angle, and a unit slip
+(degrees read as radians, milliseconds as seconds) is refused in one line.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..config import Hull, format_draft
+from ..errors import InputError
+from ..ident.inputs import input_notices, read_decays
+from ..records import DecayRun
+from ..validation import input_file
+
+SERIES, MODEL, PREDICTION = "series", "model", "prediction"
+#: A simulated run matches a measured one when their initial angles differ by at most this fraction.
+MATCH_TOLERANCE = 0.25
+#: Ratios that mean a unit slip rather than another ship: degrees per radian, ms per s.
+DEG_PER_RAD = math.degrees(1.0)
+MS_PER_S = 1000.0
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """A simulation, typed: what the comparison needs whatever code or method made it."""
+
+    name: str
+    kind: str  # SERIES, MODEL or PREDICTION
+    coefficients: dict[str, float] = field(default_factory=dict)  # per unit inertia (model, prediction)
+    runs: tuple[DecayRun, ...] = ()  # the simulated decays (series)
+    notes: tuple[str, ...] = ()
+    #: A prediction's own account of a measured b1, b2 (per unit inertia) at the amplitudes (rad): which of
+    #: its components would have to change, and by how much (simplified Ikeda's ``required_change``).
+    component_changes: Callable[[float, float, Sequence[float]], list[str]] | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in (SERIES, MODEL, PREDICTION):
+            raise ValueError(f"simulation kind {self.kind!r}: use {SERIES}, {MODEL} or {PREDICTION}")
+
+
+@dataclass(frozen=True)
+class SeriesColumns:
+    """How to read a simulation's CSV (the same settings as ``identify``'s CSV options)."""
+
+    time_col: str = "time_s"
+    angle_col: str = "angle_deg"
+    rate_col: str | None = "rate_deg_s"
+    angle_unit: str | None = None  # None: decided from the data, as for the measured files
+
+
+@dataclass(frozen=True)
+class SimulationRequest:
+    """What a resolver may use: the measured runs (their amplitudes), the axis, the hull and draft."""
+
+    measured: tuple[DecayRun, ...]
+    axis: str = "roll"
+    hull: Hull | None = None
+    draft: float = 1.0
+    columns: SeriesColumns = SeriesColumns()
+
+    def require_hull(self, source: str) -> Hull:
+        if self.hull is None:
+            raise InputError(f"--simulation {source} needs --hull NAME (and --draft) to take it from")
+        return self.hull
+
+    def amplitudes_rad(self) -> list[float]:
+        """The measured runs' initial angles (rad, positive): where a prediction is evaluated."""
+        return [abs(float(run.angle[0])) for run in self.measured]
+
+
+Resolver = Callable[[SimulationRequest], Simulation]
+
+
+def from_hull(request: SimulationRequest) -> Simulation:
+    """The hull's ``[simulation]`` coefficients for the axis and draft, as given."""
+    hull = request.require_hull("hull")
+    model = hull.simulation_model(request.axis)
+    coefficients = {k: v for k, v in model.coefficients(request.draft).items() if v != 0.0}
+    name = f"hull {hull.name} {request.axis} at {format_draft(request.draft)}"
+    notes = (f"source: {' '.join(model.source.split())}",) if model.source else ()
+    return Simulation(name, MODEL, coefficients, notes=notes)
+
+
+def from_ikeda(request: SimulationRequest) -> Simulation:
+    """The hull's simplified Ikeda prediction (``config.ikeda_prediction``) as a decay model.
+
+    Its damping is predicted at the measured roll period (stiffness is not what Ikeda predicts) and
+    made a linear + quadratic model over the measured amplitudes; every input outside the method's
+    validity range is a note, and the prediction explains a measured damping in its components.
+    """
+    from ..config import ikeda_prediction
+
+    hull = request.require_hull("ikeda")
+    if request.axis != "roll":
+        raise InputError(f"--simulation ikeda predicts roll damping; these decays are {request.axis}")
+    period_s = dominant_period_s(request.measured)
+    prediction = ikeda_prediction(hull, request.draft, period_s=period_s)
+    model = prediction.equivalent_model(request.amplitudes_rad())
+    notes = (
+        f"simplified Ikeda (Kawahara, Maekawa and Ikeda 2009) at the measured period {period_s:.4g} s",
+        *(f"outside the method's range: {finding.line}" for finding in prediction.findings),
+    )
+    name = f"ikeda {hull.name} at {format_draft(request.draft)}"
+    return Simulation(name, PREDICTION, model, notes=notes, component_changes=prediction.required_change)
+
+
+#: Named sources; anything else is a file. A prediction method joins with one resolver here.
+RESOLVERS: dict[str, Resolver] = {"hull": from_hull, "ikeda": from_ikeda}
+
+
+def resolve_simulation(sources: Sequence[str], request: SimulationRequest) -> Simulation:
+    """The simulation ``--simulation`` names: a resolver by name, or one or more files (CSV, MCAP)."""
+    if not sources:
+        raise InputError("--simulation needs a source: a CSV or MCAP file, hull, or ikeda")
+    named = [s for s in sources if s in RESOLVERS]
+    if named and len(sources) > 1:
+        raise InputError(f"--simulation {named[0]} stands alone; files are given one --simulation each")
+    if named:
+        return RESOLVERS[named[0]](request)
+    return from_series([Path(s) for s in sources], request)
+
+
+def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation:
+    """Simulated decays from files, read like measured ones (release found, columns and unit as asked)."""
+    cols = request.columns
+    runs: list[DecayRun] = []
+    for path in paths:
+        input_file(path)
+        try:
+            found = read_decays(
+                path, request.axis, cols.time_col, cols.angle_col, cols.rate_col, cols.angle_unit
+            )
+        except InputError as exc:  # the reading's own words name the measured files' options
+            said = str(exc).replace("--angle-unit", "--sim-angle-unit")
+            raise type(exc)(f"simulation {path.name}: {said}") from None
+        runs += [_renamed(run, f"sim:{run.name}") for run in found]
+    rates = sorted({round(run.sample_rate, 3) for run in runs})
+    notes = (f"simulated at {', '.join(f'{r:g}' for r in rates)} Hz", *input_notices(runs))
+    return Simulation(", ".join(p.name for p in paths), SERIES, runs=tuple(runs), notes=notes)
+
+
+def _renamed(run: DecayRun, name: str) -> DecayRun:
+    return DecayRun(run.t, run.angle, run.rate, run.axis, name, run.channels, run.meta)
+
+
+@dataclass(frozen=True)
+class Match:
+    """A measured run and the simulated run released nearest its initial angle."""
+
+    measured: str
+    simulated: str
+    measured_angle_rad: float
+    simulated_angle_rad: float
+
+    @property
+    def line(self) -> str:
+        return (
+            f"{self.measured} ({math.degrees(self.measured_angle_rad):+.2f} deg) <-> {self.simulated} "
+            f"({math.degrees(self.simulated_angle_rad):+.2f} deg)"
+        )
+
+
+def match_runs(measured: Sequence[DecayRun], simulated: Sequence[DecayRun]) -> list[Match]:
+    """Each measured run with the simulated run of nearest initial |angle|, within ``MATCH_TOLERANCE``.
+
+    A unit slip shows as a ratio of 57 (degrees read as radians) and is refused
+    with what to do; nothing matching at all is refused with both sets of angles.
+    """
+    sim_angles = np.array([abs(float(r.angle[0])) for r in simulated])
+    matches = []
+    for run in measured:
+        angle = abs(float(run.angle[0]))
+        i = int(np.argmin(np.abs(sim_angles - angle)))
+        if abs(sim_angles[i] - angle) <= MATCH_TOLERANCE * angle:
+            matches.append(
+                Match(run.name, simulated[i].name, float(run.angle[0]), float(simulated[i].angle[0]))
+            )
+    if matches:
+        return matches
+    measured_angles = np.array([abs(float(r.angle[0])) for r in measured])
+    for factor, unit in ((DEG_PER_RAD, "deg"), (1.0 / DEG_PER_RAD, "rad")):
+        slip = np.abs(sim_angles[:, None] / factor - measured_angles) <= MATCH_TOLERANCE * measured_angles
+        if np.any(slip):
+            raise InputError(
+                f"the simulation's angles are about {factor:.3g} times the measured: a unit slip; "
+                f"read the simulation with --sim-angle-unit {unit}"
+            )
+    degrees = ", ".join(f"{math.degrees(a):.1f}" for a in sim_angles)
+    wanted = ", ".join(f"{math.degrees(abs(r.angle[0])):.1f}" for r in measured)
+    raise InputError(
+        f"no simulated run starts near a measured one (simulated from {degrees} deg, measured from "
+        f"{wanted} deg, within {100 * MATCH_TOLERANCE:.0f} %): simulate from the measured release angles"
+    )
+
+
+def check_time_scale(measured: Sequence[DecayRun], simulated: Sequence[DecayRun]) -> None:
+    """Refuse a simulation whose period is not within a factor 2 of the measured (a time-unit slip)."""
+    ratio = dominant_period_s(simulated) / dominant_period_s(measured)
+    if 0.5 <= ratio <= 2.0:
+        return
+    hint = ""
+    if abs(ratio / MS_PER_S - 1.0) < 0.3:
+        hint = ": its time column is in ms, write seconds"
+    elif abs(ratio * MS_PER_S - 1.0) < 0.3:
+        hint = ": the measured time column is in ms, write seconds"
+    raise InputError(
+        f"the simulation's period is {ratio:.3g} times the measured ({dominant_period_s(simulated):.4g} s "
+        f"against {dominant_period_s(measured):.4g} s){hint or ': is it the same ship and time unit?'}"
+    )
+
+
+def dominant_period_s(runs: Sequence[DecayRun]) -> float:
+    """The median over runs of the period of the angle's spectral peak (zero-padded FFT)."""
+    periods = []
+    for run in runs:
+        x = run.angle - np.mean(run.angle)
+        n_fft = 8 * x.size
+        power = np.abs(np.fft.rfft(x, n_fft))
+        freqs = np.fft.rfftfreq(n_fft, 1.0 / run.sample_rate)
+        periods.append(1.0 / freqs[int(np.argmax(power[1:])) + 1])
+    return float(np.median(periods))
