@@ -37,7 +37,7 @@ def reference_decode(stream: bytes) -> tuple[list[MTData2Message], list[Frame], 
     """What the sequential framer and the per-message decoder make of ``stream``."""
     framer = StreamFramer()
     messages, others, malformed = [], [], 0
-    for frame in framer.feed(stream) + framer.flush():  # a capture: nothing follows its last byte
+    for frame in framer.feed(stream) + framer.finish():  # a capture: nothing follows its last byte
         if frame.mid != MID.MTDATA2:
             others.append(frame)
             continue
@@ -70,7 +70,7 @@ def stream_in_chunks(stream: bytes, cuts: list[int]) -> DecodedBlock:
     decoder = StreamDecoder()
     points = sorted({min(c, len(stream)) for c in cuts})
     edges = [0, *points, len(stream)]
-    blocks = [decoder.feed(stream[a:b]) for a, b in itertools.pairwise(edges)] + [decoder.flush()]
+    blocks = [decoder.feed(stream[a:b]) for a, b in itertools.pairwise(edges)] + [decoder.finish()]
     merged = DecodedBlock.concat(blocks)
     assert decoder.pending == merged.pending_bytes
     assert decoder.messages == merged.n_messages

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tankdaq.errors import ProtocolError
 from tankdaq.xsens.batch import decode_capture
@@ -12,7 +14,7 @@ from tankdaq.xsens.frame import Frame, build_frame
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import decode_mtdata2, make_xdi, payload_well_formed
 from tankdaq.xsens.stream import StreamDecoder
-from tankdaq.xsens.synthetic import decay_capture, noisy_capture
+from tankdaq.xsens.synthetic import STRAY_HEADER, decay_capture, noisy_capture
 
 FRAMES = 100_000
 FRAME_BYTES = 69
@@ -105,3 +107,47 @@ def test_a_framer_hands_its_held_bytes_to_the_decoder_that_takes_the_stream_over
     assert decoder.feed(held) == [] and decoder.feed(data[7:]) + decoder.flush() == [
         Frame(0xFF, MID.MTDATA2, bytes(10))
     ]
+
+
+def _rows(data: bytes) -> list[bytes]:
+    return [data[i : i + FRAME_BYTES] for i in range(0, len(data), FRAME_BYTES)]
+
+
+def _in_order(wanted: list[bytes], got: list[bytes]) -> bool:
+    """``wanted`` is a subsequence of ``got`` (a frame the noise happened to leave whole may be extra)."""
+    found = iter(got)
+    return all(any(row == other for other in found) for row in wanted)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**16),
+    n=st.integers(1, 40),
+    loss=st.sampled_from(["stray header", "corrupted frame", "cut frame", "broken header"]),
+    chunk=st.integers(1, 300),
+)
+def test_a_stream_that_ends_right_after_a_held_frame_loses_no_intact_frame(
+    seed: int, n: int, loss: str, chunk: int
+) -> None:
+    """The last frame follows a loss of sync and nothing follows it: the end of the stream releases it.
+
+    (Each loss starts with a preamble: a frame followed by garbage is not confirmed, by design.)"""
+    noisy, intact = noisy_capture(n, corrupt_fraction=0.2, stray_fraction=0.2, seed=seed)
+    clean = _rows(decay_capture(n, seed=seed))
+    corrupted = bytearray(clean[0])
+    corrupted[10] ^= 0x5A
+    lost = {"stray header": STRAY_HEADER, "corrupted frame": bytes(corrupted), "cut frame": clean[0][:20],
+            "broken header": b"\xfa\x13\x37"}[loss]  # fmt: skip
+    stream = noisy + lost + clean[-1]
+    wanted = [row for row, whole in zip(clean, intact, strict=True) if whole] + [clean[-1]]
+
+    framer = StreamFramer()
+    got = [f.to_bytes() for f in framer.feed(stream) + framer.finish()]
+    assert _in_order(wanted, got) and got[-1] == clean[-1]
+    decoder = StreamDecoder()
+    blocks = [decoder.feed(stream[i : i + chunk]) for i in range(0, len(stream), chunk)] + [decoder.finish()]
+    streamed = np.concatenate([b.columns["SampleTimeFine"] for b in blocks if b.n_messages])
+    batch = decode_capture(stream)
+    expected = np.array([int.from_bytes(row[12:16], "big") for row in got])  # SampleTimeFine's bytes
+    np.testing.assert_array_equal(batch.columns["SampleTimeFine"], expected)
+    np.testing.assert_array_equal(streamed, expected)

@@ -130,7 +130,7 @@ def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
     for start in range(0, len(data), CHUNK_BYTES):
         blocks.append(decoder.feed(data[start : start + CHUNK_BYTES]))
         bar.advance(task, CHUNK_BYTES // 1024)
-    return DecodedBlock.concat([*blocks, decoder.flush()])  # the capture ends: nothing follows its last frame
+    return DecodedBlock.concat([*blocks, decoder.finish()])  # the capture ends: nothing follows it
 
 
 def decode_legacy(block: DecodedBlock, mode: int, settings: int) -> list[tuple[int, MTData2Message]]:

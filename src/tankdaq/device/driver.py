@@ -62,6 +62,7 @@ from ..xsens.framer import StreamFramer
 from ..xsens.mtdata2 import describe_xdi
 from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, CounterTracker
 from .decoding import SampleDecoder
+from .latency import ftdi_latency_ms, latency_note
 from .legacy_output import LegacyOutput
 from .ports import describe_missing, find_by_serial, path_exists, resolve_port, usb_serial_of
 
@@ -75,6 +76,12 @@ READ_TIMEOUT_S = 0.01
 LISTEN_S = 0.25
 #: How long a baud move waits for the Reset ack before reopening (it comes at once, if it can be read).
 RESET_ACK_WAIT_S = 0.2
+#: What ``inspect`` may write (all with an empty payload: requests, and the two state changes that
+#: take a device to Config and back where it was).
+INSPECTION_REQUESTS = frozenset(
+    (MID.GOTO_CONFIG, MID.GOTO_MEASUREMENT, MID.REQ_DID, MID.REQ_PRODUCT_CODE, MID.REQ_FW_REV,
+     MID.OUTPUT_CONFIGURATION)
+)  # fmt: skip
 #: Share of a line's bit rate the data may use (acks and bursts need the rest).
 HEADROOM = 0.9
 MODEMMANAGER_HINT = (
@@ -134,6 +141,7 @@ class DeviceReport:
     configuration: tuple[tuple[int, int], ...]
     was_measuring: bool
     usb_serial: str | None
+    latency_ms: int | None = None  # the FTDI latency timer (None: not an FTDI usb-serial port)
 
     def lines(self) -> list[str]:
         outputs = [f"  {describe_xdi(xdi)} at {'max' if hz in (0, 0xFFFF) else f'{hz} Hz'}"
@@ -145,9 +153,15 @@ class DeviceReport:
             f"firmware: {self.firmware}",
             f"baud: {self.baud}",
             f"state found: {'measuring' if self.was_measuring else 'config'} (left so)",
+            *([note] if (note := latency_note(self.port, self.latency_ms, self._fastest_hz())) else []),
             "output configuration: " + ("legacy MTData (no MTData2 configuration)" if self.legacy else ""),
             *outputs,
         ]
+
+    def _fastest_hz(self) -> float:
+        """The fastest output rate configured (the line's bursts are counted in its samples)."""
+        rates = [hz for _, hz in self.configuration if hz not in (0, 0xFFFF)]
+        return float(max(rates, default=100))
 
 
 @dataclass
@@ -253,6 +267,7 @@ class MTiDriver:
         self.info: DeviceInfo | None = None
         self.counters = StreamCounters()
         self.was_measuring = False  # data frames arrived before the device reached Config
+        self._inspecting = False  # ``inspect`` runs: only INSPECTION_REQUESTS may be written
         self._serial: serial.SerialBase | None = None
         self._framer = StreamFramer()
         self._after_reply: list[Frame] = []  # frames that came after the last reply, in the same read
@@ -327,6 +342,8 @@ class MTiDriver:
         return data
 
     def _write(self, data: bytes) -> None:
+        if self._inspecting and (data[2] not in INSPECTION_REQUESTS or data[3] != 0):
+            raise DeviceError(f"refused to write {data.hex(' ')} while inspecting: it may change the device")
         try:
             self._port().write(data)
         except (serial.SerialException, OSError) as exc:
@@ -352,9 +369,12 @@ class MTiDriver:
             frames = self._framer.feed(data) if data else self._framer.flush()
             self._log.add(data, frames)
             for i, frame in enumerate(frames):
-                if frame.mid == MID.WAKEUP and answer_wakeup:
+                if frame.mid == MID.WAKEUP and answer_wakeup and not self._inspecting:
                     self._write(build_frame(MID.WAKEUP_ACK))
-                self.was_measuring |= frame.mid in (MID.MTDATA2, MID.MTDATA)
+                # data, or a WakeUp left unanswered (the device then measures on its own)
+                self.was_measuring |= frame.mid in (MID.MTDATA2, MID.MTDATA) or (
+                    frame.mid == MID.WAKEUP and self._inspecting
+                )
                 if frame.mid in wanted or frame.mid == MID.ERROR:
                     self._after_reply = frames[i + 1 :]
                     return frame
@@ -388,6 +408,13 @@ class MTiDriver:
 
     def go_to_config(self, rates: Sequence[int] | None = None) -> None:
         """Take the device to Config (see the module docstring); DeviceError says what was tried."""
+        acked, rate, tried = self._search_config(rates)
+        if not acked:
+            self._recover(rate, tried)
+
+    def _search_config(self, rates: Sequence[int] | None) -> tuple[bool, int, list[tuple[int, float]]]:
+        """GoToConfig at each rate in turn (nothing else is written): (acknowledged, the rate the line
+        is left at: where it was acked, where frames came unanswered, else the likeliest, the rates tried)."""
         rates = list(dict.fromkeys(rates or (self.line_baud, self.probe_first, *SEARCH_BAUDS)))
         main = self.probe_first if self.probe_first in rates else rates[0]  # where the device most likely is
         self._log = LineLog()
@@ -398,24 +425,27 @@ class MTiDriver:
             seconds = self.goto_config_s if rate == main else self.probe_s  # a quick look elsewhere
             tried.append((rate, seconds))
             if self._goto_config_for(seconds):
-                return
+                return True, rate, tried
             if sum(self._log.frames.values()) > frames_before:  # it talks at this rate but ignores us
-                self._recover(rate, tried)
-                return
+                return False, rate, tried
         self._set_line(main)
-        self._recover(main, tried)
+        return False, main, tried
 
     def _goto_config_for(self, seconds: float) -> bool:
         ack = self._exchange({MID.GOTO_CONFIG_ACK}, seconds, resend=build_frame(MID.GOTO_CONFIG))
         return ack is not None and ack.mid == MID.GOTO_CONFIG_ACK
+
+    def _tried(self, tried: list[tuple[int, float]]) -> str:
+        """The GoToConfig search in words: the long look first, then the quick ones."""
+        (main, main_s), *others = sorted(tried, key=lambda tried_rate: -tried_rate[1])
+        scanned = f", {self.probe_s:g} s at each of {', '.join(str(r) for r, _ in others)}" if others else ""
+        return f"GoToConfig for {main_s:g} s at {main} baud{scanned}"
 
     def _recover(self, rate: int, tried: list[tuple[int, float]]) -> None:
         """Reset, then GoToConfig through the boot (WakeUp answered) until acknowledged."""
         self._write(build_frame(MID.RESET))
         if self._goto_config_for(self.boot_s):
             return
-        (main, main_s), *others = sorted(tried, key=lambda tried_rate: -tried_rate[1])  # the long look first
-        scanned = f", {self.probe_s:g} s at each of {', '.join(str(r) for r, _ in others)}" if others else ""
         if not self._log.byte_count:
             hint = f"nothing arrived: check power and cable; {MODEMMANAGER_HINT}"
         elif not self._log.frames:
@@ -423,9 +453,9 @@ class MTiDriver:
         else:
             hint = "the device talks but ignores GoToConfig and Reset: power-cycle it"
         raise DeviceError(
-            f"no answer from {self.path}: GoToConfig for {main_s:g} s at {main} baud"
-            f"{scanned}, then Reset at {rate} baud and GoToConfig for {self.boot_s:g} s "
-            f"(WakeUp {'seen' if self._log.wakeup else 'not seen'}); received {self._log.describe()}; {hint}"
+            f"no answer from {self.path}: {self._tried(tried)}, then Reset at {rate} baud and GoToConfig "
+            f"for {self.boot_s:g} s (WakeUp {'seen' if self._log.wakeup else 'not seen'}); "
+            f"received {self._log.describe()}; {hint}"
         )
 
     def identify(self) -> tuple[int, str, str]:
@@ -436,12 +466,35 @@ class MTiDriver:
         return device_id, product, firmware
 
     def inspect(self) -> DeviceReport:
-        """Hand-shake and read what the device is and how it is set up; it is left as found (measuring
-        again if it was)."""
+        """Read what the device is and how it is set up, changing nothing (docs/protocol.md).
+
+        Only GoToConfig (at each standard rate in turn), the identity and configuration requests
+        and, for a device found measuring, GoToMeasurement are written: never Reset, SetBaudrate
+        or a flash write (``_write`` refuses anything else while inspecting). A WakeUp is not
+        answered (that would hold a booting device in Config): such a device was about to measure,
+        and is returned to measurement. A device that does not answer GoToConfig is one line.
+        """
         self.open()
         self.was_measuring = False
-        self._exchange({MID.MTDATA2, MID.MTDATA}, LISTEN_S)  # does it stream before we ask anything?
-        self.go_to_config()
+        self._inspecting = True
+        try:
+            self._exchange({MID.MTDATA2, MID.MTDATA}, LISTEN_S)  # does it stream before we ask anything?
+            acked, _, tried = self._search_config(None)
+            if not acked:
+                raise DeviceError(
+                    f"no answer to GoToConfig from {self.path}: {self._tried(tried)}; received "
+                    f"{self._log.describe()}; device info sends no Reset: if it is an Xsens device stuck "
+                    f"in measurement, run tankdaq device reset {self.path}"
+                )
+            report = self._read_setup()
+            if self.was_measuring:
+                self.request(MID.GOTO_MEASUREMENT)
+        finally:
+            self._inspecting = False
+        return report
+
+    def _read_setup(self) -> DeviceReport:
+        """Identity and output configuration of a device in Config (requests only)."""
         device_id, product, firmware = self.identify()
         self._write(build_frame(MID.OUTPUT_CONFIGURATION))  # empty: a request, the configuration stays
         reply = self._exchange({MID.OUTPUT_CONFIGURATION_ACK}, self.step_timeout_s)
@@ -449,10 +502,8 @@ class MTiDriver:
             raise DeviceError(f"no reply to ReqOutputConfiguration from {self.path}")
         legacy = reply.mid == MID.ERROR
         configuration = () if legacy else tuple(parse_output_configuration(reply.payload))
-        if self.was_measuring:
-            self.request(MID.GOTO_MEASUREMENT)
         return DeviceReport(self.path, self.line_baud, device_id, product, firmware, legacy, configuration,
-                            self.was_measuring, self.usb_serial)  # fmt: skip
+                            self.was_measuring, self.usb_serial, ftdi_latency_ms(self.path))  # fmt: skip
 
     def reset_device(self, restore_defaults: bool = False) -> bool:
         """Reset (after RestoreFactoryDefaults if asked); True when the WakeUp of the reboot was seen.

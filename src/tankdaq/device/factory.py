@@ -18,6 +18,7 @@ from ..config import format_draft
 from ..errors import InputError
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .driver import MTiDriver
+from .latency import ftdi_latency_ms, latency_note
 
 if TYPE_CHECKING:
     from ..physics.scenario import DecayScenario
@@ -114,6 +115,9 @@ def open_device(
     try:
         device.driver.open()
         device.driver.configure()
+        note = latency_note(device.driver.path, ftdi_latency_ms(device.driver.path), rate_hz)
+        if note:
+            say(note)
     except BaseException:  # Ctrl-C while opening too: nothing started is left running
         device.close()
         raise

@@ -109,23 +109,27 @@ def scan_frames(
     sync: bytes | None = b"",
     final: bool = False,
     layouts: LayoutCache | None = None,
+    ended: bool = False,
 ) -> FrameScan:
     """All frames ``StreamFramer`` would accept from ``buf`` (uint8), found with array operations.
 
-    ``sync``: the framer's state at byte 0 (``StreamFramer.sync``); ``final``: no more bytes
-    will come (``StreamFramer.flush``); ``layouts``: item layouts known to be well formed.
+    ``sync``: the framer's state at byte 0 (``StreamFramer.sync``); ``final``: the line went
+    quiet (``StreamFramer.flush``); ``ended``: no more bytes will come, incomplete candidates are
+    skipped (``StreamFramer.finish``; implies ``final``); ``layouts``: item layouts known to be
+    well formed.
     """
     layouts = LayoutCache() if layouts is None else layouts
+    final = final or ended
     count, total, header_size = _regular_run(buf, max_length, sync)
     if not count:
-        return _scan_general(buf, max_length, sync, final, layouts)
+        return _scan_general(buf, max_length, sync, final, layouts, ended)
     rows_header = buf[:header_size].tobytes()
     rest = buf[count * total :]
     follows = _next_frame_starts(rest, int(buf[1]), int(buf[2]))
     if follows is None and final:
         follows = True
     if follows is False:  # the last row is not confirmed (rare): let the general scan sort it out
-        return _scan_general(buf, max_length, sync, final, layouts)
+        return _scan_general(buf, max_length, sync, final, layouts, ended)
     if follows is None:  # the last row waits for the byte after it
         count -= 1
         rest = buf[count * total :]
@@ -134,10 +138,11 @@ def scan_frames(
     offset = count * total
     starts = np.arange(0, offset, total)
     lengths = np.full(count, total - header_size - 1)
-    if follows is None or _waits_at_start(rest, max_length):  # the usual tail: the next frame's start
+    waits = follows is None or _waits_at_start(rest, max_length)  # the usual tail: the next frame's start
+    if waits and not (ended and rest.size):
         return FrameScan(starts, starts + header_size, lengths, 0, 0, offset, sync=rows_header,
                          regular_rows=buf[:offset].reshape(count, total))  # fmt: skip
-    tail = _scan_general(rest, max_length, rows_header, final, layouts)
+    tail = _scan_general(rest, max_length, rows_header, final, layouts, ended)
     return FrameScan(
         starts=np.concatenate((starts, tail.starts + offset)),
         payload_starts=np.concatenate((starts + header_size, tail.payload_starts + offset)),
@@ -227,9 +232,15 @@ class _Candidates:
 
 
 def _scan_general(
-    buf: np.ndarray, max_length: int, sync: bytes | None, final: bool, layouts: LayoutCache
+    buf: np.ndarray,
+    max_length: int,
+    sync: bytes | None,
+    final: bool,
+    layouts: LayoutCache,
+    ended: bool = False,
 ) -> FrameScan:
-    """The general scan: any mix of frames, garbage, corrupted frames and false headers."""
+    """The general scan: any mix of frames, garbage, corrupted frames and false headers (``ended``: the
+    incomplete candidates never complete, so none stops the scan)."""
     n = buf.size
     cand = np.flatnonzero(buf == PREAMBLE)
     last = max(n - 1, 0)
@@ -304,7 +315,10 @@ def _scan_general(
         to_check = unchecked[~_covered(starts, chosen_ends, c_starts[unchecked])]
         if to_check.size:
             continue
-        consumed, suspect = _first_stop(buf, cand[incomplete], c, chosen, sync)
+        waiting = cand[incomplete]
+        if ended and chosen.size:  # nothing completes them: only one after the last frame is a cut frame
+            waiting = waiting[waiting >= c_starts[chosen[-1]] + c_totals[chosen[-1]]]
+        consumed, suspect = _first_stop(buf, waiting, c, chosen, sync)
         if suspect < 0 or not _verify_sizes(buf, c, np.array([suspect]), layouts):
             break
 
@@ -825,14 +839,15 @@ def decode_buffer(
     sync: bytes | None = b"",
     final: bool = False,
     carried_below: int = 0,
+    ended: bool = False,
 ) -> DecodedBlock:
     """Decode every complete frame of ``buf`` (uint8); bytes from ``consumed`` on are left pending.
 
-    ``sync`` and ``final`` as in ``scan_frames``; ``carried_below``: bytes of ``buf`` held over from
-    earlier input (the data messages starting there are counted in ``carried``).
+    ``sync``, ``final`` and ``ended`` as in ``scan_frames``; ``carried_below``: bytes of ``buf`` held
+    over from earlier input (the data messages starting there are counted in ``carried``).
     """
     layouts = LayoutCache() if layouts is None else layouts
-    scan = scan_frames(buf, max_length, sync, final, layouts)
+    scan = scan_frames(buf, max_length, sync, final, layouts, ended)
     held_over = scan.starts[: int(np.searchsorted(scan.starts, carried_below))].tolist()  # 0, 1 or 2 frames
     block = DecodedBlock(
         carried=sum(int(buf[start + 2]) in (MTDATA2, MTDATA) for start in held_over),
@@ -966,7 +981,7 @@ def _payload_rows(buf: np.ndarray, starts: np.ndarray, length: int) -> np.ndarra
 
 def decode_capture(data: bytes, max_length: int = MAX_DATA_LENGTH) -> DecodedBlock:
     """Batch-decode a whole raw capture (bytes as read from the serial port; nothing follows them)."""
-    return decode_buffer(np.frombuffer(data, dtype=np.uint8), max_length, final=True)
+    return decode_buffer(np.frombuffer(data, dtype=np.uint8), max_length, ended=True)
 
 
 # ----------------------------------------------------------------------------------- to samples

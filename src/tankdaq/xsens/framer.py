@@ -13,7 +13,9 @@ of sync (bad checksum, skipped bytes) a *resync* must also be an MTData2 payload
 sizes add up (``confirm``). A candidate that fails is a *false sync* (counted) and the framer
 steps one byte on, so a false header (a stray ``FA FF 36``, a corrupted length) never swallows
 the intact frames behind it. While the bytes that decide have not arrived, the framer waits;
-``flush`` (the line went quiet, or the capture ended) accepts such a frame on what it has.
+``flush`` (the line went quiet) accepts such a frame on what it has. ``finish`` (the stream
+ended: the end of a file, a device that stopped) also gives up the candidates that can never be
+complete, so a frame held behind one (a stray header just before the last frame) is found.
 """
 
 from __future__ import annotations
@@ -84,15 +86,22 @@ class StreamFramer:
         return self._scan(final=False)
 
     def flush(self) -> list[Frame]:
-        """The line went quiet (or the capture ended): accept a held frame that only lacks a successor."""
+        """The line went quiet: accept a held frame that only lacks a successor."""
         return self._scan(final=True)
 
-    def _scan(self, final: bool) -> list[Frame]:
+    def finish(self) -> list[Frame]:
+        """The stream ended: as ``flush``, and an incomplete candidate is skipped, not waited for (its
+        bytes never come), so the frames behind it are found. With no frame behind it, it is where the
+        stream was cut: its bytes stay pending (not counted as skipped), as after ``flush``."""
+        return self._scan(final=True, ended=True)
+
+    def _scan(self, final: bool, ended: bool = False) -> list[Frame]:
         buf = self._buffer
         out: list[Frame] = []
         pos = 0
         end = len(buf)
         sync = self.sync
+        cut: tuple[int, int, int, int, bytes | None] | None = None
         while True:
             start = buf.find(PREAMBLE, pos)
             if start < 0:
@@ -101,23 +110,26 @@ class StreamFramer:
                 self.skipped_bytes += start - pos
                 sync = None
                 pos = start
-            if end - pos < 4:
+            if pos >= end:
                 break
-            length = buf[pos + 3]
-            header = 4
+            length, header = (buf[pos + 3], 4) if end - pos >= 4 else (-1, 4)
             if length == EXTENDED_LENGTH:
-                if end - pos < 6:
-                    break
-                length = buf[pos + 4] << 8 | buf[pos + 5]
-                header = 6
+                length, header = (buf[pos + 4] << 8 | buf[pos + 5], 6) if end - pos >= 6 else (-1, 6)
+            stop = pos + header + length + 1
             if length > self.max_length:
                 self.skipped_bytes += 1
                 pos += 1
                 sync = None
                 continue
-            stop = pos + header + length + 1
-            if stop > end:
-                break
+            if length < 0 or stop > end:  # incomplete
+                if not ended:
+                    break
+                # the stream ends inside it: where a file was cut, unless a frame is found behind it
+                cut = cut or (pos, self.skipped_bytes, self.bad_checksums, self.false_syncs, sync)
+                self.skipped_bytes += 1
+                pos += 1
+                sync = None
+                continue
             if sum(buf[pos + 1 : stop]) & 0xFF:
                 self.bad_checksums += 1
                 self.skipped_bytes += 1
@@ -136,6 +148,9 @@ class StreamFramer:
             out.append(Frame(bid=buf[pos + 1], mid=buf[pos + 2], payload=bytes(buf[pos + header : stop - 1])))
             sync = bytes(buf[pos : pos + header])
             pos = stop
+            cut = None
+        if cut is not None:  # nothing behind the cut frame: its bytes stay pending, as they were
+            pos, self.skipped_bytes, self.bad_checksums, self.false_syncs, sync = cut
         del buf[:pos]
         self.sync = sync
         self.frames += len(out)

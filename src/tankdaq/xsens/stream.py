@@ -41,13 +41,19 @@ class StreamDecoder:
         return self._decode(np.concatenate((self._tail, incoming)) if self._tail.size else incoming, False)
 
     def flush(self) -> DecodedBlock:
-        """The line went quiet (or the recording ended): decode a held frame that only lacks a successor."""
+        """The line went quiet: decode a held frame that only lacks a successor."""
         return self._decode(self._tail, True)
 
-    def _decode(self, buf: np.ndarray, final: bool) -> DecodedBlock:
+    def finish(self) -> DecodedBlock:
+        """The stream ended (a file's end, a device that stopped): as ``flush``, and the frames held
+        behind a candidate that can never be complete are decoded too (``StreamFramer.finish``)."""
+        return self._decode(self._tail, True, ended=True)
+
+    def _decode(self, buf: np.ndarray, final: bool, ended: bool = False) -> DecodedBlock:
         block = decode_buffer(
-            buf, self.max_length, self._layouts, sync=self._sync, final=final, carried_below=self._tail.size
-        )
+            buf, self.max_length, self._layouts, sync=self._sync, final=final, carried_below=self._tail.size,
+            ended=ended,
+        )  # fmt: skip
         self._tail = buf[buf.size - block.pending_bytes :].copy()
         self._sync = block.sync
         self.frames += block.frames

@@ -11,7 +11,7 @@
 """
 
 from .faults import Faults
-from .firmware import Behaviour
+from .firmware import Behaviour, ReceivedMessage
 from .identity import DeviceIdentity
 from .mti import SimulatedMTi
 from .output import default_configuration, effective_configuration
@@ -24,6 +24,7 @@ __all__ = [
     "Behaviour",
     "DeviceIdentity",
     "Faults",
+    "ReceivedMessage",
     "RecordedSource",
     "ScriptedSource",
     "SimulatedMTi",

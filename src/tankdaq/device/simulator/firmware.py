@@ -63,6 +63,15 @@ class Behaviour:
     measuring_at_start: bool = False  # powered up before the host came: already streaming
 
 
+@dataclass(frozen=True)
+class ReceivedMessage:
+    """One message the host wrote, as the device's framer found it."""
+
+    mid: int
+    payload: bytes
+    heard: bool  # False: it came at another baud rate or during a boot, and the device did not act on it
+
+
 class Firmware:
     """Device state and message handling; driven by the simulator's thread through ``receive``
     (what the host wrote) and ``tick`` (the clock), sending on ``line``."""
@@ -104,7 +113,12 @@ class Firmware:
         self.frames_sent = 0
         self.bytes_corrupted = 0
         self.bytes_dropped = 0
-        self.commands_seen: list[int] = []
+        self.received: list[ReceivedMessage] = []  # every message the host wrote, heard or not
+
+    @property
+    def commands_seen(self) -> list[int]:
+        """The message ids the device heard and acted on, in order."""
+        return [message.mid for message in self.received if message.heard]
 
     # ---- power and clock ----------------------------------------
 
@@ -173,14 +187,16 @@ class Firmware:
     # ---- messages ----------------------------------------
 
     def receive(self, data: bytes) -> None:
-        """Bytes the host wrote: whole commands are handled in order."""
-        if not self.line.speed_matches(self.baud) or self._booting_until is not None:
-            return  # at the wrong baud rate the device sees noise; booting, it hears nothing
+        """Bytes the host wrote: whole commands are logged (``received``) and handled in order.
+
+        At the wrong baud rate the device sees noise and while booting it hears nothing: those
+        messages are logged as not heard (the log is what the host sent, for tests to check)."""
+        in_tune = self.line.speed_matches(self.baud)
         for frame in self._framer.feed(data) + self._framer.flush():  # a host writes whole commands
-            if self._booting_until is not None:
-                break  # a Reset among them: the rest went to a rebooting device
-            self.commands_seen.append(frame.mid)
-            self._handle(frame)
+            heard = in_tune and self._booting_until is None  # after a Reset among them: a rebooting device
+            self.received.append(ReceivedMessage(frame.mid, frame.payload, heard))
+            if heard:
+                self._handle(frame)
 
     def _reply(self, mid: int, payload: bytes = b"") -> None:
         self._send(build_frame(mid, payload))

@@ -24,7 +24,7 @@ from ...physics.scenario import DecayScenario, RunTruth
 from ...xsens.constants import SERIAL_BAUDS
 from ..ports import by_id_name
 from .faults import Faults
-from .firmware import Behaviour, Firmware
+from .firmware import Behaviour, Firmware, ReceivedMessage
 from .identity import DeviceIdentity
 from .output import OutputItem
 from .pty_link import PtyLink
@@ -158,7 +158,13 @@ class SimulatedMTi:
 
     @property
     def commands_seen(self) -> list[int]:
+        """The message ids the device heard and acted on, in order."""
         return self.firmware.commands_seen
+
+    @property
+    def received(self) -> list[ReceivedMessage]:
+        """Every message the host wrote (mid, payload, heard), in order; a copy."""
+        return list(self.firmware.received)
 
     @property
     def frames_sent(self) -> int:
