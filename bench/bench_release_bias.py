@@ -1,7 +1,7 @@
 """Release instant: bias and spread of ``release_t`` against the scenario's truth on the device clock.
 
 Run: .venv/bin/python bench/bench_release_bias.py [--releases 200] [--baseline-src DIR]
-Per rate (100, 200, 400 Hz), ``--releases`` simulated hand releases of the swath model in roll with the
+Per rate (100, 200, 400 Hz), ``--releases`` simulated hand releases of the swath model (``--axis``) with the
 scenario's default hand sway, tremor and MTi-G noise; the error is ``release_t`` minus the true instant
 (SampleTimeFine ticks of the release / 10 kHz). Printed: mean bias in samples and ms, its std, the 95th
 percentile of |error|, the fraction within one sample, and (where the event carries it) how often the
@@ -28,7 +28,7 @@ DECAY_S = 25.0
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 
 
-def errors_at(rate_hz: int, releases: int) -> dict[str, list[float]]:
+def errors_at(rate_hz: int, releases: int, axis: str = "roll") -> dict[str, list[float]]:
     """Errors (s) and reported standard errors (s) of every release found at ``rate_hz``."""
     from tankdaq.acquire.release import ReleaseDetector
     from tankdaq.config import hull_scenario
@@ -37,7 +37,7 @@ def errors_at(rate_hz: int, releases: int) -> dict[str, list[float]]:
     errors, ses, missed = [], [], 0
     for seed in range(math.ceil(releases / RUNS_PER_SCENARIO)):
         runs = min(RUNS_PER_SCENARIO, releases - seed * RUNS_PER_SCENARIO)
-        scenario = hull_scenario(runs=runs, seed=9000 + seed, rate_hz=rate_hz, decay_s=DECAY_S)
+        scenario = hull_scenario(axis=axis, runs=runs, seed=9000 + seed, rate_hz=rate_hz, decay_s=DECAY_S)
         samples, trace = scenario.samples()
         found = [e for e in ReleaseDetector(axis=trace.axis).fit(samples).events_ if e.kind == "released"]
         for run in trace.runs:
@@ -68,10 +68,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--releases", type=int, default=200)
     parser.add_argument("--baseline-src", default=None)
+    parser.add_argument("--axis", default="roll", help="roll, or pitch (heavily damped: b1 ~ 2)")
     parser.add_argument("--json", action="store_true", help="print the raw errors as JSON (child mode)")
     args = parser.parse_args()
     if args.json:
-        print(json.dumps({rate: errors_at(rate, args.releases) for rate in RATES_HZ}))
+        print(json.dumps({rate: errors_at(rate, args.releases, args.axis) for rate in RATES_HZ}))
         return
     trees: list[tuple[str, str | None]] = [("this tree", None)]
     if args.baseline_src:
@@ -81,10 +82,10 @@ def main() -> None:
         env = {**os.environ, "TANKDAQ_CONFIG_DIR": str(CONFIGS)}
         if src:
             env["PYTHONPATH"] = src
-        child = [sys.executable, __file__, "--json", "--releases", str(args.releases)]
+        child = [sys.executable, __file__, "--json", "--releases", str(args.releases), "--axis", args.axis]
         done = subprocess.run(child, env=env, check=True, capture_output=True, text=True)
         measured = json.loads(done.stdout)
-        print(name)
+        print(f"{name}: swath {args.axis}")
         for rate in RATES_HZ:
             print("  " + summary(rate, measured[str(rate)]))
 
