@@ -529,8 +529,8 @@ class _DecayFit:
         with s^2 the residual variance. The curvature is read over +-``step`` (the sum of squares is
         piecewise in the sample a candidate falls in). A flat or wrongly bent curve (no information)
         answers ``step`` rather than a falsely small error; the quarter-sample grid of the scan is the
-        floor. Measured against the truth (bench/bench_release_bias.py) it is somewhat optimistic at
-        200-400 Hz: the true instant lies within 1.96 se in 85-90 % of releases, not 95 %.
+        floor. Measured against the truth (bench/bench_release_bias.py) it is optimistic: the true
+        instant lies within 1.96 se in 77-96 % of releases, not 95 %: a scale, not a calibrated interval.
         """
         centre = self.sse(tau)
         curvature = (self.sse(tau - step) + self.sse(tau + step) - 2.0 * centre) / step**2
