@@ -134,6 +134,13 @@ def test_release_within_one_sample_of_the_truth(three_decays) -> None:
         nearest = min(truths, key=lambda r: abs(r.release_ticks - first_free_ticks))
         true_first = int(ticks[np.searchsorted(ticks, nearest.release_ticks)])
         assert abs(first_free_ticks - true_first) <= sample_ticks, (first_free_ticks, true_first)
+        # the instant itself, on the device clock, with its standard error: between the last held
+        # sample and the first free one, and within a sample and three standard errors of the truth
+        se_s = release["data"]["release_se_s"]
+        assert 0 < se_s < 2 * sample_ticks / TICKS_PER_S
+        first_free_s = release["data"]["first_free_sample_t_s"]
+        assert first_free_s - sample_ticks / TICKS_PER_S < release["t_s"] <= first_free_s
+        assert abs(release["t_s"] * TICKS_PER_S - nearest.release_ticks) <= sample_ticks
 
 
 def test_pretrigger_and_settle(three_decays) -> None:

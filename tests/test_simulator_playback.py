@@ -73,6 +73,8 @@ def test_a_played_back_recording_records_the_same_samples(recorded: tuple[Record
     (release_a,) = [e for e in first.events if e["kind"] == "release"]
     (release_b,) = [e for e in again.events if e["kind"] == "release"]
     assert release_b["data"]["first_free_sample_t_s"] == release_a["data"]["first_free_sample_t_s"]
+    assert release_b["t_s"] == release_a["t_s"]
+    assert release_b["data"]["release_se_s"] == release_a["data"]["release_se_s"] > 0
 
 
 def test_the_played_back_device_is_the_recorded_one(recorded: tuple[Recording, Recording]) -> None:

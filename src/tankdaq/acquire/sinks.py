@@ -116,6 +116,7 @@ class Decay:
             "rate_initial_deg_s": math.degrees(ev.rate_rad_s) if math.isfinite(ev.rate_rad_s) else None,
             "still_water_deg": math.degrees(ev.baseline_rad),
             "first_free_sample_t_s": ev.t,
+            "release_se_s": ev.release_se_s if math.isfinite(ev.release_se_s) else None,
         }
 
     def settle_metadata(self) -> dict[str, object]:
