@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import json
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 import pytest
 import rerun as rr
-from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
+from rrd_checks import read_rrd
 from tankdaq.cli import app
 from tankdaq.diagnose.report import log_to_rerun, story
 from tankdaq.diagnose.synthetic import make_decay_set
@@ -138,17 +137,7 @@ def test_cli_writes_the_rrd(tmp_path: Path) -> None:
 
 def assert_rrd_tells(path: Path, runs: list, noise_rad: float, lines: list[str]) -> None:
     """The .rrd holds per run the five series over the whole record and the story, line for line."""
-
-    scalars: dict[str, list[float]] = defaultdict(list)
-    texts: list[str] = []
-    reader = RrdReader(path)
-    (recording,) = reader.recordings()
-    for chunk in reader.stream(store=recording).to_chunks():
-        batch = chunk.to_record_batch()
-        if "Scalars:scalars" in batch.schema.names:
-            scalars[chunk.entity_path] += [v[0] for v in batch.column("Scalars:scalars").to_pylist() if v]
-        if "TextLog:text" in batch.schema.names:
-            texts += [v[0] for v in batch.column("TextLog:text").to_pylist() if v]
+    scalars, texts = read_rrd(path)
     for run in runs:
         for series in (
             "angle/measured",

@@ -9,16 +9,15 @@ from __future__ import annotations
 
 import json
 import math
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 import pytest
 from matplotlib.figure import Figure
-from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
 from figure_checks import overlapping_texts
+from rrd_checks import read_rrd
 from tankdaq.cli import app
 from tankdaq.config import load_hull
 from tankdaq.diagnose.compare import SimulationComparison, best_damping_form
@@ -121,21 +120,6 @@ def test_potential_flow_simulation_misses_viscous_damping(tmp_path: Path, kvlcc2
     gap_after = np.array(scalars["/simulate/21338/gap/corrected"])
     assert np.sqrt(np.mean(gap_after**2)) == pytest.approx(gap["corrected_deg"], rel=1e-6)
     assert out["period"]["sentence"] in texts and texts[-1] == out["verdict"]
-
-
-def read_rrd(path: Path) -> tuple[dict[str, list[float]], list[str]]:
-    """Scalars per entity and the text log of a .rrd, read back with rerun's own reader."""
-    scalars: dict[str, list[float]] = defaultdict(list)
-    texts: list[str] = []
-    reader = RrdReader(path)
-    (recording,) = reader.recordings()
-    for chunk in reader.stream(store=recording).to_chunks():
-        batch = chunk.to_record_batch()
-        if "Scalars:scalars" in batch.schema.names:
-            scalars[chunk.entity_path] += [v[0] for v in batch.column("Scalars:scalars").to_pylist() if v]
-        if "TextLog:text" in batch.schema.names:
-            texts += [v[0] for v in batch.column("TextLog:text").to_pylist() if v]
-    return scalars, texts
 
 
 @needs_kvlcc2

@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import json
 from pathlib import Path
+from types import ModuleType
 from typing import Annotated, Any, get_args
 
 import typer
@@ -116,8 +117,8 @@ def diagnose_command(
 
     With --simulation: compare a simulation with the decays, name what it misses, add it, show the gap shrink.
     """
+    from ..diagnose import report as report_module
     from ..diagnose.effects import LIBRARY
-    from ..diagnose.report import save_rrd, story, summary_json, write_report
     from ..diagnose.workflow import Diagnoser
     from ..ident.online import prepare_identifier
 
@@ -150,18 +151,7 @@ def diagnose_command(
 
         diagnoser = Diagnoser(baseline=baseline, max_steps=max_steps, progress=advance).fit(runs)
         progress.update(task, completed=progress.tasks[0].total, description="done")
-    if report is not None:
-        path = write_report(diagnoser, report)
-        err_console.print(f"report: {path}", markup=False, highlight=False)
-    if rrd is not None:
-        save_rrd(diagnoser, rrd)
-        err_console.print(f"rerun recording: {rrd}", markup=False, highlight=False)
-    if as_json:
-        document = json.loads(summary_json(diagnoser))
-        typer.echo(json.dumps({**document, "truncated": bool(truncated), "truncated_files": truncated}))
-    else:
-        for line in story(diagnoser):
-            typer.echo(line)
+    tell(report_module, diagnoser, report, rrd, as_json, truncated)
 
 
 def compare_with_simulation(
@@ -177,8 +167,8 @@ def compare_with_simulation(
 ) -> None:
     """``diagnose --simulation``: the simulation resolved and checked, compared, and told."""
     from ..config import load_hull
+    from ..diagnose import sim_report
     from ..diagnose.compare import CANDIDATES, SimulationComparison
-    from ..diagnose.sim_report import save_rrd, story, summary_json, write_report
     from ..diagnose.simulation import SeriesColumns, SimulationRequest, resolve_simulation
     from ..ident.online import prepare_identifier
 
@@ -198,14 +188,27 @@ def compare_with_simulation(
 
         comparison = SimulationComparison(sim, max_steps=max_steps, hull=hull, progress=advance).fit(runs)
         progress.update(task, completed=progress.tasks[0].total, description="done")
+    tell(sim_report, comparison, report, rrd, as_json, truncated)
+
+
+def tell(
+    writer: ModuleType,
+    result: Any,
+    report: Path | None,
+    rrd: Path | None,
+    as_json: bool,
+    truncated: list[str],
+) -> None:
+    """A diagnosis or comparison told: the report, the .rrd, then the JSON or the story (``writer`` is the
+    module that words it, ``diagnose.report`` or ``diagnose.sim_report``: the same four functions)."""
     if report is not None:
-        err_console.print(f"report: {write_report(comparison, report)}", markup=False, highlight=False)
+        err_console.print(f"report: {writer.write_report(result, report)}", markup=False, highlight=False)
     if rrd is not None:
-        save_rrd(comparison, rrd)
+        writer.save_rrd(result, rrd)
         err_console.print(f"rerun recording: {rrd}", markup=False, highlight=False)
     if as_json:
-        document = json.loads(summary_json(comparison))
+        document = json.loads(writer.summary_json(result))
         typer.echo(json.dumps({**document, "truncated": bool(truncated), "truncated_files": truncated}))
     else:
-        for line in story(comparison):
+        for line in writer.story(result):
             typer.echo(line)
