@@ -254,7 +254,8 @@ def test_a_group_that_cannot_be_fitted_keeps_its_reason(csv_results: list) -> No
 
 
 def test_every_campaign_plan_loads_and_names_real_hulls_and_drafts():
-    from tankdaq.config import list_campaign_plans, load_campaign_plan, load_hull, parse_draft
+    from tankdaq.config import load_hull, parse_draft
+    from tankdaq.plans import list_campaign_plans, load_campaign_plan
 
     plans = list_campaign_plans()
     assert {"seed000-trimaran-catamaran-pitch", "seed001-swath-roll", "seed002-swath-pitch"} <= set(plans)

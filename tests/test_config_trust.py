@@ -15,8 +15,9 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
-from tankdaq.config import load_campaign_plan, load_hull
+from tankdaq.config import load_hull
 from tankdaq.errors import InputError
+from tankdaq.plans import load_campaign_plan
 
 runner = CliRunner()
 

@@ -380,8 +380,8 @@ def test_fault_scripts_are_parsed_or_refused_in_one_line() -> None:
 
 def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
     from tankdaq.acquire.campaign_session import plan_conditions
-    from tankdaq.config import ACCEPTANCE_RANGES, list_campaign_plans, load_campaign_plan
     from tankdaq.errors import ConfigError
+    from tankdaq.plans import ACCEPTANCE_RANGES, list_campaign_plans, load_campaign_plan
 
     for name in list_campaign_plans():
         plan = load_campaign_plan(name)
@@ -414,7 +414,7 @@ def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Pat
     import dataclasses
 
     from tankdaq.acquire.campaign_session import CampaignSession, SessionSettings
-    from tankdaq.config import load_campaign_plan
+    from tankdaq.plans import load_campaign_plan
 
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text(PLAN)

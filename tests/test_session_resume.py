@@ -16,7 +16,7 @@ from tankdaq.acquire.campaign_session import (
     SessionSettings,
     SessionState,
 )
-from tankdaq.config import load_campaign_plan
+from tankdaq.plans import load_campaign_plan
 
 PLAN = """description = "one condition, one repeat"
 hulls = ["swath"]

@@ -1,6 +1,6 @@
 """A guided test session: the campaign plan drives the recording, condition by condition.
 
-The plan (``config.CampaignPlan``: drafts, angles, repeats, acceptance tolerances) gives the
+The plan (``plans.CampaignPlan``: drafts, angles, repeats, acceptance tolerances) gives the
 conditions in order, drafts grouped (ballast changes are slow). For each condition the operator is
 told what to do; the record daemon records one decay (``RecordDaemon`` with ``runs=1``: the device
 is opened per decay, so a decay is a closed unit whatever happens next); the decay is checked as
@@ -34,10 +34,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from ..config import PLAN_AXES, CampaignPlan, acceptance_values, format_draft, load_hull, parse_draft
+from ..config import format_draft, load_hull, parse_draft
 from ..config_rules import path_in
 from ..errors import InputError
 from ..ident.derived import b_eq
+from ..plans import PLAN_AXES, CampaignPlan, acceptance_values
 from ..samples import AXIS_FIELDS
 from .daemon import RecordDaemon, RecordSettings
 from .session import DecayOutcome
@@ -83,7 +84,7 @@ class Acceptance:
 
     @classmethod
     def from_plan(cls, table: dict[str, float], where: str) -> Acceptance:
-        """The plan's tolerances, each known and in its range (``config.ACCEPTANCE_RANGES``)."""
+        """The plan's tolerances, each known and in its range (``plans.ACCEPTANCE_RANGES``)."""
         return cls(**acceptance_values(table, f"{where}: [acceptance]"))
 
 

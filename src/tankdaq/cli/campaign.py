@@ -182,9 +182,10 @@ def simulate_campaign_command(
 ) -> None:
     """Simulate a decay campaign from configs/hulls, following a test matrix from configs/campaigns
     (default: seed 000's trimaran and catamaran pitch decays at 0.9T, T, 1.1T from 2, 4, 6, 8 deg)."""
-    from ..config import load_campaign_plan, load_hull
+    from ..config import load_hull
     from ..errors import InputError
     from ..ident.campaign import write_simulated_campaign
+    from ..plans import load_campaign_plan
 
     matrix = load_campaign_plan(plan)
     axis = axis or matrix.axis

@@ -107,8 +107,8 @@ def session_command(
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
 ) -> None:
     from ..acquire.campaign_session import CampaignSession, SessionSettings
-    from ..config import load_campaign_plan
     from ..physics.scenario import parse_fault_script
+    from ..plans import load_campaign_plan
 
     answers = read_responses(responses)
     settings = SessionSettings(
