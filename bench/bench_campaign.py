@@ -27,13 +27,13 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 
 from tankdaq.ident.campaign import (
-    campaign_executor,
     find_recordings,
     group_runs,
     identify_groups,
     read_campaign_runs,
     write_simulated_campaign,
 )
+from tankdaq.ident.executors import campaign_executor
 from tankdaq.viz.campaign_report import load_plotting, write_report
 
 HULLS = ("trimaran", "catamaran", "swath")

@@ -19,7 +19,6 @@ from tankdaq.errors import InputError
 from tankdaq.ident.campaign import (
     GroupKey,
     GroupResult,
-    campaign_executor,
     csv_labels,
     find_recordings,
     group_runs,
@@ -29,6 +28,7 @@ from tankdaq.ident.campaign import (
     write_simulated_campaign,
 )
 from tankdaq.ident.derived import b_eq
+from tankdaq.ident.executors import campaign_executor
 from tankdaq.records import DecayRun
 from tankdaq.viz.campaign_report import load_plotting, write_report
 

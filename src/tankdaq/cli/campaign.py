@@ -62,8 +62,6 @@ def campaign_command(
     """
     from ..errors import InputError
     from ..ident.campaign import (
-        campaign_executor,
-        check_scheduler,
         find_campaign_hulls,
         find_recordings,
         group_runs,
@@ -71,6 +69,7 @@ def campaign_command(
         markdown_table,
         read_campaign,
     )
+    from ..ident.executors import campaign_executor, check_scheduler
     from ..ident.inputs import input_notices
     from ..ident.online import prepare_identifier
     from ..physics.models import resolve_model

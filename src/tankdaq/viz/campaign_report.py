@@ -20,8 +20,9 @@ from matplotlib.figure import Figure
 
 from ..config import format_draft
 from ..config_rules import path_in
-from ..ident.campaign import GroupKey, GroupResult, executor_map, write_tables
+from ..ident.campaign import GroupKey, GroupResult, write_tables
 from ..ident.derived import b_eq_band, extinction_curve, natural_period
+from ..ident.executors import executor_map
 from ..ident.output_error import OutputError
 from ..physics.terms import TERM_TABLE
 from .plots import report_style, save_png
@@ -46,7 +47,7 @@ def write_report(
 ) -> list[Path]:
     """campaign.csv, campaign.md and the PNG figures into ``folder`` (created); the files written.
 
-    ``executor`` (``ident.campaign.campaign_executor``) draws the figures in parallel.
+    ``executor`` (``ident.executors.campaign_executor``) draws the figures in parallel.
     """
     fitted = [r for r in results if r.fit is not None]
     return write_tables(results, folder) + write_plots(fitted, folder, executor)
