@@ -8,7 +8,17 @@ from typing import Annotated
 import typer
 
 from .. import validation
-from .app import app, checked, err_console, fail, handles_errors, progress_bar, say, warn_truncated
+from .app import (
+    DRAFT_METAVAR,
+    app,
+    checked,
+    err_console,
+    fail,
+    handles_errors,
+    progress_bar,
+    say,
+    warn_truncated,
+)
 from .identify import EndS, StartS
 
 
@@ -166,6 +176,7 @@ def simulate_campaign_command(
         typer.Option(
             "--draft",
             callback=checked(validation.draft_factor, keep_input=True),
+            metavar=DRAFT_METAVAR,
             help="Drafts (repeat; overrides the plan).",
         ),
     ] = None,
