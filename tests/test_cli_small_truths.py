@@ -59,3 +59,14 @@ def test_every_rate_option_lists_every_accepted_rate() -> None:
         assert rates == validation.OUTPUT_RATES_HZ, path
         for rate in rates:  # each rate listed is one the option takes
             assert validation.output_rate_hz(float(rate)) == rate
+
+
+def test_hulls_new_prints_the_template_it_wrote_then_its_path(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.setenv("TANKDAQ_HULLS_DIR", str(tmp_path))
+    result = runner.invoke(app, ["hulls", "new", "mymodel"])
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    written = tmp_path / "mymodel.toml"
+    assert lines[-1] == str(written)
+    assert lines[:-1] == written.read_text().splitlines()
+    assert 'name = "mymodel"' in lines and any(line.startswith("[dimensions]") for line in lines)
