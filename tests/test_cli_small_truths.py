@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from tankdaq import validation
 from tankdaq.cli import app
 from tankdaq.cli.app import DRAFT_METAVAR
+from tankdaq.ident.campaign import write_simulated_campaign
 
 runner = CliRunner()
 REPO = Path(__file__).resolve().parents[1]
@@ -70,3 +71,20 @@ def test_hulls_new_prints_the_template_it_wrote_then_its_path(tmp_path: Path, mo
     assert lines[-1] == str(written)
     assert lines[:-1] == written.read_text().splitlines()
     assert 'name = "mymodel"' in lines and any(line.startswith("[dimensions]") for line in lines)
+
+
+def test_campaign_names_the_folders_read_and_no_recurse_stays_out_of_subfolders(tmp_path: Path) -> None:
+    top = tmp_path / "campaign"
+    mine = top / "mine"
+    write_simulated_campaign(top, ["trimaran"], "pitch", [1.0], [6.0], "csv", seed=3)
+    write_simulated_campaign(mine, ["catamaran"], "pitch", [1.0], [6.0], "csv", seed=4)
+
+    result = runner.invoke(app, ["campaign", str(top), "--no-recurse", "--jobs", "1"])
+    assert result.exit_code == 0, result.output
+    assert f"read 1 recording(s) from 1 folder(s): {top}\n" in result.stderr
+    assert "| trimaran" in result.stdout and "catamaran" not in result.stdout
+
+    pooled = runner.invoke(app, ["campaign", str(top), "--jobs", "1"])
+    assert pooled.exit_code == 0, pooled.output
+    assert f"read 2 recording(s) from 2 folder(s): {top}, {mine}\n" in pooled.stderr
+    assert "| trimaran" in pooled.stdout and "| catamaran" in pooled.stdout
