@@ -88,3 +88,11 @@ def test_campaign_names_the_folders_read_and_no_recurse_stays_out_of_subfolders(
     assert pooled.exit_code == 0, pooled.output
     assert f"read 2 recording(s) from 2 folder(s): {top}, {mine}\n" in pooled.stderr
     assert "| trimaran" in pooled.stdout and "| catamaran" in pooled.stdout
+
+
+def test_the_licence_is_mit_and_is_packaged() -> None:
+    licence = (REPO / "LICENSE").read_text()
+    assert licence.startswith("MIT License") and "Copyright (c) 2026 tankdaq authors" in licence
+    pyproject = (REPO / "pyproject.toml").read_text()
+    assert 'license = "MIT"' in pyproject or 'license = { text = "MIT" }' in pyproject
+    assert 'license-files = ["LICENSE"]' in pyproject
