@@ -44,8 +44,10 @@ def test_xdg_rule(monkeypatch, tmp_path):
 def test_new_writes_a_template_that_loads_and_the_list_says_where_each_came_from(user_folder):
     result = runner.invoke(app, ["hulls", "new", "mymodel"])
     assert result.exit_code == 0, result.output
-    path = Path(result.stdout.strip())
+    *template, last = result.stdout.splitlines()
+    path = Path(last)
     assert path == user_folder / "mymodel.toml" and path.read_text().count("#") > 10
+    assert template == path.read_text().splitlines()  # the template it wrote is printed, then its path
     hull = load_hull("mymodel")
     assert hull.origin == "user" and hull.simulation == {} and hull.particulars("roll").gm_m == 0.05
     again = runner.invoke(app, ["hulls", "new", "mymodel"])

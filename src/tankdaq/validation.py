@@ -32,6 +32,14 @@ if TYPE_CHECKING:
 #: The MTi's output clock: every output rate is an integer divisor of it (LLCP, SetOutputConfiguration).
 MTI_BASE_RATE_HZ = 400
 
+#: Every output rate an MTi accepts: the whole divisors of its clock, shown in --rate's help and errors.
+OUTPUT_RATES_HZ: tuple[int, ...] = tuple(
+    rate for rate in range(1, MTI_BASE_RATE_HZ + 1) if MTI_BASE_RATE_HZ % rate == 0
+)
+
+#: The accepted rates as people read them, "1, 2, 4, ... 400".
+OUTPUT_RATES_TEXT = ", ".join(map(str, OUTPUT_RATES_HZ))
+
 #: Serial line rates an MTi accepts (the SetBaudrate codes).
 STANDARD_BAUDS: tuple[int, ...] = tuple(sorted(set(BAUD_CODES.values())))
 
@@ -41,10 +49,11 @@ MAX_BOOTSTRAP_REPLICAS = 10_000
 
 
 def output_rate_hz(value: float, option: str = "--rate") -> float:
-    """An MTi output rate: a whole divisor of 400 Hz (1, 2, 4, 5 ... 100, 200, 400)."""
-    if not (math.isfinite(value) and value >= 1 and value == int(value) and MTI_BASE_RATE_HZ % value == 0):
+    """An MTi output rate: a whole divisor of 400 Hz (``OUTPUT_RATES_HZ``)."""
+    if not (math.isfinite(value) and value in OUTPUT_RATES_HZ):
         raise InputError(
-            f"{option} {value:g} Hz is not an MTi output rate; use a whole divisor of 400 Hz (100, 200, 400)"
+            f"{option} {value:g} Hz is not an MTi output rate; "
+            f"use a whole divisor of {MTI_BASE_RATE_HZ} Hz: {OUTPUT_RATES_TEXT}"
         )
     return float(value)
 
@@ -228,6 +237,8 @@ __all__ = [
     "MAX_BOOTSTRAP_REPLICAS",
     "MAX_RELEASE_ANGLE_DEG",
     "MTI_BASE_RATE_HZ",
+    "OUTPUT_RATES_HZ",
+    "OUTPUT_RATES_TEXT",
     "STANDARD_BAUDS",
     "baud_rate",
     "bootstrap_replicas",

@@ -174,11 +174,20 @@ def checked(rule: Callable[..., Any], keep_input: bool = False, **settings: Any)
     return apply
 
 
+#: How every --draft shows in --help: the forms it takes (a factor of the design draft T).
+DRAFT_METAVAR = "0.9T|T|1.1T"
+
+
 def parse_draft_option(value: str) -> float:
     """typer parser for --draft: '0.9T', 'T', '1.1T' -> factor (bad values exit 2)."""
     from ..validation import draft_factor
 
     return checked(draft_factor)(value)
+
+
+def draft_option(default: Any = "T", help: str = "Draft, a factor of the design draft T.") -> Any:
+    """The --draft option of every command that takes one draft: parsed and shown in --help alike."""
+    return typer.Option(default, "--draft", parser=parse_draft_option, metavar=DRAFT_METAVAR, help=help)
 
 
 def say(line: str) -> None:

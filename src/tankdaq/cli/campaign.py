@@ -8,7 +8,17 @@ from typing import Annotated
 import typer
 
 from .. import validation
-from .app import app, checked, err_console, fail, handles_errors, progress_bar, say, warn_truncated
+from .app import (
+    DRAFT_METAVAR,
+    app,
+    checked,
+    err_console,
+    fail,
+    handles_errors,
+    progress_bar,
+    say,
+    warn_truncated,
+)
 from .identify import EndS, StartS
 
 
@@ -52,13 +62,18 @@ def campaign_command(
         bool,
         typer.Option("--full-scale", help="Also report at full scale (Froude; each hull's scale_factor)."),
     ] = False,
+    no_recurse: Annotated[
+        bool,
+        typer.Option("--no-recurse", help="Read only the given folders' own files, not their subfolders."),
+    ] = False,
 ) -> None:
     """Group decays by hull, axis, draft and initial angle; fit each group jointly (output error).
 
     CSV files name their condition like trimaran_0.9T_pitch_8deg.csv (or carry a JSON sidecar with
     hull, draft, axis, angle_deg); tankdaq recordings carry it in their metadata. The table goes to
     stdout. A file that cannot be read is skipped with one line; the exit code is then 1 (results
-    written for the others).
+    written for the others). Folders are searched with their subfolders (--no-recurse: not); one line
+    names every folder read.
     """
     from ..errors import InputError
     from ..ident.campaign import (
@@ -83,7 +98,7 @@ def campaign_command(
     if scheduler is not None:
         check_scheduler(scheduler)  # an address not understood or not answering: one line, at once
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
-    paths = find_recordings(inputs)
+    paths = find_recordings(inputs, recurse=not no_recurse)
     prepare_identifier(model, say)  # the native kernels: built once, on the first run after install
     prepare = []
     if report is not None:
@@ -109,6 +124,7 @@ def campaign_command(
             for skipped in found.skipped:
                 say(skipped.line)
             raise InputError(f"no decays read: all {len(paths)} files were skipped (listed above)")
+        say(folders_line(paths))  # a subfolder's decays pooled in are named, not silent
         for line in [*(skipped.line for skipped in found.skipped), *input_notices(found.runs)]:
             say(line)  # one bad file does not stop the campaign: listed, and exit 1 at the end
         runs = found.runs
@@ -143,6 +159,12 @@ def campaign_command(
         raise fail(f"{count}; the results cover the others", 1)
 
 
+def folders_line(paths: list[Path]) -> str:
+    """One line naming every folder recordings were read from: a subfolder's decays pooled in are seen."""
+    folders = sorted({str(path.parent) for path in paths})
+    return f"read {len(paths)} recording(s) from {len(folders)} folder(s): {', '.join(folders)}"
+
+
 @app.command("simulate-campaign")
 @handles_errors
 def simulate_campaign_command(
@@ -165,6 +187,7 @@ def simulate_campaign_command(
         typer.Option(
             "--draft",
             callback=checked(validation.draft_factor, keep_input=True),
+            metavar=DRAFT_METAVAR,
             help="Drafts (repeat; overrides the plan).",
         ),
     ] = None,

@@ -16,9 +16,9 @@ from ..records import DecayRun
 from .app import (
     app,
     checked,
+    draft_option,
     err_console,
     handles_errors,
-    parse_draft_option,
     progress_bar,
     say,
     warn_truncated,
@@ -109,9 +109,7 @@ def diagnose_command(
     hull: str = typer.Option(
         None, "--hull", help="Hull config: --simulation hull, and the correction in SI."
     ),
-    draft: float = typer.Option(
-        "T", "--draft", parser=parse_draft_option, help="Draft with --hull: 0.9T, T, 1.1T."
-    ),
+    draft: float = draft_option(help="Draft with --hull."),
 ) -> None:
     """Fit a baseline, find where it disagrees with the decays, name and add the missing effects.
 

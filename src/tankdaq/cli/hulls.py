@@ -82,7 +82,9 @@ def show_command(name: Annotated[str, typer.Argument(help="Hull name or .toml pa
 def new_command(
     name: Annotated[str, typer.Argument(help="Name of the new hull (letters, digits, -).")],
 ) -> None:
-    """Write a commented hull template to the user's hull folder and print its path."""
+    """Write a commented hull template to the user's hull folder; print it, then its path (the last line)."""
     from ..config import write_hull_template
 
-    typer.echo(str(write_hull_template(name)))
+    path = write_hull_template(name)
+    typer.echo(path.read_text(), nl=False)  # what to edit, shown where the user is looking
+    typer.echo(str(path))

@@ -18,9 +18,9 @@ if TYPE_CHECKING:
 from .app import (
     app,
     checked,
+    draft_option,
     err_console,
     handles_errors,
-    parse_draft_option,
     progress_bar,
     say,
     warn_truncated,
@@ -155,9 +155,7 @@ def identify_command(
         False, "--repeats", help="The runs are repeats: intervals from their spread (t, n-1 dof)."
     ),
     hull: str = typer.Option(None, "--hull", help="Hull config for dimensional results."),
-    draft: float = typer.Option(
-        "T", "--draft", parser=parse_draft_option, help="Draft with --hull: 0.9T, T, 1.1T."
-    ),
+    draft: float = draft_option(help="Draft with --hull."),
     full_scale: bool = typer.Option(
         False, "--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."
     ),

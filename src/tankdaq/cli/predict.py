@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from .. import validation
-from .app import app, checked, handles_errors, parse_draft_option
+from .app import app, checked, draft_option, handles_errors
 
 #: Amplitudes shown when no --angle is given (deg): the band a decay test covers.
 DEFAULT_ANGLES_DEG = (5.0, 10.0, 15.0, 20.0)
@@ -21,7 +21,7 @@ def predict_command(
     hull: Annotated[
         str, typer.Option("--hull", help="Hull name or .toml with [particulars] (docs/hulls.md).")
     ],
-    draft: float = typer.Option("T", "--draft", parser=parse_draft_option, help="Draft: 0.9T, T, 1.1T."),
+    draft: float = draft_option(),
     speed: Annotated[
         float | None,
         typer.Option("--speed", help="Carriage speed, m/s (default: the hull's speed_m_s, else 0)."),

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from .. import validation
-from .app import app, checked, err_console, handles_errors, parse_draft_option, say
+from .app import app, checked, draft_option, err_console, handles_errors, say
 
 if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
     from ..acquire.daemon import RecordSettings
@@ -121,9 +121,7 @@ def record_command(
         help="Device path, pyserial URL, 'auto' (the one Xsens device), 'sim' (built-in simulated MTi-G), "
         "or 'sim:FILE.mcap' (the device of a recording, played again).",
     ),
-    draft: float = typer.Option(
-        ..., "--draft", parser=parse_draft_option, help="Draft as a factor of design: 0.9T, T, 1.1T."
-    ),
+    draft: float = draft_option(...),
     angle: float = typer.Option(
         ..., "--angle", callback=checked(validation.release_angle_deg), help="Nominal release angle (deg)."
     ),
@@ -135,7 +133,7 @@ def record_command(
         100.0,
         "--rate",
         callback=checked(validation.output_rate_hz),
-        help="Output rate (Hz): 100, 200 or 400.",
+        help=f"Output rate (Hz): {validation.OUTPUT_RATES_TEXT}.",
     ),
     baud: int = typer.Option(
         None,

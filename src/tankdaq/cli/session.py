@@ -97,7 +97,10 @@ def session_command(
         None, "--responses", help="Answers, one per line (empty = Enter), used before --yes or the terminal."
     ),
     rate: float = typer.Option(
-        100.0, "--rate", callback=checked(validation.output_rate_hz), help="Output rate (Hz): 100, 200, 400."
+        100.0,
+        "--rate",
+        callback=checked(validation.output_rate_hz),
+        help=f"Output rate (Hz): {validation.OUTPUT_RATES_TEXT}.",
     ),
     viewer: ViewerOption = None,
     model: LiveModelOption = DEFAULT_LIVE_MODEL,

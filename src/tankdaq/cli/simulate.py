@@ -13,7 +13,7 @@ import typer
 
 from .. import validation
 from ..errors import InputError
-from .app import app, checked, err_console, handles_errors, parse_draft_option
+from .app import app, checked, draft_option, err_console, handles_errors
 
 if TYPE_CHECKING:
     from ..device.simulator import SimulatedMTi
@@ -36,7 +36,7 @@ def _free_link(path: Path) -> Path:
 @handles_errors
 def simulate_command(
     hull: str = typer.Option("swath", "--hull", help="Hull config whose decay model plays (tankdaq hulls)."),
-    draft: float = typer.Option("T", "--draft", parser=parse_draft_option, help="Draft: 0.9T, T, 1.1T."),
+    draft: float = draft_option(),
     angle_deg: float = typer.Option(
         8.0,
         "--angle",
@@ -48,7 +48,7 @@ def simulate_command(
         100,
         "--rate",
         callback=checked(validation.output_rate_hz),
-        help="Output rate the scenario is prepared at (Hz): 100, 200 or 400.",
+        help=f"Output rate the scenario is prepared at (Hz): {validation.OUTPUT_RATES_TEXT}.",
     ),
     seed: int = typer.Option(0, "--seed", help="Seed: the same seed plays the same test."),
     runs: int = typer.Option(3, "--runs", min=0, help="Decay runs before the water stays still."),

@@ -122,14 +122,15 @@ class GroupResult:
 # --------------------------------------------------------------------------------------------------
 
 
-def find_recordings(inputs: Sequence[str | Path]) -> list[Path]:
+def find_recordings(inputs: Sequence[str | Path], recurse: bool = True) -> list[Path]:
     """The files tankdaq reads decays from (``store.inputs.INPUT_FORMATS``: .mcap, .csv) among ``inputs``
-    (folders searched recursively), sorted."""
+    (folders searched recursively unless ``recurse`` is False: then only the folder's own files), sorted."""
     found: list[Path] = []
     known = " or ".join(INPUT_FORMATS)
     for item in map(Path, inputs):
         if item.is_dir():
-            found.extend(p for p in sorted(item.rglob("*")) if p.suffix.lower() in INPUT_FORMATS)
+            files = item.rglob("*") if recurse else item.iterdir()
+            found.extend(p for p in sorted(files) if p.is_file() and p.suffix.lower() in INPUT_FORMATS)
         elif item.is_file():
             if item.suffix.lower() not in INPUT_FORMATS:
                 raise InputError(f"{item}: not a recording; give {known} files or a folder of them")
