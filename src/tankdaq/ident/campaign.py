@@ -130,7 +130,8 @@ def find_recordings(inputs: Sequence[str | Path], recurse: bool = True) -> list[
     for item in map(Path, inputs):
         if item.is_dir():
             files = item.rglob("*") if recurse else item.iterdir()
-            found.extend(p for p in sorted(files) if p.is_file() and p.suffix.lower() in INPUT_FORMATS)
+            # not is_dir(): a dangling link is kept, to be reported as one (a folder named x.csv is not)
+            found.extend(p for p in sorted(files) if not p.is_dir() and p.suffix.lower() in INPUT_FORMATS)
         elif item.is_file():
             if item.suffix.lower() not in INPUT_FORMATS:
                 raise InputError(f"{item}: not a recording; give {known} files or a folder of them")
