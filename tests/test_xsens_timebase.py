@@ -1,7 +1,8 @@
-"""SampleTimeFine unwrapping (day wrap, GNSS messages with older times) and PacketCounter gaps."""
+"""SampleTimeFine unwrapping (day and 2**32 wraps, GNSS messages with older times) and PacketCounter gaps."""
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -9,10 +10,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from tankdaq.device.decoding import SampleDecoder
 from tankdaq.errors import ProtocolError
+from tankdaq.xsens.constants import MID
+from tankdaq.xsens.frame import build_frame
 from tankdaq.xsens.framer import StreamFramer
-from tankdaq.xsens.mtdata2 import decode_mtdata2
-from tankdaq.xsens.timebase import MODULUS_32_BIT, MODULUS_ONE_DAY, CounterTracker, SampleTimeUnwrapper
+from tankdaq.xsens.mtdata2 import decode_mtdata2, encode_mtdata2, make_xdi
+from tankdaq.xsens.timebase import (
+    MODULUS_32_BIT,
+    MODULUS_ONE_DAY,
+    CounterTracker,
+    SampleTimeUnwrapper,
+    sample_time_modulus,
+)
 
 CAPTURES = Path(__file__).parents[2] / "shared" / "data" / "xsens-captures"
 
@@ -105,3 +115,55 @@ def test_counter_tracker_vectorised_equals_scalar() -> None:
     assert scalar.gaps == vector.gaps and scalar.lost == vector.lost == int(
         np.sum(np.diff(counters) % 65536 - 1)
     )
+
+
+@pytest.mark.parametrize(
+    ("product_code", "modulus"),
+    [
+        ("MTi-630-2A8G4", MODULUS_32_BIT),
+        ("MTi-680G-2A8G4", MODULUS_32_BIT),
+        ("MTi-1-8A7G6", MODULUS_32_BIT),
+        ("MTi-G-710-2A8G4", MODULUS_ONE_DAY),
+        ("MTi-300-2A8G4", MODULUS_ONE_DAY),
+        ("MTi-10-2A5G4", MODULUS_ONE_DAY),
+        ("", MODULUS_ONE_DAY),  # not yet asked: the MTi-G-710's
+    ],
+)
+def test_modulus_follows_the_device_family(product_code: str, modulus: int) -> None:
+    assert sample_time_modulus(product_code) == modulus
+
+
+def _mtdata2(counter: int, ticks: int) -> bytes:
+    items = [(make_xdi("PacketCounter"), counter), (make_xdi("SampleTimeFine"), ticks),
+             (make_xdi("EulerAngles"), (1.0, 2.0, 3.0))]  # fmt: skip
+    return build_frame(MID.MTDATA2, encode_mtdata2(items))
+
+
+@settings(max_examples=15, deadline=None)
+@given(cuts=st.lists(st.integers(1, 40 * 19), min_size=1, max_size=6))
+def test_600_series_decoder_unwraps_its_clock_and_counter_across_blocks(cuts: list[int]) -> None:
+    # a 600-series stream whose SampleTimeFine and PacketCounter both wrap, cut into arbitrary reads
+    n = 40
+    raw_ticks = [(2**32 - 2_000 + 100 * k) % 2**32 for k in range(n)]
+    counters = [(65_530 + k) % 65_536 for k in range(n)]
+    stream = b"".join(_mtdata2(c, t) for c, t in zip(counters, raw_ticks, strict=True))
+    decoder = SampleDecoder.for_device("MTi-630-2A8G4")
+    tracker = CounterTracker()
+    bounds = [0, *sorted(set(cuts)), len(stream)]
+    blocks = [decoder.feed(stream[a:b], 0.0)[0] for a, b in itertools.pairwise(bounds)]
+    samples = np.concatenate([*blocks, decoder.feed(b"", 0.0)[0]])
+    assert samples["ticks"].tolist() == [2**32 - 2_000 + 100 * k for k in range(n)]
+    assert samples["counter"].tolist() == counters
+    tracker.update_many(samples["counter"])
+    assert (tracker.lost, tracker.gap_count) == (0, 0)
+
+
+def test_counter_wrap_is_not_a_loss_and_a_loss_at_the_wrap_is_counted() -> None:
+    tracker = CounterTracker()
+    assert tracker.update_many(np.array([65_533, 65_534])).tolist() == [0, 0]
+    assert tracker.update_many(np.array([65_535, 0, 1])).tolist() == [0, 0, 0]  # the wrap, across calls
+    assert (tracker.lost, tracker.gap_count, tracker.out_of_order) == (0, 0, 0)
+    tracker.update(65_535)  # a repeat, not 65534 lost packets
+    assert (tracker.lost, tracker.out_of_order) == (0, 1)
+    assert tracker.update_many(np.array([1])).tolist() == [1]  # 0 went missing at the wrap
+    assert (tracker.lost, tracker.gaps[-1]) == (1, (0, 1))

@@ -84,7 +84,8 @@ def replay_recording(
     session = DecaySession(settings, sinks, on_event=on_event)
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))
-    decoder = SampleDecoder(LegacyOutput.for_decay(rate_hz) if legacy else None)  # as the driver asked for
+    output = LegacyOutput.for_decay(rate_hz) if legacy else None  # as the driver asked for
+    decoder = SampleDecoder.for_device(str(meta.get("product_code", "")), output)
     wall0: float | None = None
     t0 = 0.0
     try:

@@ -14,7 +14,7 @@ from ..xsens.batch import DecodedBlock, to_samples
 from ..xsens.constants import MID
 from ..xsens.legacy import decode_mtdata
 from ..xsens.stream import StreamDecoder
-from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrapper
+from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrapper, sample_time_modulus
 from .legacy_output import LegacyOutput
 
 
@@ -30,6 +30,15 @@ class SampleDecoder:
         self.stream = StreamDecoder()
         self._unwrapper = SampleTimeUnwrapper(modulus)
         self._legacy_counter = SampleTimeUnwrapper(1 << 16)
+
+    @classmethod
+    def for_device(cls, product_code: str, legacy: LegacyOutput | None = None) -> SampleDecoder:
+        """The decoder for the device that says it is ``product_code``: its family's clock modulus.
+
+        Make one per session and feed it every block: its unwrapper carries each wrap of
+        SampleTimeFine from the session's first sample on.
+        """
+        return cls(legacy, sample_time_modulus(product_code))
 
     def feed(self, raw: bytes, host_t: float) -> tuple[np.ndarray, DecodedBlock]:
         """Samples completed by ``raw``; an empty read (a quiet line) confirms a held frame."""

@@ -60,7 +60,7 @@ from ..xsens.control import (
 from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
 from ..xsens.mtdata2 import describe_xdi
-from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, CounterTracker
+from ..xsens.timebase import TICKS_PER_SECOND, CounterTracker
 from .decoding import SampleDecoder
 from .latency import ftdi_latency_ms, latency_note
 from .legacy_output import LegacyOutput
@@ -223,7 +223,8 @@ class MTiDriver:
 
     ``baud``: the line rate to run at (None: keep the device's rate if it carries the output,
     else move it to the slowest standard rate that does). ``probe_first``: where to look for the
-    device first when ``baud`` is None (factory default 115200).
+    device first when ``baud`` is None (factory default 115200). ``modulus``: the SampleTimeFine
+    modulus (None: the one of the device family the device says it is, reference §2.6).
     """
 
     def __init__(
@@ -239,7 +240,7 @@ class MTiDriver:
         probe_s: float = 0.6,
         boot_s: float = 6.0,
         silence_timeout_s: float = 3.0,
-        modulus: int = MODULUS_ONE_DAY,
+        modulus: int | None = None,
         by_id_dirs: Sequence[str] | None = None,
     ) -> None:
         for rate in (baud, probe_first):
@@ -275,8 +276,12 @@ class MTiDriver:
         self._log = LineLog()
         self._reset_stream_state()
 
-    def _reset_stream_state(self, legacy: LegacyOutput | None = None) -> None:
-        self._samples = SampleDecoder(legacy, self.modulus)
+    def _reset_stream_state(self, legacy: LegacyOutput | None = None, product: str = "") -> None:
+        # one decoder for the whole session: its unwrapper carries every clock wrap from the first sample
+        if self.modulus is None:
+            self._samples = SampleDecoder.for_device(product, legacy)
+        else:
+            self._samples = SampleDecoder(legacy, self.modulus)
         self._tracker = CounterTracker()
         self._carry: StreamBlock | None = None
 
@@ -530,7 +535,7 @@ class MTiDriver:
         if target != found:
             self.move_baud(target, is_600_series(product))
         self.request(MID.GOTO_MEASUREMENT)
-        self._reset_stream_state(LegacyOutput.for_decay(self.rate_hz) if legacy else None)
+        self._reset_stream_state(LegacyOutput.for_decay(self.rate_hz) if legacy else None, product)
         # a device streams at once: what came with the ack is the stream's start, not hand-shake noise
         self._unread = b"".join(f.to_bytes() for f in self._after_reply) + self._framer.take_pending()
         self.counters = StreamCounters()

@@ -224,7 +224,8 @@ class DecayScenario:
     handling: Handling = field(default_factory=Handling)
     noise: SensorNoise = field(default_factory=SensorNoise)
     coefficients: dict[str, float] = field(kw_only=True)
-    start_ticks: int | None = None
+    start_ticks: int | None = None  # SampleTimeFine of the first sample (near 2**32: a 600's clock wraps)
+    start_counter: int | None = None  # PacketCounter of the first sample (near 65535: about to wrap)
     pushes_again: tuple[int, ...] = ()  # runs (from 0) in which the hand pushes the model again mid-decay
 
     def __post_init__(self) -> None:
@@ -247,6 +248,12 @@ class DecayScenario:
             raise InputError(f"{self.hull} {self.axis}: {SIMULATION_RULE}: {why}")
         if self.start_ticks is None:
             self.start_ticks = int(np.random.default_rng([self.seed, 1]).integers(0, TICK_MODULUS // 2))
+        if self.start_ticks < 0:
+            raise InputError(f"start ticks {self.start_ticks} is negative; SampleTimeFine counts from 0")
+        if self.start_counter is None:
+            self.start_counter = self.seed & 0xFFFF
+        if not 0 <= self.start_counter <= 0xFFFF:
+            raise InputError(f"start counter {self.start_counter} is outside PacketCounter's 0..65535")
 
     @property
     def run_s(self) -> float:
@@ -366,7 +373,7 @@ class DecayScenario:
 
     def sensor(self) -> SensorModel:
         """The scenario's sensor (its biases follow the seed)."""
-        return SensorModel(self.noise, self.rate_hz, self.seed)
+        return SensorModel(self.noise, self.rate_hz, self.seed, int(self.start_counter or 0))
 
     def samples(self) -> tuple[np.ndarray, ScenarioTrace]:
         """Measured samples of all runs, and the trace they measure (the truth)."""
@@ -444,10 +451,11 @@ class SensorModel:
     heading_deg = 30.0
     lever_arm_m = 0.15  # sensor height above the rotation axis: adds tangential and centripetal acceleration
 
-    def __init__(self, noise: SensorNoise, rate_hz: float, seed: int) -> None:
+    def __init__(self, noise: SensorNoise, rate_hz: float, seed: int, start_counter: int = 0) -> None:
         self.noise = noise
         self.rate_hz = rate_hz
         self.seed = seed
+        self.start_counter = start_counter
         bias_rng = np.random.default_rng([seed, 3])
         self.angle_bias = np.radians(noise.angle_bias_deg) * bias_rng.standard_normal(3)
         self.gyro_bias = np.radians(noise.gyro_bias_deg_s) * bias_rng.standard_normal(3)
@@ -465,7 +473,7 @@ class SensorModel:
         out = np.zeros(n, dtype=SAMPLE_DTYPE)
         out["ticks"] = trace.ticks
         out["t"] = out["ticks"] / TICKS_PER_S
-        out["counter"] = (np.round(trace.t * self.rate_hz).astype(np.int64) + self.seed) & 0xFFFF
+        out["counter"] = (np.round(trace.t * self.rate_hz).astype(np.int64) + self.start_counter) & 0xFFFF
         out["status"] = STATUS_OK
         angle_sd = math.radians(nz.angle_noise_deg)
         for k, (name, value) in enumerate(

@@ -8,6 +8,8 @@ wrap: each step is taken as the shortest signed distance modulo the modulus.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from ..errors import ProtocolError
@@ -18,6 +20,21 @@ MODULUS_ONE_DAY = 864_000_000
 #: SampleTimeFine modulus of the other families (MTi-1, MTi-600).
 MODULUS_32_BIT = 1 << 32
 COUNTER_MODULUS = 1 << 16
+#: Product codes of the 10/100-series (MTi-10/20/30, MTi-100/200/300, MTi-G-700/710): one-day clocks.
+_ONE_DAY_FAMILY = re.compile(r"MTi-(?:[1-3]0|[1-3]00|G-7[01]0)(?:\D|$)")
+
+
+def sample_time_modulus(product_code: str) -> int:
+    """SampleTimeFine modulus of the device that says it is ``product_code`` (reference §2.6).
+
+    One day on the 10/100-series, 2**32 on the others (MTi-1 and 600-series): unwrapping a
+    600-series clock with the one-day modulus drops every sample above 864e6 ticks and
+    restarts the timeline at its wrap. No product code (a device not yet asked, an old
+    recording): one day, the MTi-G-710 tankdaq was built for.
+    """
+    if not product_code or _ONE_DAY_FAMILY.match(product_code):
+        return MODULUS_ONE_DAY
+    return MODULUS_32_BIT
 
 
 class SampleTimeUnwrapper:

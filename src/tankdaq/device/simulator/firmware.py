@@ -96,7 +96,7 @@ class Firmware:
         self.baud = self.pending_baud = baud
         self.speed = speed
         self.faults = faults
-        self.output = Output(legacy=legacy)
+        self.output = Output(legacy=legacy, clock_modulus=identity.clock_modulus)
         self.measuring = False
         self._rng = np.random.default_rng([seed, 99])
         self._epoch = time.monotonic()

@@ -8,6 +8,7 @@ from typing import Any
 
 from ...errors import ProtocolError
 from ...xsens.control import fw_rev_payload, is_600_series
+from ...xsens.timebase import sample_time_modulus
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,11 @@ class DeviceIdentity:
     @property
     def family_600(self) -> bool:
         return is_600_series(self.product_code)
+
+    @property
+    def clock_modulus(self) -> int:
+        """Where this device's SampleTimeFine wraps (one day on the 10/100-series, 2**32 on a 600)."""
+        return sample_time_modulus(self.product_code)
 
     @classmethod
     def recorded(cls, device: Mapping[str, Any]) -> DeviceIdentity | None:

@@ -74,6 +74,8 @@ class Output:
     legacy: bool = False
     items: list[OutputItem] = field(default_factory=default_configuration)
     legacy_mode: LegacyOutput = field(default_factory=LegacyOutput.default)
+    #: where SampleTimeFine wraps: the device family's modulus (one day on an MTi-G-710, 2**32 on a 600)
+    clock_modulus: int = TICK_MODULUS
 
     def restore_defaults(self) -> None:
         self.items = default_configuration()
@@ -107,17 +109,18 @@ class Output:
                     continue
                 if item.name == "Quaternion" and quats is None:
                     quats = quaternion(block["roll"], block["pitch"], block["yaw"])
-                items.append((item.xdi, _value(item.name, sample, None if quats is None else quats[row])))
+                quat = None if quats is None else quats[row]
+                items.append((item.xdi, _value(item.name, sample, quat, self.clock_modulus)))
             frames.append(build_frame(MID.MTDATA2, encode_mtdata2(items)))
         return frames
 
 
-def _value(name: str, sample: np.void, quaternion: np.ndarray | None) -> object:
+def _value(name: str, sample: np.void, quaternion: np.ndarray | None, clock_modulus: int) -> object:
     """The MTData2 value of output ``name`` for one sample (Euler angles in degrees, as on the wire)."""
     ticks = int(sample["ticks"])
     values: dict[str, Callable[[], object]] = {
         "PacketCounter": lambda: int(sample["counter"]),
-        "SampleTimeFine": lambda: ticks % TICK_MODULUS,
+        "SampleTimeFine": lambda: ticks % clock_modulus,
         "SampleTimeCoarse": lambda: (ticks // TICKS_PER_S) & 0xFFFFFFFF,
         "EulerAngles": lambda: tuple(math.degrees(float(sample[f])) for f in ("roll", "pitch", "yaw")),
         "Quaternion": lambda: tuple(float(q) for q in quaternion),  # type: ignore[union-attr]
