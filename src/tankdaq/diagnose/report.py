@@ -202,15 +202,21 @@ def _gap_cells(fit: Fit) -> str:
     )
 
 
-def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
-    """``directory/diagnose.md`` with the story, a step table and three PNG figures."""
-    from ..viz.plots import save_png
-
+def report_folder(directory: str | Path) -> Path:
+    """The report's folder, made where missing (one line when it cannot be)."""
     out = Path(directory)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise RecordingError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
+    return out
+
+
+def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
+    """``directory/diagnose.md`` with the story, a step table and three PNG figures."""
+    from ..viz.plots import save_png
+
+    out = report_folder(directory)
     base_runs, final_runs = diagnoser.baseline_.runs, diagnoser.final_.runs
     spectra = diagnoser.diagnostics_[0].spectrum, diagnoser.diagnostics_[-1].spectrum
     figures = {

@@ -21,7 +21,7 @@ from ..viz import diagnose_view
 from .compare import CorrectionStep, DampingPoint, SimulationComparison
 from .correction import Correction, moment_name
 from .fitting import RunPrediction
-from .report import diagnostics_summary, finite_json
+from .report import diagnostics_summary, finite_json, report_folder
 from .residuals import SPECTRUM_MEANING
 from .simulation import SERIES
 
@@ -296,11 +296,7 @@ def write_report(comparison: SimulationComparison, directory: str | Path) -> Pat
     """``directory/simulation.md`` with the story, the gap table and two PNG figures."""
     from ..viz.plots import save_png
 
-    out = Path(directory)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise RecordingError(f"cannot create report folder {out}: {exc.strerror or exc}") from None
+    out = report_folder(directory)
     for name, fig in figures(comparison).items():
         save_png(fig, out / name)
     rms = comparison.rms_rad_
