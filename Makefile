@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean venv viewer-test-deps
+.PHONY: demo test lint docs bench clean venv viewer-test-deps
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -23,6 +23,11 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check src tests bench
 	$(BIN)/mypy
 
+# The API reference, generated from the docstrings (pdoc) into build/api. Any warning fails the build:
+# a module that does not import, a name in __all__ that resolves to nothing.
+docs: $(STAMP)
+	$(BIN)/python -W error -m pdoc --docformat restructuredtext -o build/api tankdaq
+
 # The live-view window test runs the real viewer under Xvfb with Mesa's software Vulkan driver
 # (Debian packages). Installed where this machine allows (root and apt-get); otherwise say why:
 # that test then skips with its reason and the build goes on.
@@ -40,7 +45,7 @@ viewer-test-deps:
 # One pytest worker per core: most of the suite's wall time is the simulated MTi-G streaming in real time.
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
-test: $(STAMP) lint viewer-test-deps
+test: $(STAMP) lint docs viewer-test-deps
 	$(BIN)/python -m tankdaq.prepare
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal
 
