@@ -127,3 +127,83 @@ def test_the_check_sees_a_lazy_upward_import(tmp_path: Path) -> None:
     assert found == {"ident", "numba"}
     refused = [dep for dep in sorted(found) if not allowed(dep, "xsens", {"errors", "numpy"})]
     assert refused == ["ident", "numba"]
+
+
+def module_graph(root: Path = SRC) -> dict[str, set[str]]:
+    """``{module: the tankdaq modules it imports}``, lazy imports included, packages by their ``__init__``."""
+    modules: dict[str, Path] = {}
+    for path in root.rglob("*.py"):
+        parts = ("tankdaq", *path.relative_to(root).with_suffix("").parts)
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        targets = set()
+        for imported in imports_of(path, root):
+            parts = imported.split(".")
+            while parts and ".".join(parts) not in modules:
+                parts.pop()
+            target = ".".join(parts)
+            if target not in ("", "tankdaq", name):  # tankdaq/__init__ holds only the version
+                targets.add(target)
+        graph[name] = targets
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected groups of more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles: list[list[str]] = []
+    for start in graph:
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph.get(child, ())))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                group = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    group.append(member)
+                    if member == node:
+                        break
+                if len(group) > 1:
+                    cycles.append(sorted(group))
+    return cycles
+
+
+def test_no_import_cycle_between_modules() -> None:
+    """Inside a room too: no module reaches, even lazily, a module that reaches back to it."""
+    cycles = import_cycles(module_graph())
+    assert not cycles, f"import cycles (lazy imports included): {cycles}"
+
+
+def test_the_cycle_check_sees_a_lazy_cycle(tmp_path: Path) -> None:
+    room = tmp_path / "ident"
+    room.mkdir()
+    (room / "__init__.py").write_text("")
+    (room / "a.py").write_text("from .b import x\n")
+    (room / "b.py").write_text("def f():\n    from . import c\n")
+    (room / "c.py").write_text("import tankdaq.ident.a\n")
+    (room / "d.py").write_text("from .a import x\n")
+    expected = [["tankdaq.ident.a", "tankdaq.ident.b", "tankdaq.ident.c"]]
+    assert import_cycles(module_graph(tmp_path)) == expected

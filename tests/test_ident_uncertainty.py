@@ -7,17 +7,10 @@ import pytest
 
 from tankdaq.errors import InputError
 from tankdaq.ident.equation_error import EquationError
+from tankdaq.ident.intervals import fit_with_intervals, moving_block_bootstrap, repeat_spread
 from tankdaq.ident.output_error import OutputError
 from tankdaq.ident.report import summarize
-from tankdaq.ident.uncertainty import (
-    bic,
-    fit_with_intervals,
-    hac_covariance,
-    ljung_box,
-    moving_block_bootstrap,
-    repeat_spread,
-    residual_whiteness,
-)
+from tankdaq.ident.uncertainty import bic, hac_covariance, ljung_box, residual_whiteness
 from test_ident_helpers import synthetic_run, truth_for
 
 TERMS = ("b1", "b2", "c1", "c3")
@@ -69,9 +62,9 @@ def test_intervals_are_returned_beside_the_fit_which_keeps_its_own() -> None:
 @pytest.mark.parametrize(
     ("method", "bootstrap", "n_runs", "mentions"),
     [
-        ("ee", 10, 3, "--bootstrap works with --method oe, not ee"),
-        ("oe", 10, 3, "--repeats needs at least three runs .* and no --bootstrap"),
-        ("oe", 0, 2, "--repeats needs at least three runs"),
+        ("ee", 10, 3, "use method oe, not ee"),
+        ("oe", 10, 3, "repeats need at least three runs .* and no bootstrap"),
+        ("oe", 0, 2, "repeats need at least three runs"),
     ],
 )
 def test_intervals_that_cannot_work_are_refused_before_any_fit(

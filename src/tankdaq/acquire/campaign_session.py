@@ -916,9 +916,9 @@ def repeat_spreads(groups: dict[Any, list[Any]], model: str) -> list[dict[str, A
     """Per condition with repeats: each coefficient fitted on each repeat alone, their mean and spread."""
     from functools import partial
 
+    from ..ident.intervals import repeat_spread
     from ..ident.model_choice import choose_model
     from ..ident.output_error import OutputError
-    from ..ident.uncertainty import repeat_spread
     from ..physics.models import is_auto
 
     rows = []

@@ -169,9 +169,9 @@ def identify_command(
     from ..ident.conditions import condition_of, group_conditions, grouping_line
     from ..ident.derived import scale_results
     from ..ident.estimators import make_estimator
+    from ..ident.intervals import check_intervals
     from ..ident.online import prepare_identifier
     from ..ident.report import text_report
-    from ..ident.uncertainty import check_intervals
     from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 
     if axis not in (None, "roll", "pitch"):
@@ -269,9 +269,9 @@ def _fit_condition(
 ) -> dict:
     """One fit of ``runs`` (the model chosen by data when ``terms`` is None) and its summary."""
     from ..ident.estimators import make_estimator
+    from ..ident.intervals import fit_with_intervals
     from ..ident.model_choice import choose_model
     from ..ident.report import summarize
-    from ..ident.uncertainty import fit_with_intervals
 
     choice = None
     if terms is None:

@@ -28,9 +28,9 @@ from .derived import (
     tested_amplitudes_deg,
 )
 from .estimators import make_estimator
+from .intervals import IntervalSummary
 from .output_error import OutputError, seed_objective
 from .plausibility import check_runs
-from .uncertainty import IntervalSummary
 
 
 def predicted_angles(estimator: Any, runs: Sequence[DecayRun]) -> list[np.ndarray]:
