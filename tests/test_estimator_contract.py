@@ -13,7 +13,7 @@ from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.config import hull_scenario
 from tankdaq.diagnose.synthetic import make_decay_set
 from tankdaq.diagnose.workflow import Diagnoser
-from tankdaq.errors import NotFittedError
+from tankdaq.errors import InputError, NotFittedError
 from tankdaq.ident.base import Estimator
 from tankdaq.ident.equation_error import EquationError
 from tankdaq.ident.online import OnlineIdentifier
@@ -135,3 +135,44 @@ def test_a_missing_attribute_after_fit_is_a_plain_attribute_error() -> None:
     with pytest.raises(AttributeError) as raised:
         _ = fitted.gain_
     assert not isinstance(raised.value, NotFittedError)
+
+
+@pytest.mark.parametrize(("cls", "settings", "fit"), CASES, ids=IDS)
+def test_set_params_changes_settings_by_name(cls, settings, fit) -> None:
+    estimator = cls(NPS) if cls is SeparateIdentifier else cls()
+    assert estimator.set_params(**settings) is estimator
+    assert estimator.get_params() == cls(**settings).get_params()
+    if cls is not OnlineIdentifier:  # its **settings go on to the estimator it refits, as in its constructor
+        with pytest.raises(InputError, match="has no setting 'no_such_setting'"):
+            estimator.set_params(no_such_setting=1)
+
+
+class _Interruptible(OutputError):
+    """An output-error fit that can be interrupted inside its solve, after its runs and terms are known."""
+
+    interrupt = False
+
+    def _solve(self, p0: np.ndarray, free: np.ndarray, tol: float) -> np.ndarray:
+        if self.interrupt:
+            raise KeyboardInterrupt  # what Ctrl-C does in the middle of a fit
+        return super()._solve(p0, free, tol)
+
+
+def test_a_fit_that_fails_leaves_no_result() -> None:
+    estimator = _Interruptible("b1,c1")
+    estimator.interrupt = True
+    with pytest.raises(KeyboardInterrupt):
+        estimator.fit(RUNS)
+    assert not estimator.fitted
+    with pytest.raises(NotFittedError):
+        _ = estimator.terms_
+
+
+def test_a_refit_that_fails_keeps_the_results_of_the_last_success() -> None:
+    estimator = _Interruptible("b1,c1").fit(RUNS)
+    before = dict(estimator.coefficients_)
+    estimator.interrupt = True
+    with pytest.raises(KeyboardInterrupt):
+        estimator.fit(RUNS[:1])
+    assert estimator.coefficients_ == before
+    assert len(estimator.runs_) == len(RUNS)  # not the runs of the fit that failed

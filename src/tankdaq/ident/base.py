@@ -3,17 +3,22 @@
 Settings are the constructor's parameters, stored under their own names and
 never changed by ``fit``: ``get_params()`` reads them back through the
 constructor's signature, so ``clone()`` is an unfitted twin and a fitted
-estimator still says how it was set up. A result asked for before ``fit``
-raises ``NotFittedError`` with what to do, not a bare AttributeError.
+estimator still says how it was set up; ``set_params()`` changes them between
+fits, by name. Results exist only after a fit that succeeded: a fit that raises
+(bad data, a budget, Ctrl-C) leaves the results as they were before it, so a
+failed fit never reads as fitted. A result asked for before ``fit`` raises
+``NotFittedError`` with what to do, not a bare AttributeError.
 """
 
 from __future__ import annotations
 
 import copy
+import functools
 import inspect
+from collections.abc import Callable
 from typing import Any, Protocol, Self, runtime_checkable
 
-from ..errors import NotFittedError
+from ..errors import InputError, NotFittedError
 
 
 @runtime_checkable
@@ -27,8 +32,39 @@ class Estimator(Protocol):
     def clone(self) -> Self: ...
 
 
+def _is_result(name: str) -> bool:
+    return name.endswith("_") and not name.startswith("_")
+
+
+def _results_only_on_success(fit: Callable[..., Any]) -> Callable[..., Any]:
+    """``fit`` such that, when it raises, the estimator's results are those it had before the call."""
+
+    @functools.wraps(fit)
+    def guarded(self: Any, *args: Any, **kwargs: Any) -> Any:
+        before = {name: value for name, value in self.__dict__.items() if _is_result(name)}
+        try:
+            return fit(self, *args, **kwargs)
+        except BaseException:
+            for name in [name for name in self.__dict__ if _is_result(name)]:
+                del self.__dict__[name]
+            self.__dict__.update(before)
+            raise
+
+    guarded.__dict__["_guards_results"] = True
+    return guarded
+
+
 class EstimatorMixin:
-    """``get_params``, ``clone`` and the not-fitted check, shared by every estimator."""
+    """``get_params``, ``set_params``, ``clone`` and the not-fitted check, shared by every estimator.
+
+    A subclass's own ``fit`` is wrapped so that its results appear only when it returns.
+    """
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        fit = cls.__dict__.get("fit")
+        if callable(fit) and not getattr(fit, "_guards_results", False):
+            cls.fit = _results_only_on_success(fit)  # type: ignore[attr-defined]
 
     def get_params(self) -> dict[str, Any]:
         """The constructor's settings by name, as given (read through the constructor's signature).
@@ -47,6 +83,25 @@ class EstimatorMixin:
             else:
                 params[name] = self.__dict__[name]
         return params
+
+    def set_params(self, **params: Any) -> Self:
+        """Change settings by name (between fits); a name the constructor does not take is refused."""
+        own = type(self).__init__ is not object.__init__
+        signature = inspect.signature(type(self).__init__).parameters if own else {}
+        keywords = next((n for n, p in signature.items() if p.kind is inspect.Parameter.VAR_KEYWORD), None)
+        named = {
+            n for n, p in signature.items() if n != "self" and p.kind is not inspect.Parameter.VAR_KEYWORD
+        }
+        for name in params:
+            if name not in named and keywords is None:
+                listed = ", ".join(sorted(named)) or "none"
+                raise InputError(f"{type(self).__name__} has no setting {name!r}: its settings are {listed}")
+        for name, value in params.items():
+            if name in named:
+                setattr(self, name, value)
+            else:  # taken by the constructor's **settings, as it would be
+                self.__dict__[str(keywords)][name] = value
+        return self
 
     def clone(self, **changes: Any) -> Self:
         """An unfitted estimator with the same settings but ``changes`` (containers copied, not shared)."""
