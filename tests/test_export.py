@@ -269,3 +269,17 @@ def test_help_lists_every_format():
     for name in ("csv", "h5", "parquet", "mat", "release", "device"):
         assert name in result.output
     assert "tankdaq[parquet]" in result.output
+
+
+def test_campaign_reads_the_exported_csv_as_the_recording(recording, tmp_path):
+    from tankdaq.ident.campaign import read_campaign_runs
+
+    (direct,), (again,) = (
+        read_campaign_runs(recording),
+        read_campaign_runs(export(recording, "--out", tmp_path)[0]),
+    )
+    for key in ("hull", "draft", "axis", "angle_deg"):
+        assert again.meta[key] == direct.meta[key]
+    np.testing.assert_array_equal(again.angle, direct.angle)
+    np.testing.assert_array_equal(again.rate, direct.rate)
+    np.testing.assert_array_equal(again.t - again.t[0], direct.t - direct.t[0])
