@@ -12,13 +12,18 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from scipy.io import loadmat
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
 from tankdaq.ident.campaign import SimulatedTest, csv_labels, write_simulated_campaign
 from tankdaq.samples import SAMPLE_DTYPE
+from tankdaq.store.export import ExportTable
 from tankdaq.store.export_layout import column_name
+from tankdaq.store.export_writers import write_csv
 from tankdaq.store.reader import read_recording
 from tankdaq.store.writer import RecordingWriter
 
@@ -111,6 +116,26 @@ def test_plain_read_csv_gives_the_recording_exactly(two_decays, tmp_path):
     assert frame["ticks"].dtype == np.int64 and frame["pitch_rad"].dtype == np.float64
     assert frame["yaw_rad"].isna().sum() == 10  # the gap is empty cells, read as missing
     assert_exact({name: frame[name].to_numpy() for name in frame.columns}, samples, RELEASES_S[0])
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    values=arrays(np.float64, st.integers(1, 40), elements=st.floats(width=64)),
+    ticks=st.integers(-(2**63), 2**63 - 1),
+)
+def test_any_float_and_integer_reads_back_bit_for_bit(tmp_path_factory, values, ticks):
+    """Subnormals, huge values, -0.0, infinities and NaN (an empty cell) through plain pd.read_csv."""
+    path = tmp_path_factory.mktemp("any") / "x.csv"
+    columns = {"x_rad": values, "ticks": np.full(values.size, ticks, dtype=np.int64)}
+    write_csv(
+        ExportTable("x", columns, {"x_rad": "rad", "ticks": "0.1 ms"}, {"format": "tankdaq export"}), path
+    )
+    read = pd.read_csv(path)
+    got = read["x_rad"].to_numpy(dtype=np.float64)
+    nan = np.isnan(values)
+    np.testing.assert_array_equal(np.isnan(got), nan)
+    np.testing.assert_array_equal(got[~nan].view(np.uint64), values[~nan].view(np.uint64))
+    np.testing.assert_array_equal(read["ticks"].to_numpy(), columns["ticks"], strict=True)
 
 
 def test_csv_is_one_ascii_header_row_then_numbers(two_decays, tmp_path):
