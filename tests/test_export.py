@@ -308,3 +308,16 @@ def test_campaign_reads_the_exported_csv_as_the_recording(recording, tmp_path):
     np.testing.assert_array_equal(again.angle, direct.angle)
     np.testing.assert_array_equal(again.rate, direct.rate)
     np.testing.assert_array_equal(again.t - again.t[0], direct.t - direct.t[0])
+
+
+def test_a_json_beside_that_is_not_an_export_is_never_overwritten(recording, tmp_path):
+    labels = tmp_path / f"{recording.stem}.json"
+    labels.write_text('{"hull": "swath", "axis": "roll", "angle_deg": 8}')
+    result = runner.invoke(app, ["export", str(recording), "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    (line,) = result.stderr.strip().splitlines()
+    assert str(labels) in line and "--out" in line
+    assert labels.read_text() == '{"hull": "swath", "axis": "roll", "angle_deg": 8}'
+    assert not (tmp_path / f"{recording.stem}.csv").exists()
+    export(recording, "--out", tmp_path / "again")
+    export(recording, "--out", tmp_path / "again")  # an earlier export's sidecar is replaced
