@@ -77,6 +77,12 @@ def identify_json(*args: object) -> dict:
     return json.loads(result.stdout)
 
 
+@pytest.fixture(scope="module")
+def direct(recording: Path) -> dict:
+    """``tankdaq identify --json`` of the recording itself (fitted once for the tests comparing with it)."""
+    return identify_json(recording)
+
+
 def usable(path: Path) -> np.ndarray:
     """The samples an export holds: finite time, decay angle and rate."""
     samples = read_recording(path).samples
@@ -100,10 +106,10 @@ def assert_exact(read: dict[str, np.ndarray], samples: np.ndarray, release_s: fl
 
 
 @pytest.mark.parametrize("frame", ["device", "release"])
-def test_identify_of_the_export_equals_identify_of_the_recording(recording, tmp_path, frame):
+def test_identify_of_the_export_equals_identify_of_the_recording(recording, direct, tmp_path, frame):
     written = export(recording, "--out", tmp_path, "--frame", frame)
     assert written == [tmp_path / f"{recording.stem}.csv", tmp_path / f"{recording.stem}.json"]
-    direct, again = identify_json(recording), identify_json(written[0])
+    again = identify_json(written[0])
     for term, c in direct["coefficients"].items():
         assert again["coefficients"][term]["value"] == pytest.approx(c["value"], rel=1e-9, abs=0)
     assert again["runs"][0]["samples"] == direct["runs"][0]["samples"]
@@ -193,9 +199,8 @@ def usable_roll(path: Path) -> np.ndarray:
     return samples[np.isfinite(samples["roll"]) & np.isfinite(samples["p"])]
 
 
-def test_an_export_written_before_the_sidecar_is_still_read_exactly(recording, tmp_path):
+def test_an_export_written_before_the_sidecar_is_still_read_exactly(recording, direct, tmp_path):
     old = identify_json(old_style_export(recording, tmp_path / "old.csv"))
-    direct = identify_json(recording)
     for term, c in direct["coefficients"].items():
         assert old["coefficients"][term]["value"] == pytest.approx(c["value"], rel=1e-9, abs=0)
     assert old["runs"][0]["samples"] == direct["runs"][0]["samples"]
