@@ -206,13 +206,17 @@ def test_an_export_written_before_the_sidecar_is_still_read_exactly(recording, d
     assert old["runs"][0]["samples"] == direct["runs"][0]["samples"]
 
 
-def test_malformed_release_times_in_the_sidecar_are_one_line(recording, tmp_path):
+@pytest.mark.parametrize(
+    ("key", "value", "says"),
+    [("release_t_s", [3, 1], "release_t_s"), ("release_t_s", "soon", "release_t_s"), ("axis", 7, "axis 7")],
+)
+def test_a_malformed_sidecar_is_one_line(recording, tmp_path, key, value, says):
     csv_path, sidecar = export(recording, "--out", tmp_path)
-    sidecar.write_text(json.dumps({**json.loads(sidecar.read_text()), "release_t_s": [3, 1]}))
+    sidecar.write_text(json.dumps({**json.loads(sidecar.read_text()), key: value}))
     result = runner.invoke(app, ["identify", str(csv_path)])
     assert result.exit_code == 2 and "Traceback" not in result.output
     (line,) = result.stderr.strip().splitlines()
-    assert "release_t_s" in line and sidecar.name in line
+    assert says in line and str(csv_path) in line
 
 
 # ---------------------------------------------------------------------------------------------------
