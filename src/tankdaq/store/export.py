@@ -26,6 +26,7 @@ from .export_layout import (
     DEVICE_TIME_COLUMN,
     EXPORT_FORMAT,
     TIME_COLUMN,
+    ExportTable,
     column_name,
     read_sidecar,
     sidecar_path,
@@ -41,16 +42,6 @@ TEXT_KEYS = frozenset(
     {"hull", "hull_description", "draft", "axis", "device_id", "product_code", "firmware", "software_version",
      "operator", "note"}
 )  # fmt: skip
-
-
-@dataclass
-class ExportTable:
-    """Columns (name -> values, names carry the unit suffix), their units, and the run metadata."""
-
-    name: str
-    columns: dict[str, np.ndarray]
-    units: dict[str, str]
-    metadata: dict[str, object]
 
 
 #: Writer by format name; the format name is also the file suffix. Each returns the files it wrote.

@@ -11,7 +11,10 @@ root attributes and inside Parquet as schema metadata, always marked ``"format":
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
 
@@ -53,3 +56,13 @@ def read_sidecar(path: Path) -> dict[str, object] | None:
     if not isinstance(data, dict) or data.get("format") != EXPORT_FORMAT:
         return None
     return data
+
+
+@dataclass
+class ExportTable:
+    """Columns (name -> values, names carry the unit suffix), their units, and the run metadata."""
+
+    name: str
+    columns: dict[str, np.ndarray]
+    units: dict[str, str]
+    metadata: dict[str, object]

@@ -8,14 +8,11 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from .export_layout import sidecar_path
-
-if TYPE_CHECKING:
-    from .export import ExportTable
+from .export_layout import ExportTable, sidecar_path
 
 
 def json_ready(value: object) -> object:
