@@ -25,11 +25,11 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from tankdaq.maneuver.identify import SeparateIdentifier  # noqa: E402
-from tankdaq.maneuver.io import read_record, write_record  # noqa: E402
-from tankdaq.maneuver.model import add_noise, simulate_zigzag  # noqa: E402
-from tankdaq.maneuver.sensitivity import sensitivity_analysis  # noqa: E402
-from tankdaq.maneuver.vehicle import load_vehicle  # noqa: E402
+from tankdaq.auv.identify import SeparateIdentifier  # noqa: E402
+from tankdaq.auv.io import read_record, write_record  # noqa: E402
+from tankdaq.auv.model import add_noise, simulate_zigzag  # noqa: E402
+from tankdaq.auv.sensitivity import sensitivity_analysis  # noqa: E402
+from tankdaq.auv.vehicle import load_vehicle  # noqa: E402
 
 REPEATS = 3
 DELTA_RAD, THETA_RAD = np.radians(15.0), np.radians(10.0)

@@ -10,6 +10,9 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.release import ReleaseDetector
+from tankdaq.auv.identify import LeastSquaresRegressor, LSSVMRegressor, SeparateIdentifier
+from tankdaq.auv.model import simulate_zigzag
+from tankdaq.auv.vehicle import load_vehicle
 from tankdaq.config import hull_scenario
 from tankdaq.diagnose.synthetic import make_decay_set
 from tankdaq.diagnose.workflow import Diagnoser
@@ -19,9 +22,6 @@ from tankdaq.ident.equation_error import EquationError
 from tankdaq.ident.online import OnlineIdentifier
 from tankdaq.ident.output_error import OutputError
 from tankdaq.ident.seed_methods import GeneticSeed, GeneticSettings, SwarmSeed, SwarmSettings
-from tankdaq.maneuver.identify import LeastSquaresRegressor, LSSVMRegressor, SeparateIdentifier
-from tankdaq.maneuver.model import simulate_zigzag
-from tankdaq.maneuver.vehicle import load_vehicle
 
 RUNS = make_decay_set([], seed=21, duration_s=8.0).runs
 RNG = np.random.default_rng(0)

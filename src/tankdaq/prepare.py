@@ -16,10 +16,10 @@ import math
 
 def prepare() -> None:
     """Build (or find) the native kernels, and compile (or load) the JIT and diving-plane kernels."""
+    from .auv.model import simulate_zigzag
+    from .auv.vehicle import load_vehicle
     from .ident.compiled import warm_jit
     from .ident.online import prepare_kernels
-    from .maneuver.model import simulate_zigzag
-    from .maneuver.vehicle import load_vehicle
 
     reason = prepare_kernels()
     if reason is not None:

@@ -15,10 +15,10 @@ from .. import validation
 from ..errors import InputError
 from .app import app, checked, err_console, handles_errors
 
-if TYPE_CHECKING:  # the maneuver models compile with numba: imported by the commands that run them
-    from ..maneuver.model import StateRecord
-    from ..maneuver.sensitivity import SensitivityResult
-    from ..maneuver.vehicle import Vehicle
+if TYPE_CHECKING:  # the auv models compile with numba: imported by the commands that run them
+    from ..auv.model import StateRecord
+    from ..auv.sensitivity import SensitivityResult
+    from ..auv.vehicle import Vehicle
 
 auv_app = typer.Typer(
     no_args_is_help=True,
@@ -78,8 +78,8 @@ def _check_method(method: str) -> None:
 
 def _vehicle_for(path: Path, record: StateRecord, name: str | None) -> Vehicle:
     """The vehicle named on the command line, else the one the record carries or names."""
-    from ..maneuver.io import read_vehicle_attachment
-    from ..maneuver.vehicle import list_vehicles, load_vehicle
+    from ..auv.io import read_vehicle_attachment
+    from ..auv.vehicle import list_vehicles, load_vehicle
 
     if name:
         return load_vehicle(name)
@@ -106,7 +106,7 @@ def _manoeuvre_angles_rad(record: StateRecord) -> tuple[float, float]:
 def _sensitivity(
     vehicle: Vehicle, delta_rad: float, theta_rad: float, step: float = 0.10, threshold: float = 0.10
 ) -> SensitivityResult:
-    from ..maneuver.sensitivity import sensitivity_analysis
+    from ..auv.sensitivity import sensitivity_analysis
 
     with _progress("sensitivity: re-simulating the zigzag") as update:
         return sensitivity_analysis(
@@ -137,9 +137,9 @@ def simulate_command(
     seed: int = typer.Option(0, "--seed", help="Noise random seed."),
 ) -> None:
     """Simulate a diving-plane manoeuvre with the vehicle's standard derivatives and write it."""
-    from ..maneuver.io import write_record
-    from ..maneuver.model import add_noise, simulate_zigzag
-    from ..maneuver.vehicle import load_vehicle
+    from ..auv.io import write_record
+    from ..auv.model import add_noise, simulate_zigzag
+    from ..auv.vehicle import load_vehicle
 
     if manoeuvre != "zigzag":
         raise InputError(f"--manoeuvre {manoeuvre!r} unknown; the only manoeuvre is zigzag")
@@ -221,9 +221,9 @@ def identify_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Identify the surge, heave and pitch derivatives one equation at a time; compare with the standard."""
-    from ..maneuver.identify import SeparateIdentifier
-    from ..maneuver.io import read_record
-    from ..maneuver.report import identification_report
+    from ..auv.identify import SeparateIdentifier
+    from ..auv.io import read_record
+    from ..auv.report import identification_report
 
     _check_method(method)
     if window_s is not None and window_s <= 0:
@@ -257,8 +257,8 @@ def sensitivity_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Rank the derivatives by how much the zigzag changes when each is perturbed."""
-    from ..maneuver.sensitivity import OUTPUTS
-    from ..maneuver.vehicle import load_vehicle
+    from ..auv.sensitivity import OUTPUTS
+    from ..auv.vehicle import load_vehicle
 
     vehicle = load_vehicle(vehicle_name)
     delta_rad, theta_rad = np.radians(delta_deg), np.radians(theta_deg)
@@ -306,9 +306,9 @@ def validate_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""
-    from ..maneuver.io import read_record
-    from ..maneuver.report import validate_models
-    from ..maneuver.validate import MODES, SCORED_STATES, default_mode
+    from ..auv.io import read_record
+    from ..auv.report import validate_models
+    from ..auv.validate import MODES, SCORED_STATES, default_mode
 
     _check_method(method)
     if plot is not None and plot.suffix.lower() != ".png":
@@ -323,7 +323,7 @@ def validate_command(
     validation = validate_models(record, target, vehicle, sensitivity, method, mode, str(test or file))
     results, failures = validation.results, validation.failures
     if plot is not None:
-        from ..viz.maneuver_view import validation_figure
+        from ..viz.auv_view import validation_figure
         from ..viz.plots import save_png
 
         save_png(validation_figure(target, results), plot, dpi=110)

@@ -1,4 +1,4 @@
-"""Records of named float columns on disk, as MCAP or CSV: the encoding under ``maneuver.io``'s
+"""Records of named float columns on disk, as MCAP or CSV: the encoding under ``auv.io``'s
 diving-plane records, kept here so that only the store speaks MCAP.
 
 MCAP layout: one channel of JSON messages (schema encoding "jsonschema", message encoding "json"), one

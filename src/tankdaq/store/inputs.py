@@ -2,7 +2,7 @@
 
 As python-can's ``LogReader`` picks a reader class by suffix, ``INPUT_FORMATS`` maps a suffix to its
 format (a reader and whether the file names its own test condition); ``read_runs(path)`` is the one entry
-point for decays, and ``by_suffix`` the one suffix lookup (the AUV records of ``maneuver.io`` use it with
+point for decays, and ``by_suffix`` the one suffix lookup (the AUV records of ``auv.io`` use it with
 their own table): an unknown suffix gets one line listing the known ones. The store only reads: a plain
 CSV comes back whole and ``ident.inputs.read_decays`` finds its releases on the way in.
 """

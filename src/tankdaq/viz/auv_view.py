@@ -1,7 +1,7 @@
 """The AUV validation figure: a measured diving-plane manoeuvre against its re-simulations.
 
 Built like every report figure (``viz.plots``: ``Figure`` on the Agg canvas, ``report_style``), so
-``tankdaq auv validate --plot`` needs no pyplot; the scores come from ``maneuver.validate``.
+``tankdaq auv validate --plot`` needs no pyplot; the scores come from ``auv.validate``.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..maneuver.model import StateRecord
-from ..maneuver.validate import ValidationResult
+from ..auv.model import StateRecord
+from ..auv.validate import ValidationResult
 from .plots import report_style
 
 #: Panels top to bottom: state column, axis label, drawn in degrees.

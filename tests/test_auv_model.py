@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tankdaq.errors import InputError
-from tankdaq.maneuver.model import (
+from tankdaq.auv.model import (
     REALISTIC_NOISE_STD,
     STATE_COLUMNS,
     _rhs,
@@ -16,7 +15,8 @@ from tankdaq.maneuver.model import (
     simulate_zigzag,
     trim_state,
 )
-from tankdaq.maneuver.vehicle import TERM_BY_NAME, VISCOUS_TERMS, list_vehicles, load_vehicle
+from tankdaq.auv.vehicle import TERM_BY_NAME, VISCOUS_TERMS, list_vehicles, load_vehicle
+from tankdaq.errors import InputError
 
 
 def test_both_public_vehicles_are_configured_with_a_source_for_every_value():

@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from tankdaq.errors import BadRecordingInput, InputError
-from tankdaq.maneuver.io import (
+from tankdaq.auv.io import (
     FIELDS,
     METADATA_NAME,
     TOPIC,
@@ -19,8 +18,9 @@ from tankdaq.maneuver.io import (
     read_vehicle_attachment,
     write_record,
 )
-from tankdaq.maneuver.model import STATE_COLUMNS, add_noise, simulate_zigzag
-from tankdaq.maneuver.vehicle import load_vehicle
+from tankdaq.auv.model import STATE_COLUMNS, add_noise, simulate_zigzag
+from tankdaq.auv.vehicle import load_vehicle
+from tankdaq.errors import BadRecordingInput, InputError
 
 
 @pytest.fixture(scope="module")

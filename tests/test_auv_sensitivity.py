@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tankdaq.auv.model import StateRecord, simulate_zigzag
+from tankdaq.auv.sensitivity import OUTPUTS, manoeuvre_outputs, sensitivity_analysis
+from tankdaq.auv.vehicle import load_vehicle
 from tankdaq.errors import InputError
-from tankdaq.maneuver.model import StateRecord, simulate_zigzag
-from tankdaq.maneuver.sensitivity import OUTPUTS, manoeuvre_outputs, sensitivity_analysis
-from tankdaq.maneuver.vehicle import load_vehicle
 
 
 def test_outputs_of_a_known_synthetic_zigzag():

@@ -14,8 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import spearmanr
 
-from tankdaq.errors import BadIdentificationInput, InputError
-from tankdaq.maneuver.identify import (
+from tankdaq.auv.identify import (
     LeastSquaresRegressor,
     LSSVMRegressor,
     SeparateIdentifier,
@@ -23,10 +22,11 @@ from tankdaq.maneuver.identify import (
     relative_errors,
     weak_form_kernels,
 )
-from tankdaq.maneuver.model import StateRecord, add_noise, simulate_zigzag
-from tankdaq.maneuver.sensitivity import sensitivity_analysis
-from tankdaq.maneuver.validate import resimulate
-from tankdaq.maneuver.vehicle import load_vehicle
+from tankdaq.auv.model import StateRecord, add_noise, simulate_zigzag
+from tankdaq.auv.sensitivity import sensitivity_analysis
+from tankdaq.auv.validate import resimulate
+from tankdaq.auv.vehicle import load_vehicle
+from tankdaq.errors import BadIdentificationInput, InputError
 
 RATE_HZ = 100.0
 NOISE_SEEDS = (1, 2, 3)

@@ -1,0 +1,1 @@
+"""tankdaq.auv"""
