@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.acquire.session import Block, DecaySession, SessionSettings
+from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
 from tankdaq.config import load_hull
 from tankdaq.errors import IdentificationError
@@ -80,8 +80,8 @@ def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_
     recording = RecordingSink(
         tmp_path, describe_run("roll", 8.0, hull=hull, draft=1.0, sample_rate_hz=100.0), draft=1.0
     )
-    session = DecaySession(
-        SessionSettings(), [IdentifierSink(make_identifier), recording, ViewSink(LiveView("none"))]
+    session = DecayPipeline(
+        DetectionSettings(), [IdentifierSink(make_identifier), recording, ViewSink(LiveView("none"))]
     )
     blocks = (samples[i : i + 2] for i in range(0, samples.size, 2))  # 20 ms reads at 100 Hz
     outcomes = []

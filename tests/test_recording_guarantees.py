@@ -1,7 +1,7 @@
 """A decay is never lost: any error while a decay is recorded closes its file; readers say when a file is cut.
 
 One real recording (the simulated MTi-G on a pty, through the driver and the daemon) is made per
-module. Its raw bytes are fed again through a ``DecaySession`` that writes a new file, with a
+module. Its raw bytes are fed again through a ``DecayPipeline`` that writes a new file, with a
 real failure injected (a view or a callback that raises) at the release, in the middle of the
 decay and at its end; every file must then be a complete MCAP (footer, summary) that holds the
 decay up to the failure. A copy cut in half stands for a recording whose writer was killed:
@@ -21,7 +21,7 @@ from mcap.reader import make_reader
 from typer.testing import CliRunner
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.acquire.session import Block, DecaySession, SessionSettings
+from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import Decay, IdentifierSink, RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
@@ -104,14 +104,14 @@ def _feed_recording(
     on_event=None,
     identifier: type[OnlineIdentifier] = OnlineIdentifier,
     extra: Sequence[Sink] = (),
-) -> DecaySession:
+) -> DecayPipeline:
     """The source's raw bytes, re-decoded, through a session that writes into ``out``."""
     recording = read_recording(source)
     sinks = [  # the daemon's pipeline; fed from a file: each refit in its block
         IdentifierSink(identifier, wait_for_fits=True), RecordingSink(out, {"hull": "swath"}), ViewSink(view),
         *extra,
     ]  # fmt: skip
-    session = DecaySession(SessionSettings(angle_deg=8.0), sinks, on_event=on_event)
+    session = DecayPipeline(DetectionSettings(angle_deg=8.0), sinks, on_event=on_event)
     decoder = SampleDecoder()
     for host_ns, raw in recording.raw_chunks:
         samples, _ = decoder.feed(raw, host_ns / 1e9)

@@ -22,7 +22,7 @@ import pytest
 from mcap.reader import make_reader
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.acquire.session import Block, DecaySession, SessionSettings
+from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
 from tankdaq.config import load_hull
 from tankdaq.errors import IdentificationError
@@ -249,7 +249,7 @@ def test_a_runaway_refit_in_the_recorder_is_abandoned_and_the_file_closes_comple
     # a budget no refit can keep (a microsecond): every refit is abandoned whatever this machine's speed,
     # so the test does not hang on a machine fast enough to finish a runaway refit within a looser one
     sinks = [IdentifierSink(make_identifier, refit_budget_s=1e-6), recording, ViewSink(LiveView("none"))]
-    session = DecaySession(SessionSettings(), sinks)
+    session = DecayPipeline(DetectionSettings(), sinks)
     outcomes = []
     try:
         for start in range(0, samples.size, 2):  # 20 ms reads at 100 Hz

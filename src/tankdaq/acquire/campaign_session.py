@@ -41,7 +41,7 @@ from ..ident.derived import b_eq
 from ..plans import PLAN_AXES, CampaignPlan, acceptance_values
 from ..samples import AXIS_FIELDS
 from .daemon import RecordDaemon, RecordSettings
-from .session import DecayOutcome
+from .pipeline import DecayOutcome
 from .session_log import LOG_NAME, SessionLog
 from .sinks import Block, Decay, Sink
 

@@ -6,7 +6,7 @@ names the signal). A device that vanishes mid-decay closes that file with what a
 daemon waits for the device to come back. ``port="sim"`` starts the built-in
 simulated MTi-G in-process on a pseudo-terminal, opened like hardware
 (``device.factory.open_device``); ``port="sim:FILE.mcap"`` plays the device of that recording
-(its raw bytes, at their pace) through the same pty. The decay pipeline is a ``DecaySession``
+(its raw bytes, at their pace) through the same pty. The decay pipeline is a ``DecayPipeline``
 with three sinks: the online identifier, the recording, the live view (``acquire.sinks``).
 """
 
@@ -32,7 +32,7 @@ from ..ident.online import OnlineIdentifier, prepare_identifier
 from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
-from .session import Block, DecayOutcome, DecaySession, SessionSettings
+from .pipeline import Block, DecayOutcome, DecayPipeline, DetectionSettings
 from .sinks import IdentifierSink, RecordingSink, Sink, ViewSink
 
 if TYPE_CHECKING:
@@ -243,7 +243,7 @@ class RecordDaemon:
         self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=self.on_event)
         return self.device.driver
 
-    def _session(self, driver: MTiDriver) -> DecaySession:
+    def _pipeline(self, driver: MTiDriver) -> DecayPipeline:
         from ..store.writer import describe_run
 
         s = self.settings
@@ -274,7 +274,7 @@ class RecordDaemon:
             on_note=lambda line: self.on_event(f"viewer: {line}"),
             rrd_reserve_bytes=s.disk_reserve_bytes,
         )
-        session_settings = SessionSettings(
+        detection = DetectionSettings(
             axis=s.axis,
             angle_deg=s.angle_deg,
             angle_tolerance_deg=s.angle_tolerance_deg,
@@ -296,7 +296,7 @@ class RecordDaemon:
             hull=self.hull.name if self.hull else "the hull",
         )
         sinks = [IdentifierSink(identifier), recording, ViewSink(view), *self.extra_sinks]
-        return DecaySession(session_settings, sinks, on_event=self.on_event)
+        return DecayPipeline(detection, sinks, on_event=self.on_event)
 
     # ---- the loop ----------------------------------------
 
@@ -307,22 +307,22 @@ class RecordDaemon:
 
     def _run(self) -> list[DecayOutcome]:
         s = self.settings
-        session: DecaySession | None = None
+        pipeline: DecayPipeline | None = None
         signals = self._signals
         try:
             prepare_identifier(s.model, self.on_event)  # before anything opens: no refit compiles mid-decay
             driver = self._open_device()
             self.status.device = driver.info.describe() if driver.info else s.port
             self.on_event(f"device: {self.status.device}")
-            session = self._session(driver)
+            pipeline = self._pipeline(driver)
             self.status.state = "waiting"
             while (s.runs is None or len(self.outcomes) < s.runs) and not self._stop.is_set():
                 try:
                     signals.in_loop = True  # a signal now ends the loop after this read
-                    self._pump(driver, session)
+                    self._pump(driver, pipeline)
                 except DeviceGone as exc:
                     signals.in_loop = False
-                    self._device_gone(driver, session, str(exc))
+                    self._device_gone(driver, pipeline, str(exc))
                 finally:
                     signals.in_loop = False
         except KeyboardInterrupt:
@@ -335,7 +335,7 @@ class RecordDaemon:
             if signals.stopped_by:
                 self.on_event(f"stopping ({signals.stopped_by}): closing files")
             try:
-                self._shut_down(session)
+                self._shut_down(pipeline)
             finally:
                 signals.closing = False
         return self.outcomes
@@ -344,39 +344,39 @@ class RecordDaemon:
         """Ask ``run`` to return after the current read (from a callback or another thread)."""
         self._stop.set()
 
-    def _shut_down(self, session: DecaySession | None) -> None:
+    def _shut_down(self, pipeline: DecayPipeline | None) -> None:
         """Close the decay under way (its file stays readable), the sinks (the viewer), the device."""
         try:
-            if session is not None:
-                closed = session.abort("note", "recording stopped by the operator")
+            if pipeline is not None:
+                closed = pipeline.abort("note", "recording stopped by the operator")
                 if closed is not None:
                     self.outcomes.append(closed)
         except RecordingError as exc:  # the disk is full: the file is left for tankdaq recover
             self.on_event(str(exc))
         finally:
             try:
-                if session is not None:
-                    session.close()
+                if pipeline is not None:
+                    pipeline.close()
             finally:
                 if self.device is not None:
                     self.device.close()
 
-    def _pump(self, driver: MTiDriver, session: DecaySession) -> None:
+    def _pump(self, driver: MTiDriver, pipeline: DecayPipeline) -> None:
         wait = self._next_read - time.monotonic()
         if wait > 0:
             time.sleep(wait)
         self._next_read = time.monotonic() + READ_INTERVAL_S
         block = driver.read_block()
-        finished = session.feed(Block(block.samples, block.raw, block.host_t, block.carried))
+        finished = pipeline.feed(Block(block.samples, block.raw, block.host_t, block.carried))
         self.outcomes.extend(finished)
         c = driver.counters
         st = self.status
         st.samples, st.gaps, st.bad_frames = c.samples, c.gaps, c.bad_frames
-        st.state, st.held_deg, st.runs_done = session.state, session.held_deg, len(self.outcomes)
+        st.state, st.held_deg, st.runs_done = pipeline.state, pipeline.held_deg, len(self.outcomes)
         self.on_status(st)
 
-    def _device_gone(self, driver: MTiDriver, session: DecaySession, message: str) -> None:
-        closed = session.abort("unplug", message)
+    def _device_gone(self, driver: MTiDriver, pipeline: DecayPipeline, message: str) -> None:
+        closed = pipeline.abort("unplug", message)
         if closed is not None:
             self.outcomes.append(closed)
         self.status.state = "device gone: waiting for it to come back"

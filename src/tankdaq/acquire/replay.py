@@ -19,7 +19,7 @@ from ..errors import BadRecordingInput
 from ..ident.online import prepare_identifier
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView, default_viewer_mode, describe_mode
-from .session import Block, DecayOutcome, DecaySession, SessionSettings
+from .pipeline import Block, DecayOutcome, DecayPipeline, DetectionSettings
 from .sinks import IdentifierSink, ViewSink
 
 #: At full speed, serial reads are merged into blocks spanning this much arrival time: the
@@ -71,7 +71,7 @@ def replay_recording(
     if on_event is not None:
         on_event(describe_mode(mode, default=viewer is None))
     view = LiveView(mode, axis=axis, on_note=note)
-    settings = SessionSettings(
+    settings = DetectionSettings(
         axis=axis,
         angle_deg=nominal if math.isfinite(nominal) else 0.0,
         angle_tolerance_deg=math.inf if not math.isfinite(nominal) else 1.0,
@@ -81,7 +81,7 @@ def replay_recording(
     rrd_base = path.with_name(path.stem + ".replay") if view.mode == "save" else None  # spawn falls back
     # the daemon's pipeline without the recording; each block's refit is done before the next block
     sinks = [IdentifierSink(wait_for_fits=True), ViewSink(view, rrd_base)]
-    session = DecaySession(settings, sinks, on_event=on_event)
+    pipeline = DecayPipeline(settings, sinks, on_event=on_event)
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))
     output = LegacyOutput.for_decay(rate_hz) if legacy else None  # as the driver asked for
@@ -96,10 +96,10 @@ def replay_recording(
                     wall0, t0 = time.monotonic(), float(samples["t"][0])
                 due = wall0 + (float(samples["t"][-1]) - t0) / speed
                 time.sleep(max(0.0, due - time.monotonic()))
-            session.feed(Block(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
+            pipeline.feed(Block(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
             if on_progress is not None:
                 on_progress(i + 1, len(chunks))
-        session.abort("note", "end of recording")
+        pipeline.abort("note", "end of recording")
     finally:
-        session.close()  # the view (and a decay cut by an error)
-    return session.outcomes
+        pipeline.close()  # the view (and a decay cut by an error)
+    return pipeline.outcomes

@@ -1,6 +1,6 @@
 """What a decay pipeline feeds: sinks that listen to blocks, releases, fits, notes and settles.
 
-``DecaySession`` detects releases and settles; everything done with a decay is a sink, in the way
+``DecayPipeline`` detects releases and settles; everything done with a decay is a sink, in the way
 python-can's ``Notifier`` hands each message to its listeners and its file logger is one more
 listener. The record daemon's pipeline is ``[IdentifierSink, RecordingSink, ViewSink]``; replay is
 the same pipeline without the ``RecordingSink``; a guided session adds its own (its level check).

@@ -13,7 +13,7 @@ from .app import app, checked, draft_option, err_console, handles_errors, say
 
 if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
     from ..acquire.daemon import RecordSettings
-    from ..acquire.session import DecayOutcome
+    from ..acquire.pipeline import DecayOutcome
 
 
 class AxisChoice(StrEnum):

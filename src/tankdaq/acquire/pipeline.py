@@ -1,6 +1,6 @@
 """The decay pipeline: samples in, release detection, and the sinks that record, fit and show each decay.
 
-``DecaySession`` knows nothing about serial ports or files: the record daemon feeds it blocks from
+``DecayPipeline`` knows nothing about serial ports or files: the record daemon feeds it blocks from
 the driver, replay feeds it blocks re-decoded from a file. For each block it runs release
 detection and tells its sinks (``acquire.sinks``): every block, a confirmed release (with the
 pre-trigger from its history of blocks), the notes of the decay, and its settle. What a decay
@@ -26,7 +26,7 @@ from ..samples import AXIS_FIELDS
 from .release import ReleaseDetector, ReleaseEvent
 from .sinks import Block, Decay, DecayOutcome, Sink
 
-__all__ = ["HISTORY_S", "Block", "DecayOutcome", "DecaySession", "SessionSettings"]
+__all__ = ["HISTORY_S", "Block", "DecayOutcome", "DecayPipeline", "DetectionSettings"]
 
 #: How much history (device seconds) is kept while waiting for a release: the pre-trigger plus
 #: the time the detector may need to confirm a release it dates back.
@@ -34,7 +34,7 @@ HISTORY_S = 30.0
 
 
 @dataclass
-class SessionSettings:
+class DetectionSettings:
     """What release detection needs to know beyond the samples (degrees at this edge)."""
 
     axis: str = "roll"  # roll, pitch or auto
@@ -45,7 +45,7 @@ class SessionSettings:
     detector_settings: dict[str, float] = field(default_factory=dict)
 
 
-class DecaySession:
+class DecayPipeline:
     """Feed ``Block``s with ``feed``; decays are detected and handed to the ``sinks`` in order.
 
     ``on_event`` receives one line of text per thing a person wants to know (release, settle,
@@ -54,7 +54,7 @@ class DecaySession:
 
     def __init__(
         self,
-        settings: SessionSettings,
+        settings: DetectionSettings,
         sinks: Sequence[Sink],
         on_event: Callable[[str], None] | None = None,
     ) -> None:
