@@ -18,8 +18,7 @@ import numpy as np
 
 from tankdaq.config import load_hull
 from tankdaq.ident.derived import b_eq, natural_period
-from tankdaq.ident.output_error import OutputError, seed_objective
-from tankdaq.ident.seed_methods import (
+from tankdaq.ident.evolutionary import (
     GENETIC_SETTINGS,
     SWARM_SETTINGS,
     GeneticSeed,
@@ -27,6 +26,7 @@ from tankdaq.ident.seed_methods import (
     SearchSpace,
     SwarmSeed,
 )
+from tankdaq.ident.output_error import OutputError, seed_objective
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 

@@ -19,9 +19,9 @@ from tankdaq.diagnose.workflow import Diagnoser
 from tankdaq.errors import InputError, NotFittedError
 from tankdaq.ident.base import Estimator
 from tankdaq.ident.equation_error import EquationError
+from tankdaq.ident.evolutionary import GeneticSeed, GeneticSettings, SwarmSeed, SwarmSettings
 from tankdaq.ident.online import OnlineIdentifier
 from tankdaq.ident.output_error import OutputError
-from tankdaq.ident.seed_methods import GeneticSeed, GeneticSettings, SwarmSeed, SwarmSettings
 
 RUNS = make_decay_set([], seed=21, duration_s=8.0).runs
 RNG = np.random.default_rng(0)

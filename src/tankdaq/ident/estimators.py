@@ -14,13 +14,13 @@ from typing import Any
 
 from ..errors import InputError
 from .equation_error import EquationError
+from .evolutionary import SEED_ESTIMATORS
 from .output_error import OutputError
-from .seed_methods import SEED_ESTIMATORS
 
 EstimatorFactory = Callable[..., Any]
 
 ESTIMATORS: dict[str, EstimatorFactory] = {"oe": OutputError, "ee": EquationError}
-ESTIMATORS.update(SEED_ESTIMATORS)  # the seeds' GA/PSO: ga, pso, ga-seed000 ... (ident.seed_methods)
+ESTIMATORS.update(SEED_ESTIMATORS)  # the seeds' GA/PSO: ga, pso, ga-seed000 ... (ident.evolutionary)
 
 
 def register_estimator(name: str, factory: EstimatorFactory) -> None:

@@ -753,7 +753,7 @@ def seed_objective(
 ) -> float:
     """RMS of the one-step-ahead predicted rate (seed 000 eq. 4.5-4.6), rad/s.
 
-    As in the seeds' software (and ``ident.seed_methods``): one Euler step from
+    As in the seeds' software (and ``ident.evolutionary``): one Euler step from
     the measured state at k predicts the rate at k+1; the measured rate is the
     gyro, or the angle differentiated when there is none. The angle is taken
     relative to the fitted offset, the model's equilibrium.

@@ -12,8 +12,7 @@ from tankdaq.config import load_hull
 from tankdaq.errors import BadIdentificationInput, InputError
 from tankdaq.ident.derived import damping_ratio
 from tankdaq.ident.estimators import make_estimator
-from tankdaq.ident.output_error import OutputError, seed_objective
-from tankdaq.ident.seed_methods import (
+from tankdaq.ident.evolutionary import (
     INERTIA_FLOOR,
     GeneticSeed,
     GeneticSettings,
@@ -22,6 +21,7 @@ from tankdaq.ident.seed_methods import (
     SwarmSeed,
     SwarmSettings,
 )
+from tankdaq.ident.output_error import OutputError, seed_objective
 from tankdaq.physics.decay import acceleration, simulate_decay
 from tankdaq.records import DecayRun
 
