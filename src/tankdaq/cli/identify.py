@@ -233,8 +233,8 @@ def identify_command(
 
 def _compare(runs: list[DecayRun], method: str, as_json: bool, truncated: dict, pooled: str | None) -> None:
     """``--compare``: every seed formula and ITTC form fitted to ``runs``, the table printed."""
+    from ..ident.comparison import compare_models, compare_text, group_models
     from ..ident.free_decay import cut_lines
-    from ..ident.report import compare_models, compare_text, group_models
     from ..physics.models import COMPARE_MODELS
 
     if pooled is not None:

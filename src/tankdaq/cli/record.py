@@ -238,7 +238,8 @@ def identify_recordings(
     paths: list[Path], report_dir: Path, model: str, truth: dict[str, float] | None = None
 ) -> None:
     """Fit all recordings jointly; print the table (and the truth when known) and each decay's PNG."""
-    from ..ident.report import identify_jointly, text_report
+    from ..ident.comparison import identify_jointly
+    from ..ident.report import text_report
     from ..store.reader import read_decay_runs
     from ..viz.plots import save_decay_fits
 
