@@ -16,7 +16,8 @@ from rerun.chunk import RrdReader
 from tankdaq.errors import InputError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.samples import empty_samples
-from tankdaq.viz.live import APPLICATION_ID, LiveView, default_viewer_mode, rerun_executable
+from tankdaq.viz.live import APPLICATION_ID, LiveView
+from tankdaq.viz.viewer import default_viewer_mode, rerun_executable
 
 pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")  # a streamed .rrd has none: expected
 

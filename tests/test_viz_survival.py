@@ -32,7 +32,9 @@ from tankdaq.errors import RecordingError
 from tankdaq.samples import empty_samples
 from tankdaq.store.reader import read_recording
 from tankdaq.store.recover import recover
-from tankdaq.viz.live import QUEUE_LIMIT, LiveView, rerun_executable
+from tankdaq.viz.live import LiveView
+from tankdaq.viz.view_feed import QUEUE_LIMIT
+from tankdaq.viz.viewer import rerun_executable
 
 pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
 

@@ -623,7 +623,8 @@ class CampaignSession:
 
     def _open_panel(self, state: SessionState) -> None:
         from ..viz.campaign_view import CampaignView
-        from ..viz.live import LiveView, default_viewer_mode
+        from ..viz.live import LiveView
+        from ..viz.viewer import default_viewer_mode
 
         base = self.record
         mode = base.viewer or default_viewer_mode()

@@ -31,7 +31,8 @@ from ..errors import DeviceGone, InputError, RecordingError
 from ..ident.online import OnlineIdentifier, prepare_identifier
 from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
-from ..viz.live import LiveView, default_viewer_mode, describe_mode
+from ..viz.live import LiveView
+from ..viz.viewer import default_viewer_mode, describe_mode
 from .pipeline import Block, DecayOutcome, DecayPipeline, DetectionSettings
 from .sinks import IdentifierSink, RecordingSink, Sink, ViewSink
 

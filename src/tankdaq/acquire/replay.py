@@ -18,7 +18,8 @@ from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
 from ..ident.online import prepare_identifier
 from ..store.reader import read_recording, truncation_notice
-from ..viz.live import LiveView, default_viewer_mode, describe_mode
+from ..viz.live import LiveView
+from ..viz.viewer import default_viewer_mode, describe_mode
 from .pipeline import Block, DecayOutcome, DecayPipeline, DetectionSettings
 from .sinks import IdentifierSink, ViewSink
 

@@ -24,7 +24,7 @@ class AxisChoice(StrEnum):
 
 def _viewer(value: str) -> str:
     from ..errors import InputError
-    from ..viz.live import check_mode
+    from ..viz.viewer import check_mode
 
     try:
         return check_mode(value)

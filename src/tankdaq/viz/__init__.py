@@ -1,4 +1,5 @@
-"""tankdaq.viz: the rerun live view (``viz.live``) and PNG report figures (``viz.plots``).
+"""tankdaq.viz: the rerun live view (``viz.live``, its feed thread ``viz.view_feed``, the viewer process
+``viz.viewer``) and PNG report figures (``viz.plots``).
 
 Nothing is imported here: PNG reports should not pay for loading rerun. rerun's own Rust log
 lines ("Flush timed out", "File-writer thread shut down") are silenced unless ``RUST_LOG`` is set:

@@ -12,7 +12,7 @@ Rerun plots series against a timeline, so the x axis of the two plots is a seque
 ``release_angle_deg`` holding the nominal angle in whole degrees (a half-degree plan angle is drawn
 at its nearest degree; the session log and the report keep the exact value). The matrix is static:
 it is the same on every timeline. Like the live view, every call only queues a job for one
-background thread (``viz.live.ViewFeed``): the session never waits for rerun.
+background thread (``viz.view_feed.ViewFeed``): the session never waits for rerun.
 """
 
 from __future__ import annotations
@@ -25,15 +25,9 @@ from pathlib import Path
 import rerun as rr
 import rerun.blueprint as rrb
 
-from .live import (
-    APPLICATION_ID,
-    CLOSE_TIMEOUT_S,
-    URL_SCHEMES,
-    ViewFeed,
-    _url_listening,
-    check_mode,
-    term_title,
-)
+from .live import APPLICATION_ID, CLOSE_TIMEOUT_S, term_title
+from .view_feed import ViewFeed
+from .viewer import URL_SCHEMES, check_mode, url_listening
 
 ANGLE_TIMELINE = "release_angle_deg"
 STATUS_COLORS = {
@@ -121,7 +115,7 @@ class CampaignView:
         sinks: list[rr.GrpcSink | rr.FileSink] = []
         if rrd_path is not None:
             sinks.append(rr.FileSink(str(rrd_path)))
-        if url is not None and self.mode != "save" and _url_listening(url):
+        if url is not None and self.mode != "save" and url_listening(url):
             sinks.append(rr.GrpcSink(url))
         if not sinks:
             return

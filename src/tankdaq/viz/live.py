@@ -16,20 +16,13 @@ flush that timed out, a full disk under the .rrd) becomes one line for the opera
 from __future__ import annotations
 
 import contextlib
-import os
-import shutil
-import socket
 import subprocess
 import sys
-import threading
-import time
 import uuid
-from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Self
-from urllib.parse import urlsplit
 
 import numpy as np
 
@@ -38,6 +31,8 @@ from ..physics.terms import TERM_TABLE
 from ..samples import AXIS_FIELDS
 from ..store.disk import RESERVE_BYTES, free_bytes, megabytes
 from ..store.schemas import interval_pairs
+from .view_feed import ViewFeed
+from .viewer import DEFAULT_BIND, URL_SCHEMES, check_mode, display_available, spawn_viewer, url_listening
 
 if TYPE_CHECKING:  # rerun is imported where a view logs, not for --viewer none (0.6 s of start-up)
     import rerun as rr
@@ -45,20 +40,10 @@ if TYPE_CHECKING:  # rerun is imported where a view logs, not for --viewer none 
 
 APPLICATION_ID = "tankdaq"
 TIMELINE = "t"
-URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
-MODES = ("spawn", "save", "none")
-
-#: A spawned viewer and its gRPC server listen here unless the operator asks otherwise.
-DEFAULT_BIND = "127.0.0.1"
-#: Updates (sample blocks, refits) waiting for the view thread beyond this many are dropped:
-#: at 50 reads a second the view is then about five seconds behind.
-QUEUE_LIMIT = 256
 #: At the end of a run rerun gets this long to take what was logged (file and viewer).
 FLUSH_TIMEOUT_S = 5.0
 #: Closing the view waits at most this long for the view thread to finish its queue.
 CLOSE_TIMEOUT_S = 15.0
-#: A spawned viewer must be listening within this long.
-SPAWN_TIMEOUT_S = 20.0
 
 MEASURED_COLOR = (31, 119, 180)
 MODEL_COLOR = (214, 39, 40)
@@ -67,150 +52,10 @@ INTERVAL_COLOR = (31, 119, 180, 90)
 EVENT_LEVELS = {"warning": "WARN", "unplug": "ERROR", "gap": "WARN"}
 
 
-def rerun_executable() -> str | None:
-    """The viewer of the installed rerun-sdk: its ``rerun_cli`` binary, else beside this Python, else PATH.
-
-    The binary inside ``rerun_cli`` is found wherever tankdaq runs from (``.venv/bin/tankdaq`` with
-    the venv not on PATH), and it is the viewer process itself, not a Python wrapper around it.
-    """
-    try:
-        import rerun_cli
-    except ImportError:
-        bundled = None
-    else:
-        bundled = Path(rerun_cli.__file__).with_name("rerun.exe" if sys.platform == "win32" else "rerun")
-    beside = Path(sys.executable).parent / "rerun"
-    for candidate in (bundled, beside):
-        if candidate is not None and candidate.is_file() and os.access(candidate, os.X_OK):
-            return str(candidate)
-    return shutil.which("rerun")
-
-
-def display_available() -> bool:
-    """True when a window can be opened: an X or Wayland display is named."""
-    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-
-
-def default_viewer_mode() -> str:
-    """``spawn`` when there is a display and a viewer to show on it, ``save`` (an .rrd) otherwise."""
-    return "spawn" if display_available() and rerun_executable() else "save"
-
-
-def describe_mode(mode: str, default: bool) -> str:
-    """The one line ``record`` and ``replay`` print at start: which view, and how to choose another."""
-    what = {
-        "spawn": "spawn (a rerun window; an .rrd is saved as well)",
-        "save": "save (an .rrd per decay; open it with rerun FILE.rrd)",
-        "none": "none (no live view)",
-    }.get(mode, f"stream to {mode}")
-    chosen = (
-        f"default ({'a display is available' if mode == 'spawn' else 'no display'}); choose with --viewer"
-        if default
-        else "as asked"
-    )
-    return f"viewer: {what}, {chosen}"
-
-
-def check_mode(mode: str) -> str:
-    """Refuse a viewer mode that is neither spawn, save, none nor a rerun URL (exit 2 at the CLI)."""
-    if mode in MODES or mode.startswith(URL_SCHEMES):
-        return mode
-    raise InputError(
-        f"viewer mode {mode!r} not understood: use spawn, save, none, or a URL like rerun+http://127.0.0.1:9876/proxy"
-    )
-
-
 def term_title(term: str) -> str:
     """``b1 (1/s)``: a coefficient named with its unit from the one term table."""
     spec = TERM_TABLE.get(term)
     return f"{term} ({spec.unit})" if spec else term
-
-
-def _url_listening(url: str) -> bool:
-    """True when something accepts connections at a rerun URL's host and port."""
-    parts = urlsplit(url)
-    return _listening(parts.hostname or "127.0.0.1", parts.port or 9876)
-
-
-def _listening(host: str, port: int) -> bool:
-    address = "127.0.0.1" if host in ("0.0.0.0", "::", "") else host
-    with socket.socket(socket.AF_INET6 if ":" in address else socket.AF_INET) as probe:
-        probe.settimeout(0.5)
-        return probe.connect_ex((address, port)) == 0
-
-
-class ViewFeed:
-    """Jobs run in order on one background thread; ``put`` never waits.
-
-    Droppable jobs (sample blocks, refits) beyond ``limit`` waiting are dropped and counted;
-    the others (a new run, its end, events) are always kept: a few per decay. A job that
-    raises is handed to ``on_error`` and the thread goes on.
-    """
-
-    def __init__(self, on_error: Callable[[BaseException], None], limit: int = QUEUE_LIMIT) -> None:
-        self.limit = limit
-        self.on_error = on_error
-        self.dropped = 0
-        self.done = 0
-        self._jobs: deque[tuple[Callable[[], None], bool]] = deque()
-        self._waiting_droppable = 0
-        self._busy = False
-        self._stopping = False
-        self._cond = threading.Condition()
-        self._thread = threading.Thread(target=self._work, name="tankdaq-view", daemon=True)
-        self._thread.start()
-
-    def put(self, job: Callable[[], None], droppable: bool) -> bool:
-        """Queue ``job``; False when it was dropped (the view is behind)."""
-        with self._cond:
-            if self._stopping or (droppable and self._waiting_droppable >= self.limit):
-                self.dropped += droppable
-                return False
-            self._jobs.append((job, droppable))
-            self._waiting_droppable += droppable
-            self._cond.notify_all()
-            return True
-
-    def wait_idle(self, timeout_s: float) -> bool:
-        """Wait until every queued job has run; False if that took longer than ``timeout_s``."""
-        deadline = time.monotonic() + timeout_s
-        with self._cond:
-            while self._jobs or self._busy:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self._cond.wait(left)
-            return True
-
-    def stop(self, timeout_s: float) -> bool:
-        """Run what is queued (within ``timeout_s``), then end the thread; False if it did not finish."""
-        idle = self.wait_idle(timeout_s)
-        with self._cond:
-            self._stopping = True
-            self._cond.notify_all()
-        if idle:
-            self._thread.join(timeout=1.0)
-        return idle
-
-    def _work(self) -> None:
-        while True:
-            with self._cond:
-                while not self._jobs and not self._stopping:
-                    self._cond.wait()
-                if not self._jobs:
-                    return
-                job, droppable = self._jobs.popleft()
-                self._waiting_droppable -= droppable
-                self._busy = True
-            try:
-                job()
-            except Exception as exc:  # whatever rerun raises, acquisition goes on
-                self.on_error(exc)
-            finally:
-                with self._cond:
-                    self._busy = False
-                    self.done += 1
-                    self._cond.notify_all()
 
 
 def decay_blueprint(terms: Sequence[str] = ()) -> rrb.Blueprint:
@@ -412,38 +257,7 @@ class LiveView:
 
     def _spawn_viewer(self) -> None:
         """Start the viewer (bound to ``bind``) unless one already listens on the port; else fall back."""
-        url = f"rerun+http://127.0.0.1:{self.spawn_port}/proxy"
-        if _listening(self.bind, self.spawn_port):
-            self.on_note(f"a viewer already listens on port {self.spawn_port}: the view goes there")
-            self._live_url = url
-            return
-        executable = rerun_executable()
-        if executable is None:
-            self.on_note("no rerun viewer found (is rerun-sdk installed?): saving an .rrd instead")
-            return
-        process = subprocess.Popen(
-            [executable, "--bind", self.bind, "--port", str(self.spawn_port), "--hide-welcome-screen",
-             "--expect-data-soon"],
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-            start_new_session=True,  # the window outlives tankdaq for the operator; Ctrl-C spares it
-            env={**os.environ, "RERUN_APP_ONLY": "true"},
-        )  # fmt: skip
-        self.viewer_process = process
-        deadline = time.monotonic() + SPAWN_TIMEOUT_S
-        while process.poll() is None and time.monotonic() < deadline:
-            if _listening(self.bind, self.spawn_port):
-                self._live_url = url
-                self.on_note(f"rerun viewer pid {process.pid} listening on {self.bind}:{self.spawn_port}")
-                return
-            time.sleep(0.05)
-        code = process.poll()
-        if code is None:
-            process.kill()
-            process.wait(timeout=10)
-        why = f"exited with code {code}" if code is not None else f"did not listen in {SPAWN_TIMEOUT_S:g} s"
-        self.on_note(f"the rerun viewer {why} (no working display?): saving an .rrd instead")
+        self.viewer_process, self._live_url = spawn_viewer(self.bind, self.spawn_port, self.on_note)
 
     def _viewer_gone(self) -> bool:
         """True (once noted) when the spawned viewer has exited: its sink is dropped from then on."""
@@ -488,7 +302,7 @@ class LiveView:
         self._measured_angle: list[np.ndarray] = []
         self._styled_terms: set[str] = set()
         self._rrd_writing = rrd_path if rrd_path is not None and self._room_for_rrd(rrd_path) else None
-        self._streaming = self._live_url is not None and _url_listening(self._live_url)
+        self._streaming = self._live_url is not None and url_listening(self._live_url)
         if self._live_url is not None and not self._streaming:
             self.on_note(f"no viewer listening at {self._live_url}: this decay goes to the .rrd only")
         sinks = self._sinks()

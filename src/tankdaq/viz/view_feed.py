@@ -1,0 +1,88 @@
+"""The view's one background thread: jobs run in order, ``put`` never waits, and what falls behind is
+dropped and counted, so a slow or dead viewer never holds up acquisition.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+
+#: Updates (sample blocks, refits) waiting for the view thread beyond this many are dropped:
+#: at 50 reads a second the view is then about five seconds behind.
+QUEUE_LIMIT = 256
+
+
+class ViewFeed:
+    """Jobs run in order on one background thread; ``put`` never waits.
+
+    Droppable jobs (sample blocks, refits) beyond ``limit`` waiting are dropped and counted;
+    the others (a new run, its end, events) are always kept: a few per decay. A job that
+    raises is handed to ``on_error`` and the thread goes on.
+    """
+
+    def __init__(self, on_error: Callable[[BaseException], None], limit: int = QUEUE_LIMIT) -> None:
+        self.limit = limit
+        self.on_error = on_error
+        self.dropped = 0
+        self.done = 0
+        self._jobs: deque[tuple[Callable[[], None], bool]] = deque()
+        self._waiting_droppable = 0
+        self._busy = False
+        self._stopping = False
+        self._cond = threading.Condition()
+        self._thread = threading.Thread(target=self._work, name="tankdaq-view", daemon=True)
+        self._thread.start()
+
+    def put(self, job: Callable[[], None], droppable: bool) -> bool:
+        """Queue ``job``; False when it was dropped (the view is behind)."""
+        with self._cond:
+            if self._stopping or (droppable and self._waiting_droppable >= self.limit):
+                self.dropped += droppable
+                return False
+            self._jobs.append((job, droppable))
+            self._waiting_droppable += droppable
+            self._cond.notify_all()
+            return True
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait until every queued job has run; False if that took longer than ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while self._jobs or self._busy:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+            return True
+
+    def stop(self, timeout_s: float) -> bool:
+        """Run what is queued (within ``timeout_s``), then end the thread; False if it did not finish."""
+        idle = self.wait_idle(timeout_s)
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        if idle:
+            self._thread.join(timeout=1.0)
+        return idle
+
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                while not self._jobs and not self._stopping:
+                    self._cond.wait()
+                if not self._jobs:
+                    return
+                job, droppable = self._jobs.popleft()
+                self._waiting_droppable -= droppable
+                self._busy = True
+            try:
+                job()
+            except Exception as exc:  # whatever rerun raises, acquisition goes on
+                self.on_error(exc)
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self.done += 1
+                    self._cond.notify_all()
