@@ -20,7 +20,8 @@ from figure_checks import overlapping_texts
 from rrd_checks import read_rrd
 from tankdaq.cli import app
 from tankdaq.config import load_hull
-from tankdaq.diagnose.compare import SimulationComparison, best_damping_form
+from tankdaq.diagnose.compare import SimulationComparison
+from tankdaq.diagnose.sim_equation import best_damping_form
 from tankdaq.diagnose.sim_report import figures, story
 from tankdaq.diagnose.simulation import SeriesColumns, SimulationRequest, resolve_simulation
 from tankdaq.ident.free_decay import cut_free_decays
