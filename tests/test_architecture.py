@@ -31,6 +31,7 @@ THIRD_PARTY = {
     "pymoo": "pymoo",
     "distributed": "dask",
     "dask": "dask",
+    "sqlalchemy": "sqlalchemy",
 }
 EVERYTHING = "everything"
 
