@@ -111,32 +111,34 @@ def _wait_for(condition: object, proc: subprocess.Popen, what: str) -> None:
         time.sleep(0.02)
 
 
-def _has_samples(out: Path) -> bool:
-    """A decay under way whose samples reached the disk (the file is not closed: no footer yet)."""
+def _cut_after_a_catalogued_one(out: Path, url: str) -> bool:
+    """One decay closed and catalogued by the recorder itself, the next under way with samples on disk."""
     from tankdaq.errors import RecordingError
     from tankdaq.store.reader import read_recording
 
-    for path in out.glob("*.mcap"):
-        try:
-            recording = read_recording(path)
-        except RecordingError:
-            continue
-        if recording.samples.size and not recording.complete:
-            return True
-    return False
+    files = sorted(out.glob("*.mcap"))
+    if len(files) < 2:
+        return False
+    try:
+        latest = read_recording(files[-1])
+    except RecordingError:
+        return False  # opened, nothing on disk yet
+    if latest.complete or not latest.samples.size:
+        return False
+    return any(r["complete"] for r in _rows(url))
 
 
 def test_a_recorder_killed_mid_decay_leaves_no_complete_row_until_recover_and_index(tmp_path: Path) -> None:
     out, url = tmp_path / "rec", _url(tmp_path)
     args = ["record", "--port", "sim", "--hull", "swath", "--draft", "T", "--angle", "8", "--runs", "3"]
     proc = subprocess.Popen(
-        [EXE, *args, "--out", str(out), "--viewer", "none", "--sim-speed", "4", "--catalogue", url],
+        [EXE, *args, "--out", str(out), "--viewer", "none", "--sim-speed", "8", "--catalogue", url],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
     try:
-        _wait_for(lambda: _has_samples(out), proc, "decay with samples on disk")
+        _wait_for(lambda: _cut_after_a_catalogued_one(out, url), proc, "second decay under way")
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=30)
     finally:
@@ -144,12 +146,15 @@ def test_a_recorder_killed_mid_decay_leaves_no_complete_row_until_recover_and_in
             proc.kill()
             proc.wait(timeout=30)
         proc.communicate()
-    (cut,) = list(out.glob("*.mcap"))
-    assert not any(r["complete"] for r in _rows(url)), "a row claims a file the kill cut"
+    first, cut = sorted(out.glob("*.mcap"))
+    assert [(r["path"], r["complete"]) for r in _rows(url)] == [(str(first.resolve()), True)]
+    assert _rows(url)[0]["fit_source"] == "record" and _rows(url)[0]["coefficients"]  # the live final fit
     run = [EXE, "catalogue", "index", str(out), "--catalogue", url]
     assert subprocess.run(run, capture_output=True, timeout=120).returncode == 0
-    rows = _rows(url)
-    assert [(r["path"], r["complete"]) for r in rows] == [(str(cut.resolve()), False)]
+    assert {r["path"]: r["complete"] for r in _rows(url)} == {
+        str(first.resolve()): True,
+        str(cut.resolve()): False,
+    }
 
     recovered = out / "recovered.mcap"
     done = subprocess.run(
@@ -158,7 +163,7 @@ def test_a_recorder_killed_mid_decay_leaves_no_complete_row_until_recover_and_in
     assert done.returncode in (0, 3), done.stderr
     assert subprocess.run(run, capture_output=True, timeout=120).returncode == 0
     complete = {r["path"] for r in _rows(url) if r["complete"]}
-    assert complete == {str(recovered.resolve())}
+    assert complete == {str(first.resolve()), str(recovered.resolve())}
 
 
 # -- two writers at once ---------------------------------------------------------------------------

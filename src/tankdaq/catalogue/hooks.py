@@ -14,10 +14,13 @@ import queue
 import threading
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..acquire.sinks import Decay, Sink
 from .database import Catalogue, CatalogueError, describe, one_line, open_catalogue, resolve_url
+
+if TYPE_CHECKING:  # the session's module is imported by the session command only
+    from ..acquire.campaign_session import RunEntry
 
 Job = Callable[[Catalogue], object]
 #: How long a command waits at its end for the catalogue's last writes before it leaves them to index.
@@ -104,10 +107,10 @@ class CatalogueWriter:
         listed = list(paths)
         self.submit(lambda catalogue: update_fit(catalogue, listed, fields))
 
-    def add_session(self, folder: Path) -> None:
+    def add_session(self, folder: Path, only: str | None = None) -> None:
         from .writing import record_session
 
-        self.submit(lambda catalogue: record_session(catalogue, folder))
+        self.submit(lambda catalogue: record_session(catalogue, folder, only))
 
     def add_campaign(self, results: Iterable[Any]) -> None:
         from .writing import record_fits
@@ -132,10 +135,10 @@ class CatalogueSink(Sink):
         """The writer outlives one pipeline (a session opens one per decay): its owner closes it."""
 
 
-def session_listener(writer: CatalogueWriter, folder: Path) -> Callable[[object], None]:
-    """A guided session's verdict listener: the session's rows brought up to date from its log."""
+def session_listener(writer: CatalogueWriter, folder: Path) -> Callable[[RunEntry], None]:
+    """A guided session's verdict listener: the judged decay's row (and the session's) from its log."""
 
-    def judged(_entry: object) -> None:
-        writer.add_session(folder)
+    def judged(entry: RunEntry) -> None:
+        writer.add_session(folder, only=entry.file)
 
     return judged

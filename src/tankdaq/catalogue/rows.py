@@ -163,6 +163,21 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
     return row, version
 
 
+def bare_row(path: Path) -> dict[str, Any]:
+    """The row of a decay file nothing can be read from yet (cut before its first data reached the
+    disk): where it is, its hash, not complete. A session's log still says what it was."""
+    now = utc_now()
+    return {
+        "sha256": file_sha256(path),
+        "path": str(path.resolve()),
+        "size_bytes": path.stat().st_size,
+        "complete": False,
+        "code_version": __version__,
+        "created_utc": now,
+        "updated_utc": now,
+    }
+
+
 def _release_angle(meta: Mapping[str, str], events: list[dict[str, Any]]) -> float | None:
     measured = _finite(meta.get("angle_initial_deg"))
     if measured is None:

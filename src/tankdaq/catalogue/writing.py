@@ -14,7 +14,7 @@ import sqlalchemy as sa
 
 from ..errors import RecordingError
 from .database import Catalogue, decays, hulls, sessions
-from .rows import find_hull, fit_fields, recording_row, utc_now
+from .rows import bare_row, find_hull, fit_fields, recording_row, utc_now
 
 #: What a file seen again (moved, re-indexed, recovered) changes in its row: where it is, not what was
 #: said about it (verdicts, later fits, the hull version it was recorded with).
@@ -46,10 +46,18 @@ def _add_hull(connection: sa.Connection, version: Mapping[str, Any] | None) -> N
         connection.execute(statement.on_conflict_do_nothing(index_elements=["sha256"]))
 
 
-def add_file(catalogue: Catalogue, path: Path, extra: Mapping[str, Any] | None = None) -> str:
+def add_file(
+    catalogue: Catalogue, path: Path, extra: Mapping[str, Any] | None = None, unreadable: bool = False
+) -> str:
     """Catalogue one recording (after its file is closed); returns its hash. ``extra`` columns (a
-    verdict, a session) are written too, on a new row or an existing one."""
-    row, version = recording_row(path)
+    verdict, a session) are written too, on a new row or an existing one. A file that cannot be read
+    raises ``RecordingError``, or with ``unreadable`` gets a bare row (a session's decay cut early)."""
+    try:
+        row, version = recording_row(path)
+    except RecordingError:
+        if not unreadable:
+            raise
+        row, version = bare_row(path), None
     row |= dict(extra or {})
     with catalogue.engine.begin() as connection:
         _add_hull(connection, version)
@@ -81,10 +89,11 @@ def session_id(log_path: Path) -> str:
         return hashlib.sha256(fh.readline()).hexdigest()[:32]
 
 
-def record_session(catalogue: Catalogue, folder: Path) -> int:
+def record_session(catalogue: Catalogue, folder: Path, only: str | None = None) -> int:
     """The session in ``folder`` (its ``session.jsonl``): its row, and each decay's file with the
     session, plan, decay number, the operator's verdict and the checks' reasons. Returns the decays
-    catalogued (a decay whose file is gone is left out: the log says it was rejected as missing)."""
+    catalogued (a decay whose file is gone is left out: the log says it was rejected as missing).
+    ``only``: the one file just judged (a session's verdict; the others are already there)."""
     from ..acquire.session_log import SessionLog
 
     log = SessionLog(folder)
@@ -99,7 +108,7 @@ def record_session(catalogue: Catalogue, folder: Path) -> int:
     done = 0
     for decay, run in sorted(runs.items()):
         path = folder / run["file"]
-        if not path.is_file():
+        if not path.is_file() or only not in (None, run["file"]):
             continue
         verdict = verdicts.get(decay, {})
         extra = {
@@ -109,10 +118,7 @@ def record_session(catalogue: Catalogue, folder: Path) -> int:
             "verdict": verdict.get("verdict"),
             "checks": list(verdict.get("reasons", run.get("reasons", []))),
         }
-        try:
-            add_file(catalogue, path, extra)
-        except RecordingError:
-            continue  # a file cut short that cannot be read: recover makes a readable one
+        add_file(catalogue, path, extra, unreadable=True)  # cut before any data: still the session's
         done += 1
     hull_name = str(plan["hull"]) if plan.get("hull") else None
     _upsert_session(catalogue, folder, sid, plan_name, hull_name, records, runs, verdicts)
