@@ -7,6 +7,7 @@ sets the variable for the whole run): no test writes the user's own catalogue.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -24,6 +25,7 @@ import sqlalchemy as sa
 from typer.testing import CliRunner
 
 import tankdaq
+import tankdaq.config
 from tankdaq.catalogue.database import (
     BadCatalogueQuery,
     CatalogueError,
@@ -148,7 +150,10 @@ def test_a_recorder_killed_mid_decay_leaves_no_complete_row_until_recover_and_in
         proc.communicate()
     first, cut = sorted(out.glob("*.mcap"))
     assert [(r["path"], r["complete"]) for r in _rows(url)] == [(str(first.resolve()), True)]
-    assert _rows(url)[0]["fit_source"] == "record" and _rows(url)[0]["coefficients"]  # the live final fit
+    (live,) = _rows(url)
+    assert live["fit_source"] == "record" and live["coefficients"]["b1"]["value"] > 0  # the live final fit
+    hull_file = Path(tankdaq.config.load_hull("swath").path)  # the hull's version it was recorded with
+    assert live["hull_sha256"] == hashlib.sha256(hull_file.read_bytes()).hexdigest()
     run = [EXE, "catalogue", "index", str(out), "--catalogue", url]
     assert subprocess.run(run, capture_output=True, timeout=120).returncode == 0
     assert {r["path"]: r["complete"] for r in _rows(url)} == {
@@ -293,6 +298,13 @@ def test_a_value_is_a_bound_parameter_never_sql(campaign_folder: Path, tmp_path:
     assert _count(url) == 36
 
 
+@pytest.mark.parametrize("given", ["mysql://lab/runs", "postgresql+asyncpg://x/y"])
+def test_a_catalogue_that_is_not_one_is_refused_before_work_in_one_line(given: str) -> None:
+    result = CliRunner().invoke(app, ["runs", "--catalogue", given])
+    assert result.exit_code == 2 and result.output.count("\n") == 1
+    assert result.output.startswith(f"error: catalogue {given!r}: give a path")
+
+
 def test_a_newer_schema_is_refused_in_one_line(tmp_path: Path) -> None:
     url = _url(tmp_path)
     with open_catalogue(url) as catalogue, catalogue.engine.begin() as connection:
@@ -330,6 +342,16 @@ def test_a_campaign_by_query_equals_the_campaign_by_paths(campaign_folder: Path,
         fit = by_paths[0] if "_4deg_" in row["path"] else by_paths[1]
         assert {k: v["value"] for k, v in row["coefficients"].items()} == pytest.approx(fit, rel=1e-12)
         assert row["b_eq_per_s"]["5"] > 0
+
+    compared = CliRunner().invoke(
+        app, ["runs", "--compare", "draft=1.1T angle=4", "draft=1.1T angle=5", "--json", "--catalogue", url]
+    )
+    assert compared.exit_code == 0, compared.output
+    four, five = sorted(json.loads(compared.stdout), key=lambda row: row["angle_nominal_deg"])
+    assert (four["n_a"], four["n_b"], five["n_a"], five["n_b"]) == (1, 0, 1, 0)
+    assert four["b_eq_5deg_per_s_a"] == pytest.approx(
+        next(r["b_eq_per_s"]["5"] for r in written.values() if "_4deg_" in r["path"]), rel=1e-12
+    )
 
 
 def test_runs_with_a_query_no_recording_matches_is_one_line(tmp_path: Path) -> None:
