@@ -348,7 +348,7 @@ def test_a_campaign_by_query_equals_the_campaign_by_paths(campaign_folder: Path,
     )
     assert compared.exit_code == 0, compared.output
     four, five = sorted(json.loads(compared.stdout), key=lambda row: row["angle_nominal_deg"])
-    assert (four["n_a"], four["n_b"], five["n_a"], five["n_b"]) == (1, 0, 1, 0)
+    assert (four["n_a"], four["n_b"], five["n_a"], five["n_b"]) == (1, 0, 0, 1)  # A: 4 deg, B: 5 deg
     assert four["b_eq_5deg_per_s_a"] == pytest.approx(
         next(r["b_eq_per_s"]["5"] for r in written.values() if "_4deg_" in r["path"]), rel=1e-12
     )
