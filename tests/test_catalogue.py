@@ -341,7 +341,7 @@ def test_a_campaign_by_query_equals_the_campaign_by_paths(campaign_folder: Path,
     for row in written.values():
         fit = by_paths[0] if "_4deg_" in row["path"] else by_paths[1]
         assert {k: v["value"] for k, v in row["coefficients"].items()} == pytest.approx(fit, rel=1e-12)
-        assert row["b_eq_per_s"]["5"] > 0
+        assert row["b_eq_per_s"]["5"] > 0 and row["b44_hat"]["5"] > 0  # swath gives beam and displacement
 
     compared = CliRunner().invoke(
         app, ["runs", "--compare", "draft=1.1T angle=4", "draft=1.1T angle=5", "--json", "--catalogue", url]
@@ -392,12 +392,14 @@ def test_a_locked_catalogue_is_one_line_and_never_holds_the_caller(
     open_catalogue(url).close()
     lines: list[str] = []
     holder = sa.create_engine(url).connect()
+    writer = CatalogueWriter(url, lines.append)
     try:
         holder.exec_driver_sql("BEGIN EXCLUSIVE")  # another process's long write, as the writer sees it
-        writer = CatalogueWriter(url, lines.append)
         writer.add_files([campaign_folder / "swath_T_roll_8deg_run01.mcap"])
         writer.close(wait_s=0.5)
         assert len(lines) == 1 and "still busy" in lines[0] and "catalogue index" in lines[0]
     finally:
         holder.rollback()
         holder.close()
+        writer.close()  # the lock gone, the queued write lands: the writer's thread ends here
+    assert lines[1:] == [] and len(_rows(url)) == 1

@@ -38,6 +38,7 @@ class CatalogueWriter:
         self._jobs: queue.Queue[Job | None] = queue.Queue()
         self._thread: threading.Thread | None = None
         self._catalogue: Catalogue | None = None
+        self._closing = False
 
     @classmethod
     def from_option(cls, given: str | None, on_line: Callable[[str], None]) -> CatalogueWriter:
@@ -80,12 +81,15 @@ class CatalogueWriter:
         """Let the queued writes finish (at most ``wait_s``), then stop the thread."""
         if self._thread is None:
             return
-        self._jobs.put(None)
+        if not self._closing:
+            self._closing = True
+            self._jobs.put(None)
         self._thread.join(wait_s)
-        if self._thread.is_alive():
+        if self._thread.is_alive():  # kept: a later close() may wait for it again
             assert self.url is not None
             self.on_line(f"catalogue: {describe(self.url)} still busy after {wait_s:g} s; {CATCH_UP}")
-        self._thread = None
+            return
+        self._thread, self._closing = None, False
 
     def __enter__(self) -> CatalogueWriter:
         return self

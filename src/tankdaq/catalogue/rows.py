@@ -79,7 +79,7 @@ def fit_fields(
     """A fit's columns: coefficients with their 95 % intervals, period, B_eq (and B̂44 for roll, where
     the hull gives beam and displacement) at ``STANDARD_AMPLITUDES_DEG``. ``condition``: hull, draft,
     axis."""
-    from ..ident.derived import b44_hat_factor, b_eq, natural_period
+    from ..ident.derived import b_eq, natural_period
 
     values = {term: float(value) for term, value in coefficients.items()}
     table: dict[str, dict[str, float | None]] = {}
@@ -93,7 +93,7 @@ def fit_fields(
         "coefficients": table,
         "natural_period_s": _finite(natural_period(values)),
         "b_eq_per_s": b_eqs,
-        "b44_hat": _b44_hat(values, b_eqs, condition, b44_hat_factor),
+        "b44_hat": _b44_hat(values, b_eqs, condition),
         "r2_angle": _finite(r2_angle),
         "warnings": list(warnings),
         "updated_utc": utc_now(),
@@ -104,8 +104,10 @@ def _b44_hat(
     values: dict[str, float],
     b_eqs: dict[str, float | None],
     condition: tuple[Hull | None, str | None, str | None],
-    factor_of: Any,
 ) -> dict[str, float | None] | None:
+    """B̂44 at each amplitude: B_eq/I times the total inertia (from the hull's GM and displacement) times
+    B̂44's factor; None off roll or where the hull lacks what it needs."""
+    from ..ident.derived import b44_hat_factor
     from ..ident.report import dimensional_summary
 
     hull, draft, axis = condition
@@ -113,7 +115,7 @@ def _b44_hat(
         return None
     try:
         draft_factor = parse_draft(draft)
-        factor = factor_of(hull, draft_factor)
+        factor = b44_hat_factor(hull, draft_factor)
         inertia = dimensional_summary(values, hull, axis, draft_factor).get("total_inertia_kg_m2")
     except (TankdaqError, ValueError, ZeroDivisionError):
         return None

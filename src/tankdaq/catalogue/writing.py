@@ -12,6 +12,7 @@ from typing import Any
 
 import sqlalchemy as sa
 
+from ..config import Hull
 from ..errors import RecordingError
 from .database import Catalogue, decays, hulls, sessions
 from .rows import bare_row, find_hull, fit_fields, recording_row, utc_now
@@ -151,14 +152,22 @@ def _upsert_session(
         connection.execute(statement.on_conflict_do_update(index_elements=["session_id"], set_=keep))
 
 
+def _condition(runs: Sequence[Any]) -> tuple[Hull | None, str | None, str | None]:
+    """Hull, draft and axis of fitted runs (their metadata, else their file names: ``condition_of``)."""
+    from ..ident.conditions import condition_of
+
+    if not runs:
+        return None, None, None
+    condition = condition_of(runs[0])
+    return find_hull(condition.hull), condition.draft, condition.axis
+
+
 def fit_of_estimator(
     source: str, fit: Any, runs: Sequence[Any], warnings: Sequence[str] = (), model: str | None = None
 ) -> dict[str, Any]:
     """A fitted estimator's columns (``coefficients_``, ``ci95_``, ``r2_angle_`` when it has one) for
     the condition its runs carry in their metadata."""
-    meta = runs[0].meta if runs else {}
-    hull = find_hull(meta.get("hull"))
-    condition = (hull, meta.get("draft"), meta.get("axis"))
+    condition = _condition(runs)
     ci95 = {term: tuple(pair) for term, pair in getattr(fit, "ci95_", {}).items()}
     r2 = getattr(fit, "r2_angle_", None)
     return fit_fields(source, fit.coefficients_, ci95, r2, warnings, condition, model)
@@ -183,8 +192,7 @@ def record_fits(catalogue: Catalogue, results: Iterable[Any]) -> int:
 
 def fit_of_summary(source: str, summary: Mapping[str, Any], runs: Sequence[Any]) -> dict[str, Any]:
     """An identify or diagnose summary's fit (``ident.report.summarize``) as catalogue columns."""
-    meta = runs[0].meta if runs else {}
-    condition = (find_hull(meta.get("hull")), meta.get("draft"), meta.get("axis"))
+    condition = _condition(runs)
     table = summary["coefficients"]
     coefficients = {term: entry["value"] for term, entry in table.items()}
     ci95 = {term: tuple(entry["ci95"]) for term, entry in table.items() if entry.get("ci95")}

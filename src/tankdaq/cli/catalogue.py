@@ -80,6 +80,10 @@ def _shown(key: str, value: object) -> object:
         return Path(value).name
     if key == "recorded_utc" and isinstance(value, str):
         return value[:16].replace("T", " ")
+    if key == "warnings" and value:  # each one in --json; never a row without its mark
+        return f"{str(value).count(' | ') + 1} warning(s)"
+    if key == "complete":
+        return "yes" if value else "CUT"
     return value
 
 
@@ -92,7 +96,10 @@ def _print_table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> 
         table.add_column(title, overflow="fold")
     for row in rows:
         table.add_row(*(_cell(_shown(key, row.get(key))) for key, _ in columns))
-    Console(soft_wrap=False).print(table)
+    console = Console(soft_wrap=False)
+    if not console.is_terminal:  # a pipe or a file: every column whole, not 80 characters
+        console = Console(soft_wrap=False, width=240)
+    console.print(table)
 
 
 def _emit(rows: list[dict[str, Any]], as_json: bool, as_csv: bool, columns: list[tuple[str, str]]) -> None:
