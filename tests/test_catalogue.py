@@ -22,6 +22,8 @@ from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import tankdaq
@@ -403,3 +405,24 @@ def test_a_locked_catalogue_is_one_line_and_never_holds_the_caller(
         holder.close()
         writer.close()  # the lock gone, the queued write lands: the writer's thread ends here
     assert lines[1:] == [] and len(_rows(url)) == 1
+
+
+@pytest.fixture(scope="module")
+def empty_catalogue(tmp_path_factory: pytest.TempPathFactory) -> str:
+    url = _url(tmp_path_factory.mktemp("where"))
+    open_catalogue(url).close()
+    return url
+
+
+@settings(max_examples=60, deadline=None)
+@given(text=st.text(alphabet=st.sampled_from(list("hulraswt2=<>!~'\";-() _*%\\0")), max_size=40))
+def test_any_where_text_is_conditions_or_one_refusal_never_sql(empty_catalogue: str, text: str) -> None:
+    """Whatever is typed: bound conditions that run, or ``BadCatalogueQuery``; the table stays whole."""
+    try:
+        conditions = RunQuery(where=text).conditions()
+    except BadCatalogueQuery as exc:
+        assert "\n" not in str(exc)
+        return
+    with open_catalogue(empty_catalogue) as catalogue, catalogue.engine.connect() as connection:
+        assert connection.execute(sa.select(decays).where(*conditions)).all() == []
+        assert connection.execute(sa.select(sa.func.count()).select_from(schema_version)).scalar_one() == 1
