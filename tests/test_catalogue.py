@@ -12,7 +12,6 @@ import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -28,6 +27,7 @@ from typer.testing import CliRunner
 
 import tankdaq
 import tankdaq.config
+from pg_server import throwaway_postgres, why_not
 from tankdaq.catalogue.database import (
     BadCatalogueQuery,
     CatalogueError,
@@ -176,54 +176,14 @@ def test_a_recorder_killed_mid_decay_leaves_no_complete_row_until_recover_and_in
 # -- two writers at once ---------------------------------------------------------------------------
 
 
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
-def _pg_bin() -> Path | None:
-    found = sorted(Path("/usr/lib/postgresql").glob("*/bin/pg_ctl"))
-    return found[-1].parent if found else None
-
-
 @pytest.fixture(scope="module")
 def postgres_url() -> Iterator[str]:
-    """A throwaway PostgreSQL server: initdb and pg_ctl in a temporary folder on a free port (as the
-    ``postgres`` user when the tests run as root: initdb refuses root); stopped at the end."""
-    bin_dir = _pg_bin()
-    if bin_dir is None:
-        pytest.skip("PostgreSQL server binaries (initdb, pg_ctl) not installed: `make` installs postgresql")
-    as_user: list[str] = []
-    folder = Path(tempfile.mkdtemp(prefix="tankdaq-pg-"))
-    if os.geteuid() == 0:
-        if shutil.which("runuser") is None:
-            pytest.skip("running as root without runuser: initdb refuses root")
-        as_user = ["runuser", "-u", "postgres", "--"]
-        shutil.chown(folder, "postgres")
-    data, port = folder / "data", _free_port()
-    initdb = [
-        *as_user,
-        str(bin_dir / "initdb"),
-        "-D",
-        str(data),
-        "-U",
-        "tankdaq",
-        "--auth=trust",
-        "-E",
-        "UTF8",
-    ]
-    subprocess.run(initdb, check=True, capture_output=True, timeout=120)
-    options = f"-p {port} -k {folder} -c listen_addresses=127.0.0.1"
-    pg_ctl = [*as_user, str(bin_dir / "pg_ctl"), "-D", str(data)]
-    subprocess.run(
-        [*pg_ctl, "-o", options, "-l", str(folder / "log"), "-w", "start"], check=True, timeout=120
-    )
-    try:
-        yield f"postgresql://tankdaq@127.0.0.1:{port}/postgres"
-    finally:
-        subprocess.run([*pg_ctl, "-m", "fast", "-w", "stop"], check=True, capture_output=True, timeout=120)
-        shutil.rmtree(folder, ignore_errors=True)
+    """A throwaway PostgreSQL server (tests/pg_server.py), stopped at the end; skipped with the reason."""
+    reason = why_not()
+    if reason is not None:
+        pytest.skip(reason)
+    with throwaway_postgres() as url:
+        yield url
 
 
 def _two_writers(url: str, go: Path) -> None:

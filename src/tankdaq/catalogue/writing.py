@@ -34,11 +34,21 @@ def _insert(connection: sa.Connection, table: sa.Table) -> Any:
 
 
 def upsert_rows(connection: sa.Connection, rows: Sequence[Mapping[str, Any]], update: Iterable[str]) -> None:
-    """Insert decay rows; a hash already there gets only the ``update`` columns."""
+    """Insert decay rows; a hash already there gets only the ``update`` columns. Rows with the same
+    columns go as one statement with many parameter sets (compiled once, cached)."""
+    wanted = tuple(update)
+    shapes: dict[tuple[str, ...], list[Mapping[str, Any]]] = {}
     for row in rows:
-        statement = _insert(connection, decays).values(**row)
-        changed = {c: statement.excluded[c] for c in update if c in row}
-        connection.execute(statement.on_conflict_do_update(index_elements=["sha256"], set_=changed))
+        shapes.setdefault(tuple(sorted(row)), []).append(row)
+    for columns, group in shapes.items():
+        statement = _insert(connection, decays)
+        changed = {c: statement.excluded[c] for c in wanted if c in columns}
+        upsert = (
+            statement.on_conflict_do_update(index_elements=["sha256"], set_=changed)
+            if changed
+            else statement.on_conflict_do_nothing(index_elements=["sha256"])
+        )
+        connection.execute(upsert, [dict(row) for row in group])
 
 
 def _add_hull(connection: sa.Connection, version: Mapping[str, Any] | None) -> None:
@@ -67,20 +77,19 @@ def add_file(
 
 
 def update_fit(catalogue: Catalogue, paths: Sequence[Path], fields: Mapping[str, Any]) -> int:
-    """Give the rows of ``paths`` a fit (identify, campaign, diagnose); a recording not catalogued
-    yet is added first. Files that are not tankdaq recordings (CSV) are not catalogued. Returns the
-    rows updated."""
+    """Give the rows of ``paths`` a fit (identify, campaign, diagnose) in one transaction; a recording
+    not catalogued yet is added first. Files that are not tankdaq recordings (CSV) are not catalogued.
+    Returns the rows written."""
     mcaps = [path.resolve() for path in paths if path.suffix.lower() == ".mcap" and path.is_file()]
-    updated = 0
-    for path in mcaps:
-        with catalogue.engine.begin() as connection:
-            found = connection.execute(
-                decays.update().where(decays.c.path == str(path)).values(**fields)
-            ).rowcount
-        if not found:
-            add_file(catalogue, path, fields)
-        updated += 1
-    return updated
+    missing = []
+    with catalogue.engine.begin() as connection:
+        for path in mcaps:
+            statement = decays.update().where(decays.c.path == str(path)).values(**fields)
+            if not connection.execute(statement).rowcount:
+                missing.append(path)
+    for path in missing:
+        add_file(catalogue, path, fields)
+    return len(mcaps)
 
 
 def session_id(log_path: Path) -> str:
