@@ -25,6 +25,8 @@ FILE_NAME = "catalogue.sqlite"
 #: How long a writer waits for another one's lock before giving up (SQLite), in ms.
 BUSY_TIMEOUT_MS = 30_000
 OFF = ("none", "off", "")
+#: The execution option that marks a connection as a reader (``Catalogue.reading``).
+READ_ONLY = "tankdaq_read_only"
 
 
 class CatalogueError(TankdaqError):
@@ -160,6 +162,11 @@ class Catalogue:
     url: str
     engine: sa.Engine
 
+    def reading(self) -> sa.Connection:
+        """A connection that only reads: on SQLite a deferred BEGIN, so it never takes the write lock
+        (WAL readers do not wait for writers, nor writers for them)."""
+        return self.engine.connect().execution_options(**{READ_ONLY: True})
+
     def close(self) -> None:
         self.engine.dispose()
 
@@ -203,7 +210,10 @@ def _engine(url: str) -> sa.Engine:
 
     @sa.event.listens_for(engine, "begin")
     def _begin(connection: sa.Connection) -> None:
-        connection.exec_driver_sql("BEGIN IMMEDIATE")  # the write lock first: no deadlock on upgrade
+        if connection.get_execution_options().get(READ_ONLY):
+            connection.exec_driver_sql("BEGIN")
+        else:
+            connection.exec_driver_sql("BEGIN IMMEDIATE")  # the write lock first: no deadlock on upgrade
 
     return engine
 

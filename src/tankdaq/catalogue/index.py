@@ -72,7 +72,7 @@ def index_folder(
 
 def _known_paths(catalogue: Catalogue, hashes: list[str]) -> dict[str, str]:
     found: dict[str, str] = {}
-    with catalogue.engine.connect() as connection:
+    with catalogue.reading() as connection:
         for start in range(0, len(hashes), LOOKUP_BATCH):
             batch = hashes[start : start + LOOKUP_BATCH]
             rows = connection.execute(

@@ -164,7 +164,7 @@ def parse_runs(text: str) -> RunQuery:
 def select_rows(catalogue: Catalogue, query: RunQuery) -> list[dict[str, Any]]:
     """The rows that match, oldest first, as plain dicts (JSON columns decoded)."""
     statement = sa.select(decays).where(*query.conditions()).order_by(decays.c.recorded_utc, decays.c.id)
-    with catalogue.engine.connect() as connection:
+    with catalogue.reading() as connection:
         return [_decoded(dict(row._mapping)) for row in connection.execute(statement)]
 
 
@@ -248,7 +248,7 @@ def selection(catalogue: Catalogue, text: str) -> list[dict[str, Any]]:
         sa.or_(decays.c.session_id.startswith(text, autoescape=True), decays.c.plan == text),
         *RunQuery().conditions(),  # the decays kept, as ``runs`` lists them
     )
-    with catalogue.engine.connect() as connection:
+    with catalogue.reading() as connection:
         rows = [_decoded(dict(row._mapping)) for row in connection.execute(statement)]
     if not rows:
         raise BadCatalogueQuery(f"--compare {text!r}: no session, plan or query in the catalogue matches")
