@@ -386,3 +386,25 @@ def test_any_where_text_is_conditions_or_one_refusal_never_sql(empty_catalogue: 
     with open_catalogue(empty_catalogue) as catalogue, catalogue.engine.connect() as connection:
         assert connection.execute(sa.select(decays).where(*conditions)).all() == []
         assert connection.execute(sa.select(sa.func.count()).select_from(schema_version)).scalar_one() == 1
+
+
+def test_identify_and_diagnose_by_query_read_what_the_paths_read(
+    campaign_folder: Path, tmp_path: Path
+) -> None:
+    url = _url(tmp_path)
+    with open_catalogue(url) as catalogue:
+        index_folder(catalogue, campaign_folder)
+    path = campaign_folder / "swath_0.9T_roll_6deg_run01.mcap"
+    base = ["identify", "--model", "b1,c1", "--json", "--catalogue", url]
+    by_path = CliRunner().invoke(app, [*base, str(path)])
+    by_query = CliRunner().invoke(app, [*base, "--runs", "hull=swath draft=0.9T angle=6"])
+    assert by_path.exit_code == 0 and by_query.exit_code == 0, by_query.output
+    assert json.loads(by_query.stdout)["coefficients"] == json.loads(by_path.stdout)["coefficients"]
+    both = CliRunner().invoke(app, [*base, str(path), "--runs", "hull=swath"])
+    assert both.exit_code == 2 and both.output.strip() == "error: give files or --runs QUERY, not both"
+    diagnosed = CliRunner().invoke(
+        app, ["diagnose", "--runs", "hull=swath draft=0.9T angle=6", "--max-steps", "0", "--catalogue", url]
+    )
+    assert diagnosed.exit_code == 0, diagnosed.output
+    (row,) = [r for r in _rows(url) if r["path"] == str(path.resolve())]
+    assert row["fit_source"] == "diagnose" and row["coefficients"]["b1"]["value"] > 0
