@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint docs bench clean venv viewer-test-deps
+.PHONY: demo test lint docs bench clean venv viewer-test-deps catalogue-test-deps
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -45,7 +45,20 @@ viewer-test-deps:
 # One pytest worker per core: most of the suite's wall time is the simulated MTi-G streaming in real time.
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
-test: $(STAMP) lint docs viewer-test-deps
+# The run catalogue's PostgreSQL tests start a throwaway server (initdb, pg_ctl) from the Debian
+# `postgresql` package, installed where this machine allows; otherwise those tests skip with the reason
+# and the SQLite ones still run.
+catalogue-test-deps:
+	@if ls /usr/lib/postgresql/*/bin/pg_ctl >/dev/null 2>&1; then \
+		:; \
+	elif [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then \
+		echo "make: not root or no apt-get: cannot install postgresql; the PostgreSQL catalogue tests skip"; \
+	elif ! (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+			postgresql) >/dev/null 2>&1; then \
+		echo "make: apt-get could not install postgresql; the PostgreSQL catalogue tests skip"; \
+	fi
+
+test: $(STAMP) lint docs viewer-test-deps catalogue-test-deps
 	$(BIN)/python -m tankdaq.prepare
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal
 

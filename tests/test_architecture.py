@@ -33,6 +33,7 @@ THIRD_PARTY = {
     "dask": "dask",
     "h5py": "h5py",
     "pyarrow": "pyarrow",
+    "sqlalchemy": "sqlalchemy",
 }
 EVERYTHING = "everything"
 

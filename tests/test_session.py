@@ -69,6 +69,8 @@ def _session_args(plan: Path, out: Path, *extra: str) -> list[str]:
         "20",
         "--sim-faults",
         "2:wrong-angle,6:double-push",
+        "--catalogue",
+        str(out.parent / "catalogue.sqlite"),
         *extra,
     ]
 
@@ -161,6 +163,33 @@ def test_every_recording_is_in_the_session_file_with_its_verdict(session: dict[s
     assert all(abs(r["angle_deg"]) < 0.5 and r["sd_deg"] < 0.3 for r in levels)
     notes = [r for r in records if r["type"] == "note"]
     assert [n["text"] for n in notes] == ["water calm, model trimmed"]
+
+
+def test_the_catalogue_lists_exactly_the_accepted_decays_of_a_draft(session: dict[str, Any]) -> None:
+    """``tankdaq runs --hull swath --draft T --json``: the session's accepted decays at T, no other (the
+    session killed mid-decay and resumed wrote its catalogue as it went)."""
+    out = session["out"]
+    records = _records(out)
+    verdicts = {r["decay"]: r["verdict"] for r in records if r["type"] == "verdict"}
+    runs = [r for r in records if r["type"] == "run"]
+    accepted = {
+        str((out / r["file"]).resolve())
+        for r in runs
+        if verdicts[r["decay"]] == "accepted" and r["draft"] == "T"
+    }
+    catalogue = str(out.parent / "catalogue.sqlite")
+    result = CliRunner().invoke(
+        app, ["runs", "--hull", "swath", "--draft", "T", "--json", "--catalogue", catalogue]
+    )
+    assert result.exit_code == 0, result.output
+    listed = json.loads(result.stdout)
+    assert len(listed) == len(accepted) == 4 and {row["path"] for row in listed} == accepted
+    assert all(row["verdict"] == "accepted" and row["complete"] and row["r2_angle"] > 0.9 for row in listed)
+    assert len({row["session_id"] for row in listed}) == 1
+    rejected = CliRunner().invoke(app, ["runs", "--verdict", "rejected", "--json", "--catalogue", catalogue])
+    assert {Path(row["path"]).name for row in json.loads(rejected.stdout)} == {
+        r["file"] for r in runs if verdicts[r["decay"]] == "rejected"
+    }
 
 
 def test_the_wrong_angle_is_flagged_and_repeated(session: dict[str, Any]) -> None:

@@ -482,8 +482,10 @@ class CampaignSession:
         on_line: Callable[[str], None] | None = None,
         on_progress: Callable[[Progress], None] | None = None,
         resume: bool = False,
+        on_verdict: Callable[[RunEntry], None] | None = None,
     ) -> None:
         self.settings = settings
+        self.on_verdict = on_verdict or (lambda _entry: None)  # after the log holds it (the run catalogue)
         self.operator = operator
         self.on_line = on_line or (lambda _line: None)
         self.on_progress = on_progress or (lambda _p: None)
@@ -847,6 +849,7 @@ class CampaignSession:
         if key == "s":
             self.log.append("skip", draft=condition.draft, angle_deg=condition.angle_deg)
         state = self._reload()
+        self.on_verdict(next(r for r in state.runs if r.decay == entry.decay))
         self.on_line(f"decay {entry.decay}: {verdict} ({question.choices[key]})")
         self._show_condition(state, condition)
         return state

@@ -42,6 +42,8 @@ COMMAND_MODULES = {
     "predict": "predict",
     "auv": "auv",
     "hulls": "hulls",
+    "catalogue": "catalogue",
+    "runs": "catalogue",
 }
 
 

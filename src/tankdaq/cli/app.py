@@ -233,3 +233,24 @@ def progress_bar() -> Progress:
         console=err_console,
         transient=True,
     )
+
+
+def catalogue_option() -> Any:
+    """``--catalogue`` of every command that writes or reads the run catalogue (docs/catalogue.md), for
+    ``Annotated[str | None, catalogue_option()] = None``."""
+    return typer.Option(
+        "--catalogue",
+        metavar="URL|PATH|none",
+        help="Run catalogue: a SQLite file or folder, postgresql://..., or none "
+        "[default: $TANKDAQ_CATALOGUE, else catalogue.sqlite in the user data folder].",
+    )
+
+
+def runs_option() -> Any:
+    """``--runs QUERY`` of identify, campaign and diagnose: catalogued recordings in place of paths
+    (``Annotated``, as ``catalogue_option``)."""
+    return typer.Option(
+        "--runs",
+        metavar="QUERY",
+        help='Catalogued recordings in place of paths, e.g. "hull=swath draft=1.1T since=2026-03".',
+    )

@@ -19,13 +19,15 @@ from .app import (
     say,
     warn_truncated,
 )
-from .identify import EndS, StartS
+from .identify import CatalogueOption, EndS, RunsQuery, StartS
 
 
 @app.command("campaign")
 @handles_errors
 def campaign_command(
-    inputs: Annotated[list[Path], typer.Argument(help="Recordings (.mcap, .csv) or folders of them.")],
+    inputs: Annotated[
+        list[Path] | None, typer.Argument(help="Recordings (.mcap, .csv) or folders of them (or --runs).")
+    ] = None,
     report: Annotated[
         Path | None,
         typer.Option(
@@ -66,6 +68,8 @@ def campaign_command(
         bool,
         typer.Option("--no-recurse", help="Read only the given folders' own files, not their subfolders."),
     ] = False,
+    runs_query: RunsQuery = None,
+    catalogue: CatalogueOption = None,
 ) -> None:
     """Group decays by hull, axis, draft and initial angle; fit each group jointly (output error).
 
@@ -75,6 +79,8 @@ def campaign_command(
     written for the others). Folders are searched with their subfolders (--no-recurse: not); one line
     names every folder read.
     """
+    from ..catalogue.hooks import CatalogueWriter
+    from ..catalogue.query import inputs_or_query
     from ..errors import InputError
     from ..ident.campaign import (
         find_campaign_hulls,
@@ -98,7 +104,8 @@ def campaign_command(
     if scheduler is not None:
         check_scheduler(scheduler)  # an address not understood or not answering: one line, at once
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
-    paths = find_recordings(inputs, recurse=not no_recurse)
+    writer = CatalogueWriter.from_option(catalogue, say)
+    paths = find_recordings(inputs_or_query(inputs, runs_query, catalogue), recurse=not no_recurse)
     prepare_identifier(model, say)  # the native kernels: built once, on the first run after install
     prepare = []
     if report is not None:
@@ -138,6 +145,7 @@ def campaign_command(
             hulls=known,
             executor=pool,
         )
+        writer.add_campaign(results)  # each group's fit onto its recordings' catalogue rows
         warn_truncated(runs)
         echo_cuts(runs)
         typer.echo(markdown_table(results), nl=False)
@@ -154,6 +162,7 @@ def campaign_command(
         if report is not None:
             written = write_report(results, report, pool)
             err_console.print(f"wrote {len(written)} files to {report}", markup=False)
+    writer.close()
     if found.skipped:
         count = f"{len(found.skipped)} of {len(paths)} files skipped (listed above)"
         raise fail(f"{count}; the results cover the others", 1)

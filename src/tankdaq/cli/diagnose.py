@@ -26,9 +26,11 @@ from .app import (
 from .identify import (
     AngleColumn,
     AngleUnit,
+    CatalogueOption,
     EndS,
     KeepAll,
     RateColumn,
+    RunsQuery,
     SkipHalfCycles,
     StartS,
     TimeColumn,
@@ -58,12 +60,12 @@ SimAngleUnit = Annotated[str | None, for_simulation(AngleUnit, "--sim-angle-unit
 @handles_errors
 def diagnose_command(
     inputs: Annotated[
-        list[Path],
+        list[Path] | None,
         typer.Argument(
             callback=checked(validation.input_file),
-            help="Decay recordings (.mcap) or CSV files, one decay each.",
+            help="Decay recordings (.mcap) or CSV files, one decay each (or --runs).",
         ),
-    ],
+    ] = None,
     axis: str = typer.Option("roll", "--axis", help="roll or pitch."),
     baseline: str = typer.Option(
         None,
@@ -110,11 +112,16 @@ def diagnose_command(
         None, "--hull", help="Hull config: --simulation hull, and the correction in SI."
     ),
     draft: float = draft_option(help="Draft with --hull."),
+    runs_query: RunsQuery = None,
+    catalogue: CatalogueOption = None,
 ) -> None:
     """Fit a baseline, find where it disagrees with the decays, name and add the missing effects.
 
     With --simulation: compare a simulation with the decays, name what it misses, add it, show the gap shrink.
     """
+    from ..catalogue.hooks import CatalogueWriter
+    from ..catalogue.query import inputs_or_query
+    from ..catalogue.writing import fit_of_estimator, run_paths
     from ..diagnose import report as report_module
     from ..diagnose.effects import LIBRARY
     from ..diagnose.workflow import Diagnoser
@@ -128,6 +135,8 @@ def diagnose_command(
         raise InputError("--baseline does not apply with --simulation: the simulation is the baseline")
     if hull is not None and not simulation:
         raise InputError("--hull applies with --simulation (the hull's model, and the correction in SI)")
+    writer = CatalogueWriter.from_option(catalogue, say)
+    inputs = inputs_or_query(inputs, runs_query, catalogue)
     runs = load_runs(
         inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end,
         time_unit,
@@ -149,6 +158,9 @@ def diagnose_command(
 
         diagnoser = Diagnoser(baseline=baseline, max_steps=max_steps, progress=advance).fit(runs)
         progress.update(task, completed=progress.tasks[0].total, description="done")
+    final = diagnoser.final_.estimator  # the diagnosed model onto the recordings' catalogue rows
+    with writer:
+        writer.add_fit(run_paths(runs), fit_of_estimator("diagnose", final, runs, final.warnings_))
     tell(report_module, diagnoser, report, rrd, as_json, truncated)
 
 

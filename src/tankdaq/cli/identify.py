@@ -14,17 +14,24 @@ from ..errors import InputError
 from ..records import DecayRun
 
 if TYPE_CHECKING:
+    from ..catalogue.hooks import CatalogueWriter
     from ..config import Hull
 from .app import (
     app,
+    catalogue_option,
     checked,
     draft_option,
     err_console,
     handles_errors,
     progress_bar,
+    runs_option,
     say,
     warn_truncated,
 )
+
+# The run catalogue (identify, campaign, diagnose): where fits are written, and --runs in place of paths.
+CatalogueOption = Annotated[str | None, catalogue_option()]
+RunsQuery = Annotated[str | None, runs_option()]
 
 # Options every command that reads decays shares (identify, diagnose): how to read other labs' CSV.
 TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
@@ -113,12 +120,12 @@ def _clean(value: object) -> object:
 @handles_errors
 def identify_command(
     inputs: Annotated[
-        list[Path],
+        list[Path] | None,
         typer.Argument(
             callback=checked(validation.input_file),
-            help="Decay recordings (.mcap) or CSV files, one decay each.",
+            help="Decay recordings (.mcap) or CSV files, one decay each (or --runs).",
         ),
-    ],
+    ] = None,
     axis: str = typer.Option(
         None, "--axis", help="roll or pitch (default: a recording's own axis; roll for CSV)."
     ),
@@ -159,12 +166,16 @@ def identify_command(
     full_scale: bool = typer.Option(
         False, "--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."
     ),
+    runs_query: RunsQuery = None,
+    catalogue: CatalogueOption = None,
 ) -> None:
     """Identify the decay equation's coefficients from free-decay records.
 
     Decays of different conditions (hull, draft, axis from the recordings' metadata or names) get one
     fit each unless --joint; the default model is chosen by the data (docs/models.md).
     """
+    from ..catalogue.hooks import CatalogueWriter
+    from ..catalogue.query import inputs_or_query
     from ..config import full_scale_of, load_hull
     from ..ident.conditions import condition_of, group_conditions, grouping_line
     from ..ident.derived import scale_results
@@ -174,6 +185,8 @@ def identify_command(
     from ..ident.report import text_report
     from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 
+    writer = CatalogueWriter.from_option(catalogue, say)  # a --catalogue not understood: one line, now
+    inputs = inputs_or_query(inputs, runs_query, catalogue)
     if axis not in (None, "roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     hull_config = load_hull(hull) if hull else None
@@ -210,6 +223,9 @@ def identify_command(
             summary["conditions"] = pooled
         summaries.append(summary)
         scaled_lines.append(scale_results(summary, hull_config, draft, scale))  # B̂44; the ship's
+        if pooled is None:  # a fit of one condition: the rows of its recordings carry it
+            _catalogue_fit(writer, "identify", summary, condition_runs)
+    writer.close()
     if len(summaries) == 1:
         document: dict[str, object] = {**summaries[0], **truncated}
     else:
@@ -303,3 +319,10 @@ def _fit_condition(
     given = {"chosen": ",".join(terms), "reason": "given by --model"}
     summary["model_choice"] = choice.as_dict() if choice is not None else given
     return summary
+
+
+def _catalogue_fit(writer: CatalogueWriter, source: str, summary: dict, runs: list[DecayRun]) -> None:
+    """A condition's fit onto its recordings' catalogue rows (identify, diagnose)."""
+    from ..catalogue.writing import fit_of_summary, run_paths
+
+    writer.add_fit(run_paths(runs), fit_of_summary(source, summary, runs))

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from .. import validation
-from .app import app, checked, draft_option, err_console, handles_errors, say
+from .app import app, catalogue_option, checked, draft_option, err_console, handles_errors, say
 
 if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
     from ..acquire.daemon import RecordSettings
@@ -95,15 +95,19 @@ class _StatusLine:
 STOPPED_EXIT_CODE = 130
 
 
-def run_record(settings: RecordSettings) -> list[DecayOutcome]:
-    """Run the daemon with a status line, print how many decay files it wrote (the files that exist).
+def run_record(settings: RecordSettings, catalogue: str | None = None) -> list[DecayOutcome]:
+    """Run the daemon with a status line, print how many decay files it wrote (the files that exist);
+    each file, once closed, goes into the run catalogue (``--catalogue``; a failure there is one line).
 
     Stopped by a signal, it exits 130 after the summary (typer.Exit), as Ctrl-C does anywhere.
     """
     from ..acquire.daemon import RecordDaemon
+    from ..catalogue.hooks import CatalogueSink, CatalogueWriter
 
-    with _StatusLine(settings.runs) as line:
-        daemon = RecordDaemon(settings, on_event=line.event, on_status=line.status)
+    with CatalogueWriter.from_option(catalogue, say) as writer, _StatusLine(settings.runs) as line:
+        daemon = RecordDaemon(
+            settings, on_event=line.event, on_status=line.status, sinks=[CatalogueSink(writer)]
+        )
         outcomes = daemon.run()
     saved = daemon.recordings
     err_console.print(f"{len(saved)} decay(s) recorded under {settings.out_dir}", markup=False)
@@ -163,6 +167,7 @@ def record_command(
     model: LiveModelOption = DEFAULT_LIVE_MODEL,
     sim_speed: SimSpeedOption = 1.0,
     sim_seed: SimSeedOption = 0,
+    catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
     """Record decays: detect each release, write one MCAP per decay, fit and show it live."""
     from ..acquire.daemon import RecordSettings
@@ -186,7 +191,7 @@ def record_command(
         sim_speed=sim_speed,
         sim_seed=sim_seed,
     )
-    run_record(settings)
+    run_record(settings, catalogue)
 
 
 def _speed(value: str) -> float | None:

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Annotated
 
 import typer
 
 from .. import validation
 from ..errors import InputError
-from .app import app, checked, err_console, handles_errors, say
+from .app import app, catalogue_option, checked, err_console, handles_errors, say
 from .record import (
     DEFAULT_LIVE_MODEL,
     LiveModelOption,
@@ -108,8 +109,10 @@ def session_command(
     sim_speed: SimSpeedOption = 1.0,
     sim_seed: SimSeedOption = 0,
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
+    catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
     from ..acquire.campaign_session import CampaignSession, SessionSettings
+    from ..catalogue.hooks import CatalogueWriter, session_listener
     from ..physics.scenario import parse_fault_script
     from ..plans import load_campaign_plan
 
@@ -129,21 +132,25 @@ def session_command(
         },
         sim_faults=parse_fault_script(sim_faults) if port == "sim" else {},
     )
-    session = CampaignSession(
-        settings,
-        ScriptedOrTerminalOperator(answers, yes),
-        on_line=say,
-        on_progress=lambda progress: (
-            err_console.rule(progress.line(), style="dim")
-            if err_console.is_terminal
-            else say(f"-- {progress.line()}")
-        ),
-        resume=resume,
-    )
-    try:
-        state = session.run()
-    except KeyboardInterrupt:
-        say(f"session stopped; nothing is lost: continue with --resume --out {out}")
-        raise
+    with CatalogueWriter.from_option(catalogue, say) as writer:
+        session = CampaignSession(
+            settings,
+            ScriptedOrTerminalOperator(answers, yes),
+            on_line=say,
+            on_progress=lambda progress: (
+                err_console.rule(progress.line(), style="dim")
+                if err_console.is_terminal
+                else say(f"-- {progress.line()}")
+            ),
+            resume=resume,
+            on_verdict=session_listener(writer, out),
+        )
+        try:
+            state = session.run()
+        except KeyboardInterrupt:
+            say(f"session stopped; nothing is lost: continue with --resume --out {out}")
+            raise
+        finally:
+            writer.add_session(out)  # the log's last word (a decay stopped, recovered or missing)
     kept = sum(1 for r in state.runs if r.verdict == "accepted")
     say(f"session done: {kept} decays accepted of {state.decays} recorded; log {out / 'session.jsonl'}")

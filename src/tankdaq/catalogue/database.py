@@ -1,0 +1,245 @@
+"""Where the catalogue lives and what its tables are: one URL, one schema, migrations of its own.
+
+The catalogue is an index of files, never their only copy: every row can be rebuilt from the files
+(``catalogue.index``). So the schema is migrated by ordered functions recorded in a ``schema_version``
+table (lighter than Alembic for four tables), and a catalogue that cannot be opened is one line
+(``CatalogueError``), never a lost recording.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import sqlalchemy as sa
+
+from ..errors import InputError, TankdaqError
+
+#: The environment variable that names the catalogue (a URL, a path, or ``none``).
+ENV_VAR = "TANKDAQ_CATALOGUE"
+#: The default file name, in the user data folder (platformdirs) or in a folder given as a path.
+FILE_NAME = "catalogue.sqlite"
+#: How long a writer waits for another one's lock before giving up (SQLite), in ms.
+BUSY_TIMEOUT_MS = 30_000
+OFF = ("none", "off", "")
+#: The execution option that marks a connection as a reader (``Catalogue.reading``).
+READ_ONLY = "tankdaq_read_only"
+
+
+class CatalogueError(TankdaqError):
+    """The catalogue cannot be opened or written (locked, corrupt, unreachable): the files are unaffected."""
+
+
+class BadCatalogueQuery(CatalogueError, InputError):
+    """A ``--where``, ``--runs`` or filter the catalogue does not understand."""
+
+    exit_code = 2
+
+
+metadata = sa.MetaData()
+
+schema_version = sa.Table(
+    "schema_version",
+    metadata,
+    sa.Column("version", sa.Integer, primary_key=True),
+    sa.Column("applied_utc", sa.String(40), nullable=False),
+)
+
+hulls = sa.Table(
+    "hulls",
+    metadata,
+    sa.Column("sha256", sa.String(64), primary_key=True),  # a changed GM is a new version, never an edit
+    sa.Column("name", sa.String(64), nullable=False, index=True),
+    sa.Column("path", sa.Text, nullable=False),
+    sa.Column("content", sa.Text, nullable=False),
+    sa.Column("first_seen_utc", sa.String(40), nullable=False),
+)
+
+sessions = sa.Table(
+    "sessions",
+    metadata,
+    sa.Column("session_id", sa.String(64), primary_key=True),  # hash of the log's first record
+    sa.Column("folder", sa.Text, nullable=False),
+    sa.Column("plan", sa.String(128)),
+    sa.Column("hull", sa.String(64)),
+    sa.Column("started_utc", sa.String(40)),
+    sa.Column("decays", sa.Integer, nullable=False, default=0),
+    sa.Column("accepted", sa.Integer, nullable=False, default=0),
+    sa.Column("updated_utc", sa.String(40), nullable=False),
+)
+
+decays = sa.Table(
+    "decays",
+    metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("sha256", sa.String(64), nullable=False, unique=True),
+    sa.Column("path", sa.Text, nullable=False),
+    sa.Column("size_bytes", sa.BigInteger, nullable=False),
+    sa.Column("complete", sa.Boolean, nullable=False),
+    sa.Column("recorded_utc", sa.String(40), index=True),
+    # the condition
+    sa.Column("hull", sa.String(64), index=True),
+    sa.Column("hull_sha256", sa.String(64)),
+    sa.Column("draft", sa.String(16), index=True),
+    sa.Column("axis", sa.String(8), index=True),
+    sa.Column("speed_m_s", sa.Float),
+    sa.Column("angle_nominal_deg", sa.Float),
+    sa.Column("release_angle_deg", sa.Float),
+    # the device
+    sa.Column("device_id", sa.String(32)),
+    sa.Column("firmware", sa.String(32)),
+    # the session and the operator's word
+    sa.Column("session_id", sa.String(64), index=True),
+    sa.Column("plan", sa.String(128)),
+    sa.Column("decay_number", sa.Integer),
+    sa.Column("verdict", sa.String(16), index=True),
+    sa.Column("checks", sa.JSON),  # the reasons a check gave, one line each
+    # the fit (the newest: the live final fit, then identify, campaign or diagnose)
+    sa.Column("fit_source", sa.String(16)),
+    sa.Column("fit_model", sa.Text),
+    sa.Column("coefficients", sa.JSON),  # {term: {"value", "ci_low", "ci_high"}}
+    sa.Column("natural_period_s", sa.Float),
+    sa.Column("b_eq_per_s", sa.JSON),  # {"2": B_eq/I at 2 deg, "5": ..., "10": ...}
+    sa.Column("b44_hat", sa.JSON),  # the same amplitudes, where the hull gives beam and displacement
+    sa.Column("r2_angle", sa.Float),
+    sa.Column("warnings", sa.JSON),
+    sa.Column("code_version", sa.String(32)),
+    sa.Column("created_utc", sa.String(40), nullable=False),
+    sa.Column("updated_utc", sa.String(40), nullable=False),
+)
+
+
+def _v1_tables(connection: sa.Connection) -> None:
+    for table in (hulls, sessions, decays):
+        table.create(connection, checkfirst=True)
+
+
+#: Ordered migrations: index i brings the schema to version i + 1. Append, never edit.
+MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables]
+SCHEMA_VERSION = len(MIGRATIONS)
+
+
+def resolve_url(given: str | None = None) -> str | None:
+    """The catalogue's SQLAlchemy URL from ``--catalogue`` (else ``TANKDAQ_CATALOGUE``, else the user
+    data folder); None when switched off (``none``). A path is a SQLite file (a folder: its own
+    ``catalogue.sqlite``); ``postgresql://`` is served by psycopg 3."""
+    value = os.environ.get(ENV_VAR) if given is None else given
+    if value is not None and value.strip().lower() in OFF:
+        return None
+    if value is None:
+        import platformdirs
+
+        return _sqlite_url(Path(platformdirs.user_data_dir("tankdaq")) / FILE_NAME)
+    value = value.strip()
+    if value.startswith("postgresql://"):
+        return "postgresql+psycopg://" + value.removeprefix("postgresql://")
+    if "://" in value:
+        if not value.startswith(("sqlite://", "postgresql+psycopg://")):
+            raise BadCatalogueQuery(
+                f"catalogue {value!r}: give a path, sqlite:///FILE or postgresql://USER@HOST/DB, or none"
+            )
+        return value
+    path = Path(value).expanduser()
+    return _sqlite_url(path / FILE_NAME if path.is_dir() else path)
+
+
+def _sqlite_url(path: Path) -> str:
+    return f"sqlite:///{path.resolve()}"
+
+
+def describe(url: str) -> str:
+    """The URL as a person reads it (no password)."""
+    return sa.make_url(url).render_as_string(hide_password=True)
+
+
+@dataclass
+class Catalogue:
+    """An open catalogue: ``engine`` and the URL it came from (``open_catalogue``)."""
+
+    url: str
+    engine: sa.Engine
+
+    def reading(self) -> sa.Connection:
+        """A connection that only reads: on SQLite a deferred BEGIN, so it never takes the write lock
+        (WAL readers do not wait for writers, nor writers for them)."""
+        return self.engine.connect().execution_options(**{READ_ONLY: True})
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    def __enter__(self) -> Catalogue:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def open_catalogue(url: str) -> Catalogue:
+    """Connect, create or migrate the schema; SQLite in WAL mode with a busy timeout, so several
+    recorders and an analysis write at once. Whatever fails is one ``CatalogueError`` line."""
+    try:
+        engine = _engine(url)
+        with engine.begin() as connection:
+            migrate(connection)
+    except CatalogueError:
+        raise
+    except (sa.exc.SQLAlchemyError, OSError, ImportError) as exc:
+        raise CatalogueError(f"catalogue {describe(url)} not usable: {one_line(exc)}") from None
+    return Catalogue(url, engine)
+
+
+def _engine(url: str) -> sa.Engine:
+    parsed = sa.make_url(url)
+    if parsed.get_backend_name() != "sqlite":
+        return sa.create_engine(url, pool_pre_ping=True)
+    if parsed.database:
+        Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
+    engine = sa.create_engine(url, connect_args={"timeout": BUSY_TIMEOUT_MS / 1000})
+
+    @sa.event.listens_for(engine, "connect")
+    def _pragmas(dbapi_connection: Any, _record: Any) -> None:
+        dbapi_connection.isolation_level = None  # BEGIN IMMEDIATE below, not pysqlite's deferred BEGIN
+        cursor = dbapi_connection.cursor()
+        cursor.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
+        cursor.execute("PRAGMA journal_mode = WAL")
+        cursor.execute("PRAGMA synchronous = NORMAL")
+        cursor.close()
+
+    @sa.event.listens_for(engine, "begin")
+    def _begin(connection: sa.Connection) -> None:
+        if connection.get_execution_options().get(READ_ONLY):
+            connection.exec_driver_sql("BEGIN")
+        else:
+            connection.exec_driver_sql("BEGIN IMMEDIATE")  # the write lock first: no deadlock on upgrade
+
+    return engine
+
+
+def migrate(connection: sa.Connection) -> int:
+    """Bring the schema to ``SCHEMA_VERSION``; returns the version found. A newer catalogue (written by
+    a later tankdaq) is refused rather than written with the wrong columns."""
+    from datetime import UTC, datetime
+
+    if connection.dialect.name == "postgresql":  # two processes opening a new catalogue at once
+        connection.execute(sa.text("SELECT pg_advisory_xact_lock(24240424)"))
+    schema_version.create(connection, checkfirst=True)
+    found = connection.execute(sa.select(sa.func.max(schema_version.c.version))).scalar() or 0
+    if found > SCHEMA_VERSION:
+        raise CatalogueError(
+            f"catalogue schema version {found} is newer than this tankdaq's ({SCHEMA_VERSION}): "
+            "upgrade tankdaq"
+        )
+    for version in range(found + 1, SCHEMA_VERSION + 1):
+        MIGRATIONS[version - 1](connection)
+        now = datetime.now(UTC).isoformat(timespec="seconds")
+        connection.execute(schema_version.insert().values(version=version, applied_utc=now))
+    return int(found)
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception's message on one line (database drivers print several)."""
+    text = str(getattr(exc, "orig", None) or exc)
+    return " ".join(text.split())[:300]

@@ -1,0 +1,148 @@
+"""The catalogue written as work happens, never in the way of a file.
+
+``CatalogueWriter`` runs every write on a thread of its own, after the file it describes is closed:
+a locked SQLite file waits out its busy timeout there, not in the record loop. A failure (locked,
+corrupt, a server that does not answer) is one line, said once; the files are untouched and
+``tankdaq catalogue index FOLDER`` catches up. ``CatalogueSink`` is a listener of the record pipeline
+(after the file's sink: the file closes first); ``session_listener`` hears a guided session's verdicts.
+"""
+
+from __future__ import annotations
+
+import functools
+import queue
+import threading
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ..acquire.sinks import Decay, Sink
+from .database import Catalogue, CatalogueError, describe, one_line, open_catalogue, resolve_url
+
+if TYPE_CHECKING:  # the session's module is imported by the session command only
+    from ..acquire.campaign_session import RunEntry
+
+Job = Callable[[Catalogue], object]
+#: How long a command waits at its end for the catalogue's last writes before it leaves them to index.
+CLOSE_WAIT_S = 60.0
+CATCH_UP = "the files are kept; `tankdaq catalogue index FOLDER` catches up"
+
+
+class CatalogueWriter:
+    """Writes queued jobs to the catalogue at ``url`` (None: off, every job dropped) on one thread."""
+
+    def __init__(self, url: str | None, on_line: Callable[[str], None]) -> None:
+        self.url = url
+        self.on_line = on_line
+        self.failures: list[str] = []
+        self._jobs: queue.Queue[Job | None] = queue.Queue()
+        self._thread: threading.Thread | None = None
+        self._catalogue: Catalogue | None = None
+        self._closing = False
+
+    @classmethod
+    def from_option(cls, given: str | None, on_line: Callable[[str], None]) -> CatalogueWriter:
+        """From ``--catalogue`` (None: ``TANKDAQ_CATALOGUE`` or the user data folder); a value that is
+        not a catalogue is refused before any work starts (``BadCatalogueQuery``)."""
+        return cls(resolve_url(given), on_line)
+
+    @property
+    def enabled(self) -> bool:
+        return self.url is not None
+
+    def submit(self, job: Job) -> None:
+        """Queue a write; it runs after the ones before it."""
+        if self.url is None:
+            return
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._serve, name="tankdaq-catalogue", daemon=True)
+            self._thread.start()
+        self._jobs.put(job)
+
+    def _serve(self) -> None:
+        while (job := self._jobs.get()) is not None:
+            try:
+                if self._catalogue is None:
+                    assert self.url is not None
+                    self._catalogue = open_catalogue(self.url)
+                job(self._catalogue)
+            except Exception as exc:
+                self._fail(exc)
+        if self._catalogue is not None:
+            self._catalogue.close()
+
+    def _fail(self, exc: BaseException) -> None:
+        why = str(exc) if isinstance(exc, CatalogueError) else one_line(exc)
+        if why not in self.failures:
+            self.failures.append(why)
+            self.on_line(f"catalogue: {why}; {CATCH_UP}")
+
+    def close(self, wait_s: float = CLOSE_WAIT_S) -> None:
+        """Let the queued writes finish (at most ``wait_s``), then stop the thread."""
+        if self._thread is None:
+            return
+        if not self._closing:
+            self._closing = True
+            self._jobs.put(None)
+        self._thread.join(wait_s)
+        if self._thread.is_alive():  # kept: a later close() may wait for it again
+            assert self.url is not None
+            self.on_line(f"catalogue: {describe(self.url)} still busy after {wait_s:g} s; {CATCH_UP}")
+            return
+        self._thread, self._closing = None, False
+
+    def __enter__(self) -> CatalogueWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- what the commands write ----------------------------------------
+
+    def add_files(self, paths: Iterable[Path]) -> None:
+        from .writing import add_file
+
+        for path in paths:
+            self.submit(functools.partial(add_file, path=path))
+
+    def add_fit(self, paths: Iterable[Path], fields: dict[str, Any]) -> None:
+        from .writing import update_fit
+
+        listed = list(paths)
+        self.submit(lambda catalogue: update_fit(catalogue, listed, fields))
+
+    def add_session(self, folder: Path, only: str | None = None) -> None:
+        from .writing import record_session
+
+        self.submit(lambda catalogue: record_session(catalogue, folder, only))
+
+    def add_campaign(self, results: Iterable[Any]) -> None:
+        from .writing import record_fits
+
+        listed = list(results)
+        self.submit(lambda catalogue: record_fits(catalogue, listed))
+
+
+class CatalogueSink(Sink):
+    """A listener of the record pipeline: each decay's file, once closed, goes into the catalogue.
+
+    It comes after the file's sink in the pipeline, so ``on_settle`` hears a closed file."""
+
+    def __init__(self, writer: CatalogueWriter) -> None:
+        self.writer = writer
+
+    def on_settle(self, decay: Decay) -> None:
+        if decay.path is not None and decay.path.is_file():
+            self.writer.add_files([decay.path])
+
+    def close(self) -> None:
+        """The writer outlives one pipeline (a session opens one per decay): its owner closes it."""
+
+
+def session_listener(writer: CatalogueWriter, folder: Path) -> Callable[[RunEntry], None]:
+    """A guided session's verdict listener: the judged decay's row (and the session's) from its log."""
+
+    def judged(entry: RunEntry) -> None:
+        writer.add_session(folder, only=entry.file)
+
+    return judged

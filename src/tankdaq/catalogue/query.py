@@ -1,0 +1,300 @@
+"""Asking the catalogue like a lab asks: filters, a tiny ``--where`` language, a DataFrame.
+
+Nothing a user types reaches SQL as text: a filter or a ``--where`` clause names a known column and
+an operator from a fixed list, and its value is a bound parameter. ``hull=swath draft=1.1T
+since=2026-03`` (``--runs``) and ``r2 >= 0.99 and verdict = accepted`` (``--where``) are parsed here.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import sqlalchemy as sa
+
+from ..config import format_draft, parse_draft
+from ..errors import InputError
+from .database import BadCatalogueQuery, Catalogue, decays, open_catalogue, resolve_url
+from .rows import STANDARD_AMPLITUDES_DEG
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+#: The names a query may use, and the column each means.
+FIELDS: dict[str, sa.Column[Any]] = {
+    "hull": decays.c.hull,
+    "draft": decays.c.draft,
+    "axis": decays.c.axis,
+    "speed": decays.c.speed_m_s,
+    "angle": decays.c.angle_nominal_deg,
+    "release_angle": decays.c.release_angle_deg,
+    "device": decays.c.device_id,
+    "firmware": decays.c.firmware,
+    "session": decays.c.session_id,
+    "plan": decays.c.plan,
+    "decay": decays.c.decay_number,
+    "verdict": decays.c.verdict,
+    "model": decays.c.fit_model,
+    "source": decays.c.fit_source,
+    "period": decays.c.natural_period_s,
+    "r2": decays.c.r2_angle,
+    "complete": decays.c.complete,
+    "recorded": decays.c.recorded_utc,
+    "path": decays.c.path,
+    "sha256": decays.c.sha256,
+    "size": decays.c.size_bytes,
+    "version": decays.c.code_version,
+}
+OPERATORS = {
+    "=": lambda c, v: c == v,
+    "!=": lambda c, v: c != v,
+    "<": lambda c, v: c < v,
+    "<=": lambda c, v: c <= v,
+    ">": lambda c, v: c > v,
+    ">=": lambda c, v: c >= v,
+    "~": lambda c, v: c.contains(v, autoescape=True),
+}
+_CLAUSE = re.compile(r"^\s*([a-z_0-9]+)\s*(<=|>=|!=|=|<|>|~)\s*(\"[^\"]*\"|'[^']*'|\S+)\s*$")
+_DATE = re.compile(r"^\d{4}(-\d{2}(-\d{2}([T ][0-9:.]+)?)?)?$")
+#: What ``--verdict`` takes (absent: every decay not rejected; ``any``: all, rejected included).
+VERDICTS = ("accepted", "rejected")
+WHERE_HELP = "field op value [and ...]; op = != < <= > >= ~ (contains); fields: " + ", ".join(FIELDS)
+
+
+@dataclass(frozen=True)
+class RunQuery:
+    """What to list: equality filters, a date range, and ``--where`` clauses, all checked here."""
+
+    equal: dict[str, str] = field(default_factory=dict)
+    since: str | None = None
+    until: str | None = None
+    where: str | None = None
+
+    def conditions(self) -> list[sa.ColumnElement[bool]]:
+        equal = dict(self.equal)
+        verdict = equal.pop("verdict", None)
+        found = [FIELDS[name] == _value(name, value) for name, value in equal.items()]
+        if verdict is None:  # a rejected decay is listed only when asked for: the lab's list is the kept
+            found.append(sa.or_(decays.c.verdict.is_(None), decays.c.verdict != "rejected"))
+        elif verdict != "any":
+            if verdict not in VERDICTS:
+                raise BadCatalogueQuery(f"verdict {verdict!r}: give {', '.join(VERDICTS)} or any")
+            found.append(decays.c.verdict == verdict)
+        if self.since:
+            found.append(decays.c.recorded_utc >= _date(self.since))
+        if self.until:
+            found.append(decays.c.recorded_utc < _date(self.until))
+        return found + (parse_where(self.where) if self.where else [])
+
+
+def _date(text: str) -> str:
+    if not _DATE.match(text.strip()):
+        raise BadCatalogueQuery(f"date {text!r} not understood: write 2026, 2026-03 or 2026-03-15")
+    return text.strip()
+
+
+def _value(name: str, text: str) -> Any:
+    """A value as its column holds it: numbers for numeric columns, drafts written as tankdaq writes."""
+    column = FIELDS[name]
+    if name == "draft":
+        try:
+            return format_draft(parse_draft(text))
+        except InputError as exc:
+            raise BadCatalogueQuery(str(exc)) from None
+    if name == "complete":
+        if text.lower() not in ("true", "false", "yes", "no", "1", "0"):
+            raise BadCatalogueQuery(f"complete={text!r}: give true or false")
+        return text.lower() in ("true", "yes", "1")
+    if isinstance(column.type, sa.Float | sa.Integer):
+        try:
+            number = float(text)
+        except ValueError:
+            raise BadCatalogueQuery(f"{name}: {text!r} is not a number") from None
+        return int(number) if isinstance(column.type, sa.Integer) and number.is_integer() else number
+    return text
+
+
+def parse_where(text: str) -> list[sa.ColumnElement[bool]]:
+    """``field op value [and field op value ...]`` as bound conditions; anything else is one line."""
+    clauses = re.split(r"\s+and\s+", text.strip(), flags=re.IGNORECASE)
+    found = []
+    for clause in clauses:
+        match = _CLAUSE.match(clause)
+        if not match:
+            raise BadCatalogueQuery(f"--where {clause!r} not understood: {WHERE_HELP}")
+        name, op, value = match.groups()
+        if name not in FIELDS:
+            raise BadCatalogueQuery(f"--where: no field {name!r}; fields: {', '.join(FIELDS)}")
+        if value[:1] in "\"'":
+            value = value[1:-1]
+        if name in ("since", "until"):
+            raise BadCatalogueQuery("--where: use --since/--until for dates, or recorded >= 2026-03")
+        try:
+            found.append(OPERATORS[op](FIELDS[name], _value(name, value)))
+        except BadCatalogueQuery as exc:
+            raise BadCatalogueQuery(f"--where {clause!r}: {exc}") from None
+    return found
+
+
+def parse_runs(text: str) -> RunQuery:
+    """``hull=swath draft=1.1T since=2026-03`` (``--runs``): ``key=value`` words, each key once
+    (a rejected decay only with ``verdict=rejected`` or ``verdict=any``)."""
+    equal: dict[str, str] = {}
+    dates: dict[str, str] = {}
+    for word in text.split():
+        key, sep, value = word.partition("=")
+        if not sep or not value:
+            raise BadCatalogueQuery(
+                f"--runs {word!r}: write key=value, e.g. hull=swath draft=1.1T since=2026-03"
+            )
+        if key in ("since", "until"):
+            dates[key] = value
+        elif key in FIELDS:
+            equal[key] = value
+        else:
+            raise BadCatalogueQuery(f"--runs: no field {key!r}; fields: since, until, {', '.join(FIELDS)}")
+    if not equal and not dates:
+        raise BadCatalogueQuery("--runs: give at least one key=value, e.g. hull=swath")
+    return RunQuery(equal, dates.get("since"), dates.get("until"))
+
+
+def select_rows(catalogue: Catalogue, query: RunQuery) -> list[dict[str, Any]]:
+    """The rows that match, oldest first, as plain dicts (JSON columns decoded)."""
+    statement = sa.select(decays).where(*query.conditions()).order_by(decays.c.recorded_utc, decays.c.id)
+    with catalogue.reading() as connection:
+        return [_decoded(dict(row._mapping)) for row in connection.execute(statement)]
+
+
+def _decoded(row: dict[str, Any]) -> dict[str, Any]:
+    for key in ("checks", "coefficients", "b_eq_per_s", "b44_hat", "warnings"):
+        if isinstance(row.get(key), str):
+            row[key] = json.loads(row[key])
+    return row
+
+
+def flat(row: dict[str, Any]) -> dict[str, Any]:
+    """One row as a table shows it: coefficients as columns, B_eq and B̂44 per standard amplitude."""
+    out = {k: v for k, v in row.items() if k not in ("coefficients", "b_eq_per_s", "b44_hat")}
+    for term, entry in (row.get("coefficients") or {}).items():
+        out[term] = entry.get("value")
+        out[f"{term}_ci_low"] = entry.get("ci_low")
+        out[f"{term}_ci_high"] = entry.get("ci_high")
+    for amplitude in STANDARD_AMPLITUDES_DEG:
+        key = f"{amplitude:g}"
+        out[f"b_eq_{key}deg_per_s"] = (row.get("b_eq_per_s") or {}).get(key)
+        out[f"b44_hat_{key}deg"] = (row.get("b44_hat") or {}).get(key)
+    out["checks"] = " | ".join(row.get("checks") or [])
+    out["warnings"] = " | ".join(row.get("warnings") or [])
+    return out
+
+
+def paths_for(text: str, catalogue_url: str | None = None) -> list[Path]:
+    """The files a ``--runs`` query names (complete recordings that exist), for identify, campaign
+    and diagnose; none found is one line saying so."""
+    url = resolve_url(catalogue_url)
+    if url is None:
+        raise BadCatalogueQuery("--runs needs a catalogue: drop --catalogue none")
+    query = parse_runs(text)
+    with open_catalogue(url) as catalogue:
+        complete = {**query.equal, "complete": "true"}
+        rows = select_rows(catalogue, RunQuery(complete, query.since, query.until))
+    paths = [Path(row["path"]) for row in rows if Path(row["path"]).is_file()]
+    if not paths:
+        raise BadCatalogueQuery(f"--runs {text!r}: no complete recording in the catalogue matches")
+    return paths
+
+
+def runs(
+    hull: str | None = None,
+    draft: str | None = None,
+    axis: str | None = None,
+    since: str | None = None,
+    verdict: str | None = None,
+    where: str | None = None,
+    catalogue: str | None = None,
+) -> pd.DataFrame:
+    """The catalogued runs that match, as a pandas DataFrame (one row per decay; coefficients, B_eq
+    and B̂44 at 2, 5 and 10 deg as columns). ``catalogue``: a URL or path (default: as the CLI)."""
+    import pandas as pd
+
+    equal = {k: v for k, v in {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict}.items() if v}
+    url = resolve_url(catalogue)
+    if url is None:
+        raise BadCatalogueQuery("the catalogue is switched off (none): give a catalogue")
+    with open_catalogue(url) as opened:
+        rows = select_rows(opened, RunQuery(equal, since, None, where))
+    return pd.DataFrame([flat(row) for row in rows])
+
+
+#: What ``compare`` groups by: the condition a lab compares across campaigns.
+CONDITION = ("hull", "axis", "draft", "angle_nominal_deg")
+COMPARED = ("natural_period_s", "b_eq_5deg_per_s", "b44_hat_5deg", "r2_angle")
+
+
+def selection(catalogue: Catalogue, text: str) -> list[dict[str, Any]]:
+    """One side of ``runs --compare``: a session id (or its first characters), a session folder, a
+    plan name, or a ``--runs`` query."""
+    if "=" in text:
+        return select_rows(catalogue, parse_runs(text))
+    folder = Path(text)
+    if (folder / "session.jsonl").is_file():
+        from .writing import session_id
+
+        text = session_id(folder / "session.jsonl")
+    statement = sa.select(decays).where(
+        sa.or_(decays.c.session_id.startswith(text, autoescape=True), decays.c.plan == text),
+        *RunQuery().conditions(),  # the decays kept, as ``runs`` lists them
+    )
+    with catalogue.reading() as connection:
+        rows = [_decoded(dict(row._mapping)) for row in connection.execute(statement)]
+    if not rows:
+        raise BadCatalogueQuery(f"--compare {text!r}: no session, plan or query in the catalogue matches")
+    return rows
+
+
+def compare(first: list[dict[str, Any]], second: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Two selections side by side, per condition: how many decays, and the mean period, B_eq and B̂44
+    at 5 deg and R² of each (``_a``, ``_b``), with B_eq's change in per cent."""
+    import math
+
+    def means(rows: list[dict[str, Any]]) -> dict[tuple[Any, ...], dict[str, Any]]:
+        groups: dict[tuple[Any, ...], list[dict[str, Any]]] = {}
+        for row in map(flat, rows):
+            groups.setdefault(tuple(row.get(k) for k in CONDITION), []).append(row)
+        out = {}
+        for key, group in groups.items():
+            entry: dict[str, Any] = {"n": len(group)}
+            for name in COMPARED:
+                values = [float(r[name]) for r in group if r.get(name) is not None]
+                entry[name] = sum(values) / len(values) if values else math.nan
+            out[key] = entry
+        return out
+
+    a, b = means(first), means(second)
+    table = []
+    for key in sorted(set(a) | set(b), key=lambda k: tuple(str(v) for v in k)):
+        row: dict[str, Any] = dict(zip(CONDITION, key, strict=True))
+        for side, found in (("a", a.get(key)), ("b", b.get(key))):
+            row[f"n_{side}"] = found["n"] if found else 0
+            for name in COMPARED:
+                row[f"{name}_{side}"] = found[name] if found else math.nan
+        b_a, b_b = row["b_eq_5deg_per_s_a"], row["b_eq_5deg_per_s_b"]
+        row["b_eq_5deg_change_pct"] = 100.0 * (b_b - b_a) / b_a if b_a else math.nan
+        table.append(row)
+    return table
+
+
+def inputs_or_query(paths: list[Path] | None, query: str | None, catalogue: str | None) -> list[Path]:
+    """The files a command reads: the paths given, or those ``--runs`` finds (one of the two)."""
+    if paths and query:
+        raise BadCatalogueQuery("give files or --runs QUERY, not both")
+    if query:
+        return paths_for(query, catalogue)
+    if not paths:
+        raise BadCatalogueQuery(
+            'give the files to read, or --runs "hull=NAME draft=T ..." (docs/catalogue.md)'
+        )
+    return paths

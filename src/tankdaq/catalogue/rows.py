@@ -1,0 +1,188 @@
+"""What one row holds: a decay file read back (condition, device, the fit it carries, its SHA-256), a
+fit's quantities (B_eq and B̂44 at the standard amplitudes) and a hull version.
+
+Everything here is made from the files, so ``index`` and the live hooks write the same rows.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from .. import __version__
+from ..config import Hull, load_hull, parse_draft
+from ..errors import TankdaqError
+
+#: The amplitudes B_eq and B̂44 are kept at (deg): what a lab compares across campaigns.
+STANDARD_AMPLITUDES_DEG = (2.0, 5.0, 10.0)
+
+
+def utc_now() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+def file_sha256(path: Path) -> str:
+    """The file's SHA-256, read in blocks (a decay file is tens of kB to a few MB)."""
+    digest = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _finite(value: object) -> float | None:
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
+    return number if math.isfinite(number) else None
+
+
+def hull_version(hull: Hull) -> dict[str, Any] | None:
+    """The hull file as one version (its content hashed), None for a hull made in code."""
+    if hull.path is None or not hull.path.is_file():
+        return None
+    content = hull.path.read_bytes()
+    return {
+        "sha256": hashlib.sha256(content).hexdigest(),
+        "name": hull.name,
+        "path": str(hull.path),
+        "content": content.decode("utf-8", "replace"),
+        "first_seen_utc": utc_now(),
+    }
+
+
+def find_hull(name: str | None) -> Hull | None:
+    """The hull a file names, or None when it is not known here (the row keeps the name)."""
+    if not name:
+        return None
+    try:
+        return load_hull(name)
+    except TankdaqError:
+        return None
+
+
+def fit_fields(
+    source: str,
+    coefficients: Mapping[str, float],
+    ci95: Mapping[str, Sequence[float]] | None = None,
+    r2_angle: float | None = None,
+    warnings: Sequence[str] = (),
+    condition: tuple[Hull | None, str | None, str | None] = (None, None, None),
+    model: str | None = None,
+) -> dict[str, Any]:
+    """A fit's columns: coefficients with their 95 % intervals, period, B_eq (and B̂44 for roll, where
+    the hull gives beam and displacement) at ``STANDARD_AMPLITUDES_DEG``. ``condition``: hull, draft,
+    axis."""
+    from ..ident.derived import b_eq, natural_period
+
+    values = {term: float(value) for term, value in coefficients.items()}
+    table: dict[str, dict[str, float | None]] = {}
+    for term, value in values.items():
+        low, high = (ci95 or {}).get(term) or (None, None)
+        table[term] = {"value": value, "ci_low": _finite(low), "ci_high": _finite(high)}
+    b_eqs = {f"{a:g}": _finite(b_eq(values, math.radians(a))) for a in STANDARD_AMPLITUDES_DEG}
+    return {
+        "fit_source": source,
+        "fit_model": model or ",".join(values),
+        "coefficients": table,
+        "natural_period_s": _finite(natural_period(values)),
+        "b_eq_per_s": b_eqs,
+        "b44_hat": _b44_hat(values, b_eqs, condition),
+        "r2_angle": _finite(r2_angle),
+        "warnings": list(warnings),
+        "updated_utc": utc_now(),
+    }
+
+
+def _b44_hat(
+    values: dict[str, float],
+    b_eqs: dict[str, float | None],
+    condition: tuple[Hull | None, str | None, str | None],
+) -> dict[str, float | None] | None:
+    """B̂44 at each amplitude: B_eq/I times the total inertia (from the hull's GM and displacement) times
+    B̂44's factor; None off roll or where the hull lacks what it needs."""
+    from ..ident.derived import b44_hat_factor
+    from ..ident.report import dimensional_summary
+
+    hull, draft, axis = condition
+    if hull is None or draft is None or axis != "roll":
+        return None
+    try:
+        draft_factor = parse_draft(draft)
+        factor = b44_hat_factor(hull, draft_factor)
+        inertia = dimensional_summary(values, hull, axis, draft_factor).get("total_inertia_kg_m2")
+    except (TankdaqError, ValueError, ZeroDivisionError):
+        return None
+    if factor is None or inertia is None:
+        return None
+    return {a: None if b is None else b * inertia * factor for a, b in b_eqs.items()}
+
+
+def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """The row of one tankdaq recording and its hull's version (None when the hull is not known here).
+
+    A file cut short (no footer) is ``complete`` False: ``tankdaq recover`` then ``index`` makes the
+    complete one. Raises ``RecordingError`` (one line) for a file that is not a readable recording.
+    """
+    from ..store.reader import read_recording
+
+    recording = read_recording(path)
+    meta = recording.metadata
+    hull = find_hull(meta.get("hull"))
+    now = utc_now()
+    row: dict[str, Any] = {
+        "sha256": sha256 or file_sha256(path),
+        "path": str(path.resolve()),
+        "size_bytes": path.stat().st_size,
+        "complete": recording.complete,
+        "recorded_utc": meta.get("release_utc") or meta.get("created_utc"),
+        "hull": meta.get("hull"),
+        "draft": meta.get("draft"),
+        "axis": recording.axis,
+        "speed_m_s": _finite(meta.get("speed_m_s")) or 0.0,
+        "angle_nominal_deg": _finite(meta.get("angle_nominal_deg")),
+        "release_angle_deg": _release_angle(meta, recording.events),
+        "device_id": meta.get("device_id"),
+        "firmware": meta.get("firmware"),
+        "code_version": meta.get("software_version") or __version__,
+        "created_utc": now,
+        "updated_utc": now,
+    }
+    version = hull_version(hull) if hull is not None else None
+    row["hull_sha256"] = version["sha256"] if version else None
+    if recording.fits:
+        last = recording.fits[-1]  # the final fit (or the last refit of a decay cut short)
+        ci95 = {term: pair for term, pair in (last.get("ci95") or {}).items() if isinstance(pair, list)}
+        warnings = json.loads(meta.get("warnings", "[]") or "[]")
+        condition = (hull, row["draft"], row["axis"])
+        row |= fit_fields("record", last["coefficients"], ci95, last.get("r2"), warnings, condition)
+    return row, version
+
+
+def bare_row(path: Path) -> dict[str, Any]:
+    """The row of a decay file nothing can be read from yet (cut before its first data reached the
+    disk): where it is, its hash, not complete. A session's log still says what it was."""
+    now = utc_now()
+    return {
+        "sha256": file_sha256(path),
+        "path": str(path.resolve()),
+        "size_bytes": path.stat().st_size,
+        "complete": False,
+        "code_version": __version__,
+        "created_utc": now,
+        "updated_utc": now,
+    }
+
+
+def _release_angle(meta: Mapping[str, str], events: list[dict[str, Any]]) -> float | None:
+    measured = _finite(meta.get("angle_initial_deg"))
+    if measured is None:
+        release = next((e for e in events if e.get("kind") == "release"), {})
+        measured = _finite((release.get("data") or {}).get("angle_initial_deg"))
+    return None if measured is None else abs(measured)

@@ -1,0 +1,210 @@
+"""Adding and updating rows: a file (found again by its SHA-256 wherever it moved), a session's
+verdicts, a fit made by identify, campaign or diagnose. Every write is one transaction; a row is keyed
+by the file's hash, so writing the same file twice, or from two processes, makes one row.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import sqlalchemy as sa
+
+from ..config import Hull
+from ..errors import RecordingError
+from .database import Catalogue, decays, hulls, sessions
+from .rows import bare_row, find_hull, fit_fields, recording_row, utc_now
+
+#: What a file seen again (moved, re-indexed, recovered) changes in its row: where it is, not what was
+#: said about it (verdicts, later fits, the hull version it was recorded with).
+LOCATION_COLUMNS = ("path", "size_bytes", "complete", "updated_utc")
+
+
+def _insert(connection: sa.Connection, table: sa.Table) -> Any:
+    """The dialect's INSERT that can say ON CONFLICT (SQLite and PostgreSQL spell it alike)."""
+    if connection.dialect.name == "postgresql":
+        from sqlalchemy.dialects.postgresql import insert as pg_insert
+
+        return pg_insert(table)
+    from sqlalchemy.dialects.sqlite import insert as sqlite_insert
+
+    return sqlite_insert(table)
+
+
+def upsert_rows(connection: sa.Connection, rows: Sequence[Mapping[str, Any]], update: Iterable[str]) -> None:
+    """Insert decay rows; a hash already there gets only the ``update`` columns. Rows with the same
+    columns go as one statement with many parameter sets (compiled once, cached)."""
+    wanted = tuple(update)
+    shapes: dict[tuple[str, ...], list[Mapping[str, Any]]] = {}
+    for row in rows:
+        shapes.setdefault(tuple(sorted(row)), []).append(row)
+    for columns, group in shapes.items():
+        statement = _insert(connection, decays)
+        changed = {c: statement.excluded[c] for c in wanted if c in columns}
+        upsert = (
+            statement.on_conflict_do_update(index_elements=["sha256"], set_=changed)
+            if changed
+            else statement.on_conflict_do_nothing(index_elements=["sha256"])
+        )
+        connection.execute(upsert, [dict(row) for row in group])
+
+
+def _add_hull(connection: sa.Connection, version: Mapping[str, Any] | None) -> None:
+    if version is not None:
+        statement = _insert(connection, hulls).values(**version)
+        connection.execute(statement.on_conflict_do_nothing(index_elements=["sha256"]))
+
+
+def add_file(
+    catalogue: Catalogue, path: Path, extra: Mapping[str, Any] | None = None, unreadable: bool = False
+) -> str:
+    """Catalogue one recording (after its file is closed); returns its hash. ``extra`` columns (a
+    verdict, a session) are written too, on a new row or an existing one. A file that cannot be read
+    raises ``RecordingError``, or with ``unreadable`` gets a bare row (a session's decay cut early)."""
+    try:
+        row, version = recording_row(path)
+    except RecordingError:
+        if not unreadable:
+            raise
+        row, version = bare_row(path), None
+    row |= dict(extra or {})
+    with catalogue.engine.begin() as connection:
+        _add_hull(connection, version)
+        upsert_rows(connection, [row], [*LOCATION_COLUMNS, *(extra or {})])
+    return str(row["sha256"])
+
+
+def update_fit(catalogue: Catalogue, paths: Sequence[Path], fields: Mapping[str, Any]) -> int:
+    """Give the rows of ``paths`` a fit (identify, campaign, diagnose) in one transaction; a recording
+    not catalogued yet is added first. Files that are not tankdaq recordings (CSV) are not catalogued.
+    Returns the rows written."""
+    mcaps = [path.resolve() for path in paths if path.suffix.lower() == ".mcap" and path.is_file()]
+    missing = []
+    with catalogue.engine.begin() as connection:
+        for path in mcaps:
+            statement = decays.update().where(decays.c.path == str(path)).values(**fields)
+            if not connection.execute(statement).rowcount:
+                missing.append(path)
+    for path in missing:
+        add_file(catalogue, path, fields)
+    return len(mcaps)
+
+
+def session_id(log_path: Path) -> str:
+    """A session's id: the hash of its log's first line (the plan, with when it began), so the id
+    follows the folder when it moves."""
+    with log_path.open("rb") as fh:
+        return hashlib.sha256(fh.readline()).hexdigest()[:32]
+
+
+def record_session(catalogue: Catalogue, folder: Path, only: str | None = None) -> int:
+    """The session in ``folder`` (its ``session.jsonl``): its row, and each decay's file with the
+    session, plan, decay number, the operator's verdict and the checks' reasons. Returns the decays
+    catalogued (a decay whose file is gone is left out: the log says it was rejected as missing).
+    ``only``: the one file just judged (a session's verdict; the others are already there)."""
+    from ..acquire.session_log import SessionLog
+
+    log = SessionLog(folder)
+    records = log.read()
+    if not records:
+        return 0
+    sid = session_id(log.path)
+    plan = next((r for r in records if r.get("type") == "plan"), {})
+    plan_name = str((plan.get("plan") or {}).get("name", "")) or None
+    runs = {r["decay"]: r for r in records if r.get("type") == "run"}
+    verdicts = {r["decay"]: r for r in records if r.get("type") == "verdict"}
+    done = 0
+    for decay, run in sorted(runs.items()):
+        path = folder / run["file"]
+        if not path.is_file() or only not in (None, run["file"]):
+            continue
+        verdict = verdicts.get(decay, {})
+        extra = {
+            "session_id": sid,
+            "plan": plan_name,
+            "decay_number": decay,
+            "verdict": verdict.get("verdict"),
+            "checks": list(verdict.get("reasons", run.get("reasons", []))),
+        }
+        add_file(catalogue, path, extra, unreadable=True)  # cut before any data: still the session's
+        done += 1
+    hull_name = str(plan["hull"]) if plan.get("hull") else None
+    _upsert_session(catalogue, folder, sid, plan_name, hull_name, records, runs, verdicts)
+    return done
+
+
+def _upsert_session(
+    catalogue: Catalogue,
+    folder: Path,
+    sid: str,
+    plan_name: str | None,
+    hull_name: str | None,
+    records: list[dict[str, Any]],
+    runs: Mapping[int, Any],
+    verdicts: Mapping[int, Mapping[str, Any]],
+) -> None:
+    row = {
+        "session_id": sid,
+        "folder": str(folder.resolve()),
+        "plan": plan_name,
+        "hull": hull_name,
+        "started_utc": records[0].get("at"),
+        "decays": len(runs),
+        "accepted": sum(1 for v in verdicts.values() if v.get("verdict") == "accepted"),
+        "updated_utc": utc_now(),
+    }
+    with catalogue.engine.begin() as connection:
+        statement = _insert(connection, sessions).values(**row)
+        keep = {c: statement.excluded[c] for c in row if c not in ("session_id", "started_utc")}
+        connection.execute(statement.on_conflict_do_update(index_elements=["session_id"], set_=keep))
+
+
+def _condition(runs: Sequence[Any]) -> tuple[Hull | None, str | None, str | None]:
+    """Hull, draft and axis of fitted runs (their metadata, else their file names: ``condition_of``)."""
+    from ..ident.conditions import condition_of
+
+    if not runs:
+        return None, None, None
+    condition = condition_of(runs[0])
+    return find_hull(condition.hull), condition.draft, condition.axis
+
+
+def fit_of_estimator(
+    source: str, fit: Any, runs: Sequence[Any], warnings: Sequence[str] = (), model: str | None = None
+) -> dict[str, Any]:
+    """A fitted estimator's columns (``coefficients_``, ``ci95_``, ``r2_angle_`` when it has one) for
+    the condition its runs carry in their metadata."""
+    condition = _condition(runs)
+    ci95 = {term: tuple(pair) for term, pair in getattr(fit, "ci95_", {}).items()}
+    r2 = getattr(fit, "r2_angle_", None)
+    return fit_fields(source, fit.coefficients_, ci95, r2, warnings, condition, model)
+
+
+def run_paths(runs: Sequence[Any]) -> list[Path]:
+    """The files runs were read from (``meta["file"]``), once each."""
+    return [Path(p) for p in dict.fromkeys(str(r.meta["file"]) for r in runs if r.meta.get("file"))]
+
+
+def record_fits(catalogue: Catalogue, results: Iterable[Any]) -> int:
+    """A campaign's group fits (``ident.campaign.GroupResult``) onto each group's recordings, as they
+    come (a generator of results is consumed once). Returns the rows updated."""
+    updated = 0
+    for result in results:
+        if result.fit is None:
+            continue
+        fields = fit_of_estimator("campaign", result.fit, result.runs, result.warnings)
+        updated += update_fit(catalogue, run_paths(result.runs), fields)
+    return updated
+
+
+def fit_of_summary(source: str, summary: Mapping[str, Any], runs: Sequence[Any]) -> dict[str, Any]:
+    """An identify or diagnose summary's fit (``ident.report.summarize``) as catalogue columns."""
+    condition = _condition(runs)
+    table = summary["coefficients"]
+    coefficients = {term: entry["value"] for term, entry in table.items()}
+    ci95 = {term: tuple(entry["ci95"]) for term, entry in table.items() if entry.get("ci95")}
+    model = summary.get("model", {}).get("name")
+    warnings = summary.get("warnings", [])
+    return fit_fields(source, coefficients, ci95, summary.get("r2_angle"), warnings, condition, model)

@@ -1,0 +1,170 @@
+"""``tankdaq catalogue index DIR`` (rows rebuilt from the files) and ``tankdaq runs`` (asked like a lab
+asks: filters, ``--where``, ``--compare``; a table, ``--json`` or ``--csv``)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from .app import app, catalogue_option, handles_errors, progress_bar, say
+
+catalogue_app = typer.Typer(no_args_is_help=True, help="The run catalogue: rebuild its rows from files.")
+app.add_typer(catalogue_app, name="catalogue")
+
+#: The columns the default table shows (``--json``/``--csv`` give every column).
+TABLE_COLUMNS = (
+    ("recorded_utc", "recorded"),
+    ("hull", "hull"),
+    ("draft", "draft"),
+    ("axis", "axis"),
+    ("release_angle_deg", "angle deg"),
+    ("verdict", "verdict"),
+    ("natural_period_s", "T0 s"),
+    ("b_eq_5deg_per_s", "B_eq 5° 1/s"),
+    ("b44_hat_5deg", "B̂44 5°"),
+    ("r2_angle", "R²"),
+    ("complete", "complete"),
+    ("warnings", "warnings"),
+    ("path", "file"),
+)
+
+
+def _open(given: str | None) -> Any:
+    from ..catalogue.database import BadCatalogueQuery, open_catalogue, resolve_url
+
+    url = resolve_url(given)
+    if url is None:
+        raise BadCatalogueQuery("the catalogue is switched off (none): give --catalogue URL|PATH")
+    return open_catalogue(url)
+
+
+@catalogue_app.command("index")
+@handles_errors
+def index_command(
+    folder: Annotated[
+        Path,
+        typer.Argument(
+            exists=True, file_okay=False, dir_okay=True, help="Folder of recordings (searched deep)."
+        ),
+    ],
+    catalogue: Annotated[str | None, catalogue_option()] = None,
+) -> None:
+    """Add every recording (.mcap) under FOLDER and its sessions' verdicts; idempotent by SHA-256
+    (a file seen before is left alone, a moved one has its path updated)."""
+    from ..catalogue.database import describe
+    from ..catalogue.index import index_folder
+
+    with _open(catalogue) as opened, progress_bar() as progress:
+        task = progress.add_task("indexing", total=None)
+        report = index_folder(opened, folder, lambda path: progress.update(task, description=path.name))
+    for line in report.skipped:
+        say(f"skipped {line}")
+    typer.echo(f"{describe(opened.url)}: {report.line}")
+
+
+def _cell(value: object) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def _shown(key: str, value: object) -> object:
+    """What the table shows of a value: a file's name (its folder is in --json), the time to the minute."""
+    if key == "path" and isinstance(value, str):
+        return Path(value).name
+    if key == "recorded_utc" and isinstance(value, str):
+        return value[:16].replace("T", " ")
+    if key == "warnings" and value:  # each one in --json; never a row without its mark
+        return f"{str(value).count(' | ') + 1} warning(s)"
+    if key == "complete":
+        return "yes" if value else "CUT"
+    return value
+
+
+def _print_table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(show_lines=False)
+    for _, title in columns:
+        table.add_column(title, overflow="fold")
+    for row in rows:
+        table.add_row(*(_cell(_shown(key, row.get(key))) for key, _ in columns))
+    console = Console(soft_wrap=False)
+    if not console.is_terminal:  # a pipe or a file: every column whole, not 80 characters
+        console = Console(soft_wrap=False, width=240)
+    console.print(table)
+
+
+def _emit(rows: list[dict[str, Any]], as_json: bool, as_csv: bool, columns: list[tuple[str, str]]) -> None:
+    if as_json:
+        clean = [
+            {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in r.items()} for r in rows
+        ]
+        typer.echo(json.dumps(clean, indent=1, default=str))
+    elif as_csv:
+        import csv
+        import sys
+
+        names = list(dict.fromkeys(k for row in rows for k in row))
+        writer = csv.DictWriter(sys.stdout, fieldnames=names, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+    else:
+        _print_table(rows, columns)
+
+
+@app.command("runs")
+@handles_errors
+def runs_command(
+    hull: Annotated[str | None, typer.Option("--hull", help="Hull name.")] = None,
+    draft: Annotated[str | None, typer.Option("--draft", metavar="0.9T|T|1.1T", help="Draft.")] = None,
+    axis: Annotated[str | None, typer.Option("--axis", help="roll or pitch.")] = None,
+    since: Annotated[
+        str | None, typer.Option("--since", metavar="DATE", help="From 2026, 2026-03 ...")
+    ] = None,
+    verdict: Annotated[
+        str | None,
+        typer.Option("--verdict", help="accepted, rejected or any [default: every decay not rejected]."),
+    ] = None,
+    where: Annotated[
+        str | None,
+        typer.Option(
+            "--where", metavar="EXPR", help='e.g. "r2 >= 0.99 and firmware ~ 1.8" (docs/catalogue.md).'
+        ),
+    ] = None,
+    compare: Annotated[
+        tuple[str, str] | None,
+        typer.Option(
+            "--compare", metavar="A B", help="Two sessions (id, folder), plans or queries side by side."
+        ),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="JSON on stdout.")] = False,
+    as_csv: Annotated[bool, typer.Option("--csv", help="CSV on stdout.")] = False,
+    catalogue: Annotated[str | None, catalogue_option()] = None,
+) -> None:
+    """List catalogued decays (one row each), or compare two campaigns per condition."""
+    from ..catalogue.query import RunQuery, flat, select_rows, selection
+    from ..catalogue.query import compare as compare_rows
+    from ..errors import InputError
+
+    if as_json and as_csv:
+        raise InputError("--json and --csv: give one")
+    equal = {k: v for k, v in {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict}.items() if v}
+    query = RunQuery(equal, since, None, where)
+    query.conditions()  # a bad filter is one line before the catalogue opens
+    with _open(catalogue) as opened:
+        if compare is not None:
+            table = compare_rows(selection(opened, compare[0]), selection(opened, compare[1]))
+            _emit(table, as_json, as_csv, [(k, k) for k in (table[0] if table else {})])
+            return
+        rows = [flat(row) for row in select_rows(opened, query)]
+    if not as_json and not as_csv:
+        say(f"{len(rows)} run(s)")
+    _emit(rows, as_json, as_csv, list(TABLE_COLUMNS))
