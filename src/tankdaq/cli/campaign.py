@@ -11,6 +11,7 @@ from .. import validation
 from .app import (
     DRAFT_METAVAR,
     app,
+    build_kernels_shown,
     checked,
     err_console,
     fail,
@@ -99,6 +100,7 @@ def campaign_command(
         check_scheduler(scheduler)  # an address not understood or not answering: one line, at once
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     paths = find_recordings(inputs, recurse=not no_recurse)
+    build_kernels_shown()
     prepare_identifier(model, say)  # the native kernels: built once, on the first run after install
     prepare = []
     if report is not None:

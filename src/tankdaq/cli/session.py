@@ -9,7 +9,7 @@ import typer
 
 from .. import validation
 from ..errors import InputError
-from .app import app, checked, err_console, handles_errors, say
+from .app import app, build_kernels_shown, checked, err_console, handles_errors, say
 from .record import (
     DEFAULT_LIVE_MODEL,
     LiveModelOption,
@@ -140,6 +140,7 @@ def session_command(
         ),
         resume=resume,
     )
+    build_kernels_shown()
     try:
         state = session.run()
     except KeyboardInterrupt:
