@@ -1,12 +1,13 @@
 """The built wheel, installed read-only, works from another folder (issue 23's must-hold).
 
 The wheel is built from this tree, installed without its dependencies into a fresh venv whose
-site-packages is then made read-only; the dependencies come from this project's venv through a plain path
-line in a ``.pth`` file (nested ``.pth`` files there are not processed, so this checkout's editable
+site-packages is then made read-only; the dependencies come from this project's venv through a plain
+path line in a ``.pth`` file (nested ``.pth`` files there are not processed, so this checkout's editable
 install stays out: ``tankdaq.__file__`` says which one runs). With a fresh home folder and from another
-folder, ``tankdaq demo`` builds its kernels into the user cache and passes, ``tankdaq --help`` and
-``help(tankdaq)`` work, and nothing is written into site-packages (root ignores the read-only bits: the
-listing before and after is what holds it).
+folder, ``tankdaq demo`` builds its kernels into the user cache (drawing its progress) and passes,
+``tankdaq --help`` and ``help(tankdaq)`` work, and nothing is written into site-packages (root ignores
+the read-only bits: the listing before and after is what holds it). The wheel carries the LICENSE and
+a PyPI page that starts with ``pip install``.
 """
 
 from __future__ import annotations
@@ -141,6 +142,12 @@ def test_the_wheel_installed_read_only_runs_the_demo_from_another_folder(
 
     def run(*args: str | Path) -> subprocess.CompletedProcess[str]:
         return subprocess.run(args, cwd=work, env=env, capture_output=True, text=True, timeout=600)
+
+    (info,) = site.glob("tankdaq-*.dist-info")
+    assert "MIT License" in (info / "licenses" / "LICENSE").read_text()
+    page = (info / "METADATA").read_text().split("\n\n", 1)[1]  # the long description, after the headers
+    assert page.index("pip install tankdaq") < page.index("tankdaq demo") and "make demo" not in page
+    assert "](https://" in page and "](docs/" not in page, "the PyPI page links to files not in the wheel"
 
     helped = run(venv / "bin" / "python", "-c", HELP)
     assert helped.returncode == 0, helped.stderr
