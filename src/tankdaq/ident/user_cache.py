@@ -52,8 +52,7 @@ def use_user_cache_for_numba() -> None:
     """
     from numba.core import caching
 
-    implementation = vars(caching).get("CacheImpl") or vars(caching)["_CacheImpl"]  # its older name
-    locators: list[type] = implementation._locator_classes
+    locators: list[type[object]] = caching.CacheImpl._locator_classes  # the same in numba 0.61 to 0.68
     if any(cls.__name__ == "TankdaqCacheLocator" for cls in locators):
         return
 
