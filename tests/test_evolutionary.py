@@ -11,7 +11,7 @@ from scipy.optimize import lsq_linear
 from tankdaq.config import load_hull
 from tankdaq.errors import BadIdentificationInput, InputError
 from tankdaq.ident.derived import damping_ratio
-from tankdaq.ident.estimators import make_estimator
+from tankdaq.ident.estimators import make_estimator, reports_progress
 from tankdaq.ident.evolutionary import (
     INERTIA_FLOOR,
     GeneticSeed,
@@ -190,6 +190,20 @@ def test_fit_is_reproducible_and_reports_progress(noisy_run: DecayRun) -> None:
     second = GeneticSeed("b1,c1", settings=settings, random_state=7)
     assert first.fit(noisy_run).coefficients_ == second.fit(noisy_run).coefficients_
     assert calls[-1] == (12, 12) and len(calls) == 12
+
+
+@pytest.mark.parametrize("method", ["ga", "pso", "ga-seed000"])
+def test_the_searches_by_method_name_take_their_progress_in_the_constructor(
+    method: str, noisy_run: DecayRun
+) -> None:
+    """What ``identify --method ga`` shows its generations through: a setting, kept by ``clone``."""
+    assert reports_progress(method) and not reports_progress("oe") and not reports_progress("ee")
+    calls: list[tuple[int, int]] = []
+    small = GeneticSettings(40, 5) if method.startswith("ga") else SwarmSettings(40, 5, 0.15)
+    estimator = make_estimator(method, "b1,c1", settings=small, progress=lambda d, n: calls.append((d, n)))
+    assert estimator.clone().get_params()["progress"] is estimator.progress
+    estimator.fit(noisy_run)
+    assert calls == [(generation, 5) for generation in range(1, 6)]
 
 
 def test_each_alias_defaults_to_its_papers_settings() -> None:

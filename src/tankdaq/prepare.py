@@ -1,12 +1,12 @@
 """Build and compile every kernel once, in one process, before anything runs them side by side.
 
-The identification kernels are built ahead of time into a native module (``ident.compiled``:
-later processes load them in a millisecond, without numba) and compiled by numba's JIT too (the
-fallback, and what the native module is tested against). numba's on-disk cache is written by
-whichever process compiles a kernel first; processes that compile the same kernel at the same
-moment can read each other's half-written cache files (a ``SystemError`` from numba's unpickler).
-``make`` runs ``python -m tankdaq.prepare`` after installing and before the test workers start.
-``record`` and ``replay`` prepare the identifier's kernels themselves.
+The identification kernels are built ahead of time into a native module in the user cache folder
+(``ident.compiled``, ``ident.user_cache``: later processes load them in a millisecond, without numba)
+and compiled by numba's JIT too (the fallback, and what the native module is tested against).
+numba's on-disk cache is written by whichever process compiles a kernel first; processes that
+compile the same kernel at the same moment can read each other's half-written cache files (a
+``SystemError`` from numba's unpickler). ``make`` runs ``python -m tankdaq.prepare`` after installing
+and before the test workers start. ``record`` and ``replay`` prepare the identifier's kernels themselves.
 """
 
 from __future__ import annotations

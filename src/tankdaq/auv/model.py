@@ -22,7 +22,10 @@ import numpy as np
 from numba import njit
 
 from ..errors import InputError
+from ..ident.user_cache import use_user_cache_for_numba
 from .vehicle import Vehicle
+
+use_user_cache_for_numba()  # numba's cache in the user cache folder, never beside an installed source
 
 #: Recorded state columns, in order (SI units, angles in rad).
 STATE_COLUMNS: tuple[str, ...] = ("u", "w", "q", "theta", "z", "x", "delta_s")

@@ -254,3 +254,16 @@ def runs_option() -> Any:
         metavar="QUERY",
         help='Catalogued recordings in place of paths, e.g. "hull=swath draft=1.1T since=2026-03".',
     )
+def build_kernels_shown() -> None:
+    """On a first run, build the native kernels under the line that says how long, how big and where,
+    with a spinner and the elapsed time; the library then finds them built (or says why not itself)."""
+    from ..ident import compiled
+    from ..ident.online import first_run_notice
+
+    notice = first_run_notice()
+    if notice is None:
+        return
+    say(notice)
+    with progress_bar() as progress:
+        progress.add_task("building native kernels", total=None)
+        compiled.ensure_native()

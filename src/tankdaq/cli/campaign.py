@@ -11,6 +11,7 @@ from .. import validation
 from .app import (
     DRAFT_METAVAR,
     app,
+    build_kernels_shown,
     checked,
     err_console,
     fail,
@@ -106,6 +107,7 @@ def campaign_command(
     given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
     writer = CatalogueWriter.from_option(catalogue, say)
     paths = find_recordings(inputs_or_query(inputs, runs_query, catalogue), recurse=not no_recurse)
+    build_kernels_shown()
     prepare_identifier(model, say)  # the native kernels: built once, on the first run after install
     prepare = []
     if report is not None:

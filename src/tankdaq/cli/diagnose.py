@@ -15,6 +15,7 @@ from ..errors import InputError
 from ..records import DecayRun
 from .app import (
     app,
+    build_kernels_shown,
     checked,
     draft_option,
     err_console,
@@ -148,6 +149,7 @@ def diagnose_command(
         return
     baseline = baseline or DEFAULT_BASELINE
     truncated = warn_truncated(runs)
+    build_kernels_shown()
     prepare_identifier(baseline, say)  # the native kernels: built once, on the first run after install
     with progress_bar() as progress:
         # per step: every candidate, plus the two refits of the late-disturbance test
@@ -189,6 +191,7 @@ def compare_with_simulation(
     request = SimulationRequest(tuple(runs), axis, hull, draft, SeriesColumns(*sim_read))
     sim = resolve_simulation(sources, request)
     truncated = warn_truncated(runs)
+    build_kernels_shown()
     prepare_identifier("b1,b2,c1,c3", say)
     with progress_bar() as progress:
         task = progress.add_task("comparing", total=4 + max_steps * len(CANDIDATES))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -19,6 +19,7 @@ if TYPE_CHECKING:
 from .app import (
     app,
     catalogue_option,
+    build_kernels_shown,
     checked,
     draft_option,
     err_console,
@@ -206,6 +207,7 @@ def identify_command(
     fits = [runs] if joint or len(groups) == 1 else list(groups.values())
     for condition_runs in fits if not compare else []:  # impossible interval requests fail before any fit
         check_intervals(probe, len(condition_runs), bootstrap, repeats, method)
+    build_kernels_shown()
     prepare_identifier(terms or MODEL_FAMILY[-1], say)  # the native kernels: built once, on the first run
 
     if compare:
@@ -284,7 +286,7 @@ def _fit_condition(
     label: str,
 ) -> dict:
     """One fit of ``runs`` (the model chosen by data when ``terms`` is None) and its summary."""
-    from ..ident.estimators import make_estimator
+    from ..ident.estimators import make_estimator, reports_progress
     from ..ident.intervals import fit_with_intervals
     from ..ident.model_choice import choose_model
     from ..ident.report import summarize
@@ -299,13 +301,14 @@ def _fit_condition(
             )
         terms = choice.terms
         say(f"{label}: {choice.reason}")
-    estimator = make_estimator(method, terms)
     repeats_of = (lambda: make_estimator(method, terms)) if repeats else None
     with progress_bar() as progress:
         task = progress.add_task(f"fitting {method}", total=1 + bootstrap)
-        if hasattr(estimator, "progress"):  # the seeds' GA/PSO report their generations
+        settings: dict[str, Any] = {}
+        if reports_progress(method):  # the seeds' GA/PSO (about 100 s): their generations
             generations = progress.add_task("generations", total=None)
-            estimator.progress = lambda done, total: progress.update(generations, completed=done, total=total)
+            settings["progress"] = lambda done, of: progress.update(generations, completed=done, total=of)
+        estimator = make_estimator(method, terms, **settings)
         estimator, intervals = fit_with_intervals(
             estimator,
             runs,

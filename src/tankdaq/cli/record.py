@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from .. import validation
-from .app import app, catalogue_option, checked, draft_option, err_console, handles_errors, say
+from .app import app, build_kernels_shown, catalogue_option, checked, draft_option, err_console, handles_errors, say
 
 if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
     from ..acquire.daemon import RecordSettings
@@ -104,6 +104,7 @@ def run_record(settings: RecordSettings, catalogue: str | None = None) -> list[D
     from ..acquire.daemon import RecordDaemon
     from ..catalogue.hooks import CatalogueSink, CatalogueWriter
 
+    build_kernels_shown()
     with CatalogueWriter.from_option(catalogue, say) as writer, _StatusLine(settings.runs) as line:
         daemon = RecordDaemon(
             settings, on_event=line.event, on_status=line.status, sinks=[CatalogueSink(writer)]
@@ -224,6 +225,7 @@ def replay_command(
     from ..acquire.replay import replay_recording
 
     pace = _speed(speed)
+    build_kernels_shown()
     for path in files:
         outcomes = replay_recording(
             path,

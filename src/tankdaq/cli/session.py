@@ -10,7 +10,7 @@ import typer
 
 from .. import validation
 from ..errors import InputError
-from .app import app, catalogue_option, checked, err_console, handles_errors, say
+from .app import app, build_kernels_shown, catalogue_option, checked, err_console, handles_errors, say
 from .record import (
     DEFAULT_LIVE_MODEL,
     LiveModelOption,
@@ -145,6 +145,7 @@ def session_command(
             resume=resume,
             on_verdict=session_listener(writer, out),
         )
+        build_kernels_shown()
         try:
             state = session.run()
         except KeyboardInterrupt:

@@ -9,6 +9,7 @@ estimator with ``fit(runs) -> self`` and at least ``terms_``,
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -35,4 +36,17 @@ def make_estimator(method: str, terms: str | Sequence[str], **settings: Any) -> 
     return ESTIMATORS[method](terms, **settings)
 
 
-__all__ = ["ESTIMATORS", "EquationError", "OutputError", "make_estimator", "register_estimator"]
+def reports_progress(method: str) -> bool:
+    """Whether ``method``'s estimator takes a ``progress`` setting, called with (done, total) as it goes
+    (the seeds' GA/PSO: their generations), so a caller can hand it one in the constructor."""
+    return "progress" in inspect.signature(ESTIMATORS[method]).parameters
+
+
+__all__ = [
+    "ESTIMATORS",
+    "EquationError",
+    "OutputError",
+    "make_estimator",
+    "register_estimator",
+    "reports_progress",
+]

@@ -35,6 +35,10 @@ import math
 import numba
 import numpy as np
 
+from .user_cache import use_user_cache_for_numba
+
+use_user_cache_for_numba()  # numba's cache in the user cache folder, never beside an installed source
+
 #: A decay never leaves +-pi; a simulated state beyond a full turn has diverged (a capsize).
 MAX_ANGLE_RAD = 2.0 * math.pi
 #: Far beyond any model's rate (a 2 s roll period at 90 deg is 5 rad/s): beyond it, diverged.

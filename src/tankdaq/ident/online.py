@@ -36,6 +36,7 @@ from .least_squares import solve_budget
 from .output_error import OutputError
 from .plausibility import Finding, check_runs
 from .signals import band_crossings, white_noise_level
+from .user_cache import shown
 
 #: With ``terms="auto"`` a model of k terms is tried live once the decay has this many half-cycles per term.
 HALF_CYCLES_PER_TERM = 2
@@ -410,11 +411,23 @@ def prepare_kernels(terms: str | Sequence[str] = "ittc-quadratic-restoring") -> 
 FIRST_RUN_S = "10–40"
 
 
+def first_run_notice() -> str | None:
+    """The line a first run says before it builds the kernels (how long, how big, where); None when
+    they are ready (or their build failed before: no build is attempted then)."""
+    if compiled.ahead_of_time() or compiled.build_failed():
+        return None
+    return (
+        "preparing the identifier (first run after install): building native kernels (once, "
+        f"about {FIRST_RUN_S} s, {compiled.NATIVE_SIZE_MB:g} MB) into {shown(compiled.kernel_folder())}"
+    )
+
+
 def prepare_identifier(terms: str | Sequence[str], on_event: Callable[[str], None] | None = None) -> None:
-    """``prepare_kernels``, saying so in one line when it means compiling (the first run after install)
-    and in another when the kernels run on numba's JIT (slower to start) and why."""
-    if not compiled.ahead_of_time() and not compiled.build_failed() and on_event is not None:
-        on_event(f"preparing the identifier (first run after install; about {FIRST_RUN_S} s)")
+    """``prepare_kernels``, saying so in one line when it means building them (the first run after
+    install) and in another when the kernels run on numba's JIT (slower to start) and why."""
+    notice = first_run_notice()
+    if notice is not None and on_event is not None:
+        on_event(notice)
     reason = prepare_kernels(terms)
     if reason is not None and on_event is not None:
         on_event(f"identifier kernels on numba's JIT, slower to start: {reason}")
