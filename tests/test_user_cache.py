@@ -18,14 +18,14 @@ WHERE = """
 import json, sys
 import numba
 from tankdaq.ident import compiled, kernels
-from tankdaq.maneuver import model
+from tankdaq.auv import model
 sys.path.insert(0, sys.argv[1])
 import users_module
 print(json.dumps({
     "kernels": str(compiled.kernel_folder()),
     "native": str(compiled.native_path()),
     "numba": kernels.simulate._cache._cache_path,
-    "maneuver": model._rhs._cache._cache_path,
+    "auv": model._rhs._cache._cache_path,
     "users": users_module.twice._cache._cache_path,
 }))
 """
@@ -57,7 +57,7 @@ def test_kernels_and_numba_cache_go_to_the_user_cache_folder_and_a_users_numba_s
     assert Path(where["kernels"]) == cache / "kernels"
     assert Path(where["native"]).parent == cache / "kernels"
     assert Path(where["numba"]).is_relative_to(cache / "numba"), where
-    assert Path(where["maneuver"]).is_relative_to(cache / "numba"), where
+    assert Path(where["auv"]).is_relative_to(cache / "numba"), where
     assert Path(where["users"]).is_relative_to(tmp_path / "users"), "a user's own numba cache moved"
 
 

@@ -254,6 +254,8 @@ def runs_option() -> Any:
         metavar="QUERY",
         help='Catalogued recordings in place of paths, e.g. "hull=swath draft=1.1T since=2026-03".',
     )
+
+
 def build_kernels_shown() -> None:
     """On a first run, build the native kernels under the line that says how long, how big and where,
     with a spinner and the elapsed time; the library then finds them built (or says why not itself)."""

@@ -18,8 +18,8 @@ if TYPE_CHECKING:
     from ..config import Hull
 from .app import (
     app,
-    catalogue_option,
     build_kernels_shown,
+    catalogue_option,
     checked,
     draft_option,
     err_console,

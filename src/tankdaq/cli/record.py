@@ -9,7 +9,16 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from .. import validation
-from .app import app, build_kernels_shown, catalogue_option, checked, draft_option, err_console, handles_errors, say
+from .app import (
+    app,
+    build_kernels_shown,
+    catalogue_option,
+    checked,
+    draft_option,
+    err_console,
+    handles_errors,
+    say,
+)
 
 if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
     from ..acquire.daemon import RecordSettings

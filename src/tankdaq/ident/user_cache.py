@@ -2,7 +2,7 @@
 
 A pip install may be read-only (a lab PC's system-wide install, a container), so the native kernels
 (``ident.compiled``) and numba's JIT cache of every ``cache=True`` kernel (``ident.kernels``,
-``maneuver.model``) go to ``$TANKDAQ_CACHE_DIR``, else the platform's user cache folder
+``auv.model``) go to ``$TANKDAQ_CACHE_DIR``, else the platform's user cache folder
 (``~/.cache/tankdaq`` on Linux, platformdirs). numba on its own would write beside the source first.
 """
 
