@@ -2,6 +2,70 @@
 
 Data flows one way: serial bytes -> frames (xsens) -> samples -> decays (acquire)
 -> fits (ident) -> views and files (viz, store). Every stage is usable from Python.
+
+The public API (docs/api.md)::
+
+    import tankdaq
+
+    rec = tankdaq.read("run.mcap")            # .samples: a DataFrame, units in the column names
+    result = tankdaq.identify(rec)            # .coefficients, .derived, .warnings, .plot()
+    (sim,) = tankdaq.simulate("sim")          # a simulated decay written as a recording
+
+Whatever ``__all__`` does not name is internal. The names load on first use, so ``import tankdaq``
+(and ``tankdaq --help``) import no pandas, scipy or matplotlib.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
 __version__ = "0.1.0"
+
+__all__ = [
+    "Campaign",
+    "Decay",
+    "Diagnosis",
+    "Identification",
+    "Reading",
+    "Recording",
+    "__version__",
+    "campaign",
+    "diagnose",
+    "identify",
+    "read",
+    "simulate",
+]
+
+#: Public name -> the API module that holds it.
+_PUBLIC = {
+    "read": "recording",
+    "Recording": "recording",
+    "Decay": "recording",
+    "identify": "identification",
+    "Identification": "identification",
+    "Reading": "identification",
+    "campaign": "workflows",
+    "Campaign": "workflows",
+    "diagnose": "workflows",
+    "Diagnosis": "workflows",
+    "simulate": "workflows",
+}
+
+if TYPE_CHECKING:
+    from .api.identification import Identification, Reading, identify
+    from .api.recording import Decay, Recording, read
+    from .api.workflows import Campaign, Diagnosis, campaign, diagnose, simulate
+
+
+def __getattr__(name: str) -> Any:
+    """The public names, imported when first asked for (PEP 562)."""
+    if name not in _PUBLIC:
+        raise AttributeError(f"module 'tankdaq' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".api.{_PUBLIC[name]}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

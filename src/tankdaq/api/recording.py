@@ -1,0 +1,272 @@
+"""``tankdaq.read``: a recording (MCAP) or a decay CSV as pandas DataFrames with units in the column names.
+
+The library keeps SI units and radians inside (``samples.SAMPLE_DTYPE``, ``records.DecayRun``); this is an
+edge, so angles and rates come out in degrees and every column name ends in its unit (``roll_deg``,
+``roll_rate_deg_s``, ``acc_z_m_s2``). The names are made from the sample fields and ``SAMPLE_UNITS``, the
+one vocabulary: a field's people name (``p`` is the roll rate) plus the suffix of its unit. ``time_s``
+counts from the first release (the time people plot a decay against); ``device_time_s`` keeps the device
+clock beside it.
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypedDict
+
+import numpy as np
+
+from ..records import DecayRun
+from ..samples import SAMPLE_UNITS
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+#: The people name of the sample fields whose own name is a symbol (the rest keep theirs).
+FIELD_NAMES = {
+    "t": "device_time",
+    "host_t": "host_time",
+    "p": "roll_rate",
+    "q": "pitch_rate",
+    "r": "yaw_rate",
+    "ax": "acc_x",
+    "ay": "acc_y",
+    "az": "acc_z",
+}
+#: SI unit -> (unit people read, its column suffix, conversion from SI); units not listed stay as stored.
+PEOPLE_UNITS: dict[str, tuple[str, str, Callable[[np.ndarray], np.ndarray] | None]] = {
+    "rad": ("deg", "deg", np.degrees),
+    "rad/s": ("deg/s", "deg_s", np.degrees),
+    "s": ("s", "s", None),
+    "s since epoch": ("s since epoch", "s", None),
+    "m/s^2": ("m/s^2", "m_s2", None),
+}
+
+
+class RecordingMeta(TypedDict, total=False):
+    """What is known about a recording, typed (a recording's metadata is stored as text)."""
+
+    source: str  # the file read
+    format: str  # "tankdaq recording" or "CSV"
+    axis: str  # roll or pitch
+    hull: str | None
+    draft: float  # factor of the design draft
+    angle_nominal_deg: float
+    angle_initial_deg: float
+    sample_rate_hz: float
+    device_id: str
+    operator: str
+    note: str
+    release_device_time_s: list[float]  # each decay's release on the device clock
+    complete_file: bool  # False: the file was cut short (``truncation`` says what to do)
+    truncation: str | None
+    stored: dict[str, str]  # a recording's metadata as written, every key
+
+
+def people_column(field_name: str, values: np.ndarray) -> tuple[str, str, np.ndarray]:
+    """(column name, unit, values) of one sample field at the edge: degrees, the unit in the name."""
+    unit = SAMPLE_UNITS.get(field_name, "")
+    name = FIELD_NAMES.get(field_name, field_name)
+    if unit not in PEOPLE_UNITS:
+        return name, unit, np.asarray(values)
+    shown, suffix, convert = PEOPLE_UNITS[unit]
+    data = np.asarray(values, dtype=float)
+    return f"{name}_{suffix}", shown, convert(data) if convert is not None else data
+
+
+def frame(columns: dict[str, tuple[str, np.ndarray]]) -> pd.DataFrame:
+    """A DataFrame of ``{name: (unit, values)}``; ``df.attrs["units"]`` maps each column to its unit."""
+    import pandas as pd
+
+    table = pd.DataFrame({name: values for name, (_unit, values) in columns.items()})
+    table.attrs["units"] = {name: unit for name, (unit, _values) in columns.items()}
+    return table
+
+
+def _release_of(run: DecayRun) -> float:
+    """Where a decay's own time starts: its release on the file's clock (its first sample for a CSV)."""
+    value = run.meta.get("release_t_s")
+    return float(value) if isinstance(value, int | float) else float(run.t[0])
+
+
+@dataclass(frozen=True)
+class Decay:
+    """One free decay of a recording: from its release to the next release (or the file's end).
+
+    ``samples`` has ``time_s`` from the release, the angle and rate in degrees, and the other channels the
+    file holds; ``run`` is the same decay as the estimators see it (SI, rad), which ``tankdaq.identify``
+    accepts too.
+    """
+
+    number: int
+    run: DecayRun
+    samples: pd.DataFrame
+
+    @property
+    def name(self) -> str:
+        return self.run.name
+
+    @property
+    def initial_angle_deg(self) -> float:
+        return float(np.degrees(self.run.angle[0]))
+
+    @property
+    def duration_s(self) -> float:
+        return self.run.duration
+
+
+def decay_frame(run: DecayRun) -> pd.DataFrame:
+    """A decay's samples at the edge: ``time_s`` from its release, ``<axis>_deg``, ``<axis>_rate_deg_s``,
+    and its channels (as stored, SI, under the names the reader gave them)."""
+    columns: dict[str, tuple[str, np.ndarray]] = {
+        "time_s": ("s", run.t - _release_of(run)),
+        f"{run.axis}_deg": ("deg", np.degrees(run.angle)),
+    }
+    if run.rate is not None:
+        columns[f"{run.axis}_rate_deg_s"] = ("deg/s", np.degrees(run.rate))
+    columns.update({name: ("SI", values) for name, values in run.channels.items()})
+    return frame(columns)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recording or decay file read for people: ``samples`` (a DataFrame, units in the column names,
+    ``time_s`` from the first release), ``meta`` (typed), ``decays`` (one ``Decay`` per release) and the
+    lines the reading has for the user (``notices``). Shown as a table in a notebook.
+
+    >>> rec = tankdaq.read("recordings/demo/swath_T_roll_8deg_20261121-143015_run01.mcap")  # doctest: +SKIP
+    >>> rec.samples[["time_s", "roll_deg", "roll_rate_deg_s"]].head()  # doctest: +SKIP
+    """
+
+    path: Path
+    samples: pd.DataFrame
+    meta: RecordingMeta
+    decays: list[Decay]
+    notices: list[str] = field(default_factory=list)
+
+    @property
+    def units(self) -> dict[str, str]:
+        """Each column of ``samples`` and its unit."""
+        return dict(self.samples.attrs.get("units", {}))
+
+    def export(self, file_format: str, out_dir: str | Path | None = None, frame: str | None = None) -> Path:
+        """Write this recording through ``tankdaq export``'s writers (``store.export``: csv, mat, and
+        whatever else ``WRITERS`` holds); returns the file written. A recording (MCAP) only: a CSV is
+        already a file every tool opens. ``frame`` is the time origin, ``"release"`` or ``"device"``
+        (default: the exporter's)."""
+        from ..errors import InputError
+        from ..store.export import export_recording
+
+        if self.meta.get("format") != "tankdaq recording":
+            raise InputError(f"{self.path} is a CSV file already: only a recording (.mcap) is exported")
+        folder = Path(out_dir) if out_dir is not None else None
+        if frame is None:
+            return export_recording(self.path, file_format, folder)
+        return export_recording(self.path, file_format, folder, frame=frame)
+
+    def to_csv(self, out_dir: str | Path | None = None) -> Path:
+        """``export("csv", out_dir)``: the CSV ``tankdaq export`` writes."""
+        return self.export("csv", out_dir)
+
+    def _repr_html_(self) -> str:
+        meta = {k: v for k, v in self.meta.items() if k != "stored"}
+        rows = "".join(
+            f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in meta.items()
+        )
+        decays = "".join(
+            f"<tr><td>{d.number}</td><td>{html.escape(d.name)}</td><td>{d.initial_angle_deg:.2f}</td>"
+            f"<td>{d.duration_s:.2f}</td><td>{d.run.t.size}</td></tr>"
+            for d in self.decays
+        )
+        notices = "".join(f"<li>{html.escape(line)}</li>" for line in self.notices)
+        return (
+            f"<h4>{html.escape(self.path.name)}</h4><table>{rows}</table>"
+            "<table><tr><th>decay</th><th>name</th><th>initial angle (deg)</th><th>duration (s)</th>"
+            f"<th>samples</th></tr>{decays}</table>"
+            + (f"<ul>{notices}</ul>" if notices else "")
+            + self.samples.head().to_html(index=False)
+        )
+
+
+def read(
+    path: str | Path,
+    *,
+    axis: str | None = None,
+    time_col: str = "time_s",
+    angle_col: str = "angle_deg",
+    rate_col: str | None = "rate_deg_s",
+    angle_unit: str | None = None,
+    time_unit: str | None = None,
+) -> Recording:
+    """Read a tankdaq recording (``.mcap``) or a decay CSV (any spreadsheet dialect; the column settings
+    are ``tankdaq identify``'s) into a ``Recording``; its decays are found as ``identify`` finds them.
+
+    >>> rec = tankdaq.read("run.mcap")  # doctest: +SKIP
+    >>> rec.decays[0].samples.plot(x="time_s", y="roll_deg")  # doctest: +SKIP
+    """
+    from ..ident.inputs import input_notices, read_decays
+    from ..store.csv_import import CsvOptions
+    from ..store.inputs import input_format, read_runs
+
+    path = Path(path)
+    kind = input_format(path).name  # an unknown suffix is one line before anything is read
+    runs = read_decays(path, axis, time_col, angle_col, rate_col, angle_unit, False, 0, time_unit)
+    first = runs[0]
+    meta: RecordingMeta = {"source": str(path), "format": kind, "axis": first.axis}
+    for key in RecordingMeta.__annotations__:
+        if key in first.meta and key not in ("source", "axis"):
+            meta[key] = first.meta[key]  # type: ignore[literal-required]
+    releases = [_release_of(run) for run in runs]
+    meta["release_device_time_s"] = releases
+    if path.suffix.lower() == ".mcap":
+        samples, stored = _recording_samples(path, releases)
+        meta["stored"] = stored
+        frames = _split_at(samples, releases)
+    else:
+        options = CsvOptions(time_col, angle_col, rate_col, angle_unit, True, time_unit)
+        (whole,) = read_runs(path, axis, options)
+        samples = decay_frame(whole)
+        samples["time_s"] -= releases[0] - float(whole.t[0])
+        frames = [decay_frame(run) for run in runs]
+    decays = [Decay(n, run, part) for n, (run, part) in enumerate(zip(runs, frames, strict=True), start=1)]
+    return Recording(path, samples, meta, decays, input_notices(runs))
+
+
+def _split_at(samples: pd.DataFrame, releases: list[float]) -> list[pd.DataFrame]:
+    """A recording's samples from each release to the next, ``time_s`` from that release."""
+    device_time = samples["device_time_s"].to_numpy()
+    parts = []
+    for start, stop in zip(releases, [*releases[1:], np.inf], strict=True):
+        part = samples[(device_time >= start) & (device_time < stop)].reset_index(drop=True)
+        part["time_s"] = part["device_time_s"] - start
+        part.attrs["units"] = dict(samples.attrs["units"])
+        parts.append(part)
+    return parts
+
+
+def _recording_samples(path: Path, releases: list[float]) -> tuple[pd.DataFrame, dict[str, str]]:
+    """Every sample of a recording at the edge, and its metadata as stored."""
+    from ..store.reader import read_recording
+
+    recording = read_recording(path)
+    samples = recording.samples
+    origin = releases[0] if releases else float(samples["t"][0])
+    columns: dict[str, tuple[str, np.ndarray]] = {"time_s": ("s", samples["t"] - origin)}
+    for name in samples.dtype.names or ():
+        column, unit, values = people_column(name, samples[name])
+        columns[column] = (unit, values)
+    return frame(columns), dict(recording.metadata)
+
+
+def runs_of(data: Any) -> list[DecayRun] | None:
+    """The decays of an object ``tankdaq.identify`` accepts in place of a path (a ``Recording``, a
+    ``Decay``, a ``DecayRun``); None for a path."""
+    if isinstance(data, Recording):
+        return [decay.run for decay in data.decays]
+    if isinstance(data, Decay):
+        return [data.run]
+    if isinstance(data, DecayRun):
+        return [data]
+    return None
