@@ -31,6 +31,8 @@ THIRD_PARTY = {
     "pymoo": "pymoo",
     "distributed": "dask",
     "dask": "dask",
+    "h5py": "h5py",
+    "pyarrow": "pyarrow",
 }
 EVERYTHING = "everything"
 

@@ -1,4 +1,4 @@
-"""``tankdaq export``: recordings to CSV or MATLAB .mat for other labs' tools."""
+"""``tankdaq export``: recordings to CSV, HDF5, Parquet or MATLAB .mat for the tools labs use."""
 
 from __future__ import annotations
 
@@ -18,7 +18,14 @@ def export_command(
         list[Path],
         typer.Argument(callback=checked(validation.input_file), help="tankdaq recordings (.mcap)."),
     ],
-    file_format: Annotated[str, typer.Option("--format", help="csv or mat.")] = "csv",
+    file_format: Annotated[
+        str,
+        typer.Option(
+            "--format",
+            help="csv (with a <name>.json of the run metadata), h5 (one file per decay), "
+            "parquet (needs pip install tankdaq[parquet]) or mat.",
+        ),
+    ] = "csv",
     out: Annotated[
         Path | None,
         typer.Option(
@@ -28,20 +35,23 @@ def export_command(
         ),
     ] = None,
     frame: Annotated[
-        str, typer.Option("--frame", help="Time origin: device (the sensor clock) or release (t = 0 there).")
-    ] = "device",
+        str,
+        typer.Option(
+            "--frame", help="Time origin: release (t = 0 at the release) or device (the sensor clock)."
+        ),
+    ] = "release",
 ) -> None:
-    """Write time, angle, rate and every recorded channel in SI units, with a units row and the run
-    metadata (a comment block in CSV, a struct in .mat). tankdaq identify reads the CSV back exactly."""
+    """Write time, angle, rate and every recorded channel in SI units (units in the column names:
+    time_s, roll_rad, p_rad_s, ...) with the run metadata as typed values, exactly as recorded.
+    pandas, Excel and MATLAB read the CSV without options; tankdaq identify reads it back exactly.
+    Prints each file written."""
     from ..errors import InputError
-    from ..store.export import FRAMES, WRITERS, export_recording
+    from ..store.export import check_options, export_recording
 
-    if file_format not in WRITERS:
-        raise InputError(f"format {file_format!r} not understood: use {' or '.join(WRITERS)}")
-    if frame not in FRAMES:
-        raise InputError(f"frame {frame!r} not understood: use {' or '.join(FRAMES)}")
+    check_options(file_format, frame)
     for path in recordings:
         if path.suffix.lower() != ".mcap":
             raise InputError(f"{path}: not a tankdaq recording (.mcap)")
     for path in recordings:
-        typer.echo(str(export_recording(path, file_format, out, frame, on_notice=say)))
+        for written in export_recording(path, file_format, out, frame, on_notice=say):
+            typer.echo(str(written))

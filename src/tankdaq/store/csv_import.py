@@ -1,8 +1,10 @@
 """Records from CSV files (other labs' data, spreadsheets, the KVLCC2 reference run), read as stored.
 
-The store only reads. A file written by ``tankdaq export`` (``store.export``) is read back exactly: SI
-columns (``angle_rad``, ``rate_rad_s``) are taken without a ``--angle-col``, the units row is skipped, the
-``# key = value`` block becomes ``meta`` and its ``release_t_s`` cuts the runs where the recording did. Any
+The store only reads. A file written by ``tankdaq export`` (``store.export``) is read back exactly: its
+``<stem>.json`` sidecar (``store.export_layout``) becomes ``meta``, the axis' SI columns (``roll_rad``,
+``p_rad_s``) are taken without a ``--angle-col``, and its ``release_t_s`` cuts the runs where the
+recording did. An export written before the sidecar (a ``# key = value`` block, ``angle_rad`` and
+``rate_rad_s``, a units row) is read the same way. Any
 other CSV comes back whole, as one record marked ``meta[FIND_RELEASES]``: where its decays start (one or
 several releases in a long record) is found by ``ident.inputs`` on the way in, since finding a release is
 signal work of identification (noise levels, where a free decay ends) and data flows one way, store ->
@@ -29,12 +31,13 @@ from ..records import DecayRun
 from ..validation import input_file
 from .csv_dialect import Table, read_table
 from .csv_units import ANGLE_UNITS, TIME_UNITS, UnitChoice, angle_unit, time_unit
+from .export_layout import axis_columns, read_sidecar, sidecar_path
 
 #: A decay needs at least this many samples.
 MIN_SAMPLES = 20
 #: The rate column looked for by default; any other name given must exist.
 DEFAULT_RATE_COL = "rate_deg_s"
-#: The first line of a ``tankdaq export`` CSV (``store.export.CSV_MARK``).
+#: The first line of a CSV exported before the JSON sidecar (a ``# key = value`` metadata block).
 EXPORT_MARK = "# tankdaq export"
 #: ``meta`` key of a record read whole whose releases are still to be found (``ident.inputs``).
 FIND_RELEASES = "find_releases"
@@ -66,25 +69,32 @@ class CsvOptions:
 DEFAULT_CSV = CsvOptions()
 
 
-def read_csv_file(path: str | Path, options: CsvOptions = DEFAULT_CSV, axis: str = "roll") -> list[DecayRun]:
+def read_csv_file(
+    path: str | Path, options: CsvOptions = DEFAULT_CSV, axis: str | None = None
+) -> list[DecayRun]:
     """The runs of a CSV file as stored: an export's runs from each recorded release, else the record
     whole (marked ``FIND_RELEASES`` unless ``keep_all``); without the rate column the angle is the only
-    output. What the reader decided (dialect, units) is in ``meta[NOTICES]``."""
+    output. ``axis`` None: an export's own axis, else roll. What the reader decided (dialect, units) is
+    in ``meta[NOTICES]``."""
     path = Path(path)
+    table, header = _read_columns(path, options)
+    axis = axis or _exported_axis(header) or "roll"
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
-    table, header = _read_columns(path, options)
     columns = table.columns
     angle_col, given_unit, rate_col = options.angle_col, options.angle_unit, options.rate_col
-    if angle_col == "angle_deg" and "angle_deg" not in columns and "angle_rad" in columns:  # SI (export)
-        angle_col, given_unit = "angle_rad", "rad"
-        rate_col = "rate_rad_s" if rate_col == DEFAULT_RATE_COL else rate_col
+    si_columns = ("angle_rad", "rate_rad_s")  # an export's angle and rate; before the sidecar: these
+    if header and axis_columns(axis)[0] in columns:
+        si_columns = axis_columns(axis)
+    if angle_col == "angle_deg" and "angle_deg" not in columns and si_columns[0] in columns:  # SI (export)
+        angle_col, given_unit = si_columns[0], "rad"
+        rate_col = si_columns[1] if rate_col == DEFAULT_RATE_COL else rate_col
     _check_columns(path, table, options.time_col, angle_col, rate_col)
     notices = [f"{path.name}: read as {table.dialect.describe()}"] if not table.dialect.plain else []
     if table.ignored:
         notices.append(f"{path.name}: text columns not read: {', '.join(table.ignored)}")
     t_raw, angle_raw = columns.pop(options.time_col), columns.pop(angle_col)
-    if header and angle_col == "angle_rad" and options.time_col == "time_s":  # an export says its units
+    if header and angle_col == si_columns[0] and options.time_col == "time_s":  # an export says its units
         units = (UnitChoice("rad"), UnitChoice("s"))
     else:
         units = (
@@ -104,7 +114,7 @@ def read_csv_file(path: str | Path, options: CsvOptions = DEFAULT_CSV, axis: str
         channels=channels,
         meta={"file": str(path)},
     )
-    run.meta.update(header)
+    run.meta.update({key: value for key, value in header.items() if key != "units"})
     run.meta[NOTICES] = notices
     _check_motion(run, units[0].unit)
     if options.keep_all:
@@ -134,6 +144,12 @@ def _check_columns(path: Path, table: Table, time_col: str, angle_col: str, rate
         raise InputError(f"{path}: --rate-col {rate_col!r} is the time or angle column: give another one")
 
 
+def _exported_axis(header: dict[str, object]) -> str | None:
+    """The axis an export names (checked by the caller like a given one)."""
+    axis = header.get("axis")
+    return str(axis) if axis is not None else None
+
+
 def _release_times(path: Path, value: object) -> list[float]:
     """An export's ``release_t_s``: a list of finite times, increasing (else one line naming it)."""
     if isinstance(value, list) and all(
@@ -142,9 +158,10 @@ def _release_times(path: Path, value: object) -> list[float]:
         times = [float(v) for v in value]
         if times == sorted(times):
             return times
+    where = sidecar_path(path).name if read_sidecar(path) is not None else "its metadata line"
     raise InputError(
-        f"{path}: its metadata line '# release_t_s = {json.dumps(value)[:60]}' is not a list of "
-        "increasing times in s; fix or delete that line"
+        f"{path}: release_t_s = {json.dumps(value)[:60]} in {where} is not a list of increasing times "
+        "in s; fix or delete it"
     )
 
 
@@ -165,14 +182,16 @@ def number_parts(runs: list[DecayRun]) -> list[DecayRun]:
 
 
 def _read_columns(path: Path, options: CsvOptions) -> tuple[Table, dict[str, object]]:
-    """The numeric columns, and the ``# key = value`` metadata block of a ``tankdaq export`` file."""
+    """The numeric columns, and the metadata of a ``tankdaq export`` file: its JSON sidecar, or the
+    ``# key = value`` block of an export written before the sidecar."""
     input_file(path)
     wanted = [options.time_col, options.angle_col]
     wanted += [options.rate_col] if options.rate_col not in (None, DEFAULT_RATE_COL) else []
+    sidecar = read_sidecar(path)
     with path.open("rb") as fh:
         exported = fh.read(len(EXPORT_MARK) + 3).lstrip(b"\xef\xbb\xbf").startswith(EXPORT_MARK.encode())
-    table = read_table(path, wanted, skip_rows=1 if exported else 0)  # an export's units row
-    header = _metadata(table.comments) if exported else {}
+    table = read_table(path, wanted, skip_rows=1 if exported else 0)  # an old export's units row
+    header = sidecar if sidecar is not None else _metadata(table.comments) if exported else {}
     rows = len(next(iter(table.columns.values()))) if table.columns else 0
     if rows < MIN_SAMPLES:
         raise BadIdentificationInput(f"{path}: {rows} data rows; a decay needs at least {MIN_SAMPLES}")

@@ -1,31 +1,39 @@
-"""Recordings out to other labs' tools: CSV (spreadsheets, ``tankdaq identify``) and MATLAB .mat.
+"""Recordings out to the tools labs use: CSV (pandas, Excel, MATLAB ``readtable``, ``tankdaq identify``),
+HDF5 (h5py, one file per decay), Parquet (pyarrow) and MATLAB .mat.
 
-One table per recording: time, the decay axis' angle and rate, then every other
-recorded sample field, all in SI units, with the run metadata (a ``# key = value``
-comment block in CSV, a ``meta`` struct in .mat). ``release_t_s`` in the metadata
-lists the releases in the file's time frame, so ``store.csv_import`` cuts the runs
-exactly where the recording's release events put them. Writers are picked by
-format name from ``WRITERS``, the way python-can picks log writers by suffix.
+A table is time, the decay axis' angle and rate, then every other sample field, in the SI units the
+recording holds (names in ``store.export_layout``), with the run metadata as typed values (numbers as
+numbers, lists as lists). ``--frame release`` (the default) puts t = 0 at the release and keeps the
+device clock as ``device_time_s``; ``release_t_s`` in the metadata lists the releases in the file's time
+frame, so ``store.csv_import`` cuts the runs exactly where the recording's release events put them.
+Writers are picked by format name (also the suffix) from ``WRITERS``, the way python-can picks log
+writers by suffix; ``PER_DECAY`` formats write one file per release, as labs store one file per run.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import BadRecordingInput, InputError
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
-from .csv_import import EXPORT_MARK as CSV_MARK
-from .reader import _finite_increasing, _release_times, read_recording, truncation_notice
+from .export_layout import DEVICE_TIME_COLUMN, EXPORT_FORMAT, TIME_COLUMN, column_name
+from .export_writers import write_csv, write_h5, write_mat, write_parquet
+from .reader import Recording, _finite_increasing, _release_times, read_recording, truncation_notice
 from .schemas import TOPIC_SAMPLES
 
-FRAMES = ("device", "release")
-#: Column suffix of each SI unit: the suffix ``csv_import`` reads the unit from.
-UNIT_SUFFIX = {"s": "s", "rad": "rad", "rad/s": "rad_s", "m/s^2": "m_s2"}
+#: Time frames; the first is the default (people read time since the release).
+FRAMES = ("release", "device")
+#: Run metadata that stays text even when it reads as a number (an id, a draft like ``1.1T``).
+TEXT_KEYS = frozenset(
+    {"hull", "hull_description", "draft", "axis", "device_id", "product_code", "firmware", "software_version",
+     "operator", "note"}
+)  # fmt: skip
 
 
 @dataclass
@@ -38,95 +46,158 @@ class ExportTable:
     metadata: dict[str, object]
 
 
-def recording_table(path: str | Path, frame: str = "device") -> ExportTable:
-    """The export table of one recording; ``frame='release'`` puts t = 0 at the first release."""
+#: Writer by format name; the format name is also the file suffix. Each returns the files it wrote.
+WRITERS: dict[str, Callable[[ExportTable, Path], list[Path]]] = {
+    "csv": write_csv,
+    "h5": write_h5,
+    "parquet": write_parquet,
+    "mat": write_mat,
+}
+#: Formats written as one file per decay (``<stem>_decay<k>``), the way a lab's run database holds runs.
+PER_DECAY = frozenset({"h5"})
+#: What a format needs beyond the core install, and the line that says how to get it.
+EXTRAS = {"parquet": ("pyarrow", "parquet export needs pyarrow: pip install tankdaq[parquet]")}
+
+
+def check_options(file_format: str, frame: str) -> None:
+    """Format and frame are known and the format's library is installed (one line each, exit 2)."""
+    if file_format not in WRITERS:
+        raise InputError(f"format {file_format!r} not understood: use {', '.join(WRITERS)}")
+    if frame not in FRAMES:
+        raise InputError(f"frame {frame!r} not understood: use {' or '.join(FRAMES)}")
+    if file_format in EXTRAS:
+        module, line = EXTRAS[file_format]
+        try:
+            __import__(module)
+        except ImportError:
+            raise InputError(line) from None
+
+
+def typed_metadata(metadata: dict[str, str]) -> dict[str, object]:
+    """A recording's metadata strings as the values they stand for (``"6"`` -> 6, a JSON list -> list);
+    names, ids and drafts stay text; a value that is no finite number stays text."""
+    text_keys = {key for key in metadata if key in TEXT_KEYS or key.endswith("_utc")}
+    return {key: text if key in text_keys else _typed(text) for key, text in metadata.items()}
+
+
+def _typed(text: str) -> object:
+    try:
+        return json.loads(text, parse_constant=lambda _: text)
+    except json.JSONDecodeError:
+        return text
+
+
+@dataclass(frozen=True)
+class _Usable:
+    """A recording, its samples with finite time, angle and rate (time increasing), its releases."""
+
+    recording: Recording
+    samples: np.ndarray
+    releases: list[float]
+
+    @property
+    def dropped_rows(self) -> int:
+        return int(self.recording.samples.size - self.samples.size)
+
+
+def recording_table(path: str | Path, frame: str = FRAMES[0]) -> ExportTable:
+    """The export table of one recording; ``frame='release'`` puts t = 0 at the first release (a
+    recording without a release keeps the device clock, and its metadata says ``frame: device``)."""
+    usable = _usable(path, frame)
+    return _table(usable, usable.samples, None, usable.recording.path.stem, frame)
+
+
+def decay_tables(path: str | Path, frame: str = FRAMES[0]) -> list[ExportTable]:
+    """One table per release, from the release to the next, t = 0 at its release (``frame='release'``);
+    the first also holds what came before its release (negative times), so no sample is left out."""
+    usable = _usable(path, frame)
+    stem = usable.recording.path.stem
+    if len(usable.releases) < 2:
+        return [_table(usable, usable.samples, None, stem, frame)]
+    parts = np.split(usable.samples, np.searchsorted(usable.samples["t"], usable.releases[1:], side="left"))
+    return [_table(usable, part, k, f"{stem}_decay{k + 1}", frame) for k, part in enumerate(parts)]
+
+
+def _usable(path: str | Path, frame: str) -> _Usable:
     if frame not in FRAMES:
         raise InputError(f"frame {frame!r} not understood: use {' or '.join(FRAMES)}")
     recording = read_recording(path)
-    axis = recording.axis
-    angle_field, rate_field = AXIS_FIELDS[axis]
+    angle_field, rate_field = AXIS_FIELDS[recording.axis]
     samples = recording.samples
     samples = samples[_finite_increasing(samples["t"], samples[angle_field], samples[rate_field])]
     if samples.size == 0:
         raise BadRecordingInput(
-            f"{recording.path}: no sample with a finite time, {axis} angle and rate: nothing to export "
-            f"(a tankdaq recording holds them on {TOPIC_SAMPLES})"
+            f"{recording.path}: no sample with a finite time, {recording.axis} angle and rate: nothing to "
+            f"export (a tankdaq recording holds them on {TOPIC_SAMPLES})"
         )
-    releases = _release_times(recording.events)
-    origin = releases[0] if frame == "release" and releases else 0.0
-    columns = {
-        "time_s": samples["t"] - origin,
-        "angle_rad": samples[angle_field],
-        "rate_rad_s": samples[rate_field],
-    }
-    units = {"time_s": "s", "angle_rad": "rad", "rate_rad_s": "rad/s"}
-    for field in samples.dtype.names:
-        if field in ("t", angle_field, rate_field):
-            continue
-        unit = SAMPLE_UNITS[field]
-        name = f"{field}_{UNIT_SUFFIX[unit]}" if unit in UNIT_SUFFIX else field
-        columns[name] = samples[field].astype(float)
-        units[name] = unit
+    return _Usable(recording, samples, _release_times(recording.events))
+
+
+def _table(usable: _Usable, samples: np.ndarray, decay: int | None, name: str, frame: str) -> ExportTable:
+    """Columns of ``samples`` with t = 0 at release number ``decay`` (the first when None: the whole
+    recording) in the release frame; the metadata lists the releases the table holds."""
+    recording = usable.recording
+    axis = recording.axis
+    frame = frame if usable.releases else "device"
+    held = usable.releases if decay is None else usable.releases[decay : decay + 1]
+    origin = held[0] if frame == "release" else 0.0
+    angle_field, rate_field = AXIS_FIELDS[axis]
+    fields = [angle_field, rate_field]
+    fields += [f for f in samples.dtype.names or () if f not in (*fields, "t")]
+    columns = {TIME_COLUMN: samples["t"] - origin}
+    units = {TIME_COLUMN: "s"}
+    if frame == "release":
+        columns[DEVICE_TIME_COLUMN], units[DEVICE_TIME_COLUMN] = samples["t"].copy(), "s"
+    for field in fields:
+        columns[column_name(field)] = samples[field].copy()
+        units[column_name(field)] = SAMPLE_UNITS[field]
+    meta = typed_metadata(recording.metadata)
+    nominal = meta.get("angle_nominal_deg")
     metadata: dict[str, object] = {
-        **recording.metadata,
+        "format": EXPORT_FORMAT,
+        **meta,
         "source": str(recording.path),
         "axis": axis,
         "frame": frame,
         "time_origin_s": origin,
-        "release_t_s": [r - origin for r in releases],
-        "dropped_rows": int(recording.samples.size - samples.size),
+        "release_t_s": [r - origin for r in held],
+        "dropped_rows": usable.dropped_rows,
         "complete_file": recording.complete,
     }
-    return ExportTable(recording.path.stem, columns, units, metadata)
-
-
-def write_csv(table: ExportTable, path: Path) -> Path:
-    """Comment block (metadata, one JSON value per key), header, units row, rows at full precision."""
-    lines = [f"{CSV_MARK} of {table.metadata.get('source', table.name)}"]
-    lines += [f"# {key} = {json.dumps(value)}" for key, value in table.metadata.items()]
-    lines.append(",".join(table.columns))
-    lines.append(",".join(table.units[name] for name in table.columns))
-    matrix = np.column_stack(list(table.columns.values()))
-    lines += [",".join(repr(float(x)) for x in row) for row in matrix]
-    path.write_text("\n".join(lines) + "\n")
-    return path
-
-
-def write_mat(table: ExportTable, path: Path) -> Path:
-    """One struct ``tankdaq`` with the columns, ``units`` and ``meta`` (scipy.io.savemat, MATLAB 5)."""
-    from scipy.io import savemat
-
-    meta = {key: json.dumps(value) if isinstance(value, list | dict | bool) else value for key, value in
-            table.metadata.items() if value is not None}  # fmt: skip
-    struct = {**table.columns, "units": dict(table.units), "meta": meta}
-    savemat(path, {"tankdaq": struct}, long_field_names=True, oned_as="column")
-    return path
-
-
-#: Writer by format name; the format name is also the file suffix.
-WRITERS: dict[str, Callable[[ExportTable, Path], Path]] = {"csv": write_csv, "mat": write_mat}
+    if isinstance(nominal, int | float) and math.isfinite(nominal):  # the campaign's label sidecar key
+        metadata["angle_deg"] = float(nominal)
+    return ExportTable(name, columns, units, metadata)
 
 
 def export_recording(
     path: str | Path,
     file_format: str,
     out_dir: Path | None = None,
-    frame: str = "device",
+    frame: str = FRAMES[0],
     on_notice: Callable[[str], None] | None = None,
-) -> Path:
-    """Write one recording as ``<out_dir>/<stem>.<format>`` (default beside it); returns the path written.
+) -> list[Path]:
+    """Write one recording as ``<out_dir>/<stem>.<format>`` (default beside it; one file per decay for
+    ``PER_DECAY`` formats, a ``<stem>.json`` sidecar beside a CSV); returns the paths written.
 
-    ``on_notice`` hears the one line that says the recording is cut short, when it is.
+    ``on_notice`` hears the lines the user should read: the recording is cut short, or holds no release
+    (its times stay device time).
     """
-    writer = WRITERS.get(file_format)
-    if writer is None:
-        raise InputError(f"format {file_format!r} not understood: use {' or '.join(WRITERS)}")
-    table = recording_table(path, frame)
-    if not table.metadata["complete_file"] and on_notice is not None:
-        on_notice(truncation_notice(path))
+    check_options(file_format, frame)
+    tables = decay_tables(path, frame) if file_format in PER_DECAY else [recording_table(path, frame)]
+    if on_notice is not None:
+        if not tables[0].metadata["complete_file"]:
+            on_notice(truncation_notice(path))
+        if frame == "release" and tables[0].metadata["frame"] == "device":
+            on_notice(f"{path}: no release recorded, so its times are the device clock (--frame device)")
+    if file_format in PER_DECAY and len(tables) > 1:  # each decay file says which decay it holds
+        tables = [
+            replace(table, metadata={**table.metadata, "decay": k, "decays": len(tables)})
+            for k, table in enumerate(tables, start=1)
+        ]
     folder = out_dir if out_dir is not None else Path(path).parent
+    writer = WRITERS[file_format]
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        return writer(table, folder / f"{table.name}.{file_format}")
+        return [path for table in tables for path in writer(table, folder / f"{table.name}.{file_format}")]
     except OSError as exc:
         raise InputError(f"cannot write into {folder}: {exc.strerror or exc}") from None

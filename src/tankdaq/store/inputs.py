@@ -39,7 +39,7 @@ def _read_mcap(path: Path, axis: str | None, _options: CsvOptions) -> list[Decay
 
 
 def _read_csv(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun]:
-    return read_csv_file(path, options, axis or "roll")
+    return read_csv_file(path, options, axis)
 
 
 #: Suffix (lower case) -> format.
