@@ -2,47 +2,31 @@
 
 The library keeps SI units and radians inside (``samples.SAMPLE_DTYPE``, ``records.DecayRun``); this is an
 edge, so angles and rates come out in degrees and every column name ends in its unit (``roll_deg``,
-``roll_rate_deg_s``, ``acc_z_m_s2``). The names are made from the sample fields and ``SAMPLE_UNITS``, the
-one vocabulary: a field's people name (``p`` is the roll rate) plus the suffix of its unit. ``time_s``
-counts from the first release (the time people plot a decay against); ``device_time_s`` keeps the device
-clock beside it.
+``p_deg_s``, ``az_m_s2``): the names of ``tankdaq export``'s files (``store.export_layout``: the sample
+field and the suffix of its unit), with degrees for radians, so a DataFrame and an exported file speak one
+vocabulary. ``time_s`` counts from the first release (the time people plot a decay against);
+``device_time_s`` keeps the device clock beside it.
 """
 
 from __future__ import annotations
 
 import html
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
+from ..errors import InputError
 from ..records import DecayRun
-from ..samples import SAMPLE_UNITS
+from ..samples import AXIS_FIELDS, SAMPLE_UNITS
+from ..store.export_layout import DEVICE_TIME_COLUMN, TIME_COLUMN, column_name
 
 if TYPE_CHECKING:
     import pandas as pd
 
-#: The people name of the sample fields whose own name is a symbol (the rest keep theirs).
-FIELD_NAMES = {
-    "t": "device_time",
-    "host_t": "host_time",
-    "p": "roll_rate",
-    "q": "pitch_rate",
-    "r": "yaw_rate",
-    "ax": "acc_x",
-    "ay": "acc_y",
-    "az": "acc_z",
-}
-#: SI unit -> (unit people read, its column suffix, conversion from SI); units not listed stay as stored.
-PEOPLE_UNITS: dict[str, tuple[str, str, Callable[[np.ndarray], np.ndarray] | None]] = {
-    "rad": ("deg", "deg", np.degrees),
-    "rad/s": ("deg/s", "deg_s", np.degrees),
-    "s": ("s", "s", None),
-    "s since epoch": ("s since epoch", "s", None),
-    "m/s^2": ("m/s^2", "m_s2", None),
-}
+#: SI unit -> (the unit people read, its column suffix): angles and rates in degrees at this edge.
+DEGREES = {"rad": ("deg", "deg"), "rad/s": ("deg/s", "deg_s")}
 
 
 class RecordingMeta(TypedDict, total=False):
@@ -62,18 +46,20 @@ class RecordingMeta(TypedDict, total=False):
     release_device_time_s: list[float]  # each decay's release on the device clock
     complete_file: bool  # False: the file was cut short (``truncation`` says what to do)
     truncation: str | None
-    stored: dict[str, str]  # a recording's metadata as written, every key
+    stored: dict[str, object]  # a recording's metadata as written, every key, typed
 
 
 def people_column(field_name: str, values: np.ndarray) -> tuple[str, str, np.ndarray]:
-    """(column name, unit, values) of one sample field at the edge: degrees, the unit in the name."""
-    unit = SAMPLE_UNITS.get(field_name, "")
-    name = FIELD_NAMES.get(field_name, field_name)
-    if unit not in PEOPLE_UNITS:
-        return name, unit, np.asarray(values)
-    shown, suffix, convert = PEOPLE_UNITS[unit]
-    data = np.asarray(values, dtype=float)
-    return f"{name}_{suffix}", shown, convert(data) if convert is not None else data
+    """(column name, unit, values) of one sample field at the edge: the export's name
+    (``store.export_layout``: the field and its unit's suffix, the device clock ``device_time_s``) with
+    angles and rates in degrees (``roll_deg``, ``p_deg_s``)."""
+    if field_name == "t":
+        return DEVICE_TIME_COLUMN, "s", np.asarray(values, dtype=float)
+    unit = SAMPLE_UNITS[field_name]
+    if unit in DEGREES:
+        shown, suffix = DEGREES[unit]
+        return f"{field_name}_{suffix}", shown, np.degrees(np.asarray(values, dtype=float))
+    return column_name(field_name), unit, np.asarray(values)
 
 
 def frame(columns: dict[str, tuple[str, np.ndarray]]) -> pd.DataFrame:
@@ -118,14 +104,17 @@ class Decay:
 
 
 def decay_frame(run: DecayRun) -> pd.DataFrame:
-    """A decay's samples at the edge: ``time_s`` from its release, ``<axis>_deg``, ``<axis>_rate_deg_s``,
-    and its channels (as stored, SI, under the names the reader gave them)."""
+    """A decay's samples at the edge: ``time_s`` from its release, the angle and rate in degrees
+    (``roll_deg``, ``p_deg_s``), and its channels (as stored, SI, under the names the reader gave them)."""
+    angle_field, rate_field = AXIS_FIELDS[run.axis]
+    name, unit, angle = people_column(angle_field, run.angle)
     columns: dict[str, tuple[str, np.ndarray]] = {
-        "time_s": ("s", run.t - _release_of(run)),
-        f"{run.axis}_deg": ("deg", np.degrees(run.angle)),
+        TIME_COLUMN: ("s", run.t - _release_of(run)),
+        name: (unit, angle),
     }
     if run.rate is not None:
-        columns[f"{run.axis}_rate_deg_s"] = ("deg/s", np.degrees(run.rate))
+        name, unit, rate = people_column(rate_field, run.rate)
+        columns[name] = (unit, rate)
     columns.update({name: ("SI", values) for name, values in run.channels.items()})
     return frame(columns)
 
@@ -137,7 +126,7 @@ class Recording:
     lines the reading has for the user (``notices``). Shown as a table in a notebook.
 
     >>> rec = tankdaq.read("recordings/demo/swath_T_roll_8deg_20261121-143015_run01.mcap")  # doctest: +SKIP
-    >>> rec.samples[["time_s", "roll_deg", "roll_rate_deg_s"]].head()  # doctest: +SKIP
+    >>> rec.samples[["time_s", "roll_deg", "p_deg_s"]].head()  # doctest: +SKIP
     """
 
     path: Path
@@ -151,24 +140,34 @@ class Recording:
         """Each column of ``samples`` and its unit."""
         return dict(self.samples.attrs.get("units", {}))
 
-    def export(self, file_format: str, out_dir: str | Path | None = None, frame: str | None = None) -> Path:
-        """Write this recording through ``tankdaq export``'s writers (``store.export``: csv, mat, and
-        whatever else ``WRITERS`` holds); returns the file written. A recording (MCAP) only: a CSV is
-        already a file every tool opens. ``frame`` is the time origin, ``"release"`` or ``"device"``
-        (default: the exporter's)."""
-        from ..errors import InputError
+    def export(
+        self, file_format: str, out_dir: str | Path | None = None, frame: str = "release"
+    ) -> list[Path]:
+        """Write this recording as ``tankdaq export`` does (``store.export``: ``csv`` with its ``.json``
+        sidecar, ``h5`` one file per decay, ``parquet``, ``mat``) into ``out_dir`` (default: beside it);
+        returns the files written. The files hold the recording's SI values exactly; ``frame`` is the
+        time origin, ``"release"`` (time since the release) or ``"device"``."""
         from ..store.export import export_recording
 
         if self.meta.get("format") != "tankdaq recording":
             raise InputError(f"{self.path} is a CSV file already: only a recording (.mcap) is exported")
-        folder = Path(out_dir) if out_dir is not None else None
-        if frame is None:
-            return export_recording(self.path, file_format, folder)
-        return export_recording(self.path, file_format, folder, frame=frame)
+        return export_recording(self.path, file_format, Path(out_dir) if out_dir is not None else None, frame)
 
-    def to_csv(self, out_dir: str | Path | None = None) -> Path:
-        """``export("csv", out_dir)``: the CSV ``tankdaq export`` writes."""
-        return self.export("csv", out_dir)
+    def to_csv(self, out_dir: str | Path | None = None, frame: str = "release") -> Path:
+        """The CSV ``pd.read_csv`` reads without options (units in the column names, the metadata in a
+        ``.json`` sidecar beside it); returns its path.
+
+        >>> pd.read_csv(rec.to_csv("exports"))  # doctest: +SKIP
+        """
+        return self.export("csv", out_dir, frame)[0]
+
+    def to_hdf5(self, out_dir: str | Path | None = None, frame: str = "release") -> list[Path]:
+        """One HDF5 file per decay (a dataset per column with its ``unit`` attribute, the metadata as typed
+        root attributes); returns their paths.
+
+        >>> h5py.File(rec.to_hdf5("exports")[0])["roll_rad"][:]  # doctest: +SKIP
+        """
+        return self.export("h5", out_dir, frame)
 
     def _repr_html_(self) -> str:
         meta = {k: v for k, v in self.meta.items() if k != "stored"}
@@ -247,17 +246,18 @@ def _split_at(samples: pd.DataFrame, releases: list[float]) -> list[pd.DataFrame
 
 
 def _recording_samples(path: Path, releases: list[float]) -> tuple[pd.DataFrame, dict[str, str]]:
-    """Every sample of a recording at the edge, and its metadata as stored."""
+    """Every sample of a recording at the edge, and its metadata (typed as ``tankdaq export`` types it)."""
+    from ..store.export import typed_metadata
     from ..store.reader import read_recording
 
     recording = read_recording(path)
     samples = recording.samples
     origin = releases[0] if releases else float(samples["t"][0])
-    columns: dict[str, tuple[str, np.ndarray]] = {"time_s": ("s", samples["t"] - origin)}
+    columns: dict[str, tuple[str, np.ndarray]] = {TIME_COLUMN: ("s", samples["t"] - origin)}
     for name in samples.dtype.names or ():
         column, unit, values = people_column(name, samples[name])
         columns[column] = (unit, values)
-    return frame(columns), dict(recording.metadata)
+    return frame(columns), typed_metadata(recording.metadata)
 
 
 def runs_of(data: Any) -> list[DecayRun] | None:
