@@ -245,7 +245,7 @@ def _split_at(samples: pd.DataFrame, releases: list[float]) -> list[pd.DataFrame
     return parts
 
 
-def _recording_samples(path: Path, releases: list[float]) -> tuple[pd.DataFrame, dict[str, str]]:
+def _recording_samples(path: Path, releases: list[float]) -> tuple[pd.DataFrame, dict[str, object]]:
     """Every sample of a recording at the edge, and its metadata (typed as ``tankdaq export`` types it)."""
     from ..store.export import typed_metadata
     from ..store.reader import read_recording
