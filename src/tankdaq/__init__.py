@@ -18,6 +18,8 @@ Whatever ``__all__`` does not name is internal. The names load on first use, so 
 from __future__ import annotations
 
 import importlib
+import sys
+import types
 from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
@@ -69,3 +71,17 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted({*globals(), *__all__})
+
+
+class _Package(types.ModuleType):
+    """``tankdaq`` itself. Importing a subpackage binds it as an attribute of its parent; the API's
+    ``tankdaq.diagnose`` (the function) shares its name with the ``tankdaq.diagnose`` room, so a public
+    name is never rebound to a module: the room stays reachable by ``from tankdaq.diagnose import ...``."""
+
+    def __setattr__(self, name: str, value: object) -> None:
+        if name in _PUBLIC and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from .. import validation
 from ..errors import InputError
-from .identification import Reading, Source, load_runs
+from .identification import Reading, Source, load_runs, truncations
 from .progress import Kept, Progress
 from .recording import Recording, read
 
@@ -196,14 +196,16 @@ def campaign(
 @dataclass(frozen=True)
 class Diagnosis:
     """What ``diagnose`` found: ``story`` (the lines ``tankdaq diagnose`` prints), ``document`` (its
-    ``--json``), ``diagnoser`` (the fitted ``diagnose.workflow.Diagnoser``), ``report`` (the Markdown
-    report written, when asked)."""
+    ``--json``, less the truncation keys: ``truncated_files`` lists the recordings cut short),
+    ``diagnoser`` (the fitted ``diagnose.workflow.Diagnoser``), ``report`` (the Markdown report written,
+    when asked)."""
 
     diagnoser: Diagnoser
     story: list[str]
     document: dict[str, Any]
     notices: list[str]
     report: Path | None
+    truncated_files: list[str]
 
     def _repr_html_(self) -> str:
         return f"<pre>{html.escape(chr(10).join(self.story))}</pre>"
@@ -233,11 +235,14 @@ def diagnose(
     folder = validation.output_dir(Path(report), option="report") if report is not None else None
     kept = Kept(progress)
     runs = load_runs(sources, reading or Reading(axis="roll"), kept)
-    prepare_identifier(baseline, kept.line)
+    cut = truncations(runs)
+    for line in cut.values():
+        kept.line(line)
+    prepare_identifier(baseline, kept.line)  # the native kernels: built once, on the first run
     with kept.task("baseline", 1 + max_steps * (len(LIBRARY) + 2)) as advance:
         count = itertools.count(1)
         step = lambda _label: advance(next(count))  # noqa: E731
         diagnoser = Diagnoser(baseline=baseline, max_steps=max_steps, progress=step).fit(runs)
     written = report_module.write_report(diagnoser, folder) if folder is not None else None
     document = json.loads(report_module.summary_json(diagnoser))
-    return Diagnosis(diagnoser, report_module.story(diagnoser), document, kept.lines, written)
+    return Diagnosis(diagnoser, report_module.story(diagnoser), document, kept.lines, written, list(cut))
