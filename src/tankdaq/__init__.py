@@ -39,19 +39,19 @@ __all__ = [
     "simulate",
 ]
 
-#: Public name -> the API module that holds it.
+#: Public name -> the module that holds it.
 _PUBLIC = {
-    "read": "recording",
-    "Recording": "recording",
-    "Decay": "recording",
-    "identify": "identification",
-    "Identification": "identification",
-    "Reading": "identification",
-    "campaign": "workflows",
-    "Campaign": "workflows",
-    "diagnose": "workflows",
-    "Diagnosis": "workflows",
-    "simulate": "workflows",
+    "read": "api.recording",
+    "Recording": "api.recording",
+    "Decay": "api.recording",
+    "identify": "api.identification",
+    "Identification": "api.identification",
+    "Reading": "api.identification",
+    "campaign": "api.workflows",
+    "Campaign": "api.workflows",
+    "diagnose": "api.workflows",
+    "Diagnosis": "api.workflows",
+    "simulate": "api.workflows",
 }
 
 if TYPE_CHECKING:
@@ -64,7 +64,7 @@ def __getattr__(name: str) -> Any:
     """The public names, imported when first asked for (PEP 562)."""
     if name not in _PUBLIC:
         raise AttributeError(f"module 'tankdaq' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".api.{_PUBLIC[name]}", __name__), name)
+    value = getattr(importlib.import_module(f".{_PUBLIC[name]}", __name__), name)
     globals()[name] = value
     return value
 

@@ -35,14 +35,15 @@ Source = str | Path | Recording | Decay | DecayRun
 
 @dataclass(frozen=True)
 class ConditionFit:
-    """One fit: the runs of one condition (or all of them, pooled), the fitted estimator, its summary
-    (one ``groups`` entry of the JSON) and the lines the text report adds (B̂44, full scale)."""
+    """One fit: the runs of one condition (or of several, ``pooled`` by ``joint``), the fitted estimator,
+    its summary (one ``groups`` entry of the JSON) and the lines the text report adds (B̂44, full scale)."""
 
     label: str
     runs: list[DecayRun]
     estimator: Any
     summary: dict[str, Any]
     scaled_lines: list[str]
+    pooled: bool = False
 
 
 @dataclass(frozen=True)
@@ -296,7 +297,7 @@ def identify(
             summary["warnings"].insert(0, pooled)
             summary["conditions"] = pooled
         lines = scale_results(summary, hull_config, draft, scale)  # B̂44; the ship's
-        fits.append(ConditionFit(label, condition_runs, estimator, summary, lines))
+        fits.append(ConditionFit(label, condition_runs, estimator, summary, lines, pooled is not None))
     truncated = {"truncated": bool(cut), "truncated_files": list(cut)}
     if len(fits) == 1:
         document: dict[str, Any] = {**fits[0].summary, **truncated}
