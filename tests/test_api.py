@@ -25,18 +25,21 @@ from tankdaq.store.reader import read_recording
 runner = CliRunner()
 
 
+def timeless(document: dict) -> dict:
+    """The document without the fits' wall times, the one value two runs never share."""
+    for fit in [document, *document.get("groups", [])]:
+        fit.pop("elapsed_s", None)
+    return document
+
+
 def cli_json(*args: object) -> dict:
     result = runner.invoke(app, [*map(str, args), "--json"])
     assert result.exit_code == 0, result.output
-    document = json.loads(result.stdout)
-    document.pop("elapsed_s", None)  # the fit's wall time, the one value two runs never share
-    return document
+    return timeless(json.loads(result.stdout))
 
 
 def api_json(result: tankdaq.Identification) -> dict:
-    document = json.loads(result.to_json())
-    document.pop("elapsed_s", None)
-    return document
+    return timeless(json.loads(result.to_json()))
 
 
 @pytest.fixture(scope="module")
@@ -170,3 +173,23 @@ def test_campaign_and_diagnose_give_their_commands_results(
     assert command.pop("truncated") is False and command.pop("truncated_files") == []
     assert {k: v for k, v in diagnosis.document.items() if k != "elapsed_s"} == command
     assert any(line.startswith("baseline b1,c1: RMS") for line in diagnosis.story)
+
+
+def test_conditions_are_fitted_apart_as_the_cli_fits_them(
+    simulated: list[tankdaq.Recording], tmp_path: Path
+) -> None:
+    (deeper,) = tankdaq.simulate(tmp_path, draft="1.1T", seed=6, decay_s=15.0)
+    assert deeper.meta["draft"] == pytest.approx(1.1)
+    sources = [simulated[0].path, deeper.path]
+    result = tankdaq.identify(sources, "b1,b2,c1")
+    assert api_json(result) == cli_json("identify", *sources, "--model", "b1,b2,c1")
+    assert [fit.label for fit in result.fits] == ["swath T roll", "swath 1.1T roll"]
+    table = result.coefficients
+    assert list(table["condition"]) == ["swath T roll"] * 3 + ["swath 1.1T roll"] * 3
+    assert list(table["value"]) == [
+        group["coefficients"][term]["value"]
+        for group in result.document["groups"]
+        for term in ("b1", "b2", "c1")
+    ]
+    assert set(result.derived["condition"]) == {"swath T roll", "swath 1.1T roll"}
+    assert any(line.startswith("2 conditions, one fit each") for line in result.notices)
