@@ -6,6 +6,7 @@ CLI runs in-process on the same files, and the API must give the CLI's numbers e
 
 from __future__ import annotations
 
+import html
 import json
 import subprocess
 import sys
@@ -193,3 +194,22 @@ def test_conditions_are_fitted_apart_as_the_cli_fits_them(
     ]
     assert set(result.derived["condition"]) == {"swath T roll", "swath 1.1T roll"}
     assert any(line.startswith("2 conditions, one fit each") for line in result.notices)
+
+
+def test_warnings_go_wherever_the_result_is_shown(tmp_path: Path) -> None:
+    """A noise-free decay leaves residuals far from white: the fit warns, and every view of it says so."""
+    from tankdaq.physics.decay import simulate_decay
+
+    t = np.arange(0.0, 40.0, 0.02)
+    angle, rate = simulate_decay({"b1": 0.05, "c1": 1.6}, t, np.radians(8.0))
+    path = tmp_path / "clean.csv"
+    pd.DataFrame({"time_s": t, "angle_deg": np.degrees(angle), "rate_deg_s": np.degrees(rate)}).to_csv(
+        path, index=False
+    )
+    result = tankdaq.identify(path, "b1,c1")
+    assert result.warnings and result.warnings == result.document["warnings"]
+    assert result.coefficients.attrs["warnings"] == result.warnings == result.derived.attrs["warnings"]
+    assert f"({len(result.warnings)} warnings: result.warnings)" in result.plot().axes[0].get_title()
+    shown = result._repr_html_()
+    assert all(f"warning: {line}" in shown for line in map(html.escape, result.warnings))
+    assert all(f"warning: {line}" in result.text() for line in result.warnings)

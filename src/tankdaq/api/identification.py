@@ -84,7 +84,7 @@ class Identification:
             for fit in self.fits
             for term, entry in fit.summary["coefficients"].items()
         ]
-        return _table(rows)
+        return self._with_warnings(_table(rows))
 
     @property
     def derived(self) -> pd.DataFrame:
@@ -105,10 +105,16 @@ class Identification:
             for fit in self.fits
             for b_eq, bertin in zip(fit.summary["b_eq"], fit.summary["bertin_n"], strict=True)
         ]
-        return _table(rows)
+        return self._with_warnings(_table(rows))
 
     def _condition(self, fit: ConditionFit) -> dict[str, str]:
         return {"condition": fit.label} if len(self.fits) > 1 else {}
+
+    def _with_warnings(self, table: pd.DataFrame) -> pd.DataFrame:
+        """A table of this fit carries its warnings (``table.attrs["warnings"]``): an implausible result
+        is never shown without them."""
+        table.attrs["warnings"] = self.warnings
+        return table
 
     def to_json(self) -> str:
         """The text ``tankdaq identify --json`` prints (NaN and infinities as null)."""
@@ -133,7 +139,9 @@ class Identification:
         fit = self.fits[condition]
         run = fit.runs[decay]
         model = predicted_angles(fit.estimator, [run] if len(fit.runs) == 1 else fit.runs)
-        title = f"{run.name}: {fit.summary['model']['name']}"
+        found = len(fit.summary["warnings"])
+        said = f" ({found} warning{'s' if found > 1 else ''}: result.warnings)" if found else ""
+        title = f"{run.name}: {fit.summary['model']['name']}{said}"
         return decay_fit_figure(
             run.t - run.t[0], run.angle, model[0 if len(fit.runs) == 1 else decay], axis=run.axis, title=title
         )

@@ -184,7 +184,8 @@ def campaign(
         found = read_campaign(paths, start_s, end_s, pool, lambda _path: reading(next(count)))
         if not found.runs:
             raise InputError(found.skipped[0].reason if len(found.skipped) == 1 else "no decays read")
-        for line in [*(skipped.line for skipped in found.skipped), *input_notices(found.runs)]:
+        cut = truncations(found.runs).values()
+        for line in [*(skipped.line for skipped in found.skipped), *input_notices(found.runs), *cut]:
             kept.line(line)
         groups = group_runs(found.runs)
         known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
