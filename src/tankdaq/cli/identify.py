@@ -143,7 +143,7 @@ def identify_command(
         axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end
     )
     if compare:
-        _compare(inputs, reading, method, joint, as_json)
+        _compare(inputs, reading, method, as_json)
         return
     result = identify(
         inputs, model, method=method, joint=joint, hull=hull, draft=draft, full_scale=full_scale,
@@ -152,7 +152,7 @@ def identify_command(
     typer.echo(result.to_json() if as_json else result.text())
 
 
-def _compare(inputs: list[Path], reading: Reading, method: str, joint: bool, as_json: bool) -> None:
+def _compare(inputs: list[Path], reading: Reading, method: str, as_json: bool) -> None:
     """``--compare``: every seed formula and ITTC form fitted to the decays, the table printed."""
     from ..api.identification import load_runs, to_json, truncations
     from ..ident.conditions import group_conditions, grouping_line
