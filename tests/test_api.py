@@ -213,3 +213,33 @@ def test_warnings_go_wherever_the_result_is_shown(tmp_path: Path) -> None:
     shown = result._repr_html_()
     assert all(f"warning: {line}" in shown for line in map(html.escape, result.warnings))
     assert all(f"warning: {line}" in result.text() for line in result.warnings)
+
+
+def test_an_exported_csv_reads_back_as_the_recording(
+    simulated: list[tankdaq.Recording], tmp_path: Path
+) -> None:
+    rec = simulated[0]
+    back = tankdaq.read(rec.to_csv(tmp_path))
+    assert back.meta["format"] == "CSV" and back.units == rec.units
+    columns = list(rec.samples)
+    same = {"check_exact": True, "check_dtype": False}  # the CSV reader gives floats; the values are equal
+    pd.testing.assert_frame_equal(back.samples[columns], rec.samples, **same)
+    pd.testing.assert_frame_equal(back.decays[0].samples[columns], rec.decays[0].samples, **same)
+    with pytest.raises(InputError, match="CSV file already"):
+        back.to_csv(tmp_path)
+
+
+KVLCC2 = (
+    Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2-roll-decay" / "model_test_21338.csv"
+)
+
+
+@pytest.mark.skipif(not KVLCC2.is_file(), reason=f"the KVLCC2 roll decay is not at {KVLCC2}")
+def test_a_foreign_csv_in_radians_reads_in_degrees() -> None:
+    rec = tankdaq.read(KVLCC2, time_col="time", angle_col="phi", rate_col=None)
+    raw = pd.read_csv(KVLCC2)
+    np.testing.assert_allclose(rec.samples["roll_deg"], np.degrees(raw["phi"]), rtol=1e-12)
+    assert rec.units["roll_deg"] == "deg" and rec.units["theta"] == "as read"
+    assert any("angle unit: rad" in line for line in rec.notices)
+    assert len(rec.decays) == 1 and rec.decays[0].samples["time_s"].iloc[0] == 0.0
+    assert abs(rec.decays[0].initial_angle_deg) > 5.0

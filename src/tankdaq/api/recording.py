@@ -72,9 +72,15 @@ def frame(columns: dict[str, tuple[str, np.ndarray]]) -> pd.DataFrame:
 
 
 def _release_of(run: DecayRun) -> float:
-    """Where a decay's own time starts: its release on the file's clock (its first sample for a CSV)."""
+    """Where a decay's own time starts: its release on the file's clock (a recording's release event; an
+    exported CSV's last ``release_t_s`` at or before the run; else its first sample, the release found)."""
     value = run.meta.get("release_t_s")
-    return float(value) if isinstance(value, int | float) else float(run.t[0])
+    if isinstance(value, int | float):
+        return float(value)
+    if isinstance(value, list):
+        before = [float(r) for r in value if isinstance(r, int | float) and r <= run.t[0]]
+        return max(before) if before else float(run.t[0])
+    return float(run.t[0])
 
 
 @dataclass(frozen=True)
@@ -105,7 +111,7 @@ class Decay:
 
 def decay_frame(run: DecayRun) -> pd.DataFrame:
     """A decay's samples at the edge: ``time_s`` from its release, the angle and rate in degrees
-    (``roll_deg``, ``p_deg_s``), and its channels (as stored, SI, under the names the reader gave them)."""
+    (``roll_deg``, ``p_deg_s``), and its channels (``_channel_column``)."""
     angle_field, rate_field = AXIS_FIELDS[run.axis]
     name, unit, angle = people_column(angle_field, run.angle)
     columns: dict[str, tuple[str, np.ndarray]] = {
@@ -115,8 +121,24 @@ def decay_frame(run: DecayRun) -> pd.DataFrame:
     if run.rate is not None:
         name, unit, rate = people_column(rate_field, run.rate)
         columns[name] = (unit, rate)
-    columns.update({name: ("SI", values) for name, values in run.channels.items()})
+    for channel, values in run.channels.items():
+        name, unit, shown = _channel_column(channel, values)
+        columns[name] = (unit, shown)
     return frame(columns)
+
+
+#: The SI suffixes a CSV reader leaves on a channel's name (``_deg``/``_rad`` columns lose theirs).
+_KEPT_SUFFIXES = ("_rad_s", "_m_s2")
+
+
+def _channel_column(channel: str, values: np.ndarray) -> tuple[str, str, np.ndarray]:
+    """A CSV channel at the edge: a sample field (an exported file's ``pitch_rad``, ``q_rad_s``, ``ax_m_s2``)
+    under the samples' name and unit; any other column as the reader gave it (``as read``: SI when its
+    name said a unit, else the file's own)."""
+    field_name = next((channel[: -len(s)] for s in _KEPT_SUFFIXES if channel.endswith(s)), channel)
+    if field_name in SAMPLE_UNITS and field_name != "t":
+        return people_column(field_name, values)
+    return channel, "s" if channel == DEVICE_TIME_COLUMN else "as read", values
 
 
 @dataclass(frozen=True)
@@ -215,7 +237,7 @@ def read(
     first = runs[0]
     meta: RecordingMeta = {"source": str(path), "format": kind, "axis": first.axis}
     for key in RecordingMeta.__annotations__:
-        if key in first.meta and key not in ("source", "axis"):
+        if key in first.meta and key not in ("source", "axis", "format"):
             meta[key] = first.meta[key]  # type: ignore[literal-required]
     releases = [_release_of(run) for run in runs]
     meta["release_device_time_s"] = releases
