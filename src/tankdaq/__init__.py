@@ -20,7 +20,10 @@ from __future__ import annotations
 import importlib
 import sys
 import types
-from typing import TYPE_CHECKING, Any
+
+TYPE_CHECKING = (
+    False  # not ``typing``'s: importing typing was most of ``import tankdaq`` (mypy knows the name)
+)
 
 __version__ = "0.1.0"
 
@@ -55,6 +58,8 @@ _PUBLIC = {
 }
 
 if TYPE_CHECKING:
+    from typing import Any
+
     from .api.identification import Identification, Reading, identify
     from .api.recording import Decay, Recording, read
     from .api.workflows import Campaign, Diagnosis, campaign, diagnose, simulate
