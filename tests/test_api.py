@@ -243,3 +243,24 @@ def test_a_foreign_csv_in_radians_reads_in_degrees() -> None:
     assert any("angle unit: rad" in line for line in rec.notices)
     assert len(rec.decays) == 1 and rec.decays[0].samples["time_s"].iloc[0] == 0.0
     assert abs(rec.decays[0].initial_angle_deg) > 5.0
+
+
+def test_a_recording_stopped_before_a_release_reads_without_decays(tmp_path: Path) -> None:
+    """Its samples are not lost to a missing release: read gives them and says why there is no decay;
+    identify refuses it in one line."""
+    from tankdaq.samples import empty_samples
+    from tankdaq.store.writer import RecordingWriter
+
+    samples = empty_samples(200)
+    samples["t"] = 100.0 + np.arange(200) / 100.0
+    samples["roll"] = np.radians(2.0)
+    samples["p"] = 0.0
+    with RecordingWriter(tmp_path / "held.mcap", {"axis": "roll"}, {}) as writer:
+        writer.write_samples(samples)
+    rec = tankdaq.read(writer.path)
+    assert rec.decays == [] and rec.meta["release_device_time_s"] == []
+    assert any("no release recorded" in line for line in rec.notices)
+    np.testing.assert_array_equal(rec.samples["time_s"], samples["t"] - 100.0)
+    np.testing.assert_array_equal(rec.samples["roll_deg"], np.full(200, 2.0))
+    with pytest.raises(InputError, match="hold no release"):
+        tankdaq.identify(rec)

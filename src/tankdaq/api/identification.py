@@ -228,6 +228,8 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
             Path(str(item)), r.axis, r.time_col, r.angle_col, r.rate_col, r.angle_unit, r.keep_all,
             r.skip_half_cycles, r.time_unit,
         )  # fmt: skip
+    if not runs:  # a recording read with no release in it
+        raise InputError("no decay to fit: the recordings given hold no release (tankdaq.read says so)")
     for line in input_notices(runs):
         progress.line(line)
     return cut_free_decays(runs, r.start_s, r.end_s)

@@ -11,6 +11,7 @@ vocabulary. ``time_s`` counts from the first release (the time people plot a dec
 from __future__ import annotations
 
 import html
+import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict
@@ -24,6 +25,8 @@ from ..store.export_layout import DEVICE_TIME_COLUMN, TIME_COLUMN, column_name
 
 if TYPE_CHECKING:
     import pandas as pd
+
+    from ..store.csv_import import CsvOptions
 
 #: SI unit -> (the unit people read, its column suffix): angles and rates in degrees at this edge.
 DEGREES = {"rad": ("deg", "deg"), "rad/s": ("deg/s", "deg_s")}
@@ -227,31 +230,65 @@ def read(
     >>> rec = tankdaq.read("run.mcap")  # doctest: +SKIP
     >>> rec.decays[0].samples.plot(x="time_s", y="roll_deg")  # doctest: +SKIP
     """
-    from ..ident.inputs import input_notices, read_decays
     from ..store.csv_import import CsvOptions
-    from ..store.inputs import input_format, read_runs
+    from ..store.inputs import input_format
 
+    if axis not in (None, "roll", "pitch"):
+        raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     path = Path(path)
     kind = input_format(path).name  # an unknown suffix is one line before anything is read
-    runs = read_decays(path, axis, time_col, angle_col, rate_col, angle_unit, False, 0, time_unit)
-    first = runs[0]
-    meta: RecordingMeta = {"source": str(path), "format": kind, "axis": first.axis}
-    for key in RecordingMeta.__annotations__:
-        if key in first.meta and key not in ("source", "axis", "format"):
-            meta[key] = first.meta[key]  # type: ignore[literal-required]
-    releases = [_release_of(run) for run in runs]
-    meta["release_device_time_s"] = releases
+    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit)
     if path.suffix.lower() == ".mcap":
-        samples, stored = _recording_samples(path, releases)
-        meta["stored"] = stored
-        frames = _split_at(samples, releases)
-    else:
-        options = CsvOptions(time_col, angle_col, rate_col, angle_unit, True, time_unit)
-        (whole,) = read_runs(path, axis, options)
-        samples = decay_frame(whole)
-        samples["time_s"] -= releases[0] - float(whole.t[0])
-        frames = [decay_frame(run) for run in runs]
-    decays = [Decay(n, run, part) for n, (run, part) in enumerate(zip(runs, frames, strict=True), start=1)]
+        return _read_recording(path, axis, kind)
+    return _read_csv(path, axis, options, kind)
+
+
+def _meta(path: Path, kind: str, axis: str, runs: list[DecayRun]) -> RecordingMeta:
+    """What is known about a file: its decays' metadata (typed by the readers) and their releases."""
+    meta: RecordingMeta = {"source": str(path), "format": kind, "axis": runs[0].axis if runs else axis}
+    for key in RecordingMeta.__annotations__:
+        if runs and key in runs[0].meta and key not in ("source", "axis", "format"):
+            meta[key] = runs[0].meta[key]  # type: ignore[literal-required]
+    meta["release_device_time_s"] = [_release_of(run) for run in runs]
+    return meta
+
+
+def _read_recording(path: Path, axis: str | None, kind: str) -> Recording:
+    """A recording: every sample, and one decay per release event (a recording stopped before any
+    release has its samples and no decay, and says so)."""
+    from ..ident.inputs import input_notices, read_decays
+    from ..store.export import typed_metadata
+    from ..store.reader import read_recording
+
+    recording = read_recording(path)
+    released = any(event.get("kind") == "release" for event in recording.events)
+    runs = read_decays(path, axis) if released else []
+    meta = _meta(path, kind, axis or recording.axis, runs)
+    meta["stored"] = typed_metadata(recording.metadata)
+    samples = _recording_samples(recording.samples, meta["release_device_time_s"])
+    decays = [Decay(n, run, part) for n, (run, part) in enumerate(
+        zip(runs, _split_at(samples, meta["release_device_time_s"]), strict=True), start=1
+    )]  # fmt: skip
+    notices = input_notices(runs)
+    if not released:
+        notices.append(f"{path.name}: no release recorded (stopped before one was detected): no decay")
+    return Recording(path, samples, meta, decays, notices)
+
+
+def _read_csv(path: Path, axis: str | None, options: CsvOptions, kind: str) -> Recording:
+    """A decay CSV: the record whole, and its decays as ``identify`` finds them."""
+    from dataclasses import replace
+
+    from ..ident.inputs import input_notices, read_decays
+    from ..store.inputs import read_runs
+
+    o = options
+    runs = read_decays(path, axis, o.time_col, o.angle_col, o.rate_col, o.angle_unit, False, 0, o.time_unit)
+    meta = _meta(path, kind, runs[0].axis, runs)
+    (whole,) = read_runs(path, axis, replace(options, keep_all=True))
+    samples = decay_frame(whole)
+    samples[TIME_COLUMN] -= meta["release_device_time_s"][0] - float(whole.t[0])
+    decays = [Decay(n, run, decay_frame(run)) for n, run in enumerate(runs, start=1)]
     return Recording(path, samples, meta, decays, input_notices(runs))
 
 
@@ -259,7 +296,7 @@ def _split_at(samples: pd.DataFrame, releases: list[float]) -> list[pd.DataFrame
     """A recording's samples from each release to the next, ``time_s`` from that release."""
     device_time = samples["device_time_s"].to_numpy()
     parts = []
-    for start, stop in zip(releases, [*releases[1:], np.inf], strict=True):
+    for start, stop in itertools.pairwise([*releases, np.inf]):
         part = samples[(device_time >= start) & (device_time < stop)].reset_index(drop=True)
         part["time_s"] = part["device_time_s"] - start
         part.attrs["units"] = dict(samples.attrs["units"])
@@ -267,19 +304,14 @@ def _split_at(samples: pd.DataFrame, releases: list[float]) -> list[pd.DataFrame
     return parts
 
 
-def _recording_samples(path: Path, releases: list[float]) -> tuple[pd.DataFrame, dict[str, object]]:
-    """Every sample of a recording at the edge, and its metadata (typed as ``tankdaq export`` types it)."""
-    from ..store.export import typed_metadata
-    from ..store.reader import read_recording
-
-    recording = read_recording(path)
-    samples = recording.samples
+def _recording_samples(samples: np.ndarray, releases: list[float]) -> pd.DataFrame:
+    """Every sample of a recording at the edge, ``time_s`` from the first release."""
     origin = releases[0] if releases else float(samples["t"][0])
     columns: dict[str, tuple[str, np.ndarray]] = {TIME_COLUMN: ("s", samples["t"] - origin)}
     for name in samples.dtype.names or ():
         column, unit, values = people_column(name, samples[name])
         columns[column] = (unit, values)
-    return frame(columns), typed_metadata(recording.metadata)
+    return frame(columns)
 
 
 def runs_of(data: Any) -> list[DecayRun] | None:
