@@ -150,19 +150,22 @@ def campaign(
     """Identify a test campaign: every recording or CSV in ``inputs`` (files or folders, with their
     subfolders unless ``recurse=False``) grouped by hull, axis, draft and initial angle, each group fitted
     jointly (``model``: terms or an alias). ``hulls`` give dimensional results; ``report`` a folder for
-    campaign.csv, campaign.md and the figures; ``jobs`` worker processes.
+    campaign.csv, campaign.md and the figures; ``jobs`` worker processes. The units of work are the
+    command's (``ident.campaign.read_campaign_file``, ``fit_group``); every decay is held here, as a
+    notebook wants them (``results[k].runs``).
 
     >>> result = tankdaq.campaign("recordings/campaign", hulls=["trimaran"])  # doctest: +SKIP
     >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s"]]  # doctest: +SKIP
     """
     from ..ident.campaign import (
+        SkippedFile,
         find_campaign_hulls,
         find_recordings,
         group_runs,
         identify_groups,
-        read_campaign,
+        read_campaign_file,
     )
-    from ..ident.executors import campaign_executor
+    from ..ident.executors import campaign_executor, executor_map
     from ..ident.inputs import input_notices
     from ..ident.online import prepare_identifier
     from ..physics.models import resolve_model
@@ -173,25 +176,32 @@ def campaign(
     given_hulls = find_campaign_hulls([], list(hulls))
     paths = find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse)
     prepare_identifier(model, kept.line)
-    jobs = max(1, min(jobs, validation.usable_cores()))
     prepare = []
     if folder is not None:
         from ..viz.campaign_report import load_plotting, write_report
 
-        prepare.append(load_plotting)
-    with campaign_executor(jobs, None, prepare) as pool, kept.task("reading", len(paths)) as reading:
-        count = itertools.count(1)
-        found = read_campaign(paths, start_s, end_s, pool, lambda _path: reading(next(count)))
-        if not found.runs:
-            raise InputError(found.skipped[0].reason if len(found.skipped) == 1 else "no decays read")
-        cut = truncations(found.runs).values()
-        for line in [*(skipped.line for skipped in found.skipped), *input_notices(found.runs), *cut]:
+        prepare.append(load_plotting)  # loaded before a pool forks: its workers draw the figures
+    with campaign_executor(max(1, min(jobs, validation.usable_cores())), None, prepare) as pool:
+        with kept.task("reading", len(paths)) as reading:
+            read = []
+            for found in executor_map(
+                pool, read_campaign_file, paths, [start_s] * len(paths), [end_s] * len(paths)
+            ):
+                read.append(found)
+                reading(len(read))
+        skipped = [found for found in read if isinstance(found, SkippedFile)]
+        runs = [run for found in read if not isinstance(found, SkippedFile) for run in found]
+        if not runs:
+            raise InputError(skipped[0].reason if len(skipped) == 1 else "no decays read: all files skipped")
+        for line in [*(s.line for s in skipped), *input_notices(runs), *truncations(runs).values()]:
             kept.line(line)
-        groups = group_runs(found.runs)
+        groups = group_runs(runs)
         known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
-        results = identify_groups(groups, model, hulls=known, executor=pool)
+        with kept.task("fitting", len(groups)) as fitting:
+            count = itertools.count(1)
+            results = identify_groups(groups, model, lambda _key: fitting(next(count)), known, pool)
         written = write_report(results, folder, pool) if folder is not None else []
-    return Campaign(results, [skipped.line for skipped in found.skipped], kept.lines, list(written))
+    return Campaign(results, [s.line for s in skipped], kept.lines, list(written))
 
 
 @dataclass(frozen=True)
