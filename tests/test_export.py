@@ -12,13 +12,18 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from scipy.io import loadmat
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
 from tankdaq.ident.campaign import SimulatedTest, csv_labels, write_simulated_campaign
 from tankdaq.samples import SAMPLE_DTYPE
+from tankdaq.store.export import ExportTable
 from tankdaq.store.export_layout import column_name
+from tankdaq.store.export_writers import write_csv
 from tankdaq.store.reader import read_recording
 from tankdaq.store.writer import RecordingWriter
 
@@ -72,6 +77,12 @@ def identify_json(*args: object) -> dict:
     return json.loads(result.stdout)
 
 
+@pytest.fixture(scope="module")
+def direct(recording: Path) -> dict:
+    """``tankdaq identify --json`` of the recording itself (fitted once for the tests comparing with it)."""
+    return identify_json(recording)
+
+
 def usable(path: Path) -> np.ndarray:
     """The samples an export holds: finite time, decay angle and rate."""
     samples = read_recording(path).samples
@@ -95,10 +106,10 @@ def assert_exact(read: dict[str, np.ndarray], samples: np.ndarray, release_s: fl
 
 
 @pytest.mark.parametrize("frame", ["device", "release"])
-def test_identify_of_the_export_equals_identify_of_the_recording(recording, tmp_path, frame):
+def test_identify_of_the_export_equals_identify_of_the_recording(recording, direct, tmp_path, frame):
     written = export(recording, "--out", tmp_path, "--frame", frame)
     assert written == [tmp_path / f"{recording.stem}.csv", tmp_path / f"{recording.stem}.json"]
-    direct, again = identify_json(recording), identify_json(written[0])
+    again = identify_json(written[0])
     for term, c in direct["coefficients"].items():
         assert again["coefficients"][term]["value"] == pytest.approx(c["value"], rel=1e-9, abs=0)
     assert again["runs"][0]["samples"] == direct["runs"][0]["samples"]
@@ -111,6 +122,26 @@ def test_plain_read_csv_gives_the_recording_exactly(two_decays, tmp_path):
     assert frame["ticks"].dtype == np.int64 and frame["pitch_rad"].dtype == np.float64
     assert frame["yaw_rad"].isna().sum() == 10  # the gap is empty cells, read as missing
     assert_exact({name: frame[name].to_numpy() for name in frame.columns}, samples, RELEASES_S[0])
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    values=arrays(np.float64, st.integers(1, 40), elements=st.floats(width=64)),
+    ticks=st.integers(-(2**63), 2**63 - 1),
+)
+def test_any_float_and_integer_reads_back_bit_for_bit(tmp_path_factory, values, ticks):
+    """Subnormals, huge values, -0.0, infinities and NaN (an empty cell) through plain pd.read_csv."""
+    path = tmp_path_factory.mktemp("any") / "x.csv"
+    columns = {"x_rad": values, "ticks": np.full(values.size, ticks, dtype=np.int64)}
+    write_csv(
+        ExportTable("x", columns, {"x_rad": "rad", "ticks": "0.1 ms"}, {"format": "tankdaq export"}), path
+    )
+    read = pd.read_csv(path)
+    got = read["x_rad"].to_numpy(dtype=np.float64)
+    nan = np.isnan(values)
+    np.testing.assert_array_equal(np.isnan(got), nan)
+    np.testing.assert_array_equal(got[~nan].view(np.uint64), values[~nan].view(np.uint64))
+    np.testing.assert_array_equal(read["ticks"].to_numpy(), columns["ticks"], strict=True)
 
 
 def test_csv_is_one_ascii_header_row_then_numbers(two_decays, tmp_path):
@@ -168,21 +199,24 @@ def usable_roll(path: Path) -> np.ndarray:
     return samples[np.isfinite(samples["roll"]) & np.isfinite(samples["p"])]
 
 
-def test_an_export_written_before_the_sidecar_is_still_read_exactly(recording, tmp_path):
+def test_an_export_written_before_the_sidecar_is_still_read_exactly(recording, direct, tmp_path):
     old = identify_json(old_style_export(recording, tmp_path / "old.csv"))
-    direct = identify_json(recording)
     for term, c in direct["coefficients"].items():
         assert old["coefficients"][term]["value"] == pytest.approx(c["value"], rel=1e-9, abs=0)
     assert old["runs"][0]["samples"] == direct["runs"][0]["samples"]
 
 
-def test_malformed_release_times_in_the_sidecar_are_one_line(recording, tmp_path):
+@pytest.mark.parametrize(
+    ("key", "value", "says"),
+    [("release_t_s", [3, 1], "release_t_s"), ("release_t_s", "soon", "release_t_s"), ("axis", 7, "axis 7")],
+)
+def test_a_malformed_sidecar_is_one_line(recording, tmp_path, key, value, says):
     csv_path, sidecar = export(recording, "--out", tmp_path)
-    sidecar.write_text(json.dumps({**json.loads(sidecar.read_text()), "release_t_s": [3, 1]}))
+    sidecar.write_text(json.dumps({**json.loads(sidecar.read_text()), key: value}))
     result = runner.invoke(app, ["identify", str(csv_path)])
     assert result.exit_code == 2 and "Traceback" not in result.output
     (line,) = result.stderr.strip().splitlines()
-    assert "release_t_s" in line and sidecar.name in line
+    assert says in line and str(csv_path) in line
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -269,3 +303,30 @@ def test_help_lists_every_format():
     for name in ("csv", "h5", "parquet", "mat", "release", "device"):
         assert name in result.output
     assert "tankdaq[parquet]" in result.output
+
+
+def test_campaign_reads_the_exported_csv_as_the_recording(recording, tmp_path):
+    from tankdaq.ident.campaign import read_campaign_runs
+
+    (direct,), (again,) = (
+        read_campaign_runs(recording),
+        read_campaign_runs(export(recording, "--out", tmp_path)[0]),
+    )
+    for key in ("hull", "draft", "axis", "angle_deg"):
+        assert again.meta[key] == direct.meta[key]
+    np.testing.assert_array_equal(again.angle, direct.angle)
+    np.testing.assert_array_equal(again.rate, direct.rate)
+    np.testing.assert_array_equal(again.t - again.t[0], direct.t - direct.t[0])
+
+
+def test_a_json_beside_that_is_not_an_export_is_never_overwritten(recording, tmp_path):
+    labels = tmp_path / f"{recording.stem}.json"
+    labels.write_text('{"hull": "swath", "axis": "roll", "angle_deg": 8}')
+    result = runner.invoke(app, ["export", str(recording), "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    (line,) = result.stderr.strip().splitlines()
+    assert str(labels) in line and "--out" in line
+    assert labels.read_text() == '{"hull": "swath", "axis": "roll", "angle_deg": 8}'
+    assert not (tmp_path / f"{recording.stem}.csv").exists()
+    export(recording, "--out", tmp_path / "again")
+    export(recording, "--out", tmp_path / "again")  # an earlier export's sidecar is replaced

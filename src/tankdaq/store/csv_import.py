@@ -78,7 +78,12 @@ def read_csv_file(
     in ``meta[NOTICES]``."""
     path = Path(path)
     table, header = _read_columns(path, options)
-    axis = axis or _exported_axis(header) or "roll"
+    if axis is None and "axis" in header and header["axis"] not in ("roll", "pitch"):
+        raise InputError(
+            f"{path}: its metadata says axis {json.dumps(header['axis'])[:40]}: fix it to roll or pitch, or "
+            "give --axis"
+        )
+    axis = axis or str(header.get("axis", "roll"))
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
     columns = table.columns
@@ -142,12 +147,6 @@ def _check_columns(path: Path, table: Table, time_col: str, angle_col: str, rate
         raise InputError(f"{path}: no rate column {rate_col!r}; columns are {', '.join(columns)}")
     if rate_col in (time_col, angle_col):
         raise InputError(f"{path}: --rate-col {rate_col!r} is the time or angle column: give another one")
-
-
-def _exported_axis(header: dict[str, object]) -> str | None:
-    """The axis an export names (checked by the caller like a given one)."""
-    axis = header.get("axis")
-    return str(axis) if axis is not None else None
 
 
 def _release_times(path: Path, value: object) -> list[float]:

@@ -22,7 +22,14 @@ import numpy as np
 
 from ..errors import BadRecordingInput, InputError
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
-from .export_layout import DEVICE_TIME_COLUMN, EXPORT_FORMAT, TIME_COLUMN, column_name
+from .export_layout import (
+    DEVICE_TIME_COLUMN,
+    EXPORT_FORMAT,
+    TIME_COLUMN,
+    column_name,
+    read_sidecar,
+    sidecar_path,
+)
 from .export_writers import write_csv, write_h5, write_mat, write_parquet
 from .reader import Recording, _finite_increasing, _release_times, read_recording, truncation_notice
 from .schemas import TOPIC_SAMPLES
@@ -196,8 +203,21 @@ def export_recording(
         ]
     folder = out_dir if out_dir is not None else Path(path).parent
     writer = WRITERS[file_format]
+    if file_format == "csv":
+        _check_sidecar_free(folder / f"{tables[0].name}.csv")
     try:
         folder.mkdir(parents=True, exist_ok=True)
         return [path for table in tables for path in writer(table, folder / f"{table.name}.{file_format}")]
     except OSError as exc:
         raise InputError(f"cannot write into {folder}: {exc.strerror or exc}") from None
+
+
+def _check_sidecar_free(csv_path: Path) -> None:
+    """A ``<stem>.json`` beside the CSV that is not an earlier export's (a campaign's labels, another
+    tool's file) is never overwritten: one line before anything is written."""
+    sidecar = sidecar_path(csv_path)
+    if sidecar.exists() and read_sidecar(csv_path) is None:
+        raise InputError(
+            f"{sidecar} exists and is not a tankdaq export's metadata: move it, or export with --out "
+            "into another folder"
+        )
