@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 Source = str | Path | Recording | Decay | DecayRun
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
 class ConditionFit:
     """One fit: the runs of one condition (or of several, ``pooled`` by ``joint``), the fitted estimator,
     its summary (one ``groups`` entry of the JSON) and the lines the text report adds (B̂44, full scale)."""
@@ -46,7 +46,7 @@ class ConditionFit:
     pooled: bool = False
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
 class Identification:
     """What ``identify`` found. ``document`` is the object ``tankdaq identify --json`` prints (``to_json``
     gives its text); ``fits`` one entry per condition fitted; ``notices`` the lines the reading and the

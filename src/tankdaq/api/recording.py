@@ -86,7 +86,7 @@ def _release_of(run: DecayRun) -> float:
     return float(run.t[0])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
 class Decay:
     """One free decay of a recording: from its release to the next release (or the file's end).
 
@@ -144,7 +144,7 @@ def _channel_column(channel: str, values: np.ndarray) -> tuple[str, str, np.ndar
     return channel, "s" if channel == DEVICE_TIME_COLUMN else "as read", values
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
 class Recording:
     """A recording or decay file read for people: ``samples`` (a DataFrame, units in the column names,
     ``time_s`` from the first release), ``meta`` (typed), ``decays`` (one ``Decay`` per release) and the

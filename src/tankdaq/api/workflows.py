@@ -107,7 +107,7 @@ def _write_decay(
     return writer.path
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
 class Campaign:
     """A campaign fitted group by group (hull, axis, draft, angle). ``table`` is campaign.csv's rows;
     ``results`` the fits (``ident.campaign.GroupResult``); ``skipped`` the files that could not be read
@@ -204,7 +204,7 @@ def campaign(
     return Campaign(results, [s.line for s in skipped], kept.lines, list(written))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
 class Diagnosis:
     """What ``diagnose`` found: ``story`` (the lines ``tankdaq diagnose`` prints), ``document`` (its
     ``--json``, less the truncation keys: ``truncated_files`` lists the recordings cut short),
