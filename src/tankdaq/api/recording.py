@@ -65,7 +65,7 @@ def people_column(field_name: str, values: np.ndarray) -> tuple[str, str, np.nda
     return column_name(field_name), unit, np.asarray(values)
 
 
-def frame(columns: dict[str, tuple[str, np.ndarray]]) -> pd.DataFrame:
+def units_frame(columns: dict[str, tuple[str, np.ndarray]]) -> pd.DataFrame:
     """A DataFrame of ``{name: (unit, values)}``; ``df.attrs["units"]`` maps each column to its unit."""
     import pandas as pd
 
@@ -127,7 +127,7 @@ def decay_frame(run: DecayRun) -> pd.DataFrame:
     for channel, values in run.channels.items():
         name, unit, shown = _channel_column(channel, values)
         columns[name] = (unit, shown)
-    return frame(columns)
+    return units_frame(columns)
 
 
 #: The SI suffixes a CSV reader leaves on a channel's name (``_deg``/``_rad`` columns lose theirs).
@@ -311,7 +311,7 @@ def _recording_samples(samples: np.ndarray, releases: list[float]) -> pd.DataFra
     for name in samples.dtype.names or ():
         column, unit, values = people_column(name, samples[name])
         columns[column] = (unit, values)
-    return frame(columns)
+    return units_frame(columns)
 
 
 def runs_of(data: Any) -> list[DecayRun] | None:
