@@ -2,9 +2,10 @@
 process against ``tankdaq identify --json`` started afresh, on one simulated recording.
 
 Run: OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/bench_api.py   (about a minute; without that variable
-OpenBLAS's spinning threads count as the warm process's CPU and the warm figure is 1.3 s, not 0.15 s). CPU time (user + system) of child processes,
-median and least of REPEATS interleaved starts, bytecode compiled first (PYTHONDONTWRITEBYTECODE dropped);
-``BASELINE_SRC=/tmp/base/src`` adds the ``import tankdaq`` of another tree (a ``git archive`` of main).
+OpenBLAS's spinning threads count as the warm process's CPU: 1.3 s, not 0.15 s). CPU time (user +
+system) of child processes, median and least of REPEATS interleaved starts, bytecode compiled first
+(PYTHONDONTWRITEBYTECODE dropped); ``BASELINE_SRC=/tmp/base/src`` adds the ``import tankdaq`` of another
+tree (a ``git archive`` of main).
 """
 
 from __future__ import annotations
