@@ -7,9 +7,10 @@ purpose (``TankdaqError``) become one line on stderr and the error's exit code.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import sys
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar, cast
 
@@ -197,7 +198,9 @@ def say(line: str) -> None:
 
 def warn_truncated(runs: Iterable[Any]) -> list[str]:
     """One warning line per recording cut short among the decays read; the files, for ``--json``."""
-    notices = {str(run.meta["file"]): run.meta["truncation"] for run in runs if run.meta.get("truncation")}
+    from ..api.identification import truncations
+
+    notices = truncations(list(runs))
     for notice in notices.values():
         say(notice)
     return list(notices)
@@ -269,3 +272,36 @@ def build_kernels_shown() -> None:
     with progress_bar() as progress:
         progress.add_task("building native kernels", total=None)
         compiled.ensure_native()
+
+
+class TerminalProgress:
+    """The API's ``Progress`` on the terminal: lines through ``say``, tasks as rows of one transient
+    ``progress_bar`` (a task opened inside another joins its display: rich draws one live display)."""
+
+    def __init__(self) -> None:
+        self._bar: Progress | None = None
+
+    def line(self, text: str) -> None:
+        say(text)
+
+    @contextlib.contextmanager
+    def task(self, description: str, total: int | None = None) -> Iterator[Callable[..., None]]:
+        if self._bar is not None:
+            yield self._updater(self._bar, self._bar.add_task(description, total=total))
+            return
+        with progress_bar() as bar:
+            self._bar = bar
+            try:
+                yield self._updater(bar, bar.add_task(description, total=total))
+            finally:
+                self._bar = None
+
+    @staticmethod
+    def _updater(bar: Progress, task: Any) -> Callable[..., None]:
+        def update(done: int, total: int | None = None) -> None:
+            if total is None:
+                bar.update(task, completed=done)
+            else:
+                bar.update(task, completed=done, total=total)
+
+        return update

@@ -14,6 +14,7 @@ from .. import validation
 from ..errors import InputError
 from ..records import DecayRun
 from .app import (
+    TerminalProgress,
     app,
     build_kernels_shown,
     checked,
@@ -120,13 +121,12 @@ def diagnose_command(
 
     With --simulation: compare a simulation with the decays, name what it misses, add it, show the gap shrink.
     """
+    from ..api.identification import Reading
+    from ..api.workflows import diagnose
     from ..catalogue.hooks import CatalogueWriter
     from ..catalogue.query import inputs_or_query
     from ..catalogue.writing import fit_of_estimator, run_paths
     from ..diagnose import report as report_module
-    from ..diagnose.effects import LIBRARY
-    from ..diagnose.workflow import Diagnoser
-    from ..ident.online import prepare_identifier
 
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
@@ -138,32 +138,27 @@ def diagnose_command(
         raise InputError("--hull applies with --simulation (the hull's model, and the correction in SI)")
     writer = CatalogueWriter.from_option(catalogue, say)
     inputs = inputs_or_query(inputs, runs_query, catalogue)
-    runs = load_runs(
-        inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end,
-        time_unit,
-    )  # fmt: skip
     if simulation:
+        runs = load_runs(
+            inputs, axis, time_col, angle_col, rate_col, angle_unit, keep_all, skip_half_cycles, start, end,
+            time_unit,
+        )  # fmt: skip
         columns = (sim_time_col or time_col, sim_angle_col or angle_col, sim_rate_col or rate_col)
         sim_read = (*columns, sim_angle_unit or angle_unit)
         compare_with_simulation(runs, simulation, sim_read, hull, draft, max_steps, as_json, report, rrd)
         return
-    baseline = baseline or DEFAULT_BASELINE
-    truncated = warn_truncated(runs)
+    reading = Reading(
+        axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end
+    )
     build_kernels_shown()
-    prepare_identifier(baseline, say)  # the native kernels: built once, on the first run after install
-    with progress_bar() as progress:
-        # per step: every candidate, plus the two refits of the late-disturbance test
-        task = progress.add_task("baseline", total=1 + max_steps * (len(LIBRARY) + 2))
-
-        def advance(label: str) -> None:
-            progress.update(task, advance=1, description=f"refit: {label}")
-
-        diagnoser = Diagnoser(baseline=baseline, max_steps=max_steps, progress=advance).fit(runs)
-        progress.update(task, completed=progress.tasks[0].total, description="done")
-    final = diagnoser.final_.estimator  # the diagnosed model onto the recordings' catalogue rows
+    found = diagnose(
+        inputs, baseline=baseline or DEFAULT_BASELINE, max_steps=max_steps, reading=reading,
+        progress=TerminalProgress(),
+    )  # fmt: skip
+    final, runs = found.diagnoser.final_.estimator, found.diagnoser.runs_  # onto the recordings' rows
     with writer:
         writer.add_fit(run_paths(runs), fit_of_estimator("diagnose", final, runs, final.warnings_))
-    tell(report_module, diagnoser, report, rrd, as_json, truncated)
+    tell(report_module, found.diagnoser, report, rrd, as_json, found.truncated_files)
 
 
 def compare_with_simulation(

@@ -1,0 +1,367 @@
+"""``tankdaq.identify``: the decay equation's coefficients from recordings, CSV files or decays in memory.
+
+This is the one identification pipeline of ``tankdaq identify`` (the command parses its options, calls
+``identify`` and prints ``Identification.document``): read through ``ident.inputs`` and cut to the free
+decay, grouped by condition (hull, draft, axis) unless ``joint``, the model chosen by the data unless
+given, fitted with its intervals, summarised by ``ident.report.summarize`` (plausibility warnings
+included), with B̂44 and the full-scale results where a hull allows (``ident.derived.scale_results``).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .. import validation
+from ..errors import InputError
+from ..records import DecayRun
+from .progress import Kept, Progress
+from .recording import Decay, Recording, runs_of
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..config import Hull
+    from ..viz.plots import Figure
+
+#: What ``identify`` takes: a path, a ``Recording``, a ``Decay`` or a ``DecayRun``, or a list of them.
+Source = str | Path | Recording | Decay | DecayRun
+
+
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
+class ConditionFit:
+    """One fit: the runs of one condition (or of several, ``pooled`` by ``joint``), the fitted estimator,
+    its summary (one ``groups`` entry of the JSON) and the lines the text report adds (B̂44, full scale)."""
+
+    label: str
+    runs: list[DecayRun]
+    estimator: Any
+    summary: dict[str, Any]
+    scaled_lines: list[str]
+    pooled: bool = False
+
+
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
+class Identification:
+    """What ``identify`` found. ``document`` is the object ``tankdaq identify --json`` prints (``to_json``
+    gives its text); ``fits`` one entry per condition fitted; ``notices`` the lines the reading and the
+    model choice had for the user; ``truncated_files`` the recordings that were cut short.
+
+    >>> result = tankdaq.identify("run.mcap")  # doctest: +SKIP
+    >>> result.coefficients  # term, value, unit, std, ci95_low, ci95_high  # doctest: +SKIP
+    >>> result.warnings  # what physics says is implausible  # doctest: +SKIP
+    """
+
+    document: dict[str, Any]
+    fits: list[ConditionFit]
+    notices: list[str]
+    truncated_files: list[str]
+
+    @property
+    def warnings(self) -> list[str]:
+        """Every plausibility finding and fit warning, as ``--json`` lists them."""
+        return list(self.document["warnings"])
+
+    @property
+    def coefficients(self) -> pd.DataFrame:
+        """One row per term (and condition, when several were fitted apart): the value per unit total
+        inertia in SI units and rad, its unit, its standard deviation and 95 % interval."""
+        rows = [
+            {
+                **self._condition(fit),
+                "term": term,
+                "value": entry["value"],
+                "unit": entry["unit"],
+                "std": entry["std"],
+                "ci95_low": entry["ci95"][0],
+                "ci95_high": entry["ci95"][1],
+            }
+            for fit in self.fits
+            for term, entry in fit.summary["coefficients"].items()
+        ]
+        return self._with_warnings(_table(rows))
+
+    @property
+    def derived(self) -> pd.DataFrame:
+        """Per tested amplitude: the natural period, B_eq/I, B̂44 (roll, where the hull gives its beam and
+        displacement; else NaN) and Bertin's N, with their standard deviations."""
+        rows = [
+            {
+                **self._condition(fit),
+                "amplitude_deg": b_eq["amplitude_deg"],
+                "natural_period_s": fit.summary["natural_period_s"],
+                "damping_ratio": fit.summary["damping_ratio"],
+                "b_eq_per_s": b_eq["value_per_s"],
+                "b_eq_std_per_s": b_eq["std"],
+                "b44_hat": b_eq.get("b44_hat", math.nan),
+                "bertin_n_per_deg": bertin["value_per_deg"],
+                "bertin_n_std_per_deg": bertin["std"],
+            }
+            for fit in self.fits
+            for b_eq, bertin in zip(fit.summary["b_eq"], fit.summary["bertin_n"], strict=True)
+        ]
+        return self._with_warnings(_table(rows))
+
+    def _condition(self, fit: ConditionFit) -> dict[str, str]:
+        return {"condition": fit.label} if len(self.fits) > 1 else {}
+
+    def _with_warnings(self, table: pd.DataFrame) -> pd.DataFrame:
+        """A table of this fit carries its warnings (``table.attrs["warnings"]``): an implausible result
+        is never shown without them."""
+        table.attrs["warnings"] = self.warnings
+        return table
+
+    def to_json(self) -> str:
+        """The text ``tankdaq identify --json`` prints (NaN and infinities as null)."""
+        return to_json(self.document)
+
+    def text(self) -> str:
+        """The report ``tankdaq identify`` prints."""
+        from ..ident.report import text_report
+
+        parts = []
+        for fit in self.fits:
+            head = [f"== {fit.summary['condition_label']} =="] if len(self.fits) > 1 else []
+            parts.append("\n".join([*head, text_report(fit.summary), *fit.scaled_lines]))
+        return "\n\n".join(parts)
+
+    def plot(self, decay: int = 0, condition: int = 0) -> Figure:
+        """The measured decay with the fitted model over it and the residual (angle in deg against the
+        time since release): decay number ``decay`` (from 0) of fit ``condition``."""
+        from ..ident.report import predicted_angles
+        from ..viz.plots import decay_fit_figure
+
+        fit = self.fits[condition]
+        run = fit.runs[decay]
+        model = predicted_angles(fit.estimator, [run] if len(fit.runs) == 1 else fit.runs)
+        found = len(fit.summary["warnings"])
+        said = f" ({found} warning{'s' if found > 1 else ''}: result.warnings)" if found else ""
+        title = f"{run.name}: {fit.summary['model']['name']}{said}"
+        return decay_fit_figure(
+            run.t - run.t[0], run.angle, model[0 if len(fit.runs) == 1 else decay], axis=run.axis, title=title
+        )
+
+    def _repr_html_(self) -> str:
+        heads = "".join(
+            f"<p><b>{html.escape(fit.label)}</b>: model {html.escape(fit.summary['model']['name'])} "
+            f"({html.escape(', '.join(fit.summary['model']['terms']))}), method "
+            f"{html.escape(fit.summary['method'])}, {len(fit.runs)} run(s), natural period "
+            f"{fit.summary['natural_period_s']:.4f} s</p>"
+            for fit in self.fits
+        )
+        warnings = "".join(f"<li>warning: {html.escape(line)}</li>" for line in self.warnings)
+        return (
+            heads
+            + (f'<ul style="color:#b00">{warnings}</ul>' if warnings else "")
+            + self.coefficients.to_html(index=False)
+            + self.derived.to_html(index=False)
+        )
+
+
+def _table(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    import pandas as pd
+
+    return pd.DataFrame(rows)
+
+
+def to_json(document: dict[str, Any]) -> str:
+    """One JSON object as the commands print it: NaN and infinities as null."""
+    return json.dumps(_clean(document), default=_json_default)
+
+
+def _json_default(value: object) -> object:
+    """NaN/inf become null so the output stays valid JSON."""
+    return None if isinstance(value, float) and not math.isfinite(value) else str(value)
+
+
+def _clean(value: object) -> object:
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    return value
+
+
+@dataclass(frozen=True)
+class Reading:
+    """How decay files are read (``tankdaq identify``'s CSV options) and where each free decay is cut
+    (``start_s``/``end_s`` from the release; None: from the release to the end found)."""
+
+    axis: str | None = None
+    time_col: str = "time_s"
+    angle_col: str = "angle_deg"
+    rate_col: str | None = "rate_deg_s"
+    angle_unit: str | None = None
+    time_unit: str | None = None
+    keep_all: bool = False
+    skip_half_cycles: int = 0
+    start_s: float | None = None
+    end_s: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.axis not in (None, "roll", "pitch"):
+            raise InputError(f"axis {self.axis!r} not understood: use roll or pitch")
+
+
+def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Progress) -> list[DecayRun]:
+    """The free decays of every source: files read through the one way in (``ident.inputs.read_decays``:
+    the reader by suffix, a CSV's releases found), decays in memory as they are; each cut where its free
+    part ends (``ident.free_decay``). What the reading decided is said in one line each."""
+    from ..ident.free_decay import cut_free_decays
+    from ..ident.inputs import input_notices, read_decays
+
+    items = [sources] if isinstance(sources, str | Path | Recording | Decay | DecayRun) else list(sources)
+    if not items:
+        raise InputError("no decays given: give a recording, a CSV file or decays read with tankdaq.read")
+    r = reading
+    runs: list[DecayRun] = []
+    for item in items:
+        given = runs_of(item)
+        runs += given if given is not None else read_decays(
+            Path(str(item)), r.axis, r.time_col, r.angle_col, r.rate_col, r.angle_unit, r.keep_all,
+            r.skip_half_cycles, r.time_unit,
+        )  # fmt: skip
+    if not runs:  # a recording read with no release in it
+        raise InputError("no decay to fit: the recordings given hold no release (tankdaq.read says so)")
+    for line in input_notices(runs):
+        progress.line(line)
+    return cut_free_decays(runs, r.start_s, r.end_s)
+
+
+def truncations(runs: Sequence[DecayRun]) -> dict[str, str]:
+    """The recordings cut short among the decays read: file -> the line that says what to do."""
+    return {str(run.meta["file"]): run.meta["truncation"] for run in runs if run.meta.get("truncation")}
+
+
+def identify(
+    sources: Source | Sequence[Source],
+    model: str = "auto",
+    *,
+    method: str = "oe",
+    joint: bool = False,
+    hull: str | None = None,
+    draft: float | str = 1.0,
+    full_scale: bool = False,
+    bootstrap: int = 0,
+    repeats: bool = False,
+    reading: Reading = Reading(),
+    progress: Progress | None = None,
+) -> Identification:
+    """Identify the decay equation's coefficients from free decays; ``tankdaq identify`` is this call.
+
+    ``model``: ``"auto"`` (the data choose from a small family, held-out), terms (``"b1,b2,c1,c3"``) or an
+    alias (docs/models.md); ``method``: ``oe`` (output error), ``ee``, ``ga``, ``pso``; decays of different
+    conditions are fitted apart unless ``joint``. ``hull`` (a name or a .toml) and ``draft`` (``1.0`` or
+    ``"1.1T"``) give dimensional results and B̂44; ``full_scale`` adds the ship's by Froude. Intervals
+    from the fit, a moving-block ``bootstrap`` or the spread of ``repeats``. Bad input raises
+    ``tankdaq.errors.InputError`` with one line that says what to do.
+
+    >>> result = tankdaq.identify("run.mcap", model="b1,b2,c1,c3", hull="swath")  # doctest: +SKIP
+    >>> result.coefficients.set_index("term")["value"]  # doctest: +SKIP
+    >>> result.derived[["amplitude_deg", "b_eq_per_s", "b44_hat"]]  # doctest: +SKIP
+    """
+    from ..config import format_draft, full_scale_of, load_hull
+    from ..ident.conditions import condition_of, group_conditions, grouping_line
+    from ..ident.derived import scale_results
+    from ..ident.estimators import make_estimator
+    from ..ident.intervals import check_intervals
+    from ..ident.online import prepare_identifier
+    from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
+
+    kept = Kept(progress)
+    draft = validation.draft_factor(draft if isinstance(draft, str) else format_draft(float(draft)))
+    bootstrap = validation.bootstrap_replicas(bootstrap)
+    hull_config = load_hull(hull) if hull else None
+    scale = full_scale_of(hull_config, full_scale)
+    terms = None if is_auto(model) else resolve_model(model)
+    probe = make_estimator(method, terms or MODEL_FAMILY[0])  # an unknown method fails before any reading
+    runs = load_runs(sources, reading, kept)
+    if hull_config is not None:  # the draft must be one the hull has on the decays' axes, before any fit
+        for run_axis in sorted({run.axis for run in runs}):
+            validation.hull_draft(hull_config, draft, run_axis)
+    cut = truncations(runs)
+    for line in cut.values():
+        kept.line(line)
+    groups = group_conditions(runs)
+    pooled = grouping_line(groups, joint=True) if len(groups) > 1 and joint else None
+    parts = [runs] if joint or len(groups) == 1 else list(groups.values())
+    for condition_runs in parts:  # impossible interval requests fail before any fit
+        check_intervals(probe, len(condition_runs), bootstrap, repeats, method)
+    prepare_identifier(terms or MODEL_FAMILY[-1], kept.line)  # native kernels: built on the first run
+    if len(parts) > 1:
+        kept.line(grouping_line(groups))
+    fits = []
+    for condition_runs in parts:
+        label = "all conditions (--joint)" if pooled else condition_of(condition_runs[0]).label
+        settings = (method, bootstrap, repeats, hull_config, draft)
+        estimator, summary = _fit_condition(condition_runs, terms, settings, label, kept)
+        summary["condition"] = None if pooled else condition_of(condition_runs[0]).as_dict()
+        if pooled is not None:
+            summary["warnings"].insert(0, pooled)
+            summary["conditions"] = pooled
+        lines = scale_results(summary, hull_config, draft, scale)  # B̂44; the ship's
+        fits.append(ConditionFit(label, condition_runs, estimator, summary, lines, pooled is not None))
+    truncated = {"truncated": bool(cut), "truncated_files": list(cut)}
+    if len(fits) == 1:
+        document: dict[str, Any] = {**fits[0].summary, **truncated}
+    else:
+        warnings = [f"{fit.label}: {line}" for fit in fits for line in fit.summary["warnings"]]
+        groups_doc = [fit.summary for fit in fits]
+        document = {
+            "conditions": grouping_line(groups),
+            "groups": groups_doc,
+            "warnings": warnings,
+            **truncated,
+        }
+    return Identification(document, fits, kept.lines, list(cut))
+
+
+def _fit_condition(
+    runs: list[DecayRun],
+    terms: tuple[str, ...] | None,
+    settings: tuple[str, int, bool, Hull | None, float],
+    label: str,
+    progress: Progress,
+) -> tuple[Any, dict[str, Any]]:
+    """One fit of ``runs`` (the model chosen by data when ``terms`` is None), and its summary."""
+    from ..ident.estimators import make_estimator, reports_progress
+    from ..ident.intervals import fit_with_intervals
+    from ..ident.model_choice import choose_model
+    from ..ident.report import summarize
+
+    method, bootstrap, repeats, hull_config, draft = settings
+    choice = None
+    if terms is None:
+        with progress.task(f"choosing the model ({label})"):
+            particulars = hull_config.particulars(runs[0].axis) if hull_config is not None else None
+            choice = choose_model(
+                runs, particulars=particulars, hull=getattr(hull_config, "name", "the hull")
+            )
+        terms = choice.terms
+        progress.line(f"{label}: {choice.reason}")
+    fitted_terms = terms
+    repeats_of = (lambda: make_estimator(method, fitted_terms)) if repeats else None
+    with progress.task(f"fitting {method}", 1 + bootstrap) as advance:
+        if reports_progress(method):  # the seeds' GA/PSO (about 100 s) report their generations
+            with progress.task("generations") as generations:
+                estimator = make_estimator(method, terms, progress=generations)
+                estimator, intervals = fit_with_intervals(
+                    estimator, runs, bootstrap, repeats_of, progress=advance, method=method
+                )
+        else:
+            estimator = make_estimator(method, terms)
+            estimator, intervals = fit_with_intervals(
+                estimator, runs, bootstrap, repeats_of, progress=advance, method=method
+            )
+    summary = summarize(estimator, runs, method, hull_config, draft, intervals)
+    summary["condition_label"] = label
+    given = {"chosen": ",".join(terms), "reason": "given by --model"}
+    summary["model_choice"] = choice.as_dict() if choice is not None else given
+    return estimator, summary

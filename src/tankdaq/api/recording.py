@@ -1,0 +1,326 @@
+"""``tankdaq.read``: a recording (MCAP) or a decay CSV as pandas DataFrames with units in the column names.
+
+The library keeps SI units and radians inside (``samples.SAMPLE_DTYPE``, ``records.DecayRun``); this is an
+edge, so angles and rates come out in degrees and every column name ends in its unit (``roll_deg``,
+``p_deg_s``, ``az_m_s2``): the names of ``tankdaq export``'s files (``store.export_layout``: the sample
+field and the suffix of its unit), with degrees for radians, so a DataFrame and an exported file speak one
+vocabulary. ``time_s`` counts from the first release (the time people plot a decay against);
+``device_time_s`` keeps the device clock beside it.
+"""
+
+from __future__ import annotations
+
+import html
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypedDict
+
+import numpy as np
+
+from ..errors import InputError
+from ..records import DecayRun
+from ..samples import AXIS_FIELDS, SAMPLE_UNITS
+from ..store.export_layout import DEVICE_TIME_COLUMN, TIME_COLUMN, column_name
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from ..store.csv_import import CsvOptions
+
+#: SI unit -> (the unit people read, its column suffix): angles and rates in degrees at this edge.
+DEGREES = {"rad": ("deg", "deg"), "rad/s": ("deg/s", "deg_s")}
+
+
+class RecordingMeta(TypedDict, total=False):
+    """What is known about a recording, typed (a recording's metadata is stored as text)."""
+
+    source: str  # the file read
+    format: str  # "tankdaq recording" or "CSV"
+    axis: str  # roll or pitch
+    hull: str | None
+    draft: float  # factor of the design draft
+    angle_nominal_deg: float
+    angle_initial_deg: float
+    sample_rate_hz: float
+    device_id: str
+    operator: str
+    note: str
+    release_device_time_s: list[float]  # each decay's release on the device clock
+    complete_file: bool  # False: the file was cut short (``truncation`` says what to do)
+    truncation: str | None
+    stored: dict[str, object]  # a recording's metadata as written, every key, typed
+
+
+def people_column(field_name: str, values: np.ndarray) -> tuple[str, str, np.ndarray]:
+    """(column name, unit, values) of one sample field at the edge: the export's name
+    (``store.export_layout``: the field and its unit's suffix, the device clock ``device_time_s``) with
+    angles and rates in degrees (``roll_deg``, ``p_deg_s``)."""
+    if field_name == "t":
+        return DEVICE_TIME_COLUMN, "s", np.asarray(values, dtype=float)
+    unit = SAMPLE_UNITS[field_name]
+    if unit in DEGREES:
+        shown, suffix = DEGREES[unit]
+        return f"{field_name}_{suffix}", shown, np.degrees(np.asarray(values, dtype=float))
+    return column_name(field_name), unit, np.asarray(values)
+
+
+def units_frame(columns: dict[str, tuple[str, np.ndarray]]) -> pd.DataFrame:
+    """A DataFrame of ``{name: (unit, values)}``; ``df.attrs["units"]`` maps each column to its unit."""
+    import pandas as pd
+
+    table = pd.DataFrame({name: values for name, (_unit, values) in columns.items()})
+    table.attrs["units"] = {name: unit for name, (unit, _values) in columns.items()}
+    return table
+
+
+def _release_of(run: DecayRun) -> float:
+    """Where a decay's own time starts: its release on the file's clock (a recording's release event; an
+    exported CSV's last ``release_t_s`` at or before the run; else its first sample, the release found)."""
+    value = run.meta.get("release_t_s")
+    if isinstance(value, int | float):
+        return float(value)
+    if isinstance(value, list):
+        before = [float(r) for r in value if isinstance(r, int | float) and r <= run.t[0]]
+        return max(before) if before else float(run.t[0])
+    return float(run.t[0])
+
+
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
+class Decay:
+    """One free decay of a recording: from its release to the next release (or the file's end).
+
+    ``samples`` has ``time_s`` from the release, the angle and rate in degrees, and the other channels the
+    file holds; ``run`` is the same decay as the estimators see it (SI, rad), which ``tankdaq.identify``
+    accepts too.
+    """
+
+    number: int
+    run: DecayRun
+    samples: pd.DataFrame
+
+    @property
+    def name(self) -> str:
+        return self.run.name
+
+    @property
+    def initial_angle_deg(self) -> float:
+        return float(np.degrees(self.run.angle[0]))
+
+    @property
+    def duration_s(self) -> float:
+        return self.run.duration
+
+
+def decay_frame(run: DecayRun) -> pd.DataFrame:
+    """A decay's samples at the edge: ``time_s`` from its release, the angle and rate in degrees
+    (``roll_deg``, ``p_deg_s``), and its channels (``_channel_column``)."""
+    angle_field, rate_field = AXIS_FIELDS[run.axis]
+    name, unit, angle = people_column(angle_field, run.angle)
+    columns: dict[str, tuple[str, np.ndarray]] = {
+        TIME_COLUMN: ("s", run.t - _release_of(run)),
+        name: (unit, angle),
+    }
+    if run.rate is not None:
+        name, unit, rate = people_column(rate_field, run.rate)
+        columns[name] = (unit, rate)
+    for channel, values in run.channels.items():
+        name, unit, shown = _channel_column(channel, values)
+        columns[name] = (unit, shown)
+    return units_frame(columns)
+
+
+#: The SI suffixes a CSV reader leaves on a channel's name (``_deg``/``_rad`` columns lose theirs).
+_KEPT_SUFFIXES = ("_rad_s", "_m_s2")
+
+
+def _channel_column(channel: str, values: np.ndarray) -> tuple[str, str, np.ndarray]:
+    """A CSV channel at the edge: a sample field (an exported file's ``pitch_rad``, ``q_rad_s``, ``ax_m_s2``)
+    under the samples' name and unit; any other column as the reader gave it (``as read``: SI when its
+    name said a unit, else the file's own)."""
+    field_name = next((channel[: -len(s)] for s in _KEPT_SUFFIXES if channel.endswith(s)), channel)
+    if field_name in SAMPLE_UNITS and field_name != "t":
+        return people_column(field_name, values)
+    return channel, "s" if channel == DEVICE_TIME_COLUMN else "as read", values
+
+
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
+class Recording:
+    """A recording or decay file read for people: ``samples`` (a DataFrame, units in the column names,
+    ``time_s`` from the first release), ``meta`` (typed), ``decays`` (one ``Decay`` per release) and the
+    lines the reading has for the user (``notices``). Shown as a table in a notebook.
+
+    >>> rec = tankdaq.read("recordings/demo/swath_T_roll_8deg_20261121-143015_run01.mcap")  # doctest: +SKIP
+    >>> rec.samples[["time_s", "roll_deg", "p_deg_s"]].head()  # doctest: +SKIP
+    """
+
+    path: Path
+    samples: pd.DataFrame
+    meta: RecordingMeta
+    decays: list[Decay]
+    notices: list[str] = field(default_factory=list)
+
+    @property
+    def units(self) -> dict[str, str]:
+        """Each column of ``samples`` and its unit."""
+        return dict(self.samples.attrs.get("units", {}))
+
+    def export(
+        self, file_format: str, out_dir: str | Path | None = None, frame: str = "release"
+    ) -> list[Path]:
+        """Write this recording as ``tankdaq export`` does (``store.export``: ``csv`` with its ``.json``
+        sidecar, ``h5`` one file per decay, ``parquet``, ``mat``) into ``out_dir`` (default: beside it);
+        returns the files written. The files hold the recording's SI values exactly; ``frame`` is the
+        time origin, ``"release"`` (time since the release) or ``"device"``."""
+        from ..store.export import export_recording
+
+        if self.meta.get("format") != "tankdaq recording":
+            raise InputError(f"{self.path} is a CSV file already: only a recording (.mcap) is exported")
+        return export_recording(self.path, file_format, Path(out_dir) if out_dir is not None else None, frame)
+
+    def to_csv(self, out_dir: str | Path | None = None, frame: str = "release") -> Path:
+        """The CSV ``pd.read_csv`` reads without options (units in the column names, the metadata in a
+        ``.json`` sidecar beside it); returns its path.
+
+        >>> pd.read_csv(rec.to_csv("exports"))  # doctest: +SKIP
+        """
+        return self.export("csv", out_dir, frame)[0]
+
+    def to_hdf5(self, out_dir: str | Path | None = None, frame: str = "release") -> list[Path]:
+        """One HDF5 file per decay (a dataset per column with its ``unit`` attribute, the metadata as typed
+        root attributes); returns their paths.
+
+        >>> h5py.File(rec.to_hdf5("exports")[0])["roll_rad"][:]  # doctest: +SKIP
+        """
+        return self.export("h5", out_dir, frame)
+
+    def _repr_html_(self) -> str:
+        meta = {k: v for k, v in self.meta.items() if k != "stored"}
+        rows = "".join(
+            f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in meta.items()
+        )
+        decays = "".join(
+            f"<tr><td>{d.number}</td><td>{html.escape(d.name)}</td><td>{d.initial_angle_deg:.2f}</td>"
+            f"<td>{d.duration_s:.2f}</td><td>{d.run.t.size}</td></tr>"
+            for d in self.decays
+        )
+        notices = "".join(f"<li>{html.escape(line)}</li>" for line in self.notices)
+        return (
+            f"<h4>{html.escape(self.path.name)}</h4><table>{rows}</table>"
+            "<table><tr><th>decay</th><th>name</th><th>initial angle (deg)</th><th>duration (s)</th>"
+            f"<th>samples</th></tr>{decays}</table>"
+            + (f"<ul>{notices}</ul>" if notices else "")
+            + self.samples.head().to_html(index=False)
+        )
+
+
+def read(
+    path: str | Path,
+    *,
+    axis: str | None = None,
+    time_col: str = "time_s",
+    angle_col: str = "angle_deg",
+    rate_col: str | None = "rate_deg_s",
+    angle_unit: str | None = None,
+    time_unit: str | None = None,
+) -> Recording:
+    """Read a tankdaq recording (``.mcap``) or a decay CSV (any spreadsheet dialect; the column settings
+    are ``tankdaq identify``'s) into a ``Recording``; its decays are found as ``identify`` finds them.
+
+    >>> rec = tankdaq.read("run.mcap")  # doctest: +SKIP
+    >>> rec.decays[0].samples.plot(x="time_s", y="roll_deg")  # doctest: +SKIP
+    """
+    from ..store.csv_import import CsvOptions
+    from ..store.inputs import input_format
+
+    if axis not in (None, "roll", "pitch"):
+        raise InputError(f"axis {axis!r} not understood: use roll or pitch")
+    path = Path(path)
+    kind = input_format(path).name  # an unknown suffix is one line before anything is read
+    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit)
+    if path.suffix.lower() == ".mcap":
+        return _read_recording(path, axis, kind)
+    return _read_csv(path, axis, options, kind)
+
+
+def _meta(path: Path, kind: str, axis: str, runs: list[DecayRun]) -> RecordingMeta:
+    """What is known about a file: its decays' metadata (typed by the readers) and their releases."""
+    meta: RecordingMeta = {"source": str(path), "format": kind, "axis": runs[0].axis if runs else axis}
+    for key in RecordingMeta.__annotations__:
+        if runs and key in runs[0].meta and key not in ("source", "axis", "format"):
+            meta[key] = runs[0].meta[key]  # type: ignore[literal-required]
+    meta["release_device_time_s"] = [_release_of(run) for run in runs]
+    return meta
+
+
+def _read_recording(path: Path, axis: str | None, kind: str) -> Recording:
+    """A recording: every sample, and one decay per release event (a recording stopped before any
+    release has its samples and no decay, and says so)."""
+    from ..ident.inputs import input_notices, read_decays
+    from ..store.export import typed_metadata
+    from ..store.reader import read_recording
+
+    recording = read_recording(path)
+    released = any(event.get("kind") == "release" for event in recording.events)
+    runs = read_decays(path, axis) if released else []
+    meta = _meta(path, kind, axis or recording.axis, runs)
+    meta["stored"] = typed_metadata(recording.metadata)
+    samples = _recording_samples(recording.samples, meta["release_device_time_s"])
+    decays = [Decay(n, run, part) for n, (run, part) in enumerate(
+        zip(runs, _split_at(samples, meta["release_device_time_s"]), strict=True), start=1
+    )]  # fmt: skip
+    notices = input_notices(runs)
+    if not released:
+        notices.append(f"{path.name}: no release recorded (stopped before one was detected): no decay")
+    return Recording(path, samples, meta, decays, notices)
+
+
+def _read_csv(path: Path, axis: str | None, options: CsvOptions, kind: str) -> Recording:
+    """A decay CSV: the record whole, and its decays as ``identify`` finds them."""
+    from dataclasses import replace
+
+    from ..ident.inputs import input_notices, read_decays
+    from ..store.inputs import read_runs
+
+    o = options
+    runs = read_decays(path, axis, o.time_col, o.angle_col, o.rate_col, o.angle_unit, False, 0, o.time_unit)
+    meta = _meta(path, kind, runs[0].axis, runs)
+    (whole,) = read_runs(path, axis, replace(options, keep_all=True))
+    samples = decay_frame(whole)
+    samples[TIME_COLUMN] -= meta["release_device_time_s"][0] - float(whole.t[0])
+    decays = [Decay(n, run, decay_frame(run)) for n, run in enumerate(runs, start=1)]
+    return Recording(path, samples, meta, decays, input_notices(runs))
+
+
+def _split_at(samples: pd.DataFrame, releases: list[float]) -> list[pd.DataFrame]:
+    """A recording's samples from each release to the next, ``time_s`` from that release."""
+    device_time = samples["device_time_s"].to_numpy()
+    parts = []
+    for start, stop in itertools.pairwise([*releases, np.inf]):
+        part = samples[(device_time >= start) & (device_time < stop)].reset_index(drop=True)
+        part["time_s"] = part["device_time_s"] - start
+        part.attrs["units"] = dict(samples.attrs["units"])
+        parts.append(part)
+    return parts
+
+
+def _recording_samples(samples: np.ndarray, releases: list[float]) -> pd.DataFrame:
+    """Every sample of a recording at the edge, ``time_s`` from the first release."""
+    origin = releases[0] if releases else float(samples["t"][0])
+    columns: dict[str, tuple[str, np.ndarray]] = {TIME_COLUMN: ("s", samples["t"] - origin)}
+    for name in samples.dtype.names or ():
+        column, unit, values = people_column(name, samples[name])
+        columns[column] = (unit, values)
+    return units_frame(columns)
+
+
+def runs_of(data: Any) -> list[DecayRun] | None:
+    """The decays of an object ``tankdaq.identify`` accepts in place of a path (a ``Recording``, a
+    ``Decay``, a ``DecayRun``); None for a path."""
+    if isinstance(data, Recording):
+        return [decay.run for decay in data.decays]
+    if isinstance(data, Decay):
+        return [data.run]
+    if isinstance(data, DecayRun):
+        return [data]
+    return None
