@@ -261,6 +261,8 @@ class RecordDaemon:
         )
         metadata["port"] = info.port if info else s.port
         metadata["legacy_protocol"] = bool(info.legacy) if info else False
+        if info is not None:
+            metadata.update(info.orientation.metadata())  # orientation_source (and what was refused)
         config = {"record": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(s).items()}}
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]

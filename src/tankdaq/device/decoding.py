@@ -6,15 +6,19 @@ Both must turn the same bytes into the same samples, so the code that does it li
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from ..errors import ProtocolError
 from ..samples import empty_samples
 from ..xsens.batch import DecodedBlock, to_samples
 from ..xsens.constants import MID
+from ..xsens.control import INTEGRATED_RATE_OF_TURN
 from ..xsens.legacy import decode_mtdata
 from ..xsens.stream import StreamDecoder
 from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrapper, sample_time_modulus
+from .attitude import GyroAttitude
 from .legacy_output import LegacyOutput
 
 
@@ -23,28 +27,47 @@ class SampleDecoder:
 
     MTData2: device time from unwrapped SampleTimeFine (``modulus`` of the device family).
     Legacy (``legacy`` given): time is the unwrapped sample counter times the output period.
+    ``integrated``: the device gives no orientation (IMU-class): roll and pitch of every sample
+    come from its rate of turn, anchored by gravity while quiet (``attitude.GyroAttitude``).
     """
 
-    def __init__(self, legacy: LegacyOutput | None = None, modulus: int = MODULUS_ONE_DAY) -> None:
+    def __init__(
+        self, legacy: LegacyOutput | None = None, modulus: int = MODULUS_ONE_DAY, integrated: bool = False
+    ) -> None:
         self.legacy = legacy
+        self.attitude = GyroAttitude() if integrated else None
         self.stream = StreamDecoder()
         self._unwrapper = SampleTimeUnwrapper(modulus)
         self._legacy_counter = SampleTimeUnwrapper(1 << 16)
 
     @classmethod
-    def for_device(cls, product_code: str, legacy: LegacyOutput | None = None) -> SampleDecoder:
+    def for_device(
+        cls, product_code: str, legacy: LegacyOutput | None = None, integrated: bool = False
+    ) -> SampleDecoder:
         """The decoder for the device that says it is ``product_code``: its family's clock modulus.
 
         Make one per session and feed it every block: its unwrapper carries each wrap of
         SampleTimeFine from the session's first sample on.
         """
-        return cls(legacy, sample_time_modulus(product_code))
+        return cls(legacy, sample_time_modulus(product_code), integrated)
+
+    @classmethod
+    def for_recording(
+        cls, metadata: Mapping[str, object], legacy: LegacyOutput | None = None
+    ) -> SampleDecoder:
+        """The decoder for the device a recording's metadata describe: its product's clock modulus,
+        and roll and pitch integrated again when the device gave no orientation (an IMU-class device)."""
+        integrated = metadata.get("orientation_source") == INTEGRATED_RATE_OF_TURN
+        return cls.for_device(str(metadata.get("product_code", "")), legacy, integrated)
 
     def feed(self, raw: bytes, host_t: float) -> tuple[np.ndarray, DecodedBlock]:
         """Samples completed by ``raw``; an empty read (a quiet line) confirms a held frame."""
         decoded = self.stream.feed(raw) if raw else self.stream.flush()
         if self.legacy is None:
-            return to_samples(decoded, self._unwrapper, host_t), decoded
+            samples = to_samples(decoded, self._unwrapper, host_t)
+            if self.attitude is not None:
+                self.attitude.fill(samples)
+            return samples, decoded
         return self._legacy_samples(decoded, host_t), decoded
 
     def _legacy_samples(self, decoded: DecodedBlock, host_t: float) -> np.ndarray:

@@ -10,7 +10,9 @@ are built and parsed by ``tankdaq.xsens`` only.
 States a lab meets (``Behaviour``): stuck in measurement, ignoring GoToConfig until a Reset;
 slow flash writes; a boot of some seconds after Reset before the WakeUp; a baud rate that
 changes only after Reset (the host must reopen at the new rate: the link reads the slave's
-termios speed); a 600-series product that sets its baud rate with PortConfig.
+termios speed); a 600-series product that sets its baud rate with PortConfig; a device that
+refuses some orientation outputs (Error 0x21 to a SetOutputConfiguration holding one), and an
+IMU-class product that has none.
 """
 
 from __future__ import annotations
@@ -23,9 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import ProtocolError
+from ...errors import InputError, ProtocolError
 from ...xsens.constants import FLASH_WRITES, MID, baud_code
 from ...xsens.control import (
+    ORIENTATION_OUTPUTS,
     baudrate_payload,
     device_id_payload,
     output_configuration_payload,
@@ -61,6 +64,24 @@ class Behaviour:
     flash_write_s: float = 0.0  # wall seconds before a flash-writing message is acknowledged
     boot_s: float = 0.0  # wall seconds of silence after a Reset before the WakeUp
     measuring_at_start: bool = False  # powered up before the host came: already streaming
+    #: orientation outputs it answers Error 0x21 to (``refused_orientation``; an IMU-class identity: all)
+    refuses: frozenset[str] = frozenset()
+
+
+#: ``tankdaq simulate --refuse`` words for the orientation outputs.
+REFUSABLE = {"euler": "EulerAngles", "quaternion": "Quaternion", "matrix": "RotationMatrix"}
+
+
+def refused_orientation(text: str) -> frozenset[str]:
+    """``"euler,quaternion"`` -> the orientation outputs it refuses (``Behaviour.refuses``)."""
+    words = [word.strip() for word in text.split(",") if word.strip()]
+    unknown = [word for word in words if word not in REFUSABLE]
+    if unknown:
+        raise InputError(
+            f"--refuse {unknown[0]!r} not understood: list orientation outputs among {', '.join(REFUSABLE)}, "
+            "e.g. euler or euler,quaternion"
+        )
+    return frozenset(REFUSABLE[word] for word in words)
 
 
 @dataclass(frozen=True)
@@ -96,7 +117,8 @@ class Firmware:
         self.baud = self.pending_baud = baud
         self.speed = speed
         self.faults = faults
-        self.output = Output(legacy=legacy, clock_modulus=identity.clock_modulus)
+        self.refuses = behaviour.refuses | frozenset(ORIENTATION_OUTPUTS if identity.imu_class else ())
+        self.output = Output(legacy=legacy, clock_modulus=identity.clock_modulus, lacking=self.refuses)
         self.measuring = False
         self._rng = np.random.default_rng([seed, 99])
         self._epoch = time.monotonic()
@@ -313,7 +335,7 @@ class Firmware:
                 effective = effective_configuration(parse_output_configuration(data))
             except ProtocolError:
                 effective = []
-            if not effective:
+            if not effective or any(item.name in self.refuses for item in effective):
                 self._error(ERROR_INVALID_PARAMETER)
                 return
             self.output.items = effective
