@@ -31,6 +31,12 @@ from ..physics.scenario import GRAVITY_M_S2
 MAX_STEP_S = 0.1
 
 
+def euler_rates(p: float, q: float, r: float, roll: float, pitch: float) -> tuple[float, float]:
+    """Roll and pitch rates of body rates p, q, r (rad/s) at ``roll``, ``pitch`` (Z-Y'-X'' kinematics)."""
+    sin_roll, cos_roll = math.sin(roll), math.cos(roll)
+    return p + (q * sin_roll + r * cos_roll) * math.tan(pitch), q * cos_roll - r * sin_roll
+
+
 class _Axis:
     """One angle and its gyro bias: state and covariance of a two-state Kalman filter."""
 
@@ -134,12 +140,13 @@ class GyroAttitude:
             return self._angles()
         roll_axis, pitch_axis = self._roll, self._pitch
         p, q = p - roll_axis.bias, q - pitch_axis.bias
-        sin_roll, cos_roll = math.sin(roll_axis.angle), math.cos(roll_axis.angle)
-        rates = (p + (q * sin_roll + r * cos_roll) * math.tan(pitch_axis.angle), q * cos_roll - r * sin_roll)
+        # trapezoids (the rates are instantaneous), the kinematics taken at the angles predicted for now
+        guess = euler_rates(p, q, r, roll_axis.angle, pitch_axis.angle)
+        rates = euler_rates(p, q, r, roll_axis.angle + guess[0] * dt, pitch_axis.angle + guess[1] * dt)
         q_angle = self.gyro_noise_rad_s_rthz**2 * dt / 2
         q_bias = self.bias_walk_rad_s_rthz**2 * dt
         for k, axis in enumerate((roll_axis, pitch_axis)):
-            step = (rates[k] + self._last_rates[k]) / 2 * dt  # trapezoids: the rates are instantaneous
+            step = (rates[k] + self._last_rates[k]) / 2 * dt
             axis.predict(step / dt, dt, q_angle, q_bias)
             self._integrated[k] += step
         self._last_rates = rates
