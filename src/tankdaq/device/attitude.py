@@ -80,7 +80,7 @@ class GyroAttitude:
     def __init__(
         self,
         gyro_noise_rad_s_rthz: float = math.radians(0.03),
-        gravity_noise_rad_rthz: float = math.radians(0.03),
+        gravity_noise_rad_rthz: float = math.radians(0.01),
         bias_walk_rad_s_rthz: float = 1e-6,
         initial_bias_sd_rad_s: float = math.radians(0.5),
         quiet_rate_rad_s: float = math.radians(1.5),
