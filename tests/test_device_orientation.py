@@ -9,6 +9,8 @@ rate of turn, anchored by gravity before the release, and matches the simulator'
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -159,3 +161,24 @@ def test_an_imu_class_device_records_roll_within_a_tenth_of_a_degree_of_the_trut
     static = (bias[1] * math.cos(held) - bias[2] * math.sin(held)) / GRAVITY_M_S2
     assert math.degrees(abs(error.mean() - static)) < 0.03
     assert math.degrees(math.sqrt(np.mean((error - static) ** 2))) < 0.1
+
+
+@pytest.mark.parametrize(
+    ("args", "start"),
+    [
+        (["--refuse", "yaw"], "error: --refuse 'yaw' not understood: list orientation outputs among euler"),
+        (["--imu", "--mti-600"], "error: --imu and --refuse play an MTData2 device of their own"),
+        (["--refuse", "euler", "--legacy"], "error: --imu and --refuse play an MTData2 device of their own"),
+    ],
+    ids=["unknown-output", "imu-and-600", "refuse-and-legacy"],
+)
+def test_simulate_refuses_an_orientation_setting_it_cannot_play_in_one_line(
+    args: list[str], start: str
+) -> None:
+    tankdaq = str(Path(sys.executable).with_name("tankdaq"))
+    done = subprocess.run(
+        [tankdaq, "simulate", "--runs", "0", *args], capture_output=True, text=True, timeout=60
+    )
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert done.returncode == 2 and len(lines) == 1 and lines[0].startswith(start), done.stderr
+    assert done.stdout == ""  # no simulator was started: no port printed

@@ -116,7 +116,7 @@ def simulate_command(
     refuses = refused_orientation(refuse)
     if (imu or refuses) and (legacy or mti_600 or replay is not None):
         raise InputError(
-            "--imu and --refuse are MTData2 devices of their own: no --legacy, --mti-600 or --replay"
+            "--imu and --refuse play an MTData2 device of their own: no --legacy, --mti-600 or --replay"
         )
     scenario = hull_scenario(
         hull_config, draft, axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
