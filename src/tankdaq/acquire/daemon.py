@@ -289,7 +289,7 @@ class RecordDaemon:
             config,
             draft=s.draft,
             nominal_angle_deg=s.angle_deg,
-            closing_metadata=lambda: driver.counters.metadata(),
+            closing_metadata=driver.closing_metadata,
         )
         self._recording = recording
         identifier = partial(  # the hull's GM and gyradius for the fits' plausibility checks

@@ -69,7 +69,9 @@ class _Axis:
 class GyroAttitude:
     """Roll and pitch from rate of turn and acceleration (module docstring); ``fill(samples)`` in order.
 
-    ``gyro_noise_rad_s_rthz``: the gyro's white noise (angle random walk); ``gravity_noise_rad_rthz``:
+    ``gyro_noise_rad_s_rthz``: the gyro's white noise (angle random walk); ``initial_bias_rad_s`` and
+    ``initial_bias_sd_rad_s``: the gyro bias (p, q) known before the first sample, and how well (a
+    replay starts from the bias the recorder had learnt); ``gravity_noise_rad_rthz``:
     how much to trust the gravity direction while quiet (its noise density, with the small motions of
     a held model in it); ``quiet_rate_rad_s``/``quiet_s``: the smoothed rate stays below this for this
     long before gravity is used, and gravity is used ``delay_s`` late (once the rate after it is
@@ -82,6 +84,7 @@ class GyroAttitude:
         gyro_noise_rad_s_rthz: float = math.radians(0.03),
         gravity_noise_rad_rthz: float = math.radians(0.01),
         bias_walk_rad_s_rthz: float = 1e-6,
+        initial_bias_rad_s: tuple[float, float] = (0.0, 0.0),
         initial_bias_sd_rad_s: float = math.radians(0.5),
         quiet_rate_rad_s: float = math.radians(1.5),
         quiet_s: float = 0.5,
@@ -92,6 +95,7 @@ class GyroAttitude:
         self.gyro_noise_rad_s_rthz = gyro_noise_rad_s_rthz
         self.gravity_noise_rad_rthz = gravity_noise_rad_rthz
         self.bias_walk_rad_s_rthz = bias_walk_rad_s_rthz
+        self.initial_bias_rad_s = initial_bias_rad_s
         self.initial_bias_sd_rad_s = initial_bias_sd_rad_s
         self.quiet_rate_rad_s = quiet_rate_rad_s
         self.quiet_s = quiet_s
@@ -114,9 +118,9 @@ class GyroAttitude:
 
     @property
     def bias_rad_s(self) -> tuple[float, float]:
-        """The learnt gyro bias of the roll (p) and pitch (q) rates."""
+        """The learnt gyro bias of the roll (p) and pitch (q) rates (before any sample: the initial one)."""
         if self._roll is None or self._pitch is None:
-            return (0.0, 0.0)
+            return self.initial_bias_rad_s
         return (self._roll.bias, self._pitch.bias)
 
     def fill(self, samples: np.ndarray) -> np.ndarray:

@@ -21,6 +21,9 @@ from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrap
 from .attitude import GyroAttitude
 from .legacy_output import LegacyOutput
 
+#: How well a recording's gyro bias is known when its file is decoded again (rad/s).
+KNOWN_BIAS_SD_RAD_S = 1e-4
+
 
 class SampleDecoder:
     """``feed(raw, host_t)`` -> (``SAMPLE_DTYPE`` samples, the decoded block with its other frames).
@@ -32,10 +35,14 @@ class SampleDecoder:
     """
 
     def __init__(
-        self, legacy: LegacyOutput | None = None, modulus: int = MODULUS_ONE_DAY, integrated: bool = False
+        self,
+        legacy: LegacyOutput | None = None,
+        modulus: int = MODULUS_ONE_DAY,
+        integrated: bool = False,
+        attitude: GyroAttitude | None = None,
     ) -> None:
         self.legacy = legacy
-        self.attitude = GyroAttitude() if integrated else None
+        self.attitude = attitude or (GyroAttitude() if integrated else None)
         self.stream = StreamDecoder()
         self._unwrapper = SampleTimeUnwrapper(modulus)
         self._legacy_counter = SampleTimeUnwrapper(1 << 16)
@@ -56,9 +63,24 @@ class SampleDecoder:
         cls, metadata: Mapping[str, object], legacy: LegacyOutput | None = None
     ) -> SampleDecoder:
         """The decoder for the device a recording's metadata describe: its product's clock modulus,
-        and roll and pitch integrated again when the device gave no orientation (an IMU-class device)."""
-        integrated = metadata.get("orientation_source") == INTEGRATED_RATE_OF_TURN
-        return cls.for_device(str(metadata.get("product_code", "")), legacy, integrated)
+        and roll and pitch integrated again when the device gave no orientation (an IMU-class device),
+        from the gyro bias the recorder had learnt (a file begins in the hold: too short to learn it)."""
+        modulus = sample_time_modulus(str(metadata.get("product_code", "")))
+        if metadata.get("orientation_source") != INTEGRATED_RATE_OF_TURN:
+            return cls(legacy, modulus)
+        try:
+            bias = (float(str(metadata["gyro_bias_p_rad_s"])), float(str(metadata["gyro_bias_q_rad_s"])))
+        except (KeyError, ValueError):
+            return cls(legacy, modulus, integrated=True)  # a file cut before it closed: learnt again
+        known = GyroAttitude(initial_bias_rad_s=bias, initial_bias_sd_rad_s=KNOWN_BIAS_SD_RAD_S)
+        return cls(legacy, modulus, attitude=known)
+
+    def attitude_metadata(self) -> dict[str, object]:
+        """What a recording of an integrated attitude keeps at close: the gyro bias learnt (none: {})."""
+        if self.attitude is None:
+            return {}
+        bias_p, bias_q = self.attitude.bias_rad_s
+        return {"gyro_bias_p_rad_s": bias_p, "gyro_bias_q_rad_s": bias_q}
 
     def feed(self, raw: bytes, host_t: float) -> tuple[np.ndarray, DecodedBlock]:
         """Samples completed by ``raw``; an empty read (a quiet line) confirms a held frame."""

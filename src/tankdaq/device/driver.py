@@ -652,6 +652,10 @@ class MTiDriver:
 
     # ---- streaming ----------------------------------------
 
+    def closing_metadata(self) -> dict[str, object]:
+        """What a recording keeps at close: the link counters, and an integrated attitude's gyro bias."""
+        return {**self.counters.metadata(), **self._samples.attitude_metadata()}
+
     def read_block(self) -> StreamBlock:
         """One read: the samples it completed (maybe none). Raises DeviceGone if the device vanished."""
         raw = self._read()

@@ -163,6 +163,8 @@ RUN_METADATA_KEYS: dict[str, str] = {
     "orientation_source": "where roll and pitch come from: Euler angles, quaternion, rotation matrix "
     "(the first output the device accepted) or integrated rate of turn (an IMU-class device)",
     "orientation_refused": "the orientation outputs the device refused, with its error codes (absent: none)",
+    "gyro_bias_<p|q>_rad_s": "integrated rate of turn: the gyro bias learnt (written at close; replay "
+    "starts from it)",
     "link_<counter>": "serial link counters at close: bytes, frames, bad_checksums, skipped_bytes, "
     "false_syncs (false frames turned away), gaps, lost",
     "software_version": "tankdaq version that wrote the file",
