@@ -108,13 +108,8 @@ class GyroAttitude:
         self._rate_smooth = math.nan
         self._quiet_for_s = 0.0
         self._integrated = [0.0, 0.0]  # roll and pitch integrated from the rates, never corrected
-        self._last_rates = (0.0, 0.0)  # the Euler-angle rates of the previous sample
+        self._last_rates: tuple[float, float] | None = None  # the Euler-angle rates of the previous sample
         self._history: deque[tuple[float, float, float, float, float]] = deque()
-
-    @property
-    def anchored(self) -> bool:
-        """Whether gravity has anchored the angles (a quiet stretch has been seen)."""
-        return self._roll is not None and self._quiet_for_s >= self.quiet_s
 
     @property
     def bias_rad_s(self) -> tuple[float, float]:
@@ -149,8 +144,9 @@ class GyroAttitude:
         rates = euler_rates(p, q, r, roll_axis.angle + guess[0] * dt, pitch_axis.angle + guess[1] * dt)
         q_angle = self.gyro_noise_rad_s_rthz**2 * dt / 2
         q_bias = self.bias_walk_rad_s_rthz**2 * dt
+        last = self._last_rates or rates  # the first step after a start: no earlier rate
         for k, axis in enumerate((roll_axis, pitch_axis)):
-            step = (rates[k] + self._last_rates[k]) / 2 * dt
+            step = (rates[k] + last[k]) / 2 * dt
             axis.predict(step / dt, dt, q_angle, q_bias)
             self._integrated[k] += step
         self._last_rates = rates
@@ -194,7 +190,7 @@ class GyroAttitude:
         self._roll.bias, self._pitch.bias = biases
         self._quiet_for_s = 0.0
         self._history.clear()
-        self._last_rates = (0.0, 0.0)
+        self._last_rates = None
         self._rate_smooth = math.nan  # the next rate starts the smoothing
 
     def _angles(self) -> tuple[float, float]:
