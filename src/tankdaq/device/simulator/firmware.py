@@ -28,6 +28,7 @@ import numpy as np
 from ...errors import InputError, ProtocolError
 from ...xsens.constants import FLASH_WRITES, MID, baud_code
 from ...xsens.control import (
+    ERROR_INVALID_PARAMETER,
     ORIENTATION_OUTPUTS,
     baudrate_payload,
     device_id_payload,
@@ -49,7 +50,6 @@ from .sources import FrameSource
 #: Answer to the host's WakeUpAck must come within this time after WakeUp, else the device measures.
 WAKEUP_WINDOW_S = 0.5
 ERROR_INVALID_MESSAGE = 0x04
-ERROR_INVALID_PARAMETER = 0x21
 ERROR_INVALID_BAUD = 0x20
 #: Ports of a 600-series device (PortConfig words): the host port first.
 PORTS_600 = 3
