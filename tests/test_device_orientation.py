@@ -22,6 +22,7 @@ from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, ScriptedSource, SimulatedMTi
 from tankdaq.physics.scenario import GRAVITY_M_S2, DecayScenario, SensorNoise
+from tankdaq.store.playback import recorded_device
 from tankdaq.store.reader import Recording, iter_raw_chunks, read_recording
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.control import ORIENTATION_OUTPUTS, OrientationSource, parse_output_configuration
@@ -128,6 +129,19 @@ def test_a_device_refusing_euler_angles_records_roll_from_what_it_gives(
     for name in ("roll", "pitch"):  # float32 on the wire: micro-radians
         np.testing.assert_allclose(recorded[name], device[name][rows], atol=2e-6)
     assert np.ptp(recorded["roll"]) > math.radians(10)  # a whole decay, both ways
+    # the recording's device plays again (record --port sim:FILE.mcap): it refuses what it did not send
+    with SimulatedMTi(source=recorded_device(recording.path), speed=SPEED) as sim:
+        driver = MTiDriver(sim.link, rate_hz=RATE_HZ)
+        try:
+            again = driver.configure().orientation
+            played = driver.samples(1.0)
+        finally:
+            driver.close()
+    refused = recording.metadata["orientation_refused"]
+    assert again.metadata() == {"orientation_source": source, "orientation_refused": refused}  # as recorded
+    rows = np.searchsorted(recorded["ticks"], played["ticks"])
+    assert played.size >= RATE_HZ // 2 and np.array_equal(recorded["ticks"][rows], played["ticks"])
+    np.testing.assert_allclose(played["roll"], recorded["roll"][rows], rtol=0, atol=1e-12)  # the same bytes
 
 
 def test_an_imu_class_device_records_roll_within_a_tenth_of_a_degree_of_the_truth(tmp_path: Path) -> None:

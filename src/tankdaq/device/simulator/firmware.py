@@ -41,6 +41,7 @@ from ...xsens.control import (
 )
 from ...xsens.frame import Frame, build_frame
 from ...xsens.framer import StreamFramer
+from ...xsens.mtdata2 import SPEC_BY_BASE, TYPE_MASK
 from .faults import Faults
 from .identity import DeviceIdentity
 from .output import Output, effective_configuration
@@ -66,6 +67,18 @@ class Behaviour:
     measuring_at_start: bool = False  # powered up before the host came: already streaming
     #: orientation outputs it answers Error 0x21 to (``refused_orientation``; an IMU-class identity: all)
     refuses: frozenset[str] = frozenset()
+
+
+def refused_outputs(
+    behaviour: Behaviour, identity: DeviceIdentity, recorded: list[tuple[int, int]] | None
+) -> frozenset[str]:
+    """The orientation outputs a device refuses: as it behaves, all of them on an IMU-class product, and
+    on a recording's device those the recording does not hold (it can only send what it sent)."""
+    refused = set(behaviour.refuses) | set(ORIENTATION_OUTPUTS if identity.imu_class else ())
+    if recorded is not None:
+        sent = {SPEC_BY_BASE[xdi & TYPE_MASK].name for xdi, _ in recorded if xdi & TYPE_MASK in SPEC_BY_BASE}
+        refused |= set(ORIENTATION_OUTPUTS) - sent
+    return frozenset(refused)
 
 
 #: ``tankdaq simulate --refuse`` words for the orientation outputs.
@@ -117,7 +130,7 @@ class Firmware:
         self.baud = self.pending_baud = baud
         self.speed = speed
         self.faults = faults
-        self.refuses = behaviour.refuses | frozenset(ORIENTATION_OUTPUTS if identity.imu_class else ())
+        self.refuses = refused_outputs(behaviour, identity, source.configuration)
         self.output = Output(legacy=legacy, clock_modulus=identity.clock_modulus, lacking=self.refuses)
         self.measuring = False
         self._rng = np.random.default_rng([seed, 99])
@@ -329,16 +342,19 @@ class Firmware:
         self._reply(MID.BAUDRATE_ACK)
 
     def _on_output_configuration(self, data: bytes) -> None:
-        """Set (when ``data``) and echo the configuration; a recording's device sends what it sent."""
-        if data and self.source.configuration is None:
+        """Set (when ``data``) and echo the configuration; a recording's device sends what it sent (and
+        refuses the orientation outputs it did not send)."""
+        recorded = self.source.configuration is not None
+        if data:
             try:
                 effective = effective_configuration(parse_output_configuration(data))
             except ProtocolError:
                 effective = []
-            if not effective or any(item.name in self.refuses for item in effective):
+            if not (effective or recorded) or any(item.name in self.refuses for item in effective):
                 self._error(ERROR_INVALID_PARAMETER)
                 return
-            self.output.items = effective
+            if not recorded:
+                self.output.items = effective
         echo = self.source.configuration or self.output.entries
         self._reply(MID.OUTPUT_CONFIGURATION_ACK, output_configuration_payload(echo))
 
