@@ -21,6 +21,7 @@ from tankdaq.config import hull_scenario
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, ScriptedSource, SimulatedMTi
+from tankdaq.errors import InputError
 from tankdaq.physics.scenario import GRAVITY_M_S2, DecayScenario, SensorNoise
 from tankdaq.store.playback import recorded_device
 from tankdaq.store.reader import Recording, iter_raw_chunks, read_recording
@@ -93,6 +94,19 @@ def test_the_driver_moves_to_the_next_orientation_output_the_device_refuses(
     tried = [[name] for name, _ in expected.refused] + [[expected.output] if expected.output else []]
     assert asked == tried  # one SetOutputConfiguration per candidate, each with one orientation (or none)
     assert samples.size >= 0.4 * RATE_HZ and np.isfinite(samples["roll"]).all()
+
+
+def test_an_imu_class_device_below_the_integrable_rate_is_one_line() -> None:
+    scenario = hull_scenario(rate_hz=25, runs=1, seed=2, release_after_s=5.0, decay_s=3.0)
+    with SimulatedMTi(scenario, identity=DeviceIdentity.mti_100()) as sim:
+        driver = MTiDriver(sim.link, rate_hz=25)
+        try:
+            with pytest.raises(
+                InputError, match=r"^MTi-100-2A8G4 gives no orientation: .* at least 50 Hz; use --rate 100$"
+            ):
+                driver.configure()
+        finally:
+            driver.close()
 
 
 @pytest.mark.parametrize(

@@ -69,6 +69,7 @@ from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
 from ..xsens.mtdata2 import describe_xdi
 from ..xsens.timebase import TICKS_PER_SECOND, CounterTracker
+from .attitude import MIN_RATE_HZ
 from .decoding import SampleDecoder
 from .latency import ftdi_latency_ms, latency_note
 from .legacy_output import LegacyOutput
@@ -541,6 +542,11 @@ class MTiDriver:
         self.go_to_config()
         device_id, product, firmware = self.identify()
         configuration, legacy, bits_per_second, orientation = self._configure_outputs(product)
+        if orientation.integrated and self.rate_hz < MIN_RATE_HZ:
+            raise InputError(
+                f"{product} gives no orientation: roll and pitch are integrated from its rate of turn, "
+                f"which needs at least {MIN_RATE_HZ:g} Hz; use --rate 100"
+            )
         target = self._choose_baud(bits_per_second)
         found = self.line_baud
         if target != found:
