@@ -262,6 +262,8 @@ class RecordDaemon:
         )
         metadata["port"] = info.port if info else s.port
         metadata["legacy_protocol"] = bool(info.legacy) if info else False
+        if info is not None:
+            metadata.update(info.orientation.metadata())  # orientation_source (and what was refused)
         config = {"record": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(s).items()}}
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
@@ -288,7 +290,7 @@ class RecordDaemon:
             config,
             draft=s.draft,
             nominal_angle_deg=s.angle_deg,
-            closing_metadata=lambda: driver.counters.metadata(),
+            closing_metadata=driver.closing_metadata,
         )
         self._recording = recording
         identifier = partial(  # the hull's GM and gyradius for the fits' plausibility checks

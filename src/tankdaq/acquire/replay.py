@@ -86,7 +86,7 @@ def replay_recording(
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))
     output = LegacyOutput.for_decay(rate_hz) if legacy else None  # as the driver asked for
-    decoder = SampleDecoder.for_device(str(meta.get("product_code", "")), output)
+    decoder = SampleDecoder.for_recording(meta, output)
     wall0: float | None = None
     t0 = 0.0
     try:

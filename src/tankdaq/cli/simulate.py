@@ -78,6 +78,12 @@ def simulate_command(
     boot_s: float = typer.Option(0.0, "--boot", min=0.0, help="Seconds of silence after a Reset."),
     flash_write_s: float = typer.Option(0.0, "--flash-write", min=0.0, help="Seconds a flash write takes."),
     mti_600: bool = typer.Option(False, "--mti-600", help="Be an MTi-630 (baud rate through PortConfig)."),
+    imu: bool = typer.Option(
+        False, "--imu", help="Be an MTi-100 IMU: rate of turn and acceleration, no orientation output."
+    ),
+    refuse: str = typer.Option(
+        "", "--refuse", help="Orientation outputs to refuse with Error 0x21: euler, euler,quaternion, ..."
+    ),
     replay: Path = typer.Option(
         None,
         "--replay",
@@ -86,7 +92,15 @@ def simulate_command(
 ) -> None:
     """Serve a simulated MTi-G on a pty; the first stdout line is the port to open."""
     from ..config import format_draft, hull_scenario, load_hull
-    from ..device.simulator import Behaviour, DeviceIdentity, Faults, ScriptedSource, SimulatedMTi
+    from ..device.simulator import (
+        Behaviour,
+        DeviceIdentity,
+        Faults,
+        ScriptedSource,
+        SimulatedMTi,
+        refused_orientation,
+    )
+    from ..physics.scenario import SensorNoise
     from ..store.playback import recorded_device
 
     if axis not in ("roll", "pitch"):
@@ -99,9 +113,15 @@ def simulate_command(
         raise InputError("--legacy and --mti-600 exclude each other: a 600-series device speaks MTData2")
     if replay is not None and (legacy or truth is not None):
         raise InputError("--replay plays the recorded MTData2 as it was: no --legacy, no scripted --truth")
+    refuses = refused_orientation(refuse)
+    if (imu or refuses) and (legacy or mti_600 or replay is not None):
+        raise InputError(
+            "--imu and --refuse play an MTData2 device of their own: no --legacy, --mti-600 or --replay"
+        )
     scenario = hull_scenario(
         hull_config, draft, axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
         release_after_s=release_after_s, decay_s=decay_s,
+        noise=SensorNoise.mti_100() if imu else SensorNoise(),  # an IMU's gyro and accelerometer
     )  # fmt: skip
     fault_set = Faults.parse(faults)
     source = recorded_device(replay) if replay is not None else ScriptedSource(scenario)
@@ -118,8 +138,8 @@ def simulate_command(
         faults=fault_set,
         link=None if link is None else str(link),
         seed=seed,
-        behaviour=Behaviour(stuck=stuck, flash_write_s=flash_write_s, boot_s=boot_s),
-        identity=DeviceIdentity.mti_630() if mti_600 else None,
+        behaviour=Behaviour(stuck=stuck, flash_write_s=flash_write_s, boot_s=boot_s, refuses=refuses),
+        identity=DeviceIdentity.mti_630() if mti_600 else DeviceIdentity.mti_100() if imu else None,
     )
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):

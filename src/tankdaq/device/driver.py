@@ -12,7 +12,10 @@ path (or a pyserial URL). What it does, in order:
 3. read device id, product code and firmware;
 4. SetOutputConfiguration for the decay channels, diffing the echoed (effective) configuration
    (each flash write has its own, longer timeout); a device answering Error 0x04 is a 2007-era
-   MTi-G and is configured with OutputMode/OutputSettings/Period instead;
+   MTi-G and is configured with OutputMode/OutputSettings/Period instead. The orientation is
+   negotiated: Euler angles, else (Error 0x21) quaternion, else rotation matrix, else none (an
+   IMU-class device, or one its product code says is: roll and pitch from the integrated rate of
+   turn, ``device.attitude``); ``info.orientation`` says which, and what was refused;
 5. if the line cannot carry the output (or ``baud`` asks for another rate): SetBaudrate (600-series:
    PortConfig), Reset, reopen the port at the new rate and hand-shake again;
 6. GoToMeasurement, then yield ``StreamBlock``s: ``SAMPLE_DTYPE`` samples with device time
@@ -41,11 +44,16 @@ from ..samples import SAMPLE_DTYPE
 from ..xsens.constants import FLASH_WRITES, MID, SEARCH_BAUDS, SERIAL_BAUDS
 from ..xsens.control import (
     BITS_PER_BYTE,
+    ERROR_INVALID_PARAMETER,
     FRAME_OVERHEAD,
+    ORIENTATION_OUTPUTS,
+    ORIENTATION_WORDS,
+    OrientationSource,
     baudrate_payload,
     check_bandwidth,
     decay_output_configuration,
     is_600_series,
+    is_imu_class,
     line_refusal,
     output_configuration_payload,
     parse_device_id,
@@ -61,6 +69,7 @@ from ..xsens.frame import Frame, build_frame
 from ..xsens.framer import StreamFramer
 from ..xsens.mtdata2 import describe_xdi
 from ..xsens.timebase import TICKS_PER_SECOND, CounterTracker
+from .attitude import MIN_RATE_HZ
 from .decoding import SampleDecoder
 from .latency import ftdi_latency_ms, latency_note
 from .legacy_output import LegacyOutput
@@ -118,6 +127,7 @@ class DeviceInfo:
     configuration: tuple[tuple[int, int], ...] = ()
     baud_changed_from: int | None = None  # the device's rate before tankdaq moved it
     usb_serial: str | None = None
+    orientation: OrientationSource = field(default_factory=OrientationSource)  # roll and pitch from what
 
     def describe(self) -> str:
         kind = "legacy MTData" if self.legacy else "MTData2"
@@ -276,12 +286,14 @@ class MTiDriver:
         self._log = LineLog()
         self._reset_stream_state()
 
-    def _reset_stream_state(self, legacy: LegacyOutput | None = None, product: str = "") -> None:
+    def _reset_stream_state(
+        self, legacy: LegacyOutput | None = None, product: str = "", integrated: bool = False
+    ) -> None:
         # one decoder for the whole session: its unwrapper carries every clock wrap from the first sample
         if self.modulus is None:
-            self._samples = SampleDecoder.for_device(product, legacy)
+            self._samples = SampleDecoder.for_device(product, legacy, integrated)
         else:
-            self._samples = SampleDecoder(legacy, self.modulus)
+            self._samples = SampleDecoder(legacy, self.modulus, integrated)
         self._tracker = CounterTracker()
         self._carry: StreamBlock | None = None
 
@@ -529,20 +541,27 @@ class MTiDriver:
         self.open()
         self.go_to_config()
         device_id, product, firmware = self.identify()
-        configuration, legacy, bits_per_second = self._configure_outputs()
+        configuration, legacy, bits_per_second, orientation = self._configure_outputs(product)
+        if orientation.integrated and self.rate_hz < MIN_RATE_HZ:
+            raise InputError(
+                f"{product} gives no orientation: roll and pitch are integrated from its rate of turn, "
+                f"which needs at least {MIN_RATE_HZ:g} Hz; use --rate 100"
+            )
         target = self._choose_baud(bits_per_second)
         found = self.line_baud
         if target != found:
             self.move_baud(target, is_600_series(product))
         self.request(MID.GOTO_MEASUREMENT)
-        self._reset_stream_state(LegacyOutput.for_decay(self.rate_hz) if legacy else None, product)
+        self._reset_stream_state(
+            LegacyOutput.for_decay(self.rate_hz) if legacy else None, product, orientation.integrated
+        )
         # a device streams at once: what came with the ack is the stream's start, not hand-shake noise
         self._unread = b"".join(f.to_bytes() for f in self._after_reply) + self._framer.take_pending()
         self.counters = StreamCounters()
         self._last_data = time.monotonic()
         self.info = DeviceInfo(self.path, self.line_baud, device_id, product, firmware, legacy, self.rate_hz,
                                tuple(configuration), found if target != found else None,
-                               self.usb_serial)  # fmt: skip
+                               self.usb_serial, orientation)  # fmt: skip
         return self.info
 
     def _choose_baud(self, bits_per_second: float) -> int:
@@ -577,35 +596,71 @@ class MTiDriver:
         except DeviceError as exc:
             raise DeviceError(f"moved from {old} to {target} baud, then lost the device: {exc}") from None
 
-    def _configure_outputs(self) -> tuple[list[tuple[int, int]], bool, float]:
-        """(configuration, legacy?, bits/s it needs): MTData2, or the legacy settings if the device
-        does not know SetOutputConfiguration."""
-        requested = decay_output_configuration(int(self.rate_hz))
+    def _configure_outputs(
+        self, product: str
+    ) -> tuple[list[tuple[int, int]], bool, float, OrientationSource]:
+        """(configuration, legacy?, bits/s it needs, orientation source): MTData2 with the first
+        orientation output the device accepts (Euler angles, quaternion, rotation matrix; an IMU-class
+        product or a device refusing all three: none, the rate of turn is integrated), or the legacy
+        settings if the device does not know SetOutputConfiguration."""
+        imu_class = is_imu_class(product)
+        candidates = [*(() if imu_class else ORIENTATION_OUTPUTS), None]
+        refused: list[tuple[str, int]] = []
+        while True:  # each refusal moves to the next candidate; the last one (None) returns or raises
+            orientation = candidates[len(refused)]
+            requested = decay_output_configuration(int(self.rate_hz), orientation=orientation)
+            reply = self._set_output_configuration(requested)
+            if reply.mid != MID.ERROR:
+                source = OrientationSource(orientation, tuple(refused), imu_class)
+                echoed = self._check_echo(requested, reply.payload)
+                return echoed, False, self._bits_per_second(requested), source
+            code, meaning = parse_error(reply.payload)
+            if code == ERROR_NOT_IMPLEMENTED and orientation == ORIENTATION_OUTPUTS[0]:
+                return [], True, self._configure_legacy(), OrientationSource()
+            if code != ERROR_INVALID_PARAMETER or orientation is None:
+                asked = "no orientation" if orientation is None else ORIENTATION_WORDS[orientation]
+                raise DeviceError(
+                    f"the device refused the output configuration (with {asked}): "
+                    f"error 0x{code:02X}: {meaning}"
+                )
+            refused.append((orientation, code))
+
+    def _set_output_configuration(self, requested: list[tuple[int, int]]) -> Frame:
+        """SetOutputConfiguration: the device's ack (the effective configuration) or its Error."""
         self._write(build_frame(MID.OUTPUT_CONFIGURATION, output_configuration_payload(requested)))
         reply = self._exchange({MID.OUTPUT_CONFIGURATION_ACK}, self.flash_timeout_s)
         if reply is None:
             raise DeviceError(
                 f"no reply to SetOutputConfiguration from {self.path} within {self.flash_timeout_s:g} s"
             )
-        if reply.mid == MID.ERROR:
-            code, meaning = parse_error(reply.payload)
-            if code != ERROR_NOT_IMPLEMENTED:
-                raise DeviceError(
-                    f"the device refused the output configuration: error 0x{code:02X}: {meaning}"
-                )
-            output = LegacyOutput.for_decay(self.rate_hz)
-            self.request(MID.OUTPUT_MODE, output.mode.to_bytes(2, "big"), "SetOutputMode")
-            self.request(MID.OUTPUT_SETTINGS, output.settings.to_bytes(4, "big"), "SetOutputSettings")
-            self.request(MID.PERIOD, output.period.to_bytes(2, "big"), "SetPeriod")
-            return [], True, (output.layout.length + FRAME_OVERHEAD) * self.rate_hz * BITS_PER_BYTE
-        echoed = parse_output_configuration(reply.payload)
+        return reply
+
+    def _configure_legacy(self) -> float:
+        """A 2007-era MTi-G: OutputMode, OutputSettings and Period; the bits/s its MTData needs."""
+        output = LegacyOutput.for_decay(self.rate_hz)
+        self.request(MID.OUTPUT_MODE, output.mode.to_bytes(2, "big"), "SetOutputMode")
+        self.request(MID.OUTPUT_SETTINGS, output.settings.to_bytes(4, "big"), "SetOutputSettings")
+        self.request(MID.PERIOD, output.period.to_bytes(2, "big"), "SetPeriod")
+        return (output.layout.length + FRAME_OVERHEAD) * self.rate_hz * BITS_PER_BYTE
+
+    @staticmethod
+    def _check_echo(requested: list[tuple[int, int]], payload: bytes) -> list[tuple[int, int]]:
+        """The echoed (effective) configuration, which must hold every output asked for."""
+        echoed = parse_output_configuration(payload)
         differences = [f"{describe_xdi(xdi)} at {hz} Hz" for xdi, hz in requested if (xdi, hz) not in echoed]
         if differences:
             got = ", ".join(f"{describe_xdi(x)} {h} Hz" for x, h in echoed)
             raise DeviceError(f"the device did not accept {'; '.join(differences)} (it will send: {got})")
-        return echoed, False, check_bandwidth(requested, self.rate_hz, self.line_baud).bits_per_second
+        return echoed
+
+    def _bits_per_second(self, requested: list[tuple[int, int]]) -> float:
+        return check_bandwidth(requested, self.rate_hz, self.line_baud).bits_per_second
 
     # ---- streaming ----------------------------------------
+
+    def closing_metadata(self) -> dict[str, object]:
+        """What a recording keeps at close: the link counters, and an integrated attitude's gyro bias."""
+        return {**self.counters.metadata(), **self._samples.attitude_metadata()}
 
     def read_block(self) -> StreamBlock:
         """One read: the samples it completed (maybe none). Raises DeviceGone if the device vanished."""

@@ -114,10 +114,13 @@ def open_device(
     )
     try:
         device.driver.open()
-        device.driver.configure()
-        note = latency_note(device.driver.path, ftdi_latency_ms(device.driver.path), rate_hz)
-        if note:
-            say(note)
+        info = device.driver.configure()
+        for note in (
+            info.orientation.line(),  # roll and pitch from other than Euler angles: what and why
+            latency_note(device.driver.path, ftdi_latency_ms(device.driver.path), rate_hz),
+        ):
+            if note:
+                say(note)
     except BaseException:  # Ctrl-C while opening too: nothing started is left running
         device.close()
         raise

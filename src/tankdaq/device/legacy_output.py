@@ -21,7 +21,7 @@ from ..xsens.legacy import (
     LegacyLayout,
     legacy_layout,
 )
-from .attitude import quaternion, rotation_matrix
+from ..xsens.orientation import quaternion, rotation_matrix
 
 #: SetPeriod counts in 1/115200 s; 1152 is 100 Hz.
 PERIOD_CLOCK_HZ = 115200

@@ -80,6 +80,13 @@ class SensorNoise:
         """A perfect sensor: for checking the truth against the samples."""
         return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
+    @classmethod
+    def mti_100(cls) -> SensorNoise:
+        """An MTi-100-class inertial unit (datasheet: gyro 0.01 deg/s/sqrt(Hz) over +-450 deg/s,
+        accelerometer 60 ug/sqrt(Hz) = 0.0006 m/s^2/sqrt(Hz) over +-200 m/s^2); biases as the default."""
+        return cls(gyro_noise_deg_s_rthz=0.01, gyro_lsb_deg_s=900.0 / 65536, acc_noise_m_s2_rthz=0.0006,
+                   acc_lsb_m_s2=400.0 / 65536)  # fmt: skip
+
 
 @dataclass(frozen=True)
 class Handling:
@@ -469,7 +476,11 @@ class SensorModel:
         nyquist_rthz = math.sqrt(self.rate_hz / 2)
         main, other = trace.angle, trace.other_angle
         roll, pitch = (main, other) if trace.axis == "roll" else (other, main)
-        p, q = (trace.rate, trace.other_rate) if trace.axis == "roll" else (trace.other_rate, trace.rate)
+        roll_rate, pitch_rate = (
+            (trace.rate, trace.other_rate) if trace.axis == "roll" else (trace.other_rate, trace.rate)
+        )
+        # the gyro measures body rates: the Euler-angle rates through the Z-Y'-X'' kinematics (no yaw rate)
+        p, q, r = roll_rate, pitch_rate * np.cos(roll), -pitch_rate * np.sin(roll)
         out = np.zeros(n, dtype=SAMPLE_DTYPE)
         out["ticks"] = trace.ticks
         out["t"] = out["ticks"] / TICKS_PER_S
@@ -481,7 +492,7 @@ class SensorModel:
         ):
             out[name] = value + self.angle_bias[k] + angle_sd * rng.standard_normal(n)
         gyro_sd = math.radians(nz.gyro_noise_deg_s_rthz) * nyquist_rthz
-        for k, (name, value) in enumerate((("p", p), ("q", q), ("r", 0.0))):
+        for k, (name, value) in enumerate((("p", p), ("q", q), ("r", r))):
             out[name] = _quantise(
                 value + self.gyro_bias[k] + gyro_sd * rng.standard_normal(n), math.radians(nz.gyro_lsb_deg_s)
             )

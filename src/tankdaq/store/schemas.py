@@ -160,6 +160,11 @@ RUN_METADATA_KEYS: dict[str, str] = {
     "firmware": "device firmware revision",
     "baud": "serial line rate the device streamed at (bit/s)",
     "baud_changed": "true when tankdaq moved the device to that rate (baud_before: the rate it was at)",
+    "orientation_source": "where roll and pitch come from: Euler angles, quaternion, rotation matrix "
+    "(the first output the device accepted) or integrated rate of turn (an IMU-class device)",
+    "orientation_refused": "the orientation outputs the device refused, with its error codes (absent: none)",
+    "gyro_bias_<p|q>_rad_s": "integrated rate of turn: the gyro bias learnt (written at close; replay "
+    "starts from it)",
     "link_<counter>": "serial link counters at close: bytes, frames, bad_checksums, skipped_bytes, "
     "false_syncs (false frames turned away), gaps, lost",
     "software_version": "tankdaq version that wrote the file",

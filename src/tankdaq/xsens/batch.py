@@ -46,6 +46,7 @@ from .mtdata2 import (
     item_spans,
     payload_well_formed,
 )
+from .orientation import euler_from_matrix, euler_from_quaternion
 from .timebase import TICKS_PER_SECOND, SampleTimeUnwrapper
 
 _STRUCT_TO_DTYPE = {"B": "u1", "H": ">u2", "I": ">u4", "i": ">i4", "h": ">i2"}
@@ -57,8 +58,14 @@ RAW_IMU_DTYPE = np.dtype([("counts", ">u2", (9,)), ("temp", ">i2")])
 FP1632_DTYPE = np.dtype([("fraction", ">u4"), ("integer", ">i2")])
 MTDATA2 = int(MID.MTDATA2)  # a plain int: enum attribute access is slow in a per-chunk path
 MTDATA = int(MID.MTDATA)
+#: Orientation outputs, in the order a sample takes its roll, pitch and yaw from them.
+ORIENTATION_COLUMNS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "EulerAngles": np.deg2rad,
+    "Quaternion": euler_from_quaternion,
+    "RotationMatrix": euler_from_matrix,
+}
 #: Channels that make a message a sample (GNSS-only messages are not).
-INERTIAL_OUTPUTS = ("EulerAngles", "RateOfTurn", "Acceleration")
+INERTIAL_OUTPUTS = (*ORIENTATION_COLUMNS, "RateOfTurn", "Acceleration")
 #: Below this many bytes a running sum is the cheaper checksum; above, row sums per frame length.
 RUNNING_SUM_LIMIT = 1 << 18
 #: Up to this many rows a layout is matched with one gather; beyond, one compare per header field.
@@ -994,7 +1001,8 @@ def to_samples(
 
     GNSS-only messages are not samples; messages without SampleTimeFine cannot be placed in
     time and are dropped, and so are messages whose SampleTimeFine is beyond the device clock's
-    range or whose EulerAngles are not ENU (the driver configured ENU): a corrupted frame passes
+    range or whose orientation (Euler angles, quaternion or rotation matrix: the first the device
+    gives, ``xsens.orientation``) is not ENU (the driver configured ENU): a corrupted frame passes
     the one-byte checksum once in 256, and one such frame must never stop a recording. Its
     PacketCounter is then missing, so it shows as a lost packet. Never raises on bytes.
     ``unwrapper`` carries the time base across consecutive blocks.
@@ -1006,9 +1014,10 @@ def to_samples(
     rows = np.flatnonzero(inertial & block.present.get("SampleTimeFine", none))
     if rows.size:
         rows = rows[block.columns["SampleTimeFine"][rows].astype(np.int64) < unwrapper.modulus]
-    if "EulerAngles" in block.xdis and rows.size:
-        euler = block.present["EulerAngles"][rows]
-        rows = rows[~(euler & (block.xdis["EulerAngles"][rows] & FRAME_MASK != FRAMES["ENU"]))]
+    for name in ORIENTATION_COLUMNS:
+        if name in block.xdis and rows.size:
+            given = block.present[name][rows]
+            rows = rows[~(given & (block.xdis[name][rows] & FRAME_MASK != FRAMES["ENU"]))]
     out = empty_samples(rows.size)
     if not rows.size:
         return out
@@ -1016,13 +1025,19 @@ def to_samples(
     out["t"] = out["ticks"] / TICKS_PER_SECOND
     if host_t is not None:
         out["host_t"] = host_t
-    channels = {"EulerAngles": ("roll", "pitch", "yaw"), "RateOfTurn": ("p", "q", "r"),
-                "Acceleration": ("ax", "ay", "az")}  # fmt: skip
-    for name, sample_fields in channels.items():
+    for name, to_rad in reversed(ORIENTATION_COLUMNS.items()):  # Euler angles win where several came
+        if name in block.columns:
+            given = block.present[name][rows]
+            every = bool(given.all())
+            angles = to_rad(block.columns[name][rows] if every else block.columns[name][rows][given])
+            for axis, sample_field in enumerate(("roll", "pitch", "yaw")):
+                if every:
+                    out[sample_field] = angles[:, axis]
+                else:
+                    out[sample_field][given] = angles[:, axis]
+    for name, sample_fields in {"RateOfTurn": ("p", "q", "r"), "Acceleration": ("ax", "ay", "az")}.items():
         if name in block.columns:
             values = block.columns[name][rows]
-            if name == "EulerAngles":
-                values = np.deg2rad(values)
             for axis, sample_field in enumerate(sample_fields):
                 out[sample_field] = values[:, axis]
     if "PacketCounter" in block.columns:

@@ -35,6 +35,18 @@ DECAY_OUTPUTS: tuple[str, ...] = (
     "Acceleration",
     "StatusWord",
 )
+#: The orientation outputs asked for, best first: the one a device refuses is replaced by the next
+#: (each gives the same roll and pitch, ``xsens.orientation``); with none, the rate of turn is integrated.
+ORIENTATION_OUTPUTS: tuple[str, ...] = ("EulerAngles", "Quaternion", "RotationMatrix")
+ORIENTATION_WORDS = {
+    "EulerAngles": "Euler angles",
+    "Quaternion": "quaternion",
+    "RotationMatrix": "rotation matrix",
+}
+#: The orientation source of a device without orientation output (a recording's ``orientation_source``).
+INTEGRATED_RATE_OF_TURN = "integrated rate of turn"
+#: The error a device answers to an output it does not have (invalid parameter): try the next one.
+ERROR_INVALID_PARAMETER = 0x21
 #: Outputs that ride along with every message (their frequency is ignored by the device).
 PER_MESSAGE_OUTPUTS = frozenset(
     {"PacketCounter", "SampleTimeFine", "SampleTimeCoarse", "UtcTime", "StatusByte", "StatusWord"}
@@ -62,16 +74,75 @@ def parse_output_configuration(payload: bytes) -> list[tuple[int, int]]:
     return [struct.unpack_from(">HH", payload, offset) for offset in range(0, len(payload), 4)]
 
 
-def decay_output_configuration(rate_hz: int, precision: str = "float32") -> list[tuple[int, int]]:
-    """The decay-test output set at ``rate_hz`` (counters, time and status at 0xFFFF)."""
+def decay_output_configuration(
+    rate_hz: int, precision: str = "float32", orientation: str | None = "EulerAngles"
+) -> list[tuple[int, int]]:
+    """The decay-test output set at ``rate_hz`` (counters, time and status at 0xFFFF), with
+    ``orientation`` (one of ``ORIENTATION_OUTPUTS``; None: no orientation) in place of Euler angles."""
     if not 1 <= rate_hz <= MAX_RATE_HZ:
         raise ProtocolError(f"output rate {rate_hz} Hz is outside 1..{MAX_RATE_HZ} Hz (MTi-G-710 maximum)")
+    if orientation is not None and orientation not in ORIENTATION_OUTPUTS:
+        raise ProtocolError(
+            f"{orientation!r} is not an orientation output ({', '.join(ORIENTATION_OUTPUTS)})"
+        )
+    names = [orientation if name == "EulerAngles" else name for name in DECAY_OUTPUTS]
     return [
         (make_xdi(name), MAX_FREQUENCY)
         if name in PER_MESSAGE_OUTPUTS
         else (make_xdi(name, precision), rate_hz)
-        for name in DECAY_OUTPUTS
+        for name in names
+        if name is not None
     ]
+
+
+def is_imu_class(product_code: str) -> bool:
+    """An IMU-class product (MTi-1, MTi-10, MTi-100, MTi-610): rate of turn and acceleration, no
+    orientation output [inference from the product families' naming: x1/x10/x100/610 IMU, x2/x20/x200/620
+    VRU, x3/x30/x300/630 AHRS]."""
+    return re.match(r"MTi-(1|10|100|610)(-|$)", product_code) is not None
+
+
+@dataclass(frozen=True)
+class OrientationSource:
+    """Where a device's roll and pitch come from: the orientation output it accepted (None: none, the
+    rate of turn is integrated), what it refused on the way (output, error code), and whether its
+    product code said it has no orientation output (then none was asked for)."""
+
+    output: str | None = "EulerAngles"
+    refused: tuple[tuple[str, int], ...] = ()
+    imu_class: bool = False
+
+    @property
+    def integrated(self) -> bool:
+        return self.output is None
+
+    @property
+    def label(self) -> str:
+        """A recording's ``orientation_source``: the output in words, or the integrated rate of turn."""
+        return INTEGRATED_RATE_OF_TURN if self.output is None else ORIENTATION_WORDS[self.output]
+
+    def metadata(self) -> dict[str, str]:
+        """What a recording keeps: ``orientation_source``, and ``orientation_refused`` when anything was."""
+        refused = ", ".join(f"{ORIENTATION_WORDS[name]} (error 0x{code:02X})" for name, code in self.refused)
+        return {"orientation_source": self.label, **({"orientation_refused": refused} if refused else {})}
+
+    def line(self) -> str | None:
+        """The one line a recorder says when roll and pitch do not come from Euler angles (None: they do)."""
+        if self.output == "EulerAngles":
+            return None
+        if self.imu_class:
+            why = "the device is an IMU-class product (no orientation output)"
+        else:
+            names = [ORIENTATION_WORDS[name] for name, _ in self.refused]
+            listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+            codes = sorted({f"0x{code:02X}" for _, code in self.refused})
+            why = f"the device refused {listed} (error {', '.join(codes)})"
+        if self.output is None:
+            return (
+                f"{why}: roll and pitch come from its rate of turn integrated over the decay, anchored by "
+                "gravity at rest before the release"
+            )
+        return f"{why}: roll and pitch come from its {ORIENTATION_WORDS[self.output]}"
 
 
 def _entry_bytes(xdi: int) -> int:

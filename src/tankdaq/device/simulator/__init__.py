@@ -11,7 +11,7 @@
 """
 
 from .faults import Faults
-from .firmware import Behaviour, ReceivedMessage
+from .firmware import Behaviour, ReceivedMessage, refused_orientation
 from .identity import DeviceIdentity
 from .mti import SimulatedMTi
 from .output import default_configuration, effective_configuration
@@ -30,5 +30,6 @@ __all__ = [
     "SimulatedMTi",
     "default_configuration",
     "effective_configuration",
+    "refused_orientation",
     "sweep_stale_folders",
 ]

@@ -10,7 +10,9 @@ are built and parsed by ``tankdaq.xsens`` only.
 States a lab meets (``Behaviour``): stuck in measurement, ignoring GoToConfig until a Reset;
 slow flash writes; a boot of some seconds after Reset before the WakeUp; a baud rate that
 changes only after Reset (the host must reopen at the new rate: the link reads the slave's
-termios speed); a 600-series product that sets its baud rate with PortConfig.
+termios speed); a 600-series product that sets its baud rate with PortConfig; a device that
+refuses some orientation outputs (Error 0x21 to a SetOutputConfiguration holding one), and an
+IMU-class product that has none.
 """
 
 from __future__ import annotations
@@ -23,9 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import ProtocolError
+from ...errors import InputError, ProtocolError
 from ...xsens.constants import FLASH_WRITES, MID, baud_code
 from ...xsens.control import (
+    ERROR_INVALID_PARAMETER,
+    ORIENTATION_OUTPUTS,
     baudrate_payload,
     device_id_payload,
     output_configuration_payload,
@@ -37,6 +41,7 @@ from ...xsens.control import (
 )
 from ...xsens.frame import Frame, build_frame
 from ...xsens.framer import StreamFramer
+from ...xsens.mtdata2 import SPEC_BY_BASE, TYPE_MASK
 from .faults import Faults
 from .identity import DeviceIdentity
 from .output import Output, effective_configuration
@@ -46,7 +51,6 @@ from .sources import FrameSource
 #: Answer to the host's WakeUpAck must come within this time after WakeUp, else the device measures.
 WAKEUP_WINDOW_S = 0.5
 ERROR_INVALID_MESSAGE = 0x04
-ERROR_INVALID_PARAMETER = 0x21
 ERROR_INVALID_BAUD = 0x20
 #: Ports of a 600-series device (PortConfig words): the host port first.
 PORTS_600 = 3
@@ -61,6 +65,36 @@ class Behaviour:
     flash_write_s: float = 0.0  # wall seconds before a flash-writing message is acknowledged
     boot_s: float = 0.0  # wall seconds of silence after a Reset before the WakeUp
     measuring_at_start: bool = False  # powered up before the host came: already streaming
+    #: orientation outputs it answers Error 0x21 to (``refused_orientation``; an IMU-class identity: all)
+    refuses: frozenset[str] = frozenset()
+
+
+def refused_outputs(
+    behaviour: Behaviour, identity: DeviceIdentity, recorded: list[tuple[int, int]] | None
+) -> frozenset[str]:
+    """The orientation outputs a device refuses: as it behaves, all of them on an IMU-class product, and
+    on a recording's device those the recording does not hold (it can only send what it sent)."""
+    refused = set(behaviour.refuses) | set(ORIENTATION_OUTPUTS if identity.imu_class else ())
+    if recorded is not None:
+        sent = {SPEC_BY_BASE[xdi & TYPE_MASK].name for xdi, _ in recorded if xdi & TYPE_MASK in SPEC_BY_BASE}
+        refused |= set(ORIENTATION_OUTPUTS) - sent
+    return frozenset(refused)
+
+
+#: ``tankdaq simulate --refuse`` words for the orientation outputs.
+REFUSABLE = {"euler": "EulerAngles", "quaternion": "Quaternion", "matrix": "RotationMatrix"}
+
+
+def refused_orientation(text: str) -> frozenset[str]:
+    """``"euler,quaternion"`` -> the orientation outputs it refuses (``Behaviour.refuses``)."""
+    words = [word.strip() for word in text.split(",") if word.strip()]
+    unknown = [word for word in words if word not in REFUSABLE]
+    if unknown:
+        raise InputError(
+            f"--refuse {unknown[0]!r} not understood: list orientation outputs among {', '.join(REFUSABLE)}, "
+            "e.g. euler or euler,quaternion"
+        )
+    return frozenset(REFUSABLE[word] for word in words)
 
 
 @dataclass(frozen=True)
@@ -96,7 +130,8 @@ class Firmware:
         self.baud = self.pending_baud = baud
         self.speed = speed
         self.faults = faults
-        self.output = Output(legacy=legacy, clock_modulus=identity.clock_modulus)
+        self.refuses = refused_outputs(behaviour, identity, source.configuration)
+        self.output = Output(legacy=legacy, clock_modulus=identity.clock_modulus, lacking=self.refuses)
         self.measuring = False
         self._rng = np.random.default_rng([seed, 99])
         self._epoch = time.monotonic()
@@ -307,16 +342,19 @@ class Firmware:
         self._reply(MID.BAUDRATE_ACK)
 
     def _on_output_configuration(self, data: bytes) -> None:
-        """Set (when ``data``) and echo the configuration; a recording's device sends what it sent."""
-        if data and self.source.configuration is None:
+        """Set (when ``data``) and echo the configuration; a recording's device sends what it sent (and
+        refuses the orientation outputs it did not send)."""
+        recorded = self.source.configuration is not None
+        if data:
             try:
                 effective = effective_configuration(parse_output_configuration(data))
             except ProtocolError:
                 effective = []
-            if not effective:
+            if not (effective or recorded) or any(item.name in self.refuses for item in effective):
                 self._error(ERROR_INVALID_PARAMETER)
                 return
-            self.output.items = effective
+            if not recorded:
+                self.output.items = effective
         echo = self.source.configuration or self.output.entries
         self._reply(MID.OUTPUT_CONFIGURATION_ACK, output_configuration_payload(echo))
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ...errors import ProtocolError
-from ...xsens.control import fw_rev_payload, is_600_series
+from ...xsens.control import fw_rev_payload, is_600_series, is_imu_class
 from ...xsens.timebase import sample_time_modulus
 
 
@@ -33,6 +33,12 @@ class DeviceIdentity:
         """A 600-series unit: 8-byte device id, baud rate through PortConfig."""
         return cls(0x0880_0000_0000_1A2C, "MTi-630-2A8G4", fw_rev_payload("1.12.0 build 100 scm 0"))
 
+    @classmethod
+    def mti_100(cls) -> DeviceIdentity:
+        """An IMU-class unit: rate of turn and acceleration, no orientation output [device id type
+        0x0067 for an MTi-100 is an inference]."""
+        return cls(0x00671A2C, "MTi-100-2A8G4", fw_rev_payload("1.8.2 build 35 scm 0"))
+
     @property
     def serial_number(self) -> str:
         """The USB serial number (Xsens put the device id there)."""
@@ -41,6 +47,11 @@ class DeviceIdentity:
     @property
     def family_600(self) -> bool:
         return is_600_series(self.product_code)
+
+    @property
+    def imu_class(self) -> bool:
+        """No orientation output: the device refuses Euler angles, quaternion and rotation matrix."""
+        return is_imu_class(self.product_code)
 
     @property
     def clock_modulus(self) -> int:

@@ -20,7 +20,7 @@ from ...xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS
 from ...xsens.frame import build_frame
 from ...xsens.legacy import encode_mtdata
 from ...xsens.mtdata2 import FRAME_MASK, SPEC_BY_BASE, TYPE_MASK, encode_mtdata2, make_xdi
-from ..attitude import quaternion
+from ...xsens.orientation import quaternion, rotation_matrix
 from ..legacy_output import LegacyOutput, sample_values
 
 #: Rates an MTi-G-710 can output: divisors of 400 Hz (the echo rounds a request down to one).
@@ -28,8 +28,8 @@ DEVICE_RATES_HZ = (1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, 80, 100, 200, 400)
 MAX_RATE_HZ = 400
 #: Outputs the simulator can produce (a request for others is dropped from the echoed configuration).
 SUPPORTED_OUTPUTS = frozenset(
-    {"PacketCounter", "SampleTimeFine", "SampleTimeCoarse", "EulerAngles", "Quaternion", "RateOfTurn",
-     "Acceleration", "StatusWord", "StatusByte"}
+    {"PacketCounter", "SampleTimeFine", "SampleTimeCoarse", "EulerAngles", "Quaternion", "RotationMatrix",
+     "RateOfTurn", "Acceleration", "StatusWord", "StatusByte"}
 )  # fmt: skip
 
 
@@ -61,9 +61,10 @@ def effective_configuration(requested: list[tuple[int, int]]) -> list[OutputItem
     return items
 
 
-def default_configuration(rate_hz: int = 100) -> list[OutputItem]:
-    """MTi-G-710 factory-like default: counter, time, quaternion, status at 100 Hz."""
-    names = ("PacketCounter", "SampleTimeFine", "Quaternion", "StatusWord")
+def default_configuration(rate_hz: int = 100, without: frozenset[str] = frozenset()) -> list[OutputItem]:
+    """MTi-G-710 factory-like default: counter, time, quaternion, status at 100 Hz (``without`` the
+    outputs the device does not have: an IMU-class device sends no quaternion)."""
+    names = [n for n in ("PacketCounter", "SampleTimeFine", "Quaternion", "StatusWord") if n not in without]
     return effective_configuration([(make_xdi(n), rate_hz) for n in names])
 
 
@@ -76,9 +77,14 @@ class Output:
     legacy_mode: LegacyOutput = field(default_factory=LegacyOutput.default)
     #: where SampleTimeFine wraps: the device family's modulus (one day on an MTi-G-710, 2**32 on a 600)
     clock_modulus: int = TICK_MODULUS
+    #: outputs the device does not have (it refuses them): never in its defaults
+    lacking: frozenset[str] = frozenset()
+
+    def __post_init__(self) -> None:
+        self.items = [item for item in self.items if item.name not in self.lacking]
 
     def restore_defaults(self) -> None:
-        self.items = default_configuration()
+        self.items = default_configuration(without=self.lacking)
         self.legacy_mode = LegacyOutput.default()
 
     @property
@@ -100,22 +106,28 @@ class Output:
             mode, settings = self.legacy_mode.mode, self.legacy_mode.settings
             return [build_frame(MID.MTDATA, encode_mtdata(sample_values(s), mode, settings)) for s in block]
         rate = self.rate_hz
-        quats = None
+        forms: dict[str, Callable[..., np.ndarray]] = {
+            "Quaternion": quaternion,
+            "RotationMatrix": rotation_matrix,
+        }
+        orientation: dict[str, np.ndarray] = {}  # the block's quaternions or matrices, made when first asked
         frames = []
         for row, (sample, k) in enumerate(zip(block, indices, strict=True)):
             items: list[tuple[int, object]] = []
             for item in self.items:
                 if item.hz != MAX_FREQUENCY and k % max(1, round(rate / item.hz)):
                     continue
-                if item.name == "Quaternion" and quats is None:
-                    quats = quaternion(block["roll"], block["pitch"], block["yaw"])
-                quat = None if quats is None else quats[row]
-                items.append((item.xdi, _value(item.name, sample, quat, self.clock_modulus)))
+                if item.name in forms:
+                    if item.name not in orientation:
+                        orientation[item.name] = forms[item.name](block["roll"], block["pitch"], block["yaw"])
+                    items.append((item.xdi, tuple(orientation[item.name][row].tolist())))
+                    continue
+                items.append((item.xdi, _value(item.name, sample, self.clock_modulus)))
             frames.append(build_frame(MID.MTDATA2, encode_mtdata2(items)))
         return frames
 
 
-def _value(name: str, sample: np.void, quaternion: np.ndarray | None, clock_modulus: int) -> object:
+def _value(name: str, sample: np.void, clock_modulus: int) -> object:
     """The MTData2 value of output ``name`` for one sample (Euler angles in degrees, as on the wire)."""
     ticks = int(sample["ticks"])
     values: dict[str, Callable[[], object]] = {
@@ -123,7 +135,6 @@ def _value(name: str, sample: np.void, quaternion: np.ndarray | None, clock_modu
         "SampleTimeFine": lambda: ticks % clock_modulus,
         "SampleTimeCoarse": lambda: (ticks // TICKS_PER_S) & 0xFFFFFFFF,
         "EulerAngles": lambda: tuple(math.degrees(float(sample[f])) for f in ("roll", "pitch", "yaw")),
-        "Quaternion": lambda: tuple(float(q) for q in quaternion),  # type: ignore[union-attr]
         "RateOfTurn": lambda: tuple(float(sample[f]) for f in ("p", "q", "r")),
         "Acceleration": lambda: tuple(float(sample[f]) for f in ("ax", "ay", "az")),
         "StatusWord": lambda: int(sample["status"]),
