@@ -229,7 +229,15 @@ def moving_block_bootstrap(
             angle = fitted["angle"] + resid["angle"][idx]
             rate = None if resid["rate"] is None else fitted["rate"] + resid["rate"][idx]
             replicas.append(
-                DecayRun(t=run.t, angle=angle, rate=rate, axis=run.axis, name=run.name, channels=run.channels)
+                DecayRun(
+                    t=run.t,
+                    angle=angle,
+                    rate=rate,
+                    axis=run.axis,
+                    name=run.name,
+                    channels=run.channels,
+                    excluded=run.excluded,
+                )
             )
         clone = estimator.clone(compute_diagnostics=False)
         clone.fit(replicas, start=estimator)
