@@ -398,11 +398,12 @@ class BackgroundFit:
 
     def _update(self, pending: list[_Samples]) -> None:
         rates = [rate for _, _, rate, _ in pending if rate is not None]
+        excluded = np.concatenate([excluded for _, _, _, excluded in pending])
         result = self.identifier.update(
             np.concatenate([t for t, _, _, _ in pending]),
             np.concatenate([angle for _, angle, _, _ in pending]),
             np.concatenate(rates) if len(rates) == len(pending) else None,
-            np.concatenate([excluded for _, _, _, excluded in pending]),
+            **({"excluded": excluded} if excluded.any() else {}),  # said only when there are any
         )
         if result is not None:
             with self._wake:
