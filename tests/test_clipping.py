@@ -26,6 +26,7 @@ from tankdaq.acquire.campaign_session import (
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario
+from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Faults, SimulatedMTi
 from tankdaq.device.simulator.pty_link import PtyLink
@@ -38,6 +39,7 @@ from tankdaq.samples import (
     STATUS_CLIP_GYR,
     STATUS_ORIENTATION_VALID,
     StatusTally,
+    empty_samples,
     sample_flags,
 )
 from tankdaq.store.reader import read_decay_runs, read_recording
@@ -76,11 +78,41 @@ def test_the_status_word_gives_one_set_of_flags() -> None:
     # start-up (before the first valid orientation) is not a flag; a cleared bit later is
     assert flags.orientation_invalid.tolist() == [False, False, False, True, False]
     assert not sample_flags(np.zeros(5, np.uint32)).unusable.any()  # a device that never reports it
+    samples = empty_samples(5)
+    samples["t"], samples["status"], samples["roll"], samples["pitch"] = (
+        [0.0, 1.0, 1.5, 3.0, 4.0],
+        words,
+        0.1,
+        0,
+    )
     tally = StatusTally(release_t=2.0)
-    tally.add(np.array([0.0, 1.0, 1.5, 3.0, 4.0]), words)
+    tally.add(samples)
     assert (tally.clipped_before, tally.clipped_after, tally.invalid_after) == (1, 1, 1)
     assert (tally.first_after_s, tally.last_after_s) == (1.0, 2.0)
     assert STATUS_CLIP_ACC & STATUS_CLIP_GYR == 0
+    # a message without orientation (GNSS) that sets OrientationValid does not make the rest "invalid"
+    gnss_first = sample_flags(np.array([ok, 0x5, 0x5]), oriented=np.array([False, True, True]))
+    assert not gnss_first.orientation_invalid.any()
+
+
+def test_a_real_mti_g_710_capture_flags_nothing() -> None:
+    """einride's MTi-G-710 capture: its GNSS message sets OrientationValid, its inertial ones never do."""
+    path = (
+        Path(__file__).resolve().parents[2]
+        / "shared"
+        / "data"
+        / "xsens-captures"
+        / "einride-1"
+        / "output.bin"
+    )
+    if not path.exists():
+        pytest.skip(f"the real capture is not here ({path})")
+    decoder = SampleDecoder()
+    samples = np.concatenate([decoder.feed(path.read_bytes(), 0.0)[0], decoder.finish(0.0)[0]])
+    assert {int(w) & STATUS_ORIENTATION_VALID for w in samples["status"]} == {0, STATUS_ORIENTATION_VALID}
+    tally = StatusTally(release_t=float(samples["t"][0]))
+    assert not tally.add(samples).any() and not tally.flagged_after
+    assert not sample_flags(samples["status"]).clipped.any()
 
 
 def test_clipping_in_the_decay_is_flagged_everywhere_and_left_out_of_the_fit(tmp_path: Path) -> None:

@@ -91,18 +91,28 @@ class SampleFlags:
         return self.clipped | self.orientation_invalid
 
 
-def sample_flags(status: np.ndarray, valid_before: bool = False) -> SampleFlags:
-    """The flags of ``status`` words. OrientationValid counts only from the first sample that has it set
-    (``valid_before``: an earlier sample did): a device that never sets it does not report it (a stream
-    configured without the status word reads 0), and one that has not yet set it is starting up."""
+def sample_flags(
+    status: np.ndarray, valid_before: bool = False, oriented: np.ndarray | None = None
+) -> SampleFlags:
+    """The flags of ``status`` words. OrientationValid counts only in samples that carry an orientation
+    (``oriented``, default all: a GNSS message has a status word but no angles) and only from the first
+    of those that has it set (``valid_before``: an earlier one did): a device that never sets it does not
+    report it (a stream configured without the status word reads 0; a real MTi-G-710 capture's inertial
+    messages never set it), and one that has not yet set it is starting up."""
     words = np.asarray(status, dtype=np.uint32)
+    carries = np.ones(words.shape, bool) if oriented is None else np.asarray(oriented, dtype=bool)
     valid = (words & STATUS_ORIENTATION_VALID) != 0
-    reported = np.logical_or.accumulate(valid) | valid_before if words.size else valid
+    seen = np.logical_or.accumulate(valid & carries) | valid_before if words.size else valid
     return SampleFlags(
         acc_clipped=(words & STATUS_CLIP_ACC) != 0,
         gyro_clipped=(words & STATUS_CLIP_GYR) != 0,
-        orientation_invalid=reported & ~valid,
+        orientation_invalid=seen & carries & ~valid,
     )
+
+
+def oriented(samples: np.ndarray) -> np.ndarray:
+    """Which samples carry an orientation (roll and pitch measured)."""
+    return np.isfinite(samples["roll"]) & np.isfinite(samples["pitch"])
 
 
 @dataclass
@@ -121,12 +131,14 @@ class StatusTally:
     last_after_s: float = float("nan")
     valid_seen: bool = False
 
-    def add(self, t: np.ndarray, status: np.ndarray) -> np.ndarray:
-        """Count the samples at times ``t`` (device s); returns the mask of the flagged ones after release."""
-        words = np.asarray(status, dtype=np.uint32)
-        flags = sample_flags(words, self.valid_seen)
-        self.valid_seen = self.valid_seen or bool(np.any((words & STATUS_ORIENTATION_VALID) != 0))
-        after = np.asarray(t) >= self.release_t
+    def add(self, samples: np.ndarray) -> np.ndarray:
+        """Count ``samples`` (``SAMPLE_DTYPE``); returns the mask of the flagged ones after the release."""
+        words = np.asarray(samples["status"], dtype=np.uint32)
+        carries = oriented(samples)
+        flags = sample_flags(words, self.valid_seen, carries)
+        self.valid_seen = self.valid_seen or bool(np.any(((words & STATUS_ORIENTATION_VALID) != 0) & carries))
+        t = samples["t"]
+        after = t >= self.release_t
         self.clipped_before += int(np.count_nonzero(flags.clipped & ~after))
         self.acc_clipped_after += int(np.count_nonzero(flags.acc_clipped & after))
         self.gyro_clipped_after += int(np.count_nonzero(flags.gyro_clipped & after))
@@ -134,14 +146,14 @@ class StatusTally:
         self.invalid_after += int(np.count_nonzero(flags.orientation_invalid & after))
         flagged = flags.unusable & after
         if flagged.any():
-            since = np.asarray(t)[flagged] - self.release_t
+            since = t[flagged] - self.release_t
             first = float(since[0]) if np.isnan(self.first_after_s) else self.first_after_s
             self.first_after_s, self.last_after_s = first, float(since[-1])
         return flagged
 
-    def unusable(self, status: np.ndarray) -> np.ndarray:
+    def unusable(self, samples: np.ndarray) -> np.ndarray:
         """Which of these samples (counted already, or about to be) a fit leaves out."""
-        return sample_flags(status, self.valid_seen).unusable
+        return sample_flags(samples["status"], self.valid_seen, oriented(samples)).unusable
 
     @property
     def flagged_after(self) -> bool:

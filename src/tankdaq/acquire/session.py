@@ -139,7 +139,7 @@ class DecaySession:
             decay.last_t = float(block.samples["t"][-1])
         flagged_before = decay is not None and decay.status.flagged_after
         if decay is not None and block.samples.size:
-            decay.status.add(block.samples["t"], block.samples["status"])
+            decay.status.add(block.samples)
         self._tell(lambda sink: sink.on_block(block, decay))
         if decay is not None and not flagged_before:
             self._note_flagged(decay)
@@ -213,7 +213,7 @@ class DecaySession:
             last_t=max([release_t, *(self._last_time(b) for b in blocks)]),
         )
         for samples in history:  # the tilt since the last decay, and what followed the release
-            decay.status.add(samples["t"], samples["status"])
+            decay.status.add(samples)
         self.decay = decay
         self.state = "decaying"
         self._tell(lambda sink: sink.on_release(decay, blocks))

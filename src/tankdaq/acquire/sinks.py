@@ -239,7 +239,7 @@ class IdentifierSink(Sink):
         after = block.samples[block.samples["t"] >= decay.release_t] if block.samples.size else block.samples
         if after.size:
             angle_field, rate_field = AXIS_FIELDS[decay.axis]
-            excluded = decay.status.unusable(after["status"])
+            excluded = decay.status.unusable(after)
             self._live.submit(
                 after["t"].copy(), after[angle_field].copy(), after[rate_field].copy(), excluded
             )

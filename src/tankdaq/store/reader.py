@@ -449,8 +449,8 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
         tally = StatusTally(start)
         since = bounds[number - 2] if number > 1 else -np.inf  # the tilt: back to the previous release
         before = samples[(samples["t"] < start) & (samples["t"] >= since)]
-        tally.add(before["t"], before["status"])
-        excluded = tally.add(part_kept["t"], part_kept["status"])
+        tally.add(before)
+        excluded = tally.add(part_kept)
         runs.append(
             DecayRun(
                 t=part_kept["t"],
