@@ -50,11 +50,13 @@ SPEED = 6.0
 FAST = 1e6
 
 
-def _record(tmp_path: Path, fault: str) -> tuple[list[str], Path, dict[str, float]]:
+def _record(
+    tmp_path: Path, fault: str, faults: Faults | None = None
+) -> tuple[list[str], Path, dict[str, float]]:
     """One short decay of the default hull with a scripted fault, recorded through the pty."""
     scenario = hull_scenario(runs=1, seed=3, release_after_s=6.0, decay_s=15.0, **scripted_run(fault, 8.0))
     lines: list[str] = []
-    with SimulatedMTi(scenario, speed=SPEED) as sim:
+    with SimulatedMTi(scenario, speed=SPEED, faults=faults) as sim:
         settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, angle_tolerance_deg=3.0,
                                   out_dir=tmp_path, runs=1, viewer="none")  # fmt: skip
         (outcome,) = RecordDaemon(settings, on_event=lines.append).run()
@@ -146,11 +148,15 @@ def test_clipping_in_the_decay_is_flagged_everywhere_and_left_out_of_the_fit(tmp
 
 
 def test_clipping_only_during_the_push_is_noted_and_harmless(tmp_path: Path) -> None:
-    lines, path, _ = _record(tmp_path, "hard-push")
+    """Recorded through FTDI-style USB bursts (16 ms) too: the timeline stays the device's."""
+    lines, path, _ = _record(tmp_path, "hard-push", Faults.parse("latency=16"))
     assert not any("sensor flagged" in line for line in lines), lines
     (summary,) = [line for line in lines if line.startswith("run 1: ") and " -> " in line]
     assert "before the release (the tilt): harmless" in summary, summary
-    meta = read_recording(path).metadata
+    recording = read_recording(path)
+    meta = recording.metadata
+    assert meta["link_gaps"] == "0" and meta["link_lost"] == "0"
+    assert np.all(np.diff(recording.samples["ticks"]) == 100)  # 100 Hz on the device clock, bursts or not
     assert int(meta["clipped_samples_before_release"]) > 0
     assert int(meta["clipped_samples_after_release"]) == 0
     (run,) = read_decay_runs(path)
