@@ -31,9 +31,11 @@ from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Faults, SimulatedMTi
 from tankdaq.device.simulator.pty_link import PtyLink
 from tankdaq.errors import DeviceGone, InputError
+from tankdaq.ident.equation_error import EquationError
 from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.scenario import SCRIPTED_FAULTS, scripted_run
 from tankdaq.plans import load_campaign_plan
+from tankdaq.records import DecayRun
 from tankdaq.samples import (
     STATUS_CLIP_ACC,
     STATUS_CLIP_GYR,
@@ -295,3 +297,21 @@ def test_the_driver_gives_the_held_last_frame_when_the_device_goes(tmp_path: Pat
     samples = np.concatenate(got)
     expected = int.from_bytes(last[12:16], "big")  # the last frame's SampleTimeFine
     assert samples.size == 7 and int(samples["ticks"][-1]) % (1 << 32) == expected
+
+
+def test_the_equation_error_fit_leaves_the_clipped_samples_out_too() -> None:
+    """``--method ee`` (and the output-error fit's seed): no regression row whose smoothing window holds a
+    clipped sample; kept, the saturated rate's derivative bends the stiffness."""
+    samples, trace = hull_scenario(
+        runs=1, seed=1, decay_s=15.0, **scripted_run("clipped-decay", 8.0)
+    ).samples()
+    truth = trace.runs[0].coefficients
+    free = samples[trace.runs[0].release_index :]
+    excluded = sample_flags(free["status"]).unusable
+    assert excluded.any()
+    terms = tuple(k for k in ("b1", "b2", "b3", "c1", "c2", "c3") if truth.get(k))
+    errors = []
+    for mask in (excluded, None):
+        run = DecayRun(free["t"], free["roll"], free["p"], excluded=mask)
+        errors.append(abs(EquationError(terms).fit([run]).coefficients_["c1"] / truth["c1"] - 1))
+    assert errors[0] < 0.01 and errors[0] < errors[1] / 3
