@@ -61,6 +61,7 @@ ACCEPTANCE_RANGES: dict[str, tuple[float, float]] = {
     "rate_limit_deg_s": (0.0, 2000.0),
     "repeat_tolerance": (0.0, 10.0),
     "period_tolerance": (0.0, 1.0),
+    "max_flagged_samples": (0.0, 1e6),
 }
 
 

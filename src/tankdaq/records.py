@@ -31,12 +31,15 @@ class DecayRun:
     name: str = "run"
     channels: dict[str, np.ndarray] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)  # free-form: JSON values from files and settings
+    excluded: np.ndarray | None = None  # samples fits leave out (a sensor clipped: samples.StatusTally)
 
     def __post_init__(self) -> None:
         self.t = np.asarray(self.t, dtype=float)
         self.angle = np.asarray(self.angle, dtype=float)
         if self.rate is not None:
             self.rate = np.asarray(self.rate, dtype=float)
+        if self.excluded is not None:
+            self.excluded = np.asarray(self.excluded, dtype=bool)
         self.validate()
 
     def validate(self) -> None:
@@ -48,6 +51,8 @@ class DecayRun:
             raise BadIdentificationInput(f"{self.name}: time and angle have different lengths")
         if self.rate is not None and self.rate.shape != self.t.shape:
             raise BadIdentificationInput(f"{self.name}: time and rate have different lengths")
+        if self.excluded is not None and self.excluded.shape != self.t.shape:
+            raise BadIdentificationInput(f"{self.name}: time and the excluded samples have different lengths")
         for label, arr in (("time", self.t), ("angle", self.angle), ("rate", self.rate)):
             if arr is not None and not np.all(np.isfinite(arr)):
                 raise BadIdentificationInput(
@@ -55,6 +60,11 @@ class DecayRun:
                 )
         if n > 1 and np.any(np.diff(self.t) <= 0):
             raise BadIdentificationInput(f"{self.name}: time is not strictly increasing")
+
+    @property
+    def kept(self) -> np.ndarray:
+        """The samples a fit uses (all but ``excluded``)."""
+        return np.ones(self.t.shape, dtype=bool) if self.excluded is None else ~self.excluded
 
     @property
     def duration(self) -> float:
@@ -76,4 +86,5 @@ class DecayRun:
             name=self.name,
             channels={k: v[sl] for k, v in self.channels.items()},
             meta=dict(self.meta),
+            excluded=None if self.excluded is None else self.excluded[sl],
         )

@@ -81,6 +81,7 @@ class Acceptance:
     rate_limit_deg_s: float = 290.0  # |rate| at or above this: the gyro saturated (MTi-G: ±300 deg/s)
     repeat_tolerance: float = 0.2  # B_eq at the nominal angle vs the earlier repeats, relative
     period_tolerance: float = 0.03  # natural period vs the earlier repeats, relative
+    max_flagged_samples: float = 0  # samples after the release the sensor flags (clipped): more, rejected
 
     @classmethod
     def from_plan(cls, table: dict[str, float], where: str) -> Acceptance:
@@ -167,6 +168,8 @@ class Measured:
     free_end_reason: str = ""
     fit_error: str = ""
     fit_warnings: list[str] = field(default_factory=list)  # the final fit's implausibilities
+    flagged_samples: int = 0  # after the release, flagged by the sensor (clipping, orientation not valid)
+    flagged_why: str = ""  # the one line the recording's reader gives them
 
 
 def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
@@ -188,12 +191,15 @@ def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
         )
         end = find_free_end(run)
         measured.free_end, measured.free_end_reason = end.kind, end.reason
+        if run.excluded is not None:
+            measured.flagged_samples = int(np.count_nonzero(run.excluded))
+            measured.flagged_why = str(run.meta.get("excluded_why", ""))
     fit = outcome.fit
     if fit is None:
         measured.fit_error = "; ".join(w for w in outcome.warnings if "fit" in w) or "no fit"
         return measured
     measured.half_cycles = fit.half_cycles
-    measured.fit_warnings = list(fit.warnings)
+    measured.fit_warnings = [f.message for f in fit.findings if not f.about_data]  # clipping: checked below
     measured.r2_angle = fit.r2_angle
     measured.coefficients = dict(fit.coefficients)
     measured.natural_period_s = fit.natural_period_s
@@ -226,6 +232,11 @@ def check_decay(
         reasons.append(f"release not clean: {measured.free_end_reason}")
     if measured.max_rate_deg_s >= a.rate_limit_deg_s:
         reasons.append(f"rate saturated: {measured.max_rate_deg_s:.0f} deg/s (limit {a.rate_limit_deg_s:g})")
+    if measured.flagged_samples > a.max_flagged_samples:
+        reasons.append(
+            f"clipped: {measured.flagged_why or f'{measured.flagged_samples} samples flagged'} "
+            f"(max_flagged_samples {a.max_flagged_samples:g}); repeat at a smaller angle"
+        )
     if measured.fit_error:
         reasons.append(f"no fit: {measured.fit_error}")
         return reasons

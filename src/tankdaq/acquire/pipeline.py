@@ -137,7 +137,12 @@ class DecayPipeline:
             self._trim_history()
         elif block.samples.size:
             decay.last_t = float(block.samples["t"][-1])
+        flagged_before = decay is not None and decay.status.flagged_after
+        if decay is not None and block.samples.size:
+            decay.status.add(block.samples)
         self._tell(lambda sink: sink.on_block(block, decay))
+        if decay is not None and not flagged_before:
+            self._note_flagged(decay)
         if block.samples.size == 0:
             return finished
         for axis, detector in self._detectors.items():
@@ -189,6 +194,7 @@ class DecayPipeline:
                 f"{s.angle_deg:g} deg by more than {s.angle_tolerance_deg:g} deg"
             )
         blocks = self._pretrigger_blocks(release_t - s.pretrigger_s)
+        history = [b.samples for b in self._history if b.samples.size]
         self._history.clear()
         for other in self._detectors.values():
             if other.axis != axis:
@@ -206,6 +212,8 @@ class DecayPipeline:
             model=s.model,
             last_t=max([release_t, *(self._last_time(b) for b in blocks)]),
         )
+        for samples in history:  # the tilt since the last decay, and what followed the release
+            decay.status.add(samples)
         self.decay = decay
         self.state = "decaying"
         self._tell(lambda sink: sink.on_release(decay, blocks))
@@ -214,6 +222,22 @@ class DecayPipeline:
         )
         for line in warnings:
             self.on_event(f"warning: {line}")
+        if tilt := decay.status.describe_before():
+            self.on_event(f"note: run {decay.run}: sensor {tilt}")
+            decay.note("note", f"sensor {tilt}", release_t)
+        self._note_flagged(decay)
+
+    def _note_flagged(self, decay: Decay) -> None:
+        """The first samples after the release the sensor flags (clipping, orientation not valid): a warning
+        event (the file, the view, a record line) as they arrive; the count goes in the file at settle."""
+        tally = decay.status
+        if tally.flagged_after:
+            decay.note(
+                "warning",
+                f"sensor flagged samples {tally.first_after_s:.2f} s after the release (clipping or "
+                "orientation not valid): the decay is not clean; those samples are left out of fits",
+                tally.release_t + tally.first_after_s,
+            )
 
     def _pretrigger_blocks(self, start_t: float) -> list[Block]:
         """The history from the block holding ``start_t`` on, the first one cut to whole frames."""
@@ -273,4 +297,10 @@ class DecayPipeline:
         coeffs = "  ".join(f"{k}={v:.4g}" for k, v in fit.coefficients.items()) if fit else "no fit"
         where = f" -> {outcome.path}" if outcome.path else ""
         period = f", T0 {fit.natural_period_s:.3f} s, R2 {fit.r2_angle:.4f}" if fit else ""
-        return f"run {outcome.run}: {outcome.settle_reason}; {coeffs}{period}{where}"
+        status = outcome.status
+        flags = "".join(
+            f"; {line}"
+            for line in ((status.describe_after(), status.describe_before()) if status else ())
+            if line
+        )
+        return f"run {outcome.run}: {outcome.settle_reason}; {coeffs}{period}{flags}{where}"

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import RecordingError, TankdaqError
 from ..ident.online import REFIT_BUDGET_S, BackgroundFit, OnlineIdentifier, OnlineResult
-from ..samples import AXIS_FIELDS
+from ..samples import AXIS_FIELDS, StatusTally
 from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter
 
@@ -61,6 +61,7 @@ class DecayOutcome:
     settle_reason: str
     fit: OnlineResult | None
     warnings: list[str]
+    status: StatusTally | None = None  # the status flags of its samples (clipping before and after release)
 
 
 @dataclass
@@ -90,6 +91,10 @@ class Decay:
     settle_reason: str = ""
     error: str = ""
     model: str = ""  # the live model as asked ("auto": chosen by the data); ``terms`` is what it may use
+    status: StatusTally = field(init=False)  # the status flags counted as samples arrive (the session's)
+
+    def __post_init__(self) -> None:
+        self.status = StatusTally(self.release_t)
 
     def publish(self, result: OnlineResult) -> None:
         """A fit for every sink (the identifier's refits and its final fit)."""
@@ -122,8 +127,12 @@ class Decay:
     def settle_metadata(self) -> dict[str, object]:
         """What the recording's metadata gains at close: why it ended and the final fit."""
         if self.settle_reason == "error":
-            return {"settle_reason": "error", "error": self.error}
-        extra: dict[str, object] = {"settle_reason": self.settle_reason, "final_fit_s": self.final_fit_s}
+            return {"settle_reason": "error", "error": self.error, **self.status.metadata()}
+        extra: dict[str, object] = {
+            "settle_reason": self.settle_reason,
+            "final_fit_s": self.final_fit_s,
+            **self.status.metadata(),
+        }
         final = self.final_fit
         if final is not None:
             extra.update({f"fit_{k}": v for k, v in final.coefficients.items()})
@@ -142,6 +151,7 @@ class Decay:
             settle_reason=self.settle_reason,
             fit=self.final_fit if self.settle_reason != "error" else self.fit,
             warnings=list(self.warnings),
+            status=self.status,
         )
 
 
@@ -212,8 +222,9 @@ class IdentifierSink(Sink):
         """The fit to every sink; an implausibility it carries (a check the last fit passed) as a warning
         note: the file's events, the view's event log, the record lines."""
         decay.publish(result)
-        new = [f for f in result.findings if f.check not in self._implausible]
-        self._implausible = [finding.check for finding in result.findings]
+        about_fit = [f for f in result.findings if not f.about_data]  # the data's flags: the session's note
+        new = [f for f in about_fit if f.check not in self._implausible]
+        self._implausible = [finding.check for finding in about_fit]
         for finding in new:
             decay.note("warning", f"fit at {result.t_end - decay.release_t:.1f} s: {finding}", result.t_end)
 
@@ -228,7 +239,10 @@ class IdentifierSink(Sink):
         after = block.samples[block.samples["t"] >= decay.release_t] if block.samples.size else block.samples
         if after.size:
             angle_field, rate_field = AXIS_FIELDS[decay.axis]
-            self._live.submit(after["t"].copy(), after[angle_field].copy(), after[rate_field].copy())
+            excluded = decay.status.unusable(after)
+            self._live.submit(
+                after["t"].copy(), after[angle_field].copy(), after[rate_field].copy(), excluded
+            )
 
     def on_settle(self, decay: Decay) -> None:
         live, self._live = self._live, None

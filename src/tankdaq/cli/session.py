@@ -38,6 +38,7 @@ PLAN is a name in configs/campaigns or a .toml file:
   rate_limit_deg_s = 290.0     # gyro saturation
   repeat_tolerance = 0.2       # B_eq vs the earlier repeats (relative)
   period_tolerance = 0.03      # natural period vs the earlier repeats
+  max_flagged_samples = 0      # clipped samples after the release (more: rejected)
 
 Every key and range is checked as the plan is read (docs/session.md): a typo is named with the
 nearest known key, a value out of range is one line with its range.

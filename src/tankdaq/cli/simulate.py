@@ -56,7 +56,9 @@ def simulate_command(
     decay_s: float = typer.Option(25.0, "--decay", help="Seconds of free decay per run."),
     legacy: bool = typer.Option(False, "--legacy", help="Be a 2007-era MTi-G (legacy MTData 0x32)."),
     faults: str = typer.Option(
-        "", "--faults", help="e.g. corrupt=0.001,drop=1e-4,stall=2@30,unplug=60,replug=5"
+        "",
+        "--faults",
+        help="e.g. corrupt=0.001,drop=1e-4,stall=2@30,unplug=60,replug=5,latency=16 (USB bursts every 16 ms)",
     ),
     truth: Path = typer.Option(
         None,

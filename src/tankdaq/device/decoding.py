@@ -92,6 +92,13 @@ class SampleDecoder:
             return samples, decoded
         return self._legacy_samples(decoded, host_t), decoded
 
+    def finish(self, host_t: float) -> tuple[np.ndarray, DecodedBlock]:
+        """The stream ended (a device gone): samples of the frames held (``StreamDecoder.finish``)."""
+        decoded = self.stream.finish()
+        if self.legacy is None:
+            return to_samples(decoded, self._unwrapper, host_t), decoded
+        return self._legacy_samples(decoded, host_t), decoded
+
     def _legacy_samples(self, decoded: DecodedBlock, host_t: float) -> np.ndarray:
         output = self.legacy
         assert output is not None

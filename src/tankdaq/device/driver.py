@@ -296,6 +296,7 @@ class MTiDriver:
             self._samples = SampleDecoder(legacy, self.modulus, integrated)
         self._tracker = CounterTracker()
         self._carry: StreamBlock | None = None
+        self._gone: DeviceGone | None = None  # raised at the next read, after the stream's last samples
 
     # ---- opening ----------------------------------------
 
@@ -663,8 +664,15 @@ class MTiDriver:
         return {**self.counters.metadata(), **self._samples.attitude_metadata()}
 
     def read_block(self) -> StreamBlock:
-        """One read: the samples it completed (maybe none). Raises DeviceGone if the device vanished."""
-        raw = self._read()
+        """One read: the samples it completed (maybe none). Raises DeviceGone if the device vanished;
+        a frame the decoder held for confirmation is given first (the stream ended: ``finish``)."""
+        if self._gone is not None:
+            gone, self._gone = self._gone, None
+            raise gone
+        try:
+            raw = self._read()
+        except DeviceGone as exc:
+            return self._end_of_stream(exc)
         if self._unread:
             raw, self._unread = self._unread + raw, b""
         host_t = time.time()
@@ -673,9 +681,11 @@ class MTiDriver:
             self._last_data = now
         elif now - self._last_data > self.silence_timeout_s:
             self.close()
-            raise DeviceGone(
-                f"no data from {self.path} for {self.silence_timeout_s:g} s "
-                "(cable unplugged or device powered off?)"
+            return self._end_of_stream(
+                DeviceGone(
+                    f"no data from {self.path} for {self.silence_timeout_s:g} s "
+                    "(cable unplugged or device powered off?)"
+                )
             )
         samples, decoded = self._samples.feed(raw, host_t)
         for frame in decoded.other_frames:
@@ -683,6 +693,17 @@ class MTiDriver:
                 self.counters.device_errors.append(parse_error(frame.payload))
         self._count(raw, decoded.frames, samples)
         return StreamBlock(samples, raw, host_t, decoded.frames, min(decoded.carried, samples.size))
+
+    def _end_of_stream(self, gone: DeviceGone) -> StreamBlock:
+        """The stream ended: the frames the decoder still holds whose structure confirms them come out as a
+        last block (their bytes were in earlier blocks' raw), and ``gone`` is raised at the next read."""
+        host_t = time.time()
+        samples, decoded = self._samples.finish(host_t)
+        if not samples.size:
+            raise gone
+        self._gone = gone
+        self._count(b"", decoded.frames, samples)
+        return StreamBlock(samples, b"", host_t, decoded.frames, samples.size)
 
     def _count(self, raw: bytes, frames: int, samples: np.ndarray) -> None:
         c, d = self.counters, self._samples.stream

@@ -99,7 +99,10 @@ class EquationError(EstimatorMixin):
             angle_s, rate_s, acc_s = smoothed_derivatives(run.angle, dt, window, self.polyorder)
             if self.use_rate and run.rate is not None:
                 rate_s, acc_s, _ = smoothed_derivatives(run.rate, dt, window, self.polyorder)
-            keep = slice(window // 2, run.t.size - window // 2)
+            keep = np.arange(window // 2, run.t.size - window // 2)
+            if run.excluded is not None:  # no row whose smoothing window holds an excluded (clipped) sample
+                near = np.convolve(run.excluded.astype(float), np.ones(window), mode="same") > 0
+                keep = keep[~near[keep]]
             u = exogenous_input(run, self.exogenous)
             phi = term_matrix(codes, angle_s[keep], rate_s[keep], u[keep], self.friction_eps)
             intercepts = np.zeros((phi.shape[0], len(runs)))

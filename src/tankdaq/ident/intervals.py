@@ -69,10 +69,21 @@ def moving_block_bootstrap(
             n = run.t.size
             starts = rng.integers(0, n - block + 1, size=int(np.ceil(n / block)))
             idx = np.concatenate([np.arange(s, s + block) for s in starts])[:n]
+            if run.excluded is not None:  # an excluded (clipped) sample's residual is not noise: not drawn
+                drawn = idx[run.kept[idx]]
+                idx = np.resize(drawn, n) if drawn.size else idx
             angle = fitted["angle"] + resid["angle"][idx]
             rate = None if resid["rate"] is None else fitted["rate"] + resid["rate"][idx]
             replicas.append(
-                DecayRun(t=run.t, angle=angle, rate=rate, axis=run.axis, name=run.name, channels=run.channels)
+                DecayRun(
+                    t=run.t,
+                    angle=angle,
+                    rate=rate,
+                    axis=run.axis,
+                    name=run.name,
+                    channels=run.channels,
+                    excluded=run.excluded,
+                )
             )
         clone = estimator.clone(compute_diagnostics=False)
         clone.fit(replicas, start=estimator)

@@ -43,7 +43,7 @@ class Candidate:
 
     @property
     def plausible(self) -> bool:
-        return not self.error and not self.findings
+        return not self.error and not any(not f.about_data for f in self.findings)
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -97,9 +97,10 @@ def score(
     squares, count = 0.0, 0
     for r, (run, part) in enumerate(zip(runs, first, strict=True)):
         predicted, _ = early.predict(run, run_index=r)
-        held = slice(part.t.size, None)
+        held = np.arange(run.t.size) >= part.t.size
+        held &= run.kept  # clipped samples are no test of a model either
         squares += float(np.sum((run.angle[held] - predicted[held]) ** 2))
-        count += run.t.size - part.t.size
+        count += int(np.count_nonzero(held))
     candidate.held_out_rms_deg = math.degrees(math.sqrt(squares / count)) if count else math.nan
     return candidate
 

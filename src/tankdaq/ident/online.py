@@ -114,6 +114,7 @@ class OnlineIdentifier(EstimatorMixin):
         self._t: list[np.ndarray] = []
         self._angle: list[np.ndarray] = []
         self._rate: list[np.ndarray] = []
+        self._excluded: list[np.ndarray] = []
         self._fitted_half_cycles = 0
         self._checked_at = -np.inf
         self.estimator_: OutputError | None = None
@@ -121,8 +122,15 @@ class OnlineIdentifier(EstimatorMixin):
         self.results_: list[OnlineResult] = []
         self.failures_: list[str] = []
 
-    def update(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray | None = None) -> OnlineResult | None:
+    def update(
+        self,
+        t: np.ndarray,
+        angle: np.ndarray,
+        rate: np.ndarray | None = None,
+        excluded: np.ndarray | None = None,
+    ) -> OnlineResult | None:
         """Append samples (rad, rad/s); refit and return the result when a new half-cycle completed.
+        ``excluded``: samples the fits leave out (a sensor clipped; ``DecayRun.excluded``).
 
         Half-cycles are counted at most every ``check_interval_s`` of device time, so feeding
         a few samples at a time at 400 Hz costs almost nothing between refits.
@@ -132,6 +140,7 @@ class OnlineIdentifier(EstimatorMixin):
         self._angle.append(np.atleast_1d(np.asarray(angle, dtype=float)))
         if rate is not None:
             self._rate.append(np.atleast_1d(np.asarray(rate, dtype=float)))
+        self._excluded.append(np.zeros(t.shape, bool) if excluded is None else np.atleast_1d(excluded))
         if t.size == 0 or t[-1] - self._checked_at < self.check_interval_s:
             return None
         self._checked_at = float(t[-1])
@@ -177,7 +186,8 @@ class OnlineIdentifier(EstimatorMixin):
                 larger = self._fit(family[level], run, current)
             except IdentificationError:
                 continue
-            plausible = not check_runs(larger.coefficients_, [run], larger.offsets_, self.particulars)
+            findings = check_runs(larger.coefficients_, [run], larger.offsets_, self.particulars)
+            plausible = all(finding.about_data for finding in findings)
             if plausible and larger.bic_ < current.bic_ - LIVE_DELTA_BIC:
                 current, self.level_ = larger, level
         return current
@@ -189,7 +199,15 @@ class OnlineIdentifier(EstimatorMixin):
         if t.size < 20:
             return None
         rate = np.concatenate(self._rate) if len(self._rate) == len(self._t) else None
-        return DecayRun(t=t, angle=np.concatenate(self._angle), rate=rate, axis=self.axis, name="live")
+        excluded = np.concatenate(self._excluded).astype(bool)
+        return DecayRun(
+            t=t,
+            angle=np.concatenate(self._angle),
+            rate=rate,
+            axis=self.axis,
+            name="live",
+            excluded=excluded if excluded.any() else None,
+        )
 
     @staticmethod
     def _half_cycles(run: DecayRun) -> int:
@@ -236,6 +254,10 @@ class OnlineIdentifier(EstimatorMixin):
 REFIT_BUDGET_S = 5.0
 
 
+#: Samples handed to the worker: time, angle, rate (or None), excluded.
+_Samples = tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]
+
+
 class BackgroundFit:
     """An ``OnlineIdentifier`` run on its own thread: ``submit`` never waits, results come back by ``take``.
 
@@ -258,7 +280,7 @@ class BackgroundFit:
         self._notes: list[str] = []
         self._final_budget_s = refit_budget_s
         self._wake = threading.Condition()
-        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]] = []
+        self._pending: list[_Samples] = []
         self._busy = False  # the worker holds samples it has not finished with
         self._results: list[OnlineResult] = []
         self._finish_requested = False
@@ -270,10 +292,16 @@ class BackgroundFit:
         self._thread = threading.Thread(target=self._work, name="tankdaq-live-fit", daemon=True)
         self._thread.start()
 
-    def submit(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray | None = None) -> None:
-        """Hand samples (rad, rad/s) to the worker; returns at once."""
+    def submit(
+        self,
+        t: np.ndarray,
+        angle: np.ndarray,
+        rate: np.ndarray | None = None,
+        excluded: np.ndarray | None = None,
+    ) -> None:
+        """Hand samples (rad, rad/s; ``excluded``: left out of the fits) to the worker; returns at once."""
         with self._wake:
-            self._pending.append((t, angle, rate))
+            self._pending.append((t, angle, rate, np.zeros(t.shape, bool) if excluded is None else excluded))
             self._wake.notify_all()
 
     def wait_idle(self, timeout_s: float) -> None:
@@ -369,12 +397,14 @@ class BackgroundFit:
                 "this decay); the next refit starts from the last good one"
             )
 
-    def _update(self, pending: list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]) -> None:
-        rates = [rate for _, _, rate in pending if rate is not None]
+    def _update(self, pending: list[_Samples]) -> None:
+        rates = [rate for _, _, rate, _ in pending if rate is not None]
+        excluded = np.concatenate([excluded for _, _, _, excluded in pending])
         result = self.identifier.update(
-            np.concatenate([t for t, _, _ in pending]),
-            np.concatenate([angle for _, angle, _ in pending]),
+            np.concatenate([t for t, _, _, _ in pending]),
+            np.concatenate([angle for _, angle, _, _ in pending]),
             np.concatenate(rates) if len(rates) == len(pending) else None,
+            **({"excluded": excluded} if excluded.any() else {}),  # said only when there are any
         )
         if result is not None:
             with self._wake:

@@ -231,6 +231,7 @@ class OutputError(EstimatorMixin):
         self._check_settings(runs)
         self.terms_ = resolve_model(self.terms)
         self.runs_ = runs
+        self._kept = [run.kept for run in runs]  # residuals of excluded samples (clipped) are left out
         layout = self._make_layout(len(runs))
         self._layout = layout
         self._codes = term_codes(layout.dynamics)
@@ -379,17 +380,19 @@ class OutputError(EstimatorMixin):
         ss_res = ss_tot = 0.0
         for r, run in enumerate(self.runs_):
             pred = self._predict_run(params, r, with_jacobian=False)
-            ss_res += float(np.sum((run.angle - pred["angle"]) ** 2))
-            ss_tot += float(np.sum((run.angle - run.angle.mean()) ** 2))
+            kept = self._kept[r]
+            ss_res += float(np.sum((run.angle - pred["angle"])[kept] ** 2))
+            ss_tot += float(np.sum((run.angle[kept] - run.angle[kept].mean()) ** 2))
         return 1.0 - ss_res / ss_tot
 
     def _residual_sigmas(self, params: np.ndarray) -> list[dict[str, float]]:
         out = []
         for r, run in enumerate(self.runs_):
             pred = self._predict_run(params, r, with_jacobian=False)
-            sig = {"angle": max(_rms(run.angle - pred["angle"]), 1e-12)}
+            kept = self._kept[r]
+            sig = {"angle": max(_rms((run.angle - pred["angle"])[kept]), 1e-12)}
             if self._has_rate[r]:
-                sig["rate"] = max(_rms(run.rate - pred["rate"]), 1e-12)
+                sig["rate"] = max(_rms((run.rate - pred["rate"])[kept]), 1e-12)
             out.append(sig)
         return out
 
@@ -529,18 +532,19 @@ class OutputError(EstimatorMixin):
         self, params: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, list[tuple[list[np.ndarray], list[np.ndarray]]], bool]:
         """Residuals and Jacobian divided by the noise levels; also per run the (Jacobians, residuals)
-        of each output, which the HAC covariance needs instant by instant."""
+        of each output, which the HAC covariance needs instant by instant. The model is simulated
+        through excluded samples (a clipped stretch): only their residuals are left out."""
         res, jac, blocks = [], [], []
         ok_all = True
         for r, run in enumerate(self.runs_):
             pred = self._predict_run(params, r, with_jacobian=True)
             ok_all &= bool(pred["ok"])
-            sig = self.sigmas_[r]
-            run_jac = [-pred["ja"] / sig["angle"]]
-            run_res = [(run.angle - pred["angle"]) / sig["angle"]]
+            sig, kept = self.sigmas_[r], self._kept[r]
+            run_jac = [-pred["ja"][kept] / sig["angle"]]
+            run_res = [(run.angle - pred["angle"])[kept] / sig["angle"]]
             if self._has_rate[r]:
-                run_jac.append(-pred["jv"] / sig["rate"])
-                run_res.append((run.rate - pred["rate"]) / sig["rate"])
+                run_jac.append(-pred["jv"][kept] / sig["rate"])
+                run_res.append((run.rate - pred["rate"])[kept] / sig["rate"])
             res += run_res
             jac += run_jac
             blocks.append((run_jac, run_res))
@@ -617,14 +621,17 @@ class OutputError(EstimatorMixin):
             resid_rate = run.rate - pred["rate"] if self._has_rate[r] else None
             self.fitted_.append({"angle": pred["angle"], "rate": pred["rate"]})
             self.residuals_.append({"angle": resid_angle, "rate": resid_rate})
-            ss_res += float(resid_angle @ resid_angle)
-            ss_tot += float(np.sum((run.angle - run.angle.mean()) ** 2))
+            kept = self._kept[r]
+            ss_res += float(resid_angle[kept] @ resid_angle[kept])
+            ss_tot += float(np.sum((run.angle[kept] - run.angle[kept].mean()) ** 2))
             for output, resid in (("angle", resid_angle), ("rate", resid_rate)):
                 if resid is not None:
-                    blocks_res.append(resid)
+                    blocks_res.append(resid[kept])
                     blocks_sigma.append(self.sigmas_[r][output])
         self.r2_angle_ = 1.0 - ss_res / ss_tot
-        all_angle = np.concatenate([run.angle for run in self.runs_])
+        all_angle = np.concatenate(
+            [run.angle[kept] for run, kept in zip(self.runs_, self._kept, strict=True)]
+        )
         self.nrmse_ = math.sqrt(ss_res / all_angle.size) / float(np.ptp(all_angle))
         self.n_obs_ = n_obs
         self.bic_ = bic(blocks_res, n_free, None if self.reweight else blocks_sigma)
@@ -639,10 +646,12 @@ class OutputError(EstimatorMixin):
         self.warnings_ = []
         if self.compute_diagnostics:
             self.warnings_ = coefficient_warnings(self.terms_, theta, std, self.correlation_)
-            for run, resid in zip(self.runs_, self.residuals_, strict=True):
+            for run, resid, kept in zip(self.runs_, self.residuals_, self._kept, strict=True):
                 for output in ("angle", "rate"):
                     if resid[output] is not None:
-                        warning = whiteness_warning(run.name, output, *residual_whiteness(resid[output]))
+                        warning = whiteness_warning(
+                            run.name, output, *residual_whiteness(resid[output][kept])
+                        )
                         if warning:
                             self.warnings_.append(warning)
 

@@ -20,6 +20,9 @@ and why.
   degrees, or no release; above: degrees read as radians, or a capsize).
 - timing: the time step between 0.1 ms and 0.1 s, the natural period between 0.1 and 100 s and at
   least ten samples per period (a time column in milliseconds read as seconds fails all three).
+- clipped: samples of the decay the sensor flagged (clipping, orientation not valid; ``DecayRun.excluded``)
+  were left out of the fit: the result stands on the rest, and the decay was not a clean measurement. A
+  finding about the data (``Finding.about_data``), not about the model: choosing a model ignores it.
 """
 
 from __future__ import annotations
@@ -48,6 +51,8 @@ MIN_SAMPLES_PER_PERIOD = 10
 #: Added inertia as a fraction of the dry one: typically 5-40 % for roll (reference §5; KVLCC2 17 %),
 #: widened by 0.1 and 0.15 for a gyradius known to about 5 % and GM to 2 % (k^2 / GM: about 12 %).
 ADDED_INERTIA_BOUNDS = (-0.05, 0.55)
+#: Checks about the measurement rather than the fitted model (every candidate model carries them alike).
+DATA_CHECKS = ("clipped",)
 #: Points of the amplitude grids the damping and stiffness checks look at.
 GRID_POINTS = 41
 
@@ -56,13 +61,18 @@ GRID_POINTS = 41
 class Finding:
     """One implausibility: which check, the one-line message, the value and the bounds it broke."""
 
-    check: str  # damping, stiffness, period, amplitude, time_step
+    check: str  # damping, stiffness, period, amplitude, time_step, clipped
     message: str
     value: float
     bounds: tuple[float, float]
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+    @property
+    def about_data(self) -> bool:
+        """True for a finding about the measurement (clipped samples), which no model choice changes."""
+        return self.check in DATA_CHECKS
 
     def __str__(self) -> str:
         return self.message
@@ -212,6 +222,26 @@ def check_timing(dt_s: float, period_s: float) -> list[Finding]:
     return found
 
 
+def check_excluded(runs: Sequence[DecayRun]) -> list[Finding]:
+    """Runs with samples left out of the fit (``DecayRun.excluded``: the sensor clipped after the release,
+    or its orientation was not valid): one finding each, with what the recording says of them."""
+    found = []
+    for run in runs:
+        count = 0 if run.excluded is None else int(np.count_nonzero(run.excluded))
+        if count:
+            why = run.meta.get("excluded_why") or f"{count} samples flagged by the sensor: left out of fits"
+            found.append(
+                Finding(
+                    "clipped",
+                    f"{run.name}: {why}; the fit stands on the other samples, but the decay was not a clean "
+                    "measurement: repeat it at a smaller angle (or with a sensor of wider range)",
+                    float(count),
+                    (0.0, 0.0),
+                )
+            )
+    return found
+
+
 def check_fit(
     coefficients: Mapping[str, float],
     amplitude_rad: float,
@@ -247,7 +277,7 @@ def check_runs(
     top = math.radians(max(amplitudes)) if amplitudes else max(float(np.max(np.abs(r.angle))) for r in runs)
     steps = np.concatenate([np.diff(run.t) for run in runs if run.t.size > 1] or [np.zeros(0)])
     dt_s = float(np.median(steps)) if steps.size else None
-    return check_fit(coefficients, top, dt_s, particulars, hull)
+    return check_fit(coefficients, top, dt_s, particulars, hull) + check_excluded(runs)
 
 
 def messages(findings: Sequence[Finding]) -> list[str]:

@@ -23,7 +23,13 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..samples import SAMPLE_DTYPE
+from ..samples import (
+    SAMPLE_DTYPE,
+    STATUS_CLIP_ACC,
+    STATUS_CLIP_GYR,
+    STATUS_CLIPPING_DETECTED,
+    STATUS_ORIENTATION_VALID,
+)
 from .decay import TERMS, acceleration, decay_refusal, simulate_decay
 
 #: SampleTimeFine ticks per second, and the wrap of the 10/100-series (one day of ticks).
@@ -38,9 +44,16 @@ RELEASE_JITTER_S = 0.01
 PUSH_AGAIN_AFTER_S = 3.0
 #: The second push brings the amplitude back to this fraction of the initial angle.
 PUSH_AGAIN_FRACTION = 0.8
-#: What a scripted campaign run can do wrong (``scripted_run``): the hand tilts to the wrong angle, or
-#: pushes the model again mid-decay (the release is not clean).
-SCRIPTED_FAULTS = ("wrong-angle", "double-push")
+#: What a scripted campaign run can do wrong (``scripted_run``): the hand tilts to the wrong angle,
+#: pushes the model again mid-decay (the release is not clean), shoves it to its angle so hard that the
+#: gyro clips during the push (harmless: the decay is clean), or the gyro's range is so small that the
+#: first swings of the decay clip (the decay must be rejected).
+SCRIPTED_FAULTS = ("wrong-angle", "double-push", "hard-push", "clipped-decay")
+#: A hard push reaches its angle at this mean rate (deg/s): its peak, 1.9 times more, clips a 300 deg/s gyro.
+HARD_PUSH_DEG_S = 250.0
+#: A clipped-decay run's gyro range per degree of release angle (deg/s per deg): below the first swings'
+#: peak rate for a lightly damped model with a period under about 3 s (omega x0 > 2 x0).
+CLIPPED_RANGE_PER_DEG = 2.0
 #: A wrong-angle run is tilted this much further than asked.
 WRONG_ANGLE_FACTOR = 1.5
 
@@ -74,6 +87,8 @@ class SensorNoise:
     acc_noise_m_s2_rthz: float = 0.002
     acc_bias_m_s2: float = 0.02
     acc_lsb_m_s2: float = 100.0 / 65536
+    gyro_range_deg_s: float = 300.0  # beyond it the rate of turn saturates and the status word says so
+    acc_range_m_s2: float = 50.0
 
     @classmethod
     def none(cls) -> SensorNoise:
@@ -425,6 +440,14 @@ def scripted_run(fault: str | None, angle_deg: float) -> dict[str, object]:
         return {"angle_deg": min(angle_deg * WRONG_ANGLE_FACTOR, 30.0)}
     if fault == "double-push":
         return {"angle_deg": angle_deg, "pushes_again": (0,)}
+    if fault == "hard-push":
+        shove_s = abs(angle_deg) / HARD_PUSH_DEG_S
+        return {"angle_deg": angle_deg, "handling": Handling(tilt_s=(shove_s, shove_s))}
+    if fault == "clipped-decay":
+        return {
+            "angle_deg": angle_deg,
+            "noise": SensorNoise(gyro_range_deg_s=CLIPPED_RANGE_PER_DEG * abs(angle_deg)),
+        }
     raise InputError(f"scripted fault {fault!r} not understood; use {' or '.join(SCRIPTED_FAULTS)}")
 
 
@@ -492,15 +515,17 @@ class SensorModel:
         ):
             out[name] = value + self.angle_bias[k] + angle_sd * rng.standard_normal(n)
         gyro_sd = math.radians(nz.gyro_noise_deg_s_rthz) * nyquist_rthz
+        gyro_range = math.radians(nz.gyro_range_deg_s)
         for k, (name, value) in enumerate((("p", p), ("q", q), ("r", r))):
-            out[name] = _quantise(
-                value + self.gyro_bias[k] + gyro_sd * rng.standard_normal(n), math.radians(nz.gyro_lsb_deg_s)
-            )
+            sensed = value + self.gyro_bias[k] + gyro_sd * rng.standard_normal(n)
+            quantised = _quantise(sensed, math.radians(nz.gyro_lsb_deg_s))
+            out[name] = _saturate(out, quantised, gyro_range, STATUS_CLIP_GYR, k)
         specific_force = self._specific_force(trace, roll, pitch)
         acc_sd = nz.acc_noise_m_s2_rthz * nyquist_rthz
         for k, name in enumerate(("ax", "ay", "az")):
-            out[name] = _quantise(
-                specific_force[k] + self.acc_bias[k] + acc_sd * rng.standard_normal(n), nz.acc_lsb_m_s2
+            sensed = specific_force[k] + self.acc_bias[k] + acc_sd * rng.standard_normal(n)
+            out[name] = _saturate(
+                out, _quantise(sensed, nz.acc_lsb_m_s2), nz.acc_range_m_s2, STATUS_CLIP_ACC, k
             )
         return out
 
@@ -515,6 +540,18 @@ class SensorModel:
         else:
             fx = fx + self.lever_arm_m * trace.acc
         return [fx, fy, fz]
+
+
+def _saturate(out: np.ndarray, values: np.ndarray, limit: float, clip_bits: int, axis: int) -> np.ndarray:
+    """``values`` held within +-``limit``; where they are not, ``out``'s status word gets the axis's clip
+    bit and ClippingDetected, and loses OrientationValid (an MTi's filter is not valid while it clips)."""
+    clipped = np.abs(values) > limit
+    if clipped.any():
+        axis_bit = (clip_bits & -clip_bits) << axis  # the lowest bit of the sensor's three, then the axis
+        out["status"][clipped] = (out["status"][clipped] | axis_bit | STATUS_CLIPPING_DETECTED) & ~np.uint32(
+            STATUS_ORIENTATION_VALID
+        )
+    return np.clip(values, -limit, limit)
 
 
 def _quantise(values: np.ndarray, step: float) -> np.ndarray:

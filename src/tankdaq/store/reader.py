@@ -34,7 +34,7 @@ from mcap.writer import MCAP0_MAGIC
 from ..config import parse_draft
 from ..errors import BadRecordingInput, InputError
 from ..records import DecayRun
-from ..samples import AXIS_FIELDS
+from ..samples import AXIS_FIELDS, StatusTally
 from ..validation import input_file
 from . import schemas
 
@@ -419,7 +419,9 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
     """The decays of a recording: from each release event to the next one (or the end).
 
     The axis comes from the file's metadata unless given; the rate is the gyro's.
-    Rows with NaN (dropouts) are left out; ``meta`` says what was dropped.
+    Rows with NaN (dropouts) are left out; ``meta`` says what was dropped. Samples the status word
+    flags after the release (a sensor clipped, the orientation not valid: ``samples.StatusTally``) are
+    the run's ``excluded`` (fits leave them out), with one line in ``meta["excluded_why"]``.
     """
     recording = read_recording(path)
     axis = axis or recording.axis
@@ -444,6 +446,11 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
             raise BadRecordingInput(
                 f"{recording.path}: release {number} at t = {start:.3f} s has no usable samples after it"
             )
+        tally = StatusTally(start)
+        since = bounds[number - 2] if number > 1 else -np.inf  # the tilt: back to the previous release
+        before = samples[(samples["t"] < start) & (samples["t"] >= since)]
+        tally.add(before)
+        excluded = tally.add(part_kept)
         runs.append(
             DecayRun(
                 t=part_kept["t"],
@@ -458,13 +465,16 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
                     "acc_y_m_s2": part_kept["ay"],
                     "acc_z_m_s2": part_kept["az"],
                 },
-                meta=_run_meta(recording, axis, start, dropped=int(part.size - part_kept.size)),
+                meta=_run_meta(recording, axis, start, dropped=int(part.size - part_kept.size), tally=tally),
+                excluded=excluded if excluded.any() else None,
             )
         )
     return runs
 
 
-def _run_meta(recording: Recording, axis: str, release_t_s: float, dropped: int) -> dict[str, object]:
+def _run_meta(
+    recording: Recording, axis: str, release_t_s: float, dropped: int, tally: StatusTally
+) -> dict[str, object]:
     meta = recording.metadata
     out: dict[str, object] = {
         "file": str(recording.path),
@@ -474,7 +484,10 @@ def _run_meta(recording: Recording, axis: str, release_t_s: float, dropped: int)
         "dropped_samples": dropped,
         "complete_file": recording.complete,
         "truncation": truncation_notice(recording.path, recording.damage) if recording.truncated else None,
+        "status_flags": tally.metadata(),
     }
+    if tally.flagged_after:
+        out["excluded_why"] = tally.describe_after()
     if "draft" in meta:
         out["draft"] = parse_draft(meta["draft"])
     for key in ("angle_nominal_deg", "angle_initial_deg", "sample_rate_hz"):

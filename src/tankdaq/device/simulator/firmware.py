@@ -209,15 +209,21 @@ class Firmware:
         if not self.measuring:
             return 0.02
         device_s = self._origin_s + self.source.time_s(self._next_frame, self.output)
-        return min(0.02, max(0.0, self._epoch + device_s / self.speed - time.monotonic()))
+        due = min(0.02, max(0.0, self._epoch + device_s / self.speed - time.monotonic()))
+        return min(due, self.line.holding(self._latency_s)) if self._outbox else due
+
+    @property
+    def _latency_s(self) -> float:
+        return self.faults.latency_ms / 1000
 
     @property
     def has_output(self) -> bool:
-        return bool(self._outbox)
+        """Bytes wait and the line would take them now (a USB latency burst is not held back)."""
+        return bool(self._outbox) and self.line.holding(self._latency_s) == 0
 
     def flush(self) -> None:
         """Send what the baud rate allows since the last write (the pty itself has no speed)."""
-        self.line.send(self._outbox, self.baud, self.speed)
+        self.line.send(self._outbox, self.baud, self.speed, self._latency_s)
 
     # ---- messages ----------------------------------------
 

@@ -76,6 +76,7 @@ class PtyLink:
         self._slave = -1
         self._budget = 0.0
         self._budget_at = 0.0
+        self._burst_at = 0.0  # when the last latency burst went out (wall clock)
         self._rng = np.random.default_rng([seed, 98])
         self.bytes_overflowed = 0
 
@@ -162,14 +163,19 @@ class PtyLink:
         """A device that boots starts with an empty line."""
         self._budget, self._budget_at = 0.0, time.monotonic()
 
-    def send(self, outbox: bytearray, baud: int, speed: float) -> None:
+    def holding(self, latency_s: float) -> float:
+        """Wall seconds until a USB adapter with latency timer ``latency_s`` hands its bytes over (0: now)."""
+        return max(0.0, self._burst_at + latency_s - time.monotonic()) if latency_s > 0 else 0.0
+
+    def send(self, outbox: bytearray, baud: int, speed: float, latency_s: float = 0.0) -> None:
         """Write from ``outbox`` what ``baud`` carries since the last write (``speed``: device clock
-        speed-up); bytes beyond the device's buffer are lost, at the wrong line speed they are garbage."""
+        speed-up); bytes beyond the device's buffer are lost, at the wrong line speed they are garbage.
+        With ``latency_s`` (a USB adapter's latency timer) the bytes go in one burst per period."""
         if len(outbox) > OUTBOX_LIMIT:
             excess = len(outbox) - OUTBOX_LIMIT
             del outbox[:excess]
             self.bytes_overflowed += excess
-        if not outbox or self.master < 0:
+        if not outbox or self.master < 0 or self.holding(latency_s) > 0:
             return
         now = time.monotonic()
         bytes_per_s = baud / 10 * speed
@@ -187,6 +193,7 @@ class PtyLink:
             return  # nobody reads (or the pty went away): keep the bytes, the buffer limit applies
         del outbox[:written]
         self._budget -= written
+        self._burst_at = now  # a USB adapter with a latency timer holds the next bytes a period
 
 
 def _register_by_id(folder: str) -> None:
