@@ -21,6 +21,8 @@ from ..errors import RecordingError
 from ..records import DecayRun
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.legend import Legend
     from matplotlib.typing import RcKeyType
 
 MEASURED_COLOR = "#1f77b4"
@@ -48,6 +50,12 @@ def report_style() -> Iterator[None]:
         yield
 
 
+def legend_beside(ax: Axes, **kwargs: Any) -> Legend:
+    """``ax``'s legend right of it, outside the data: the layout engine (constrained) makes room for it.
+    Every legend of a report figure is outside its axes or in the figure's own margin, never on data."""
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
+
+
 def _figure(
     rows: int, height_ratios: Sequence[float] | None = None, sharex: bool = True
 ) -> tuple[Figure, list]:
@@ -65,8 +73,10 @@ def decay_fit_figure(
     axis: str = "roll",
     title: str | None = None,
     model_label: str = "model",
+    xlabel: str = "time since release (s)",
 ) -> Figure:
-    """Measured decay with the model drawn over it and, with a model, the residual underneath."""
+    """Measured decay with the model drawn over it and, with a model, the residual underneath (``t_s``
+    the time since release, as every decay figure draws it)."""
     t_s = np.asarray(t_s, dtype=float)
     measured_deg = np.degrees(np.asarray(angle_rad, dtype=float))
     with report_style():
@@ -83,8 +93,8 @@ def decay_fit_figure(
             residual.plot(t_s, measured_deg - model_deg, color=MEASURED_COLOR, linewidth=0.8)
             residual.axhline(0.0, color="0.4", linewidth=0.6)
             residual.set_ylabel("residual (deg)")
-        axes[-1].set_xlabel("time (s)")
-        top.legend(loc="upper right")
+        axes[-1].set_xlabel(xlabel)
+        legend_beside(top)
         if title:
             top.set_title(title)
     return fig
@@ -109,7 +119,7 @@ def series_figure(
         ax.set_xlabel(xlabel)
         ax.set_ylabel(ylabel)
         if len(series) > 1:
-            ax.legend()
+            legend_beside(ax)
         if title:
             ax.set_title(title)
     return fig
