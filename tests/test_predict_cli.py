@@ -204,7 +204,15 @@ def test_kvlcc2_21338_b44_hat_matches_a_hand_calculation() -> None:
     for model, full in zip(out["b_eq"], ship["b_eq"], strict=True):
         assert full["b_eq_n_m_s"] == pytest.approx(model["value_per_s"] * inertia * lam**4.5, rel=1e-5)
     text = runner.invoke(app, args)
-    assert text.exit_code == 0 and "B̂44" in text.stdout and "full scale (1:68)" in text.stdout
+    assert text.exit_code == 0 and "full scale (1:68)" in text.stdout
+    lines = text.stdout.splitlines()
+    (head,) = [i for i, line in enumerate(lines) if "B_eq/I (1/s)" in line]
+    assert lines[head].index("B_eq/I") < lines[head].index("B̂44") < lines[head].index("Bertin N")
+    for point, row in zip(out["b_eq"], lines[head + 1 : head + 1 + len(out["b_eq"])], strict=True):
+        amplitude, _, b_eq_per_s, _, b44_hat, _ = row.split()  # B̂44 beside B_eq/I in the one table
+        assert float(amplitude) == pytest.approx(point["amplitude_deg"], abs=0.006)
+        assert float(b_eq_per_s) == pytest.approx(point["value_per_s"], rel=1e-4)
+        assert float(b44_hat) == pytest.approx(point["b44_hat"], rel=1e-3)
 
 
 def test_campaign_full_scale_uses_each_hulls_scale_factor(tmp_path: Path, monkeypatch) -> None:
