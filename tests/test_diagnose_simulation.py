@@ -335,7 +335,7 @@ def test_mcap_simulations_are_matched_by_initial_angle(tmp_path: Path, swath_dec
 
 
 def test_short_run_labels() -> None:
-    from tankdaq.viz.diagnose_view import short_labels
+    from tankdaq.viz.plots import short_labels
 
     assert short_labels(["model_test_21338"]) == ["21338"]
     assert short_labels(["model_test_21338#1", "model_test_21338#2"]) == ["21338_1", "21338_2"]

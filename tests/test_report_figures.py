@@ -30,7 +30,7 @@ from tankdaq.maneuver.model import StateRecord
 from tankdaq.maneuver.validate import ValidationResult
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
-from tankdaq.viz import campaign_report, diagnose_view
+from tankdaq.viz import campaign_report, diagnose_view, plots
 from tankdaq.viz.maneuver_view import validation_figure
 from tankdaq.viz.plots import decay_fit_figure, series_figure
 
@@ -87,14 +87,14 @@ def test_run_labels_are_condition_and_run_number() -> None:
         DecayRun(np.arange(3.0), np.zeros(3), name=Path(n).stem, meta={"file": f"/lab/{n}.mcap"})
         for n in LONG_NAMES
     ]
-    assert diagnose_view.run_labels(runs) == [
+    assert plots.run_labels(runs) == [
         "swath 1.1T roll #1",
         "swath 1.1T roll #2",
         "swath 1.1T roll #3",
     ]
     # names that say no condition: the shortest unique tails, never the whole names
     plain = [DecayRun(np.arange(3.0), np.zeros(3), name=n) for n in ("model_test_21338", "model_test_21340")]
-    assert diagnose_view.run_labels(plain) == ["21338", "21340"]
+    assert plots.run_labels(plain) == ["21338", "21340"]
 
 
 def test_diagnose_figures_show_time_since_release_short_labels_and_no_overlap() -> None:
@@ -109,7 +109,7 @@ def test_diagnose_figures_show_time_since_release_short_labels_and_no_overlap() 
         assert_fit_to_hand_on(fig, name)
     # without labels the panels are named by the names' short tails, not the whole file names
     unnamed = diagnose_view.models_figure(baseline, final)
-    assert all(len(ax.get_title(loc="left")) <= diagnose_view.LABEL_CHARS for ax in unnamed.axes)
+    assert all(len(ax.get_title(loc="left")) <= plots.LABEL_CHARS for ax in unnamed.axes)
     assert_fit_to_hand_on(unnamed, "models without labels")
 
 
@@ -135,7 +135,7 @@ def test_spectrum_is_asd_in_hz_against_hz_with_a_fine_grid() -> None:
 
 def test_simulation_and_damping_figures_carry_b44_hat_beside_b_eq() -> None:
     sim, fixed = predictions(), predictions(0.1)
-    labels = diagnose_view.run_labels(
+    labels = plots.run_labels(
         [DecayRun(p.t, p.angle, name=p.name, meta={"file": p.name + ".mcap"}) for p in sim]
     )
     assert_fit_to_hand_on(diagnose_view.simulation_figure(sim, fixed, labels, (1.234, 0.0567)), "simulation")

@@ -16,7 +16,7 @@ import numpy as np
 from ..errors import RecordingError
 from ..ident.free_decay import cut_lines
 from ..ident.plausibility import check_runs
-from ..viz import diagnose_view
+from ..viz import diagnose_view, plots
 from .fitting import Fit
 from .residuals import SPECTRUM_MEANING, residual_spectrum
 from .workflow import Diagnoser, Diagnostics, Step, signature_seen
@@ -220,7 +220,7 @@ def figures(diagnoser: Diagnoser) -> dict[str, Any]:
     """The report's figures by file name: per run (its condition and run number) the models and the
     residuals against the time since release, and the residual spectrum in Hz."""
     base_runs, final_runs = diagnoser.baseline_.runs, diagnoser.final_.runs
-    labels = diagnose_view.run_labels(diagnoser.runs_)
+    labels = plots.run_labels(diagnoser.runs_)
     omega0 = natural_frequency_rad_s(diagnoser.final_)
     rate_hz = diagnoser.runs_[0].sample_rate
     first, last = (

@@ -17,7 +17,7 @@ from ..errors import RecordingError
 from ..ident.derived import b44_hat_factor, extinction_curve
 from ..physics.terms import TERM_TABLE
 from ..records import DecayRun
-from ..viz import diagnose_view
+from ..viz import diagnose_view, plots
 from .compare import CorrectionStep, DampingPoint, SimulationComparison
 from .correction import Correction, moment_name
 from .fitting import RunPrediction
@@ -289,7 +289,7 @@ def summary_json(comparison: SimulationComparison) -> str:
 def figures(comparison: SimulationComparison) -> dict[str, Any]:
     """The report's figures by file name: the curves side by side, and damping with the extinction curve."""
     c = comparison
-    labels = diagnose_view.run_labels(c.runs_)
+    labels = plots.run_labels(c.runs_)
     gap = (_deg(c.rms_rad_["simulation"]), _deg(c.rms_rad_["corrected"]))
     bands = {
         side: (
@@ -375,7 +375,7 @@ def _report_lines(comparison: SimulationComparison) -> list[str]:
 
 def save_rrd(comparison: SimulationComparison, path: str | Path) -> Path:
     """The curves side by side and the story in a new .rrd file (open it with ``rerun path``)."""
-    labels = diagnose_view.short_labels([run.name for run in comparison.runs_])
+    labels = plots.short_labels([run.name for run in comparison.runs_])
     return diagnose_view.save_simulation_rrd(
         path, comparison.curves_["simulation"], comparison.curves_["corrected"], labels, story(comparison)
     )

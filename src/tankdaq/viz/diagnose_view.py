@@ -8,7 +8,6 @@ built like every report figure (``viz.plots``); rerun is imported only when a re
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
@@ -18,10 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..errors import InputError
-from ..ident.conditions import UNKNOWN, condition_of
-from ..records import DecayRun
-from ..store.naming import parse_recording_name
-from .plots import MEASURED_COLOR, MODEL_COLOR, legend_beside, report_style
+from .plots import MEASURED_COLOR, MODEL_COLOR, legend_beside, report_style, short_labels
 
 
 class PredictedRun(Protocol):
@@ -203,38 +199,6 @@ def _write_rrd(path: str | Path, log: Callable[[Any], None]) -> Path:
 
 #: The simulation's colour beside the measured (blue) and the corrected model (red).
 SIMULATION_COLOR = "#ff7f0e"
-#: The longest run label a figure or the viewer shows.
-LABEL_CHARS = 16
-
-
-def short_labels(names: Sequence[str]) -> list[str]:
-    """Labels that tell the runs apart in a panel and name rerun entities: the shortest unique tail of
-    their names' tokens (``model_test_21338`` -> ``21338``, ``stem#2`` -> ``stem_2``, not a bare part
-    number), at most ``LABEL_CHARS`` long, else ``runN``."""
-    tokens = [[t for t in re.split(r"[\s_/\\:.#-]+", name) if t] for name in names]
-    for count in range(1, max((len(t) for t in tokens), default=1) + 1):
-        labels = ["_".join(t[-count:]) for t in tokens]
-        readable = all(0 < len(lb) <= LABEL_CHARS and not (lb.isdigit() and len(lb) <= 2) for lb in labels)
-        if len(set(labels)) == len(labels) and readable:
-            return labels
-    return [f"run{i + 1}" for i in range(len(names))]
-
-
-def run_labels(runs: Sequence[DecayRun]) -> list[str]:
-    """What a person calls each run: its condition and run number (``swath T roll #3``; a record's
-    second decay ``#3.2``) from the recording's metadata and name; where that does not tell every run
-    apart, ``short_labels`` of the names."""
-    labels = []
-    for run in runs:
-        condition = condition_of(run)
-        named = parse_recording_name(Path(str(run.meta.get("file", run.name))).name)
-        part = run.name.rpartition("#")[2] if "#" in run.name else ""
-        number = f" #{named.run}" if named is not None and named.run is not None else ""
-        known = condition.hull != UNKNOWN and condition.draft != UNKNOWN
-        labels.append(f"{condition.label}{number}{'.' + part if number and part else ''}" if known else "")
-    if all(labels) and len(set(labels)) == len(labels):
-        return labels
-    return short_labels([run.name for run in runs])
 
 
 def simulation_figure(
