@@ -131,8 +131,8 @@ def spectrum_figure(first: ResidualSpectrum, last: ResidualSpectrum, omega0_rad_
 def log_diagnosis(
     stream: Any, baseline: Sequence[PredictedRun], final: Sequence[PredictedRun], story: Sequence[str]
 ) -> None:
-    """Per run the measurement, baseline, final model and residuals on the ``t`` timeline (degrees),
-    and the story as a text log. ``stream`` is an rr.RecordingStream."""
+    """Per run the measurement, baseline, final model and residuals on the ``t`` timeline (time since
+    release, degrees), and the story as a text log. ``stream`` is an rr.RecordingStream."""
     import rerun as rr
 
     from . import live
@@ -143,12 +143,13 @@ def log_diagnosis(
         "final": (live.MODEL_COLOR, 2.0),
     }
     for base, last in zip(baseline, final, strict=True):
+        t, t_final = _since_release(base), _since_release(last)
         series = {
-            f"diagnose/{base.name}/angle/measured": (base.t, base.angle + base.residual_angle, "measured"),
-            f"diagnose/{base.name}/angle/baseline": (base.t, base.angle, "baseline"),
-            f"diagnose/{base.name}/angle/final": (last.t, last.angle, "final"),
-            f"diagnose/{base.name}/residual/baseline": (base.t, base.residual_angle, "baseline"),
-            f"diagnose/{base.name}/residual/final": (last.t, last.residual_angle, "final"),
+            f"diagnose/{base.name}/angle/measured": (t, base.angle + base.residual_angle, "measured"),
+            f"diagnose/{base.name}/angle/baseline": (t, base.angle, "baseline"),
+            f"diagnose/{base.name}/angle/final": (t_final, last.angle, "final"),
+            f"diagnose/{base.name}/residual/baseline": (t, base.residual_angle, "baseline"),
+            f"diagnose/{base.name}/residual/final": (t_final, last.residual_angle, "final"),
         }
         _log_series(stream, series, styles)
     for line in story:
