@@ -18,7 +18,7 @@ def drawn_texts(fig: Figure) -> list[tuple[str, object]]:
     renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
     ticks: set[int] = set()
     texts: list[Text] = []
-    for ax in fig.axes:
+    for ax in [*fig.axes, *(child for parent in fig.axes for child in parent.child_axes)]:  # + secondary axes
         for axis in (ax.xaxis, ax.yaxis):
             low, high = sorted(axis.get_view_interval())
             margin = 1e-9 * (high - low)

@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 from figure_checks import assert_fit_to_hand_on, clipped_texts, layout_problems, legends_on_axes
 from tankdaq.config import load_hull
 from tankdaq.diagnose.residuals import residual_spectrum
+from tankdaq.diagnose.synthetic import make_decay_set
 from tankdaq.ident.campaign import (
     GroupResult,
     find_campaign_hulls,
@@ -241,3 +242,23 @@ def test_auv_validation_figure_keeps_its_scores_beside_the_panels() -> None:
     ]
     fig = validation_figure(record, results)
     assert_fit_to_hand_on(fig, "auv validation")
+
+
+def test_the_diagnose_reports_own_figures_are_fit_to_hand_on() -> None:
+    """``diagnose.report.figures`` of a real (small) diagnosis: runs named in the recording grammar get
+    their condition and run number, the decays start at 0 s although the device clock does not."""
+    from tankdaq.diagnose.report import figures
+    from tankdaq.diagnose.workflow import Diagnoser
+
+    data = make_decay_set(("damping.quadratic",), seed=22, angles_deg=(15.0, 8.0), duration_s=8.0)
+    for k, run in enumerate(data.runs, 1):
+        run.t = run.t + DEVICE_T0_S
+        run.name = f"swath_T_roll_{k * 7}deg_20261121-14301{k}_run0{k}"
+        run.meta["file"] = f"/lab/{run.name}.mcap"
+    drawn = figures(Diagnoser(max_steps=0).fit(data.runs))  # the baseline alone: the figures are the point
+    for name, fig in drawn.items():
+        assert_fit_to_hand_on(fig, name)
+    titles = [ax.get_title(loc="left") for ax in drawn["models.png"].axes]
+    assert titles == ["swath T roll #1", "swath T roll #2"]
+    assert all(ax.get_lines()[0].get_xdata()[0] == 0.0 for ax in drawn["residuals.png"].axes)
+    assert drawn["spectrum.png"].axes[0].get_xlabel().startswith("frequency (Hz)")

@@ -225,7 +225,7 @@ def simulation_figure(
             right.axhline(0.0, color="0.4", linewidth=0.6)
             right.set_ylabel("gap (deg)")
         axes[0, 0].set_title("angle from the measured release")
-        axes[0, 1].set_title(f"measured minus model: RMS {gap_deg[0]:.3g} -> {gap_deg[1]:.3g} deg")
+        axes[0, 1].set_title(f"measured minus model\nRMS {gap_deg[0]:.3g} -> {gap_deg[1]:.3g} deg")
         for ax in axes[-1]:
             ax.set_xlabel("time since release (s)")
         fig.legend(
