@@ -140,6 +140,10 @@ def test_simulation_and_damping_figures_carry_b44_hat_beside_b_eq() -> None:
         [DecayRun(p.t, p.angle, name=p.name, meta={"file": p.name + ".mcap"}) for p in sim]
     )
     assert_fit_to_hand_on(diagnose_view.simulation_figure(sim, fixed, labels, (1.234, 0.0567)), "simulation")
+    long = [f"catamaran-2026-long-lab-model-name 1.1T roll #{k}" for k in (1, 2, 3)]  # a lab's hull name
+    drawn = diagnose_view.simulation_figure(sim, fixed, long, (1.234, 0.0567))
+    assert_fit_to_hand_on(drawn, "simulation with long labels")
+    assert [ax.get_title(loc="left") for ax in drawn.axes[::2]] == long
     amplitudes = [1.0, 4.0, 8.0, 12.0]
     value = np.array([0.2, 0.3, 0.4, 0.5])
     bands = {

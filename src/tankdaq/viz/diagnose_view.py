@@ -209,9 +209,10 @@ def simulation_figure(
     gap_deg: tuple[float, float],
 ) -> Figure:
     """Per run, side by side: measured, simulation and corrected angle against the time since release,
-    and the gap of each to the measurement (``gap_deg``: RMS before and after, in the title)."""
+    and the gap of each to the measurement (``gap_deg``: RMS before and after, in the title). Each row is
+    named by its run's label above its left panel (a y-label of a long name would be cut)."""
     with report_style():
-        fig = Figure(figsize=(11.0, 1.3 + 2.3 * len(simulation)), layout="constrained")
+        fig = Figure(figsize=(11.0, 1.6 + 2.4 * len(simulation)), layout="constrained")
         FigureCanvasAgg(fig)
         axes = fig.subplots(len(simulation), 2, squeeze=False, sharex=True, width_ratios=(3, 2))
         for (left, right), sim, fixed, label in zip(axes, simulation, corrected, labels, strict=True):
@@ -219,19 +220,22 @@ def simulation_figure(
             left.plot(t, np.degrees(sim.angle + sim.residual_angle), color=MEASURED_COLOR, linewidth=0.8)
             left.plot(t, np.degrees(sim.angle), color=SIMULATION_COLOR, linestyle=":")
             left.plot(t, np.degrees(fixed.angle), color=MODEL_COLOR, linestyle="--", linewidth=1.0)
-            left.set_ylabel(f"{label} (deg)")
+            left.set_title(label, loc="left", fontsize=9)
+            left.set_ylabel("angle (deg)")
             right.plot(t, np.degrees(sim.residual_angle), color=SIMULATION_COLOR, linewidth=0.7)
             right.plot(t, np.degrees(fixed.residual_angle), color=MODEL_COLOR, linewidth=0.7)
             right.axhline(0.0, color="0.4", linewidth=0.6)
-            right.set_ylabel("gap (deg)")
-        axes[0, 0].set_title("angle from the measured release")
-        axes[0, 1].set_title(f"measured minus model\nRMS {gap_deg[0]:.3g} -> {gap_deg[1]:.3g} deg")
+            right.set_ylabel("measured minus model (deg)")
+        fig.suptitle(
+            "angle from the measured release, and measured minus model: "
+            f"RMS {gap_deg[0]:.3g} -> {gap_deg[1]:.3g} deg"
+        )
         for ax in axes[-1]:
             ax.set_xlabel("time since release (s)")
         fig.legend(
             axes[0, 0].lines,
             ["measured", "simulation", "corrected"],
-            loc="outside upper center",
+            loc="outside lower center",
             ncols=3,
         )
     return fig
