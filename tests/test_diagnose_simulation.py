@@ -7,6 +7,7 @@ measurement (other column names, degrees, another rate and length).
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from pathlib import Path
@@ -16,13 +17,13 @@ import pytest
 from matplotlib.figure import Figure
 from typer.testing import CliRunner
 
-from figure_checks import overlapping_texts
+from figure_checks import assert_fit_to_hand_on, overlapping_texts
 from rrd_checks import read_rrd
 from tankdaq.cli import app
 from tankdaq.config import load_hull
 from tankdaq.diagnose.compare import SimulationComparison
 from tankdaq.diagnose.sim_equation import best_damping_form
-from tankdaq.diagnose.sim_report import figures, story
+from tankdaq.diagnose.sim_report import figures, story, summary
 from tankdaq.diagnose.simulation import SeriesColumns, SimulationRequest, resolve_simulation
 from tankdaq.ident.free_decay import cut_free_decays
 from tankdaq.ident.inputs import read_decays
@@ -141,8 +142,9 @@ def test_a_right_simulation_names_nothing(tmp_path: Path, kvlcc2) -> None:
 
 
 def assert_no_overlap(figs: dict[str, Figure]) -> None:
+    """No text over text or cut off, no legend on a panel (``figure_checks``)."""
     for name, fig in figs.items():
-        assert overlapping_texts(fig) == [], name
+        assert_fit_to_hand_on(fig, name)
 
 
 def write_hull(path: Path, coefficients: dict[str, float], scale: float | None = 10.0) -> Path:
@@ -336,7 +338,7 @@ def test_mcap_simulations_are_matched_by_initial_angle(tmp_path: Path, swath_dec
 
 
 def test_short_run_labels() -> None:
-    from tankdaq.viz.diagnose_view import short_labels
+    from tankdaq.viz.plots import short_labels
 
     assert short_labels(["model_test_21338"]) == ["21338"]
     assert short_labels(["model_test_21338#1", "model_test_21338#2"]) == ["21338_1", "21338_2"]
@@ -365,6 +367,18 @@ def test_an_ikeda_prediction_of_kvlcc2_is_compared_in_its_own_components(kvlcc2)
     # B_eq measured below the prediction (the kvlcc2 hull's docs): both parts would have to shrink
     factors = [float(line.split("change x")[1].split()[0]) for line in (linear, quadratic)]
     assert all(0.0 < factor < 1.0 for factor in factors), factors
+    # B̂44 beside B_eq/I, by hand from the parameters file's columns (model scale: lengths / lambda)
+    with (KVLCC2.parent / "model_test_parameters.csv").open() as f:
+        row = next(r for r in csv.DictReader(f) if r["id"] == "21338")
+    lam, rho, g = float(row["scale_factor"]), float(row["rho"]), float(row["g"])
+    mass, beam, gm = rho * float(row["Volume"]) / lam**3, float(row["beam"]) / lam, float(row["gm"]) / lam
+    reference = comparison.reference_.coefficients_
+    inertia = mass * g * gm / (reference["c1"] + reference.get("s1", 0.0))
+    damping = summary(comparison)["damping"]
+    for side in ("measured", "simulation", "corrected"):
+        hand = [b * inertia * math.sqrt(beam / (2 * g)) / (mass * beam**2) for b in damping[side]["b_eq_1_s"]]
+        assert damping[side]["b44_hat"] == pytest.approx(hand, rel=1e-6)
+    assert_no_overlap(figures(comparison))  # damping.png with B̂44's axis
 
 
 def test_a_simulation_with_time_in_milliseconds_is_read_as_such(tmp_path: Path, swath_decays) -> None:

@@ -20,7 +20,7 @@ def test_decay_figure_draws_degrees_model_and_residual(tmp_path: Path) -> None:
     fig = decay_fit_figure(t, measured, model, axis="pitch", title="swath 1.1T")
     top, bottom = fig.axes
     assert top.get_ylabel() == "pitch angle (deg)" and bottom.get_ylabel() == "residual (deg)"
-    assert bottom.get_xlabel() == "time (s)" and top.get_title() == "swath 1.1T"
+    assert bottom.get_xlabel() == "time since release (s)" and top.get_title() == "swath 1.1T"
     measured_line, model_line = top.get_lines()
     np.testing.assert_allclose(measured_line.get_ydata(), np.degrees(measured))
     np.testing.assert_allclose(model_line.get_ydata(), np.degrees(model))
@@ -37,7 +37,7 @@ def test_decay_figure_without_model_has_one_panel() -> None:
     t = np.linspace(0, 1, 11)
     fig = decay_fit_figure(t, np.radians(np.ones(11)))
     (ax,) = fig.axes
-    assert ax.get_xlabel() == "time (s)"
+    assert ax.get_xlabel() == "time since release (s)"
     np.testing.assert_allclose(ax.get_lines()[0].get_ydata(), 1.0)
 
 

@@ -16,9 +16,9 @@ import numpy as np
 from ..errors import RecordingError
 from ..ident.free_decay import cut_lines
 from ..ident.plausibility import check_runs
-from ..viz import diagnose_view
+from ..viz import diagnose_view, plots
 from .fitting import Fit
-from .residuals import SPECTRUM_MEANING
+from .residuals import SPECTRUM_MEANING, residual_spectrum
 from .workflow import Diagnoser, Diagnostics, Step, signature_seen
 
 
@@ -212,19 +212,34 @@ def report_folder(directory: str | Path) -> Path:
     return out
 
 
+#: Zero padding of the report's residual spectrum: a readable curve between the Welch segments' bins.
+SPECTRUM_PADDING = 8
+
+
+def figures(diagnoser: Diagnoser) -> dict[str, Any]:
+    """The report's figures by file name: per run (its condition and run number) the models and the
+    residuals against the time since release, and the residual spectrum in Hz."""
+    base_runs, final_runs = diagnoser.baseline_.runs, diagnoser.final_.runs
+    labels = plots.run_labels(diagnoser.runs_)
+    omega0 = natural_frequency_rad_s(diagnoser.final_)
+    rate_hz = diagnoser.runs_[0].sample_rate
+    first, last = (
+        residual_spectrum([p.residual_angle for p in fit.runs], rate_hz, omega0, SPECTRUM_PADDING)
+        for fit in (diagnoser.baseline_, diagnoser.final_)
+    )
+    return {
+        "models.png": diagnose_view.models_figure(base_runs, final_runs, labels),
+        "residuals.png": diagnose_view.residuals_figure(base_runs, final_runs, labels),
+        "spectrum.png": diagnose_view.spectrum_figure(first, last, omega0),
+    }
+
+
 def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
     """``directory/diagnose.md`` with the story, a step table and three PNG figures."""
     from ..viz.plots import save_png
 
     out = report_folder(directory)
-    base_runs, final_runs = diagnoser.baseline_.runs, diagnoser.final_.runs
-    spectra = diagnoser.diagnostics_[0].spectrum, diagnoser.diagnostics_[-1].spectrum
-    figures = {
-        "models.png": diagnose_view.models_figure(base_runs, final_runs),
-        "residuals.png": diagnose_view.residuals_figure(base_runs, final_runs),
-        "spectrum.png": diagnose_view.spectrum_figure(*spectra, natural_frequency_rad_s(diagnoser.final_)),
-    }
-    for name, fig in figures.items():
+    for name, fig in figures(diagnoser).items():
         save_png(fig, out / name)
     base = diagnoser.baseline_
     rows = [

@@ -31,13 +31,18 @@ class Spectrum:
     location: str  # "none", "zero", "natural", "double", "triple", "other"
 
 
-def residual_spectrum(residuals: Sequence[np.ndarray], rate_hz: float, omega0_rad_s: float) -> Spectrum:
-    """Run-averaged Welch PSD of the residual; segments of about four natural periods."""
+def residual_spectrum(
+    residuals: Sequence[np.ndarray], rate_hz: float, omega0_rad_s: float, padding: int = 1
+) -> Spectrum:
+    """Run-averaged Welch PSD of the residual; segments of about four natural periods. ``padding``
+    zero-pads each segment that many times (a figure's smooth curve; the resolution, and so where a
+    peak is said to sit, is the segments')."""
     period_samples = int(2 * np.pi / max(omega0_rad_s, 1e-3) * rate_hz)
     shortest = min(e.size for e in residuals)
     nperseg = int(min(shortest, max(4 * period_samples, 64)))
     spectra = [
-        welch(np.asarray(e, dtype=float), fs=rate_hz, nperseg=nperseg, detrend=False) for e in residuals
+        welch(np.asarray(e, dtype=float), fs=rate_hz, nperseg=nperseg, nfft=padding * nperseg, detrend=False)
+        for e in residuals
     ]
     omega = 2 * np.pi * spectra[0][0]
     psd_mean = np.mean([psd for _, psd in spectra], axis=0)
@@ -50,7 +55,7 @@ def residual_spectrum(residuals: Sequence[np.ndarray], rate_hz: float, omega0_ra
         psd_mean,
         float(omega[i_peak]),
         prominence,
-        _locate(omega[i_peak], omega0_rad_s, prominence, omega[1]),
+        _locate(omega[i_peak], omega0_rad_s, prominence, 2 * np.pi * rate_hz / nperseg),
     )
 
 

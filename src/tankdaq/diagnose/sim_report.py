@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import RecordingError
-from ..ident.derived import extinction_curve
+from ..ident.derived import b44_hat_factor, extinction_curve
 from ..physics.terms import TERM_TABLE
 from ..records import DecayRun
-from ..viz import diagnose_view
+from ..viz import diagnose_view, plots
 from .compare import CorrectionStep, DampingPoint, SimulationComparison
 from .correction import Correction, moment_name
 from .fitting import RunPrediction
@@ -154,12 +154,25 @@ def decrements(comparison: SimulationComparison) -> dict[str, tuple[np.ndarray, 
     return {name: (curve.mean_amplitude, curve.decrement) for name, curve in out.items()}
 
 
-def _band(points: list[DampingPoint], side: str) -> dict[str, Any]:
+def b44_hat_per_b_eq(comparison: SimulationComparison) -> float | None:
+    """B̂44 per B_eq/I: I √(B/2g) / (ρ∇B²), I the correction's total inertia (Δ g GM / c1), for roll
+    where the hull gives its beam and displacement; None otherwise."""
+    inertia = comparison.correction_.total_inertia_kg_m2
+    if comparison.hull is None or inertia is None or comparison.runs_[0].axis != "roll":
+        return None
+    factor = b44_hat_factor(comparison.hull)
+    return None if factor is None else inertia * factor
+
+
+def _band(points: list[DampingPoint], side: str, hat: float | None) -> dict[str, Any]:
     values = [getattr(p, side) for p in points]
-    return {
+    band: dict[str, Any] = {
         "b_eq_1_s": [v for v, _ in values],
         "ci95_1_s": [[v - 1.96 * s, v + 1.96 * s] for v, s in values],
     }
+    if hat is not None:
+        band["b44_hat"] = [v * hat for v, _ in values]
+    return band
 
 
 def _simulation_part(c: SimulationComparison) -> dict[str, Any]:
@@ -192,9 +205,10 @@ def _period_part(c: SimulationComparison) -> dict[str, Any]:
 
 
 def _damping_part(c: SimulationComparison) -> dict[str, Any]:
+    hat = b44_hat_per_b_eq(c)
     return {
         "amplitudes_deg": c.amplitudes_deg_,
-        **{side: _band(c.damping_, side) for side in ("measured", "simulation", "corrected")},
+        **{side: _band(c.damping_, side, hat) for side in ("measured", "simulation", "corrected")},
         "ratio": [p.ratio for p in c.damping_],
         "ratio_ci95": [list(p.ratio_ci95) for p in c.damping_],
         "disagrees": [p.disagrees for p in c.damping_],
@@ -275,7 +289,7 @@ def summary_json(comparison: SimulationComparison) -> str:
 def figures(comparison: SimulationComparison) -> dict[str, Any]:
     """The report's figures by file name: the curves side by side, and damping with the extinction curve."""
     c = comparison
-    labels = diagnose_view.short_labels([run.name for run in c.runs_])
+    labels = plots.run_labels(c.runs_)
     gap = (_deg(c.rms_rad_["simulation"]), _deg(c.rms_rad_["corrected"]))
     bands = {
         side: (
@@ -288,7 +302,9 @@ def figures(comparison: SimulationComparison) -> dict[str, Any]:
         "simulation.png": diagnose_view.simulation_figure(
             c.curves_["simulation"], c.curves_["corrected"], labels, gap
         ),
-        "damping.png": diagnose_view.damping_figure(c.amplitudes_deg_, bands, decrements(c)),
+        "damping.png": diagnose_view.damping_figure(
+            c.amplitudes_deg_, bands, decrements(c), b44_hat_per_b_eq(c)
+        ),
     }
 
 
@@ -299,45 +315,7 @@ def write_report(comparison: SimulationComparison, directory: str | Path) -> Pat
     out = report_folder(directory)
     for name, fig in figures(comparison).items():
         save_png(fig, out / name)
-    rms = comparison.rms_rad_
-    rows = [f"| {name} | {_deg(value):.4f} |" for name, value in rms.items()]
-    damping = [
-        f"| {p.amplitude_deg:.2f} | {p.measured[0]:.4g} ± {1.96 * p.measured[1]:.2g} | "
-        f"{p.simulation[0]:.4g} ± {1.96 * p.simulation[1]:.2g} | "
-        f"{p.corrected[0]:.4g} ± {1.96 * p.corrected[1]:.2g} "
-        f"| {100 * p.ratio:.0f} % |"
-        for p in comparison.damping_
-    ]
-    text = "\n".join(
-        [
-            "# Simulation against measurement",
-            "",
-            f"Simulation: {comparison.simulation.name}. Runs: {', '.join(r.name for r in comparison.runs_)}",
-            "",
-            "## Story",
-            "",
-            *[f"- {line}" for line in story(comparison)],
-            "",
-            "## The gap (RMS of the angle over the measured decay, every model from the measured release)",
-            "",
-            "| model | RMS angle (deg) |",
-            "|---|---|",
-            *rows,
-            "",
-            f"Gap reduction (1 - corrected / simulation): {100 * comparison.gap_reduction_:.1f} %",
-            "",
-            "## B_eq per unit inertia (1/s, ± 95 %)",
-            "",
-            "| amplitude (deg) | measured | simulation | corrected | simulation / measured |",
-            "|---|---|---|---|---|",
-            *damping,
-            "",
-            "![measured, simulation and corrected](simulation.png)",
-            "",
-            "![damping and extinction curve](damping.png)",
-            "",
-        ]
-    )
+    text = "\n".join(_report_lines(comparison))
     path = out / "simulation.md"
     try:
         path.write_text(text)
@@ -346,9 +324,58 @@ def write_report(comparison: SimulationComparison, directory: str | Path) -> Pat
     return path
 
 
+def _damping_rows(comparison: SimulationComparison) -> list[str]:
+    """The B_eq table: per amplitude each side's B_eq/I ± 95 % and, where the hull allows, its B̂44."""
+    hat = b44_hat_per_b_eq(comparison)
+    sides = ("measured", "simulation", "corrected")
+    head = "| amplitude (deg) | measured | simulation | corrected | simulation / measured |"
+    if hat is not None:
+        head += " B̂44 measured | B̂44 simulation | B̂44 corrected |"
+    rows = [head, "|" + "---|" * (head.count("|") - 1)]
+    for p in comparison.damping_:
+        cells = [f"{p.amplitude_deg:.2f}"]
+        cells += [f"{getattr(p, side)[0]:.4g} ± {1.96 * getattr(p, side)[1]:.2g}" for side in sides]
+        cells.append(f"{100 * p.ratio:.0f} %")
+        if hat is not None:
+            cells += [f"{getattr(p, side)[0] * hat:.4g}" for side in sides]
+        rows.append("| " + " | ".join(cells) + " |")
+    return rows
+
+
+def _report_lines(comparison: SimulationComparison) -> list[str]:
+    """simulation.md: the story, the gap table, the B_eq table and the figures."""
+    rows = [f"| {name} | {_deg(value):.4f} |" for name, value in comparison.rms_rad_.items()]
+    return [
+        "# Simulation against measurement",
+        "",
+        f"Simulation: {comparison.simulation.name}. Runs: {', '.join(r.name for r in comparison.runs_)}",
+        "",
+        "## Story",
+        "",
+        *[f"- {line}" for line in story(comparison)],
+        "",
+        "## The gap (RMS of the angle over the measured decay, every model from the measured release)",
+        "",
+        "| model | RMS angle (deg) |",
+        "|---|---|",
+        *rows,
+        "",
+        f"Gap reduction (1 - corrected / simulation): {100 * comparison.gap_reduction_:.1f} %",
+        "",
+        "## B_eq per unit inertia (1/s, ± 95 %)",
+        "",
+        *_damping_rows(comparison),
+        "",
+        "![measured, simulation and corrected](simulation.png)",
+        "",
+        "![damping and extinction curve](damping.png)",
+        "",
+    ]
+
+
 def save_rrd(comparison: SimulationComparison, path: str | Path) -> Path:
     """The curves side by side and the story in a new .rrd file (open it with ``rerun path``)."""
-    labels = diagnose_view.short_labels([run.name for run in comparison.runs_])
+    labels = plots.short_labels([run.name for run in comparison.runs_])
     return diagnose_view.save_simulation_rrd(
         path, comparison.curves_["simulation"], comparison.curves_["corrected"], labels, story(comparison)
     )

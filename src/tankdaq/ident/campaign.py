@@ -30,7 +30,7 @@ from ..records import DecayRun
 from ..samples import AXIS_FIELDS, empty_samples
 from ..store.inputs import INPUT_FORMATS, input_format
 from ..store.naming import parse_recording_name
-from .derived import amplitude_table, damping_ratio, natural_period
+from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
 from .executors import executor_map
 from .free_decay import cut_free_decays, cut_lines
 from .inputs import read_decays
@@ -114,7 +114,22 @@ class GroupResult:
         if "total_inertia_kg_m2" not in found:
             return {}
         inertia = found["total_inertia_kg_m2"]
-        return {"gm_m": found["gm_m"], "total_inertia_kg_m2": inertia, "b_eq_n_m_s": b_eq_per_s * inertia}
+        row = {"gm_m": found["gm_m"], "total_inertia_kg_m2": inertia, "b_eq_n_m_s": b_eq_per_s * inertia}
+        hat = self.b44_hat_per_b_eq()
+        return row if hat is None else row | {"b44_hat": b_eq_per_s * hat}
+
+    def b44_hat_per_b_eq(self) -> float | None:
+        """B̂44 per B_eq/I (I √(B/2g) / (ρ∇B²), I = Δ g GM / c1 at the group's draft): roll groups whose
+        hull gives the displacement, GM and beam; None otherwise (and without a fit)."""
+        if self.fit is None or self.hull is None or self.key.axis != "roll":
+            return None
+        from .report import dimensional_summary
+
+        found = dimensional_summary(self.fit.coefficients_, self.hull, self.key.axis, self.key.draft)
+        factor = b44_hat_factor(self.hull, self.key.draft)
+        if factor is None or "total_inertia_kg_m2" not in found:
+            return None
+        return float(found["total_inertia_kg_m2"] * factor)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -352,10 +367,12 @@ def write_csv(results: Sequence[GroupResult], path: Path) -> Path:
 def markdown_table(results: Sequence[GroupResult]) -> str:
     """The campaign as a Markdown table: coefficients ± 1 sigma, period, B_eq at the initial angle, R²."""
     terms = list(dict.fromkeys(t for r in results if r.fit for t in r.fit.terms_))
-    header = ["hull", "axis", "draft", "angle deg", "runs", *terms, "T0 s", "zeta", "B_eq 1/s", "R² angle"]
+    rows = [result.summary() for result in results]
+    hat = any("b44_hat" in row for row in rows)  # B̂44 where a hull gives the beam and the inertia
+    header = ["hull", "axis", "draft", "angle deg", "runs", *terms, "T0 s", "zeta", "B_eq/I 1/s"]
+    header += ["B̂44", "R² angle"] if hat else ["R² angle"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for result in results:
-        row = result.summary()
+    for result, row in zip(results, rows, strict=True):
         cells = [row["hull"], row["axis"], row["draft"], f"{row['angle_deg']:g}", str(row["runs"])]
         if result.fit is None:
             cells += [f"not fitted: {result.error}"] + [""] * (len(header) - len(cells) - 1)
@@ -365,6 +382,7 @@ def markdown_table(results: Sequence[GroupResult]) -> str:
                 f"{row['natural_period_s']:.4g}",
                 f"{row['damping_ratio']:.3g}",
                 f"{row['b_eq_per_s']:.4g} ± {row['b_eq_std']:.2g}",
+                *([f"{row['b44_hat']:.4g}" if "b44_hat" in row else ""] if hat else []),
                 f"{row['r2_angle']:.4f}",
             ]
         lines.append("| " + " | ".join(cells) + " |")

@@ -274,17 +274,11 @@ def b44_hat_factor(hull: Any, draft: float = 1.0) -> float | None:
 
 
 def scale_results(summary: dict[str, Any], hull: Any, draft: float, scale: FroudeScale | None) -> list[str]:
-    """Adds B̂44 beside B_eq/I (roll, where the hull gives beam and displacement) and, with ``scale``,
-    the full-scale results to an identify summary; returns the lines the text report prints for them."""
+    """With ``scale``, adds the full-scale results to an identify summary (``summarize`` has put B̂44
+    beside B_eq/I already); returns the lines the text report prints for them."""
+    del hull, draft  # the summary's own dimensional part holds what the full scale needs
     inertia = summary.get("dimensional", {}).get("total_inertia_kg_m2")
-    roll = summary["axis"] == "roll"
-    factor = b44_hat_factor(hull, draft) if hull is not None and roll else None
     lines: list[str] = []
-    if factor is not None and inertia is not None:
-        for row in summary["b_eq"]:
-            row["b44_hat"] = row["value_per_s"] * inertia * factor
-        lines.append("  B̂44 = B44 / (ρ ∇ B²) · √(B/2g) (non-dimensional; unchanged at full scale):")
-        lines += [f"  {row['amplitude_deg']:>8.2f} deg{row['b44_hat']:>14.5g}" for row in summary["b_eq"]]
     if scale is not None:
         coefficients = {k: v["value"] for k, v in summary["coefficients"].items()}
         ship: dict[str, Any] = {

@@ -20,6 +20,7 @@ from ..records import DecayRun
 from .compiled import simulate, substeps, term_codes
 from .derived import (
     amplitude_table,
+    b44_hat_factor,
     damping_ratio,
     dimensional,
     extinction_curve,
@@ -137,7 +138,19 @@ def summarize(
     }
     if hull is not None:
         summary["dimensional"] = dimensional_summary(coefficients, hull, runs[0].axis, draft)
+        add_b44_hat(summary, hull, draft)
     return summary
+
+
+def add_b44_hat(summary: dict[str, Any], hull: Any, draft: float) -> None:
+    """B̂44 = B_eq/I · I · √(B/2g) / (ρ∇B²) into each ``b_eq`` row (``b44_hat``) of a roll summary whose
+    hull gives the inertia (displacement, GM) and the beam; nothing otherwise (the rows say B_eq/I only)."""
+    inertia = summary.get("dimensional", {}).get("total_inertia_kg_m2")
+    factor = b44_hat_factor(hull, draft) if summary["axis"] == "roll" else None
+    if inertia is None or factor is None:
+        return
+    for row in summary["b_eq"]:
+        row["b44_hat"] = row["value_per_s"] * inertia * factor
 
 
 def dimensional_summary(coefficients: dict[str, float], hull: Any, axis: str, draft: float) -> dict[str, Any]:
@@ -167,6 +180,7 @@ def dimensional_summary(coefficients: dict[str, float], hull: Any, axis: str, dr
 def text_report(summary: dict[str, Any]) -> str:
     """A readable report of ``summarize``'s output."""
     angle_name = "phi" if summary["axis"] == "roll" else "theta"
+    hat_head = f"{'B̂44':>11}" if any("b44_hat" in row for row in summary["b_eq"]) else ""
     lines = [
         f"model {summary['model']['name']} ({', '.join(summary['model']['terms'])}), "
         f"method {summary['method']}, "
@@ -188,12 +202,17 @@ def text_report(summary: dict[str, Any]) -> str:
         f"  angle R^2 {summary['r2_angle']:.5f}, NRMSE {summary['nrmse']:.4f}, "
         f"seed objective {summary['seed_objective']:.4g} rad/s",
         "",
-        f"  {'amplitude':>10}{'B_eq/I (1/s)':>16}{'std':>11}{'Bertin N (1/deg)':>19}",
+        f"  {'amplitude':>10}{'B_eq/I (1/s)':>16}{'std':>11}{hat_head}{'Bertin N (1/deg)':>19}",
     ]
     for b, n in zip(summary["b_eq"], summary["bertin_n"], strict=True):
+        hat = f"{b['b44_hat']:>11.4g}" if "b44_hat" in b else ""
         lines.append(
-            f"  {b['amplitude_deg']:>8.2f} deg{b['value_per_s']:>14.5g}{b['std']:>11.2g}"
+            f"  {b['amplitude_deg']:>8.2f} deg{b['value_per_s']:>14.5g}{b['std']:>11.2g}{hat}"
             f"{n['value_per_deg']:>19.4g}"
+        )
+    if hat_head:
+        lines.append(
+            "  B̂44 = B44 / (ρ ∇ B²) · √(B/2g), B44 = B_eq/I · I (non-dimensional; unchanged at full scale)"
         )
     lines.append("")
     for run in summary["runs"]:

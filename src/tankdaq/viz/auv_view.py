@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 
 from ..auv.model import StateRecord
 from ..auv.validate import ValidationResult
-from .plots import report_style
+from .plots import legend_beside, report_style
 
 #: Panels top to bottom: state column, axis label, drawn in degrees.
 PANELS: tuple[tuple[str, str, bool], ...] = (
@@ -30,7 +30,7 @@ def validation_figure(record: StateRecord, results: Sequence[ValidationResult]) 
     """Measured pitch, pitch rate, heave velocity, depth and plane angle, with each re-simulation over
     them (its R^2 in the legend for the scored states)."""
     with report_style():
-        fig = Figure(figsize=(9.0, 11.0), layout="constrained")
+        fig = Figure(figsize=(11.0, 11.0), layout="constrained")
         FigureCanvasAgg(fig)
         axes = fig.subplots(len(PANELS), 1, sharex=True, squeeze=False)[:, 0]
         for ax, (column, label, in_degrees) in zip(axes, PANELS, strict=True):
@@ -42,7 +42,7 @@ def validation_figure(record: StateRecord, results: Sequence[ValidationResult]) 
                 simulated = result.simulated
                 ax.plot(simulated.t, simulated[column] * scale, label=f"{result.label}{score}")
             ax.set_ylabel(label)
-            ax.legend(fontsize=7, loc="upper right", frameon=True)
+            legend_beside(ax, fontsize=7)  # each panel's own scores, right of its data
         axes[-1].set_xlabel("time (s)")
         fig.suptitle(f"{record.meta.get('vehicle', 'vehicle')}: re-simulated manoeuvre")
     return fig

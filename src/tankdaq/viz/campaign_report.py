@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..config import format_draft
@@ -31,6 +32,8 @@ from .plots import report_style, save_png
 #: (top) and the panels' titles above their axes, and the tick labels between panels (gap).
 LEFT_IN, RIGHT_IN, BOTTOM_IN, TOP_IN, PANEL_TITLE_IN, GAP_IN = 0.8, 0.2, 0.55, 0.45, 0.25, 0.75
 PANEL_WIDTH_IN, HEIGHT_IN = 3.6, 3.2
+#: Between the last panel's edge and its legend (in the margin right of the panels).
+LEGEND_GAP_IN = 0.2
 DPI = 110
 #: The figures with a panel per coefficient, which take longest to draw.
 MULTI_PANEL = ("coefficients", "hulls")
@@ -89,6 +92,7 @@ def _figure(ncols: int, title: str, panel_titles: bool = False) -> tuple[Figure,
     top = TOP_IN + (PANEL_TITLE_IN if panel_titles else 0.0)
     panel = (width - LEFT_IN - RIGHT_IN - GAP_IN * (ncols - 1)) / ncols
     fig = Figure(figsize=(width, HEIGHT_IN))
+    FigureCanvasAgg(fig)  # the legend's width is measured with its renderer
     fig.subplots_adjust(
         left=LEFT_IN / width,
         right=1.0 - RIGHT_IN / width,
@@ -99,6 +103,21 @@ def _figure(ncols: int, title: str, panel_titles: bool = False) -> tuple[Figure,
     axes = list(fig.subplots(1, ncols, squeeze=False)[0])
     fig.suptitle(title)
     return fig, axes
+
+
+def _legend_beside(fig: Figure, axes: Sequence[Axes], title: str | None = None) -> None:
+    """The figure's one legend right of its panels, in a margin the figure grows by to fit it: a legend
+    never covers data, however long its labels (hull names). The panels keep their size in inches."""
+    handles, labels = max((ax.get_legend_handles_labels() for ax in axes), key=lambda hl: len(hl[1]))
+    width, height = fig.get_size_inches()
+    params = fig.subplotpars
+    legend = fig.legend(handles, labels, title=title, loc="upper left", borderaxespad=0.0)
+    extra = legend.get_window_extent(fig.canvas.get_renderer()).width / fig.dpi + LEGEND_GAP_IN  # type: ignore[attr-defined]
+    wide = width + extra
+    fig.set_size_inches(wide, height)
+    right_in = (1.0 - params.right) * width
+    fig.subplots_adjust(left=params.left * width / wide, right=1.0 - (right_in + extra) / wide)
+    legend.set_bbox_to_anchor((1.0 - (right_in + extra - LEGEND_GAP_IN) / wide, params.top))
 
 
 def _fit(result: GroupResult) -> OutputError:
@@ -154,21 +173,30 @@ def _per_coefficient(
             _errorbar_series(ax, [r for r in results if line_of(r.key) == line], term, line[1])
         ax.set_xlabel("initial angle (deg)")
         ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
-    axes[0].legend(title=legend_title)
+    _legend_beside(fig, axes, legend_title)
     return fig
 
 
 def _plot_b_eq(series: Sequence[GroupResult]) -> Figure:
-    """B_eq(phi_a) of each group's fit over 0 ... its initial angle with its 95 % band; colour by draft."""
+    """B_eq(phi_a) of each group's fit over 0 ... its initial angle with its 95 % band; colour by draft.
+    Beside it B̂44 (ITTC's non-dimensional damping) where every group's hull gives beam and inertia."""
 
-    def draw(ax: Axes, result: GroupResult, colour: str) -> None:
-        grid_deg = np.linspace(0.2, result.key.angle_deg, 25)
-        values, std = b_eq_band(_fit(result).coefficients_, _fit(result).covariance_, grid_deg)
-        ax.plot(grid_deg, values, color=colour, alpha=0.8)
-        ax.fill_between(grid_deg, values - 1.96 * std, values + 1.96 * std, color=colour, alpha=0.15)
-        ax.plot(grid_deg[-1], values[-1], "o", color=colour)
+    def draw(scale: Callable[[GroupResult], float]) -> Callable[[Axes, GroupResult, str], None]:
+        def band(ax: Axes, result: GroupResult, colour: str) -> None:
+            grid_deg = np.linspace(0.2, result.key.angle_deg, 25)
+            values, std = b_eq_band(_fit(result).coefficients_, _fit(result).covariance_, grid_deg)
+            values, std = values * scale(result), std * scale(result)
+            ax.plot(grid_deg, values, color=colour, alpha=0.8)
+            ax.fill_between(grid_deg, values - 1.96 * std, values + 1.96 * std, color=colour, alpha=0.15)
+            ax.plot(grid_deg[-1], values[-1], "o", color=colour)
 
-    return _per_draft(series, "equivalent linear damping", draw, "amplitude (deg)", "B_eq / I (1/s)")
+        return band
+
+    panels = [(draw(lambda _: 1.0), "B_eq / I (1/s)")]
+    hats = {id(r): r.b44_hat_per_b_eq() for r in series}
+    if all(hat is not None for hat in hats.values()):
+        panels.append((draw(lambda r: float(hats[id(r)] or 0.0)), "B̂44 = B44 √(B/2g) / (ρ∇B²)"))
+    return _per_draft(series, "equivalent linear damping", panels, "amplitude (deg)")
 
 
 def _plot_extinction(series: Sequence[GroupResult]) -> Figure:
@@ -182,30 +210,30 @@ def _plot_extinction(series: Sequence[GroupResult]) -> Figure:
     return _per_draft(
         series,
         "extinction curves",
-        draw,
+        [(draw, "decrement per half-cycle (deg)")],
         "mean amplitude of successive peaks (deg)",
-        "decrement per half-cycle (deg)",
     )
 
 
 def _per_draft(
     series: Sequence[GroupResult],
     title: str,
-    draw: Callable[[Axes, GroupResult, str], None],
+    panels: Sequence[tuple[Callable[[Axes, GroupResult, str], None], str]],
     xlabel: str,
-    ylabel: str,
 ) -> Figure:
-    """One hull and axis in one panel: ``draw`` each group in its draft's colour, one legend entry a draft."""
+    """One hull and axis, a panel per ``(draw, ylabel)``: ``draw`` each group in its draft's colour, one
+    legend entry a draft, beside the panels."""
     first = series[0].key
-    fig, (ax,) = _figure(1, f"{first.hull} {first.axis}: {title}")
+    fig, axes = _figure(len(panels), f"{first.hull} {first.axis}: {title}")
     drafts = sorted({r.key.draft for r in series})
-    for result in series:
-        draw(ax, result, f"C{drafts.index(result.key.draft)}")
+    for ax, (draw, ylabel) in zip(axes, panels, strict=True):
+        for result in series:
+            draw(ax, result, f"C{drafts.index(result.key.draft)}")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
     for i, draft in enumerate(drafts):
-        ax.plot([], [], color=f"C{i}", label=format_draft(draft))
-    ax.legend(title="draft")
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel(ylabel)
+        axes[0].plot([], [], color=f"C{i}", label=format_draft(draft))
+    _legend_beside(fig, axes, "draft")
     return fig
 
 
@@ -228,7 +256,7 @@ def _plot_period(results: Sequence[GroupResult]) -> Figure:
         )
     ax.set_xlabel("draft / design draft")
     ax.set_ylabel("natural period (s)")
-    ax.legend()
+    _legend_beside(fig, [ax], "hull")
     return fig
 
 

@@ -8,7 +8,6 @@ built like every report figure (``viz.plots``); rerun is imported only when a re
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Protocol
@@ -18,7 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..errors import InputError
-from .plots import MEASURED_COLOR, MODEL_COLOR, report_style
+from .plots import MEASURED_COLOR, MODEL_COLOR, legend_beside, report_style, short_labels
 
 
 class PredictedRun(Protocol):
@@ -45,66 +44,95 @@ class ResidualSpectrum(Protocol):
 
 def _new_figure(rows: int) -> tuple[Figure, np.ndarray]:
     with report_style():
-        fig = Figure(figsize=(9.0, 1.2 + 2.2 * rows), layout="constrained")
+        fig = Figure(figsize=(9.0, 1.6 + 2.2 * rows), layout="constrained")
         FigureCanvasAgg(fig)
-        axes = fig.subplots(rows, 1, squeeze=False)[:, 0]
+        axes = fig.subplots(rows, 1, squeeze=False, sharex=True)[:, 0]
     return fig, axes
 
 
-def models_figure(baseline: Sequence[PredictedRun], final: Sequence[PredictedRun]) -> Figure:
-    """Per run: measurement, baseline model and final model, in degrees."""
+def _since_release(run: PredictedRun) -> np.ndarray:
+    """The run's time from its first free sample (the fitted decay starts at the release), s."""
+    t = np.asarray(run.t, dtype=float)
+    return t - t[0]
+
+
+def _per_run(
+    fig: Figure, axes: np.ndarray, labels: Sequence[str], ylabel: str, title: str, legend: Sequence[str]
+) -> None:
+    """Each panel named by its run (a short label above it, never a long y-label), one legend for the
+    figure right of the panels, the time since release under the last."""
+    for ax, label in zip(axes, labels, strict=True):
+        ax.set_title(label, loc="left", fontsize=9)
+        ax.set_ylabel(ylabel)
+    fig.suptitle(title)
+    fig.legend(axes[0].lines[: len(legend)], legend, loc="outside right upper")
+    axes[-1].set_xlabel("time since release (s)")
+
+
+def models_figure(
+    baseline: Sequence[PredictedRun], final: Sequence[PredictedRun], labels: Sequence[str] | None = None
+) -> Figure:
+    """Per run: measurement, baseline model and final model, in degrees, against the time since release
+    (``labels``: a short one per run, ``run_labels``; default ``short_labels`` of the names)."""
     with report_style():
         fig, axes = _new_figure(len(baseline))
         for ax, base, last in zip(axes, baseline, final, strict=True):
+            t = _since_release(base)
             measured = base.angle + base.residual_angle
-            ax.plot(base.t, np.degrees(measured), color=MEASURED_COLOR, linewidth=0.8, label="measured")
-            ax.plot(base.t, np.degrees(base.angle), color="0.5", linestyle=":", label="baseline")
-            ax.plot(last.t, np.degrees(last.angle), color=MODEL_COLOR, linestyle="--", label="final")
-            ax.set_ylabel(f"{base.name} (deg)")
-        axes[0].legend(loc="upper right", ncols=3)
-        axes[0].set_title("measurement, baseline and final model")
-        axes[-1].set_xlabel("time (s)")
+            ax.plot(t, np.degrees(measured), color=MEASURED_COLOR, linewidth=0.8)
+            ax.plot(t, np.degrees(base.angle), color="0.5", linestyle=":")
+            ax.plot(_since_release(last), np.degrees(last.angle), color=MODEL_COLOR, linestyle="--")
+        names = labels or short_labels([run.name for run in baseline])
+        legend = ["measured", "baseline", "final"]
+        _per_run(fig, axes, names, "angle (deg)", "measurement, baseline and final model", legend)
     return fig
 
 
-def residuals_figure(baseline: Sequence[PredictedRun], final: Sequence[PredictedRun]) -> Figure:
-    """Per run: the angle residual of the baseline and of the final model, in degrees."""
+def residuals_figure(
+    baseline: Sequence[PredictedRun], final: Sequence[PredictedRun], labels: Sequence[str] | None = None
+) -> Figure:
+    """Per run: the angle residual of the baseline and of the final model, in degrees, against the time
+    since release."""
     with report_style():
         fig, axes = _new_figure(len(baseline))
         for ax, base, last in zip(axes, baseline, final, strict=True):
             ax.plot(
-                base.t, np.degrees(base.residual_angle), color=MEASURED_COLOR, linewidth=0.7, label="baseline"
+                _since_release(base), np.degrees(base.residual_angle), color=MEASURED_COLOR, linewidth=0.7
             )
-            ax.plot(last.t, np.degrees(last.residual_angle), color=MODEL_COLOR, linewidth=0.7, label="final")
+            ax.plot(_since_release(last), np.degrees(last.residual_angle), color=MODEL_COLOR, linewidth=0.7)
             ax.axhline(0.0, color="0.4", linewidth=0.6)
-            ax.set_ylabel(f"{base.name} (deg)")
-        axes[0].legend(loc="upper right", ncols=2)
-        axes[0].set_title("residual before and after")
-        axes[-1].set_xlabel("time (s)")
+        names = labels or short_labels([run.name for run in baseline])
+        _per_run(fig, axes, names, "residual (deg)", "residual before and after", ["baseline", "final"])
     return fig
 
 
 def spectrum_figure(first: ResidualSpectrum, last: ResidualSpectrum, omega0_rad_s: float) -> Figure:
-    """Welch spectrum of the residual, baseline against final, with the natural frequency's first three
-    multiples marked (``omega0_rad_s`` 0 when the model has none: no marks, automatic range)."""
+    """Amplitude spectral density of the residual (deg/√Hz) against frequency (Hz), baseline against
+    final, with the natural frequency's first three multiples marked (``omega0_rad_s`` 0 when the model
+    has none: no marks, automatic range). The spectra come zero-padded (``diagnose.residuals``): a smooth
+    curve at the Welch segments' resolution."""
+    f0_hz = omega0_rad_s / (2 * np.pi)
     with report_style():
         fig, (ax,) = _new_figure(1)
-        ax.semilogy(first.omega_rad_s, np.degrees(np.sqrt(first.psd)), color=MEASURED_COLOR, label="baseline")
-        ax.semilogy(last.omega_rad_s, np.degrees(np.sqrt(last.psd)), color=MODEL_COLOR, label="final")
+        for spectrum, color, label in ((first, MEASURED_COLOR, "baseline"), (last, MODEL_COLOR, "final")):
+            frequency_hz = np.asarray(spectrum.omega_rad_s) / (2 * np.pi)
+            ax.semilogy(frequency_hz, np.degrees(np.sqrt(spectrum.psd)), color=color, label=label)
         for k in (1, 2, 3):
-            ax.axvline(k * omega0_rad_s, color="0.6", linewidth=0.6, linestyle=":")
-        ax.set_xlim(0, 6 * omega0_rad_s if omega0_rad_s > 0 else None)
-        ax.set_xlabel("frequency (rad/s); dotted: 1, 2, 3 x natural")
-        ax.set_ylabel("residual ASD (deg/sqrt(Hz))")
-        ax.legend()
+            if f0_hz > 0:
+                ax.axvline(k * f0_hz, color="0.6", linewidth=0.6, linestyle=":")
+        ax.set_xlim(0, 6 * f0_hz if f0_hz > 0 else None)
+        ax.set_xlabel("frequency (Hz); dotted: 1, 2, 3 x natural" if f0_hz > 0 else "frequency (Hz)")
+        ax.set_ylabel("residual ASD (deg/√Hz)")
+        ax.set_title("residual spectrum")
+        legend_beside(ax)
     return fig
 
 
 def log_diagnosis(
     stream: Any, baseline: Sequence[PredictedRun], final: Sequence[PredictedRun], story: Sequence[str]
 ) -> None:
-    """Per run the measurement, baseline, final model and residuals on the ``t`` timeline (degrees),
-    and the story as a text log. ``stream`` is an rr.RecordingStream."""
+    """Per run the measurement, baseline, final model and residuals on the ``t`` timeline (time since
+    release, degrees), and the story as a text log. ``stream`` is an rr.RecordingStream."""
     import rerun as rr
 
     from . import live
@@ -115,12 +143,13 @@ def log_diagnosis(
         "final": (live.MODEL_COLOR, 2.0),
     }
     for base, last in zip(baseline, final, strict=True):
+        t, t_final = _since_release(base), _since_release(last)
         series = {
-            f"diagnose/{base.name}/angle/measured": (base.t, base.angle + base.residual_angle, "measured"),
-            f"diagnose/{base.name}/angle/baseline": (base.t, base.angle, "baseline"),
-            f"diagnose/{base.name}/angle/final": (last.t, last.angle, "final"),
-            f"diagnose/{base.name}/residual/baseline": (base.t, base.residual_angle, "baseline"),
-            f"diagnose/{base.name}/residual/final": (last.t, last.residual_angle, "final"),
+            f"diagnose/{base.name}/angle/measured": (t, base.angle + base.residual_angle, "measured"),
+            f"diagnose/{base.name}/angle/baseline": (t, base.angle, "baseline"),
+            f"diagnose/{base.name}/angle/final": (t_final, last.angle, "final"),
+            f"diagnose/{base.name}/residual/baseline": (t, base.residual_angle, "baseline"),
+            f"diagnose/{base.name}/residual/final": (t_final, last.residual_angle, "final"),
         }
         _log_series(stream, series, styles)
     for line in story:
@@ -171,21 +200,6 @@ def _write_rrd(path: str | Path, log: Callable[[Any], None]) -> Path:
 
 #: The simulation's colour beside the measured (blue) and the corrected model (red).
 SIMULATION_COLOR = "#ff7f0e"
-#: The longest run label a figure or the viewer shows.
-LABEL_CHARS = 16
-
-
-def short_labels(names: Sequence[str]) -> list[str]:
-    """Labels that tell the runs apart in a panel and name rerun entities: the shortest unique tail of
-    their names' tokens (``model_test_21338`` -> ``21338``, ``stem#2`` -> ``stem_2``, not a bare part
-    number), at most ``LABEL_CHARS`` long, else ``runN``."""
-    tokens = [[t for t in re.split(r"[\s_/\\:.#-]+", name) if t] for name in names]
-    for count in range(1, max((len(t) for t in tokens), default=1) + 1):
-        labels = ["_".join(t[-count:]) for t in tokens]
-        readable = all(0 < len(lb) <= LABEL_CHARS and not (lb.isdigit() and len(lb) <= 2) for lb in labels)
-        if len(set(labels)) == len(labels) and readable:
-            return labels
-    return [f"run{i + 1}" for i in range(len(names))]
 
 
 def simulation_figure(
@@ -195,9 +209,10 @@ def simulation_figure(
     gap_deg: tuple[float, float],
 ) -> Figure:
     """Per run, side by side: measured, simulation and corrected angle against the time since release,
-    and the gap of each to the measurement (``gap_deg``: RMS before and after, in the title)."""
+    and the gap of each to the measurement (``gap_deg``: RMS before and after, in the title). Each row is
+    named by its run's label above its left panel (a y-label of a long name would be cut)."""
     with report_style():
-        fig = Figure(figsize=(11.0, 1.3 + 2.3 * len(simulation)), layout="constrained")
+        fig = Figure(figsize=(11.0, 1.6 + 2.4 * len(simulation)), layout="constrained")
         FigureCanvasAgg(fig)
         axes = fig.subplots(len(simulation), 2, squeeze=False, sharex=True, width_ratios=(3, 2))
         for (left, right), sim, fixed, label in zip(axes, simulation, corrected, labels, strict=True):
@@ -205,19 +220,22 @@ def simulation_figure(
             left.plot(t, np.degrees(sim.angle + sim.residual_angle), color=MEASURED_COLOR, linewidth=0.8)
             left.plot(t, np.degrees(sim.angle), color=SIMULATION_COLOR, linestyle=":")
             left.plot(t, np.degrees(fixed.angle), color=MODEL_COLOR, linestyle="--", linewidth=1.0)
-            left.set_ylabel(f"{label} (deg)")
+            left.set_title(label, loc="left", fontsize=9)
+            left.set_ylabel("angle (deg)")
             right.plot(t, np.degrees(sim.residual_angle), color=SIMULATION_COLOR, linewidth=0.7)
             right.plot(t, np.degrees(fixed.residual_angle), color=MODEL_COLOR, linewidth=0.7)
             right.axhline(0.0, color="0.4", linewidth=0.6)
-            right.set_ylabel("gap (deg)")
-        axes[0, 0].set_title("angle from the measured release")
-        axes[0, 1].set_title(f"measured minus model: RMS {gap_deg[0]:.3g} -> {gap_deg[1]:.3g} deg")
+            right.set_ylabel("measured minus model (deg)")
+        fig.suptitle(
+            "angle from the measured release, and measured minus model: "
+            f"RMS {gap_deg[0]:.3g} -> {gap_deg[1]:.3g} deg"
+        )
         for ax in axes[-1]:
             ax.set_xlabel("time since release (s)")
         fig.legend(
             axes[0, 0].lines,
             ["measured", "simulation", "corrected"],
-            loc="outside upper center",
+            loc="outside lower center",
             ncols=3,
         )
     return fig
@@ -227,10 +245,12 @@ def damping_figure(
     amplitudes_deg: Sequence[float],
     b_eq: dict[str, tuple[np.ndarray, np.ndarray]],
     decrements: dict[str, tuple[np.ndarray, np.ndarray]],
+    b44_hat_per_b_eq: float | None = None,
 ) -> Figure:
     """B_eq(phi_a) with 95 % bands (``b_eq``: name -> value, std in 1/s) and the decrement per half
     cycle against the mean amplitude (``decrements``: name -> amplitude, decrement in rad), side by side;
-    names are measured, simulation and corrected."""
+    names are measured, simulation and corrected. ``b44_hat_per_b_eq`` (I √(B/2g) / (ρ∇B²), where the
+    hull gives them) adds B̂44's scale beside B_eq/I."""
     colors = {"measured": MEASURED_COLOR, "simulation": SIMULATION_COLOR, "corrected": MODEL_COLOR}
     markers = {"measured": "o", "simulation": "s", "corrected": "^"}
     with report_style():
@@ -244,7 +264,11 @@ def damping_figure(
                 amplitudes, value - 1.96 * std, value + 1.96 * std, color=colors[name], alpha=0.2
             )
         left.set_xlabel("amplitude (deg)")
-        left.set_ylabel("B_eq per unit inertia (1/s)")
+        left.set_ylabel("B_eq / I (1/s)")
+        if b44_hat_per_b_eq is not None:
+            k = b44_hat_per_b_eq
+            hat = left.secondary_yaxis("right", functions=(lambda b: b * k, lambda h: h / k))
+            hat.set_ylabel("B̂44 = B44 √(B/2g) / (ρ∇B²)")
         left.set_title("equivalent linear damping, 95 % bands")
         for name, (amplitude, decrement) in decrements.items():
             right.plot(

@@ -7,6 +7,7 @@ threads. Inputs are SI (rad, rad/s); degrees appear only on the axes.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -18,9 +19,13 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..errors import RecordingError
+from ..ident.conditions import UNKNOWN, condition_of
 from ..records import DecayRun
+from ..store.naming import parse_recording_name
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.legend import Legend
     from matplotlib.typing import RcKeyType
 
 MEASURED_COLOR = "#1f77b4"
@@ -48,6 +53,12 @@ def report_style() -> Iterator[None]:
         yield
 
 
+def legend_beside(ax: Axes, **kwargs: Any) -> Legend:
+    """``ax``'s legend right of it, outside the data: the layout engine (constrained) makes room for it.
+    Every legend of a report figure is outside its axes or in the figure's own margin, never on data."""
+    return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
+
+
 def _figure(
     rows: int, height_ratios: Sequence[float] | None = None, sharex: bool = True
 ) -> tuple[Figure, list]:
@@ -65,8 +76,10 @@ def decay_fit_figure(
     axis: str = "roll",
     title: str | None = None,
     model_label: str = "model",
+    xlabel: str = "time since release (s)",
 ) -> Figure:
-    """Measured decay with the model drawn over it and, with a model, the residual underneath."""
+    """Measured decay with the model drawn over it and, with a model, the residual underneath (``t_s``
+    the time since release, as every decay figure draws it)."""
     t_s = np.asarray(t_s, dtype=float)
     measured_deg = np.degrees(np.asarray(angle_rad, dtype=float))
     with report_style():
@@ -83,8 +96,8 @@ def decay_fit_figure(
             residual.plot(t_s, measured_deg - model_deg, color=MEASURED_COLOR, linewidth=0.8)
             residual.axhline(0.0, color="0.4", linewidth=0.6)
             residual.set_ylabel("residual (deg)")
-        axes[-1].set_xlabel("time (s)")
-        top.legend(loc="upper right")
+        axes[-1].set_xlabel(xlabel)
+        legend_beside(top)
         if title:
             top.set_title(title)
     return fig
@@ -109,10 +122,44 @@ def series_figure(
         ax.set_xlabel(xlabel)
         ax.set_ylabel(ylabel)
         if len(series) > 1:
-            ax.legend()
+            legend_beside(ax)
         if title:
             ax.set_title(title)
     return fig
+
+
+#: The longest run label a figure or the viewer shows.
+LABEL_CHARS = 16
+
+
+def short_labels(names: Sequence[str]) -> list[str]:
+    """Labels that tell the runs apart in a panel and name rerun entities: the shortest unique tail of
+    their names' tokens (``model_test_21338`` -> ``21338``, ``stem#2`` -> ``stem_2``, not a bare part
+    number), at most ``LABEL_CHARS`` long, else ``runN``."""
+    tokens = [[t for t in re.split(r"[\s_/\\:.#-]+", name) if t] for name in names]
+    for count in range(1, max((len(t) for t in tokens), default=1) + 1):
+        labels = ["_".join(t[-count:]) for t in tokens]
+        readable = all(0 < len(lb) <= LABEL_CHARS and not (lb.isdigit() and len(lb) <= 2) for lb in labels)
+        if len(set(labels)) == len(labels) and readable:
+            return labels
+    return [f"run{i + 1}" for i in range(len(names))]
+
+
+def run_labels(runs: Sequence[DecayRun]) -> list[str]:
+    """What a person calls each run: its condition and run number (``swath T roll #3``; a record's
+    second decay ``#3.2``) from the recording's metadata and name; where that does not tell every run
+    apart, ``short_labels`` of the names."""
+    labels = []
+    for run in runs:
+        condition = condition_of(run)
+        named = parse_recording_name(Path(str(run.meta.get("file", run.name))).name)
+        part = run.name.rpartition("#")[2] if "#" in run.name else ""
+        number = f" #{named.run}" if named is not None and named.run is not None else ""
+        known = condition.hull != UNKNOWN and condition.draft != UNKNOWN
+        labels.append(f"{condition.label}{number}{'.' + part if number and part else ''}" if known else "")
+    if all(labels) and len(set(labels)) == len(labels):
+        return labels
+    return short_labels([run.name for run in runs])
 
 
 def save_png(fig: Figure, path: str | Path, dpi: int = 150) -> Path:
@@ -128,10 +175,11 @@ def save_png(fig: Figure, path: str | Path, dpi: int = 150) -> Path:
 
 
 def save_decay_fits(runs: Sequence[DecayRun], predicted: Sequence[np.ndarray], folder: Path) -> list[Path]:
-    """One PNG per decay (measured, model, residual), named after the decay's file, in ``folder``."""
+    """One PNG per decay (measured, model, residual), named after the decay's file, in ``folder``; its
+    title is the run's short label (``run_labels``)."""
     written = []
-    for run, model_angle in zip(runs, predicted, strict=True):
+    for run, model_angle, label in zip(runs, predicted, run_labels(runs), strict=True):
         stem = Path(str(run.meta.get("file", run.name))).stem
-        figure = decay_fit_figure(run.t - run.t[0], run.angle, model_angle, axis=run.axis, title=stem)
+        figure = decay_fit_figure(run.t - run.t[0], run.angle, model_angle, axis=run.axis, title=label)
         written.append(save_png(figure, folder / f"{stem}.png"))
     return written
