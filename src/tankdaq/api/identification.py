@@ -306,7 +306,7 @@ def identify(
         if pooled is not None:
             summary["warnings"].insert(0, pooled)
             summary["conditions"] = pooled
-        lines = scale_results(summary, hull_config, draft, scale)  # B̂44; the ship's
+        lines = scale_results(summary, scale)  # the ship's (B̂44 is summarize's)
         fits.append(ConditionFit(label, condition_runs, estimator, summary, lines, pooled is not None))
     truncated = {"truncated": bool(cut), "truncated_files": list(cut)}
     if len(fits) == 1:

@@ -273,10 +273,9 @@ def b44_hat_factor(hull: Any, draft: float = 1.0) -> float | None:
     return hat_factor(beam, hull.displacement_kg * draft, G)  # rho * volume = the displacement
 
 
-def scale_results(summary: dict[str, Any], hull: Any, draft: float, scale: FroudeScale | None) -> list[str]:
+def scale_results(summary: dict[str, Any], scale: FroudeScale | None) -> list[str]:
     """With ``scale``, adds the full-scale results to an identify summary (``summarize`` has put B̂44
     beside B_eq/I already); returns the lines the text report prints for them."""
-    del hull, draft  # the summary's own dimensional part holds what the full scale needs
     inertia = summary.get("dimensional", {}).get("total_inertia_kg_m2")
     lines: list[str] = []
     if scale is not None:
