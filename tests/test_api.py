@@ -133,7 +133,8 @@ def test_identify_reads_a_csv_pandas_wrote_as_the_cli_does(
     assert api_json(result) == expected
     assert list(result.coefficients["term"]) == ["b1", "b2", "c1", "c3"]
     figure = result.plot()
-    assert figure.axes[-1].get_xlabel() == "time (s)" and "roll angle (deg)" in figure.axes[0].get_ylabel()
+    assert figure.axes[-1].get_xlabel() == "time since release (s)"
+    assert "roll angle (deg)" in figure.axes[0].get_ylabel()
     shown = result._repr_html_()
     assert all(f"<td>{term}</td>" in shown for term in ("b1", "b2", "c1", "c3"))
 
