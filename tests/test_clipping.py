@@ -19,11 +19,11 @@ from tankdaq.acquire.campaign_session import (
     CampaignSession,
     Condition,
     Measured,
-    SessionLog,
     SessionSettings,
     check_decay,
 )
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario
 from tankdaq.device.decoding import SampleDecoder

@@ -22,14 +22,12 @@ from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
 from tankdaq.acquire.campaign_session import (
-    LOG_NAME,
     Acceptance,
     Condition,
     Measured,
-    SessionLock,
-    SessionLog,
     check_decay,
 )
+from tankdaq.acquire.guided.journal import LOG_NAME, SessionLock, SessionLog
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario
 from tankdaq.errors import InputError

@@ -12,10 +12,10 @@ from typing import Any
 from tankdaq.acquire.campaign_session import (
     CampaignSession,
     Measured,
-    SessionLog,
     SessionSettings,
     SessionState,
 )
+from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.plans import load_campaign_plan
 
 PLAN = """description = "one condition, one repeat"

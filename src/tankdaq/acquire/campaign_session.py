@@ -23,7 +23,6 @@ answers from ``--yes`` / a responses file; tests script it the same way.
 from __future__ import annotations
 
 import dataclasses
-import fcntl
 import math
 import os
 import time
@@ -41,14 +40,13 @@ from ..ident.derived import b_eq
 from ..plans import PLAN_AXES, CampaignPlan, acceptance_values
 from ..samples import AXIS_FIELDS
 from .daemon import RecordDaemon, RecordSettings
+from .guided.journal import LOG_NAME, SessionLock, SessionLog
 from .pipeline import DecayOutcome
-from .session_log import LOG_NAME, SessionLog
 from .sinks import Block, Decay, Sink
 
 if TYPE_CHECKING:
     from ..viz.campaign_view import CampaignView
 
-LOCK_NAME = "session.lock"
 REPORT_DIR = "report"
 PANEL_NAME = "campaign.rrd"
 #: device seconds of still water the level check averages after a draft change
@@ -109,41 +107,6 @@ def plan_conditions(plan: CampaignPlan) -> list[Condition]:
     """The conditions in the order they are run: every angle of a draft, then the next draft."""
     drafts = [format_draft(parse_draft(d)) for d in plan.drafts]
     return [Condition(d, float(a)) for d in drafts for a in plan.angles_deg]
-
-
-# --------------------------------------------------------------------------------------------------
-# The lock (the session file is ``acquire.session_log``)
-# --------------------------------------------------------------------------------------------------
-
-
-class SessionLock:
-    """An exclusive ``flock`` on ``session.lock`` for as long as the session runs (context manager)."""
-
-    def __init__(self, folder: Path) -> None:
-        self.path = folder / LOCK_NAME
-        self._fd = -1
-
-    def __enter__(self) -> SessionLock:
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
-            os.close(fd)
-            raise InputError(
-                f"another session (pid {holder}) is writing {self.path.parent}; "
-                "wait for it, or use another --out"
-            ) from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
-        self._fd = fd
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        if self._fd >= 0:
-            fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = -1
 
 
 # --------------------------------------------------------------------------------------------------
