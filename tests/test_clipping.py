@@ -15,15 +15,14 @@ import pytest
 from typer.testing import CliRunner
 
 from tankdaq.acquire.campaign_session import (
-    Acceptance,
     CampaignSession,
-    Condition,
     Measured,
     SessionSettings,
     check_decay,
 )
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.guided.journal import SessionLog
+from tankdaq.acquire.guided.plan import Acceptance, Condition
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario
 from tankdaq.device.decoding import SampleDecoder

@@ -22,12 +22,11 @@ from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
 from tankdaq.acquire.campaign_session import (
-    Acceptance,
-    Condition,
     Measured,
     check_decay,
 )
 from tankdaq.acquire.guided.journal import LOG_NAME, SessionLock, SessionLog
+from tankdaq.acquire.guided.plan import Acceptance, Condition
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario
 from tankdaq.errors import InputError
@@ -406,7 +405,7 @@ def test_fault_scripts_are_parsed_or_refused_in_one_line() -> None:
 
 
 def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
-    from tankdaq.acquire.campaign_session import plan_conditions
+    from tankdaq.acquire.guided.plan import plan_conditions
     from tankdaq.errors import ConfigError
     from tankdaq.plans import ACCEPTANCE_RANGES, list_campaign_plans, load_campaign_plan
 
