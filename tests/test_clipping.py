@@ -16,11 +16,10 @@ from typer.testing import CliRunner
 
 from tankdaq.acquire.campaign_session import (
     CampaignSession,
-    Measured,
     SessionSettings,
-    check_decay,
 )
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.guided.checks import Measured, check_decay
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.plan import Acceptance, Condition
 from tankdaq.cli import app

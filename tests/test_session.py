@@ -21,10 +21,7 @@ import pytest
 from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
-from tankdaq.acquire.campaign_session import (
-    Measured,
-    check_decay,
-)
+from tankdaq.acquire.guided.checks import Measured, check_decay
 from tankdaq.acquire.guided.journal import LOG_NAME, SessionLock, SessionLog
 from tankdaq.acquire.guided.plan import Acceptance, Condition
 from tankdaq.cli import app

@@ -11,10 +11,10 @@ from typing import Any
 
 from tankdaq.acquire.campaign_session import (
     CampaignSession,
-    Measured,
     SessionSettings,
     SessionState,
 )
+from tankdaq.acquire.guided.checks import Measured
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.plans import load_campaign_plan
 

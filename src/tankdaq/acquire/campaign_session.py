@@ -23,7 +23,6 @@ answers from ``--yes`` / a responses file; tests script it the same way.
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 import time
 from collections.abc import Callable
@@ -36,184 +35,23 @@ import numpy as np
 from ..config import format_draft, load_hull, parse_draft
 from ..config_rules import path_in
 from ..errors import InputError
-from ..ident.derived import b_eq
 from ..plans import PLAN_AXES, CampaignPlan
-from ..samples import AXIS_FIELDS
 from .daemon import RecordDaemon, RecordSettings
+from .guided.checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level, usable_measured
 from .guided.journal import LOG_NAME, SessionLock, SessionLog
+from .guided.measure import LEVEL_S, LevelCheck, measure_decay
 from .guided.plan import Acceptance, Condition, plan_conditions
-from .pipeline import DecayOutcome
-from .sinks import Block, Decay, Sink
 
 if TYPE_CHECKING:
     from ..viz.campaign_view import CampaignView
 
 REPORT_DIR = "report"
 PANEL_NAME = "campaign.rrd"
-#: device seconds of still water the level check averages after a draft change
-LEVEL_S = 2.0
-#: the still water moves less than this (standard deviation, deg) when the model is at rest
-STILL_SD_DEG = 0.3
-#: why a decay ended early, by its settle reason
-CUT_SHORT = {
-    "note": "stopped by the operator",
-    "unplug": "the device went away",
-    "error": "a recording error",
-}
 #: daemon lines shown for the first decay only (every decay opens the device again)
 ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
-#: settle reasons of a decay that ended by itself (anything else was cut short)
-COMPLETE_SETTLES = ("amplitude", "timeout")
 #: rejected decays of one condition after which the default answer is to skip it, not to repeat it
 #: (``--yes`` answers the default: a condition that keeps failing cannot loop forever)
 MAX_REJECTED = 3
-
-
-# --------------------------------------------------------------------------------------------------
-# Checking a decay
-# --------------------------------------------------------------------------------------------------
-
-
-@dataclass
-class Measured:
-    """What the checks look at in one recorded decay (degrees, SI otherwise)."""
-
-    angle_deg: float
-    still_water_deg: float
-    settle_reason: str
-    half_cycles: int = 0
-    r2_angle: float = math.nan
-    coefficients: dict[str, float] = field(default_factory=dict)
-    natural_period_s: float = math.nan
-    b_eq_per_s: float = math.nan  # at the nominal angle
-    max_rate_deg_s: float = math.nan
-    free_end: str = ""  # how the free decay ends (``ident.free_decay``): "excitation" = pushed again
-    free_end_reason: str = ""
-    fit_error: str = ""
-    fit_warnings: list[str] = field(default_factory=list)  # the final fit's implausibilities
-    flagged_samples: int = 0  # after the release, flagged by the sensor (clipping, orientation not valid)
-    flagged_why: str = ""  # the one line the recording's reader gives them
-
-
-def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
-    """Read the decay back from its file (what is checked is what was stored) and its final fit."""
-    from ..ident.free_decay import find_free_end
-    from ..store.reader import read_decay_runs, read_recording
-
-    assert outcome.path is not None
-    recording = read_recording(outcome.path)
-    release = next((e for e in recording.events if e.get("kind") == "release"), {})
-    still = (release.get("data") or {}).get("still_water_deg", math.nan)
-    measured = Measured(abs(outcome.angle_initial_deg), float(still), outcome.settle_reason)
-    runs = read_decay_runs(outcome.path)
-    if runs:
-        run = runs[0]
-        rate = run.rate
-        measured.max_rate_deg_s = (
-            float(np.degrees(np.max(np.abs(rate)))) if rate is not None and rate.size else math.nan
-        )
-        end = find_free_end(run)
-        measured.free_end, measured.free_end_reason = end.kind, end.reason
-        if run.excluded is not None:
-            measured.flagged_samples = int(np.count_nonzero(run.excluded))
-            measured.flagged_why = str(run.meta.get("excluded_why", ""))
-    fit = outcome.fit
-    if fit is None:
-        measured.fit_error = "; ".join(w for w in outcome.warnings if "fit" in w) or "no fit"
-        return measured
-    measured.half_cycles = fit.half_cycles
-    measured.fit_warnings = [f.message for f in fit.findings if not f.about_data]  # clipping: checked below
-    measured.r2_angle = fit.r2_angle
-    measured.coefficients = dict(fit.coefficients)
-    measured.natural_period_s = fit.natural_period_s
-    measured.b_eq_per_s = b_eq(fit.coefficients, math.radians(nominal_deg))
-    return measured
-
-
-def check_decay(
-    measured: Measured, condition: Condition, acceptance: Acceptance, earlier: list[Measured]
-) -> list[str]:
-    """Why this decay should be repeated (empty: it passes). ``earlier``: the condition's accepted repeats."""
-    a = acceptance
-    reasons = []
-    if measured.settle_reason not in COMPLETE_SETTLES:
-        why = CUT_SHORT.get(measured.settle_reason, measured.settle_reason)
-        reasons.append(f"cut short ({why})")
-    off = measured.angle_deg - condition.angle_deg
-    if abs(off) > a.angle_tolerance_deg:
-        reasons.append(
-            f"released at {measured.angle_deg:.1f} deg, {off:+.1f} deg from the nominal "
-            f"{condition.angle_deg:g} "
-            f"(tolerance {a.angle_tolerance_deg:g})"
-        )
-    if abs(measured.still_water_deg) > a.level_tolerance_deg:
-        reasons.append(
-            f"not level: still water at {measured.still_water_deg:+.2f} deg "
-            f"(tolerance {a.level_tolerance_deg:g}); re-trim"
-        )
-    if measured.free_end == "excitation":
-        reasons.append(f"release not clean: {measured.free_end_reason}")
-    if measured.max_rate_deg_s >= a.rate_limit_deg_s:
-        reasons.append(f"rate saturated: {measured.max_rate_deg_s:.0f} deg/s (limit {a.rate_limit_deg_s:g})")
-    if measured.flagged_samples > a.max_flagged_samples:
-        reasons.append(
-            f"clipped: {measured.flagged_why or f'{measured.flagged_samples} samples flagged'} "
-            f"(max_flagged_samples {a.max_flagged_samples:g}); repeat at a smaller angle"
-        )
-    if measured.fit_error:
-        reasons.append(f"no fit: {measured.fit_error}")
-        return reasons
-    if measured.half_cycles < a.min_half_cycles:
-        reasons.append(f"too short: {measured.half_cycles} half-cycles (at least {a.min_half_cycles:g})")
-    if not measured.r2_angle >= a.min_r2:
-        reasons.append(f"poor fit: R² {measured.r2_angle:.4f} (at least {a.min_r2:g})")
-    reasons += [f"fit: {line}" for line in measured.fit_warnings]  # never accepted silently
-    if earlier:
-        reasons += _repeat_reasons(measured, earlier, a)
-    return reasons
-
-
-def _usable_measured(measured: dict[str, Any]) -> bool:
-    """Whether a logged ``measured`` makes a ``Measured`` (the checks of later repeats read it)."""
-    kinds = {
-        "float": (int, float),
-        "int": (int, float),
-        "str": (str,),
-        "dict[str, float]": (dict,),
-        "list[str]": (list,),
-    }
-    for f in dataclasses.fields(Measured):
-        value = measured.get(f.name)
-        if (
-            f.name not in measured
-            and f.default is dataclasses.MISSING
-            and f.default_factory is dataclasses.MISSING
-        ):
-            return False
-        if f.name in measured and (isinstance(value, bool) or not isinstance(value, kinds[str(f.type)])):
-            return False
-    coefficients = measured.get("coefficients", {})
-    warnings = measured.get("fit_warnings", [])
-    return all(isinstance(v, int | float) and not isinstance(v, bool) for v in coefficients.values()) and all(
-        isinstance(w, str) for w in warnings
-    )
-
-
-def _repeat_reasons(measured: Measured, earlier: list[Measured], a: Acceptance) -> list[str]:
-    reasons = []
-    b_ref = float(np.mean([m.b_eq_per_s for m in earlier]))
-    t_ref = float(np.mean([m.natural_period_s for m in earlier]))
-    if abs(measured.b_eq_per_s - b_ref) > a.repeat_tolerance * abs(b_ref):
-        reasons.append(
-            f"not a repeat: B_eq {measured.b_eq_per_s:.4g} 1/s vs {b_ref:.4g} of the earlier repeats "
-            f"(tolerance {a.repeat_tolerance:.0%})"
-        )
-    if abs(measured.natural_period_s - t_ref) > a.period_tolerance * t_ref:
-        reasons.append(
-            f"not a repeat: period {measured.natural_period_s:.3f} s vs {t_ref:.3f} s of the earlier repeats "
-            f"(tolerance {a.period_tolerance:.0%})"
-        )
-    return reasons
 
 
 # --------------------------------------------------------------------------------------------------
@@ -264,7 +102,7 @@ class SessionState:
         if kind == "run":
             if r["decay"] in by_decay:
                 return f"decay {r['decay']} was logged before"
-            if r["measured"] and not _usable_measured(r["measured"]):
+            if r["measured"] and not usable_measured(r["measured"]):
                 return "its measured values are incomplete"
             entry = RunEntry(
                 r["decay"],
@@ -370,30 +208,6 @@ class Progress:
 
 def _minutes(seconds: float) -> str:
     return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
-
-
-class LevelCheck(Sink):
-    """A sink of the record pipeline: the still water of the decay axis over ``LEVEL_S`` of device
-    time, read from every block; ``on_full`` is called once that much has arrived."""
-
-    def __init__(self, axis: str, on_full: Callable[[], None] = lambda: None) -> None:
-        self.angle_field = AXIS_FIELDS[axis][0]
-        self.on_full = on_full
-        self._blocks: list[np.ndarray] = []
-
-    def on_block(self, block: Block, decay: Decay | None) -> None:
-        if block.samples.size:
-            self._blocks.append(block.samples)
-        if self.full:
-            self.on_full()
-
-    @property
-    def full(self) -> bool:
-        return bool(self._blocks) and float(self._blocks[-1]["t"][-1] - self._blocks[0]["t"][0]) >= LEVEL_S
-
-    def mean_sd_deg(self) -> tuple[float, float]:
-        angle = np.degrees(np.concatenate([b[self.angle_field] for b in self._blocks]))
-        return float(angle.mean()), float(angle.std())
 
 
 @dataclass
@@ -670,7 +484,7 @@ class CampaignSession:
                     self._panel().set_status(c.draft, c.angle_deg, "skipped")
             return self._reload()
         mean_deg, sd_deg = self._measure_level(condition)
-        level = abs(mean_deg) <= self.acceptance.level_tolerance_deg and sd_deg <= STILL_SD_DEG
+        level = is_level(mean_deg, sd_deg, self.acceptance)
         self.log.append("level", draft=condition.draft, angle_deg=mean_deg, sd_deg=sd_deg, ok=level)
         still = f"still water at {mean_deg:+.2f} deg (sd {sd_deg:.2f} over {LEVEL_S:g} s)"
         if level:
