@@ -494,7 +494,7 @@ def test_a_swath_session_with_the_default_model_accepts_positive_damping(tmp_pat
 
 
 def test_an_implausible_fit_asks_and_yes_gives_up_after_the_cap(tmp_path: Path) -> None:
-    from tankdaq.acquire.campaign_session import MAX_REJECTED
+    from tankdaq.acquire.guided.operator import MAX_REJECTED
 
     out, records = _run_session(tmp_path, "--model", "b1,b2,c1,c3")  # b1 < 0 on SWATH decays from 15 deg
     verdicts = [r for r in records if r["type"] == "verdict"]

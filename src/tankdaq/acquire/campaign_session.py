@@ -16,8 +16,7 @@ recording the log never heard of (the session died mid-decay) is logged as rejec
 A lock (``flock`` on ``session.lock``) keeps a second session out of the folder; the kernel drops it
 when its process dies, so a stale lock never blocks.
 
-The operator is an ``Operator``: ``ask(Question) -> answer``. The CLI asks on the terminal or takes
-answers from ``--yes`` / a responses file; tests script it the same way.
+The operator is an ``Operator`` (``guided.operator``): ``ask(Question) -> answer``.
 """
 
 from __future__ import annotations
@@ -28,7 +27,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,6 +39,7 @@ from .daemon import RecordDaemon, RecordSettings
 from .guided.checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
 from .guided.journal import LOG_NAME, SessionLock, SessionLog
 from .guided.measure import LEVEL_S, LevelCheck, measure_decay
+from .guided.operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
 from .guided.plan import Acceptance, Condition, plan_conditions
 from .guided.state import RunEntry, SessionState
 
@@ -50,53 +50,6 @@ REPORT_DIR = "report"
 PANEL_NAME = "campaign.rrd"
 #: daemon lines shown for the first decay only (every decay opens the device again)
 ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
-#: rejected decays of one condition after which the default answer is to skip it, not to repeat it
-#: (``--yes`` answers the default: a condition that keeps failing cannot loop forever)
-MAX_REJECTED = 3
-
-
-# --------------------------------------------------------------------------------------------------
-# The operator and the runner
-# --------------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Question:
-    """A prompt: ``kind`` (draft, verdict), the text, the keys understood and the default (Enter)."""
-
-    kind: str
-    text: str
-    choices: dict[str, str]
-    default: str
-
-
-class Operator(Protocol):
-    def ask(self, question: Question) -> str:
-        """The answer: a key of ``question.choices`` ("" = the default), or ``n <text>`` for a note."""
-        ...
-
-
-@dataclass
-class Progress:
-    """What the progress line shows."""
-
-    condition: Condition | None
-    repeat: int
-    done: int
-    total: int
-    decays: int
-    elapsed_s: float
-    left_s: float | None
-
-    def line(self) -> str:
-        left = "" if self.left_s is None else f", about {_minutes(self.left_s)} left"
-        where = f"{self.condition.label} repeat {self.repeat}" if self.condition else "done"
-        kept = f"{self.done}/{self.total} decays kept, {self.decays} recorded"
-        return f"{where} | {kept} | {_minutes(self.elapsed_s)} spent{left}"
-
-
-def _minutes(seconds: float) -> str:
-    return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
 
 
 @dataclass
@@ -352,20 +305,13 @@ class CampaignSession:
             key = answer.lower() or question.default
             if key in question.choices:
                 return key
-            self.on_line(f"'{answer}' not understood; keys: {_keys(question)}")
+            self.on_line(f"'{answer}' not understood; keys: {keys_line(question)}")
 
     def _set_draft(self, state: SessionState, condition: Condition) -> SessionState:
         """The operator sets the draft and says when; the still water is then measured before the first
         decay: off level (or still moving), the question comes again."""
-        angles = ", ".join(f"{c.angle_deg:g}" for c in self.conditions if c.draft == condition.draft)
-        question = Question(
-            "draft",
-            f"Set draft {condition.draft} and trim the model level (angles {angles} deg next); "
-            "leave it at rest for the level check",
-            {"": "ready", "s": f"skip draft {condition.draft}"},
-            "",
-        )
-        key = self._ask(question, None)
+        angles = [c.angle_deg for c in self.conditions if c.draft == condition.draft]
+        key = self._ask(draft_question(condition.draft, angles), None)
         if key == "s":
             for c in self.conditions:
                 if c.draft == condition.draft and state.status(c) != "accepted":
@@ -450,34 +396,16 @@ class CampaignSession:
 
     def _judge(self, state: SessionState, entry: RunEntry) -> SessionState:
         condition = entry.condition
-        if entry.reasons:
-            for reason in entry.reasons:
-                self.on_line(f"decay {entry.decay} flagged: {reason}")
-            rejected = sum(1 for r in state.runs if r.condition == condition and r.verdict == "rejected")
-            give_up = rejected + 1 >= MAX_REJECTED
-            question = Question(
-                "verdict",
-                f"Decay {entry.decay} ({condition.label}) failed a check"
-                + (
-                    f"; {rejected + 1} decays of this condition failed (limit {MAX_REJECTED}): skip it?"
-                    if give_up
-                    else ": repeat it?"
-                ),
-                {"r": "reject and repeat", "a": "accept anyway", "s": "reject and skip the condition"},
-                "s" if give_up else "r",
-            )
-        else:
+        for reason in entry.reasons:
+            self.on_line(f"decay {entry.decay} flagged: {reason}")
+        if not entry.reasons:
             m = entry.measured
             self.on_line(
                 f"decay {entry.decay} passes: {m['angle_deg']:.1f} deg, {m['half_cycles']} half-cycles, "
                 f"R² {m['r2_angle']:.4f}, T0 {m['natural_period_s']:.3f} s, B_eq {m['b_eq_per_s']:.4g} 1/s"
             )
-            question = Question(
-                "verdict",
-                f"Keep decay {entry.decay} ({condition.label})?",
-                {"a": "accept", "r": "reject and repeat", "s": "reject and skip the condition"},
-                "a",
-            )
+        rejected = sum(1 for r in state.runs if r.condition == condition and r.verdict == "rejected")
+        question = verdict_question(entry.decay, condition, bool(entry.reasons), rejected)
         key = self._ask(question, entry.decay)
         verdict = "accepted" if key == "a" else "rejected"
         self.log.append(
@@ -513,18 +441,6 @@ def _terms(model: str) -> tuple[str, ...]:
     from ..physics.models import resolve_model
 
     return resolve_model(model)
-
-
-def _keys(question: Question) -> str:
-    return (
-        ", ".join(f"{'Enter' if k == question.default else k}={v}" for k, v in question.choices.items())
-        + ", n TEXT=note"
-    )
-
-
-def describe_question(question: Question) -> str:
-    """The prompt line: text, then the keys (Enter = the default)."""
-    return f"{question.text} [{_keys(question)}]"
 
 
 # --------------------------------------------------------------------------------------------------
