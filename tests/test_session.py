@@ -436,7 +436,7 @@ class _Answers:
 def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Path) -> None:
     import dataclasses
 
-    from tankdaq.acquire.campaign_session import CampaignSession, SessionSettings
+    from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
     from tankdaq.plans import load_campaign_plan
 
     plan_file = tmp_path / "plan.toml"

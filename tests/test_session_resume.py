@@ -9,12 +9,12 @@ import json
 from pathlib import Path
 from typing import Any
 
-from tankdaq.acquire.campaign_session import (
+from tankdaq.acquire.guided.checks import Measured
+from tankdaq.acquire.guided.journal import SessionLog
+from tankdaq.acquire.guided.runner import (
     CampaignSession,
     SessionSettings,
 )
-from tankdaq.acquire.guided.checks import Measured
-from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.state import SessionState
 from tankdaq.plans import load_campaign_plan
 

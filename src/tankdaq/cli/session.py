@@ -79,8 +79,8 @@ def session_command(
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
-    from ..acquire.campaign_session import CampaignSession, SessionSettings
     from ..acquire.guided.operator import ScriptedOrTerminalOperator, read_responses
+    from ..acquire.guided.runner import CampaignSession, SessionSettings
     from ..catalogue.hooks import CatalogueWriter, session_listener
     from ..physics.scenario import parse_fault_script
     from ..plans import load_campaign_plan

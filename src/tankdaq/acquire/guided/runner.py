@@ -1,22 +1,19 @@
-"""A guided test session: the campaign plan drives the recording, condition by condition.
+"""The loop of a guided test session (``CampaignSession``): the campaign plan drives the recording,
+condition by condition.
 
-The plan (``plans.CampaignPlan``: drafts, angles, repeats, acceptance tolerances) gives the
-conditions in order, drafts grouped (ballast changes are slow). For each condition the operator is
-told what to do; the record daemon records one decay (``RecordDaemon`` with ``runs=1``: the device
-is opened per decay, so a decay is a closed unit whatever happens next); the decay is checked as
-soon as it settles (``check_decay``) and the operator accepts it, repeats it, skips the condition or
-adds a note. When every condition has its repeats, the campaign report of the accepted decays is
-written.
+The plan (``guided.plan``) gives the conditions in order, drafts grouped (ballast changes are slow).
+For each condition the operator is told what to do; the record daemon records one decay
+(``RecordDaemon`` with ``runs=1``: the device is opened per decay, so a decay is a closed unit whatever
+happens next); the decay is measured (``guided.measure``) and checked (``guided.checks``) as soon as it
+settles, and the operator (``guided.operator``) accepts it, repeats it, skips the condition or adds a
+note. When every condition has its repeats, the report of the accepted decays is written
+(``guided.report``).
 
-Everything that happens goes to ``session.jsonl`` in the output folder, one JSON object per line,
-flushed and fsynced before the session goes on (``SessionLog``). The session's state is only ever
-derived from that file (``SessionState``), so ``resume`` after Ctrl-C, a crash or a power cut
-continues exactly where it stopped: a decay recorded but not yet judged is judged first, and a
-recording the log never heard of (the session died mid-decay) is logged as rejected, never lost.
-A lock (``flock`` on ``session.lock``) keeps a second session out of the folder; the kernel drops it
-when its process dies, so a stale lock never blocks.
-
-The operator is an ``Operator`` (``guided.operator``): ``ask(Question) -> answer``.
+Everything that happens goes to ``session.jsonl`` under a lock (``guided.journal``), fsynced before the
+session goes on. The session's state is only ever derived from that file (``guided.state``), so
+``resume`` after Ctrl-C, a crash or a power cut continues exactly where it stopped: a decay recorded
+but not yet judged is judged first, and a recording the log never heard of (the session died
+mid-decay) is logged as rejected, never lost.
 """
 
 from __future__ import annotations
@@ -31,21 +28,21 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..config import format_draft, load_hull, parse_draft
-from ..config_rules import path_in
-from ..errors import InputError
-from ..plans import PLAN_AXES, CampaignPlan
-from .daemon import RecordDaemon, RecordSettings
-from .guided.checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
-from .guided.journal import LOG_NAME, SessionLock, SessionLog
-from .guided.measure import LEVEL_S, LevelCheck, measure_decay
-from .guided.operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
-from .guided.plan import Acceptance, Condition, plan_conditions
-from .guided.report import REPORT_DIR, write_session_report
-from .guided.state import RunEntry, SessionState
+from ...config import format_draft, load_hull, parse_draft
+from ...config_rules import path_in
+from ...errors import InputError
+from ...plans import PLAN_AXES, CampaignPlan
+from ..daemon import RecordDaemon, RecordSettings
+from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
+from .journal import LOG_NAME, SessionLock, SessionLog
+from .measure import LEVEL_S, LevelCheck, measure_decay
+from .operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
+from .plan import Acceptance, Condition, plan_conditions
+from .report import REPORT_DIR, write_session_report
+from .state import RunEntry, SessionState
 
 if TYPE_CHECKING:
-    from ..viz.campaign_view import CampaignView
+    from ...viz.campaign_view import CampaignView
 
 PANEL_NAME = "campaign.rrd"
 #: daemon lines shown for the first decay only (every decay opens the device again)
@@ -108,7 +105,7 @@ class CampaignSession:
     # ---- settings of one decay ----------------------------------------
 
     def _record_settings(self, condition: Condition, decay: int) -> RecordSettings:
-        from ..physics.scenario import scripted_run
+        from ...physics.scenario import scripted_run
 
         base = self.record
         overrides = (
@@ -205,7 +202,7 @@ class CampaignSession:
             )
 
     def _condition_of(self, path: Path) -> Condition | None:
-        from ..store.reader import read_recording
+        from ...store.reader import read_recording
 
         try:
             meta = read_recording(path).metadata
@@ -214,9 +211,9 @@ class CampaignSession:
             return None
 
     def _open_panel(self, state: SessionState) -> None:
-        from ..viz.campaign_view import CampaignView
-        from ..viz.live import LiveView
-        from ..viz.viewer import default_viewer_mode
+        from ...viz.campaign_view import CampaignView
+        from ...viz.live import LiveView
+        from ...viz.viewer import default_viewer_mode
 
         base = self.record
         mode = base.viewer or default_viewer_mode()
@@ -438,6 +435,6 @@ class CampaignSession:
 
 
 def _terms(model: str) -> tuple[str, ...]:
-    from ..physics.models import resolve_model
+    from ...physics.models import resolve_model
 
     return resolve_model(model)
