@@ -23,12 +23,11 @@ import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...config import format_draft, load_hull, parse_draft
+from ...config import load_hull
 from ...config_rules import path_in
 from ...errors import InputError
 from ...plans import PLAN_AXES, CampaignPlan
@@ -37,14 +36,15 @@ from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_le
 from .journal import LOG_NAME, SessionLock, SessionLog
 from .measure import LEVEL_S, LevelCheck, measure_decay
 from .operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
+from .panel import open_panel, show_condition
 from .plan import Acceptance, Condition, plan_conditions
+from .recovery import adopt_orphans, mark_missing
 from .report import REPORT_DIR, write_session_report
 from .state import RunEntry, SessionState
 
 if TYPE_CHECKING:
     from ...viz.campaign_view import CampaignView
 
-PANEL_NAME = "campaign.rrd"
 #: daemon lines shown for the first decay only (every decay opens the device again)
 ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
 
@@ -166,73 +166,12 @@ class CampaignSession:
         for line in self.log.skipped + SessionState.from_log(records, self.conditions, 1).problems:
             self.on_line(line)  # each record left out, once, as the session opens
         self.log.append("start", resumed=bool(records), pid=os.getpid(), port=self.record.port)
-        self._adopt_orphans(self._reload())
-        self._mark_missing(self._reload())
+        adopt_orphans(self.log, self._reload(), self.on_line)
+        mark_missing(self.log, self._reload(), self.on_line)
         return self._reload()
 
-    def _mark_missing(self, state: SessionState) -> None:
-        """Decays whose file is gone from the folder since: rejected, so their condition is recorded
-        again and the report covers only files that exist."""
-        for run in state.runs:
-            if run.verdict == "rejected" or (self.folder / run.file).is_file():
-                continue
-            reason = f"{run.file} is gone from {self.folder}"
-            self.log.append(
-                "verdict", decay=run.decay, verdict="rejected", action="missing", reasons=[reason]
-            )
-            self.on_line(
-                f"decay {run.decay}: {reason}; marked rejected, {run.condition.label} is recorded again"
-            )
-
-    def _adopt_orphans(self, state: SessionState) -> None:
-        """Recordings in the folder the log never heard of (the session died mid-decay): logged, rejected."""
-        known = {r.file for r in state.runs}
-        decay = state.next_decay - 1
-        for path in sorted(self.folder.glob("*.mcap")):
-            if path.name in known:
-                continue
-            decay += 1
-            condition = self._condition_of(path) or state.next_condition() or self.conditions[-1]
-            reason = "the session stopped during this decay (recovered from the folder)"
-            self.log.append("run", decay=decay, draft=condition.draft, angle_deg=condition.angle_deg,
-                            file=path.name, reasons=[reason], measured={})  # fmt: skip
-            self.log.append("verdict", decay=decay, verdict="rejected", action="recovered")
-            self.on_line(
-                f"decay {decay}: {path.name} is not in the log (cut by a stop); kept, marked rejected"
-            )
-
-    def _condition_of(self, path: Path) -> Condition | None:
-        from ...store.reader import read_recording
-
-        try:
-            meta = read_recording(path).metadata
-            return Condition(format_draft(parse_draft(str(meta["draft"]))), float(meta["angle_nominal_deg"]))
-        except Exception:  # a file cut before its metadata: the condition under way is the best guess
-            return None
-
     def _open_panel(self, state: SessionState) -> None:
-        from ...viz.campaign_view import CampaignView
-        from ...viz.live import LiveView
-        from ...viz.viewer import default_viewer_mode
-
-        base = self.record
-        mode = base.viewer or default_viewer_mode()
-        url = None
-        if mode == "spawn":  # the decay views reuse this viewer: it listens before the first decay
-            LiveView(
-                "spawn", bind=base.viewer_bind, spawn_port=base.viewer_port, on_note=self._viewer_note
-            ).close()
-            url = f"rerun+http://127.0.0.1:{base.viewer_port}/proxy"
-        plan = self.settings.plan
-        self.view = CampaignView(
-            mode,
-            self.folder / PANEL_NAME,
-            [format_draft(parse_draft(d)) for d in plan.drafts],
-            plan.angles_deg,
-            _terms(base.model),
-            viewer_url=url,
-            on_note=self._viewer_note,
-        )
+        self.view = open_panel(self.record, self.settings.plan, self._viewer_note)
         for condition in self.conditions:
             self._show_condition(state, condition)
 
@@ -245,18 +184,7 @@ class CampaignSession:
         self.on_line(f"viewer: {line}")
 
     def _show_condition(self, state: SessionState, condition: Condition) -> None:
-        kept = len(state.accepted(condition))
-        status = state.status(condition)
-        self._panel().set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
-        if status == "accepted":
-            measured = [Measured(**r.measured) for r in state.accepted(condition)]
-            terms = dict.fromkeys(k for m in measured for k in m.coefficients)  # repeats' models may differ:
-            mean = {
-                k: float(np.mean([m.coefficients.get(k, 0.0) for m in measured])) for k in terms
-            }  # absent = 0
-            self._panel().accepted(
-                condition.draft, condition.angle_deg, mean, float(np.mean([m.b_eq_per_s for m in measured]))
-            )
+        show_condition(self._panel(), state, condition)
 
     def _lead(self, state: SessionState) -> SessionState:
         pending = state.unjudged()
@@ -327,7 +255,7 @@ class CampaignSession:
                 f"{still}: not level or not at rest (tolerance {self.acceptance.level_tolerance_deg:g} deg, "
                 f"sd {STILL_SD_DEG:g}); re-trim, let it settle and confirm again"
             )
-        self._adopt_orphans(self._reload())  # a decay the level check recorded is kept, rejected
+        adopt_orphans(self.log, self._reload(), self.on_line)  # a decay the level check recorded: rejected
         return self._reload()
 
     def _measure_level(self, condition: Condition) -> tuple[float, float]:
@@ -432,9 +360,3 @@ class CampaignSession:
             decays=[p.name for p in accepted],
         )
         self.on_line(f"campaign report of {len(accepted)} accepted decays: {self.folder / REPORT_DIR}")
-
-
-def _terms(model: str) -> tuple[str, ...]:
-    from ...physics.models import resolve_model
-
-    return resolve_model(model)
