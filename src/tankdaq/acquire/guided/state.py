@@ -42,7 +42,7 @@ class SessionState:
     def from_log(
         cls, records: list[dict[str, Any]], conditions: list[Condition], repeats: int
     ) -> SessionState:
-        """The state the records say (each already checked by ``session_log.record_problem``); a record
+        """The state the records say (each already checked by ``journal.record_problem``); a record
         that contradicts the ones before it is left out and listed in ``problems``."""
         state = cls(conditions, repeats)
         by_decay: dict[int, RunEntry] = {}
