@@ -14,16 +14,14 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from tankdaq.acquire.campaign_session import (
-    Acceptance,
-    CampaignSession,
-    Condition,
-    Measured,
-    SessionLog,
-    SessionSettings,
-    check_decay,
-)
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.guided.checks import Measured, check_decay
+from tankdaq.acquire.guided.journal import SessionLog
+from tankdaq.acquire.guided.plan import Acceptance, Condition
+from tankdaq.acquire.guided.runner import (
+    CampaignSession,
+    SessionSettings,
+)
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario
 from tankdaq.device.decoding import SampleDecoder

@@ -21,15 +21,9 @@ import pytest
 from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
-from tankdaq.acquire.campaign_session import (
-    LOG_NAME,
-    Acceptance,
-    Condition,
-    Measured,
-    SessionLock,
-    SessionLog,
-    check_decay,
-)
+from tankdaq.acquire.guided.checks import Measured, check_decay
+from tankdaq.acquire.guided.journal import LOG_NAME, SessionLock, SessionLog
+from tankdaq.acquire.guided.plan import Acceptance, Condition
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario
 from tankdaq.errors import InputError
@@ -408,7 +402,7 @@ def test_fault_scripts_are_parsed_or_refused_in_one_line() -> None:
 
 
 def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
-    from tankdaq.acquire.campaign_session import plan_conditions
+    from tankdaq.acquire.guided.plan import plan_conditions
     from tankdaq.errors import ConfigError
     from tankdaq.plans import ACCEPTANCE_RANGES, list_campaign_plans, load_campaign_plan
 
@@ -442,7 +436,7 @@ class _Answers:
 def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Path) -> None:
     import dataclasses
 
-    from tankdaq.acquire.campaign_session import CampaignSession, SessionSettings
+    from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
     from tankdaq.plans import load_campaign_plan
 
     plan_file = tmp_path / "plan.toml"
@@ -500,7 +494,7 @@ def test_a_swath_session_with_the_default_model_accepts_positive_damping(tmp_pat
 
 
 def test_an_implausible_fit_asks_and_yes_gives_up_after_the_cap(tmp_path: Path) -> None:
-    from tankdaq.acquire.campaign_session import MAX_REJECTED
+    from tankdaq.acquire.guided.operator import MAX_REJECTED
 
     out, records = _run_session(tmp_path, "--model", "b1,b2,c1,c3")  # b1 < 0 on SWATH decays from 15 deg
     verdicts = [r for r in records if r["type"] == "verdict"]

@@ -9,13 +9,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from tankdaq.acquire.campaign_session import (
+from tankdaq.acquire.guided.checks import Measured
+from tankdaq.acquire.guided.journal import SessionLog
+from tankdaq.acquire.guided.runner import (
     CampaignSession,
-    Measured,
-    SessionLog,
     SessionSettings,
-    SessionState,
 )
+from tankdaq.acquire.guided.state import SessionState
 from tankdaq.plans import load_campaign_plan
 
 PLAN = """description = "one condition, one repeat"

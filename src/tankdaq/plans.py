@@ -31,7 +31,7 @@ class CampaignPlan:
     """A test matrix: which hulls, axis, drafts and initial angles a campaign covers.
 
     A guided session (``tankdaq session``) also reads ``repeats`` (decays kept per condition) and the
-    ``[acceptance]`` table (tolerances of its checks, ``acquire.campaign_session.Acceptance``). The
+    ``[acceptance]`` table (tolerances of its checks, ``acquire.guided.plan.Acceptance``). The
     conditions run in the order written: all angles of the first draft, then the next draft.
     """
 

@@ -20,7 +20,7 @@ from ..acquire.sinks import Decay, Sink
 from .database import Catalogue, CatalogueError, describe, one_line, open_catalogue, resolve_url
 
 if TYPE_CHECKING:  # the session's module is imported by the session command only
-    from ..acquire.campaign_session import RunEntry
+    from ..acquire.guided.state import RunEntry
 
 Job = Callable[[Catalogue], object]
 #: How long a command waits at its end for the catalogue's last writes before it leaves them to index.

@@ -104,7 +104,7 @@ def record_session(catalogue: Catalogue, folder: Path, only: str | None = None) 
     session, plan, decay number, the operator's verdict and the checks' reasons. Returns the decays
     catalogued (a decay whose file is gone is left out: the log says it was rejected as missing).
     ``only``: the one file just judged (a session's verdict; the others are already there)."""
-    from ..acquire.session_log import SessionLog
+    from ..acquire.guided.journal import SessionLog
 
     log = SessionLog(folder)
     records = log.read()

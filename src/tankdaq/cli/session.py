@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from .. import validation
-from ..errors import InputError
 from .app import app, build_kernels_shown, catalogue_option, checked, err_console, handles_errors, say
 from .record import (
     DEFAULT_LIVE_MODEL,
@@ -50,37 +48,6 @@ condition is done, the campaign report of the accepted decays is written to OUT/
 """
 
 
-class ScriptedOrTerminalOperator:
-    """Answers from the responses file first, then --yes (the default), then the terminal."""
-
-    def __init__(self, responses: list[str], yes: bool) -> None:
-        self.responses = responses
-        self.yes = yes
-
-    def ask(self, question: object) -> str:
-        from ..acquire.campaign_session import describe_question
-
-        say(f"? {describe_question(question)}")  # type: ignore[arg-type]
-        if self.responses:
-            answer = self.responses.pop(0)
-            say(f"> {answer or '(Enter)'}")
-            return answer
-        if self.yes:
-            say("> (Enter)")
-            return ""
-        if not sys.stdin.isatty():
-            raise InputError("a question needs an answer and none is left: give --yes or --responses FILE")
-        return err_console.input("> ")
-
-
-def read_responses(path: Path | None) -> list[str]:
-    """One answer per line (an empty line is Enter); lines starting with # are comments."""
-    if path is None:
-        return []
-    validation.input_file(path, what="responses file")
-    return [line.rstrip("\n") for line in path.read_text().splitlines() if not line.startswith("#")]
-
-
 @app.command("session", help=HELP)
 @handles_errors
 def session_command(
@@ -112,7 +79,8 @@ def session_command(
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
-    from ..acquire.campaign_session import CampaignSession, SessionSettings
+    from ..acquire.guided.operator import ScriptedOrTerminalOperator, read_responses
+    from ..acquire.guided.runner import CampaignSession, SessionSettings
     from ..catalogue.hooks import CatalogueWriter, session_listener
     from ..physics.scenario import parse_fault_script
     from ..plans import load_campaign_plan
@@ -136,7 +104,7 @@ def session_command(
     with CatalogueWriter.from_option(catalogue, say) as writer:
         session = CampaignSession(
             settings,
-            ScriptedOrTerminalOperator(answers, yes),
+            ScriptedOrTerminalOperator(answers, yes, say, err_console.input),
             on_line=say,
             on_progress=lambda progress: (
                 err_console.rule(progress.line(), style="dim")

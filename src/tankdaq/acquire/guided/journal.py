@@ -1,14 +1,19 @@
-"""``session.jsonl``: a guided session's append-only log, written fsynced and read back defensively.
+"""The journal of a guided session: ``session.jsonl``, its append-only log, written fsynced and read back
+defensively, and ``session.lock``, which keeps a second session out of the folder.
 
 The log is the session's only state, and it is a file on a lab disk: a power cut leaves half a line,
 an editor or a copy can leave bytes that are not UTF-8 or lines that are not records. Reading it back
 never fails on such a line: every line that cannot be used is skipped and listed (``SessionLog.skipped``,
 one line each naming the line number and why), and the session goes on from the others. A decay whose
 record was skipped is not lost: its file is still in the folder, and the session adopts it.
+
+The lock is a ``flock`` on ``session.lock``: the kernel drops it when its process dies, so a stale lock
+never blocks.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import os
@@ -16,7 +21,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from ...errors import InputError
+
 LOG_NAME = "session.jsonl"
+LOCK_NAME = "session.lock"
 #: The verdicts a decay can have.
 VERDICTS = ("accepted", "rejected")
 
@@ -129,3 +137,33 @@ def record_problem(record: dict[str, Any]) -> str | None:
         if name not in record or not test(record[name]):
             return f"a {kind} record without {what} ({name})"
     return None
+
+
+class SessionLock:
+    """An exclusive ``flock`` on ``session.lock`` for as long as the session runs (context manager)."""
+
+    def __init__(self, folder: Path) -> None:
+        self.path = folder / LOCK_NAME
+        self._fd = -1
+
+    def __enter__(self) -> SessionLock:
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise InputError(
+                f"another session (pid {holder}) is writing {self.path.parent}; "
+                "wait for it, or use another --out"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+        self._fd = fd
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._fd >= 0:
+            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = -1

@@ -1,0 +1,85 @@
+"""The report at the end of a guided session: ``tankdaq campaign``'s report of the accepted decays, plus
+each coefficient's repeat-to-repeat spread for the conditions with two or more repeats.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from ...config import format_draft
+
+#: the report's folder inside the session's
+REPORT_DIR = "report"
+
+
+def write_session_report(files: list[Path], folder: Path, model: str, hull: str) -> list[Path]:
+    """``tankdaq campaign``'s report of ``files``, plus each coefficient's repeat-to-repeat spread
+    (``repeat_spread.csv`` and a section of campaign.md) for the conditions with two or more repeats."""
+    from ...ident.campaign import (
+        find_campaign_hulls,
+        group_runs,
+        identify_groups,
+        read_campaign_runs,
+    )
+    from ...viz.campaign_report import write_report
+
+    runs = [run for path in files for run in read_campaign_runs(path)]
+    groups = group_runs(runs)
+    results = identify_groups(groups, model, hulls=find_campaign_hulls({k.hull for k in groups}, [hull]))
+    written = write_report(results, folder)
+    spread = repeat_spreads(groups, model)
+    if spread:
+        written.append(_write_spread(spread, folder))
+    return written
+
+
+def repeat_spreads(groups: dict[Any, list[Any]], model: str) -> list[dict[str, Any]]:
+    """Per condition with repeats: each coefficient fitted on each repeat alone, their mean and spread."""
+    from functools import partial
+
+    from ...ident.intervals import repeat_spread
+    from ...ident.model_choice import choose_model
+    from ...ident.output_error import OutputError
+    from ...physics.models import is_auto
+
+    rows = []
+    for key, runs in groups.items():
+        if len(runs) < 2:
+            continue
+        chosen = choose_model(runs).terms if is_auto(model) else model  # the condition's, as its fit's
+        summary = repeat_spread(partial(OutputError, chosen), runs)
+        terms = list(summary.std)
+        row: dict[str, Any] = {"hull": key.hull, "axis": key.axis, "draft": format_draft(key.draft),
+                               "angle_deg": key.angle_deg, "repeats": len(runs)}  # fmt: skip
+        for i, term in enumerate(terms):
+            values = summary.samples[:, i]
+            row[f"{term}_mean"] = float(values.mean())
+            row[f"{term}_repeat_sd"] = float(values.std(ddof=1))
+        rows.append(row)
+    return rows
+
+
+def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
+    import csv
+
+    path = folder / "repeat_spread.csv"
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=columns, restval="")
+        writer.writeheader()
+        writer.writerows(rows)
+    terms = [c[: -len("_mean")] for c in columns if c.endswith("_mean")]
+    lines = [
+        "\n## Repeat-to-repeat spread\n",
+        "Each repeat fitted alone; mean ± sample standard deviation of the repeats.\n",
+        "| draft | angle deg | repeats | " + " | ".join(terms) + " |",
+        "|" + "---|" * (3 + len(terms)),
+    ]
+    for row in rows:
+        cells = [row["draft"], f"{row['angle_deg']:g}", str(row["repeats"])]
+        cells += [f"{row[t + '_mean']:.4g} ± {row[t + '_repeat_sd']:.2g}" for t in terms]
+        lines.append("| " + " | ".join(cells) + " |")
+    with (folder / "campaign.md").open("a") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return path

@@ -1,0 +1,362 @@
+"""The loop of a guided test session (``CampaignSession``): the campaign plan drives the recording,
+condition by condition.
+
+The plan (``guided.plan``) gives the conditions in order, drafts grouped (ballast changes are slow).
+For each condition the operator is told what to do; the record daemon records one decay
+(``RecordDaemon`` with ``runs=1``: the device is opened per decay, so a decay is a closed unit whatever
+happens next); the decay is measured (``guided.measure``) and checked (``guided.checks``) as soon as it
+settles, and the operator (``guided.operator``) accepts it, repeats it, skips the condition or adds a
+note. When every condition has its repeats, the report of the accepted decays is written
+(``guided.report``).
+
+Everything that happens goes to ``session.jsonl`` under a lock (``guided.journal``), fsynced before the
+session goes on. The session's state is only ever derived from that file (``guided.state``), so
+``resume`` after Ctrl-C, a crash or a power cut continues exactly where it stopped: a decay recorded
+but not yet judged is judged first, and a recording the log never heard of (the session died
+mid-decay) is logged as rejected, never lost.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ...config import load_hull
+from ...config_rules import path_in
+from ...errors import InputError
+from ...plans import PLAN_AXES, CampaignPlan
+from ..daemon import RecordDaemon, RecordSettings
+from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
+from .journal import LOG_NAME, SessionLock, SessionLog
+from .measure import LEVEL_S, LevelCheck, measure_decay
+from .operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
+from .panel import open_panel, show_condition
+from .plan import Acceptance, Condition, plan_conditions
+from .recovery import adopt_orphans, mark_missing
+from .report import REPORT_DIR, write_session_report
+from .state import RunEntry, SessionState
+
+if TYPE_CHECKING:
+    from ...viz.campaign_view import CampaignView
+
+#: daemon lines shown for the first decay only (every decay opens the device again)
+ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
+
+
+@dataclass
+class SessionSettings:
+    """A guided session: the plan, the hull, where, and how each decay is recorded."""
+
+    plan: CampaignPlan
+    hull: str
+    record: dict[str, Any]  # RecordSettings of every decay (port, out_dir, rate, viewer, model, sim...)
+    sim_faults: dict[int, str] = field(default_factory=dict)  # decay number -> scripted fault (port sim)
+
+
+class CampaignSession:
+    """``run()`` leads the operator through the plan; see the module docstring."""
+
+    def __init__(
+        self,
+        settings: SessionSettings,
+        operator: Operator,
+        on_line: Callable[[str], None] | None = None,
+        on_progress: Callable[[Progress], None] | None = None,
+        resume: bool = False,
+        on_verdict: Callable[[RunEntry], None] | None = None,
+    ) -> None:
+        self.settings = settings
+        self.on_verdict = on_verdict or (lambda _entry: None)  # after the log holds it (the run catalogue)
+        self.operator = operator
+        self.on_line = on_line or (lambda _line: None)
+        self.on_progress = on_progress or (lambda _p: None)
+        self.resume = resume
+        plan = settings.plan
+        if plan.axis not in PLAN_AXES:  # a plan made in code: a file's is checked as it is read
+            raise InputError(
+                f"plan {plan.name}: axis must be one of {', '.join(PLAN_AXES)}, not {plan.axis!r}"
+            )
+        first = plan_conditions(plan)[0]  # a placeholder condition: each decay gets its own
+        self.record = RecordSettings(
+            **{"draft": first.draft_factor, "angle_deg": first.angle_deg} | settings.record
+        )
+        self.folder = self.record.out_dir
+        self.acceptance = Acceptance.from_plan(plan.acceptance, f"plan {plan.name}")
+        self.conditions = plan_conditions(plan)
+        hull = load_hull(settings.hull)
+        if hull.name not in plan.hulls and settings.hull not in plan.hulls:
+            raise InputError(
+                f"plan {plan.name} covers {', '.join(plan.hulls)}, not {hull.name}; give one of them"
+            )
+        for condition in self.conditions:  # every condition checked before the device opens
+            RecordDaemon(self._record_settings(condition, 1))
+        self.log = SessionLog(self.folder)
+        self._started = time.monotonic()
+        self._decay_seconds: list[float] = []
+        self._shown: set[str] = set()
+        self.view: CampaignView | None = None
+
+    # ---- settings of one decay ----------------------------------------
+
+    def _record_settings(self, condition: Condition, decay: int) -> RecordSettings:
+        from ...physics.scenario import scripted_run
+
+        base = self.record
+        overrides = (
+            scripted_run(self.settings.sim_faults.get(decay), condition.angle_deg)
+            if base.port == "sim"
+            else {}
+        )
+        return dataclasses.replace(
+            base,
+            hull=self.settings.hull,
+            axis=self.settings.plan.axis,
+            draft=condition.draft_factor,
+            angle_deg=condition.angle_deg,
+            angle_tolerance_deg=self.acceptance.angle_tolerance_deg,
+            runs=1,
+            sim_seed=base.sim_seed + decay,
+            sim_overrides=overrides,
+            note=f"session {self.settings.plan.name}, decay {decay}",
+        )
+
+    # ---- the session ----------------------------------------
+
+    def run(self) -> SessionState:
+        """Lead the session to its end (or until interrupted); returns the final state."""
+        self.folder.mkdir(parents=True, exist_ok=True)
+        with SessionLock(self.folder):
+            state = self._open_log()
+            self._open_panel(state)
+            try:
+                return self._lead(state)
+            finally:
+                if self.view is not None:
+                    self.view.close()
+
+    def _open_log(self) -> SessionState:
+        records = self.log.read()
+        plan = dataclasses.asdict(self.settings.plan)
+        if records and not self.resume:
+            raise InputError(
+                f"{self.folder} already holds a session; give --resume to continue it, or another --out"
+            )
+        if not records:
+            if self.resume:
+                raise InputError(f"no session to resume in {self.folder} ({LOG_NAME} is missing)")
+            self.log.append(
+                "plan",
+                plan=plan,
+                hull=self.settings.hull,
+                conditions=[dataclasses.asdict(c) for c in self.conditions],
+            )
+        else:
+            logged = next((r for r in records if r.get("type") == "plan"), None)
+            if logged is None or logged.get("plan") != plan or logged.get("hull") != self.settings.hull:
+                raise InputError(
+                    f"{self.folder} holds a session of another plan or hull; "
+                    "resume it with the same PLAN and --hull"
+                )
+        for line in self.log.skipped + SessionState.from_log(records, self.conditions, 1).problems:
+            self.on_line(line)  # each record left out, once, as the session opens
+        self.log.append("start", resumed=bool(records), pid=os.getpid(), port=self.record.port)
+        adopt_orphans(self.log, self._reload(), self.on_line)
+        mark_missing(self.log, self._reload(), self.on_line)
+        return self._reload()
+
+    def _open_panel(self, state: SessionState) -> None:
+        self.view = open_panel(self.record, self.settings.plan, self._viewer_note)
+        for condition in self.conditions:
+            self._show_condition(state, condition)
+
+    def _panel(self) -> CampaignView:
+        """The campaign panel, opened by ``run`` before the first condition is shown."""
+        assert self.view is not None, "the panel opens before the session leads any decay"
+        return self.view
+
+    def _viewer_note(self, line: str) -> None:
+        self.on_line(f"viewer: {line}")
+
+    def _show_condition(self, state: SessionState, condition: Condition) -> None:
+        show_condition(self._panel(), state, condition)
+
+    def _lead(self, state: SessionState) -> SessionState:
+        pending = state.unjudged()
+        if pending is not None:  # recorded before the stop, never judged
+            state = self._judge(state, pending)
+        while (condition := state.next_condition()) is not None:
+            self._progress(state, condition)
+            if state.draft_ready != condition.draft:
+                state = self._set_draft(state, condition)
+                continue
+            state = self._record_one(state, condition)
+        self._progress(state, None)
+        if not state.report:
+            self._write_report(state)
+            state = SessionState.from_log(self.log.read(), self.conditions, state.repeats)
+        return state
+
+    def _reload(self) -> SessionState:
+        return SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
+
+    def _progress(self, state: SessionState, condition: Condition | None) -> None:
+        total = sum(state.repeats for c in self.conditions if c not in state.skipped)
+        done = sum(
+            min(len(state.accepted(c)), state.repeats) for c in self.conditions if c not in state.skipped
+        )
+        per_decay = float(np.mean(self._decay_seconds)) if self._decay_seconds else None
+        left = None if per_decay is None else per_decay * state.runs_left()
+        repeat = len(state.accepted(condition)) + 1 if condition else 0
+        self.on_progress(
+            Progress(condition, repeat, done, total, state.decays, time.monotonic() - self._started, left)
+        )
+
+    def _ask(self, question: Question, decay: int | None) -> str:
+        """Ask until the answer is a choice; notes are logged on the way."""
+        while True:
+            answer = self.operator.ask(question).strip()
+            if answer.startswith("n ") or answer == "n":
+                text = answer[2:].strip()
+                if text:
+                    self.log.append("note", decay=decay, text=text)
+                    self.on_line(f"note kept: {text}")
+                continue
+            key = answer.lower() or question.default
+            if key in question.choices:
+                return key
+            self.on_line(f"'{answer}' not understood; keys: {keys_line(question)}")
+
+    def _set_draft(self, state: SessionState, condition: Condition) -> SessionState:
+        """The operator sets the draft and says when; the still water is then measured before the first
+        decay: off level (or still moving), the question comes again."""
+        angles = [c.angle_deg for c in self.conditions if c.draft == condition.draft]
+        key = self._ask(draft_question(condition.draft, angles), None)
+        if key == "s":
+            for c in self.conditions:
+                if c.draft == condition.draft and state.status(c) != "accepted":
+                    self.log.append("skip", draft=c.draft, angle_deg=c.angle_deg)
+                    self._panel().set_status(c.draft, c.angle_deg, "skipped")
+            return self._reload()
+        mean_deg, sd_deg = self._measure_level(condition)
+        level = is_level(mean_deg, sd_deg, self.acceptance)
+        self.log.append("level", draft=condition.draft, angle_deg=mean_deg, sd_deg=sd_deg, ok=level)
+        still = f"still water at {mean_deg:+.2f} deg (sd {sd_deg:.2f} over {LEVEL_S:g} s)"
+        if level:
+            self.on_line(f"{still}: level")
+            self.log.append("draft", draft=condition.draft, action="ready")
+        else:
+            self.on_line(
+                f"{still}: not level or not at rest (tolerance {self.acceptance.level_tolerance_deg:g} deg, "
+                f"sd {STILL_SD_DEG:g}); re-trim, let it settle and confirm again"
+            )
+        adopt_orphans(self.log, self._reload(), self.on_line)  # a decay the level check recorded: rejected
+        return self._reload()
+
+    def _measure_level(self, condition: Condition) -> tuple[float, float]:
+        """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time."""
+        settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
+        level = LevelCheck(self.settings.plan.axis)
+        daemon = RecordDaemon(settings, sinks=[level])
+        level.on_full = daemon.stop
+        daemon.run()
+        if not level.full:
+            raise KeyboardInterrupt  # stopped during the level check
+        return level.mean_sd_deg()
+
+    def _record_one(self, state: SessionState, condition: Condition) -> SessionState:
+        decay = state.next_decay
+        repeat = len(state.accepted(condition)) + 1
+        self.on_line(
+            f"decay {decay}: {condition.label}, repeat {repeat}/{state.repeats}: "
+            f"tilt to {condition.angle_deg:g} deg and release"
+        )
+        self._panel().set_status(
+            condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
+        )
+        started = time.monotonic()
+        daemon = RecordDaemon(
+            self._record_settings(condition, decay), on_event=lambda line: self._daemon_line(line, decay)
+        )
+        outcomes = [o for o in daemon.run() if o.path is not None]
+        if not outcomes:
+            raise KeyboardInterrupt  # stopped before a release: nothing recorded, nothing to log
+        outcome = outcomes[-1]
+        measured = measure_decay(outcome, condition.angle_deg)
+        earlier = [Measured(**r.measured) for r in state.accepted(condition)]
+        reasons = check_decay(measured, condition, self.acceptance, earlier)
+        self.log.append(
+            "run",
+            decay=decay,
+            draft=condition.draft,
+            angle_deg=condition.angle_deg,
+            file=outcome.path.name if outcome.path else "",
+            reasons=reasons,
+            measured=dataclasses.asdict(measured),
+        )
+        if outcome.settle_reason not in COMPLETE_SETTLES:
+            self.log.append("verdict", decay=decay, verdict="rejected", action="stopped")
+            raise KeyboardInterrupt  # the operator stopped mid-decay: the file is logged, the session ends
+        self._decay_seconds.append(time.monotonic() - started)
+        state = self._reload()
+        return self._judge(state, state.runs[-1])
+
+    def _daemon_line(self, line: str, decay: int) -> None:
+        """The daemon's lines, its "run 1" named as the session's decay; the device and viewer lines
+        every decay repeats are shown once."""
+        for prefix, named in (("run 1:", f"decay {decay}:"), ("warning: run 1:", f"warning: decay {decay}:")):
+            if line.startswith(prefix):
+                line = named + line[len(prefix) :]
+        key = next((p for p in ONCE_PREFIXES if line.startswith(p)), line)
+        if key in self._shown:
+            return
+        if line.startswith(ONCE_PREFIXES) or line.startswith("viewer: "):
+            self._shown.add(key)
+        self.on_line(line)
+
+    def _judge(self, state: SessionState, entry: RunEntry) -> SessionState:
+        condition = entry.condition
+        for reason in entry.reasons:
+            self.on_line(f"decay {entry.decay} flagged: {reason}")
+        if not entry.reasons:
+            m = entry.measured
+            self.on_line(
+                f"decay {entry.decay} passes: {m['angle_deg']:.1f} deg, {m['half_cycles']} half-cycles, "
+                f"R² {m['r2_angle']:.4f}, T0 {m['natural_period_s']:.3f} s, B_eq {m['b_eq_per_s']:.4g} 1/s"
+            )
+        rejected = sum(1 for r in state.runs if r.condition == condition and r.verdict == "rejected")
+        question = verdict_question(entry.decay, condition, bool(entry.reasons), rejected)
+        key = self._ask(question, entry.decay)
+        verdict = "accepted" if key == "a" else "rejected"
+        self.log.append(
+            "verdict", decay=entry.decay, verdict=verdict, action=question.choices[key], reasons=entry.reasons
+        )
+        if key == "s":
+            self.log.append("skip", draft=condition.draft, angle_deg=condition.angle_deg)
+        state = self._reload()
+        self.on_verdict(next(r for r in state.runs if r.decay == entry.decay))
+        self.on_line(f"decay {entry.decay}: {verdict} ({question.choices[key]})")
+        self._show_condition(state, condition)
+        return state
+
+    # ---- the report ----------------------------------------
+
+    def _write_report(self, state: SessionState) -> None:
+        accepted = [path_in(self.folder, r.file) for r in state.runs if r.verdict == "accepted"]
+        if not accepted:
+            self.on_line("no decay accepted: no report")
+            return
+        written = write_session_report(
+            accepted, self.folder / REPORT_DIR, self.record.model, self.settings.hull
+        )
+        self.log.append(
+            "report",
+            files=[str(p.relative_to(self.folder)) for p in written],
+            decays=[p.name for p in accepted],
+        )
+        self.on_line(f"campaign report of {len(accepted)} accepted decays: {self.folder / REPORT_DIR}")
