@@ -27,6 +27,7 @@ from tankdaq.ident.campaign import (
     read_campaign_runs,
     write_simulated_campaign,
 )
+from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
 from tankdaq.ident.derived import b_eq
 from tankdaq.ident.executors import campaign_executor
 from tankdaq.records import DecayRun
@@ -279,3 +280,19 @@ def test_simulate_campaign_follows_a_plan(tmp_path):
     assert len(names) == 12 and names[0].startswith("swath_0.9T_roll_")
     bad = CliRunner().invoke(app, ["simulate-campaign", str(tmp_path / "x"), "--plan", "nope"])
     assert bad.exit_code == 2 and "seed001-swath-roll" in bad.output
+
+
+def test_a_streamed_campaign_gives_the_serial_rows_and_keeps_no_recording(
+    csv_campaign: Path, csv_results: list
+) -> None:
+    """Workers read the files themselves and send back rows only (``ident.campaign_stream``)."""
+    paths = find_recordings([csv_campaign])
+    with campaign_executor(jobs=2) as pool:
+        scan = scan_campaign(paths, executor=pool)
+        rows = sorted(fit_campaign(scan.groups(), executor=pool), key=lambda row: row.key)
+    assert scan.skipped == [] and scan.decays == len(paths)
+    assert [row.key for row in rows] == [result.key for result in csv_results]
+    for row, result in zip(rows, csv_results, strict=True):
+        assert row.result is None  # no fit, no runs: the parent holds the table row
+        assert row.row == result.summary()
+        assert row.warnings == tuple(result.warnings) and row.terms == tuple(result.fit.terms_)
