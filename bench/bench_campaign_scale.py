@@ -1,8 +1,8 @@
 """Campaign cost against N: ``--jobs 1``, ``--jobs 2`` and a 2-worker Dask cluster side by side in one run.
 
 Run: .venv/bin/python bench/bench_campaign_scale.py [--sizes 36,360,3600] [--repeats 3] [--data DIR]
-[--out FILE.md] [--baseline SRC]   (N = 3600 takes minutes). Two tables, markdown, printed and written
-to --out:
+[--out FILE.md] [--baseline SRC] [--no-work] [--no-command] [--modes "--jobs 2"]   (N = 3600 takes
+about 15 minutes on a loaded 2-core machine). Two tables, markdown, printed and written to --out:
 
 1. The work (scan and fit, no report) in this process, the executor already started (the pool forked,
    the client connected to a real ``dask scheduler`` with two ``dask worker`` processes): wall, the
@@ -161,7 +161,12 @@ def command(folder: Path, mode: str, address: str, dask_pids: list[int], src: st
 
 
 def command_table(
-    sizes: list[int], data: Path, address: str, dask_pids: list[int], baseline: str | None
+    sizes: list[int],
+    data: Path,
+    address: str,
+    dask_pids: list[int],
+    baseline: str | None,
+    modes: list[str],
 ) -> str:
     """Table 2: ``tankdaq campaign`` end to end, this tree (and --baseline's), one run per N and mode."""
     lines = [
@@ -175,7 +180,7 @@ def command_table(
     for n in sizes:
         folder = decays(data, n)
         for tree, src in trees:
-            for mode in MODES:
+            for mode in modes:
                 wall, own, theirs, parent_mb, workers_mb = command(folder, mode, address, dask_pids, src)
                 lines.append(
                     f"| {n} | {tree} | {mode} | {wall:.2f} | {own:.2f} | {theirs:.2f} "
@@ -193,6 +198,8 @@ def main() -> None:
     parser.add_argument("--out", type=Path)
     parser.add_argument("--baseline", help="src/ of an earlier commit: its command beside this one")
     parser.add_argument("--no-command", action="store_true", help="only the in-process table")
+    parser.add_argument("--no-work", action="store_true", help="only the command table")
+    parser.add_argument("--modes", default=",".join(MODES), help=f"some of: {', '.join(MODES)}")
     args = parser.parse_args()
     sizes = [int(n) for n in args.sizes.split(",")]
     header = (
@@ -204,9 +211,12 @@ def main() -> None:
     print(header, flush=True)
     with tempfile.TemporaryDirectory() as tmp, dask_cluster(2, Path(tmp)) as (address, processes):
         dask_pids = [p.pid for p in processes[1:]]
-        tables = [header, "", work_table(sizes, args.data, args.repeats, address, dask_pids)]
+        tables = [header]
+        if not args.no_work:
+            tables += ["", work_table(sizes, args.data, args.repeats, address, dask_pids)]
         if not args.no_command:
-            tables += ["", command_table(sizes, args.data, address, dask_pids, args.baseline)]
+            modes = [mode for mode in MODES if mode in args.modes.split(",")]
+            tables += ["", command_table(sizes, args.data, address, dask_pids, args.baseline, modes)]
         tables.append(f"\nload average at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     text = "\n".join(tables) + "\n"
     print(text)

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from campaign_scale import dask_cluster, write_many_decays
 from tankdaq.cli import app
-from tankdaq.ident.campaign import SimulatedTest, find_recordings
+from tankdaq.ident.campaign import SimulatedTest, find_campaign_hulls, find_recordings
 from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
 from tankdaq.ident.executors import campaign_executor
 
@@ -26,7 +26,9 @@ def test_a_dask_cluster_of_two_workers_gives_the_pools_results(tmp_path: Path) -
     write_many_decays(folder, N_DECAYS, hulls=("trimaran",), drafts=(1.0,), test=SHORT)
     with campaign_executor(jobs=2) as pool:
         scan = scan_campaign(find_recordings([folder]), executor=pool)
-        rows = sorted(fit_campaign(scan.groups(), executor=pool), key=lambda row: row.key)
+        groups = scan.groups()
+        hulls = find_campaign_hulls({key.hull for key in groups})  # as the command: dimensional columns
+        rows = sorted(fit_campaign(groups, hulls=hulls, executor=pool), key=lambda row: row.key)
     report = tmp_path / "report"
     with dask_cluster(2, tmp_path) as (address, processes):
         command = [
