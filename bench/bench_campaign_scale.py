@@ -49,6 +49,8 @@ from tankdaq.ident.executors import campaign_executor
 TANKDAQ = [sys.executable, "-c", "from tankdaq.cli import main; main()"]
 MODES = ("--jobs 1", "--jobs 2", "dask, 2 workers")
 SAMPLE_S = 0.05
+#: The campaign whose first run warms each executor and tree (not timed).
+WARM_N = 36
 
 
 def decays(data: Path, n: int) -> Path:
@@ -105,7 +107,7 @@ def work_table(sizes: list[int], data: Path, repeats: int, address: str, dask_pi
     for n in sizes:
         folder = decays(data, n)
         figures: dict[str, list[tuple[float, float, float]]] = {mode: [] for mode in MODES}
-        warm = decays(data, min(sizes))
+        warm = decays(data, WARM_N)
         for _ in range(repeats):
             for mode, make in executors(address).items():
                 with make() as executor:
@@ -176,7 +178,7 @@ def command_table(
     ]
     trees = [("this tree", os.environ.get("PYTHONPATH"))] + ([("baseline", baseline)] if baseline else [])
     for _, src in trees:  # not timed: a tree's first command may build its kernels, fill caches
-        command(decays(data, min(sizes)), "--jobs 1", address, dask_pids, src)
+        command(decays(data, WARM_N), "--jobs 1", address, dask_pids, src)
     for n in sizes:
         folder = decays(data, n)
         for tree, src in trees:
