@@ -296,3 +296,17 @@ def test_a_streamed_campaign_gives_the_serial_rows_and_keeps_no_recording(
         assert row.result is None  # no fit, no runs: the parent holds the table row
         assert row.row == result.summary()
         assert row.warnings == tuple(result.warnings) and row.terms == tuple(result.fit.terms_)
+
+
+def test_on_result_hands_each_whole_fit_over_as_it_comes_and_keeps_only_rows(
+    csv_campaign: Path, csv_results: list
+) -> None:
+    """A consumer (a catalogue) gets every group's fit and runs; the rows yielded hold neither."""
+    scan = scan_campaign(find_recordings([csv_campaign]))
+    handed: list[GroupResult] = []
+    rows = list(fit_campaign(scan.groups(), on_result=handed.append))
+    assert [r.key for r in handed] == [row.key for row in rows] == [r.key for r in csv_results]
+    assert all(row.result is None for row in rows)
+    for mine, serial in zip(handed, csv_results, strict=True):
+        assert [run.meta["file"] for run in mine.runs] == [run.meta["file"] for run in serial.runs]
+    assert_same_fits(handed, csv_results)

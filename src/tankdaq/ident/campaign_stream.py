@@ -16,13 +16,13 @@ import math
 from collections import defaultdict
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
 from ..config import Hull
 from ..records import DecayRun
-from .campaign import GroupKey, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
+from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
 from .free_decay import cut_lines
 from .inputs import input_notices
 
@@ -165,23 +165,28 @@ def fit_campaign(
     end_s: float | None = None,
     keep: bool = False,
     progress: Callable[[GroupKey], None] | None = None,
+    on_result: Callable[[GroupResult], None] | None = None,
 ) -> Iterator[GroupRow]:
     """Each group's row, yielded as its chunk completes (not in key order: sort by ``GroupRow.key``).
 
     ``start_s``/``end_s`` must be the scan's. ``keep`` also carries each group's whole ``GroupResult``
     (fit and runs: what the report's figures draw); without it the parent holds rows only.
+    ``on_result`` is handed each group's whole ``GroupResult`` as it arrives, before its row is
+    yielded (a catalogue writing fits as they come), and the result is then let go unless ``keep``.
     """
     known = hulls or {}
     size = chunk_size(sum(map(len, groups.values())))
     tasks = []
     for chunk in _chunks_of_decays(list(groups.items()), size):
         chunk_hulls = {k.hull: known[k.hull] for k, _ in chunk if k.hull in known}
-        tasks.append((chunk, model, chunk_hulls, start_s, end_s, keep))
+        tasks.append((chunk, model, chunk_hulls, start_s, end_s, keep or on_result is not None))
     for _, rows in completed(executor, fit_chunk, tasks):
         for row in rows:
+            if on_result is not None and row.result is not None:
+                on_result(row.result)
             if progress is not None:
                 progress(row.key)
-            yield row
+            yield row if keep else replace(row, result=None)
 
 
 def _chunks_of_decays(
