@@ -29,8 +29,10 @@ from .inputs import input_notices
 T = TypeVar("T")
 
 #: A campaign is cut into about this many chunks (a chunk: one task for a worker), so two workers
-#: share the load evenly while the per-task cost (a pickle, a Dask round trip) stays small...
+#: share the load evenly while the per-task cost (a pickle) stays small; on Dask, where a task costs
+#: its worker about 6 ms more (bench_campaign_scale at N = 36), into fewer...
 CHUNKS = 32
+DASK_CHUNKS = 8
 #: ...and no chunk holds more decays than this (a worker's memory; the parent's progress steps).
 MAX_CHUNK_DECAYS = 64
 
@@ -111,7 +113,7 @@ def scan_campaign(
     progress: Callable[[Path], None] | None = None,
 ) -> CampaignScan:
     """Every file scanned in chunks on ``executor`` (here without one); ``progress`` after each file."""
-    size = chunk_size(len(paths))
+    size = chunk_size(len(paths), executor)
     chunks = [list(paths[i : i + size]) for i in range(0, len(paths), size)]
     done: dict[int, list[FileScan | SkippedFile]] = {}
     for index, scans in completed(executor, scan_chunk, [(chunk, start_s, end_s) for chunk in chunks]):
@@ -175,7 +177,7 @@ def fit_campaign(
     yielded (a catalogue writing fits as they come), and the result is then let go unless ``keep``.
     """
     known = hulls or {}
-    size = chunk_size(sum(map(len, groups.values())))
+    size = chunk_size(sum(map(len, groups.values())), executor)
     tasks = []
     for chunk in _chunks_of_decays(list(groups.items()), size):
         chunk_hulls = {k.hull: known[k.hull] for k, _ in chunk if k.hull in known}
@@ -205,9 +207,11 @@ def _chunks_of_decays(
         yield chunk
 
 
-def chunk_size(n: int) -> int:
-    """Decays per task: about ``CHUNKS`` tasks, at most ``MAX_CHUNK_DECAYS`` decays each."""
-    return max(1, min(MAX_CHUNK_DECAYS, math.ceil(n / CHUNKS)))
+def chunk_size(n: int, executor: Executor | None = None) -> int:
+    """Decays per task: about ``CHUNKS`` tasks (``DASK_CHUNKS`` on a Dask cluster), at most
+    ``MAX_CHUNK_DECAYS`` decays each."""
+    on_dask = type(executor).__module__.startswith("distributed")
+    return max(1, min(MAX_CHUNK_DECAYS, math.ceil(n / (DASK_CHUNKS if on_dask else CHUNKS))))
 
 
 def completed(
