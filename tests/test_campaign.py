@@ -24,6 +24,7 @@ from tankdaq.ident.campaign import (
     group_runs,
     identify_groups,
     markdown_table,
+    read_campaign,
     read_campaign_runs,
     write_simulated_campaign,
 )
@@ -310,3 +311,15 @@ def test_on_result_hands_each_whole_fit_over_as_it_comes_and_keeps_only_rows(
     for mine, serial in zip(handed, csv_results, strict=True):
         assert [run.meta["file"] for run in mine.runs] == [run.meta["file"] for run in serial.runs]
     assert_same_fits(handed, csv_results)
+
+
+def test_read_campaign_holds_every_decay_and_lists_the_skipped(csv_campaign: Path, tmp_path: Path) -> None:
+    """The in-memory reading (a session's few files): the decays of the files that read, in path order."""
+    bad = tmp_path / "trimaran_0.9T_pitch_8deg_run09.csv"
+    bad.write_text("time_s,angle_deg\n")
+    paths = [*find_recordings([csv_campaign]), bad]
+    found = read_campaign(paths)
+    assert [s.path for s in found.skipped] == [bad]
+    assert [run.meta["file"] for run in found.runs] == [
+        run.meta["file"] for path in paths[:-1] for run in read_campaign_runs(path)
+    ]

@@ -295,6 +295,14 @@ class SkippedFile:
         return f"skipped: {self.reason}" if named else f"skipped: {self.path}: {self.reason}"
 
 
+@dataclass
+class CampaignRead:
+    """The free decays of every file read, and the files skipped (the campaign goes on without them)."""
+
+    runs: list[DecayRun]
+    skipped: list[SkippedFile]
+
+
 def read_campaign_file(
     path: Path, start_s: float | None = None, end_s: float | None = None
 ) -> list[DecayRun] | SkippedFile:
@@ -306,6 +314,25 @@ def read_campaign_file(
         return read_campaign_runs(path, start_s, end_s)
     except TankdaqError as exc:
         return SkippedFile(path, str(exc))
+
+
+def read_campaign(
+    paths: Sequence[Path],
+    start_s: float | None = None,
+    end_s: float | None = None,
+    executor: Executor | None = None,
+) -> CampaignRead:
+    """Every recording's free decays (``read_campaign_file``), in path order, and the files skipped,
+    all held here: for a few files (a session, a test); ``tankdaq campaign`` streams
+    (``ident.campaign_stream``), its parent holding no decay."""
+    found = CampaignRead([], [])
+    n = len(paths)
+    for runs in executor_map(executor, read_campaign_file, paths, [start_s] * n, [end_s] * n):
+        if isinstance(runs, SkippedFile):
+            found.skipped.append(runs)
+        else:
+            found.runs.extend(runs)
+    return found
 
 
 # --------------------------------------------------------------------------------------------------
