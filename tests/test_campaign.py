@@ -24,9 +24,11 @@ from tankdaq.ident.campaign import (
     group_runs,
     identify_groups,
     markdown_table,
+    read_campaign,
     read_campaign_runs,
     write_simulated_campaign,
 )
+from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
 from tankdaq.ident.derived import b_eq
 from tankdaq.ident.executors import campaign_executor
 from tankdaq.records import DecayRun
@@ -279,3 +281,45 @@ def test_simulate_campaign_follows_a_plan(tmp_path):
     assert len(names) == 12 and names[0].startswith("swath_0.9T_roll_")
     bad = CliRunner().invoke(app, ["simulate-campaign", str(tmp_path / "x"), "--plan", "nope"])
     assert bad.exit_code == 2 and "seed001-swath-roll" in bad.output
+
+
+def test_a_streamed_campaign_gives_the_serial_rows_and_keeps_no_recording(
+    csv_campaign: Path, csv_results: list
+) -> None:
+    """Workers read the files themselves and send back rows only (``ident.campaign_stream``)."""
+    paths = find_recordings([csv_campaign])
+    with campaign_executor(jobs=2) as pool:
+        scan = scan_campaign(paths, executor=pool)
+        rows = sorted(fit_campaign(scan.groups(), executor=pool), key=lambda row: row.key)
+    assert scan.skipped == [] and scan.decays == len(paths)
+    assert [row.key for row in rows] == [result.key for result in csv_results]
+    for row, result in zip(rows, csv_results, strict=True):
+        assert row.result is None  # no fit, no runs: the parent holds the table row
+        assert row.row == result.summary()
+        assert row.warnings == tuple(result.warnings) and row.terms == tuple(result.fit.terms_)
+
+
+def test_on_result_hands_each_whole_fit_over_as_it_comes_and_keeps_only_rows(
+    csv_campaign: Path, csv_results: list
+) -> None:
+    """A consumer (a catalogue) gets every group's fit and runs; the rows yielded hold neither."""
+    scan = scan_campaign(find_recordings([csv_campaign]))
+    handed: list[GroupResult] = []
+    rows = list(fit_campaign(scan.groups(), on_result=handed.append))
+    assert [r.key for r in handed] == [row.key for row in rows] == [r.key for r in csv_results]
+    assert all(row.result is None for row in rows)
+    for mine, serial in zip(handed, csv_results, strict=True):
+        assert [run.meta["file"] for run in mine.runs] == [run.meta["file"] for run in serial.runs]
+    assert_same_fits(handed, csv_results)
+
+
+def test_read_campaign_holds_every_decay_and_lists_the_skipped(csv_campaign: Path, tmp_path: Path) -> None:
+    """The in-memory reading (a session's few files): the decays of the files that read, in path order."""
+    bad = tmp_path / "trimaran_0.9T_pitch_8deg_run09.csv"
+    bad.write_text("time_s,angle_deg\n")
+    paths = [*find_recordings([csv_campaign]), bad]
+    found = read_campaign(paths)
+    assert [s.path for s in found.skipped] == [bad]
+    assert [run.meta["file"] for run in found.runs] == [
+        run.meta["file"] for path in paths[:-1] for run in read_campaign_runs(path)
+    ]

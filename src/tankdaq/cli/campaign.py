@@ -18,7 +18,6 @@ from .app import (
     handles_errors,
     progress_bar,
     say,
-    warn_truncated,
 )
 from .identify import CatalogueOption, EndS, RunsQuery, StartS
 
@@ -83,19 +82,11 @@ def campaign_command(
     from ..catalogue.hooks import CatalogueWriter
     from ..catalogue.query import inputs_or_query
     from ..errors import InputError
-    from ..ident.campaign import (
-        find_campaign_hulls,
-        find_recordings,
-        group_runs,
-        identify_groups,
-        markdown_table,
-        read_campaign,
-    )
+    from ..ident.campaign import find_campaign_hulls, find_recordings, markdown_table
+    from ..ident.campaign_stream import fit_campaign, scan_campaign
     from ..ident.executors import campaign_executor, check_scheduler
-    from ..ident.inputs import input_notices
     from ..ident.online import prepare_identifier
     from ..physics.models import resolve_model
-    from .identify import echo_cuts
 
     if executor not in ("local", "dask"):
         raise InputError(f"--executor {executor!r} not understood: use local or dask")
@@ -126,47 +117,55 @@ def campaign_command(
         def advance_reading(path: Path) -> None:
             progress.update(reading, advance=1, description=f"reading {path.name}")
 
-        found = read_campaign(paths, start, end, pool, advance_reading)
-        if not found.runs:  # nothing to fit: the one file's own line, or every file's and a count
-            if len(found.skipped) == 1:
-                raise InputError(found.skipped[0].reason)
-            for skipped in found.skipped:
+        # the workers read the files and return each decay's group and lines, never its samples
+        scan = scan_campaign(paths, start, end, pool, advance_reading)
+        groups = scan.groups()
+        if not groups:  # nothing to fit: the one file's own line, or every file's and a count
+            if len(scan.skipped) == 1:
+                raise InputError(scan.skipped[0].reason)
+            for skipped in scan.skipped:
                 say(skipped.line)
             raise InputError(f"no decays read: all {len(paths)} files were skipped (listed above)")
         say(folders_line(paths))  # a subfolder's decays pooled in are named, not silent
-        for line in [*(skipped.line for skipped in found.skipped), *input_notices(found.runs)]:
+        for line in [*(skipped.line for skipped in scan.skipped), *scan.notices]:
             say(line)  # one bad file does not stop the campaign: listed, and exit 1 at the end
-        runs = found.runs
-        groups = group_runs(runs)
         known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
         fitting = progress.add_task("fitting", total=len(groups))
-        results = identify_groups(
+        streamed = fit_campaign(
             groups,
             model,
+            known,
+            pool,
+            start,
+            end,
+            keep=report is not None or full_scale,  # their figures and lines need the fits
             progress=lambda key: progress.update(fitting, advance=1, description=key.label),
-            hulls=known,
-            executor=pool,
+            # each group's fit onto its recordings' catalogue rows as it arrives, then let go
+            on_result=(lambda result: writer.add_campaign([result])) if writer.enabled else None,
         )
-        writer.add_campaign(results)  # each group's fit onto its recordings' catalogue rows
-        warn_truncated(runs)
-        echo_cuts(runs)
+        results = sorted(streamed, key=lambda row: row.key)  # rows only: a few kB per group
+        for line in scan.truncations:
+            say(line)
+        for line in scan.cuts:
+            err_console.print(f"cut: {line}", markup=False, highlight=False, soft_wrap=True)
         typer.echo(markdown_table(results), nl=False)
+        fits = [r.result for r in results if r.result is not None]
         if full_scale:
             from ..ident.derived import campaign_full_scale
 
-            typer.echo("\n".join(campaign_full_scale(results)))
-        failed = [r for r in results if r.fit is None]
-        for result in failed:
-            err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
+            typer.echo("\n".join(campaign_full_scale(fits)))
+        for result in results:
+            if result.error is not None:
+                err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
         for result in results:  # a fit physics says is implausible: said here, in the table and the report
             for line in result.warnings:
                 err_console.print(f"warning: {result.key.label}: {line}", markup=False, soft_wrap=True)
         if report is not None:
-            written = write_report(results, report, pool)
+            written = write_report(fits, report, pool)
             err_console.print(f"wrote {len(written)} files to {report}", markup=False)
     writer.close()
-    if found.skipped:
-        count = f"{len(found.skipped)} of {len(paths)} files skipped (listed above)"
+    if scan.skipped:
+        count = f"{len(scan.skipped)} of {len(paths)} files skipped (listed above)"
         raise fail(f"{count}; the results cover the others", 1)
 
 

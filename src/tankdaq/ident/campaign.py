@@ -225,14 +225,18 @@ def _rounded_first_peak_deg(run: DecayRun) -> float:
     return float(round(abs(math.degrees(float(run.angle[0])))))
 
 
+def run_key(run: DecayRun) -> GroupKey:
+    """The group of a labelled run (``read_campaign_runs``)."""
+    return GroupKey(
+        str(run.meta["hull"]), run.axis, round(float(run.meta["draft"]), 6), float(run.meta["angle_deg"])
+    )
+
+
 def group_runs(runs: Iterable[DecayRun]) -> dict[GroupKey, list[DecayRun]]:
     """Runs by (hull, axis, draft, nominal angle), in sorted key order."""
     groups: dict[GroupKey, list[DecayRun]] = defaultdict(list)
     for run in runs:
-        key = GroupKey(
-            str(run.meta["hull"]), run.axis, round(float(run.meta["draft"]), 6), float(run.meta["angle_deg"])
-        )
-        groups[key].append(run)
+        groups[run_key(run)].append(run)
     return dict(sorted(groups.items()))
 
 
@@ -332,20 +336,17 @@ def read_campaign(
     start_s: float | None = None,
     end_s: float | None = None,
     executor: Executor | None = None,
-    progress: Callable[[Path], None] | None = None,
 ) -> CampaignRead:
-    """Every recording's free decays (``read_campaign_file``), in path order, and the files skipped;
-    ``executor`` spreads the files over cores or machines, ``progress`` is called after each file."""
+    """Every recording's free decays (``read_campaign_file``), in path order, and the files skipped,
+    all held here: for a few files (a session, a test); ``tankdaq campaign`` streams
+    (``ident.campaign_stream``), its parent holding no decay."""
     found = CampaignRead([], [])
     n = len(paths)
-    found_per_file = executor_map(executor, read_campaign_file, paths, [start_s] * n, [end_s] * n)
-    for path, runs in zip(paths, found_per_file, strict=True):
+    for runs in executor_map(executor, read_campaign_file, paths, [start_s] * n, [end_s] * n):
         if isinstance(runs, SkippedFile):
             found.skipped.append(runs)
         else:
             found.runs.extend(runs)
-        if progress is not None:
-            progress(path)
     return found
 
 
@@ -354,8 +355,36 @@ def read_campaign(
 # --------------------------------------------------------------------------------------------------
 
 
-def write_csv(results: Sequence[GroupResult], path: Path) -> Path:
-    rows = [r.summary() for r in results]
+@dataclass(frozen=True)
+class GroupRow:
+    """One group's row of the campaign table (``GroupResult.summary``), its fitted terms and warnings:
+    what a streamed campaign keeps of a group (``ident.campaign_stream``); the whole ``GroupResult``
+    (fit and runs) only when asked for (the report's figures draw them)."""
+
+    key: GroupKey
+    row: dict[str, Any]
+    terms: tuple[str, ...]  # empty when the group was not fitted
+    warnings: tuple[str, ...]
+    result: GroupResult | None = None
+
+    @classmethod
+    def of(cls, result: GroupResult, keep: bool = False) -> GroupRow:
+        terms = tuple(result.fit.terms_) if result.fit is not None else ()
+        return cls(result.key, result.summary(), terms, tuple(result.warnings), result if keep else None)
+
+    @property
+    def error(self) -> str | None:
+        """Why the group was not fitted; None when it was."""
+        return None if self.terms else str(self.row.get("error"))
+
+
+def table_rows(results: Sequence[GroupResult | GroupRow]) -> list[GroupRow]:
+    """The table's rows of fits or of rows already made."""
+    return [r if isinstance(r, GroupRow) else GroupRow.of(r) for r in results]
+
+
+def write_csv(results: Sequence[GroupResult | GroupRow], path: Path) -> Path:
+    rows = [r.row for r in table_rows(results)]
     columns = list(dict.fromkeys(k for row in rows for k in row))
     with path.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=columns, restval="")
@@ -364,17 +393,18 @@ def write_csv(results: Sequence[GroupResult], path: Path) -> Path:
     return path
 
 
-def markdown_table(results: Sequence[GroupResult]) -> str:
+def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
     """The campaign as a Markdown table: coefficients ± 1 sigma, period, B_eq at the initial angle, R²."""
-    terms = list(dict.fromkeys(t for r in results if r.fit for t in r.fit.terms_))
-    rows = [result.summary() for result in results]
-    hat = any("b44_hat" in row for row in rows)  # B̂44 where a hull gives the beam and the inertia
+    rows = table_rows(results)
+    terms = list(dict.fromkeys(t for r in rows for t in r.terms))
+    hat = any("b44_hat" in r.row for r in rows)  # B̂44 where a hull gives the beam and the inertia
     header = ["hull", "axis", "draft", "angle deg", "runs", *terms, "T0 s", "zeta", "B_eq/I 1/s"]
     header += ["B̂44", "R² angle"] if hat else ["R² angle"]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    for result, row in zip(results, rows, strict=True):
+    for result in rows:
+        row = result.row
         cells = [row["hull"], row["axis"], row["draft"], f"{row['angle_deg']:g}", str(row["runs"])]
-        if result.fit is None:
+        if result.error is not None:
             cells += [f"not fitted: {result.error}"] + [""] * (len(header) - len(cells) - 1)
         else:
             cells += [f"{row[t]:.4g} ± {row[t + '_std']:.2g}" if t in row else "" for t in terms]
@@ -386,7 +416,7 @@ def markdown_table(results: Sequence[GroupResult]) -> str:
                 f"{row['r2_angle']:.4f}",
             ]
         lines.append("| " + " | ".join(cells) + " |")
-    implausible = [f"- {r.key.label}: {line}" for r in results for line in r.warnings]
+    implausible = [f"- {r.key.label}: {line}" for r in rows for line in r.warnings]
     if implausible:
         lines += ["", "Warnings (physically implausible fits, docs/models.md):", "", *implausible]
     return "\n".join(lines) + "\n"
@@ -479,12 +509,12 @@ def write_simulated_campaign(
                     np.savetxt(path, table, delimiter=",", header="time_s,angle_deg,rate_deg_s", comments="")
                 else:
                     labels = (hull_name, axis, draft, angle_deg)
-                    path = _write_mcap(folder / f"{stem}.mcap", labels, t, angle, rate, test)
+                    path = write_simulated_recording(folder / f"{stem}.mcap", labels, t, angle, rate, test)
                 written.append(path)
     return written
 
 
-def _write_mcap(
+def write_simulated_recording(
     path: Path,
     labels: tuple[str, str, float, float],
     t: np.ndarray,
@@ -492,6 +522,8 @@ def _write_mcap(
     rate: np.ndarray,
     test: SimulatedTest,
 ) -> Path:
+    """A tankdaq recording of a simulated decay (a held tilt, the samples, a release event), labelled
+    (hull, axis, draft, nominal angle) in its metadata."""
     from ..store.writer import RecordingWriter
 
     hull, axis, draft, angle_deg = labels

@@ -1,0 +1,232 @@
+"""A campaign that streams: the parent holds each decay's group label and each group's table row, never
+the recordings nor the fits' per-sample state.
+
+Two passes over the files, both in the workers (``ident.executors``), in chunks. The scan reads each file,
+cuts its free decays and returns what groups them (hull, axis, draft, nominal angle per decay) and the
+lines to say; the fit sends each worker a chunk of groups as file paths, the worker reads those files
+again, fits each group and returns its row (``GroupRow``). Reading a decay twice costs about 2 ms of
+CPU against its 5-6 ms fit; handing the decays and fits to the parent cost it 0.8 MB per decay
+(``bench/bench_campaign_scale.py``, docs/benchmarks.md). ``fit_campaign`` yields the rows as workers
+finish them, so a consumer (a table, a catalogue) can write them as they come.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor, as_completed
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, TypeVar
+
+from ..config import Hull
+from ..records import DecayRun
+from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
+from .free_decay import cut_lines
+from .inputs import input_notices
+
+T = TypeVar("T")
+
+#: A campaign is cut into about this many chunks (a chunk: one task for a worker), so two workers
+#: share the load evenly while the per-task cost (a pickle) stays small; on Dask, where a task costs
+#: its worker about 6 ms more (bench_campaign_scale at N = 36), into fewer...
+CHUNKS = 32
+DASK_CHUNKS = 8
+#: ...and no chunk holds more decays than this (a worker's memory; the parent's progress steps).
+MAX_CHUNK_DECAYS = 64
+
+
+@dataclass(frozen=True)
+class RunRef:
+    """Where a decay is: its file, and its place among the file's cut free decays."""
+
+    path: Path
+    index: int
+
+
+@dataclass(frozen=True)
+class FileScan:
+    """What the scan keeps of one file: its decays' group keys and the lines the campaign says of it."""
+
+    path: Path
+    keys: tuple[GroupKey, ...]  # one per decay, in file order
+    notices: tuple[str, ...]  # ident.inputs.input_notices
+    truncation: str | None  # the recording was cut short (meta["truncation"])
+    cuts: tuple[str, ...]  # where each decay's free part was cut, and why
+
+
+@dataclass
+class CampaignScan:
+    """Every file scanned (path order) and those skipped (the campaign goes on without them)."""
+
+    files: list[FileScan]
+    skipped: list[SkippedFile]
+
+    def groups(self) -> dict[GroupKey, list[RunRef]]:
+        """Decays by group, in sorted key order; within a group in path order (as ``group_runs``)."""
+        groups: dict[GroupKey, list[RunRef]] = defaultdict(list)
+        for scan in self.files:
+            for index, key in enumerate(scan.keys):
+                groups[key].append(RunRef(scan.path, index))
+        return dict(sorted(groups.items()))
+
+    @property
+    def decays(self) -> int:
+        return sum(len(scan.keys) for scan in self.files)
+
+    @property
+    def notices(self) -> list[str]:
+        return list(dict.fromkeys(line for scan in self.files for line in scan.notices))
+
+    @property
+    def truncations(self) -> list[str]:
+        return [scan.truncation for scan in self.files if scan.truncation]
+
+    @property
+    def cuts(self) -> list[str]:
+        return [line for scan in self.files for line in scan.cuts]
+
+
+def scan_file(path: Path, start_s: float | None = None, end_s: float | None = None) -> FileScan | SkippedFile:
+    """A file's group keys and lines (``read_campaign_file``), without its samples."""
+    runs = read_campaign_file(path, start_s, end_s)
+    if isinstance(runs, SkippedFile):
+        return runs
+    truncation = next((str(r.meta["truncation"]) for r in runs if r.meta.get("truncation")), None)
+    keys = tuple(run_key(run) for run in runs)
+    return FileScan(path, keys, tuple(input_notices(runs)), truncation, tuple(cut_lines(runs)))
+
+
+def scan_chunk(
+    paths: Sequence[Path], start_s: float | None, end_s: float | None
+) -> list[FileScan | SkippedFile]:
+    """``scan_file`` of a chunk of files: one task for a worker."""
+    return [scan_file(path, start_s, end_s) for path in paths]
+
+
+def scan_campaign(
+    paths: Sequence[Path],
+    start_s: float | None = None,
+    end_s: float | None = None,
+    executor: Executor | None = None,
+    progress: Callable[[Path], None] | None = None,
+) -> CampaignScan:
+    """Every file scanned in chunks on ``executor`` (here without one); ``progress`` after each file."""
+    size = chunk_size(len(paths), executor)
+    chunks = [list(paths[i : i + size]) for i in range(0, len(paths), size)]
+    done: dict[int, list[FileScan | SkippedFile]] = {}
+    for index, scans in completed(executor, scan_chunk, [(chunk, start_s, end_s) for chunk in chunks]):
+        done[index] = scans
+        for scan in scans:
+            if progress is not None:
+                progress(scan.path)
+    found = CampaignScan([], [])
+    for index in sorted(done):
+        for scan in done[index]:
+            (found.skipped if isinstance(scan, SkippedFile) else found.files).append(scan)  # type: ignore[arg-type]
+    return found
+
+
+def fit_chunk(
+    groups: Sequence[tuple[GroupKey, Sequence[RunRef]]],
+    model: str,
+    hulls: dict[str, Hull],
+    start_s: float | None,
+    end_s: float | None,
+    keep: bool,
+) -> list[GroupRow]:
+    """Read a chunk of groups' files (each once), fit each group (``fit_group``), return the rows."""
+    read: dict[Path, list[DecayRun]] = {}
+    rows = []
+    for key, refs in groups:
+        runs = [_decays(ref.path, read, start_s, end_s)[ref.index] for ref in refs]
+        rows.append(GroupRow.of(fit_group(key, runs, model, hulls.get(key.hull)), keep))
+    return rows
+
+
+def _decays(path: Path, read: dict[Path, list[DecayRun]], start_s: float | None, end_s: float | None) -> list:
+    """A file's cut decays, read once per chunk; a file that no longer reads as it did at the scan
+    stops the campaign with its reason (it changed while the campaign ran)."""
+    if path not in read:
+        runs = read_campaign_file(path, start_s, end_s)
+        if isinstance(runs, SkippedFile):
+            from ..errors import TankdaqError
+
+            raise TankdaqError(f"{runs.reason} (it changed while the campaign ran; run it again)")
+        read[path] = runs
+    return read[path]
+
+
+def fit_campaign(
+    groups: dict[GroupKey, list[RunRef]],
+    model: str = "ittc-quadratic-restoring",
+    hulls: dict[str, Hull] | None = None,
+    executor: Executor | None = None,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    keep: bool = False,
+    progress: Callable[[GroupKey], None] | None = None,
+    on_result: Callable[[GroupResult], None] | None = None,
+) -> Iterator[GroupRow]:
+    """Each group's row, yielded as its chunk completes (not in key order: sort by ``GroupRow.key``).
+
+    ``start_s``/``end_s`` must be the scan's. ``keep`` also carries each group's whole ``GroupResult``
+    (fit and runs: what the report's figures draw); without it the parent holds rows only.
+    ``on_result`` is handed each group's whole ``GroupResult`` as it arrives, before its row is
+    yielded (a catalogue writing fits as they come), and the result is then let go unless ``keep``.
+    """
+    known = hulls or {}
+    size = chunk_size(sum(map(len, groups.values())), executor)
+    tasks = []
+    for chunk in _chunks_of_decays(list(groups.items()), size):
+        chunk_hulls = {k.hull: known[k.hull] for k, _ in chunk if k.hull in known}
+        tasks.append((chunk, model, chunk_hulls, start_s, end_s, keep or on_result is not None))
+    for _, rows in completed(executor, fit_chunk, tasks):
+        for row in rows:
+            if on_result is not None and row.result is not None:
+                on_result(row.result)
+            if progress is not None:
+                progress(row.key)
+            yield row if keep else replace(row, result=None)
+
+
+def _chunks_of_decays(
+    groups: list[tuple[GroupKey, list[RunRef]]], size: int
+) -> Iterator[list[tuple[GroupKey, list[RunRef]]]]:
+    """Whole groups, gathered until a chunk holds ``size`` decays."""
+    chunk: list[tuple[GroupKey, list[RunRef]]] = []
+    decays = 0
+    for group in groups:
+        chunk.append(group)
+        decays += len(group[1])
+        if decays >= size:
+            yield chunk
+            chunk, decays = [], 0
+    if chunk:
+        yield chunk
+
+
+def chunk_size(n: int, executor: Executor | None = None) -> int:
+    """Decays per task: about ``CHUNKS`` tasks (``DASK_CHUNKS`` on a Dask cluster), at most
+    ``MAX_CHUNK_DECAYS`` decays each."""
+    on_dask = type(executor).__module__.startswith("distributed")
+    return max(1, min(MAX_CHUNK_DECAYS, math.ceil(n / (DASK_CHUNKS if on_dask else CHUNKS))))
+
+
+def completed(
+    executor: Executor | None, function: Callable[..., T], tasks: Sequence[tuple[Any, ...]]
+) -> Iterator[tuple[int, T]]:
+    """(task index, result) of each task as it completes: all submitted at once (their arguments are
+    paths and labels, small), in this process in order without an executor."""
+    if executor is None:
+        for index, arguments in enumerate(tasks):
+            yield index, function(*arguments)
+        return
+    futures = {executor.submit(function, *arguments): i for i, arguments in enumerate(tasks)}
+    try:
+        for future in as_completed(futures):
+            yield futures.pop(future), future.result()
+    finally:  # a failed task or a consumer that stopped early: what has not started never will
+        for future in futures:
+            future.cancel()

@@ -1,0 +1,57 @@
+"""``tankdaq campaign --executor dask`` on a real cluster: a ``dask scheduler`` and two ``dask worker``
+processes started (and stopped) here, 360 short decays, the pool's results to 1e-12."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from campaign_scale import dask_cluster, write_many_decays
+from tankdaq.cli import app
+from tankdaq.ident.campaign import SimulatedTest, find_campaign_hulls, find_recordings
+from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
+from tankdaq.ident.executors import campaign_executor
+
+pytest.importorskip("distributed", reason="the dask extra is not installed (pip install 'tankdaq[dask]')")
+
+N_DECAYS = 360
+SHORT = SimulatedTest(duration_s=3.0)  # three pitch periods: enough to fit, cheap to read
+
+
+def test_a_dask_cluster_of_two_workers_gives_the_pools_results(tmp_path: Path) -> None:
+    folder = tmp_path / "decays"
+    write_many_decays(folder, N_DECAYS, hulls=("trimaran",), drafts=(1.0,), test=SHORT)
+    with campaign_executor(jobs=2) as pool:
+        scan = scan_campaign(find_recordings([folder]), executor=pool)
+        groups = scan.groups()
+        hulls = find_campaign_hulls({key.hull for key in groups})  # as the command: dimensional columns
+        rows = sorted(fit_campaign(groups, hulls=hulls, executor=pool), key=lambda row: row.key)
+    report = tmp_path / "report"
+    with dask_cluster(2, tmp_path) as (address, processes):
+        command = [
+            "campaign",
+            str(folder),
+            "--executor",
+            "dask",
+            "--scheduler",
+            address,
+            "--report",
+            str(report),
+        ]
+        result = CliRunner().invoke(app, command)
+    assert all(process.poll() is not None for process in processes)  # every process started is stopped
+    assert result.exit_code == 0, result.output
+    with (report / "campaign.csv").open() as fh:
+        on_dask = list(csv.DictReader(fh))
+    assert len(rows) == N_DECAYS // 2 and sum(row.row["runs"] for row in rows) == N_DECAYS
+    assert len(on_dask) == len(rows)
+    for mine, expected in zip(on_dask, (row.row for row in rows), strict=True):
+        assert mine["error"] == expected["error"] == "" and mine.keys() == expected.keys()
+        for column, value in expected.items():
+            if isinstance(value, float):
+                assert float(mine[column]) == pytest.approx(value, rel=1e-12, abs=1e-12), column
+            else:
+                assert mine[column] == str(value), column
