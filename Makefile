@@ -60,7 +60,7 @@ catalogue-test-deps:
 
 test: $(STAMP) lint docs viewer-test-deps catalogue-test-deps
 	$(BIN)/python -m tankdaq.prepare
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal --durations=25
 
 bench: $(STAMP)
 	$(BIN)/python bench/run_all.py
