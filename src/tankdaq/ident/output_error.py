@@ -42,11 +42,14 @@ from .compiled import (
     simulate_with_sensitivities,
     substeps,
     term_codes,
-    term_matrix,
 )
 from .derived import natural_period
 from .equation_error import EquationError, check_runs, exogenous_input
+from .fit_statistics import summarize_residuals, whiteness_warnings
 from .least_squares import levenberg_marquardt
+from .observation_lag import LagOperator
+from .one_step import one_step_rms, rms
+from .parameter_layout import OBSERVATION_PARAMS, RING_PARAMS, RING_RUN_PARAMS, ParameterLayout
 from .signals import white_noise_level
 from .uncertainty import (
     bic,
@@ -54,81 +57,11 @@ from .uncertainty import (
     coefficient_warnings,
     correlation_from_covariance,
     hac_covariance,
-    residual_whiteness,
-    whiteness_warning,
 )
 
-#: The observation parameters shared by all runs, in layout order, with the setting that asks for each.
-OBSERVATION_PARAMS: dict[str, str] = {
-    "angle_gain_error": "fit_gain",
-    "angle_lag_s": "fit_lag",
-    "gyro_bias_rad_s": "fit_gyro_bias",
-}
-#: The unmeasured ringing's shared parameters, and its per-run amplitudes.
-RING_PARAMS: tuple[str, str] = ("ring_omega_rad_s", "ring_decay_1_s")
-RING_RUN_PARAMS: tuple[str, str] = ("ring_cos", "ring_sin")
 #: Below this angle R^2 the fit from the equation-error start is retried from a linear start.
 FALLBACK_R2 = 0.9
 _KU_CODE = term_codes(("ku",))
-
-
-class ParameterLayout:
-    """Where each parameter sits in the vector: the shared ones, then each run's own.
-
-    Shared: the dynamics terms, the input's coupling coefficients, the ringing's
-    frequency and decay rate, the observation parameters. Per run: initial
-    angle and rate, the angle offset, the ringing's amplitudes.
-    """
-
-    def __init__(
-        self,
-        dynamics: tuple[str, ...],
-        couplings: tuple[str, ...],
-        ringing: bool,
-        observation: tuple[str, ...],
-        offset: bool,
-        n_runs: int,
-    ) -> None:
-        self.dynamics = dynamics
-        self.couplings = couplings
-        self.ringing = ringing
-        self.shared = (*dynamics, *couplings, *(RING_PARAMS if ringing else ()), *observation)
-        self.per_run = (
-            "angle0",
-            "rate0",
-            *(("angle_offset_rad",) if offset else ()),
-            *(RING_RUN_PARAMS if ringing else ()),
-        )
-        self.n_runs = n_runs
-        self.n_shared = len(self.shared)
-        self.size = self.n_shared + len(self.per_run) * n_runs
-        self.names = [*self.shared] + [f"{name}[{r}]" for r in range(n_runs) for name in self.per_run]
-        self._shared_index = {name: i for i, name in enumerate(self.shared)}
-
-    def index(self, name: str) -> int | None:
-        """Position of a shared parameter (None when the model does not have it)."""
-        return self._shared_index.get(name)
-
-    def run_index(self, r: int, name: str) -> int | None:
-        """Position of run r's own parameter (None when the model does not have it)."""
-        return self.run_at(r, name) if name in self.per_run else None
-
-    def at(self, name: str) -> int:
-        """Position of a shared parameter the model has."""
-        return self._shared_index[name]
-
-    def run_at(self, r: int, name: str) -> int:
-        """Position of run r's own parameter the model has."""
-        return self.n_shared + len(self.per_run) * r + self.per_run.index(name)
-
-    def run_slice(self, r: int) -> slice:
-        start = self.n_shared + len(self.per_run) * r
-        return slice(start, start + len(self.per_run))
-
-    def value(self, params: np.ndarray, name: str, default: float = 0.0, run: int | None = None) -> float:
-        """A parameter's value, shared or (with ``run``) of one run; ``default`` when the model lacks it."""
-        i = self.index(name) if run is None else self.run_index(run, name)
-        return default if i is None else float(params[i])
 
 
 @dataclass
@@ -390,9 +323,9 @@ class OutputError(EstimatorMixin):
         for r, run in enumerate(self.runs_):
             pred = self._predict_run(params, r, with_jacobian=False)
             kept = self._kept[r]
-            sig = {"angle": max(_rms((run.angle - pred["angle"])[kept]), 1e-12)}
+            sig = {"angle": max(rms((run.angle - pred["angle"])[kept]), 1e-12)}
             if self._has_rate[r]:
-                sig["rate"] = max(_rms((run.rate - pred["rate"])[kept]), 1e-12)
+                sig["rate"] = max(rms((run.rate - pred["rate"])[kept]), 1e-12)
             out.append(sig)
         return out
 
@@ -580,16 +513,8 @@ class OutputError(EstimatorMixin):
         self.natural_period_s_ = natural_period(self.coefficients_)
         n_obs = res_w.size
         n_free = int(free.sum())
-        if self.cov_type == "hac":
-            period_samples = self.natural_period_s_ / float(np.median(np.diff(self.runs_[0].t)))
-            bandwidth = (
-                max(1, round(self.hac_periods * period_samples)) if math.isfinite(period_samples) else 1
-            )
-            cov_free = hac_covariance(self.score_blocks_, bandwidth) * n_obs / max(n_obs - n_free, 1)
-        else:
-            cov_free = classic_covariance(jac_w[:, free], res_w, n_free)
         cov = np.zeros((layout.size, layout.size))
-        cov[np.ix_(free, free)] = cov_free
+        cov[np.ix_(free, free)] = self._free_covariance(res_w, jac_w, free)
         self.param_covariance_ = cov
         self.covariance_ = cov[np.ix_(term_index, term_index)]
         std = np.sqrt(np.clip(np.diag(self.covariance_), 0.0, None))
@@ -611,31 +536,18 @@ class OutputError(EstimatorMixin):
         self.offsets_ = [p.get("angle_offset_rad", 0.0) for p in self.run_params_]
         self.initial_states_ = [(p["angle0"], p["rate0"]) for p in self.run_params_]
 
-        self.fitted_, self.residuals_ = [], []
-        ss_res = ss_tot = 0.0
-        blocks_res: list[np.ndarray] = []
-        blocks_sigma: list[float] = []
-        for r, run in enumerate(self.runs_):
-            pred = self._predict_run(params, r, with_jacobian=False)
-            resid_angle = run.angle - pred["angle"]
-            resid_rate = run.rate - pred["rate"] if self._has_rate[r] else None
-            self.fitted_.append({"angle": pred["angle"], "rate": pred["rate"]})
-            self.residuals_.append({"angle": resid_angle, "rate": resid_rate})
-            kept = self._kept[r]
-            ss_res += float(resid_angle[kept] @ resid_angle[kept])
-            ss_tot += float(np.sum((run.angle[kept] - run.angle[kept].mean()) ** 2))
-            for output, resid in (("angle", resid_angle), ("rate", resid_rate)):
-                if resid is not None:
-                    blocks_res.append(resid[kept])
-                    blocks_sigma.append(self.sigmas_[r][output])
-        self.r2_angle_ = 1.0 - ss_res / ss_tot
-        all_angle = np.concatenate(
-            [run.angle[kept] for run, kept in zip(self.runs_, self._kept, strict=True)]
+        summary = summarize_residuals(
+            self.runs_,
+            [self._predict_run(params, r, with_jacobian=False) for r in range(len(self.runs_))],
+            self._kept,
+            self._has_rate,
+            self.sigmas_,
         )
-        self.nrmse_ = math.sqrt(ss_res / all_angle.size) / float(np.ptp(all_angle))
+        self.fitted_, self.residuals_ = summary.fitted, summary.residuals
+        self.r2_angle_, self.nrmse_ = summary.r2_angle, summary.nrmse
         self.n_obs_ = n_obs
-        self.bic_ = bic(blocks_res, n_free, None if self.reweight else blocks_sigma)
-        self.seed_objective_ = _one_step_rms(
+        self.bic_ = bic(summary.blocks, n_free, None if self.reweight else summary.block_sigmas)
+        self.seed_objective_ = one_step_rms(
             self._codes,
             self._kernel_theta(params),
             self.runs_,
@@ -646,14 +558,19 @@ class OutputError(EstimatorMixin):
         self.warnings_ = []
         if self.compute_diagnostics:
             self.warnings_ = coefficient_warnings(self.terms_, theta, std, self.correlation_)
-            for run, resid, kept in zip(self.runs_, self.residuals_, self._kept, strict=True):
-                for output in ("angle", "rate"):
-                    if resid[output] is not None:
-                        warning = whiteness_warning(
-                            run.name, output, *residual_whiteness(resid[output][kept])
-                        )
-                        if warning:
-                            self.warnings_.append(warning)
+            self.warnings_ += whiteness_warnings(self.runs_, self.residuals_, self._kept)
+
+    def _free_covariance(self, res_w: np.ndarray, jac_w: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """Covariance of the free parameters: HAC over about ``hac_periods`` natural periods (the residuals
+        of a decay are coloured), or classic."""
+        n_obs, n_free = res_w.size, int(free.sum())
+        if self.cov_type == "hac":
+            period_samples = self.natural_period_s_ / float(np.median(np.diff(self.runs_[0].t)))
+            bandwidth = (
+                max(1, round(self.hac_periods * period_samples)) if math.isfinite(period_samples) else 1
+            )
+            return hac_covariance(self.score_blocks_, bandwidth) * n_obs / max(n_obs - n_free, 1)
+        return classic_covariance(jac_w[:, free], res_w, n_free)
 
     def predict(
         self,
@@ -684,111 +601,3 @@ class OutputError(EstimatorMixin):
         if offset is not None and self._layout.run_index(run_index, "angle_offset_rad") is None:
             pred["angle"] = pred["angle"] + offset
         return pred["angle"], pred["rate"]
-
-
-class LagOperator:
-    """x(t - lag) on the grid t from the simulated x and x' there: a linear map, so sensitivities follow.
-
-    Inside the grid a cubic Hermite interpolation (error ~ (omega h)^4, whatever
-    the lag); beyond the ends a second-order Taylor step from the end sample,
-    x + d x' + d^2/2 x'' with d = (t - lag) - t_end, using the model's x''.
-    """
-
-    def __init__(self, t: np.ndarray, lag: float) -> None:
-        n = t.size
-        s = t - lag
-        i = np.clip(np.searchsorted(t, s) - 1, 0, n - 2)
-        h = t[i + 1] - t[i]
-        u = (s - t[i]) / h
-        self.lo, self.hi = i, i + 1
-        # weights of x[lo], h x'[lo], x[hi], h x'[hi] and their derivatives in the lag (ds/dlag = -1)
-        self.w = [
-            (1 + 2 * u) * (1 - u) ** 2,
-            h * u * (1 - u) ** 2,
-            u * u * (3 - 2 * u),
-            h * u * u * (u - 1),
-        ]
-        self.dw = [
-            -(6 * u * u - 6 * u) / h,
-            -(3 * u * u - 4 * u + 1),
-            -(6 * u - 6 * u * u) / h,
-            -(3 * u * u - 2 * u),
-        ]
-        self.wa = np.zeros(n)
-        self.dwa = np.zeros(n)
-        self.end = np.zeros(n, dtype=int)  # 0: first sample's x'', 1: last sample's
-        for end, outside in ((0, s < t[0]), (-1, s > t[-1])):
-            if not np.any(outside):
-                continue
-            d = s[outside] - t[end]
-            self.lo[outside] = self.hi[outside] = end % n
-            self.w[0][outside], self.w[1][outside] = 1.0, d
-            self.w[2][outside], self.w[3][outside] = 0.0, 0.0
-            self.dw[0][outside], self.dw[1][outside] = 0.0, -1.0
-            self.dw[2][outside], self.dw[3][outside] = 0.0, 0.0
-            self.wa[outside], self.dwa[outside] = 0.5 * d * d, -d
-            self.end[outside] = 0 if end == 0 else 1
-
-    def _combine(
-        self, w: list[np.ndarray], wa: np.ndarray, x: np.ndarray, v: np.ndarray, acc: np.ndarray
-    ) -> np.ndarray:
-        def col(weight: np.ndarray) -> np.ndarray:
-            return weight if x.ndim == 1 else weight[:, None]
-
-        return (
-            col(w[0]) * x[self.lo]
-            + col(w[1]) * v[self.lo]
-            + col(w[2]) * x[self.hi]
-            + col(w[3]) * v[self.hi]
-            + col(wa) * acc[self.end]
-        )
-
-    def apply(self, x: np.ndarray, v: np.ndarray, acc_ends: np.ndarray) -> np.ndarray:
-        """x(t - lag) from x, x' on the grid (or their sensitivities, one column per parameter)."""
-        return self._combine(self.w, self.wa, x, v, acc_ends)
-
-    def apply_lag_derivative(self, x: np.ndarray, v: np.ndarray, acc_ends: np.ndarray) -> np.ndarray:
-        """d x(t - lag) / d lag."""
-        return self._combine(self.dw, self.dwa, x, v, acc_ends)
-
-
-def seed_objective(
-    terms: Sequence[str],
-    theta: np.ndarray,
-    runs: Sequence[DecayRun],
-    offsets: Sequence[float],
-    inputs: Sequence[np.ndarray] | None = None,
-    friction_eps: float = 1e-3,
-) -> float:
-    """RMS of the one-step-ahead predicted rate (seed 000 eq. 4.5-4.6), rad/s.
-
-    As in the seeds' software (and ``ident.evolutionary``): one Euler step from
-    the measured state at k predicts the rate at k+1; the measured rate is the
-    gyro, or the angle differentiated when there is none. The angle is taken
-    relative to the fitted offset, the model's equilibrium.
-    """
-    return _one_step_rms(
-        term_codes(terms), np.asarray(theta, dtype=float), runs, offsets, inputs, friction_eps
-    )
-
-
-def _one_step_rms(
-    codes: np.ndarray,
-    theta: np.ndarray,
-    runs: Sequence[DecayRun],
-    offsets: Sequence[float],
-    inputs: Sequence[np.ndarray] | None,
-    friction_eps: float,
-) -> float:
-    errors = []
-    for r, (run, offset) in enumerate(zip(runs, offsets, strict=True)):
-        x = run.angle - offset
-        v = run.rate if run.rate is not None else np.gradient(run.angle, run.t)
-        u = np.zeros_like(run.t) if inputs is None else inputs[r]
-        acc = -term_matrix(codes, x[:-1], v[:-1], u[:-1], friction_eps) @ theta
-        errors.append(v[1:] - (v[:-1] + np.diff(run.t) * acc))
-    return _rms(np.concatenate(errors))
-
-
-def _rms(a: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(a))))
