@@ -21,7 +21,9 @@ from typing import Protocol
 import numpy as np
 
 from ...errors import InputError
-from ...physics.scenario import DecayScenario, RunTruth, SensorModel, still_trace
+from ...physics.scenario import DecayScenario
+from ...physics.sensor import SensorModel
+from ...physics.truth import RunTruth, still_trace
 from ...xsens.batch import DecodedBlock, decode_buffer
 from ...xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS
 from ...xsens.frame_scan import scan_frames
