@@ -11,7 +11,8 @@ import pytest
 
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.config import hull_scenario
-from tankdaq.device.driver import MTiDriver, open_error_message
+from tankdaq.device.driver import MTiDriver
+from tankdaq.device.link import open_error_message
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
 from tankdaq.errors import DeviceError, DeviceGone, DeviceNotFound, InputError
 from tankdaq.physics.truth import TICK_MODULUS
