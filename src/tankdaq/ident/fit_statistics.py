@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..records import DecayRun
+from .signals import white_noise_level
 from .uncertainty import residual_whiteness, whiteness_warning
 
 
@@ -77,3 +78,12 @@ def whiteness_warnings(
                 if warning:
                     warnings.append(warning)
     return warnings
+
+
+def initial_noise_levels(run: DecayRun, has_rate: bool) -> dict[str, float]:
+    """Noise levels from third differences, floored so a clean record does not get infinite weight."""
+    floor_angle = 1e-4 * float(np.ptp(run.angle))
+    sig = {"angle": max(white_noise_level(run.angle), floor_angle)}
+    if has_rate and run.rate is not None:
+        sig["rate"] = max(white_noise_level(run.rate), 1e-4 * float(np.ptp(run.rate)))
+    return sig

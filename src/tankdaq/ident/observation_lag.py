@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .compiled import acceleration_partials
+from .forcing import Forcing
+
 
 class LagOperator:
     """x(t - lag) on the grid t from the simulated x and x' there: a linear map, so sensitivities follow.
@@ -73,3 +76,33 @@ class LagOperator:
     def apply_lag_derivative(self, x: np.ndarray, v: np.ndarray, acc_ends: np.ndarray) -> np.ndarray:
         """d x(t - lag) / d lag."""
         return self._combine(self.dw, self.dwa, x, v, acc_ends)
+
+
+def end_accelerations(
+    codes: np.ndarray, theta: np.ndarray, x: np.ndarray, v: np.ndarray, forcing: Forcing, friction_eps: float
+) -> np.ndarray:
+    """x'' at the first and last instant: where the lagged angle leaves the simulated span."""
+    ends = [0, -1]
+    return acceleration_partials(codes, theta, x[ends], v[ends], forcing.u[ends], friction_eps)[0]
+
+
+def end_acceleration_sensitivities(
+    codes: np.ndarray,
+    theta: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    forcing: Forcing,
+    sx: np.ndarray,
+    sv: np.ndarray,
+    kernel_cols: list[int],
+    friction_eps: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """x'' at both ends and its derivative in every kernel parameter (through state, theta, input)."""
+    ends = [0, -1]
+    acc, acc_x, acc_v, acc_u, phi = acceleration_partials(
+        codes, theta, x[ends], v[ends], forcing.u[ends], friction_eps
+    )
+    s_acc = acc_x[:, None] * sx[ends] + acc_v[:, None] * sv[ends]
+    s_acc[:, : theta.size] -= phi
+    s_acc[:, theta.size + 2 :] += acc_u[:, None] * forcing.partials[ends]
+    return acc, s_acc[:, kernel_cols]

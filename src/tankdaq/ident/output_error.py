@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -37,7 +36,6 @@ from ..physics.models import resolve_model
 from ..records import DecayRun
 from .base import EstimatorMixin
 from .compiled import (
-    acceleration_partials,
     simulate,
     simulate_with_sensitivities,
     substeps,
@@ -45,12 +43,12 @@ from .compiled import (
 )
 from .derived import natural_period
 from .equation_error import EquationError, check_runs, exogenous_input
-from .fit_statistics import summarize_residuals, whiteness_warnings
+from .fit_statistics import initial_noise_levels, summarize_residuals, whiteness_warnings
+from .forcing import input_forcing
 from .least_squares import levenberg_marquardt
-from .observation_lag import LagOperator
+from .observation_lag import LagOperator, end_acceleration_sensitivities, end_accelerations
 from .one_step import one_step_rms, rms
-from .parameter_layout import OBSERVATION_PARAMS, RING_PARAMS, RING_RUN_PARAMS, ParameterLayout
-from .signals import white_noise_level
+from .parameter_layout import OBSERVATION_PARAMS, ParameterLayout
 from .uncertainty import (
     bic,
     classic_covariance,
@@ -62,15 +60,6 @@ from .uncertainty import (
 #: Below this angle R^2 the fit from the equation-error start is retried from a linear start.
 FALLBACK_R2 = 0.9
 _KU_CODE = term_codes(("ku",))
-
-
-@dataclass
-class _Forcing:
-    """The input u(t) of one run at given parameters, and its partials in the layout's columns."""
-
-    u: np.ndarray
-    partials: np.ndarray  # (n, m)
-    columns: list[int]  # layout column of each partial
 
 
 class OutputError(EstimatorMixin):
@@ -180,7 +169,7 @@ class OutputError(EstimatorMixin):
         dt_max = max(float(np.max(np.diff(run.t))) for run in runs)
         self._n_sub = substeps(dt_max, p0[: len(layout.dynamics)], layout.dynamics, amplitude)
         self.sigmas_ = [
-            self._initial_sigmas(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
+            initial_noise_levels(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
         ]
         self._predictions: dict[int, tuple[bytes, dict[str, Any]]] = {}
         self._lag_ops: dict[int, tuple[float, LagOperator]] = {}
@@ -300,15 +289,6 @@ class OutputError(EstimatorMixin):
             terms, use_rate=self.use_rate, exogenous=exogenous, friction_eps=self.friction_eps
         ).fit(runs)
 
-    @staticmethod
-    def _initial_sigmas(run: DecayRun, has_rate: bool) -> dict[str, float]:
-        """Noise levels from third differences, floored so a clean record does not get infinite weight."""
-        floor_angle = 1e-4 * float(np.ptp(run.angle))
-        sig = {"angle": max(white_noise_level(run.angle), floor_angle)}
-        if has_rate and run.rate is not None:
-            sig["rate"] = max(white_noise_level(run.rate), 1e-4 * float(np.ptp(run.rate)))
-        return sig
-
     def _angle_r2(self, params: np.ndarray) -> float:
         ss_res = ss_tot = 0.0
         for r, run in enumerate(self.runs_):
@@ -330,30 +310,6 @@ class OutputError(EstimatorMixin):
         return out
 
     # ------------------------------------------------------------------ the model
-    def _forcing(self, params: np.ndarray, r: int, t: np.ndarray, channels: list[np.ndarray]) -> _Forcing:
-        """u(t) = sum_c k_c u_c(t) + exp(-l s)(p cos ws + q sin ws), s = t - t[0], and du/dparameter."""
-        layout = self._layout
-        u = np.zeros_like(t)
-        partials: list[np.ndarray] = []
-        columns: list[int] = []
-        for name, series in zip(layout.couplings, channels, strict=True):
-            i = layout.at(name)
-            u = u + params[i] * series
-            partials.append(series)
-            columns.append(i)
-        if layout.ringing:
-            omega_i, decay_i = (layout.at(n) for n in RING_PARAMS)
-            cos_i, sin_i = (layout.run_at(r, n) for n in RING_RUN_PARAMS)
-            since = t - t[0]
-            envelope = np.exp(-params[decay_i] * since)
-            cos, sin = envelope * np.cos(params[omega_i] * since), envelope * np.sin(params[omega_i] * since)
-            ring = params[cos_i] * cos + params[sin_i] * sin
-            u = u + ring
-            partials += [since * (params[sin_i] * cos - params[cos_i] * sin), -since * ring, cos, sin]
-            columns += [omega_i, decay_i, cos_i, sin_i]
-        stacked = np.stack(partials, axis=1) if partials else np.zeros((t.size, 0))
-        return _Forcing(u, np.ascontiguousarray(stacked), columns)
-
     def _kernel_theta(self, params: np.ndarray) -> np.ndarray:
         """The kernel's coefficients: the dynamics terms, then a unit ku when an input is modelled."""
         theta = params[: len(self._layout.dynamics)]
@@ -381,7 +337,7 @@ class OutputError(EstimatorMixin):
         """Angle and rate of run r's parameters at instants t (and their Jacobian over the full vector)."""
         layout = self._layout
         theta = self._kernel_theta(params)
-        forcing = self._forcing(params, r, t, channels)
+        forcing = input_forcing(self._layout, params, r, t, channels)
         angle0, rate0 = (layout.value(params, n, run=r) for n in ("angle0", "rate0"))
         offset = layout.value(params, "angle_offset_rad", run=r)
         gain = 1.0 + layout.value(params, "angle_gain_error")
@@ -391,7 +347,11 @@ class OutputError(EstimatorMixin):
         if not with_jacobian:
             x, v = simulate(t, angle0, rate0, theta, self._codes, forcing.u, eps, n_sub)
             lagged = (
-                x if lag == 0.0 else self._lag(r, t, lag).apply(x, v, self._end_acc(theta, x, v, forcing))
+                x
+                if lag == 0.0
+                else self._lag(r, t, lag).apply(
+                    x, v, end_accelerations(self._codes, theta, x, v, forcing, self.friction_eps)
+                )
             )
             return {"angle": gain * lagged + offset, "rate": v + bias, "ok": True}
         x, v, sx, sv, ok = simulate_with_sensitivities(
@@ -410,7 +370,9 @@ class OutputError(EstimatorMixin):
         lagged = x
         if (li := layout.index("angle_lag_s")) is not None:
             op = self._lag(r, t, lag)
-            acc_ends, s_acc_ends = self._end_acc_sensitivities(theta, x, v, forcing, sx, sv, kernel_cols)
+            acc_ends, s_acc_ends = end_acceleration_sensitivities(
+                self._codes, theta, x, v, forcing, sx, sv, kernel_cols, self.friction_eps
+            )
             lagged = op.apply(x, v, acc_ends)
             ja[:, li] = gain * op.apply_lag_derivative(x, v, acc_ends)
             ja[:, layout_cols] = gain * op.apply(sx_l, sv_l, s_acc_ends)
@@ -433,33 +395,6 @@ class OutputError(EstimatorMixin):
         if cached is None or cached[0] != lag:
             cached = self._lag_ops[r] = (lag, LagOperator(t, lag))
         return cached[1]
-
-    def _end_acc(self, theta: np.ndarray, x: np.ndarray, v: np.ndarray, forcing: _Forcing) -> np.ndarray:
-        """x'' at the first and last instant: where the lagged angle leaves the simulated span."""
-        ends = [0, -1]
-        return acceleration_partials(
-            self._codes, theta, x[ends], v[ends], forcing.u[ends], self.friction_eps
-        )[0]
-
-    def _end_acc_sensitivities(
-        self,
-        theta: np.ndarray,
-        x: np.ndarray,
-        v: np.ndarray,
-        forcing: _Forcing,
-        sx: np.ndarray,
-        sv: np.ndarray,
-        kernel_cols: list[int],
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """x'' at both ends and its derivative in every kernel parameter (through state, theta, input)."""
-        ends = [0, -1]
-        acc, acc_x, acc_v, acc_u, phi = acceleration_partials(
-            self._codes, theta, x[ends], v[ends], forcing.u[ends], self.friction_eps
-        )
-        s_acc = acc_x[:, None] * sx[ends] + acc_v[:, None] * sv[ends]
-        s_acc[:, : theta.size] -= phi
-        s_acc[:, theta.size + 2 :] += acc_u[:, None] * forcing.partials[ends]
-        return acc, s_acc[:, kernel_cols]
 
     def _weighted(
         self, params: np.ndarray
@@ -552,7 +487,10 @@ class OutputError(EstimatorMixin):
             self._kernel_theta(params),
             self.runs_,
             self.offsets_,
-            [self._forcing(params, r, run.t, self._channels[r]).u for r, run in enumerate(self.runs_)],
+            [
+                input_forcing(self._layout, params, r, run.t, self._channels[r]).u
+                for r, run in enumerate(self.runs_)
+            ],
             self.friction_eps,
         )
         self.warnings_ = []
