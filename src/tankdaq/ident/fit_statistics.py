@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..records import DecayRun
+from .one_step import rms
 from .signals import white_noise_level
 from .uncertainty import residual_whiteness, whiteness_warning
 
@@ -87,3 +88,30 @@ def initial_noise_levels(run: DecayRun, has_rate: bool) -> dict[str, float]:
     if has_rate and run.rate is not None:
         sig["rate"] = max(white_noise_level(run.rate), 1e-4 * float(np.ptp(run.rate)))
     return sig
+
+
+def angle_r2(
+    runs: Sequence[DecayRun], predictions: Sequence[dict[str, Any]], kept: Sequence[np.ndarray]
+) -> float:
+    """R² of the predicted angle over the kept samples of all runs (the fallback start's test)."""
+    ss_res = ss_tot = 0.0
+    for run, pred, keep in zip(runs, predictions, kept, strict=True):
+        ss_res += float(np.sum((run.angle - pred["angle"])[keep] ** 2))
+        ss_tot += float(np.sum((run.angle[keep] - run.angle[keep].mean()) ** 2))
+    return 1.0 - ss_res / ss_tot
+
+
+def residual_noise_levels(
+    runs: Sequence[DecayRun],
+    predictions: Sequence[dict[str, Any]],
+    kept: Sequence[np.ndarray],
+    has_rate: Sequence[bool],
+) -> list[dict[str, float]]:
+    """Per run the RMS residual of each output: the weights of the refit after the first solve."""
+    out = []
+    for r, (run, pred) in enumerate(zip(runs, predictions, strict=True)):
+        sig = {"angle": max(rms((run.angle - pred["angle"])[kept[r]]), 1e-12)}
+        if has_rate[r]:
+            sig["rate"] = max(rms((run.rate - pred["rate"])[kept[r]]), 1e-12)
+        out.append(sig)
+    return out

@@ -43,11 +43,17 @@ from .compiled import (
 )
 from .derived import natural_period
 from .equation_error import EquationError, check_runs, exogenous_input
-from .fit_statistics import initial_noise_levels, summarize_residuals, whiteness_warnings
+from .fit_statistics import (
+    angle_r2,
+    initial_noise_levels,
+    residual_noise_levels,
+    summarize_residuals,
+    whiteness_warnings,
+)
 from .forcing import input_forcing
 from .least_squares import levenberg_marquardt
 from .observation_lag import LagOperator, end_acceleration_sensitivities, end_accelerations
-from .one_step import one_step_rms, rms
+from .one_step import one_step_rms
 from .parameter_layout import OBSERVATION_PARAMS, ParameterLayout
 from .uncertainty import (
     bic,
@@ -177,13 +183,17 @@ class OutputError(EstimatorMixin):
         # with reweighting the first solve only has to get close: the second one polishes
         rough = max(1e-6, self.tol) if self.reweight else self.tol
         params = self._solve(p0, free, rough)
-        if start is None and self._angle_r2(params) < FALLBACK_R2:
+        if start is None and angle_r2(self.runs_, self._predictions_at(params), self._kept) < FALLBACK_R2:
             linear = self._start_vector(runs, None, fixed_coefficients, guess or {}, linear_only=True)
             fallback = self._solve(linear, free, rough)
-            if self._angle_r2(fallback) > self._angle_r2(params):
+            if angle_r2(self.runs_, self._predictions_at(fallback), self._kept) > angle_r2(
+                self.runs_, self._predictions_at(params), self._kept
+            ):
                 params = fallback
         if self.reweight:
-            self.sigmas_ = self._residual_sigmas(params)
+            self.sigmas_ = residual_noise_levels(
+                self.runs_, self._predictions_at(params), self._kept, self._has_rate
+            )
             params = self._solve(params, free, self.tol)
         self._finish(params, free)
         self._predictions, self._lag_ops = {}, {}
@@ -211,18 +221,10 @@ class OutputError(EstimatorMixin):
         return (self.exogenous,) if isinstance(self.exogenous, str) else tuple(self.exogenous)
 
     def _make_layout(self, n_runs: int) -> ParameterLayout:
-        channels = self._channel_names
-        if "ku" in self.terms_:
-            if len(channels) != 1:
-                raise BadIdentificationInput(
-                    f"the ku term couples one exogenous channel; {len(channels)} given (exogenous=...)"
-                )
-            couplings: tuple[str, ...] = ("ku",)
-        else:
-            couplings = tuple(f"k_{ch}" for ch in channels)
         observation = tuple(name for name, setting in OBSERVATION_PARAMS.items() if getattr(self, setting))
-        dynamics = tuple(t for t in self.terms_ if t != "ku")
-        return ParameterLayout(dynamics, couplings, self.ringing, observation, self.fit_offset, n_runs)
+        return ParameterLayout.for_model(
+            self.terms_, self._channel_names, self.ringing, observation, self.fit_offset, n_runs
+        )
 
     def _channel_series(self, run: DecayRun) -> list[np.ndarray]:
         return [exogenous_input(run, ch, self.exogenous_cutoff_hz) for ch in self._channel_names]
@@ -241,14 +243,12 @@ class OutputError(EstimatorMixin):
         fit: the fallback when the full start leads the fit astray.
         """
         layout = self._layout
-        p0 = np.zeros(layout.size)
         known: dict[str, float] = {}
         per_run: list[dict[str, float]] = []
         if isinstance(start, OutputError):
             start.check_fitted()
             if start._layout.names == layout.names:
-                p0 = start.params_.copy()
-                return self._fix(p0, fixed)
+                return self._fix(start.params_.copy(), fixed)
             # a swapped spring (c1*x <-> s1*sin x) starts from the stiffness it replaces
             swapped = {"s1": start.shared_params_.get("c1"), "c1": start.shared_params_.get("s1")}
             known = {k: v for k, v in swapped.items() if v is not None} | start.shared_params_
@@ -263,13 +263,7 @@ class OutputError(EstimatorMixin):
                 {"angle0": a0, "rate0": v0, "angle_offset_rad": off}
                 for (a0, v0), off in zip(ee.initial_states_, ee.offsets_, strict=True)
             ]
-        known = guess | known
-        for i, name in enumerate(layout.shared):
-            p0[i] = known.get(name, 0.0)
-        for r, values in enumerate(per_run):
-            for name in layout.per_run:
-                p0[layout.run_at(r, name)] = values.get(name, guess.get(name, 0.0))
-        return self._fix(p0, fixed)
+        return self._fix(layout.vector(known, per_run, guess), fixed)
 
     def _fix(self, p0: np.ndarray, fixed: dict[str, float] | None) -> np.ndarray:
         if fixed is not None:
@@ -289,25 +283,9 @@ class OutputError(EstimatorMixin):
             terms, use_rate=self.use_rate, exogenous=exogenous, friction_eps=self.friction_eps
         ).fit(runs)
 
-    def _angle_r2(self, params: np.ndarray) -> float:
-        ss_res = ss_tot = 0.0
-        for r, run in enumerate(self.runs_):
-            pred = self._predict_run(params, r, with_jacobian=False)
-            kept = self._kept[r]
-            ss_res += float(np.sum((run.angle - pred["angle"])[kept] ** 2))
-            ss_tot += float(np.sum((run.angle[kept] - run.angle[kept].mean()) ** 2))
-        return 1.0 - ss_res / ss_tot
-
-    def _residual_sigmas(self, params: np.ndarray) -> list[dict[str, float]]:
-        out = []
-        for r, run in enumerate(self.runs_):
-            pred = self._predict_run(params, r, with_jacobian=False)
-            kept = self._kept[r]
-            sig = {"angle": max(rms((run.angle - pred["angle"])[kept]), 1e-12)}
-            if self._has_rate[r]:
-                sig["rate"] = max(rms((run.rate - pred["rate"])[kept]), 1e-12)
-            out.append(sig)
-        return out
+    def _predictions_at(self, params: np.ndarray) -> list[dict[str, Any]]:
+        """Every run's predicted outputs at ``params`` (no Jacobian)."""
+        return [self._predict_run(params, r, with_jacobian=False) for r in range(len(self.runs_))]
 
     # ------------------------------------------------------------------ the model
     def _kernel_theta(self, params: np.ndarray) -> np.ndarray:
@@ -473,7 +451,7 @@ class OutputError(EstimatorMixin):
 
         summary = summarize_residuals(
             self.runs_,
-            [self._predict_run(params, r, with_jacobian=False) for r in range(len(self.runs_))],
+            self._predictions_at(params),
             self._kept,
             self._has_rate,
             self.sigmas_,

@@ -6,7 +6,11 @@ the report's shared and per-run values) asks the layout, so the order is decided
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+
+from ..errors import BadIdentificationInput
 
 #: The observation parameters shared by all runs, in layout order, with the setting that asks for each.
 OBSERVATION_PARAMS: dict[str, str] = {
@@ -52,6 +56,29 @@ class ParameterLayout:
         self.names = [*self.shared] + [f"{name}[{r}]" for r in range(n_runs) for name in self.per_run]
         self._shared_index = {name: i for i, name in enumerate(self.shared)}
 
+    @classmethod
+    def for_model(
+        cls,
+        terms: Sequence[str],
+        channels: Sequence[str],
+        ringing: bool,
+        observation: tuple[str, ...],
+        offset: bool,
+        n_runs: int,
+    ) -> ParameterLayout:
+        """The layout of a model's ``terms`` forced by the exogenous ``channels``: the ``ku`` term couples the
+        one channel, else each channel gets its own ``k_<channel>``."""
+        if "ku" in terms:
+            if len(channels) != 1:
+                raise BadIdentificationInput(
+                    f"the ku term couples one exogenous channel; {len(channels)} given (exogenous=...)"
+                )
+            couplings: tuple[str, ...] = ("ku",)
+        else:
+            couplings = tuple(f"k_{ch}" for ch in channels)
+        dynamics = tuple(t for t in terms if t != "ku")
+        return cls(dynamics, couplings, ringing, observation, offset, n_runs)
+
     def index(self, name: str) -> int | None:
         """Position of a shared parameter (None when the model does not have it)."""
         return self._shared_index.get(name)
@@ -76,3 +103,16 @@ class ParameterLayout:
         """A parameter's value, shared or (with ``run``) of one run; ``default`` when the model lacks it."""
         i = self.index(name) if run is None else self.run_index(run, name)
         return default if i is None else float(params[i])
+
+    def vector(
+        self, shared: dict[str, float], per_run: list[dict[str, float]], default: dict[str, float]
+    ) -> np.ndarray:
+        """The vector from values by name: ``shared``, each run's own, ``default`` (else 0) where none is."""
+        p0 = np.zeros(self.size)
+        known = default | shared
+        for i, name in enumerate(self.shared):
+            p0[i] = known.get(name, 0.0)
+        for r, values in enumerate(per_run):
+            for name in self.per_run:
+                p0[self.run_at(r, name)] = values.get(name, default.get(name, 0.0))
+        return p0
