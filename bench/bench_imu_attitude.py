@@ -23,7 +23,8 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from tankdaq.device.attitude import GyroAttitude  # noqa: E402
-from tankdaq.physics.scenario import GRAVITY_M_S2, DecayScenario, SensorNoise  # noqa: E402
+from tankdaq.physics.scenario import DecayScenario  # noqa: E402
+from tankdaq.physics.sensor import GRAVITY_M_S2, SensorNoise  # noqa: E402
 
 SEEDS = 16
 WINDOW_S = 20.0

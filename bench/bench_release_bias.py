@@ -32,7 +32,7 @@ def errors_at(rate_hz: int, releases: int, axis: str = "roll") -> dict[str, list
     """Errors (s) and reported standard errors (s) of every release found at ``rate_hz``."""
     from tankdaq.acquire.release import ReleaseDetector
     from tankdaq.config import hull_scenario
-    from tankdaq.physics.scenario import TICKS_PER_S
+    from tankdaq.physics.truth import TICKS_PER_S
 
     errors, ses, missed = [], [], 0
     for seed in range(math.ceil(releases / RUNS_PER_SCENARIO)):

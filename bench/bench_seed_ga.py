@@ -26,7 +26,8 @@ from tankdaq.ident.evolutionary import (
     SearchSpace,
     SwarmSeed,
 )
-from tankdaq.ident.output_error import OutputError, seed_objective
+from tankdaq.ident.one_step import seed_objective
+from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 

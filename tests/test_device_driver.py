@@ -11,10 +11,11 @@ import pytest
 
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.config import hull_scenario
-from tankdaq.device.driver import MTiDriver, open_error_message
+from tankdaq.device.driver import MTiDriver
+from tankdaq.device.link import open_error_message
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
 from tankdaq.errors import DeviceError, DeviceGone, DeviceNotFound, InputError
-from tankdaq.physics.scenario import TICK_MODULUS
+from tankdaq.physics.truth import TICK_MODULUS
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.control import decay_output_configuration
 

@@ -22,7 +22,8 @@ from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, ScriptedSource, SimulatedMTi
 from tankdaq.errors import InputError
-from tankdaq.physics.scenario import GRAVITY_M_S2, DecayScenario, SensorNoise
+from tankdaq.physics.scenario import DecayScenario
+from tankdaq.physics.sensor import GRAVITY_M_S2, SensorNoise
 from tankdaq.store.playback import recorded_device
 from tankdaq.store.reader import Recording, iter_raw_chunks, read_recording
 from tankdaq.xsens.constants import MID

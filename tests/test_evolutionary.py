@@ -21,7 +21,8 @@ from tankdaq.ident.evolutionary import (
     SwarmSeed,
     SwarmSettings,
 )
-from tankdaq.ident.output_error import OutputError, seed_objective
+from tankdaq.ident.one_step import seed_objective
+from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import acceleration, simulate_decay
 from tankdaq.records import DecayRun
 

@@ -9,7 +9,8 @@ from scipy.integrate import solve_ivp
 
 from tankdaq.errors import BadIdentificationInput
 from tankdaq.ident.equation_error import EquationError
-from tankdaq.ident.output_error import LagOperator, OutputError
+from tankdaq.ident.observation_lag import LagOperator
+from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.models import MODEL_ALIASES
 from tankdaq.records import DecayRun

@@ -10,7 +10,9 @@ import pytest
 from tankdaq.acquire.release import ReleaseDetector, detect_releases, pick_axis
 from tankdaq.config import hull_scenario
 from tankdaq.errors import InputError
-from tankdaq.physics.scenario import TICKS_PER_S, Handling, SensorNoise, still_trace
+from tankdaq.physics.scenario import Handling
+from tankdaq.physics.sensor import SensorNoise
+from tankdaq.physics.truth import TICKS_PER_S, still_trace
 
 WITH_PUT_BACKS = Handling(put_back_fraction=0.2)
 

@@ -10,13 +10,9 @@ import pytest
 from tankdaq.config import hull_scenario, load_hull
 from tankdaq.errors import InputError
 from tankdaq.physics.decay import simulate_decay
-from tankdaq.physics.scenario import (
-    TICK_MODULUS,
-    TICKS_PER_S,
-    Handling,
-    SensorModel,
-    SensorNoise,
-)
+from tankdaq.physics.scenario import Handling
+from tankdaq.physics.sensor import SensorModel, SensorNoise
+from tankdaq.physics.truth import TICK_MODULUS, TICKS_PER_S
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,8 @@ from typer.testing import CliRunner
 from tankdaq.cli import app
 from tankdaq.errors import BadRecordingInput
 from tankdaq.store import schemas
-from tankdaq.store.reader import RecordScan, read_recording
+from tankdaq.store.reader import read_recording
+from tankdaq.store.record_scan import RecordScan
 from tankdaq.store.recover import recover
 
 #: A writer child: argv = mode path [path2]. Prints "batch host_ns" after each batch it handed to the writer.

@@ -12,9 +12,10 @@ from hypothesis import strategies as st
 
 from tankdaq.errors import ProtocolError
 from tankdaq.samples import SAMPLE_DTYPE
-from tankdaq.xsens.batch import RUNNING_SUM_LIMIT, DecodedBlock, decode_capture, to_samples
+from tankdaq.xsens.batch import DecodedBlock, decode_capture, to_samples
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.frame import Frame, build_frame
+from tankdaq.xsens.frame_scan import RUNNING_SUM_LIMIT
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import (
     GnssPvt,

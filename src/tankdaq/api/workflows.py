@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
     from ..diagnose.workflow import Diagnoser
     from ..ident.campaign import GroupResult
-    from ..physics.scenario import RunTruth
+    from ..physics.truth import RunTruth
 
 
 def simulate(
@@ -90,7 +90,7 @@ def _write_decay(
     start_ticks: int,
 ) -> Path:
     """One decay's samples (from the tilt to the end of its run) as a recording with its release event."""
-    from ..physics.scenario import TICKS_PER_S
+    from ..physics.truth import TICKS_PER_S
     from ..store.naming import recording_name
     from ..store.writer import RecordingWriter, describe_run
 

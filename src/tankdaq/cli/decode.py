@@ -68,7 +68,7 @@ class OutputFormat(StrEnum):
 
 def read_capture(path: Path) -> bytes:
     """The capture's bytes; a one-line InputError when it cannot be used."""
-    from ..store.reader import is_mcap
+    from ..store.record_scan import is_mcap
 
     input_file(path, "raw capture file (e.g. output.bin)")
     try:

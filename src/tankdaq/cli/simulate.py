@@ -102,7 +102,7 @@ def simulate_command(
         SimulatedMTi,
         refused_orientation,
     )
-    from ..physics.scenario import SensorNoise
+    from ..physics.sensor import SensorNoise
     from ..store.playback import recorded_device
 
     if axis not in ("roll", "pitch"):

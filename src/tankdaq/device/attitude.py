@@ -24,7 +24,7 @@ from collections import deque
 
 import numpy as np
 
-from ..physics.scenario import GRAVITY_M_S2
+from ..physics.sensor import GRAVITY_M_S2
 
 #: The slowest output rate integrated: below it the integration's own error (trapezoids through a 3 s
 #: swing of 40 deg: 0.03 deg at 50 Hz, 0.11 deg at 25 Hz) is no longer small beside the gyro's noise.

@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -37,107 +36,36 @@ from ..physics.models import resolve_model
 from ..records import DecayRun
 from .base import EstimatorMixin
 from .compiled import (
-    acceleration_partials,
     simulate,
     simulate_with_sensitivities,
     substeps,
     term_codes,
-    term_matrix,
 )
 from .derived import natural_period
 from .equation_error import EquationError, check_runs, exogenous_input
+from .fit_statistics import (
+    angle_r2,
+    initial_noise_levels,
+    residual_noise_levels,
+    summarize_residuals,
+    whiteness_warnings,
+)
+from .forcing import input_forcing
 from .least_squares import levenberg_marquardt
-from .signals import white_noise_level
+from .observation_lag import LagOperator, end_acceleration_sensitivities, end_accelerations
+from .one_step import one_step_rms
+from .parameter_layout import OBSERVATION_PARAMS, ParameterLayout
 from .uncertainty import (
     bic,
     classic_covariance,
     coefficient_warnings,
     correlation_from_covariance,
     hac_covariance,
-    residual_whiteness,
-    whiteness_warning,
 )
 
-#: The observation parameters shared by all runs, in layout order, with the setting that asks for each.
-OBSERVATION_PARAMS: dict[str, str] = {
-    "angle_gain_error": "fit_gain",
-    "angle_lag_s": "fit_lag",
-    "gyro_bias_rad_s": "fit_gyro_bias",
-}
-#: The unmeasured ringing's shared parameters, and its per-run amplitudes.
-RING_PARAMS: tuple[str, str] = ("ring_omega_rad_s", "ring_decay_1_s")
-RING_RUN_PARAMS: tuple[str, str] = ("ring_cos", "ring_sin")
 #: Below this angle R^2 the fit from the equation-error start is retried from a linear start.
 FALLBACK_R2 = 0.9
 _KU_CODE = term_codes(("ku",))
-
-
-class ParameterLayout:
-    """Where each parameter sits in the vector: the shared ones, then each run's own.
-
-    Shared: the dynamics terms, the input's coupling coefficients, the ringing's
-    frequency and decay rate, the observation parameters. Per run: initial
-    angle and rate, the angle offset, the ringing's amplitudes.
-    """
-
-    def __init__(
-        self,
-        dynamics: tuple[str, ...],
-        couplings: tuple[str, ...],
-        ringing: bool,
-        observation: tuple[str, ...],
-        offset: bool,
-        n_runs: int,
-    ) -> None:
-        self.dynamics = dynamics
-        self.couplings = couplings
-        self.ringing = ringing
-        self.shared = (*dynamics, *couplings, *(RING_PARAMS if ringing else ()), *observation)
-        self.per_run = (
-            "angle0",
-            "rate0",
-            *(("angle_offset_rad",) if offset else ()),
-            *(RING_RUN_PARAMS if ringing else ()),
-        )
-        self.n_runs = n_runs
-        self.n_shared = len(self.shared)
-        self.size = self.n_shared + len(self.per_run) * n_runs
-        self.names = [*self.shared] + [f"{name}[{r}]" for r in range(n_runs) for name in self.per_run]
-        self._shared_index = {name: i for i, name in enumerate(self.shared)}
-
-    def index(self, name: str) -> int | None:
-        """Position of a shared parameter (None when the model does not have it)."""
-        return self._shared_index.get(name)
-
-    def run_index(self, r: int, name: str) -> int | None:
-        """Position of run r's own parameter (None when the model does not have it)."""
-        return self.run_at(r, name) if name in self.per_run else None
-
-    def at(self, name: str) -> int:
-        """Position of a shared parameter the model has."""
-        return self._shared_index[name]
-
-    def run_at(self, r: int, name: str) -> int:
-        """Position of run r's own parameter the model has."""
-        return self.n_shared + len(self.per_run) * r + self.per_run.index(name)
-
-    def run_slice(self, r: int) -> slice:
-        start = self.n_shared + len(self.per_run) * r
-        return slice(start, start + len(self.per_run))
-
-    def value(self, params: np.ndarray, name: str, default: float = 0.0, run: int | None = None) -> float:
-        """A parameter's value, shared or (with ``run``) of one run; ``default`` when the model lacks it."""
-        i = self.index(name) if run is None else self.run_index(run, name)
-        return default if i is None else float(params[i])
-
-
-@dataclass
-class _Forcing:
-    """The input u(t) of one run at given parameters, and its partials in the layout's columns."""
-
-    u: np.ndarray
-    partials: np.ndarray  # (n, m)
-    columns: list[int]  # layout column of each partial
 
 
 class OutputError(EstimatorMixin):
@@ -247,7 +175,7 @@ class OutputError(EstimatorMixin):
         dt_max = max(float(np.max(np.diff(run.t))) for run in runs)
         self._n_sub = substeps(dt_max, p0[: len(layout.dynamics)], layout.dynamics, amplitude)
         self.sigmas_ = [
-            self._initial_sigmas(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
+            initial_noise_levels(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
         ]
         self._predictions: dict[int, tuple[bytes, dict[str, Any]]] = {}
         self._lag_ops: dict[int, tuple[float, LagOperator]] = {}
@@ -255,13 +183,17 @@ class OutputError(EstimatorMixin):
         # with reweighting the first solve only has to get close: the second one polishes
         rough = max(1e-6, self.tol) if self.reweight else self.tol
         params = self._solve(p0, free, rough)
-        if start is None and self._angle_r2(params) < FALLBACK_R2:
+        if start is None and angle_r2(self.runs_, self._predictions_at(params), self._kept) < FALLBACK_R2:
             linear = self._start_vector(runs, None, fixed_coefficients, guess or {}, linear_only=True)
             fallback = self._solve(linear, free, rough)
-            if self._angle_r2(fallback) > self._angle_r2(params):
+            if angle_r2(self.runs_, self._predictions_at(fallback), self._kept) > angle_r2(
+                self.runs_, self._predictions_at(params), self._kept
+            ):
                 params = fallback
         if self.reweight:
-            self.sigmas_ = self._residual_sigmas(params)
+            self.sigmas_ = residual_noise_levels(
+                self.runs_, self._predictions_at(params), self._kept, self._has_rate
+            )
             params = self._solve(params, free, self.tol)
         self._finish(params, free)
         self._predictions, self._lag_ops = {}, {}
@@ -289,18 +221,10 @@ class OutputError(EstimatorMixin):
         return (self.exogenous,) if isinstance(self.exogenous, str) else tuple(self.exogenous)
 
     def _make_layout(self, n_runs: int) -> ParameterLayout:
-        channels = self._channel_names
-        if "ku" in self.terms_:
-            if len(channels) != 1:
-                raise BadIdentificationInput(
-                    f"the ku term couples one exogenous channel; {len(channels)} given (exogenous=...)"
-                )
-            couplings: tuple[str, ...] = ("ku",)
-        else:
-            couplings = tuple(f"k_{ch}" for ch in channels)
         observation = tuple(name for name, setting in OBSERVATION_PARAMS.items() if getattr(self, setting))
-        dynamics = tuple(t for t in self.terms_ if t != "ku")
-        return ParameterLayout(dynamics, couplings, self.ringing, observation, self.fit_offset, n_runs)
+        return ParameterLayout.for_model(
+            self.terms_, self._channel_names, self.ringing, observation, self.fit_offset, n_runs
+        )
 
     def _channel_series(self, run: DecayRun) -> list[np.ndarray]:
         return [exogenous_input(run, ch, self.exogenous_cutoff_hz) for ch in self._channel_names]
@@ -319,14 +243,12 @@ class OutputError(EstimatorMixin):
         fit: the fallback when the full start leads the fit astray.
         """
         layout = self._layout
-        p0 = np.zeros(layout.size)
         known: dict[str, float] = {}
         per_run: list[dict[str, float]] = []
         if isinstance(start, OutputError):
             start.check_fitted()
             if start._layout.names == layout.names:
-                p0 = start.params_.copy()
-                return self._fix(p0, fixed)
+                return self._fix(start.params_.copy(), fixed)
             # a swapped spring (c1*x <-> s1*sin x) starts from the stiffness it replaces
             swapped = {"s1": start.shared_params_.get("c1"), "c1": start.shared_params_.get("s1")}
             known = {k: v for k, v in swapped.items() if v is not None} | start.shared_params_
@@ -341,13 +263,7 @@ class OutputError(EstimatorMixin):
                 {"angle0": a0, "rate0": v0, "angle_offset_rad": off}
                 for (a0, v0), off in zip(ee.initial_states_, ee.offsets_, strict=True)
             ]
-        known = guess | known
-        for i, name in enumerate(layout.shared):
-            p0[i] = known.get(name, 0.0)
-        for r, values in enumerate(per_run):
-            for name in layout.per_run:
-                p0[layout.run_at(r, name)] = values.get(name, guess.get(name, 0.0))
-        return self._fix(p0, fixed)
+        return self._fix(layout.vector(known, per_run, guess), fixed)
 
     def _fix(self, p0: np.ndarray, fixed: dict[str, float] | None) -> np.ndarray:
         if fixed is not None:
@@ -367,60 +283,11 @@ class OutputError(EstimatorMixin):
             terms, use_rate=self.use_rate, exogenous=exogenous, friction_eps=self.friction_eps
         ).fit(runs)
 
-    @staticmethod
-    def _initial_sigmas(run: DecayRun, has_rate: bool) -> dict[str, float]:
-        """Noise levels from third differences, floored so a clean record does not get infinite weight."""
-        floor_angle = 1e-4 * float(np.ptp(run.angle))
-        sig = {"angle": max(white_noise_level(run.angle), floor_angle)}
-        if has_rate and run.rate is not None:
-            sig["rate"] = max(white_noise_level(run.rate), 1e-4 * float(np.ptp(run.rate)))
-        return sig
-
-    def _angle_r2(self, params: np.ndarray) -> float:
-        ss_res = ss_tot = 0.0
-        for r, run in enumerate(self.runs_):
-            pred = self._predict_run(params, r, with_jacobian=False)
-            kept = self._kept[r]
-            ss_res += float(np.sum((run.angle - pred["angle"])[kept] ** 2))
-            ss_tot += float(np.sum((run.angle[kept] - run.angle[kept].mean()) ** 2))
-        return 1.0 - ss_res / ss_tot
-
-    def _residual_sigmas(self, params: np.ndarray) -> list[dict[str, float]]:
-        out = []
-        for r, run in enumerate(self.runs_):
-            pred = self._predict_run(params, r, with_jacobian=False)
-            kept = self._kept[r]
-            sig = {"angle": max(_rms((run.angle - pred["angle"])[kept]), 1e-12)}
-            if self._has_rate[r]:
-                sig["rate"] = max(_rms((run.rate - pred["rate"])[kept]), 1e-12)
-            out.append(sig)
-        return out
+    def _predictions_at(self, params: np.ndarray) -> list[dict[str, Any]]:
+        """Every run's predicted outputs at ``params`` (no Jacobian)."""
+        return [self._predict_run(params, r, with_jacobian=False) for r in range(len(self.runs_))]
 
     # ------------------------------------------------------------------ the model
-    def _forcing(self, params: np.ndarray, r: int, t: np.ndarray, channels: list[np.ndarray]) -> _Forcing:
-        """u(t) = sum_c k_c u_c(t) + exp(-l s)(p cos ws + q sin ws), s = t - t[0], and du/dparameter."""
-        layout = self._layout
-        u = np.zeros_like(t)
-        partials: list[np.ndarray] = []
-        columns: list[int] = []
-        for name, series in zip(layout.couplings, channels, strict=True):
-            i = layout.at(name)
-            u = u + params[i] * series
-            partials.append(series)
-            columns.append(i)
-        if layout.ringing:
-            omega_i, decay_i = (layout.at(n) for n in RING_PARAMS)
-            cos_i, sin_i = (layout.run_at(r, n) for n in RING_RUN_PARAMS)
-            since = t - t[0]
-            envelope = np.exp(-params[decay_i] * since)
-            cos, sin = envelope * np.cos(params[omega_i] * since), envelope * np.sin(params[omega_i] * since)
-            ring = params[cos_i] * cos + params[sin_i] * sin
-            u = u + ring
-            partials += [since * (params[sin_i] * cos - params[cos_i] * sin), -since * ring, cos, sin]
-            columns += [omega_i, decay_i, cos_i, sin_i]
-        stacked = np.stack(partials, axis=1) if partials else np.zeros((t.size, 0))
-        return _Forcing(u, np.ascontiguousarray(stacked), columns)
-
     def _kernel_theta(self, params: np.ndarray) -> np.ndarray:
         """The kernel's coefficients: the dynamics terms, then a unit ku when an input is modelled."""
         theta = params[: len(self._layout.dynamics)]
@@ -448,7 +315,7 @@ class OutputError(EstimatorMixin):
         """Angle and rate of run r's parameters at instants t (and their Jacobian over the full vector)."""
         layout = self._layout
         theta = self._kernel_theta(params)
-        forcing = self._forcing(params, r, t, channels)
+        forcing = input_forcing(self._layout, params, r, t, channels)
         angle0, rate0 = (layout.value(params, n, run=r) for n in ("angle0", "rate0"))
         offset = layout.value(params, "angle_offset_rad", run=r)
         gain = 1.0 + layout.value(params, "angle_gain_error")
@@ -458,7 +325,11 @@ class OutputError(EstimatorMixin):
         if not with_jacobian:
             x, v = simulate(t, angle0, rate0, theta, self._codes, forcing.u, eps, n_sub)
             lagged = (
-                x if lag == 0.0 else self._lag(r, t, lag).apply(x, v, self._end_acc(theta, x, v, forcing))
+                x
+                if lag == 0.0
+                else self._lag(r, t, lag).apply(
+                    x, v, end_accelerations(self._codes, theta, x, v, forcing, self.friction_eps)
+                )
             )
             return {"angle": gain * lagged + offset, "rate": v + bias, "ok": True}
         x, v, sx, sv, ok = simulate_with_sensitivities(
@@ -477,7 +348,9 @@ class OutputError(EstimatorMixin):
         lagged = x
         if (li := layout.index("angle_lag_s")) is not None:
             op = self._lag(r, t, lag)
-            acc_ends, s_acc_ends = self._end_acc_sensitivities(theta, x, v, forcing, sx, sv, kernel_cols)
+            acc_ends, s_acc_ends = end_acceleration_sensitivities(
+                self._codes, theta, x, v, forcing, sx, sv, kernel_cols, self.friction_eps
+            )
             lagged = op.apply(x, v, acc_ends)
             ja[:, li] = gain * op.apply_lag_derivative(x, v, acc_ends)
             ja[:, layout_cols] = gain * op.apply(sx_l, sv_l, s_acc_ends)
@@ -500,33 +373,6 @@ class OutputError(EstimatorMixin):
         if cached is None or cached[0] != lag:
             cached = self._lag_ops[r] = (lag, LagOperator(t, lag))
         return cached[1]
-
-    def _end_acc(self, theta: np.ndarray, x: np.ndarray, v: np.ndarray, forcing: _Forcing) -> np.ndarray:
-        """x'' at the first and last instant: where the lagged angle leaves the simulated span."""
-        ends = [0, -1]
-        return acceleration_partials(
-            self._codes, theta, x[ends], v[ends], forcing.u[ends], self.friction_eps
-        )[0]
-
-    def _end_acc_sensitivities(
-        self,
-        theta: np.ndarray,
-        x: np.ndarray,
-        v: np.ndarray,
-        forcing: _Forcing,
-        sx: np.ndarray,
-        sv: np.ndarray,
-        kernel_cols: list[int],
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """x'' at both ends and its derivative in every kernel parameter (through state, theta, input)."""
-        ends = [0, -1]
-        acc, acc_x, acc_v, acc_u, phi = acceleration_partials(
-            self._codes, theta, x[ends], v[ends], forcing.u[ends], self.friction_eps
-        )
-        s_acc = acc_x[:, None] * sx[ends] + acc_v[:, None] * sv[ends]
-        s_acc[:, : theta.size] -= phi
-        s_acc[:, theta.size + 2 :] += acc_u[:, None] * forcing.partials[ends]
-        return acc, s_acc[:, kernel_cols]
 
     def _weighted(
         self, params: np.ndarray
@@ -580,16 +426,8 @@ class OutputError(EstimatorMixin):
         self.natural_period_s_ = natural_period(self.coefficients_)
         n_obs = res_w.size
         n_free = int(free.sum())
-        if self.cov_type == "hac":
-            period_samples = self.natural_period_s_ / float(np.median(np.diff(self.runs_[0].t)))
-            bandwidth = (
-                max(1, round(self.hac_periods * period_samples)) if math.isfinite(period_samples) else 1
-            )
-            cov_free = hac_covariance(self.score_blocks_, bandwidth) * n_obs / max(n_obs - n_free, 1)
-        else:
-            cov_free = classic_covariance(jac_w[:, free], res_w, n_free)
         cov = np.zeros((layout.size, layout.size))
-        cov[np.ix_(free, free)] = cov_free
+        cov[np.ix_(free, free)] = self._free_covariance(res_w, jac_w, free)
         self.param_covariance_ = cov
         self.covariance_ = cov[np.ix_(term_index, term_index)]
         std = np.sqrt(np.clip(np.diag(self.covariance_), 0.0, None))
@@ -611,49 +449,44 @@ class OutputError(EstimatorMixin):
         self.offsets_ = [p.get("angle_offset_rad", 0.0) for p in self.run_params_]
         self.initial_states_ = [(p["angle0"], p["rate0"]) for p in self.run_params_]
 
-        self.fitted_, self.residuals_ = [], []
-        ss_res = ss_tot = 0.0
-        blocks_res: list[np.ndarray] = []
-        blocks_sigma: list[float] = []
-        for r, run in enumerate(self.runs_):
-            pred = self._predict_run(params, r, with_jacobian=False)
-            resid_angle = run.angle - pred["angle"]
-            resid_rate = run.rate - pred["rate"] if self._has_rate[r] else None
-            self.fitted_.append({"angle": pred["angle"], "rate": pred["rate"]})
-            self.residuals_.append({"angle": resid_angle, "rate": resid_rate})
-            kept = self._kept[r]
-            ss_res += float(resid_angle[kept] @ resid_angle[kept])
-            ss_tot += float(np.sum((run.angle[kept] - run.angle[kept].mean()) ** 2))
-            for output, resid in (("angle", resid_angle), ("rate", resid_rate)):
-                if resid is not None:
-                    blocks_res.append(resid[kept])
-                    blocks_sigma.append(self.sigmas_[r][output])
-        self.r2_angle_ = 1.0 - ss_res / ss_tot
-        all_angle = np.concatenate(
-            [run.angle[kept] for run, kept in zip(self.runs_, self._kept, strict=True)]
+        summary = summarize_residuals(
+            self.runs_,
+            self._predictions_at(params),
+            self._kept,
+            self._has_rate,
+            self.sigmas_,
         )
-        self.nrmse_ = math.sqrt(ss_res / all_angle.size) / float(np.ptp(all_angle))
+        self.fitted_, self.residuals_ = summary.fitted, summary.residuals
+        self.r2_angle_, self.nrmse_ = summary.r2_angle, summary.nrmse
         self.n_obs_ = n_obs
-        self.bic_ = bic(blocks_res, n_free, None if self.reweight else blocks_sigma)
-        self.seed_objective_ = _one_step_rms(
+        self.bic_ = bic(summary.blocks, n_free, None if self.reweight else summary.block_sigmas)
+        self.seed_objective_ = one_step_rms(
             self._codes,
             self._kernel_theta(params),
             self.runs_,
             self.offsets_,
-            [self._forcing(params, r, run.t, self._channels[r]).u for r, run in enumerate(self.runs_)],
+            [
+                input_forcing(self._layout, params, r, run.t, self._channels[r]).u
+                for r, run in enumerate(self.runs_)
+            ],
             self.friction_eps,
         )
         self.warnings_ = []
         if self.compute_diagnostics:
             self.warnings_ = coefficient_warnings(self.terms_, theta, std, self.correlation_)
-            for run, resid, kept in zip(self.runs_, self.residuals_, self._kept, strict=True):
-                for output in ("angle", "rate"):
-                    if resid[output] is not None:
-                        warning = whiteness_warning(
-                            run.name, output, *residual_whiteness(resid[output][kept])
-                        )
-                        if warning:
-                            self.warnings_.append(warning)
+            self.warnings_ += whiteness_warnings(self.runs_, self.residuals_, self._kept)
+
+    def _free_covariance(self, res_w: np.ndarray, jac_w: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """Covariance of the free parameters: HAC over about ``hac_periods`` natural periods (the residuals
+        of a decay are coloured), or classic."""
+        n_obs, n_free = res_w.size, int(free.sum())
+        if self.cov_type == "hac":
+            period_samples = self.natural_period_s_ / float(np.median(np.diff(self.runs_[0].t)))
+            bandwidth = (
+                max(1, round(self.hac_periods * period_samples)) if math.isfinite(period_samples) else 1
+            )
+            return hac_covariance(self.score_blocks_, bandwidth) * n_obs / max(n_obs - n_free, 1)
+        return classic_covariance(jac_w[:, free], res_w, n_free)
 
     def predict(
         self,
@@ -684,111 +517,3 @@ class OutputError(EstimatorMixin):
         if offset is not None and self._layout.run_index(run_index, "angle_offset_rad") is None:
             pred["angle"] = pred["angle"] + offset
         return pred["angle"], pred["rate"]
-
-
-class LagOperator:
-    """x(t - lag) on the grid t from the simulated x and x' there: a linear map, so sensitivities follow.
-
-    Inside the grid a cubic Hermite interpolation (error ~ (omega h)^4, whatever
-    the lag); beyond the ends a second-order Taylor step from the end sample,
-    x + d x' + d^2/2 x'' with d = (t - lag) - t_end, using the model's x''.
-    """
-
-    def __init__(self, t: np.ndarray, lag: float) -> None:
-        n = t.size
-        s = t - lag
-        i = np.clip(np.searchsorted(t, s) - 1, 0, n - 2)
-        h = t[i + 1] - t[i]
-        u = (s - t[i]) / h
-        self.lo, self.hi = i, i + 1
-        # weights of x[lo], h x'[lo], x[hi], h x'[hi] and their derivatives in the lag (ds/dlag = -1)
-        self.w = [
-            (1 + 2 * u) * (1 - u) ** 2,
-            h * u * (1 - u) ** 2,
-            u * u * (3 - 2 * u),
-            h * u * u * (u - 1),
-        ]
-        self.dw = [
-            -(6 * u * u - 6 * u) / h,
-            -(3 * u * u - 4 * u + 1),
-            -(6 * u - 6 * u * u) / h,
-            -(3 * u * u - 2 * u),
-        ]
-        self.wa = np.zeros(n)
-        self.dwa = np.zeros(n)
-        self.end = np.zeros(n, dtype=int)  # 0: first sample's x'', 1: last sample's
-        for end, outside in ((0, s < t[0]), (-1, s > t[-1])):
-            if not np.any(outside):
-                continue
-            d = s[outside] - t[end]
-            self.lo[outside] = self.hi[outside] = end % n
-            self.w[0][outside], self.w[1][outside] = 1.0, d
-            self.w[2][outside], self.w[3][outside] = 0.0, 0.0
-            self.dw[0][outside], self.dw[1][outside] = 0.0, -1.0
-            self.dw[2][outside], self.dw[3][outside] = 0.0, 0.0
-            self.wa[outside], self.dwa[outside] = 0.5 * d * d, -d
-            self.end[outside] = 0 if end == 0 else 1
-
-    def _combine(
-        self, w: list[np.ndarray], wa: np.ndarray, x: np.ndarray, v: np.ndarray, acc: np.ndarray
-    ) -> np.ndarray:
-        def col(weight: np.ndarray) -> np.ndarray:
-            return weight if x.ndim == 1 else weight[:, None]
-
-        return (
-            col(w[0]) * x[self.lo]
-            + col(w[1]) * v[self.lo]
-            + col(w[2]) * x[self.hi]
-            + col(w[3]) * v[self.hi]
-            + col(wa) * acc[self.end]
-        )
-
-    def apply(self, x: np.ndarray, v: np.ndarray, acc_ends: np.ndarray) -> np.ndarray:
-        """x(t - lag) from x, x' on the grid (or their sensitivities, one column per parameter)."""
-        return self._combine(self.w, self.wa, x, v, acc_ends)
-
-    def apply_lag_derivative(self, x: np.ndarray, v: np.ndarray, acc_ends: np.ndarray) -> np.ndarray:
-        """d x(t - lag) / d lag."""
-        return self._combine(self.dw, self.dwa, x, v, acc_ends)
-
-
-def seed_objective(
-    terms: Sequence[str],
-    theta: np.ndarray,
-    runs: Sequence[DecayRun],
-    offsets: Sequence[float],
-    inputs: Sequence[np.ndarray] | None = None,
-    friction_eps: float = 1e-3,
-) -> float:
-    """RMS of the one-step-ahead predicted rate (seed 000 eq. 4.5-4.6), rad/s.
-
-    As in the seeds' software (and ``ident.evolutionary``): one Euler step from
-    the measured state at k predicts the rate at k+1; the measured rate is the
-    gyro, or the angle differentiated when there is none. The angle is taken
-    relative to the fitted offset, the model's equilibrium.
-    """
-    return _one_step_rms(
-        term_codes(terms), np.asarray(theta, dtype=float), runs, offsets, inputs, friction_eps
-    )
-
-
-def _one_step_rms(
-    codes: np.ndarray,
-    theta: np.ndarray,
-    runs: Sequence[DecayRun],
-    offsets: Sequence[float],
-    inputs: Sequence[np.ndarray] | None,
-    friction_eps: float,
-) -> float:
-    errors = []
-    for r, (run, offset) in enumerate(zip(runs, offsets, strict=True)):
-        x = run.angle - offset
-        v = run.rate if run.rate is not None else np.gradient(run.angle, run.t)
-        u = np.zeros_like(run.t) if inputs is None else inputs[r]
-        acc = -term_matrix(codes, x[:-1], v[:-1], u[:-1], friction_eps) @ theta
-        errors.append(v[1:] - (v[:-1] + np.diff(run.t) * acc))
-    return _rms(np.concatenate(errors))
-
-
-def _rms(a: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(a))))

@@ -28,7 +28,8 @@ from .derived import (
     tested_amplitudes_deg,
 )
 from .intervals import IntervalSummary
-from .output_error import OutputError, seed_objective
+from .one_step import seed_objective
+from .output_error import OutputError
 from .plausibility import check_runs
 
 

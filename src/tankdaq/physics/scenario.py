@@ -9,7 +9,8 @@ and the estimators are tested against exactly this, so the scenario produces:
   heave motion, on the device clock (SampleTimeFine, 10 kHz ticks);
 - the truth of every run: release instant (s, ticks, first free sample), initial state,
   model terms and coefficients;
-- sensor samples (``SAMPLE_DTYPE``) with MTi-G-like noise, bias and quantisation on top.
+- sensor samples (``SAMPLE_DTYPE``) with MTi-G-like noise, bias and quantisation on top
+  (``physics.sensor``; the trace and the truth are ``physics.truth``).
 
 Everything is vectorised and seeded: an hour of still water and handling takes well under a
 second per hour of 100 Hz data apart from the decay integrations themselves.
@@ -18,24 +19,14 @@ second per hour of 100 Hz data apart from the decay integrations themselves.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import InputError
-from ..samples import (
-    SAMPLE_DTYPE,
-    STATUS_CLIP_ACC,
-    STATUS_CLIP_GYR,
-    STATUS_CLIPPING_DETECTED,
-    STATUS_ORIENTATION_VALID,
-)
-from .decay import TERMS, acceleration, decay_refusal, simulate_decay
-
-#: SampleTimeFine ticks per second, and the wrap of the 10/100-series (one day of ticks).
-TICKS_PER_S = 10_000
-TICK_MODULUS = 864_000_000
-GRAVITY_M_S2 = 9.81
+from .decay import acceleration, decay_refusal, simulate_decay
+from .sensor import SensorModel, SensorNoise
+from .truth import TICK_MODULUS, TICKS_PER_S, RunTruth, ScenarioTrace
 
 #: The release falls this much (uniformly) after the scripted instant: off the sample grid at any rate.
 RELEASE_JITTER_S = 0.01
@@ -63,45 +54,6 @@ SIMULATION_RULE = (
     "simulator can play)"
 )
 
-#: StatusWord of a healthy MTi-G streaming: self-test passed (bit 0), filter valid (bit 1).
-STATUS_OK = 0x00000003
-
-
-@dataclass(frozen=True)
-class SensorNoise:
-    """MTi-G measurement imperfections; the defaults sit in the range of the datasheets.
-
-    MTi-G-710 (and the 2007 MTi-G): roll/pitch filter output noise a few hundredths of a
-    degree (static accuracy 0.2-0.5 deg is bias, not noise); gyro noise density 0.01-0.05
-    deg/s/sqrt(Hz), here 0.028 so that a 100 Hz stream (50 Hz bandwidth) shows 0.2 deg/s rms
-    and 400 Hz shows 0.4 deg/s; accelerometer noise density ~0.002 m/s^2/sqrt(Hz). Rate and
-    acceleration are quantised by a 16-bit ADC over +-300 deg/s and +-50 m/s^2. Biases are
-    drawn once per scenario with the given rms.
-    """
-
-    angle_noise_deg: float = 0.02
-    angle_bias_deg: float = 0.05
-    gyro_noise_deg_s_rthz: float = 0.028
-    gyro_bias_deg_s: float = 0.05
-    gyro_lsb_deg_s: float = 600.0 / 65536
-    acc_noise_m_s2_rthz: float = 0.002
-    acc_bias_m_s2: float = 0.02
-    acc_lsb_m_s2: float = 100.0 / 65536
-    gyro_range_deg_s: float = 300.0  # beyond it the rate of turn saturates and the status word says so
-    acc_range_m_s2: float = 50.0
-
-    @classmethod
-    def none(cls) -> SensorNoise:
-        """A perfect sensor: for checking the truth against the samples."""
-        return cls(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-
-    @classmethod
-    def mti_100(cls) -> SensorNoise:
-        """An MTi-100-class inertial unit (datasheet: gyro 0.01 deg/s/sqrt(Hz) over +-450 deg/s,
-        accelerometer 60 ug/sqrt(Hz) = 0.0006 m/s^2/sqrt(Hz) over +-200 m/s^2); biases as the default."""
-        return cls(gyro_noise_deg_s_rthz=0.01, gyro_lsb_deg_s=900.0 / 65536, acc_noise_m_s2_rthz=0.0006,
-                   acc_lsb_m_s2=400.0 / 65536)  # fmt: skip
-
 
 @dataclass(frozen=True)
 class Handling:
@@ -123,62 +75,6 @@ class Handling:
     put_back_s: tuple[float, float] = (1.5, 2.5)
     put_back_fraction: float = 0.0
     lead_in_s: float = 1.0
-
-
-@dataclass(frozen=True)
-class RunTruth:
-    """What really happened in one run (angles in rad; times on the device clock)."""
-
-    run: int
-    kind: str  # "release" or "put_back"
-    axis: str
-    tilt_start_s: float
-    release_s: float | None = None
-    release_ticks: int | None = None  # SampleTimeFine at release, wrapped like the device's counter
-    release_index: int | None = None  # the first sample at or after the release: the first free sample
-    angle0_rad: float | None = None
-    rate0_rad_s: float | None = None
-    end_s: float = 0.0
-    coefficients: dict[str, float] = field(default_factory=dict)
-    pushed_again_s: float | None = None  # the hand pushed the model again mid-decay (not a free decay)
-
-    @property
-    def terms(self) -> list[str]:
-        return [k for k in TERMS if self.coefficients.get(k, 0.0) != 0.0]
-
-    def to_json(self) -> dict[str, object]:
-        """Plain JSON: SI values, plus degrees for people."""
-        out: dict[str, object] = asdict(self)
-        out["terms"] = self.terms
-        if self.angle0_rad is not None:
-            out["angle0_deg"] = math.degrees(self.angle0_rad)
-        return out
-
-
-@dataclass
-class ScenarioTrace:
-    """True motion on the sample grid, and the truth of every run."""
-
-    rate_hz: float
-    axis: str
-    start_ticks: int
-    t: np.ndarray  # s since the scenario start (device clock)
-    angle: np.ndarray  # rad, sensed axis
-    rate: np.ndarray  # rad/s
-    acc: np.ndarray  # rad/s^2
-    other_angle: np.ndarray  # rad, the other of roll/pitch
-    other_rate: np.ndarray
-    heave_m: np.ndarray
-    heave_acc_m_s2: np.ndarray
-    runs: list[RunTruth]
-
-    @property
-    def ticks(self) -> np.ndarray:
-        """Unwrapped SampleTimeFine of every sample."""
-        return self.start_ticks + np.round(self.t * TICKS_PER_S).astype(np.int64)
-
-    def __len__(self) -> int:
-        return int(self.t.size)
 
 
 def _quintic_step(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -291,30 +187,10 @@ class DecayScenario:
         n = round(self.duration_s * self.rate_hz)
         t = np.arange(n) / self.rate_hz
         x, v, a = np.zeros(n), np.zeros(n), np.zeros(n)
-        h = self.handling
         coeffs = dict(self.coefficients)
         truths: list[RunTruth] = []
-        tilt_starts = []
-        hands = []
-        for run in range(self.runs):
-            tilt_s = rng.uniform(*h.tilt_s)
-            hold_s = min(rng.uniform(*h.hold_s), self.release_after_s - tilt_s - h.lead_in_s)
-            # The hand lets go between samples: a jitter independent of the rate keeps the truth
-            # (in s and ticks) the same whatever output rate the device is configured to.
-            release = run * self.run_s + self.release_after_s + rng.uniform(0, RELEASE_JITTER_S)
-            sign = 1.0 if rng.uniform() < 0.5 else -1.0
-            target = sign * math.radians(abs(self.angle_deg) + rng.normal(0, h.angle_scatter_deg))
-            hand = _Hand(
-                release - hold_s - tilt_s,
-                tilt_s,
-                target,
-                _Wobble.draw(rng, h.sway_deg, (0.1, 0.8)),
-                _Wobble.draw(rng, h.tremor_deg, (8.0, 12.0)),
-            )
-            put_back_s = rng.uniform(*h.put_back_s) if rng.uniform() < h.put_back_fraction else None
-            hands.append((release, hand, put_back_s))
-            tilt_starts.append(hand.start_s)
-        tilt_starts.append(self.duration_s)
+        hands = self._draw_hands(rng)
+        tilt_starts = [hand.start_s for _, hand, _ in hands] + [self.duration_s]
         index = self._first_index_at
         for run, (release, hand, put_back_s) in enumerate(hands):
             i_tilt, i_release = index(hand.start_s), index(release)
@@ -371,6 +247,30 @@ class DecayScenario:
             heave_acc_m_s2=-2 * heave_m_rad2 * (v**2 + x * a),
             runs=truths,
         )
+
+    def _draw_hands(self, rng: np.random.Generator) -> list[tuple[float, _Hand, float | None]]:
+        """(release instant, the hand, put-back duration or None) of every run, drawn in run order so the
+        random stream (and so the truth) is the same whatever is done with it afterwards."""
+        h = self.handling
+        hands = []
+        for run in range(self.runs):
+            tilt_s = rng.uniform(*h.tilt_s)
+            hold_s = min(rng.uniform(*h.hold_s), self.release_after_s - tilt_s - h.lead_in_s)
+            # The hand lets go between samples: a jitter independent of the rate keeps the truth
+            # (in s and ticks) the same whatever output rate the device is configured to.
+            release = run * self.run_s + self.release_after_s + rng.uniform(0, RELEASE_JITTER_S)
+            sign = 1.0 if rng.uniform() < 0.5 else -1.0
+            target = sign * math.radians(abs(self.angle_deg) + rng.normal(0, h.angle_scatter_deg))
+            hand = _Hand(
+                release - hold_s - tilt_s,
+                tilt_s,
+                target,
+                _Wobble.draw(rng, h.sway_deg, (0.1, 0.8)),
+                _Wobble.draw(rng, h.tremor_deg, (8.0, 12.0)),
+            )
+            put_back_s = rng.uniform(*h.put_back_s) if rng.uniform() < h.put_back_fraction else None
+            hands.append((release, hand, put_back_s))
+        return hands
 
     @staticmethod
     def _push_again(
@@ -464,95 +364,3 @@ def parse_fault_script(text: str) -> dict[int, str]:
             )
         script[int(number)] = fault
     return script
-
-
-def still_trace(rate_hz: float, axis: str, start_ticks: int, start_index: int, n: int) -> ScenarioTrace:
-    """Still water on the sample grid from sample ``start_index`` on (after the scripted runs)."""
-    t = (start_index + np.arange(n)) / rate_hz
-    zeros = np.zeros(n)
-    return ScenarioTrace(
-        rate_hz, axis, start_ticks, t, zeros, zeros, zeros, zeros + math.radians(0.3), zeros, zeros, zeros, []
-    )
-
-
-class SensorModel:
-    """Turns true motion into MTi-G samples: biases fixed per seed, fresh noise per block."""
-
-    heading_deg = 30.0
-    lever_arm_m = 0.15  # sensor height above the rotation axis: adds tangential and centripetal acceleration
-
-    def __init__(self, noise: SensorNoise, rate_hz: float, seed: int, start_counter: int = 0) -> None:
-        self.noise = noise
-        self.rate_hz = rate_hz
-        self.seed = seed
-        self.start_counter = start_counter
-        bias_rng = np.random.default_rng([seed, 3])
-        self.angle_bias = np.radians(noise.angle_bias_deg) * bias_rng.standard_normal(3)
-        self.gyro_bias = np.radians(noise.gyro_bias_deg_s) * bias_rng.standard_normal(3)
-        self.acc_bias = noise.acc_bias_m_s2 * bias_rng.standard_normal(3)
-
-    def measure(self, trace: ScenarioTrace, block: int = 0) -> np.ndarray:
-        """``SAMPLE_DTYPE`` samples of the trace; ``block`` seeds the noise of successive pieces."""
-        rng = np.random.default_rng([self.seed, 4, block])
-        n = len(trace)
-        nz = self.noise
-        nyquist_rthz = math.sqrt(self.rate_hz / 2)
-        main, other = trace.angle, trace.other_angle
-        roll, pitch = (main, other) if trace.axis == "roll" else (other, main)
-        roll_rate, pitch_rate = (
-            (trace.rate, trace.other_rate) if trace.axis == "roll" else (trace.other_rate, trace.rate)
-        )
-        # the gyro measures body rates: the Euler-angle rates through the Z-Y'-X'' kinematics (no yaw rate)
-        p, q, r = roll_rate, pitch_rate * np.cos(roll), -pitch_rate * np.sin(roll)
-        out = np.zeros(n, dtype=SAMPLE_DTYPE)
-        out["ticks"] = trace.ticks
-        out["t"] = out["ticks"] / TICKS_PER_S
-        out["counter"] = (np.round(trace.t * self.rate_hz).astype(np.int64) + self.start_counter) & 0xFFFF
-        out["status"] = STATUS_OK
-        angle_sd = math.radians(nz.angle_noise_deg)
-        for k, (name, value) in enumerate(
-            (("roll", roll), ("pitch", pitch), ("yaw", math.radians(self.heading_deg)))
-        ):
-            out[name] = value + self.angle_bias[k] + angle_sd * rng.standard_normal(n)
-        gyro_sd = math.radians(nz.gyro_noise_deg_s_rthz) * nyquist_rthz
-        gyro_range = math.radians(nz.gyro_range_deg_s)
-        for k, (name, value) in enumerate((("p", p), ("q", q), ("r", r))):
-            sensed = value + self.gyro_bias[k] + gyro_sd * rng.standard_normal(n)
-            quantised = _quantise(sensed, math.radians(nz.gyro_lsb_deg_s))
-            out[name] = _saturate(out, quantised, gyro_range, STATUS_CLIP_GYR, k)
-        specific_force = self._specific_force(trace, roll, pitch)
-        acc_sd = nz.acc_noise_m_s2_rthz * nyquist_rthz
-        for k, name in enumerate(("ax", "ay", "az")):
-            sensed = specific_force[k] + self.acc_bias[k] + acc_sd * rng.standard_normal(n)
-            out[name] = _saturate(
-                out, _quantise(sensed, nz.acc_lsb_m_s2), nz.acc_range_m_s2, STATUS_CLIP_ACC, k
-            )
-        return out
-
-    def _specific_force(self, trace: ScenarioTrace, roll: np.ndarray, pitch: np.ndarray) -> list[np.ndarray]:
-        """Gravity seen in the body frame, plus lever-arm and heave accelerations (small-angle kinematics)."""
-        g = GRAVITY_M_S2
-        fx = -g * np.sin(pitch)
-        fy = g * np.cos(pitch) * np.sin(roll)
-        fz = g * np.cos(pitch) * np.cos(roll) + trace.heave_acc_m_s2 - self.lever_arm_m * trace.rate**2
-        if trace.axis == "roll":
-            fy = fy - self.lever_arm_m * trace.acc
-        else:
-            fx = fx + self.lever_arm_m * trace.acc
-        return [fx, fy, fz]
-
-
-def _saturate(out: np.ndarray, values: np.ndarray, limit: float, clip_bits: int, axis: int) -> np.ndarray:
-    """``values`` held within +-``limit``; where they are not, ``out``'s status word gets the axis's clip
-    bit and ClippingDetected, and loses OrientationValid (an MTi's filter is not valid while it clips)."""
-    clipped = np.abs(values) > limit
-    if clipped.any():
-        axis_bit = (clip_bits & -clip_bits) << axis  # the lowest bit of the sensor's three, then the axis
-        out["status"][clipped] = (out["status"][clipped] | axis_bit | STATUS_CLIPPING_DETECTED) & ~np.uint32(
-            STATUS_ORIENTATION_VALID
-        )
-    return np.clip(values, -limit, limit)
-
-
-def _quantise(values: np.ndarray, step: float) -> np.ndarray:
-    return np.round(values / step) * step if step > 0 else values

@@ -3,7 +3,7 @@
 ``read_recording`` first tries the index: a complete file with sample blocks
 (``/samples/blocks``, written beside the per-sample JSON since tankdaq 0.1)
 reads only its small chunks of blocks, events and fits, through the summary.
-Every other file goes through ``RecordScan``, which reads the file front to
+Every other file goes through ``store.record_scan.RecordScan``, which reads the file front to
 back with mcap's StreamReader. That path does not need the summary at the end
 of the file, so a file whose writer was killed (no summary, maybe a torn last
 chunk) reads up to its last complete chunk instead of failing, and a file
@@ -24,84 +24,17 @@ from typing import Any
 import numpy as np
 import zstandard
 from mcap.data_stream import ReadDataStream
-from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.exceptions import InvalidMagic
 from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
-from mcap.records import Attachment, Channel, Chunk, Footer, Header, McapRecord, Message, Metadata
-from mcap.stream_reader import StreamReader, breakup_chunk
-from mcap.writer import MCAP0_MAGIC
+from mcap.records import Attachment, Channel, Chunk, Message, Metadata
 
 from ..config import parse_draft
 from ..errors import BadRecordingInput, InputError
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, StatusTally
-from ..validation import input_file
 from . import schemas
-
-#: What a torn tail can raise inside mcap: short reads, bad lengths, CRC mismatches, broken zstd frames.
-_DAMAGE = (McapError, ValueError, struct.error, zstandard.ZstdError, RuntimeError)
-
-
-class RecordScan:
-    """Every record of an MCAP file in file order, stopping quietly where a damaged tail begins.
-
-    Chunks are opened here (not inside StreamReader) so a torn last chunk is
-    noticed as damage and counted. After iterating: ``complete`` (the footer was
-    read), ``clean_end`` (the file ended on a record boundary, so nothing on disk
-    was lost), ``damage`` (what stopped the scan, or None), ``chunks``,
-    ``bytes_read`` and ``size``.
-    """
-
-    def __init__(self, path: str | Path) -> None:
-        self.path = input_file(Path(path), "recording", error=BadRecordingInput)
-        self.size = self.path.stat().st_size
-        if self.size == 0:
-            raise BadRecordingInput(f"{self.path} is empty: the writer died before writing anything")
-        self.complete = False
-        self.damage: str | None = None
-        self.bytes_read = 0
-        self.chunks = 0
-
-    @property
-    def clean_end(self) -> bool:
-        return self.complete or (self.damage is not None and self.bytes_read == self.size)
-
-    def __iter__(self) -> Iterator[McapRecord]:
-        with self.path.open("rb") as stream:
-            if not is_mcap(stream.read(len(MCAP0_MAGIC))):
-                raise BadRecordingInput(
-                    f"{self.path} is not an MCAP file (it does not start with the MCAP magic bytes)"
-                )
-            stream.seek(0)
-            records = StreamReader(stream, emit_chunks=True, validate_crcs=True).records
-            try:
-                first = next(records)
-            except (*_DAMAGE, InvalidMagic, EOFError) as exc:
-                short = isinstance(exc, EndOfFile | struct.error | EOFError) or not str(exc)
-                why = "" if short else f" ({exc})"
-                raise BadRecordingInput(
-                    f"{self.path} is an MCAP file cut short at {self.size} bytes, before its first record "
-                    f"ended{why}: nothing to read"
-                ) from None
-            if not isinstance(first, Header):
-                raise BadRecordingInput(f"{self.path} is not a readable MCAP file: no header record")
-            yield first
-            while True:
-                self.bytes_read = stream.tell()
-                try:
-                    record = next(records)
-                    inner = (
-                        breakup_chunk(record, validate_crc=True) if isinstance(record, Chunk) else [record]
-                    )
-                except StopIteration:
-                    break
-                except _DAMAGE as exc:
-                    self.damage = "file ends early" if isinstance(exc, EndOfFile) else str(exc)
-                    break
-                self.chunks += isinstance(record, Chunk)
-                self.complete = isinstance(record, Footer)
-                yield from inner
-            self.bytes_read = stream.tell() if self.complete else self.bytes_read
+from .record_scan import MCAP_DAMAGE, RecordScan
 
 
 @dataclass
@@ -195,7 +128,7 @@ def _read_indexed(path: Path) -> Recording | None:
         try:  # anything not plainly a complete MCAP file is left to the scan, which says what is wrong
             reader = SeekingReader(stream, validate_crcs=True)
             summary = reader.get_summary()
-        except (*_DAMAGE, InvalidMagic, OSError):  # OSError: a file shorter than a footer seeks before 0
+        except (*MCAP_DAMAGE, InvalidMagic, OSError):  # OSError: a file shorter than a footer seeks before 0
             return None
         if summary is None or summary.statistics is None:
             return None
@@ -220,7 +153,7 @@ def _read_indexed(path: Path) -> Recording | None:
                 dict(m.metadata) for m in reader.iter_metadata() if m.name == schemas.RUN_METADATA_NAME
             ]
             attachments = {a.name: a.data for a in reader.iter_attachments()}
-        except _DAMAGE:
+        except MCAP_DAMAGE:
             return None
     samples = schemas.samples_from_blocks(blocks)
     if samples.size != summary.statistics.channel_message_counts.get(
@@ -301,12 +234,6 @@ def _assemble(
     )
 
 
-def is_mcap(data: bytes) -> bool:
-    """Whether these bytes (a file's start is enough) open an MCAP file: lets callers that read raw
-    captures send a recording to the commands that read recordings."""
-    return data.startswith(MCAP0_MAGIC)
-
-
 def truncation_notice(path: str | Path, damage: str | None = None) -> str:
     """The one line every command that reads a recording prints when the recording is cut short."""
     why = f" ({damage})" if damage and damage != "file ends early" else ""
@@ -352,7 +279,7 @@ def _indexed_raw_chunks(path: Path) -> list[tuple[int, bytes]] | None:
     with path.open("rb") as stream:
         try:
             summary = SeekingReader(stream, validate_crcs=True).get_summary()
-        except (*_DAMAGE, InvalidMagic, OSError):  # OSError: a file shorter than a footer seeks before 0
+        except (*MCAP_DAMAGE, InvalidMagic, OSError):  # OSError: a file shorter than a footer seeks before 0
             return None
         if summary is None:
             return None
@@ -365,7 +292,7 @@ def _indexed_raw_chunks(path: Path) -> list[tuple[int, bytes]] | None:
             try:
                 chunk = Chunk.read(ReadDataStream(stream))
                 data = _chunk_data(chunk)
-            except _DAMAGE:
+            except MCAP_DAMAGE:
                 return None
             if data is None:
                 return None
@@ -500,7 +427,6 @@ def _run_meta(
 
 
 __all__ = [
-    "RecordScan",
     "Recording",
     "iter_raw_chunks",
     "read_decay_runs",

@@ -19,7 +19,7 @@ from mcap.writer import CompressionType, Writer
 from .. import __version__
 from ..errors import BadRecordingInput, RecordingError
 from .naming import create_exclusive
-from .reader import RecordScan
+from .record_scan import RecordScan
 
 #: Progress callback: (bytes of the source read so far, total bytes).
 Progress = Callable[[int, int], None]

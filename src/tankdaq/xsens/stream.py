@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .batch import DecodedBlock, LayoutCache, decode_buffer
+from .batch import DecodedBlock, decode_buffer
 from .constants import MAX_DATA_LENGTH
+from .layouts import LayoutCache
 
 
 class StreamDecoder:

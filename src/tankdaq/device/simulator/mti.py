@@ -20,7 +20,8 @@ from pathlib import Path
 
 from ...config import hull_scenario
 from ...errors import InputError
-from ...physics.scenario import DecayScenario, RunTruth
+from ...physics.scenario import DecayScenario
+from ...physics.truth import RunTruth
 from ...xsens.constants import SERIAL_BAUDS
 from ..ports import by_id_name
 from .faults import Faults

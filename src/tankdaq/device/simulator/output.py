@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...physics.scenario import TICK_MODULUS, TICKS_PER_S
+from ...physics.truth import TICK_MODULUS, TICKS_PER_S
 from ...xsens.constants import MID
 from ...xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS
 from ...xsens.frame import build_frame
