@@ -26,9 +26,9 @@ from tankdaq.ident.campaign import (
     markdown_table,
     read_campaign,
     read_campaign_runs,
-    write_simulated_campaign,
 )
 from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
+from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.ident.derived import b_eq
 from tankdaq.ident.executors import campaign_executor
 from tankdaq.records import DecayRun

@@ -11,8 +11,9 @@ from typer.testing import CliRunner
 
 from campaign_scale import dask_cluster, write_many_decays
 from tankdaq.cli import app
-from tankdaq.ident.campaign import SimulatedTest, find_campaign_hulls, find_recordings
+from tankdaq.ident.campaign import find_campaign_hulls, find_recordings
 from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
+from tankdaq.ident.campaign_synthetic import SimulatedTest
 from tankdaq.ident.executors import campaign_executor
 
 pytest.importorskip("distributed", reason="the dask extra is not installed (pip install 'tankdaq[dask]')")

@@ -40,7 +40,8 @@ from tankdaq.catalogue.hooks import CatalogueWriter
 from tankdaq.catalogue.index import index_folder
 from tankdaq.catalogue.query import RunQuery, paths_for, select_rows
 from tankdaq.cli import app
-from tankdaq.ident.campaign import group_runs, identify_groups, read_campaign, write_simulated_campaign
+from tankdaq.ident.campaign import group_runs, identify_groups, read_campaign
+from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 EXE = str(Path(sys.executable).with_name("tankdaq"))
 HERE = Path(__file__).resolve().parent

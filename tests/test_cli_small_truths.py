@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from tankdaq import validation
 from tankdaq.cli import app
 from tankdaq.cli.app import DRAFT_METAVAR
-from tankdaq.ident.campaign import write_simulated_campaign
+from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 runner = CliRunner()
 REPO = Path(__file__).resolve().parents[1]

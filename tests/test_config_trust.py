@@ -242,7 +242,7 @@ def test_recording_names_refuse_an_unsafe_hull() -> None:
 
 @pytest.fixture
 def one_csv(lab: Path) -> Path:
-    from tankdaq.ident.campaign import write_simulated_campaign
+    from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
     folder = lab / "rec"
     write_simulated_campaign(folder, ["swath"], "roll", [1.0], [8.0], "csv", seed=1)

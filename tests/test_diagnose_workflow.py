@@ -224,7 +224,7 @@ def test_simulated_campaign_recordings_reveal_the_hull_model(tmp_path: Path) -> 
     store) of the SWATH roll model, whose truth is b1, b3 (cubic damping), c1, c3 (cubic restoring) plus
     negligible b2, c2: from a linear baseline the workflow must find both nonlinear families."""
     from tankdaq.config import load_hull
-    from tankdaq.ident.campaign import write_simulated_campaign
+    from tankdaq.ident.campaign_synthetic import write_simulated_campaign
     from tankdaq.store.reader import read_decay_runs
 
     paths = write_simulated_campaign(tmp_path, ["swath"], "roll", [1.0], [4.0, 8.0, 12.0], "mcap", seed=1)

@@ -19,7 +19,8 @@ from scipy.io import loadmat
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
-from tankdaq.ident.campaign import SimulatedTest, csv_labels, write_simulated_campaign
+from tankdaq.ident.campaign import csv_labels
+from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store.export import ExportTable
 from tankdaq.store.export_layout import column_name

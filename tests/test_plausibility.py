@@ -15,12 +15,8 @@ from typer.testing import CliRunner
 
 from tankdaq.cli import app
 from tankdaq.config import AxisParticulars
-from tankdaq.ident.campaign import (
-    GroupKey,
-    fit_group,
-    markdown_table,
-    write_simulated_campaign,
-)
+from tankdaq.ident.campaign import GroupKey, fit_group, markdown_table
+from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.ident.derived import b_eq
 from tankdaq.ident.free_decay import cut_free_decays
 from tankdaq.ident.inputs import read_decays

@@ -27,8 +27,8 @@ from tankdaq.ident.campaign import (
     identify_groups,
     markdown_table,
     read_campaign_runs,
-    write_simulated_campaign,
 )
+from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 from tankdaq.viz import campaign_report, diagnose_view, plots

@@ -216,7 +216,7 @@ def simulate_campaign_command(
     (default: seed 000's trimaran and catamaran pitch decays at 0.9T, T, 1.1T from 2, 4, 6, 8 deg)."""
     from ..config import load_hull
     from ..errors import InputError
-    from ..ident.campaign import write_simulated_campaign
+    from ..ident.campaign_synthetic import write_simulated_campaign
     from ..plans import load_campaign_plan
 
     matrix = load_campaign_plan(plan)
