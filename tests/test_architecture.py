@@ -210,3 +210,17 @@ def test_the_cycle_check_sees_a_lazy_cycle(tmp_path: Path) -> None:
     (room / "d.py").write_text("from .a import x\n")
     expected = [["tankdaq.ident.a", "tankdaq.ident.b", "tankdaq.ident.c"]]
     assert import_cycles(module_graph(tmp_path)) == expected
+
+
+def test_every_module_is_named_in_the_map() -> None:
+    """docs/architecture.md's "Rooms" names every module, so the map cannot drift from the code."""
+    rooms = DOC.read_text().split("\n## Rooms\n", 1)
+    assert len(rooms) == 2, "no Rooms section in docs/architecture.md"
+    named = set(re.findall(r"`(?:tankdaq\.)?([a-z_][a-z0-9_.]*)`", rooms[1]))
+    missing = []
+    for path in sorted(SRC.rglob("*.py")):
+        parts = path.relative_to(SRC).with_suffix("").parts
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        if module and module not in named:
+            missing.append(module)
+    assert not missing, f"modules docs/architecture.md's Rooms does not name: {missing}"

@@ -1,9 +1,5 @@
-"""Identification of the decay equation's coefficients from free-decay runs.
-
-``models`` (term sets, seed aliases), ``kernels`` (compiled RK4 with exact
-sensitivities), ``equation_error`` / ``output_error`` (the estimators; output
-error is the answer), ``estimators`` (the method registry), ``uncertainty``
-(HAC, block bootstrap, repeats, warnings), ``derived`` (period, B_eq, Bertin N,
-dimensional), ``online`` (live refits), ``report`` (JSON, text, model
-comparison). See docs/models.md.
+"""Identification of the decay equation's coefficients from free-decay runs: the estimators (output error
+is the answer; equation error; the papers' GA and PSO), honest intervals, plausibility, the model chosen by
+the data, derived results, live refits and campaigns. Its modules are mapped in docs/architecture.md; the
+models and checks in docs/models.md.
 """

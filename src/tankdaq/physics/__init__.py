@@ -1,1 +1,2 @@
-"""Physics: the decay equation, hull configurations, simulation of decays."""
+"""The decay equation: its term vocabulary and named models, integration, a scripted hand-operated decay test
+with its simulated sensor, the simplified Ikeda prediction and Froude scaling."""
