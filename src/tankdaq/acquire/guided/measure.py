@@ -64,6 +64,8 @@ class LevelCheck(Sink):
         self._blocks: list[np.ndarray] = []
 
     def on_block(self, block: Block, decay: Decay | None) -> None:
+        if self.full:  # what arrives while the daemon stops is not the still water measured
+            return
         if block.samples.size:
             self._blocks.append(block.samples)
         if self.full:
@@ -74,5 +76,9 @@ class LevelCheck(Sink):
         return bool(self._blocks) and float(self._blocks[-1]["t"][-1] - self._blocks[0]["t"][0]) >= LEVEL_S
 
     def mean_sd_deg(self) -> tuple[float, float]:
-        angle = np.degrees(np.concatenate([b[self.angle_field] for b in self._blocks]))
+        """Mean and spread of the angle over exactly the first ``LEVEL_S`` of device time: never the
+        motion after it (a hand tilting the model while a slow host stops the daemon)."""
+        samples = np.concatenate(self._blocks)
+        first = samples[samples["t"] <= samples["t"][0] + LEVEL_S]
+        angle = np.degrees(first[self.angle_field])
         return float(angle.mean()), float(angle.std())
