@@ -31,7 +31,7 @@ from ..physics.terms import TERM_TABLE
 from ..samples import AXIS_FIELDS
 from ..store.disk import RESERVE_BYTES, free_bytes, megabytes
 from ..store.schemas import interval_pairs
-from .view_feed import ViewFeed
+from .view_feed import QUEUE_LIMIT, SAVE_QUEUE_LIMIT, ViewFeed
 from .viewer import DEFAULT_BIND, URL_SCHEMES, check_mode, display_available, spawn_viewer, url_listening
 
 if TYPE_CHECKING:  # rerun is imported where a view logs, not for --viewer none (0.6 s of start-up)
@@ -92,6 +92,8 @@ class LiveView:
     itself runs on the view's thread (see the module docstring). ``on_note`` gets one
     line per thing the operator should know (viewer started, gone, the .rrd stopped).
     Spawn with no display falls back to save at once; ``mode`` is the mode in effect.
+    ``queue_limit``: updates waiting for the view thread beyond which sample blocks and refits are
+    dropped (default: a few seconds with a viewer, ``view_feed.SAVE_QUEUE_LIMIT`` when only saving).
     """
 
     def __init__(
@@ -104,6 +106,7 @@ class LiveView:
         bind: str = DEFAULT_BIND,
         on_note: Callable[[str], None] | None = None,
         rrd_reserve_bytes: int = RESERVE_BYTES,
+        queue_limit: int | None = None,
     ) -> None:
         self.mode = check_mode(mode)
         if axis not in AXIS_FIELDS:
@@ -114,6 +117,7 @@ class LiveView:
         self.bind = bind
         self.on_note = on_note or (lambda line: print(f"viewer: {line}", file=sys.stderr))
         self.rrd_reserve_bytes = rrd_reserve_bytes
+        self.queue_limit = queue_limit
         self.viewer_process: subprocess.Popen[bytes] | None = None
         self.rrd_path: Path | None = None
         self._first_rrd_path = None if rrd_path is None else Path(rrd_path)
@@ -145,7 +149,10 @@ class LiveView:
 
     def _jobs(self) -> ViewFeed:
         if self._feed is None:
-            self._feed = ViewFeed(on_error=self._job_failed)
+            # a viewer shows the present: a few seconds of backlog at most; a saved .rrd is a file a
+            # person opens later: whole, unless the view thread is minutes behind
+            limit = self.queue_limit or (SAVE_QUEUE_LIMIT if self.mode == "save" else QUEUE_LIMIT)
+            self._feed = ViewFeed(on_error=self._job_failed, limit=limit)
         return self._feed
 
     # -- the caller's side: queue and return ------------------------------------------------------------

@@ -12,6 +12,9 @@ from collections.abc import Callable
 #: Updates (sample blocks, refits) waiting for the view thread beyond this many are dropped:
 #: at 50 reads a second the view is then about five seconds behind.
 QUEUE_LIMIT = 256
+#: With no viewer attached (``--viewer save``) the .rrd is a file for later: updates are dropped only
+#: beyond this many waiting (minutes of a decay at 400 Hz; some 40 MB at the very most).
+SAVE_QUEUE_LIMIT = 20_000
 
 
 class ViewFeed:
