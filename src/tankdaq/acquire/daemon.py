@@ -8,6 +8,10 @@ simulated MTi-G in-process on a pseudo-terminal, opened like hardware
 (``device.factory.open_device``); ``port="sim:FILE.mcap"`` plays the device of that recording
 (its raw bytes, at their pace) through the same pty. The decay pipeline is a ``DecayPipeline``
 with three sinks: the online identifier, the recording, the live view (``acquire.sinks``).
+
+Two threads: ``tankdaq-read`` (``acquire.read_thread``) only reads the device and queues the
+blocks; the thread that called ``run`` takes them and runs the pipeline, its sinks, the files and
+the callbacks, so an error there reaches the caller as before and the reads never wait for it.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from typing import TYPE_CHECKING
 
 from .. import validation
 from ..config import Hull, hull_scenario, load_hull
-from ..device.driver import MTiDriver
+from ..device.driver import MTiDriver, StreamCounters
 from ..device.factory import OpenDevice, SimPort, SimulatedSensor, open_device
 from ..errors import DeviceGone, InputError, RecordingError
 from ..ident.online import OnlineIdentifier, prepare_identifier
@@ -34,15 +38,12 @@ from ..store.playback import recorded_device
 from ..viz.live import LiveView
 from ..viz.viewer import default_viewer_mode, describe_mode
 from .pipeline import Block, DecayOutcome, DecayPipeline, DetectionSettings
+from .read_thread import DeviceReader, Read
 from .sinks import IdentifierSink, RecordingSink, Sink, ViewSink
 
 if TYPE_CHECKING:
     from ..device.simulator import RecordedSource, SimulatedMTi
     from ..physics.scenario import DecayScenario
-
-#: Reads are spaced at least this far apart: blocks of a few samples instead of one, so the
-#: per-block work (decode, detect, write, view) is shared; 20 ms is invisible in a live view.
-READ_INTERVAL_S = 0.02
 
 #: What the driver learnt that each recording keeps (``describe_run``).
 DEVICE_METADATA = ("device_id", "product_code", "firmware", "baud", "baud_changed_from")
@@ -141,8 +142,9 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 class _SignalStop:
     """Ctrl-C, SIGTERM and SIGHUP stop the daemon, the open decay closed as a complete file.
 
-    Inside the read loop a signal only asks the loop to end after the current read (an exception
-    raised into the middle of a write could leave the file without its footer); anywhere else
+    Inside the read loop a signal only asks the loop to end: the reader stops after its current
+    read, the blocks it read are fed, then the files close (an exception raised into the middle of a
+    write could leave the file without its footer); anywhere else
     (preparing the kernels, opening the device, waiting for it to come back) it raises
     KeyboardInterrupt at once. Only the first signal does anything: later ones wait for the files
     to close, and the closing is bounded (the final fit at most ``FINAL_FIT_WAIT_S``, the view 15 s).
@@ -199,7 +201,7 @@ class RecordDaemon:
         self.make_identifier = identifier
         self.device: OpenDevice | None = None
         self.outcomes: list[DecayOutcome] = []
-        self._next_read = 0.0
+        self._fed_counters = StreamCounters()  # the link as of the last block the pipeline was fed
         self._stop = threading.Event()
         self._signals = _SignalStop(self._stop)
         self._recording: RecordingSink | None = None
@@ -290,7 +292,7 @@ class RecordDaemon:
             config,
             draft=s.draft,
             nominal_angle_deg=s.angle_deg,
-            closing_metadata=driver.closing_metadata,
+            closing_metadata=lambda: {**driver.closing_metadata(), **self._fed_counters.metadata()},
         )
         self._recording = recording
         identifier = partial(  # the hull's GM and gyradius for the fits' plausibility checks
@@ -319,15 +321,14 @@ class RecordDaemon:
             self.on_event(f"device: {self.status.device}")
             pipeline = self._pipeline(driver)
             self.status.state = "waiting"
-            while (s.runs is None or len(self.outcomes) < s.runs) and not self._stop.is_set():
+            while not self._done():
+                signals.in_loop = True  # a signal now ends the loop once the blocks read are fed
                 try:
-                    signals.in_loop = True  # a signal now ends the loop after this read
-                    self._pump(driver, pipeline)
-                except DeviceGone as exc:
-                    signals.in_loop = False
-                    self._device_gone(driver, pipeline, str(exc))
+                    gone = self._stream(driver, pipeline)
                 finally:
                     signals.in_loop = False
+                if gone is not None:
+                    self._device_gone(driver, pipeline, str(gone))
         except KeyboardInterrupt:
             signals.stopped_by = signals.stopped_by or "SIGINT"
         except RecordingError:
@@ -344,7 +345,7 @@ class RecordDaemon:
         return self.outcomes
 
     def stop(self) -> None:
-        """Ask ``run`` to return after the current read (from a callback or another thread)."""
+        """Ask ``run`` to return once the blocks already read are fed (from a callback or another thread)."""
         self._stop.set()
 
     def _shut_down(self, pipeline: DecayPipeline | None) -> None:
@@ -364,15 +365,34 @@ class RecordDaemon:
                 if self.device is not None:
                     self.device.close()
 
-    def _pump(self, driver: MTiDriver, pipeline: DecayPipeline) -> None:
-        wait = self._next_read - time.monotonic()
-        if wait > 0:
-            time.sleep(wait)
-        self._next_read = time.monotonic() + READ_INTERVAL_S
-        block = driver.read_block()
-        finished = pipeline.feed(Block(block.samples, block.raw, block.host_t, block.carried))
-        self.outcomes.extend(finished)
-        c = driver.counters
+    def _done(self) -> bool:
+        return self._stop.is_set() or self._runs_done()
+
+    def _stream(self, driver: MTiDriver, pipeline: DecayPipeline) -> DeviceGone | None:
+        """Feed the reading thread's blocks to the pipeline until done (returns None) or the device is gone
+        (returns why). Stopped, every block read is fed; once ``runs`` are done the rest is not (the
+        reads after the last decay wanted could only start one more)."""
+        reader = DeviceReader(driver).start()
+        try:
+            for item in reader.items(until=self._done):
+                if not isinstance(item, Read):  # the reader ended: stopped, the device gone, or a failure
+                    if isinstance(item.error, DeviceGone) or item.error is None:
+                        return item.error
+                    raise item.error
+                if not self._runs_done():
+                    self._feed(pipeline, item)
+            return None
+        finally:
+            reader.close()
+
+    def _runs_done(self) -> bool:
+        runs = self.settings.runs
+        return runs is not None and len(self.outcomes) >= runs
+
+    def _feed(self, pipeline: DecayPipeline, read: Read) -> None:
+        block = read.block
+        self.outcomes.extend(pipeline.feed(Block(block.samples, block.raw, block.host_t, block.carried)))
+        self._fed_counters = c = read.counters
         st = self.status
         st.samples, st.gaps, st.bad_frames = c.samples, c.gaps, c.bad_frames
         st.state, st.held_deg, st.runs_done = pipeline.state, pipeline.held_deg, len(self.outcomes)

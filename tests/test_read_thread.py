@@ -1,0 +1,136 @@
+"""The thread that reads the device does nothing else, and a stop loses no block it read.
+
+All real: the simulated MTi-G on a pty opened through pyserial, the daemon's own pipeline and
+files, read back with the official ``mcap`` reader. The spies below call the real methods and only
+note which thread called them.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.read_thread import THREAD_NAME
+from tankdaq.acquire.release import ReleaseDetector
+from tankdaq.acquire.sinks import Block, Decay, Sink
+from tankdaq.device.driver import MTiDriver, StreamBlock
+from tankdaq.ident.online import OnlineResult
+from tankdaq.store.reader import iter_raw_chunks, read_recording
+from tankdaq.store.writer import RecordingWriter
+
+
+def _settings(out: Path, **overrides: object) -> RecordSettings:
+    base: dict[str, object] = {
+        "port": "sim", "draft": 1.0, "angle_deg": 8.0, "hull": "swath", "out_dir": out, "viewer": "none",
+        "runs": 1, "sim_speed": 8.0, "sim_seed": 5,
+    }  # fmt: skip
+    return RecordSettings(**{**base, **overrides})  # type: ignore[arg-type]
+
+
+class _Reads:
+    """Every block the driver returned, and the threads that read them (the real ``read_block``)."""
+
+    def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
+        self.blocks: list[StreamBlock] = []
+        self.threads: set[threading.Thread] = set()
+        self.more = threading.Condition()
+        real = MTiDriver.read_block
+
+        def read_block(driver: MTiDriver) -> StreamBlock:
+            block = real(driver)
+            with self.more:
+                self.blocks.append(block)
+                self.threads.add(threading.current_thread())
+                self.more.notify_all()
+            return block
+
+        monkeypatch.setattr(MTiDriver, "read_block", read_block)
+
+
+Seen = dict[str, set[threading.Thread]]
+
+
+def _spy(monkeypatch: pytest.MonkeyPatch, owner: type, name: str, seen: Seen) -> None:
+    real: Callable[..., object] = getattr(owner, name)
+
+    def call(*args: object, **kwargs: object) -> object:
+        seen.setdefault(f"{owner.__name__}.{name}", set()).add(threading.current_thread())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(owner, name, call)
+
+
+class _ThreadSink(Sink):
+    """A listener of the pipeline that notes the thread of every call it hears."""
+
+    def __init__(self, seen: Seen) -> None:
+        self.seen = seen
+
+    def _note(self, what: str) -> None:
+        self.seen.setdefault(f"sink.{what}", set()).add(threading.current_thread())
+
+    def on_block(self, block: Block, decay: Decay | None) -> None:
+        self._note("on_block")
+
+    def on_release(self, decay: Decay, pretrigger: object) -> None:
+        self._note("on_release")
+
+    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
+        self._note("on_fit")
+
+    def on_settle(self, decay: Decay) -> None:
+        self._note("on_settle")
+
+
+def test_no_release_detection_fit_or_write_runs_on_the_reading_thread(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    reads = _Reads(monkeypatch)
+    seen: Seen = {}
+    _spy(monkeypatch, ReleaseDetector, "feed", seen)
+    for name in ("write_raw", "write_samples", "write_event", "write_fit"):
+        _spy(monkeypatch, RecordingWriter, name, seen)
+    (outcome,) = RecordDaemon(_settings(tmp_path), sinks=[_ThreadSink(seen)]).run()
+    assert outcome.settle_reason in ("amplitude", "timeout") and outcome.path is not None
+    assert reads.threads and {thread.name for thread in reads.threads} == {THREAD_NAME}
+    wanted = {"ReleaseDetector.feed", "RecordingWriter.write_raw", "RecordingWriter.write_fit"}
+    wanted |= {"sink.on_block", "sink.on_release", "sink.on_fit", "sink.on_settle"}
+    assert wanted <= set(seen), sorted(seen)
+    for what, threads in seen.items():
+        assert not threads & reads.threads, f"{what} ran on the reading thread"
+
+
+def test_a_stop_mid_decay_feeds_every_block_already_read_into_the_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``stop()`` mid-decay while the pipeline is held until the reader has read 10 blocks more: those
+    blocks (and any read after) are in the decay's file, which closes complete."""
+    reads = _Reads(monkeypatch)
+    daemon: RecordDaemon
+    held: list[bool] = []
+
+    class StopMidDecay(Sink):
+        def on_block(self, block: Block, decay: Decay | None) -> None:
+            if decay is None or held or block.samples.size == 0:
+                return
+            if float(block.samples["t"][-1]) - decay.release_t < 3.0:
+                return
+            daemon.stop()
+            with reads.more:
+                target = len(reads.blocks) + 10
+                held.append(reads.more.wait_for(lambda: len(reads.blocks) >= target, timeout=30.0))
+
+    daemon = RecordDaemon(_settings(tmp_path, runs=None), sinks=[StopMidDecay()])
+    (outcome,) = daemon.run()
+    assert held == [True], "the reader went on reading while the pipeline was held"
+    assert outcome.settle_reason == "note" and outcome.path is not None
+    assert not read_recording(outcome.path).truncated
+    in_file = [host_ns for host_ns, raw in iter_raw_chunks(outcome.path) if raw]
+    read = [int(block.host_t * 1e9) for block in reads.blocks if block.raw]
+    after_start = [host_ns for host_ns in read if host_ns >= in_file[0]]
+    assert len(after_start) > 10
+    assert after_start == in_file, "every block read up to the stop reached the file, in order"
