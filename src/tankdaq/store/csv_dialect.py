@@ -15,6 +15,7 @@ import codecs
 import csv
 import math
 import re
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -191,15 +192,17 @@ def _load_fast(path: Path, dialect: Dialect, skip: int, columns: list[int]) -> n
             skip -= bool(line.strip())
         lines = (line.replace(",", ".") for line in fh) if dialect.decimal_comma else fh
         try:
-            return np.loadtxt(
-                lines,
-                delimiter=dialect.separator,
-                usecols=columns,
-                dtype=float,
-                comments="#",
-                ndmin=2,
-                quotechar='"',
-            ).reshape(-1, len(columns))
+            with warnings.catch_warnings():  # a file with no data rows: the caller says so in one line
+                warnings.simplefilter("ignore", UserWarning)
+                return np.loadtxt(
+                    lines,
+                    delimiter=dialect.separator,
+                    usecols=columns,
+                    dtype=float,
+                    comments="#",
+                    ndmin=2,
+                    quotechar='"',
+                ).reshape(-1, len(columns))
         except (ValueError, IndexError):
             return None
 
