@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import pytest
 
-from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from record_settings import sim_record_settings
+from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.acquire.read_thread import THREAD_NAME
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.acquire.sinks import Block, Decay, Sink
@@ -22,13 +24,8 @@ from tankdaq.ident.online import OnlineResult
 from tankdaq.store.reader import iter_raw_chunks, read_recording
 from tankdaq.store.writer import RecordingWriter
 
-
-def _settings(out: Path, **overrides: object) -> RecordSettings:
-    base: dict[str, object] = {
-        "port": "sim", "draft": 1.0, "angle_deg": 8.0, "hull": "swath", "out_dir": out, "viewer": "none",
-        "runs": 1, "sim_speed": 8.0, "sim_seed": 5,
-    }  # fmt: skip
-    return RecordSettings(**{**base, **overrides})  # type: ignore[arg-type]
+#: One decay at 8x, a fixed seed.
+_settings = partial(sim_record_settings, runs=1, sim_speed=8.0, sim_seed=5)
 
 
 class _Reads:

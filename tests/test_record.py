@@ -21,7 +21,8 @@ import pytest
 from mcap.reader import make_reader
 from typer.testing import CliRunner
 
-from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from record_settings import sim_record_settings
+from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.cli import app
 from tankdaq.samples import AXIS_FIELDS
 from tankdaq.store.reader import iter_raw_chunks, read_recording
@@ -44,18 +45,10 @@ def _decode_raw(path: Path) -> np.ndarray:
     return np.concatenate(blocks)
 
 
-def _sim_settings(out: Path, **overrides: object) -> RecordSettings:
-    """Record settings for the built-in simulated MTi-G: swath roll at T from 8 deg, no viewer."""
-    base: dict[str, object] = {
-        "port": "sim", "draft": 1.0, "angle_deg": 8.0, "hull": "swath", "out_dir": out, "viewer": "none",
-    }  # fmt: skip
-    return RecordSettings(**{**base, **overrides})  # type: ignore[arg-type]
-
-
 @pytest.fixture(scope="module")
 def three_decays(tmp_path_factory: pytest.TempPathFactory) -> tuple[RecordDaemon, list]:
     out = tmp_path_factory.mktemp("rec")
-    settings = _sim_settings(
+    settings = sim_record_settings(
         out,
         draft=1.1,
         runs=3,
@@ -192,7 +185,7 @@ def test_replay_redetects_the_release_and_refits(three_decays) -> None:
 
 
 def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: Path) -> None:
-    settings = _sim_settings(tmp_path, runs=2, sim_speed=4.0, sim_seed=5, reconnect_timeout_s=30.0)
+    settings = sim_record_settings(tmp_path, runs=2, sim_speed=4.0, sim_seed=5, reconnect_timeout_s=30.0)
     plugged = threading.Event()
     daemon: RecordDaemon
 
@@ -433,7 +426,7 @@ def test_a_legacy_mti_g_is_recorded_and_replayed(tmp_path: Path) -> None:
     """The 2007-era MTi-G speaks only MTData 0x32: recording and replay decode it all the same."""
     from tankdaq.acquire.replay import replay_recording
 
-    settings = _sim_settings(tmp_path, runs=1, sim_speed=8.0, sim_seed=9, sim_legacy=True)
+    settings = sim_record_settings(tmp_path, runs=1, sim_speed=8.0, sim_seed=9, sim_legacy=True)
     daemon = RecordDaemon(settings)
     (outcome,) = daemon.run()
     recording = read_recording(outcome.path)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import shutil
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,8 @@ import pytest
 from mcap.reader import make_reader
 from typer.testing import CliRunner
 
-from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from record_settings import sim_record_settings
+from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import Decay, IdentifierSink, RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
@@ -36,12 +38,8 @@ class Injected(RuntimeError):
     """The failure a test injects (a dying viewer, a broken callback)."""
 
 
-def _settings(out: Path, **overrides: object) -> RecordSettings:
-    base: dict[str, object] = {
-        "port": "sim", "draft": 1.0, "angle_deg": 8.0, "hull": "swath", "out_dir": out, "viewer": "none",
-        "runs": 1, "sim_speed": 8.0, "sim_seed": 5,
-    }  # fmt: skip
-    return RecordSettings(**{**base, **overrides})  # type: ignore[arg-type]
+#: One decay at 8x, a fixed seed.
+_settings = partial(sim_record_settings, runs=1, sim_speed=8.0, sim_seed=5)
 
 
 @pytest.fixture(scope="module")

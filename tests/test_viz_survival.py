@@ -19,6 +19,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,8 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from rerun.chunk import RrdReader
 
-from tankdaq.acquire.daemon import DaemonStatus, RecordDaemon, RecordSettings
+from record_settings import sim_record_settings
+from tankdaq.acquire.daemon import DaemonStatus, RecordDaemon
 from tankdaq.errors import RecordingError
 from tankdaq.samples import empty_samples
 from tankdaq.store.reader import read_recording
@@ -42,12 +44,8 @@ TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
 SIM_RECORD = ["record", "--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "8"]
 
 
-def _settings(out: Path, **overrides: object) -> RecordSettings:
-    base: dict[str, object] = {
-        "port": "sim", "draft": 1.0, "angle_deg": 8.0, "hull": "swath", "out_dir": out, "viewer": "save",
-        "sim_speed": 16.0, "sim_seed": 4,
-    }  # fmt: skip
-    return RecordSettings(**{**base, **overrides})  # type: ignore[arg-type]
+#: The view saving, at 16x, a fixed seed.
+_settings = partial(sim_record_settings, viewer="save", sim_speed=16.0, sim_seed=4)
 
 
 def _complete(path: Path) -> bool:
