@@ -88,8 +88,8 @@ def bench_cramer_rao(n_runs: int = 200, amplitude_deg: float = 10.0) -> None:
     p_true = reference.params_.copy()
     p_true[: len(terms)] = [truth[k] for k in terms]
     p_true[len(terms) :] = [0.3, 0.0, 0.01]
-    reference._sigmas = [{"angle": ANGLE_NOISE, "rate": RATE_NOISE}]
-    _, jac, _, _ = reference._weighted(p_true)
+    reference._model.sigmas = [{"angle": ANGLE_NOISE, "rate": RATE_NOISE}]
+    _, jac, _, _ = reference._model.weighted(p_true)
     crb = np.linalg.inv(jac.T @ jac)[: len(terms), : len(terms)]
     amplitude = math.radians(amplitude_deg)
     grad = np.array(

@@ -172,13 +172,13 @@ def test_a_record_cut_mid_swing_after_two_cycles_is_still_fitted():
 
 def assert_jacobian_is_central_differences(fit: OutputError, params: np.ndarray) -> None:
     """The weighted Jacobian at ``params`` column by column against central differences."""
-    _, jac, _, _ = fit._weighted(params)
+    _, jac, _, _ = fit._model.weighted(params)
     for k, name in enumerate(fit.param_names_):
         step = 1e-6 * max(1.0, abs(params[k]))
         up, down = params.copy(), params.copy()
         up[k] += step
         down[k] -= step
-        numeric = (fit._weighted(up)[0] - fit._weighted(down)[0]) / (2 * step)
+        numeric = (fit._model.weighted(up)[0] - fit._model.weighted(down)[0]) / (2 * step)
         assert np.max(np.abs(numeric - jac[:, k])) < 1e-6 * np.max(np.abs(jac[:, k])), name
 
 

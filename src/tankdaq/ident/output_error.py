@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
@@ -35,12 +34,7 @@ from ..errors import BadIdentificationInput, InputError
 from ..physics.models import resolve_model
 from ..records import DecayRun
 from .base import EstimatorMixin
-from .compiled import (
-    simulate,
-    simulate_with_sensitivities,
-    substeps,
-    term_codes,
-)
+from .compiled import substeps
 from .derived import natural_period
 from .equation_error import EquationError, check_runs, exogenous_input
 from .fit_statistics import (
@@ -50,10 +44,9 @@ from .fit_statistics import (
     summarize_residuals,
     whiteness_warnings,
 )
-from .forcing import input_forcing
 from .least_squares import levenberg_marquardt
-from .observation_lag import LagOperator, end_acceleration_sensitivities, end_accelerations
 from .one_step import one_step_rms
+from .output_model import OutputModel
 from .parameter_layout import OBSERVATION_PARAMS, ParameterLayout
 from .uncertainty import (
     bic,
@@ -65,7 +58,6 @@ from .uncertainty import (
 
 #: Below this angle R^2 the fit from the equation-error start is retried from a linear start.
 FALLBACK_R2 = 0.9
-_KU_CODE = term_codes(("ku",))
 
 
 class OutputError(EstimatorMixin):
@@ -159,14 +151,7 @@ class OutputError(EstimatorMixin):
         self._check_settings(runs)
         self.terms_ = resolve_model(self.terms)
         self.runs_ = runs
-        self._kept = [run.kept for run in runs]  # residuals of excluded samples (clipped) are left out
-        layout = self._make_layout(len(runs))
-        self._layout = layout
-        self._codes = term_codes(layout.dynamics)
-        if layout.couplings or layout.ringing:
-            self._codes = np.concatenate([self._codes, _KU_CODE])
-        self._channels = [self._channel_series(run) for run in runs]
-        self._has_rate = [self.use_rate and run.rate is not None for run in runs]
+        layout = self._layout = self._make_layout(len(runs))
         p0 = self._start_vector(runs, start, fixed_coefficients, guess or {})
         free = np.ones(layout.size, dtype=bool)
         if fixed_coefficients is not None:
@@ -174,29 +159,27 @@ class OutputError(EstimatorMixin):
         amplitude = max(float(np.max(np.abs(run.angle - np.median(run.angle)))) for run in runs)
         dt_max = max(float(np.max(np.diff(run.t))) for run in runs)
         self._n_sub = substeps(dt_max, p0[: len(layout.dynamics)], layout.dynamics, amplitude)
-        self.sigmas_ = [
-            initial_noise_levels(run, has_rate) for run, has_rate in zip(runs, self._has_rate, strict=True)
-        ]
-        self._predictions: dict[int, tuple[bytes, dict[str, Any]]] = {}
-        self._lag_ops: dict[int, tuple[float, LagOperator]] = {}
+        has_rate = [self.use_rate and run.rate is not None for run in runs]
+        sigmas = [initial_noise_levels(run, rated) for run, rated in zip(runs, has_rate, strict=True)]
+        channels = [self._channel_series(run) for run in runs]
+        model = OutputModel(runs, layout, channels, has_rate, self.friction_eps, self._n_sub, sigmas)
+        self._model = model
 
         # with reweighting the first solve only has to get close: the second one polishes
         rough = max(1e-6, self.tol) if self.reweight else self.tol
         params = self._solve(p0, free, rough)
-        if start is None and angle_r2(self.runs_, self._predictions_at(params), self._kept) < FALLBACK_R2:
+        if start is None and angle_r2(runs, model.predictions(params), model.kept) < FALLBACK_R2:
             linear = self._start_vector(runs, None, fixed_coefficients, guess or {}, linear_only=True)
             fallback = self._solve(linear, free, rough)
-            if angle_r2(self.runs_, self._predictions_at(fallback), self._kept) > angle_r2(
-                self.runs_, self._predictions_at(params), self._kept
+            if angle_r2(runs, model.predictions(fallback), model.kept) > angle_r2(
+                runs, model.predictions(params), model.kept
             ):
                 params = fallback
         if self.reweight:
-            self.sigmas_ = residual_noise_levels(
-                self.runs_, self._predictions_at(params), self._kept, self._has_rate
-            )
+            model.sigmas = residual_noise_levels(runs, model.predictions(params), model.kept, has_rate)
             params = self._solve(params, free, self.tol)
         self._finish(params, free)
-        self._predictions, self._lag_ops = {}, {}
+        model.forget()
         self.elapsed_s_ = time.perf_counter() - started
         return self
 
@@ -283,124 +266,11 @@ class OutputError(EstimatorMixin):
             terms, use_rate=self.use_rate, exogenous=exogenous, friction_eps=self.friction_eps
         ).fit(runs)
 
-    def _predictions_at(self, params: np.ndarray) -> list[dict[str, Any]]:
-        """Every run's predicted outputs at ``params`` (no Jacobian)."""
-        return [self._predict_run(params, r, with_jacobian=False) for r in range(len(self.runs_))]
-
-    # ------------------------------------------------------------------ the model
-    def _kernel_theta(self, params: np.ndarray) -> np.ndarray:
-        """The kernel's coefficients: the dynamics terms, then a unit ku when an input is modelled."""
-        theta = params[: len(self._layout.dynamics)]
-        return np.append(theta, 1.0) if self._codes.size > theta.size else theta.copy()
-
-    def _predict_run(self, params: np.ndarray, r: int, with_jacobian: bool) -> dict[str, Any]:
-        """Measured-frame angle and rate of run r, and their Jacobian rows over the full vector.
-
-        The last prediction with Jacobian is kept per run: the solver's final point is asked
-        for again by the noise re-estimate, the second solve and the results (about a third of
-        a fit's integrations).
-        """
-        key = params.tobytes()
-        cached = self._predictions.get(r)
-        if cached is not None and cached[0] == key and (with_jacobian or cached[1]["ok"]):
-            return cached[1]
-        pred = self._integrate(params, r, self.runs_[r].t, self._channels[r], with_jacobian)
-        if with_jacobian:
-            self._predictions[r] = (key, pred)
-        return pred
-
-    def _integrate(
-        self, params: np.ndarray, r: int, t: np.ndarray, channels: list[np.ndarray], with_jacobian: bool
-    ) -> dict[str, Any]:
-        """Angle and rate of run r's parameters at instants t (and their Jacobian over the full vector)."""
-        layout = self._layout
-        theta = self._kernel_theta(params)
-        forcing = input_forcing(self._layout, params, r, t, channels)
-        angle0, rate0 = (layout.value(params, n, run=r) for n in ("angle0", "rate0"))
-        offset = layout.value(params, "angle_offset_rad", run=r)
-        gain = 1.0 + layout.value(params, "angle_gain_error")
-        lag = layout.value(params, "angle_lag_s")
-        bias = layout.value(params, "gyro_bias_rad_s")
-        eps, n_sub = self.friction_eps, self._n_sub
-        if not with_jacobian:
-            x, v = simulate(t, angle0, rate0, theta, self._codes, forcing.u, eps, n_sub)
-            lagged = (
-                x
-                if lag == 0.0
-                else self._lag(r, t, lag).apply(
-                    x, v, end_accelerations(self._codes, theta, x, v, forcing, self.friction_eps)
-                )
-            )
-            return {"angle": gain * lagged + offset, "rate": v + bias, "ok": True}
-        x, v, sx, sv, ok = simulate_with_sensitivities(
-            t, angle0, rate0, theta, self._codes, forcing.u, forcing.partials, eps, n_sub
-        )
-        n_dyn = len(layout.dynamics)
-        n_kernel_theta = theta.size
-        rs = layout.run_slice(r)
-        # kernel columns -> layout columns: dynamics terms, (unit ku: no parameter), x0, v0, input parameters
-        kernel_cols = [*range(n_dyn), n_kernel_theta, n_kernel_theta + 1]
-        kernel_cols += [n_kernel_theta + 2 + k for k in range(len(forcing.columns))]
-        layout_cols = [*range(n_dyn), rs.start, rs.start + 1, *forcing.columns]
-        sx_l, sv_l = sx[:, kernel_cols], sv[:, kernel_cols]
-        ja = np.zeros((t.size, layout.size))
-        jv = np.zeros((t.size, layout.size))
-        lagged = x
-        if (li := layout.index("angle_lag_s")) is not None:
-            op = self._lag(r, t, lag)
-            acc_ends, s_acc_ends = end_acceleration_sensitivities(
-                self._codes, theta, x, v, forcing, sx, sv, kernel_cols, self.friction_eps
-            )
-            lagged = op.apply(x, v, acc_ends)
-            ja[:, li] = gain * op.apply_lag_derivative(x, v, acc_ends)
-            ja[:, layout_cols] = gain * op.apply(sx_l, sv_l, s_acc_ends)
-        else:
-            ja[:, layout_cols] = gain * sx_l
-        jv[:, layout_cols] = sv_l
-        if (oi := layout.run_index(r, "angle_offset_rad")) is not None:
-            ja[:, oi] = 1.0
-        if (gi := layout.index("angle_gain_error")) is not None:
-            ja[:, gi] = lagged
-        if (bi := layout.index("gyro_bias_rad_s")) is not None:
-            jv[:, bi] = 1.0
-        return {"angle": gain * lagged + offset, "rate": v + bias, "ja": ja, "jv": jv, "ok": ok}
-
-    def _lag(self, r: int, t: np.ndarray, lag: float) -> LagOperator:
-        """The lag operator on run r's instants, kept while the solver tries other parameters."""
-        if t is not self.runs_[r].t:
-            return LagOperator(t, lag)
-        cached = self._lag_ops.get(r)
-        if cached is None or cached[0] != lag:
-            cached = self._lag_ops[r] = (lag, LagOperator(t, lag))
-        return cached[1]
-
-    def _weighted(
-        self, params: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, list[tuple[list[np.ndarray], list[np.ndarray]]], bool]:
-        """Residuals and Jacobian divided by the noise levels; also per run the (Jacobians, residuals)
-        of each output, which the HAC covariance needs instant by instant. The model is simulated
-        through excluded samples (a clipped stretch): only their residuals are left out."""
-        res, jac, blocks = [], [], []
-        ok_all = True
-        for r, run in enumerate(self.runs_):
-            pred = self._predict_run(params, r, with_jacobian=True)
-            ok_all &= bool(pred["ok"])
-            sig, kept = self.sigmas_[r], self._kept[r]
-            run_jac = [-pred["ja"][kept] / sig["angle"]]
-            run_res = [(run.angle - pred["angle"])[kept] / sig["angle"]]
-            if self._has_rate[r]:
-                run_jac.append(-pred["jv"][kept] / sig["rate"])
-                run_res.append((run.rate - pred["rate"])[kept] / sig["rate"])
-            res += run_res
-            jac += run_jac
-            blocks.append((run_jac, run_res))
-        return np.concatenate(res), np.vstack(jac), blocks, ok_all
-
     def _solve(self, p0: np.ndarray, free: np.ndarray, tol: float) -> np.ndarray:
         def evaluate(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             p = p0.copy()
             p[free] = q
-            res, jac, _, ok = self._weighted(p)
+            res, jac, _, ok = self._model.weighted(p)
             if not ok:  # diverged: a large penalty makes LM refuse the step and back off
                 res = np.full_like(res, 1e6)
             return res, jac[:, free]
@@ -418,7 +288,9 @@ class OutputError(EstimatorMixin):
             raise BadIdentificationInput("the fit diverged: no finite parameters; try a simpler model")
         self.params_ = params
         self.param_names_ = layout.names
-        res_w, jac_w, blocks, _ = self._weighted(params)
+        model = self._model
+        self.sigmas_ = model.sigmas
+        res_w, jac_w, blocks, _ = model.weighted(params)
         self.score_blocks_ = [([j[:, free] for j in js], rs) for js, rs in blocks]
         term_index = [layout.at(k) for k in self.terms_]
         theta = params[term_index]
@@ -449,32 +321,24 @@ class OutputError(EstimatorMixin):
         self.offsets_ = [p.get("angle_offset_rad", 0.0) for p in self.run_params_]
         self.initial_states_ = [(p["angle0"], p["rate0"]) for p in self.run_params_]
 
-        summary = summarize_residuals(
-            self.runs_,
-            self._predictions_at(params),
-            self._kept,
-            self._has_rate,
-            self.sigmas_,
-        )
+        predictions = model.predictions(params)
+        summary = summarize_residuals(self.runs_, predictions, model.kept, model.has_rate, model.sigmas)
         self.fitted_, self.residuals_ = summary.fitted, summary.residuals
         self.r2_angle_, self.nrmse_ = summary.r2_angle, summary.nrmse
         self.n_obs_ = n_obs
         self.bic_ = bic(summary.blocks, n_free, None if self.reweight else summary.block_sigmas)
         self.seed_objective_ = one_step_rms(
-            self._codes,
-            self._kernel_theta(params),
+            model.codes,
+            model.kernel_theta(params),
             self.runs_,
             self.offsets_,
-            [
-                input_forcing(self._layout, params, r, run.t, self._channels[r]).u
-                for r, run in enumerate(self.runs_)
-            ],
+            model.forcing_inputs(params),
             self.friction_eps,
         )
         self.warnings_ = []
         if self.compute_diagnostics:
             self.warnings_ = coefficient_warnings(self.terms_, theta, std, self.correlation_)
-            self.warnings_ += whiteness_warnings(self.runs_, self.residuals_, self._kept)
+            self.warnings_ += whiteness_warnings(self.runs_, self.residuals_, model.kept)
 
     def _free_covariance(self, res_w: np.ndarray, jac_w: np.ndarray, free: np.ndarray) -> np.ndarray:
         """Covariance of the free parameters: HAC over about ``hac_periods`` natural periods (the residuals
@@ -513,7 +377,7 @@ class OutputError(EstimatorMixin):
             params[[self._layout.run_at(run_index, n) for n in ("angle0", "rate0")]] = initial_state
         if offset is not None and (i := self._layout.run_index(run_index, "angle_offset_rad")) is not None:
             params[i] = offset
-        pred = self._integrate(params, run_index, t, channels, with_jacobian=False)
+        pred = self._model.integrate(params, run_index, t, channels, with_jacobian=False)
         if offset is not None and self._layout.run_index(run_index, "angle_offset_rad") is None:
             pred["angle"] = pred["angle"] + offset
         return pred["angle"], pred["rate"]
