@@ -149,78 +149,84 @@ def _angle_end(run: DecayRun, peaks: _Peaks | None) -> FreeDecayEnd | None:
     """
     if peaks is None:
         return None
-    v, sigma = peaks.value, peaks.sigma
-    swing = np.abs(np.diff(v))
-    ratio = swing[1:] / swing[:-1]
-    half_periods = np.diff(peaks.t)
+    swing = np.abs(np.diff(peaks.value))
     for k in range(1, swing.size):  # swing k ends at peak k+1; the last clean peak is k
-        before = int(peaks.index[k]) + 1
-        if swing[k] / 2 < NOISE_PEAKS * sigma:
-            return _end_at(
-                run,
-                int(peaks.index[k + 1]),
-                "noise",
-                f"the signal sinks into the noise: swing {math.degrees(swing[k]):.3g} deg, "
-                f"noise {math.degrees(sigma):.2g} deg",
-            )
-        if swing[k] > swing[k - 1] + 4 * math.sqrt(2) * sigma:
-            return _end_at(
-                run,
-                before,
-                "excitation",
-                f"a second excitation: the swing grows from {math.degrees(swing[k - 1]):.3g} "
-                f"to {math.degrees(swing[k]):.3g} deg",
-            )
-        loss = 1.0 - ratio[k - 1]
-        usual_loss = max(1.0 - ratio[k - 3 : k - 1]) if k >= 3 else math.inf
-        if loss > LOSS_JUMP * usual_loss + 4 * math.sqrt(2) * sigma / swing[k - 1]:
-            return _end_at(
-                run,
+        found = _swing_end(peaks, swing, k)
+        if found is not None:
+            return _end_at(run, *found)
+    return _tail_end(run, peaks, swing)
+
+
+def _swing_end(peaks: _Peaks, swing: np.ndarray, k: int) -> tuple[int, str, str] | None:
+    """Whether swing k is one a free decay cannot make: (the index where it ends, kind, reason)."""
+    v, sigma = peaks.value, peaks.sigma
+    before = int(peaks.index[k]) + 1
+    if swing[k] / 2 < NOISE_PEAKS * sigma:
+        return (
+            int(peaks.index[k + 1]),
+            "noise",
+            f"the signal sinks into the noise: swing {math.degrees(swing[k]):.3g} deg, "
+            f"noise {math.degrees(sigma):.2g} deg",
+        )
+    if swing[k] > swing[k - 1] + 4 * math.sqrt(2) * sigma:
+        return (
+            before,
+            "excitation",
+            f"a second excitation: the swing grows from {math.degrees(swing[k - 1]):.3g} "
+            f"to {math.degrees(swing[k]):.3g} deg",
+        )
+    ratio = swing[1:] / swing[:-1]
+    loss = 1.0 - ratio[k - 1]
+    usual_loss = max(1.0 - ratio[k - 3 : k - 1]) if k >= 3 else math.inf
+    if loss > LOSS_JUMP * usual_loss + 4 * math.sqrt(2) * sigma / swing[k - 1]:
+        return (
+            before,
+            "disturbance",
+            f"a disturbance: a half-cycle loses {100 * loss:.0f} % of its swing, "
+            f"{100 * usual_loss:.0f} % before",
+        )
+    if k >= 2:
+        midline = (v[k - 1] + 2 * v[k] + v[k + 1]) / 4
+        previous = (v[k - 2] + 2 * v[k - 1] + v[k]) / 4
+        bias = swing[k - 2] * (1.0 - min(ratio[k - 2], 1.0)) ** 2 / 4
+        if abs(midline - previous) > MIDLINE_FRACTION * swing[k] / 2 + bias + 5 * sigma:
+            jump_deg = math.degrees(midline - previous)
+            return before, "disturbance", f"a disturbance: the equilibrium jumps by {jump_deg:+.3g} deg"
+    if k >= 3:
+        half_periods = np.diff(peaks.t)
+        usual = float(np.median(half_periods[k - 3 : k]))
+        jitter = 8 * sigma / (math.pi * swing[k])  # zero-crossing time noise, relative
+        if abs(half_periods[k] - usual) > (HALF_PERIOD_FRACTION + jitter) * usual:
+            return (
                 before,
                 "disturbance",
-                f"a disturbance: a half-cycle loses {100 * loss:.0f} % of its swing, "
-                f"{100 * usual_loss:.0f} % before",
+                f"a disturbance: a half-period of {half_periods[k]:.3g} s, {usual:.3g} s before",
             )
-        if k >= 2:
-            midline = (v[k - 1] + 2 * v[k] + v[k + 1]) / 4
-            previous = (v[k - 2] + 2 * v[k - 1] + v[k]) / 4
-            bias = swing[k - 2] * (1.0 - min(ratio[k - 2], 1.0)) ** 2 / 4
-            if abs(midline - previous) > MIDLINE_FRACTION * swing[k] / 2 + bias + 5 * sigma:
-                return _end_at(
-                    run,
-                    before,
-                    "disturbance",
-                    f"a disturbance: the equilibrium jumps by {math.degrees(midline - previous):+.3g} deg",
-                )
-        if k >= 3:
-            usual = float(np.median(half_periods[k - 3 : k]))
-            jitter = 8 * sigma / (math.pi * swing[k])  # zero-crossing time noise, relative
-            if abs(half_periods[k] - usual) > (HALF_PERIOD_FRACTION + jitter) * usual:
-                return _end_at(
-                    run,
-                    before,
-                    "disturbance",
-                    f"a disturbance: a half-period of {half_periods[k]:.3g} s, {usual:.3g} s before",
-                )
+    return None
+
+
+def _tail_end(run: DecayRun, peaks: _Peaks, swing: np.ndarray) -> FreeDecayEnd | None:
+    """After the last half-cycle: a long tail without one has settled, or was pushed aside."""
+    v, sigma = peaks.value, peaks.sigma
     last = int(peaks.index[-1])
     rest = run.angle[last:]
     period_samples = 2 * int(np.median(np.diff(peaks.index)))
-    if rest.size > 2 * period_samples:  # a long tail without half-cycles: settled, or pushed aside
-        shift = float(np.median(rest[period_samples:])) - (v[-2] + v[-1]) / 2
-        if abs(shift) > MIDLINE_FRACTION * swing[-1] + 5 * sigma:
-            return _end_at(
-                run,
-                last + period_samples // 2,
-                "disturbance",
-                f"a disturbance: the angle leaves its equilibrium by {math.degrees(shift):+.3g} deg",
-            )
+    if rest.size <= 2 * period_samples:
+        return None
+    shift = float(np.median(rest[period_samples:])) - (v[-2] + v[-1]) / 2
+    if abs(shift) > MIDLINE_FRACTION * swing[-1] + 5 * sigma:
         return _end_at(
             run,
             last + period_samples // 2,
-            "noise",
-            f"the signal sinks into the noise after a last swing of {math.degrees(swing[-1]):.3g} deg",
+            "disturbance",
+            f"a disturbance: the angle leaves its equilibrium by {math.degrees(shift):+.3g} deg",
         )
-    return None
+    return _end_at(
+        run,
+        last + period_samples // 2,
+        "noise",
+        f"the signal sinks into the noise after a last swing of {math.degrees(swing[-1]):.3g} deg",
+    )
 
 
 def channel_kind(name: str) -> str | None:

@@ -166,6 +166,41 @@ def _sane(z: np.ndarray) -> bool:
     return True
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _rk4_step(
+    z: np.ndarray,
+    h: float,
+    theta: np.ndarray,
+    codes: np.ndarray,
+    u0: float,
+    du: float,
+    g0: np.ndarray,
+    g_mid: np.ndarray,
+    g1: np.ndarray,
+    eps: float,
+    k1: np.ndarray,
+    k2: np.ndarray,
+    k3: np.ndarray,
+    k4: np.ndarray,
+    tmp: np.ndarray,
+) -> None:
+    """One RK4 step of the state and its sensitivities, in place; the input goes u0 -> u0 + du and its
+    partials g0 -> g1 (g_mid halfway). k1..k4 and tmp are work arrays, so no step allocates."""
+    size = z.size
+    _deriv(z, k1, theta, codes, u0, g0, eps)
+    for m in range(size):
+        tmp[m] = z[m] + 0.5 * h * k1[m]
+    _deriv(tmp, k2, theta, codes, u0 + 0.5 * du, g_mid, eps)
+    for m in range(size):
+        tmp[m] = z[m] + 0.5 * h * k2[m]
+    _deriv(tmp, k3, theta, codes, u0 + 0.5 * du, g_mid, eps)
+    for m in range(size):
+        tmp[m] = z[m] + h * k3[m]
+    _deriv(tmp, k4, theta, codes, u0 + du, g1, eps)
+    for m in range(size):
+        z[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
+
+
 @numba.njit(cache=True, nogil=True)
 def simulate_with_sensitivities(
     t: np.ndarray,
@@ -223,18 +258,7 @@ def simulate_with_sensitivities(
                     g0[k] = du_dp[i - 1, k] + s * dg
                     g_mid[k] = g0[k] + 0.5 * dg
                     g1[k] = g0[k] + dg
-                _deriv(z, k1, theta, codes, u0, g0, eps)
-                for m in range(size):
-                    tmp[m] = z[m] + 0.5 * h * k1[m]
-                _deriv(tmp, k2, theta, codes, u0 + 0.5 * du, g_mid, eps)
-                for m in range(size):
-                    tmp[m] = z[m] + 0.5 * h * k2[m]
-                _deriv(tmp, k3, theta, codes, u0 + 0.5 * du, g_mid, eps)
-                for m in range(size):
-                    tmp[m] = z[m] + h * k3[m]
-                _deriv(tmp, k4, theta, codes, u0 + du, g1, eps)
-                for m in range(size):
-                    z[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
+                _rk4_step(z, h, theta, codes, u0, du, g0, g_mid, g1, eps, k1, k2, k3, k4, tmp)
             ok = _sane(z)
         if ok:
             xs[i] = z[0]

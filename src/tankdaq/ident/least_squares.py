@@ -172,21 +172,10 @@ def levenberg_marquardt(
             if not np.isfinite(fnorm_trial) or not np.all(np.isfinite(jac_trial)):
                 fnorm_trial = np.inf
             worse = 0.1 * fnorm_trial >= fnorm  # refused outright: no reduction to speak of
-            actual = -1.0 if worse else 1.0 - (fnorm_trial / fnorm) ** 2
-            model = (float(np.linalg.norm(sv * c)) / fnorm) ** 2  # ||J step||^2 / ||f||^2
-            damped = par * (pnorm / fnorm) ** 2
-            predicted = model + 2.0 * damped
-            slope = -(model + damped)  # the model's directional derivative along the step
+            jstep_norm = float(np.linalg.norm(sv * c))  # ||J step||
+            actual, predicted, slope = _reductions(fnorm, fnorm_trial, worse, jstep_norm, par, pnorm)
             ratio = actual / predicted if predicted != 0.0 else 0.0
-            if ratio <= 0.25:
-                shrink = 0.5 if actual >= 0.0 else 0.5 * slope / (slope + 0.5 * actual)
-                if worse or shrink < 0.1:
-                    shrink = 0.1
-                delta = shrink * min(delta, pnorm / 0.1)
-                par /= shrink
-            elif par == 0.0 or ratio >= 0.75:
-                delta = pnorm / 0.5
-                par *= 0.5
+            delta, par = _new_radius(ratio, actual, slope, worse, delta, par, pnorm)
             accepted = ratio >= 1e-4
             if accepted:
                 x, f, jac, fnorm = trial, f_trial, jac_trial, fnorm_trial
@@ -200,6 +189,34 @@ def levenberg_marquardt(
                 return _result(x, fnorm, nfev, 0)
             if accepted:
                 break
+
+
+def _reductions(
+    fnorm: float, fnorm_trial: float, worse: bool, jstep_norm: float, par: float, pnorm: float
+) -> tuple[float, float, float]:
+    """A trial's actual and predicted relative reductions of the sum of squares, and the model's slope.
+
+    A trial far ``worse`` than the current point (a diverged simulation, a penalty) reduces by -1.
+    """
+    actual = -1.0 if worse else 1.0 - (fnorm_trial / fnorm) ** 2
+    model = (jstep_norm / fnorm) ** 2  # ||J step||^2 / ||f||^2
+    damped = par * (pnorm / fnorm) ** 2
+    return actual, model + 2.0 * damped, -(model + damped)  # slope: the directional derivative
+
+
+def _new_radius(
+    ratio: float, actual: float, slope: float, worse: bool, delta: float, par: float, pnorm: float
+) -> tuple[float, float]:
+    """The trust radius and damping after a trial (MINPACK's lmder): shrunk on a poor ratio, by a
+    quadratic fit to the directional derivative, tenfold when refused; doubled on a good one."""
+    if ratio <= 0.25:
+        shrink = 0.5 if actual >= 0.0 else 0.5 * slope / (slope + 0.5 * actual)
+        if worse or shrink < 0.1:
+            shrink = 0.1
+        return shrink * min(delta, pnorm / 0.1), par / shrink
+    if par == 0.0 or ratio >= 0.75:
+        return pnorm / 0.5, par * 0.5
+    return delta, par
 
 
 def _largest_cosine(r: np.ndarray, qtf: np.ndarray, fnorm: float, col_norms: np.ndarray) -> float:
