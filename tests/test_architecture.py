@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import re
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -224,3 +225,84 @@ def test_every_module_is_named_in_the_map() -> None:
         if module and module not in named:
             missing.append(module)
     assert not missing, f"modules docs/architecture.md's Rooms does not name: {missing}"
+
+
+# ---- sizes: rooms that fit in a head -------------------------------------------------------------------
+
+#: A module over this many lines, or a function whose body is over ``MAX_FUNCTION_LINES``, needs a reason
+#: in docs/architecture.md's "Sizes" section.
+MAX_MODULE_LINES = 500
+MAX_FUNCTION_LINES = 80
+
+
+def function_lengths(path: Path, root: Path = SRC) -> dict[str, int]:
+    """``{"room/module.py:Class.function": lines}`` for every function in one file.
+
+    A function's lines run from the first line after its signature (the docstring counts) to its last:
+    a command's typer option signature is no part of it, everything the function does is.
+    """
+    where = path.relative_to(root).as_posix()
+    lengths: dict[str, int] = {}
+
+    def visit(node: ast.AST, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if not isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                visit(child, prefix)
+                continue
+            if not isinstance(child, ast.ClassDef):
+                last = child.end_lineno or child.lineno
+                lengths[f"{where}:{prefix}{child.name}"] = last - child.body[0].lineno + 1
+            visit(child, f"{prefix}{child.name}.")
+
+    visit(ast.parse(path.read_text(), str(path)), "")
+    return lengths
+
+
+def oversized(root: Path = SRC) -> dict[str, int]:
+    """Every module over ``MAX_MODULE_LINES`` and function over ``MAX_FUNCTION_LINES``, with its lines."""
+    found: dict[str, int] = {}
+    for path in sorted(root.rglob("*.py")):
+        lines = len(path.read_text().splitlines())
+        if lines > MAX_MODULE_LINES:
+            found[path.relative_to(root).as_posix()] = lines
+        found |= {name: n for name, n in function_lengths(path, root).items() if n > MAX_FUNCTION_LINES}
+    return found
+
+
+def stated_size_exceptions() -> set[str]:
+    """The modules and functions docs/architecture.md's "Sizes" section lets stay over the limits."""
+    section = DOC.read_text().split("\n## Sizes\n", 1)
+    assert len(section) == 2, "no Sizes section in docs/architecture.md"
+    body = section[1].split("\n## ", 1)[0]
+    return set(re.findall(r"^- `([\w/.]+\.py(?::[\w.]+)?)`", body, flags=re.MULTILINE))
+
+
+def test_no_module_or_function_is_over_its_size_unless_the_map_says_why() -> None:
+    unexplained = {name: n for name, n in oversized().items() if name not in stated_size_exceptions()}
+    assert not unexplained, (
+        f"over {MAX_MODULE_LINES} lines a module or {MAX_FUNCTION_LINES} a function body: {unexplained}; "
+        "split it, or say why it must stay in docs/architecture.md's Sizes section"
+    )
+
+
+def test_every_size_exception_the_map_states_is_still_needed() -> None:
+    """An exception that no longer applies is a stale line in the map: it goes."""
+    stale = sorted(stated_size_exceptions() - set(oversized()))
+    assert not stale, f"docs/architecture.md's Sizes section names what is within the limits now: {stale}"
+
+
+def test_the_size_check_sees_a_long_function_and_not_a_long_signature(tmp_path: Path) -> None:
+    room = tmp_path / "cli"
+    room.mkdir()
+    options = "".join(f"    option_{i}: int = 0,\n" for i in range(60))
+    body = "".join(f"x = {i}\n" for i in range(MAX_FUNCTION_LINES))
+    (room / "command.py").write_text(
+        f'def command(\n{options}) -> None:\n    """Help."""\n{textwrap.indent(body, " " * 4)}\n\n'
+        f"class Kind:\n    def method(self) -> None:\n{textwrap.indent(body, ' ' * 8)}"
+    )
+    (room / "long.py").write_text("x = 0\n" * (MAX_MODULE_LINES + 1))
+    assert function_lengths(room / "command.py", tmp_path) == {
+        "cli/command.py:command": MAX_FUNCTION_LINES + 1,  # the docstring and the body, not the 60 options
+        "cli/command.py:Kind.method": MAX_FUNCTION_LINES,
+    }
+    assert oversized(tmp_path) == {"cli/command.py:command": MAX_FUNCTION_LINES + 1, "cli/long.py": 501}
