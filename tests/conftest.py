@@ -1,10 +1,27 @@
-"""Every test's run catalogue is a temporary file: no test ever writes the user's own catalogue."""
+"""Fixtures every test module may use.
+
+- Every test's run catalogue is a temporary file: no test ever writes the user's own catalogue.
+- ``simulator``: a simulated MTi-G serving on a real pty, stopped when the test ends.
+- ``record_settings``: record settings for the built-in simulated MTi-G, writing into the test's folder.
+- ``decay_recording``: one short decay recorded end to end into a real MCAP file, made once a session.
+
+tankdaq is imported inside the fixtures, so collecting a test that uses none of them costs nothing.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
+
+if TYPE_CHECKING:
+    from tankdaq.acquire.daemon import RecordSettings
+    from tankdaq.device.simulator import SimulatedMTi
+
+#: The simulator fixture's device clock against the wall clock: a decay in a few seconds.
+SIMULATOR_SPEED = 10.0
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -14,3 +31,45 @@ def _catalogue_in_a_temp_folder(tmp_path_factory: pytest.TempPathFactory) -> Ite
     patch.setenv("TANKDAQ_CATALOGUE", str(tmp_path_factory.mktemp("catalogue") / "catalogue.sqlite"))
     yield
     patch.undo()
+
+
+@pytest.fixture
+def simulator() -> Iterator[SimulatedMTi]:
+    """A simulated MTi-G on a real pty, opened by path like hardware (``simulator.link``, ``.port``).
+
+    It plays the swath's roll decay at 100 Hz, its clock ``SIMULATOR_SPEED`` times the wall clock. When
+    the test ends, passed or failed, it is stopped and its pty, links and folder removed.
+    """
+    from tankdaq.config import hull_scenario
+    from tankdaq.device.simulator import SimulatedMTi
+
+    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SIMULATOR_SPEED) as device:
+        yield device
+
+
+@pytest.fixture
+def record_settings(tmp_path: Path) -> Callable[..., RecordSettings]:
+    """Makes ``RecordSettings`` for the built-in simulated MTi-G (``tests/record_settings.py``: swath roll
+    at T from 8 deg, no viewer) writing into the test's ``tmp_path``; a test names only what it changes,
+    ``record_settings(runs=1, port=simulator.link)``, and another folder as ``out_dir=``."""
+
+    from record_settings import sim_record_settings
+
+    def make(**overrides: object) -> RecordSettings:
+        return sim_record_settings(tmp_path, **overrides)
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def decay_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One roll decay of the swath recorded end to end: the simulated MTi-G on its pty, the driver, the
+    release detection, the live fit and the MCAP writer (raw bytes, samples, events, fits), device clock at
+    8x, seed 5. One file for the whole session: read it, or copy it before changing anything."""
+    from record_settings import sim_record_settings
+    from tankdaq.acquire.daemon import RecordDaemon
+
+    settings = sim_record_settings(tmp_path_factory.mktemp("decay"), runs=1, sim_speed=8.0, sim_seed=5)
+    (outcome,) = RecordDaemon(settings).run()
+    assert outcome.path is not None, "the simulated decay was not recorded"
+    return outcome.path

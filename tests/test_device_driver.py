@@ -59,28 +59,28 @@ def test_samples_are_the_scenario_in_si_units() -> None:
         np.testing.assert_allclose(samples[name], reference[name], rtol=1e-6, atol=1e-6)
 
 
-def test_unplug_raises_device_gone_and_replug_reconnects() -> None:
-    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
+def test_unplug_raises_device_gone_and_replug_reconnects(simulator: SimulatedMTi) -> None:
+    with MTiDriver(simulator.link) as driver:
         driver.configure()
         assert driver.samples(1.0).size == 100
-        old_port = sim.port
-        sim.unplug()
-        assert not os.path.exists(sim.link)
+        old_port = simulator.port
+        simulator.unplug()
+        assert not os.path.exists(simulator.link)
         with pytest.raises(DeviceGone, match="vanished"):
             driver.samples(5.0)
-        sim.replug()
+        simulator.replug()
         info = driver.reconnect(timeout_s=5.0)
-        assert info.port == sim.link
+        assert info.port == simulator.link
         samples = driver.samples(2.0)
     assert samples.size == 200
     _assert_contiguous(samples, 100)
     assert old_port  # the pts number may or may not be reused; the stable link is what matters
 
 
-def test_reconnect_gives_up_with_device_gone_when_nothing_comes_back() -> None:
-    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
+def test_reconnect_gives_up_with_device_gone_when_nothing_comes_back(simulator: SimulatedMTi) -> None:
+    with MTiDriver(simulator.link) as driver:
         driver.configure()
-        sim.unplug()
+        simulator.unplug()
         with pytest.raises(DeviceGone, match="did not come back"):
             driver.reconnect(timeout_s=0.5)
 
@@ -122,11 +122,13 @@ def test_corrupted_bytes_are_survived_and_counted() -> None:
     assert set(counters.metadata()) >= {"link_bad_checksums", "link_skipped_bytes", "link_false_syncs"}
 
 
-def test_a_stall_shows_up_as_a_counter_gap() -> None:
-    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.link) as driver:
+def test_a_stall_shows_up_as_a_counter_gap(simulator: SimulatedMTi) -> None:
+    with MTiDriver(simulator.link) as driver:
         driver.configure()
         before = driver.samples(1.0)
-        sim.stall(3.0)  # device seconds from the next sample: exactly 300 samples, whatever the scheduling
+        simulator.stall(
+            3.0
+        )  # device seconds from the next sample: exactly 300 samples, whatever the scheduling
         after = driver.samples(5.0)
     steps = np.diff(np.concatenate((before, after))["counter"].astype(np.int64)) % 65536
     jumps = steps[steps != 1]
@@ -254,19 +256,19 @@ def test_a_600_series_device_is_moved_with_port_config() -> None:
     _assert_contiguous(samples, 400)
 
 
-def test_a_replug_under_a_new_name_is_found_by_usb_serial_number() -> None:
-    with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED) as sim, MTiDriver(sim.port) as driver:
+def test_a_replug_under_a_new_name_is_found_by_usb_serial_number(simulator: SimulatedMTi) -> None:
+    with MTiDriver(simulator.port) as driver:
         driver.configure()  # opened by its /dev/pts name, which will not come back
-        first_name = sim.port
-        assert driver.usb_serial == sim.identity.serial_number
-        sim.unplug()
+        first_name = simulator.port
+        assert driver.usb_serial == simulator.identity.serial_number
+        simulator.unplug()
         with pytest.raises(DeviceGone):
             driver.samples(5.0)
-        sim.replug()
+        simulator.replug()
         info = driver.reconnect(timeout_s=5.0)
         samples = driver.samples(1.0)
-        assert sim.port != first_name  # (another program may own that pts number by now)
-        assert os.path.realpath(info.port) == sim.port
+        assert simulator.port != first_name  # (another program may own that pts number by now)
+        assert os.path.realpath(info.port) == simulator.port
         assert os.path.basename(info.port).startswith("usb-Xsens_MTi-G-710-2A8G4_077B1A2C")
     assert samples.size == 100
 

@@ -121,12 +121,14 @@ def test_latency_timer_is_read_through_the_ports_resolved_name(tmp_path: Path) -
     assert "udev rule in docs/protocol.md" in note
 
 
-def test_no_latency_line_for_a_port_that_is_not_an_ftdi_usb_serial_device(tmp_path: Path) -> None:
+def test_no_latency_line_for_a_port_that_is_not_an_ftdi_usb_serial_device(
+    simulator: SimulatedMTi, tmp_path: Path
+) -> None:
     sysfs = tmp_path / "sys"
     _sysfs(sysfs, "ttyUSB0", "1\n")  # set to 1 ms: nothing to say
     (sysfs / "bus" / "usb-serial" / "devices" / "ttyUSB1").mkdir()  # a usb-serial without the timer
     assert ftdi_latency_ms("/dev/ttyUSB0", sysfs) == 1 and latency_note("/dev/ttyUSB0", 1, 400) is None
     assert ftdi_latency_ms("/dev/ttyUSB1", sysfs) is None and ftdi_latency_ms("/dev/ttyACM0", sysfs) is None
-    with SimulatedMTi(hull_scenario(rate_hz=100), speed=10.0) as sim, MTiDriver(sim.link) as driver:
+    with MTiDriver(simulator.link) as driver:
         report = driver.inspect()  # a pty: not in sysfs
     assert report.latency_ms is None and not any("latency" in line for line in report.lines())

@@ -53,12 +53,6 @@ class Client:
         return replies[-1]
 
 
-@pytest.fixture
-def sim():
-    with SimulatedMTi(hull_scenario(rate_hz=100), speed=10.0) as device:
-        yield device
-
-
 def _reset(client: Client) -> list[Frame]:
     """Reset the device (a power cycle without unplugging: the port stays open) and collect the boot."""
     client.ask(MID.GOTO_CONFIG)
@@ -66,8 +60,8 @@ def _reset(client: Client) -> list[Frame]:
     return client.collect(0.3, until=MID.WAKEUP)
 
 
-def test_reset_boots_with_wakeup_and_an_acknowledged_wakeup_keeps_config(sim: SimulatedMTi) -> None:
-    client = Client(sim.link)
+def test_reset_boots_with_wakeup_and_an_acknowledged_wakeup_keeps_config(simulator: SimulatedMTi) -> None:
+    client = Client(simulator.link)
     assert [f.mid for f in _reset(client)][-2:] == [MID.RESET_ACK, MID.WAKEUP]
     client.send(MID.WAKEUP_ACK)
     assert client.collect(0.8) == []  # acknowledged: no data until GoToMeasurement
@@ -75,8 +69,8 @@ def test_reset_boots_with_wakeup_and_an_acknowledged_wakeup_keeps_config(sim: Si
     assert any(f.mid == MID.MTDATA2 for f in client.collect(0.3))
 
 
-def test_unacknowledged_wakeup_means_measuring_with_the_stored_configuration(sim: SimulatedMTi) -> None:
-    client = Client(sim.link)
+def test_unacknowledged_wakeup_means_measuring_with_the_stored_configuration(simulator: SimulatedMTi) -> None:
+    client = Client(simulator.link)
     assert _reset(client)[-1].mid == MID.WAKEUP
     frames = [f for f in client.collect(1.0) if f.mid == MID.MTDATA2]
     assert frames
@@ -89,8 +83,8 @@ def test_unacknowledged_wakeup_means_measuring_with_the_stored_configuration(sim
     }
 
 
-def test_output_configuration_is_honoured_and_the_echo_is_effective(sim: SimulatedMTi) -> None:
-    client = Client(sim.link)
+def test_output_configuration_is_honoured_and_the_echo_is_effective(simulator: SimulatedMTi) -> None:
+    client = Client(simulator.link)
     assert client.ask(MID.GOTO_CONFIG).mid == MID.GOTO_CONFIG_ACK
     requested = [
         (make_xdi("PacketCounter"), 0xFFFF),
@@ -114,8 +108,8 @@ def test_output_configuration_is_honoured_and_the_echo_is_effective(sim: Simulat
     assert messages[0].precision("EulerAngles") == "fp1632"
 
 
-def test_unknown_messages_get_error_0x04(sim: SimulatedMTi) -> None:
-    client = Client(sim.link)
+def test_unknown_messages_get_error_0x04(simulator: SimulatedMTi) -> None:
+    client = Client(simulator.link)
     client.ask(MID.GOTO_CONFIG)
     reply = client.ask(MID.RUN_SELFTEST)
     assert (reply.mid, reply.payload) == (MID.ERROR, b"\x04")
@@ -151,19 +145,19 @@ def test_legacy_device_refuses_output_configuration() -> None:
         assert client.ask(MID.REQ_FW_REV).payload == bytes((2, 4, 6))
 
 
-def test_driver_opens_a_pyserial_url(sim: SimulatedMTi, tmp_path) -> None:
+def test_driver_opens_a_pyserial_url(simulator: SimulatedMTi, tmp_path) -> None:
     log = tmp_path / "spy.txt"
-    with MTiDriver(f"spy://{sim.link}?file={log}") as driver:
+    with MTiDriver(f"spy://{simulator.link}?file={log}") as driver:
         driver.configure()
         assert driver.samples(0.5).size == 50
     assert log.stat().st_size > 0  # the spy handler saw the traffic
 
 
-def test_silence_longer_than_the_timeout_is_a_vanished_device(sim: SimulatedMTi) -> None:
-    with MTiDriver(sim.link, silence_timeout_s=0.3) as driver:
+def test_silence_longer_than_the_timeout_is_a_vanished_device(simulator: SimulatedMTi) -> None:
+    with MTiDriver(simulator.link, silence_timeout_s=0.3) as driver:
         driver.configure()
         driver.samples(0.5)
-        sim.stall(20.0)  # device seconds: two wall seconds at speed 10
+        simulator.stall(20.0)  # device seconds: two wall seconds at speed 10
         with pytest.raises(DeviceGone, match="no data"):
             driver.samples(5.0)
 

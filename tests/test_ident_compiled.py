@@ -15,11 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tankdaq.config import hull_scenario
-from tankdaq.device.driver import MTiDriver
-from tankdaq.device.simulator import SimulatedMTi
 from tankdaq.ident import compiled, kernels
-from tankdaq.store.writer import RecordingWriter
 
 
 @pytest.fixture(scope="module")
@@ -64,25 +60,6 @@ def test_a_wrong_argument_is_a_type_error_not_a_crash(native: object) -> None:
         compiled.simulate(t, 0.1)
 
 
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One simulated roll decay recorded to MCAP (raw bytes and samples), through the real pty and driver."""
-    path = tmp_path_factory.mktemp("compiled") / "decay.mcap"
-    scenario = hull_scenario(hull="swath", draft=1.0, angle_deg=8.0, runs=1, seed=7)
-    with SimulatedMTi(scenario, speed=40.0) as sim, MTiDriver(sim.link) as driver:
-        driver.configure()
-        with RecordingWriter(path, {"axis": "roll", "angle_nominal_deg": 8.0, "hull": "swath"}, {}) as writer:
-            first = last = None
-            while first is None or last is None or last - first < 17.0:
-                block = driver.read_block()
-                writer.write_raw(block.raw, int(block.host_t * 1e9))
-                writer.write_samples(block.samples)
-                if block.samples.size:
-                    first = float(block.samples["t"][0]) if first is None else first
-                    last = float(block.samples["t"][-1])
-    return path
-
-
 #: ``tankdaq replay``, then which of the heavy start-up libraries the process had imported.
 REPLAY = """
 import atexit, sys
@@ -110,20 +87,20 @@ def _fit_lines(output: str) -> list[str]:
     return [line for line in output.splitlines() if "b1=" in line]
 
 
-def test_a_replay_runs_on_the_native_kernels_without_numba(native: object, recording: Path) -> None:
-    done = _replay(recording, None)
+def test_a_replay_runs_on_the_native_kernels_without_numba(native: object, decay_recording: Path) -> None:
+    done = _replay(decay_recording, None)
     assert done.returncode == 0, done.stderr
     assert len(_fit_lines(done.stdout)) == 1, done.stdout
     assert "loaded: []" in done.stderr, done.stderr
 
 
 def test_a_replay_that_cannot_build_the_kernels_uses_the_jit_says_why_and_fits_the_same(
-    native: object, recording: Path, tmp_path: Path
+    native: object, decay_recording: Path, tmp_path: Path
 ) -> None:
     blocked = tmp_path / "not-a-folder"
     blocked.write_text("a file where the kernel folder would be: the build cannot write there\n")
-    on_jit = _replay(recording, str(blocked))
-    on_native = _replay(recording, None)
+    on_jit = _replay(decay_recording, str(blocked))
+    on_native = _replay(decay_recording, None)
     assert on_jit.returncode == 0, on_jit.stderr
     said = on_jit.stdout + on_jit.stderr
     assert "numba's JIT" in said and "not-a-folder" in said, said
