@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from record_settings import sim_record_settings
+from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.config import hull_scenario
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
 from tankdaq.physics.scenario import DecayScenario
@@ -24,8 +25,9 @@ SPEED = 6.0
 
 
 def _record(tmp_path: Path, sim: SimulatedMTi, port: str, rate_hz: float, baud: int | None = None):
-    settings = RecordSettings(port=port, draft=1.0, angle_deg=8.0, hull="swath", rate_hz=rate_hz, baud=baud,
-                              out_dir=tmp_path, runs=1, viewer="none", reconnect_timeout_s=20.0)  # fmt: skip
+    settings = sim_record_settings(
+        tmp_path, port=port, rate_hz=rate_hz, baud=baud, runs=1, reconnect_timeout_s=20.0
+    )
     (outcome,) = RecordDaemon(settings).run()
     recording = read_recording(outcome.path)
     release = next(e for e in recording.events if e["kind"] == "release")

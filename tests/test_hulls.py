@@ -106,10 +106,10 @@ def test_campaign_uses_the_user_hulls_gm(tmp_path, user_folder):
     assert "free decay" in fields["cuts"]
 
 
-def test_a_hull_without_coefficients_records_from_a_real_port(tmp_path):
+def test_a_hull_without_coefficients_records_from_a_real_port(tmp_path, record_settings):
     """The lab's own hull on a real serial port (the simulated MTi-G's pty, opened by path like hardware):
     the recording is labelled with it, and its dimensions travel in the file."""
-    from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+    from tankdaq.acquire.daemon import RecordDaemon
     from tankdaq.device.simulator import SimulatedMTi
     from tankdaq.store.reader import read_recording
 
@@ -117,8 +117,7 @@ def test_a_hull_without_coefficients_records_from_a_real_port(tmp_path):
     own.write_text(MY_HULL)
     scenario = hull_scenario(hull="swath", draft=1.0, angle_deg=8.0, runs=2, seed=5)
     with SimulatedMTi(scenario, speed=8.0, seed=5) as sim:
-        settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, hull=str(own), out_dir=tmp_path,
-                                  runs=1, viewer="none")  # fmt: skip
+        settings = record_settings(port=sim.link, hull=str(own), runs=1)
         (outcome,) = RecordDaemon(settings).run()
     assert outcome.path is not None and outcome.path.name.startswith("mymodel_T_roll_8deg_")
     metadata = read_recording(outcome.path).metadata

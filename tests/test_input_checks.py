@@ -125,10 +125,11 @@ def test_other_rates_are_refused(rate: float) -> None:
         validation.output_rate_hz(rate)
 
 
-def test_the_record_daemon_applies_the_same_rules_as_the_command_line(tmp_path: Path) -> None:
-    from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+def test_the_record_daemon_applies_the_same_rules_as_the_command_line(
+    tmp_path: Path, record_settings
+) -> None:
+    from tankdaq.acquire.daemon import RecordDaemon
 
-    base = {"port": "sim", "hull": "swath", "draft": 1.0, "angle_deg": 8.0, "out_dir": tmp_path}
     for bad, match in (
         ({"rate_hz": 0.5}, "output rate"),
         ({"baud": 0}, "baud rate"),
@@ -138,7 +139,7 @@ def test_the_record_daemon_applies_the_same_rules_as_the_command_line(tmp_path: 
     ):
         (tmp_path / "a-file").write_text("")
         with pytest.raises(InputError, match=match):
-            RecordDaemon(RecordSettings(**{**base, **bad}))  # type: ignore[arg-type]
+            RecordDaemon(record_settings(**bad))
 
 
 @pytest.mark.parametrize(

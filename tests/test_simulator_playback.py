@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from record_settings import sim_record_settings
+from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
@@ -40,9 +41,9 @@ DEVICE_COLUMNS = ("t", "ticks", "counter", "roll", "pitch", "yaw", "p", "q", "r"
 
 
 def _record(port: str, out: Path) -> Recording:
-    settings = RecordSettings(port=port, draft=1.0, angle_deg=8.0, hull="swath", rate_hz=100, out_dir=out,
-                              runs=1, viewer="none", sim_speed=SPEED, sim_seed=3,
-                              pretrigger_s=PRETRIGGER_S)  # fmt: skip
+    settings = sim_record_settings(
+        out, port=port, runs=1, sim_speed=SPEED, sim_seed=3, pretrigger_s=PRETRIGGER_S
+    )
     (outcome,) = RecordDaemon(settings).run()
     assert outcome.settle_reason == "amplitude"  # settled as a decay does: not cut short by the end of a tape
     return read_recording(outcome.path)
