@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import InputError
 from ..ident.base import EstimatorMixin
 from ..samples import AXIS_FIELDS
-from .release_instant import ReleaseInstantFit
+from .release_instant import find_release_instant
 
 STILL, TILTED, HELD, LEAVING, SWUNG, DECAYING = "still", "tilted", "held", "leaving", "swung", "decaying"
 UNKNOWN = "unknown"
@@ -79,6 +79,19 @@ def _first_sustained(mask: np.ndarray, length: int, start: int) -> int | None:
 def _first(mask: np.ndarray, start: int) -> int | None:
     hits = np.flatnonzero(mask[start:])
     return int(start + hits[0]) if hits.size else None
+
+
+def _fill_gaps(values: np.ndarray, before: float) -> np.ndarray:
+    """Carry the last finite value over NaN (a message without that output) so indices stay put;
+    ``before`` stands in for a NaN at the very start."""
+    finite = np.isfinite(values)
+    if finite.all():
+        return values
+    filled = values.copy()
+    last_index = np.maximum.accumulate(np.where(finite, np.arange(values.size), -1))
+    filled[last_index >= 0] = values[last_index[last_index >= 0]]
+    filled[last_index < 0] = before
+    return filled
 
 
 def _trailing_mean(values: np.ndarray, width: int) -> np.ndarray:
@@ -176,7 +189,9 @@ class ReleaseDetector(EstimatorMixin):
     piece = 16384
 
     def _feed_piece(self, t: np.ndarray, angle: np.ndarray, rate: np.ndarray) -> None:
-        angle, rate = self._fill_gaps(angle, 0), self._fill_gaps(rate, 1)
+        angle, rate = _fill_gaps(angle, self._last_finite[0]), _fill_gaps(rate, self._last_finite[1])
+        if t.size:
+            self._last_finite = [float(angle[-1]), float(rate[-1])]
         self._t = np.concatenate((self._t, t))
         self._x = np.concatenate((self._x, angle))
         self._r = np.concatenate((self._r, rate))
@@ -198,19 +213,6 @@ class ReleaseDetector(EstimatorMixin):
         while steps[self.state_]():
             pass
         self._trim()
-
-    def _fill_gaps(self, values: np.ndarray, channel: int) -> np.ndarray:
-        """Carry the last finite value over NaN (a message without that output) so indices stay put."""
-        finite = np.isfinite(values)
-        if finite.all():
-            self._last_finite[channel] = float(values[-1]) if values.size else self._last_finite[channel]
-            return values
-        filled = values.copy()
-        last_index = np.maximum.accumulate(np.where(finite, np.arange(values.size), -1))
-        filled[last_index >= 0] = values[last_index[last_index >= 0]]
-        filled[last_index < 0] = self._last_finite[channel]
-        self._last_finite[channel] = float(filled[-1])
-        return filled
 
     def fit(self, samples: np.ndarray) -> ReleaseDetector:
         """Offline: run over a whole array (from a fresh state); events in ``events_``."""
@@ -406,14 +408,8 @@ class ReleaseDetector(EstimatorMixin):
         return self._go(DECAYING, end)
 
     def _locate_release(self, leave: int, end: int) -> ReleaseEvent:
-        """Find the release instant; emit the release event.
-
-        The held motion before, the decay equation after (integral form, linear in its
-        coefficients, so every candidate instant is one least-squares solve), jointly on angle
-        and rate over several quarter cycles: the instant that explains both best is the release.
-        Scanned in 10 ms steps over the stretch before the departure, then refined down to a
-        quarter sample, with the asymmetric restoring term c2 kept only where the data ask for it.
-        """
+        """Emit the release at the instant the held motion before and the decay equation after, fitted
+        jointly over several quarter cycles, explain best (``release_instant``)."""
         lo = max(0, leave - self._n(self.fit_before_s))
         dt = 1.0 / float(self.rate_hz_ or 1.0)
         if leave - lo < 4:  # streamed in while already moving: no hold to fit, report the departure
@@ -421,23 +417,15 @@ class ReleaseDetector(EstimatorMixin):
                               rate_rad_s=float(self._r[leave]), release_t=float(self._t[leave]),
                               release_se_s=dt)  # fmt: skip
         window = slice(lo, end + 1)
-        full, symmetric = (ReleaseInstantFit(self._t[window], self._x[window], self._r[window], leave - lo,
-                                     rest_rad=self.baseline_rad_, asymmetric=asymmetric)
-                           for asymmetric in (True, False))  # fmt: skip
-        earliest = float(self._t[lo + 2])
         first = max(lo + 2, leave - self._n(self.scan_back_s))
-        tau = min((float(self._t[k]) for k in range(first, leave + 1, self._n(0.01))), key=full.sse)
-        # c2 only if it earns its place (BIC on noise-weighted rows): when the hull is nearly symmetric
-        # it is almost collinear with k0 and the odd terms over one swing, and its noise costs the instant.
-        physics = full if symmetric.sse(tau) - full.sse(tau) > math.log(full.y.size) else symmetric
-        for step, reach in ((2.0, 6), (1.0, 2), (0.25, 3)):  # +-12, then +-2 samples, then quarter samples
-            candidates = (tau + dt * step * j for j in range(-reach, reach + 1))
-            tau = min((c for c in candidates if c > earliest), key=physics.sse)
-        angle0, rate0 = physics.state_at(tau)
+        scan = range(first - lo, leave - lo + 1, self._n(0.01))  # every 10 ms before the departure
+        found = find_release_instant(self._t[window], self._x[window], self._r[window], leave - lo,
+                                     self.baseline_rad_, scan, dt)  # fmt: skip
+        tau = found.t_s
         index = int(np.searchsorted(self._t, tau - 1e-9 * dt))
         tau = min(tau, float(self._t[index]))  # a rounding hair past the first free sample is that sample
-        return self._emit("released", index, end, angle_rad=angle0, rate_rad_s=rate0, release_t=tau,
-                          release_se_s=physics.instant_se(tau, 2 * dt))  # fmt: skip
+        return self._emit("released", index, end, angle_rad=found.angle_rad, rate_rad_s=found.rate_rad_s,
+                          release_t=tau, release_se_s=found.se_s)  # fmt: skip
 
 
 def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: float) -> list[ReleaseEvent]:

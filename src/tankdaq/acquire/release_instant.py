@@ -1,16 +1,56 @@
 """Where the release happened: the hand's held motion before a candidate instant and the decay equation
 after it, fitted jointly to angle and rate; the instant that explains both best is the release.
 
-``acquire.release.ReleaseDetector`` decides *whether* a release happened and scans candidate instants
-through this fit, which answers for each how well (``sse``), with what state (``state_at``) and how
-sure (``instant_se``).
+``acquire.release.ReleaseDetector`` decides *whether* a release happened; ``find_release_instant`` then
+scans candidate instants through this fit, which answers for each how well (``sse``), with what state
+(``state_at``) and how sure (``instant_se``).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
+
+
+@dataclass(frozen=True)
+class ReleaseInstant:
+    """The instant found (device s), its standard error, and the state the decay starts from there."""
+
+    t_s: float
+    se_s: float
+    angle_rad: float
+    rate_rad_s: float
+
+
+def find_release_instant(
+    t: np.ndarray,
+    angle: np.ndarray,
+    rate: np.ndarray,
+    hold: int,
+    rest_rad: float,
+    scan: range,
+    dt: float,
+) -> ReleaseInstant:
+    """The instant that explains the held motion before it and the decay after it best.
+
+    ``hold`` is the sample where the model left the hold, ``dt`` the sample interval (s). Scanned over
+    the samples ``scan`` names, then refined down to a quarter sample, with the asymmetric restoring
+    term c2 kept only where the data ask for it.
+    """
+    full, symmetric = (ReleaseInstantFit(t, angle, rate, hold, rest_rad=rest_rad, asymmetric=asymmetric)
+                       for asymmetric in (True, False))  # fmt: skip
+    earliest = float(t[2])
+    tau = min((float(t[k]) for k in scan), key=full.sse)
+    # c2 only if it earns its place (BIC on noise-weighted rows): when the hull is nearly symmetric
+    # it is almost collinear with k0 and the odd terms over one swing, and its noise costs the instant.
+    physics = full if symmetric.sse(tau) - full.sse(tau) > math.log(full.y.size) else symmetric
+    for step, reach in ((2.0, 6), (1.0, 2), (0.25, 3)):  # +-12, then +-2 samples, then quarter samples
+        candidates = (tau + dt * step * j for j in range(-reach, reach + 1))
+        tau = min((c for c in candidates if c > earliest), key=physics.sse)
+    angle0, rate0 = physics.state_at(tau)
+    return ReleaseInstant(tau, physics.instant_se(tau, 2 * dt), angle0, rate0)
 
 
 class ReleaseInstantFit:
