@@ -58,15 +58,9 @@ def per_sample_us(seconds: float, n: int) -> float:
     return seconds / n * 1e6
 
 
-def main() -> None:
-    n = RATE_HZ * 60 * MINUTES
-    samples = make_samples(n)
-    frame = bytes(RAW_BYTES_PER_SAMPLE * BATCH)
-    print(
-        f"workload: {MINUTES} min at {RATE_HZ} Hz = {n} samples, "
-        f"batches of {BATCH}, {len(frame)} raw bytes each"
-    )
-
+def bench_json(samples: np.ndarray) -> None:
+    """Building the per-sample JSON column-wise against a dict and json.dumps per sample."""
+    n = samples.size
     start = time.process_time()
     texts = schemas.samples_to_json(samples)
     column_wise = time.process_time() - start
@@ -81,69 +75,96 @@ def main() -> None:
         f"({per_dict / column_wise:.1f}x); {sum(map(len, texts)) / n:.0f} bytes/sample"
     )
 
-    with tempfile.TemporaryDirectory(dir=Path.cwd()) as folder:
-        path = Path(folder) / "bench.mcap"
-        writer = RecordingWriter(path, {"hull": "swath", "axis": "roll"}, {}, flush_interval_s=1.0)
-        flushes = 0
-        start = time.process_time()
-        wall = time.perf_counter()
-        for k in range(0, n, BATCH):
-            writer.write_raw(frame, host_ns=int(samples["host_t"][k] * 1e9))
-            writer.write_samples(samples[k : k + BATCH])
-            if k % (RATE_HZ // 2) == 0:  # the daemon's clock: a flush is due twice a second of data
-                writer.flush()
-                flushes += 1
-        writer.close()
-        cpu = time.process_time() - start
-        wall = time.perf_counter() - wall
-        size = path.stat().st_size
-        print(
-            f"write (raw + samples, flush+fsync {flushes}x): {per_sample_us(cpu, n):.1f} us CPU/sample = "
-            f"{cpu / (60 * MINUTES) * 100:.2f} % of one core at {RATE_HZ} Hz (wall {wall:.2f} s for "
-            f"{60 * MINUTES} s of data)"
-        )
-        print(
-            f"file size: {size / MINUTES / 1e6:.2f} MB per minute at {RATE_HZ} Hz "
-            f"({size / n:.0f} bytes/sample incl. raw)"
-        )
 
-        fd = os.open(Path(folder) / "fsync_probe", os.O_WRONLY | os.O_CREAT)
-        start = time.perf_counter()
-        for _ in range(50):
-            os.write(fd, bytes(4096))
-            os.fsync(fd)
-        os.close(fd)
-        print(f"fsync of a 4 KiB append: {(time.perf_counter() - start) / 50 * 1e3:.2f} ms (this disk)")
+def bench_write(samples: np.ndarray, frame: bytes, path: Path) -> None:
+    """Writing raw bytes and samples as the daemon does, with its flush and fsync twice a second of data."""
+    n = samples.size
+    writer = RecordingWriter(path, {"hull": "swath", "axis": "roll"}, {}, flush_interval_s=1.0)
+    flushes = 0
+    start = time.process_time()
+    wall = time.perf_counter()
+    for k in range(0, n, BATCH):
+        writer.write_raw(frame, host_ns=int(samples["host_t"][k] * 1e9))
+        writer.write_samples(samples[k : k + BATCH])
+        if k % (RATE_HZ // 2) == 0:  # the daemon's clock: a flush is due twice a second of data
+            writer.flush()
+            flushes += 1
+    writer.close()
+    cpu = time.process_time() - start
+    wall = time.perf_counter() - wall
+    size = path.stat().st_size
+    print(
+        f"write (raw + samples, flush+fsync {flushes}x): {per_sample_us(cpu, n):.1f} us CPU/sample = "
+        f"{cpu / (60 * MINUTES) * 100:.2f} % of one core at {RATE_HZ} Hz (wall {wall:.2f} s for "
+        f"{60 * MINUTES} s of data)"
+    )
+    print(
+        f"file size: {size / MINUTES / 1e6:.2f} MB per minute at {RATE_HZ} Hz "
+        f"({size / n:.0f} bytes/sample incl. raw)"
+    )
 
-        read_s = min(cpu_seconds(read_recording, path) for _ in range(5))
-        scan_s = cpu_seconds(read_recording_scanned, path)
-        print(
-            f"read_recording: {read_s * 1e3:.1f} ms CPU for {n} samples ({n / read_s / 1e6:.2f} M samples/s, "
-            f"best of 5); front-to-back scan of the per-sample JSON (files without blocks, cut files): "
-            f"{scan_s:.2f} s ({n / scan_s / 1e3:.0f} k samples/s); blocks {scan_s / read_s:.0f}x faster"
-        )
 
-        torn = Path(folder) / "torn.mcap"
-        torn.write_bytes(path.read_bytes()[: size * 3 // 4])
-        start = time.perf_counter()
-        report = recover(torn)
-        recover_s = time.perf_counter() - start
-        print(
-            f"recover: {recover_s:.2f} s for {size * 0.75 / 1e6:.1f} MB "
-            f"({size * 0.75 / 1e6 / recover_s:.1f} MB/s), "
-            f"{report.messages} messages kept, exit {report.exit_code}"
-        )
+def bench_fsync(folder: Path) -> None:
+    fd = os.open(folder / "fsync_probe", os.O_WRONLY | os.O_CREAT)
+    start = time.perf_counter()
+    for _ in range(50):
+        os.write(fd, bytes(4096))
+        os.fsync(fd)
+    os.close(fd)
+    print(f"fsync of a 4 KiB append: {(time.perf_counter() - start) / 50 * 1e3:.2f} ms (this disk)")
 
-        view = LiveView("save", rrd_path=Path(folder) / "bench.rrd")
-        start = time.process_time()
-        for k in range(0, n, 40):  # the live loop logs every 100 ms
-            view.log_samples(samples[k : k + 40])
-        view.close()
-        rr_cpu = time.process_time() - start
-        print(
-            f"rerun log_samples (save, 40 per call): {per_sample_us(rr_cpu, n):.1f} us CPU/sample = "
-            f"{rr_cpu / (60 * MINUTES) * 100:.2f} % of one core at {RATE_HZ} Hz"
-        )
+
+def bench_read_and_recover(path: Path, n: int) -> None:
+    """Reading the file back (by blocks, and scanning the per-sample JSON), and recovering a torn copy."""
+    read_s = min(cpu_seconds(read_recording, path) for _ in range(5))
+    scan_s = cpu_seconds(read_recording_scanned, path)
+    print(
+        f"read_recording: {read_s * 1e3:.1f} ms CPU for {n} samples ({n / read_s / 1e6:.2f} M samples/s, "
+        f"best of 5); front-to-back scan of the per-sample JSON (files without blocks, cut files): "
+        f"{scan_s:.2f} s ({n / scan_s / 1e3:.0f} k samples/s); blocks {scan_s / read_s:.0f}x faster"
+    )
+    size = path.stat().st_size
+    torn = path.with_name("torn.mcap")
+    torn.write_bytes(path.read_bytes()[: size * 3 // 4])
+    start = time.perf_counter()
+    report = recover(torn)
+    recover_s = time.perf_counter() - start
+    print(
+        f"recover: {recover_s:.2f} s for {size * 0.75 / 1e6:.1f} MB "
+        f"({size * 0.75 / 1e6 / recover_s:.1f} MB/s), "
+        f"{report.messages} messages kept, exit {report.exit_code}"
+    )
+
+
+def bench_rerun(samples: np.ndarray, rrd_path: Path) -> None:
+    n = samples.size
+    view = LiveView("save", rrd_path=rrd_path)
+    start = time.process_time()
+    for k in range(0, n, 40):  # the live loop logs every 100 ms
+        view.log_samples(samples[k : k + 40])
+    view.close()
+    rr_cpu = time.process_time() - start
+    print(
+        f"rerun log_samples (save, 40 per call): {per_sample_us(rr_cpu, n):.1f} us CPU/sample = "
+        f"{rr_cpu / (60 * MINUTES) * 100:.2f} % of one core at {RATE_HZ} Hz"
+    )
+
+
+def main() -> None:
+    n = RATE_HZ * 60 * MINUTES
+    samples = make_samples(n)
+    frame = bytes(RAW_BYTES_PER_SAMPLE * BATCH)
+    print(
+        f"workload: {MINUTES} min at {RATE_HZ} Hz = {n} samples, "
+        f"batches of {BATCH}, {len(frame)} raw bytes each"
+    )
+    bench_json(samples)
+    with tempfile.TemporaryDirectory(dir=Path.cwd()) as name:
+        folder = Path(name)
+        bench_write(samples, frame, folder / "bench.mcap")
+        bench_fsync(folder)
+        bench_read_and_recover(folder / "bench.mcap", n)
+        bench_rerun(samples, folder / "bench.rrd")
 
 
 if __name__ == "__main__":
