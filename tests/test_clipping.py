@@ -45,6 +45,7 @@ from tankdaq.samples import (
 )
 from tankdaq.store.reader import read_decay_runs, read_recording
 from tankdaq.xsens.synthetic import decay_capture
+from xsens_captures import capture
 
 SPEED = 6.0
 #: A device clock so fast that the line's byte budget never limits a write (only the latency timer does).
@@ -99,16 +100,7 @@ def test_the_status_word_gives_one_set_of_flags() -> None:
 
 def test_a_real_mti_g_710_capture_flags_nothing() -> None:
     """einride's MTi-G-710 capture: its GNSS message sets OrientationValid, its inertial ones never do."""
-    path = (
-        Path(__file__).resolve().parents[2]
-        / "shared"
-        / "data"
-        / "xsens-captures"
-        / "einride-1"
-        / "output.bin"
-    )
-    if not path.exists():
-        pytest.skip(f"the real capture is not here ({path})")
+    path = capture("einride-1")
     decoder = SampleDecoder()
     samples = np.concatenate([decoder.feed(path.read_bytes(), 0.0)[0], decoder.finish(0.0)[0]])
     assert {int(w) & STATUS_ORIENTATION_VALID for w in samples["status"]} == {0, STATUS_ORIENTATION_VALID}

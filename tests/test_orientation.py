@@ -8,7 +8,6 @@ the integrated rate of turn of an IMU-class device on trajectories whose truth i
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,6 +30,7 @@ from tankdaq.xsens.control import (
 from tankdaq.xsens.mtdata2 import SPEC_BY_BASE, TYPE_MASK
 from tankdaq.xsens.orientation import euler_from_matrix, euler_from_quaternion, quaternion, rotation_matrix
 from tankdaq.xsens.timebase import MODULUS_ONE_DAY, SampleTimeUnwrapper
+from xsens_captures import capture
 
 angles = st.tuples(
     st.floats(-math.radians(85), math.radians(85)),  # roll: a ship does not capsize in a decay test
@@ -208,14 +208,10 @@ def test_the_integrated_rate_of_turn_matches_a_simulated_decay_within_a_tenth_of
     assert math.degrees(abs(attitude.bias_rad_s[0] - sensor.gyro_bias[0])) < 0.005
 
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "xsens-captures" / "einride-5" / "output.bin"
-
-
-@pytest.mark.skipif(not DATA.exists(), reason=f"the real MTi capture {DATA} is not on this machine")
 def test_a_real_devices_quaternion_and_rotation_matrix_give_the_same_angles() -> None:
     """A real MTi-G-710 capture (einride set 5) sends both in each message: read column by column, the
     matrix gives the quaternion's roll, pitch and yaw (read row by row it would not: yaw off by ~180 deg)."""
-    block = decode_capture(DATA.read_bytes())
+    block = decode_capture(capture("einride-5").read_bytes())
     both = block.present["Quaternion"] & block.present["RotationMatrix"]
     assert both.sum() >= 90
     from_quaternion = euler_from_quaternion(block.columns["Quaternion"][both])

@@ -29,7 +29,7 @@ from tankdaq.errors import InputError
 from tankdaq.store.playback import recorded_device
 from tankdaq.store.reader import Recording, read_recording
 from tankdaq.xsens.control import parse_output_configuration
-from test_xsens_captures import capture_dir, read_golden_blocks
+from xsens_captures import capture_dir, read_golden_blocks
 
 #: Device clock speed-up of the recordings (as the other record tests).
 SPEED = 6.0

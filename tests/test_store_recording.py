@@ -29,6 +29,7 @@ from tankdaq.store.reader import Recording, iter_raw_chunks, read_decay_runs, re
 from tankdaq.store.reader import _read_indexed as read_recording_indexed
 from tankdaq.store.reader import _read_scanned as read_recording_scanned
 from tankdaq.store.writer import RecordingWriter, describe_run
+from xsens_captures import capture as real_capture
 
 RATE_HZ = 200.0
 RELEASE_T_S = 2.0
@@ -424,12 +425,8 @@ def test_a_file_cut_before_its_first_chunk_says_so(tmp_path: Path) -> None:
         read_recording(cut)
 
 
-CAPTURE = Path("/work/shared/data/xsens-captures/einride-1/output.bin")
-
-
-@pytest.mark.skipif(not CAPTURE.is_file(), reason="shared Xsens captures not present")
 def test_a_real_xsens_capture_survives_byte_for_byte(tmp_path: Path) -> None:
-    capture = CAPTURE.read_bytes()
+    capture = real_capture("einride-1").read_bytes()
     cuts = np.sort(np.random.default_rng(5).choice(np.arange(1, len(capture)), size=60, replace=False))
     pieces = [capture[a:b] for a, b in zip([0, *cuts], [*cuts, len(capture)], strict=True)]  # as serial reads
     with RecordingWriter(tmp_path / "capture.mcap", {"axis": "roll"}, {}) as writer:

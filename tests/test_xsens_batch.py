@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,8 +29,7 @@ from tankdaq.xsens.mtdata2 import (
 from tankdaq.xsens.stream import StreamDecoder
 from tankdaq.xsens.synthetic import decay_capture, decay_signals
 from tankdaq.xsens.timebase import MODULUS_ONE_DAY, SampleTimeUnwrapper
-
-CAPTURES = Path(__file__).parents[2] / "shared" / "data" / "xsens-captures"
+from xsens_captures import SETS, capture
 
 
 def reference_decode(stream: bytes) -> tuple[list[MTData2Message], list[Frame], int, StreamFramer]:
@@ -98,12 +96,9 @@ def assert_blocks_equal(a: DecodedBlock, b: DecodedBlock) -> None:
 # ------------------------------------------------------------------------------------ real captures
 
 
-@pytest.mark.parametrize("name", [f"einride-{n}" for n in range(1, 6)])
+@pytest.mark.parametrize("name", SETS)
 def test_real_captures_batch_and_stream_equal_per_message(name: str) -> None:
-    path = CAPTURES / name / "output.bin"
-    if not path.is_file():
-        pytest.skip(f"real captures not found at {path}")
-    data = path.read_bytes()
+    data = capture(name).read_bytes()
     block = decode_capture(data)
     assert block.n_messages == 100
     assert_same_as_reference(block, data)

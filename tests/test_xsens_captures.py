@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import astuple
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,52 +11,7 @@ from tankdaq.xsens.constants import MID
 from tankdaq.xsens.control import MAX_FREQUENCY, parse_output_configuration
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import MTData2Message, decode_mtdata2, describe_xdi
-
-CAPTURES = Path(__file__).parents[2] / "shared" / "data" / "xsens-captures"
-SETS = [f"einride-{n}" for n in range(1, 6)]
-
-#: einride's spelling -> the Xsens names tankdaq uses.
-GOLDEN_NAMES = {
-    "UTCTime": "UtcTime",
-    "GNSSPVTData": "GnssPvtData",
-    "GNSSSatInfo": "GnssSatInfo",
-    "PositionECEF": "PositionEcef",
-}
-GOLDEN_PRECISIONS = {"Float32": "float32", "FP1220": "fp1220", "FP1632": "fp1632", "Float64": "float64"}
-GOLDEN_FRAMES = {"EastNorthUp": "ENU", "NorthEastDown": "NED", "NorthWestUp": "NWU"}
-
-Field = tuple[str, str | None, str | None, list[str]]  # name, frame, precision, value lines
-
-
-def capture_dir(name: str) -> Path:
-    path = CAPTURES / name
-    if not (path / "output.bin").is_file():
-        pytest.skip(f"real captures not found at {path} (check out shared/data beside the repository)")
-    return path
-
-
-def parse_head(head: str) -> tuple[str, str | None, str | None]:
-    """'EulerAngles(EastNorthUp,Float32)' -> ('EulerAngles', 'ENU', 'float32')."""
-    name, _, rest = head.rstrip(":").partition("(")
-    parts = rest.rstrip(")").split(",") if rest else []
-    frame = next((GOLDEN_FRAMES[p] for p in parts if p in GOLDEN_FRAMES), None)
-    precision = next((GOLDEN_PRECISIONS[p] for p in parts if p in GOLDEN_PRECISIONS), None)
-    return GOLDEN_NAMES.get(name, name), frame, precision
-
-
-def read_golden_blocks(path: Path) -> list[list[Field]]:
-    """The reference decode: blank-line separated blocks of 'Name(format):' and indented values."""
-    blocks: list[list[Field]] = []
-    for text in path.read_text().split("\n\n"):
-        fields: list[Field] = []
-        for line in text.splitlines():
-            if line.startswith("  "):
-                fields[-1][3].append(line.strip())
-            elif line:
-                fields.append((*parse_head(line), []))
-        if fields:
-            blocks.append(fields)
-    return blocks
+from xsens_captures import SETS, Field, capture_dir, read_golden_blocks
 
 
 def assert_real_equal(got: float, text: str, precision: str, where: str) -> None:

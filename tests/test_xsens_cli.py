@@ -17,16 +17,9 @@ from tankdaq.xsens.frame import build_frame
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import decode_mtdata2
 from tankdaq.xsens.synthetic import decay_capture
+from xsens_captures import capture as real_capture
 
-CAPTURES = Path(__file__).parents[2] / "shared" / "data" / "xsens-captures"
 runner = CliRunner()
-
-
-def real_capture(name: str) -> Path:
-    path = CAPTURES / name / "output.bin"
-    if not path.is_file():
-        pytest.skip(f"real captures not found at {path}")
-    return path
 
 
 def test_jsonl_has_one_object_per_message_with_the_decoded_values(tmp_path: Path) -> None:
