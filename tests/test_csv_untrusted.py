@@ -14,22 +14,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
+from held_tilt import RATE_HZ, TRUTH, held_tilt
 from tankdaq.cli import app
 from tankdaq.physics.decay import simulate_decay
 from test_ident_helpers import KVLCC2_21338
 
 runner = CliRunner()
-TRUTH = {"b1": 0.3, "b2": 0.4, "c1": 14.0}
-RATE_HZ = 100.0
-
-
-def held_tilt(angle0_deg: float = 8.0, hold_s: float = 2.0, free_s: float = 12.0):
-    """A held tilt, then the released decay (rad, rad/s): exact, to test reading and not noise."""
-    t = np.arange(int((hold_s + free_s) * RATE_HZ)) / RATE_HZ
-    free = t >= hold_s
-    angle, rate = np.full(t.size, math.radians(angle0_deg)), np.zeros(t.size)
-    angle[free], rate[free] = simulate_decay(TRUTH, t[free] - hold_s, math.radians(angle0_deg))
-    return t, angle, rate
 
 
 def hand_stopped(angles_deg, free_s: float = 5.0, noise_deg: float = 0.01, seed: int = 0):

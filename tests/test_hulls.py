@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from held_tilt import write_held_tilt_csv
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario, load_hull, user_hulls_dir
-from test_ident_csv_import import write_held_tilt_csv
 
 runner = CliRunner()
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from held_tilt import write_held_tilt_csv
 from tankdaq.cli import app
-from test_ident_csv_import import write_held_tilt_csv
 
 runner = CliRunner()
 

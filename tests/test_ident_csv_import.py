@@ -7,35 +7,11 @@ import math
 import numpy as np
 import pytest
 
+from held_tilt import write_held_tilt_csv
 from tankdaq.errors import BadIdentificationInput, InputError
 from tankdaq.ident.inputs import read_decays
 from tankdaq.physics.decay import simulate_decay
 from test_ident_helpers import KVLCC2_21338
-
-
-def write_held_tilt_csv(path, hold_s=2.0, angle0_deg=8.0, extra=True, noise_deg=0.0, seed=0):
-    """A held tilt, then a release: what the lab records (white noise of ``noise_deg`` on angle and rate)."""
-    c = {"b1": 0.3, "b2": 0.4, "c1": 14.0}
-    t = np.arange(int((hold_s + 12.0) * 100)) / 100.0
-    free = t >= hold_s
-    angle = np.full(t.size, math.radians(angle0_deg))
-    rate = np.zeros(t.size)
-    angle[free], rate[free] = simulate_decay(c, t[free] - hold_s, math.radians(angle0_deg))
-    rng = np.random.default_rng(seed)
-    angle_deg = np.degrees(angle) + rng.normal(0, noise_deg, t.size)
-    columns = {
-        "time_s": t,
-        "angle_deg": angle_deg,
-        "rate_deg_s": np.degrees(rate) + rng.normal(0, noise_deg, t.size),
-    }
-    if extra:
-        columns |= {"heave_m": 0.001 * np.sin(t), "other_angle_deg": 0.5 * np.ones(t.size)}
-    path.write_text(
-        ",".join(columns)
-        + "\n"
-        + "\n".join(",".join(f"{col[i]:.9g}" for col in columns.values()) for i in range(t.size))
-    )
-    return path
 
 
 def test_units_channels_and_release_cut(tmp_path):

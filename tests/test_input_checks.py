@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from held_tilt import write_held_tilt_csv
 from tankdaq import validation
 from tankdaq.cli import app
 from tankdaq.errors import InputError
-from test_ident_csv_import import write_held_tilt_csv
 
 runner = CliRunner()
 
