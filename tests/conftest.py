@@ -4,12 +4,14 @@
 - ``simulator``: a simulated MTi-G serving on a real pty, stopped when the test ends.
 - ``record_settings``: record settings for the built-in simulated MTi-G, writing into the test's folder.
 - ``decay_recording``: one short decay recorded end to end into a real MCAP file, made once a session.
+- ``private_tempdir``: the temporary folder for this test alone, where a simulator would put its pty link.
 
 tankdaq is imported inside the fixtures, so collecting a test that uses none of them costs nothing.
 """
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -45,6 +47,16 @@ def simulator() -> Iterator[SimulatedMTi]:
 
     with SimulatedMTi(hull_scenario(rate_hz=100), speed=SIMULATOR_SPEED) as device:
         yield device
+
+
+@pytest.fixture
+def private_tempdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """``tempfile``'s folder for this test alone: a simulator started in this process makes its folder
+    (pty link, by-id links) there, so a test can tell that nothing was started or that nothing is left."""
+    private = tmp_path / "tmp"
+    private.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(private))
+    return private
 
 
 @pytest.fixture

@@ -220,11 +220,8 @@ def test_an_error_exit_of_simulate_leaves_no_folder(tmp_path: Path) -> None:
     assert _folders_of(process.pid) == []
 
 
-def test_a_simulator_that_cannot_start_leaves_no_folder(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+def test_a_simulator_that_cannot_start_leaves_no_folder(tmp_path: Path, private_tempdir: Path) -> None:
     with pytest.raises(FileNotFoundError):  # its link cannot be made: the pty opens, then the start fails
         SimulatedMTi(link=tmp_path / "no-such-folder" / "ttyMTi0").start()
-    assert not list(tmp_path.glob(f"{TEMP_PREFIX}*"))
-    assert str(tmp_path) not in os.environ.get("TANKDAQ_SERIAL_BY_ID", "")
+    assert not list(private_tempdir.glob(f"{TEMP_PREFIX}*"))
+    assert str(private_tempdir) not in os.environ.get("TANKDAQ_SERIAL_BY_ID", "")

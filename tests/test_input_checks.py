@@ -8,7 +8,6 @@ folder (``tankdaq-sim-*``) and no recording appeared in it or in the output fold
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import pytest
@@ -29,15 +28,12 @@ RECORD += ["--runs", "1"]  # should a case not be refused, it ends after one dec
 
 
 @pytest.fixture
-def places(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, Path]:
+def places(tmp_path: Path, private_tempdir: Path) -> dict[str, Path]:
     """A private temporary folder (where a simulator would put its pty link), a CSV decay, a file."""
-    private = tmp_path / "tmp"
-    private.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(private))
     a_file = tmp_path / "a-file"
     a_file.write_text("not a folder")
     return {
-        "tmp": private,
+        "tmp": private_tempdir,
         "out": tmp_path / "out",
         "csv": write_held_tilt_csv(tmp_path / "decay.csv"),
         "file": a_file,

@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -176,12 +175,8 @@ def test_the_sim_port_names_a_recording() -> None:
     ],
 )
 def test_a_bad_recording_is_refused_before_the_device_opens(
-    recorded: tuple[Recording, Recording], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, target: str,
-    mentions: str,
-) -> None:  # fmt: skip
-    private = tmp_path / "tmp"
-    private.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(private))
+    recorded: tuple[Recording, Recording], tmp_path: Path, private_tempdir: Path, target: str, mentions: str
+) -> None:
     not_mcap = tmp_path / "notes.mcap"
     not_mcap.write_text("not a recording")
     files = {"missing": tmp_path / "missing.mcap", "not-mcap": not_mcap, "rate": recorded[0].path}
@@ -192,7 +187,7 @@ def test_a_bad_recording_is_refused_before_the_device_opens(
     assert result.exit_code == 2, result.output
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: ") and mentions in lines[0], result.stderr
-    assert not list(private.iterdir()) and not (tmp_path / "out").exists()
+    assert not list(private_tempdir.iterdir()) and not (tmp_path / "out").exists()
 
 
 def test_simulate_replay_serves_the_recorded_device(recorded: tuple[Recording, Recording]) -> None:
