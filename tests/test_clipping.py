@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from record_settings import sim_record_settings
-from tankdaq.acquire.daemon import RecordDaemon
+from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.guided.checks import Measured, check_decay
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.plan import Acceptance, Condition
@@ -59,7 +58,8 @@ def _record(
     scenario = hull_scenario(runs=1, seed=3, release_after_s=6.0, decay_s=15.0, **scripted_run(fault, 8.0))
     lines: list[str] = []
     with SimulatedMTi(scenario, speed=SPEED, faults=faults) as sim:
-        settings = sim_record_settings(tmp_path, port=sim.link, hull=None, angle_tolerance_deg=3.0, runs=1)
+        settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, angle_tolerance_deg=3.0,
+                                  out_dir=tmp_path, runs=1, viewer="none")  # fmt: skip
         (outcome,) = RecordDaemon(settings, on_event=lines.append).run()
         truth = sim.truth[0].coefficients
     assert outcome.path is not None

@@ -16,8 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from record_settings import sim_record_settings
-from tankdaq.acquire.daemon import RecordDaemon
+from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.config import hull_scenario
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
@@ -40,7 +39,8 @@ LONG_DECAY = {"b1": 0.2, "c1": 14.2185, "c3": 69.457}
 
 def _record(tmp_path: Path, sim: SimulatedMTi) -> tuple[Recording, list[str]]:
     lines: list[str] = []
-    settings = sim_record_settings(tmp_path, port=sim.link, rate_hz=RATE_HZ, runs=1, reconnect_timeout_s=20.0)
+    settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, hull="swath", rate_hz=RATE_HZ,
+                              out_dir=tmp_path, runs=1, viewer="none", reconnect_timeout_s=20.0)  # fmt: skip
     (outcome,) = RecordDaemon(settings, on_event=lines.append).run()
     return read_recording(outcome.path), lines
 
