@@ -146,7 +146,8 @@ def test_a_device_refusing_euler_angles_records_roll_from_what_it_gives(
     assert np.ptp(recorded["roll"]) > math.radians(10)  # a whole decay, both ways
     # the recording's device plays again (record --port sim:FILE.mcap): it refuses what it did not send
     with SimulatedMTi(source=recorded_device(recording.path), speed=SPEED) as sim:
-        driver = MTiDriver(sim.link, rate_hz=RATE_HZ)
+        # the played-back device answers from the recording; a loaded host is given time (10 s, not 1)
+        driver = MTiDriver(sim.link, rate_hz=RATE_HZ, step_timeout_s=10.0)
         try:
             again = driver.configure().orientation
             played = driver.samples(1.0)
