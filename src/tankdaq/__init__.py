@@ -51,8 +51,8 @@ _PUBLIC = {
     "identify": "api.identification",
     "Identification": "api.identification",
     "Reading": "api.identification",
-    "campaign": "api.workflows",
-    "Campaign": "api.workflows",
+    "campaign": "api.campaigns",
+    "Campaign": "api.campaigns",
     "diagnose": "api.workflows",
     "Diagnosis": "api.workflows",
     "simulate": "api.workflows",
@@ -62,9 +62,10 @@ _PUBLIC = {
 if TYPE_CHECKING:
     from typing import Any
 
+    from .api.campaigns import Campaign, campaign
     from .api.identification import Identification, Reading, identify
     from .api.recording import Decay, Recording, read
-    from .api.workflows import Campaign, Diagnosis, campaign, diagnose, simulate
+    from .api.workflows import Diagnosis, diagnose, simulate
     from .catalogue.query import runs
 
 

@@ -206,8 +206,8 @@ class Reading:
     end_s: float | None = None
 
     def __post_init__(self) -> None:
-        if self.axis not in (None, "roll", "pitch"):
-            raise InputError(f"axis {self.axis!r} not understood: use roll or pitch")
+        if self.axis is not None:
+            validation.decay_axis(self.axis, option="axis")
 
 
 def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Progress) -> list[DecayRun]:

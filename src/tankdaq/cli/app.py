@@ -298,10 +298,7 @@ class TerminalProgress:
 
     @staticmethod
     def _updater(bar: Progress, task: Any) -> Callable[..., None]:
-        def update(done: int, total: int | None = None) -> None:
-            if total is None:
-                bar.update(task, completed=done)
-            else:
-                bar.update(task, completed=done, total=total)
+        def update(done: int, total: int | None = None, description: str | None = None) -> None:
+            bar.update(task, completed=done, total=total, description=description)
 
         return update
