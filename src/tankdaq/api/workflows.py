@@ -1,31 +1,22 @@
-"""``tankdaq.simulate`` and ``tankdaq.diagnose``: the other workflows from Python (``tankdaq.campaign`` is
-``api.campaigns``).
+"""``tankdaq.simulate``: decay tests without hardware (``tankdaq.campaign`` is ``api.campaigns``,
+``tankdaq.diagnose`` ``api.diagnosis``).
 
-Each calls the library pipeline its command uses: ``simulate`` plays a hull's scripted decay test
-(``config.hull_scenario``: the simulator's physics and sensor) into real recording files, one per decay as
-``tankdaq record`` writes them; ``diagnose`` runs ``tankdaq diagnose``'s ``Diagnoser``.
+``simulate`` plays a hull's scripted decay test (``config.hull_scenario``: the simulator's physics and
+sensor) into real recording files, one per decay as ``tankdaq record`` writes them.
 """
 
 from __future__ import annotations
 
-import html
-import itertools
-import json
-from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .. import validation
 from ..errors import InputError
-from .identification import Reading, Source, load_runs, truncations
-from .progress import Kept, Progress
 from .recording import Recording, read
 
 if TYPE_CHECKING:
     import numpy as np
 
-    from ..diagnose.workflow import Diagnoser
     from ..physics.truth import RunTruth
 
 
@@ -102,58 +93,3 @@ def _write_decay(
         release_s = origin_s + float(truth.release_s or 0.0)
         writer.write_event("release", "simulated release", t_s=release_s)
     return writer.path
-
-
-@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
-class Diagnosis:
-    """What ``diagnose`` found: ``story`` (the lines ``tankdaq diagnose`` prints), ``document`` (its
-    ``--json``, less the truncation keys: ``truncated_files`` lists the recordings cut short),
-    ``diagnoser`` (the fitted ``diagnose.workflow.Diagnoser``), ``report`` (the Markdown report written,
-    when asked)."""
-
-    diagnoser: Diagnoser
-    story: list[str]
-    document: dict[str, Any]
-    notices: list[str]
-    report: Path | None
-    truncated_files: list[str]
-
-    def _repr_html_(self) -> str:
-        return f"<pre>{html.escape(chr(10).join(self.story))}</pre>"
-
-
-def diagnose(
-    sources: Source | Sequence[Source],
-    *,
-    baseline: str = "b1,c1",
-    max_steps: int = 4,
-    reading: Reading | None = None,
-    report: str | Path | None = None,
-    progress: Progress | None = None,
-) -> Diagnosis:
-    """Find what a decay model is missing: fit ``baseline``, read the residuals, add the effects they
-    show (at most ``max_steps``) and tell the gap shrink; ``report`` a folder for the Markdown report.
-
-    >>> tankdaq.diagnose("run.mcap").story  # doctest: +SKIP
-    """
-    from ..diagnose import report as report_module
-    from ..diagnose.effects import LIBRARY
-    from ..diagnose.workflow import Diagnoser
-    from ..ident.online import prepare_identifier
-
-    if max_steps < 0:
-        raise InputError(f"max_steps must be 0 or more, not {max_steps}")
-    folder = validation.output_dir(Path(report), option="report") if report is not None else None
-    kept = Kept(progress)
-    runs = load_runs(sources, reading or Reading(axis="roll"), kept)
-    cut = truncations(runs)
-    for line in cut.values():
-        kept.line(line)
-    prepare_identifier(baseline, kept.line)  # the native kernels: built once, on the first run
-    with kept.task("baseline", 1 + max_steps * (len(LIBRARY) + 2)) as advance:
-        count = itertools.count(1)
-        step = lambda _label: advance(next(count))  # noqa: E731
-        diagnoser = Diagnoser(baseline=baseline, max_steps=max_steps, progress=step).fit(runs)
-    written = report_module.write_report(diagnoser, folder) if folder is not None else None
-    document = json.loads(report_module.summary_json(diagnoser))
-    return Diagnosis(diagnoser, report_module.story(diagnoser), document, kept.lines, written, list(cut))

@@ -18,6 +18,7 @@ from .app import (
     fail,
     handles_errors,
     say,
+    say_cuts,
 )
 from .options import (
     CatalogueOption,
@@ -97,8 +98,7 @@ def campaign_command(
             jobs=min(jobs or cores, cores), executor=executor, scheduler=scheduler, report=report,
             full_scale=full_scale, on_result=catalogued, progress=TerminalProgress(),
         )  # fmt: skip
-    for line in result.cuts:
-        err_console.print(f"cut: {line}", markup=False, highlight=False, soft_wrap=True)
+    say_cuts(result.cuts)
     typer.echo(result.to_json() if as_json else result.text(), nl=as_json)
     for line in result.warnings:  # a fit physics says is implausible: said here, in the table and the report
         err_console.print(f"warning: {line}", markup=False, soft_wrap=True)
