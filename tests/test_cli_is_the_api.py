@@ -90,3 +90,14 @@ def test_identify_compare_is_compare_models(two_drafts: list[Path]) -> None:
     assert list(found.table["bic"]) == [row["bic"] for row in command["compare"]]
     assert [row["models"] for row in found.rows] == [row["models"] for row in command["compare"]]
     assert command["warnings"] == [] and len(command["cuts"]) == 1
+
+
+@pytest.mark.parametrize("command", ["identify", "diagnose", "simulate", "simulate-campaign"])
+def test_every_axis_option_is_checked_alike_while_parsing(command: str, tmp_path: Path) -> None:
+    """``--axis`` is defined once (``cli.options``): the same one line and exit 2 everywhere, before any
+    file is read or written."""
+    given = {"identify": [str(tmp_path)], "diagnose": [str(tmp_path)], "simulate-campaign": [str(tmp_path)]}
+    done = runner.invoke(app, [command, *given.get(command, []), "--axis", "yaw"])
+    assert done.exit_code == 2, done.output
+    assert done.stderr.strip() == "error: --axis 'yaw' not understood: use roll or pitch"
+    assert list(tmp_path.iterdir()) == []
