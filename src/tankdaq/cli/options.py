@@ -33,8 +33,8 @@ ReadAxis = Annotated[
         help="roll or pitch (default: a recording's own axis; roll for CSV).",
     ),
 ]
-#: ``--json``: the result as one JSON object on stdout (lines and progress stay on stderr).
-JsonOutput = Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")]
+#: ``--json``: the result as JSON on stdout (lines and progress stay on stderr).
+JsonOutput = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
 
 # How other labs' CSV files are read (identify, diagnose: ``tankdaq.Reading``).
 TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
