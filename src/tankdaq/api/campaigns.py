@@ -188,7 +188,7 @@ def _scan(
         scan = scan_campaign(
             paths, start_s, end_s, pool, lambda path: advance(next(count), description=f"reading {path.name}")
         )
-    if not scan.files or not scan.groups():
+    if not scan.decays:
         if len(scan.skipped) == 1:
             raise InputError(scan.skipped[0].reason)
         for skipped in scan.skipped:
