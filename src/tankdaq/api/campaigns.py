@@ -129,6 +129,7 @@ def campaign(
     >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s"]]  # doctest: +SKIP
     """
     from ..ident.campaign import find_campaign_hulls, find_recordings
+    from ..ident.derived import campaign_full_scale
     from ..ident.executors import campaign_executor
     from ..ident.online import prepare_identifier
 
@@ -153,7 +154,7 @@ def campaign(
             kept.line(line)
         results = [row.result for row in rows if row.result is not None]
         written = write_report(results, folder, pool) if folder is not None else []
-    scaled = _full_scale(results) if full_scale else []
+    scaled = campaign_full_scale(results) if full_scale else []
     if not keep_fits:  # the fits were kept for the report and the full-scale lines only
         results = []
         rows = [replace(row, result=None) for row in rows]
@@ -226,12 +227,6 @@ def _fit(
             on_result=on_result,
         )
         return sorted(streamed, key=lambda row: row.key)  # rows only unless keep: a few kB per group
-
-
-def _full_scale(results: list[GroupResult]) -> list[str]:
-    from ..ident.derived import campaign_full_scale
-
-    return campaign_full_scale(results)
 
 
 def folders_line(paths: list[Path]) -> str:
