@@ -62,7 +62,7 @@ def test_import_is_light_and_every_public_name_resolves() -> None:
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     found = json.loads(done.stdout)
-    assert found == {"heavy": [], "missing": [], "dir": [], "diagnose": "tankdaq.api.workflows"}
+    assert found == {"heavy": [], "missing": [], "dir": [], "diagnose": "tankdaq.api.diagnosis"}
     with pytest.raises(AttributeError, match="no attribute 'ident_internal'"):
         _ = tankdaq.ident_internal
 

@@ -32,10 +32,12 @@ __all__ = [
     "Decay",
     "Diagnosis",
     "Identification",
+    "ModelComparison",
     "Reading",
     "Recording",
     "__version__",
     "campaign",
+    "compare_models",
     "diagnose",
     "identify",
     "read",
@@ -51,10 +53,12 @@ _PUBLIC = {
     "identify": "api.identification",
     "Identification": "api.identification",
     "Reading": "api.identification",
-    "campaign": "api.workflows",
-    "Campaign": "api.workflows",
-    "diagnose": "api.workflows",
-    "Diagnosis": "api.workflows",
+    "campaign": "api.campaigns",
+    "compare_models": "api.comparison",
+    "ModelComparison": "api.comparison",
+    "Campaign": "api.campaigns",
+    "diagnose": "api.diagnosis",
+    "Diagnosis": "api.diagnosis",
     "simulate": "api.workflows",
     "runs": "catalogue.query",
 }
@@ -62,9 +66,12 @@ _PUBLIC = {
 if TYPE_CHECKING:
     from typing import Any
 
+    from .api.campaigns import Campaign, campaign
+    from .api.comparison import ModelComparison, compare_models
+    from .api.diagnosis import Diagnosis, diagnose
     from .api.identification import Identification, Reading, identify
     from .api.recording import Decay, Recording, read
-    from .api.workflows import Campaign, Diagnosis, campaign, diagnose, simulate
+    from .api.workflows import simulate
     from .catalogue.query import runs
 
 

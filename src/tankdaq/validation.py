@@ -68,6 +68,17 @@ def release_angle_deg(value: float, option: str = "--angle") -> float:
     return float(value)
 
 
+#: The axes a decay test tilts (``samples.AXIS_FIELDS``'s keys).
+DECAY_AXES = ("roll", "pitch")
+
+
+def decay_axis(value: str, option: str = "--axis") -> str:
+    """A decay axis: roll or pitch."""
+    if value not in DECAY_AXES:
+        raise InputError(f"{option} {value!r} not understood: use roll or pitch")
+    return value
+
+
 def draft_factor(text: str) -> float:
     """A draft as people write it: ``0.9T``, ``T``, ``1.1T`` -> factor of the design draft."""
     from .config import parse_draft
@@ -169,6 +180,24 @@ def usable_cores() -> int:
         return len(os.sched_getaffinity(0)) or 1
     except AttributeError:  # not Linux
         return os.cpu_count() or 1
+
+
+#: Where a campaign's work runs: ``local`` (a process pool) or ``dask`` (a cluster; needs a scheduler).
+EXECUTORS = ("local", "dask")
+
+
+def campaign_executor(
+    executor: str, scheduler: str | None, option: str = "--executor", scheduler_option: str = "--scheduler"
+) -> str:
+    """Where a campaign runs: ``local``, or ``dask`` with a scheduler address (and a scheduler only then;
+    whether it answers is ``ident.executors.check_scheduler``'s)."""
+    if executor not in EXECUTORS:
+        raise InputError(f"{option} {executor!r} not understood: use local or dask")
+    if (executor == "dask") != (scheduler is not None):
+        raise InputError(
+            f"{option} dask needs {scheduler_option} ADDRESS, and {scheduler_option} needs {option} dask"
+        )
+    return executor
 
 
 def _cannot_write_in(folder: Path) -> str | None:

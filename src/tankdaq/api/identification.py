@@ -206,8 +206,8 @@ class Reading:
     end_s: float | None = None
 
     def __post_init__(self) -> None:
-        if self.axis not in (None, "roll", "pitch"):
-            raise InputError(f"axis {self.axis!r} not understood: use roll or pitch")
+        if self.axis is not None:
+            validation.decay_axis(self.axis, option="axis")
 
 
 def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Progress) -> list[DecayRun]:
@@ -308,19 +308,21 @@ def identify(
             summary["conditions"] = pooled
         lines = scale_results(summary, scale)  # the ship's (B̂44 is summarize's)
         fits.append(ConditionFit(label, condition_runs, estimator, summary, lines, pooled is not None))
-    truncated = {"truncated": bool(cut), "truncated_files": list(cut)}
+    return Identification(_document(fits, grouping_line(groups), list(cut)), fits, kept.lines, list(cut))
+
+
+def _document(fits: list[ConditionFit], conditions: str, cut: list[str]) -> dict[str, Any]:
+    """``tankdaq identify --json``: the one fit's summary, or each condition's under ``groups``."""
+    truncated = {"truncated": bool(cut), "truncated_files": cut}
     if len(fits) == 1:
-        document: dict[str, Any] = {**fits[0].summary, **truncated}
-    else:
-        warnings = [f"{fit.label}: {line}" for fit in fits for line in fit.summary["warnings"]]
-        groups_doc = [fit.summary for fit in fits]
-        document = {
-            "conditions": grouping_line(groups),
-            "groups": groups_doc,
-            "warnings": warnings,
-            **truncated,
-        }
-    return Identification(document, fits, kept.lines, list(cut))
+        return {**fits[0].summary, **truncated}
+    warnings = [f"{fit.label}: {line}" for fit in fits for line in fit.summary["warnings"]]
+    return {
+        "conditions": conditions,
+        "groups": [fit.summary for fit in fits],
+        "warnings": warnings,
+        **truncated,
+    }
 
 
 def _fit_condition(

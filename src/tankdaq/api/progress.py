@@ -10,7 +10,8 @@ from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
 from typing import Protocol
 
-#: Moves a task on: ``update(done, total=None)`` (a total of None leaves it as it was).
+#: Moves a task on: ``update(done, total=None, description=None)`` (None leaves the total or the
+#: description as it was; a description says what the task is at, such as the file being read).
 Update = Callable[..., None]
 
 
@@ -32,7 +33,7 @@ class Quiet:
 
     @contextmanager
     def task(self, description: str, total: int | None = None) -> Iterator[Update]:
-        yield lambda done, total=None: None
+        yield lambda done, total=None, description=None: None
 
 
 class Kept:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
+from .. import validation
 from ..errors import InputError
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
@@ -233,8 +234,8 @@ def read(
     from ..store.csv_import import CsvOptions
     from ..store.inputs import input_format
 
-    if axis not in (None, "roll", "pitch"):
-        raise InputError(f"axis {axis!r} not understood: use roll or pitch")
+    if axis is not None:
+        validation.decay_axis(axis, option="axis")
     path = Path(path)
     kind = input_format(path).name  # an unknown suffix is one line before anything is read
     options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit)

@@ -1,33 +1,22 @@
-"""``tankdaq.simulate``, ``tankdaq.campaign`` and ``tankdaq.diagnose``: the other workflows from Python.
+"""``tankdaq.simulate``: decay tests without hardware (``tankdaq.campaign`` is ``api.campaigns``,
+``tankdaq.diagnose`` ``api.diagnosis``).
 
-Each calls the library pipeline its command uses: ``simulate`` plays a hull's scripted decay test
-(``config.hull_scenario``: the simulator's physics and sensor) into real recording files, one per decay as
-``tankdaq record`` writes them; ``campaign`` reads, groups and fits as ``tankdaq campaign``
-(``ident.campaign``); ``diagnose`` runs ``tankdaq diagnose``'s ``Diagnoser``.
+``simulate`` plays a hull's scripted decay test (``config.hull_scenario``: the simulator's physics and
+sensor) into real recording files, one per decay as ``tankdaq record`` writes them.
 """
 
 from __future__ import annotations
 
-import html
-import itertools
-import json
-from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .. import validation
 from ..errors import InputError
-from .identification import Reading, Source, load_runs, truncations
-from .progress import Kept, Progress
 from .recording import Recording, read
 
 if TYPE_CHECKING:
     import numpy as np
-    import pandas as pd
 
-    from ..diagnose.workflow import Diagnoser
-    from ..ident.campaign import GroupResult
     from ..physics.truth import RunTruth
 
 
@@ -52,8 +41,7 @@ def simulate(
     """
     from ..config import format_draft, hull_scenario, load_hull
 
-    if axis not in ("roll", "pitch"):
-        raise InputError(f"axis {axis!r} not understood: use roll or pitch")
+    validation.decay_axis(axis, option="axis")
     factor = validation.draft_factor(draft if isinstance(draft, str) else format_draft(float(draft)))
     folder = validation.output_dir(Path(out_dir), option="out_dir")
     if not 1 <= runs <= 100:
@@ -105,155 +93,3 @@ def _write_decay(
         release_s = origin_s + float(truth.release_s or 0.0)
         writer.write_event("release", "simulated release", t_s=release_s)
     return writer.path
-
-
-@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
-class Campaign:
-    """A campaign fitted group by group (hull, axis, draft, angle). ``table`` is campaign.csv's rows;
-    ``results`` the fits (``ident.campaign.GroupResult``); ``skipped`` the files that could not be read
-    (one line each); ``report_files`` what ``report=`` wrote."""
-
-    results: list[GroupResult]
-    skipped: list[str]
-    notices: list[str]
-    report_files: list[Path]
-
-    @property
-    def table(self) -> pd.DataFrame:
-        import pandas as pd
-
-        return pd.DataFrame([result.summary() for result in self.results])
-
-    @property
-    def warnings(self) -> list[str]:
-        """Every group's implausibilities and failed fits, one line each."""
-        failed = [f"{r.key.label} not fitted: {r.error}" for r in self.results if r.fit is None]
-        return failed + [f"{r.key.label}: {line}" for r in self.results for line in r.warnings]
-
-    def _repr_html_(self) -> str:
-        lines = "".join(f"<li>{html.escape(line)}</li>" for line in [*self.skipped, *self.warnings])
-        return (f"<ul>{lines}</ul>" if lines else "") + self.table.to_html(index=False)
-
-
-def campaign(
-    inputs: str | Path | Sequence[str | Path],
-    model: str = "ittc-quadratic-restoring",
-    *,
-    hulls: Sequence[str] = (),
-    start_s: float | None = None,
-    end_s: float | None = None,
-    recurse: bool = True,
-    jobs: int = 1,
-    report: str | Path | None = None,
-    progress: Progress | None = None,
-) -> Campaign:
-    """Identify a test campaign: every recording or CSV in ``inputs`` (files or folders, with their
-    subfolders unless ``recurse=False``) grouped by hull, axis, draft and initial angle, each group fitted
-    jointly (``model``: terms or an alias). ``hulls`` give dimensional results; ``report`` a folder for
-    campaign.csv, campaign.md and the figures; ``jobs`` worker processes. The units of work are the
-    command's (``ident.campaign.read_campaign_file``, ``fit_group``); every decay is held here, as a
-    notebook wants them (``results[k].runs``).
-
-    >>> result = tankdaq.campaign("recordings/campaign", hulls=["trimaran"])  # doctest: +SKIP
-    >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s"]]  # doctest: +SKIP
-    """
-    from ..ident.campaign import (
-        SkippedFile,
-        find_campaign_hulls,
-        find_recordings,
-        group_runs,
-        identify_groups,
-        read_campaign_file,
-    )
-    from ..ident.executors import campaign_executor, executor_map
-    from ..ident.inputs import input_notices
-    from ..ident.online import prepare_identifier
-    from ..physics.models import resolve_model
-
-    kept = Kept(progress)
-    resolve_model(model)  # a typo fails before any file is read
-    folder = validation.output_dir(Path(report), option="report") if report is not None else None
-    given_hulls = find_campaign_hulls([], list(hulls))
-    paths = find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse)
-    prepare_identifier(model, kept.line)
-    prepare = []
-    if folder is not None:
-        from ..viz.campaign_report import load_plotting, write_report
-
-        prepare.append(load_plotting)  # loaded before a pool forks: its workers draw the figures
-    with campaign_executor(max(1, min(jobs, validation.usable_cores())), None, prepare) as pool:
-        with kept.task("reading", len(paths)) as reading:
-            read = []
-            for found in executor_map(
-                pool, read_campaign_file, paths, [start_s] * len(paths), [end_s] * len(paths)
-            ):
-                read.append(found)
-                reading(len(read))
-        skipped = [found for found in read if isinstance(found, SkippedFile)]
-        runs = [run for found in read if not isinstance(found, SkippedFile) for run in found]
-        if not runs:
-            raise InputError(skipped[0].reason if len(skipped) == 1 else "no decays read: all files skipped")
-        for line in [*(s.line for s in skipped), *input_notices(runs), *truncations(runs).values()]:
-            kept.line(line)
-        groups = group_runs(runs)
-        known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
-        with kept.task("fitting", len(groups)) as fitting:
-            count = itertools.count(1)
-            results = identify_groups(groups, model, lambda _key: fitting(next(count)), known, pool)
-        written = write_report(results, folder, pool) if folder is not None else []
-    return Campaign(results, [s.line for s in skipped], kept.lines, list(written))
-
-
-@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
-class Diagnosis:
-    """What ``diagnose`` found: ``story`` (the lines ``tankdaq diagnose`` prints), ``document`` (its
-    ``--json``, less the truncation keys: ``truncated_files`` lists the recordings cut short),
-    ``diagnoser`` (the fitted ``diagnose.workflow.Diagnoser``), ``report`` (the Markdown report written,
-    when asked)."""
-
-    diagnoser: Diagnoser
-    story: list[str]
-    document: dict[str, Any]
-    notices: list[str]
-    report: Path | None
-    truncated_files: list[str]
-
-    def _repr_html_(self) -> str:
-        return f"<pre>{html.escape(chr(10).join(self.story))}</pre>"
-
-
-def diagnose(
-    sources: Source | Sequence[Source],
-    *,
-    baseline: str = "b1,c1",
-    max_steps: int = 4,
-    reading: Reading | None = None,
-    report: str | Path | None = None,
-    progress: Progress | None = None,
-) -> Diagnosis:
-    """Find what a decay model is missing: fit ``baseline``, read the residuals, add the effects they
-    show (at most ``max_steps``) and tell the gap shrink; ``report`` a folder for the Markdown report.
-
-    >>> tankdaq.diagnose("run.mcap").story  # doctest: +SKIP
-    """
-    from ..diagnose import report as report_module
-    from ..diagnose.effects import LIBRARY
-    from ..diagnose.workflow import Diagnoser
-    from ..ident.online import prepare_identifier
-
-    if max_steps < 0:
-        raise InputError(f"max_steps must be 0 or more, not {max_steps}")
-    folder = validation.output_dir(Path(report), option="report") if report is not None else None
-    kept = Kept(progress)
-    runs = load_runs(sources, reading or Reading(axis="roll"), kept)
-    cut = truncations(runs)
-    for line in cut.values():
-        kept.line(line)
-    prepare_identifier(baseline, kept.line)  # the native kernels: built once, on the first run
-    with kept.task("baseline", 1 + max_steps * (len(LIBRARY) + 2)) as advance:
-        count = itertools.count(1)
-        step = lambda _label: advance(next(count))  # noqa: E731
-        diagnoser = Diagnoser(baseline=baseline, max_steps=max_steps, progress=step).fit(runs)
-    written = report_module.write_report(diagnoser, folder) if folder is not None else None
-    document = json.loads(report_module.summary_json(diagnoser))
-    return Diagnosis(diagnoser, report_module.story(diagnoser), document, kept.lines, written, list(cut))

@@ -206,6 +206,12 @@ def warn_truncated(runs: Iterable[Any]) -> list[str]:
     return list(notices)
 
 
+def say_cuts(lines: Iterable[str]) -> None:
+    """Where each decay's free part was cut, and why (``ident.free_decay.cut_lines``): one line each."""
+    for line in lines:
+        say(f"cut: {line}")
+
+
 def _print_version(value: bool) -> None:
     if value:
         from .. import __version__
@@ -298,10 +304,7 @@ class TerminalProgress:
 
     @staticmethod
     def _updater(bar: Progress, task: Any) -> Callable[..., None]:
-        def update(done: int, total: int | None = None) -> None:
-            if total is None:
-                bar.update(task, completed=done)
-            else:
-                bar.update(task, completed=done, total=total)
+        def update(done: int, total: int | None = None, description: str | None = None) -> None:
+            bar.update(task, completed=done, total=total, description=description)
 
         return update

@@ -14,6 +14,7 @@ import typer
 from .. import validation
 from ..errors import InputError
 from .app import app, checked, err_console, handles_errors
+from .options import JsonOutput
 
 if TYPE_CHECKING:  # the auv models compile with numba: imported by the commands that run them
     from ..auv.model import StateRecord
@@ -218,7 +219,7 @@ def identify_command(
         "--sensitivity/--no-sensitivity",
         help="Rank the derivatives by sensitivity next to their errors.",
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    as_json: JsonOutput = False,
 ) -> None:
     """Identify the surge, heave and pitch derivatives one equation at a time; compare with the standard."""
     from ..auv.identify import SeparateIdentifier
@@ -254,7 +255,7 @@ def sensitivity_command(
         help="Perturbation of each derivative [%], between 0 and 100.",
     ),
     threshold: float = typer.Option(0.10, "--threshold", help="Index at which a derivative is dominant."),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    as_json: JsonOutput = False,
 ) -> None:
     """Rank the derivatives by how much the zigzag changes when each is perturbed."""
     from ..auv.sensitivity import OUTPUTS
@@ -303,7 +304,7 @@ def validate_command(
         help="zigzag (re-run the manoeuvre; default for zigzag records) "
         "or replay (driven by the measured plane).",
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    as_json: JsonOutput = False,
 ) -> None:
     """Re-simulate a manoeuvre with the identified model (all derivatives, dominant ones) and score it."""
     from ..auv.io import read_record

@@ -10,16 +10,26 @@ import typer
 from .. import validation
 from .app import (
     DRAFT_METAVAR,
+    TerminalProgress,
     app,
     build_kernels_shown,
     checked,
     err_console,
     fail,
     handles_errors,
-    progress_bar,
     say,
+    say_cuts,
 )
-from .identify import CatalogueOption, EndS, RunsQuery, StartS
+from .options import (
+    CatalogueOption,
+    EndS,
+    FullScale,
+    JsonOutput,
+    RunsQuery,
+    StartS,
+    model_option,
+    report_option,
+)
 
 
 @app.command("campaign")
@@ -29,16 +39,9 @@ def campaign_command(
         list[Path] | None, typer.Argument(help="Recordings (.mcap, .csv) or folders of them (or --runs).")
     ] = None,
     report: Annotated[
-        Path | None,
-        typer.Option(
-            "--report",
-            callback=checked(validation.output_dir, option="--report"),
-            help="Write campaign.csv, campaign.md and PNG plots here.",
-        ),
+        Path | None, report_option("Write campaign.csv, campaign.md and PNG plots here.")
     ] = None,
-    model: Annotated[
-        str, typer.Option("--model", help="Terms (b1,b2,c1,c3) or an alias (docs/models.md).")
-    ] = "ittc-quadratic-restoring",
+    model: Annotated[str, model_option()] = "ittc-quadratic-restoring",
     hulls: Annotated[
         list[str] | None,
         typer.Option("--hull", help="Hull files or names for dimensional results (repeat; else by name)."),
@@ -60,119 +63,50 @@ def campaign_command(
         str | None,
         typer.Option("--scheduler", help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (tankdaq[dask])."),
     ] = None,
-    full_scale: Annotated[
-        bool,
-        typer.Option("--full-scale", help="Also report at full scale (Froude; each hull's scale_factor)."),
-    ] = False,
+    full_scale: FullScale = False,
     no_recurse: Annotated[
         bool,
         typer.Option("--no-recurse", help="Read only the given folders' own files, not their subfolders."),
     ] = False,
+    as_json: JsonOutput = False,
     runs_query: RunsQuery = None,
     catalogue: CatalogueOption = None,
 ) -> None:
     """Group decays by hull, axis, draft and initial angle; fit each group jointly (output error).
 
     CSV files name their condition like trimaran_0.9T_pitch_8deg.csv (or carry a JSON sidecar with
-    hull, draft, axis, angle_deg); tankdaq recordings carry it in their metadata. The table goes to
-    stdout. A file that cannot be read is skipped with one line; the exit code is then 1 (results
-    written for the others). Folders are searched with their subfolders (--no-recurse: not); one line
-    names every folder read.
+    hull, draft, axis, angle_deg); tankdaq recordings carry it in their metadata. The table (or with
+    --json one JSON object) goes to stdout. A file that cannot be read is skipped with one line; the exit
+    code is then 1 (results written for the others). Folders are searched with their subfolders
+    (--no-recurse: not); one line names every folder read.
     """
+    from ..api.campaigns import campaign
     from ..catalogue.hooks import CatalogueWriter
     from ..catalogue.query import inputs_or_query
-    from ..errors import InputError
-    from ..ident.campaign import find_campaign_hulls, find_recordings, markdown_table
-    from ..ident.campaign_stream import fit_campaign, scan_campaign
-    from ..ident.executors import campaign_executor, check_scheduler
-    from ..ident.online import prepare_identifier
-    from ..physics.models import resolve_model
 
-    if executor not in ("local", "dask"):
-        raise InputError(f"--executor {executor!r} not understood: use local or dask")
-    if (executor == "dask") != (scheduler is not None):
-        raise InputError("--executor dask needs --scheduler ADDRESS, and --scheduler needs --executor dask")
-    resolve_model(model)  # a typo fails before any file is read
-    if scheduler is not None:
-        check_scheduler(scheduler)  # an address not understood or not answering: one line, at once
-    given_hulls = find_campaign_hulls([], hulls or [])  # a bad --hull fails before any file is read
+    validation.campaign_executor(executor, scheduler)  # the pair checked before anything is opened
     writer = CatalogueWriter.from_option(catalogue, say)
-    paths = find_recordings(inputs_or_query(inputs, runs_query, catalogue), recurse=not no_recurse)
-    build_kernels_shown()
-    prepare_identifier(model, say)  # the native kernels: built once, on the first run after install
-    prepare = []
-    if report is not None:
-        from ..viz.campaign_report import load_plotting, write_report
-
-        prepare.append(load_plotting)  # loaded before the pool forks: its workers draw the figures
+    inputs = inputs_or_query(inputs, runs_query, catalogue)
     cores = validation.usable_cores()
     if jobs is not None and jobs > cores and executor == "local":
         say(f"--jobs {jobs}: this machine gives tankdaq {cores} cores; running {cores} workers")
-    with (
-        campaign_executor(min(jobs or cores, cores), scheduler, prepare) as pool,
-        progress_bar() as progress,
-    ):
-        reading = progress.add_task("reading", total=len(paths))
-
-        def advance_reading(path: Path) -> None:
-            progress.update(reading, advance=1, description=f"reading {path.name}")
-
-        # the workers read the files and return each decay's group and lines, never its samples
-        scan = scan_campaign(paths, start, end, pool, advance_reading)
-        groups = scan.groups()
-        if not groups:  # nothing to fit: the one file's own line, or every file's and a count
-            if len(scan.skipped) == 1:
-                raise InputError(scan.skipped[0].reason)
-            for skipped in scan.skipped:
-                say(skipped.line)
-            raise InputError(f"no decays read: all {len(paths)} files were skipped (listed above)")
-        say(folders_line(paths))  # a subfolder's decays pooled in are named, not silent
-        for line in [*(skipped.line for skipped in scan.skipped), *scan.notices]:
-            say(line)  # one bad file does not stop the campaign: listed, and exit 1 at the end
-        known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
-        fitting = progress.add_task("fitting", total=len(groups))
-        streamed = fit_campaign(
-            groups,
-            model,
-            known,
-            pool,
-            start,
-            end,
-            keep=report is not None or full_scale,  # their figures and lines need the fits
-            progress=lambda key: progress.update(fitting, advance=1, description=key.label),
-            # each group's fit onto its recordings' catalogue rows as it arrives, then let go
-            on_result=(lambda result: writer.add_campaign([result])) if writer.enabled else None,
-        )
-        results = sorted(streamed, key=lambda row: row.key)  # rows only: a few kB per group
-        for line in scan.truncations:
-            say(line)
-        for line in scan.cuts:
-            err_console.print(f"cut: {line}", markup=False, highlight=False, soft_wrap=True)
-        typer.echo(markdown_table(results), nl=False)
-        fits = [r.result for r in results if r.result is not None]
-        if full_scale:
-            from ..ident.derived import campaign_full_scale
-
-            typer.echo("\n".join(campaign_full_scale(fits)))
-        for result in results:
-            if result.error is not None:
-                err_console.print(f"warning: {result.key.label} not fitted: {result.error}", markup=False)
-        for result in results:  # a fit physics says is implausible: said here, in the table and the report
-            for line in result.warnings:
-                err_console.print(f"warning: {result.key.label}: {line}", markup=False, soft_wrap=True)
-        if report is not None:
-            written = write_report(fits, report, pool)
-            err_console.print(f"wrote {len(written)} files to {report}", markup=False)
-    writer.close()
-    if scan.skipped:
-        count = f"{len(scan.skipped)} of {len(paths)} files skipped (listed above)"
+    build_kernels_shown()
+    catalogued = (lambda fit: writer.add_campaign([fit])) if writer.enabled else None
+    with writer:  # each group's fit onto its recordings' catalogue rows as it arrives, then let go
+        result = campaign(
+            inputs, model, hulls=hulls or [], start_s=start, end_s=end, recurse=not no_recurse,
+            jobs=min(jobs or cores, cores), executor=executor, scheduler=scheduler, report=report,
+            full_scale=full_scale, on_result=catalogued, progress=TerminalProgress(),
+        )  # fmt: skip
+    say_cuts(result.cuts)
+    typer.echo(result.to_json() if as_json else result.text(), nl=as_json)
+    for line in result.warnings:  # a fit physics says is implausible: said here, in the table and the report
+        err_console.print(f"warning: {line}", markup=False, soft_wrap=True)
+    if report is not None:
+        err_console.print(f"wrote {len(result.report_files)} files to {report}", markup=False)
+    if result.skipped:
+        count = f"{len(result.skipped)} of {len(result.files)} files skipped (listed above)"
         raise fail(f"{count}; the results cover the others", 1)
-
-
-def folders_line(paths: list[Path]) -> str:
-    """One line naming every folder recordings were read from: a subfolder's decays pooled in are seen."""
-    folders = sorted({str(path.parent) for path in paths})
-    return f"read {len(paths)} recording(s) from {len(folders)} folder(s): {', '.join(folders)}"
 
 
 @app.command("simulate-campaign")
@@ -191,7 +125,12 @@ def simulate_campaign_command(
     hulls: Annotated[
         list[str] | None, typer.Option("--hull", help="Hull configs (repeat; overrides the plan).")
     ] = None,
-    axis: Annotated[str | None, typer.Option("--axis", help="roll or pitch (overrides the plan).")] = None,
+    axis: Annotated[
+        str | None,
+        typer.Option(
+            "--axis", callback=checked(validation.decay_axis), help="roll or pitch (overrides the plan)."
+        ),
+    ] = None,
     drafts: Annotated[
         list[str] | None,
         typer.Option(
@@ -215,14 +154,11 @@ def simulate_campaign_command(
     """Simulate a decay campaign from configs/hulls, following a test matrix from configs/campaigns
     (default: seed 000's trimaran and catamaran pitch decays at 0.9T, T, 1.1T from 2, 4, 6, 8 deg)."""
     from ..config import load_hull
-    from ..errors import InputError
     from ..ident.campaign_synthetic import write_simulated_campaign
     from ..plans import load_campaign_plan
 
     matrix = load_campaign_plan(plan)
-    axis = axis or matrix.axis
-    if axis not in ("roll", "pitch"):
-        raise InputError(f"axis {axis!r} not understood: use roll or pitch")
+    axis = axis or matrix.axis  # the plan's is checked where it is read
     draft_factors = [validation.draft_factor(d) for d in drafts or matrix.drafts]
     for hull in hulls or matrix.hulls:  # every condition is checked before the first file is written
         for draft in draft_factors:

@@ -11,6 +11,7 @@ from typing import Annotated, Any
 import typer
 
 from .app import app, catalogue_option, handles_errors, progress_bar, say
+from .options import JsonOutput
 
 catalogue_app = typer.Typer(no_args_is_help=True, help="The run catalogue: rebuild its rows from files.")
 app.add_typer(catalogue_app, name="catalogue")
@@ -145,7 +146,7 @@ def runs_command(
             "--compare", metavar="A B", help="Two sessions (id, folder), plans or queries side by side."
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="JSON on stdout.")] = False,
+    as_json: JsonOutput = False,
     as_csv: Annotated[bool, typer.Option("--csv", help="CSV on stdout.")] = False,
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:

@@ -8,85 +8,37 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from .. import validation
-from ..records import DecayRun
 from .app import (
     TerminalProgress,
     app,
     build_kernels_shown,
-    catalogue_option,
     checked,
     draft_option,
-    err_console,
     handles_errors,
-    progress_bar,
-    runs_option,
     say,
-    warn_truncated,
+    say_cuts,
+)
+from .options import (
+    AngleColumn,
+    AngleUnit,
+    CatalogueOption,
+    EndS,
+    FullScale,
+    JsonOutput,
+    KeepAll,
+    RateColumn,
+    ReadAxis,
+    RunsQuery,
+    SkipHalfCycles,
+    StartS,
+    TimeColumn,
+    TimeUnit,
+    model_option,
 )
 
 if TYPE_CHECKING:
-    from ..api.identification import Reading
+    from ..api.identification import ConditionFit, Reading
     from ..catalogue.hooks import CatalogueWriter
-
-# The run catalogue (identify, campaign, diagnose): where fits are written, and --runs in place of paths.
-CatalogueOption = Annotated[str | None, catalogue_option()]
-RunsQuery = Annotated[str | None, runs_option()]
-
-# Options every command that reads decays shares (identify, diagnose): how to read other labs' CSV.
-TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
-AngleColumn = Annotated[str, typer.Option("--angle-col", help="CSV angle column.")]
-RateColumn = Annotated[str, typer.Option("--rate-col", help="CSV rate column (ignored when absent).")]
-AngleUnit = Annotated[
-    str | None,
-    typer.Option("--angle-unit", help="Unit of the CSV angle and rate: deg or rad [default: from the data]."),
-]
-TimeUnit = Annotated[
-    str | None, typer.Option("--time-unit", help="Unit of the CSV time: s or ms [default: from the data].")
-]
-KeepAll = Annotated[bool, typer.Option("--keep-all", help="Do not cut the CSV record at the release.")]
-SkipHalfCycles = Annotated[
-    int, typer.Option("--skip-half-cycles", min=0, help="Half-cycles dropped after it.")
-]
-# Where the free decay is taken from and to (identify, diagnose, campaign); automatic end by default.
-StartS = Annotated[
-    float | None, typer.Option("--start", min=0.0, help="Keep from S s after each release (default 0).")
-]
-EndS = Annotated[
-    float | None,
-    typer.Option("--end", min=0.0, help="End each free decay S s after its release (default: found)."),
-]
-
-
-def echo_cuts(runs: list[DecayRun]) -> None:
-    """One line per run on stderr: where its free decay was cut and why."""
-    from ..ident.free_decay import cut_lines
-
-    for line in cut_lines(runs):
-        err_console.print(f"cut: {line}", markup=False, highlight=False, soft_wrap=True)
-
-
-def load_runs(
-    inputs: list[Path],
-    axis: str | None,
-    time_col: str,
-    angle_col: str,
-    rate_col: str | None,
-    angle_unit: str | None,
-    keep_all: bool,
-    skip_half_cycles: int,
-    start_s: float | None = None,
-    end_s: float | None = None,
-    time_unit: str | None = None,
-) -> list[DecayRun]:
-    """The free decays of every input, read and cut as ``tankdaq.identify`` reads them
-    (``api.identification.load_runs``); what the reading decided is said in one line each."""
-    from ..api.identification import Reading
-    from ..api.identification import load_runs as read_and_cut
-
-    reading = Reading(
-        axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start_s, end_s
-    )
-    return read_and_cut(inputs, reading, TerminalProgress())
 
 
 @app.command("identify")
@@ -99,15 +51,14 @@ def identify_command(
             help="Decay recordings (.mcap) or CSV files, one decay each (or --runs).",
         ),
     ] = None,
-    axis: str = typer.Option(
-        None, "--axis", help="roll or pitch (default: a recording's own axis; roll for CSV)."
-    ),
-    model: str = typer.Option(
-        "auto",
-        "--model",
-        help="auto (the best of a small family on held-out data), terms (b1,b2,c1,c3) or an alias "
-        "(docs/models.md).",
-    ),
+    axis: ReadAxis = None,
+    model: Annotated[
+        str,
+        model_option(
+            "auto (the best of a small family on held-out data), terms (b1,b2,c1,c3) or an alias "
+            "(docs/models.md)."
+        ),
+    ] = "auto",
     method: str = typer.Option("oe", "--method", help="oe (output error), ee (equation error), ..."),
     compare: bool = typer.Option(
         False, "--compare", help="Fit every seed formula and ITTC form; print the table."
@@ -115,7 +66,7 @@ def identify_command(
     joint: bool = typer.Option(
         False, "--joint", help="Fit decays of different conditions (hull, draft, axis) together (warned)."
     ),
-    as_json: bool = typer.Option(False, "--json", help="Print one JSON object on stdout."),
+    as_json: JsonOutput = False,
     time_col: TimeColumn = "time_s",
     angle_col: AngleColumn = "angle_deg",
     rate_col: RateColumn = "rate_deg_s",
@@ -136,9 +87,7 @@ def identify_command(
     ),
     hull: str = typer.Option(None, "--hull", help="Hull config for dimensional results."),
     draft: float = draft_option(help="Draft with --hull."),
-    full_scale: bool = typer.Option(
-        False, "--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."
-    ),
+    full_scale: FullScale = False,
     runs_query: RunsQuery = None,
     catalogue: CatalogueOption = None,
 ) -> None:
@@ -166,51 +115,30 @@ def identify_command(
     )  # fmt: skip
     with writer:
         for fit in result.fits:
-            if not fit.pooled:  # a fit of one condition: the rows of its recordings carry it
-                _catalogue_fit(writer, "identify", fit.summary, fit.runs)
+            _catalogue_fit(writer, fit)
     typer.echo(result.to_json() if as_json else result.text())
 
 
 def _compare(inputs: list[Path], reading: Reading, method: str, as_json: bool) -> None:
-    """``--compare``: every seed formula and ITTC form fitted to the decays, the table printed."""
-    from ..api.identification import load_runs, to_json, truncations
-    from ..ident.comparison import compare_models, compare_text, group_models
-    from ..ident.conditions import group_conditions, grouping_line
-    from ..ident.estimators import make_estimator
-    from ..ident.free_decay import cut_lines
-    from ..ident.online import prepare_identifier
-    from ..physics.models import COMPARE_MODELS, MODEL_FAMILY
+    """``--compare``: every seed formula and ITTC form fitted to the decays (``tankdaq.compare_models``)."""
+    from ..api.comparison import compare_models
 
-    make_estimator(method, MODEL_FAMILY[0])  # an unknown method fails before any reading
-    runs = load_runs(inputs, reading, TerminalProgress())
-    cut = list(truncations(runs))
-    warn_truncated(runs)
-    groups = group_conditions(runs)
-    pooled = grouping_line(groups, joint=True) if len(groups) > 1 else None
-    prepare_identifier(MODEL_FAMILY[-1], say)  # the native kernels: built once, on the first run
-    if pooled is not None:
-        say(f"warning: {pooled}")
-    with progress_bar() as progress:
-        task = progress.add_task("fitting models", total=len(group_models(COMPARE_MODELS)))
-        rows = compare_models(
-            runs, COMPARE_MODELS, method, lambda name: progress.update(task, advance=1, description=name)
-        )
-    if as_json:
-        document = {
-            "compare": rows,
-            "cuts": cut_lines(runs),
-            "warnings": [pooled] if pooled else [],
-            "truncated": bool(cut),
-            "truncated_files": cut,
-        }
-        typer.echo(to_json(document))
-    else:
-        echo_cuts(runs)
-        typer.echo(compare_text(rows))
+    build_kernels_shown()
+    found = compare_models(inputs, method=method, reading=reading, progress=TerminalProgress())
+    for line in found.warnings:
+        say(f"warning: {line}")
+    if not as_json:
+        say_cuts(found.cuts)
+    typer.echo(found.to_json() if as_json else found.text())
 
 
-def _catalogue_fit(writer: CatalogueWriter, source: str, summary: dict, runs: list[DecayRun]) -> None:
-    """A condition's fit onto its recordings' catalogue rows."""
+def _catalogue_fit(writer: CatalogueWriter, fit: ConditionFit) -> None:
+    """A fit onto its recordings' catalogue rows: a condition's as ``identify``; a ``--joint`` fit of
+    several conditions as ``identify-joint`` (its warnings say it pooled them) on each condition's
+    rows, its B̂44 at that condition's draft."""
     from ..catalogue.writing import fit_of_summary, run_paths
+    from ..ident.conditions import group_conditions
 
-    writer.add_fit(run_paths(runs), fit_of_summary(source, summary, runs))
+    source = "identify-joint" if fit.pooled else "identify"
+    for runs in group_conditions(fit.runs).values() if fit.pooled else [fit.runs]:
+        writer.add_fit(run_paths(runs), fit_of_summary(source, fit.summary, runs))

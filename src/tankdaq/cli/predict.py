@@ -10,6 +10,7 @@ import typer
 
 from .. import validation
 from .app import app, checked, draft_option, handles_errors
+from .options import JsonOutput
 
 #: Amplitudes shown when no --angle is given (deg): the band a decay test covers.
 DEFAULT_ANGLES_DEG = (5.0, 10.0, 15.0, 20.0)
@@ -40,7 +41,7 @@ def predict_command(
         bool,
         typer.Option("--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."),
     ] = False,
-    as_json: Annotated[bool, typer.Option("--json", help="Print one JSON object on stdout.")] = False,
+    as_json: JsonOutput = False,
 ) -> None:
     """Predict the roll damping components at the natural roll frequency (simplified Ikeda method)."""
     from ..config import full_scale_of, ikeda_prediction, load_hull

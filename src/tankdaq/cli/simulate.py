@@ -14,6 +14,7 @@ import typer
 from .. import validation
 from ..errors import InputError
 from .app import app, checked, draft_option, err_console, handles_errors
+from .options import DecayAxis
 
 if TYPE_CHECKING:
     from ..device.simulator import SimulatedMTi
@@ -43,7 +44,7 @@ def simulate_command(
         callback=checked(validation.release_angle_deg),
         help="Tilt angle (deg) the engineer sets by hand.",
     ),
-    axis: str = typer.Option("roll", "--axis", help="Tilted axis: roll or pitch."),
+    axis: DecayAxis = "roll",
     rate_hz: float = typer.Option(
         100,
         "--rate",
@@ -105,8 +106,6 @@ def simulate_command(
     from ..physics.sensor import SensorNoise
     from ..store.playback import recorded_device
 
-    if axis not in ("roll", "pitch"):
-        raise InputError(f"axis {axis!r} not understood; use roll or pitch")
     if speed <= 0:
         raise InputError(f"--speed must be positive, got {speed:g}")
     hull_config = load_hull(hull)

@@ -335,8 +335,8 @@ def read_campaign(
     executor: Executor | None = None,
 ) -> CampaignRead:
     """Every recording's free decays (``read_campaign_file``), in path order, and the files skipped,
-    all held here: for a few files (a session, a test); ``tankdaq campaign`` streams
-    (``ident.campaign_stream``), its parent holding no decay."""
+    all held here: for a few files (a test, a bench); ``tankdaq.campaign``, which the command and the
+    guided session's report call, streams (``ident.campaign_stream``), its parent holding no decay."""
     found = CampaignRead([], [])
     n = len(paths)
     for runs in executor_map(executor, read_campaign_file, paths, [start_s] * n, [end_s] * n):

@@ -1,5 +1,6 @@
-"""The report at the end of a guided session: ``tankdaq campaign``'s report of the accepted decays, plus
-each coefficient's repeat-to-repeat spread for the conditions with two or more repeats.
+"""The report at the end of a guided session: ``tankdaq campaign``'s report of the accepted decays (the same
+pipeline, ``tankdaq.campaign``), plus each coefficient's repeat-to-repeat spread for the conditions with
+two or more repeats.
 """
 
 from __future__ import annotations
@@ -14,21 +15,14 @@ REPORT_DIR = "report"
 
 
 def write_session_report(files: list[Path], folder: Path, model: str, hull: str) -> list[Path]:
-    """``tankdaq campaign``'s report of ``files``, plus each coefficient's repeat-to-repeat spread
+    """``tankdaq campaign``'s report of ``files`` (``tankdaq.campaign``, in this process: the session's
+    device may still be streaming), plus each coefficient's repeat-to-repeat spread
     (``repeat_spread.csv`` and a section of campaign.md) for the conditions with two or more repeats."""
-    from ...ident.campaign import (
-        find_campaign_hulls,
-        group_runs,
-        identify_groups,
-        read_campaign_runs,
-    )
-    from ...viz.campaign_report import write_report
+    from ...api.campaigns import campaign
 
-    runs = [run for path in files for run in read_campaign_runs(path)]
-    groups = group_runs(runs)
-    results = identify_groups(groups, model, hulls=find_campaign_hulls({k.hull for k in groups}, [hull]))
-    written = write_report(results, folder)
-    spread = repeat_spreads(groups, model)
+    found = campaign(files, model, hulls=[hull], report=folder, keep_fits=True)
+    written = list(found.report_files)
+    spread = repeat_spreads({result.key: result.runs for result in found.results}, model)
     if spread:
         written.append(_write_spread(spread, folder))
     return written

@@ -1,0 +1,235 @@
+"""``tankdaq.campaign``: a test campaign fitted group by group; ``tankdaq campaign`` is this call, and so is
+the guided session's report (``acquire.guided.report``).
+
+The campaign streams (``ident.campaign_stream``): the workers read the files and send back each decay's
+group, then read them again a chunk of groups at a time, fit each group and send back its table row. The
+caller holds the rows (a few kB per group), never the recordings, unless the fits are asked for
+(``keep_fits``, or a report or full-scale results, which draw them). The workers are a process pool
+(``jobs``) or a Dask cluster (``executor="dask"``, ``scheduler``); the numbers are the same.
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .. import validation
+from ..errors import InputError
+from .identification import to_json
+from .progress import Kept, Progress
+
+if TYPE_CHECKING:
+    from concurrent.futures import Executor
+
+    import pandas as pd
+
+    from ..config import Hull
+    from ..ident.campaign import GroupKey, GroupResult, GroupRow
+    from ..ident.campaign_stream import CampaignScan, RunRef
+
+
+@dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
+class Campaign:
+    """What ``campaign`` found. ``rows`` are campaign.csv's rows (``ident.campaign.GroupRow``, in group
+    order) and ``table`` the same as a DataFrame; ``results`` the groups' fits and decays
+    (``ident.campaign.GroupResult``) when they were kept (``keep_fits``, a report or ``full_scale``), else
+    empty; ``files`` the recordings read; ``skipped`` the files that could not be read (one line each:
+    the campaign went on without them); ``notices`` the lines the reading had for the user; ``cuts``
+    where each decay's free part was cut, and why; ``full_scale`` the Froude lines (``full_scale=True``);
+    ``report_files`` what ``report=`` wrote.
+
+    >>> result = tankdaq.campaign("recordings/campaign")  # doctest: +SKIP
+    >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s", "b44_hat"]]  # doctest: +SKIP
+    >>> result.warnings  # failed fits and what physics says is implausible  # doctest: +SKIP
+    """
+
+    rows: list[GroupRow]
+    results: list[GroupResult]
+    files: list[Path]
+    skipped: list[str]
+    notices: list[str]
+    cuts: list[str]
+    full_scale: list[str]
+    report_files: list[Path]
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """One row per group: coefficients per unit inertia and their std, period, B_eq, B̂44, R²."""
+        import pandas as pd
+
+        table = pd.DataFrame([row.row for row in self.rows])
+        table.attrs["warnings"] = self.warnings  # an implausible result is never shown without them
+        return table
+
+    @property
+    def warnings(self) -> list[str]:
+        """Every group not fitted and every implausibility, one line each (``--json``'s ``warnings``)."""
+        failed = [f"{row.key.label} not fitted: {row.error}" for row in self.rows if row.error is not None]
+        return failed + [f"{row.key.label}: {line}" for row in self.rows for line in row.warnings]
+
+    @property
+    def document(self) -> dict[str, Any]:
+        """The object ``tankdaq campaign --json`` prints: ``groups`` (the table's rows), ``warnings``,
+        ``skipped``, ``cuts`` and, with ``full_scale``, its lines."""
+        document = {
+            "groups": [row.row for row in self.rows],
+            "warnings": self.warnings,
+            "skipped": self.skipped,
+            "cuts": self.cuts,
+        }
+        return document | ({"full_scale": self.full_scale} if self.full_scale else {})
+
+    def to_json(self) -> str:
+        """The text ``tankdaq campaign --json`` prints (NaN and infinities as null)."""
+        return to_json(self.document)
+
+    def text(self) -> str:
+        """The Markdown table ``tankdaq campaign`` prints, then the full-scale lines."""
+        from ..ident.campaign import markdown_table
+
+        return markdown_table(self.rows) + "".join(f"{line}\n" for line in self.full_scale)
+
+    def _repr_html_(self) -> str:
+        lines = "".join(f"<li>{html.escape(line)}</li>" for line in [*self.skipped, *self.warnings])
+        return (f"<ul>{lines}</ul>" if lines else "") + self.table.to_html(index=False)
+
+
+def campaign(
+    inputs: str | Path | Sequence[str | Path],
+    model: str = "ittc-quadratic-restoring",
+    *,
+    hulls: Sequence[str | Path] = (),
+    start_s: float | None = None,
+    end_s: float | None = None,
+    recurse: bool = True,
+    jobs: int = 1,
+    executor: str = "local",
+    scheduler: str | None = None,
+    report: str | Path | None = None,
+    full_scale: bool = False,
+    keep_fits: bool = False,
+    on_result: Callable[[GroupResult], None] | None = None,
+    progress: Progress | None = None,
+) -> Campaign:
+    """Identify a test campaign: every recording or CSV in ``inputs`` (files or folders, with their
+    subfolders unless ``recurse=False``) grouped by hull, axis, draft and initial angle, each group fitted
+    jointly by output error (``model``: terms or an alias). ``hulls`` (names or .toml) give dimensional
+    results and B̂44 (else each group's hull is looked up by name); ``start_s``/``end_s`` cut each free
+    decay as ``identify`` does. ``jobs`` worker processes (at most the cores), or ``executor="dask"``
+    with a ``scheduler`` address. ``report`` a folder for campaign.csv, campaign.md and the figures;
+    ``full_scale`` the ship's period and damping by Froude. ``on_result`` is handed each group's whole
+    fit as it arrives (the run catalogue writes it), which is then let go unless ``keep_fits``. A file
+    that cannot be read is skipped with its line in ``skipped``; bad input raises
+    ``tankdaq.errors.InputError`` before any file is read.
+
+    >>> result = tankdaq.campaign("recordings/campaign", hulls=["trimaran"], jobs=2)  # doctest: +SKIP
+    >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s"]]  # doctest: +SKIP
+    """
+    from ..ident.campaign import find_campaign_hulls, find_recordings
+    from ..ident.derived import campaign_full_scale
+    from ..ident.executors import campaign_executor
+    from ..ident.online import prepare_identifier
+
+    kept = Kept(progress)
+    workers = _check_campaign(model, jobs, executor, scheduler)
+    folder = validation.output_dir(Path(report), option="report") if report is not None else None
+    given_hulls = find_campaign_hulls([], [str(hull) for hull in hulls])  # a bad hull: before any file
+    paths = find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse)
+    prepare_identifier(model, kept.line)  # the native kernels: built once, on the first run
+    prepare = []
+    if folder is not None:
+        from ..viz.campaign_report import load_plotting, write_report
+
+        prepare.append(load_plotting)  # loaded before a pool forks: its workers draw the figures
+    with campaign_executor(workers, scheduler, prepare) as pool:
+        scan = _scan(paths, start_s, end_s, pool, kept)
+        groups = scan.groups()
+        known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
+        keep = keep_fits or folder is not None or full_scale  # their figures and lines draw the fits
+        rows = _fit(groups, model, known, pool, (start_s, end_s), keep, on_result, kept)
+        for line in scan.truncations:
+            kept.line(line)
+        results = [row.result for row in rows if row.result is not None]
+        written = write_report(results, folder, pool) if folder is not None else []
+    scaled = campaign_full_scale(results) if full_scale else []
+    if not keep_fits:  # the fits were kept for the report and the full-scale lines only
+        results = []
+        rows = [replace(row, result=None) for row in rows]
+    skipped = [skipped.line for skipped in scan.skipped]
+    return Campaign(rows, results, paths, skipped, kept.lines, scan.cuts, scaled, list(written))
+
+
+def _check_campaign(model: str, jobs: int, executor: str, scheduler: str | None) -> int:
+    """The settings checked before any file is read; the worker processes to start (1: none)."""
+    from ..ident.executors import check_scheduler
+    from ..physics.models import resolve_model
+
+    resolve_model(model)  # a typo fails before any file is read
+    validation.campaign_executor(executor, scheduler, option="executor", scheduler_option="scheduler")
+    if scheduler is not None:
+        check_scheduler(scheduler)  # an address not understood or not answering: one line, at once
+    if jobs < 1:
+        raise InputError(f"jobs {jobs}: give 1 or more worker processes")
+    return min(jobs, validation.usable_cores())
+
+
+def _scan(
+    paths: list[Path], start_s: float | None, end_s: float | None, pool: Executor | None, kept: Kept
+) -> CampaignScan:
+    """Every file scanned by the workers (each decay's group and lines, never its samples); the folders
+    read, the files skipped and what the reading decided said in one line each. A campaign of which no
+    file reads is refused: the one file's reason, or every file's line and a count."""
+    from ..ident.campaign_stream import scan_campaign
+
+    with kept.task("reading", len(paths)) as advance:
+        count = iter(range(1, len(paths) + 1))
+        scan = scan_campaign(
+            paths, start_s, end_s, pool, lambda path: advance(next(count), description=f"reading {path.name}")
+        )
+    if not scan.decays:
+        if len(scan.skipped) == 1:
+            raise InputError(scan.skipped[0].reason)
+        for skipped in scan.skipped:
+            kept.line(skipped.line)
+        raise InputError(f"no decays read: all {len(paths)} files were skipped (listed above)")
+    kept.line(folders_line(paths))  # a subfolder's decays pooled in are named, not silent
+    for line in [*(skipped.line for skipped in scan.skipped), *scan.notices]:
+        kept.line(line)  # one bad file does not stop the campaign: listed
+    return scan
+
+
+def _fit(
+    groups: dict[GroupKey, list[RunRef]],
+    model: str,
+    hulls: dict[str, Hull],
+    pool: Executor | None,
+    window: tuple[float | None, float | None],
+    keep: bool,
+    on_result: Callable[[GroupResult], None] | None,
+    kept: Kept,
+) -> list[GroupRow]:
+    """Each group fitted by the workers; its row kept (with its fit when ``keep``), in group order."""
+    from ..ident.campaign_stream import fit_campaign
+
+    with kept.task("fitting", len(groups)) as advance:
+        count = iter(range(1, len(groups) + 1))
+        streamed = fit_campaign(
+            groups,
+            model,
+            hulls,
+            pool,
+            *window,
+            keep=keep,
+            progress=lambda key: advance(next(count), description=key.label),
+            on_result=on_result,
+        )
+        return sorted(streamed, key=lambda row: row.key)  # rows only unless keep: a few kB per group
+
+
+def folders_line(paths: list[Path]) -> str:
+    """One line naming every folder recordings were read from: a subfolder's decays pooled in are seen."""
+    folders = sorted({str(path.parent) for path in paths})
+    return f"read {len(paths)} recording(s) from {len(folders)} folder(s): {', '.join(folders)}"

@@ -1,0 +1,76 @@
+"""The options several commands share, defined once: the same flag, help and check wherever it appears.
+
+Each is an ``Annotated`` type for a command's signature (``axis: DecayAxis = "roll"``) or, where the
+help differs by command, a function giving the ``typer.Option``. Checks are ``tankdaq.validation`` rules
+run while the arguments are parsed (``app.checked``): one ``error:`` line and exit 2 before any work.
+``--draft`` is ``app.draft_option``; ``--catalogue`` and ``--runs`` are ``app.catalogue_option`` and
+``app.runs_option``, typed here.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+import typer
+
+from .. import validation
+from .app import catalogue_option, checked, runs_option
+
+# The run catalogue (identify, campaign, diagnose): where fits are written, and --runs in place of paths.
+CatalogueOption = Annotated[str | None, catalogue_option()]
+RunsQuery = Annotated[str | None, runs_option()]
+
+#: ``--axis`` of a command that tilts or reads one axis (roll by default).
+DecayAxis = Annotated[
+    str, typer.Option("--axis", callback=checked(validation.decay_axis), help="roll or pitch.")
+]
+#: ``--axis`` of a command whose recordings say their axis (identify): given, or the files'.
+ReadAxis = Annotated[
+    str | None,
+    typer.Option(
+        "--axis",
+        callback=checked(validation.decay_axis),
+        help="roll or pitch (default: a recording's own axis; roll for CSV).",
+    ),
+]
+#: ``--json``: the result as JSON on stdout (lines and progress stay on stderr).
+JsonOutput = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
+
+# How other labs' CSV files are read (identify, diagnose: ``tankdaq.Reading``).
+TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
+AngleColumn = Annotated[str, typer.Option("--angle-col", help="CSV angle column.")]
+RateColumn = Annotated[str, typer.Option("--rate-col", help="CSV rate column (ignored when absent).")]
+AngleUnit = Annotated[
+    str | None,
+    typer.Option("--angle-unit", help="Unit of the CSV angle and rate: deg or rad [default: from the data]."),
+]
+TimeUnit = Annotated[
+    str | None, typer.Option("--time-unit", help="Unit of the CSV time: s or ms [default: from the data].")
+]
+KeepAll = Annotated[bool, typer.Option("--keep-all", help="Do not cut the CSV record at the release.")]
+SkipHalfCycles = Annotated[
+    int, typer.Option("--skip-half-cycles", min=0, help="Half-cycles dropped after it.")
+]
+# Where the free decay is taken from and to (identify, diagnose, campaign); automatic end by default.
+StartS = Annotated[
+    float | None, typer.Option("--start", min=0.0, help="Keep from S s after each release (default 0).")
+]
+EndS = Annotated[
+    float | None,
+    typer.Option("--end", min=0.0, help="End each free decay S s after its release (default: found)."),
+]
+#: ``--full-scale`` (identify, campaign): the ship's results by Froude from the hull's scale factor.
+FullScale = Annotated[
+    bool,
+    typer.Option("--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."),
+]
+
+
+def report_option(help: str) -> Any:
+    """``--report DIR`` (campaign, diagnose): a folder checked writable while the arguments are parsed."""
+    return typer.Option("--report", callback=checked(validation.output_dir, option="--report"), help=help)
+
+
+def model_option(help: str = "Terms (b1,b2,c1,c3) or an alias (docs/models.md).") -> Any:
+    """``--model`` of the commands that fit (checked by the library before any file is read)."""
+    return typer.Option("--model", help=help)
