@@ -10,11 +10,16 @@ between consecutive chunks of a file are the gaps between reads, the pre-trigger
 confirmation and the settle included (the reads between decays are in no file). Reads are spaced
 20 ms (``acquire.read_thread.READ_INTERVAL_S``), so a gap above that is a read that waited.
 
-``--in-process-sim`` runs ``--port sim`` instead (the simulator a thread of the recorder): then a
-gap is often the simulator, starved of the interpreter, sending nothing (reads that bring no bytes
-are in no file), not a read that waited.
+``--in-process-sim`` runs ``--port sim`` instead (the simulator a thread of the recorder). Reads that
+bring no bytes are in no file, so a gap in a file is either a read that waited or a device that sent
+nothing: a simulator starved of the interpreter (in-process) or of a CPU (a loaded machine) does that,
+hardware does not. ``--device-realtime`` runs the simulator at SCHED_FIFO 1 (``chrt``, needs root),
+as hardware that never waits for the host. Run as root, the recorders are run as a lab user without
+CAP_SYS_NICE (``setpriv``): their reader process gets no real-time priority; ``--realtime-reader``
+records with this tree once more as root, its reader process at the real-time priority it asks for.
 
 Run: .venv/bin/python bench/bench_read_loop.py [--decays 50] [--sim-speed 8] [--baseline-src DIR]
+     [--device-realtime] [--realtime-reader] [--in-process-sim]
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -51,13 +57,13 @@ def _env(src: str | None) -> dict[str, str]:
 
 
 @contextlib.contextmanager
-def simulator(runs: int, speed: float) -> Iterator[str]:
-    """``tankdaq simulate`` of this tree in a process of its own for ``runs`` decays; yields its link."""
+def simulator(runs: int, speed: float, realtime: bool) -> Iterator[str]:
+    """``tankdaq simulate`` of this tree in a process of its own for ``runs`` decays; yields its link.
+    ``realtime``: at SCHED_FIFO 1 (``chrt``), as hardware, which never waits for the host's CPUs."""
     args = ["simulate", "--hull", "swath", "--draft", "T", "--angle", "8", "--rate", "400"]
     args += ["--runs", str(runs), "--speed", f"{speed:g}", "--baud", SIM_BAUD]
-    process = subprocess.Popen(
-        [*TANKDAQ, *args], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True
-    )
+    command = [*(["chrt", "-f", "1"] if realtime else []), *TANKDAQ, *args]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         assert process.stdout is not None
         link = process.stdout.readline().strip()
@@ -85,17 +91,34 @@ def _wait_until_answering(link: str, attempts: int = 10) -> None:
     raise SystemExit(f"the simulator on {link} never answered GoToConfig")
 
 
-def record(src: str | None, out: Path, decays: int, speed: float, in_process: bool) -> float:
+@dataclass(frozen=True)
+class Setup:
+    """How every recording of the run is made (``--help``)."""
+
+    decays: int
+    speed: float
+    in_process: bool
+    device_realtime: bool
+
+
+#: A recorder run as a lab user: without CAP_SYS_NICE its reader process gets no real-time priority.
+AS_A_USER = ["setpriv", "--bounding-set=-sys_nice", "--inh-caps=-sys_nice"] if os.geteuid() == 0 else []
+
+
+def record(src: str | None, out: Path, setup: Setup, as_user: bool) -> float:
     """One ``tankdaq record`` of ``decays`` decays at 400 Hz with the view saving; its wall time."""
+    decays, speed = setup.decays, setup.speed
     args = ["record", "--hull", "swath", "--draft", "T", "--angle", "8", "--rate", "400"]
     args += ["--runs", str(decays), "--viewer", "save", "--out", str(out)]
     with contextlib.ExitStack() as stack:
-        if in_process:
+        if setup.in_process:
             args += ["--port", "sim", "--sim-speed", f"{speed:g}"]
         else:  # runs to spare: the device clock runs from power-up, while it computes and before the record
-            args += ["--port", stack.enter_context(simulator(decays + 20, speed)), "--baud", SIM_BAUD]
+            link = stack.enter_context(simulator(decays + 20, speed, setup.device_realtime))
+            args += ["--port", link, "--baud", SIM_BAUD]
+        command = [*(AS_A_USER if as_user else []), *TANKDAQ, *args]
         started = time.monotonic()
-        done = subprocess.run([*TANKDAQ, *args], capture_output=True, text=True, env=_env(src), timeout=7200)
+        done = subprocess.run(command, capture_output=True, text=True, env=_env(src), timeout=7200)
         wall_s = time.monotonic() - started
     if done.returncode:  # say why; the files it closed are measured all the same
         print(f"record exited {done.returncode}: {done.stderr.strip().splitlines()[-3:]}")
@@ -130,19 +153,29 @@ def main() -> None:
     parser.add_argument("--sim-speed", type=float, default=8.0)
     parser.add_argument("--baseline-src", default=None)
     parser.add_argument("--in-process-sim", action="store_true", help="--port sim: the simulator a thread")
+    parser.add_argument("--device-realtime", action="store_true", help="the simulator at SCHED_FIFO 1 (chrt)")
+    parser.add_argument(
+        "--realtime-reader", action="store_true", help="this tree once more, its reader allowed SCHED_FIFO"
+    )
     args = parser.parse_args()
+    setup = Setup(args.decays, args.sim_speed, args.in_process_sim, args.device_realtime)
     print(f"{platform.node()} {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs")
-    where = "a thread of the recorder" if args.in_process_sim else "a process of its own"
-    print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, simulator {where}, x{args.sim_speed:g}")
+    where = "a thread of the recorder" if setup.in_process else "a process of its own"
+    where += ", at SCHED_FIFO 1" if setup.device_realtime else ""
+    print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, simulator {where}, x{setup.speed:g}")
+    print(f"recorders as a user without CAP_SYS_NICE: {' '.join(AS_A_USER) or '(not root: as they are)'}")
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    trees: list[tuple[str, str | None]] = [("this tree", os.environ.get("PYTHONPATH"))]
+    this = os.environ.get("PYTHONPATH")
+    runs: list[tuple[str, str | None, bool]] = [("this tree", this, True)]
     if args.baseline_src:
-        trees.insert(0, (f"baseline {args.baseline_src}", args.baseline_src))
+        runs.insert(0, (f"baseline {args.baseline_src}", args.baseline_src, True))
+    if args.realtime_reader:
+        runs.append(("this tree, reader allowed SCHED_FIFO", this, False))
     with tempfile.TemporaryDirectory() as tmp:
-        for i, (tree, src) in enumerate(trees):
+        for i, (label, src, as_user) in enumerate(runs):
             out = Path(tmp) / str(i)
-            wall_s = record(src, out, args.decays, args.sim_speed, args.in_process_sim)
-            print(describe(tree, read_gaps_ms(out), wall_s), flush=True)
+            wall_s = record(src, out, setup, as_user)
+            print(describe(label, read_gaps_ms(out), wall_s), flush=True)
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 

@@ -8,7 +8,8 @@ inherited. Every ``interval_s`` it reads what has arrived, stamps the host arriv
 monotonic clock) and sends (stamps, bytes) down a pipe; the driver decodes them in the recorder.
 Commands still go from the driver: the process lives only while the device streams.
 
-Stopping (``stop``, or the recorder's end of the control pipe closing) the process reads once more
+It asks for the lowest real-time priority (``REALTIME_PRIORITY``) and reads at the normal one where that
+is not allowed. Stopping (``stop``, or the recorder's end of the control pipe closing) the process reads once more
 what has arrived, sends it and ends: nothing read is lost. It ignores the terminal's signals (a
 session of its own): the recorder decides when reading ends, and its death closes the control pipe,
 which ends the process (no orphan). A read that fails or finds the port closed is sent as ``gone``
@@ -42,6 +43,10 @@ NO_DATA = (
     "device reports readiness to read but returned no data (device disconnected or multiple access on port?)"
 )
 CONTROL, OUT = 0, 1  # the process's stdin (stop, or EOF) and stdout (the messages)
+#: The real-time priority the process asks for (SCHED_FIFO, the lowest level): it sleeps between reads
+#: and reads a few kB, so on a busy host it is the one process that should not wait for a CPU. Granted to
+#: root, to CAP_SYS_NICE or under an rtprio limit (docs/protocol.md); otherwise it reads at the normal one.
+REALTIME_PRIORITY = 1
 
 
 @dataclass(frozen=True)
@@ -77,6 +82,14 @@ class ReadProcess:
     @property
     def pid(self) -> int:
         return self._process.pid
+
+    @property
+    def realtime(self) -> bool:
+        """Whether the process got the real-time priority it asks for (False once it has ended)."""
+        try:
+            return os.sched_getscheduler(self.pid) == os.SCHED_FIFO
+        except OSError:
+            return False
 
     def __enter__(self) -> ReadProcess:
         return self
@@ -187,6 +200,8 @@ def _serve(fd: int, interval_s: float, wait_s: float) -> None:
 
 def main(argv: list[str]) -> int:
     fd, interval_s, wait_s = int(argv[1]), float(argv[2]), float(argv[3])
+    with contextlib.suppress(OSError):  # not allowed: the normal priority
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
     try:
         _serve(fd, interval_s, wait_s)
     except BrokenPipeError:  # the recorder is gone: nobody to read for
