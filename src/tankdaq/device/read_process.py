@@ -1,19 +1,20 @@
 """The reads of a streaming device, in a process of their own that does nothing else.
 
 A thread of the recorder shares the interpreter with the pipeline, the live fit, the view and the
-files: a read waited up to 0.3 s for them at 400 Hz (docs/benchmarks.md), that long the bytes sat in
-the port's buffers. ``ReadProcess`` runs this file as a small Python process (``python -I -S``: the
-standard library only, nothing of tankdaq, no site packages) on the serial port's file descriptor,
-inherited. Every ``interval_s`` it reads what has arrived, stamps the host arrival time (wall and
-monotonic clock) and sends (stamps, bytes) down a pipe; the driver decodes them in the recorder.
-Commands still go from the driver: the process lives only while the device streams.
+files: reads waited for them, over 0.1 s in the median decay at 400 Hz on a busy host
+(docs/benchmarks.md), that long the bytes sat in the port's buffers. ``ReadProcess`` runs this
+file as a small Python process (``python -I -S``: the standard library only, nothing of tankdaq,
+no site packages) on the serial port's file descriptor, inherited. Every ``interval_s`` it reads
+what has arrived, stamps the host arrival time (wall and monotonic clock) and sends (stamps, bytes)
+down a pipe; the driver decodes them in the recorder. Commands still go from the driver: the process
+lives only while the device streams.
 
-It asks for the lowest real-time priority (``REALTIME_PRIORITY``) and reads at the normal one where that
-is not allowed. Stopping (``stop``, or the recorder's end of the control pipe closing) the process reads once more
-what has arrived, sends it and ends: nothing read is lost. It ignores the terminal's signals (a
-session of its own): the recorder decides when reading ends, and its death closes the control pipe,
-which ends the process (no orphan). A read that fails or finds the port closed is sent as ``gone``
-with the reason, and the process ends.
+It asks for the lowest real-time priority (``REALTIME_PRIORITY``) and reads at the normal one
+where that is not allowed. Stopping (``stop``, or the recorder's end of the control pipe closing),
+the process reads once more what has arrived, sends it and ends: nothing read is lost. It ignores
+the terminal's signals (a session of its own): the recorder decides when reading ends, and its
+death closes the control pipe, which ends the process (no orphan). A read that fails or finds the
+port closed is sent as ``gone`` with the reason, and the process ends.
 """
 
 from __future__ import annotations
@@ -199,6 +200,7 @@ def _serve(fd: int, interval_s: float, wait_s: float) -> None:
 
 
 def main(argv: list[str]) -> int:
+    """The process: ``argv`` is this file, the descriptor, ``interval_s`` and ``wait_s``; exit code 0."""
     fd, interval_s, wait_s = int(argv[1]), float(argv[2]), float(argv[3])
     with contextlib.suppress(OSError):  # not allowed: the normal priority
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
