@@ -19,7 +19,7 @@ CAP_SYS_NICE (``setpriv``): their reader process gets no real-time priority; ``-
 records with this tree once more as root, its reader process at the real-time priority it asks for.
 
 Run: .venv/bin/python bench/bench_read_loop.py [--decays 50] [--sim-speed 8] [--baseline-src DIR]
-     [--device-realtime] [--realtime-reader] [--in-process-sim]
+     [--device-realtime] [--realtime-reader] [--in-process-sim] [--parallel]
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -157,6 +158,7 @@ def main() -> None:
     parser.add_argument(
         "--realtime-reader", action="store_true", help="this tree once more, its reader allowed SCHED_FIFO"
     )
+    parser.add_argument("--parallel", action="store_true", help="all recordings at once, each its simulator")
     args = parser.parse_args()
     setup = Setup(args.decays, args.sim_speed, args.in_process_sim, args.device_realtime)
     print(f"{platform.node()} {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs")
@@ -164,6 +166,7 @@ def main() -> None:
     where += ", at SCHED_FIFO 1" if setup.device_realtime else ""
     print(f"{time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}, simulator {where}, x{setup.speed:g}")
     print(f"recorders as a user without CAP_SYS_NICE: {' '.join(AS_A_USER) or '(not root: as they are)'}")
+    print("recordings " + ("at once" if args.parallel else "one after the other"))
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     this = os.environ.get("PYTHONPATH")
     runs: list[tuple[str, str | None, bool]] = [("this tree", this, True)]
@@ -171,10 +174,10 @@ def main() -> None:
         runs.insert(0, (f"baseline {args.baseline_src}", args.baseline_src, True))
     if args.realtime_reader:
         runs.append(("this tree, reader allowed SCHED_FIFO", this, False))
-    with tempfile.TemporaryDirectory() as tmp:
-        for i, (label, src, as_user) in enumerate(runs):
-            out = Path(tmp) / str(i)
-            wall_s = record(src, out, setup, as_user)
+    with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(len(runs) if args.parallel else 1) as pool:
+        outs = [Path(tmp) / str(i) for i in range(len(runs))]
+        walls = pool.map(lambda i: record(runs[i][1], outs[i], setup, runs[i][2]), range(len(runs)))
+        for (label, _src, _as_user), out, wall_s in zip(runs, outs, walls, strict=True):
             print(describe(label, read_gaps_ms(out), wall_s), flush=True)
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
