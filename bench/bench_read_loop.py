@@ -60,10 +60,11 @@ def _env(src: str | None) -> dict[str, str]:
 @contextlib.contextmanager
 def simulator(runs: int, speed: float, realtime: bool) -> Iterator[str]:
     """``tankdaq simulate`` of this tree in a process of its own for ``runs`` decays; yields its link.
-    ``realtime``: at SCHED_FIFO 1 (``chrt``), as hardware, which never waits for the host's CPUs."""
+    ``realtime``: at SCHED_FIFO 1 (``chrt``) once it answers, as hardware, which never waits for the
+    host's CPUs."""
     args = ["simulate", "--hull", "swath", "--draft", "T", "--angle", "8", "--rate", "400"]
     args += ["--runs", str(runs), "--speed", f"{speed:g}", "--baud", SIM_BAUD]
-    command = [*(["chrt", "-f", "1"] if realtime else []), *TANKDAQ, *args]
+    command = [*TANKDAQ, *args]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         assert process.stdout is not None
@@ -71,6 +72,8 @@ def simulator(runs: int, speed: float, realtime: bool) -> Iterator[str]:
         if not link:
             raise SystemExit(f"the simulator did not start (exit code {process.wait()})")
         _wait_until_answering(link)
+        if realtime:  # only now: computing the scenario at SCHED_FIFO would take a CPU from everyone
+            subprocess.run(["chrt", "--all-tasks", "--fifo", "--pid", "1", str(process.pid)], check=True)
         yield link
     finally:
         process.send_signal(signal.SIGINT)
