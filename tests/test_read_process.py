@@ -123,3 +123,15 @@ def test_a_recorder_that_dies_takes_its_reader_process_with_it() -> None:
         finally:
             recorder.kill()
             recorder.wait()
+
+
+def test_a_reader_process_killed_ends_its_chunks_without_a_stop() -> None:
+    """Killed from outside (the OOM killer, a stray kill), the process's chunks end and ``stopping`` is still
+    False: the driver then takes the device for gone and reconnects (a new reader process)."""
+    with _pty() as (master, slave), ReadProcess(slave, interval_s=0.01, wait_s=0.01) as process:
+        os.write(master, b"\xfa" * 10)
+        os.kill(process.pid, signal.SIGKILL)
+        list(process.chunks(threading.Event()))
+        assert not process.stopping
+        killed = f"exit code {-signal.SIGKILL}"
+        _until(lambda: process.exit_note() == killed, "the exit code of a killed process")
