@@ -1,14 +1,16 @@
-"""The thread that reads the device does nothing else, and a stop loses no block it read.
+"""The reads of the device happen in a process that does nothing else, the blocks are decoded on a thread
+that does nothing else, and a stop loses no block read.
 
-All real: the simulated MTi-G on a pty opened through pyserial, the daemon's own pipeline and
-files, read back with the official ``mcap`` reader. The spies below call the real methods and only
-note which thread called them.
+All real: the simulated MTi-G on a pty opened through pyserial, the reader process on its descriptor,
+the daemon's own pipeline and files, read back with the official ``mcap`` reader. The spies below call
+the real methods and only note which thread (or process) called them.
 """
 
 from __future__ import annotations
 
+import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from functools import partial
 from pathlib import Path
 
@@ -20,6 +22,7 @@ from tankdaq.acquire.read_thread import THREAD_NAME
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.acquire.sinks import Block, Decay, Sink
 from tankdaq.device.driver import MTiDriver, StreamBlock
+from tankdaq.device.read_process import Chunk, ReadProcess
 from tankdaq.ident.online import OnlineResult
 from tankdaq.store.reader import iter_raw_chunks, read_recording
 from tankdaq.store.writer import RecordingWriter
@@ -29,23 +32,37 @@ _settings = partial(sim_record_settings, runs=1, sim_speed=8.0, sim_seed=5)
 
 
 class _Reads:
-    """Every block the driver returned, and the threads that read them (the real ``read_block``)."""
+    """Every block the driver made of a read, the threads that made them (the real ``_block_of``), and
+    the reader processes with every chunk they sent (the real ``ReadProcess``)."""
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
         self.blocks: list[StreamBlock] = []
         self.threads: set[threading.Thread] = set()
+        self.processes: list[ReadProcess] = []
+        self.chunks: list[Chunk] = []
         self.more = threading.Condition()
-        real = MTiDriver.read_block
+        real_block_of, real_init, real_chunks = MTiDriver._block_of, ReadProcess.__init__, ReadProcess.chunks
 
-        def read_block(driver: MTiDriver) -> StreamBlock:
-            block = real(driver)
+        def block_of(driver: MTiDriver, raw: bytes, host_t: float, now: float) -> StreamBlock:
+            block = real_block_of(driver, raw, host_t, now)
             with self.more:
                 self.blocks.append(block)
                 self.threads.add(threading.current_thread())
                 self.more.notify_all()
             return block
 
-        monkeypatch.setattr(MTiDriver, "read_block", read_block)
+        def init(process: ReadProcess, *args: object) -> None:
+            real_init(process, *args)  # type: ignore[arg-type]
+            self.processes.append(process)
+
+        def chunks(process: ReadProcess, *args: object) -> Iterator[Chunk]:
+            for chunk in real_chunks(process, *args):  # type: ignore[arg-type]
+                self.chunks.append(chunk)
+                yield chunk
+
+        monkeypatch.setattr(MTiDriver, "_block_of", block_of)
+        monkeypatch.setattr(ReadProcess, "__init__", init)
+        monkeypatch.setattr(ReadProcess, "chunks", chunks)
 
 
 Seen = dict[str, set[threading.Thread]]
@@ -94,6 +111,12 @@ def test_no_release_detection_fit_or_write_runs_on_the_reading_thread(
     (outcome,) = RecordDaemon(_settings(tmp_path), sinks=[_ThreadSink(seen)]).run()
     assert outcome.settle_reason in ("amplitude", "timeout") and outcome.path is not None
     assert reads.threads and {thread.name for thread in reads.threads} == {THREAD_NAME}
+    # the reads were made by a process of their own, which has ended; the file's stamps are its reads'
+    assert reads.processes
+    assert all(p.pid != os.getpid() and p.exit_note() != "running" for p in reads.processes)
+    stamps = {int(chunk.host_t * 1e9) for chunk in reads.chunks}
+    in_file = [host_ns for host_ns, raw in iter_raw_chunks(outcome.path) if raw]
+    assert in_file and set(in_file) <= stamps
     wanted = {"ReleaseDetector.feed", "RecordingWriter.write_raw", "RecordingWriter.write_fit"}
     wanted |= {"sink.on_block", "sink.on_release", "sink.on_fit", "sink.on_settle"}
     assert wanted <= set(seen), sorted(seen)

@@ -1,12 +1,15 @@
-"""The thread that reads the device and does nothing else.
+"""The thread that takes the device's reads and does nothing else.
 
 Release confirmation, pre-trigger writing, fit hand-off and file work took 0.14–0.54 s once per
 decay at 400 Hz when they ran on the reading thread: that long the bytes waited in the port's
-buffers. ``DeviceReader`` reads a block every ``READ_INTERVAL_S`` on its own thread
-(``tankdaq-read``) and queues it with the link counters as of that read; the record daemon's
-thread takes the blocks and runs the pipeline. The queue is bounded generously and never drops: a
-reader that gets that far ahead waits for the pipeline. Stopping, the reader ends after its current
-read and every block it read still comes out of ``items`` (nothing read is lost).
+buffers. A thread of their own was not enough: it shared the interpreter with the pipeline, the
+live fit and the view (up to 0.3 s, docs/benchmarks.md). So where the port is a path the reads
+are made by a process of their own (``device.read_process``: every ``READ_INTERVAL_S``, stamped
+there), and ``DeviceReader``'s thread (``tankdaq-read``) only decodes them into blocks; for a
+pyserial URL it reads itself. Each block is queued with the link counters as of that read; the
+record daemon's thread takes the blocks and runs the pipeline. The queue is bounded generously and
+never drops: a reader that gets that far ahead waits for the pipeline. Stopping, the reader ends
+after its current read and every block it read still comes out of ``items`` (nothing read is lost).
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ READ_INTERVAL_S = 0.02
 #: Blocks the queue holds before the reader waits (never drops): a minute of reads at 20 ms.
 QUEUE_BLOCKS = 3000
 
-#: The name of the reading thread (a test checks that no release, fit or write runs on it).
+#: The name of the thread that takes the reads (a test checks that no release, fit or write runs on it).
 THREAD_NAME = "tankdaq-read"
 
 
@@ -66,14 +69,8 @@ class DeviceReader:
         self._stop.set()
 
     def _read(self) -> None:
-        next_read = 0.0
         try:
-            while not self._stop.is_set():
-                wait = next_read - time.monotonic()
-                if wait > 0 and self._stop.wait(wait):
-                    break
-                next_read = time.monotonic() + self.interval_s
-                block = self.driver.read_block()
+            for block in self._blocks():
                 counters = self.driver.counters
                 snapshot = dataclasses.replace(counters, device_errors=list(counters.device_errors))
                 self._queue.put(Read(block, snapshot))
@@ -81,6 +78,20 @@ class DeviceReader:
             self._queue.put(Ended(exc))
         else:
             self._queue.put(Ended(None))
+
+    def _blocks(self) -> Iterator[StreamBlock]:
+        """The driver's blocks until stopped: read by a process of their own where the port is a path
+        (``device.read_process``), else by this thread."""
+        if self.driver.reads_in_process_possible:
+            yield from self.driver.reads_in_process(self._stop, self.interval_s)
+            return
+        next_read = 0.0
+        while not self._stop.is_set():
+            wait = next_read - time.monotonic()
+            if wait > 0 and self._stop.wait(wait):
+                break
+            next_read = time.monotonic() + self.interval_s
+            yield self.driver.read_block()
 
     def items(self, until: Callable[[], bool], poll_s: float = 0.05) -> Iterator[Read | Ended]:
         """The reads in order, then the ``Ended`` that closes them; once ``until()`` is true the reader is

@@ -31,6 +31,7 @@ serial number) with back-off and configures again.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
@@ -66,8 +67,9 @@ from ..xsens.timebase import TICKS_PER_SECOND, CounterTracker
 from .attitude import MIN_RATE_HZ
 from .decoding import SampleDecoder
 from .legacy_output import LegacyOutput
-from .link import XbusLink
+from .link import READ_TIMEOUT_S, XbusLink
 from .ports import find_by_serial, path_exists
+from .read_process import ReadProcess
 
 ERROR_NOT_IMPLEMENTED = 0x04
 #: How long a baud move waits for the Reset ack before reopening (it comes at once, if it can be read).
@@ -328,17 +330,47 @@ class MTiDriver(XbusLink):
     def read_block(self) -> StreamBlock:
         """One read: the samples it completed (maybe none). Raises DeviceGone if the device vanished;
         a frame the decoder held for confirmation is given first (the stream ended: ``finish``)."""
-        if self._gone is not None:
-            gone, self._gone = self._gone, None
-            raise gone
+        self._raise_if_gone()
         try:
             raw = self._read()
         except DeviceGone as exc:
             return self._end_of_stream(exc)
+        return self._block_of(raw, time.time(), time.monotonic())
+
+    def reads_in_process(self, stop: threading.Event, interval_s: float) -> Iterator[StreamBlock]:
+        """The blocks of reads made every ``interval_s`` by a process of their own (``ReadProcess`` on
+        the port's descriptor), stamped there, until ``stop`` is set (then every byte it read comes out)
+        or the device is gone (DeviceGone, after the last block, as ``read_block``). The port must be a
+        path (``reads_in_process_possible``)."""
+        with ReadProcess(self._port().fileno(), interval_s, READ_TIMEOUT_S) as process:
+            for chunk in process.chunks(stop):
+                if chunk.gone is not None:
+                    self.close()
+                    why = f"{self.path} vanished ({chunk.gone}); reconnect() waits for it to come back"
+                    yield self._end_of_stream(DeviceGone(why))
+                else:
+                    yield self._block_of(chunk.data, chunk.host_t, chunk.monotonic_s)
+                self._raise_if_gone()
+            if not process.stopping:  # it ended on its own: killed, or a bug
+                self.close()
+                yield self._end_of_stream(DeviceGone(f"the reader process of {self.path} ended "
+                                                     f"({process.exit_note()})"))  # fmt: skip
+                self._raise_if_gone()
+
+    @property
+    def reads_in_process_possible(self) -> bool:
+        """Whether the port is a descriptor a reader process can share (a path, not a pyserial URL)."""
+        return self._serial is not None and "://" not in self.path and self._serial.fileno() >= 0
+
+    def _raise_if_gone(self) -> None:
+        if self._gone is not None:
+            gone, self._gone = self._gone, None
+            raise gone
+
+    def _block_of(self, raw: bytes, host_t: float, now: float) -> StreamBlock:
+        """The block of one read: ``raw`` arrived at ``host_t`` (wall clock), ``now`` (monotonic)."""
         if self._unread:
             raw, self._unread = self._unread + raw, b""
-        host_t = time.time()
-        now = time.monotonic()
         if raw:
             self._last_data = now
         elif now - self._last_data > self.silence_timeout_s:
