@@ -14,8 +14,17 @@ import sqlalchemy as sa
 
 from ..config import Hull
 from ..errors import RecordingError
-from .database import Catalogue, decays, hulls, sessions
-from .rows import bare_row, find_hull, fit_fields, recording_row, utc_now
+from .database import Catalogue, decays, exports, hulls, sessions
+from .rows import (
+    DECAY_SUFFIXES,
+    bare_row,
+    decay_row,
+    export_metadata,
+    export_row,
+    find_hull,
+    fit_fields,
+    utc_now,
+)
 
 #: What a file seen again (moved, re-indexed, recovered) changes in its row: where it is, not what was
 #: said about it (verdicts, later fits, the hull version it was recorded with).
@@ -58,13 +67,18 @@ def _add_hull(connection: sa.Connection, version: Mapping[str, Any] | None) -> N
 
 
 def add_file(
-    catalogue: Catalogue, path: Path, extra: Mapping[str, Any] | None = None, unreadable: bool = False
+    catalogue: Catalogue,
+    path: Path,
+    extra: Mapping[str, Any] | None = None,
+    unreadable: bool = False,
+    sha256: str | None = None,
 ) -> str:
-    """Catalogue one recording (after its file is closed); returns its hash. ``extra`` columns (a
-    verdict, a session) are written too, on a new row or an existing one. A file that cannot be read
-    raises ``RecordingError``, or with ``unreadable`` gets a bare row (a session's decay cut early)."""
+    """Catalogue one decay file, a recording or a lab's CSV (after the file is closed); returns its
+    hash. ``extra`` columns (a verdict, a session) are written too, on a new row or an existing one. A
+    file that cannot be read raises ``RecordingError``, or with ``unreadable`` gets a bare row (a
+    session's decay cut early). ``sha256``: the file's, when the caller has just hashed it."""
     try:
-        row, version = recording_row(path)
+        row, version = decay_row(path, sha256)
     except RecordingError:
         if not unreadable:
             raise
@@ -76,20 +90,35 @@ def add_file(
     return str(row["sha256"])
 
 
+def add_export(catalogue: Catalogue, path: Path, metadata: dict[str, Any], sha256: str | None = None) -> str:
+    """Catalogue a file ``tankdaq export`` wrote (``rows.export_metadata``) in ``exports``, tied to the
+    row of the recording it came from when that is catalogued; returns its hash."""
+    row = export_row(path, metadata, sha256)
+    with catalogue.engine.begin() as connection:
+        if row["source_path"] is not None:
+            found = connection.execute(sa.select(decays.c.sha256).where(decays.c.path == row["source_path"]))
+            row["source_sha256"] = found.scalar()
+        statement = _insert(connection, exports).values(**row)
+        keep = {c: statement.excluded[c] for c in ("path", "size_bytes", "source_sha256", "updated_utc")}
+        connection.execute(statement.on_conflict_do_update(index_elements=["sha256"], set_=keep))
+    return str(row["sha256"])
+
+
 def update_fit(catalogue: Catalogue, paths: Sequence[Path], fields: Mapping[str, Any]) -> int:
-    """Give the rows of ``paths`` a fit (identify, campaign, diagnose) in one transaction; a recording
-    not catalogued yet is added first. Files that are not tankdaq recordings (CSV) are not catalogued.
-    Returns the rows written."""
-    mcaps = [path.resolve() for path in paths if path.suffix.lower() == ".mcap" and path.is_file()]
+    """Give the rows of ``paths`` a fit (identify, campaign, diagnose) in one transaction; a decay file
+    (a recording, a lab's CSV) not catalogued yet is added first. A CSV ``tankdaq export`` wrote is its
+    recording's copy, not a decay of its own: its fit is not written. Returns the rows written."""
+    files = [path.resolve() for path in paths if path.suffix.lower() in DECAY_SUFFIXES and path.is_file()]
+    files = [path for path in files if path.suffix.lower() != ".csv" or export_metadata(path) is None]
     missing = []
     with catalogue.engine.begin() as connection:
-        for path in mcaps:
+        for path in files:
             statement = decays.update().where(decays.c.path == str(path)).values(**fields)
             if not connection.execute(statement).rowcount:
                 missing.append(path)
     for path in missing:
         add_file(catalogue, path, fields)
-    return len(mcaps)
+    return len(files)
 
 
 def session_id(log_path: Path) -> str:
