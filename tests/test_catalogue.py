@@ -405,6 +405,26 @@ def test_a_corrupt_catalogue_is_one_line_and_identify_still_answers(
     assert row["coefficients"]["b1"]["ci_low"] < row["coefficients"]["b1"]["value"]
 
 
+def test_a_campaigns_fits_go_in_batches_and_one_that_fails_is_one_line(
+    campaign_folder: Path, tmp_path: Path
+) -> None:
+    """A campaign's group fits are held as columns (not fits) and written a batch to a transaction, the
+    rest at close; a result the catalogue cannot take is its one line, never the campaign's error."""
+    paths = sorted(campaign_folder.glob("swath_1.1T_*.mcap"))[:4]
+    results = identify_groups(group_runs(read_campaign(paths).runs), "b1,c1")
+    url = _url(tmp_path)
+    lines: list[str] = []
+    writer = CatalogueWriter(url, lines.append)
+    writer.add_campaign(results)
+    assert not (tmp_path / "catalogue.sqlite").exists()  # fewer than a batch: nothing written yet
+    writer.add_campaign([object()])  # not a campaign's result
+    writer.close()
+    assert len(lines) == 1 and lines[0].startswith("catalogue: ") and "index" in lines[0]
+    written = {r["path"]: r for r in _rows(url)}
+    assert set(written) == {str(p.resolve()) for p in paths}
+    assert all(row["fit_source"] == "campaign" and row["b44_hat"]["5"] > 0 for row in written.values())
+
+
 def test_a_locked_catalogue_is_one_line_and_never_holds_the_caller(
     campaign_folder: Path, tmp_path: Path
 ) -> None:
