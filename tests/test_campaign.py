@@ -27,7 +27,15 @@ from tankdaq.ident.campaign import (
     read_campaign,
     read_campaign_runs,
 )
-from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
+from tankdaq.ident.campaign_stream import (
+    CHUNKS,
+    MAX_CHUNK_DECAYS,
+    RunRef,
+    chunk_size,
+    fit_campaign,
+    fit_chunks,
+    scan_campaign,
+)
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.ident.derived import b_eq
 from tankdaq.ident.executors import campaign_executor
@@ -136,7 +144,28 @@ def test_a_dask_cluster_gives_the_serial_results(csv_campaign: Path, csv_results
         campaign_executor(scheduler=cluster.scheduler_address) as executor,
     ):
         results = identify_groups(group_runs(runs), executor=executor)
+        groups = scan_campaign(find_recordings([csv_campaign]), executor=executor).groups()
+        chunks = list(fit_chunks(list(groups.items()), executor))
+        rows = sorted(fit_campaign(groups, executor=executor), key=lambda row: row.key)
     assert_same_fits(results, csv_results)
+    assert [row.row for row in rows] == [result.summary() for result in csv_results]
+    # the cluster's size is known, and the fits go in chunks of whole groups that shrink to one group
+    assert executor.threads == 2
+    assert [group for chunk in chunks for group in chunk] == list(groups.items())
+    sizes = [sum(len(refs) for _, refs in chunk) for chunk in chunks]
+    assert sizes == sorted(sizes, reverse=True) and sizes[0] > sizes[-1] and len(chunks[-1]) == 1
+
+
+def test_a_local_pool_fits_in_chunks_of_one_size() -> None:
+    """The pool's chunks (``CHUNKS``): equal until the last, whole groups, at most ``MAX_CHUNK_DECAYS``."""
+    paths = [Path(f"r{i}.mcap") for i in range(400)]
+    keys = [GroupKey("trimaran", "pitch", 1.0, float(i)) for i in range(200)]
+    groups = [(key, [RunRef(p, 0) for p in paths[i::200]]) for i, key in enumerate(keys)]
+    chunks = list(fit_chunks(groups, None))
+    sizes = [sum(len(refs) for _, refs in chunk) for chunk in chunks]
+    assert [group for chunk in chunks for group in chunk] == groups
+    assert set(sizes[:-1]) == {2 * math.ceil(chunk_size(400) / 2)}  # whole groups of two: 13 -> 14
+    assert chunk_size(400) == math.ceil(400 / CHUNKS) and chunk_size(10**6) == MAX_CHUNK_DECAYS
 
 
 def test_mcap_campaign_reads_back_like_the_csv_one(tmp_path: Path) -> None:

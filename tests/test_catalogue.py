@@ -19,6 +19,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import h5py
 import pytest
 import sqlalchemy as sa
 from hypothesis import given, settings
@@ -29,9 +30,11 @@ import tankdaq
 import tankdaq.config
 from pg_server import throwaway_postgres, why_not
 from tankdaq.catalogue.database import (
+    SCHEMA_VERSION,
     BadCatalogueQuery,
     CatalogueError,
     decays,
+    exports,
     open_catalogue,
     resolve_url,
     schema_version,
@@ -106,6 +109,60 @@ def test_index_36_then_again_then_a_moved_file_follows_by_hash(campaign_folder: 
 
     frame = tankdaq.runs(hull="swath", draft="1.1T", catalogue=url)
     assert len(frame) == 12 and set(frame["draft"]) == {"1.1T"}
+
+
+def _table(url: str, table: sa.Table) -> list[dict]:
+    with open_catalogue(url) as catalogue, catalogue.engine.connect() as connection:
+        return [dict(r._mapping) for r in connection.execute(sa.select(table))]
+
+
+def test_index_takes_lab_csv_decays_and_exports_by_hash(campaign_folder: Path, tmp_path: Path) -> None:
+    """A lab's CSV decays are decays (their condition from the name, or unknown); files ``tankdaq
+    export`` wrote go to ``exports``, tied to their recording, so no decay is listed twice."""
+    from tankdaq.store.export import export_recording
+
+    folder = tmp_path / "lab"
+    folder.mkdir()
+    recording = shutil.copy(campaign_folder / "swath_T_roll_8deg_run01.mcap", folder)
+    named, other = write_simulated_campaign(folder / "csv", ["swath"], "roll", [1.1], [6.0, 8.0], "csv")
+    unnamed = other.rename(other.with_name("tank_log_0412.csv"))  # a name that says nothing
+    (h5,) = export_recording(recording, "h5", folder / "h5")
+    exported_csv = export_recording(recording, "csv", folder / "csv_export")[0]
+    (folder / "campaign.csv").write_text("group,b1\nswath,0.1\n")  # a report's table: not a decay
+    with h5py.File(folder / "other_tool.h5", "w") as other:  # another tool's HDF5: not an export
+        other.create_dataset("t", data=[0.0, 0.1])
+    url = _url(tmp_path)
+    with open_catalogue(url) as catalogue:
+        report = index_folder(catalogue, folder)
+    assert (len(report.added), report.exports, len(report.skipped)) == (5, 2, 2)
+    assert ["campaign.csv" in line or "other_tool.h5" in line for line in report.skipped] == [True, True]
+    rows = {Path(r["path"]).name: r for r in _rows(url)}
+    assert set(rows) == {Path(recording).name, named.name, unnamed.name}
+    condition = ("hull", "draft", "axis", "angle_nominal_deg", "complete")
+    assert tuple(rows[named.name][c] for c in condition) == ("swath", "1.1T", "roll", 6.0, True)
+    assert tuple(rows[unnamed.name][c] for c in condition) == (None, None, "roll", None, True)
+    assert rows[named.name]["sha256"] == hashlib.sha256(named.read_bytes()).hexdigest()
+    source = rows[Path(recording).name]["sha256"]
+    copies = {Path(r["path"]).name: r for r in _table(url, exports)}
+    assert set(copies) == {h5.name, exported_csv.name}
+    assert {(r["format"], r["source_sha256"]) for r in copies.values()} == {("h5", source), ("csv", source)}
+
+    with open_catalogue(url) as catalogue:
+        again = index_folder(catalogue, folder)
+        assert (len(again.added), len(again.unchanged)) == (0, 5)
+        moved = h5.rename(folder / "moved.h5")
+        after_move = index_folder(catalogue, folder)
+    assert [p.name for p in after_move.moved] == ["moved.h5"]
+    assert {Path(r["path"]).name for r in _table(url, exports)} == {"moved.h5", exported_csv.name}
+    assert len(_rows(url)) == 3 and moved.is_file()
+
+    identified = CliRunner().invoke(app, ["identify", str(unnamed), "--model", "b1,c1", "--catalogue", url])
+    assert identified.exit_code == 0, identified.output
+    assert {Path(r["path"]).name: r["fit_source"] for r in _rows(url)}[unnamed.name] == "identify"
+    args = ["identify", str(exported_csv), "--model", "b1,c1", "--catalogue", url]
+    exported = CliRunner().invoke(app, args)
+    assert exported.exit_code == 0, exported.output
+    assert len(_rows(url)) == 3  # an export's fit does not make it a decay of its own
 
 
 def _wait_for(condition: object, proc: subprocess.Popen, what: str) -> None:
@@ -271,7 +328,7 @@ def test_a_catalogue_that_is_not_one_is_refused_before_work_in_one_line(given: s
 def test_a_newer_schema_is_refused_in_one_line(tmp_path: Path) -> None:
     url = _url(tmp_path)
     with open_catalogue(url) as catalogue, catalogue.engine.begin() as connection:
-        assert connection.execute(sa.select(sa.func.max(schema_version.c.version))).scalar() == 1
+        assert connection.execute(sa.select(sa.func.max(schema_version.c.version))).scalar() == SCHEMA_VERSION
         connection.execute(schema_version.insert().values(version=99, applied_utc="later"))
     with pytest.raises(CatalogueError, match="newer than this tankdaq"):
         open_catalogue(url)
@@ -348,6 +405,26 @@ def test_a_corrupt_catalogue_is_one_line_and_identify_still_answers(
     assert row["coefficients"]["b1"]["ci_low"] < row["coefficients"]["b1"]["value"]
 
 
+def test_a_campaigns_fits_go_in_batches_and_one_that_fails_is_one_line(
+    campaign_folder: Path, tmp_path: Path
+) -> None:
+    """A campaign's group fits are held as columns (not fits) and written a batch to a transaction, the
+    rest at close; a result the catalogue cannot take is its one line, never the campaign's error."""
+    paths = sorted(campaign_folder.glob("swath_1.1T_*.mcap"))[:4]
+    results = identify_groups(group_runs(read_campaign(paths).runs), "b1,c1")
+    url = _url(tmp_path)
+    lines: list[str] = []
+    writer = CatalogueWriter(url, lines.append)
+    writer.add_campaign(results)
+    assert not (tmp_path / "catalogue.sqlite").exists()  # fewer than a batch: nothing written yet
+    writer.add_campaign([object()])  # not a campaign's result
+    writer.close()
+    assert len(lines) == 1 and lines[0].startswith("catalogue: ") and "index" in lines[0]
+    written = {r["path"]: r for r in _rows(url)}
+    assert set(written) == {str(p.resolve()) for p in paths}
+    assert all(row["fit_source"] == "campaign" and row["b44_hat"]["5"] > 0 for row in written.values())
+
+
 def test_a_locked_catalogue_is_one_line_and_never_holds_the_caller(
     campaign_folder: Path, tmp_path: Path
 ) -> None:
@@ -386,7 +463,8 @@ def test_any_where_text_is_conditions_or_one_refusal_never_sql(empty_catalogue: 
         return
     with open_catalogue(empty_catalogue) as catalogue, catalogue.engine.connect() as connection:
         assert connection.execute(sa.select(decays).where(*conditions)).all() == []
-        assert connection.execute(sa.select(sa.func.count()).select_from(schema_version)).scalar_one() == 1
+        count = sa.select(sa.func.count()).select_from(schema_version)
+        assert connection.execute(count).scalar_one() == SCHEMA_VERSION  # one row per migration, no more
 
 
 def test_identify_and_diagnose_by_query_read_what_the_paths_read(

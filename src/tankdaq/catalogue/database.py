@@ -2,7 +2,7 @@
 
 The catalogue is an index of files, never their only copy: every row can be rebuilt from the files
 (``catalogue.index``). So the schema is migrated by ordered functions recorded in a ``schema_version``
-table (lighter than Alembic for four tables), and a catalogue that cannot be opened is one line
+table (lighter than Alembic for five tables), and a catalogue that cannot be opened is one line
 (``CatalogueError``), never a lost recording.
 """
 
@@ -112,13 +112,34 @@ decays = sa.Table(
 )
 
 
+#: A file exported from a recording (``tankdaq export``: HDF5 per decay, CSV with its sidecar): kept
+#: apart from ``decays``, tied to its recording's row, so a query never lists a decay twice.
+exports = sa.Table(
+    "exports",
+    metadata,
+    sa.Column("sha256", sa.String(64), primary_key=True),
+    sa.Column("path", sa.Text, nullable=False),
+    sa.Column("size_bytes", sa.BigInteger, nullable=False),
+    sa.Column("format", sa.String(16), nullable=False),  # the suffix: h5, csv
+    sa.Column("source_path", sa.Text),  # the recording it was exported from, as the export says
+    sa.Column("source_sha256", sa.String(64), index=True),  # that recording's row, when it is known
+    sa.Column("decay", sa.Integer),  # which of the recording's decays (HDF5: one file per decay)
+    sa.Column("created_utc", sa.String(40), nullable=False),
+    sa.Column("updated_utc", sa.String(40), nullable=False),
+)
+
+
 def _v1_tables(connection: sa.Connection) -> None:
     for table in (hulls, sessions, decays):
         table.create(connection, checkfirst=True)
 
 
+def _v2_exports(connection: sa.Connection) -> None:
+    exports.create(connection, checkfirst=True)
+
+
 #: Ordered migrations: index i brings the schema to version i + 1. Append, never edit.
-MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables]
+MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports]
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

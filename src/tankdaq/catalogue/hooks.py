@@ -26,6 +26,8 @@ Job = Callable[[Catalogue], object]
 #: How long a command waits at its end for the catalogue's last writes before it leaves them to index.
 CLOSE_WAIT_S = 60.0
 CATCH_UP = "the files are kept; `tankdaq catalogue index FOLDER` catches up"
+#: A campaign's group fits go to the catalogue this many to a transaction.
+CAMPAIGN_BATCH = 200
 
 
 class CatalogueWriter:
@@ -39,6 +41,7 @@ class CatalogueWriter:
         self._thread: threading.Thread | None = None
         self._catalogue: Catalogue | None = None
         self._closing = False
+        self._campaign: list[tuple[list[Path], dict[str, Any]]] = []  # fits not yet handed to the thread
 
     @classmethod
     def from_option(cls, given: str | None, on_line: Callable[[str], None]) -> CatalogueWriter:
@@ -79,6 +82,7 @@ class CatalogueWriter:
 
     def close(self, wait_s: float = CLOSE_WAIT_S) -> None:
         """Let the queued writes finish (at most ``wait_s``), then stop the thread."""
+        self._flush_campaign()
         if self._thread is None:
             return
         if not self._closing:
@@ -117,10 +121,25 @@ class CatalogueWriter:
         self.submit(lambda catalogue: record_session(catalogue, folder, only))
 
     def add_campaign(self, results: Iterable[Any]) -> None:
-        from .writing import record_fits
+        """A campaign's group fits: each made into its files and columns now (so the caller lets the
+        fit and its runs go), written ``CAMPAIGN_BATCH`` groups to a transaction (the rest at close)."""
+        from .writing import campaign_fit
 
-        listed = list(results)
-        self.submit(lambda catalogue: record_fits(catalogue, listed))
+        if self.url is None:
+            return
+        try:
+            self._campaign += [fit for result in results if (fit := campaign_fit(result)) is not None]
+        except Exception as exc:  # the catalogue's trouble, never the campaign's
+            self._fail(exc)
+        if len(self._campaign) >= CAMPAIGN_BATCH:
+            self._flush_campaign()
+
+    def _flush_campaign(self) -> None:
+        from .writing import update_fits
+
+        batch, self._campaign = self._campaign, []
+        if batch:
+            self.submit(lambda catalogue: update_fits(catalogue, batch))
 
 
 class CatalogueSink(Sink):

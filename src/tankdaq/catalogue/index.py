@@ -1,8 +1,10 @@
 """``tankdaq catalogue index DIR``: the catalogue rebuilt from the files, idempotently.
 
-Every recording is known by its SHA-256: a file seen before is left alone, a file that moved has its
-path updated, a new one is read and added; each session folder's log then gives its decays their
-verdicts. Running it twice changes nothing; a catalogue lost or never written is made again from here.
+Every decay file (a recording, a lab's CSV decay) and every file ``tankdaq export`` wrote (HDF5, a CSV
+with its sidecar) is known by its SHA-256: a file seen before is left alone, a file that moved has its
+path updated, a new one is read and added (an export to ``exports``, tied to its recording); each
+session folder's log then gives its decays their verdicts. Running it twice changes nothing; a
+catalogue lost or never written is made again from here.
 """
 
 from __future__ import annotations
@@ -14,9 +16,9 @@ from pathlib import Path
 import sqlalchemy as sa
 
 from ..errors import RecordingError
-from .database import Catalogue, decays
-from .rows import file_sha256, utc_now
-from .writing import add_file, record_session
+from .database import Catalogue, decays, exports
+from .rows import DECAY_SUFFIXES, EXPORT_SUFFIXES, export_metadata, file_sha256, utc_now
+from .writing import add_export, add_file, record_session
 
 #: How many hashes one look-up asks for (a bound parameter list, well under every driver's limit).
 LOOKUP_BATCH = 500
@@ -31,38 +33,43 @@ class IndexReport:
     unchanged: list[Path] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)  # one line each: the file and why
     sessions: int = 0
+    exports: int = 0  # of those added, files exported from a recording
 
     @property
     def line(self) -> str:
+        exported = f"; {self.exports} of those added are exports of a recording" if self.exports else ""
         return (
             f"{len(self.added)} added, {len(self.moved)} moved, {len(self.unchanged)} unchanged, "
-            f"{len(self.skipped)} skipped, {self.sessions} session(s)"
+            f"{len(self.skipped)} skipped, {self.sessions} session(s){exported}"
         )
 
 
 def index_folder(
     catalogue: Catalogue, folder: Path, progress: Callable[[Path], None] | None = None
 ) -> IndexReport:
-    """Catalogue every ``.mcap`` recording under ``folder`` and every session log in it."""
+    """Catalogue every decay file and export under ``folder`` and every session log in it."""
     report = IndexReport()
-    files = sorted(p for p in folder.rglob("*.mcap") if p.is_file())
+    suffixes = (*DECAY_SUFFIXES, *EXPORT_SUFFIXES)
+    files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in suffixes and p.is_file())
+    files.sort(key=lambda p: p.suffix.lower() != ".mcap")  # recordings first: exports find their rows
     hashes = {path: file_sha256(path) for path in files}
     known = _known_paths(catalogue, list(hashes.values()))
     for path, sha in hashes.items():
         where = known.get(sha)
-        if where == str(path.resolve()) or (where is not None and Path(where).is_file()):
+        if where is not None and (where[0] == str(path.resolve()) or Path(where[0]).is_file()):
             report.unchanged.append(path)  # seen here before, or a copy of a file still in its place
         elif where is not None:
-            _move(catalogue, sha, path)
+            _move(catalogue, where[1], sha, path)
             report.moved.append(path)
         else:
             try:
-                add_file(catalogue, path)
-            except RecordingError as exc:  # not a tankdaq recording, or cut to nothing readable
+                table = _add(catalogue, path, sha)
+            except RecordingError as exc:  # not a decay tankdaq reads, nor an export of one
                 report.skipped.append(f"{path}: {exc}")
             else:
                 report.added.append(path)
-                known[sha] = str(path.resolve())
+                report.exports += table is exports
+                known[sha] = (str(path.resolve()), table)
         if progress is not None:
             progress(path)
     for log in sorted(folder.rglob("session.jsonl")):
@@ -70,22 +77,34 @@ def index_folder(
     return report
 
 
-def _known_paths(catalogue: Catalogue, hashes: list[str]) -> dict[str, str]:
-    found: dict[str, str] = {}
+def _add(catalogue: Catalogue, path: Path, sha: str) -> sa.Table:
+    """A new file into its table: an export (``rows.export_metadata``) or a decay; returns the table."""
+    metadata = export_metadata(path) if path.suffix.lower() != ".mcap" else None
+    if metadata is not None:
+        add_export(catalogue, path, metadata, sha)
+        return exports
+    add_file(catalogue, path, sha256=sha)
+    return decays
+
+
+def _known_paths(catalogue: Catalogue, hashes: list[str]) -> dict[str, tuple[str, sa.Table]]:
+    """Where each hash already catalogued is, and in which table."""
+    found: dict[str, tuple[str, sa.Table]] = {}
     with catalogue.reading() as connection:
-        for start in range(0, len(hashes), LOOKUP_BATCH):
-            batch = hashes[start : start + LOOKUP_BATCH]
-            rows = connection.execute(
-                sa.select(decays.c.sha256, decays.c.path).where(decays.c.sha256.in_(batch))
-            )
-            found.update({sha: path for sha, path in rows})
+        for table in (decays, exports):
+            for start in range(0, len(hashes), LOOKUP_BATCH):
+                batch = hashes[start : start + LOOKUP_BATCH]
+                rows = connection.execute(
+                    sa.select(table.c.sha256, table.c.path).where(table.c.sha256.in_(batch))
+                )
+                found.update({sha: (path, table) for sha, path in rows})
     return found
 
 
-def _move(catalogue: Catalogue, sha: str, path: Path) -> None:
+def _move(catalogue: Catalogue, table: sa.Table, sha: str, path: Path) -> None:
     with catalogue.engine.begin() as connection:
         connection.execute(
-            decays.update()
-            .where(decays.c.sha256 == sha)
+            table.update()
+            .where(table.c.sha256 == sha)
             .values(path=str(path.resolve()), size_bytes=path.stat().st_size, updated_utc=utc_now())
         )

@@ -1,5 +1,6 @@
-"""What one row holds: a decay file read back (condition, device, the fit it carries, its SHA-256), a
-fit's quantities (B_eq and B̂44 at the standard amplitudes) and a hull version.
+"""What one row holds: a decay file read back (a recording: condition, device, the fit it carries; a
+lab's CSV decay: the condition its name or sidecar gives), its SHA-256, a fit's quantities (B_eq and
+B̂44 at the standard amplitudes), a hull version, and a file exported from a recording.
 
 Everything here is made from the files, so ``index`` and the live hooks write the same rows.
 """
@@ -16,7 +17,7 @@ from typing import Any
 
 from .. import __version__
 from ..config import Hull, load_hull, parse_draft
-from ..errors import TankdaqError
+from ..errors import RecordingError, TankdaqError
 
 #: The amplitudes B_eq and B̂44 are kept at (deg): what a lab compares across campaigns.
 STANDARD_AMPLITUDES_DEG = (2.0, 5.0, 10.0)
@@ -163,6 +164,91 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
         condition = (hull, row["draft"], row["axis"])
         row |= fit_fields("record", last["coefficients"], ci95, last.get("r2"), warnings, condition)
     return row, version
+
+
+#: The files ``index`` and the hooks catalogue, by suffix: decays (rows of ``decays``)...
+DECAY_SUFFIXES = (".mcap", ".csv")
+#: ...and what ``tankdaq export`` writes one file per decay of (rows of ``exports``); an exported CSV
+#: (its ``<stem>.json`` sidecar says so) is an export too.
+EXPORT_SUFFIXES = (".h5",)
+
+
+def export_metadata(path: Path) -> dict[str, Any] | None:
+    """The metadata of a file ``tankdaq export`` wrote (HDF5 root attributes, a CSV's sidecar); None
+    for any other CSV. An HDF5 file that is not a tankdaq export raises ``RecordingError``."""
+    from ..store.export_layout import read_h5_metadata, read_sidecar
+
+    if path.suffix.lower() == ".csv":
+        return read_sidecar(path)
+    try:
+        found = read_h5_metadata(path)
+    except OSError as exc:
+        raise RecordingError(f"{path}: not an HDF5 file tankdaq can read ({exc})") from None
+    if found is None:
+        raise RecordingError(f"{path}: an HDF5 file, but not one tankdaq export wrote (no format attribute)")
+    return found
+
+
+def export_row(path: Path, metadata: Mapping[str, Any], sha256: str | None = None) -> dict[str, Any]:
+    """The ``exports`` row of an exported file: where it is, its hash, the recording it came from."""
+    now = utc_now()
+    decay = metadata.get("decay")
+    source = metadata.get("source")
+    return {
+        "sha256": sha256 or file_sha256(path),
+        "path": str(path.resolve()),
+        "size_bytes": path.stat().st_size,
+        "format": path.suffix.lower().lstrip("."),
+        "source_path": str(Path(str(source)).resolve()) if source else None,
+        "decay": int(decay) if isinstance(decay, int | float) and not isinstance(decay, bool) else None,
+        "created_utc": now,
+        "updated_utc": now,
+    }
+
+
+def csv_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """The row of a lab's CSV decay: as ``recording_row``, its condition from its JSON sidecar or its
+    name (``ident.campaign.csv_labels``; unknown columns stay empty when neither says). Raises
+    ``RecordingError`` for a CSV that holds no decay tankdaq can read."""
+    from ..config import format_draft
+    from ..errors import InputError
+    from ..ident.campaign import csv_labels
+    from ..store.inputs import read_runs
+
+    try:
+        runs = read_runs(path)
+    except InputError as exc:
+        raise RecordingError(str(exc)) from None
+    if not runs:
+        raise RecordingError(f"{path}: no decay in it")
+    try:
+        labels = csv_labels(path)
+    except InputError:  # a decay all the same: its row says where and what, the condition unknown
+        labels = {}
+    hull = find_hull(labels.get("hull"))
+    version = hull_version(hull) if hull is not None else None
+    now = utc_now()
+    row = {
+        "sha256": sha256 or file_sha256(path),
+        "path": str(path.resolve()),
+        "size_bytes": path.stat().st_size,
+        "complete": True,
+        "hull": labels.get("hull"),
+        "hull_sha256": version["sha256"] if version else None,
+        "draft": format_draft(labels["draft"]) if "draft" in labels else None,
+        "axis": labels.get("axis", runs[0].axis),
+        "angle_nominal_deg": _finite(labels.get("angle_deg")),
+        "created_utc": now,
+        "updated_utc": now,
+    }
+    return row, version
+
+
+def decay_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """``recording_row`` or ``csv_row``, by the file's suffix."""
+    if path.suffix.lower() == ".csv":
+        return csv_row(path, sha256)
+    return recording_row(path, sha256)
 
 
 def bare_row(path: Path) -> dict[str, Any]:

@@ -14,8 +14,17 @@ import sqlalchemy as sa
 
 from ..config import Hull
 from ..errors import RecordingError
-from .database import Catalogue, decays, hulls, sessions
-from .rows import bare_row, find_hull, fit_fields, recording_row, utc_now
+from .database import Catalogue, decays, exports, hulls, sessions
+from .rows import (
+    DECAY_SUFFIXES,
+    bare_row,
+    decay_row,
+    export_metadata,
+    export_row,
+    find_hull,
+    fit_fields,
+    utc_now,
+)
 
 #: What a file seen again (moved, re-indexed, recovered) changes in its row: where it is, not what was
 #: said about it (verdicts, later fits, the hull version it was recorded with).
@@ -58,13 +67,18 @@ def _add_hull(connection: sa.Connection, version: Mapping[str, Any] | None) -> N
 
 
 def add_file(
-    catalogue: Catalogue, path: Path, extra: Mapping[str, Any] | None = None, unreadable: bool = False
+    catalogue: Catalogue,
+    path: Path,
+    extra: Mapping[str, Any] | None = None,
+    unreadable: bool = False,
+    sha256: str | None = None,
 ) -> str:
-    """Catalogue one recording (after its file is closed); returns its hash. ``extra`` columns (a
-    verdict, a session) are written too, on a new row or an existing one. A file that cannot be read
-    raises ``RecordingError``, or with ``unreadable`` gets a bare row (a session's decay cut early)."""
+    """Catalogue one decay file, a recording or a lab's CSV (after the file is closed); returns its
+    hash. ``extra`` columns (a verdict, a session) are written too, on a new row or an existing one. A
+    file that cannot be read raises ``RecordingError``, or with ``unreadable`` gets a bare row (a
+    session's decay cut early). ``sha256``: the file's, when the caller has just hashed it."""
     try:
-        row, version = recording_row(path)
+        row, version = decay_row(path, sha256)
     except RecordingError:
         if not unreadable:
             raise
@@ -76,20 +90,44 @@ def add_file(
     return str(row["sha256"])
 
 
-def update_fit(catalogue: Catalogue, paths: Sequence[Path], fields: Mapping[str, Any]) -> int:
-    """Give the rows of ``paths`` a fit (identify, campaign, diagnose) in one transaction; a recording
-    not catalogued yet is added first. Files that are not tankdaq recordings (CSV) are not catalogued.
-    Returns the rows written."""
-    mcaps = [path.resolve() for path in paths if path.suffix.lower() == ".mcap" and path.is_file()]
-    missing = []
+def add_export(catalogue: Catalogue, path: Path, metadata: dict[str, Any], sha256: str | None = None) -> str:
+    """Catalogue a file ``tankdaq export`` wrote (``rows.export_metadata``) in ``exports``, tied to the
+    row of the recording it came from when that is catalogued; returns its hash."""
+    row = export_row(path, metadata, sha256)
     with catalogue.engine.begin() as connection:
-        for path in mcaps:
-            statement = decays.update().where(decays.c.path == str(path)).values(**fields)
-            if not connection.execute(statement).rowcount:
-                missing.append(path)
-    for path in missing:
+        if row["source_path"] is not None:
+            found = connection.execute(sa.select(decays.c.sha256).where(decays.c.path == row["source_path"]))
+            row["source_sha256"] = found.scalar()
+        statement = _insert(connection, exports).values(**row)
+        keep = {c: statement.excluded[c] for c in ("path", "size_bytes", "source_sha256", "updated_utc")}
+        connection.execute(statement.on_conflict_do_update(index_elements=["sha256"], set_=keep))
+    return str(row["sha256"])
+
+
+def update_fit(catalogue: Catalogue, paths: Sequence[Path], fields: Mapping[str, Any]) -> int:
+    """Give the rows of ``paths`` a fit (identify, campaign, diagnose) in one transaction; a decay file
+    (a recording, a lab's CSV) not catalogued yet is added first. A CSV ``tankdaq export`` wrote is its
+    recording's copy, not a decay of its own: its fit is not written. Returns the rows written."""
+    return update_fits(catalogue, [(paths, fields)])
+
+
+def update_fits(catalogue: Catalogue, fits: Sequence[tuple[Sequence[Path], Mapping[str, Any]]]) -> int:
+    """``update_fit`` of many fits (a campaign's batch of groups) in one transaction."""
+    missing: list[tuple[Path, Mapping[str, Any]]] = []
+    written = 0
+    with catalogue.engine.begin() as connection:
+        for paths, fields in fits:
+            files = [p.resolve() for p in paths if p.suffix.lower() in DECAY_SUFFIXES and p.is_file()]
+            for path in files:
+                if path.suffix.lower() == ".csv" and export_metadata(path) is not None:
+                    continue
+                written += 1
+                statement = decays.update().where(decays.c.path == str(path)).values(**fields)
+                if not connection.execute(statement).rowcount:
+                    missing.append((path, fields))
+    for path, fields in missing:
         add_file(catalogue, path, fields)
-    return len(mcaps)
+    return written
 
 
 def session_id(log_path: Path) -> str:
@@ -161,22 +199,29 @@ def _upsert_session(
         connection.execute(statement.on_conflict_do_update(index_elements=["session_id"], set_=keep))
 
 
-def _condition(runs: Sequence[Any]) -> tuple[Hull | None, str | None, str | None]:
-    """Hull, draft and axis of fitted runs (their metadata, else their file names: ``condition_of``)."""
+def _condition(runs: Sequence[Any], hull: Hull | None = None) -> tuple[Hull | None, str | None, str | None]:
+    """Hull, draft and axis of fitted runs (their metadata, else their file names: ``condition_of``);
+    ``hull``: the one already loaded for them (a campaign's group), else it is looked up by name."""
     from ..ident.conditions import condition_of
 
     if not runs:
         return None, None, None
     condition = condition_of(runs[0])
-    return find_hull(condition.hull), condition.draft, condition.axis
+    found = hull if hull is not None and hull.name == condition.hull else find_hull(condition.hull)
+    return found, condition.draft, condition.axis
 
 
 def fit_of_estimator(
-    source: str, fit: Any, runs: Sequence[Any], warnings: Sequence[str] = (), model: str | None = None
+    source: str,
+    fit: Any,
+    runs: Sequence[Any],
+    warnings: Sequence[str] = (),
+    model: str | None = None,
+    hull: Hull | None = None,
 ) -> dict[str, Any]:
     """A fitted estimator's columns (``coefficients_``, ``ci95_``, ``r2_angle_`` when it has one) for
-    the condition its runs carry in their metadata."""
-    condition = _condition(runs)
+    the condition its runs carry in their metadata (``hull``: theirs, when the caller has it)."""
+    condition = _condition(runs, hull)
     ci95 = {term: tuple(pair) for term, pair in getattr(fit, "ci95_", {}).items()}
     r2 = getattr(fit, "r2_angle_", None)
     return fit_fields(source, fit.coefficients_, ci95, r2, warnings, condition, model)
@@ -187,16 +232,19 @@ def run_paths(runs: Sequence[Any]) -> list[Path]:
     return [Path(p) for p in dict.fromkeys(str(r.meta["file"]) for r in runs if r.meta.get("file"))]
 
 
+def campaign_fit(result: Any) -> tuple[list[Path], dict[str, Any]] | None:
+    """A campaign group's fit (``ident.campaign.GroupResult``) as (its files, its columns); None for a
+    group that was not fitted. Uses the group's own hull and warnings: nothing is read or found again."""
+    if result.fit is None:
+        return None
+    fields = fit_of_estimator("campaign", result.fit, result.runs, result.warnings, hull=result.hull)
+    return run_paths(result.runs), fields
+
+
 def record_fits(catalogue: Catalogue, results: Iterable[Any]) -> int:
-    """A campaign's group fits (``ident.campaign.GroupResult``) onto each group's recordings, as they
-    come (a generator of results is consumed once). Returns the rows updated."""
-    updated = 0
-    for result in results:
-        if result.fit is None:
-            continue
-        fields = fit_of_estimator("campaign", result.fit, result.runs, result.warnings)
-        updated += update_fit(catalogue, run_paths(result.runs), fields)
-    return updated
+    """A campaign's group fits (``ident.campaign.GroupResult``) onto each group's recordings, in one
+    transaction. Returns the rows updated."""
+    return update_fits(catalogue, [fit for result in results if (fit := campaign_fit(result)) is not None])
 
 
 def fit_of_summary(source: str, summary: Mapping[str, Any], runs: Sequence[Any]) -> dict[str, Any]:

@@ -54,8 +54,9 @@ def index_command(
     ],
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
-    """Add every recording (.mcap) under FOLDER and its sessions' verdicts; idempotent by SHA-256
-    (a file seen before is left alone, a moved one has its path updated)."""
+    """Add every recording (.mcap), lab CSV decay (.csv) and export (.h5, an exported .csv) under
+    FOLDER and its sessions' verdicts; idempotent by SHA-256 (a file seen before is left alone, a
+    moved one has its path updated)."""
     from ..catalogue.database import describe
     from ..catalogue.index import index_folder
 

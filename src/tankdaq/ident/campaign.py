@@ -16,6 +16,7 @@ from collections import defaultdict
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -61,9 +62,10 @@ class GroupResult:
     extra: dict[str, float] = field(default_factory=dict)
     hull: Hull | None = None  # the hull file found for key.hull: dimensional results from its GM
 
-    @property
+    @cached_property
     def warnings(self) -> list[str]:
-        """The fit's implausibilities (``ident.plausibility``), one line each; none without a fit."""
+        """The fit's implausibilities (``ident.plausibility``), one line each; none without a fit. Found
+        once: a result pickled back from a worker brings them along (the catalogue asks again)."""
         if self.fit is None:
             return []
         particulars = self.hull.particulars(self.key.axis) if self.hull is not None else None

@@ -28,13 +28,17 @@ from .inputs import input_notices
 
 T = TypeVar("T")
 
-#: A campaign is cut into about this many chunks (a chunk: one task for a worker), so two workers
-#: share the load evenly while the per-task cost (a pickle) stays small; on Dask, where a task costs
-#: its worker about 6 ms more (bench_campaign_scale at N = 36), into fewer...
+#: A campaign on a local pool is cut into about this many chunks (a chunk: one task for a worker), so
+#: two workers share the load evenly while the per-task cost (a pickle) stays small...
 CHUNKS = 32
-DASK_CHUNKS = 8
 #: ...and no chunk holds more decays than this (a worker's memory; the parent's progress steps).
 MAX_CHUNK_DECAYS = 64
+#: On a Dask cluster a task costs about 5 ms of CPU between client, scheduler and worker (and a round
+#: trip; bench_campaign_scale), so there are fewer: the scan (reading, the same cost per file) one
+#: chunk per worker thread; the fits (one group can cost 7x another) in chunks that shrink as the work
+#: runs out, each this fraction of what is left per thread (guided self-scheduling): a few large tasks
+#: first, single groups at the end, so no worker waits long on another's last chunk.
+DASK_GUIDED = 2
 
 
 @dataclass(frozen=True)
@@ -177,9 +181,8 @@ def fit_campaign(
     yielded (a catalogue writing fits as they come), and the result is then let go unless ``keep``.
     """
     known = hulls or {}
-    size = chunk_size(sum(map(len, groups.values())), executor)
     tasks = []
-    for chunk in _chunks_of_decays(list(groups.items()), size):
+    for chunk in fit_chunks(list(groups.items()), executor):
         chunk_hulls = {k.hull: known[k.hull] for k, _ in chunk if k.hull in known}
         tasks.append((chunk, model, chunk_hulls, start_s, end_s, keep or on_result is not None))
     for _, rows in completed(executor, fit_chunk, tasks):
@@ -191,27 +194,40 @@ def fit_campaign(
             yield row if keep else replace(row, result=None)
 
 
-def _chunks_of_decays(
-    groups: list[tuple[GroupKey, list[RunRef]]], size: int
+def fit_chunks(
+    groups: list[tuple[GroupKey, list[RunRef]]], executor: Executor | None = None
 ) -> Iterator[list[tuple[GroupKey, list[RunRef]]]]:
-    """Whole groups, gathered until a chunk holds ``size`` decays."""
+    """Whole groups, gathered until a chunk holds its share of decays: ``chunk_size`` of all on a local
+    pool; on a Dask cluster a share of what is left (``DASK_GUIDED``), at least one group."""
+    threads = cluster_threads(executor)
+    left = sum(len(refs) for _, refs in groups)
+    size = chunk_size(left, executor)
     chunk: list[tuple[GroupKey, list[RunRef]]] = []
     decays = 0
     for group in groups:
+        if not chunk and threads is not None:
+            size = max(1, min(MAX_CHUNK_DECAYS, math.ceil(left / (DASK_GUIDED * threads))))
         chunk.append(group)
         decays += len(group[1])
         if decays >= size:
             yield chunk
+            left -= decays
             chunk, decays = [], 0
     if chunk:
         yield chunk
 
 
+def cluster_threads(executor: Executor | None) -> int | None:
+    """The worker threads of the Dask cluster behind ``executor`` (``ident.executors.DaskExecutor``);
+    None for a local pool or this process."""
+    threads = getattr(executor, "threads", None)
+    return threads if isinstance(threads, int) else None
+
+
 def chunk_size(n: int, executor: Executor | None = None) -> int:
-    """Decays per task: about ``CHUNKS`` tasks (``DASK_CHUNKS`` on a Dask cluster), at most
-    ``MAX_CHUNK_DECAYS`` decays each."""
-    on_dask = type(executor).__module__.startswith("distributed")
-    return max(1, min(MAX_CHUNK_DECAYS, math.ceil(n / (DASK_CHUNKS if on_dask else CHUNKS))))
+    """Decays (or files) per task of a pass over ``n``: about ``CHUNKS`` tasks on a local pool, one
+    per worker thread on a Dask cluster; at most ``MAX_CHUNK_DECAYS`` each."""
+    return max(1, min(MAX_CHUNK_DECAYS, math.ceil(n / (cluster_threads(executor) or CHUNKS))))
 
 
 def completed(

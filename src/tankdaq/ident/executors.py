@@ -34,7 +34,7 @@ def campaign_executor(
     """
     if scheduler is not None:
         with _dask_client(scheduler) as client:
-            yield client.get_executor()
+            yield DaskExecutor(client)
     elif jobs <= 1:
         yield None
     else:
@@ -52,6 +52,22 @@ def campaign_executor(
             finally:
                 gc.unfreeze()
             yield pool
+
+
+class DaskExecutor(Executor):
+    """A Dask cluster as an executor that knows its size (``threads``: the work is cut to it, see
+    ``ident.campaign_stream``). Tasks are not hashed (``pure=False``): the client spends no CPU
+    tokenizing their arguments, and a chunk submitted twice runs twice."""
+
+    def __init__(self, client: Any) -> None:
+        self._executor = client.get_executor(pure=False)
+        self.threads = max(1, sum(client.nthreads().values()))
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Any:
+        return self._executor.submit(fn, *args, **kwargs)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        self._executor.shutdown(wait=wait)
 
 
 #: How long a Dask scheduler has to answer before the campaign gives up (one line, exit 1).

@@ -66,3 +66,13 @@ class ExportTable:
     columns: dict[str, np.ndarray]
     units: dict[str, str]
     metadata: dict[str, object]
+
+
+def read_h5_metadata(path: Path) -> dict[str, object] | None:
+    """The metadata of an HDF5 file ``tankdaq export`` wrote (its root attributes); None for another
+    tool's HDF5 file. A file HDF5 cannot open raises ``OSError``."""
+    import h5py
+
+    with h5py.File(path, "r") as h5:
+        found = {key: h5.attrs[key] for key in h5.attrs}
+    return found if found.get("format") == EXPORT_FORMAT else None
