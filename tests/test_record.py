@@ -21,8 +21,11 @@ import pytest
 from mcap.reader import make_reader
 from typer.testing import CliRunner
 
+from event_stream import wait_for_event
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
+from tankdaq.acquire.events import DeviceBack, DeviceLost, Event, Released
+from tankdaq.acquire.listeners import EventLog
 from tankdaq.cli import app
 from tankdaq.samples import AXIS_FIELDS
 from tankdaq.store.reader import iter_raw_chunks, read_recording
@@ -189,8 +192,8 @@ def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: P
     plugged = threading.Event()
     daemon: RecordDaemon
 
-    def on_event(line: str) -> None:
-        if line.startswith("run 1: released") and not plugged.is_set():
+    def on_event(event: Event) -> None:
+        if isinstance(event, Released) and event.run == 1 and not plugged.is_set():
             plugged.set()
 
             def pull_and_replug() -> None:
@@ -201,9 +204,11 @@ def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: P
 
             threading.Thread(target=pull_and_replug, daemon=True).start()
 
-    daemon = RecordDaemon(settings, on_event=on_event)
+    heard = EventLog(on_event)
+    daemon = RecordDaemon(settings, sinks=[heard])
     outcomes = daemon.run()
     assert plugged.is_set()
+    assert len(heard.of(DeviceLost)) == 1 and len(heard.of(DeviceBack)) == 1
     assert len(outcomes) == 2
     cut, whole = outcomes
     assert cut.settle_reason == "unplug"
@@ -243,15 +248,10 @@ def record_args(port: str, out: Path, *extra: str) -> list[str]:
 
 def _recording_after_release(out: Path, *extra: str) -> subprocess.Popen:
     """``tankdaq record --port sim`` in a subprocess, returned once it has reported a release."""
-    args = record_args("sim", out, "--viewer", "none")
+    args = record_args("sim", out, "--viewer", "none", "--events", "jsonl")
     proc = _tankdaq(*args, *extra)
-    assert proc.stderr is not None
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if "released at" in proc.stderr.readline():
-            return proc
-    proc.kill()
-    raise AssertionError("the recorder reported no release within 60 s")
+    wait_for_event(proc, "released", 60.0)
+    return proc
 
 
 def _chunk_spans(path: Path) -> list[tuple[int, int]]:

@@ -7,7 +7,9 @@ daemon waits for the device to come back. ``port="sim"`` starts the built-in
 simulated MTi-G in-process on a pseudo-terminal, opened like hardware
 (``device.factory.open_device``); ``port="sim:FILE.mcap"`` plays the device of that recording
 (its raw bytes, at their pace) through the same pty. The decay pipeline is a ``DecayPipeline``
-with three sinks: the online identifier, the recording, the live view (``acquire.sinks``).
+with three sinks: the online identifier, the recording, the live view (``acquire.sinks``), and the
+listeners given (``sinks``). What a person is told (the device, held, released, settled, gone, back,
+stopping) is a typed event (``acquire.events``) every sink hears; the command line prints them.
 
 Two threads: ``tankdaq-read`` (``acquire.read_thread``) only reads the device and queues the
 blocks; the thread that called ``run`` takes them and runs the pipeline, its sinks, the files and
@@ -37,7 +39,18 @@ from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
 from ..viz.live import LiveView
 from ..viz.viewer import default_viewer_mode, describe_mode
-from .pipeline import Block, DecayOutcome, DecayPipeline, DetectionSettings
+from .events import (
+    DecayOutcome,
+    DeviceBack,
+    DeviceLost,
+    DeviceReady,
+    Event,
+    Notice,
+    Stopped,
+    Stopping,
+    ViewerNote,
+)
+from .pipeline import Block, DecayPipeline, DetectionSettings
 from .read_thread import DeviceReader, Read
 from .sinks import IdentifierSink, RecordingSink, Sink, ViewSink
 
@@ -186,13 +199,11 @@ class RecordDaemon:
     def __init__(
         self,
         settings: RecordSettings,
-        on_event: Callable[[str], None] | None = None,
         on_status: Callable[[DaemonStatus], None] | None = None,
-        sinks: Sequence[Sink] = (),  # more listeners of the pipeline (a session's level check)
+        sinks: Sequence[Sink] = (),  # more listeners: the printer of the events, a session's level check
         identifier: Callable[..., OnlineIdentifier] = OnlineIdentifier,  # the live fit (IdentifierSink's)
     ) -> None:
         self.settings = settings
-        self.on_event = on_event or (lambda _line: None)
         self.on_status = on_status or (lambda _status: None)
         self.status = DaemonStatus()
         self.hull: Hull | None = settings.check()  # before a simulator starts or the port opens
@@ -205,6 +216,20 @@ class RecordDaemon:
         self._stop = threading.Event()
         self._signals = _SignalStop(self._stop)
         self._recording: RecordingSink | None = None
+        self._pipeline: DecayPipeline | None = None
+
+    def emit(self, event: Event) -> None:
+        """An event for every listener: through the pipeline once it runs (every sink), before that to
+        the listeners given (the device and the viewer are announced before the pipeline exists)."""
+        if self._pipeline is not None:
+            self._pipeline.emit(event)
+            return
+        for sink in self.extra_sinks:
+            sink.on_event(event)
+
+    def _notice(self, source: str) -> Callable[[str], None]:
+        """A part's one-line callback (the device factory, the identifier's kernels) as typed notices."""
+        return lambda text: self.emit(Notice(source, text))
 
     @property
     def stopped_by(self) -> str | None:
@@ -243,10 +268,11 @@ class RecordDaemon:
             legacy=s.sim_legacy,
             recorded=self.replayed,
         )
-        self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=self.on_event)
+        say = self._notice("device")
+        self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=say)
         return self.device.driver
 
-    def _pipeline(self, driver: MTiDriver) -> DecayPipeline:
+    def _make_pipeline(self, driver: MTiDriver) -> DecayPipeline:
         from ..store.writer import describe_run
 
         s = self.settings
@@ -270,13 +296,13 @@ class RecordDaemon:
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
         mode = s.viewer or default_viewer_mode()
-        self.on_event(describe_mode(mode, default=s.viewer is None))
+        self.emit(ViewerNote(describe_mode(mode, default=s.viewer is None)))
         view = LiveView(
             mode,
             axis="roll" if s.axis == "auto" else s.axis,
             bind=s.viewer_bind,
             spawn_port=s.viewer_port,
-            on_note=lambda line: self.on_event(f"viewer: {line}"),
+            on_note=lambda line: self.emit(ViewerNote(line)),
             rrd_reserve_bytes=s.disk_reserve_bytes,
         )
         detection = DetectionSettings(
@@ -301,7 +327,7 @@ class RecordDaemon:
             hull=self.hull.name if self.hull else "the hull",
         )
         sinks = [IdentifierSink(identifier), recording, ViewSink(view), *self.extra_sinks]
-        return DecayPipeline(detection, sinks, on_event=self.on_event)
+        return DecayPipeline(detection, sinks)
 
     # ---- the loop ----------------------------------------
 
@@ -315,11 +341,12 @@ class RecordDaemon:
         pipeline: DecayPipeline | None = None
         signals = self._signals
         try:
-            prepare_identifier(s.model, self.on_event)  # before anything opens: no refit compiles mid-decay
+            # before anything opens: no refit compiles mid-decay
+            prepare_identifier(s.model, self._notice("identifier"))
             driver = self._open_device()
             self.status.device = driver.info.describe() if driver.info else s.port
-            self.on_event(f"device: {self.status.device}")
-            pipeline = self._pipeline(driver)
+            self.emit(DeviceReady(self.status.device))
+            pipeline = self._pipeline = self._make_pipeline(driver)
             self.status.state = "waiting"
             while not self._done():
                 signals.in_loop = True  # a signal now ends the loop once the blocks read are fed
@@ -332,16 +359,19 @@ class RecordDaemon:
         except KeyboardInterrupt:
             signals.stopped_by = signals.stopped_by or "SIGINT"
         except RecordingError:
-            self.on_event("recording stopped: a file could not be written (files already closed are intact)")
+            stopped = "recording stopped: a file could not be written (files already closed are intact)"
+            self.emit(Notice("recording", stopped))
             raise
         finally:
             signals.closing = True  # a second Ctrl-C must not cut the file being closed
             if signals.stopped_by:
-                self.on_event(f"stopping ({signals.stopped_by}): closing files")
+                self.emit(Stopping(signals.stopped_by))
             try:
                 self._shut_down(pipeline)
             finally:
                 signals.closing = False
+                self._pipeline = None  # closed: what is said now goes to the listeners given
+        self.emit(Stopped(signals.stopped_by, len(self.outcomes)))
         return self.outcomes
 
     def stop(self) -> None:
@@ -356,7 +386,7 @@ class RecordDaemon:
                 if closed is not None:
                     self.outcomes.append(closed)
         except RecordingError as exc:  # the disk is full: the file is left for tankdaq recover
-            self.on_event(str(exc))
+            self.emit(Notice("recording", str(exc)))
         finally:
             try:
                 if pipeline is not None:
@@ -404,8 +434,8 @@ class RecordDaemon:
             self.outcomes.append(closed)
         self.status.state = "device gone: waiting for it to come back"
         self.on_status(self.status)
-        self.on_event(f"device gone ({message}); waiting up to {self.settings.reconnect_timeout_s:g} s")
+        self.emit(DeviceLost(message, self.settings.reconnect_timeout_s))
         started = time.monotonic()
         driver.reconnect(timeout_s=self.settings.reconnect_timeout_s)
-        self.on_event(f"device back after {time.monotonic() - started:.1f} s")
+        self.emit(DeviceBack(time.monotonic() - started))
         self.status.state = "waiting"

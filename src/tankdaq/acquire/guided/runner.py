@@ -32,6 +32,8 @@ from ...config_rules import path_in
 from ...errors import InputError
 from ...plans import PLAN_AXES, CampaignPlan
 from ..daemon import RecordDaemon, RecordSettings
+from ..events import DeviceReady, Event, Notice, Settled, Stopped, ViewerNote
+from ..listeners import EventLog, EventPrinter
 from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
 from .journal import LOG_NAME, SessionLock, SessionLog
 from .measure import LEVEL_S, LevelCheck, measure_decay
@@ -45,8 +47,8 @@ from .state import RunEntry, SessionState
 if TYPE_CHECKING:
     from ...viz.campaign_view import CampaignView
 
-#: daemon lines shown for the first decay only (every decay opens the device again)
-ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
+#: events shown once in a session (every decay opens the device again; the views say the same)
+SHOWN_ONCE = (Notice, DeviceReady, ViewerNote)
 
 
 @dataclass
@@ -95,12 +97,16 @@ class CampaignSession:
                 f"plan {plan.name} covers {', '.join(plan.hulls)}, not {hull.name}; give one of them"
             )
         for condition in self.conditions:  # every condition checked before the device opens
-            RecordDaemon(self._record_settings(condition, 1))
+            settings_of_decay = self._record_settings(condition, 1)
+            settings_of_decay.check()
+            settings_of_decay.recorded_device()
         self.log = SessionLog(self.folder)
         self._started = time.monotonic()
         self._decay_seconds: list[float] = []
-        self._shown: set[str] = set()
+        self._decay: int | None = None  # the decay being recorded: the events' run is named after it
+        self.printer = EventPrinter(self.on_line, self._run_name, once=SHOWN_ONCE)
         self.view: CampaignView | None = None
+        self.stopped: Stopped | None = None  # how the recording was stopped, when it was (run() returns)
 
     # ---- settings of one decay ----------------------------------------
 
@@ -181,7 +187,11 @@ class CampaignSession:
         return self.view
 
     def _viewer_note(self, line: str) -> None:
-        self.on_line(f"viewer: {line}")
+        self.printer.on_event(ViewerNote(line))
+
+    def _run_name(self, _event: Event) -> str | None:
+        """The daemon's run is the session's decay."""
+        return None if self._decay is None else f"decay {self._decay}"
 
     def _show_condition(self, state: SessionState, condition: Condition) -> None:
         show_condition(self._panel(), state, condition)
@@ -193,9 +203,13 @@ class CampaignSession:
         while (condition := state.next_condition()) is not None:
             self._progress(state, condition)
             if state.draft_ready != condition.draft:
-                state = self._set_draft(state, condition)
-                continue
-            state = self._record_one(state, condition)
+                step = self._set_draft(state, condition)
+            else:
+                step = self._record_one(state, condition)
+            if isinstance(step, Stopped):  # the recording was stopped: the session ends, resumable
+                self.stopped = step
+                return self._reload()
+            state = step
         self._progress(state, None)
         if not state.report:
             self._write_report(state)
@@ -232,7 +246,7 @@ class CampaignSession:
                 return key
             self.on_line(f"'{answer}' not understood; keys: {keys_line(question)}")
 
-    def _set_draft(self, state: SessionState, condition: Condition) -> SessionState:
+    def _set_draft(self, state: SessionState, condition: Condition) -> SessionState | Stopped:
         """The operator sets the draft and says when; the still water is then measured before the first
         decay: off level (or still moving), the question comes again."""
         angles = [c.angle_deg for c in self.conditions if c.draft == condition.draft]
@@ -243,7 +257,10 @@ class CampaignSession:
                     self.log.append("skip", draft=c.draft, angle_deg=c.angle_deg)
                     self._panel().set_status(c.draft, c.angle_deg, "skipped")
             return self._reload()
-        mean_deg, sd_deg = self._measure_level(condition)
+        measured = self._measure_level(condition)
+        if isinstance(measured, Stopped):
+            return measured
+        mean_deg, sd_deg = measured
         level = is_level(mean_deg, sd_deg, self.acceptance)
         self.log.append("level", draft=condition.draft, angle_deg=mean_deg, sd_deg=sd_deg, ok=level)
         still = f"still water at {mean_deg:+.2f} deg (sd {sd_deg:.2f} over {LEVEL_S:g} s)"
@@ -258,18 +275,20 @@ class CampaignSession:
         adopt_orphans(self.log, self._reload(), self.on_line)  # a decay the level check recorded: rejected
         return self._reload()
 
-    def _measure_level(self, condition: Condition) -> tuple[float, float]:
-        """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time."""
+    def _measure_level(self, condition: Condition) -> tuple[float, float] | Stopped:
+        """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time, or how
+        the recording was stopped before that much arrived."""
         settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
         level = LevelCheck(self.settings.plan.axis)
-        daemon = RecordDaemon(settings, sinks=[level])
+        heard = EventLog()
+        daemon = RecordDaemon(settings, sinks=[level, heard])
         level.on_full = daemon.stop
         daemon.run()
-        if not level.full:
-            raise KeyboardInterrupt  # stopped during the level check
+        if not level.full:  # stopped during the level check
+            return heard.of(Stopped)[-1]
         return level.mean_sd_deg()
 
-    def _record_one(self, state: SessionState, condition: Condition) -> SessionState:
+    def _record_one(self, state: SessionState, condition: Condition) -> SessionState | Stopped:
         decay = state.next_decay
         repeat = len(state.accepted(condition)) + 1
         self.on_line(
@@ -280,12 +299,16 @@ class CampaignSession:
             condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
         )
         started = time.monotonic()
-        daemon = RecordDaemon(
-            self._record_settings(condition, decay), on_event=lambda line: self._daemon_line(line, decay)
-        )
-        outcomes = [o for o in daemon.run() if o.path is not None]
+        heard = EventLog()
+        self._decay = decay
+        try:
+            RecordDaemon(self._record_settings(condition, decay), sinks=[self.printer, heard]).run()
+        finally:
+            self._decay = None
+        stopped = heard.of(Stopped)[-1]
+        outcomes = [event.outcome for event in heard.of(Settled) if event.outcome.path is not None]
         if not outcomes:
-            raise KeyboardInterrupt  # stopped before a release: nothing recorded, nothing to log
+            return stopped  # stopped before a release: nothing recorded, nothing to log
         outcome = outcomes[-1]
         measured = measure_decay(outcome, condition.angle_deg)
         earlier = [Measured(**r.measured) for r in state.accepted(condition)]
@@ -301,23 +324,10 @@ class CampaignSession:
         )
         if outcome.settle_reason not in COMPLETE_SETTLES:
             self.log.append("verdict", decay=decay, verdict="rejected", action="stopped")
-            raise KeyboardInterrupt  # the operator stopped mid-decay: the file is logged, the session ends
+            return stopped  # the operator stopped mid-decay: the file is logged, the session ends
         self._decay_seconds.append(time.monotonic() - started)
         state = self._reload()
         return self._judge(state, state.runs[-1])
-
-    def _daemon_line(self, line: str, decay: int) -> None:
-        """The daemon's lines, its "run 1" named as the session's decay; the device and viewer lines
-        every decay repeats are shown once."""
-        for prefix, named in (("run 1:", f"decay {decay}:"), ("warning: run 1:", f"warning: decay {decay}:")):
-            if line.startswith(prefix):
-                line = named + line[len(prefix) :]
-        key = next((p for p in ONCE_PREFIXES if line.startswith(p)), line)
-        if key in self._shown:
-            return
-        if line.startswith(ONCE_PREFIXES) or line.startswith("viewer: "):
-            self._shown.add(key)
-        self.on_line(line)
 
     def _judge(self, state: SessionState, entry: RunEntry) -> SessionState:
         condition = entry.condition
