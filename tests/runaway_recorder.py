@@ -4,7 +4,7 @@
 T, 8 deg, simulator at 4x), its live identifier given the gyro 1000 times too large (a rate in mrad/s
 read as rad/s), a decay the model cannot follow: each refit runs until its budget abandons it. Its own
 lines on stdout: ``refit started`` when one begins, at the ``Stopping`` event ``heard <monotonic s>
-refit running <bool>`` then ``stopping <signal>``; at the end ``files <n>``. The daemon's event lines
+refit running <bool>`` then ``stop event <signal>``; at the end ``files <n>``. The daemon's event lines
 go to stderr. Exits 130 when stopped by a signal.
 """
 
@@ -47,7 +47,7 @@ class GyroInMilliradians(OnlineIdentifier):
 def on_event(event: Event) -> None:
     if isinstance(event, Stopping):
         print(f"heard {time.monotonic():.6f} refit running {refitting.is_set()}", flush=True)
-        print(f"stopping {event.signal}", flush=True)
+        print(f"stop event {event.signal}", flush=True)
 
 
 def main(out: Path) -> int:

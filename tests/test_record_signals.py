@@ -94,7 +94,7 @@ def test_ctrl_c_is_heard_while_a_live_refit_runs_away_and_the_file_closes_comple
         _wait_for_line(proc, "refit started")
         sent = time.monotonic()
         proc.send_signal(signal.SIGINT)
-        heard_lines = _wait_for_line(proc, "stopping SIGINT")
+        heard_lines = _wait_for_line(proc, "stop event SIGINT")
         proc.send_signal(signal.SIGINT)  # impatient: a second Ctrl-C while the file closes
         out, err = proc.communicate(timeout=STOP_S)
         out = "".join(heard_lines) + out

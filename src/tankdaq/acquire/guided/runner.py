@@ -7,7 +7,9 @@ For each condition the operator is told what to do; the record daemon records on
 happens next); the decay is measured (``guided.measure``) and checked (``guided.checks``) as soon as it
 settles, and the operator (``guided.operator``) accepts it, repeats it, skips the condition or adds a
 note. When every condition has its repeats, the report of the accepted decays is written
-(``guided.report``).
+(``guided.report``). The session hears each recording as typed events (``acquire.events``): it prints
+them with its decay numbers, and a recording stopped by Ctrl-C or SIGTERM (``Stopped``) ends ``run``
+with ``stopped`` set, every file closed, never by an exception.
 
 Everything that happens goes to ``session.jsonl`` under a lock (``guided.journal``), fsynced before the
 session goes on. The session's state is only ever derived from that file (``guided.state``), so
@@ -21,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -34,6 +36,7 @@ from ...plans import PLAN_AXES, CampaignPlan
 from ..daemon import RecordDaemon, RecordSettings
 from ..events import DeviceReady, Event, Notice, Settled, Stopped, ViewerNote
 from ..listeners import EventLog, EventPrinter
+from ..sinks import Sink
 from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
 from .journal import LOG_NAME, SessionLock, SessionLog
 from .measure import LEVEL_S, LevelCheck, measure_decay
@@ -72,8 +75,10 @@ class CampaignSession:
         on_progress: Callable[[Progress], None] | None = None,
         resume: bool = False,
         on_verdict: Callable[[RunEntry], None] | None = None,
+        listeners: Sequence[Sink] = (),  # hear every recording's events (a notebook, a test)
     ) -> None:
         self.settings = settings
+        self.listeners = list(listeners)
         self.on_verdict = on_verdict or (lambda _entry: None)  # after the log holds it (the run catalogue)
         self.operator = operator
         self.on_line = on_line or (lambda _line: None)
@@ -281,7 +286,7 @@ class CampaignSession:
         settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
         level = LevelCheck(self.settings.plan.axis)
         heard = EventLog()
-        daemon = RecordDaemon(settings, sinks=[level, heard])
+        daemon = RecordDaemon(settings, sinks=[level, heard, *self.listeners])
         level.on_full = daemon.stop
         daemon.run()
         if not level.full:  # stopped during the level check
@@ -302,7 +307,8 @@ class CampaignSession:
         heard = EventLog()
         self._decay = decay
         try:
-            RecordDaemon(self._record_settings(condition, decay), sinks=[self.printer, heard]).run()
+            listeners = [self.printer, heard, *self.listeners]
+            RecordDaemon(self._record_settings(condition, decay), sinks=listeners).run()
         finally:
             self._decay = None
         stopped = heard.of(Stopped)[-1]
