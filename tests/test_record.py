@@ -24,7 +24,7 @@ from typer.testing import CliRunner
 from event_stream import wait_for_event
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
-from tankdaq.acquire.events import DeviceBack, DeviceLost, Event, Released
+from tankdaq.acquire.events import DeviceBack, DeviceLost, Event, Released, Settled
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.cli import app
 from tankdaq.samples import AXIS_FIELDS
@@ -178,9 +178,12 @@ def test_replay_redetects_the_release_and_refits(three_decays) -> None:
 
     _, outcomes = three_decays
     recorded = outcomes[0]
-    replayed = replay_recording(recorded.path, speed=None, viewer="none")
+    heard = EventLog()
+    replayed = replay_recording(recorded.path, speed=None, viewer="none", listeners=[heard])
     assert len(replayed) == 1
     again = replayed[0]
+    (released,) = heard.of(Released)  # the listeners hear replay's events as they hear the daemon's
+    assert released.t_s == again.release_t and [e.outcome for e in heard.of(Settled)] == replayed
     assert abs(again.release_t - recorded.release_t) < 0.011
     for term, value in recorded.fit.coefficients.items():
         half_width = abs(recorded.fit.ci95[term][1] - recorded.fit.ci95[term][0]) / 2
