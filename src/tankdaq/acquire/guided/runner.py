@@ -2,9 +2,12 @@
 condition by condition.
 
 The plan (``guided.plan``) gives the conditions in order, drafts grouped (ballast changes are slow).
-For each condition the operator is told what to do; the record daemon records one decay
-(``RecordDaemon`` with ``runs=1``: the device is opened per decay, so a decay is a closed unit whatever
-happens next); the decay is measured (``guided.measure``) and checked (``guided.checks``) as soon as it
+The device is opened once and streams for the whole session (``acquire.streaming.StreamingDaemon``:
+``record``'s pipeline, sinks and signal handling): the session is one more listener of it and moves
+through its plan on its typed events. For each condition the operator is told what to do and the
+session feeds the stream until that decay settles (on port ``sim`` the simulated sensor plays the decay
+asked for); the still water before a draft's first decay is measured from the same stream
+(``LevelCheck``). The decay is measured (``guided.measure``) and checked (``guided.checks``) as soon as it
 settles, and the operator (``guided.operator``) accepts it, repeats it, skips the condition or adds a
 note. When every condition has its repeats, the report of the accepted decays is written
 (``guided.report``). The session hears each recording as typed events (``acquire.events``): it prints
@@ -20,6 +23,7 @@ mid-decay) is logged as rejected, never lost.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import time
@@ -33,10 +37,11 @@ from ...config import load_hull
 from ...config_rules import path_in
 from ...errors import InputError
 from ...plans import PLAN_AXES, CampaignPlan
-from ..daemon import RecordDaemon, RecordSettings
-from ..events import DeviceReady, Event, Notice, Settled, Stopped, ViewerNote
+from ..daemon import RecordSettings
+from ..events import DecayOutcome, DeviceReady, Event, Notice, Settled, Stopped, ViewerNote
 from ..listeners import EventLog, EventPrinter
 from ..sinks import Sink
+from ..streaming import StreamingDaemon
 from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
 from .journal import LOG_NAME, SessionLock, SessionLog
 from .measure import LEVEL_S, LevelCheck, measure_decay
@@ -112,6 +117,10 @@ class CampaignSession:
         self.printer = EventPrinter(self.on_line, self._run_name, once=SHOWN_ONCE)
         self.view: CampaignView | None = None
         self.stopped: Stopped | None = None  # how the recording was stopped, when it was (run() returns)
+        self.level = LevelCheck(plan.axis)
+        self.heard = EventLog()  # what the recorder said, typed: the session moves on its events
+        self.daemon: StreamingDaemon | None = None  # opened by the first step that needs the device
+        self._device = contextlib.ExitStack()
 
     # ---- settings of one decay ----------------------------------------
 
@@ -120,10 +129,10 @@ class CampaignSession:
 
         base = self.record
         overrides = (
-            scripted_run(self.settings.sim_faults.get(decay), condition.angle_deg)
+            scripted_run(self.settings.sim_faults.get(decay), condition.angle_deg) | {"runs": 1}
             if base.port == "sim"
             else {}
-        )
+        )  # the simulated sensor plays this one decay when the session asks for it
         return dataclasses.replace(
             base,
             hull=self.settings.hull,
@@ -131,7 +140,7 @@ class CampaignSession:
             draft=condition.draft_factor,
             angle_deg=condition.angle_deg,
             angle_tolerance_deg=self.acceptance.angle_tolerance_deg,
-            runs=1,
+            runs=None,  # the device streams the whole session
             sim_seed=base.sim_seed + decay,
             sim_overrides=overrides,
             note=f"session {self.settings.plan.name}, decay {decay}",
@@ -142,7 +151,8 @@ class CampaignSession:
     def run(self) -> SessionState:
         """Lead the session to its end (or until interrupted); returns the final state."""
         self.folder.mkdir(parents=True, exist_ok=True)
-        with SessionLock(self.folder):
+        with SessionLock(self.folder), contextlib.ExitStack() as device:
+            self._device = device
             state = self._open_log()
             self._open_panel(state)
             try:
@@ -150,6 +160,20 @@ class CampaignSession:
             finally:
                 if self.view is not None:
                     self.view.close()
+
+    def _stream(self) -> StreamingDaemon:
+        """The session's one recorder: the device opened and configured at the first step that needs it,
+        streaming until the session ends (``run`` closes it)."""
+        if self.daemon is None:
+            first = self.conditions[0]
+            settings = self._record_settings(first, 0)
+            if settings.port == "sim":  # still water until the session asks for a decay
+                settings = dataclasses.replace(settings, sim_overrides={"runs": 0})
+            sinks = [self.level, self.printer, self.heard, *self.listeners]
+            daemon = StreamingDaemon(settings, sinks=sinks)
+            self._device.enter_context(daemon.streaming())
+            self.daemon = daemon
+        return self.daemon
 
     def _open_log(self) -> SessionState:
         records = self.log.read()
@@ -283,15 +307,10 @@ class CampaignSession:
     def _measure_level(self, condition: Condition) -> tuple[float, float] | Stopped:
         """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time, or how
         the recording was stopped before that much arrived."""
-        settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
-        level = LevelCheck(self.settings.plan.axis)
-        heard = EventLog()
-        daemon = RecordDaemon(settings, sinks=[level, heard, *self.listeners])
-        level.on_full = daemon.stop
-        daemon.run()
-        if not level.full:  # stopped during the level check
-            return heard.of(Stopped)[-1]
-        return level.mean_sd_deg()
+        daemon = self._stream()
+        self.level.arm()
+        stopped = daemon.stream_until(lambda: self.level.full)
+        return stopped if stopped is not None else self.level.mean_sd_deg()
 
     def _record_one(self, state: SessionState, condition: Condition) -> SessionState | Stopped:
         decay = state.next_decay
@@ -304,18 +323,23 @@ class CampaignSession:
             condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
         )
         started = time.monotonic()
-        heard = EventLog()
+        daemon = self._stream()
+        daemon.retarget(self._record_settings(condition, decay), run=decay)
+        heard_before = len(self.heard.events)
+
+        def settled() -> list[DecayOutcome]:
+            events = self.heard.events[heard_before:]
+            return [e.outcome for e in events if isinstance(e, Settled) and e.outcome.path is not None]
+
         self._decay = decay
         try:
-            listeners = [self.printer, heard, *self.listeners]
-            RecordDaemon(self._record_settings(condition, decay), sinks=listeners).run()
+            stopped = daemon.stream_until(lambda: bool(settled()))
         finally:
             self._decay = None
-        stopped = heard.of(Stopped)[-1]
-        outcomes = [event.outcome for event in heard.of(Settled) if event.outcome.path is not None]
-        if not outcomes:
+        if not settled():
+            assert stopped is not None
             return stopped  # stopped before a release: nothing recorded, nothing to log
-        outcome = outcomes[-1]
+        outcome = settled()[0]
         measured = measure_decay(outcome, condition.angle_deg)
         earlier = [Measured(**r.measured) for r in state.accepted(condition)]
         reasons = check_decay(measured, condition, self.acceptance, earlier)
@@ -328,9 +352,10 @@ class CampaignSession:
             reasons=reasons,
             measured=dataclasses.asdict(measured),
         )
-        if outcome.settle_reason not in COMPLETE_SETTLES:
-            self.log.append("verdict", decay=decay, verdict="rejected", action="stopped")
-            return stopped  # the operator stopped mid-decay: the file is logged, the session ends
+        if stopped is not None:
+            if outcome.settle_reason not in COMPLETE_SETTLES:  # stopped mid-decay: logged, the session ends
+                self.log.append("verdict", decay=decay, verdict="rejected", action="stopped")
+            return stopped  # a whole decay is judged first on resume
         self._decay_seconds.append(time.monotonic() - started)
         state = self._reload()
         return self._judge(state, state.runs[-1])
