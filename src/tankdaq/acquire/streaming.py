@@ -31,15 +31,14 @@ class StreamingDaemon(RecordDaemon):
     @contextlib.contextmanager
     def streaming(self) -> Iterator[StreamingDaemon]:
         """Open the device and build the pipeline; at the end (normal, an error, an operator's Ctrl-C at a
-        question) feed what was read, close the decay under way complete, the sinks and the device.
-        Between steps a stop signal raises KeyboardInterrupt (SIGTERM at a question closes all as
-        Ctrl-C does); inside a step it ends the step (``stream_until``)."""
+        question) feed what was read, close the decay under way complete, the sinks and the device."""
         pipeline: DecayPipeline | None = None
-        with self._signals.installed():
-            try:
+        try:
+            with self._signals.installed():
                 self._driver, pipeline = self._start()
-                yield self
-            finally:
+            yield self
+        finally:
+            with self._signals.installed():
                 self._signals.closing = True  # a Ctrl-C now never cuts the file being closed
                 try:
                     if pipeline is not None:
