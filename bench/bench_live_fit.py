@@ -37,18 +37,19 @@ BASELINE = "948966e"
 def measure_decay(out: Path) -> dict[str, object]:
     """One decay through the record daemon; the loop's pauses from the release to the settle."""
     from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+    from tankdaq.acquire.events import DeviceLost, Event, Released, Settled
+    from tankdaq.acquire.listeners import EventLog
     from tankdaq.store.reader import read_recording
 
-    lines: list[str] = []
     passes: list[float] = []
     phase = {"state": "before"}
 
-    def on_event(line: str) -> None:
-        lines.append(line)
-        print(f"{time.monotonic() - started:7.2f} {line}", file=sys.stderr, flush=True)
-        if line.startswith("run 1: released"):
+    def on_event(event: Event) -> None:
+        if event.printed:
+            print(f"{time.monotonic() - started:7.2f} {event.line()}", file=sys.stderr, flush=True)
+        if isinstance(event, Released):
             phase["state"] = "decay"
-        elif line.startswith("run 1: ") and phase["state"] == "decay":
+        elif isinstance(event, Settled) and phase["state"] == "decay":
             phase["state"] = "settled"
 
     def on_status(_status: object) -> None:
@@ -61,13 +62,14 @@ def measure_decay(out: Path) -> dict[str, object]:
         port="sim", draft=1.0, angle_deg=8.0, hull="swath", out_dir=out, viewer="none", runs=1,
         sim_speed=4.0, sim_seed=4,
     )  # fmt: skip
-    daemon = RecordDaemon(settings, on_event=on_event, on_status=on_status)
+    heard = EventLog(on_event)
+    daemon = RecordDaemon(settings, on_status=on_status, sinks=[heard])
     (outcome,) = daemon.run()
     gaps = [b - a for a, b in itertools.pairwise(passes)]
     return {
         "longest_pause_s": max(gaps),
         "pauses_over_0.1s": sum(g > 0.1 for g in gaps),
-        "device_gone": sum("device gone" in line for line in lines),
+        "device_gone": len(heard.of(DeviceLost)),
         "counter_gaps": daemon.status.gaps,
         "wall_s": time.monotonic() - started,
         "fits_in_file": len(read_recording(outcome.path).fits),

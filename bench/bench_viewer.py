@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.events import DeviceLost, Event, Settled
+from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.sinks import ViewSink
 from tankdaq.config import hull_scenario
 from tankdaq.device.simulator import ScriptedSource
@@ -36,14 +38,14 @@ class TimedDaemon(RecordDaemon):
     first decay. The reads run on their own thread: the time between them is the read cadence."""
 
     def __init__(self, settings: RecordSettings) -> None:
-        super().__init__(settings, on_event=self._event)
+        super().__init__(settings, sinks=[EventLog(self._event)])
         self.read_t: list[float] = []
         self.gone = 0
         self.dropped = 0
 
-    def _event(self, line: str) -> None:
-        self.gone += "device gone" in line
-        if line.startswith("run 1:") and " -> " in line:
+    def _event(self, event: Event) -> None:
+        self.gone += isinstance(event, DeviceLost)
+        if isinstance(event, Settled):
             self.stop()
 
     def _feed(self, pipeline, read) -> None:  # type: ignore[no-untyped-def]

@@ -2,9 +2,10 @@
 
 ``python tests/runaway_recorder.py OUT_DIR``: the real RecordDaemon on the simulated MTi-G (swath at
 T, 8 deg, simulator at 4x), its live identifier given the gyro 1000 times too large (a rate in mrad/s
-read as rad/s), a decay the model cannot follow: each refit runs until its budget abandons it. Lines
-on stdout: every daemon event, ``refit started`` when one begins, and at the stop ``heard <monotonic
-s> refit running <bool>``; at the end ``files <n>``. Exits 130 when stopped by a signal.
+read as rad/s), a decay the model cannot follow: each refit runs until its budget abandons it. Its own
+lines on stdout: ``refit started`` when one begins, at the ``Stopping`` event ``heard <monotonic s>
+refit running <bool>`` then ``stop event <signal>``; at the end ``files <n>``. The daemon's event lines
+go to stderr. Exits 130 when stopped by a signal.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from typing import Any
 import numpy as np
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.events import Event, Stopping
+from tankdaq.acquire.listeners import EventLog, EventPrinter
 from tankdaq.ident.online import OnlineIdentifier, OnlineResult
 from tankdaq.records import DecayRun
 
@@ -41,10 +44,10 @@ class GyroInMilliradians(OnlineIdentifier):
             refitting.clear()
 
 
-def on_event(line: str) -> None:
-    if line.startswith("stopping"):
+def on_event(event: Event) -> None:
+    if isinstance(event, Stopping):
         print(f"heard {time.monotonic():.6f} refit running {refitting.is_set()}", flush=True)
-    print(line, flush=True)
+        print(f"stop event {event.signal}", flush=True)
 
 
 def main(out: Path) -> int:
@@ -53,7 +56,8 @@ def main(out: Path) -> int:
     )
     # the first refit after 8 half-cycles, from a cold start: on this gyro it runs past its budget
     identifier = functools.partial(GyroInMilliradians, min_half_cycles=8)
-    daemon = RecordDaemon(settings, on_event=on_event, identifier=identifier)
+    printer = EventPrinter(lambda line: print(line, file=sys.stderr, flush=True))
+    daemon = RecordDaemon(settings, sinks=[EventLog(on_event), printer], identifier=identifier)
     daemon.run()
     print(f"files {len(daemon.recordings)}", flush=True)
     return 130 if daemon.stopped_by else 0

@@ -15,6 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.events import Note, Settled
 from tankdaq.acquire.guided.checks import Measured, check_decay
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.plan import Acceptance, Condition
@@ -22,6 +23,7 @@ from tankdaq.acquire.guided.runner import (
     CampaignSession,
     SessionSettings,
 )
+from tankdaq.acquire.listeners import EventLog
 from tankdaq.cli import app
 from tankdaq.config import hull_scenario
 from tankdaq.device.decoding import SampleDecoder
@@ -53,17 +55,17 @@ FAST = 1e6
 
 def _record(
     tmp_path: Path, fault: str, faults: Faults | None = None
-) -> tuple[list[str], Path, dict[str, float]]:
-    """One short decay of the default hull with a scripted fault, recorded through the pty."""
+) -> tuple[EventLog, Path, dict[str, float]]:
+    """One short decay of the default hull with a scripted fault, recorded through the pty; its events."""
     scenario = hull_scenario(runs=1, seed=3, release_after_s=6.0, decay_s=15.0, **scripted_run(fault, 8.0))
-    lines: list[str] = []
+    heard = EventLog()
     with SimulatedMTi(scenario, speed=SPEED, faults=faults) as sim:
         settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, angle_tolerance_deg=3.0,
                                   out_dir=tmp_path, runs=1, viewer="none")  # fmt: skip
-        (outcome,) = RecordDaemon(settings, on_event=lines.append).run()
+        (outcome,) = RecordDaemon(settings, sinks=[heard]).run()
         truth = sim.truth[0].coefficients
     assert outcome.path is not None
-    return lines, outcome.path, truth
+    return heard, outcome.path, truth
 
 
 def _identify(path: Path, *extra: str) -> str:
@@ -110,10 +112,14 @@ def test_a_real_mti_g_710_capture_flags_nothing() -> None:
 
 
 def test_clipping_in_the_decay_is_flagged_everywhere_and_left_out_of_the_fit(tmp_path: Path) -> None:
-    lines, path, truth = _record(tmp_path, "clipped-decay")
-    assert any(line.startswith("warning: run 1: sensor flagged samples") for line in lines), lines
-    (summary,) = [line for line in lines if line.startswith("run 1: ") and " -> " in line]
-    assert "gyro clipped in" in summary and "after the release" in summary, summary
+    heard, path, truth = _record(tmp_path, "clipped-decay")
+    warnings = [note for note in heard.of(Note) if note.kind == "warning" and note.run == 1]
+    assert any("sensor flagged samples" in note.text for note in warnings), heard.events
+    (settled,) = heard.of(Settled)
+    assert settled.outcome.path == path and settled.outcome.status is not None
+    flagged = settled.outcome.status.describe_after()
+    assert "gyro clipped in" in flagged and "after the release" in flagged, flagged
+    assert flagged in settled.line()  # the line a person reads says it
     recording = read_recording(path)
     meta = recording.metadata
     assert int(meta["clipped_samples_after_release"]) > 0
@@ -149,10 +155,13 @@ def test_clipping_in_the_decay_is_flagged_everywhere_and_left_out_of_the_fit(tmp
 
 def test_clipping_only_during_the_push_is_noted_and_harmless(tmp_path: Path) -> None:
     """Recorded through FTDI-style USB bursts (16 ms) too: the timeline stays the device's."""
-    lines, path, _ = _record(tmp_path, "hard-push", Faults.parse("latency=16"))
-    assert not any("sensor flagged" in line for line in lines), lines
-    (summary,) = [line for line in lines if line.startswith("run 1: ") and " -> " in line]
-    assert "before the release (the tilt): harmless" in summary, summary
+    heard, path, _ = _record(tmp_path, "hard-push", Faults.parse("latency=16"))
+    assert not [note for note in heard.of(Note) if "sensor flagged" in note.text], heard.events
+    (settled,) = heard.of(Settled)
+    assert settled.outcome.path == path and settled.outcome.status is not None
+    assert not settled.outcome.status.describe_after()
+    assert "before the release (the tilt): harmless" in settled.outcome.status.describe_before()
+    assert settled.outcome.status.describe_before() in settled.line()  # the line a person reads says it
     recording = read_recording(path)
     meta = recording.metadata
     assert meta["link_gaps"] == "0" and meta["link_lost"] == "0"

@@ -17,6 +17,8 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+from tankdaq.acquire.events import Notice
+from tankdaq.acquire.listeners import EventLog
 from tankdaq.config import hull_scenario
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
@@ -38,11 +40,14 @@ LONG_DECAY = {"b1": 0.2, "c1": 14.2185, "c3": 69.457}
 
 
 def _record(tmp_path: Path, sim: SimulatedMTi) -> tuple[Recording, list[str]]:
-    lines: list[str] = []
+    """One decay; the device's notices (what the factory said about the orientation) as the second."""
+    heard = EventLog()
     settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, hull="swath", rate_hz=RATE_HZ,
                               out_dir=tmp_path, runs=1, viewer="none", reconnect_timeout_s=20.0)  # fmt: skip
-    (outcome,) = RecordDaemon(settings, on_event=lines.append).run()
-    return read_recording(outcome.path), lines
+    (outcome,) = RecordDaemon(settings, sinks=[heard]).run()
+    return read_recording(outcome.path), [
+        notice.text for notice in heard.of(Notice) if notice.source == "device"
+    ]
 
 
 def _orientations_asked(sim: SimulatedMTi) -> list[list[str]]:
@@ -172,8 +177,7 @@ def test_an_imu_class_device_records_roll_within_a_tenth_of_a_degree_of_the_trut
         assert isinstance(sim.source, ScriptedSource)
         played = sim.source.samples_at(RATE_HZ)
         trace, truth_runs = played.trace, played.truth
-    imu_lines = [entry for entry in lines if "IMU-class" in entry]
-    assert imu_lines == [OrientationSource(None, imu_class=True).line()], lines
+    assert lines.count(OrientationSource(None, imu_class=True).line()) == 1, lines
     assert recording.metadata["orientation_source"] == "integrated rate of turn"
     assert "orientation_refused" not in recording.metadata
     recorded = recording.samples

@@ -8,6 +8,7 @@ with a fresh numba cache (a first run after install), against the simulator on a
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -176,18 +177,20 @@ def test_a_first_run_after_install_prepares_the_kernels_before_the_device_and_lo
     out = tmp_path / "rec"
     args = ["record", "--port", "sim", "--hull", "swath", "--draft", "T", "--angle", "8", "--runs", "1"]
     args += ["--viewer", "none", "--sim-speed", "8", "--sim-seed", str(seed), "--out", str(out)]
+    args += ["--events", "jsonl"]
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "TANKDAQ_KERNEL_DIR": cache}
         done = subprocess.run([TANKDAQ, *args], env=env, capture_output=True, text=True, timeout=600)
         built = list(Path(cache).glob("tankdaq_kernels-*"))
     assert len(built) == 1, built
-    lines = done.stderr.splitlines() + done.stdout.splitlines()
     assert done.returncode == 0, done.stderr
     assert "Traceback" not in done.stderr
-    preparing = [i for i, line in enumerate(lines) if "preparing the identifier (first run" in line]
-    device = [i for i, line in enumerate(lines) if line.lstrip().startswith("device:")]
-    assert len(preparing) == 1 and device and preparing[0] < device[0], lines
-    assert not [line for line in lines if "device gone" in line], lines
+    assert done.stderr.count("preparing the identifier (first run") == 1, done.stderr  # said by the command
+    events = [json.loads(line) for line in done.stdout.splitlines()]
+    kinds = [event["event"] for event in events]
+    assert "device_ready" in kinds and "device_lost" not in kinds, kinds
+    building = [e for e in events if e["event"] == "notice" and e["source"] == "identifier"]
+    assert building == [], "the kernels were built before the recorder started, not while it streamed"
     (path,) = out.glob("*.mcap")
     recording = read_recording(path)
     counters = recording.samples["counter"].astype(np.int64)

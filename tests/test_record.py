@@ -21,8 +21,11 @@ import pytest
 from mcap.reader import make_reader
 from typer.testing import CliRunner
 
+from event_stream import wait_for_event
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
+from tankdaq.acquire.events import DeviceBack, DeviceLost, Event, Released, Settled
+from tankdaq.acquire.listeners import EventLog
 from tankdaq.cli import app
 from tankdaq.samples import AXIS_FIELDS
 from tankdaq.store.reader import iter_raw_chunks, read_recording
@@ -175,9 +178,12 @@ def test_replay_redetects_the_release_and_refits(three_decays) -> None:
 
     _, outcomes = three_decays
     recorded = outcomes[0]
-    replayed = replay_recording(recorded.path, speed=None, viewer="none")
+    heard = EventLog()
+    replayed = replay_recording(recorded.path, speed=None, viewer="none", listeners=[heard])
     assert len(replayed) == 1
     again = replayed[0]
+    (released,) = heard.of(Released)  # the listeners hear replay's events as they hear the daemon's
+    assert released.t_s == again.release_t and [e.outcome for e in heard.of(Settled)] == replayed
     assert abs(again.release_t - recorded.release_t) < 0.011
     for term, value in recorded.fit.coefficients.items():
         half_width = abs(recorded.fit.ci95[term][1] - recorded.fit.ci95[term][0]) / 2
@@ -189,8 +195,8 @@ def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: P
     plugged = threading.Event()
     daemon: RecordDaemon
 
-    def on_event(line: str) -> None:
-        if line.startswith("run 1: released") and not plugged.is_set():
+    def on_event(event: Event) -> None:
+        if isinstance(event, Released) and event.run == 1 and not plugged.is_set():
             plugged.set()
 
             def pull_and_replug() -> None:
@@ -201,9 +207,11 @@ def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: P
 
             threading.Thread(target=pull_and_replug, daemon=True).start()
 
-    daemon = RecordDaemon(settings, on_event=on_event)
+    heard = EventLog(on_event)
+    daemon = RecordDaemon(settings, sinks=[heard])
     outcomes = daemon.run()
     assert plugged.is_set()
+    assert len(heard.of(DeviceLost)) == 1 and len(heard.of(DeviceBack)) == 1
     assert len(outcomes) == 2
     cut, whole = outcomes
     assert cut.settle_reason == "unplug"
@@ -243,15 +251,10 @@ def record_args(port: str, out: Path, *extra: str) -> list[str]:
 
 def _recording_after_release(out: Path, *extra: str) -> subprocess.Popen:
     """``tankdaq record --port sim`` in a subprocess, returned once it has reported a release."""
-    args = record_args("sim", out, "--viewer", "none")
+    args = record_args("sim", out, "--viewer", "none", "--events", "jsonl")
     proc = _tankdaq(*args, *extra)
-    assert proc.stderr is not None
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if "released at" in proc.stderr.readline():
-            return proc
-    proc.kill()
-    raise AssertionError("the recorder reported no release within 60 s")
+    wait_for_event(proc, "released", 60.0)
+    return proc
 
 
 def _chunk_spans(path: Path) -> list[tuple[int, int]]:

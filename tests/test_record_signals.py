@@ -21,6 +21,8 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
+from event_stream import events_of, wait_for_event
+
 TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
 RUNAWAY = Path(__file__).with_name("runaway_recorder.py")
 #: Generous bounds on a loaded machine: conditions decide, these only stop a hung test.
@@ -28,18 +30,17 @@ START_S = 120.0
 STOP_S = 60.0
 
 
-def _wait_for_line(proc: subprocess.Popen[str], stream: str, wanted: str) -> list[str]:
-    """The lines of ``stream`` up to the first holding ``wanted`` (the process is killed past START_S)."""
-    pipe = proc.stderr if stream == "stderr" else proc.stdout
-    assert pipe is not None
+def _wait_for_line(proc: subprocess.Popen[str], wanted: str) -> list[str]:
+    """The runaway recorder's own stdout lines up to ``wanted`` (the process is killed past START_S)."""
+    assert proc.stdout is not None
     lines: list[str] = []
     deadline = time.monotonic() + START_S
     while time.monotonic() < deadline:
-        line = pipe.readline()
+        line = proc.stdout.readline()
         if not line and proc.poll() is not None:
             break
         lines.append(line)
-        if wanted in line:
+        if line.split() == wanted.split():
             return lines
     proc.kill()
     proc.communicate(timeout=STOP_S)
@@ -61,20 +62,22 @@ def test_a_signal_mid_decay_closes_a_complete_file_exits_130_and_the_summary_cou
     tmp_path: Path, signum: signal.Signals
 ) -> None:
     args = ["record", "--port", "sim", "--hull", "swath", "--draft", "T", "--angle", "8"]
-    args += ["--viewer", "none", "--sim-speed", "4", "--out", str(tmp_path)]
+    args += ["--viewer", "none", "--sim-speed", "4", "--out", str(tmp_path), "--events", "jsonl"]
     proc = subprocess.Popen([TANKDAQ, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        _wait_for_line(proc, "stderr", "released at")
+        wait_for_event(proc, "released", START_S)
         (path,) = tmp_path.glob("*.mcap")
         proc.send_signal(signum)
-        _, err = proc.communicate(timeout=STOP_S)
+        out, err = proc.communicate(timeout=STOP_S)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
     assert proc.returncode == 130, err
     assert "Traceback" not in err
-    assert f"stopping ({signum.name}): closing files" in err
+    assert [event["signal"] for event in events_of(out, "stopping")] == [signum.name]
+    (settled,) = events_of(out, "settled")
+    assert settled["settle_reason"] == "note" and settled["path"] == str(path)
     events = _complete(path)
     assert events[0]["kind"] == "release" and events[-1]["kind"] == "settled"
     files = list(tmp_path.glob("*.mcap"))
@@ -88,10 +91,10 @@ def test_ctrl_c_is_heard_while_a_live_refit_runs_away_and_the_file_closes_comple
     args = [sys.executable, str(RUNAWAY), str(tmp_path)]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        _wait_for_line(proc, "stdout", "refit started")
+        _wait_for_line(proc, "refit started")
         sent = time.monotonic()
         proc.send_signal(signal.SIGINT)
-        heard_lines = _wait_for_line(proc, "stdout", "stopping (SIGINT)")
+        heard_lines = _wait_for_line(proc, "stop event SIGINT")
         proc.send_signal(signal.SIGINT)  # impatient: a second Ctrl-C while the file closes
         out, err = proc.communicate(timeout=STOP_S)
         out = "".join(heard_lines) + out

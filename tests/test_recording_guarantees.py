@@ -23,6 +23,8 @@ from typer.testing import CliRunner
 
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
+from tankdaq.acquire.events import Event, Released
+from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import Decay, IdentifierSink, RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
@@ -99,7 +101,6 @@ def _feed_recording(
     source: Path,
     out: Path,
     view: LiveView,
-    on_event=None,
     identifier: type[OnlineIdentifier] = OnlineIdentifier,
     extra: Sequence[Sink] = (),
 ) -> DecayPipeline:
@@ -109,7 +110,7 @@ def _feed_recording(
         IdentifierSink(identifier, wait_for_fits=True), RecordingSink(out, {"hull": "swath"}), ViewSink(view),
         *extra,
     ]  # fmt: skip
-    session = DecayPipeline(DetectionSettings(angle_deg=8.0), sinks, on_event=on_event)
+    session = DecayPipeline(DetectionSettings(angle_deg=8.0), sinks)
     decoder = SampleDecoder()
     for host_ns, raw in recording.raw_chunks:
         samples, _ = decoder.feed(raw, host_ns / 1e9)
@@ -239,12 +240,12 @@ def test_a_sink_that_fails_never_takes_the_file_down(recorded: Path, tmp_path: P
     assert recording.samples.size > 0 and recording.raw_chunks
 
 
-def test_a_callback_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Path) -> None:
-    def on_event(line: str) -> None:
-        if "released" in line:
+def test_a_listener_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Path) -> None:
+    def react(event: Event) -> None:
+        if isinstance(event, Released):
             raise Injected("the status display failed")
 
-    daemon = RecordDaemon(_settings(tmp_path), on_event=on_event)
+    daemon = RecordDaemon(_settings(tmp_path), sinks=[EventLog(react)])
     with pytest.raises(Injected):
         daemon.run()
     (path,) = tmp_path.glob("*.mcap")

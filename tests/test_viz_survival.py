@@ -9,6 +9,7 @@ command-line cases.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import random
 import re
@@ -30,18 +31,38 @@ from rerun.chunk import RrdReader
 
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import DaemonStatus, RecordDaemon
+from tankdaq.acquire.events import DeviceBack, DeviceLost, Note, Settled, ViewerNote
+from tankdaq.acquire.listeners import EventLog
 from tankdaq.errors import RecordingError
 from tankdaq.samples import empty_samples
 from tankdaq.store.reader import read_recording
 from tankdaq.store.recover import recover
 from tankdaq.viz.live import LiveView
 from tankdaq.viz.view_feed import QUEUE_LIMIT
-from tankdaq.viz.viewer import rerun_executable
+from tankdaq.viz.viewer import describe_mode, rerun_executable
 
 pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
 
 TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
-SIM_RECORD = ["record", "--hull", "swath", "--port", "sim", "--draft", "T", "--angle", "8"]
+SIM_RECORD = [
+    "record",
+    "--hull",
+    "swath",
+    "--port",
+    "sim",
+    "--draft",
+    "T",
+    "--angle",
+    "8",
+    "--events",
+    "jsonl",
+]
+
+
+def _viewer_notes(stdout: str) -> list[str]:
+    """What the view said, from the command's event stream (``--events jsonl``)."""
+    events = [json.loads(line) for line in stdout.splitlines()]
+    return [event["text"] for event in events if event["event"] == "viewer_note"]
 
 
 #: The view saving, at 16x, a fixed seed.
@@ -104,21 +125,15 @@ def test_record_keeps_its_read_cadence_while_the_view_saves(
     release: the simulator computed its 21-run scenario in its serving thread, seconds of silence
     on the line. The view's logging runs on its own thread and is not in the read loop either.
     """
-    lines: list[str] = []
     daemon: RecordDaemon
-
-    def on_event(line: str) -> None:
-        lines.append(line)
-        if line.startswith("run 1:") and " -> " in line:
-            daemon.stop()
-
+    heard = EventLog(lambda event: daemon.stop() if isinstance(event, Settled) else None)
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    daemon = RecordDaemon(_settings(tmp_path, runs=None, sim_speed=8.0, viewer=None), on_event=on_event)
+    daemon = RecordDaemon(_settings(tmp_path, runs=None, sim_speed=8.0, viewer=None), sinks=[heard])
     outcomes = daemon.run()
-    (mode,) = [line for line in lines if line.startswith("viewer: ")]
-    assert mode.startswith("viewer: save") and "default (no display)" in mode and "--viewer" in mode
-    assert not [line for line in lines if "device gone" in line or "device back" in line], lines
+    (mode,) = heard.of(ViewerNote)
+    assert mode.text == describe_mode("save", default=True) and "--viewer" in mode.text
+    assert not heard.of(DeviceLost) and not heard.of(DeviceBack), heard.events
     assert daemon.status.gaps == 0 and daemon.status.bad_frames == 0
     (outcome,) = outcomes
     assert outcome.settle_reason in ("amplitude", "timeout") and _complete(outcome.path)
@@ -175,7 +190,7 @@ def test_a_viewer_killed_or_stalled_at_any_moment_costs_no_decay(tmp_path: Path,
     """
     kill_at = random.Random(seed).randrange(300, 6000)
     port = _free_port()
-    lines: list[str] = []
+    heard = EventLog()
     with _grpc_server(port) as server:
         signalled = False
 
@@ -186,15 +201,15 @@ def test_a_viewer_killed_or_stalled_at_any_moment_costs_no_decay(tmp_path: Path,
                 signalled = True
 
         settings = _settings(tmp_path, runs=2, viewer=f"rerun+http://127.0.0.1:{port}/proxy")
-        outcomes = RecordDaemon(settings, on_event=lines.append, on_status=on_status).run()
+        outcomes = RecordDaemon(settings, on_status=on_status, sinks=[heard]).run()
         assert signalled, "the server was killed while recording"
     assert len(outcomes) == 2
     for outcome in outcomes:
         assert outcome.settle_reason in ("amplitude", "timeout")
         assert _complete(outcome.path), outcome.path
-    assert not [line for line in lines if "device gone" in line]
-    mode, *viewer_lines = [line for line in lines if line.startswith("viewer:")]
-    assert mode.startswith("viewer: stream to rerun+http://127.0.0.1")
+    assert not heard.of(DeviceLost)
+    mode, *viewer_lines = heard.of(ViewerNote)
+    assert mode.text == describe_mode(settings.viewer or "", default=False)
     assert len(viewer_lines) <= 2, viewer_lines  # at most: the end of that run, the next run goes to the .rrd
 
 
@@ -222,17 +237,17 @@ def test_spawn_without_the_venv_on_path_or_a_display_records_and_saves(tmp_path:
     result = _run_tankdaq(
         [*args, "--viewer", "spawn", "--viewer-port", str(_free_port()), "--out", str(tmp_path)], env
     )
-    for pid in re.findall(r"rerun viewer pid (\d+)", result.stderr):  # one that outlived its display
+    notes = _viewer_notes(result.stdout)
+    for pid in re.findall(r"rerun viewer pid (\d+)", " ".join(notes)):  # one that outlived its display
         with contextlib.suppress(OSError):
             if b"rerun" in Path(f"/proc/{pid}/cmdline").read_bytes():
                 os.kill(int(pid), signal.SIGKILL)
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr and "Flush timed out" not in result.stderr
-    viewer_lines = [line for line in result.stderr.splitlines() if line.startswith("viewer:")]
-    assert viewer_lines[0].startswith("viewer: spawn")
+    assert notes[0] == describe_mode("spawn", default=False), notes
     expected = "no display" if display == "none" else "the rerun viewer exited"
-    assert any(expected in line for line in viewer_lines[1:]), result.stderr
-    assert len(viewer_lines) <= 3, result.stderr  # a dead display may first let the viewer listen, then die
+    assert any(expected in note for note in notes[1:]), notes
+    assert len(notes) <= 3, notes  # a dead display may first let the viewer listen, then die
     (mcap,) = tmp_path.glob("*.mcap")
     assert _complete(mcap)
     assert _rrd_rows(mcap.with_suffix(".rrd"), "/angle/measured") > 0
@@ -267,9 +282,9 @@ def test_a_full_disk_takes_the_rrd_never_a_finished_mcap(tmp_path: Path, size_kb
     times the MCAP's size): without the free-space budget the second MCAP is cut; with it the .rrd
     stops (mid-decay, or before a decay) and every MCAP finishes. 160 kB cannot hold one whole decay: the
     one cut recovers (into another folder), and no .rrd was ever begun."""
-    lines: list[str] = []
+    heard = EventLog()
     with _small_disk(tmp_path, size_kb) as disk:
-        daemon = RecordDaemon(_settings(disk, runs=2, disk_reserve_bytes=RESERVE), on_event=lines.append)
+        daemon = RecordDaemon(_settings(disk, runs=2, disk_reserve_bytes=RESERVE), sinks=[heard])
         try:
             daemon.run()
             stopped = None
@@ -281,7 +296,9 @@ def test_a_full_disk_takes_the_rrd_never_a_finished_mcap(tmp_path: Path, size_kb
             assert read_recording(outcome.path).samples.size > 1000
         mcaps = sorted(disk.glob("*.mcap"))
         cut = [p for p in mcaps if not _complete(p)]
-        gave_way = [line for line in lines if "the .rrd stops here" in line or "without an .rrd" in line]
+        said = [event.line() for event in heard.events if isinstance(event, ViewerNote | Note)]
+        gave_way = [line for line in said if "the .rrd stops here" in line or "without an .rrd" in line]
+        lines = [event.line() for event in heard.events]
         if size_kb >= 3072:
             assert stopped is None and len(finished) == 2, lines
             assert gave_way, lines
@@ -312,15 +329,16 @@ def test_an_rrd_refused_by_the_file_system_is_one_line_and_the_mcaps_finish(tmp_
                           preexec_fn=small_files)  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr
+    notes = _viewer_notes(result.stdout)
     rerun_said = [line for line in result.stderr.splitlines() if "File-writer thread" in line]
-    assert all(line.startswith("viewer: ") for line in rerun_said), result.stderr  # ours, not rerun's log
+    ours = {ViewerNote(note).line() for note in notes}
+    assert all(line in ours for line in rerun_said), result.stderr  # our viewer notes, not rerun's log
     mcaps = sorted(tmp_path.glob("*.mcap"))
     assert len(mcaps) == 2 and all(_complete(p) for p in mcaps)
-    lines = result.stderr.splitlines()
-    viewer_lines = [line for line in lines if line.startswith("viewer: the .rrd could not be finished")]
-    # whether an .rrd reaches the limit depends on how the reads were chunked (load): at most one line
-    # per run; that the line comes is the next test's, with chunks it controls
-    assert len(viewer_lines) <= 2, result.stderr
+    unfinished = [note for note in notes if "the .rrd could not be finished" in note]
+    # whether an .rrd reaches the limit depends on how the reads were chunked (load): at most one note
+    # per run; that the note comes is the next test's, with chunks it controls
+    assert len(unfinished) <= 2, notes
 
 
 #: A save view under a 1 MB file-size limit, fed one-sample blocks (an .rrd of about 4 MB): its notes.

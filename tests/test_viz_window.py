@@ -10,6 +10,7 @@ where it runs as root with apt-get).
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import queue
 import select
@@ -20,7 +21,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -69,32 +70,49 @@ def _free_port() -> int:
         return sock.getsockname()[1]
 
 
-def _lines(stream) -> queue.Queue[str]:
-    """The process's stderr, line by line, read on a thread (``None`` at its end)."""
-    lines: queue.Queue[str] = queue.Queue()
+def _events(stream) -> queue.Queue[dict | None]:
+    """The process's event stream (``--events jsonl`` on stdout), read on a thread (``None`` at its end)."""
+    events: queue.Queue[dict | None] = queue.Queue()
 
     def pump() -> None:
         for line in stream:
-            lines.put(line.rstrip("\n"))
-        lines.put(None)
+            events.put(json.loads(line))
+        events.put(None)
 
     threading.Thread(target=pump, daemon=True).start()
-    return lines
+    return events
 
 
-def _wait_for(lines: queue.Queue[str], seen: list[str], wanted: str, deadline_s: float = 180) -> str:
+def _wait_for(
+    events: queue.Queue[dict | None],
+    seen: list[dict],
+    wanted: Callable[[dict], bool],
+    deadline_s: float = 180,
+) -> dict:
+    """The first event ``wanted`` holds true of (those before it go to ``seen``)."""
     deadline = time.monotonic() + deadline_s
     while time.monotonic() < deadline:
         try:
-            line = lines.get(timeout=1)
+            event = events.get(timeout=1)
         except queue.Empty:
             continue
-        if line is None:
-            raise AssertionError(f"tankdaq ended before {wanted!r}:\n" + "\n".join(seen))
-        seen.append(line)
-        if wanted in line:
-            return line
-    raise AssertionError(f"no {wanted!r} within {deadline_s:g} s:\n" + "\n".join(seen))
+        if event is None:
+            raise AssertionError(f"tankdaq ended before the event waited for: {seen}")
+        seen.append(event)
+        if wanted(event):
+            return event
+    raise AssertionError(f"not the event waited for within {deadline_s:g} s: {seen}")
+
+
+def _viewer_said(words: str) -> Callable[[dict], bool]:
+    return lambda event: event["event"] == "viewer_note" and words in event["text"]
+
+
+def _settled(run: int | None = None) -> Callable[[dict], bool]:
+    """A whole decay's end: run ``run``, or the next one (None)."""
+    return lambda event: (
+        event["event"] == "settled" and run in (None, event["run"]) and event["settle_reason"] == "amplitude"
+    )
 
 
 def _pixels_near(image: np.ndarray, color: tuple[int, ...], tolerance: int = 40) -> int:
@@ -112,16 +130,18 @@ def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_deca
         record = [
             str(Path(sys.executable).with_name("tankdaq")), "record", "--hull", "swath", "--port", "sim",
             "--draft", "T", "--angle", "8", "--sim-speed", "8", "--viewer", "spawn",
-            "--viewer-port", str(port), "--out", str(tmp_path),
+            "--viewer-port", str(port), "--out", str(tmp_path), "--events", "jsonl",
         ]  # fmt: skip
-        proc = subprocess.Popen(record, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env)
-        seen: list[str] = []
+        said = tmp_path / "stderr.txt"
+        with said.open("w") as err:
+            proc = subprocess.Popen(record, stdout=subprocess.PIPE, stderr=err, text=True, env=env)
+        seen: list[dict] = []
         try:
-            lines = _lines(proc.stderr)
-            listening = _wait_for(lines, seen, "viewer: rerun viewer pid")
+            events = _events(proc.stdout)
+            listening = _wait_for(events, seen, _viewer_said("rerun viewer pid"))["text"]
             viewer_pid = int(listening.split("pid ")[1].split()[0])
             assert f"listening on 127.0.0.1:{port}" in listening  # bound to this machine only
-            _wait_for(lines, seen, "run 1: amplitude")  # the first decay and its final fit are drawn
+            _wait_for(events, seen, _settled(1))  # the first decay and its final fit are drawn
 
             from rerun.experimental import ViewerClient
 
@@ -133,12 +153,12 @@ def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_deca
             assert _pixels_near(image, MODEL_COLOR) > 500, "no fitted model drawn"
 
             os.kill(viewer_pid, signal.SIGKILL)  # the viewer crashes in the middle of the session
-            _wait_for(lines, seen, "viewer: the rerun viewer exited")
-            _wait_for(lines, seen, "run 2: amplitude")  # the session goes on: a decay after the crash
+            _wait_for(events, seen, _viewer_said("the rerun viewer exited"))
+            _wait_for(events, seen, _settled())  # the session goes on: a whole decay after the crash
             proc.send_signal(signal.SIGTERM)  # the operator ends the session (as Ctrl-C)
-            while (line := lines.get(timeout=240)) is not None:
-                seen.append(line)
-            assert proc.wait(timeout=60) in (0, 130), "\n".join(seen)
+            while (event := events.get(timeout=240)) is not None:
+                seen.append(event)
+            assert proc.wait(timeout=60) in (0, 130), seen
         finally:
             if proc.poll() is None:
                 proc.kill()
@@ -146,7 +166,7 @@ def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_deca
             if viewer_pid is not None:
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(viewer_pid, signal.SIGKILL)
-    output = "\n".join(seen)
+    output = said.read_text()
     assert "Traceback" not in output and "Flush timed out" not in output
     mcaps = sorted(tmp_path.glob("*.mcap"))
     assert len(mcaps) >= 2, output

@@ -7,7 +7,9 @@ daemon waits for the device to come back. ``port="sim"`` starts the built-in
 simulated MTi-G in-process on a pseudo-terminal, opened like hardware
 (``device.factory.open_device``); ``port="sim:FILE.mcap"`` plays the device of that recording
 (its raw bytes, at their pace) through the same pty. The decay pipeline is a ``DecayPipeline``
-with three sinks: the online identifier, the recording, the live view (``acquire.sinks``).
+with three sinks: the online identifier, the recording, the live view (``acquire.sinks``), and the
+listeners given (``sinks``). What a person is told (the device, held, released, settled, gone, back,
+stopping) is a typed event (``acquire.events``) every sink hears; the command line prints them.
 
 Two threads: ``tankdaq-read`` (``acquire.read_thread``) only reads the device and queues the
 blocks; the thread that called ``run`` takes them and runs the pipeline, its sinks, the files and
@@ -16,12 +18,10 @@ the callbacks, so an error there reaches the caller as before and the reads neve
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import signal
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
@@ -37,8 +37,20 @@ from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
 from ..viz.live import LiveView
 from ..viz.viewer import default_viewer_mode, describe_mode
-from .pipeline import Block, DecayOutcome, DecayPipeline, DetectionSettings
+from .events import (
+    DecayOutcome,
+    DeviceBack,
+    DeviceLost,
+    DeviceReady,
+    Event,
+    Notice,
+    Stopped,
+    Stopping,
+    ViewerNote,
+)
+from .pipeline import Block, DecayPipeline, DetectionSettings
 from .read_thread import DeviceReader, Read
+from .signals import SignalStop
 from .sinks import IdentifierSink, RecordingSink, Sink, ViewSink
 
 if TYPE_CHECKING:
@@ -135,64 +147,17 @@ class DaemonStatus:
         )
 
 
-#: What stops a recording the way Ctrl-C does: the decay under way closes as a complete file.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
-
-class _SignalStop:
-    """Ctrl-C, SIGTERM and SIGHUP stop the daemon, the open decay closed as a complete file.
-
-    Inside the read loop a signal only asks the loop to end: the reader stops after its current
-    read, the blocks it read are fed, then the files close (an exception raised into the middle of a
-    write could leave the file without its footer); anywhere else
-    (preparing the kernels, opening the device, waiting for it to come back) it raises
-    KeyboardInterrupt at once. Only the first signal does anything: later ones wait for the files
-    to close, and the closing is bounded (the final fit at most ``FINAL_FIT_WAIT_S``, the view 15 s).
-    """
-
-    def __init__(self, stop: threading.Event) -> None:
-        self.stop = stop
-        self.stopped_by: str | None = None  # the first signal's name
-        self.in_loop = False
-        self.closing = False
-
-    def __call__(self, signum: int, _frame: object) -> None:
-        first = self.stopped_by is None
-        if first:
-            self.stopped_by = signal.Signals(signum).name
-        self.stop.set()
-        if first and not (self.in_loop or self.closing):  # a second signal never cuts the stop under way
-            raise KeyboardInterrupt
-
-    @contextlib.contextmanager
-    def installed(self) -> Iterator[None]:
-        """The handler on every stop signal while the block runs (only the main thread can)."""
-        previous: dict[int, object] = {}
-        try:
-            for signum in STOP_SIGNALS:
-                previous[signum] = signal.signal(signum, self)
-        except ValueError:  # not the main thread (tests): leave signals alone
-            pass
-        try:
-            yield
-        finally:
-            for number, handler in previous.items():
-                signal.signal(number, handler)  # type: ignore[arg-type]
-
-
 class RecordDaemon:
     """``run()`` records decays from the device until done; see the module docstring."""
 
     def __init__(
         self,
         settings: RecordSettings,
-        on_event: Callable[[str], None] | None = None,
         on_status: Callable[[DaemonStatus], None] | None = None,
-        sinks: Sequence[Sink] = (),  # more listeners of the pipeline (a session's level check)
+        sinks: Sequence[Sink] = (),  # more listeners: the printer of the events, a session's level check
         identifier: Callable[..., OnlineIdentifier] = OnlineIdentifier,  # the live fit (IdentifierSink's)
     ) -> None:
         self.settings = settings
-        self.on_event = on_event or (lambda _line: None)
         self.on_status = on_status or (lambda _status: None)
         self.status = DaemonStatus()
         self.hull: Hull | None = settings.check()  # before a simulator starts or the port opens
@@ -203,8 +168,22 @@ class RecordDaemon:
         self.outcomes: list[DecayOutcome] = []
         self._fed_counters = StreamCounters()  # the link as of the last block the pipeline was fed
         self._stop = threading.Event()
-        self._signals = _SignalStop(self._stop)
+        self._signals = SignalStop(self._stop)
         self._recording: RecordingSink | None = None
+        self._pipeline: DecayPipeline | None = None
+
+    def emit(self, event: Event) -> None:
+        """An event for every listener: through the pipeline once it runs (every sink), before that to
+        the listeners given (the device and the viewer are announced before the pipeline exists)."""
+        if self._pipeline is not None:
+            self._pipeline.emit(event)
+            return
+        for sink in self.extra_sinks:
+            sink.on_event(event)
+
+    def _notice(self, source: str) -> Callable[[str], None]:
+        """A part's one-line callback (the device factory, the identifier's kernels) as typed notices."""
+        return lambda text: self.emit(Notice(source, text))
 
     @property
     def stopped_by(self) -> str | None:
@@ -243,10 +222,12 @@ class RecordDaemon:
             legacy=s.sim_legacy,
             recorded=self.replayed,
         )
-        self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=self.on_event)
+        say = self._notice("device")
+        self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=say)
         return self.device.driver
 
-    def _pipeline(self, driver: MTiDriver) -> DecayPipeline:
+    def _file_header(self, driver: MTiDriver) -> tuple[dict[str, object], dict[str, dict[str, object]]]:
+        """The metadata and the configuration every recording of these settings carries."""
         from ..store.writer import describe_run
 
         s = self.settings
@@ -269,14 +250,19 @@ class RecordDaemon:
         config = {"record": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(s).items()}}
         config["device"] = {k: v for k, v in device.items() if k != "configuration"}
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
+        return metadata, config
+
+    def _make_pipeline(self, driver: MTiDriver) -> DecayPipeline:
+        s = self.settings
+        metadata, config = self._file_header(driver)
         mode = s.viewer or default_viewer_mode()
-        self.on_event(describe_mode(mode, default=s.viewer is None))
+        self.emit(ViewerNote(describe_mode(mode, default=s.viewer is None)))
         view = LiveView(
             mode,
             axis="roll" if s.axis == "auto" else s.axis,
             bind=s.viewer_bind,
             spawn_port=s.viewer_port,
-            on_note=lambda line: self.on_event(f"viewer: {line}"),
+            on_note=lambda line: self.emit(ViewerNote(line)),
             rrd_reserve_bytes=s.disk_reserve_bytes,
         )
         detection = DetectionSettings(
@@ -301,7 +287,7 @@ class RecordDaemon:
             hull=self.hull.name if self.hull else "the hull",
         )
         sinks = [IdentifierSink(identifier), recording, ViewSink(view), *self.extra_sinks]
-        return DecayPipeline(detection, sinks, on_event=self.on_event)
+        return DecayPipeline(detection, sinks)
 
     # ---- the loop ----------------------------------------
 
@@ -310,21 +296,26 @@ class RecordDaemon:
         with self._signals.installed():
             return self._run()
 
-    def _run(self) -> list[DecayOutcome]:
+    def _start(self) -> tuple[MTiDriver, DecayPipeline]:
+        """Prepare the kernels (no refit compiles mid-decay), open the device, build the pipeline."""
         s = self.settings
+        prepare_identifier(s.model, self._notice("identifier"))
+        driver = self._open_device()
+        self.status.device = driver.info.describe() if driver.info else s.port
+        self.emit(DeviceReady(self.status.device))
+        pipeline = self._pipeline = self._make_pipeline(driver)
+        self.status.state = "waiting"
+        return driver, pipeline
+
+    def _run(self) -> list[DecayOutcome]:
         pipeline: DecayPipeline | None = None
         signals = self._signals
         try:
-            prepare_identifier(s.model, self.on_event)  # before anything opens: no refit compiles mid-decay
-            driver = self._open_device()
-            self.status.device = driver.info.describe() if driver.info else s.port
-            self.on_event(f"device: {self.status.device}")
-            pipeline = self._pipeline(driver)
-            self.status.state = "waiting"
+            driver, pipeline = self._start()
             while not self._done():
                 signals.in_loop = True  # a signal now ends the loop once the blocks read are fed
                 try:
-                    gone = self._stream(driver, pipeline)
+                    gone = self._stream(pipeline, DeviceReader(driver).start())
                 finally:
                     signals.in_loop = False
                 if gone is not None:
@@ -332,17 +323,26 @@ class RecordDaemon:
         except KeyboardInterrupt:
             signals.stopped_by = signals.stopped_by or "SIGINT"
         except RecordingError:
-            self.on_event("recording stopped: a file could not be written (files already closed are intact)")
+            stopped = "recording stopped: a file could not be written (files already closed are intact)"
+            self.emit(Notice("recording", stopped))
             raise
         finally:
-            signals.closing = True  # a second Ctrl-C must not cut the file being closed
-            if signals.stopped_by:
-                self.on_event(f"stopping ({signals.stopped_by}): closing files")
-            try:
-                self._shut_down(pipeline)
-            finally:
-                signals.closing = False
+            self._finish(pipeline)
+        self.emit(Stopped(signals.stopped_by, len(self.outcomes)))
         return self.outcomes
+
+    def _finish(self, pipeline: DecayPipeline | None) -> None:
+        """Stopping: the decay under way closed complete, then the sinks and the device; a second Ctrl-C
+        meanwhile never cuts the file being closed."""
+        signals = self._signals
+        signals.closing = True
+        if signals.stopped_by:
+            self.emit(Stopping(signals.stopped_by))
+        try:
+            self._shut_down(pipeline)
+        finally:
+            signals.closing = False
+            self._pipeline = None  # closed: what is said now goes to the listeners given
 
     def stop(self) -> None:
         """Ask ``run`` to return once the blocks already read are fed (from a callback or another thread)."""
@@ -356,7 +356,7 @@ class RecordDaemon:
                 if closed is not None:
                     self.outcomes.append(closed)
         except RecordingError as exc:  # the disk is full: the file is left for tankdaq recover
-            self.on_event(str(exc))
+            self.emit(Notice("recording", str(exc)))
         finally:
             try:
                 if pipeline is not None:
@@ -368,22 +368,29 @@ class RecordDaemon:
     def _done(self) -> bool:
         return self._stop.is_set() or self._runs_done()
 
-    def _stream(self, driver: MTiDriver, pipeline: DecayPipeline) -> DeviceGone | None:
-        """Feed the reading thread's blocks to the pipeline until done (returns None) or the device is gone
+    def _stream(
+        self, pipeline: DecayPipeline, reader: DeviceReader, until: Callable[[], bool] | None = None
+    ) -> DeviceGone | None:
+        """Feed ``reader``'s blocks to the pipeline until done (returns None) or the device is gone
         (returns why). Stopped, every block read is fed; once ``runs`` are done the rest is not (the
-        reads after the last decay wanted could only start one more)."""
-        reader = DeviceReader(driver).start()
+        reads after the last decay wanted could only start one more). ``until``: a guided session's
+        step is over; the reader is left reading (the blocks wait in its queue for the next step)."""
+        ended = False
         try:
             for item in reader.items(until=self._done):
                 if not isinstance(item, Read):  # the reader ended: stopped, the device gone, or a failure
+                    ended = True
                     if isinstance(item.error, DeviceGone) or item.error is None:
                         return item.error
                     raise item.error
                 if not self._runs_done():
                     self._feed(pipeline, item)
+                if until is not None and until():
+                    return None
             return None
         finally:
-            reader.close()
+            if ended or until is None:
+                reader.close()
 
     def _runs_done(self) -> bool:
         runs = self.settings.runs
@@ -404,8 +411,8 @@ class RecordDaemon:
             self.outcomes.append(closed)
         self.status.state = "device gone: waiting for it to come back"
         self.on_status(self.status)
-        self.on_event(f"device gone ({message}); waiting up to {self.settings.reconnect_timeout_s:g} s")
+        self.emit(DeviceLost(message, self.settings.reconnect_timeout_s))
         started = time.monotonic()
         driver.reconnect(timeout_s=self.settings.reconnect_timeout_s)
-        self.on_event(f"device back after {time.monotonic() - started:.1f} s")
+        self.emit(DeviceBack(time.monotonic() - started))
         self.status.state = "waiting"

@@ -5,7 +5,8 @@ the driver, replay feeds it blocks re-decoded from a file. For each block it run
 detection and tells its sinks (``acquire.sinks``): every block, a confirmed release (with the
 pre-trigger from its history of blocks), the notes of the decay, and its settle. What a decay
 leaves (an MCAP, a live fit, a view) is made by the sinks; the daemon's pipeline is identifier,
-recording, view, replay's the same without the recording.
+recording, view, replay's the same without the recording. What a person is told (held, released,
+a warning, settled) goes to every sink as a typed event (``acquire.events``, ``Sink.on_event``).
 
 A decay is never lost: whatever a sink or callback raises while a decay is open, every sink is
 still told (the file takes the block), then the decay is closed (``settle_reason`` ``error``,
@@ -23,8 +24,9 @@ from dataclasses import dataclass, field
 from ..ident.online import OnlineResult
 from ..physics.models import resolve_model
 from ..samples import AXIS_FIELDS
+from .events import DecayOutcome, Event, Fitted, Held, Note, PutBack, Released, Settled
 from .release import ReleaseDetector, ReleaseEvent
-from .sinks import Block, Decay, DecayOutcome, Sink
+from .sinks import Block, Decay, Sink
 
 __all__ = ["HISTORY_S", "Block", "DecayOutcome", "DecayPipeline", "DetectionSettings"]
 
@@ -46,21 +48,13 @@ class DetectionSettings:
 
 
 class DecayPipeline:
-    """Feed ``Block``s with ``feed``; decays are detected and handed to the ``sinks`` in order.
-
-    ``on_event`` receives one line of text per thing a person wants to know (release, settle,
-    warnings, file).
+    """Feed ``Block``s with ``feed``; decays are detected and handed to the ``sinks`` in order, and every
+    sink hears the events (``emit``). ``next_run`` is the number the next decay gets (1 first).
     """
 
-    def __init__(
-        self,
-        settings: DetectionSettings,
-        sinks: Sequence[Sink],
-        on_event: Callable[[str], None] | None = None,
-    ) -> None:
+    def __init__(self, settings: DetectionSettings, sinks: Sequence[Sink]) -> None:
         self.settings = settings
         self.sinks = list(sinks)
-        self.on_event = on_event or (lambda _line: None)
         self.terms = resolve_model(settings.model)
         axes = list(AXIS_FIELDS) if settings.axis == "auto" else [settings.axis]
         self._detectors = {axis: ReleaseDetector(axis=axis, **settings.detector_settings) for axis in axes}
@@ -68,7 +62,7 @@ class DecayPipeline:
         self.outcomes: list[DecayOutcome] = []
         self.state = "waiting"
         self.held_deg = math.nan
-        self._run_no = 0
+        self.next_run = 1
         self.decay: Decay | None = None  # the decay under way
 
     # ---- telling the sinks ----------------------------------------
@@ -84,14 +78,19 @@ class DecayPipeline:
         if failure is not None:
             raise failure
 
+    def emit(self, event: Event) -> None:
+        """An event for every sink (``Sink.on_event``), whatever an earlier one raised."""
+        self._tell(lambda sink: sink.on_event(event))
+
     def _publish_fit(self, decay: Decay, result: OnlineResult) -> None:
         self._tell(lambda sink: sink.on_fit(decay, result))
+        self.emit(Fitted(decay.run, result))
 
     def _publish_note(
         self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
     ) -> None:
-        if kind == "warning":  # a warning a sink raises during the decay (an implausible fit) is a line too
-            self.on_event(f"warning: run {decay.run}: {message}")
+        if kind == "warning":  # a warning a sink raises during the decay (an implausible fit) is an event too
+            self.emit(Note("warning", message, decay.run))
         self._tell(lambda sink: sink.on_note(decay, kind, message, t_s, data))
 
     # ---- feeding ----------------------------------------
@@ -127,7 +126,8 @@ class DecayPipeline:
                 sink.on_settle(decay)
         outcome = decay.outcome()
         self.outcomes.append(outcome)
-        self.on_event(self._summary(outcome))
+        with contextlib.suppress(Exception):  # the error passed on is the first one
+            self.emit(Settled(outcome))
 
     def _feed(self, block: Block) -> list[DecayOutcome]:
         finished: list[DecayOutcome] = []
@@ -170,10 +170,10 @@ class DecayPipeline:
         if event.kind == "held" and decay is None:
             self.state = "held"
             self.held_deg = math.degrees(event.angle_rad - event.baseline_rad)
-            self.on_event(f"held at {self.held_deg:+.2f} deg ({axis})")
+            self.emit(Held(self.held_deg, axis))
         elif event.kind == "put_back" and decay is None:
             self.state = "waiting"
-            self.on_event("put back without a release")
+            self.emit(PutBack())
         elif event.kind == "released" and decay is None:
             self._start_decay(axis, event)
         elif event.kind == "settled" and decay is not None:
@@ -184,7 +184,6 @@ class DecayPipeline:
 
     def _start_decay(self, axis: str, event: ReleaseEvent) -> None:
         s = self.settings
-        self._run_no += 1
         release_t = event.release_t if math.isfinite(event.release_t) else event.t
         angle_deg = math.degrees(event.angle_rad - event.baseline_rad)
         warnings: list[str] = []
@@ -200,7 +199,7 @@ class DecayPipeline:
             if other.axis != axis:
                 other.reset()
         decay = Decay(
-            run=self._run_no,
+            run=self.next_run,
             axis=axis,
             terms=self.terms,
             release_t=release_t,
@@ -216,14 +215,13 @@ class DecayPipeline:
             decay.status.add(samples)
         self.decay = decay
         self.state = "decaying"
+        self.next_run += 1
         self._tell(lambda sink: sink.on_release(decay, blocks))
-        self.on_event(
-            f"run {self._run_no}: released at {abs(angle_deg):.2f} deg ({axis}), t = {release_t:.3f} s"
-        )
+        self.emit(Released(decay.run, angle_deg, axis, release_t))
         for line in warnings:
-            self.on_event(f"warning: {line}")
+            self.emit(Note("warning", line))
         if tilt := decay.status.describe_before():
-            self.on_event(f"note: run {decay.run}: sensor {tilt}")
+            self.emit(Note("note", f"sensor {tilt}", decay.run))
             decay.note("note", f"sensor {tilt}", release_t)
         self._note_flagged(decay)
 
@@ -265,7 +263,7 @@ class DecayPipeline:
         finally:
             outcome = decay.outcome()
             self.outcomes.append(outcome)
-        self.on_event(self._summary(outcome))
+        self.emit(Settled(outcome))
         return outcome
 
     def abort(self, kind: str, message: str) -> DecayOutcome | None:
@@ -290,17 +288,3 @@ class DecayPipeline:
             self.abort("note", "session closed")
         finally:
             self._tell(lambda sink: sink.close())
-
-    @staticmethod
-    def _summary(outcome: DecayOutcome) -> str:
-        fit = outcome.fit
-        coeffs = "  ".join(f"{k}={v:.4g}" for k, v in fit.coefficients.items()) if fit else "no fit"
-        where = f" -> {outcome.path}" if outcome.path else ""
-        period = f", T0 {fit.natural_period_s:.3f} s, R2 {fit.r2_angle:.4f}" if fit else ""
-        status = outcome.status
-        flags = "".join(
-            f"; {line}"
-            for line in ((status.describe_after(), status.describe_before()) if status else ())
-            if line
-        )
-        return f"run {outcome.run}: {outcome.settle_reason}; {coeffs}{period}{flags}{where}"

@@ -3,14 +3,15 @@
 The raw channel is fed, chunk by chunk with its arrival time, through the same
 stream decoder and the same pipeline as the live daemon without its recording sink
 (identifier and view), so the viewer shows what it showed live. ``speed`` paces by device time
-(1.0 = real time); ``None`` runs as fast as possible.
+(1.0 = real time); ``None`` runs as fast as possible. What a person is told goes to ``listeners``
+as typed events (``acquire.events``), as the daemon's does.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ..device.decoding import SampleDecoder
@@ -20,8 +21,9 @@ from ..ident.online import prepare_identifier
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView
 from ..viz.viewer import default_viewer_mode, describe_mode
-from .pipeline import Block, DecayOutcome, DecayPipeline, DetectionSettings
-from .sinks import IdentifierSink, ViewSink
+from .events import DecayOutcome, Event, Notice, ViewerNote
+from .pipeline import Block, DecayPipeline, DetectionSettings
+from .sinks import IdentifierSink, Sink, ViewSink
 
 #: At full speed, serial reads are merged into blocks spanning this much arrival time: the
 #: per-block work is shared and the result is the same (the decoder is a stream decoder).
@@ -53,36 +55,40 @@ def replay_recording(
     speed: float | None = None,
     viewer: str | None = "none",
     model: str | None = None,
-    on_event: Callable[[str], None] | None = None,
+    listeners: Sequence[Sink] = (),
     on_progress: Callable[[int, int], None] | None = None,
 ) -> list[DecayOutcome]:
-    """Replay one tankdaq MCAP; returns the decays found (normally the one it holds)."""
+    """Replay one tankdaq MCAP; returns the decays found (normally the one it holds). ``listeners`` hear
+    the events (the printer, a collector) and ride along the pipeline."""
+
+    def emit(event: Event) -> None:  # before the pipeline runs: the listeners only
+        for listener in listeners:
+            listener.on_event(event)
+
     path = Path(path)
     recording = read_recording(path)
-    if recording.truncated and on_event is not None:
-        on_event(truncation_notice(path, recording.damage))
+    if recording.truncated:
+        emit(Notice("replay", truncation_notice(path, recording.damage)))
     meta = recording.metadata
     axis = recording.axis
     nominal = float(meta.get("angle_nominal_deg", "nan"))
     chunks = coalesce(recording.raw_chunks, COALESCE_S if speed is None else 0.0)
     if not chunks:
         raise BadRecordingInput(f"{path}: the recording holds no raw device bytes to replay")
-    note = None if on_event is None else (lambda line: on_event(f"viewer: {line}"))
     mode = viewer or default_viewer_mode()
-    if on_event is not None:
-        on_event(describe_mode(mode, default=viewer is None))
-    view = LiveView(mode, axis=axis, on_note=note)
+    emit(ViewerNote(describe_mode(mode, default=viewer is None)))
+    view = LiveView(mode, axis=axis, on_note=lambda line: emit(ViewerNote(line)))
     settings = DetectionSettings(
         axis=axis,
         angle_deg=nominal if math.isfinite(nominal) else 0.0,
         angle_tolerance_deg=math.inf if not math.isfinite(nominal) else 1.0,
         model=model or str(meta.get("model", meta.get("model_terms", "ittc-quadratic-restoring"))),
     )
-    prepare_identifier(settings.model, on_event)
+    prepare_identifier(settings.model, lambda text: emit(Notice("identifier", text)))
     rrd_base = path.with_name(path.stem + ".replay") if view.mode == "save" else None  # spawn falls back
     # the daemon's pipeline without the recording; each block's refit is done before the next block
-    sinks = [IdentifierSink(wait_for_fits=True), ViewSink(view, rrd_base)]
-    pipeline = DecayPipeline(settings, sinks, on_event=on_event)
+    sinks = [IdentifierSink(wait_for_fits=True), ViewSink(view, rrd_base), *listeners]
+    pipeline = DecayPipeline(settings, sinks)
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))
     output = LegacyOutput.for_decay(rate_hz) if legacy else None  # as the driver asked for

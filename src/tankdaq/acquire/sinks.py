@@ -28,6 +28,7 @@ from ..ident.online import REFIT_BUDGET_S, BackgroundFit, OnlineIdentifier, Onli
 from ..samples import AXIS_FIELDS, StatusTally
 from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter
+from .events import DecayOutcome, Event
 
 if TYPE_CHECKING:
     from ..viz.live import LiveView
@@ -46,22 +47,6 @@ class Block:
     raw: bytes
     host_t: float
     carried: int = 0  # leading samples whose bytes are in earlier blocks' raw (the decoder held them)
-
-
-@dataclass
-class DecayOutcome:
-    """What one recorded decay left behind."""
-
-    run: int
-    axis: str
-    path: Path | None
-    rrd_path: Path | None
-    release_t: float
-    angle_initial_deg: float
-    settle_reason: str
-    fit: OnlineResult | None
-    warnings: list[str]
-    status: StatusTally | None = None  # the status flags of its samples (clipping before and after release)
 
 
 @dataclass
@@ -174,6 +159,10 @@ class Sink:
 
     def on_settle(self, decay: Decay) -> None:
         """The decay ended (``decay.settle_reason``; ``error`` after an exception: close, fit nothing)."""
+
+    def on_event(self, event: Event) -> None:
+        """What a person would be told (``acquire.events``): a release, a settle, a warning, the device
+        gone, the stop. The printer, a guided session and a notebook listen here."""
 
     def close(self) -> None:
         """The pipeline ends: release what the sink holds."""

@@ -22,7 +22,8 @@ from .app import (
 
 if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
     from ..acquire.daemon import RecordSettings
-    from ..acquire.pipeline import DecayOutcome
+    from ..acquire.events import DecayOutcome
+    from ..acquire.sinks import Sink
 
 
 class AxisChoice(StrEnum):
@@ -70,7 +71,34 @@ ViewerOption = Annotated[
 ]
 SimSpeedOption = Annotated[float, typer.Option("--sim-speed", min=0.1, max=50.0, hidden=True)]
 SimSeedOption = Annotated[int, typer.Option("--sim-seed", hidden=True)]
+
+
+class EventsFormat(StrEnum):
+    jsonl = "jsonl"
+
+
+EventsOption = Annotated[
+    EventsFormat | None,
+    typer.Option(
+        "--events",
+        help="Also write every event (held, released, settled, warnings, device, stop) to stdout, one "
+        "JSON object per line, and nothing else: for programs (the lines on stderr are for people).",
+    ),
+]
 DEFAULT_LIVE_MODEL = "auto"  # the refits move up physics.models.MODEL_FAMILY as the data allow
+
+
+def event_listeners(events: EventsFormat | None) -> list[Sink]:
+    """The pipeline's listeners a command adds: the printer of the event lines (stderr, each word
+    explained once), and with ``--events jsonl`` each event as a JSON line on stdout."""
+    import sys
+
+    from ..acquire.listeners import EventPrinter, EventStream
+
+    chosen: list[Sink] = [EventPrinter(say)]
+    if events is EventsFormat.jsonl:
+        chosen.append(EventStream(sys.stdout))
+    return chosen
 
 
 class _StatusLine:
@@ -93,9 +121,6 @@ class _StatusLine:
         if err_console.is_terminal:
             self._live.__exit__(None, None, None)
 
-    def event(self, line: str) -> None:
-        say(line)
-
     def status(self, status: object) -> None:
         self._text.plain = status.line(self.runs)  # type: ignore[attr-defined]
 
@@ -104,7 +129,9 @@ class _StatusLine:
 STOPPED_EXIT_CODE = 130
 
 
-def run_record(settings: RecordSettings, catalogue: str | None = None) -> list[DecayOutcome]:
+def run_record(
+    settings: RecordSettings, catalogue: str | None = None, events: EventsFormat | None = None
+) -> list[DecayOutcome]:
     """Run the daemon with a status line, print how many decay files it wrote (the files that exist);
     each file, once closed, goes into the run catalogue (``--catalogue``; a failure there is one line).
 
@@ -116,7 +143,7 @@ def run_record(settings: RecordSettings, catalogue: str | None = None) -> list[D
     build_kernels_shown()
     with CatalogueWriter.from_option(catalogue, say) as writer, _StatusLine(settings.runs) as line:
         daemon = RecordDaemon(
-            settings, on_event=line.event, on_status=line.status, sinks=[CatalogueSink(writer)]
+            settings, on_status=line.status, sinks=[CatalogueSink(writer), *event_listeners(events)]
         )
         outcomes = daemon.run()
     saved = daemon.recordings
@@ -178,8 +205,14 @@ def record_command(
     sim_speed: SimSpeedOption = 1.0,
     sim_seed: SimSeedOption = 0,
     catalogue: Annotated[str | None, catalogue_option()] = None,
+    events: EventsOption = None,
 ) -> None:
-    """Record decays: detect each release, write one MCAP per decay, fit and show it live."""
+    """Record decays: detect each release, write one MCAP per decay, fit and show it live.
+
+    Each run's line says how it ended: amplitude (a whole decay, the swing below the settle threshold),
+    timeout, note (stopped by the operator: the file is complete), unplug or error; a note line is worth
+    knowing, a warning line means check that decay.
+    """
     from ..acquire.daemon import RecordSettings
 
     settings = RecordSettings(
@@ -201,7 +234,7 @@ def record_command(
         sim_speed=sim_speed,
         sim_seed=sim_seed,
     )
-    run_record(settings, catalogue)
+    run_record(settings, catalogue, events)
 
 
 def _speed(value: str) -> float | None:
@@ -229,6 +262,7 @@ def replay_command(
         callback=lambda v: v if v is None else _viewer(v),
         help="spawn, save (an .rrd beside each file), none, or a rerun URL.",
     ),
+    events: EventsOption = None,
 ) -> None:
     """Replay recordings: re-decode the raw bytes, re-detect the release, re-fit, show it again."""
     from ..acquire.replay import replay_recording
@@ -240,9 +274,9 @@ def replay_command(
             path,
             speed=pace,
             viewer=viewer,
-            on_event=say,
+            listeners=event_listeners(events),
         )
-        for o in outcomes:
+        for o in outcomes if events is None else ():  # with --events the settled events say it
             fit = o.fit
             coeffs = "  ".join(f"{k}={v:.4g}" for k, v in fit.coefficients.items()) if fit else "no fit"
             typer.echo(

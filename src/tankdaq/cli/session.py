@@ -11,12 +11,15 @@ from .. import validation
 from .app import app, build_kernels_shown, catalogue_option, checked, err_console, handles_errors, say
 from .record import (
     DEFAULT_LIVE_MODEL,
+    STOPPED_EXIT_CODE,
     LiveModelOption,
     SimSeedOption,
     SimSpeedOption,
     ViewerOption,
     hull_option,
 )
+
+STOPPED = "session stopped; nothing is lost: continue with --resume --out {out}"
 
 HELP = """Run a test session from a campaign PLAN, condition by condition, with the operator.
 
@@ -117,10 +120,13 @@ def session_command(
         build_kernels_shown()
         try:
             state = session.run()
-        except KeyboardInterrupt:
-            say(f"session stopped; nothing is lost: continue with --resume --out {out}")
+        except KeyboardInterrupt:  # the operator's Ctrl-C at a question
+            say(STOPPED.format(out=out))
             raise
         finally:
             writer.add_session(out)  # the log's last word (a decay stopped, recovered or missing)
+    if session.stopped is not None:  # the recording was stopped (Ctrl-C, SIGTERM): every file is closed
+        say(STOPPED.format(out=out))
+        raise typer.Exit(STOPPED_EXIT_CODE)
     kept = sum(1 for r in state.runs if r.verdict == "accepted")
     say(f"session done: {kept} decays accepted of {state.decays} recorded; log {out / 'session.jsonl'}")

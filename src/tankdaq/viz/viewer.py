@@ -57,7 +57,7 @@ def default_viewer_mode() -> str:
 
 
 def describe_mode(mode: str, default: bool) -> str:
-    """The one line ``record`` and ``replay`` print at start: which view, and how to choose another."""
+    """What ``record`` and ``replay`` say at start (a viewer note): which view, and how to choose another."""
     what = {
         "spawn": "spawn (a rerun window; an .rrd is saved as well)",
         "save": "save (an .rrd per decay; open it with rerun FILE.rrd)",
@@ -68,7 +68,7 @@ def describe_mode(mode: str, default: bool) -> str:
         if default
         else "as asked"
     )
-    return f"viewer: {what}, {chosen}"
+    return f"{what}, {chosen}"
 
 
 def check_mode(mode: str) -> str:

@@ -5,6 +5,7 @@ the still water of the decay axis before a draft's first decay (``LevelCheck``, 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -56,15 +57,24 @@ def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
 
 class LevelCheck(Sink):
     """A sink of the record pipeline: the still water of the decay axis over ``LEVEL_S`` of device
-    time, read from every block; ``on_full`` is called once that much has arrived."""
+    time, read from every block; ``on_full`` is called once that much has arrived.
+
+    A session's stream runs all along: ``arm()`` starts a measurement with the blocks read from then
+    on (the ones read while the operator was still trimming the model are not the still water)."""
 
     def __init__(self, axis: str, on_full: Callable[[], None] = lambda: None) -> None:
         self.angle_field = AXIS_FIELDS[axis][0]
         self.on_full = on_full
         self._blocks: list[np.ndarray] = []
+        self._since_host_t = -math.inf
+
+    def arm(self) -> None:
+        """Measure again, from the blocks read from now on."""
+        self._blocks = []
+        self._since_host_t = time.time()  # the clock of ``Block.host_t``
 
     def on_block(self, block: Block, decay: Decay | None) -> None:
-        if self.full:  # what arrives while the daemon stops is not the still water measured
+        if self.full or block.host_t < self._since_host_t:  # after it is full: not the still water measured
             return
         if block.samples.size:
             self._blocks.append(block.samples)

@@ -27,14 +27,12 @@ def open_panel(record: RecordSettings, plan: CampaignPlan, on_note: Callable[[st
     first decay and the decay views reuse it."""
     from ...physics.models import resolve_model
     from ...viz.campaign_view import CampaignView
-    from ...viz.live import LiveView
-    from ...viz.viewer import default_viewer_mode
+    from ...viz.viewer import default_viewer_mode, display_available, spawn_viewer
 
     mode = record.viewer or default_viewer_mode()
     url = None
-    if mode == "spawn":  # the decay views reuse this viewer: it listens before the first decay
-        LiveView("spawn", bind=record.viewer_bind, spawn_port=record.viewer_port, on_note=on_note).close()
-        url = f"rerun+http://127.0.0.1:{record.viewer_port}/proxy"
+    if mode == "spawn" and display_available():  # without a display each decay's view says so, once
+        _process, url = spawn_viewer(record.viewer_bind, record.viewer_port, on_note)  # it outlives us
     return CampaignView(
         mode,
         record.out_dir / PANEL_NAME,

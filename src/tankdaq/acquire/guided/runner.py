@@ -2,12 +2,17 @@
 condition by condition.
 
 The plan (``guided.plan``) gives the conditions in order, drafts grouped (ballast changes are slow).
-For each condition the operator is told what to do; the record daemon records one decay
-(``RecordDaemon`` with ``runs=1``: the device is opened per decay, so a decay is a closed unit whatever
-happens next); the decay is measured (``guided.measure``) and checked (``guided.checks``) as soon as it
+The device is opened once and streams for the whole session (``acquire.streaming.StreamingDaemon``:
+``record``'s pipeline, sinks and signal handling): the session is one more listener of it and moves
+through its plan on its typed events. For each condition the operator is told what to do and the
+session feeds the stream until that decay settles (on port ``sim`` the simulated sensor plays the decay
+asked for); the still water before a draft's first decay is measured from the same stream
+(``LevelCheck``). The decay is measured (``guided.measure``) and checked (``guided.checks``) as soon as it
 settles, and the operator (``guided.operator``) accepts it, repeats it, skips the condition or adds a
 note. When every condition has its repeats, the report of the accepted decays is written
-(``guided.report``).
+(``guided.report``). The session hears each recording as typed events (``acquire.events``): it prints
+them with its decay numbers, and a recording stopped by Ctrl-C or SIGTERM (``Stopped``) ends ``run``
+with ``stopped`` set, every file closed, never by an exception.
 
 Everything that happens goes to ``session.jsonl`` under a lock (``guided.journal``), fsynced before the
 session goes on. The session's state is only ever derived from that file (``guided.state``), so
@@ -18,10 +23,11 @@ mid-decay) is logged as rejected, never lost.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -31,7 +37,11 @@ from ...config import load_hull
 from ...config_rules import path_in
 from ...errors import InputError
 from ...plans import PLAN_AXES, CampaignPlan
-from ..daemon import RecordDaemon, RecordSettings
+from ..daemon import RecordSettings
+from ..events import DecayOutcome, DeviceReady, Event, Notice, Settled, Stopped, ViewerNote
+from ..listeners import EventLog, EventPrinter
+from ..sinks import Sink
+from ..streaming import StreamingDaemon
 from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
 from .journal import LOG_NAME, SessionLock, SessionLog
 from .measure import LEVEL_S, LevelCheck, measure_decay
@@ -45,8 +55,8 @@ from .state import RunEntry, SessionState
 if TYPE_CHECKING:
     from ...viz.campaign_view import CampaignView
 
-#: daemon lines shown for the first decay only (every decay opens the device again)
-ONCE_PREFIXES = ("simulated MTi-G on ", "device: ")
+#: events shown once in a session (every decay opens the device again; the views say the same)
+SHOWN_ONCE = (Notice, DeviceReady, ViewerNote)
 
 
 @dataclass
@@ -70,8 +80,10 @@ class CampaignSession:
         on_progress: Callable[[Progress], None] | None = None,
         resume: bool = False,
         on_verdict: Callable[[RunEntry], None] | None = None,
+        listeners: Sequence[Sink] = (),  # hear every recording's events (a notebook, a test)
     ) -> None:
         self.settings = settings
+        self.listeners = list(listeners)
         self.on_verdict = on_verdict or (lambda _entry: None)  # after the log holds it (the run catalogue)
         self.operator = operator
         self.on_line = on_line or (lambda _line: None)
@@ -95,12 +107,20 @@ class CampaignSession:
                 f"plan {plan.name} covers {', '.join(plan.hulls)}, not {hull.name}; give one of them"
             )
         for condition in self.conditions:  # every condition checked before the device opens
-            RecordDaemon(self._record_settings(condition, 1))
+            settings_of_decay = self._record_settings(condition, 1)
+            settings_of_decay.check()
+            settings_of_decay.recorded_device()
         self.log = SessionLog(self.folder)
         self._started = time.monotonic()
         self._decay_seconds: list[float] = []
-        self._shown: set[str] = set()
+        self._decay: int | None = None  # the decay being recorded: the events' run is named after it
+        self.printer = EventPrinter(self.on_line, self._run_name, once=SHOWN_ONCE)
         self.view: CampaignView | None = None
+        self.stopped: Stopped | None = None  # how the recording was stopped, when it was (run() returns)
+        self.level = LevelCheck(plan.axis)
+        self.heard = EventLog()  # what the recorder said, typed: the session moves on its events
+        self.daemon: StreamingDaemon | None = None  # opened by the first step that needs the device
+        self._device = contextlib.ExitStack()
 
     # ---- settings of one decay ----------------------------------------
 
@@ -109,10 +129,10 @@ class CampaignSession:
 
         base = self.record
         overrides = (
-            scripted_run(self.settings.sim_faults.get(decay), condition.angle_deg)
+            scripted_run(self.settings.sim_faults.get(decay), condition.angle_deg) | {"runs": 1}
             if base.port == "sim"
             else {}
-        )
+        )  # the simulated sensor plays this one decay when the session asks for it
         return dataclasses.replace(
             base,
             hull=self.settings.hull,
@@ -120,7 +140,7 @@ class CampaignSession:
             draft=condition.draft_factor,
             angle_deg=condition.angle_deg,
             angle_tolerance_deg=self.acceptance.angle_tolerance_deg,
-            runs=1,
+            runs=None,  # the device streams the whole session
             sim_seed=base.sim_seed + decay,
             sim_overrides=overrides,
             note=f"session {self.settings.plan.name}, decay {decay}",
@@ -131,7 +151,8 @@ class CampaignSession:
     def run(self) -> SessionState:
         """Lead the session to its end (or until interrupted); returns the final state."""
         self.folder.mkdir(parents=True, exist_ok=True)
-        with SessionLock(self.folder):
+        with SessionLock(self.folder), contextlib.ExitStack() as device:
+            self._device = device
             state = self._open_log()
             self._open_panel(state)
             try:
@@ -139,6 +160,20 @@ class CampaignSession:
             finally:
                 if self.view is not None:
                     self.view.close()
+
+    def _stream(self) -> StreamingDaemon:
+        """The session's one recorder: the device opened and configured at the first step that needs it,
+        streaming until the session ends (``run`` closes it)."""
+        if self.daemon is None:
+            first = self.conditions[0]
+            settings = self._record_settings(first, 0)
+            if settings.port == "sim":  # still water until the session asks for a decay
+                settings = dataclasses.replace(settings, sim_overrides={"runs": 0})
+            sinks = [self.level, self.printer, self.heard, *self.listeners]
+            daemon = StreamingDaemon(settings, sinks=sinks)
+            self._device.enter_context(daemon.streaming())
+            self.daemon = daemon
+        return self.daemon
 
     def _open_log(self) -> SessionState:
         records = self.log.read()
@@ -181,7 +216,11 @@ class CampaignSession:
         return self.view
 
     def _viewer_note(self, line: str) -> None:
-        self.on_line(f"viewer: {line}")
+        self.printer.on_event(ViewerNote(line))
+
+    def _run_name(self, _event: Event) -> str | None:
+        """The daemon's run is the session's decay."""
+        return None if self._decay is None else f"decay {self._decay}"
 
     def _show_condition(self, state: SessionState, condition: Condition) -> None:
         show_condition(self._panel(), state, condition)
@@ -193,9 +232,13 @@ class CampaignSession:
         while (condition := state.next_condition()) is not None:
             self._progress(state, condition)
             if state.draft_ready != condition.draft:
-                state = self._set_draft(state, condition)
-                continue
-            state = self._record_one(state, condition)
+                step = self._set_draft(state, condition)
+            else:
+                step = self._record_one(state, condition)
+            if isinstance(step, Stopped):  # the recording was stopped: the session ends, resumable
+                self.stopped = step
+                return self._reload()
+            state = step
         self._progress(state, None)
         if not state.report:
             self._write_report(state)
@@ -232,7 +275,7 @@ class CampaignSession:
                 return key
             self.on_line(f"'{answer}' not understood; keys: {keys_line(question)}")
 
-    def _set_draft(self, state: SessionState, condition: Condition) -> SessionState:
+    def _set_draft(self, state: SessionState, condition: Condition) -> SessionState | Stopped:
         """The operator sets the draft and says when; the still water is then measured before the first
         decay: off level (or still moving), the question comes again."""
         angles = [c.angle_deg for c in self.conditions if c.draft == condition.draft]
@@ -243,7 +286,10 @@ class CampaignSession:
                     self.log.append("skip", draft=c.draft, angle_deg=c.angle_deg)
                     self._panel().set_status(c.draft, c.angle_deg, "skipped")
             return self._reload()
-        mean_deg, sd_deg = self._measure_level(condition)
+        measured = self._measure_level(condition)
+        if isinstance(measured, Stopped):
+            return measured
+        mean_deg, sd_deg = measured
         level = is_level(mean_deg, sd_deg, self.acceptance)
         self.log.append("level", draft=condition.draft, angle_deg=mean_deg, sd_deg=sd_deg, ok=level)
         still = f"still water at {mean_deg:+.2f} deg (sd {sd_deg:.2f} over {LEVEL_S:g} s)"
@@ -258,18 +304,15 @@ class CampaignSession:
         adopt_orphans(self.log, self._reload(), self.on_line)  # a decay the level check recorded: rejected
         return self._reload()
 
-    def _measure_level(self, condition: Condition) -> tuple[float, float]:
-        """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time."""
-        settings = dataclasses.replace(self._record_settings(condition, 0), viewer="none")  # stop() ends it
-        level = LevelCheck(self.settings.plan.axis)
-        daemon = RecordDaemon(settings, sinks=[level])
-        level.on_full = daemon.stop
-        daemon.run()
-        if not level.full:
-            raise KeyboardInterrupt  # stopped during the level check
-        return level.mean_sd_deg()
+    def _measure_level(self, condition: Condition) -> tuple[float, float] | Stopped:
+        """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time, or how
+        the recording was stopped before that much arrived."""
+        daemon = self._stream()
+        self.level.arm()
+        stopped = daemon.stream_until(lambda: self.level.full)
+        return stopped if stopped is not None else self.level.mean_sd_deg()
 
-    def _record_one(self, state: SessionState, condition: Condition) -> SessionState:
+    def _record_one(self, state: SessionState, condition: Condition) -> SessionState | Stopped:
         decay = state.next_decay
         repeat = len(state.accepted(condition)) + 1
         self.on_line(
@@ -280,13 +323,23 @@ class CampaignSession:
             condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
         )
         started = time.monotonic()
-        daemon = RecordDaemon(
-            self._record_settings(condition, decay), on_event=lambda line: self._daemon_line(line, decay)
-        )
-        outcomes = [o for o in daemon.run() if o.path is not None]
-        if not outcomes:
-            raise KeyboardInterrupt  # stopped before a release: nothing recorded, nothing to log
-        outcome = outcomes[-1]
+        daemon = self._stream()
+        daemon.retarget(self._record_settings(condition, decay), run=decay)
+        heard_before = len(self.heard.events)
+
+        def settled() -> list[DecayOutcome]:
+            events = self.heard.events[heard_before:]
+            return [e.outcome for e in events if isinstance(e, Settled) and e.outcome.path is not None]
+
+        self._decay = decay
+        try:
+            stopped = daemon.stream_until(lambda: bool(settled()))
+        finally:
+            self._decay = None
+        if not settled():
+            assert stopped is not None
+            return stopped  # stopped before a release: nothing recorded, nothing to log
+        outcome = settled()[0]
         measured = measure_decay(outcome, condition.angle_deg)
         earlier = [Measured(**r.measured) for r in state.accepted(condition)]
         reasons = check_decay(measured, condition, self.acceptance, earlier)
@@ -299,25 +352,13 @@ class CampaignSession:
             reasons=reasons,
             measured=dataclasses.asdict(measured),
         )
-        if outcome.settle_reason not in COMPLETE_SETTLES:
-            self.log.append("verdict", decay=decay, verdict="rejected", action="stopped")
-            raise KeyboardInterrupt  # the operator stopped mid-decay: the file is logged, the session ends
+        if stopped is not None:
+            if outcome.settle_reason not in COMPLETE_SETTLES:  # stopped mid-decay: logged, the session ends
+                self.log.append("verdict", decay=decay, verdict="rejected", action="stopped")
+            return stopped  # a whole decay is judged first on resume
         self._decay_seconds.append(time.monotonic() - started)
         state = self._reload()
         return self._judge(state, state.runs[-1])
-
-    def _daemon_line(self, line: str, decay: int) -> None:
-        """The daemon's lines, its "run 1" named as the session's decay; the device and viewer lines
-        every decay repeats are shown once."""
-        for prefix, named in (("run 1:", f"decay {decay}:"), ("warning: run 1:", f"warning: decay {decay}:")):
-            if line.startswith(prefix):
-                line = named + line[len(prefix) :]
-        key = next((p for p in ONCE_PREFIXES if line.startswith(p)), line)
-        if key in self._shown:
-            return
-        if line.startswith(ONCE_PREFIXES) or line.startswith("viewer: "):
-            self._shown.add(key)
-        self.on_line(line)
 
     def _judge(self, state: SessionState, entry: RunEntry) -> SessionState:
         condition = entry.condition

@@ -11,6 +11,7 @@ re-plug under a new pty name behind the same links, so the driver finds it again
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import queue
 import select
@@ -29,7 +30,7 @@ from .firmware import Behaviour, Firmware, ReceivedMessage
 from .identity import DeviceIdentity
 from .output import OutputItem
 from .pty_link import PtyLink
-from .sources import FrameSource, RecordedSource, ScriptedSource
+from .sources import FrameSource, RecordedSource, ScenarioSamples, ScriptedSource
 
 
 class SimulatedMTi:
@@ -196,6 +197,20 @@ class SimulatedMTi:
     def device_time(self) -> float:
         """Seconds on the device clock since power-up."""
         return self.firmware.device_time()
+
+    def play(self, scenario: DecayScenario) -> None:
+        """Play ``scenario`` next, on the same clock, the device streaming on (a guided session's next
+        decay: one device for the whole session), computed at the configured output rate first, then
+        retimed to start a moment of wall time from now on the device's clock and counter."""
+        source = self.source
+        if not isinstance(source, ScriptedSource):
+            raise InputError("only a scripted simulated sensor plays another scenario")
+        samples = ScenarioSamples(dataclasses.replace(scenario, rate_hz=self.firmware.output.rate_hz))
+        lead_s = 0.1
+        while not source.then_play(
+            self.firmware.frame_due_at(self.device_time() + lead_s * self.speed), samples
+        ):
+            lead_s *= 2  # the device's thread was ahead of its clock: start later
 
     # ---- faults from Python ----------------------------------------
 

@@ -15,7 +15,8 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -89,6 +90,17 @@ class ScenarioSamples:
     def truth(self) -> list[RunTruth]:
         return self.trace.runs
 
+    def retime(self, start_ticks: int, start_counter: int) -> None:
+        """The same samples on another clock: the first at ``start_ticks``, counter ``start_counter``."""
+        shift = start_ticks - self.trace.start_ticks
+        self.samples["ticks"] += shift
+        self.samples["t"] = self.samples["ticks"] / TICKS_PER_SECOND
+        counters = self.samples["counter"].astype(np.int64) + start_counter - self._sensor.start_counter
+        self.samples["counter"] = counters & 0xFFFF
+        self.trace = dataclasses.replace(self.trace, start_ticks=start_ticks)
+        self._sensor.start_counter = start_counter
+        self._tail_start = -1  # the still water after it, on the new clock too
+
     def block(self, start: int, stop: int) -> np.ndarray:
         """Samples ``start`` .. ``stop - 1``."""
         n = self.samples.size
@@ -111,7 +123,11 @@ class ScenarioSamples:
 
 
 class ScriptedSource:
-    """The scenario on the device clock from power-up, at the rate the output is configured to."""
+    """The scenario on the device clock from power-up, at the rate the output is configured to.
+
+    ``then_play`` queues another scenario from a later frame on, on the same clock (a guided session's
+    next decay, asked for while the device streams): its frames replace the still water from there.
+    """
 
     plays_from_measurement: bool = False
     configuration: list[tuple[int, int]] | None = None
@@ -120,6 +136,21 @@ class ScriptedSource:
     def __init__(self, scenario: DecayScenario) -> None:
         self.scenario = scenario
         self._by_rate: dict[float, ScenarioSamples] = {}
+        self._next: list[tuple[int, ScenarioSamples]] = []  # (first frame, its samples), in frame order
+        self._sent = 0  # frames handed out so far: a scenario queued starts after them
+        self._lock = threading.Lock()
+
+    def then_play(self, frame: int, samples: ScenarioSamples) -> bool:
+        """Play ``samples`` (computed on the caller's thread, not the device's) from ``frame`` on, retimed
+        to follow on; False when that frame is already sent (ask again from a later one)."""
+        with self._lock:
+            if frame < self._sent or (self._next and frame <= self._next[-1][0]):
+                return False
+            rate_hz = samples.rate_hz
+            ticks = int(self.scenario.start_ticks or 0) + round(frame * TICKS_PER_SECOND / rate_hz)
+            samples.retime(ticks, (int(self.scenario.start_counter or 0) + frame) & 0xFFFF)
+            self._next.append((frame, samples))
+        return True
 
     def samples_at(self, rate_hz: float) -> ScenarioSamples:
         """The scenario played at ``rate_hz`` (the truth in s and ticks is the same at every rate)."""
@@ -151,8 +182,28 @@ class ScriptedSource:
         return index / output.rate_hz
 
     def frames(self, start: int, stop: int, output: Output) -> list[bytes]:
-        block = self.samples_at(output.rate_hz).block(start, stop)
-        return output.encode(block, np.arange(start, stop))
+        with self._lock:
+            self._sent = max(self._sent, stop)
+            queued = [(first, samples) for first, samples in self._next if samples.rate_hz == output.rate_hz]
+        pieces, k = [], start
+        for first, upto, samples in self._pieces(queued, output.rate_hz):
+            if k >= stop:
+                break
+            end = int(min(stop, upto))
+            if end > k:
+                pieces.append(samples.block(k - first, end - first))
+                k = end
+        return output.encode(np.concatenate(pieces), np.arange(start, stop))
+
+    def _pieces(
+        self, queued: list[tuple[int, ScenarioSamples]], rate_hz: float
+    ) -> Iterator[tuple[int, float, ScenarioSamples]]:
+        """(first frame, end frame, samples) of what plays: the scenario, then each queued one."""
+        first, samples = 0, self.samples_at(rate_hz)
+        for start, following in queued:
+            yield first, start, samples
+            first, samples = start, following
+        yield first, math.inf, samples
 
 
 class RecordedSource:

@@ -1,0 +1,271 @@
+"""What the record pipeline tells its listeners, as typed events: a release, a settle, a warning, the
+device gone and back, the stop.
+
+The pipeline, the daemon and replay emit these; every listener hears them through ``Sink.on_event``
+(``acquire.sinks``): the command line's printer, a guided session, a notebook's collector
+(``acquire.listeners``). Nothing downstream reads the words: each event carries its values, and
+``line()`` renders the one line a person reads (``run_name`` relabels the run, e.g. a guided
+session's "decay 5"); ``record()`` is the event as a JSON object (``--events jsonl``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import ClassVar
+
+from ..ident.online import OnlineResult
+from ..samples import StatusTally
+
+#: Why a decay ended (``Settled``'s ``settle_reason``), as the printed legend explains it.
+SETTLE_REASONS = {
+    "amplitude": "the swing fell below the settle threshold (a whole decay)",
+    "timeout": "the decay went on past the longest a decay may last",
+    "note": "stopped by the operator or the end of the stream (the file is complete with what arrived)",
+    "unplug": "the device went away mid-decay (the file holds what arrived)",
+    "error": "closed after an error (the file holds what arrived; the error is in it)",
+}
+
+
+@dataclass
+class DecayOutcome:
+    """What one recorded decay left behind."""
+
+    run: int
+    axis: str
+    path: Path | None
+    rrd_path: Path | None
+    release_t: float
+    angle_initial_deg: float
+    settle_reason: str
+    fit: OnlineResult | None
+    warnings: list[str]
+    status: StatusTally | None = None  # the status flags of its samples (clipping before and after release)
+
+
+class Event:
+    """One thing that happened. ``printed`` False: a listener's event, not a line for the terminal."""
+
+    printed: ClassVar[bool] = True
+
+    def line(self, run_name: str | None = None) -> str:
+        """The line a person reads (``run_name`` replaces "run N" where the event names a run)."""
+        raise NotImplementedError
+
+    def record(self) -> dict[str, object]:
+        """The event as a JSON object: ``event`` names its type, the rest are its values."""
+        values = {f.name: _jsonable(getattr(self, f.name)) for f in fields(self)}  # type: ignore[arg-type]
+        return {"event": _snake(type(self).__name__), **values}
+
+
+def _snake(name: str) -> str:
+    return re.sub(r"(?<!^)([A-Z])", r"_\1", name).lower()
+
+
+def _jsonable(value: object) -> object:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def _run(run: int | None, run_name: str | None) -> str:
+    return run_name or f"run {run}"
+
+
+@dataclass(frozen=True)
+class Notice(Event):
+    """A one-line notice from a part around the pipeline: ``source`` is device (the port, the simulator,
+    the orientation the device gives), identifier (its kernels), recording (a file) or replay."""
+
+    source: str
+    text: str
+
+    def line(self, run_name: str | None = None) -> str:
+        return self.text
+
+
+@dataclass(frozen=True)
+class ViewerNote(Event):
+    """What the live view says: the mode in use, a viewer started, a dropped update."""
+
+    text: str
+
+    def line(self, run_name: str | None = None) -> str:
+        return f"viewer: {self.text}"
+
+
+@dataclass(frozen=True)
+class DeviceReady(Event):
+    """The device is open and configured (``description``: product, firmware, serial, port, rate)."""
+
+    description: str
+
+    def line(self, run_name: str | None = None) -> str:
+        return f"device: {self.description}"
+
+
+@dataclass(frozen=True)
+class Held(Event):
+    """The model is held tilted (signed, from the still water)."""
+
+    angle_deg: float
+    axis: str
+
+    def line(self, run_name: str | None = None) -> str:
+        return f"held at {self.angle_deg:+.2f} deg ({self.axis})"
+
+
+@dataclass(frozen=True)
+class PutBack(Event):
+    """The model was held, then put back without a release."""
+
+    def line(self, run_name: str | None = None) -> str:
+        return "put back without a release"
+
+
+@dataclass(frozen=True)
+class Released(Event):
+    """A confirmed release: run ``run`` starts (``t_s``: device time of the release)."""
+
+    run: int
+    angle_deg: float  # signed, from the still water
+    axis: str
+    t_s: float
+
+    def line(self, run_name: str | None = None) -> str:
+        where = _run(self.run, run_name)
+        return f"{where}: released at {abs(self.angle_deg):.2f} deg ({self.axis}), t = {self.t_s:.3f} s"
+
+
+@dataclass(frozen=True)
+class Note(Event):
+    """A note of a decay: ``kind`` warning (the decay or its fit may be wrong) or note (worth knowing,
+    not a fault); ``run`` None: said at the release, before the run is named."""
+
+    kind: str
+    text: str
+    run: int | None = None
+
+    def line(self, run_name: str | None = None) -> str:
+        where = "" if self.run is None and run_name is None else f"{_run(self.run, run_name)}: "
+        return f"{self.kind}: {where}{self.text}"
+
+
+@dataclass(frozen=True)
+class Fitted(Event):
+    """A refit (or the final fit) of run ``run``: for listeners (a notebook's live table), not printed."""
+
+    printed: ClassVar[bool] = False
+    run: int
+    result: OnlineResult
+
+    def line(self, run_name: str | None = None) -> str:
+        r = self.result
+        return f"{_run(self.run, run_name)}: fit to {r.t_end:.2f} s, R2 {r.r2_angle:.4f}"
+
+    def record(self) -> dict[str, object]:
+        r = self.result
+        return {
+            "event": "fitted",
+            "run": self.run,
+            "t_end_s": r.t_end,
+            "coefficients": dict(r.coefficients),
+            "r2_angle": _jsonable(r.r2_angle),
+        }
+
+
+@dataclass(frozen=True)
+class Settled(Event):
+    """Run ``outcome.run`` ended (``outcome.settle_reason``, see ``SETTLE_REASONS``), its file closed."""
+
+    outcome: DecayOutcome
+
+    def line(self, run_name: str | None = None) -> str:
+        outcome = self.outcome
+        fit = outcome.fit
+        coeffs = "  ".join(f"{k}={v:.4g}" for k, v in fit.coefficients.items()) if fit else "no fit"
+        where = f" -> {outcome.path}" if outcome.path else ""
+        period = f", T0 {fit.natural_period_s:.3f} s, R2 {fit.r2_angle:.4f}" if fit else ""
+        status = outcome.status
+        said = (status.describe_after(), status.describe_before()) if status else ()
+        flags = "".join(f"; {line}" for line in said if line)
+        return f"{_run(outcome.run, run_name)}: {outcome.settle_reason}; {coeffs}{period}{flags}{where}"
+
+    def record(self) -> dict[str, object]:
+        o = self.outcome
+        fit = o.fit
+        return {
+            "event": "settled",
+            "run": o.run,
+            "axis": o.axis,
+            "settle_reason": o.settle_reason,
+            "path": _jsonable(o.path),
+            "release_t_s": o.release_t,
+            "angle_initial_deg": o.angle_initial_deg,
+            "coefficients": dict(fit.coefficients) if fit else None,
+            "natural_period_s": _jsonable(fit.natural_period_s) if fit else None,
+            "r2_angle": _jsonable(fit.r2_angle) if fit else None,
+            "warnings": list(o.warnings),
+        }
+
+
+@dataclass(frozen=True)
+class DeviceLost(Event):
+    """The device went away (``reason``); the daemon waits ``wait_s`` for it to come back."""
+
+    reason: str
+    wait_s: float
+
+    def line(self, run_name: str | None = None) -> str:
+        return f"device gone ({self.reason}); waiting up to {self.wait_s:g} s"
+
+
+@dataclass(frozen=True)
+class DeviceBack(Event):
+    """The device came back after ``after_s`` and streams again."""
+
+    after_s: float
+
+    def line(self, run_name: str | None = None) -> str:
+        return f"device back after {self.after_s:.1f} s"
+
+
+@dataclass(frozen=True)
+class Stopping(Event):
+    """A signal (``signal``: SIGINT, SIGTERM, SIGHUP) stops the recording: the files are being closed."""
+
+    signal: str
+
+    def line(self, run_name: str | None = None) -> str:
+        return f"stopping ({self.signal}): closing files"
+
+
+@dataclass(frozen=True)
+class Stopped(Event):
+    """The stream ended: ``by`` the signal that stopped it, None when every decay asked for was recorded
+    (or the orchestrator ended it). Not printed: the command says what was recorded."""
+
+    printed: ClassVar[bool] = False
+    by: str | None
+    decays: int
+
+    def line(self, run_name: str | None = None) -> str:
+        how = f"stopped by {self.by}" if self.by else "ended"
+        return f"recording {how}: {self.decays} decay(s)"
+
+
+def legend(event: Event) -> str | None:
+    """The words an event's line uses that need explaining, said once before the first such line."""
+    if isinstance(event, Settled):
+        reasons = "; ".join(f"{name} = {why}" for name, why in SETTLE_REASONS.items())
+        return (
+            f"(each run's line: RUN: how it ended; the live fit's coefficients, T0 and R2; the file. "
+            f"How a run ends: {reasons})"
+        )
+    if isinstance(event, Note):
+        return "(warning: the decay or its fit may be wrong, check it; note: worth knowing, not a fault)"
+    return None
