@@ -1,17 +1,24 @@
 """What a recorder fed for a lab day keeps per decay (issue 22 item 8; the figure is bench_memory_day.py):
-no predicted curve in a finished decay's outcome, no list of every release event in its detectors."""
+no predicted curve in a finished decay's outcome, no list of every release event in its detectors, no
+rerun recording (and its two threads) left behind by a view's finished run."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.acquire.sinks import Decay, IdentifierSink, Sink
 from tankdaq.config import hull_scenario
 from tankdaq.ident.online import OnlineResult
+from tankdaq.samples import empty_samples
+from tankdaq.viz.live import LiveView
+
+TASKS = Path("/proc/self/task")
 
 RUNS = 3
 
@@ -66,3 +73,25 @@ def test_a_detector_that_keeps_no_events_returns_the_same_ones() -> None:
     assert [e.kind for e in offline].count("released") == RUNS
     assert [(e.kind, e.index) for e in returned] == [(e.kind, e.index) for e in offline]
     assert live.events_ == []
+
+
+def _rerun_threads() -> int:
+    """Native threads of rerun recording streams in this process (each stream runs one of these)."""
+    names = (task / "comm" for task in TASKS.iterdir())
+    return sum(1 for name in names if name.read_text().strip() == "RecordingStream")
+
+
+@pytest.mark.skipif(not TASKS.is_dir(), reason="counting native threads needs Linux's /proc/self/task")
+def test_a_saving_view_leaves_no_rerun_recording_behind_its_runs(tmp_path: Path) -> None:
+    before = _rerun_threads()
+    view = LiveView("save", on_note=lambda _line: None)
+    samples = empty_samples(40)
+    samples["t"] = np.arange(40) / 400.0
+    for run in range(4):
+        view.new_run(name=f"run {run}", rrd_path=tmp_path / f"run{run}.rrd", terms=("b1", "c1"))
+        view.log_samples(samples)
+        view.log_event("settled", "decay ended", 0.1)
+        view.end_run()
+    view.close(timeout_s=600)  # bounded; every run's end is done on the view thread by then
+    assert all((tmp_path / f"run{run}.rrd").stat().st_size > 0 for run in range(4))
+    assert _rerun_threads() <= before + 1  # at most the last run's, freed at the next run's end

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -447,7 +448,7 @@ class ReleaseDetector(EstimatorMixin):
                           release_se_s=physics.instant_se(tau, 2 * dt))  # fmt: skip
 
 
-def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: float) -> list[ReleaseEvent]:
+def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: Any) -> list[ReleaseEvent]:
     """Offline: all events in a whole array of samples (``axis='auto'`` picks the tilted axis)."""
     chosen = pick_axis(samples) if axis == "auto" else axis
     return ReleaseDetector(axis=chosen, **settings).fit(samples).events_
