@@ -57,7 +57,9 @@ class DecayPipeline:
         self.sinks = list(sinks)
         self.terms = resolve_model(settings.model)
         axes = list(AXIS_FIELDS) if settings.axis == "auto" else [settings.axis]
-        self._detectors = {axis: ReleaseDetector(axis=axis, **settings.detector_settings) for axis in axes}
+        self._detectors = {  # fed for as long as the pipeline runs: they keep no list of their events
+            axis: ReleaseDetector(axis=axis, keep_events=False, **settings.detector_settings) for axis in axes
+        }
         self._history: deque[Block] = deque()
         self.outcomes: list[DecayOutcome] = []
         self.state = "waiting"

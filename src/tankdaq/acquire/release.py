@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -107,6 +108,8 @@ class ReleaseDetector(EstimatorMixin):
 
     Angles and rates in the samples are rad and rad/s; thresholds are given in degrees because
     people set them. ``settle_deg`` 0.5 follows ITTC (record until the amplitude is below 0.5 deg).
+    ``keep_events`` False: ``events_`` stays empty and ``feed`` only returns the new events (a detector
+    fed for a whole lab day need not keep every event it saw).
     """
 
     def __init__(
@@ -127,6 +130,7 @@ class ReleaseDetector(EstimatorMixin):
         scan_back_s: float = 0.4,
         fit_quarters: float = 3.0,
         still_mean_s: float = 5.0,
+        keep_events: bool = True,
     ) -> None:
         if axis not in AXIS_FIELDS:
             raise InputError(f"axis {axis!r} not understood; use {' or '.join(AXIS_FIELDS)} (or auto)")
@@ -146,6 +150,7 @@ class ReleaseDetector(EstimatorMixin):
         self.scan_back_s = scan_back_s
         self.fit_quarters = fit_quarters
         self.still_mean_s = still_mean_s
+        self.keep_events = keep_events
         self.reset()
 
     def reset(self) -> ReleaseDetector:
@@ -184,7 +189,10 @@ class ReleaseDetector(EstimatorMixin):
         for start in range(0, t.size, self.piece):
             piece = slice(start, start + self.piece)
             self._feed_piece(t[piece], angle[piece], rate[piece])
-        return self.events_[before:]
+        new = self.events_[before:]
+        if not self.keep_events:  # a live detector: only what is returned (a lab day kept 1 MB of them)
+            del self.events_[before:]
+        return new
 
     piece = 16384
 
@@ -428,7 +436,7 @@ class ReleaseDetector(EstimatorMixin):
                           release_t=tau, release_se_s=found.se_s)  # fmt: skip
 
 
-def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: float) -> list[ReleaseEvent]:
+def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: Any) -> list[ReleaseEvent]:
     """Offline: all events in a whole array of samples (``axis='auto'`` picks the tilted axis)."""
     chosen = pick_axis(samples) if axis == "auto" else axis
     return ReleaseDetector(axis=chosen, **settings).fit(samples).events_

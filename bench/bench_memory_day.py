@@ -1,0 +1,309 @@
+"""Memory over a lab day: the record pipeline's RSS over 8 simulated hours at 400 Hz, time-compressed.
+
+In the loop is what ``tankdaq record --port sim --rate 400 --viewer save`` runs once the device is open:
+``RecordDaemon.run`` (``cli.record.run_record`` without its terminal status line) with its reading thread
+(``acquire.read_thread``) calling the driver's ``read_block`` (the real decoder, link counters and packet
+counter tracker), the daemon's ``_feed``, the decay pipeline and its real sinks: the online identifier
+(``--model``; record's default is ``auto``) with its refits on its worker thread and the final fit, one
+MCAP per decay, the view saving an .rrd beside each, and the run catalogue (a SQLite file, written on its
+own thread), plus one probe sink that reads ``VmRSS`` from ``/proc/self/status`` at each decay's settle.
+
+Not in the loop: the pty, pyserial and the hand-shake (``open_device``), and the simulator's firmware
+thread, which encodes frame by frame in Python and cannot play 400 Hz much faster than real time on this
+machine. Instead the driver reads a ``CompressedLine``: the simulator's decays (swath roll at T from
+8 deg, 35 s each: 10 s still, tilt and hold, 25 s of decay; ``CHUNK_RUNS`` runs scripted once by the
+simulator's physics and sensor model and played again and again, the clock carried on) as the MTData2
+bytes of an MTi-G-710's decay outputs, made by ``xsens.synthetic``'s array encoder. The device clock runs
+up to ``--speed`` times the wall clock and never more than ``CompressedLine.LEAD_S`` ahead of what the
+pipeline has been fed, so nothing piles up in the reading thread's queue however loaded the machine is.
+
+Each tree runs in a child process of its own, side by side (``--baseline-src``: the ``src/`` of ``git
+archive COMMIT src`` on PYTHONPATH, as bench_read_loop.py does). ``--tracemalloc`` starts tracemalloc
+at the end of the warm-up (``--warmup`` decays; much slower from there) and prints what grew between two
+decays after it and the last one, by traceback.
+
+Run: .venv/bin/python bench/bench_memory_day.py [--hours 8] [--baseline-hours 2] [--baseline-src DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+import tracemalloc
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from tankdaq.physics.scenario import DecayScenario
+
+#: Runs scripted once and played again and again (about 140 k samples at 400 Hz).
+CHUNK_RUNS = 10
+#: The decays before the warm-up ends (kernels loaded, caches and pools filled); ``--warmup``.
+WARMUP_DECAYS = 30
+RATE_HZ = 400.0
+#: Frames of each traceback tracemalloc keeps (more is slower).
+TRACE_FRAMES = 12
+#: The device the bytes come from (its SampleTimeFine wraps at one day).
+PRODUCT = "MTi-G-710-2A8G4"
+
+
+class RepeatedScenario:
+    """The simulated decays by sample index: ``CHUNK_RUNS`` runs of the scenario scripted once (by the
+    simulator's own physics and sensor model) and played again and again, the device clock
+    (SampleTimeFine) and the packet counter carried on from one round to the next."""
+
+    def __init__(self, scenario: DecayScenario) -> None:
+        self.scenario = dataclasses.replace(scenario, runs=CHUNK_RUNS)
+        self.chunk, _trace = self.scenario.samples()
+        self.rate_hz = float(self.scenario.rate_hz)
+        self.origin_s = float(self.chunk["t"][0])
+
+    def block(self, start: int, stop: int) -> np.ndarray:
+        """Samples ``start`` .. ``stop - 1``."""
+        index = np.arange(start, stop)
+        rounds, row = np.divmod(index, self.chunk.size)
+        block = self.chunk[row]  # a copy
+        ticks_per_round = round(self.chunk.size / self.rate_hz * 10_000)  # SampleTimeFine: 10 kHz
+        block["ticks"] += rounds * ticks_per_round
+        block["t"] = block["ticks"] / 10_000
+        block["counter"] = (block["counter"] + rounds * self.chunk.size) & 0xFFFF
+        return block
+
+
+def rss_kb() -> int:
+    """This process's resident set size (kB), from /proc/self/status."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    raise RuntimeError("no VmRSS in /proc/self/status")
+
+
+def top_growth(before: tracemalloc.Snapshot, after: tracemalloc.Snapshot, limit: int = 15) -> list[str]:
+    """What grew most between two snapshots, grouped by the allocation's traceback (innermost tankdaq
+    frame first), as lines."""
+    lines = []
+    for stat in after.compare_to(before, "traceback")[:limit]:
+        frames = [f for f in stat.traceback if "tankdaq" in f.filename] or list(stat.traceback)
+        where = " <- ".join(f"{Path(f.filename).name}:{f.lineno}" for f in reversed(frames[-4:]))
+        lines.append(f"{stat.size_diff / 1024:+9.0f} kB {stat.count_diff:+7d} blocks  {where}")
+    return lines
+
+
+class CompressedLine:
+    """What a bench ``MTiDriver`` reads instead of a serial port: the simulated decays as MTData2 bytes
+    (the decay outputs an MTi-G-710 sends, made by ``xsens.synthetic``'s array encoder), the device
+    clock running ``speed`` times the wall clock but never more than ``LEAD_S`` of device time ahead of
+    what the pipeline has been fed (so the reading thread's queue stays short whatever the load)."""
+
+    LEAD_S = 2.0
+
+    def __init__(self, samples: RepeatedScenario, speed: float) -> None:
+        self.samples = samples
+        self.speed = speed
+        self.sent = 0  # samples sent so far
+        self.fed_s = 0.0  # device seconds the pipeline has been fed (the daemon's ``_feed`` sets it)
+        self.origin_s = samples.origin_s
+        self._started = time.monotonic()
+
+    def read(self) -> bytes:
+        from unittest import mock
+
+        from tankdaq.xsens import synthetic
+        from tankdaq.xsens.timebase import MODULUS_ONE_DAY
+
+        rate = self.samples.rate_hz
+        due_s = min((time.monotonic() - self._started) * self.speed, self.fed_s + self.LEAD_S)
+        due = max(self.sent, int(due_s * rate))
+        if due == self.sent:
+            return b""
+        block = self.samples.block(self.sent, due)
+        self.sent = due
+        signals = {
+            "PacketCounter": block["counter"],
+            "SampleTimeFine": block["ticks"] % MODULUS_ONE_DAY,
+            "EulerAngles": np.degrees(np.column_stack([block["roll"], block["pitch"], block["yaw"]])),
+            "RateOfTurn": np.column_stack([block["p"], block["q"], block["r"]]),
+            "Acceleration": np.column_stack([block["ax"], block["ay"], block["az"]]),
+            "StatusWord": block["status"],
+        }
+        # decay_capture's encoder, given these signals (the same bytes on every tree measured)
+        with mock.patch.object(synthetic, "decay_signals", lambda *_args: signals):
+            return synthetic.decay_capture(block.size, rate)
+
+
+def child(args: argparse.Namespace) -> None:
+    """One recording of ``args.decays`` decays in this process; one JSON line per decay on stdout."""
+    from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+    from tankdaq.acquire.sinks import Sink
+    from tankdaq.catalogue.hooks import CatalogueSink, CatalogueWriter
+    from tankdaq.device.driver import MTiDriver
+    from tankdaq.device.factory import OpenDevice
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    snapshots: dict[str, tracemalloc.Snapshot] = {}
+    started = time.monotonic()
+
+    class RssProbe(Sink):
+        """RSS at each settle (and the tracemalloc snapshots at the warm-up's end and the last decay)."""
+
+        def on_settle(self, decay: object) -> None:
+            run = decay.run  # type: ignore[attr-defined]
+            if args.tracemalloc and run == args.warmup:  # traced from here: the warm-up runs at full speed
+                tracemalloc.start(TRACE_FRAMES)
+            if args.tracemalloc and run in (args.warmup + 2, args.decays):
+                snapshots["from" if run < args.decays else "to"] = tracemalloc.take_snapshot()
+            wall_s = round(time.monotonic() - started, 1)
+            print(json.dumps({"decay": run, "rss_kb": rss_kb(), "wall_s": wall_s}), flush=True)
+
+    class BenchDriver(MTiDriver):
+        """The real driver's reading and decoding (``read_block``) over a ``CompressedLine``."""
+
+        def __init__(self, line: CompressedLine) -> None:
+            super().__init__(
+                "bench", rate_hz=RATE_HZ, silence_timeout_s=3600.0
+            )  # the line waits for the pipeline
+            self.line = line
+            self._reset_stream_state(None, PRODUCT)
+            self._last_data = time.monotonic()
+
+        def _read(self) -> bytes:
+            return self.line.read()
+
+    class BenchDaemon(RecordDaemon):
+        """``RecordDaemon`` with the bench driver in place of ``open_device``; the rest is its own."""
+
+        def _open_device(self) -> MTiDriver:
+            scenario = self.simulation_scenario()
+            self.line = CompressedLine(RepeatedScenario(scenario), args.speed)
+            driver = BenchDriver(self.line)
+            self.device = OpenDevice(driver)
+            return driver
+
+        def _feed(self, pipeline: object, read: object) -> None:
+            samples = read.block.samples  # type: ignore[attr-defined]
+            if samples.size:
+                self.line.fed_s = float(samples["t"][-1]) - self.line.origin_s
+            super()._feed(pipeline, read)  # type: ignore[arg-type]
+
+    settings = RecordSettings(
+        port="sim", hull="swath", draft=1.0, angle_deg=8.0, rate_hz=RATE_HZ, out_dir=out / "recordings",
+        runs=args.decays, viewer=args.viewer, model=args.model,
+    )  # fmt: skip
+    lines = (out / "events.txt").open("w")
+    print(json.dumps({"decay": 0, "rss_kb": rss_kb(), "wall_s": 0.0}), flush=True)
+    with CatalogueWriter.from_option(str(out / "catalogue.sqlite"), lambda line: None) as writer:
+        daemon = BenchDaemon(
+            settings, on_event=lambda line: print(line, file=lines, flush=True),
+            sinks=[CatalogueSink(writer), RssProbe()],
+        )  # fmt: skip
+        outcomes = daemon.run()
+    status = daemon.status
+    summary = {"decays": len(outcomes), "samples": status.samples, "gaps": status.gaps}
+    summary |= {"bad_frames": status.bad_frames, "rss_kb_closed": rss_kb()}
+    print(json.dumps(summary), flush=True)
+    if len(snapshots) == 2:
+        grown = top_growth(snapshots["from"], snapshots["to"])
+        print(json.dumps({"tracemalloc": grown}), flush=True)
+
+
+def start_tree(
+    src: str | None, args: argparse.Namespace, decays: int, out: Path, log: Path
+) -> subprocess.Popen:
+    """The child on the tree at ``src`` (None: this one), its JSON lines into ``log`` as they come."""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    if src:  # a git archive of src/ alone: the hulls come from this checkout
+        env["PYTHONPATH"] = src
+        env.setdefault("TANKDAQ_CONFIG_DIR", str(Path(__file__).resolve().parents[1] / "configs"))
+    command = [sys.executable, __file__, "--child", "--decays", str(decays), "--speed", f"{args.speed:g}"]
+    command += ["--viewer", args.viewer, "--out", str(out), "--warmup", str(args.warmup)]
+    command += ["--model", args.model] + (["--tracemalloc"] if args.tracemalloc else [])
+    with log.open("w") as sink:
+        return subprocess.Popen(command, stdout=sink, stderr=subprocess.STDOUT, env=env)
+
+
+def read_rows(log: Path) -> list[dict[str, object]]:
+    return [json.loads(line) for line in log.read_text().splitlines() if line.startswith("{")]
+
+
+def describe(tree: str, rows: list[dict[str, object]], warmup: int, run_s: float) -> list[str]:
+    """RSS at start, after the warm-up and at the end, and the growth per simulated hour after it."""
+    per_decay = [r for r in rows if "rss_kb" in r and "decay" in r]
+    summary = next((r for r in rows if "gaps" in r), {})
+    if len(per_decay) <= warmup + 2:
+        return [f"{tree}: only {len(per_decay) - 1} decays recorded ({summary})"]
+    decay = np.array([r["decay"] for r in per_decay], dtype=float)
+    rss_mb = np.array([r["rss_kb"] for r in per_decay], dtype=float) / 1024
+    hours = decay * run_s / 3600
+    after = decay >= warmup
+    slope_mb_h = float(np.polyfit(hours[after], rss_mb[after], 1)[0])
+    warm, span_h = float(rss_mb[after][0]), float(hours[-1] - hours[after][0])
+    wall_min = float(per_decay[-1]["wall_s"]) / 60  # type: ignore[arg-type]
+    lines = [
+        f"{tree}: {int(decay[-1])} decays = {hours[-1]:.2f} simulated h in {wall_min:.1f} min wall; samples "
+        f"{summary.get('samples')}, gaps {summary.get('gaps')}, bad frames {summary.get('bad_frames')}",
+        f"  RSS start {rss_mb[0]:.1f} MB, after warm-up ({warmup} decays, {hours[after][0]:.2f} h) "
+        f"{warm:.1f} MB, end {rss_mb[-1]:.1f} MB: {rss_mb[-1] - warm:+.1f} MB in the {span_h:.2f} h after it "
+        f"({(rss_mb[-1] - warm) / span_h:+.2f} MB/h; least-squares slope {slope_mb_h:+.2f} MB/h), "
+        f"peak {rss_mb.max():.1f} MB",
+    ]
+    return lines + [f"    {line}" for line in rows[-1].get("tracemalloc", [])]  # type: ignore[union-attr]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hours", type=float, default=8.0, help="simulated hours of this tree")
+    parser.add_argument("--baseline-hours", type=float, default=2.0, help="simulated hours of the baseline")
+    parser.add_argument("--speed", type=float, default=60.0, help="the device clock's speed-up at most")
+    parser.add_argument("--viewer", default="save", choices=("save", "none"))
+    parser.add_argument("--model", default="auto", help="the live model (record's default: auto)")
+    parser.add_argument("--report", nargs="*", default=None, help="describe these logs (a run cut short)")
+    parser.add_argument("--baseline-src", default=None)
+    parser.add_argument("--log-dir", default=None, help="keep each tree's per-decay JSON lines here")
+    parser.add_argument("--tracemalloc", action="store_true")
+    parser.add_argument("--warmup", type=int, default=WARMUP_DECAYS, help="decays before the warm-up ends")
+    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--decays", type=int, default=0, help=argparse.SUPPRESS)
+    parser.add_argument("--out", default="", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        child(args)
+        return
+    run_s = 35.0  # the scenario's run: release_after_s + decay_s
+    if args.report is not None:
+        for log in args.report:
+            print("\n".join(describe(log, read_rows(Path(log)), args.warmup, run_s)))
+        return
+    print(f"{platform.node()} {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs")
+    print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)
+    trees: list[tuple[str, str | None, float]] = [("this tree", os.environ.get("PYTHONPATH"), args.hours)]
+    if args.baseline_src:
+        trees.insert(0, (f"baseline {args.baseline_src}", args.baseline_src, args.baseline_hours))
+    with tempfile.TemporaryDirectory() as tmp:
+        logs = Path(args.log_dir or tmp)
+        logs.mkdir(parents=True, exist_ok=True)
+        children = []
+        for i, (tree, src, hours) in enumerate(trees):  # side by side: the same load for both
+            decays = max(args.warmup + 3, round(hours * 3600 / run_s))
+            print(f"{tree}: {decays} decays at {RATE_HZ:g} Hz ({decays * run_s / 3600:.2f} simulated h)")
+            log = logs / f"memory-day-{i}.jsonl"
+            children.append((tree, log, start_tree(src, args, decays, Path(tmp) / str(i), log)))
+        for tree, log, child_process in children:
+            if child_process.wait():
+                print(f"{tree}: child exited {child_process.returncode}; see {log}")
+            for line in describe(tree, read_rows(log), args.warmup, run_s):
+                print(line, flush=True)
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,97 @@
+"""What a recorder fed for a lab day keeps per decay (issue 22 item 8; the figure is bench_memory_day.py):
+no predicted curve in a finished decay's outcome, no list of every release event in its detectors, no
+rerun recording (and its two threads) left behind by a view's finished run."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
+from tankdaq.acquire.release import ReleaseDetector
+from tankdaq.acquire.sinks import Decay, IdentifierSink, Sink
+from tankdaq.config import hull_scenario
+from tankdaq.ident.online import OnlineResult
+from tankdaq.samples import empty_samples
+from tankdaq.viz.live import LiveView
+
+TASKS = Path("/proc/self/task")
+
+RUNS = 3
+
+
+def _samples() -> np.ndarray:
+    samples, _trace = hull_scenario(runs=RUNS, seed=5, rate_hz=100.0).samples()
+    return samples
+
+
+class FinalFits(Sink):
+    """The last fit published in each decay, as the sinks saw it (curve included)."""
+
+    def __init__(self) -> None:
+        self.last: dict[int, OnlineResult] = {}
+
+    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
+        self.last[decay.run] = result
+
+    def on_note(
+        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
+    ) -> None:
+        """Notes are not what this sink listens for."""
+
+
+def test_a_finished_decay_keeps_its_fit_without_the_curve_and_the_detector_no_event_list() -> None:
+    samples = _samples()
+    fits = FinalFits()
+    pipeline = DecayPipeline(DetectionSettings(), [IdentifierSink(wait_for_fits=True), fits])
+    outcomes = []
+    try:
+        for i in range(0, samples.size, 20):  # 0.2 s reads at 100 Hz
+            outcomes += pipeline.feed(Block(samples[i : i + 20], b"", 0.0))
+    finally:
+        pipeline.close()
+    finished = [o for o in outcomes if o.settle_reason in ("amplitude", "timeout")]
+    assert len(finished) == RUNS
+    for outcome in finished:
+        assert outcome.fit is not None
+        published = fits.last[outcome.run]
+        assert published.predicted_t.size > 1000, "the sinks saw the whole curve"
+        assert outcome.fit.predicted_t.size == 0 and outcome.fit.predicted_angle.size == 0
+        assert outcome.fit.coefficients == published.coefficients
+        assert outcome.fit.n_samples == published.n_samples
+    assert all(detector.events_ == [] for detector in pipeline._detectors.values())
+
+
+def test_a_detector_that_keeps_no_events_returns_the_same_ones() -> None:
+    samples = _samples()
+    offline = ReleaseDetector().fit(samples).events_
+    live = ReleaseDetector(keep_events=False)
+    returned = [event for i in range(0, samples.size, 37) for event in live.feed(samples[i : i + 37])]
+    assert [e.kind for e in offline].count("released") == RUNS
+    assert [(e.kind, e.index) for e in returned] == [(e.kind, e.index) for e in offline]
+    assert live.events_ == []
+
+
+def _rerun_threads() -> int:
+    """Native threads of rerun recording streams in this process (each stream runs one of these)."""
+    names = (task / "comm" for task in TASKS.iterdir())
+    return sum(1 for name in names if name.read_text().strip() == "RecordingStream")
+
+
+@pytest.mark.skipif(not TASKS.is_dir(), reason="counting native threads needs Linux's /proc/self/task")
+def test_a_saving_view_leaves_no_rerun_recording_behind_its_runs(tmp_path: Path) -> None:
+    before = _rerun_threads()
+    view = LiveView("save", on_note=lambda _line: None)
+    samples = empty_samples(40)
+    samples["t"] = np.arange(40) / 400.0
+    for run in range(4):
+        view.new_run(name=f"run {run}", rrd_path=tmp_path / f"run{run}.rrd", terms=("b1", "c1"))
+        view.log_samples(samples)
+        view.log_event("settled", "decay ended", 0.1)
+        view.end_run()
+    view.close(timeout_s=600)  # bounded; every run's end is done on the view thread by then
+    assert all((tmp_path / f"run{run}.rrd").stat().st_size > 0 for run in range(4))
+    assert _rerun_threads() <= before + 1  # at most the last run's, freed at the next run's end
