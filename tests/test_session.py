@@ -19,21 +19,13 @@ import pytest
 from rerun.chunk import RrdReader
 from typer.testing import CliRunner
 
+from guided_session import TWO_DRAFT_PLAN
 from measured_decay import measured_decay
 from tankdaq.acquire.guided.journal import LOG_NAME, SessionLock, SessionLog
 from tankdaq.cli import app
 
 pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
 
-PLAN = """description = "2 drafts x 2 angles x 2 repeats"
-hulls = ["swath"]
-axis = "roll"
-drafts = ["T", "1.1T"]
-angles_deg = [10.0, 15.0]
-repeats = 2
-[acceptance]
-angle_tolerance_deg = 1.5
-"""
 EXE = [str(Path(sys.executable).with_name("tankdaq"))]  # the installed command, as the operator runs it
 DEADLINE_S = 240.0
 
@@ -77,7 +69,7 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """Run the plan, SIGKILL the session mid-decay after the third decay, resume it to the end."""
     folder = tmp_path_factory.mktemp("session")
     plan = folder / "plan.toml"
-    plan.write_text(PLAN)
+    plan.write_text(TWO_DRAFT_PLAN)
     out = folder / "out"
     responses = folder / "answers.txt"
     responses.write_text("# the operator's first answers\nn water calm, model trimmed\n\n")
@@ -270,7 +262,7 @@ def test_the_campaign_panel_has_one_point_per_accepted_condition(session: dict[s
 
 def test_a_second_session_cannot_write_the_same_folder(tmp_path: Path) -> None:
     plan = tmp_path / "plan.toml"
-    plan.write_text(PLAN)
+    plan.write_text(TWO_DRAFT_PLAN)
     with SessionLock(tmp_path):
         result = CliRunner().invoke(
             app, ["session", str(plan), "--port", "sim", "--hull", "swath", "--out", str(tmp_path), "--yes"]
@@ -281,7 +273,7 @@ def test_a_second_session_cannot_write_the_same_folder(tmp_path: Path) -> None:
 
 def test_a_folder_with_a_session_needs_resume_and_the_same_plan(tmp_path: Path) -> None:
     plan = tmp_path / "plan.toml"
-    plan.write_text(PLAN)
+    plan.write_text(TWO_DRAFT_PLAN)
     base = ["session", str(plan), "--port", "sim", "--hull", "swath", "--out", str(tmp_path / "out"), "--yes"]
     result = CliRunner().invoke(app, [*base, "--resume"])
     assert result.exit_code == 2 and "no session to resume" in result.output
@@ -349,7 +341,7 @@ def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Pat
     from tankdaq.plans import load_campaign_plan
 
     plan_file = tmp_path / "plan.toml"
-    plan_file.write_text(PLAN)
+    plan_file.write_text(TWO_DRAFT_PLAN)
     plan = load_campaign_plan(str(plan_file))
     out = tmp_path / "out"
     out.mkdir()

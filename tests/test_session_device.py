@@ -12,6 +12,7 @@ from typing import Any
 
 from mcap.reader import make_reader
 
+from guided_session import TWO_DRAFT_PLAN
 from tankdaq.acquire.events import DeviceReady, Released, Settled
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
@@ -19,15 +20,6 @@ from tankdaq.acquire.listeners import EventLog
 from tankdaq.plans import load_campaign_plan
 from tankdaq.store.reader import read_recording
 from tankdaq.xsens.constants import MID
-
-PLAN = """hulls = ["swath"]
-axis = "roll"
-drafts = ["T", "1.1T"]
-angles_deg = [10.0, 15.0]
-repeats = 2
-[acceptance]
-angle_tolerance_deg = 1.5
-"""
 
 
 class Accepting:
@@ -45,7 +37,7 @@ class Accepting:
 
 def test_a_session_of_eight_decays_opens_the_device_once(tmp_path: Path) -> None:
     plan_file = tmp_path / "plan.toml"
-    plan_file.write_text(PLAN)
+    plan_file.write_text(TWO_DRAFT_PLAN)
     out = tmp_path / "out"
     record = {
         "port": "sim",

@@ -7,8 +7,8 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
-from typing import Any
 
+from guided_session import Enter
 from tankdaq.acquire.guided.checks import Measured
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import (
@@ -32,20 +32,6 @@ MEASURED = dataclasses.asdict(
         10.1, 0.02, "amplitude", 16, 0.997, {"b1": 0.03, "b2": 4.6, "c1": 14.3}, 1.66, 2.6, 40.0, "record"
     )
 )
-
-
-class Enter:
-    """An operator who presses Enter (every default) a bounded number of times, then walks away."""
-
-    def __init__(self, limit: int) -> None:
-        self.limit = limit
-        self.asked: list[str] = []
-
-    def ask(self, question: Any) -> str:
-        self.asked.append(question.kind)
-        if len(self.asked) > self.limit:
-            raise KeyboardInterrupt
-        return ""
 
 
 def test_unusable_lines_are_listed_and_skipped(tmp_path: Path) -> None:

@@ -12,36 +12,22 @@ from __future__ import annotations
 import os
 import signal
 from pathlib import Path
-from typing import Any
 
 import pytest
 from mcap.reader import make_reader
 
+from guided_session import Enter
 from tankdaq.acquire.events import Event, Held, Released, Settled, Stopped
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.plans import load_campaign_plan
 
-PLAN = """hulls = ["swath"]
+ONE_CONDITION_PLAN = """hulls = ["swath"]
 axis = "roll"
 drafts = ["T"]
 angles_deg = [10.0]
 """
-
-
-class Enter:
-    """An operator who presses Enter at every question (a bounded number of times), then walks away."""
-
-    def __init__(self, limit: int = 6) -> None:
-        self.limit = limit
-        self.asked: list[str] = []
-
-    def ask(self, question: Any) -> str:
-        self.asked.append(question.kind)
-        if len(self.asked) > self.limit:
-            raise KeyboardInterrupt
-        return ""
 
 
 @pytest.mark.parametrize("stop_at", [Held, Released])
@@ -49,7 +35,7 @@ def test_a_signal_stops_the_session_as_an_outcome_and_the_decay_under_way_is_kep
     tmp_path: Path, stop_at: type[Event]
 ) -> None:
     plan_file = tmp_path / "plan.toml"
-    plan_file.write_text(PLAN)
+    plan_file.write_text(ONE_CONDITION_PLAN)
     out = tmp_path / "out"
     record = {"port": "sim", "out_dir": out, "viewer": "none", "sim_speed": 8.0, "sim_seed": 3}
     settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={})
@@ -92,7 +78,7 @@ def test_session_stopped_mid_decay_exits_130_with_the_resume_advice(tmp_path: Pa
     import time
 
     plan_file = tmp_path / "plan.toml"
-    plan_file.write_text(PLAN)
+    plan_file.write_text(ONE_CONDITION_PLAN)
     out = tmp_path / "out"
     exe = str(Path(sys.executable).with_name("tankdaq"))
     args = [exe, "session", str(plan_file), "--port", "sim", "--hull", "swath", "--out", str(out), "--yes"]
