@@ -142,16 +142,18 @@ angle_tolerance_deg = 1.5
 """
 
 
-class Accepting:
-    """Says the draft is ready, accepts every decay, and keeps each question's kind and default."""
+class Repeating:
+    """Says the draft is ready, repeats the first decay and skips the condition at the second (nothing
+    accepted: no report to fit), and keeps each question's kind and default."""
 
     def __init__(self) -> None:
         self.asked: list[tuple[str, str]] = []
+        self.verdicts = ["r", "s"]
 
     def ask(self, question: Any) -> str:
         self.asked.append((question.kind, question.default))
         assert len(self.asked) < 10, "the session should have ended"
-        return "a" if question.kind == "verdict" else ""
+        return self.verdicts.pop(0) if question.kind == "verdict" else ""
 
 
 def test_a_session_says_the_bump_before_a_decay_and_flags_that_decay(tmp_path: Path) -> None:
@@ -161,7 +163,7 @@ def test_a_session_says_the_bump_before_a_decay_and_flags_that_decay(tmp_path: P
     record = {"port": "sim", "out_dir": out, "viewer": "none", "sim_speed": 20.0, "sim_seed": 4}
     settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={2: "bump"})
     heard = EventLog()
-    operator = Accepting()
+    operator = Repeating()
     session = CampaignSession(settings, operator, listeners=[heard])
     state = session.run()
     assert session.stopped is None and [r.decay for r in state.runs] == [1, 2]

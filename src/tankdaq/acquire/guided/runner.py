@@ -61,7 +61,7 @@ from .watch import ModelWatch
 if TYPE_CHECKING:
     from ...viz.campaign_view import CampaignView
 
-#: events shown once in a session (every decay opens the device again; the views say the same)
+#: events shown once in a session (the device's lines; each decay's view says the same viewer line)
 SHOWN_ONCE = (Notice, DeviceReady, ViewerNote)
 
 
