@@ -108,11 +108,17 @@ class ModelWatch(Sink):
         if self.reference_deg is None or not block.samples.size:
             return
         self._blocks.append(block.samples)
-        if float(self._blocks[-1]["t"][-1] - self._blocks[0]["t"][0]) >= WINDOW_S:
-            samples, self._blocks = np.concatenate(self._blocks), []
-            window = self._window(samples)
+        if float(self._blocks[-1]["t"][-1] - self._blocks[0]["t"][0]) < WINDOW_S:
+            return
+        samples = np.concatenate(self._blocks)
+        t, start = samples["t"], 0
+        while t[-1] - t[start] >= WINDOW_S:  # windows of device time, however the reads cut the stream
+            stop = int(np.searchsorted(t, t[start] + WINDOW_S))
+            window = self._window(samples[start:stop])
             if window is not None:
                 self._judge(window)
+            start = stop
+        self._blocks = [samples[start:]]
 
     def on_event(self, event: Event) -> None:
         if isinstance(event, Released) and self.reference_deg is not None:
