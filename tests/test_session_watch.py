@@ -17,12 +17,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tankdaq.acquire.events import Event, ModelMoved, Released, Settled
+from tankdaq.acquire.events import MOVED_KINDS, Event, ModelMoved, Released, Settled, legend
 from tankdaq.acquire.guided.checks import watch_reasons
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.guided.watch import BUMP_RATE_DEG_S, BUMP_SD_DEG, SETTLED_S, ModelWatch
-from tankdaq.acquire.listeners import EventLog
+from tankdaq.acquire.listeners import EventLog, EventPrinter
 from tankdaq.acquire.sinks import Block
 from tankdaq.plans import load_campaign_plan
 from tankdaq.samples import SAMPLE_DTYPE
@@ -121,6 +121,22 @@ def test_a_tilt_and_its_hold_are_not_a_bump_nor_a_drift() -> None:
     end_s = _feed(watch, np.concatenate([_still(4), _tilt(0.0, to_deg=-15.0, hold_s=5.0)]))
     watch.on_event(Released(1, -15.0, "roll", end_s))
     assert said == [] and watch.standing_at(1) == []
+
+
+def test_the_printer_explains_the_watch_once_with_each_kind() -> None:
+    out: list[str] = []
+    printer = EventPrinter(out.append)
+    moved = [ModelMoved(kind, 1.2, 0.7, 2.7, 0.03, 1.0, 30.0) for kind in ("drift", "bump", "level", "bump")]
+    for event in moved:
+        printer.on_event(event)
+    explained = legend(moved[0])
+    assert explained is not None and all(f"{kind} = {why}" in explained for kind, why in MOVED_KINDS.items())
+    assert out == [explained, *(event.line() for event in moved)]  # said once, before the first
+    assert len({event.line() for event in moved}) == 3  # each kind its own line
+    assert moved[0].record() == {
+        "event": "model_moved", "kind": "drift", "angle_deg": 1.2, "spread_deg": 0.7, "rate_deg_s": 2.7,
+        "reference_deg": 0.03, "limit": 1.0, "t_s": 30.0,
+    }  # fmt: skip
 
 
 def test_a_disarmed_watch_says_nothing() -> None:
