@@ -88,7 +88,7 @@ def test_a_slow_drift_or_an_off_level_rest_is_said_once_and_a_drift_flags_the_ne
     assert stood == said  # what was said still stood at the release (the hold is not a drift)
     if kind is not None:
         (moved,) = stood
-        assert moved.reference_deg == reference_deg and moved.limit == 1.0
+        assert moved.reference_deg == reference_deg and moved.limit_deg == 1.0
         off_deg = moved.angle_deg - (reference_deg if kind == "drift" else 0.0)
         assert 1.0 < off_deg < 1.1  # said as it crossed the tolerance, on the way
     assert bool(watch_reasons(stood)) is flagged  # off level is the still-water check's, not the watch's
@@ -135,7 +135,7 @@ def test_the_printer_explains_the_watch_once_with_each_kind() -> None:
     assert len({event.line() for event in moved}) == 3  # each kind its own line
     assert moved[0].record() == {
         "event": "model_moved", "kind": "drift", "angle_deg": 1.2, "spread_deg": 0.7, "rate_deg_s": 2.7,
-        "reference_deg": 0.03, "limit": 1.0, "t_s": 30.0,
+        "reference_deg": 0.03, "limit_deg": 1.0, "t_s": 30.0,
     }  # fmt: skip
 
 

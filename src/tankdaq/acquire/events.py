@@ -271,7 +271,7 @@ class ModelMoved(Event):
     """Between decays the model did not rest as it should (a guided session's watch, ``kind`` one of
     ``MOVED_KINDS``): over the window starting at device time ``t_s``, the angle's mean ``angle_deg``
     and spread ``spread_deg``, the rate of turn's ``rate_deg_s`` (rms about its mean); ``reference_deg``
-    the still water measured when the draft was set; ``limit`` the tolerance it broke (deg: the plan's
+    the still water measured when the draft was set; ``limit_deg`` the tolerance it broke (the plan's
     level tolerance for drift and level, the still-water spread for a bump)."""
 
     kind: str
@@ -279,7 +279,7 @@ class ModelMoved(Event):
     spread_deg: float
     rate_deg_s: float
     reference_deg: float
-    limit: float
+    limit_deg: float
     t_s: float
 
     def line(self, run_name: str | None = None) -> str:
@@ -287,17 +287,17 @@ class ModelMoved(Event):
             moved = self.angle_deg - self.reference_deg
             return (
                 f"drift: still water at {self.angle_deg:+.2f} deg, {moved:+.2f} deg from the "
-                f"{self.reference_deg:+.2f} measured when the draft was set (tolerance {self.limit:g} deg); "
-                "re-trim before the next decay"
+                f"{self.reference_deg:+.2f} measured when the draft was set "
+                f"(tolerance {self.limit_deg:g} deg); re-trim before the next decay"
             )
         if self.kind == "bump":
             return (
                 f"bump: the model moved at rest (spread {self.spread_deg:.2f} deg, "
-                f"rate {self.rate_deg_s:.1f} deg/s rms; at rest it stays under {self.limit:g} deg); "
+                f"rate {self.rate_deg_s:.1f} deg/s rms; at rest it stays under {self.limit_deg:g} deg); "
                 "let it settle before the tilt"
             )
         return (
-            f"level: still water at {self.angle_deg:+.2f} deg, off level (tolerance {self.limit:g} deg); "
+            f"level: still water at {self.angle_deg:+.2f} deg, off level (tolerance {self.limit_deg:g} deg); "
             "re-trim before the next decay"
         )
 

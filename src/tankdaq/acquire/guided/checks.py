@@ -106,7 +106,7 @@ def watch_reasons(stood: list[ModelMoved]) -> list[str]:
             reasons.append(
                 f"released from a drifted level: still water at {moved.angle_deg:+.2f} deg, "
                 f"{moved.angle_deg - moved.reference_deg:+.2f} deg from the {moved.reference_deg:+.2f} "
-                f"measured when the draft was set (tolerance {moved.limit:g}); re-trim"
+                f"measured when the draft was set (tolerance {moved.limit_deg:g}); re-trim"
             )
     return reasons
 

@@ -204,7 +204,7 @@ class ModelWatch(Sink):
             self._standing = {kind: self._moved(kind, window, tolerance)}
             self.emit(self._standing[kind])
 
-    def _moved(self, kind: str, window: _Window, limit: float) -> ModelMoved:
+    def _moved(self, kind: str, window: _Window, limit_deg: float) -> ModelMoved:
         assert self.reference_deg is not None
         return ModelMoved(
             kind,
@@ -212,7 +212,7 @@ class ModelWatch(Sink):
             window.spread_deg,
             window.rate_deg_s,
             self.reference_deg,
-            limit,
+            limit_deg,
             window.t_s,
         )
 
