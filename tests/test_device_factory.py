@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from tankdaq.config import hull_scenario
-from tankdaq.device.factory import SimulatedSensor, open_device, sim_baud
+from tankdaq.device.factory import DeviceNote, SimulatedSensor, open_device, sim_baud
 from tankdaq.errors import DeviceNotFound, InputError
 
 #: Generous deadline for the first samples (reads, not timings, decide the test).
@@ -20,17 +20,18 @@ def _sim(**scenario: object) -> SimulatedSensor:
     return SimulatedSensor(lambda: hull_scenario(runs=1, **scenario), speed=4.0, seed=2)
 
 
-def _link(lines: list[str]) -> Path:
-    (line,) = [line for line in lines if line.startswith("simulated MTi-G on ")]
-    return Path(line.removeprefix("simulated MTi-G on ").split(" (")[0])
+def _link(notes: list[DeviceNote]) -> Path:
+    """The link of the simulated MTi-G the factory said it started (a typed value, not its line)."""
+    (link,) = [note.simulator_link for note in notes if note.simulator_link is not None]
+    return Path(link)
 
 
 def test_port_sim_is_the_simulated_sensor_opened_by_path_and_close_stops_it() -> None:
-    lines: list[str] = []
-    device = open_device("sim", rate_hz=100.0, sim=_sim(), on_event=lines.append)
+    notes: list[DeviceNote] = []
+    device = open_device("sim", rate_hz=100.0, sim=_sim(), on_event=notes.append)
     try:
         assert device.simulator is not None
-        assert device.driver.port == device.simulator.link == str(_link(lines))
+        assert device.driver.port == device.simulator.link == str(_link(notes))
         assert device.simulator.baud == sim_baud(100.0)
         samples = 0
         for _ in range(DEADLINE_READS):
@@ -40,7 +41,7 @@ def test_port_sim_is_the_simulated_sensor_opened_by_path_and_close_stops_it() ->
         assert samples > 0, "the configured device streams"
     finally:
         device.close()
-    assert not _link(lines).exists(), "the simulator stopped: its link is gone"
+    assert not _link(notes).exists(), "the simulator stopped: its link is gone"
 
 
 def test_port_sim_without_a_scenario_is_refused() -> None:
@@ -49,10 +50,10 @@ def test_port_sim_without_a_scenario_is_refused() -> None:
 
 
 def test_a_device_that_cannot_be_configured_leaves_no_simulator_running() -> None:
-    lines: list[str] = []
+    notes: list[DeviceNote] = []
     with pytest.raises(InputError, match="400 Hz needs"):  # 400 Hz does not fit through 115200 baud
-        open_device("sim", rate_hz=400.0, baud=115200, sim=_sim(rate_hz=400.0), on_event=lines.append)
-    assert not _link(lines).exists()
+        open_device("sim", rate_hz=400.0, baud=115200, sim=_sim(rate_hz=400.0), on_event=notes.append)
+    assert not _link(notes).exists()
 
 
 def test_any_other_port_is_the_driver_on_that_path(tmp_path: Path) -> None:

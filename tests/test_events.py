@@ -20,6 +20,7 @@ from tankdaq.acquire.events import (
     Event,
     Fitted,
     Held,
+    ModelMoved,
     Note,
     Notice,
     PutBack,
@@ -53,7 +54,9 @@ def _every_event() -> list[Event]:
         DeviceReady("MTi-G-710 on /tmp/x"), Held(-8.31, "roll"), PutBack(), Released(2, -8.3, "roll", 14.25),
         Note("warning", "fit at 4.2 s: implausible damping", 2), Note("note", "sensor clipped in 3 samples"),
         Fitted(2, _fit()), Settled(outcome), DeviceLost("read failed", 120.0), DeviceBack(2.14),
-        Stopping("SIGTERM"), Stopped("SIGTERM", 2),
+        Stopping("SIGTERM"), Stopped("SIGTERM", 2), ModelMoved("drift", 1.23, 0.02, 0.2, 0.03, 1.0, 30.5),
+        ModelMoved("bump", 0.1, 0.71, 2.7, 0.03, 0.3, 31.5),
+        ModelMoved("level", 1.1, 0.02, 0.2, 0.6, 1.0, 32.5),
     ]  # fmt: skip
 
 

@@ -13,7 +13,7 @@ from typing import Any
 from mcap.reader import make_reader
 
 from guided_session import TWO_DRAFT_PLAN
-from tankdaq.acquire.events import DeviceReady, Released, Settled
+from tankdaq.acquire.events import DeviceReady, ModelMoved, Released, Settled
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
@@ -58,6 +58,7 @@ def test_a_session_of_eight_decays_opens_the_device_once(tmp_path: Path) -> None
     sent = [message.mid for message in session.daemon.simulator.received]
     assert sent.count(MID.GOTO_CONFIG) == 1 and sent.count(MID.REQ_DID) == 1, sent  # one handshake
     assert len(heard.of(DeviceReady)) == 1
+    assert heard.of(ModelMoved) == []  # watched between the eight decays: no drift, bump or level said
     # the decays the session asked for, on the one stream, each named by the session's decay number
     assert [e.run for e in heard.of(Released)] == [r.decay for r in state.runs]
     runs = [r for r in SessionLog(out).read() if r["type"] == "run"]

@@ -17,7 +17,7 @@ import pytest
 from mcap.reader import make_reader
 
 from guided_session import Enter
-from tankdaq.acquire.events import Event, Held, Released, Settled, Stopped
+from tankdaq.acquire.events import DeviceReady, Event, Held, Notice, Released, Settled, Stopped
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
@@ -100,3 +100,30 @@ def test_session_stopped_mid_decay_exits_130_with_the_resume_advice(tmp_path: Pa
     assert "Traceback" not in err and f"continue with --resume --out {out}" in err
     records = SessionLog(out).read()
     assert records[-1]["type"] == "verdict" and records[-1]["action"] == "stopped"
+
+
+def test_a_signal_while_the_device_opens_stops_the_session_before_any_question(
+    tmp_path: Path, private_tempdir: Path
+) -> None:
+    """The session opens its device as it starts, before its first question: a Ctrl-C meanwhile (as the
+    simulated sensor is started) ends ``run`` with ``stopped`` set, nothing asked, nothing left running."""
+    plan_file = tmp_path / "plan.toml"
+    plan_file.write_text(ONE_CONDITION_PLAN)
+    out = tmp_path / "out"
+    record = {"port": "sim", "out_dir": out, "viewer": "none", "sim_speed": 8.0, "sim_seed": 3}
+    settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={})
+    signalled: list[Event] = []
+
+    def react(event: Event) -> None:
+        if isinstance(event, Notice) and event.source == "device" and not signalled:
+            signalled.append(event)
+            os.kill(os.getpid(), signal.SIGINT)
+
+    heard = EventLog(react)
+    operator = Enter()
+    session = CampaignSession(settings, operator, listeners=[heard])
+    state = session.run()
+    assert signalled and session.stopped == Stopped("SIGINT", 0) and heard.of(Stopped) == [session.stopped]
+    assert operator.asked == [] and state.decays == 0 and not list(out.glob("*.mcap"))
+    assert not heard.of(DeviceReady)  # stopped before the device was ready
+    assert list(private_tempdir.iterdir()) == []  # the simulator it started is stopped, its pty gone

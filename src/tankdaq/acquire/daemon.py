@@ -223,7 +223,9 @@ class RecordDaemon:
             recorded=self.replayed,
         )
         say = self._notice("device")
-        self.device = open_device(s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=say)
+        self.device = open_device(
+            s.port, rate_hz=s.rate_hz, baud=s.baud, sim=sim, on_event=lambda note: say(note.text)
+        )
         return self.device.driver
 
     def _file_header(self, driver: MTiDriver) -> tuple[dict[str, object], dict[str, dict[str, object]]]:

@@ -258,6 +258,50 @@ class Stopped(Event):
         return f"recording {how}: {self.decays} decay(s)"
 
 
+#: What the guided session's watch between decays reports (``ModelMoved.kind``), as the printed legend says.
+MOVED_KINDS = {
+    "drift": "its still water moved away from the level measured when the draft was set",
+    "bump": "it moved for a moment while it should have been at rest (not a release)",
+    "level": "it rests off level before the next decay",
+}
+
+
+@dataclass(frozen=True)
+class ModelMoved(Event):
+    """Between decays the model did not rest as it should (a guided session's watch, ``kind`` one of
+    ``MOVED_KINDS``): over the window starting at device time ``t_s``, the angle's mean ``angle_deg``
+    and spread ``spread_deg``, the rate of turn's ``rate_deg_s`` (rms about its mean); ``reference_deg``
+    the still water measured when the draft was set; ``limit_deg`` the tolerance it broke (the plan's
+    level tolerance for drift and level, the still-water spread for a bump)."""
+
+    kind: str
+    angle_deg: float
+    spread_deg: float
+    rate_deg_s: float
+    reference_deg: float
+    limit_deg: float
+    t_s: float
+
+    def line(self, run_name: str | None = None) -> str:
+        if self.kind == "drift":
+            moved = self.angle_deg - self.reference_deg
+            return (
+                f"drift: still water at {self.angle_deg:+.2f} deg, {moved:+.2f} deg from the "
+                f"{self.reference_deg:+.2f} measured when the draft was set "
+                f"(tolerance {self.limit_deg:g} deg); re-trim before the next decay"
+            )
+        if self.kind == "bump":
+            return (
+                f"bump: the model moved at rest (spread {self.spread_deg:.2f} deg, "
+                f"rate {self.rate_deg_s:.1f} deg/s rms; at rest it stays under {self.limit_deg:g} deg); "
+                "let it settle before the tilt"
+            )
+        return (
+            f"level: still water at {self.angle_deg:+.2f} deg, off level (tolerance {self.limit_deg:g} deg); "
+            "re-trim before the next decay"
+        )
+
+
 def legend(event: Event) -> str | None:
     """The words an event's line uses that need explaining, said once before the first such line."""
     if isinstance(event, Settled):
@@ -268,4 +312,7 @@ def legend(event: Event) -> str | None:
         )
     if isinstance(event, Note):
         return "(warning: the decay or its fit may be wrong, check it; note: worth knowing, not a fault)"
+    if isinstance(event, ModelMoved):
+        kinds = "; ".join(f"{name} = {why}" for name, why in MOVED_KINDS.items())
+        return f"(between decays the session watches the model at rest: {kinds})"
     return None

@@ -64,6 +64,11 @@ class DeviceReader:
         self._thread.start()
         return self
 
+    @property
+    def queued(self) -> int:
+        """Blocks read and not yet taken by ``items``."""
+        return self._queue.qsize()
+
     def stop(self) -> None:
         """End after the current read; what was read still comes out of ``items``."""
         self._stop.set()

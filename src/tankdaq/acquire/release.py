@@ -37,6 +37,10 @@ from .release_instant import find_release_instant
 STILL, TILTED, HELD, LEAVING, SWUNG, DECAYING = "still", "tilted", "held", "leaving", "swung", "decaying"
 UNKNOWN = "unknown"
 
+#: Away from the still water by more than this (deg) the model is tilted (``tilt_min_deg``'s default): less is
+#: the water, a hand's touch or a bump, never a tilt for a decay.
+TILT_MIN_DEG = 1.5
+
 
 @dataclass(frozen=True)
 class ReleaseEvent:
@@ -116,7 +120,7 @@ class ReleaseDetector(EstimatorMixin):
         self,
         axis: str = "roll",
         rate_hz: float | None = None,
-        tilt_min_deg: float = 1.5,
+        tilt_min_deg: float = TILT_MIN_DEG,
         hold_rate_max_deg_s: float = 3.0,
         hold_min_s: float = 0.5,
         leave_rate_deg_s: float = 3.0,

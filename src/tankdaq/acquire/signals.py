@@ -17,7 +17,8 @@ class SignalStop:
 
     Inside the read loop a signal only asks the loop to end: the reader stops after its current
     read, the blocks it read are fed, then the files close (an exception raised into the middle of a
-    write could leave the file without its footer); anywhere else
+    write could leave the file without its footer); ``deferred`` (a guided session between its
+    steps): it only sets ``stop``, which the session's next step reads; anywhere else
     (preparing the kernels, opening the device, waiting for it to come back) it raises
     KeyboardInterrupt at once. Only the first signal does anything: later ones wait for the files
     to close, and the closing is bounded (the final fit at most ``FINAL_FIT_WAIT_S``, the view 15 s).
@@ -28,13 +29,14 @@ class SignalStop:
         self.stopped_by: str | None = None  # the first signal's name
         self.in_loop = False
         self.closing = False
+        self.deferred = False
 
     def __call__(self, signum: int, _frame: object) -> None:
         first = self.stopped_by is None
         if first:
             self.stopped_by = signal.Signals(signum).name
         self.stop.set()
-        if first and not (self.in_loop or self.closing):  # a second signal never cuts the stop under way
+        if first and not (self.in_loop or self.closing or self.deferred):  # a second one never cuts a stop
             raise KeyboardInterrupt
 
     @contextlib.contextmanager

@@ -2,24 +2,34 @@
 handshake), streaming until the session ends.
 
 The session feeds it step by step: ``stream_until`` feeds the stream until the session's condition holds
-(the still water measured, the next decay settled), and ``retarget`` sets the next decay's condition
-(draft, nominal angle, note) between decays. Between steps the reading thread reads on and its blocks
-wait in its queue for the next step: nothing the device sends is skipped. The pipeline, its sinks, the
-files and the signal handling are ``record``'s (``acquire.daemon``): a Ctrl-C, SIGTERM or SIGHUP in a
-step closes the decay under way complete and ends the step with the typed ``Stopped`` event.
+(the still water measured, the next decay settled), ``stream_during`` feeds it while the operator is
+asked a question (the asking on a thread of its own: a long pause piles nothing up), and ``retarget``
+sets the next decay's condition (draft, nominal angle, note) between decays. Between steps the reading
+thread reads on and its blocks wait in its queue for the next step (a moment: the session's own work):
+nothing the device sends is skipped. The pipeline, its sinks, the files and the signal handling are
+``record``'s (``acquire.daemon``), the handlers installed for the whole session: a Ctrl-C, SIGTERM or
+SIGHUP in a step (a question included) closes the decay under way complete and ends the step with the
+typed ``Stopped`` event; one between steps ends the next step at once the same way.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
+import threading
 from collections.abc import Callable, Iterator
+from typing import TypeVar
 
 from ..device.driver import MTiDriver
 from .daemon import RecordDaemon, RecordSettings
 from .events import Stopped, Stopping
 from .pipeline import DecayPipeline
 from .read_thread import DeviceReader, Read
+
+T = TypeVar("T")
+
+#: The name of the thread that waits for the operator's answer while the session's thread feeds the stream.
+ASK_THREAD = "tankdaq-ask"
 
 
 class StreamingDaemon(RecordDaemon):
@@ -30,16 +40,20 @@ class StreamingDaemon(RecordDaemon):
 
     @contextlib.contextmanager
     def streaming(self) -> Iterator[StreamingDaemon]:
-        """Open the device and build the pipeline; at the end (normal, an error, an operator's Ctrl-C at a
-        question) feed what was read, close the decay under way complete, the sinks and the device."""
+        """Open the device and build the pipeline; at the end (normal, an error, a stop) feed what was
+        read, close the decay under way complete, the sinks and the device. The stop signals are the
+        daemon's all along: while the device opens a signal raises KeyboardInterrupt (nothing recorded
+        yet), between steps it is kept for the next step, which then ends with ``Stopped``."""
         pipeline: DecayPipeline | None = None
-        try:
-            with self._signals.installed():
+        signals = self._signals
+        with signals.installed():
+            try:
                 self._driver, pipeline = self._start()
-            yield self
-        finally:
-            with self._signals.installed():
-                self._signals.closing = True  # a Ctrl-C now never cuts the file being closed
+                signals.deferred = True
+                yield self
+            finally:
+                signals.deferred = False
+                signals.closing = True  # a Ctrl-C now never cuts the file being closed
                 try:
                     if pipeline is not None:
                         self._drain(pipeline)
@@ -47,8 +61,18 @@ class StreamingDaemon(RecordDaemon):
                     try:
                         self._shut_down(pipeline)
                     finally:
-                        self._signals.closing = False
+                        signals.closing = False
                         self._pipeline = None
+
+    @property
+    def decay_under_way(self) -> bool:
+        """Whether a decay is being recorded (released, not yet settled)."""
+        return self._pipeline is not None and self._pipeline.decay is not None
+
+    @property
+    def queued_blocks(self) -> int:
+        """Blocks read and not yet fed (the reading thread's queue): what a pause in the feeding piles up."""
+        return self._reader.queued if self._reader is not None else 0
 
     def _drain(self, pipeline: DecayPipeline) -> None:
         """The blocks read and not yet fed go to the pipeline (a decay under way keeps them)."""
@@ -96,6 +120,31 @@ class StreamingDaemon(RecordDaemon):
         stopped = Stopped(signals.stopped_by, len(self.outcomes))
         self.emit(stopped)
         return stopped
+
+    def stream_during(self, work: Callable[[], T]) -> T | Stopped:
+        """``work()`` (the operator's answer to a question) on a thread of its own while this thread feeds
+        the stream; its result once it returns (what it raises is raised here). A signal meanwhile ends
+        the stream: the ``Stopped`` is returned and ``work`` is left to end on its own (the answer no
+        longer matters; the question is asked again on resume)."""
+        done = threading.Event()
+        result: list[T] = []
+        failure: list[BaseException] = []
+
+        def answer() -> None:
+            try:
+                result.append(work())
+            except BaseException as exc:  # the operator walked away (EOF, Ctrl-D): passed on below
+                failure.append(exc)
+            finally:
+                done.set()
+
+        threading.Thread(target=answer, name=ASK_THREAD, daemon=True).start()
+        stopped = self.stream_until(done.is_set)
+        if stopped is not None:
+            return stopped
+        if failure:
+            raise failure[0]
+        return result[0]
 
     def retarget(self, settings: RecordSettings, run: int) -> None:
         """The next decay's settings (a session's condition: draft, nominal angle and its tolerance, the

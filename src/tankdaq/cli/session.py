@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from .. import validation
+from ..errors import InputError
 from .app import app, build_kernels_shown, catalogue_option, checked, err_console, handles_errors, say
 from .record import (
     DEFAULT_LIVE_MODEL,
@@ -45,10 +48,27 @@ Every key and range is checked as the plan is read (docs/session.md): a typo is 
 nearest known key, a value out of range is one line with its range.
 
 Each decay is checked as it settles; a failed check is flagged and the operator asked to repeat.
+Between decays the model is watched: a drift, a bump or an off-level rest is said as it happens, and
+a decay released from a drifted level or before a bump settled is flagged.
 Keys: Enter = the default, a accept, r reject and repeat, s skip, n TEXT adds a note.
-Everything goes to OUT/session.jsonl; --resume continues after Ctrl-C or a crash. When every
-condition is done, the campaign report of the accepted decays is written to OUT/report.
+Everything goes to OUT/session.jsonl; --resume continues after Ctrl-C, SIGTERM (at a question too:
+it is asked again) or a crash. When every condition is done, the campaign report of the accepted
+decays is written to OUT/report.
 """
+
+
+def _terminal_line(prompt: str) -> str:
+    """One line typed at the terminal, read from its descriptor. The session asks on a thread of its own
+    (its main thread feeds the stream), which a stop leaves waiting: Python's buffered stdin would hold a
+    lock the interpreter's exit needs (a fatal error at exit), a read of the descriptor holds none."""
+    err_console.print(prompt, end="", markup=False, highlight=False)
+    typed = b""
+    while not typed.endswith(b"\n"):
+        chunk = os.read(sys.stdin.fileno(), 4096)
+        if not chunk:  # Ctrl-D
+            raise InputError("the terminal closed at a question; continue with --resume")
+        typed += chunk
+    return typed.decode(errors="replace").rstrip("\r\n")
 
 
 @app.command("session", help=HELP)
@@ -107,7 +127,7 @@ def session_command(
     with CatalogueWriter.from_option(catalogue, say) as writer:
         session = CampaignSession(
             settings,
-            ScriptedOrTerminalOperator(answers, yes, say, err_console.input),
+            ScriptedOrTerminalOperator(answers, yes, say, _terminal_line),
             on_line=say,
             on_progress=lambda progress: (
                 err_console.rule(progress.line(), style="dim")
@@ -120,12 +140,12 @@ def session_command(
         build_kernels_shown()
         try:
             state = session.run()
-        except KeyboardInterrupt:  # the operator's Ctrl-C at a question
+        except KeyboardInterrupt:  # a Ctrl-C while the report is written (a question or a decay: stopped)
             say(STOPPED.format(out=out))
             raise
         finally:
             writer.add_session(out)  # the log's last word (a decay stopped, recovered or missing)
-    if session.stopped is not None:  # the recording was stopped (Ctrl-C, SIGTERM): every file is closed
+    if session.stopped is not None:  # stopped (Ctrl-C, SIGTERM) in a decay or at a question: files closed
         say(STOPPED.format(out=out))
         raise typer.Exit(STOPPED_EXIT_CODE)
     kept = sum(1 for r in state.runs if r.verdict == "accepted")

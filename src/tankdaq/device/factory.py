@@ -67,6 +67,15 @@ class SimulatedSensor:
     recorded: RecordedSource | None = None
 
 
+@dataclass(frozen=True)
+class DeviceNote:
+    """What opening a device tells the caller: ``text`` the line a person reads; ``simulator_link`` the pty
+    link of the simulated MTi-G it started (on that line), None on any other note."""
+
+    text: str
+    simulator_link: str | None = None
+
+
 @dataclass
 class OpenDevice:
     """An opened, configured device: the driver, and the simulator behind it for port ``sim``."""
@@ -94,14 +103,14 @@ def open_device(
     rate_hz: float = 100.0,
     baud: int | None = None,
     sim: SimulatedSensor | None = None,
-    on_event: Callable[[str], None] | None = None,
+    on_event: Callable[[DeviceNote], None] | None = None,
 ) -> OpenDevice:
     """Start the simulator for ``sim``, open the driver on the port and configure it for ``rate_hz``.
 
     ``baud`` None keeps the device's rate when it carries the output. Whatever fails on the way,
     what was started is stopped before the error is passed on.
     """
-    say = on_event or (lambda _line: None)
+    say = on_event or (lambda _note: None)
     simulator = None
     if is_simulated(port):
         if sim is None:
@@ -120,14 +129,14 @@ def open_device(
             latency_note(device.driver.path, ftdi_latency_ms(device.driver.path), rate_hz),
         ):
             if note:
-                say(note)
+                say(DeviceNote(note))
     except BaseException:  # Ctrl-C while opening too: nothing started is left running
         device.close()
         raise
     return device
 
 
-def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[str], None]) -> SimulatedMTi:
+def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[DeviceNote], None]) -> SimulatedMTi:
     from .simulator import SimulatedMTi
 
     if sim.recorded is not None:
@@ -139,5 +148,9 @@ def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[str], None]
             scenario, speed=sim.speed, baud=baud, seed=sim.seed, legacy=sim.legacy
         ).start()
         label = f"{scenario.hull} {format_draft(scenario.draft)} {scenario.axis}"
-    say(f"simulated MTi-G on {simulator.link} ({label})")
+    try:
+        say(DeviceNote(f"simulated MTi-G on {simulator.link} ({label})", simulator.link))
+    except BaseException:  # a Ctrl-C as it is said: nothing started is left running
+        simulator.stop()
+        raise
     return simulator

@@ -37,9 +37,16 @@ PUSH_AGAIN_AFTER_S = 3.0
 PUSH_AGAIN_FRACTION = 0.8
 #: What a scripted campaign run can do wrong (``scripted_run``): the hand tilts to the wrong angle,
 #: pushes the model again mid-decay (the release is not clean), shoves it to its angle so hard that the
-#: gyro clips during the push (harmless: the decay is clean), or the gyro's range is so small that the
-#: first swings of the decay clip (the decay must be rejected).
-SCRIPTED_FAULTS = ("wrong-angle", "double-push", "hard-push", "clipped-decay")
+#: gyro clips during the push (harmless: the decay is clean), the gyro's range is so small that the
+#: first swings of the decay clip (the decay must be rejected), or someone knocks the model at rest
+#: shortly before the tilt (a bump it has not settled from when it is tilted and released).
+SCRIPTED_FAULTS = ("wrong-angle", "double-push", "hard-push", "clipped-decay", "bump")
+#: A bumped run is knocked this long before its tilt begins (s): still swinging when the hand takes it;
+#: its tilt begins this much later than a clean run's (``release_after_s`` longer), after still water.
+BUMP_BEFORE_TILT_S = 3.5
+#: The knock sets the model swinging about its rest angle with this amplitude (deg): well above still
+#: water, below the release detector's tilt threshold (1.5 deg).
+BUMP_DEG = 1.0
 #: A hard push reaches its angle at this mean rate (deg/s): its peak, 1.9 times more, clips a 300 deg/s gyro.
 HARD_PUSH_DEG_S = 250.0
 #: A clipped-decay run's gyro range per degree of release angle (deg/s per deg): below the first swings'
@@ -145,6 +152,7 @@ class DecayScenario:
     start_ticks: int | None = None  # SampleTimeFine of the first sample (near 2**32: a 600's clock wraps)
     start_counter: int | None = None  # PacketCounter of the first sample (near 65535: about to wrap)
     pushes_again: tuple[int, ...] = ()  # runs (from 0) in which the hand pushes the model again mid-decay
+    bumps_before: tuple[int, ...] = ()  # runs (from 0) whose model is knocked at rest before the tilt
 
     def __post_init__(self) -> None:
         if self.axis not in ("roll", "pitch"):
@@ -194,6 +202,8 @@ class DecayScenario:
         index = self._first_index_at
         for run, (release, hand, put_back_s) in enumerate(hands):
             i_tilt, i_release = index(hand.start_s), index(release)
+            if run in self.bumps_before:
+                self._bump(coeffs, t, (x, v, a), index(hand.start_s - BUMP_BEFORE_TILT_S), i_tilt)
             held = slice(i_tilt, i_release)
             base = x[i_tilt - 1] if i_tilt > 0 else 0.0  # the rest angle the tilt starts from
             x[held], v[held], a[held] = hand(t[held], base)
@@ -293,6 +303,25 @@ class DecayScenario:
         again_x, again_v = simulate_decay(coeffs, t[before:stop], float(x[before]), float(v[before]) + kick)
         x[start:stop], v[start:stop] = again_x[1:], again_v[1:]
 
+    @staticmethod
+    def _bump(
+        coeffs: dict[str, float],
+        t: np.ndarray,
+        motion: tuple[np.ndarray, np.ndarray, np.ndarray],
+        start: int,
+        stop: int,
+    ) -> None:
+        """Someone knocks the model at sample ``start``: the rate jumps by what swings it ``BUMP_DEG``, and it
+        swings freely up to ``stop`` (where the hand takes it for the tilt)."""
+        if not 0 < start < stop:
+            return
+        x, v, a = motion
+        before = start - 1
+        kick = math.radians(BUMP_DEG) * math.sqrt(max(coeffs.get("c1", 1.0), 1e-6))
+        bump_x, bump_v = simulate_decay(coeffs, t[before:stop], float(x[before]), float(v[before]) + kick)
+        x[start:stop], v[start:stop] = bump_x[1:], bump_v[1:]
+        a[start:stop] = acceleration(coeffs, x[start:stop], v[start:stop])
+
     def sensor(self) -> SensorModel:
         """The scenario's sensor (its biases follow the seed)."""
         return SensorModel(self.noise, self.rate_hz, self.seed, int(self.start_counter or 0))
@@ -340,6 +369,8 @@ def scripted_run(fault: str | None, angle_deg: float) -> dict[str, object]:
         return {"angle_deg": min(angle_deg * WRONG_ANGLE_FACTOR, 30.0)}
     if fault == "double-push":
         return {"angle_deg": angle_deg, "pushes_again": (0,)}
+    if fault == "bump":
+        return {"angle_deg": angle_deg, "bumps_before": (0,), "release_after_s": 10.0 + BUMP_BEFORE_TILT_S}
     if fault == "hard-push":
         shove_s = abs(angle_deg) / HARD_PUSH_DEG_S
         return {"angle_deg": angle_deg, "handling": Handling(tilt_s=(shove_s, shove_s))}

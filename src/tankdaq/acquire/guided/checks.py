@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..events import ModelMoved
 from .plan import Acceptance, Condition
 
 #: why a decay ended early, by its settle reason
@@ -88,6 +89,25 @@ def check_decay(
     reasons += [f"fit: {line}" for line in measured.fit_warnings]  # never accepted silently
     if earlier:
         reasons += _repeat_reasons(measured, earlier, a)
+    return reasons
+
+
+def watch_reasons(stood: list[ModelMoved]) -> list[str]:
+    """Why a decay should be repeated for what the watch saw standing at its release (``guided.watch``):
+    a bump the model had not settled from, a drifted level (off level is the still-water check's)."""
+    reasons = []
+    for moved in stood:
+        if moved.kind == "bump":
+            reasons.append(
+                f"released after a bump the model had not settled from (spread {moved.spread_deg:.2f} deg, "
+                f"rate {moved.rate_deg_s:.1f} deg/s rms at t = {moved.t_s:.1f} s); wait for still water"
+            )
+        elif moved.kind == "drift":
+            reasons.append(
+                f"released from a drifted level: still water at {moved.angle_deg:+.2f} deg, "
+                f"{moved.angle_deg - moved.reference_deg:+.2f} deg from the {moved.reference_deg:+.2f} "
+                f"measured when the draft was set (tolerance {moved.limit_deg:g}); re-trim"
+            )
     return reasons
 
 

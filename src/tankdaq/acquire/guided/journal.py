@@ -61,7 +61,7 @@ class SessionLog:
             self.lines.append(number)
         return records
 
-    def append(self, kind: str, **fields: Any) -> dict[str, Any]:
+    def append(self, kind: str, /, **fields: Any) -> dict[str, Any]:
         record = {"type": kind, "at": datetime.now(UTC).isoformat(timespec="milliseconds"), **fields}
         data = (json.dumps(record, default=str) + "\n").encode()
         fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)

@@ -7,12 +7,17 @@ The device is opened once and streams for the whole session (``acquire.streaming
 through its plan on its typed events. For each condition the operator is told what to do and the
 session feeds the stream until that decay settles (on port ``sim`` the simulated sensor plays the decay
 asked for); the still water before a draft's first decay is measured from the same stream
-(``LevelCheck``). The decay is measured (``guided.measure``) and checked (``guided.checks``) as soon as it
-settles, and the operator (``guided.operator``) accepts it, repeats it, skips the condition or adds a
-note. When every condition has its repeats, the report of the accepted decays is written
-(``guided.report``). The session hears each recording as typed events (``acquire.events``): it prints
-them with its decay numbers, and a recording stopped by Ctrl-C or SIGTERM (``Stopped``) ends ``run``
-with ``stopped`` set, every file closed, never by an exception.
+(``LevelCheck``), and from then on the model is watched between decays (``guided.watch``: drift, a
+bump, level, each a typed ``ModelMoved``). The decay is measured (``guided.measure``) and checked
+(``guided.checks``, with what the watch saw standing at its release) as soon as it settles, and the
+operator (``guided.operator``) accepts it, repeats it, skips the condition or adds a note. Every
+question is asked on a thread of its own while the session's thread feeds the stream
+(``StreamingDaemon.stream_during``): a long pause piles nothing up, and a decay released while nobody
+asked for one is recorded, then kept and logged as rejected (``guided.recovery``). When every condition
+has its repeats, the device is closed and the report of the accepted decays written (``guided.report``).
+The session hears each recording as typed events (``acquire.events``): it prints them with its decay
+numbers, and a Ctrl-C, SIGTERM or SIGHUP, in a decay or at a question (``Stopped``), ends ``run`` with
+``stopped`` set, every file closed, never by an exception.
 
 Everything that happens goes to ``session.jsonl`` under a lock (``guided.journal``), fsynced before the
 session goes on. The session's state is only ever derived from that file (``guided.state``), so
@@ -38,24 +43,25 @@ from ...config_rules import path_in
 from ...errors import InputError
 from ...plans import PLAN_AXES, CampaignPlan
 from ..daemon import RecordSettings
-from ..events import DecayOutcome, DeviceReady, Event, Notice, Settled, Stopped, ViewerNote
+from ..events import DecayOutcome, DeviceReady, Event, ModelMoved, Notice, Settled, Stopped, ViewerNote
 from ..listeners import EventLog, EventPrinter
 from ..sinks import Sink
 from ..streaming import StreamingDaemon
-from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level
+from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level, watch_reasons
 from .journal import LOG_NAME, SessionLock, SessionLog
 from .measure import LEVEL_S, LevelCheck, measure_decay
 from .operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
 from .panel import open_panel, show_condition
 from .plan import Acceptance, Condition, plan_conditions
-from .recovery import adopt_orphans, mark_missing
+from .recovery import RELEASED_BETWEEN, adopt_orphans, mark_missing
 from .report import REPORT_DIR, write_session_report
 from .state import RunEntry, SessionState
+from .watch import ModelWatch
 
 if TYPE_CHECKING:
     from ...viz.campaign_view import CampaignView
 
-#: events shown once in a session (every decay opens the device again; the views say the same)
+#: events shown once in a session (the device's lines; each decay's view says the same viewer line)
 SHOWN_ONCE = (Notice, DeviceReady, ViewerNote)
 
 
@@ -118,7 +124,8 @@ class CampaignSession:
         self.view: CampaignView | None = None
         self.stopped: Stopped | None = None  # how the recording was stopped, when it was (run() returns)
         self.level = LevelCheck(plan.axis)
-        self.heard = EventLog()  # what the recorder said, typed: the session moves on its events
+        self.watch = ModelWatch(plan.axis, self.acceptance.level_tolerance_deg, self._emit)
+        self.heard = EventLog(self._react)  # what the recorder said, typed: the session moves on its events
         self.daemon: StreamingDaemon | None = None  # opened by the first step that needs the device
         self._device = contextlib.ExitStack()
 
@@ -161,19 +168,38 @@ class CampaignSession:
                 if self.view is not None:
                     self.view.close()
 
-    def _stream(self) -> StreamingDaemon:
-        """The session's one recorder: the device opened and configured at the first step that needs it,
-        streaming until the session ends (``run`` closes it)."""
-        if self.daemon is None:
-            first = self.conditions[0]
-            settings = self._record_settings(first, 0)
-            if settings.port == "sim":  # still water until the session asks for a decay
-                settings = dataclasses.replace(settings, sim_overrides={"runs": 0})
-            sinks = [self.level, self.printer, self.heard, *self.listeners]
-            daemon = StreamingDaemon(settings, sinks=sinks)
+    def _open_stream(self) -> Stopped | None:
+        """The session's one recorder: the device opened and configured before the first question, streaming
+        until the session ends (``run`` closes it); a signal while it opens: the ``Stopped``."""
+        first = self.conditions[0]
+        settings = self._record_settings(first, 0)
+        if settings.port == "sim":  # still water until the session asks for a decay
+            settings = dataclasses.replace(settings, sim_overrides={"runs": 0})
+        sinks = [self.level, self.watch, self.printer, self.heard, *self.listeners]
+        daemon = StreamingDaemon(settings, sinks=sinks)
+        try:
             self._device.enter_context(daemon.streaming())
-            self.daemon = daemon
+        except KeyboardInterrupt:  # nothing was recorded yet
+            stopped = Stopped(daemon.stopped_by or "SIGINT", 0)
+            daemon.emit(stopped)
+            return stopped
+        self.daemon = daemon
+        return None
+
+    def _stream(self) -> StreamingDaemon:
+        """The session's recorder, opened by ``_lead`` before anything is asked."""
+        assert self.daemon is not None, "the stream opens before the session leads any step"
         return self.daemon
+
+    def _emit(self, event: Event) -> None:
+        """An event of the session's own (the watch's) for every listener of the stream."""
+        if self.daemon is not None:
+            self.daemon.emit(event)
+
+    def _react(self, event: Event) -> None:
+        """What the watch saw goes to the session file as it is heard."""
+        if isinstance(event, ModelMoved):
+            self.log.append("watch", **{k: v for k, v in event.record().items() if k != "event"})
 
     def _open_log(self) -> SessionState:
         records = self.log.read()
@@ -219,31 +245,55 @@ class CampaignSession:
         self.printer.on_event(ViewerNote(line))
 
     def _run_name(self, _event: Event) -> str | None:
-        """The daemon's run is the session's decay."""
-        return None if self._decay is None else f"decay {self._decay}"
+        """The daemon's run is the session's decay; a release while none was asked for is between decays."""
+        return "between decays" if self._decay is None else f"decay {self._decay}"
 
     def _show_condition(self, state: SessionState, condition: Condition) -> None:
         show_condition(self._panel(), state, condition)
 
     def _lead(self, state: SessionState) -> SessionState:
+        if state.unjudged() is None and state.next_condition() is None:
+            return self._finish(state)
+        stopped = self._open_stream()
         pending = state.unjudged()
-        if pending is not None:  # recorded before the stop, never judged
-            state = self._judge(state, pending)
-        while (condition := state.next_condition()) is not None:
+        if stopped is None and pending is not None:  # recorded before the stop, never judged
+            step = self._judge(state, pending)
+            stopped = step if isinstance(step, Stopped) else None
+        while stopped is None:
+            stopped = self._settle_unexpected()
+            state = self._reload()
+            if stopped is not None or (condition := state.next_condition()) is None:
+                break
             self._progress(state, condition)
             if state.draft_ready != condition.draft:
                 step = self._set_draft(state, condition)
             else:
                 step = self._record_one(state, condition)
-            if isinstance(step, Stopped):  # the recording was stopped: the session ends, resumable
-                self.stopped = step
-                return self._reload()
-            state = step
+            stopped = step if isinstance(step, Stopped) else None
+        stopped = stopped or self._stream().stream_until(lambda: True)  # a signal since the last step
+        if stopped is not None:  # the recording was stopped: the session ends, resumable
+            self.stopped = stopped
+            return self._reload()
+        self._device.close()  # the report needs no device
+        return self._finish(state)
+
+    def _finish(self, state: SessionState) -> SessionState:
         self._progress(state, None)
         if not state.report:
             self._write_report(state)
             state = SessionState.from_log(self.log.read(), self.conditions, state.repeats)
         return state
+
+    def _settle_unexpected(self) -> Stopped | None:
+        """A decay released while none was asked for (the model moved during a question): recorded to its
+        settle, then kept and logged as rejected, as a recording the log never heard of is."""
+        daemon = self._stream()
+        if daemon.decay_under_way:
+            stopped = daemon.stream_until(lambda: not daemon.decay_under_way)
+            if stopped is not None:
+                return stopped
+        adopt_orphans(self.log, self._reload(), self.on_line, RELEASED_BETWEEN)
+        return None
 
     def _reload(self) -> SessionState:
         return SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
@@ -260,10 +310,13 @@ class CampaignSession:
             Progress(condition, repeat, done, total, state.decays, time.monotonic() - self._started, left)
         )
 
-    def _ask(self, question: Question, decay: int | None) -> str:
-        """Ask until the answer is a choice; notes are logged on the way."""
+    def _ask(self, question: Question, decay: int | None) -> str | Stopped:
+        """Ask until the answer is a choice, the stream fed meanwhile; notes are logged on the way."""
         while True:
-            answer = self.operator.ask(question).strip()
+            answer = self._stream().stream_during(lambda: self.operator.ask(question))
+            if isinstance(answer, Stopped):
+                return answer
+            answer = answer.strip()
             if answer.startswith("n ") or answer == "n":
                 text = answer[2:].strip()
                 if text:
@@ -279,7 +332,10 @@ class CampaignSession:
         """The operator sets the draft and says when; the still water is then measured before the first
         decay: off level (or still moving), the question comes again."""
         angles = [c.angle_deg for c in self.conditions if c.draft == condition.draft]
+        self.watch.disarm()  # the model is handled on purpose while the draft is set
         key = self._ask(draft_question(condition.draft, angles), None)
+        if isinstance(key, Stopped):
+            return key
         if key == "s":
             for c in self.conditions:
                 if c.draft == condition.draft and state.status(c) != "accepted":
@@ -296,12 +352,12 @@ class CampaignSession:
         if level:
             self.on_line(f"{still}: level")
             self.log.append("draft", draft=condition.draft, action="ready")
+            self.watch.arm(mean_deg)  # from now on the model is watched between decays
         else:
             self.on_line(
                 f"{still}: not level or not at rest (tolerance {self.acceptance.level_tolerance_deg:g} deg, "
                 f"sd {STILL_SD_DEG:g}); re-trim, let it settle and confirm again"
             )
-        adopt_orphans(self.log, self._reload(), self.on_line)  # a decay the level check recorded: rejected
         return self._reload()
 
     def _measure_level(self, condition: Condition) -> tuple[float, float] | Stopped:
@@ -343,6 +399,7 @@ class CampaignSession:
         measured = measure_decay(outcome, condition.angle_deg)
         earlier = [Measured(**r.measured) for r in state.accepted(condition)]
         reasons = check_decay(measured, condition, self.acceptance, earlier)
+        reasons += watch_reasons(self.watch.standing_at(decay))  # a bump not settled from, a drifted level
         self.log.append(
             "run",
             decay=decay,
@@ -360,7 +417,7 @@ class CampaignSession:
         state = self._reload()
         return self._judge(state, state.runs[-1])
 
-    def _judge(self, state: SessionState, entry: RunEntry) -> SessionState:
+    def _judge(self, state: SessionState, entry: RunEntry) -> SessionState | Stopped:
         condition = entry.condition
         for reason in entry.reasons:
             self.on_line(f"decay {entry.decay} flagged: {reason}")
@@ -373,6 +430,8 @@ class CampaignSession:
         rejected = sum(1 for r in state.runs if r.condition == condition and r.verdict == "rejected")
         question = verdict_question(entry.decay, condition, bool(entry.reasons), rejected)
         key = self._ask(question, entry.decay)
+        if isinstance(key, Stopped):  # unanswered: asked again on resume
+            return key
         verdict = "accepted" if key == "a" else "rejected"
         self.log.append(
             "verdict", decay=entry.decay, verdict=verdict, action=question.choices[key], reasons=entry.reasons

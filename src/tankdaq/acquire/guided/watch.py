@@ -1,0 +1,223 @@
+"""The model watched between decays, on the session's one stream: drift, a bump, level.
+
+Labs wait for still water and level the model before each run (ITTC 7.5-02-07-04.5 §3.1.6: record from
+rest, no disturbance; docs/session.md). ``ModelWatch`` is a sink of the session's pipeline: from the
+level check that sets a draft (its mean is the reference) and after each decay once the model is at rest
+again, until the next release, it judges the decay axis over windows of ``WINDOW_S`` of device time:
+
+- a window is quiet (the model at rest) when the angle's spread is at most ``STILL_SD_DEG`` (the level
+  check's "at rest") and the rate of turn's rms about its mean at most ``STILL_RATE_DEG_S``; it is shaken
+  when either is well above still water (``BUMP_SD_DEG``, ``BUMP_RATE_DEG_S``: more than a decay's
+  swing once it has settled, under 0.5 deg); in between the model moves a little (not at rest, no bump);
+- a shaken window that stays within ``TILT_MIN_DEG`` of the rest angle, followed by one that is not a
+  tilt, is a **bump** (a window that goes further is the hand's tilt, the release detector's business);
+- a quiet window whose mean is further than the plan's level tolerance from the reference is **drift**,
+  one further than that from zero (and not drifted) is off **level**.
+
+Each is said once as a ``ModelMoved`` event (``emit``: to every listener of the pipeline) while it
+stands. At the next release ``at_release`` keeps what stood then: a bump the model had not been quiet
+``SETTLED_S`` after before the tilt began, and a drift or level standing; the session's checks flag
+that decay (``checks.watch_reasons``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...samples import AXIS_FIELDS
+from ..events import Event, ModelMoved, PutBack, Released
+from ..release import TILT_MIN_DEG
+from ..sinks import Block, Decay, Sink
+from .checks import STILL_SD_DEG
+
+#: Device seconds of each window the watch judges (a bump shorter than two of them may pass unseen).
+WINDOW_S = 1.0
+#: Rate of turn (rms about its mean, deg/s) at most which the model is at rest: well above a still-water
+#: gyro's noise (MTi-G at 400 Hz: 0.4 deg/s rms).
+STILL_RATE_DEG_S = 1.0
+#: A window is shaken (a bump, unless a tilt follows) above this angle spread (deg) or rate rms (deg/s): a
+#: decay's swing once settled (under 0.5 deg, ITTC) stays below both at periods over 1.5 s.
+BUMP_SD_DEG = 0.5
+BUMP_RATE_DEG_S = 2.0
+#: Quiet device seconds after a bump before the model counts as settled (the release detector's settle
+#: window: a decay ends after this long below its threshold).
+SETTLED_S = 3.0
+
+
+@dataclass(frozen=True)
+class _Window:
+    """One judged window (degrees): where it starts and ends, mean and spread, the rate's rms, how far
+    from rest it went."""
+
+    t_s: float
+    end_s: float
+    mean_deg: float
+    spread_deg: float
+    rate_deg_s: float
+    excursion_deg: float
+
+    @property
+    def quiet(self) -> bool:
+        return self.spread_deg <= STILL_SD_DEG and self.rate_deg_s <= STILL_RATE_DEG_S
+
+    @property
+    def shaken(self) -> bool:
+        return self.spread_deg > BUMP_SD_DEG or self.rate_deg_s > BUMP_RATE_DEG_S
+
+
+class ModelWatch(Sink):
+    """Drift, bumps and level between decays; ``arm(reference_deg)`` once a draft's level is measured."""
+
+    def __init__(self, axis: str, level_tolerance_deg: float, emit: Callable[[Event], None]) -> None:
+        self.angle_field, self.rate_field = AXIS_FIELDS[axis]
+        self.level_tolerance_deg = level_tolerance_deg
+        self.emit = emit
+        self.reference_deg: float | None = None  # None: disarmed (a draft being set)
+        self.at_release: tuple[int, list[ModelMoved]] | None = None  # (decay, what stood at its release)
+        self.disarm()
+
+    def arm(self, reference_deg: float) -> None:
+        """Watch from now on against ``reference_deg``, the still water measured when the draft was set."""
+        self.disarm()
+        self.reference_deg = reference_deg
+
+    def disarm(self) -> None:
+        """Stop watching (the operator changes the draft: the model is handled on purpose)."""
+        self.reference_deg = None
+        self._blocks: list[np.ndarray] = []
+        self._rest_deg: float | None = None  # the mean of the last quiet window
+        self._quiet_since = math.nan  # device time the model has been quiet since (nan: it is not)
+        self._quiet_s = 0.0  # how long the latest quiet stretch lasted (up to its last quiet window)
+        self._settling = False  # a decay's tail: no bump until the first quiet window
+        self._pending: _Window | None = None  # a shaken window near rest: a bump unless a tilt follows
+        self._bump: ModelMoved | None = None  # the last bump since the last decay
+        self._bump_open = False  # said for the disturbance under way
+        self._tilted = False  # the hand's tilt seen: windows wait for the release or the put-back
+        self._standing: dict[str, ModelMoved] = {}  # drift or level, said and not yet over
+
+    # ---- the sink ----------------------------------------
+
+    def on_block(self, block: Block, decay: Decay | None) -> None:
+        if decay is not None:  # a decay under way: its motion is the recording's
+            self._blocks, self._settling, self._pending = [], True, None
+            return
+        if self.reference_deg is None or not block.samples.size:
+            return
+        self._blocks.append(block.samples)
+        if float(self._blocks[-1]["t"][-1] - self._blocks[0]["t"][0]) < WINDOW_S:
+            return
+        samples = np.concatenate(self._blocks)
+        t, start = samples["t"], 0
+        while t[-1] - t[start] >= WINDOW_S:  # windows of device time, however the reads cut the stream
+            stop = int(np.searchsorted(t, t[start] + WINDOW_S))
+            window = self._window(samples[start:stop])
+            if window is not None:
+                self._judge(window)
+            start = stop
+        self._blocks = [samples[start:]]
+
+    def on_event(self, event: Event) -> None:
+        if isinstance(event, Released) and self.reference_deg is not None:
+            self.at_release = (event.run, self._stood())
+            self._bump, self._bump_open, self._tilted, self._quiet_since = None, False, False, math.nan
+            self._quiet_s = 0.0
+        elif isinstance(event, PutBack):
+            self._tilted = False
+
+    def standing_at(self, decay: int) -> list[ModelMoved]:
+        """What stood when ``decay`` was released (empty: nothing, or the watch was not armed then)."""
+        if self.at_release is None or self.at_release[0] != decay:
+            return []
+        return self.at_release[1]
+
+    # ---- judging ----------------------------------------
+
+    def _window(self, samples: np.ndarray) -> _Window | None:
+        angle = np.degrees(samples[self.angle_field])
+        rate = np.degrees(samples[self.rate_field])
+        angle, rate = angle[np.isfinite(angle)], rate[np.isfinite(rate)]
+        if not angle.size:
+            return None
+        rest = self._rest_deg if self._rest_deg is not None else self.reference_deg
+        assert rest is not None
+        return _Window(
+            float(samples["t"][0]),
+            float(samples["t"][-1]),
+            float(angle.mean()),
+            float(angle.std()),
+            float(rate.std()) if rate.size else 0.0,
+            float(np.max(np.abs(angle - rest))),
+        )
+
+    def _judge(self, window: _Window) -> None:
+        if self._tilted and (not window.quiet or window.excursion_deg >= TILT_MIN_DEG):
+            return  # held or swinging for the release: the detector's
+        if window.quiet:
+            self._quiet(window)
+            return
+        if window.excursion_deg >= TILT_MIN_DEG:  # the hand's tilt (or a shove as big: a decay if released)
+            self._tilted, self._pending = True, None
+            return
+        if self._pending is not None:  # a window near rest after the shaken one: not a tilt, a bump
+            self._said_bump(self._pending)
+            return
+        self._quiet_since = math.nan  # not at rest
+        if not (self._settling or self._bump_open) and window.shaken:
+            self._pending = window  # a bump, or the first moments of a tilt: the next window says
+
+    def _quiet(self, window: _Window) -> None:
+        if self._pending is not None:  # shaken, then at rest: a knock, not a tilt
+            self._said_bump(self._pending)
+        self._pending, self._bump_open, self._settling = None, False, False
+        self._tilted = False  # back near rest without a release (put back)
+        if math.isnan(self._quiet_since):
+            self._quiet_since = window.t_s
+        self._quiet_s = window.end_s - self._quiet_since
+        self._rest_deg = window.mean_deg
+        self._check_level(window)
+
+    def _said_bump(self, window: _Window) -> None:
+        self._pending, self._quiet_since, self._quiet_s = None, math.nan, 0.0
+        if self._bump_open:
+            return
+        self._bump_open = True
+        self._bump = self._moved("bump", window, STILL_SD_DEG)
+        self.emit(self._bump)
+
+    def _check_level(self, window: _Window) -> None:
+        reference, tolerance = self.reference_deg, self.level_tolerance_deg
+        assert reference is not None
+        kind = (
+            "drift"
+            if abs(window.mean_deg - reference) > tolerance
+            else "level"
+            if abs(window.mean_deg) > tolerance
+            else None
+        )
+        if kind is None:
+            self._standing = {}
+        elif kind not in self._standing:
+            self._standing = {kind: self._moved(kind, window, tolerance)}
+            self.emit(self._standing[kind])
+
+    def _moved(self, kind: str, window: _Window, limit_deg: float) -> ModelMoved:
+        assert self.reference_deg is not None
+        return ModelMoved(
+            kind,
+            window.mean_deg,
+            window.spread_deg,
+            window.rate_deg_s,
+            self.reference_deg,
+            limit_deg,
+            window.t_s,
+        )
+
+    def _stood(self) -> list[ModelMoved]:
+        """What stood at a release: a bump not followed by ``SETTLED_S`` of quiet before the tilt began,
+        and a drift or off level."""
+        unsettled = self._bump is not None and (self._bump_open or self._quiet_s < SETTLED_S)
+        return ([self._bump] if unsettled and self._bump else []) + list(self._standing.values())
