@@ -27,6 +27,8 @@ BUSY_TIMEOUT_MS = 30_000
 OFF = ("none", "off", "")
 #: The execution option that marks a connection as a reader (``Catalogue.reading``).
 READ_ONLY = "tankdaq_read_only"
+#: How many values one look-up asks for (a bound parameter list, well under every driver's limit).
+LOOKUP_BATCH = 500
 
 
 class CatalogueError(TankdaqError):

@@ -1,10 +1,10 @@
 """``tankdaq catalogue index DIR``: the catalogue rebuilt from the files, idempotently.
 
-Every decay file (a recording, a lab's CSV decay) and every file ``tankdaq export`` wrote (HDF5, a CSV
-with its sidecar) is known by its SHA-256: a file seen before is left alone, a file that moved has its
-path updated, a new one is read and added (an export to ``exports``, tied to its recording); each
-session folder's log then gives its decays their verdicts. Running it twice changes nothing; a
-catalogue lost or never written is made again from here.
+Every decay file (a recording, a lab's CSV decay) and every file ``tankdaq export`` wrote (HDF5, Parquet,
+MATLAB, a CSV with its sidecar) is known by its SHA-256: a file seen before is left alone, a file that
+moved has its path updated, a new one is read and added (an export to ``exports``, tied to its
+recording); each session folder's log then gives its decays their verdicts. Running it twice changes
+nothing; a catalogue lost or never written is made again from here.
 """
 
 from __future__ import annotations
@@ -16,12 +16,9 @@ from pathlib import Path
 import sqlalchemy as sa
 
 from ..errors import RecordingError
-from .database import Catalogue, decays, exports
+from .database import LOOKUP_BATCH, Catalogue, decays, exports
 from .rows import DECAY_SUFFIXES, EXPORT_SUFFIXES, export_metadata, file_sha256, utc_now
 from .writing import add_export, add_file, record_session
-
-#: How many hashes one look-up asks for (a bound parameter list, well under every driver's limit).
-LOOKUP_BATCH = 500
 
 
 @dataclass
