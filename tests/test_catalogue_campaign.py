@@ -5,6 +5,7 @@ the ones ``tankdaq catalogue index`` makes of the same files.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 from pathlib import Path
@@ -18,8 +19,9 @@ import tankdaq
 from tankdaq import validation
 from tankdaq.catalogue.database import decays, hulls, open_catalogue
 from tankdaq.catalogue.hooks import CatalogueWriter
-from tankdaq.catalogue.rows import worker_row
+from tankdaq.catalogue.rows import find_hull, hull_version, worker_row
 from tankdaq.cli import app
+from tankdaq.config import load_hull
 from tankdaq.ident.campaign_stream import FileWork
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.store.export import export_recording
@@ -127,3 +129,22 @@ def test_a_catalogue_that_cannot_answer_asks_for_no_rows_in_one_line(lab: Path, 
     with CatalogueWriter(f"sqlite:///{corrupt}", lines.append) as writer:
         assert writer.uncatalogued(sorted(lab.rglob("*.mcap"))) == []
     assert len(lines) == 1 and lines[0].startswith("catalogue: ") and "index" in lines[0]
+
+
+def test_a_hull_file_that_changed_is_read_anew_even_at_the_same_size(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Rows find each decay's hull once per content: a GM changed in place (same size, same second) is
+    the new hull, in the row's B̂44 and in its hull version alike."""
+    monkeypatch.setenv("TANKDAQ_HULLS_DIR", str(tmp_path))
+    shipped = Path(str(load_hull("swath").path)).read_text()
+    assert "gm_m = 0.08\n" in shipped
+    mine = tmp_path / "swath.toml"
+    mine.write_text(shipped)
+    first = find_hull("swath")
+    assert first is not None and first.path == mine and find_hull("swath") is first  # parsed once
+    mine.write_text(shipped.replace("gm_m = 0.08\n", "gm_m = 0.09\n"))
+    second = find_hull("swath")
+    assert second is not None and second is not first
+    assert (first.particulars("roll").gm_m, second.particulars("roll").gm_m) == (0.08, 0.09)
+    assert hull_version(second)["sha256"] == hashlib.sha256(mine.read_bytes()).hexdigest()

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..config import Hull, load_hull, parse_draft
+from ..config import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError
 from .database import one_line
 
@@ -59,13 +59,26 @@ def hull_version(hull: Hull) -> dict[str, Any] | None:
     }
 
 
+#: Hulls parsed, by their file and its content's SHA-256: the decays of a campaign or a folder name the
+#: same few hull files, and parsing one (TOML, every value checked: 1 ms) costs more than the rest of a
+#: decay's row; a hull file that changed hashes anew and is parsed again.
+_PARSED_HULLS: dict[tuple[str, str], Hull] = {}
+MAX_PARSED_HULLS = 64
+
+
 def find_hull(name: str | None) -> Hull | None:
     """The hull a file names, or None when it is not known here (the row keeps the name)."""
     if not name:
         return None
     try:
-        return load_hull(name)
-    except TankdaqError:
+        path, _origin = locate_hull(name)
+        key = (str(path), hashlib.sha256(path.read_bytes()).hexdigest())
+        if key not in _PARSED_HULLS:
+            if len(_PARSED_HULLS) >= MAX_PARSED_HULLS:
+                _PARSED_HULLS.clear()
+            _PARSED_HULLS[key] = load_hull(name)
+        return _PARSED_HULLS[key]
+    except (TankdaqError, OSError):
         return None
 
 
