@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 import tankdaq
 from tankdaq import validation
-from tankdaq.catalogue.database import decays, hulls, open_catalogue
+from tankdaq.catalogue.database import PATH_INDEXES, decays, hulls, open_catalogue, schema_version
 from tankdaq.catalogue.hooks import CatalogueWriter
 from tankdaq.catalogue.rows import find_hull, hull_version, worker_row
 from tankdaq.cli import app
@@ -148,3 +148,17 @@ def test_a_hull_file_that_changed_is_read_anew_even_at_the_same_size(
     assert second is not None and second is not first
     assert (first.particulars("roll").gm_m, second.particulars("roll").gm_m) == (0.08, 0.09)
     assert hull_version(second)["sha256"] == hashlib.sha256(mine.read_bytes()).hexdigest()
+
+
+def test_a_catalogue_of_schema_2_gets_its_path_indexes_when_opened(tmp_path: Path) -> None:
+    """A fit is written onto its rows by path: a catalogue written before the path indexes gets them."""
+    url = f"sqlite:///{tmp_path / 'catalogue.sqlite'}"
+    with open_catalogue(url) as catalogue, catalogue.engine.begin() as connection:  # back to version 2
+        for index in PATH_INDEXES:
+            index.drop(connection)
+        connection.execute(schema_version.delete().where(schema_version.c.version > 2))
+    with open_catalogue(url) as catalogue, catalogue.reading() as connection:
+        inspector = sa.inspect(connection)
+        names = {found["name"] for table in ("decays", "exports") for found in inspector.get_indexes(table)}
+        version = connection.execute(sa.select(sa.func.max(schema_version.c.version))).scalar()
+    assert {"ix_decays_path", "ix_exports_source_path"} <= names and version == 3
