@@ -17,7 +17,14 @@ from typer.testing import CliRunner
 
 import tankdaq
 from tankdaq import validation
-from tankdaq.catalogue.database import PATH_INDEXES, decays, hulls, open_catalogue, schema_version
+from tankdaq.catalogue.database import (
+    PATH_INDEXES,
+    decays,
+    hulls,
+    open_catalogue,
+    resolve_url,
+    schema_version,
+)
 from tankdaq.catalogue.hooks import CatalogueWriter
 from tankdaq.catalogue.rows import find_hull, hull_version, worker_row
 from tankdaq.cli import app
@@ -45,7 +52,7 @@ def lab(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _table(url: str, table: sa.Table) -> list[dict[str, Any]]:
     """A table's rows without when they were written, by path (decays) or hash (hulls)."""
-    with open_catalogue(url) as catalogue, catalogue.reading() as connection:
+    with open_catalogue(str(resolve_url(url))) as catalogue, catalogue.reading() as connection:
         rows = [
             {k: v for k, v in r._mapping.items() if k not in WHEN}
             for r in connection.execute(sa.select(table))
@@ -59,9 +66,11 @@ def _invoke(*args: object) -> str:
     return result.stdout
 
 
-def test_a_campaigns_rows_of_files_not_catalogued_are_the_rows_index_makes(lab: Path, tmp_path: Path) -> None:
+def test_a_campaigns_rows_of_files_not_catalogued_are_the_rows_index_makes(
+    lab: Path, tmp_path: Path, catalogue_url: str
+) -> None:
     campaign = ["campaign", lab, "--model", "b1,c1", "--jobs", "2", "--catalogue"]
-    by_campaign, by_index = (f"sqlite:///{tmp_path / name}.sqlite" for name in ("campaign", "index"))
+    by_campaign, by_index = catalogue_url, f"sqlite:///{tmp_path / 'index.sqlite'}"
     _invoke("catalogue", "index", lab / "old", "--catalogue", by_campaign)  # two rows there, five not
     _invoke(*campaign, by_campaign)
     _invoke("catalogue", "index", lab, "--catalogue", by_index)

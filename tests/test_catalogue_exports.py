@@ -20,7 +20,7 @@ from scipy.io import savemat
 from typer.testing import CliRunner
 
 import tankdaq
-from tankdaq.catalogue.database import exports, open_catalogue
+from tankdaq.catalogue.database import exports, open_catalogue, resolve_url
 from tankdaq.cli import app
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
@@ -49,7 +49,7 @@ def _export(recording: Path, file_format: str, out: Path) -> Path:
 
 
 def _exports(url: str) -> dict[str, dict]:
-    with open_catalogue(url) as catalogue, catalogue.reading() as connection:
+    with open_catalogue(str(resolve_url(url))) as catalogue, catalogue.reading() as connection:
         return {Path(r.path).name: dict(r._mapping) for r in connection.execute(sa.select(exports))}
 
 
@@ -117,7 +117,7 @@ def test_another_tools_files_and_a_missing_pyarrow_are_skipped_with_their_reason
 
 
 def test_runs_say_where_each_runs_exports_are_in_the_table_json_csv_and_the_api(
-    recordings: list[Path], tmp_path: Path
+    recordings: list[Path], tmp_path: Path, catalogue_url: str
 ) -> None:
     """HDF5 and CSV of one recording, none of the other; the exports indexed before their recording
     (not tied by hash yet) are found by the path they were exported from."""
@@ -126,7 +126,7 @@ def test_runs_say_where_each_runs_exports_are_in_the_table_json_csv_and_the_api(
     with_exports, without = (Path(shutil.copy(path, lab)) for path in recordings)
     h5 = _export(with_exports, "h5", copies)
     csv = _export(with_exports, "csv", copies)
-    url = f"sqlite:///{tmp_path / 'catalogue.sqlite'}"
+    url = catalogue_url
     _index(copies, url)  # before the recordings: tied by path, not yet by hash
     assert {row["source_sha256"] for row in _exports(url).values()} == {None}
     _index(lab, url)
