@@ -98,6 +98,7 @@ def test_another_tools_files_and_a_missing_pyarrow_are_skipped_with_their_reason
     folder.mkdir()
     _export(recordings[0], "parquet", folder)
     savemat(folder / "other_tool.mat", {"tankdaq": {"meta": {"format": "not ours"}}})
+    (folder / "cut.mat").write_bytes(b"MATLAB 5.0 MAT-file, cut")  # scipy meets it with an IndexError
     with h5py.File(folder / "other_tool.h5", "w") as other:
         other.create_dataset("t", data=[0.0, 0.1])
     monkeypatch.setitem(sys.modules, "pyarrow", None)  # what `import pyarrow` meets where it is absent
@@ -106,9 +107,10 @@ def test_another_tools_files_and_a_missing_pyarrow_are_skipped_with_their_reason
         app, ["catalogue", "index", str(folder), "--catalogue", str(tmp_path / "c.sqlite")]
     )
     assert result.exit_code == 0, result.output
-    assert "0 added, 0 moved, 0 unchanged, 3 skipped" in result.stdout
+    assert "0 added, 0 moved, 0 unchanged, 4 skipped" in result.stdout
     skipped = sorted(line for line in result.stderr.splitlines() if line.startswith("skipped "))
-    assert len(skipped) == 3
+    assert len(skipped) == 4
+    assert "not a MATLAB file tankdaq can read" in next(line for line in skipped if "cut.mat" in line)
     assert "needs pyarrow: pip install tankdaq[parquet]" in next(
         line for line in skipped if ".parquet" in line
     )

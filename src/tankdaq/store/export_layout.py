@@ -82,9 +82,13 @@ def read_parquet_metadata(path: Path) -> dict[str, object] | None:
     """The metadata of a Parquet file ``tankdaq export`` wrote (the JSON under its schema metadata key
     ``tankdaq``, read from the footer alone); None for another tool's Parquet file. Needs pyarrow
     (``ImportError`` without it); a file pyarrow cannot read raises ``OSError`` or ``ValueError``."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
-    text = (pq.read_schema(path).metadata or {}).get(b"tankdaq")
+    try:
+        text = (pq.read_schema(path).metadata or {}).get(b"tankdaq")
+    except pa.ArrowException as exc:  # not a Parquet file, or one of a kind pyarrow does not read
+        raise ValueError(str(exc)) from None
     try:
         found = json.loads(text) if text is not None else None
     except (UnicodeDecodeError, json.JSONDecodeError):
@@ -98,9 +102,14 @@ def read_mat_metadata(path: Path) -> dict[str, object] | None:
     scipy cannot read raises ``ValueError`` or ``OSError``."""
     from scipy.io import loadmat, whosmat
 
-    if not any(name == "tankdaq" for name, _shape, kind in whosmat(path) if kind == "struct"):
-        return None  # whosmat reads the variables' headers only: another tool's file is not loaded
-    struct = loadmat(path, variable_names=["tankdaq"], simplify_cells=True)["tankdaq"]
+    try:
+        if not any(name == "tankdaq" for name, _shape, kind in whosmat(path) if kind == "struct"):
+            return None  # whosmat reads the variables' headers only: another tool's file is not loaded
+        struct = loadmat(path, variable_names=["tankdaq"], simplify_cells=True)["tankdaq"]
+    except OSError:
+        raise
+    except Exception as exc:  # scipy fails in many ways on bytes that are no MATLAB file (IndexError...)
+        raise ValueError(f"{type(exc).__name__}: {exc}") from None
     meta = struct.get("meta") if isinstance(struct, dict) else None
     if not isinstance(meta, dict) or meta.get("format") != EXPORT_FORMAT:
         return None
