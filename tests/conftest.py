@@ -5,6 +5,8 @@
 - ``record_settings``: record settings for the built-in simulated MTi-G, writing into the test's folder.
 - ``decay_recording``: one short decay recorded end to end into a real MCAP file, made once a session.
 - ``private_tempdir``: the temporary folder for this test alone, where a simulator would put its pty link.
+- ``postgres_url``: a throwaway PostgreSQL server for a test module's catalogues (skipped with the reason);
+  ``catalogue_url``: a test's catalogue, once a SQLite file and once that server's database.
 
 tankdaq is imported inside the fixtures, so collecting a test that uses none of them costs nothing.
 """
@@ -85,3 +87,25 @@ def decay_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     (outcome,) = RecordDaemon(settings).run()
     assert outcome.path is not None, "the simulated decay was not recorded"
     return outcome.path
+
+
+@pytest.fixture(scope="module")
+def postgres_url() -> Iterator[str]:
+    """A throwaway PostgreSQL server (tests/pg_server.py), stopped at the module's end; skipped with the
+    reason where the server binaries are not installed."""
+    from pg_server import throwaway_postgres, why_not
+
+    reason = why_not()
+    if reason is not None:
+        pytest.skip(reason)
+    with throwaway_postgres() as url:
+        yield url
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def catalogue_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
+    """An empty catalogue: a SQLite file, or a throwaway PostgreSQL server's database (skipped where
+    there is none; one server per module, so one test of a module may use it)."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'catalogue.sqlite'}"
+    return str(request.getfixturevalue("postgres_url"))

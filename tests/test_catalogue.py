@@ -16,7 +16,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import h5py
@@ -28,7 +27,6 @@ from typer.testing import CliRunner
 
 import tankdaq
 import tankdaq.config
-from pg_server import throwaway_postgres, why_not
 from tankdaq.catalogue.database import (
     SCHEMA_VERSION,
     BadCatalogueQuery,
@@ -232,16 +230,6 @@ def test_a_recorder_killed_mid_decay_leaves_no_complete_row_until_recover_and_in
 
 
 # -- two writers at once ---------------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def postgres_url() -> Iterator[str]:
-    """A throwaway PostgreSQL server (tests/pg_server.py), stopped at the end; skipped with the reason."""
-    reason = why_not()
-    if reason is not None:
-        pytest.skip(reason)
-    with throwaway_postgres() as url:
-        yield url
 
 
 def _two_writers(url: str, go: Path) -> None:

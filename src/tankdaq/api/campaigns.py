@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
     from ..config import Hull
     from ..ident.campaign import GroupKey, GroupResult, GroupRow
-    from ..ident.campaign_stream import CampaignScan, RunRef
+    from ..ident.campaign_stream import CampaignScan, FileWork, RunRef
 
 
 @dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
@@ -112,6 +112,7 @@ def campaign(
     full_scale: bool = False,
     keep_fits: bool = False,
     on_result: Callable[[GroupResult], None] | None = None,
+    file_work: FileWork | None = None,
     progress: Progress | None = None,
 ) -> Campaign:
     """Identify a test campaign: every recording or CSV in ``inputs`` (files or folders, with their
@@ -121,9 +122,11 @@ def campaign(
     decay as ``identify`` does. ``jobs`` worker processes (at most the cores), or ``executor="dask"``
     with a ``scheduler`` address. ``report`` a folder for campaign.csv, campaign.md and the figures;
     ``full_scale`` the ship's period and damping by Froude. ``on_result`` is handed each group's whole
-    fit as it arrives (the run catalogue writes it), which is then let go unless ``keep_fits``. A file
-    that cannot be read is skipped with its line in ``skipped``; bad input raises
-    ``tankdaq.errors.InputError`` before any file is read.
+    fit as it arrives (the run catalogue writes it), which is then let go unless ``keep_fits``;
+    ``file_work`` is made of the files it wants by the workers that read them (the run catalogue: the
+    rows of files it does not hold, ``ident.campaign_stream.FileWork``). A file that cannot be read is
+    skipped with its line in ``skipped``; bad input raises ``tankdaq.errors.InputError`` before any file
+    is read.
 
     >>> result = tankdaq.campaign("recordings/campaign", hulls=["trimaran"], jobs=2)  # doctest: +SKIP
     >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s"]]  # doctest: +SKIP
@@ -145,7 +148,7 @@ def campaign(
 
         prepare.append(load_plotting)  # loaded before a pool forks: its workers draw the figures
     with campaign_executor(workers, scheduler, prepare) as pool:
-        scan = _scan(paths, start_s, end_s, pool, kept)
+        scan = _scan(paths, (start_s, end_s), pool, kept, file_work)
         groups = scan.groups()
         known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
         keep = keep_fits or folder is not None or full_scale  # their figures and lines draw the fits
@@ -177,7 +180,11 @@ def _check_campaign(model: str, jobs: int, executor: str, scheduler: str | None)
 
 
 def _scan(
-    paths: list[Path], start_s: float | None, end_s: float | None, pool: Executor | None, kept: Kept
+    paths: list[Path],
+    window: tuple[float | None, float | None],
+    pool: Executor | None,
+    kept: Kept,
+    work: FileWork | None,
 ) -> CampaignScan:
     """Every file scanned by the workers (each decay's group and lines, never its samples); the folders
     read, the files skipped and what the reading decided said in one line each. A campaign of which no
@@ -187,7 +194,11 @@ def _scan(
     with kept.task("reading", len(paths)) as advance:
         count = iter(range(1, len(paths) + 1))
         scan = scan_campaign(
-            paths, start_s, end_s, pool, lambda path: advance(next(count), description=f"reading {path.name}")
+            paths,
+            *window,
+            pool,
+            lambda path: advance(next(count), description=f"reading {path.name}"),
+            work,
         )
     if not scan.decays:
         if len(scan.skipped) == 1:

@@ -27,6 +27,8 @@ BUSY_TIMEOUT_MS = 30_000
 OFF = ("none", "off", "")
 #: The execution option that marks a connection as a reader (``Catalogue.reading``).
 READ_ONLY = "tankdaq_read_only"
+#: How many values one look-up asks for (a bound parameter list, well under every driver's limit).
+LOOKUP_BATCH = 500
 
 
 class CatalogueError(TankdaqError):
@@ -129,6 +131,14 @@ exports = sa.Table(
 )
 
 
+#: A fit is written onto its files' rows by path (identify, campaign, diagnose), and a campaign asks
+#: which of its files have a row: by an index, not a scan of every row (10 ms an update at 36 000 rows).
+PATH_INDEXES = (
+    sa.Index("ix_decays_path", decays.c.path),
+    sa.Index("ix_exports_source_path", exports.c.source_path),
+)
+
+
 def _v1_tables(connection: sa.Connection) -> None:
     for table in (hulls, sessions, decays):
         table.create(connection, checkfirst=True)
@@ -138,8 +148,13 @@ def _v2_exports(connection: sa.Connection) -> None:
     exports.create(connection, checkfirst=True)
 
 
+def _v3_path_indexes(connection: sa.Connection) -> None:
+    for index in PATH_INDEXES:
+        index.create(connection, checkfirst=True)
+
+
 #: Ordered migrations: index i brings the schema to version i + 1. Append, never edit.
-MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports]
+MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports, _v3_path_indexes]
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

@@ -12,22 +12,27 @@ from __future__ import annotations
 import functools
 import queue
 import threading
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import Future
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from ..acquire.sinks import Decay, Sink
 from .database import Catalogue, CatalogueError, describe, one_line, open_catalogue, resolve_url
 
 if TYPE_CHECKING:  # the session's module is imported by the session command only
     from ..acquire.guided.state import RunEntry
+    from ..ident.campaign_stream import FileWork
+    from .writing import Made
 
 Job = Callable[[Catalogue], object]
 #: How long a command waits at its end for the catalogue's last writes before it leaves them to index.
 CLOSE_WAIT_S = 60.0
 CATCH_UP = "the files are kept; `tankdaq catalogue index FOLDER` catches up"
-#: A campaign's group fits go to the catalogue this many to a transaction.
+#: A campaign's group fits (and the rows its workers made) go to the catalogue this many to a transaction.
 CAMPAIGN_BATCH = 200
+#: How long a campaign waits, before its scan, for the catalogue to say which files it lacks.
+ASK_WAIT_S = 10.0
 
 
 class CatalogueWriter:
@@ -37,11 +42,12 @@ class CatalogueWriter:
         self.url = url
         self.on_line = on_line
         self.failures: list[str] = []
-        self._jobs: queue.Queue[Job | None] = queue.Queue()
+        self._jobs: queue.Queue[tuple[Job, Future[object]] | None] = queue.Queue()
         self._thread: threading.Thread | None = None
         self._catalogue: Catalogue | None = None
         self._closing = False
         self._campaign: list[tuple[list[Path], dict[str, Any]]] = []  # fits not yet handed to the thread
+        self._rows: list[Made] = []  # rows made by a campaign's workers, not yet handed to the thread
 
     @classmethod
     def from_option(cls, given: str | None, on_line: Callable[[str], None]) -> CatalogueWriter:
@@ -53,23 +59,29 @@ class CatalogueWriter:
     def enabled(self) -> bool:
         return self.url is not None
 
-    def submit(self, job: Job) -> None:
-        """Queue a write; it runs after the ones before it."""
+    def submit(self, job: Job) -> Future[object]:
+        """Queue a write; it runs after the ones before it. Its future holds what it returned, or why
+        it failed (said once as a line too); off, it is None at once."""
+        done: Future[object] = Future()
         if self.url is None:
-            return
+            done.set_result(None)
+            return done
         if self._thread is None:
             self._thread = threading.Thread(target=self._serve, name="tankdaq-catalogue", daemon=True)
             self._thread.start()
-        self._jobs.put(job)
+        self._jobs.put((job, done))
+        return done
 
     def _serve(self) -> None:
-        while (job := self._jobs.get()) is not None:
+        while (item := self._jobs.get()) is not None:
+            job, done = item
             try:
                 if self._catalogue is None:
                     assert self.url is not None
                     self._catalogue = open_catalogue(self.url)
-                job(self._catalogue)
+                done.set_result(job(self._catalogue))
             except Exception as exc:
+                done.set_exception(exc)
                 self._fail(exc)
         if self._catalogue is not None:
             self._catalogue.close()
@@ -135,11 +147,47 @@ class CatalogueWriter:
             self._flush_campaign()
 
     def _flush_campaign(self) -> None:
-        from .writing import update_fits
+        """The rows the workers made, then the fits: a fit finds its file's row written."""
+        from .writing import add_rows, update_fits
 
+        rows, self._rows = self._rows, []
+        if rows:
+            self.submit(lambda catalogue: add_rows(catalogue, rows))
         batch, self._campaign = self._campaign, []
         if batch:
             self.submit(lambda catalogue: update_fits(catalogue, batch))
+
+    def file_rows(self) -> FileWork:
+        """A campaign's ``file_work``: the rows of the files this catalogue does not hold, made by the
+        workers that scan them (``rows.worker_row``), so this process only writes them, ``CAMPAIGN_BATCH``
+        to a transaction."""
+        from ..ident.campaign_stream import FileWork
+        from .rows import worker_row
+
+        return FileWork(self.uncatalogued, worker_row, self.add_rows)
+
+    def uncatalogued(self, paths: Sequence[Path], wait_s: float = ASK_WAIT_S) -> list[Path]:
+        """The decay files among ``paths`` with no row at their path, asked on the writer's thread; a
+        catalogue that does not answer within ``wait_s`` (or fails: its one line) gives none, and the
+        fits' write-back makes their rows as before."""
+        from .writing import missing_paths
+
+        if self.url is None:
+            return []
+        asked = self.submit(lambda catalogue: missing_paths(catalogue, paths))
+        try:
+            return cast("list[Path]", asked.result(timeout=wait_s))
+        except Exception:  # a failure is said by the writer's thread; a timeout: none asked for
+            return []
+
+    def add_rows(self, made: Iterable[Made]) -> None:
+        """Rows a campaign's workers made (``file_rows``), written ``CAMPAIGN_BATCH`` to a transaction
+        before the fits that follow them."""
+        if self.url is None:
+            return
+        self._rows += made
+        if len(self._rows) >= CAMPAIGN_BATCH:
+            self._flush_campaign()
 
 
 class CatalogueSink(Sink):

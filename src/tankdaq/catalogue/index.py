@@ -1,10 +1,10 @@
 """``tankdaq catalogue index DIR``: the catalogue rebuilt from the files, idempotently.
 
-Every decay file (a recording, a lab's CSV decay) and every file ``tankdaq export`` wrote (HDF5, a CSV
-with its sidecar) is known by its SHA-256: a file seen before is left alone, a file that moved has its
-path updated, a new one is read and added (an export to ``exports``, tied to its recording); each
-session folder's log then gives its decays their verdicts. Running it twice changes nothing; a
-catalogue lost or never written is made again from here.
+Every decay file (a recording, a lab's CSV decay) and every file ``tankdaq export`` wrote (HDF5, Parquet,
+MATLAB, a CSV with its sidecar) is known by its SHA-256: a file seen before is left alone, a file that
+moved has its path updated, a new one is read and added (an export to ``exports``, tied to its
+recording); each session folder's log then gives its decays their verdicts. Running it twice changes
+nothing; a catalogue lost or never written is made again from here.
 """
 
 from __future__ import annotations
@@ -16,12 +16,13 @@ from pathlib import Path
 import sqlalchemy as sa
 
 from ..errors import RecordingError
-from .database import Catalogue, decays, exports
-from .rows import DECAY_SUFFIXES, EXPORT_SUFFIXES, export_metadata, file_sha256, utc_now
-from .writing import add_export, add_file, record_session
+from .database import LOOKUP_BATCH, Catalogue, decays, exports
+from .rows import DECAY_SUFFIXES, EXPORT_SUFFIXES, decay_row, export_metadata, file_sha256, utc_now
+from .writing import Made, add_export, add_rows, record_session
 
-#: How many hashes one look-up asks for (a bound parameter list, well under every driver's limit).
-LOOKUP_BATCH = 500
+#: New decay rows go into the catalogue this many to a transaction (one transaction a file cost more than
+#: making its row: bench/bench_catalogue_campaign.py, docs/benchmarks.md).
+INDEX_BATCH = 200
 
 
 @dataclass
@@ -54,6 +55,7 @@ def index_folder(
     files.sort(key=lambda p: p.suffix.lower() != ".mcap")  # recordings first: exports find their rows
     hashes = {path: file_sha256(path) for path in files}
     known = _known_paths(catalogue, list(hashes.values()))
+    pending: list[Made] = []  # new decay rows, written INDEX_BATCH to a transaction
     for path, sha in hashes.items():
         where = known.get(sha)
         if where is not None and (where[0] == str(path.resolve()) or Path(where[0]).is_file()):
@@ -63,28 +65,39 @@ def index_folder(
             report.moved.append(path)
         else:
             try:
-                table = _add(catalogue, path, sha)
+                table = _add(catalogue, path, sha, pending)
             except RecordingError as exc:  # not a decay tankdaq reads, nor an export of one
                 report.skipped.append(f"{path}: {exc}")
             else:
                 report.added.append(path)
                 report.exports += table is exports
                 known[sha] = (str(path.resolve()), table)
+        if len(pending) >= INDEX_BATCH:
+            _flush(catalogue, pending)
         if progress is not None:
             progress(path)
+    _flush(catalogue, pending)
     for log in sorted(folder.rglob("session.jsonl")):
         report.sessions += bool(record_session(catalogue, log.parent))
     return report
 
 
-def _add(catalogue: Catalogue, path: Path, sha: str) -> sa.Table:
-    """A new file into its table: an export (``rows.export_metadata``) or a decay; returns the table."""
+def _add(catalogue: Catalogue, path: Path, sha: str, pending: list[Made]) -> sa.Table:
+    """A new file into its table: an export (``rows.export_metadata``), after the decay rows made
+    before it (its recording's among them), or a decay's row into ``pending``; returns the table."""
     metadata = export_metadata(path) if path.suffix.lower() != ".mcap" else None
     if metadata is not None:
+        _flush(catalogue, pending)
         add_export(catalogue, path, metadata, sha)
         return exports
-    add_file(catalogue, path, sha256=sha)
+    pending.append(decay_row(path, sha))
     return decays
+
+
+def _flush(catalogue: Catalogue, pending: list[Made]) -> None:
+    if pending:
+        add_rows(catalogue, pending)
+        pending.clear()
 
 
 def _known_paths(catalogue: Catalogue, hashes: list[str]) -> dict[str, tuple[str, sa.Table]]:

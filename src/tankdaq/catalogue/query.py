@@ -17,7 +17,7 @@ import sqlalchemy as sa
 
 from ..config import format_draft, parse_draft
 from ..errors import InputError
-from .database import BadCatalogueQuery, Catalogue, decays, open_catalogue, resolve_url
+from .database import LOOKUP_BATCH, BadCatalogueQuery, Catalogue, decays, exports, open_catalogue, resolve_url
 from .rows import STANDARD_AMPLITUDES_DEG
 
 if TYPE_CHECKING:
@@ -161,11 +161,62 @@ def parse_runs(text: str) -> RunQuery:
     return RunQuery(equal, dates.get("since"), dates.get("until"))
 
 
-def select_rows(catalogue: Catalogue, query: RunQuery) -> list[dict[str, Any]]:
-    """The rows that match, oldest first, as plain dicts (JSON columns decoded)."""
+def select_rows(catalogue: Catalogue, query: RunQuery, with_exports: bool = False) -> list[dict[str, Any]]:
+    """The rows that match, oldest first, as plain dicts (JSON columns decoded); ``with_exports``: each
+    with ``exports``, the files ``tankdaq export`` wrote of it (``attach_exports``)."""
     statement = sa.select(decays).where(*query.conditions()).order_by(decays.c.recorded_utc, decays.c.id)
     with catalogue.reading() as connection:
-        return [_decoded(dict(row._mapping)) for row in connection.execute(statement)]
+        rows = [_decoded(dict(row._mapping)) for row in connection.execute(statement)]
+    return attach_exports(catalogue, rows) if with_exports else rows
+
+
+#: What a run's ``exports`` say of each exported file.
+EXPORT_FIELDS = ("format", "path", "decay", "size_bytes", "sha256")
+
+
+def attach_exports(catalogue: Catalogue, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Each row given ``exports``: its recording's exported files (``EXPORT_FIELDS`` each, by format,
+    decay and path), tied to it by hash, or by the path they were exported from where they were
+    indexed before their recording was catalogued."""
+    by_hash = {row["sha256"]: row for row in rows}
+    by_path = {row["path"]: row for row in rows}
+    for row in rows:
+        row["exports"] = []
+    with catalogue.reading() as connection:
+        for start in range(0, len(rows), LOOKUP_BATCH):
+            batch = rows[start : start + LOOKUP_BATCH]
+            untied = sa.and_(
+                exports.c.source_sha256.is_(None), exports.c.source_path.in_([r["path"] for r in batch])
+            )
+            tied = exports.c.source_sha256.in_([r["sha256"] for r in batch])
+            for found in connection.execute(sa.select(exports).where(sa.or_(tied, untied))):
+                owner = (
+                    by_hash.get(found.source_sha256)
+                    if found.source_sha256
+                    else by_path.get(found.source_path)
+                )
+                if owner is not None:
+                    owner["exports"].append({name: getattr(found, name) for name in EXPORT_FIELDS})
+    for row in rows:
+        row["exports"].sort(key=lambda e: (e["format"], e["decay"] or 0, e["path"]))
+    return rows
+
+
+#: What ``runs --exports`` says of each exported file's run, after the file itself.
+RUN_FIELDS = ("recorded_utc", "hull", "draft", "axis", "angle_nominal_deg", "verdict")
+
+
+def export_listing(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """One row per exported file of ``rows`` (``attach_exports``): the file (``export`` its path),
+    then its run's condition and ``recording`` (the recording's path and hash): where a lab's HDF5,
+    CSV, Parquet and .mat copies of these runs are."""
+    listing = []
+    for row in rows:
+        for found in row["exports"]:
+            entry = {"export" if name == "path" else name: value for name, value in found.items()}
+            entry |= {name: row.get(name) for name in RUN_FIELDS}
+            listing.append(entry | {"recording": row["path"], "recording_sha256": row["sha256"]})
+    return listing
 
 
 def _decoded(row: dict[str, Any]) -> dict[str, Any]:
@@ -188,6 +239,8 @@ def flat(row: dict[str, Any]) -> dict[str, Any]:
         out[f"b44_hat_{key}deg"] = (row.get("b44_hat") or {}).get(key)
     out["checks"] = " | ".join(row.get("checks") or [])
     out["warnings"] = " | ".join(row.get("warnings") or [])
+    if "exports" in row:  # each exported file's path (its format is its suffix)
+        out["exports"] = " | ".join(found["path"] for found in row["exports"])
     return out
 
 
@@ -215,9 +268,13 @@ def runs(
     verdict: str | None = None,
     where: str | None = None,
     catalogue: str | None = None,
+    exports: bool = False,
 ) -> pd.DataFrame:
     """The catalogued runs that match, as a pandas DataFrame (one row per decay; coefficients, B_eq
-    and B̂44 at 2, 5 and 10 deg as columns). ``catalogue``: a URL or path (default: as the CLI)."""
+    and B̂44 at 2, 5 and 10 deg as columns; ``exports`` the paths of the files ``tankdaq export`` wrote
+    of each, joined by `` | ``). ``exports=True``: one row per exported file instead (``export`` its
+    path, ``format``, ``decay``, then its run's condition and ``recording``), as ``runs --exports``.
+    ``catalogue``: a URL or path (default: as the CLI)."""
     import pandas as pd
 
     equal = {k: v for k, v in {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict}.items() if v}
@@ -225,8 +282,8 @@ def runs(
     if url is None:
         raise BadCatalogueQuery("the catalogue is switched off (none): give a catalogue")
     with open_catalogue(url) as opened:
-        rows = select_rows(opened, RunQuery(equal, since, None, where))
-    return pd.DataFrame([flat(row) for row in rows])
+        rows = select_rows(opened, RunQuery(equal, since, None, where), with_exports=True)
+    return pd.DataFrame(export_listing(rows) if exports else [flat(row) for row in rows])
 
 
 #: What ``compare`` groups by: the condition a lab compares across campaigns.

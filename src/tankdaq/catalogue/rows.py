@@ -16,8 +16,9 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..config import Hull, load_hull, parse_draft
+from ..config import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError
+from .database import one_line
 
 #: The amplitudes B_eq and B̂44 are kept at (deg): what a lab compares across campaigns.
 STANDARD_AMPLITUDES_DEG = (2.0, 5.0, 10.0)
@@ -58,13 +59,26 @@ def hull_version(hull: Hull) -> dict[str, Any] | None:
     }
 
 
+#: Hulls parsed, by their file and its content's SHA-256: the decays of a campaign or a folder name the
+#: same few hull files, and parsing one (TOML, every value checked: 1 ms) costs more than the rest of a
+#: decay's row; a hull file that changed hashes anew and is parsed again.
+_PARSED_HULLS: dict[tuple[str, str], Hull] = {}
+MAX_PARSED_HULLS = 64
+
+
 def find_hull(name: str | None) -> Hull | None:
     """The hull a file names, or None when it is not known here (the row keeps the name)."""
     if not name:
         return None
     try:
-        return load_hull(name)
-    except TankdaqError:
+        path, _origin = locate_hull(name)
+        key = (str(path), hashlib.sha256(path.read_bytes()).hexdigest())
+        if key not in _PARSED_HULLS:
+            if len(_PARSED_HULLS) >= MAX_PARSED_HULLS:
+                _PARSED_HULLS.clear()
+            _PARSED_HULLS[key] = load_hull(name)
+        return _PARSED_HULLS[key]
+    except (TankdaqError, OSError):
         return None
 
 
@@ -168,24 +182,33 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
 
 #: The files ``index`` and the hooks catalogue, by suffix: decays (rows of ``decays``)...
 DECAY_SUFFIXES = (".mcap", ".csv")
-#: ...and what ``tankdaq export`` writes one file per decay of (rows of ``exports``); an exported CSV
-#: (its ``<stem>.json`` sidecar says so) is an export too.
-EXPORT_SUFFIXES = (".h5",)
+#: ...and what else ``tankdaq export`` writes (rows of ``exports``): HDF5 one file per decay, Parquet and
+#: MATLAB one file per recording; an exported CSV (its ``<stem>.json`` sidecar says so) is an export too.
+EXPORT_SUFFIXES = (".h5", ".parquet", ".mat")
 
 
 def export_metadata(path: Path) -> dict[str, Any] | None:
-    """The metadata of a file ``tankdaq export`` wrote (HDF5 root attributes, a CSV's sidecar); None
-    for any other CSV. An HDF5 file that is not a tankdaq export raises ``RecordingError``."""
-    from ..store.export_layout import read_h5_metadata, read_sidecar
+    """The metadata of a file ``tankdaq export`` wrote (HDF5 root attributes, Parquet schema metadata,
+    a .mat file's ``tankdaq.meta``, a CSV's sidecar); None for any other CSV. Any other file of an export
+    suffix (another tool's, or one whose reading library is not installed) raises ``RecordingError``."""
+    from ..store import export_layout
 
-    if path.suffix.lower() == ".csv":
-        return read_sidecar(path)
+    suffix = path.suffix.lower()
+    if suffix == ".csv":
+        return export_layout.read_sidecar(path)
+    kind, library, reader = {  # what the file is, what reads it (and how to get it), its reader
+        ".h5": ("HDF5", "h5py", export_layout.read_h5_metadata),
+        ".parquet": ("Parquet", "pyarrow: pip install tankdaq[parquet]", export_layout.read_parquet_metadata),
+        ".mat": ("MATLAB", "scipy", export_layout.read_mat_metadata),
+    }[suffix]
     try:
-        found = read_h5_metadata(path)
-    except OSError as exc:
-        raise RecordingError(f"{path}: not an HDF5 file tankdaq can read ({exc})") from None
+        found = reader(path)
+    except ImportError:
+        raise RecordingError(f"{path}: reading a {kind} export needs {library}") from None
+    except (OSError, ValueError, TypeError, KeyError) as exc:
+        raise RecordingError(f"{path}: not a {kind} file tankdaq can read ({one_line(exc)})") from None
     if found is None:
-        raise RecordingError(f"{path}: an HDF5 file, but not one tankdaq export wrote (no format attribute)")
+        raise RecordingError(f"{path}: a {kind} file, but not one tankdaq export wrote (no format metadata)")
     return found
 
 
@@ -249,6 +272,19 @@ def decay_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], di
     if path.suffix.lower() == ".csv":
         return csv_row(path, sha256)
     return recording_row(path, sha256)
+
+
+def worker_row(path: Path) -> tuple[dict[str, Any], dict[str, Any] | None] | None:
+    """``decay_row`` of a file a campaign's worker has just read (``ident.campaign_stream.FileWork``),
+    so the catalogue's writer only writes it: the row ``index`` makes of the file. None for an exported
+    CSV (its recording holds the decay) and for a file whose row cannot be made here: the writer then
+    makes it itself and says in one line why it could not."""
+    try:
+        if path.suffix.lower() == ".csv" and export_metadata(path) is not None:
+            return None
+        return decay_row(path)
+    except Exception:  # the catalogue's trouble, never the campaign's
+        return None
 
 
 def bare_row(path: Path) -> dict[str, Any]:

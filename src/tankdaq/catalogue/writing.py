@@ -14,7 +14,7 @@ import sqlalchemy as sa
 
 from ..config import Hull
 from ..errors import RecordingError
-from .database import Catalogue, decays, exports, hulls, sessions
+from .database import LOOKUP_BATCH, Catalogue, decays, exports, hulls, sessions
 from .rows import (
     DECAY_SUFFIXES,
     bare_row,
@@ -66,6 +66,32 @@ def _add_hull(connection: sa.Connection, version: Mapping[str, Any] | None) -> N
         connection.execute(statement.on_conflict_do_nothing(index_elements=["sha256"]))
 
 
+Made = tuple[Mapping[str, Any], Mapping[str, Any] | None]  # a decay row and its hull's version
+
+
+def add_rows(catalogue: Catalogue, made: Sequence[Made], update: Iterable[str] = LOCATION_COLUMNS) -> None:
+    """Decay rows made from their files (``rows.decay_row``) and their hulls' versions, in one
+    transaction; a hash already there gets only the ``update`` columns (where the file is now)."""
+    versions = {version["sha256"]: version for _, version in made if version is not None}
+    with catalogue.engine.begin() as connection:
+        for version in versions.values():
+            _add_hull(connection, version)
+        upsert_rows(connection, [row for row, _ in made], update)
+
+
+def missing_paths(catalogue: Catalogue, paths: Sequence[Path]) -> list[Path]:
+    """The decay files among ``paths`` that have no row at their path (a moved one is found again by
+    its hash when its row is written)."""
+    resolved = {str(path.resolve()): path for path in paths if path.suffix.lower() in DECAY_SUFFIXES}
+    names = list(resolved)
+    with catalogue.reading() as connection:
+        for start in range(0, len(names), LOOKUP_BATCH):
+            batch = names[start : start + LOOKUP_BATCH]
+            for (found,) in connection.execute(sa.select(decays.c.path).where(decays.c.path.in_(batch))):
+                resolved.pop(found, None)
+    return list(resolved.values())
+
+
 def add_file(
     catalogue: Catalogue,
     path: Path,
@@ -84,9 +110,7 @@ def add_file(
             raise
         row, version = bare_row(path), None
     row |= dict(extra or {})
-    with catalogue.engine.begin() as connection:
-        _add_hull(connection, version)
-        upsert_rows(connection, [row], [*LOCATION_COLUMNS, *(extra or {})])
+    add_rows(catalogue, [(row, version)], [*LOCATION_COLUMNS, *(extra or {})])
     return str(row["sha256"])
 
 

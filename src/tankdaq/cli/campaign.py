@@ -92,11 +92,12 @@ def campaign_command(
         say(f"--jobs {jobs}: this machine gives tankdaq {cores} cores; running {cores} workers")
     build_kernels_shown()
     catalogued = (lambda fit: writer.add_campaign([fit])) if writer.enabled else None
+    rows = writer.file_rows() if writer.enabled else None  # a new file's row: made where it is read
     with writer:  # each group's fit onto its recordings' catalogue rows as it arrives, then let go
         result = campaign(
             inputs, model, hulls=hulls or [], start_s=start, end_s=end, recurse=not no_recurse,
             jobs=min(jobs or cores, cores), executor=executor, scheduler=scheduler, report=report,
-            full_scale=full_scale, on_result=catalogued, progress=TerminalProgress(),
+            full_scale=full_scale, on_result=catalogued, file_work=rows, progress=TerminalProgress(),
         )  # fmt: skip
     say_cuts(result.cuts)
     typer.echo(result.to_json() if as_json else result.text(), nl=as_json)

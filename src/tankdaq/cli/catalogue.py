@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections import Counter
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -32,6 +33,18 @@ TABLE_COLUMNS = (
     ("warnings", "warnings"),
     ("path", "file"),
 )
+#: The table of ``runs --exports``: one row per exported file.
+EXPORT_TABLE_COLUMNS = (
+    ("recorded_utc", "recorded"),
+    ("hull", "hull"),
+    ("draft", "draft"),
+    ("axis", "axis"),
+    ("angle_nominal_deg", "angle deg"),
+    ("recording", "recording"),
+    ("decay", "decay"),
+    ("format", "format"),
+    ("export", "exported file"),
+)
 
 
 def _open(given: str | None) -> Any:
@@ -54,9 +67,9 @@ def index_command(
     ],
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
-    """Add every recording (.mcap), lab CSV decay (.csv) and export (.h5, an exported .csv) under
-    FOLDER and its sessions' verdicts; idempotent by SHA-256 (a file seen before is left alone, a
-    moved one has its path updated)."""
+    """Add every recording (.mcap), lab CSV decay (.csv) and export (.h5, .parquet, .mat, an exported
+    .csv) under FOLDER and its sessions' verdicts; idempotent by SHA-256 (a file seen before is left
+    alone, a moved one has its path updated)."""
     from ..catalogue.database import describe
     from ..catalogue.index import index_folder
 
@@ -78,8 +91,11 @@ def _cell(value: object) -> str:
 
 def _shown(key: str, value: object) -> object:
     """What the table shows of a value: a file's name (its folder is in --json), the time to the minute."""
-    if key == "path" and isinstance(value, str):
+    if key in ("path", "recording") and isinstance(value, str):
         return Path(value).name
+    if key == "exports" and value:  # the paths in --json and --csv; here how many of each format
+        formats = Counter(Path(path).suffix.lstrip(".") for path in str(value).split(" | "))
+        return ", ".join(f"{count} {name}" for name, count in sorted(formats.items()))
     if key == "recorded_utc" and isinstance(value, str):
         return value[:16].replace("T", " ")
     if key == "warnings" and value:  # each one in --json; never a row without its mark
@@ -147,17 +163,28 @@ def runs_command(
             "--compare", metavar="A B", help="Two sessions (id, folder), plans or queries side by side."
         ),
     ] = None,
+    exports: Annotated[
+        bool,
+        typer.Option(
+            "--exports",
+            help="One row per file `tankdaq export` wrote of the runs listed (HDF5, CSV, Parquet, .mat): "
+            "where they are.",
+        ),
+    ] = False,
     as_json: JsonOutput = False,
     as_csv: Annotated[bool, typer.Option("--csv", help="CSV on stdout.")] = False,
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
-    """List catalogued decays (one row each), or compare two campaigns per condition."""
-    from ..catalogue.query import RunQuery, flat, select_rows, selection
+    """List catalogued decays (one row each, with the paths of their exports), their exported files
+    (--exports), or compare two campaigns per condition."""
+    from ..catalogue.query import RunQuery, export_listing, flat, select_rows, selection
     from ..catalogue.query import compare as compare_rows
     from ..errors import InputError
 
     if as_json and as_csv:
         raise InputError("--json and --csv: give one")
+    if exports and compare is not None:
+        raise InputError("--exports and --compare: give one")
     equal = {k: v for k, v in {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict}.items() if v}
     query = RunQuery(equal, since, None, where)
     query.conditions()  # a bad filter is one line before the catalogue opens
@@ -166,7 +193,15 @@ def runs_command(
             table = compare_rows(selection(opened, compare[0]), selection(opened, compare[1]))
             _emit(table, as_json, as_csv, [(k, k) for k in (table[0] if table else {})])
             return
-        rows = [flat(row) for row in select_rows(opened, query)]
+        found = select_rows(opened, query, with_exports=True)
+    if exports:
+        listing = export_listing(found)
+        if not as_json and not as_csv:
+            say(f"{len(listing)} exported file(s) of {len(found)} run(s)")
+        _emit(listing, as_json, as_csv, list(EXPORT_TABLE_COLUMNS))
+        return
+    rows = [flat(row) for row in found]
     if not as_json and not as_csv:
         say(f"{len(rows)} run(s)")
-    _emit(rows, as_json, as_csv, list(TABLE_COLUMNS))
+    exported = [("exports", "exports")] if any(row["exports"] for row in rows) else []
+    _emit(rows, as_json, as_csv, [*TABLE_COLUMNS[:-1], *exported, TABLE_COLUMNS[-1]])

@@ -7,14 +7,16 @@ lines to say; the fit sends each worker a chunk of groups as file paths, the wor
 again, fits each group and returns its row (``GroupRow``). Reading a decay twice costs about 2 ms of
 CPU against its 5-6 ms fit; handing the decays and fits to the parent cost it 0.8 MB per decay
 (``bench/bench_campaign_scale.py``, docs/benchmarks.md). ``fit_campaign`` yields the rows as workers
-finish them, so a consumer (a table, a catalogue) can write them as they come.
+finish them, so a consumer (a table, a catalogue) can write them as they come. Whatever else a caller
+wants of a file (the run catalogue: the row of a file it does not hold) is made by the worker that scans
+it (``FileWork``), so the parent never reads a file.
 """
 
 from __future__ import annotations
 
 import math
 from collections import defaultdict
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Collection, Iterator, Sequence
 from concurrent.futures import Executor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -102,11 +104,37 @@ def scan_file(path: Path, start_s: float | None = None, end_s: float | None = No
     return FileScan(path, keys, tuple(input_notices(runs)), truncation, tuple(cut_lines(runs)))
 
 
+@dataclass(frozen=True)
+class FileWork:
+    """Something a caller wants made of some of a campaign's files by the worker that scans each, so
+    that this process never reads a file for it (the run catalogue: the rows of files it does not hold
+    yet, ``catalogue.hooks.CatalogueWriter.file_rows``).
+
+    ``wanted`` runs here, once, before the scan, and picks the files; ``make`` runs in the worker right
+    after a file scanned well (a module-level function: a pool or Dask sends it by name) and returns
+    something small, or None; ``take`` runs here with each chunk's results as the chunk returns."""
+
+    wanted: Callable[[Sequence[Path]], Collection[Path]]
+    make: Callable[[Path], Any]
+    take: Callable[[list[Any]], None]
+
+
 def scan_chunk(
-    paths: Sequence[Path], start_s: float | None, end_s: float | None
-) -> list[FileScan | SkippedFile]:
-    """``scan_file`` of a chunk of files: one task for a worker."""
-    return [scan_file(path, start_s, end_s) for path in paths]
+    paths: Sequence[Path],
+    start_s: float | None,
+    end_s: float | None,
+    make: Callable[[Path], Any] | None = None,
+    wanted: Collection[Path] = (),
+) -> tuple[list[FileScan | SkippedFile], list[Any]]:
+    """``scan_file`` of a chunk of files (one task for a worker), and ``make`` of each ``wanted`` file
+    that scanned well (``FileWork``), what it made that is not None."""
+    scans = [scan_file(path, start_s, end_s) for path in paths]
+    made = []
+    if make is not None:
+        for scan in scans:
+            if scan.path in wanted and isinstance(scan, FileScan) and (found := make(scan.path)) is not None:
+                made.append(found)
+    return scans, made
 
 
 def scan_campaign(
@@ -115,13 +143,20 @@ def scan_campaign(
     end_s: float | None = None,
     executor: Executor | None = None,
     progress: Callable[[Path], None] | None = None,
+    work: FileWork | None = None,
 ) -> CampaignScan:
-    """Every file scanned in chunks on ``executor`` (here without one); ``progress`` after each file."""
+    """Every file scanned in chunks on ``executor`` (here without one); ``progress`` after each file;
+    ``work``: made of the files it wants by the workers that scan them, taken as each chunk returns."""
     size = chunk_size(len(paths), executor)
     chunks = [list(paths[i : i + size]) for i in range(0, len(paths), size)]
+    wanted = set(work.wanted(paths)) if work is not None else set()
+    make = work.make if work is not None and wanted else None
+    tasks = [(chunk, start_s, end_s, make, tuple(p for p in chunk if p in wanted)) for chunk in chunks]
     done: dict[int, list[FileScan | SkippedFile]] = {}
-    for index, scans in completed(executor, scan_chunk, [(chunk, start_s, end_s) for chunk in chunks]):
+    for index, (scans, made) in completed(executor, scan_chunk, tasks):
         done[index] = scans
+        if made and work is not None:
+            work.take(made)
         for scan in scans:
             if progress is not None:
                 progress(scan.path)

@@ -76,3 +76,41 @@ def read_h5_metadata(path: Path) -> dict[str, object] | None:
     with h5py.File(path, "r") as h5:
         found = {key: h5.attrs[key] for key in h5.attrs}
     return found if found.get("format") == EXPORT_FORMAT else None
+
+
+def read_parquet_metadata(path: Path) -> dict[str, object] | None:
+    """The metadata of a Parquet file ``tankdaq export`` wrote (the JSON under its schema metadata key
+    ``tankdaq``, read from the footer alone); None for another tool's Parquet file. Needs pyarrow
+    (``ImportError`` without it); a file pyarrow cannot read raises ``OSError`` or ``ValueError``."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        text = (pq.read_schema(path).metadata or {}).get(b"tankdaq")
+    except pa.ArrowException as exc:  # not a Parquet file, or one of a kind pyarrow does not read
+        raise ValueError(str(exc)) from None
+    try:
+        found = json.loads(text) if text is not None else None
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return found if isinstance(found, dict) and found.get("format") == EXPORT_FORMAT else None
+
+
+def read_mat_metadata(path: Path) -> dict[str, object] | None:
+    """The metadata of a MATLAB file ``tankdaq export`` wrote (its struct ``tankdaq``'s ``meta``, lists
+    and booleans as the JSON text they were written as); None for another tool's .mat file. A file
+    scipy cannot read raises ``ValueError`` or ``OSError``."""
+    from scipy.io import loadmat, whosmat
+
+    try:
+        if not any(name == "tankdaq" for name, _shape, kind in whosmat(path) if kind == "struct"):
+            return None  # whosmat reads the variables' headers only: another tool's file is not loaded
+        struct = loadmat(path, variable_names=["tankdaq"], simplify_cells=True)["tankdaq"]
+    except OSError:
+        raise
+    except Exception as exc:  # scipy fails in many ways on bytes that are no MATLAB file (IndexError...)
+        raise ValueError(f"{type(exc).__name__}: {exc}") from None
+    meta = struct.get("meta") if isinstance(struct, dict) else None
+    if not isinstance(meta, dict) or meta.get("format") != EXPORT_FORMAT:
+        return None
+    return {str(key): value.item() if isinstance(value, np.generic) else value for key, value in meta.items()}
