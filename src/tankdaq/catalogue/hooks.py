@@ -148,6 +148,8 @@ class CatalogueWriter:
 
     def _flush_campaign(self) -> None:
         """The rows the workers made, then the fits: a fit finds its file's row written."""
+        if self.url is None:  # off: nothing was kept, nothing to import
+            return
         from .writing import add_rows, update_fits
 
         rows, self._rows = self._rows, []
