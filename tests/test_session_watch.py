@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 
+from guided_session import ONE_CONDITION_TWICE, Repeating
 from tankdaq.acquire.events import MOVED_KINDS, Event, ModelMoved, Released, Settled, legend
 from tankdaq.acquire.guided.checks import watch_reasons
 from tankdaq.acquire.guided.journal import SessionLog
@@ -204,29 +204,6 @@ def test_a_disarmed_watch_says_nothing() -> None:
 
 
 # ---- a whole session on the simulated MTi-G ----------------------------------------
-
-ONE_CONDITION_TWICE = """hulls = ["swath"]
-axis = "roll"
-drafts = ["T"]
-angles_deg = [10.0]
-repeats = 2
-[acceptance]
-angle_tolerance_deg = 1.5
-"""
-
-
-class Repeating:
-    """Says the draft is ready, repeats the first decay and skips the condition at the second (nothing
-    accepted: no report to fit), and keeps each question's kind and default."""
-
-    def __init__(self) -> None:
-        self.asked: list[tuple[str, str]] = []
-        self.verdicts = ["r", "s"]
-
-    def ask(self, question: Any) -> str:
-        self.asked.append((question.kind, question.default))
-        assert len(self.asked) < 10, "the session should have ended"
-        return self.verdicts.pop(0) if question.kind == "verdict" else ""
 
 
 def test_a_session_says_the_bump_before_a_decay_and_flags_that_decay(tmp_path: Path) -> None:
