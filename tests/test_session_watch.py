@@ -128,6 +128,10 @@ def test_a_creeping_still_water_is_a_trend_said_before_it_crosses_the_level_tole
     (reason,) = watch_reasons([trend])
     assert f"{trend.slope_deg_min:+.1f} deg/min" in reason
     assert "deg tolerance in about" in trend.line()
+    towards = {+0.38: "17 s", -0.38: "38 s"}  # 0.62 deg to go, or 1.38 to the other side, at 2.2 deg/min
+    for moved_deg, when in towards.items():
+        assert f"tolerance in about {when};" in ModelMoved("trend", moved_deg, 0, 0, 0, 1.0, 0, 2.2).line()
+        assert f"tolerance in about {when};" in ModelMoved("trend", -moved_deg, 0, 0, 0, 1.0, 0, -2.2).line()
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])

@@ -295,7 +295,7 @@ class ModelMoved(Event):
             )
         if self.kind == "trend":
             moved = self.angle_deg - self.reference_deg
-            left_deg = self.limit_deg - math.copysign(moved, self.slope_deg_min)
+            left_deg = self.limit_deg - moved * math.copysign(1.0, self.slope_deg_min)  # the way it creeps
             when = (
                 f"at this rate it passes the {self.limit_deg:g} deg tolerance in about "
                 f"{60 * left_deg / abs(self.slope_deg_min):.0f} s"
