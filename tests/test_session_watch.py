@@ -134,6 +134,15 @@ def test_a_creeping_still_water_is_a_trend_said_before_it_crosses_the_level_tole
         assert f"tolerance in about {when};" in ModelMoved("trend", -moved_deg, 0, 0, 0, 1.0, 0, -2.2).line()
 
 
+def test_a_creep_that_slows_for_a_while_is_one_trend() -> None:
+    """A leak at 1.5 deg/min, then 0.6 (under the trend's rate, over half of it), then 1.5 again."""
+    fast = _ramp(25, 0.0, 1.5 * 25 / 60)
+    slow = _ramp(40, float(fast[-1]), float(fast[-1]) + 0.6 * 40 / 60)
+    again = _ramp(15, float(slow[-1]), float(slow[-1]) + 1.5 * 15 / 60)
+    said = _creep_events([_still(15), fast, slow, again], seed=1)
+    assert [e.kind for e in said if isinstance(e, ModelMoved)] == ["trend", "drift"]  # not said again
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_still_water_a_dying_swing_or_a_small_step_is_no_trend(seed: int) -> None:
     t_s = np.arange(round(30 * RATE_HZ)) / RATE_HZ
@@ -147,7 +156,7 @@ def test_still_water_a_dying_swing_or_a_small_step_is_no_trend(seed: int) -> Non
 def test_the_creep_is_the_least_squares_slope_and_only_a_clear_one() -> None:
     times_s = np.arange(15.0)
     assert math.isclose(creep_deg_min(times_s, 0.05 * times_s), 3.0)  # 0.05 deg/s
-    assert math.isnan(creep_deg_min(times_s, 0.01 * times_s))  # 0.6 deg/min: under TREND_DEG_MIN
+    assert math.isclose(creep_deg_min(times_s, 0.01 * times_s), 0.6)  # clear, under TREND_DEG_MIN
     swing = 0.05 * times_s + 0.3 * np.sin(2.0 * times_s)  # steep but scattered: not a clear creep
     assert math.isnan(creep_deg_min(times_s, swing))
     assert math.isnan(creep_deg_min(times_s[:2], times_s[:2]))

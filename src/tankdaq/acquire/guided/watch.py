@@ -14,8 +14,8 @@ again, until the next release, it judges the decay axis over windows of ``WINDOW
 - a quiet window whose mean is further than the plan's level tolerance from the reference is **drift**,
   one further than that from zero (and not drifted) is off **level**;
 - a still water whose level creeps, the least-squares slope of its quiet windows' means over the last
-  ``TREND_S`` at least ``TREND_DEG_MIN`` and ``TREND_T`` standard errors (``creep_deg_min``), is a
-  **trend**: a drift on its way, said before it crosses the tolerance.
+  ``TREND_S`` at least ``TREND_T`` standard errors (``creep_deg_min``) and ``TREND_DEG_MIN``, is a
+  **trend**: a drift on its way, said before it crosses the tolerance (over below half that rate).
 
 Each is said once as a ``ModelMoved`` event (``emit``: to every listener of the pipeline) while it
 stands. At the next release ``at_release`` keeps what stood then: a bump the model had not been quiet
@@ -233,11 +233,11 @@ class ModelWatch(Sink):
             return
         times_s, means_deg = (np.array(column) for column in zip(*self._means, strict=True))
         slope_deg_min = creep_deg_min(times_s, means_deg)
-        if math.isnan(slope_deg_min):
-            self._trend = None
-        elif self._trend is None:
+        if self._trend is None and abs(slope_deg_min) >= TREND_DEG_MIN:
             self._trend = self._moved("trend", window, self.level_tolerance_deg, slope_deg_min)
             self.emit(self._trend)
+        elif not abs(slope_deg_min) >= TREND_DEG_MIN / 2:  # over (nan: no clear creep): half, not to flicker
+            self._trend = None
 
     def _moved(
         self, kind: str, window: _Window, limit_deg: float, slope_deg_min: float = math.nan
@@ -263,8 +263,8 @@ class ModelWatch(Sink):
 
 
 def creep_deg_min(times_s: np.ndarray, means_deg: np.ndarray) -> float:
-    """The still water's creep (deg/min): the least-squares slope of window means at ``times_s``, when it
-    is over ``TREND_DEG_MIN`` and ``TREND_T`` of its standard errors; nan when it is not a creep."""
+    """The still water's creep (deg/min): the least-squares slope of window means at ``times_s`` when it
+    is ``TREND_T`` of its standard errors or more; nan when the means show no clear line."""
     centred_s = times_s - times_s.mean()
     spread_s2 = float(np.sum(centred_s**2))
     if times_s.size < 3 or spread_s2 <= 0:
@@ -272,5 +272,4 @@ def creep_deg_min(times_s: np.ndarray, means_deg: np.ndarray) -> float:
     slope_deg_s = float(np.sum(centred_s * (means_deg - means_deg.mean())) / spread_s2)
     residual_deg = means_deg - means_deg.mean() - slope_deg_s * centred_s
     standard_error_deg_s = math.sqrt(float(np.sum(residual_deg**2)) / (times_s.size - 2) / spread_s2)
-    creeping = abs(slope_deg_s) * 60 >= TREND_DEG_MIN and abs(slope_deg_s) >= TREND_T * standard_error_deg_s
-    return slope_deg_s * 60 if creeping else math.nan
+    return slope_deg_s * 60 if abs(slope_deg_s) >= TREND_T * standard_error_deg_s else math.nan
