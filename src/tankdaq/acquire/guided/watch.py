@@ -55,7 +55,7 @@ TREND_DEG_MIN = 1.0
 #: The trend is the least-squares slope of the quiet windows' means over the last ``TREND_S`` device
 #: seconds of still water, judged once there are ``TREND_MIN_S`` of them: a 1 s mean of MTi-G angle
 #: noise (0.02 deg rms at 100 Hz) scatters by 0.002 deg, so the slope's own scatter over 10 s is about
-#: 0.02 deg/min.
+#: 0.013 deg/min.
 TREND_S = 20.0
 TREND_MIN_S = 10.0
 #: ... and only when the slope is this many of its standard errors: a settled decay's last swing or a
@@ -256,7 +256,7 @@ class ModelWatch(Sink):
 
     def _stood(self) -> list[ModelMoved]:
         """What stood at a release: a bump not followed by ``SETTLED_S`` of quiet before the tilt began,
-        and a drift or off level."""
+        a trend, and a drift or off level."""
         unsettled = self._bump is not None and (self._bump_open or self._quiet_s < SETTLED_S)
         trend = [self._trend] if self._trend is not None else []
         return ([self._bump] if unsettled and self._bump else []) + trend + list(self._standing.values())
