@@ -57,6 +57,7 @@ def _every_event() -> list[Event]:
         Stopping("SIGTERM"), Stopped("SIGTERM", 2), ModelMoved("drift", 1.23, 0.02, 0.2, 0.03, 1.0, 30.5),
         ModelMoved("bump", 0.1, 0.71, 2.7, 0.03, 0.3, 31.5),
         ModelMoved("level", 1.1, 0.02, 0.2, 0.6, 1.0, 32.5),
+        ModelMoved("trend", 0.41, 0.02, 0.2, 0.03, 1.0, 33.5, 2.2),
     ]  # fmt: skip
 
 

@@ -12,16 +12,23 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 
+from guided_session import ONE_CONDITION_TWICE, Repeating
 from tankdaq.acquire.events import MOVED_KINDS, Event, ModelMoved, Released, Settled, legend
 from tankdaq.acquire.guided.checks import watch_reasons
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
-from tankdaq.acquire.guided.watch import BUMP_RATE_DEG_S, BUMP_SD_DEG, SETTLED_S, ModelWatch
+from tankdaq.acquire.guided.watch import (
+    BUMP_RATE_DEG_S,
+    BUMP_SD_DEG,
+    SETTLED_S,
+    TREND_DEG_MIN,
+    ModelWatch,
+    creep_deg_min,
+)
 from tankdaq.acquire.listeners import EventLog, EventPrinter
 from tankdaq.acquire.sinks import Block
 from tankdaq.plans import load_campaign_plan
@@ -73,25 +80,86 @@ def _watch(reference_deg: float) -> tuple[ModelWatch, list[Event]]:
 
 
 @pytest.mark.parametrize(
-    ("reference_deg", "to_deg", "kind", "flagged"),
-    [(0.0, 1.3, "drift", True), (0.6, 1.2, "level", False), (0.0, 0.5, None, False)],
+    ("reference_deg", "creep_s", "to_deg", "kinds", "flagged"),
+    [
+        (0.0, 90.0, 1.3, ["drift"], True),  # 0.87 deg/min: slower than a trend, a drift as it crosses
+        (0.0, 20.0, 1.3, ["trend", "drift"], True),  # 3.9 deg/min: a trend first, then the drift
+        (1.05, 0.0, 1.05, ["level"], False),
+        (0.0, 0.0, 0.0, [], False),
+    ],
 )
 def test_a_slow_drift_or_an_off_level_rest_is_said_once_and_a_drift_flags_the_next_decay(
-    reference_deg: float, to_deg: float, kind: str | None, flagged: bool
+    reference_deg: float, creep_s: float, to_deg: float, kinds: list[str], flagged: bool
 ) -> None:
     watch, said = _watch(reference_deg)
-    motion = [_still(3, reference_deg), _ramp(20, reference_deg, to_deg), _still(5, to_deg), _tilt(to_deg)]
+    creep = _ramp(creep_s, reference_deg, to_deg)
+    motion = [_still(3, reference_deg), creep, _still(5, to_deg), _tilt(to_deg)]
     end_s = _feed(watch, np.concatenate(motion))
-    assert [e.kind for e in said if isinstance(e, ModelMoved)] == ([kind] if kind else [])  # once, no bump
+    assert [e.kind for e in said if isinstance(e, ModelMoved)] == kinds  # each once, no bump
     watch.on_event(Released(1, 10.0, "roll", end_s))
     stood = watch.standing_at(1)
     assert stood == said  # what was said still stood at the release (the hold is not a drift)
-    if kind is not None:
-        (moved,) = stood
+    for moved in stood:
         assert moved.reference_deg == reference_deg and moved.limit_deg == 1.0
-        off_deg = moved.angle_deg - (reference_deg if kind == "drift" else 0.0)
-        assert 1.0 < off_deg < 1.1  # said as it crossed the tolerance, on the way
+        off_deg = moved.angle_deg - (0.0 if moved.kind == "level" else reference_deg)
+        if moved.kind == "trend":  # said before the drift, on the way
+            assert 0.2 < off_deg < 1.0 and moved.slope_deg_min >= TREND_DEG_MIN
+        else:
+            assert 1.0 < off_deg < 1.1  # said as it crossed the tolerance, on the way
     assert bool(watch_reasons(stood)) is flagged  # off level is the still-water check's, not the watch's
+
+
+def _creep_events(motion: list[np.ndarray], seed: int) -> list[Event]:
+    watch, said = _watch(0.0)
+    _feed(watch, np.concatenate(motion), seed)
+    return said
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_creeping_still_water_is_a_trend_said_before_it_crosses_the_level_tolerance(seed: int) -> None:
+    rate_deg_min = 2.0  # a model taking on water, slowly: 1 deg in 30 s
+    creep = _ramp(45, 0.0, rate_deg_min * 45 / 60)
+    said = _creep_events([_still(15), creep, _still(5, float(creep[-1]))], seed)
+    trend, drift = said
+    assert isinstance(trend, ModelMoved) and isinstance(drift, ModelMoved)
+    assert (trend.kind, drift.kind) == ("trend", "drift") and trend.t_s + 10 < drift.t_s  # well before
+    assert abs(trend.angle_deg) < 0.5 * trend.limit_deg
+    assert TREND_DEG_MIN <= trend.slope_deg_min <= rate_deg_min  # said as soon as the fit shows it
+    (reason,) = watch_reasons([trend])
+    assert f"{trend.slope_deg_min:+.1f} deg/min" in reason
+    assert "deg tolerance in about" in trend.line()
+    towards = {+0.38: "17 s", -0.38: "38 s"}  # 0.62 deg to go, or 1.38 to the other side, at 2.2 deg/min
+    for moved_deg, when in towards.items():
+        assert f"tolerance in about {when};" in ModelMoved("trend", moved_deg, 0, 0, 0, 1.0, 0, 2.2).line()
+        assert f"tolerance in about {when};" in ModelMoved("trend", -moved_deg, 0, 0, 0, 1.0, 0, -2.2).line()
+
+
+def test_a_creep_that_slows_for_a_while_is_one_trend() -> None:
+    """A leak at 1.5 deg/min, then 0.6 (under the trend's rate, over half of it), then 1.5 again."""
+    fast = _ramp(25, 0.0, 1.5 * 25 / 60)
+    slow = _ramp(40, float(fast[-1]), float(fast[-1]) + 0.6 * 40 / 60)
+    again = _ramp(15, float(slow[-1]), float(slow[-1]) + 1.5 * 15 / 60)
+    said = _creep_events([_still(15), fast, slow, again], seed=1)
+    assert [e.kind for e in said if isinstance(e, ModelMoved)] == ["trend", "drift"]  # not said again
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_still_water_a_dying_swing_or_a_small_step_is_no_trend(seed: int) -> None:
+    t_s = np.arange(round(30 * RATE_HZ)) / RATE_HZ
+    dying = 0.4 * np.exp(-0.15 * t_s) * np.sin(2 * np.pi * t_s / PERIOD_S + seed)  # a decay's last swings
+    assert _creep_events([dying, _still(40)], seed) == []
+    assert _creep_events([_still(15), _still(20, 0.2)], seed) == []  # a sensor's bias step, not a creep
+    slow_deg = TREND_DEG_MIN * 0.7  # deg over a minute: slower than a trend, within the tolerance
+    assert _creep_events([_ramp(60, 0.0, slow_deg)], seed) == []
+
+
+def test_the_creep_is_the_least_squares_slope_and_only_a_clear_one() -> None:
+    times_s = np.arange(15.0)
+    assert math.isclose(creep_deg_min(times_s, 0.05 * times_s), 3.0)  # 0.05 deg/s
+    assert math.isclose(creep_deg_min(times_s, 0.01 * times_s), 0.6)  # clear, under TREND_DEG_MIN
+    swing = 0.05 * times_s + 0.3 * np.sin(2.0 * times_s)  # steep but scattered: not a clear creep
+    assert math.isnan(creep_deg_min(times_s, swing))
+    assert math.isnan(creep_deg_min(times_s[:2], times_s[:2]))
 
 
 @pytest.mark.parametrize(("quiet_s", "unsettled"), [(0.0, True), (2 * SETTLED_S, False)])
@@ -126,16 +194,18 @@ def test_a_tilt_and_its_hold_are_not_a_bump_nor_a_drift() -> None:
 def test_the_printer_explains_the_watch_once_with_each_kind() -> None:
     out: list[str] = []
     printer = EventPrinter(out.append)
-    moved = [ModelMoved(kind, 1.2, 0.7, 2.7, 0.03, 1.0, 30.0) for kind in ("drift", "bump", "level", "bump")]
+    kinds = ("drift", "bump", "level", "trend", "bump")
+    slopes = {"trend": 1.5}
+    moved = [ModelMoved(kind, 1.2, 0.7, 2.7, 0.03, 1.0, 30.0, slopes.get(kind, math.nan)) for kind in kinds]
     for event in moved:
         printer.on_event(event)
     explained = legend(moved[0])
     assert explained is not None and all(f"{kind} = {why}" in explained for kind, why in MOVED_KINDS.items())
     assert out == [explained, *(event.line() for event in moved)]  # said once, before the first
-    assert len({event.line() for event in moved}) == 3  # each kind its own line
+    assert len({event.line() for event in moved}) == 4  # each kind its own line
     assert moved[0].record() == {
         "event": "model_moved", "kind": "drift", "angle_deg": 1.2, "spread_deg": 0.7, "rate_deg_s": 2.7,
-        "reference_deg": 0.03, "limit_deg": 1.0, "t_s": 30.0,
+        "reference_deg": 0.03, "limit_deg": 1.0, "t_s": 30.0, "slope_deg_min": None,
     }  # fmt: skip
 
 
@@ -147,29 +217,6 @@ def test_a_disarmed_watch_says_nothing() -> None:
 
 
 # ---- a whole session on the simulated MTi-G ----------------------------------------
-
-ONE_CONDITION_TWICE = """hulls = ["swath"]
-axis = "roll"
-drafts = ["T"]
-angles_deg = [10.0]
-repeats = 2
-[acceptance]
-angle_tolerance_deg = 1.5
-"""
-
-
-class Repeating:
-    """Says the draft is ready, repeats the first decay and skips the condition at the second (nothing
-    accepted: no report to fit), and keeps each question's kind and default."""
-
-    def __init__(self) -> None:
-        self.asked: list[tuple[str, str]] = []
-        self.verdicts = ["r", "s"]
-
-    def ask(self, question: Any) -> str:
-        self.asked.append((question.kind, question.default))
-        assert len(self.asked) < 10, "the session should have ended"
-        return self.verdicts.pop(0) if question.kind == "verdict" else ""
 
 
 def test_a_session_says_the_bump_before_a_decay_and_flags_that_decay(tmp_path: Path) -> None:

@@ -263,6 +263,7 @@ MOVED_KINDS = {
     "drift": "its still water moved away from the level measured when the draft was set",
     "bump": "it moved for a moment while it should have been at rest (not a release)",
     "level": "it rests off level before the next decay",
+    "trend": "its still water creeps (a slope of its level over the last seconds at rest) before it drifts",
 }
 
 
@@ -272,7 +273,8 @@ class ModelMoved(Event):
     ``MOVED_KINDS``): over the window starting at device time ``t_s``, the angle's mean ``angle_deg``
     and spread ``spread_deg``, the rate of turn's ``rate_deg_s`` (rms about its mean); ``reference_deg``
     the still water measured when the draft was set; ``limit_deg`` the tolerance it broke (the plan's
-    level tolerance for drift and level, the still-water spread for a bump)."""
+    level tolerance for drift, level and a trend, the still-water spread for a bump); a trend's
+    ``slope_deg_min``, how fast the still water creeps (nan for the others)."""
 
     kind: str
     angle_deg: float
@@ -281,6 +283,7 @@ class ModelMoved(Event):
     reference_deg: float
     limit_deg: float
     t_s: float
+    slope_deg_min: float = math.nan
 
     def line(self, run_name: str | None = None) -> str:
         if self.kind == "drift":
@@ -289,6 +292,20 @@ class ModelMoved(Event):
                 f"drift: still water at {self.angle_deg:+.2f} deg, {moved:+.2f} deg from the "
                 f"{self.reference_deg:+.2f} measured when the draft was set "
                 f"(tolerance {self.limit_deg:g} deg); re-trim before the next decay"
+            )
+        if self.kind == "trend":
+            moved = self.angle_deg - self.reference_deg
+            left_deg = self.limit_deg - moved * math.copysign(1.0, self.slope_deg_min)  # the way it creeps
+            when = (
+                f"at this rate it passes the {self.limit_deg:g} deg tolerance in about "
+                f"{60 * left_deg / abs(self.slope_deg_min):.0f} s"
+                if left_deg > 0
+                else f"already past the {self.limit_deg:g} deg tolerance"
+            )
+            return (
+                f"trend: still water creeping at {self.slope_deg_min:+.1f} deg/min, now "
+                f"{self.angle_deg:+.2f} deg, {moved:+.2f} deg from the {self.reference_deg:+.2f} measured "
+                f"when the draft was set; {when}; look for water inside or a weight that moved"
             )
         if self.kind == "bump":
             return (

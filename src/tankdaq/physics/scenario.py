@@ -38,15 +38,24 @@ PUSH_AGAIN_FRACTION = 0.8
 #: What a scripted campaign run can do wrong (``scripted_run``): the hand tilts to the wrong angle,
 #: pushes the model again mid-decay (the release is not clean), shoves it to its angle so hard that the
 #: gyro clips during the push (harmless: the decay is clean), the gyro's range is so small that the
-#: first swings of the decay clip (the decay must be rejected), or someone knocks the model at rest
-#: shortly before the tilt (a bump it has not settled from when it is tilted and released).
-SCRIPTED_FAULTS = ("wrong-angle", "double-push", "hard-push", "clipped-decay", "bump")
+#: first swings of the decay clip (the decay must be rejected), someone knocks the model at rest
+#: shortly before the tilt (a bump it has not settled from when it is tilted and released), or the
+#: still water creeps away from level before the tilt (a drift: the model heels on, and decays about its
+#: new rest).
+SCRIPTED_FAULTS = ("wrong-angle", "double-push", "hard-push", "clipped-decay", "bump", "drift")
 #: A bumped run is knocked this long before its tilt begins (s): still swinging when the hand takes it;
 #: its tilt begins this much later than a clean run's (``release_after_s`` longer), after still water.
 BUMP_BEFORE_TILT_S = 3.5
 #: The knock sets the model swinging about its rest angle with this amplitude (deg): well above still
 #: water, below the release detector's tilt threshold (1.5 deg).
 BUMP_DEG = 1.0
+#: A drifting run's still water creeps at this rate (deg/min, towards positive angles) for
+#: ``DRIFT_BEFORE_TILT_S`` before its tilt, then stays there: a model taking on water (1 L/min 0.3 m off
+#: the centreline of a 50 kg model with GM 0.1 m heels it 3.4 deg/min) or a trim weight sliding.
+DRIFT_DEG_MIN = 3.0
+#: How long a drifting run's still water creeps before its tilt (s): 1.5 deg at ``DRIFT_DEG_MIN``, past a
+#: plan's usual 1 deg level tolerance after 20 s; its tilt begins this much later than a clean run's.
+DRIFT_BEFORE_TILT_S = 30.0
 #: A hard push reaches its angle at this mean rate (deg/s): its peak, 1.9 times more, clips a 300 deg/s gyro.
 HARD_PUSH_DEG_S = 250.0
 #: A clipped-decay run's gyro range per degree of release angle (deg/s per deg): below the first swings'
@@ -153,6 +162,7 @@ class DecayScenario:
     start_counter: int | None = None  # PacketCounter of the first sample (near 65535: about to wrap)
     pushes_again: tuple[int, ...] = ()  # runs (from 0) in which the hand pushes the model again mid-decay
     bumps_before: tuple[int, ...] = ()  # runs (from 0) whose model is knocked at rest before the tilt
+    drifts_before: tuple[int, ...] = ()  # runs (from 0) whose still water creeps before the tilt
 
     def __post_init__(self) -> None:
         if self.axis not in ("roll", "pitch"):
@@ -200,10 +210,13 @@ class DecayScenario:
         hands = self._draw_hands(rng)
         tilt_starts = [hand.start_s for _, hand, _ in hands] + [self.duration_s]
         index = self._first_index_at
+        rest = 0.0  # the still water's angle (rad): a drift moves it for good, the decays settle about it
         for run, (release, hand, put_back_s) in enumerate(hands):
             i_tilt, i_release = index(hand.start_s), index(release)
             if run in self.bumps_before:
                 self._bump(coeffs, t, (x, v, a), index(hand.start_s - BUMP_BEFORE_TILT_S), i_tilt)
+            if run in self.drifts_before:
+                rest += _drift(t, (x, v), index(hand.start_s - DRIFT_BEFORE_TILT_S), i_tilt)
             held = slice(i_tilt, i_release)
             base = x[i_tilt - 1] if i_tilt > 0 else 0.0  # the rest angle the tilt starts from
             x[held], v[held], a[held] = hand(t[held], base)
@@ -212,18 +225,22 @@ class DecayScenario:
             run_end = (run + 1) * self.run_s
             if put_back_s is not None:
                 step, dstep, ddstep = _quintic_step((t[free] - release) / put_back_s)
-                x[free] = x0 * (1 - step)
-                v[free] = -x0 * dstep / put_back_s
-                a[free] = -x0 * ddstep / put_back_s**2
+                x[free] = rest + (x0 - rest) * (1 - step)
+                v[free] = -(x0 - rest) * dstep / put_back_s
+                a[free] = -(x0 - rest) * ddstep / put_back_s**2
                 truths.append(RunTruth(run, "put_back", self.axis, hand.start_s, end_s=run_end))
                 continue
-            # Integrated from the off-grid release instant; the first point is the release itself.
-            free_x, free_v = simulate_decay(coeffs, np.concatenate(([release], t[free])), x0, v0)
+            # Integrated from the off-grid release instant (the first point is the release itself), about
+            # the rest angle: a heeling moment shifts the equilibrium (its small change of the restoring
+            # curve's shape is left out).
+            times = np.concatenate(([release], t[free]))
+            free_x, free_v = simulate_decay(coeffs, times, x0 - rest, v0)
             x[free], v[free] = free_x[1:], free_v[1:]
             pushed_s = release + PUSH_AGAIN_AFTER_S if run in self.pushes_again else None
             if pushed_s is not None:
-                self._push_again(coeffs, t, x, v, index(pushed_s), free.stop, x0)
+                self._push_again(coeffs, t, x, v, index(pushed_s), free.stop, x0 - rest)
             a[free] = acceleration(coeffs, x[free], v[free])
+            x[free] += rest
             ticks = (int(self.start_ticks or 0) + round(release * TICKS_PER_S)) % TICK_MODULUS
             truths.append(
                 RunTruth(
@@ -336,6 +353,18 @@ class DecayScenario:
         return min(math.ceil(time_s * self.rate_hz - 1e-9), round(self.duration_s * self.rate_hz))
 
 
+def _drift(t: np.ndarray, motion: tuple[np.ndarray, np.ndarray], start: int, stop: int) -> float:
+    """The still water creeps at ``DRIFT_DEG_MIN`` from sample ``start`` up to ``stop`` (the tilt; slow
+    beside the model's period: no swing); returns how far it moved (rad), where the model now rests."""
+    if not 0 < start < stop:
+        return 0.0
+    x, v = motion
+    rate_rad_s = math.radians(DRIFT_DEG_MIN) / 60.0
+    x[start:stop] += rate_rad_s * (t[start:stop] - t[start])
+    v[start:stop] += rate_rad_s
+    return rate_rad_s * float(t[stop - 1] - t[start])
+
+
 @dataclass(frozen=True)
 class _Hand:
     """The engineer's hand: a smooth tilt from the rest angle to ``target``, then a hold with wobble."""
@@ -371,6 +400,8 @@ def scripted_run(fault: str | None, angle_deg: float) -> dict[str, object]:
         return {"angle_deg": angle_deg, "pushes_again": (0,)}
     if fault == "bump":
         return {"angle_deg": angle_deg, "bumps_before": (0,), "release_after_s": 10.0 + BUMP_BEFORE_TILT_S}
+    if fault == "drift":
+        return {"angle_deg": angle_deg, "drifts_before": (0,), "release_after_s": 10.0 + DRIFT_BEFORE_TILT_S}
     if fault == "hard-push":
         shove_s = abs(angle_deg) / HARD_PUSH_DEG_S
         return {"angle_deg": angle_deg, "handling": Handling(tilt_s=(shove_s, shove_s))}

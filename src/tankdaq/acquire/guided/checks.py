@@ -94,13 +94,20 @@ def check_decay(
 
 def watch_reasons(stood: list[ModelMoved]) -> list[str]:
     """Why a decay should be repeated for what the watch saw standing at its release (``guided.watch``):
-    a bump the model had not settled from, a drifted level (off level is the still-water check's)."""
+    a bump the model had not settled from, a still water creeping, a drifted level (off level is the
+    still-water check's)."""
     reasons = []
     for moved in stood:
         if moved.kind == "bump":
             reasons.append(
                 f"released after a bump the model had not settled from (spread {moved.spread_deg:.2f} deg, "
                 f"rate {moved.rate_deg_s:.1f} deg/s rms at t = {moved.t_s:.1f} s); wait for still water"
+            )
+        elif moved.kind == "trend":
+            reasons.append(
+                f"released while the still water crept at {moved.slope_deg_min:+.1f} deg/min "
+                f"(at {moved.angle_deg:+.2f} deg, t = {moved.t_s:.1f} s); find why (water inside, a weight "
+                "that moved) and re-trim"
             )
         elif moved.kind == "drift":
             reasons.append(

@@ -12,12 +12,15 @@ again, until the next release, it judges the decay axis over windows of ``WINDOW
 - a shaken window that stays within ``TILT_MIN_DEG`` of the rest angle, followed by one that is not a
   tilt, is a **bump** (a window that goes further is the hand's tilt, the release detector's business);
 - a quiet window whose mean is further than the plan's level tolerance from the reference is **drift**,
-  one further than that from zero (and not drifted) is off **level**.
+  one further than that from zero (and not drifted) is off **level**;
+- a still water whose level creeps, the least-squares slope of its quiet windows' means over the last
+  ``TREND_S`` at least ``TREND_T`` standard errors (``creep_deg_min``) and ``TREND_DEG_MIN``, is a
+  **trend**: a drift on its way, said before it crosses the tolerance (over below half that rate).
 
 Each is said once as a ``ModelMoved`` event (``emit``: to every listener of the pipeline) while it
 stands. At the next release ``at_release`` keeps what stood then: a bump the model had not been quiet
-``SETTLED_S`` after before the tilt began, and a drift or level standing; the session's checks flag
-that decay (``checks.watch_reasons``).
+``SETTLED_S`` after before the tilt began, a trend, a drift or level standing; the session's checks
+flag that decay (``checks.watch_reasons``).
 """
 
 from __future__ import annotations
@@ -46,6 +49,18 @@ BUMP_RATE_DEG_S = 2.0
 #: Quiet device seconds after a bump before the model counts as settled (the release detector's settle
 #: window: a decay ends after this long below its threshold).
 SETTLED_S = 3.0
+#: A still water creeping faster than this (deg/min) is a **trend**: at a 1 deg level tolerance a drift
+#: within a minute; a model taking on water heels some deg/min (``physics.scenario.DRIFT_DEG_MIN``).
+TREND_DEG_MIN = 1.0
+#: The trend is the least-squares slope of the quiet windows' means over the last ``TREND_S`` device
+#: seconds of still water, judged once there are ``TREND_MIN_S`` of them: a 1 s mean of MTi-G angle
+#: noise (0.02 deg rms at 100 Hz) scatters by 0.002 deg, so the slope's own scatter over 10 s is about
+#: 0.013 deg/min.
+TREND_S = 20.0
+TREND_MIN_S = 10.0
+#: ... and only when the slope is this many of its standard errors: a settled decay's last swing or a
+#: step in the still water scatters the means about any line, and is not a creep.
+TREND_T = 6.0
 
 
 @dataclass(frozen=True)
@@ -98,6 +113,8 @@ class ModelWatch(Sink):
         self._bump_open = False  # said for the disturbance under way
         self._tilted = False  # the hand's tilt seen: windows wait for the release or the put-back
         self._standing: dict[str, ModelMoved] = {}  # drift or level, said and not yet over
+        self._means: list[tuple[float, float]] = []  # (middle, mean) of the quiet windows of this still water
+        self._trend: ModelMoved | None = None  # a creeping still water, said and not yet over
 
     # ---- the sink ----------------------------------------
 
@@ -124,7 +141,7 @@ class ModelWatch(Sink):
         if isinstance(event, Released) and self.reference_deg is not None:
             self.at_release = (event.run, self._stood())
             self._bump, self._bump_open, self._tilted, self._quiet_since = None, False, False, math.nan
-            self._quiet_s = 0.0
+            self._quiet_s, self._means, self._trend = 0.0, [], None
         elif isinstance(event, PutBack):
             self._tilted = False
 
@@ -154,6 +171,8 @@ class ModelWatch(Sink):
         )
 
     def _judge(self, window: _Window) -> None:
+        if not window.quiet:
+            self._means = []  # the still water's stretch is over: a trend is fitted over one stretch
         if self._tilted and (not window.quiet or window.excursion_deg >= TILT_MIN_DEG):
             return  # held or swinging for the release: the detector's
         if window.quiet:
@@ -179,6 +198,7 @@ class ModelWatch(Sink):
         self._quiet_s = window.end_s - self._quiet_since
         self._rest_deg = window.mean_deg
         self._check_level(window)
+        self._check_trend(window)
 
     def _said_bump(self, window: _Window) -> None:
         self._pending, self._quiet_since, self._quiet_s = None, math.nan, 0.0
@@ -204,7 +224,24 @@ class ModelWatch(Sink):
             self._standing = {kind: self._moved(kind, window, tolerance)}
             self.emit(self._standing[kind])
 
-    def _moved(self, kind: str, window: _Window, limit_deg: float) -> ModelMoved:
+    def _check_trend(self, window: _Window) -> None:
+        """Fit the still water's creep over its last ``TREND_S``; say a trend once while it lasts."""
+        self._means.append((0.5 * (window.t_s + window.end_s), window.mean_deg))
+        newest_s = self._means[-1][0]
+        self._means = [(t, mean) for t, mean in self._means if newest_s - t <= TREND_S]
+        if newest_s - self._means[0][0] < TREND_MIN_S:
+            return
+        times_s, means_deg = (np.array(column) for column in zip(*self._means, strict=True))
+        slope_deg_min = creep_deg_min(times_s, means_deg)
+        if self._trend is None and abs(slope_deg_min) >= TREND_DEG_MIN:
+            self._trend = self._moved("trend", window, self.level_tolerance_deg, slope_deg_min)
+            self.emit(self._trend)
+        elif not abs(slope_deg_min) >= TREND_DEG_MIN / 2:  # over (nan: no clear creep): half, not to flicker
+            self._trend = None
+
+    def _moved(
+        self, kind: str, window: _Window, limit_deg: float, slope_deg_min: float = math.nan
+    ) -> ModelMoved:
         assert self.reference_deg is not None
         return ModelMoved(
             kind,
@@ -214,10 +251,25 @@ class ModelWatch(Sink):
             self.reference_deg,
             limit_deg,
             window.t_s,
+            slope_deg_min,
         )
 
     def _stood(self) -> list[ModelMoved]:
         """What stood at a release: a bump not followed by ``SETTLED_S`` of quiet before the tilt began,
-        and a drift or off level."""
+        a trend, and a drift or off level."""
         unsettled = self._bump is not None and (self._bump_open or self._quiet_s < SETTLED_S)
-        return ([self._bump] if unsettled and self._bump else []) + list(self._standing.values())
+        trend = [self._trend] if self._trend is not None else []
+        return ([self._bump] if unsettled and self._bump else []) + trend + list(self._standing.values())
+
+
+def creep_deg_min(times_s: np.ndarray, means_deg: np.ndarray) -> float:
+    """The still water's creep (deg/min): the least-squares slope of window means at ``times_s`` when it
+    is ``TREND_T`` of its standard errors or more; nan when the means show no clear line."""
+    centred_s = times_s - times_s.mean()
+    spread_s2 = float(np.sum(centred_s**2))
+    if times_s.size < 3 or spread_s2 <= 0:
+        return math.nan
+    slope_deg_s = float(np.sum(centred_s * (means_deg - means_deg.mean())) / spread_s2)
+    residual_deg = means_deg - means_deg.mean() - slope_deg_s * centred_s
+    standard_error_deg_s = math.sqrt(float(np.sum(residual_deg**2)) / (times_s.size - 2) / spread_s2)
+    return slope_deg_s * 60 if abs(slope_deg_s) >= TREND_T * standard_error_deg_s else math.nan
