@@ -4,6 +4,7 @@ rerun recording (and its two threads) left behind by a view's finished run."""
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -95,3 +96,48 @@ def test_a_saving_view_leaves_no_rerun_recording_behind_its_runs(tmp_path: Path)
     view.close(timeout_s=600)  # bounded; every run's end is done on the view thread by then
     assert all((tmp_path / f"run{run}.rrd").stat().st_size > 0 for run in range(4))
     assert _rerun_threads() <= before + 1  # at most the last run's, freed at the next run's end
+
+
+def _anonymous_kb() -> int:
+    """This process's resident anonymous memory (kB): its heaps, not the libraries mapped from files."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("RssAnon:"):
+            return int(line.split()[1])
+    raise AssertionError("no RssAnon in /proc/self/status")
+
+
+def _glibc() -> ctypes.CDLL | None:
+    libc = ctypes.CDLL(None)
+    return libc if hasattr(libc, "malloc_trim") and hasattr(libc, "gnu_get_libc_version") else None
+
+
+@pytest.mark.skipif(
+    not Path("/proc/self/status").is_file() or _glibc() is None,
+    reason="glibc's arenas and Linux's /proc/self/status: what a settle gives back is glibc's to give",
+)
+def test_a_settled_decay_gives_the_allocators_free_pages_back() -> None:
+    """Measured on resident memory, which is unavoidable here (what is given back is pages the kernel
+    takes), and made robust by size: 64 MB the C allocator holds free under a block still in use (where
+    ``free`` never returns them by itself), against a pipeline's few MB of its own; no load changes it."""
+    libc = _glibc()
+    assert libc is not None
+    libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+    libc.free.argtypes = [ctypes.c_void_p]
+    samples, _trace = hull_scenario(runs=1, seed=5, rate_hz=100.0).samples()
+    pipeline = DecayPipeline(DetectionSettings(), [])  # release detection alone: the settle is what counts
+    size, count = 64 * 1024, 1024  # below glibc's mmap threshold: in the main arena's heap
+    blocks = [libc.malloc(size) for _ in range(count)]
+    try:
+        for block in blocks:
+            ctypes.memset(block, 1, size)
+        for block in blocks[:-1]:  # the last one stays: the free pages sit below a block in use
+            libc.free(block)
+        held_kb = _anonymous_kb()
+        outcomes = [
+            o for i in range(0, samples.size, 50) for o in pipeline.feed(Block(samples[i : i + 50], b"", 0.0))
+        ]
+        assert [o.settle_reason for o in outcomes] == ["amplitude"]
+        given_back_kb = held_kb - _anonymous_kb()
+    finally:
+        libc.free(blocks[-1])
+    assert given_back_kb > 32 * 1024, f"{given_back_kb} kB given back after a settle"
