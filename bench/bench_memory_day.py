@@ -20,7 +20,12 @@ pipeline has been fed, so nothing piles up in the reading thread's queue however
 Each tree runs in a child process of its own, side by side (``--baseline-src``: the ``src/`` of ``git
 archive COMMIT src`` on PYTHONPATH, as bench_read_loop.py does). ``--tracemalloc`` starts tracemalloc
 at the end of the warm-up (``--warmup`` decays; much slower from there) and prints what grew between two
-decays after it and the last one, by traceback.
+decays after it and the last one, by traceback; ``--type-growth`` the objects by type that grew between
+the same two decays (cheap: no tracing). At each release (the last decay's view work done by then) the
+probe prints where the memory is (``memory_state``: anonymous mappings by kind, glibc's ``mallinfo2`` in
+use and free, its arenas, Python's allocated blocks, the threads), and the report fits a slope to each
+part. ``--catalogue off`` leaves the catalogue's sink out; ``--malloc-trim`` has the probe trim glibc's
+heap at each settle (what the pipeline itself now does: ``acquire.memory``).
 
 Run: .venv/bin/python bench/bench_memory_day.py [--hours 8] [--baseline-hours 2] [--baseline-src DIR]
 """
@@ -393,7 +398,10 @@ def describe_parts(rows: list[dict[str, object]], warmup: int, run_s: float) -> 
         slope = float(np.polyfit(hours, values * scale, 1)[0])
         first, last = values[0] * scale, values[-1] * scale
         lines.append(f"    {key:15s} {first:10.1f} -> {last:10.1f} {unit:2s} ({slope:+.2f}/h)")
-    return lines
+    rss_mb = np.array([r["rss_kb"] for r in states], dtype=float) / 1024
+    hour = np.floor(hours).astype(int)
+    medians = [f"{h}: {np.median(rss_mb[hour == h]):.1f}" for h in np.unique(hour)]
+    return [*lines, f"  RSS at the releases, median of each simulated hour (MB): {', '.join(medians)}"]
 
 
 def main() -> None:
