@@ -1,6 +1,7 @@
 """What a recorder fed for a lab day keeps per decay (issue 22 item 8; the figure is bench_memory_day.py):
 no predicted curve in a finished decay's outcome, no list of every release event in its detectors, no
-rerun recording (and its two threads) left behind by a view's finished run."""
+rerun recording (and its two threads) left behind by a view's finished run, and the C allocator's free
+pages given back once a decay has settled."""
 
 from __future__ import annotations
 
