@@ -2,10 +2,11 @@
 
 A decay's buffers (its fit, its file, its .rrd) are freed when it ends, but glibc's malloc keeps the
 freed pages of its arenas (each thread that allocates attaches to one, up to 8 per core: the pipeline,
-the live fit's worker, the view, rerun's threads) for later, and only the top of each arena is ever returned by itself. Over a lab
-day that is some 30 MB held free with the view saving, and the resident size swings and drifts with
-it (docs/benchmarks.md, "Memory over a lab day"). ``malloc_trim(0)`` returns every whole free page of
-every arena; it is done once a decay has settled, on the pipeline's thread (never the reading one).
+the live fit's worker, the view, rerun's threads) for later, and only the top of each arena is ever
+returned by itself. Over a lab day that is some 30 MB held free with the view saving, and the resident
+size swings and drifts with it (docs/benchmarks.md, "Memory over a lab day"). ``malloc_trim(0)``
+returns every whole free page of every arena; it is done once a decay has settled, on the pipeline's
+thread (never the reading one).
 """
 
 from __future__ import annotations
