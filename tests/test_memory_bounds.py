@@ -1,17 +1,21 @@
 """What a recorder fed for a lab day keeps per decay (issue 22 item 8; the figure is bench_memory_day.py):
 no predicted curve in a finished decay's outcome, no list of every release event in its detectors, no
-rerun recording (and its two threads) left behind by a view's finished run, and the C allocator's free
-pages given back once a decay has settled."""
+rerun recording (and its two threads) left behind by a view's finished run, the C allocator's free
+pages given back once a decay has settled, and glibc's arenas capped for the record daemon's threads."""
 
 from __future__ import annotations
 
 import ctypes
+import os
+import subprocess
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tankdaq.acquire.memory import ARENAS
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.acquire.sinks import Decay, IdentifierSink, Sink
@@ -142,3 +146,45 @@ def test_a_settled_decay_gives_the_allocators_free_pages_back() -> None:
     finally:
         libc.free(blocks[-1])
     assert given_back_kb > 32 * 1024, f"{given_back_kb} kB given back after a settle"
+
+
+ARENA_PROBE = """
+import ctypes, sys, tempfile, threading
+import numpy as np
+from pathlib import Path
+from tankdaq.acquire.memory import limit_arenas
+if sys.argv[1] == "limit":
+    limit_arenas()
+ready, done = threading.Barrier(9), threading.Event()
+def work():
+    keep = np.ones(100_000)  # C malloc on this thread: it attaches to an arena
+    ready.wait()
+    done.wait()
+threads = [threading.Thread(target=work) for _ in range(8)]
+for thread in threads:
+    thread.start()
+ready.wait()  # eight threads hold memory at once: none can take an arena another let go
+libc = ctypes.CDLL(None)
+with tempfile.NamedTemporaryFile() as out:
+    libc.fopen.restype = ctypes.c_void_p
+    stream = ctypes.c_void_p(libc.fopen(out.name.encode(), b"w"))
+    libc.malloc_info(0, stream)
+    libc.fclose(stream)
+    print(Path(out.name).read_text().count("<heap nr="))
+done.set()
+"""
+
+
+@pytest.mark.skipif(_glibc() is None, reason="glibc's arenas: other C libraries have none to cap")
+def test_the_record_daemon_caps_glibcs_arenas() -> None:
+    """Counted in a fresh process (a test process's arenas are already made): eight threads holding
+    memory at once get at most the cap of arenas, where glibc alone gives them one each."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MALLOC_ARENA_MAX", "GLIBC_TUNABLES")}
+
+    def arenas(mode: str) -> int:
+        run = subprocess.run([sys.executable, "-c", ARENA_PROBE, mode], capture_output=True, text=True,
+                             env=env, timeout=120, check=True)  # fmt: skip
+        return int(run.stdout.strip())
+
+    assert arenas("limit") <= ARENAS
+    assert arenas("free") > ARENAS + 2  # what the cap prevents (one per thread on this machine)
