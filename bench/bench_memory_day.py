@@ -20,7 +20,12 @@ pipeline has been fed, so nothing piles up in the reading thread's queue however
 Each tree runs in a child process of its own, side by side (``--baseline-src``: the ``src/`` of ``git
 archive COMMIT src`` on PYTHONPATH, as bench_read_loop.py does). ``--tracemalloc`` starts tracemalloc
 at the end of the warm-up (``--warmup`` decays; much slower from there) and prints what grew between two
-decays after it and the last one, by traceback.
+decays after it and the last one, by traceback; ``--type-growth`` the objects by type that grew between
+the same two decays (cheap: no tracing). At each release (the last decay's view work done by then) the
+probe prints where the memory is (``memory_state``: anonymous mappings by kind, glibc's ``mallinfo2`` in
+use and free, its arenas, Python's allocated blocks, the threads), and the report fits a slope to each
+part. ``--catalogue off`` leaves the catalogue's sink out; ``--malloc-trim`` has the probe trim glibc's
+heap at each settle (what the pipeline itself now does: ``acquire.memory``).
 
 Run: .venv/bin/python bench/bench_memory_day.py [--hours 8] [--baseline-hours 2] [--baseline-src DIR]
 """
@@ -28,7 +33,10 @@ Run: .venv/bin/python bench/bench_memory_day.py [--hours 8] [--baseline-hours 2]
 from __future__ import annotations
 
 import argparse
+import collections
+import ctypes
 import dataclasses
+import gc
 import json
 import os
 import platform
@@ -87,6 +95,81 @@ def rss_kb() -> int:
     raise RuntimeError("no VmRSS in /proc/self/status")
 
 
+class MallInfo2(ctypes.Structure):
+    """glibc's ``struct mallinfo2`` (2.33+): what its arenas hold, in bytes."""
+
+    _fields_ = [
+        (name, ctypes.c_size_t)
+        for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+                     "fordblks", "keepcost")
+    ]  # fmt: skip
+
+
+def glibc() -> ctypes.CDLL | None:
+    """The C library when it is glibc with ``mallinfo2`` (else None: another libc, another platform)."""
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallinfo2.restype = MallInfo2
+        libc.fopen.restype = ctypes.c_void_p
+        libc.fopen.argtypes = [ctypes.c_char_p, ctypes.c_char_p]
+        libc.fclose.argtypes = [ctypes.c_void_p]
+        libc.malloc_info.argtypes = [ctypes.c_int, ctypes.c_void_p]
+    except (OSError, AttributeError):
+        return None
+    return libc
+
+
+def arena_count(libc: ctypes.CDLL) -> int:
+    """glibc's malloc arenas (``malloc_info``'s ``<heap nr=...>`` elements)."""
+    with tempfile.NamedTemporaryFile() as out:
+        stream = libc.fopen(out.name.encode(), b"w")
+        libc.malloc_info(0, stream)
+        libc.fclose(stream)
+        return Path(out.name).read_text().count("<heap nr=")
+
+
+def anonymous_kb() -> dict[str, int]:
+    """Resident anonymous memory (kB) by the kind of mapping it is in, told apart by the mapping's size:
+    ``heap_kb`` glibc's main arena; ``pyarena_kb`` 1 MB mappings (Python's object arenas); ``stack_kb``
+    8 MB (thread stacks); ``mapped_kb`` other mappings up to 64 MB (glibc's thread arenas, large numpy
+    buffers); ``reserved_kb`` beyond 64 MB (mimalloc's arenas: rerun's Rust allocator)."""
+    totals = dict.fromkeys(("heap_kb", "pyarena_kb", "stack_kb", "mapped_kb", "reserved_kb"), 0)
+    kind = ""
+    for line in Path("/proc/self/smaps").read_text().splitlines():
+        head = line.split()
+        if "-" in head[0] and len(head) >= 5:  # a mapping's first line: range perms offset dev inode [path]
+            path = head[5] if len(head) > 5 else ""
+            start, end = (int(x, 16) for x in head[0].split("-"))
+            kind = "heap_kb" if path == "[heap]" else "" if path else size_kind((end - start) // 1024)
+        elif head[0] == "Rss:" and kind:
+            totals[kind] += int(head[1])
+    return totals
+
+
+def size_kind(size_kb: int) -> str:
+    """The bucket of an anonymous mapping of this size (``anonymous_kb``)."""
+    if size_kb == 1024:
+        return "pyarena_kb"
+    if size_kb == 8192:
+        return "stack_kb"
+    return "mapped_kb" if size_kb <= 65536 else "reserved_kb"
+
+
+def memory_state(libc: ctypes.CDLL | None) -> dict[str, int]:
+    """Where this process's memory is (kB): RSS, anonymous memory by mapping, what glibc's arenas hold in
+    use and free, the Python blocks allocated, the threads."""
+    state = {"rss_kb": rss_kb(), **anonymous_kb(), "py_blocks": sys.getallocatedblocks()}
+    state["threads"] = len(os.listdir("/proc/self/task"))
+    if libc is not None:
+        info = libc.mallinfo2()
+        state |= {
+            "malloc_used_kb": (info.uordblks + info.hblkhd) // 1024,
+            "malloc_free_kb": info.fordblks // 1024,
+        }
+        state["malloc_arenas"] = arena_count(libc)
+    return state
+
+
 def top_growth(before: tracemalloc.Snapshot, after: tracemalloc.Snapshot, limit: int = 15) -> list[str]:
     """What grew most between two snapshots, grouped by the allocation's traceback (innermost tankdaq
     frame first), as lines."""
@@ -140,21 +223,33 @@ class CompressedLine:
             return synthetic.decay_capture(block.size, rate)
 
 
-def child(args: argparse.Namespace) -> None:
-    """One recording of ``args.decays`` decays in this process; one JSON line per decay on stdout."""
-    from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+def probe_sink(args: argparse.Namespace, out: Path, snapshots: dict[str, tracemalloc.Snapshot]) -> object:
+    """The bench's listener of the pipeline (``RssProbe``), last after the real sinks."""
     from tankdaq.acquire.sinks import Sink
-    from tankdaq.catalogue.hooks import CatalogueSink, CatalogueWriter
-    from tankdaq.device.driver import MTiDriver
-    from tankdaq.device.factory import OpenDevice
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    snapshots: dict[str, tracemalloc.Snapshot] = {}
+    counts: dict[int, collections.Counter[str]] = {}
     started = time.monotonic()
+    libc = glibc()
+    lines = (out / "events.txt").open("w")
 
     class RssProbe(Sink):
-        """RSS at each settle (and the tracemalloc snapshots at the warm-up's end and the last decay)."""
+        """RSS at each settle; where the memory is (``memory_state``) at each release, the last decay's
+        view work done by then; the tracemalloc snapshots at the warm-up's end and the last decay;
+        ``--malloc-trim``: glibc's ``malloc_trim(0)`` after each settle's measure (a probe of what
+        the allocator keeps free)."""
+
+        def on_release(self, decay: object, pretrigger: object) -> None:
+            run = decay.run  # type: ignore[attr-defined]
+            print(json.dumps({"before_decay": run, **memory_state(libc)}), flush=True)
+            if args.type_growth and run in (args.warmup + 2, args.decays):
+                counts[run] = collections.Counter(type(o).__qualname__ for o in gc.get_objects())
+                if len(counts) == 2:
+                    first, last = counts.values()
+                    grown = (last - first).most_common(12)
+                    print(
+                        json.dumps({"object_growth": grown, "decays": args.decays - args.warmup - 2}),
+                        flush=True,
+                    )
 
         def on_settle(self, decay: object) -> None:
             run = decay.run  # type: ignore[attr-defined]
@@ -164,6 +259,26 @@ def child(args: argparse.Namespace) -> None:
                 snapshots["from" if run < args.decays else "to"] = tracemalloc.take_snapshot()
             wall_s = round(time.monotonic() - started, 1)
             print(json.dumps({"decay": run, "rss_kb": rss_kb(), "wall_s": wall_s}), flush=True)
+            if args.malloc_trim and libc is not None:
+                libc.malloc_trim(0)
+
+        def on_event(self, event: object) -> None:
+            print(event.line(), file=lines, flush=True)  # type: ignore[attr-defined]
+
+    return RssProbe()
+
+
+def child(args: argparse.Namespace) -> None:
+    """One recording of ``args.decays`` decays in this process; one JSON line per decay on stdout."""
+    from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+    from tankdaq.catalogue.hooks import CatalogueSink, CatalogueWriter
+    from tankdaq.device.driver import MTiDriver
+    from tankdaq.device.factory import OpenDevice
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    snapshots: dict[str, tracemalloc.Snapshot] = {}
+    probe = probe_sink(args, out, snapshots)
 
     class BenchDriver(MTiDriver):
         """The real driver's reading and decoding (``read_block``) over a ``CompressedLine``."""
@@ -199,13 +314,11 @@ def child(args: argparse.Namespace) -> None:
         port="sim", hull="swath", draft=1.0, angle_deg=8.0, rate_hz=RATE_HZ, out_dir=out / "recordings",
         runs=args.decays, viewer=args.viewer, model=args.model,
     )  # fmt: skip
-    lines = (out / "events.txt").open("w")
     print(json.dumps({"decay": 0, "rss_kb": rss_kb(), "wall_s": 0.0}), flush=True)
-    with CatalogueWriter.from_option(str(out / "catalogue.sqlite"), lambda line: None) as writer:
-        daemon = BenchDaemon(
-            settings, on_event=lambda line: print(line, file=lines, flush=True),
-            sinks=[CatalogueSink(writer), RssProbe()],
-        )  # fmt: skip
+    catalogue = str(out / "catalogue.sqlite") if args.catalogue == "on" else "none"
+    with CatalogueWriter.from_option(catalogue, lambda line: None) as writer:
+        sinks = [CatalogueSink(writer)] if writer.enabled else []
+        daemon = BenchDaemon(settings, sinks=[*sinks, probe])  # type: ignore[list-item]
         outcomes = daemon.run()
     status = daemon.status
     summary = {"decays": len(outcomes), "samples": status.samples, "gaps": status.gaps}
@@ -226,7 +339,11 @@ def start_tree(
         env.setdefault("TANKDAQ_CONFIG_DIR", str(Path(__file__).resolve().parents[1] / "configs"))
     command = [sys.executable, __file__, "--child", "--decays", str(decays), "--speed", f"{args.speed:g}"]
     command += ["--viewer", args.viewer, "--out", str(out), "--warmup", str(args.warmup)]
-    command += ["--model", args.model] + (["--tracemalloc"] if args.tracemalloc else [])
+    command += ["--model", args.model, "--catalogue", args.catalogue]
+    command += ["--type-growth"] if args.type_growth else []
+    command += (["--tracemalloc"] if args.tracemalloc else []) + (
+        ["--malloc-trim"] if args.malloc_trim else []
+    )
     with log.open("w") as sink:
         return subprocess.Popen(command, stdout=sink, stderr=subprocess.STDOUT, env=env)
 
@@ -256,7 +373,35 @@ def describe(tree: str, rows: list[dict[str, object]], warmup: int, run_s: float
         f"({(rss_mb[-1] - warm) / span_h:+.2f} MB/h; least-squares slope {slope_mb_h:+.2f} MB/h), "
         f"peak {rss_mb.max():.1f} MB",
     ]
+    late = hours >= hours[after][0] + span_h / 2  # the second half after the warm-up: does it plateau?
+    if late.sum() > 3:
+        late_slope = float(np.polyfit(hours[late], rss_mb[late], 1)[0])
+        lines.append(
+            f"  least-squares slope over the last {hours[-1] - hours[late][0]:.2f} h: {late_slope:+.2f} MB/h"
+        )
+    lines += describe_parts(rows, warmup, run_s)
     return lines + [f"    {line}" for line in rows[-1].get("tracemalloc", [])]  # type: ignore[union-attr]
+
+
+def describe_parts(rows: list[dict[str, object]], warmup: int, run_s: float) -> list[str]:
+    """Each part of ``memory_state`` at the releases after the warm-up: first, last, least-squares slope."""
+    states = [r for r in rows if "before_decay" in r and int(r["before_decay"]) > warmup]  # type: ignore[call-overload]
+    if len(states) < 3:
+        return []
+    hours = np.array([r["before_decay"] for r in states], dtype=float) * run_s / 3600
+    lines = ["  at each release after the warm-up (first -> last, least-squares slope per simulated hour):"]
+    for key in states[0]:
+        if key == "before_decay":
+            continue
+        values = np.array([r.get(key, np.nan) for r in states], dtype=float)
+        scale, unit = (1 / 1024, "MB") if key.endswith("_kb") else (1, "")
+        slope = float(np.polyfit(hours, values * scale, 1)[0])
+        first, last = values[0] * scale, values[-1] * scale
+        lines.append(f"    {key:15s} {first:10.1f} -> {last:10.1f} {unit:2s} ({slope:+.2f}/h)")
+    rss_mb = np.array([r["rss_kb"] for r in states], dtype=float) / 1024
+    hour = np.floor(hours).astype(int)
+    medians = [f"{h}: {np.median(rss_mb[hour == h]):.1f}" for h in np.unique(hour)]
+    return [*lines, f"  RSS at the releases, median of each simulated hour (MB): {', '.join(medians)}"]
 
 
 def main() -> None:
@@ -270,6 +415,11 @@ def main() -> None:
     parser.add_argument("--baseline-src", default=None)
     parser.add_argument("--log-dir", default=None, help="keep each tree's per-decay JSON lines here")
     parser.add_argument("--tracemalloc", action="store_true")
+    parser.add_argument("--catalogue", default="on", choices=("on", "off"), help="the run catalogue's sink")
+    parser.add_argument("--type-growth", action="store_true", help="objects by type, warm-up vs last decay")
+    parser.add_argument(
+        "--malloc-trim", action="store_true", help="the probe trims glibc's heap at each settle"
+    )
     parser.add_argument("--warmup", type=int, default=WARMUP_DECAYS, help="decays before the warm-up ends")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--decays", type=int, default=0, help=argparse.SUPPRESS)

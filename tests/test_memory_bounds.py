@@ -1,15 +1,21 @@
 """What a recorder fed for a lab day keeps per decay (issue 22 item 8; the figure is bench_memory_day.py):
 no predicted curve in a finished decay's outcome, no list of every release event in its detectors, no
-rerun recording (and its two threads) left behind by a view's finished run."""
+rerun recording (and its two threads) left behind by a view's finished run, the C allocator's free
+pages given back once a decay has settled, and glibc's arenas capped for the record daemon's threads."""
 
 from __future__ import annotations
 
+import ctypes
+import os
+import subprocess
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tankdaq.acquire.memory import ARENAS
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.acquire.sinks import Decay, IdentifierSink, Sink
@@ -95,3 +101,90 @@ def test_a_saving_view_leaves_no_rerun_recording_behind_its_runs(tmp_path: Path)
     view.close(timeout_s=600)  # bounded; every run's end is done on the view thread by then
     assert all((tmp_path / f"run{run}.rrd").stat().st_size > 0 for run in range(4))
     assert _rerun_threads() <= before + 1  # at most the last run's, freed at the next run's end
+
+
+def _anonymous_kb() -> int:
+    """This process's resident anonymous memory (kB): its heaps, not the libraries mapped from files."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("RssAnon:"):
+            return int(line.split()[1])
+    raise AssertionError("no RssAnon in /proc/self/status")
+
+
+def _glibc() -> ctypes.CDLL | None:
+    libc = ctypes.CDLL(None)
+    return libc if hasattr(libc, "malloc_trim") and hasattr(libc, "gnu_get_libc_version") else None
+
+
+@pytest.mark.skipif(
+    not Path("/proc/self/status").is_file() or _glibc() is None,
+    reason="glibc's arenas and Linux's /proc/self/status: what a settle gives back is glibc's to give",
+)
+def test_a_settled_decay_gives_the_allocators_free_pages_back() -> None:
+    """Measured on resident memory, which is unavoidable here (what is given back is pages the kernel
+    takes), and made robust by size: 64 MB the C allocator holds free under a block still in use (where
+    ``free`` never returns them by itself), against a pipeline's few MB of its own; no load changes it."""
+    libc = _glibc()
+    assert libc is not None
+    libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+    libc.free.argtypes = [ctypes.c_void_p]
+    samples, _trace = hull_scenario(runs=1, seed=5, rate_hz=100.0).samples()
+    pipeline = DecayPipeline(DetectionSettings(), [])  # release detection alone: the settle is what counts
+    size, count = 64 * 1024, 1024  # below glibc's mmap threshold: in the main arena's heap
+    blocks = [libc.malloc(size) for _ in range(count)]
+    try:
+        for block in blocks:
+            ctypes.memset(block, 1, size)
+        for block in blocks[:-1]:  # the last one stays: the free pages sit below a block in use
+            libc.free(block)
+        held_kb = _anonymous_kb()
+        outcomes = [
+            o for i in range(0, samples.size, 50) for o in pipeline.feed(Block(samples[i : i + 50], b"", 0.0))
+        ]
+        assert [o.settle_reason for o in outcomes] == ["amplitude"]
+        given_back_kb = held_kb - _anonymous_kb()
+    finally:
+        libc.free(blocks[-1])
+    assert given_back_kb > 32 * 1024, f"{given_back_kb} kB given back after a settle"
+
+
+ARENA_PROBE = """
+import ctypes, sys, tempfile, threading
+import numpy as np
+from pathlib import Path
+from tankdaq.acquire.memory import limit_arenas
+if sys.argv[1] == "limit":
+    limit_arenas()
+ready, done = threading.Barrier(9), threading.Event()
+def work():
+    keep = np.ones(100_000)  # C malloc on this thread: it attaches to an arena
+    ready.wait()
+    done.wait()
+threads = [threading.Thread(target=work) for _ in range(8)]
+for thread in threads:
+    thread.start()
+ready.wait()  # eight threads hold memory at once: none can take an arena another let go
+libc = ctypes.CDLL(None)
+with tempfile.NamedTemporaryFile() as out:
+    libc.fopen.restype = ctypes.c_void_p
+    stream = ctypes.c_void_p(libc.fopen(out.name.encode(), b"w"))
+    libc.malloc_info(0, stream)
+    libc.fclose(stream)
+    print(Path(out.name).read_text().count("<heap nr="))
+done.set()
+"""
+
+
+@pytest.mark.skipif(_glibc() is None, reason="glibc's arenas: other C libraries have none to cap")
+def test_the_record_daemon_caps_glibcs_arenas() -> None:
+    """Counted in a fresh process (a test process's arenas are already made): eight threads holding
+    memory at once get at most the cap of arenas, where glibc alone gives them one each."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MALLOC_ARENA_MAX", "GLIBC_TUNABLES")}
+
+    def arenas(mode: str) -> int:
+        run = subprocess.run([sys.executable, "-c", ARENA_PROBE, mode], capture_output=True, text=True,
+                             env=env, timeout=120, check=True)  # fmt: skip
+        return int(run.stdout.strip())
+
+    assert arenas("limit") <= ARENAS
+    assert arenas("free") > ARENAS + 2  # what the cap prevents (one per thread on this machine)

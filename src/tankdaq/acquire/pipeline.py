@@ -25,6 +25,7 @@ from ..ident.online import OnlineResult
 from ..physics.models import resolve_model
 from ..samples import AXIS_FIELDS
 from .events import DecayOutcome, Event, Fitted, Held, Note, PutBack, Released, Settled
+from .memory import release_free_memory
 from .release import ReleaseDetector, ReleaseEvent
 from .sinks import Block, Decay, Sink
 
@@ -266,6 +267,7 @@ class DecayPipeline:
             outcome = decay.outcome()
             self.outcomes.append(outcome)
         self.emit(Settled(outcome))
+        release_free_memory()  # the decay's buffers, freed now, back to the system (acquire.memory)
         return outcome
 
     def abort(self, kind: str, message: str) -> DecayOutcome | None:

@@ -1,0 +1,70 @@
+"""Giving the C allocator's free memory back to the system after each decay.
+
+A decay's buffers (its fit, its file, its .rrd) are freed when it ends, but glibc's malloc keeps the
+freed pages of its arenas (each thread that allocates attaches to one, up to 8 per core: the pipeline,
+the live fit's worker, the view, rerun's threads) for later, and only the top of each arena is ever
+returned by itself. Over a lab day that is some 30 MB held free with the view saving, and the resident
+size swings and drifts with it (docs/benchmarks.md, "Memory over a lab day"). ``malloc_trim(0)``
+returns every whole free page of every arena; it is done once a decay has settled, on the pipeline's
+thread (never the reading one). ``limit_arenas`` caps the arenas at the record daemon's start (rerun's
+threads alone took 15 on 2 cores, each keeping its own free pages); what ``MALLOC_ARENA_MAX`` does.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import os
+import sys
+from collections.abc import Callable
+
+
+@functools.cache
+def _glibc() -> ctypes.CDLL | None:
+    """The C library this process runs on when it is glibc; None on another C library or platform."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(None)
+        libc.gnu_get_libc_version  # noqa: B018 (glibc's own symbol: another C library has none)
+    except (OSError, AttributeError):
+        return None
+    return libc
+
+
+@functools.cache
+def _malloc_trim() -> Callable[[int], int] | None:
+    """glibc's ``malloc_trim``; None elsewhere (nothing to do there)."""
+    libc = _glibc()
+    if libc is None:
+        return None
+    trim = libc.malloc_trim
+    trim.argtypes = [ctypes.c_size_t]
+    trim.restype = ctypes.c_int
+    return trim
+
+
+#: glibc's ``mallopt`` parameter for the most arenas (malloc.h's ``M_ARENA_MAX``).
+M_ARENA_MAX = -8
+#: Arenas a recording process uses at most: over 1.5 simulated hours of the memory bench, glibc's memory
+#: held free went from 32-59 MB with its own 15 arenas to 7-9 MB with 2 (docs/benchmarks.md).
+ARENAS = 2
+
+
+def limit_arenas(count: int = ARENAS) -> bool:
+    """Cap glibc's arenas at ``count`` for the threads made from now on, unless the user set
+    ``MALLOC_ARENA_MAX`` (or glibc's tunables); False where nothing was changed."""
+    libc = _glibc()
+    user_set = "MALLOC_ARENA_MAX" in os.environ or "arena_max" in os.environ.get("GLIBC_TUNABLES", "")
+    if libc is None or user_set:
+        return False
+    return bool(libc.mallopt(ctypes.c_int(M_ARENA_MAX), ctypes.c_int(count)))
+
+
+def release_free_memory() -> bool:
+    """Return the allocator's whole free pages to the system; False where there is no such call."""
+    trim = _malloc_trim()
+    if trim is None:
+        return False
+    trim(0)
+    return True
