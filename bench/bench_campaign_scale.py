@@ -217,7 +217,11 @@ def main() -> None:
         if not args.no_work:
             tables += ["", work_table(sizes, args.data, args.repeats, address, dask_pids)]
         if not args.no_command:
-            modes = [mode for mode in MODES if mode in args.modes.split(",")]
+            modes = [
+                mode
+                for mode in MODES
+                if any(mode.startswith(given.strip()) for given in args.modes.split(",") if given.strip())
+            ]
             tables += ["", command_table(sizes, args.data, address, dask_pids, args.baseline, modes)]
         tables.append(f"\nload average at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     text = "\n".join(tables) + "\n"
