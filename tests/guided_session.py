@@ -1,8 +1,12 @@
 """What the guided session's tests share: the two-draft plan and an operator who presses Enter; a plan of
-one decay repeated and an operator who repeats it, then skips."""
+one decay repeated and an operator who repeats it, then skips; a signal sent to a ``tankdaq session``
+process once it has reached a given point."""
 
 from __future__ import annotations
 
+import subprocess
+import time
+from collections.abc import Callable
 from typing import Any
 
 #: 2 drafts x 2 angles x 2 repeats of the swath in roll: eight decays, a draft change between them.
@@ -54,3 +58,24 @@ class Repeating:
         self.asked.append((question.kind, question.default))
         assert len(self.asked) < 10, "the session should have ended"
         return self.verdicts.pop(0) if question.kind == "verdict" else ""
+
+
+def signal_when(
+    proc: subprocess.Popen[str], ready: Callable[[], bool], signum: int, what: str, wait_s: float = 120.0
+) -> str:
+    """Send ``signum`` to the session process once ``ready()`` holds (polled, bounded by ``wait_s``: the
+    assertion says ``what`` it waited for) and wait for it to end; its stderr. A process that fails or
+    hangs is killed before the test goes on."""
+    try:
+        deadline = time.monotonic() + wait_s
+        while not ready():
+            assert proc.poll() is None, proc.communicate()[1]
+            assert time.monotonic() < deadline, what
+            time.sleep(0.02)  # polling the session's files: a real condition, bounded
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    return err

@@ -18,13 +18,13 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from mcap.reader import make_reader
 
+from guided_session import signal_when
 from tankdaq.acquire.events import Released, Settled
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
@@ -150,17 +150,9 @@ def test_sigterm_at_the_verdict_question_stops_the_session_and_resume_asks_it_ag
     )
     os.close(operator_side)
     try:
-        deadline = time.monotonic() + WAIT_S
-        while not (out.is_dir() and _verdict_open(out)):
-            assert proc.poll() is None, proc.communicate()[1]
-            assert time.monotonic() < deadline, "no verdict question"
-            time.sleep(0.02)
-        proc.send_signal(signal.SIGTERM)
-        _, err = proc.communicate(timeout=60)
+        ready = lambda: out.is_dir() and _verdict_open(out)  # noqa: E731
+        err = signal_when(proc, ready, signal.SIGTERM, "no verdict question", WAIT_S)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
         os.close(terminal)
     assert proc.returncode == 130, err  # stopped the typed way (SIGTERM's default would be -15)
     assert "Traceback" not in err and f"continue with --resume --out {out}" in err

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from guided_session import Enter
+from guided_session import Enter, signal_when
 from tankdaq.acquire.events import DeviceReady, Event, Held, Notice, Released, Settled, Stopped
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
@@ -34,11 +34,7 @@ angles_deg = [10.0]
 def test_a_signal_stops_the_session_as_an_outcome_and_the_decay_under_way_is_kept(
     tmp_path: Path, stop_at: type[Event]
 ) -> None:
-    plan_file = tmp_path / "plan.toml"
-    plan_file.write_text(ONE_CONDITION_PLAN)
-    out = tmp_path / "out"
-    record = {"port": "sim", "out_dir": out, "viewer": "none", "sim_speed": 8.0, "sim_seed": 3}
-    settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={})
+    settings, out = _one_condition(tmp_path)
     signalled: list[Event] = []
 
     def react(event: Event) -> None:  # on the feeding (main) thread, as the daemon's signal handler runs
@@ -75,7 +71,6 @@ def test_session_stopped_mid_decay_exits_130_with_the_resume_advice(tmp_path: Pa
     """The command: SIGINT while a decay is being written (its file has data and is not yet in the log)."""
     import subprocess
     import sys
-    import time
 
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text(ONE_CONDITION_PLAN)
@@ -84,18 +79,8 @@ def test_session_stopped_mid_decay_exits_130_with_the_resume_advice(tmp_path: Pa
     args = [exe, "session", str(plan_file), "--port", "sim", "--hull", "swath", "--out", str(out), "--yes"]
     args += ["--viewer", "none", "--sim-speed", "8", "--sim-faults", ""]
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 120
-        while not any(p.stat().st_size > 0 for p in out.glob("*.mcap")):
-            assert proc.poll() is None, proc.communicate()[1]
-            assert time.monotonic() < deadline, "no decay under way"
-            time.sleep(0.02)
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
+    writing = lambda: any(p.stat().st_size > 0 for p in out.glob("*.mcap"))  # noqa: E731
+    err = signal_when(proc, writing, signal.SIGINT, "no decay under way")
     assert proc.returncode == 130, err
     assert "Traceback" not in err and f"continue with --resume --out {out}" in err
     records = SessionLog(out).read()
@@ -107,11 +92,7 @@ def test_a_signal_while_the_device_opens_stops_the_session_before_any_question(
 ) -> None:
     """The session opens its device as it starts, before its first question: a Ctrl-C meanwhile (as the
     simulated sensor is started) ends ``run`` with ``stopped`` set, nothing asked, nothing left running."""
-    plan_file = tmp_path / "plan.toml"
-    plan_file.write_text(ONE_CONDITION_PLAN)
-    out = tmp_path / "out"
-    record = {"port": "sim", "out_dir": out, "viewer": "none", "sim_speed": 8.0, "sim_seed": 3}
-    settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={})
+    settings, out = _one_condition(tmp_path)
     signalled: list[Event] = []
 
     def react(event: Event) -> None:
@@ -127,3 +108,12 @@ def test_a_signal_while_the_device_opens_stops_the_session_before_any_question(
     assert operator.asked == [] and state.decays == 0 and not list(out.glob("*.mcap"))
     assert not heard.of(DeviceReady)  # stopped before the device was ready
     assert list(private_tempdir.iterdir()) == []  # the simulator it started is stopped, its pty gone
+
+
+def _one_condition(tmp_path: Path) -> tuple[SessionSettings, Path]:
+    """A session of the one-condition plan on the simulated sensor at 8x, and its folder."""
+    plan_file = tmp_path / "plan.toml"
+    plan_file.write_text(ONE_CONDITION_PLAN)
+    out = tmp_path / "out"
+    record = {"port": "sim", "out_dir": out, "viewer": "none", "sim_speed": 8.0, "sim_seed": 3}
+    return SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={}), out
