@@ -259,9 +259,10 @@ def _recording_after_release(out: Path, *extra: str) -> subprocess.Popen:
 
 def _chunk_spans(path: Path) -> list[tuple[int, int]]:
     """(first, last) log time of every complete chunk of a killed file, in file order (ns)."""
-    from mcap.exceptions import McapError
     from mcap.records import Chunk
     from mcap.stream_reader import StreamReader
+
+    from tankdaq.store.record_scan import MCAP_DAMAGE
 
     spans: list[tuple[int, int]] = []
     with path.open("rb") as f:
@@ -269,7 +270,7 @@ def _chunk_spans(path: Path) -> list[tuple[int, int]]:
             for record in StreamReader(f, emit_chunks=True).records:
                 if isinstance(record, Chunk) and record.message_start_time:
                     spans.append((record.message_start_time, record.message_end_time))
-        except McapError:  # the killed tail
+        except MCAP_DAMAGE:  # the killed tail, cut anywhere (even inside a record's length)
             pass
     return spans
 

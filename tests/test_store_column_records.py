@@ -83,3 +83,25 @@ def test_a_file_that_is_not_such_a_record_is_one_clear_error(tmp_path: Path) -> 
     text.write_text("t_s,heave_m\n0.0,calm\n")
     with pytest.raises(BadRecordingInput, match="not a readable CSV record"):
         read_csv(text, LAYOUT)
+
+
+def test_an_mcap_record_cut_anywhere_is_one_clear_error(
+    tmp_path: Path, columns: dict[str, np.ndarray]
+) -> None:
+    """A record cut short (a full disk, a copy stopped) reads to its messages or fails as
+    ``BadRecordingInput`` at every length: never a struct or zstd error out of the mcap reader."""
+    whole = tmp_path / "probe.mcap"
+    attachment = FileAttachment("v.toml", "application/toml", b"x")
+    write_mcap(whole, LAYOUT, columns, {"vehicle": "probe"}, attachment)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    refused = 0
+    for length in range(0, len(data), 7):
+        cut.write_bytes(data[:length])
+        for read in (lambda p: read_mcap(p, LAYOUT), read_attachments):
+            try:
+                read(cut)
+            except BadRecordingInput as exc:
+                refused += 1
+                assert str(cut) in str(exc)
+    assert refused > 0

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from rerun.chunk import RrdReader
 
@@ -36,6 +35,7 @@ from tankdaq.acquire.listeners import EventLog
 from tankdaq.errors import RecordingError
 from tankdaq.samples import empty_samples
 from tankdaq.store.reader import read_recording
+from tankdaq.store.record_scan import MCAP_DAMAGE
 from tankdaq.store.recover import recover
 from tankdaq.viz.live import LiveView
 from tankdaq.viz.view_feed import QUEUE_LIMIT
@@ -75,7 +75,7 @@ def _complete(path: Path) -> bool:
         try:
             reader = make_reader(f)
             summary = reader.get_summary()
-        except McapError:  # a cut file: its tail is not a footer (or it holds nothing at all)
+        except MCAP_DAMAGE:  # a cut file: its tail is not a footer (or too short to hold one, or nothing)
             return False
         if summary is None:
             return False

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from .. import __version__
 from ..errors import BadRecordingInput
+from .record_scan import MCAP_DAMAGE
 
 #: Columns read back, by field name, in file order.
 Columns = dict[str, list[float]]
@@ -160,7 +160,7 @@ def read_mcap(path: Path, layout: ColumnLayout) -> tuple[Columns, dict[str, str]
                 for f in layout.fields:
                     if f in sample:
                         columns[f].append(sample[f])
-    except (McapError, ValueError, KeyError, EOFError, OSError) as exc:
+    except (*MCAP_DAMAGE, KeyError, EOFError, OSError) as exc:
         raise BadRecordingInput(f"{path}: not a readable MCAP record ({exc})") from None
     if not columns[layout.fields[0]]:
         raise BadRecordingInput(f"{path}: no messages on {layout.topic}; is this a {layout.what}?")
@@ -172,5 +172,5 @@ def read_attachments(path: Path) -> list[FileAttachment]:
     try:
         with path.open("rb") as fh:
             return [FileAttachment(a.name, a.media_type, a.data) for a in make_reader(fh).iter_attachments()]
-    except (McapError, ValueError, OSError) as exc:
+    except (*MCAP_DAMAGE, EOFError, OSError) as exc:
         raise BadRecordingInput(f"{path}: its attachments cannot be read ({exc})") from None
