@@ -18,6 +18,7 @@ import contextlib
 import dataclasses
 import threading
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future
 from typing import TypeVar
 
 from ..device.driver import MTiDriver
@@ -126,25 +127,17 @@ class StreamingDaemon(RecordDaemon):
         the stream; its result once it returns (what it raises is raised here). A signal meanwhile ends
         the stream: the ``Stopped`` is returned and ``work`` is left to end on its own (the answer no
         longer matters; the question is asked again on resume)."""
-        done = threading.Event()
-        result: list[T] = []
-        failure: list[BaseException] = []
+        answered: Future[T] = Future()
 
         def answer() -> None:
             try:
-                result.append(work())
-            except BaseException as exc:  # the operator walked away (EOF, Ctrl-D): passed on below
-                failure.append(exc)
-            finally:
-                done.set()
+                answered.set_result(work())
+            except BaseException as exc:  # the operator walked away (EOF, Ctrl-D): raised below
+                answered.set_exception(exc)
 
         threading.Thread(target=answer, name=ASK_THREAD, daemon=True).start()
-        stopped = self.stream_until(done.is_set)
-        if stopped is not None:
-            return stopped
-        if failure:
-            raise failure[0]
-        return result[0]
+        stopped = self.stream_until(answered.done)
+        return stopped if stopped is not None else answered.result()
 
     def retarget(self, settings: RecordSettings, run: int) -> None:
         """The next decay's settings (a session's condition: draft, nominal angle and its tolerance, the
