@@ -9,14 +9,16 @@ table (lighter than Alembic for five tables), and a catalogue that cannot be ope
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import sqlalchemy as sa
 
 from ..errors import InputError, TankdaqError
+
+T = TypeVar("T")
 
 #: The environment variable that names the catalogue (a URL, a path, or ``none``).
 ENV_VAR = "TANKDAQ_CATALOGUE"
@@ -29,6 +31,12 @@ OFF = ("none", "off", "")
 READ_ONLY = "tankdaq_read_only"
 #: How many values one look-up asks for (a bound parameter list, well under every driver's limit).
 LOOKUP_BATCH = 500
+
+
+def in_batches(values: Sequence[T]) -> Iterator[Sequence[T]]:
+    """``values`` in slices of at most ``LOOKUP_BATCH``: one look-up's ``IN`` list each."""
+    for start in range(0, len(values), LOOKUP_BATCH):
+        yield values[start : start + LOOKUP_BATCH]
 
 
 class CatalogueError(TankdaqError):

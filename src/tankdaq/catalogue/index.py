@@ -16,7 +16,7 @@ from pathlib import Path
 import sqlalchemy as sa
 
 from ..errors import RecordingError
-from .database import LOOKUP_BATCH, Catalogue, decays, exports
+from .database import Catalogue, decays, exports, in_batches
 from .rows import DECAY_SUFFIXES, EXPORT_SUFFIXES, decay_row, export_metadata, file_sha256, utc_now
 from .writing import Made, add_export, add_rows, record_session
 
@@ -105,8 +105,7 @@ def _known_paths(catalogue: Catalogue, hashes: list[str]) -> dict[str, tuple[str
     found: dict[str, tuple[str, sa.Table]] = {}
     with catalogue.reading() as connection:
         for table in (decays, exports):
-            for start in range(0, len(hashes), LOOKUP_BATCH):
-                batch = hashes[start : start + LOOKUP_BATCH]
+            for batch in in_batches(hashes):
                 rows = connection.execute(
                     sa.select(table.c.sha256, table.c.path).where(table.c.sha256.in_(batch))
                 )

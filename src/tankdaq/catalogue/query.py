@@ -17,7 +17,7 @@ import sqlalchemy as sa
 
 from ..config import format_draft, parse_draft
 from ..errors import InputError
-from .database import LOOKUP_BATCH, BadCatalogueQuery, Catalogue, decays, exports, open_catalogue, resolve_url
+from .database import BadCatalogueQuery, Catalogue, decays, exports, in_batches, open_catalogue, resolve_url
 from .rows import STANDARD_AMPLITUDES_DEG
 
 if TYPE_CHECKING:
@@ -183,8 +183,7 @@ def attach_exports(catalogue: Catalogue, rows: list[dict[str, Any]]) -> list[dic
     for row in rows:
         row["exports"] = []
     with catalogue.reading() as connection:
-        for start in range(0, len(rows), LOOKUP_BATCH):
-            batch = rows[start : start + LOOKUP_BATCH]
+        for batch in in_batches(rows):
             untied = sa.and_(
                 exports.c.source_sha256.is_(None), exports.c.source_path.in_([r["path"] for r in batch])
             )

@@ -14,7 +14,7 @@ import sqlalchemy as sa
 
 from ..config import Hull
 from ..errors import RecordingError
-from .database import LOOKUP_BATCH, Catalogue, decays, exports, hulls, sessions
+from .database import Catalogue, decays, exports, hulls, in_batches, sessions
 from .rows import (
     DECAY_SUFFIXES,
     bare_row,
@@ -85,8 +85,7 @@ def missing_paths(catalogue: Catalogue, paths: Sequence[Path]) -> list[Path]:
     resolved = {str(path.resolve()): path for path in paths if path.suffix.lower() in DECAY_SUFFIXES}
     names = list(resolved)
     with catalogue.reading() as connection:
-        for start in range(0, len(names), LOOKUP_BATCH):
-            batch = names[start : start + LOOKUP_BATCH]
+        for batch in in_batches(names):
             for (found,) in connection.execute(sa.select(decays.c.path).where(decays.c.path.in_(batch))):
                 resolved.pop(found, None)
     return list(resolved.values())
