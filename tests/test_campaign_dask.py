@@ -12,9 +12,9 @@ from typer.testing import CliRunner
 from campaign_scale import dask_cluster, write_many_decays
 from tankdaq.cli import app
 from tankdaq.ident.campaign import find_campaign_hulls, find_recordings
-from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
+from tankdaq.ident.campaign_stream import completed, fit_campaign, scan_campaign, scan_file
 from tankdaq.ident.campaign_synthetic import SimulatedTest
-from tankdaq.ident.executors import campaign_executor
+from tankdaq.ident.executors import CLIENT_BATCH_S, DaskExecutor, campaign_executor
 
 pytest.importorskip("distributed", reason="the dask extra is not installed (pip install 'tankdaq[dask]')")
 
@@ -43,6 +43,7 @@ def test_a_dask_cluster_of_two_workers_gives_the_pools_results(tmp_path: Path) -
             str(report),
         ]
         result = CliRunner().invoke(app, command)
+        a_pass_stopped_early_leaves_nothing_on_the_cluster(address, find_recordings([folder])[:8])
     assert all(process.poll() is not None for process in processes)  # every process started is stopped
     assert result.exit_code == 0, result.output
     with (report / "campaign.csv").open() as fh:
@@ -56,3 +57,18 @@ def test_a_dask_cluster_of_two_workers_gives_the_pools_results(tmp_path: Path) -
                 assert float(mine[column]) == pytest.approx(value, rel=1e-12, abs=1e-12), column
             else:
                 assert mine[column] == str(value), column
+
+
+def a_pass_stopped_early_leaves_nothing_on_the_cluster(address: str, paths: list[Path]) -> None:
+    """A pass goes out in one message through a client that batches for at most ``CLIENT_BATCH_S``; a
+    consumer that stops after the first result cancels the rest (the client then holds no task)."""
+    with campaign_executor(scheduler=address) as executor:
+        assert isinstance(executor, DaskExecutor)
+        client = executor._client
+        assert client.scheduler_comm.interval <= CLIENT_BATCH_S
+        passed = completed(executor, scan_file, [(path,) for path in paths])
+        index, first = next(passed)
+        assert first.path == paths[index]
+        assert len(client.futures) == len(paths)
+        passed.close()
+        assert not client.futures

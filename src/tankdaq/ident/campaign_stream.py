@@ -25,6 +25,7 @@ from typing import Any, TypeVar
 from ..config import Hull
 from ..records import DecayRun
 from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
+from .executors import DaskExecutor
 from .free_decay import cut_lines
 from .inputs import input_notices
 
@@ -269,10 +270,14 @@ def completed(
     executor: Executor | None, function: Callable[..., T], tasks: Sequence[tuple[Any, ...]]
 ) -> Iterator[tuple[int, T]]:
     """(task index, result) of each task as it completes: all submitted at once (their arguments are
-    paths and labels, small), in this process in order without an executor."""
+    paths and labels, small), in this process in order without an executor; on a Dask cluster by its
+    own ``completed`` (``ident.executors.DaskExecutor``: a pass in one message)."""
     if executor is None:
         for index, arguments in enumerate(tasks):
             yield index, function(*arguments)
+        return
+    if isinstance(executor, DaskExecutor):
+        yield from executor.completed(function, tasks)
         return
     futures = {executor.submit(function, *arguments): i for i, arguments in enumerate(tasks)}
     try:
