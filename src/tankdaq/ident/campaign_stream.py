@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from collections.abc import Callable, Collection, Iterator, Sequence
+from collections.abc import Callable, Collection, Generator, Iterator, Sequence
 from concurrent.futures import Executor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -268,7 +268,7 @@ def chunk_size(n: int, executor: Executor | None = None) -> int:
 
 def completed(
     executor: Executor | None, function: Callable[..., T], tasks: Sequence[tuple[Any, ...]]
-) -> Iterator[tuple[int, T]]:
+) -> Generator[tuple[int, T], None, None]:
     """(task index, result) of each task as it completes: all submitted at once (their arguments are
     paths and labels, small), in this process in order without an executor; on a Dask cluster by its
     own ``completed`` (``ident.executors.DaskExecutor``: a pass in one message)."""
