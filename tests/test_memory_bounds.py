@@ -188,3 +188,35 @@ def test_the_record_daemon_caps_glibcs_arenas() -> None:
 
     assert arenas("limit") <= ARENAS
     assert arenas("free") > ARENAS + 2  # what the cap prevents (one per thread on this machine)
+
+
+MMAP_PROBE = """
+import ctypes, sys
+from tankdaq.acquire.memory import fix_mmap_threshold
+if sys.argv[1] == "fixed":
+    fix_mmap_threshold()
+libc = ctypes.CDLL(None)
+libc.malloc.restype = ctypes.c_void_p
+libc.malloc.argtypes = [ctypes.c_size_t]
+libc.free.argtypes = [ctypes.c_void_p]
+libc.free(libc.malloc(4 << 20))  # a large block freed: glibc alone raises its threshold past 4 MB
+block = libc.malloc(1 << 20)
+size_field = ctypes.c_size_t.from_address(block - ctypes.sizeof(ctypes.c_size_t)).value
+print(bool(size_field & 2))  # the chunk's IS_MMAPPED bit: a mapping of its own, given back whole
+libc.free(block)
+"""
+
+
+@pytest.mark.skipif(_glibc() is None, reason="glibc's mmap threshold: other C libraries have none")
+def test_large_blocks_keep_mappings_of_their_own_after_a_larger_one_was_freed() -> None:
+    """In a fresh process: a 1 MB block after a 4 MB one was freed is still mapped on its own with the
+    threshold fixed (given back whole when freed), where glibc alone cuts it from its heap."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MALLOC_MMAP_THRESHOLD_", "GLIBC_TUNABLES")}
+
+    def mapped(mode: str) -> str:
+        run = subprocess.run([sys.executable, "-c", MMAP_PROBE, mode], capture_output=True, text=True,
+                             env=env, timeout=120, check=True)  # fmt: skip
+        return run.stdout.strip()
+
+    assert mapped("fixed") == "True"
+    assert mapped("free") == "False"  # what the fixed threshold prevents

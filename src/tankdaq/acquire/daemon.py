@@ -48,7 +48,7 @@ from .events import (
     Stopping,
     ViewerNote,
 )
-from .memory import limit_arenas
+from .memory import tune_allocator
 from .pipeline import Block, DecayPipeline, DetectionSettings
 from .read_thread import DeviceReader, Read
 from .signals import SignalStop
@@ -302,7 +302,7 @@ class RecordDaemon:
     def _start(self) -> tuple[MTiDriver, DecayPipeline]:
         """Prepare the kernels (no refit compiles mid-decay), open the device, build the pipeline."""
         s = self.settings
-        limit_arenas()  # before the view's, rerun's and the fits' threads (acquire.memory)
+        tune_allocator()  # before the view's, rerun's and the fits' threads (acquire.memory)
         prepare_identifier(s.model, self._notice("identifier"))
         driver = self._open_device()
         self.status.device = driver.info.describe() if driver.info else s.port

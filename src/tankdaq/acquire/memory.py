@@ -8,6 +8,11 @@ size swings and drifts with it (docs/benchmarks.md, "Memory over a lab day"). ``
 returns every whole free page of every arena; it is done once a decay has settled, on the pipeline's
 thread (never the reading one). ``limit_arenas`` caps the arenas at the record daemon's start (rerun's
 threads alone took 15 on 2 cores, each keeping its own free pages); what ``MALLOC_ARENA_MAX`` does.
+
+``fix_mmap_threshold`` keeps large blocks (a fit's arrays over a decay, 80-250 kB at 400 Hz) in mappings
+of their own, given back whole when freed. glibc raises its threshold for that each time such a block is
+freed (up to 32 MB), after which they are cut from the arenas instead, and the holes they leave there are
+what kept growing over a day (docs/benchmarks.md). ``tune_allocator`` does both, at the daemon's start.
 """
 
 from __future__ import annotations
@@ -59,6 +64,31 @@ def limit_arenas(count: int = ARENAS) -> bool:
     if libc is None or user_set:
         return False
     return bool(libc.mallopt(ctypes.c_int(M_ARENA_MAX), ctypes.c_int(count)))
+
+
+#: glibc's ``mallopt`` parameter for the size from which a block is mapped on its own (``M_MMAP_THRESHOLD``).
+M_MMAP_THRESHOLD = -3
+#: That size, fixed (glibc's own starting value): setting it turns glibc's raising of it off.
+MMAP_THRESHOLD = 128 * 1024
+
+
+def fix_mmap_threshold(size: int = MMAP_THRESHOLD) -> bool:
+    """Keep blocks of ``size`` bytes and more in mappings of their own for good, unless the user set
+    ``MALLOC_MMAP_THRESHOLD_`` (or glibc's tunables); False where nothing was changed."""
+    libc = _glibc()
+    user_set = "MALLOC_MMAP_THRESHOLD_" in os.environ or "mmap_threshold" in os.environ.get(
+        "GLIBC_TUNABLES", ""
+    )
+    if libc is None or user_set:
+        return False
+    return bool(libc.mallopt(ctypes.c_int(M_MMAP_THRESHOLD), ctypes.c_int(size)))
+
+
+def tune_allocator() -> None:
+    """What a process that records all day sets at its start: the arenas capped, the large blocks in
+    mappings of their own (the 8 simulated hours of ``bench/bench_memory_day.py``)."""
+    limit_arenas()
+    fix_mmap_threshold()
 
 
 def release_free_memory() -> bool:
