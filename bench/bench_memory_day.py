@@ -6,7 +6,8 @@ In the loop is what ``tankdaq record --port sim --rate 400 --viewer save`` runs 
 counter tracker), the daemon's ``_feed``, the decay pipeline and its real sinks: the online identifier
 (``--model``; record's default is ``auto``) with its refits on its worker thread and the final fit, one
 MCAP per decay, the view saving an .rrd beside each, and the run catalogue (a SQLite file, written on its
-own thread), plus one probe sink that reads ``VmRSS`` from ``/proc/self/status`` at each decay's settle.
+own thread), plus one probe sink that reads ``VmRSS`` from ``/proc/self/status`` at each decay's settle,
+and adds the resident sets of the processes it started (the view's, ``viz.view_process``).
 
 Not in the loop: the pty, pyserial and the hand-shake (``open_device``), and the simulator's firmware
 thread, which encodes frame by frame in Python and cannot play 400 Hz much faster than real time on this
@@ -49,6 +50,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import psutil
 
 if TYPE_CHECKING:
     from tankdaq.physics.scenario import DecayScenario
@@ -87,12 +89,29 @@ class RepeatedScenario:
         return block
 
 
-def rss_kb() -> int:
+def own_rss_kb() -> int:
     """This process's resident set size (kB), from /proc/self/status."""
     for line in Path("/proc/self/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
             return int(line.split()[1])
     raise RuntimeError("no VmRSS in /proc/self/status")
+
+
+def children_rss_kb() -> int:
+    """The resident set size (kB) of every process this one started and that still runs: the view's
+    process (``viz.view_process``) and multiprocessing's resource tracker beside it."""
+    total = 0
+    for child in psutil.Process().children(recursive=True):
+        try:
+            total += child.memory_info().rss // 1024
+        except psutil.Error:
+            continue  # a view process that ended between the listing and the reading
+    return total
+
+
+def rss_kb() -> int:
+    """What the recorder holds (kB): its own resident set and its children's."""
+    return own_rss_kb() + children_rss_kb()
 
 
 class MallInfo2(ctypes.Structure):
@@ -156,9 +175,12 @@ def size_kind(size_kb: int) -> str:
 
 
 def memory_state(libc: ctypes.CDLL | None) -> dict[str, int]:
-    """Where this process's memory is (kB): RSS, anonymous memory by mapping, what glibc's arenas hold in
-    use and free, the Python blocks allocated, the threads."""
-    state = {"rss_kb": rss_kb(), **anonymous_kb(), "py_blocks": sys.getallocatedblocks()}
+    """Where the memory is (kB): RSS (this process's and its children's: the view's process), this
+    process's anonymous memory by mapping, what glibc's arenas hold in use and free, the Python blocks
+    allocated, the threads."""
+    own, children = own_rss_kb(), children_rss_kb()
+    state = {"rss_kb": own + children, "own_rss_kb": own, "children_rss_kb": children}
+    state |= {**anonymous_kb(), "py_blocks": sys.getallocatedblocks()}
     state["threads"] = len(os.listdir("/proc/self/task"))
     if libc is not None:
         info = libc.mallinfo2()

@@ -36,6 +36,7 @@ from ..ident.online import OnlineIdentifier, prepare_identifier
 from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
 from ..viz.live import LiveView
+from ..viz.view_process import ViewProcess
 from ..viz.viewer import default_viewer_mode, describe_mode
 from .events import (
     DecayOutcome,
@@ -260,7 +261,9 @@ class RecordDaemon:
         metadata, config = self._file_header(driver)
         mode = s.viewer or default_viewer_mode()
         self.emit(ViewerNote(describe_mode(mode, default=s.viewer is None)))
-        view = LiveView(
+        # a view that shows anything runs in a process of its own, replaced every so many decays:
+        # what rerun keeps of each recording is given back, and its failures stay there (viz.view_process)
+        view = (LiveView if mode == "none" else ViewProcess)(
             mode,
             axis="roll" if s.axis == "auto" else s.axis,
             bind=s.viewer_bind,

@@ -32,6 +32,7 @@ from .events import DecayOutcome, Event
 
 if TYPE_CHECKING:
     from ..viz.live import LiveView
+    from ..viz.view_process import ViewProcess
     from .release import ReleaseEvent
 
 #: How long the final fit at settle may hold the loop (it normally takes well under 0.1 s once the
@@ -383,14 +384,15 @@ class RecordingSink(Sink):
 
 
 class ViewSink(Sink):
-    """The live view (``viz.live.LiveView``): one run per decay, its .rrd beside the recording.
+    """The live view (``viz.live.LiveView``, or ``viz.view_process.ViewProcess``: the same in a process
+    of its own): one run per decay, its .rrd beside the recording.
 
     Without a recording (replay) the .rrd is named from ``rrd_base``. Before each decay the free space
     is checked: below the view's reserve the decay is shown without an .rrd (a warning; the MCAP
     comes first). The view queues everything on its own thread: a slow or dead viewer costs a note.
     """
 
-    def __init__(self, view: LiveView, rrd_base: Path | None = None) -> None:
+    def __init__(self, view: LiveView | ViewProcess, rrd_base: Path | None = None) -> None:
         self.view = view
         self.rrd_base = rrd_base
 

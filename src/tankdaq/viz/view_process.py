@@ -1,0 +1,306 @@
+"""The live view in a process of its own (``ViewProcess``), as the record daemon runs it all day.
+
+rerun's SDK keeps a little of every recording made with it, in its own allocator and threads' heaps
+(about 1 MB an hour at 400 Hz with the view saving, docs/benchmarks.md "Memory over a lab day"), and a
+native failure in it would take the process with it. Here a ``LiveView`` runs in a child process, fed
+through a pipe by one thread of this process (``ViewFeed``: ``put`` never waits, sample blocks and
+refits beyond the limit are dropped and counted, as the view's own thread does). Every
+``RUNS_PER_PROCESS`` runs the child is let go (it finishes its last .rrd and exits) and a fresh one takes
+the next run, so whatever rerun kept is given back whole. A child that dies costs one note; the next
+run starts another. The child ignores the terminal's signals: the recorder decides when the view ends,
+and a recorder that dies leaves the child at the end of its pipe, where it finishes its .rrd and exits.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from multiprocessing.connection import Connection
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Self
+
+import numpy as np
+
+from ..errors import InputError
+from ..samples import AXIS_FIELDS
+from ..store.disk import RESERVE_BYTES
+from .live import CLOSE_TIMEOUT_S, LiveView
+from .view_feed import QUEUE_LIMIT, SAVE_QUEUE_LIMIT, ViewFeed
+from .viewer import DEFAULT_BIND, check_mode, display_available
+
+#: Runs one view process shows before a fresh one takes over (about an hour of decays at 35 s each;
+#: what rerun keeps of so many runs is a megabyte or so).
+RUNS_PER_PROCESS = 100
+
+#: How much longer than its own bound on closing a view process is given before it is stopped.
+CHILD_GRACE_S = 10.0
+
+#: What a terminal or a service manager sends the whole process group; the child ignores them.
+TERMINAL_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
+
+#: A message to the child: a ``LiveView`` method's name, its positional and keyword arguments.
+Message = tuple[str, tuple[Any, ...], dict[str, Any]]
+
+
+def serve_view(conn: Connection, options: dict[str, Any]) -> None:
+    """The child: a ``LiveView`` made with ``options``, driven by the messages on ``conn`` until "close"
+    or the end of the pipe; its notes go back on ``conn``, then ("closed", dropped updates), and the
+    process ends there (it never returns)."""
+    for number in TERMINAL_SIGNALS:
+        signal.signal(number, signal.SIG_IGN)  # the recorder ends the view: it finishes its .rrd first
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, TERMINAL_SIGNALS)  # blocked since birth (``_Child``)
+    sending = threading.Lock()  # the view's thread sends notes while this one may send too
+
+    def send(message: tuple[str, object]) -> None:
+        with sending, contextlib.suppress(OSError):  # a recorder gone: nobody to tell
+            conn.send(message)
+
+    view = LiveView(on_note=lambda line: send(("note", line)), **options)
+    try:
+        while True:
+            try:
+                method, args, kwargs = conn.recv()
+            except (EOFError, OSError):
+                break
+            if method == "close":
+                break
+            if method == "new_run":
+                view.axis = kwargs.pop("axis")
+            getattr(view, method)(*args, **kwargs)
+    finally:
+        view.close()
+        send(("closed", view.dropped))
+        conn.close()
+        # Out at once: the interpreter's own exit would run rerun's, which flushes every recording again
+        # and waits without end on a viewer that stalled (the view's close above is bounded and said so).
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(0)
+
+
+class _Child:
+    """One view process, the pipe to it and the thread that hands its notes on."""
+
+    def __init__(self, options: dict[str, Any], on_note: Callable[[str], None]) -> None:
+        context = multiprocessing.get_context("spawn")  # a fresh interpreter: nothing of the recorder's
+        self.conn, theirs = context.Pipe()
+        self.process = context.Process(target=serve_view, args=(theirs, options), name="tankdaq-view")
+        self.process.daemon = False  # it outlives a recorder killed hard long enough to finish its .rrd
+        # born with the terminal's signals blocked (inherited through exec), so a Ctrl-C while it is
+        # still importing cannot kill it; it ignores them once started. Only this thread's mask changes.
+        signal.pthread_sigmask(signal.SIG_BLOCK, TERMINAL_SIGNALS)
+        self.process.start()
+        theirs.close()
+        self.runs = 0
+        self.dropped = 0
+        self._on_note = on_note
+        self._listener = threading.Thread(target=self._listen, name="tankdaq-view-notes", daemon=True)
+        self._listener.start()
+
+    def _listen(self) -> None:
+        while True:
+            try:
+                kind, value = self.conn.recv()
+            except (EOFError, OSError):
+                return
+            if kind == "note":
+                self._on_note(str(value))
+            elif kind == "closed":
+                self.dropped = int(str(value))
+
+    def send(self, message: Message) -> bool:
+        """False when the child is gone (its pipe broken)."""
+        try:
+            self.conn.send(message)
+        except (OSError, ValueError):
+            return False
+        return True
+
+    def finish(self, timeout_s: float) -> bool:
+        """Ask the child to end, wait for it (at most ``timeout_s``), stop it if it did not; True if
+        it ended by itself."""
+        self.send(("close", (), {}))
+        self.process.join(timeout_s)
+        ended = not self.process.is_alive()
+        if not ended:
+            self.process.kill()
+            self.process.join(1.0)
+        self._listener.join(1.0)
+        self.conn.close()
+        return ended
+
+
+class ViewProcess:
+    """``LiveView``'s calls (``new_run``, ``log_samples``, ``log_fit``, ``log_event``, ``end_run``,
+    ``close``), the view itself in a child process replaced every ``runs_per_process`` runs (see the
+    module docstring). ``mode`` is spawn, save or a rerun URL (spawn without a display falls back to
+    save here, at once); the other settings are ``LiveView``'s."""
+
+    def __init__(
+        self,
+        mode: str,
+        axis: str = "roll",
+        terms: Sequence[str] = (),
+        spawn_port: int = 9876,
+        bind: str = DEFAULT_BIND,
+        on_note: Callable[[str], None] | None = None,
+        rrd_reserve_bytes: int = RESERVE_BYTES,
+        runs_per_process: int = RUNS_PER_PROCESS,
+    ) -> None:
+        self.mode = check_mode(mode)
+        if axis not in AXIS_FIELDS:
+            raise InputError(f"axis {axis!r} not understood; use one of: {', '.join(AXIS_FIELDS)}")
+        if runs_per_process < 1:
+            raise InputError(f"runs_per_process {runs_per_process}: give 1 or more")
+        self.axis = axis
+        self.terms = tuple(terms)
+        self.on_note = on_note or (lambda line: print(f"viewer: {line}", file=sys.stderr))
+        self.rrd_reserve_bytes = rrd_reserve_bytes
+        self.runs_per_process = runs_per_process
+        self.rrd_path: Path | None = None
+        if self.mode == "spawn" and not display_available():
+            self.on_note("no display (DISPLAY and WAYLAND_DISPLAY unset): no window; saving an .rrd instead")
+            self.mode = "save"
+        self._options = {"mode": self.mode, "spawn_port": spawn_port, "bind": bind}
+        self._options["rrd_reserve_bytes"] = rrd_reserve_bytes
+        self._child: _Child | None = None  # touched by the feed's thread only
+        self._retired: list[_Child] = []
+        self._children_dropped = 0
+        self._gone_noted = False
+        limit = SAVE_QUEUE_LIMIT if self.mode == "save" else QUEUE_LIMIT
+        self._feed = ViewFeed(on_error=self._failed, limit=limit)
+        self.processes_started = 0
+        if self.mode == "spawn":  # the window opens now, not at the first release
+            self._feed.put(self._open_viewer, droppable=False)
+
+    @property
+    def dropped(self) -> int:
+        """Updates dropped because the view fell behind (the MCAP has them all)."""
+        return self._feed.dropped + self._children_dropped
+
+    @property
+    def pids(self) -> list[int]:
+        """The view processes started and not yet reaped (the current one last)."""
+        children = [*self._retired, *([self._child] if self._child is not None else [])]
+        return [child.process.pid for child in children if child.process.pid is not None]
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        """Wait until every call so far has been handed to a view process; False past ``timeout_s``."""
+        return self._feed.wait_idle(timeout_s)
+
+    def new_run(
+        self,
+        name: str = "decay",
+        rrd_path: str | Path | None = None,
+        terms: Sequence[str] | None = None,
+        time_origin_s: float = 0.0,
+    ) -> None:
+        """As ``LiveView.new_run``; the run goes to a fresh process once the current one has shown
+        ``runs_per_process`` runs."""
+        if terms is not None:
+            self.terms = tuple(terms)
+        self.rrd_path = None if rrd_path is None else Path(rrd_path)
+        kwargs = {"name": name, "rrd_path": self.rrd_path, "terms": self.terms, "axis": self.axis}
+        self._feed.put(lambda: self._start_run({**kwargs, "time_origin_s": float(time_origin_s)}), False)
+
+    def log_samples(self, samples: np.ndarray) -> None:
+        """As ``LiveView.log_samples`` (dropped when the view is behind)."""
+        if samples.size:
+            self._put("log_samples", (samples.copy(),), droppable=True)
+
+    def log_fit(
+        self,
+        t: np.ndarray,
+        predicted_angle: np.ndarray,
+        predicted_rate: np.ndarray,
+        coefficients: Mapping[str, float],
+        ci95: Mapping[str, object] | None = None,
+        t_fit: float | None = None,
+    ) -> None:
+        """As ``LiveView.log_fit`` (dropped when the view is behind)."""
+        args = (np.array(t, dtype=float), np.array(predicted_angle), np.array(predicted_rate))
+        self._put("log_fit", (*args, dict(coefficients), dict(ci95 or {}), t_fit), droppable=True)
+
+    def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
+        """As ``LiveView.log_event``."""
+        self._put("log_event", (kind, message, t_s), droppable=False)
+
+    def end_run(self) -> None:
+        """As ``LiveView.end_run`` (returns at once)."""
+        self._put("end_run", (), droppable=False)
+
+    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+        """End the view: every queued update sent, each view process finished (its .rrd complete) or,
+        past ``timeout_s``, stopped with a note. A spawned viewer stays open."""
+        if not self._feed.stop(timeout_s):
+            self.on_note(f"the view did not finish in {timeout_s:g} s; the last .rrd may be cut")
+        children = [*self._retired, *([self._child] if self._child is not None else [])]
+        self._child, self._retired = None, []
+        for child in children:  # each bounds its own end by ``timeout_s`` and says so: this is the backstop
+            if not child.finish(timeout_s + CHILD_GRACE_S):
+                self.on_note(f"the view process did not end in {timeout_s + CHILD_GRACE_S:g} s: stopped")
+            self._children_dropped += child.dropped
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    # -- the feed's thread ------------------------------------------------------------------------------
+
+    def _put(self, method: str, args: tuple[Any, ...], droppable: bool) -> None:
+        self._feed.put(lambda: self._send((method, args, {})), droppable)
+
+    def _start_run(self, kwargs: dict[str, Any]) -> None:
+        child = self._child
+        if child is not None and not child.process.is_alive():
+            self._note_gone(child)
+        if child is None or not child.process.is_alive() or child.runs >= self.runs_per_process:
+            child = self._next_child()
+        child.runs += 1
+        self._send(("new_run", (), kwargs))
+
+    def _open_viewer(self) -> None:
+        self._next_child()  # its LiveView spawns the viewer as it starts
+
+    def _next_child(self) -> _Child:
+        """A fresh view process; the current one (if any) is asked to finish and reaped at close."""
+        old = self._child
+        if old is not None:
+            old.send(("close", (), {}))
+            self._retired.append(old)
+        for ended in [child for child in self._retired if not child.process.is_alive()]:
+            self._retired.remove(ended)
+            ended.finish(0.0)
+            self._children_dropped += ended.dropped
+        self._child = _Child(self._options, self.on_note)
+        self.processes_started += 1
+        self._gone_noted = False
+        return self._child
+
+    def _send(self, message: Message) -> None:
+        child = self._child
+        if child is not None and not self._gone_noted and not child.send(message):
+            self._note_gone(child)
+
+    def _note_gone(self, child: _Child) -> None:
+        if not self._gone_noted:
+            self._gone_noted = True
+            child.process.join(1.0)
+            code = child.process.exitcode
+            self.on_note(
+                f"the view process ended (exit {code}); the recording goes on, the next decay starts another"
+            )
+
+    def _failed(self, exc: BaseException) -> None:
+        self.on_note(f"view update failed ({exc}); the recording goes on")
