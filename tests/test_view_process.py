@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -92,3 +94,29 @@ def test_closing_leaves_no_view_process(tmp_path: Path) -> None:
     for pid in pids:
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)  # joined: not even a zombie is left
+
+
+def test_a_script_without_a_main_guard_is_not_run_again_by_the_view(tmp_path: Path) -> None:
+    """A lab's own script that records with the view, written without ``if __name__ == "__main__"``:
+    the view's process must not import it again (it would record twice, or fail starting)."""
+    marker = tmp_path / "imports.txt"
+    script = tmp_path / "lab_script.py"
+    script.write_text(
+        "from pathlib import Path\n"
+        "import numpy as np\n"
+        "from tankdaq.samples import empty_samples\n"
+        "from tankdaq.viz.view_process import ViewProcess\n"
+        f"with open({str(marker)!r}, 'a') as fh:\n"
+        "    fh.write('imported\\n')\n"
+        "view = ViewProcess('save')\n"
+        f"view.new_run('run', rrd_path=Path({str(tmp_path / 'script.rrd')!r}))\n"
+        "samples = empty_samples(50)\n"
+        "samples['t'] = np.arange(50) / 100.0\n"
+        "view.log_samples(samples)\n"
+        "view.close()\n"
+    )
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert marker.read_text() == "imported\n"
+    scalars, _ = read_rrd(tmp_path / "script.rrd")
+    assert len(scalars["/angle/measured"]) == 50

@@ -7,16 +7,18 @@ through a pipe by one thread of this process (``ViewFeed``: ``put`` never waits,
 refits beyond the limit are dropped and counted, as the view's own thread does). Every
 ``RUNS_PER_PROCESS`` runs the child is let go (it finishes its last .rrd and exits) and a fresh one takes
 the next run, so whatever rerun kept is given back whole. A child that dies costs one note; the next
-run starts another. The child ignores the terminal's signals: the recorder decides when the view ends,
-and a recorder that dies leaves the child at the end of its pipe, where it finishes its .rrd and exits.
+run starts another. The child runs in a session of its own and ignores the terminal's signals: the
+recorder decides when the view ends, and a recorder that dies leaves the child at the end of its pipe,
+where it finishes its .rrd and exits.
 """
 
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
 import os
 import signal
+import socket
+import subprocess
 import sys
 import threading
 from collections.abc import Callable, Mapping, Sequence
@@ -48,34 +50,34 @@ TERMINAL_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
 Message = tuple[str, tuple[Any, ...], dict[str, Any]]
 
 
-def serve_view(conn: Connection, options: dict[str, Any]) -> None:
-    """The child: a ``LiveView`` made with ``options``, driven by the messages on ``conn`` until "close"
-    or the end of the pipe; its notes go back on ``conn``, then ("closed", dropped updates), and the
-    process ends there (it never returns)."""
+def serve_view(conn: Connection) -> None:
+    """The child: a ``LiveView`` made with the options of the first message on ``conn``, driven by the
+    messages after it until "close" or the end of the pipe; its notes go back on ``conn``, then
+    ("closed", dropped updates), and the process ends there (it never returns)."""
     for number in TERMINAL_SIGNALS:
         signal.signal(number, signal.SIG_IGN)  # the recorder ends the view: it finishes its .rrd first
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, TERMINAL_SIGNALS)  # blocked since birth (``_Child``)
     sending = threading.Lock()  # the view's thread sends notes while this one may send too
 
     def send(message: tuple[str, object]) -> None:
         with sending, contextlib.suppress(OSError):  # a recorder gone: nobody to tell
             conn.send(message)
 
-    view = LiveView(on_note=lambda line: send(("note", line)), **options)
+    view = None
     try:
+        view = LiveView(on_note=lambda line: send(("note", line)), **conn.recv())
         while True:
-            try:
-                method, args, kwargs = conn.recv()
-            except (EOFError, OSError):
-                break
+            method, args, kwargs = conn.recv()
             if method == "close":
                 break
             if method == "new_run":
                 view.axis = kwargs.pop("axis")
             getattr(view, method)(*args, **kwargs)
+    except (EOFError, OSError):
+        pass  # the recorder is gone: finish what was shown
     finally:
-        view.close()
-        send(("closed", view.dropped))
+        if view is not None:
+            view.close()
+            send(("closed", view.dropped))
         conn.close()
         # Out at once: the interpreter's own exit would run rerun's, which flushes every recording again
         # and waits without end on a viewer that stalled (the view's close above is bounded and said so).
@@ -86,23 +88,35 @@ def serve_view(conn: Connection, options: dict[str, Any]) -> None:
 
 
 class _Child:
-    """One view process, the pipe to it and the thread that hands its notes on."""
+    """One view process, the pipe to it and the thread that hands its notes on.
+
+    A plain ``python -m tankdaq.viz.view_process`` (not multiprocessing's spawn, which would import the
+    user's own script again in the child), in a session of its own so that a Ctrl-C or a hang-up at the
+    terminal reaches only the recorder, which then ends the view in order."""
 
     def __init__(self, options: dict[str, Any], on_note: Callable[[str], None]) -> None:
-        context = multiprocessing.get_context("spawn")  # a fresh interpreter: nothing of the recorder's
-        self.conn, theirs = context.Pipe()
-        self.process = context.Process(target=serve_view, args=(theirs, options), name="tankdaq-view")
-        self.process.daemon = False  # it outlives a recorder killed hard long enough to finish its .rrd
-        # born with the terminal's signals blocked (inherited through exec), so a Ctrl-C while it is
-        # still importing cannot kill it; it ignores them once started. Only this thread's mask changes.
-        signal.pthread_sigmask(signal.SIG_BLOCK, TERMINAL_SIGNALS)
-        self.process.start()
-        theirs.close()
+        ours, theirs = socket.socketpair()
+        with theirs:
+            self.process = subprocess.Popen(
+                [sys.executable, "-m", __name__, str(theirs.fileno())],
+                pass_fds=(theirs.fileno(),),
+                stdin=subprocess.DEVNULL,
+                start_new_session=True,
+            )
+        self.conn = Connection(ours.detach())
         self.runs = 0
         self.dropped = 0
         self._on_note = on_note
+        self.send_options(options)
         self._listener = threading.Thread(target=self._listen, name="tankdaq-view-notes", daemon=True)
         self._listener.start()
+
+    def send_options(self, options: dict[str, Any]) -> None:
+        with contextlib.suppress(OSError, ValueError):  # a child that died at once: seen at the next send
+            self.conn.send(options)
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
 
     def _listen(self) -> None:
         while True:
@@ -127,11 +141,13 @@ class _Child:
         """Ask the child to end, wait for it (at most ``timeout_s``), stop it if it did not; True if
         it ended by itself."""
         self.send(("close", (), {}))
-        self.process.join(timeout_s)
-        ended = not self.process.is_alive()
-        if not ended:
+        try:
+            self.process.wait(timeout_s)
+            ended = True
+        except subprocess.TimeoutExpired:
+            ended = False
             self.process.kill()
-            self.process.join(1.0)
+            self.process.wait()
         self._listener.join(1.0)
         self.conn.close()
         return ended
@@ -189,7 +205,7 @@ class ViewProcess:
     def pids(self) -> list[int]:
         """The view processes started and not yet reaped (the current one last)."""
         children = [*self._retired, *([self._child] if self._child is not None else [])]
-        return [child.process.pid for child in children if child.process.pid is not None]
+        return [child.process.pid for child in children]
 
     def wait_idle(self, timeout_s: float) -> bool:
         """Wait until every call so far has been handed to a view process; False past ``timeout_s``."""
@@ -263,9 +279,9 @@ class ViewProcess:
 
     def _start_run(self, kwargs: dict[str, Any]) -> None:
         child = self._child
-        if child is not None and not child.process.is_alive():
+        if child is not None and not child.alive():
             self._note_gone(child)
-        if child is None or not child.process.is_alive() or child.runs >= self.runs_per_process:
+        if child is None or not child.alive() or child.runs >= self.runs_per_process:
             child = self._next_child()
         child.runs += 1
         self._send(("new_run", (), kwargs))
@@ -279,7 +295,7 @@ class ViewProcess:
         if old is not None:
             old.send(("close", (), {}))
             self._retired.append(old)
-        for ended in [child for child in self._retired if not child.process.is_alive()]:
+        for ended in [child for child in self._retired if not child.alive()]:
             self._retired.remove(ended)
             ended.finish(0.0)
             self._children_dropped += ended.dropped
@@ -296,11 +312,16 @@ class ViewProcess:
     def _note_gone(self, child: _Child) -> None:
         if not self._gone_noted:
             self._gone_noted = True
-            child.process.join(1.0)
-            code = child.process.exitcode
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                child.process.wait(1.0)
+            code = child.process.returncode
             self.on_note(
                 f"the view process ended (exit {code}); the recording goes on, the next decay starts another"
             )
 
     def _failed(self, exc: BaseException) -> None:
         self.on_note(f"view update failed ({exc}); the recording goes on")
+
+
+if __name__ == "__main__":
+    serve_view(Connection(int(sys.argv[1])))
