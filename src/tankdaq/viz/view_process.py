@@ -122,7 +122,9 @@ class _Child:
         while True:
             try:
                 kind, value = self.conn.recv()
-            except (EOFError, OSError):
+            except (EOFError, OSError):  # the child closed its end: it is ending; reaped at once
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    self.process.wait(CHILD_GRACE_S)
                 return
             if kind == "note":
                 self._on_note(str(value))
