@@ -23,7 +23,7 @@ from ..config import format_draft
 from ..config_rules import path_in
 from ..ident.campaign import GroupKey, GroupResult, write_tables
 from ..ident.derived import b_eq_band, extinction_curve, natural_period
-from ..ident.executors import executor_map
+from ..ident.executors import executor_map, send_once
 from ..ident.output_error import OutputError
 from ..physics.terms import TERM_TABLE
 from .plots import report_style, save_png
@@ -75,7 +75,9 @@ def write_plots(results: Sequence[GroupResult], folder: Path, executor: Executor
             figures.append(("hulls", compared, f"hulls_{axis}_{format_draft(shared)}.png"))
     figures.sort(key=lambda figure: figure[0] not in MULTI_PANEL)  # the longest first: no long last one
     plots = [plot for plot, _, _ in figures]
-    groups = [series for _, series, _ in figures]
+    each = {id(result): result for _, series, _ in figures for result in series}  # a fit in 3-5 figures
+    sent = dict(zip(each, send_once(executor, list(each.values())), strict=True))
+    groups = [[sent[id(result)] for result in series] for _, series, _ in figures]
     paths = [path_in(folder, name) for _, _, name in figures]  # a name never leaves the report folder
     return list(executor_map(executor, draw_plot, plots, groups, paths))
 
