@@ -195,8 +195,9 @@ class ViewProcess:
         limit = SAVE_QUEUE_LIMIT if self.mode == "save" else QUEUE_LIMIT
         self._feed = ViewFeed(on_error=self._failed, limit=limit)
         self.processes_started = 0
-        if self.mode == "spawn":  # the window opens now, not at the first release
-            self._feed.put(self._open_viewer, droppable=False)
+        # started now, before the device opens (and a window with it), not at the first release: its
+        # start-up (a second of CPU: Python, numpy, rerun) must not fall on a decay's first seconds
+        self._feed.put(self._start_child, droppable=False)
 
     @property
     def dropped(self) -> int:
@@ -251,8 +252,9 @@ class ViewProcess:
         self._put("log_event", (kind, message, t_s), droppable=False)
 
     def end_run(self) -> None:
-        """As ``LiveView.end_run`` (returns at once)."""
-        self._put("end_run", (), droppable=False)
+        """As ``LiveView.end_run`` (returns at once). A view process that has shown its
+        ``runs_per_process`` runs is replaced now, between decays, while the model rests."""
+        self._feed.put(self._end_run, droppable=False)
 
     def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
         """End the view: every queued update sent, each view process finished (its .rrd complete) or,
@@ -283,13 +285,18 @@ class ViewProcess:
         child = self._child
         if child is not None and not child.alive():
             self._note_gone(child)
-        if child is None or not child.alive() or child.runs >= self.runs_per_process:
+        if child is None or not child.alive():
             child = self._next_child()
         child.runs += 1
         self._send(("new_run", (), kwargs))
 
-    def _open_viewer(self) -> None:
-        self._next_child()  # its LiveView spawns the viewer as it starts
+    def _end_run(self) -> None:
+        self._send(("end_run", (), {}))
+        if self._child is not None and self._child.runs >= self.runs_per_process:
+            self._next_child()
+
+    def _start_child(self) -> None:
+        self._next_child()  # with spawn, its LiveView opens the viewer as it starts
 
     def _next_child(self) -> _Child:
         """A fresh view process; the current one (if any) is asked to finish and reaped at close."""
