@@ -49,6 +49,15 @@ def _malloc_trim() -> Callable[[int], int] | None:
     return trim
 
 
+def _mallopt(parameter: int, value: int, variable: str, tunable: str) -> bool:
+    """glibc's ``mallopt(parameter, value)``, unless the user set it (the environment ``variable`` or
+    the ``tunable`` in ``GLIBC_TUNABLES``); False where nothing was changed."""
+    libc = _glibc()
+    if libc is None or variable in os.environ or tunable in os.environ.get("GLIBC_TUNABLES", ""):
+        return False
+    return bool(libc.mallopt(ctypes.c_int(parameter), ctypes.c_int(value)))
+
+
 #: glibc's ``mallopt`` parameter for the most arenas (malloc.h's ``M_ARENA_MAX``).
 M_ARENA_MAX = -8
 #: Arenas a recording process uses at most: over 1.5 simulated hours of the memory bench, glibc's memory
@@ -59,11 +68,7 @@ ARENAS = 2
 def limit_arenas(count: int = ARENAS) -> bool:
     """Cap glibc's arenas at ``count`` for the threads made from now on, unless the user set
     ``MALLOC_ARENA_MAX`` (or glibc's tunables); False where nothing was changed."""
-    libc = _glibc()
-    user_set = "MALLOC_ARENA_MAX" in os.environ or "arena_max" in os.environ.get("GLIBC_TUNABLES", "")
-    if libc is None or user_set:
-        return False
-    return bool(libc.mallopt(ctypes.c_int(M_ARENA_MAX), ctypes.c_int(count)))
+    return _mallopt(M_ARENA_MAX, count, "MALLOC_ARENA_MAX", "arena_max")
 
 
 #: glibc's ``mallopt`` parameter for the size from which a block is mapped on its own (``M_MMAP_THRESHOLD``).
@@ -75,13 +80,7 @@ MMAP_THRESHOLD = 128 * 1024
 def fix_mmap_threshold(size: int = MMAP_THRESHOLD) -> bool:
     """Keep blocks of ``size`` bytes and more in mappings of their own for good, unless the user set
     ``MALLOC_MMAP_THRESHOLD_`` (or glibc's tunables); False where nothing was changed."""
-    libc = _glibc()
-    user_set = "MALLOC_MMAP_THRESHOLD_" in os.environ or "mmap_threshold" in os.environ.get(
-        "GLIBC_TUNABLES", ""
-    )
-    if libc is None or user_set:
-        return False
-    return bool(libc.mallopt(ctypes.c_int(M_MMAP_THRESHOLD), ctypes.c_int(size)))
+    return _mallopt(M_MMAP_THRESHOLD, size, "MALLOC_MMAP_THRESHOLD_", "mmap_threshold")
 
 
 def tune_allocator() -> None:

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import contextlib
 import subprocess
-import sys
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -32,7 +31,7 @@ from ..samples import AXIS_FIELDS
 from ..store.disk import RESERVE_BYTES, free_bytes, megabytes
 from ..store.schemas import interval_pairs
 from .view_feed import QUEUE_LIMIT, SAVE_QUEUE_LIMIT, ViewFeed
-from .viewer import DEFAULT_BIND, URL_SCHEMES, check_mode, display_available, spawn_viewer, url_listening
+from .viewer import DEFAULT_BIND, URL_SCHEMES, note_to_stderr, settle_mode, spawn_viewer, url_listening
 
 if TYPE_CHECKING:  # rerun is imported where a view logs, not for --viewer none (0.6 s of start-up)
     import rerun as rr
@@ -143,14 +142,12 @@ class LiveView:
         rrd_reserve_bytes: int = RESERVE_BYTES,
         queue_limit: int | None = None,
     ) -> None:
-        self.mode = check_mode(mode)
-        if axis not in AXIS_FIELDS:
-            raise InputError(f"axis {axis!r} not understood; use one of: {', '.join(AXIS_FIELDS)}")
+        self.on_note = on_note or note_to_stderr
+        self.mode = settle_mode(mode, axis, self.on_note)
         self.axis = axis
         self.terms = tuple(terms)
         self.spawn_port = spawn_port
         self.bind = bind
-        self.on_note = on_note or (lambda line: print(f"viewer: {line}", file=sys.stderr))
         self.rrd_reserve_bytes = rrd_reserve_bytes
         self.queue_limit = queue_limit
         self.viewer_process: subprocess.Popen[bytes] | None = None
@@ -171,9 +168,6 @@ class LiveView:
             # of a decay; without a view rerun is never imported (0.6 s of a replay's start-up)
             import rerun  # noqa: F401
 
-        if self.mode == "spawn" and not display_available():
-            self.on_note("no display (DISPLAY and WAYLAND_DISPLAY unset): no window; saving an .rrd instead")
-            self.mode = "save"
         if self.mode == "spawn":
             self._jobs().put(self._spawn_viewer, droppable=False)
 

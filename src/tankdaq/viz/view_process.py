@@ -30,11 +30,10 @@ from typing import Any, Self
 import numpy as np
 
 from ..errors import InputError
-from ..samples import AXIS_FIELDS
 from ..store.disk import RESERVE_BYTES
 from .live import CLOSE_TIMEOUT_S, LiveView
 from .view_feed import QUEUE_LIMIT, SAVE_QUEUE_LIMIT, ViewFeed
-from .viewer import DEFAULT_BIND, check_mode, display_available
+from .viewer import DEFAULT_BIND, note_to_stderr, settle_mode
 
 #: Runs one view process shows before a fresh one takes over (about an hour of decays at 35 s each;
 #: what rerun keeps of so many runs is a megabyte or so).
@@ -107,13 +106,9 @@ class _Child:
         self.runs = 0
         self.dropped = 0
         self._on_note = on_note
-        self.send_options(options)
+        self.send(options)  # the child's LiveView settings: its first message
         self._listener = threading.Thread(target=self._listen, name="tankdaq-view-notes", daemon=True)
         self._listener.start()
-
-    def send_options(self, options: dict[str, Any]) -> None:
-        with contextlib.suppress(OSError, ValueError):  # a child that died at once: seen at the next send
-            self.conn.send(options)
 
     def alive(self) -> bool:
         return self.process.poll() is None
@@ -131,7 +126,7 @@ class _Child:
             elif kind == "closed":
                 self.dropped = int(str(value))
 
-    def send(self, message: Message) -> bool:
+    def send(self, message: Message | dict[str, Any]) -> bool:
         """False when the child is gone (its pipe broken)."""
         try:
             self.conn.send(message)
@@ -172,20 +167,15 @@ class ViewProcess:
         rrd_reserve_bytes: int = RESERVE_BYTES,
         runs_per_process: int = RUNS_PER_PROCESS,
     ) -> None:
-        self.mode = check_mode(mode)
-        if axis not in AXIS_FIELDS:
-            raise InputError(f"axis {axis!r} not understood; use one of: {', '.join(AXIS_FIELDS)}")
         if runs_per_process < 1:
             raise InputError(f"runs_per_process {runs_per_process}: give 1 or more")
+        self.on_note = on_note or note_to_stderr
+        self.mode = settle_mode(mode, axis, self.on_note)
         self.axis = axis
         self.terms = tuple(terms)
-        self.on_note = on_note or (lambda line: print(f"viewer: {line}", file=sys.stderr))
         self.rrd_reserve_bytes = rrd_reserve_bytes
         self.runs_per_process = runs_per_process
         self.rrd_path: Path | None = None
-        if self.mode == "spawn" and not display_available():
-            self.on_note("no display (DISPLAY and WAYLAND_DISPLAY unset): no window; saving an .rrd instead")
-            self.mode = "save"
         self._options = {"mode": self.mode, "spawn_port": spawn_port, "bind": bind}
         self._options["rrd_reserve_bytes"] = rrd_reserve_bytes
         self._child: _Child | None = None  # touched by the feed's thread only
@@ -207,8 +197,7 @@ class ViewProcess:
     @property
     def pids(self) -> list[int]:
         """The view processes started and not yet reaped (the current one last)."""
-        children = [*self._retired, *([self._child] if self._child is not None else [])]
-        return [child.process.pid for child in children]
+        return [child.process.pid for child in self._children()]
 
     def wait_idle(self, timeout_s: float) -> bool:
         """Wait until every call so far has been handed to a view process; False past ``timeout_s``."""
@@ -221,8 +210,7 @@ class ViewProcess:
         terms: Sequence[str] | None = None,
         time_origin_s: float = 0.0,
     ) -> None:
-        """As ``LiveView.new_run``; the run goes to a fresh process once the current one has shown
-        ``runs_per_process`` runs."""
+        """As ``LiveView.new_run``; a view process that has died is replaced first (with a note)."""
         if terms is not None:
             self.terms = tuple(terms)
         self.rrd_path = None if rrd_path is None else Path(rrd_path)
@@ -261,8 +249,7 @@ class ViewProcess:
         past ``timeout_s``, stopped with a note. A spawned viewer stays open."""
         if not self._feed.stop(timeout_s):
             self.on_note(f"the view did not finish in {timeout_s:g} s; the last .rrd may be cut")
-        children = [*self._retired, *([self._child] if self._child is not None else [])]
-        self._child, self._retired = None, []
+        children, self._child, self._retired = self._children(), None, []
         for child in children:  # each bounds its own end by ``timeout_s`` and says so: this is the backstop
             if not child.finish(timeout_s + CHILD_GRACE_S):
                 self.on_note(f"the view process did not end in {timeout_s + CHILD_GRACE_S:g} s: stopped")
@@ -276,6 +263,10 @@ class ViewProcess:
     ) -> None:
         self.close()
 
+    def _children(self) -> list[_Child]:
+        """The view processes not yet reaped: those let go, then the current one."""
+        return [*self._retired, *([self._child] if self._child is not None else [])]
+
     # -- the feed's thread ------------------------------------------------------------------------------
 
     def _put(self, method: str, args: tuple[Any, ...], droppable: bool) -> None:
@@ -283,9 +274,9 @@ class ViewProcess:
 
     def _start_run(self, kwargs: dict[str, Any]) -> None:
         child = self._child
-        if child is not None and not child.alive():
-            self._note_gone(child)
         if child is None or not child.alive():
+            if child is not None:
+                self._note_gone(child)
             child = self._next_child()
         child.runs += 1
         self._send(("new_run", (), kwargs))

@@ -17,6 +17,7 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from ..errors import InputError
+from ..samples import AXIS_FIELDS
 
 URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
 MODES = ("spawn", "save", "none")
@@ -131,3 +132,20 @@ def spawn_viewer(
     why = f"exited with code {code}" if code is not None else f"did not listen in {SPAWN_TIMEOUT_S:g} s"
     on_note(f"the rerun viewer {why} (no working display?): saving an .rrd instead")
     return process, None
+
+
+def note_to_stderr(line: str) -> None:
+    """A view's note where nobody listens for them: one line on stderr."""
+    print(f"viewer: {line}", file=sys.stderr)
+
+
+def settle_mode(mode: str, axis: str, on_note: Callable[[str], None]) -> str:
+    """The view mode in effect: ``mode`` and ``axis`` checked (one line each, ``InputError``), and
+    spawn without a display already save, said in one note."""
+    mode = check_mode(mode)
+    if axis not in AXIS_FIELDS:
+        raise InputError(f"axis {axis!r} not understood; use one of: {', '.join(AXIS_FIELDS)}")
+    if mode == "spawn" and not display_available():
+        on_note("no display (DISPLAY and WAYLAND_DISPLAY unset): no window; saving an .rrd instead")
+        return "save"
+    return mode
