@@ -1,7 +1,8 @@
 """What a recorder fed for a lab day keeps per decay (issue 22 item 8; the figure is bench_memory_day.py):
-no predicted curve in a finished decay's outcome, no list of every release event in its detectors, no
-rerun recording (and its two threads) left behind by a view's finished run, the C allocator's free
-pages given back once a decay has settled, and glibc's arenas capped for the record daemon's threads."""
+no predicted curve in a finished decay's outcome, only the newest outcomes kept, no list of every release
+event in its detectors, no rerun recording (and its two threads) left behind by a view's finished run, the
+C allocator's free pages given back once a decay has settled, and glibc's arenas capped for the record
+daemon's threads."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tankdaq.acquire.events import KEPT_OUTCOMES, DecayOutcome, KeptOutcomes
 from tankdaq.acquire.memory import ARENAS
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.release import ReleaseDetector
@@ -69,6 +71,16 @@ def test_a_finished_decay_keeps_its_fit_without_the_curve_and_the_detector_no_ev
         assert outcome.fit.coefficients == published.coefficients
         assert outcome.fit.n_samples == published.n_samples
     assert all(detector.events_ == [] for detector in pipeline._detectors.values())
+    assert list(pipeline.outcomes) == outcomes and pipeline.outcomes.count == len(outcomes)
+
+
+def test_a_day_of_decays_keeps_the_newest_outcomes_and_counts_them_all() -> None:
+    kept = KeptOutcomes()
+    day = [DecayOutcome(run, "roll", None, None, 0.0, 8.0, "amplitude", None, []) for run in range(1, 824)]
+    kept.extend(day[:-1])
+    kept.append(day[-1])
+    assert kept.count == 823
+    assert list(kept) == day[-KEPT_OUTCOMES:] and len(kept) == KEPT_OUTCOMES
 
 
 def test_a_detector_that_keeps_no_events_returns_the_same_ones() -> None:

@@ -44,6 +44,7 @@ from .events import (
     DeviceLost,
     DeviceReady,
     Event,
+    KeptOutcomes,
     Notice,
     Stopped,
     Stopping,
@@ -167,7 +168,7 @@ class RecordDaemon:
         self.extra_sinks = list(sinks)
         self.make_identifier = identifier
         self.device: OpenDevice | None = None
-        self.outcomes: list[DecayOutcome] = []
+        self.outcomes = KeptOutcomes()  # the newest; a day's would grow
         self._fed_counters = StreamCounters()  # the link as of the last block the pipeline was fed
         self._stop = threading.Event()
         self._signals = SignalStop(self._stop)
@@ -298,7 +299,8 @@ class RecordDaemon:
     # ---- the loop ----------------------------------------
 
     def run(self) -> list[DecayOutcome]:
-        """Record until ``runs`` decays are done or stopped; returns what was recorded."""
+        """Record until ``runs`` decays are done or stopped; returns the outcomes of the newest
+        ``KEPT_OUTCOMES`` decays (every decay's was a ``Settled`` event; ``outcomes.count``: how many)."""
         with self._signals.installed():
             return self._run()
 
@@ -335,8 +337,8 @@ class RecordDaemon:
             raise
         finally:
             self._finish(pipeline)
-        self.emit(Stopped(signals.stopped_by, len(self.outcomes)))
-        return self.outcomes
+        self.emit(Stopped(signals.stopped_by, self.outcomes.count))
+        return list(self.outcomes)
 
     def _finish(self, pipeline: DecayPipeline | None) -> None:
         """Stopping: the decay under way closed complete, then the sinks and the device; a second Ctrl-C
@@ -401,7 +403,7 @@ class RecordDaemon:
 
     def _runs_done(self) -> bool:
         runs = self.settings.runs
-        return runs is not None and len(self.outcomes) >= runs
+        return runs is not None and self.outcomes.count >= runs
 
     def _feed(self, pipeline: DecayPipeline, read: Read) -> None:
         block = read.block
@@ -409,7 +411,7 @@ class RecordDaemon:
         self._fed_counters = c = read.counters
         st = self.status
         st.samples, st.gaps, st.bad_frames = c.samples, c.gaps, c.bad_frames
-        st.state, st.held_deg, st.runs_done = pipeline.state, pipeline.held_deg, len(self.outcomes)
+        st.state, st.held_deg, st.runs_done = pipeline.state, pipeline.held_deg, self.outcomes.count
         self.on_status(st)
 
     def _device_gone(self, driver: MTiDriver, pipeline: DecayPipeline, message: str) -> None:

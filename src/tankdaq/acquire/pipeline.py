@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from ..ident.online import OnlineResult
 from ..physics.models import resolve_model
 from ..samples import AXIS_FIELDS
-from .events import DecayOutcome, Event, Fitted, Held, Note, PutBack, Released, Settled
+from .events import DecayOutcome, Event, Fitted, Held, KeptOutcomes, Note, PutBack, Released, Settled
 from .memory import release_free_memory
 from .release import ReleaseDetector, ReleaseEvent
 from .sinks import Block, Decay, Sink
@@ -62,7 +62,7 @@ class DecayPipeline:
             axis: ReleaseDetector(axis=axis, keep_events=False, **settings.detector_settings) for axis in axes
         }
         self._history: deque[Block] = deque()
-        self.outcomes: list[DecayOutcome] = []
+        self.outcomes = KeptOutcomes()
         self.state = "waiting"
         self.held_deg = math.nan
         self.next_run = 1

@@ -109,4 +109,4 @@ def replay_recording(
         pipeline.abort("note", "end of recording")
     finally:
         pipeline.close()  # the view (and a decay cut by an error)
-    return pipeline.outcomes
+    return list(pipeline.outcomes)

@@ -118,7 +118,7 @@ class StreamingDaemon(RecordDaemon):
                     self.outcomes.append(closed)
             finally:
                 signals.closing = False
-        stopped = Stopped(signals.stopped_by, len(self.outcomes))
+        stopped = Stopped(signals.stopped_by, self.outcomes.count)
         self.emit(stopped)
         return stopped
 

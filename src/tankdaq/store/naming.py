@@ -12,6 +12,7 @@ from __future__ import annotations
 import glob
 import os
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -94,12 +95,15 @@ def next_run_number(folder: str | Path, hull: str, draft: float | str, axis: str
     return max(runs, default=0) + 1
 
 
-def candidate_paths(path: str | Path) -> list[Path]:
-    """``path`` then ``stem-2.ext``, ``stem-3.ext`` ...: the names tried before giving up."""
+def candidate_paths(path: str | Path) -> Iterator[Path]:
+    """``path`` then ``stem-2.ext``, ``stem-3.ext`` ...: the names tried before giving up, made as they
+    are tried (all 999 at once were 0.5 MB of Paths, their parts interned, at every file a recorder made)."""
     path = Path(path)
     suffix = "".join(path.suffixes[-1:])
     stem = path.name[: len(path.name) - len(suffix)] if suffix else path.name
-    return [path] + [path.with_name(f"{stem}-{k}{suffix}") for k in range(2, _MAX_SUFFIX + 1)]
+    yield path
+    for k in range(2, _MAX_SUFFIX + 1):
+        yield path.with_name(f"{stem}-{k}{suffix}")
 
 
 def create_exclusive(path: str | Path) -> tuple[Path, int]:
