@@ -341,9 +341,9 @@ def child(args: argparse.Namespace) -> None:
     with CatalogueWriter.from_option(catalogue, lambda line: None) as writer:
         sinks = [CatalogueSink(writer)] if writer.enabled else []
         daemon = BenchDaemon(settings, sinks=[*sinks, probe])  # type: ignore[list-item]
-        outcomes = daemon.run()
+        daemon.run()
     status = daemon.status
-    summary = {"decays": len(outcomes), "samples": status.samples, "gaps": status.gaps}
+    summary = {"decays": daemon.outcomes.count, "samples": status.samples, "gaps": status.gaps}
     summary |= {"bad_frames": status.bad_frames, "rss_kb_closed": rss_kb()}
     print(json.dumps(summary), flush=True)
     if len(snapshots) == 2:

@@ -29,7 +29,9 @@ import tankdaq
 import tankdaq.config
 from tankdaq.catalogue.database import (
     SCHEMA_VERSION,
+    WRITER_CACHE_KB,
     BadCatalogueQuery,
+    Catalogue,
     CatalogueError,
     decays,
     exports,
@@ -311,6 +313,22 @@ def test_a_catalogue_that_is_not_one_is_refused_before_work_in_one_line(given: s
     result = CliRunner().invoke(app, ["runs", "--catalogue", given])
     assert result.exit_code == 2 and result.output.count("\n") == 1
     assert result.output.startswith(f"error: catalogue {given!r}: give a path")
+
+
+def test_a_recorders_writer_keeps_a_small_page_cache_and_queries_keep_sqlites(tmp_path: Path) -> None:
+    url = _url(tmp_path)
+    writer = CatalogueWriter(url, lambda line: None)
+    try:
+        assert writer.submit(_cache_size).result(timeout=60) == -WRITER_CACHE_KB
+    finally:
+        writer.close()
+    with open_catalogue(url) as catalogue:
+        assert _cache_size(catalogue) == -2000  # SQLite's own
+
+
+def _cache_size(catalogue: Catalogue) -> int:
+    with catalogue.engine.connect() as connection:
+        return int(connection.exec_driver_sql("PRAGMA cache_size").scalar_one())
 
 
 def test_a_newer_schema_is_refused_in_one_line(tmp_path: Path) -> None:

@@ -19,6 +19,7 @@ the callbacks, so an error there reaches the caller as before and the reads neve
 from __future__ import annotations
 
 import dataclasses
+import os
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -197,7 +198,7 @@ class RecordDaemon:
     def recordings(self) -> list[Path]:
         """The decay files this daemon wrote that exist: what a summary counts."""
         paths = self._recording.paths if self._recording is not None else []
-        return [path for path in paths if path.exists()]
+        return [Path(path) for path in paths if os.path.exists(path)]
 
     # ---- the device ----------------------------------------
 

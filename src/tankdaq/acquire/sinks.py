@@ -290,7 +290,7 @@ class RecordingSink(Sink):
         self.nominal_angle_deg = nominal_angle_deg
         self.closing_metadata = closing_metadata
         self.writer: RecordingWriter | None = None
-        self.paths: list[Path] = []  # every file opened, in order
+        self.paths: list[str] = []  # every file opened, in order (as text: a Path holds 3x the bytes)
 
     def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
         from ..store.naming import next_run_number, recording_name
@@ -309,7 +309,7 @@ class RecordingSink(Sink):
         }
         self.writer = RecordingWriter(self.out_dir / name, metadata, self.run_config)
         decay.path = self.writer.path
-        self.paths.append(self.writer.path)
+        self.paths.append(str(self.writer.path))
         for block in pretrigger:
             self._write_block(block)
 

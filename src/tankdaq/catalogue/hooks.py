@@ -18,7 +18,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 from ..acquire.sinks import Decay, Sink
-from .database import Catalogue, CatalogueError, describe, one_line, open_catalogue, resolve_url
+from .database import (
+    WRITER_CACHE_KB,
+    Catalogue,
+    CatalogueError,
+    describe,
+    one_line,
+    open_catalogue,
+    resolve_url,
+)
 
 if TYPE_CHECKING:  # the session's module is imported by the session command only
     from ..acquire.guided.state import RunEntry
@@ -78,7 +86,7 @@ class CatalogueWriter:
             try:
                 if self._catalogue is None:
                     assert self.url is not None
-                    self._catalogue = open_catalogue(self.url)
+                    self._catalogue = open_catalogue(self.url, WRITER_CACHE_KB)
                 done.set_result(job(self._catalogue))
             except Exception as exc:
                 done.set_exception(exc)
