@@ -395,6 +395,13 @@ def describe(tree: str, rows: list[dict[str, object]], warmup: int, run_s: float
         f"({(rss_mb[-1] - warm) / span_h:+.2f} MB/h; least-squares slope {slope_mb_h:+.2f} MB/h), "
         f"peak {rss_mb.max():.1f} MB",
     ]
+    first_hour = after & (hours < hours[after][0] + 1)
+    last_hour = after & (hours >= hours[-1] - 1)
+    if span_h >= 2:  # one sample scatters by +-3 MB between decays: an hour's median is the level
+        level = float(np.median(rss_mb[last_hour]) - np.median(rss_mb[first_hour]))
+        lines.append(
+            f"  median RSS of the last simulated hour against the first hour after the warm-up: {level:+.1f} MB"
+        )
     late = hours >= hours[after][0] + span_h / 2  # the second half after the warm-up: does it plateau?
     if late.sum() > 3:
         late_slope = float(np.polyfit(hours[late], rss_mb[late], 1)[0])
