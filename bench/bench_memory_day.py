@@ -400,7 +400,7 @@ def describe(tree: str, rows: list[dict[str, object]], warmup: int, run_s: float
     if span_h >= 2:  # one sample scatters by +-3 MB between decays: an hour's median is the level
         level = float(np.median(rss_mb[last_hour]) - np.median(rss_mb[first_hour]))
         lines.append(
-            f"  median RSS of the last simulated hour against the first hour after the warm-up: {level:+.1f} MB"
+            f"  median RSS of the last simulated hour against the first after the warm-up: {level:+.1f} MB"
         )
     late = hours >= hours[after][0] + span_h / 2  # the second half after the warm-up: does it plateau?
     if late.sum() > 3:
