@@ -169,7 +169,7 @@ class RecordDaemon:
         self.extra_sinks = list(sinks)
         self.make_identifier = identifier
         self.device: OpenDevice | None = None
-        self.outcomes = KeptOutcomes()  # the newest; a day's would grow
+        self.outcomes = KeptOutcomes()  # the newest, filled by the pipeline; a day's would grow
         self._fed_counters = StreamCounters()  # the link as of the last block the pipeline was fed
         self._stop = threading.Event()
         self._signals = SignalStop(self._stop)
@@ -295,7 +295,7 @@ class RecordDaemon:
             hull=self.hull.name if self.hull else "the hull",
         )
         sinks = [IdentifierSink(identifier), recording, ViewSink(view), *self.extra_sinks]
-        return DecayPipeline(detection, sinks)
+        return DecayPipeline(detection, sinks, self.outcomes)
 
     # ---- the loop ----------------------------------------
 
@@ -362,9 +362,7 @@ class RecordDaemon:
         """Close the decay under way (its file stays readable), the sinks (the viewer), the device."""
         try:
             if pipeline is not None:
-                closed = pipeline.abort("note", "recording stopped by the operator")
-                if closed is not None:
-                    self.outcomes.append(closed)
+                pipeline.abort("note", "recording stopped by the operator")
         except RecordingError as exc:  # the disk is full: the file is left for tankdaq recover
             self.emit(Notice("recording", str(exc)))
         finally:
@@ -408,7 +406,7 @@ class RecordDaemon:
 
     def _feed(self, pipeline: DecayPipeline, read: Read) -> None:
         block = read.block
-        self.outcomes.extend(pipeline.feed(Block(block.samples, block.raw, block.host_t, block.carried)))
+        pipeline.feed(Block(block.samples, block.raw, block.host_t, block.carried))
         self._fed_counters = c = read.counters
         st = self.status
         st.samples, st.gaps, st.bad_frames = c.samples, c.gaps, c.bad_frames
@@ -416,9 +414,7 @@ class RecordDaemon:
         self.on_status(st)
 
     def _device_gone(self, driver: MTiDriver, pipeline: DecayPipeline, message: str) -> None:
-        closed = pipeline.abort("unplug", message)
-        if closed is not None:
-            self.outcomes.append(closed)
+        pipeline.abort("unplug", message)
         self.status.state = "device gone: waiting for it to come back"
         self.on_status(self.status)
         self.emit(DeviceLost(message, self.settings.reconnect_timeout_s))

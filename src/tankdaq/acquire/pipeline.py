@@ -51,9 +51,12 @@ class DetectionSettings:
 class DecayPipeline:
     """Feed ``Block``s with ``feed``; decays are detected and handed to the ``sinks`` in order, and every
     sink hears the events (``emit``). ``next_run`` is the number the next decay gets (1 first).
+    Every decay's outcome goes into ``outcomes`` (a daemon's own, given, outlives its pipelines).
     """
 
-    def __init__(self, settings: DetectionSettings, sinks: Sequence[Sink]) -> None:
+    def __init__(
+        self, settings: DetectionSettings, sinks: Sequence[Sink], outcomes: KeptOutcomes | None = None
+    ) -> None:
         self.settings = settings
         self.sinks = list(sinks)
         self.terms = resolve_model(settings.model)
@@ -62,7 +65,7 @@ class DecayPipeline:
             axis: ReleaseDetector(axis=axis, keep_events=False, **settings.detector_settings) for axis in axes
         }
         self._history: deque[Block] = deque()
-        self.outcomes = KeptOutcomes()
+        self.outcomes = KeptOutcomes() if outcomes is None else outcomes
         self.state = "waiting"
         self.held_deg = math.nan
         self.next_run = 1

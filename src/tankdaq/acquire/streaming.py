@@ -113,9 +113,7 @@ class StreamingDaemon(RecordDaemon):
             signals.closing = True
             try:
                 self.emit(Stopping(signals.stopped_by))
-                closed = pipeline.abort("note", "recording stopped by the operator")
-                if closed is not None:
-                    self.outcomes.append(closed)
+                pipeline.abort("note", "recording stopped by the operator")
             finally:
                 signals.closing = False
         stopped = Stopped(signals.stopped_by, self.outcomes.count)
