@@ -9,6 +9,7 @@ realistic band, so repeated draws test the workflow, not one lucky case.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -103,8 +104,12 @@ def _forcing(
         gains["other_angle"] = truth["k_other_angle"]
     onset, wave_force = truth.get("onset_s", np.inf), truth.get("wave_force", 0.0)
 
+    weighted = [(k, channels[name]) for name, k in gains.items()]
+
     def force(t: float) -> float:
-        total = float(sum(k * channels[name](np.asarray(t)) for name, k in gains.items()))
+        total = 0.0
+        for k, channel in weighted:
+            total += k * float(channel(np.asarray(t)))
         if t > onset:  # reflected waves at the radiated (natural) frequency, building up over 0.5 s
             total += wave_force * (1 - np.exp(-(t - onset) / 0.5)) * np.sin(omega0 * (t - onset))
         return total
@@ -124,7 +129,7 @@ def make_decay_set(
     """Decays from each release angle (random sign), with the given effects hidden in them."""
     rng = np.random.default_rng(seed)
     truth = _draw_truth(effects, rng)
-    coef = np.array([truth.get(k, 0.0) for k in TERMS])
+    coefficients = [truth.get(k, 0.0) for k in TERMS]
     omega0 = float(np.sqrt(truth.get("c1", 0.0) + truth.get("s1", 0.0)))
     t = np.arange(round(duration_s * rate_hz)) / rate_hz
     fc = truth.get("fc", 0.0)
@@ -135,10 +140,12 @@ def make_decay_set(
         force, channels = _forcing(truth, angle0, omega0)
 
         def rhs(tt: float, y: np.ndarray, force: Callable[[float], float] = force) -> list[float]:
-            x, v = y
-            sx = np.sin(x)
-            basis = np.array([v, abs(v) * v, v**3, x, x * x, x**3, sx, sx * sx, sx**3])
-            return [v, -(basis @ coef) - fc * np.tanh(v / COULOMB_EPS_RAD_S) - force(tt)]
+            # plain floats: the integrator calls this some 8000 times a decay
+            x, v = float(y[0]), float(y[1])
+            sx = math.sin(x)
+            basis = (v, abs(v) * v, v**3, x, x * x, x**3, sx, sx * sx, sx**3)
+            terms = sum(c * b for c, b in zip(coefficients, basis, strict=True))
+            return [v, -terms - fc * math.tanh(v / COULOMB_EPS_RAD_S) - force(tt)]
 
         sol = solve_ivp(
             rhs, (0.0, t[-1]), [angle0, 0.0], method="DOP853", rtol=1e-10, atol=1e-12, dense_output=True
