@@ -10,12 +10,12 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test]'
-	$(BIN)/python -m tankdaq.prepare
 	touch $(STAMP)
 
 venv: $(STAMP)
 
 demo: $(STAMP)
+	$(BIN)/python -m tankdaq.prepare
 	$(BIN)/tankdaq demo
 
 lint: $(STAMP)
@@ -58,8 +58,11 @@ catalogue-test-deps:
 		echo "make: apt-get could not install postgresql; the PostgreSQL catalogue tests skip"; \
 	fi
 
-test: $(STAMP) lint docs viewer-test-deps catalogue-test-deps
-	$(BIN)/python -m tankdaq.prepare
+# The kernels build on one core while the lint, the type check and the docs run on the other.
+test: $(STAMP) viewer-test-deps catalogue-test-deps
+	$(BIN)/python -m tankdaq.prepare & prepare=$$!; \
+		$(MAKE) --no-print-directory lint docs; checked=$$?; \
+		wait $$prepare && exit $$checked
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal --durations=25
 
 bench: $(STAMP)
