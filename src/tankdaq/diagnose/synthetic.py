@@ -17,7 +17,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from ..errors import InputError
-from ..physics.decay import TERMS
+from ..physics.decay import terms_sum
 from ..records import DecayRun
 from .effects import EFFECTS
 from .fitting import COULOMB_EPS_RAD_S
@@ -129,7 +129,7 @@ def make_decay_set(
     """Decays from each release angle (random sign), with the given effects hidden in them."""
     rng = np.random.default_rng(seed)
     truth = _draw_truth(effects, rng)
-    coefficients = [truth.get(k, 0.0) for k in TERMS]
+    damping_and_restoring = terms_sum(truth)
     omega0 = float(np.sqrt(truth.get("c1", 0.0) + truth.get("s1", 0.0)))
     t = np.arange(round(duration_s * rate_hz)) / rate_hz
     fc = truth.get("fc", 0.0)
@@ -140,12 +140,9 @@ def make_decay_set(
         force, channels = _forcing(truth, angle0, omega0)
 
         def rhs(tt: float, y: np.ndarray, force: Callable[[float], float] = force) -> list[float]:
-            # plain floats: the integrator calls this some 8000 times a decay
-            x, v = float(y[0]), float(y[1])
-            sx = math.sin(x)
-            basis = (v, abs(v) * v, v**3, x, x * x, x**3, sx, sx * sx, sx**3)
-            terms = sum(c * b for c, b in zip(coefficients, basis, strict=True))
-            return [v, -terms - fc * math.tanh(v / COULOMB_EPS_RAD_S) - force(tt)]
+            x, v = float(y[0]), float(y[1])  # plain floats: called some 8000 times a decay
+            friction = fc * math.tanh(v / COULOMB_EPS_RAD_S)
+            return [v, -damping_and_restoring(x, v) - friction - force(tt)]
 
         sol = solve_ivp(
             rhs, (0.0, t[-1]), [angle0, 0.0], method="DOP853", rtol=1e-10, atol=1e-12, dense_output=True
