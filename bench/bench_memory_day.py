@@ -25,7 +25,8 @@ decays after it and the last one, by traceback; ``--type-growth`` the objects by
 the same two decays (cheap: no tracing). At each release (the last decay's view work done by then) the
 probe prints where the memory is (``memory_state``: anonymous mappings by kind, glibc's ``mallinfo2`` in
 use and free, its arenas, Python's allocated blocks, the threads), and the report fits a slope to each
-part. ``--catalogue off`` leaves the catalogue's sink out; ``--malloc-trim`` has the probe trim glibc's
+part (``--rss-only``: RSS alone, the probe's own reading of smaps and glibc's state left out).
+``--catalogue off`` leaves the catalogue's sink out; ``--malloc-trim`` has the probe trim glibc's
 heap at each settle (what the pipeline itself now does: ``acquire.memory``).
 
 Run: .venv/bin/python bench/bench_memory_day.py [--hours 8] [--baseline-hours 2] [--baseline-src DIR]
@@ -174,13 +175,17 @@ def size_kind(size_kb: int) -> str:
     return "mapped_kb" if size_kb <= 65536 else "reserved_kb"
 
 
+def rss_parts() -> dict[str, int]:
+    """RSS (kB): this process's and its children's (the view's process), and their sum."""
+    own, children = own_rss_kb(), children_rss_kb()
+    return {"rss_kb": own + children, "own_rss_kb": own, "children_rss_kb": children}
+
+
 def memory_state(libc: ctypes.CDLL | None) -> dict[str, int]:
     """Where the memory is (kB): RSS (this process's and its children's: the view's process), this
     process's anonymous memory by mapping, what glibc's arenas hold in use and free, the Python blocks
     allocated, the threads."""
-    own, children = own_rss_kb(), children_rss_kb()
-    state = {"rss_kb": own + children, "own_rss_kb": own, "children_rss_kb": children}
-    state |= {**anonymous_kb(), "py_blocks": sys.getallocatedblocks()}
+    state = {**rss_parts(), **anonymous_kb(), "py_blocks": sys.getallocatedblocks()}
     state["threads"] = len(os.listdir("/proc/self/task"))
     if libc is not None:
         info = libc.mallinfo2()
@@ -262,7 +267,8 @@ def probe_sink(args: argparse.Namespace, out: Path, snapshots: dict[str, tracema
 
         def on_release(self, decay: object, pretrigger: object) -> None:
             run = decay.run  # type: ignore[attr-defined]
-            print(json.dumps({"before_decay": run, **memory_state(libc)}), flush=True)
+            state = rss_parts() if args.rss_only else memory_state(libc)
+            print(json.dumps({"before_decay": run, **state}), flush=True)
             if args.type_growth and run in (args.warmup + 2, args.decays):
                 counts[run] = collections.Counter(type(o).__qualname__ for o in gc.get_objects())
                 if len(counts) == 2:
@@ -363,6 +369,7 @@ def start_tree(
     command += ["--viewer", args.viewer, "--out", str(out), "--warmup", str(args.warmup)]
     command += ["--model", args.model, "--catalogue", args.catalogue]
     command += ["--type-growth"] if args.type_growth else []
+    command += ["--rss-only"] if args.rss_only else []
     command += (["--tracemalloc"] if args.tracemalloc else []) + (
         ["--malloc-trim"] if args.malloc_trim else []
     )
@@ -427,10 +434,12 @@ def describe_parts(rows: list[dict[str, object]], warmup: int, run_s: float) -> 
         slope = float(np.polyfit(hours, values * scale, 1)[0])
         first, last = values[0] * scale, values[-1] * scale
         lines.append(f"    {key:15s} {first:10.1f} -> {last:10.1f} {unit:2s} ({slope:+.2f}/h)")
-    rss_mb = np.array([r["rss_kb"] for r in states], dtype=float) / 1024
     hour = np.floor(hours).astype(int)
-    medians = [f"{h}: {np.median(rss_mb[hour == h]):.1f}" for h in np.unique(hour)]
-    return [*lines, f"  RSS at the releases, median of each simulated hour (MB): {', '.join(medians)}"]
+    for key, what in (("rss_kb", "RSS"), ("own_rss_kb", "the recorder's own RSS (its view's apart)")):
+        mb = np.array([r[key] for r in states], dtype=float) / 1024
+        medians = [f"{h}: {np.median(mb[hour == h]):.1f}" for h in np.unique(hour)]
+        lines.append(f"  {what} at the releases, median of each simulated hour (MB): {', '.join(medians)}")
+    return lines
 
 
 def main() -> None:
@@ -448,6 +457,9 @@ def main() -> None:
     parser.add_argument("--type-growth", action="store_true", help="objects by type, warm-up vs last decay")
     parser.add_argument(
         "--malloc-trim", action="store_true", help="the probe trims glibc's heap at each settle"
+    )
+    parser.add_argument(
+        "--rss-only", action="store_true", help="at each release RSS alone (no smaps, mallinfo, arenas)"
     )
     parser.add_argument("--warmup", type=int, default=WARMUP_DECAYS, help="decays before the warm-up ends")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
