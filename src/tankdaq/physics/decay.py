@@ -62,7 +62,7 @@ def terms_sum(coefficients: Mapping[str, float]) -> Callable[[float, float], flo
 
     def total(x: float, v: float) -> float:
         values = _term_values(x, v, math.sin)
-        return sum(value * values[name] for name, value in pairs)
+        return sum((value * values[name] for name, value in pairs), 0.0)  # a float with no terms too
 
     return total
 
