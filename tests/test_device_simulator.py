@@ -225,3 +225,21 @@ def test_a_simulator_that_cannot_start_leaves_no_folder(tmp_path: Path, private_
         SimulatedMTi(link=tmp_path / "no-such-folder" / "ttyMTi0").start()
     assert not list(private_tempdir.glob(f"{TEMP_PREFIX}*"))
     assert str(private_tempdir) not in os.environ.get("TANKDAQ_SERIAL_BY_ID", "")
+
+
+def test_decays_played_on_one_device_keep_its_biases() -> None:
+    """A session plays each decay as a scenario of its own seed, on one device: its still water keeps one
+    level from decay to decay (a sensor's bias does not step; the session's watch would read a step as
+    the model moving). Seeds 1 and 2 alone would put the roll biases 0.07 deg apart."""
+    device = SimulatedMTi(hull_scenario(rate_hz=100, runs=0, seed=1), speed=10.0)
+    with device, MTiDriver(device.link) as driver:
+        driver.configure()
+        before = np.degrees(driver.samples(3.0)["roll"])
+        device.play(hull_scenario(rate_hz=100, runs=1, seed=2))
+        after = np.degrees(driver.samples(20.0)["roll"])
+    tilted = np.flatnonzero(np.abs(after - before.mean()) > 0.5)
+    assert tilted.size, "the played decay's tilt began within 20 device seconds"
+    still_after = after[: tilted[0] - 100]  # the still water up to a second before the hand's tilt
+    assert still_after.size >= 200
+    noise_deg = 0.02 * 3 / np.sqrt(still_after.size)  # three standard errors of a mean of the angle noise
+    assert abs(still_after.mean() - before.mean()) < noise_deg + 0.02 * 3 / np.sqrt(before.size)

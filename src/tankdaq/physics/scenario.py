@@ -163,6 +163,7 @@ class DecayScenario:
     pushes_again: tuple[int, ...] = ()  # runs (from 0) in which the hand pushes the model again mid-decay
     bumps_before: tuple[int, ...] = ()  # runs (from 0) whose model is knocked at rest before the tilt
     drifts_before: tuple[int, ...] = ()  # runs (from 0) whose still water creeps before the tilt
+    bias_seed: int | None = None  # the seed of the sensor's biases (None: ``seed``): one device, one bias
 
     def __post_init__(self) -> None:
         if self.axis not in ("roll", "pitch"):
@@ -340,8 +341,8 @@ class DecayScenario:
         a[start:stop] = acceleration(coeffs, x[start:stop], v[start:stop])
 
     def sensor(self) -> SensorModel:
-        """The scenario's sensor (its biases follow the seed)."""
-        return SensorModel(self.noise, self.rate_hz, self.seed, int(self.start_counter or 0))
+        """The scenario's sensor (its biases follow ``bias_seed``, else the seed; its noise the seed)."""
+        return SensorModel(self.noise, self.rate_hz, self.seed, int(self.start_counter or 0), self.bias_seed)
 
     def samples(self) -> tuple[np.ndarray, ScenarioTrace]:
         """Measured samples of all runs, and the trace they measure (the truth)."""

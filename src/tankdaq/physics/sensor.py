@@ -68,12 +68,19 @@ class SensorModel:
     heading_deg = 30.0
     lever_arm_m = 0.15  # sensor height above the rotation axis: adds tangential and centripetal acceleration
 
-    def __init__(self, noise: SensorNoise, rate_hz: float, seed: int, start_counter: int = 0) -> None:
+    def __init__(
+        self,
+        noise: SensorNoise,
+        rate_hz: float,
+        seed: int,
+        start_counter: int = 0,
+        bias_seed: int | None = None,
+    ) -> None:
         self.noise = noise
         self.rate_hz = rate_hz
         self.seed = seed
         self.start_counter = start_counter
-        bias_rng = np.random.default_rng([seed, 3])
+        bias_rng = np.random.default_rng([seed if bias_seed is None else bias_seed, 3])
         self.angle_bias = np.radians(noise.angle_bias_deg) * bias_rng.standard_normal(3)
         self.gyro_bias = np.radians(noise.gyro_bias_deg_s) * bias_rng.standard_normal(3)
         self.acc_bias = noise.acc_bias_m_s2 * bias_rng.standard_normal(3)

@@ -201,11 +201,16 @@ class SimulatedMTi:
     def play(self, scenario: DecayScenario) -> None:
         """Play ``scenario`` next, on the same clock, the device streaming on (a guided session's next
         decay: one device for the whole session), computed at the configured output rate first, then
-        retimed to start a moment of wall time from now on the device's clock and counter."""
+        retimed to start a moment of wall time from now on the device's clock and counter. The device
+        keeps its own biases: a sensor's still water does not step between decays."""
         source = self.source
         if not isinstance(source, ScriptedSource):
             raise InputError("only a scripted simulated sensor plays another scenario")
-        samples = ScenarioSamples(dataclasses.replace(scenario, rate_hz=self.firmware.output.rate_hz))
+        playing = source.scenario
+        device_biases = playing.seed if playing.bias_seed is None else playing.bias_seed
+        samples = ScenarioSamples(
+            dataclasses.replace(scenario, rate_hz=self.firmware.output.rate_hz, bias_seed=device_biases)
+        )
         lead_s = 0.1
         while not source.then_play(
             self.firmware.frame_due_at(self.device_time() + lead_s * self.speed), samples
