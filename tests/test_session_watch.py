@@ -27,6 +27,7 @@ from tankdaq.acquire.guided.watch import (
     SETTLED_S,
     TREND_DEG_MIN,
     ModelWatch,
+    after_last_step,
     creep_deg_min,
 )
 from tankdaq.acquire.listeners import EventLog, EventPrinter
@@ -151,6 +152,24 @@ def test_still_water_a_dying_swing_or_a_small_step_is_no_trend(seed: int) -> Non
     assert _creep_events([_still(15), _still(20, 0.2)], seed) == []  # a sensor's bias step, not a creep
     slow_deg = TREND_DEG_MIN * 0.7  # deg over a minute: slower than a trend, within the tolerance
     assert _creep_events([_ramp(60, 0.0, slow_deg)], seed) == []
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("still_s", [5.5, 6.5, 9.0])
+@pytest.mark.parametrize("step_deg", [0.13, -0.13])
+def test_a_step_soon_after_the_still_water_began_is_no_trend(
+    seed: int, still_s: float, step_deg: float
+) -> None:
+    """Still water a few seconds old, then a new level: the means of one short stretch, half at each
+    level, lie near a line (a session on CI said a trend of 1.1 deg/min here); two levels fit them far
+    better than any line, so the creep is fitted after the step."""
+    assert _creep_events([_still(still_s), _still(20, step_deg)], seed) == []
+    times_s = np.arange(11.0)
+    stepped = np.where(times_s < 6, 0.0, step_deg)
+    assert after_last_step(times_s, stepped) == 6
+    assert after_last_step(times_s, 0.02 * times_s) == 0  # a creep is no step
+    hinge = np.maximum(times_s - 6, 0.0) * 0.13  # still, then a creep setting in fast: a bend, no step
+    assert after_last_step(times_s, hinge) == 0
 
 
 def test_the_creep_is_the_least_squares_slope_and_only_a_clear_one() -> None:

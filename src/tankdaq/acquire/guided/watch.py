@@ -14,8 +14,9 @@ again, until the next release, it judges the decay axis over windows of ``WINDOW
 - a quiet window whose mean is further than the plan's level tolerance from the reference is **drift**,
   one further than that from zero (and not drifted) is off **level**;
 - a still water whose level creeps, the least-squares slope of its quiet windows' means over the last
-  ``TREND_S`` at least ``TREND_T`` standard errors (``creep_deg_min``) and ``TREND_DEG_MIN``, is a
-  **trend**: a drift on its way, said before it crosses the tolerance (over below half that rate).
+  ``TREND_S`` (after the latest step in them, ``after_last_step``) at least ``TREND_T`` standard errors
+  (``creep_deg_min``) and ``TREND_DEG_MIN``, is a **trend**: a drift on its way, said before it crosses
+  the tolerance (over below half that rate).
 
 Each is said once as a ``ModelMoved`` event (``emit``: to every listener of the pipeline) while it
 stands. At the next release ``at_release`` keeps what stood then: a bump the model had not been quiet
@@ -58,9 +59,13 @@ TREND_DEG_MIN = 1.0
 #: 0.013 deg/min.
 TREND_S = 20.0
 TREND_MIN_S = 10.0
-#: ... and only when the slope is this many of its standard errors: a settled decay's last swing or a
-#: step in the still water scatters the means about any line, and is not a creep.
+#: ... and only when the slope is this many of its standard errors: a settled decay's last swing
+#: scatters the means about any line, and is not a creep. A step in the still water (a sensor's bias
+#: settling, the model nudged to a new rest) is a new level, not a creep: the fit starts after it.
 TREND_T = 6.0
+#: Two levels are a step when they fit the means this many times better (residual sum of squares) than
+#: a line bent once: still water alone scatters either way, a step of 5 noise widths fits 25 times better.
+STEP_BETTER = 4.0
 
 
 @dataclass(frozen=True)
@@ -229,6 +234,8 @@ class ModelWatch(Sink):
         self._means.append((0.5 * (window.t_s + window.end_s), window.mean_deg))
         newest_s = self._means[-1][0]
         self._means = [(t, mean) for t, mean in self._means if newest_s - t <= TREND_S]
+        times_s, means_deg = (np.array(column) for column in zip(*self._means, strict=True))
+        self._means = self._means[after_last_step(times_s, means_deg) :]
         if newest_s - self._means[0][0] < TREND_MIN_S:
             return
         times_s, means_deg = (np.array(column) for column in zip(*self._means, strict=True))
@@ -260,6 +267,33 @@ class ModelWatch(Sink):
         unsettled = self._bump is not None and (self._bump_open or self._quiet_s < SETTLED_S)
         trend = [self._trend] if self._trend is not None else []
         return ([self._bump] if unsettled and self._bump else []) + trend + list(self._standing.values())
+
+
+def after_last_step(times_s: np.ndarray, means_deg: np.ndarray) -> int:
+    """Index of the first mean after a step in the still water (0: none). A step is two levels, with at
+    most one mean between them (the window the step fell in), the new one held for two means at least;
+    it is taken when it fits the means ``STEP_BETTER`` times better than any line that bends once (a
+    creep setting in, slowing or stopping bends; it does not jump)."""
+    if means_deg.size < 4:
+        return 0
+    bent_deg2 = min(_bent_line_rss(times_s, means_deg, knot_s) for knot_s in times_s[1:-1])
+    best_deg2, first_after = bent_deg2 / STEP_BETTER, 0
+    for after in range(2, means_deg.size - 1):  # the new level holds for two means at least
+        for before in (after, after - 1):  # the window the step fell in belongs to neither level
+            levels_deg2 = float(
+                np.var(means_deg[:before]) * before + np.var(means_deg[after:]) * (means_deg.size - after)
+            )
+            if levels_deg2 < best_deg2:
+                best_deg2, first_after = levels_deg2, after
+    return first_after
+
+
+def _bent_line_rss(times_s: np.ndarray, means_deg: np.ndarray, knot_s: float) -> float:
+    """The residual sum of squares of the best continuous line through ``means_deg`` that bends at
+    ``knot_s``."""
+    basis = np.column_stack([np.ones_like(times_s), times_s - knot_s, np.maximum(times_s - knot_s, 0.0)])
+    coefficients = np.linalg.lstsq(basis, means_deg, rcond=None)[0]
+    return float(np.sum((means_deg - basis @ coefficients) ** 2))
 
 
 def creep_deg_min(times_s: np.ndarray, means_deg: np.ndarray) -> float:
