@@ -35,10 +35,11 @@ from tankdaq.ident.campaign_stream import (
     fit_campaign,
     fit_chunks,
     scan_campaign,
+    scan_chunks,
 )
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.ident.derived import b_eq
-from tankdaq.ident.executors import campaign_executor
+from tankdaq.ident.executors import LocalPool, campaign_executor
 from tankdaq.records import DecayRun
 from tankdaq.viz.campaign_report import load_plotting, write_report
 
@@ -166,6 +167,27 @@ def test_a_local_pool_fits_in_chunks_of_one_size() -> None:
     assert [group for chunk in chunks for group in chunk] == groups
     assert set(sizes[:-1]) == {2 * math.ceil(chunk_size(400) / 2)}  # whole groups of two: 13 -> 14
     assert chunk_size(400) == math.ceil(400 / CHUNKS) and chunk_size(10**6) == MAX_CHUNK_DECAYS
+
+
+def test_the_scan_goes_to_each_worker_in_one_run_of_files_of_about_equal_bytes(tmp_path: Path) -> None:
+    """A scan costs about its file's bytes and a task a pickle each way: one chunk per worker of a local
+    pool (or a cluster's thread), neighbouring files of about equal bytes, none over
+    ``MAX_CHUNK_DECAYS`` files; each file alone without a pool (progress after each)."""
+    sizes = [40_000, *[1_000] * 30, 39_000, 1_000]  # a long recording at each end of the middle
+    paths = []
+    for i, size in enumerate(sizes):
+        paths.append(tmp_path / f"r{i:02d}.mcap")
+        paths[-1].write_bytes(b"x" * size)
+    paths.append(tmp_path / "gone.mcap")  # vanished since it was found: its scan says so
+    assert scan_chunks(paths, None) == [[path] for path in paths]
+    with LocalPool(2) as pool:  # not started: a pool forks its workers at its first task
+        assert pool.workers == 2
+        chunks = scan_chunks(paths, pool)
+        many = scan_chunks([tmp_path / f"{i}.mcap" for i in range(3 * MAX_CHUNK_DECAYS + 1)], pool)
+    assert [path for chunk in chunks for path in chunk] == paths and len(chunks) == 2
+    chunk_bytes = [sum(path.stat().st_size for path in chunk if path.exists()) for chunk in chunks]
+    assert abs(chunk_bytes[0] - chunk_bytes[1]) <= max(sizes)  # equal but for the file at the cut
+    assert len(many) == 4 and max(len(chunk) for chunk in many) <= MAX_CHUNK_DECAYS
 
 
 def test_mcap_campaign_reads_back_like_the_csv_one(tmp_path: Path) -> None:

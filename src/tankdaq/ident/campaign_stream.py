@@ -22,6 +22,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, TypeVar
 
+import numpy as np
+
 from ..config import Hull
 from ..records import DecayRun
 from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
@@ -31,16 +33,17 @@ from .inputs import input_notices
 
 T = TypeVar("T")
 
-#: A campaign on a local pool is cut into about this many chunks (a chunk: one task for a worker), so
-#: two workers share the load evenly while the per-task cost (a pickle) stays small...
+#: A campaign's fits on a local pool are cut into about this many chunks (a chunk: one task for a
+#: worker), so two workers share the load evenly while the per-task cost (a pickle) stays small...
 CHUNKS = 32
-#: ...and no chunk holds more decays than this (a worker's memory; the parent's progress steps).
+#: ...and no chunk holds more decays (or files) than this (a worker's memory; the parent's progress).
 MAX_CHUNK_DECAYS = 64
-#: On a Dask cluster a task costs about 5 ms of CPU between client, scheduler and worker (and a round
-#: trip; bench_campaign_scale), so there are fewer: the scan (reading, the same cost per file) one
-#: chunk per worker thread; the fits (one group can cost 7x another) in chunks that shrink as the work
-#: runs out, each this fraction of what is left per thread (guided self-scheduling): a few large tasks
-#: first, single groups at the end, so no worker waits long on another's last chunk.
+#: The scan costs about its files' bytes: one chunk per worker, of equal bytes (``scan_chunks``). On a
+#: Dask cluster a task costs about 5 ms of CPU between client, scheduler and worker (and a round trip;
+#: bench_campaign_scale), so the fits too go in fewer tasks (one group can cost 7x another): in chunks
+#: that shrink as the work runs out, each this fraction of what is left per thread (guided
+#: self-scheduling): a few large tasks first, single groups at the end, so no worker waits long on
+#: another's last chunk.
 DASK_GUIDED = 2
 
 
@@ -148,8 +151,7 @@ def scan_campaign(
 ) -> CampaignScan:
     """Every file scanned in chunks on ``executor`` (here without one); ``progress`` after each file;
     ``work``: made of the files it wants by the workers that scan them, taken as each chunk returns."""
-    size = chunk_size(len(paths), executor)
-    chunks = [list(paths[i : i + size]) for i in range(0, len(paths), size)]
+    chunks = scan_chunks(paths, executor)
     wanted = set(work.wanted(paths)) if work is not None else set()
     make = work.make if work is not None and wanted else None
     tasks = [(chunk, start_s, end_s, make, tuple(p for p in chunk if p in wanted)) for chunk in chunks]
@@ -251,6 +253,38 @@ def fit_chunks(
             chunk, decays = [], 0
     if chunk:
         yield chunk
+
+
+def scan_chunks(paths: Sequence[Path], executor: Executor | None = None) -> list[list[Path]]:
+    """The files cut for the scan: each alone here (progress after each); on a pool or a cluster one
+    run of neighbouring files per worker, of about equal bytes (a scan costs about its file's size and a
+    task about 0.4 ms on a pool, 5 ms on Dask: N = 36 on a pool of two scanned in 34 ms as two tasks, 40
+    as 18), at most ``MAX_CHUNK_DECAYS`` files each."""
+    workers = executor_workers(executor)
+    if workers is None or not paths:
+        return [[path] for path in paths]
+    count = min(len(paths), max(workers, math.ceil(len(paths) / MAX_CHUNK_DECAYS)))
+    ends = np.cumsum([_size(path) for path in paths], dtype=float)
+    cuts = np.searchsorted(ends, ends[-1] * np.arange(1, count) / count, side="right")
+    chunks = [list(paths[a:b]) for a, b in zip([0, *cuts], [*cuts, len(paths)], strict=True) if b > a]
+    return [
+        chunk[i : i + MAX_CHUNK_DECAYS] for chunk in chunks for i in range(0, len(chunk), MAX_CHUNK_DECAYS)
+    ]
+
+
+def _size(path: Path) -> int:
+    """A file's size in bytes; 1 where it cannot be read (its scan says why)."""
+    try:
+        return max(1, path.stat().st_size)
+    except OSError:
+        return 1
+
+
+def executor_workers(executor: Executor | None) -> int | None:
+    """How many tasks ``executor`` runs at once: a local pool's processes (``ident.executors.LocalPool``),
+    a Dask cluster's threads; None here, without one."""
+    workers = getattr(executor, "workers", None)
+    return workers if isinstance(workers, int) else cluster_threads(executor)
 
 
 def cluster_threads(executor: Executor | None) -> int | None:

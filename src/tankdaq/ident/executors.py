@@ -52,7 +52,7 @@ def campaign_executor(
         prepare_kernels()
         for load in prepare:
             load()
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=get_context("fork")) as pool:
+        with LocalPool(jobs) as pool:
             # The workers fork now (before the caller starts a progress thread), with the objects
             # loaded so far frozen out of the cyclic garbage collector: a worker's collections then
             # leave the pages it shares with this process unwritten (bench_campaign: a pool of two
@@ -63,6 +63,15 @@ def campaign_executor(
             finally:
                 gc.unfreeze()
             yield pool
+
+
+class LocalPool(ProcessPoolExecutor):
+    """A local pool of ``workers`` processes forked from this one, that knows its size (the work is cut
+    to it, see ``ident.campaign_stream``)."""
+
+    def __init__(self, workers: int) -> None:
+        super().__init__(max_workers=workers, mp_context=get_context("fork"))
+        self.workers = workers
 
 
 class DaskExecutor(Executor):
