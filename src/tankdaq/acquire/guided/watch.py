@@ -65,7 +65,7 @@ TREND_MIN_S = 10.0
 TREND_T = 6.0
 #: Two levels are a step when they fit the means this many times better (residual sum of squares) than
 #: a line bent once. A step that could pass for a creep of 1 deg/min over a short stretch is some 0.1 deg,
-#: 45 noise widths of a 1 s mean: it fits 35-500 times better; one of 10 widths about 7 times.
+#: 45 noise widths of a 1 s mean: it fits 35 times better or more (135 in the median); 10 widths, 7.
 STEP_BETTER = 4.0
 
 
