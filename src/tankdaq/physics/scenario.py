@@ -340,9 +340,16 @@ class DecayScenario:
         x[start:stop], v[start:stop] = bump_x[1:], bump_v[1:]
         a[start:stop] = acceleration(coeffs, x[start:stop], v[start:stop])
 
+    @property
+    def sensor_bias_seed(self) -> int:
+        """The seed the sensor's biases follow: ``bias_seed``, else the seed."""
+        return self.seed if self.bias_seed is None else self.bias_seed
+
     def sensor(self) -> SensorModel:
-        """The scenario's sensor (its biases follow ``bias_seed``, else the seed; its noise the seed)."""
-        return SensorModel(self.noise, self.rate_hz, self.seed, int(self.start_counter or 0), self.bias_seed)
+        """The scenario's sensor (its biases follow ``sensor_bias_seed``; its noise the seed)."""
+        return SensorModel(
+            self.noise, self.rate_hz, self.seed, int(self.start_counter or 0), self.sensor_bias_seed
+        )
 
     def samples(self) -> tuple[np.ndarray, ScenarioTrace]:
         """Measured samples of all runs, and the trace they measure (the truth)."""

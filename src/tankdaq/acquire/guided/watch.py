@@ -236,10 +236,10 @@ class ModelWatch(Sink):
         newest_s = self._means[-1][0]
         self._means = [(t, mean) for t, mean in self._means if newest_s - t <= TREND_S]
         times_s, means_deg = (np.array(column) for column in zip(*self._means, strict=True))
-        self._means = self._means[after_last_step(times_s, means_deg) :]
-        if newest_s - self._means[0][0] < TREND_MIN_S:
+        first = after_last_step(times_s, means_deg)
+        self._means, times_s, means_deg = self._means[first:], times_s[first:], means_deg[first:]
+        if newest_s - times_s[0] < TREND_MIN_S:
             return
-        times_s, means_deg = (np.array(column) for column in zip(*self._means, strict=True))
         slope_deg_min = creep_deg_min(times_s, means_deg)
         if self._trend is None and abs(slope_deg_min) >= TREND_DEG_MIN:
             self._trend = self._moved("trend", window, self.level_tolerance_deg, slope_deg_min)

@@ -206,8 +206,7 @@ class SimulatedMTi:
         source = self.source
         if not isinstance(source, ScriptedSource):
             raise InputError("only a scripted simulated sensor plays another scenario")
-        playing = source.scenario
-        device_biases = playing.seed if playing.bias_seed is None else playing.bias_seed
+        device_biases = source.scenario.sensor_bias_seed
         samples = ScenarioSamples(
             dataclasses.replace(scenario, rate_hz=self.firmware.output.rate_hz, bias_seed=device_biases)
         )
