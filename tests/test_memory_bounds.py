@@ -23,6 +23,7 @@ from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.acquire.sinks import Decay, IdentifierSink, Sink
 from tankdaq.config import hull_scenario
 from tankdaq.ident.online import OnlineResult
+from tankdaq.ident.signals import SAVGOL_CACHE, _savgol_weights, smoothed_derivatives
 from tankdaq.samples import empty_samples
 from tankdaq.viz.live import LiveView
 
@@ -81,6 +82,16 @@ def test_a_day_of_decays_keeps_the_newest_outcomes_and_counts_them_all() -> None
     kept.append(day[-1])
     assert kept.count == 823
     assert list(kept) == day[-KEPT_OUTCOMES:] and len(kept) == KEPT_OUTCOMES
+
+
+def test_the_smoothing_weights_kept_are_bounded_over_many_windows() -> None:
+    """Each decay's period sets its smoothing window: a day's windows must not pile up weight sets."""
+    t = np.linspace(-1.0, 1.0, 4000)
+    y = t**3 - 0.5 * t  # a cubic: the weights of order 3 give it back exactly
+    for window in range(5, 5 + 2 * (SAVGOL_CACHE + 40), 2):
+        value, _, _ = smoothed_derivatives(y, float(t[1] - t[0]), window, 3)
+        assert np.allclose(value[window:-window], y[window:-window], rtol=0, atol=1e-9)
+    assert _savgol_weights.cache_info().currsize <= SAVGOL_CACHE
 
 
 def test_a_detector_that_keeps_no_events_returns_the_same_ones() -> None:

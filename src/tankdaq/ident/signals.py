@@ -9,6 +9,9 @@ import numpy as np
 
 from ..errors import BadIdentificationInput
 
+#: Savitzky-Golay weight sets kept (window, order, derivative): a day's decays need a few dozen.
+SAVGOL_CACHE = 128
+
 
 def zero_crossings(y: np.ndarray) -> np.ndarray:
     """Indices i where y changes sign between i and i+1 (exact zeros count once)."""
@@ -61,11 +64,13 @@ def smoothed_derivatives(
     return value, first, second
 
 
-@functools.cache
+@functools.lru_cache(maxsize=SAVGOL_CACHE)
 def _savgol_weights(window: int, polyorder: int, deriv: int) -> np.ndarray:
     """Savitzky-Golay weights over a centred window: the ``deriv``-th derivative (per sample) at its centre.
 
-    What scipy.signal.savgol_filter computes, without importing scipy.signal (about a second).
+    What scipy.signal.savgol_filter computes, without importing scipy.signal (about a second). Kept for
+    the newest ``SAVGOL_CACHE`` windows: the window follows each decay's period, so a recorder's day
+    meets new ones, and an unbounded cache grew by one entry every few decays.
     """
     half = window // 2
     powers = np.arange(-half, half + 1, dtype=float)[None, :] ** np.arange(polyorder + 1)[:, None]
