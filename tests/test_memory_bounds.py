@@ -243,3 +243,53 @@ def test_large_blocks_keep_mappings_of_their_own_after_a_larger_one_was_freed() 
 
     assert mapped("fixed") == "True"
     assert mapped("free") == "False"  # what the fixed threshold prevents
+
+
+NUMPY_PROBE = """
+import ctypes, sys, threading
+import numpy as np
+from tankdaq.acquire.memory import uncache_numpy_small_blocks
+changed = uncache_numpy_small_blocks() if sys.argv[1] == "uncached" else False
+class MallInfo2(ctypes.Structure):
+    names = "arena ordblks smblks hblks hblkhd usmblks fsmblks uordblks fordblks keepcost"
+    _fields_ = [(name, ctypes.c_size_t) for name in names.split()]
+libc = ctypes.CDLL(None)
+libc.mallinfo2.restype = MallInfo2
+made = []
+def churn():  # seven buffers of every size numpy caches, made and freed on a thread of their own
+    blocks = [np.ones(size, np.uint8) for size in range(1, 1024) for _ in range(7)]
+    made.append(sum(block.nbytes for block in blocks))
+before = libc.mallinfo2().uordblks
+thread = threading.Thread(target=churn)
+thread.start()
+thread.join()
+held = libc.mallinfo2().uordblks - before
+grown = np.arange(10.0)
+grown.resize(100_000, refcheck=False)  # realloc
+works = bool(np.zeros(5000).sum() == 0 and grown[9] == 9 and grown[-1] == 0 and np.ones(3000).sum() == 3000)
+print(changed, works, held, made[0])
+"""
+
+
+@pytest.mark.skipif(_glibc() is None, reason="glibc's mallinfo2 tells what is in use")
+def test_numpys_freed_small_buffers_go_back_to_malloc() -> None:
+    """In fresh processes, on a thread as a recorder's reading and fitting threads: 7 buffers of every
+    size under 1 kB (3.7 MB) made and freed. numpy's own cache keeps them in use; uncached, they are
+    freed. ``-X dev`` (Python's debug hooks on its allocator) leaves numpy as it is. glibc's own
+    per-thread cache (up to 7 freed chunks of each size under 1 kB, about 0.2 MB, counted as in use) is
+    turned off in the probes, so that what is in use is what numpy holds."""
+    env = {**os.environ, "GLIBC_TUNABLES": "glibc.malloc.tcache_count=0"}
+
+    def probe(mode: str, *flags: str) -> tuple[str, str, int, int]:
+        run = subprocess.run([sys.executable, *flags, "-c", NUMPY_PROBE, mode], capture_output=True,
+                             text=True, env=env, timeout=120, check=True)  # fmt: skip
+        changed, works, held, made = run.stdout.split()
+        return changed, works, int(held), int(made)
+
+    changed, works, held, made = probe("uncached")
+    assert (changed, works) == ("True", "True")
+    assert held < 0.02 * made, f"{held} of {made} bytes still in use once freed"
+    changed, works, held, made = probe("numpy")
+    assert (changed, works) == ("False", "True")
+    assert held > 0.5 * made  # what uncaching prevents: numpy's cache keeps them
+    assert probe("uncached", "-X", "dev")[:2] == ("False", "True")
