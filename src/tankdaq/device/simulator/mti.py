@@ -82,7 +82,8 @@ class SimulatedMTi:
         self._commands: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()
         self._thread: threading.Thread | None = None
         self._running = threading.Event()
-        self._plugged = threading.Event()
+        self._plugged, self._unplugged = threading.Event(), threading.Event()
+        self._replug_timer: threading.Timer | None = None
         self._wake_r, self._wake_w = os.pipe()
         self._fired: set[str] = set()
 
@@ -116,11 +117,14 @@ class SimulatedMTi:
     def stop(self) -> None:
         """Stop serving and remove the pty, the links and the temporary folder."""
         self._running.clear()
+        if self._replug_timer is not None:
+            self._replug_timer.cancel()  # a scheduled replug never plugs a device that is gone
         self._wake()
         if self._thread is not None:
             self._thread.join(timeout=5)
             self._thread = None
         self._plugged.clear()
+        self._unplugged.set()
         for fd in (self._wake_r, self._wake_w):
             if fd >= 0:
                 with contextlib.suppress(OSError):
@@ -145,6 +149,11 @@ class SimulatedMTi:
     @property
     def plugged(self) -> bool:
         return self._plugged.is_set()
+
+    def wait_plugged(self, plugged: bool = True, timeout_s: float | None = None) -> bool:
+        """Wait until the device is plugged in (``plugged``) or out, its pty and links already made or
+        gone; False when ``timeout_s`` passed first."""
+        return (self._plugged if plugged else self._unplugged).wait(timeout_s)
 
     @property
     def baud(self) -> int:
@@ -240,12 +249,15 @@ class SimulatedMTi:
     def _plug(self) -> None:
         self.line.plug()
         self.firmware.power_up()
+        self._unplugged.clear()
         self._plugged.set()
 
     def _unplug(self) -> None:
-        self._plugged.clear()
+        """The pty and its links go first: whoever sees ``plugged`` turn False finds them gone."""
         self.line.unplug()
         self.firmware.measuring = False
+        self._plugged.clear()
+        self._unplugged.set()
 
     def _fire_scheduled_faults(self) -> None:
         f, now = self.faults, self.device_time()
@@ -256,9 +268,9 @@ class SimulatedMTi:
             self._fired.add("unplug")
             self._unplug()
             if f.replug_after_s >= 0:
-                timer = threading.Timer(f.replug_after_s / self.speed, self.replug)
-                timer.daemon = True
-                timer.start()
+                self._replug_timer = threading.Timer(f.replug_after_s / self.speed, self.replug)
+                self._replug_timer.daemon = True
+                self._replug_timer.start()
 
     # ---- the device loop ----------------------------------------
 
