@@ -140,6 +140,8 @@ def uncache_numpy_small_blocks() -> bool:
         umath = importlib.import_module("numpy._core._multiarray_umath")
     except ImportError:
         return False
+    if umath.get_handler_name() != "default_allocator" or umath.get_handler_version() != 1:
+        return False
     api = ctypes.pythonapi
     api.PyCapsule_GetName.restype = ctypes.c_char_p
     api.PyCapsule_GetName.argtypes = [ctypes.py_object]
@@ -147,8 +149,6 @@ def uncache_numpy_small_blocks() -> bool:
     api.PyCapsule_GetPointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
     api.PyMem_GetAllocator.argtypes = [ctypes.c_int, ctypes.POINTER(_Allocator)]
     table = api.PyCapsule_GetPointer(umath._ARRAY_API, api.PyCapsule_GetName(umath._ARRAY_API))
-    if umath.get_handler_name() != "default_allocator" or umath.get_handler_version() != 1:
-        return False
     slot = ctypes.c_void_p.from_address(table + NUMPY_DEFAULT_HANDLER_SLOT * ctypes.sizeof(ctypes.c_void_p))
     capsule = ctypes.c_void_p.from_address(slot.value).value if slot.value else None
     if not capsule:
