@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -236,6 +237,31 @@ def test_text_in_a_used_column_names_its_row_and_column(tmp_path):
     result = identify(path)
     assert result.exit_code == 2
     assert "row 702, column 'angle_deg': 'n/a' is not a number" in one_error_line(result)
+
+
+@pytest.mark.parametrize("separator", [",", ";"])
+def test_a_cell_longer_than_the_csv_module_takes_is_one_line(tmp_path, separator):
+    """A 200 kB cell (a pasted log in a note column, a line without line ends) is over the csv module's
+    limit: one line naming the row, not csv's own error."""
+    t, angle, _ = held_tilt()
+    notes = np.array(["ok"] * t.size, dtype=object)
+    notes[5] = '"' + "z" * 200_000 + '"'
+    columns = {"time_s": t, "angle_deg": np.degrees(angle), "note": notes}
+    path = write_csv(tmp_path / "d.csv", columns, sep=separator, comma=separator == ";")
+    result = identify(path)
+    assert result.exit_code == 2
+    assert "data line 6 (200" in one_error_line(result)
+
+
+def test_an_angle_column_of_nothing_but_nan_is_one_line_without_numpys_warnings(tmp_path):
+    t, _, _ = held_tilt()
+    path = write_csv(tmp_path / "d.csv", {"time_s": t, "angle_deg": np.full(t.size, np.nan)})
+    with warnings.catch_warnings(record=True) as caught:  # a user's terminal shows what pytest would hide
+        warnings.simplefilter("always")
+        result = identify(path)
+    assert not [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert result.exit_code == 2
+    assert "the angle column holds NaN" in one_error_line(result)
 
 
 @pytest.fixture(scope="module")

@@ -89,8 +89,24 @@ def _open(path: Path, encoding: str) -> Iterator[str]:
             yield line.rstrip("\n")
 
 
-def _split(line: str, separator: str) -> list[str]:
-    return next(csv.reader([line], delimiter=separator))
+def _split(line: str, separator: str) -> list[str] | None:
+    """The cells of one line; None where the csv module refuses it (a cell over its 128 kB limit, a NUL
+    byte): no table a lab writes has such a cell, so that separator is not the file's."""
+    try:
+        return next(csv.reader([line], delimiter=separator))
+    except csv.Error:
+        return None
+
+
+def _cells(path: Path, line: str, separator: str, row: str) -> list[str]:
+    """The cells of ``row`` (its name in the message), or one line saying why it is not a CSV row."""
+    cells = _split(line, separator)
+    if cells is None:
+        raise InputError(
+            f"{path}: {row} ({len(line)} characters) is not a {SEPARATOR_NAMES[separator]}-separated row "
+            "of a table; export the data again, one sample per line"
+        )
+    return cells
 
 
 def sniff(path: Path) -> tuple[Dialect, list[str], list[str], list[list[str]]]:
@@ -115,8 +131,8 @@ def sniff(path: Path) -> tuple[Dialect, list[str], list[str], list[list[str]]]:
     if not lines:
         raise InputError(f"{path}: no header line and no data: not a CSV table")
     separator = _separator(path, lines)
-    header = [name.strip() for name in _split(lines[0], separator)]
-    rows = [_split(line, separator) for line in lines[1:]]
+    header = [name.strip() for name in _cells(path, lines[0], separator, "the header")]
+    rows = [_cells(path, line, separator, f"data line {i}") for i, line in enumerate(lines[1:], start=1)]
     decimal_comma = separator != "," and any(_DECIMAL_COMMA.match(c) for row in rows for c in row)
     crlf = b"\r\n" in head or b"\r\x00\n" in head
     return Dialect(separator, decimal_comma, encoding, crlf), comments, header, rows
@@ -125,11 +141,11 @@ def sniff(path: Path) -> tuple[Dialect, list[str], list[str], list[list[str]]]:
 def _separator(path: Path, lines: list[str]) -> str:
     """The first separator that splits the header into two or more names and every row alike."""
     for separator in SEPARATORS:
-        widths = {len(_split(line, separator)) for line in lines}
+        widths = {len(cells) if (cells := _split(line, separator)) is not None else 0 for line in lines}
         if len(widths) == 1 and widths.pop() >= 2:
             return separator
     for separator in SEPARATORS:  # a ragged file: the header's separator, and the rows are checked later
-        if len(_split(lines[0], separator)) >= 2:
+        if len(_split(lines[0], separator) or ()) >= 2:
             return separator
     raise InputError(
         f"{path}: cannot tell how the columns are separated (tried comma, semicolon and tab); "
@@ -221,7 +237,7 @@ def _load_checked(
         seen += 1
         if seen <= skip:
             continue
-        cells = _split(line, dialect.separator)
+        cells = _cells(path, line, dialect.separator, f"row {row_number}")
         if len(cells) != len(header):
             raise InputError(
                 f"{path}: row {row_number} has {len(cells)} fields, the header {len(header)} "

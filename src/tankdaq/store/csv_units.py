@@ -50,8 +50,10 @@ def period(t: np.ndarray, angle: np.ndarray) -> float | None:
     the angle has left a band of ``CROSSING_BAND`` of the largest swing (noise does not cross); None
     with fewer than three crossings."""
     keep = np.isfinite(t) & np.isfinite(angle)
+    if not keep.any():  # nothing to time (the caller says what is wrong with the columns)
+        return None
     t, excursion = t[keep], angle[keep] - np.median(angle[keep])
-    band = CROSSING_BAND * (float(np.max(np.abs(excursion))) if excursion.size else 0.0)
+    band = CROSSING_BAND * float(np.max(np.abs(excursion)))
     outside = np.flatnonzero(np.abs(excursion) > band)
     if band <= 0 or outside.size < 2:
         return None
