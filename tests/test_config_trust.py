@@ -88,6 +88,10 @@ HULL_CASES = {
         edited(HULL, "displacement_kg = 20.0", "displacement_kg = -20.0"),
         "displacement_kg must be a number above 0",
     ),
+    "zero beam": (  # B̂44 divides by the beam: ZeroDivisionError before
+        edited(HULL, "displacement_kg = 20.0", "displacement_kg = 20.0\nbeam_m = 0"),
+        "dimensions.beam_m must be a number above 0",
+    ),
     "NaN GM": (edited(HULL, "gm_m = 0.05", "gm_m = nan"), "gm_m = nan is not finite"),
     "GM a string": (edited(HULL, "gm_m = 0.05", 'gm_m = "0.05"'), "gm_m must be a number"),
     "huge GM": (edited(HULL, "gm_m = 0.05", "gm_m = 1" + "0" * 400), "gm_m = 1000"),

@@ -247,6 +247,8 @@ def hull_scenario(
 
 #: Physical particulars of a hull and their sane ranges (above 0, at most): a model or a ship.
 PARTICULAR_RANGES = {"gm_m": 1000.0, "radius_of_gyration_m": 1000.0, "displacement_kg": 1e10}
+#: The [dimensions] that are sizes, so above 0 (other keys are kept as given, signs and all).
+POSITIVE_DIMENSIONS = {"length_m", "beam_m", "depth_m", "draft_m", "displacement_kg"}
 #: The axes a hull's [simulation] part may play.
 SIMULATED_AXES = ("roll", "pitch")
 
@@ -264,8 +266,8 @@ def _parse_hull(data: dict[str, Any], path: Path, origin: str) -> Hull:
                          PARTICULAR_RANGES["displacement_kg"])
         for key, value in table(data, "dimensions", str(path)).items()
     }  # fmt: skip
-    if "displacement_kg" in dimensions:
-        number(dimensions["displacement_kg"], f"{path}: dimensions.displacement_kg", 0.0, 1e10)
+    for key in POSITIVE_DIMENSIONS & set(dimensions):  # sizes results divide by: a 0 is a typo
+        number(dimensions[key], f"{path}: dimensions.{key}", 0.0, PARTICULAR_RANGES["displacement_kg"])
     return Hull(
         name=safe_name(data.get("name", path.stem), f"{path}: hull name"),
         description=text(data, "description", str(path)),
