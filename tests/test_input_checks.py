@@ -64,6 +64,9 @@ DEVICE_CASES = [
     ([*RECORD, "--out", "{out}", "--model", "b1,c1,ku"], "ku needs a measured input u(t)"),
     ([*RECORD, "--out", "{out}", "--baud", "0"], "--baud 0 is not an MTi baud rate"),
     ([*RECORD, "--out", "{out}", "--rate", "0.5"], "--rate 0.5 Hz is not an MTi output rate"),
+    ([*RECORD, "--out", "{out}", "--viewer", "rerun+http://[::1"], "(Invalid IPv6 URL)"),  # recorded before
+    ([*RECORD, "--out", "{out}", "--viewer", "rerun+http://127.0.0.1:99999/proxy"], "Port out of range"),
+    ([*RECORD, "--out", "{out}", "--viewer", "rerun+http:///proxy"], "names no host"),
     (["simulate", "--rate", "1000"], "--rate 1000 Hz is not an MTi output rate"),
     (["simulate", "--angle", "-5"], "--angle -5 is not a release angle"),
     (["simulate", "--draft", "2T"], "outside the configured drafts"),

@@ -74,11 +74,19 @@ def describe_mode(mode: str, default: bool) -> str:
 
 def check_mode(mode: str) -> str:
     """Refuse a viewer mode that is neither spawn, save, none nor a rerun URL (exit 2 at the CLI)."""
-    if mode in MODES or mode.startswith(URL_SCHEMES):
+    if mode in MODES:
         return mode
-    raise InputError(
-        f"viewer mode {mode!r} not understood: use spawn, save, none, or a URL like rerun+http://127.0.0.1:9876/proxy"
-    )
+    example = "rerun+http://127.0.0.1:9876/proxy"
+    if mode.startswith(URL_SCHEMES):
+        try:  # urlsplit checks the brackets of an IPv6 host; .port the port's digits and range
+            parts = urlsplit(mode)
+            parts.port  # noqa: B018 (the check is the parse)
+        except ValueError as exc:
+            raise InputError(f"viewer URL {mode!r} not understood ({exc}); write it like {example}") from None
+        if not parts.hostname:
+            raise InputError(f"viewer URL {mode!r} names no host; write it like {example}")
+        return mode
+    raise InputError(f"viewer mode {mode!r} not understood: use spawn, save, none, or a URL like {example}")
 
 
 def url_listening(url: str) -> bool:
