@@ -125,6 +125,54 @@ def test_potential_flow_simulation_misses_viscous_damping(tmp_path: Path, kvlcc2
 
 
 @needs_kvlcc2
+def test_a_simulation_with_the_wrong_gm_is_corrected_in_its_stiffness(tmp_path: Path, kvlcc2) -> None:
+    """The 21338 fit with half its linear restoring (a GM halved: the period 41 % long) is corrected in
+    its stiffness alone. Before: the stiffness refit started from the simulation's c1 and stopped in a
+    local minimum (the phase wrapped over 143 cycles), so linear damping was named first (b1 up from
+    0.019 to 1.7 1/s, the simulation damped out) and kept in the correction after the stiffness step
+    had refitted it back; on a shorter decay the measured roll left in the residual was named
+    "coupling with an unmeasured motion", then a GZ curve in place of c1."""
+    _, fit = kvlcc2
+    c = dict(fit.coefficients_)
+    soft = {**c, "c1": 0.5 * c["c1"]}
+    sim = write_sim_csv(tmp_path / "soft.csv", *simulate_from_release(fit, soft, 120.0))
+    result = invoke(KVLCC2, *KVLCC2_READ, "--simulation", sim, *SIM_READ, "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    assert "stiffness" in out["disagrees_in"] and not out["period"]["agrees"]
+    first = out["steps"][0]
+    assert first["key"] == "restoring.linear" and set(first["added"]) == {"c1"}
+    assert first["added"]["c1"] == pytest.approx(0.5 * c["c1"], rel=0.02)
+    assert not [s for s in out["steps"] if s["key"] in ("coupling.unmeasured", "restoring.sine")]
+    assert [t["term"] for t in out["correction"]["terms"]] == ["c1"]
+    assert out["gap"]["reduction"] >= 0.9
+
+
+def test_a_simulation_far_off_in_period_is_not_an_unmeasured_motion(tmp_path: Path) -> None:
+    """Measured: 20 s of b1 0.3, b2 0.05, c1 14 with sensor noise. The simulation has c1 4 and no b2
+    (the period 87 % long). Its residual holds the measured roll at 1.87 times the simulation's own
+    frequency, which is no harmonic of it: that was taken for another motion (a ringing term fitted at
+    the measured frequency), and a GZ curve s1 sin(x) put in place of the simulation's c1 x. It is the
+    stiffness (c1 + 10), then the quadratic damping."""
+    truth, simulated = {"b1": 0.3, "b2": 0.05, "c1": 14.0}, {"b1": 0.3, "c1": 4.0}
+    t = np.arange(0.0, 20.0, 0.01)
+    angle = simulate_decay(truth, t, math.radians(8.0))[0] + np.random.default_rng(3).normal(0, 2e-4, t.size)
+    measured = tmp_path / "measured.csv"
+    np.savetxt(measured, np.column_stack([t, np.degrees(angle)]), delimiter=",", header="time_s,angle_deg",
+               comments="", fmt="%.10g")  # fmt: skip
+    t_sim = np.arange(0.0, 20.0, 0.02)
+    sim = write_sim_csv(tmp_path / "soft.csv", t_sim, simulate_decay(simulated, t_sim, math.radians(8.0))[0])
+    result = invoke(measured, "--simulation", sim, *SIM_READ, "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    keys = [step["key"] for step in out["steps"]]
+    assert keys[0] == "restoring.linear" and not {"coupling.unmeasured", "restoring.sine"} & set(keys)
+    added = {term["term"]: term["per_unit_inertia"] for term in out["correction"]["terms"]}
+    assert added["c1"] == pytest.approx(10.0, rel=0.02) and added["b2"] == pytest.approx(0.05, rel=0.1)
+    assert out["gap"]["reduction"] >= 0.9
+
+
+@needs_kvlcc2
 def test_a_right_simulation_names_nothing(tmp_path: Path, kvlcc2) -> None:
     """Control: the measured fit itself, simulated and with sensor-class noise, is not corrected."""
     runs, fit = kvlcc2

@@ -138,6 +138,34 @@ class CorrectionStep:
     rms_after_rad: float
 
 
+def _cold_fit(runs: list[DecayRun], spec: ModelSpec, fixed: dict[str, float]) -> Fit | None:
+    """``spec`` fitted from the measurement's own equation-error start (the simulation's terms held)."""
+    try:
+        return fit_spec(runs, spec, fixed=fixed)
+    except BadIdentificationInput:
+        return None
+
+
+def _better(first: Fit | None, second: Fit | None) -> Fit | None:
+    """The fit of the two with the lower BIC (either may have failed)."""
+    fits = [fit for fit in (first, second) if fit is not None]
+    return min(fits, key=lambda fit: fit.bic) if fits else None
+
+
+def _simplest_best(steps: list[CorrectionStep]) -> CorrectionStep | None:
+    """The step that closes most of the gap, unless it is a new effect and a change of a term the
+    simulation holds (its b1 or c1) fits within the BIC margin of it: then that change, the simpler
+    account (a simulation whose stiffness is off is not missing a GZ curve or another motion)."""
+    if not steps:
+        return None
+    best = min(steps, key=lambda step: step.rms_after_rad)
+    held = [step for step in steps if step.effect in INCREMENTS]
+    if best.effect in INCREMENTS or not held:
+        return best
+    simplest = min(held, key=lambda step: step.after.bic)
+    return simplest if simplest.after.bic < best.after.bic - DELTA_BIC else best
+
+
 def _text(coefficients: Mapping[str, float]) -> str:
     return ", ".join(f"{k} = {v:.4g}" for k, v in coefficients.items())
 
@@ -234,10 +262,12 @@ class SimulationComparison(EstimatorMixin):
         self.free_ = fit_spec(runs, self.corrected_.spec, start=self.corrected_)
         self._compare_curves(runs)
         self._compare_cycles(runs)
-        self.added_: dict[str, float] = {}
-        for step in self.steps_:
-            for term, value in step.added.items():
-                self.added_[term] = self.added_.get(term, 0.0) + value
+        # each term as the corrected model ends with it, less the simulation's own: a term freed or added
+        # by one step is refitted by the later ones, so a step's own figure can be stale
+        final = self.corrected_.coefficients
+        self.added_: dict[str, float] = {
+            term: final[term] - sim.get(term, 0.0) for step in self.steps_ for term in step.added
+        }
         stiffness = linear_stiffness(self.reference_.coefficients_)
         self.correction_: Correction = correction(self.added_, stiffness, self.hull, runs[0].axis)
         self.component_changes_ = self._component_changes()
@@ -291,11 +321,8 @@ class SimulationComparison(EstimatorMixin):
         steps: list[CorrectionStep] = []
         while len(steps) < self.max_steps and gap > FLOOR_FACTOR * floor:
             diag = diagnose_fit(current, runs)
-            best: CorrectionStep | None = None
-            for effect in CANDIDATES:
-                step = self._try(effect, current, fixed, runs, diag, (gap, floor))
-                if step is not None and (best is None or step.rms_after_rad < best.rms_after_rad):
-                    best = step
+            tried = [self._try(effect, current, fixed, runs, diag, (gap, floor)) for effect in CANDIDATES]
+            best = _simplest_best([step for step in tried if step is not None])
             if best is None:
                 break
             steps.append(best)
@@ -323,7 +350,11 @@ class SimulationComparison(EstimatorMixin):
         try:
             after = fit_spec(runs, spec, start=current, guess=ringing_guess(diag), fixed=freed)
         except BadIdentificationInput:
-            return None  # the candidate diverged: it is not what is missing
+            after = None  # the candidate diverged from here
+        if freed is not fixed:  # a held term freed: from the simulation's value, a period far off wraps
+            after = _better(after, _cold_fit(runs, spec, freed))  # the phase (a local minimum)
+        if after is None:
+            return None  # it is not what is missing
         new = {k: v for k, v in after.coefficients.items() if k not in current.coefficients}
         if not effect.plausible(after) or any(v < 0 for k, v in new.items() if k in ("b2", "b3")):
             return None

@@ -13,9 +13,11 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..records import DecayRun
 from .fitting import Fit, ModelSpec
-from .residuals import Diagnostics
+from .residuals import Diagnostics, swing_frequency
 
 #: What a candidate is added from: the current model, the records, and what the residual says.
 Extend = Callable[[ModelSpec, Sequence[DecayRun], Diagnostics], ModelSpec | None]
@@ -48,6 +50,9 @@ class Effect:
     apply: Extend
     #: A parameter that must stay >= 0 for the fit to mean this effect (friction cannot feed energy in).
     non_negative: str | None = None
+    #: A frequency parameter that must stay off the frequency the measured angle swings at (+-15 %): a ring
+    #: there is the roll itself mis-modelled (a simulation whose period is off), not another motion.
+    off_swing: str | None = None
     #: The term whose value this effect changes when a model holds it already (a simulation's b2 too small).
     increments: str | None = None
     #: What its absence says about the physics (a simulation that misses it leaves out this).
@@ -59,7 +64,21 @@ class Effect:
 
     def plausible(self, fit: Fit) -> bool:
         """Whether the refit describes this effect physically (else it is fitting something else)."""
-        return self.non_negative is None or fit.coefficients[self.non_negative] >= 0.0
+        if self.non_negative is not None and fit.coefficients[self.non_negative] < 0.0:
+            return False
+        return self.off_swing is None or not _on_measured_swing(fit.coefficients[self.off_swing], fit)
+
+
+def _on_measured_swing(omega_rad_s: float, fit: Fit) -> bool:
+    """Whether ``omega_rad_s`` is within 15 % of the frequency the measured angles swing at."""
+    measured = [p.angle + p.residual_angle for p in fit.runs]
+    rate_hz = 1.0 / float(np.median(np.diff(fit.runs[0].t)))
+    return abs(omega_rad_s / swing_frequency(measured, rate_hz) - 1.0) <= SWING_BAND
+
+
+#: How near the measured swing a ringing frequency is the swing itself (the band ``ringing_frequency``
+#: leaves out around the natural frequency).
+SWING_BAND = 0.15
 
 
 #: What an amplitude-dependent damping a simulation lacks is, physically.
@@ -258,6 +277,7 @@ LIBRARY: tuple[Effect, ...] = (
         "dynamics",
         _ringing,
         non_negative="ring_decay_1_s",  # a motion released with the model rings down; a growing one is later
+        off_swing="ring_omega_rad_s",
         physics="a motion the simulation does not have (sloshing, the rig, another mode)",
     ),
     Effect(

@@ -230,9 +230,7 @@ def ringing_frequency(residuals: Sequence[np.ndarray], rate_hz: float, omega0_ra
     of 2*pi / record length. Zero, the natural frequency and its harmonics (+-15 %)
     are left out: those are other effects' signatures.
     """
-    n_fft = 8 * max(e.size for e in residuals)
-    power = np.sum([np.abs(np.fft.rfft(np.asarray(e) - np.mean(e), n_fft)) ** 2 for e in residuals], axis=0)
-    omega = 2 * np.pi * np.fft.rfftfreq(n_fft, 1.0 / rate_hz)
+    omega, power = _periodogram(residuals, rate_hz)
     ratio = omega / omega0_rad_s
     allowed = (ratio > 0.3) & (ratio < 6.0) & (np.abs(ratio - np.round(ratio)) > 0.15)
     floor = float(np.median(power[omega > 0]))
@@ -240,6 +238,19 @@ def ringing_frequency(residuals: Sequence[np.ndarray], rate_hz: float, omega0_ra
         return None
     i_peak = int(np.argmax(np.where(allowed, power, -np.inf)))
     return float(omega[i_peak]) if power[i_peak] > 50 * floor else None
+
+
+def swing_frequency(series: Sequence[np.ndarray], rate_hz: float) -> float:
+    """The frequency (rad/s) the series swing at most: the peak of their summed periodogram."""
+    omega, power = _periodogram(series, rate_hz)
+    return float(omega[1 + int(np.argmax(power[1:]))])
+
+
+def _periodogram(series: Sequence[np.ndarray], rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """(omega rad/s, power) of the series zero-padded 8 times, each less its mean, the powers summed."""
+    n_fft = 8 * max(np.asarray(x).size for x in series)
+    power = np.sum([np.abs(np.fft.rfft(np.asarray(x) - np.mean(x), n_fft)) ** 2 for x in series], axis=0)
+    return 2 * np.pi * np.fft.rfftfreq(n_fft, 1.0 / rate_hz), power
 
 
 @dataclass
