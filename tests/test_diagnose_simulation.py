@@ -322,6 +322,7 @@ def sim_of_swath(
         ),
         (lambda d: sim_of_swath(d, angle_deg=30.0), (), "no simulated run starts near a measured one"),
         (lambda d: sim_of_swath(d), ("--sim-angle-col", "pitch"), "no angle column"),
+        (lambda d: sim_of_swath(d), ("--sim-time-col", "t"), "(choose with --sim-time-col)"),
         (lambda d: sim_of_swath(d), ("--baseline", "b1,c1"), "--baseline does not apply"),
         (lambda d: d / "missing.csv", (), "no such file"),
         (lambda d: "ikeda", (), "--simulation ikeda needs --hull"),

@@ -14,6 +14,7 @@ runs are matched to the measured ones by initial angle, and a unit slip
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -145,7 +146,7 @@ def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation
                 path, request.axis, cols.time_col, cols.angle_col, cols.rate_col, cols.angle_unit
             )
         except InputError as exc:  # the reading's own words name the measured files' options
-            said = str(exc).replace("--angle-unit", "--sim-angle-unit")
+            said = re.sub(r"--(time-col|angle-col|rate-col|angle-unit)\b", r"--sim-\1", str(exc))
             raise type(exc)(f"simulation {path.name}: {said}") from None
         runs += [_renamed(run, f"sim:{run.name}") for run in found]
     rates = sorted({round(run.sample_rate, 3) for run in runs})
