@@ -128,6 +128,27 @@ def test_kvlcc2_read_as_degrees_is_implausible(kvlcc2_fits: dict) -> None:
     assert "radians read as degrees" in found[0].message
 
 
+@pytest.mark.parametrize(("edit", "clipped"), [("clip 6 deg", True), ("0.2 deg steps", False)])
+def test_kvlcc2_clipped_in_a_csv_is_doubted_and_a_coarse_sensor_is_not(
+    tmp_path: Path, edit: str, clipped: bool
+) -> None:
+    """Run 21338 (10.4 deg) as another lab's CSV with no sensor flags: clipped at 6 deg, its peaks are
+    flat for 0.74 s on 11 swings (b1 came out at half the true one with no warning but a non-white
+    residual); read at 0.2 deg resolution, its peaks are flat for a few % of a period and nothing is
+    said."""
+    if not KVLCC2.is_file():
+        pytest.skip(f"KVLCC2 data not at {KVLCC2} (the shared data folder is absent)")
+    table = np.genfromtxt(KVLCC2, delimiter=",", names=True)
+    degrees = np.degrees(table["phi"])
+    angle = np.clip(degrees, -6.0, 6.0) if clipped else np.round(degrees / 0.2) * 0.2
+    path = tmp_path / "21338.csv"
+    np.savetxt(path, np.column_stack([table["time"], angle]), delimiter=",", header="time_s,angle_deg",
+               comments="", fmt="%.6f")  # fmt: skip
+    out = identify(path, "--catalogue", "none")
+    flat = [line for line in out["warnings"] if "the angle is flat at +6.00 deg" in line]
+    assert bool(flat) == clipped, out["warnings"]
+
+
 # ---- simulated SWATH decays (seed 001's cubic damping, b3 = 12) ------------------------------
 
 

@@ -20,9 +20,11 @@ and why.
   degrees, or no release; above: degrees read as radians, or a capsize).
 - timing: the time step between 0.1 ms and 0.1 s, the natural period between 0.1 and 100 s and at
   least ten samples per period (a time column in milliseconds read as seconds fails all three).
-- clipped: samples of the decay the sensor flagged (clipping, orientation not valid; ``DecayRun.excluded``)
-  were left out of the fit: the result stands on the rest, and the decay was not a clean measurement. A
-  finding about the data (``Finding.about_data``), not about the model: choosing a model ignores it.
+- clipped: the angle flat at its extreme on two or more peaks for a tenth of a period or longer (a
+  sensor's range or a stop; another lab's CSV carries no flags), or samples of the decay the sensor
+  flagged (clipping, orientation not valid; ``DecayRun.excluded``) were left out of the fit: the result
+  stands on the rest, and the decay was not a clean measurement. A finding about the data
+  (``Finding.about_data``), not about the model: choosing a model ignores it.
 """
 
 from __future__ import annotations
@@ -53,6 +55,10 @@ MIN_SAMPLES_PER_PERIOD = 10
 ADDED_INERTIA_BOUNDS = (-0.05, 0.55)
 #: Checks about the measurement rather than the fitted model (every candidate model carries them alike).
 DATA_CHECKS = ("clipped",)
+#: A peak flat at the record's extreme for this fraction of a natural period is clipped (a peak is within
+#: a coarse sensor's 0.1 deg step of its top for 4.5 % of a period at 10 deg; clipped 5 % below its top,
+#: flat for 10 %).
+FLAT_TOP_FRACTION = 0.1
 #: Points of the amplitude grids the damping and stiffness checks look at.
 GRID_POINTS = 41
 
@@ -242,6 +248,41 @@ def check_excluded(runs: Sequence[DecayRun]) -> list[Finding]:
     return found
 
 
+def check_flat_tops(runs: Sequence[DecayRun], period_s: float) -> list[Finding]:
+    """Runs whose angle sits at exactly its largest (or smallest) value on two or more peaks, each for
+    ``FLAT_TOP_FRACTION`` of a period or longer: clipped by the sensor's range or stopped by the rig, which
+    no free decay does (the peaks of a decay shrink; a coarse sensor's steps flatten a peak for a few %
+    of a period). For records no sensor flagged (another lab's CSV); one finding each."""
+    found = []
+    for run in runs:
+        if run.angle.size < 3 or not math.isfinite(period_s):
+            continue
+        dt = float(np.median(np.diff(run.t)))
+        for extreme in (float(np.max(run.angle)), float(np.min(run.angle))):
+            lengths = _plateaus(run.angle == extreme)
+            long = [n * dt for n in lengths if n * dt >= FLAT_TOP_FRACTION * period_s]
+            if len(long) >= 2:
+                found.append(
+                    Finding(
+                        "clipped",
+                        f"{run.name}: the angle is flat at {math.degrees(extreme):+.2f} deg on {len(long)} "
+                        f"peaks (up to {max(long):.2f} s, {100 * max(long) / period_s:.0f} % of a period): "
+                        "clipped by the sensor's range or a stop; the fit does not see the true peaks: "
+                        "record again with a wider range, or fit from after the clipping (--start S)",
+                        float(len(long)),
+                        (0.0, 1.0),
+                    )
+                )
+                break
+    return found
+
+
+def _plateaus(mask: np.ndarray) -> list[int]:
+    """The lengths of the runs of True in ``mask``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(np.flatnonzero(edges == -1) - np.flatnonzero(edges == 1))
+
+
 def check_fit(
     coefficients: Mapping[str, float],
     amplitude_rad: float,
@@ -277,7 +318,8 @@ def check_runs(
     top = math.radians(max(amplitudes)) if amplitudes else max(float(np.max(np.abs(r.angle))) for r in runs)
     steps = np.concatenate([np.diff(run.t) for run in runs if run.t.size > 1] or [np.zeros(0)])
     dt_s = float(np.median(steps)) if steps.size else None
-    return check_fit(coefficients, top, dt_s, particulars, hull) + check_excluded(runs)
+    checks = check_fit(coefficients, top, dt_s, particulars, hull) + check_excluded(runs)
+    return checks + check_flat_tops(runs, natural_period(coefficients))
 
 
 def messages(findings: Sequence[Finding]) -> list[str]:
