@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from .. import validation
 from ..errors import InputError
-from .identification import to_json
+from .identification import drop_exports, to_json
 from .progress import Kept, Progress
 
 if TYPE_CHECKING:
@@ -140,7 +140,9 @@ def campaign(
     workers = _check_campaign(model, jobs, executor, scheduler)
     folder = validation.output_dir(Path(report), option="report") if report is not None else None
     given_hulls = find_campaign_hulls([], [str(hull) for hull in hulls])  # a bad hull: before any file
-    paths = find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse)
+    paths = drop_exports(
+        find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse), kept
+    )
     prepare_identifier(model, kept.line)  # the native kernels: built once, on the first run
     prepare = []
     if folder is not None:

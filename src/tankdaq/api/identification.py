@@ -222,7 +222,11 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
         raise InputError("no decays given: give a recording, a CSV file or decays read with tankdaq.read")
     r = reading
     runs: list[DecayRun] = []
+    files = [Path(str(item)) for item in items if isinstance(item, str | Path)]
+    exports = set(files) - set(drop_exports(files, progress))
     for item in items:
+        if isinstance(item, str | Path) and Path(str(item)) in exports:
+            continue
         given = runs_of(item)
         runs += given if given is not None else read_decays(
             Path(str(item)), r.axis, r.time_col, r.angle_col, r.rate_col, r.angle_unit, r.keep_all,
@@ -233,6 +237,17 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
     for line in input_notices(runs):
         progress.line(line)
     return cut_free_decays(runs, r.start_s, r.end_s)
+
+
+def drop_exports(paths: list[Path], progress: Progress) -> list[Path]:
+    """``paths`` without the CSV exports whose recording is among them (``store.export_layout.exports_among``:
+    the same decays twice would count as repeats), each left out said in one line."""
+    from ..store.export_layout import exports_among
+
+    exports = exports_among(paths)
+    for export, recording in exports.items():
+        progress.line(f"not read: {export} is the export of {recording}, which is read (the same decays)")
+    return [path for path in paths if path not in exports]
 
 
 def truncations(runs: Sequence[DecayRun]) -> dict[str, str]:

@@ -11,6 +11,7 @@ root attributes and inside Parquet as schema metadata, always marked ``"format":
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -114,3 +115,23 @@ def read_mat_metadata(path: Path) -> dict[str, object] | None:
     if not isinstance(meta, dict) or meta.get("format") != EXPORT_FORMAT:
         return None
     return {str(key): value.item() if isinstance(value, np.generic) else value for key, value in meta.items()}
+
+
+def exports_among(paths: Sequence[Path]) -> dict[Path, Path]:
+    """The CSV exports among ``paths`` whose own recording is among them too (export -> recording). Read
+    both, each decay would count twice: as a repeat, narrowing every interval. An export names its
+    recording in its sidecar (``source``, as given to ``tankdaq export``): found at that path, or by
+    that name in the export's own folder (the default, ``export`` writes beside each recording)."""
+    recordings = {path.resolve(): path for path in paths if path.suffix.lower() == ".mcap"}
+    found: dict[Path, Path] = {}
+    for path in paths:
+        meta = read_sidecar(path) if path.suffix.lower() == ".csv" else None
+        source = meta.get("source") if meta is not None else None
+        if not isinstance(source, str) or not source:
+            continue
+        for candidate in (Path(source), path.parent / Path(source).name):
+            recording = recordings.get(candidate.resolve())
+            if recording is not None:
+                found[path] = recording
+                break
+    return found
