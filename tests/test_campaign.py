@@ -190,29 +190,33 @@ def test_the_scan_goes_to_each_worker_in_one_run_of_files_of_about_equal_bytes(t
     assert len(many) == 4 and max(len(chunk) for chunk in many) <= MAX_CHUNK_DECAYS
 
 
-@pytest.mark.parametrize("beside", [True, False])
-def test_a_recording_and_its_csv_export_are_one_decay_not_two(tmp_path: Path, beside: bool) -> None:
-    """``tankdaq export`` writes beside each recording by default; a campaign or an identify given the
-    folder (or both files) then pooled each decay twice, as two repeats: runs 2 and every interval
-    narrowed by about 1/sqrt(2). The export is left out, and said so."""
+@pytest.mark.parametrize("second", ["export beside", "export elsewhere", "copy"])
+def test_a_recording_read_twice_is_one_decay_not_two(tmp_path: Path, second: str) -> None:
+    """A folder's recordings a second time (``tankdaq export`` writes its CSV beside each recording by
+    default; or the recordings copied into a "selected" folder): a campaign or an identify pooled each
+    decay twice, as two repeats: runs 2 and every interval narrowed by about 1/sqrt(2). The second
+    file is left out, and said so."""
     folder = tmp_path / "recordings"
     write_simulated_campaign(folder, ["trimaran"], "pitch", [1.0], [6.0, 10.0], "mcap", seed=3)
     recordings = sorted(folder.glob("*.mcap"))
-    out = folder if beside else tmp_path / "exports"
-    exported = runner.invoke(app, ["export", *map(str, recordings), "--format", "csv", "--out", str(out)])
-    assert exported.exit_code == 0, exported.output
-    exports = sorted(out.glob("*.csv"))
-    assert len(exports) == len(recordings) == 2
-    both = [folder] if beside else [folder, out]
+    out = folder if second == "export beside" else tmp_path / "second"
+    if second == "copy":
+        shutil.copytree(folder, out)
+        seconds = sorted(out.glob("*.mcap"))
+    else:
+        exported = runner.invoke(app, ["export", *map(str, recordings), "--format", "csv", "--out", str(out)])
+        assert exported.exit_code == 0, exported.output
+        seconds = sorted(out.glob("*.csv"))
+    assert len(seconds) == len(recordings) == 2
+    both = [folder] if second == "export beside" else [folder, out]
     result = runner.invoke(app, ["campaign", *map(str, both), "--json", "--catalogue", "none"])
     assert result.exit_code == 0, result.output
     assert [group["runs"] for group in json.loads(result.stdout)["groups"]] == [1, 1]
-    assert (
-        sum("not read: " in line and "is the export of" in line for line in result.stderr.splitlines()) == 2
-    )
-    single = runner.invoke(
-        app, ["identify", str(recordings[0]), str(exports[0]), "--json", "--catalogue", "none"]
-    )
+    said = [line for line in result.stderr.splitlines() if line.startswith("not read: ")]
+    why = "holds the same bytes as" if second == "copy" else "is the export of"
+    assert len(said) == 2 and all(why in line for line in said), said
+    pair = [str(recordings[0]), str(seconds[0])]
+    single = runner.invoke(app, ["identify", *pair, "--json", "--catalogue", "none"])
     assert single.exit_code == 0, single.output
     assert len(json.loads(single.stdout)["runs"]) == 1
 

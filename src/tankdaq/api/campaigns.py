@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from .. import validation
 from ..errors import InputError
-from .identification import drop_exports, to_json
+from .identification import drop_read_twice, to_json
 from .progress import Kept, Progress
 
 if TYPE_CHECKING:
@@ -140,9 +140,7 @@ def campaign(
     workers = _check_campaign(model, jobs, executor, scheduler)
     folder = validation.output_dir(Path(report), option="report") if report is not None else None
     given_hulls = find_campaign_hulls([], [str(hull) for hull in hulls])  # a bad hull: before any file
-    paths = drop_exports(
-        find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse), kept
-    )
+    paths = find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse)
     prepare_identifier(model, kept.line)  # the native kernels: built once, on the first run
     prepare = []
     if folder is not None:
@@ -202,6 +200,9 @@ def _scan(
             lambda path: advance(next(count), description=f"reading {path.name}"),
             work,
         )
+    read = [found.path for found in scan.files]  # a copy or an export of another: its decays once
+    kept_paths = set(drop_read_twice(read, kept, {found.path: found.sha256 for found in scan.files}))
+    scan.files = [found for found in scan.files if found.path in kept_paths]
     if not scan.decays:
         if len(scan.skipped) == 1:
             raise InputError(scan.skipped[0].reason)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import html
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -223,9 +223,9 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
     r = reading
     runs: list[DecayRun] = []
     files = [Path(str(item)) for item in items if isinstance(item, str | Path)]
-    exports = set(files) - set(drop_exports(files, progress))
+    twice = set(files) - set(drop_read_twice(files, progress))
     for item in items:
-        if isinstance(item, str | Path) and Path(str(item)) in exports:
+        if isinstance(item, str | Path) and Path(str(item)) in twice:
             continue
         given = runs_of(item)
         runs += given if given is not None else read_decays(
@@ -239,15 +239,17 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
     return cut_free_decays(runs, r.start_s, r.end_s)
 
 
-def drop_exports(paths: list[Path], progress: Progress) -> list[Path]:
-    """``paths`` without the CSV exports whose recording is among them (``store.export_layout.exports_among``:
-    the same decays twice would count as repeats), each left out said in one line."""
-    from ..store.export_layout import exports_among
+def drop_read_twice(
+    paths: list[Path], progress: Progress, digests: Mapping[Path, str] | None = None
+) -> list[Path]:
+    """``paths`` without the files whose decays another of them holds (``store.inputs.read_twice``: a
+    copy, or a CSV export of a recording given too), each left out said in one line."""
+    from ..store.inputs import read_twice
 
-    exports = exports_among(paths)
-    for export, recording in exports.items():
-        progress.line(f"not read: {export} is the export of {recording}, which is read (the same decays)")
-    return [path for path in paths if path not in exports]
+    twice = read_twice(paths, digests)
+    for path, why in twice.items():
+        progress.line(f"not read: {path} {why} (the same decays, which would count twice)")
+    return [path for path in paths if path not in twice]
 
 
 def truncations(runs: Sequence[DecayRun]) -> dict[str, str]:

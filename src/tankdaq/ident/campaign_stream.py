@@ -26,6 +26,7 @@ import numpy as np
 
 from ..config import Hull
 from ..records import DecayRun
+from ..store.inputs import file_sha256
 from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
 from .executors import DaskExecutor
 from .free_decay import cut_lines
@@ -64,6 +65,7 @@ class FileScan:
     notices: tuple[str, ...]  # ident.inputs.input_notices
     truncation: str | None  # the recording was cut short (meta["truncation"])
     cuts: tuple[str, ...]  # where each decay's free part was cut, and why
+    sha256: str  # of its bytes: a copy among the campaign's files is read once (``store.inputs.read_twice``)
 
 
 @dataclass
@@ -105,7 +107,8 @@ def scan_file(path: Path, start_s: float | None = None, end_s: float | None = No
         return runs
     truncation = next((str(r.meta["truncation"]) for r in runs if r.meta.get("truncation")), None)
     keys = tuple(run_key(run) for run in runs)
-    return FileScan(path, keys, tuple(input_notices(runs)), truncation, tuple(cut_lines(runs)))
+    digest = file_sha256(path)
+    return FileScan(path, keys, tuple(input_notices(runs)), truncation, tuple(cut_lines(runs)), digest)
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,9 @@ CSV comes back whole and ``ident.inputs.read_decays`` finds its releases on the 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import hashlib
+from collections import defaultdict
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
@@ -68,3 +70,39 @@ def read_runs(path: str | Path, axis: str | None = None, csv: CsvOptions = DEFAU
     ``csv_import.read_csv_file`` reads it). Without ``axis`` a recording is read on the axis it names,
     a CSV as roll."""
     return input_format(path).read(Path(path), axis, csv)
+
+
+def read_twice(paths: Sequence[Path], digests: Mapping[Path, str] | None = None) -> dict[Path, str]:
+    """The files among ``paths`` whose decays another one among them holds already, each with why:
+    a byte-for-byte copy of an earlier file (the same folder copied into a "selected" one), or a CSV
+    export whose recording is read (``export_layout.exports_among``). Read twice, a decay would count as
+    two repeats and narrow every interval. ``digests``: each file's SHA-256 where the caller has it (a
+    campaign's workers hash what they scan); else only files of equal size are hashed, here."""
+    from .export_layout import exports_among
+
+    twice = {export: f"is the export of {recording}" for export, recording in exports_among(paths).items()}
+    if digests is None:
+        by_size: dict[int, list[Path]] = defaultdict(list)
+        for path in paths:
+            if path not in twice and path.is_file():
+                by_size[path.stat().st_size].append(path)
+        digests = {path: file_sha256(path) for group in by_size.values() if len(group) > 1 for path in group}
+    first: dict[str, Path] = {}
+    for path in paths:
+        digest = digests.get(path)
+        if path in twice or digest is None:
+            continue
+        if digest in first:
+            twice[path] = f"holds the same bytes as {first[digest]}"
+        else:
+            first[digest] = path
+    return twice
+
+
+def file_sha256(path: Path) -> str:
+    """The SHA-256 of a file's bytes, in hex."""
+    digest = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
