@@ -18,6 +18,7 @@ from typing import Any
 from .. import __version__
 from ..config import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError
+from ..store.inputs import file_sha256
 from .database import one_line
 
 #: The amplitudes B_eq and B̂44 are kept at (deg): what a lab compares across campaigns.
@@ -26,15 +27,6 @@ STANDARD_AMPLITUDES_DEG = (2.0, 5.0, 10.0)
 
 def utc_now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
-
-
-def file_sha256(path: Path) -> str:
-    """The file's SHA-256, read in blocks (a decay file is tens of kB to a few MB)."""
-    digest = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _finite(value: object) -> float | None:
