@@ -253,6 +253,18 @@ def test_a_cell_longer_than_the_csv_module_takes_is_one_line(tmp_path, separator
     assert "data line 6 (200" in one_error_line(result)
 
 
+def test_rows_out_of_time_order_are_named_as_such(tmp_path):
+    """A sheet sorted by another column: the time goes back. Its "period" was read as -1.84 time units
+    and the line asked for --time-unit; it names the samples that go back instead."""
+    t, angle, _ = held_tilt()
+    order = np.random.default_rng(1).permutation(t.size)
+    path = write_csv(tmp_path / "d.csv", {"time_s": t[order], "angle_deg": np.degrees(angle)[order]})
+    result = identify(path)
+    assert result.exit_code == 2
+    line = one_error_line(result)
+    assert "column 'time_s' does not increase: sample " in line and "sort the rows by time" in line
+
+
 def test_an_angle_column_of_nothing_but_nan_is_one_line_without_numpys_warnings(tmp_path):
     t, _, _ = held_tilt()
     path = write_csv(tmp_path / "d.csv", {"time_s": t, "angle_deg": np.full(t.size, np.nan)})

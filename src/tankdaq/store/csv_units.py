@@ -109,7 +109,16 @@ def angle_unit(column: str, angle: np.ndarray, given: str | None) -> UnitChoice:
 
 
 def time_unit(column: str, t: np.ndarray, angle: np.ndarray, given: str | None) -> UnitChoice:
-    """The unit of the time column: ``given`` when it makes a decay (else refused), else decided."""
+    """The unit of the time column: ``given`` when it makes a decay (else refused), else decided. A column
+    that goes back in time is refused first: its period and step mean nothing (rows out of order)."""
+    finite = t[np.isfinite(t)]
+    back = np.flatnonzero(np.diff(finite) <= 0)
+    if back.size:
+        i = int(back[0])
+        raise InputError(
+            f"column {column!r} does not increase: sample {i + 2} ({finite[i + 1]:.6g}) is not after sample "
+            f"{i + 1} ({finite[i]:.6g}); sort the rows by time, or check --time-col"
+        )
     found = period(t, angle)
     steps = np.diff(t[np.isfinite(t)])
     step = float(np.median(steps)) if steps.size else math.nan
