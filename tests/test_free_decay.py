@@ -111,3 +111,20 @@ def test_kvlcc2_at_zero_speed_is_not_cut_short():
     end = find_free_end(run)
     assert end.kind == "record" and end.index == run.t.size, end
     assert "psi" in run.channels
+
+
+@pytest.mark.skipif(not KVLCC2_21338.is_file(), reason=f"KVLCC2 reference run not found at {KVLCC2_21338}")
+def test_a_gap_in_the_record_is_named_and_dropped_samples_are_not():
+    """Run 21338 with 5 s of samples missing: the swings around the gap looked out of step, and the cut
+    said "a disturbance: a half-period of 6.36 s". It is the gap, named, and the free part ends where it
+    starts. Every tenth sample missing at random (dropped packets) ends nothing."""
+    (run,) = read_decays(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
+    gap_at = run.t[0] + 40.0
+    keep = (run.t < gap_at) | (run.t > gap_at + 5.0)
+    gapped = DecayRun(run.t[keep], run.angle[keep], None, name="gapped")
+    end = find_free_end(gapped)
+    assert end.kind == "record" and "no samples for 5.0" in end.reason and "a gap in the record" in end.reason
+    assert gapped.t[end.index - 1] < gap_at <= gapped.t[end.index]
+    sparse = np.random.default_rng(1).random(run.t.size) > 0.1
+    dropped = DecayRun(run.t[sparse], run.angle[sparse], None, name="dropped")
+    assert find_free_end(dropped).index == dropped.t.size

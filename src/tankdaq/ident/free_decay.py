@@ -15,7 +15,9 @@ The free part ends at the last clean peak before
   between peaks, or a half-period out of step (a disturbance),
 - a peak within the noise (the signal sinks into the noise),
 - a change in a speed, sway or yaw channel when the record has one (the
-  carriage stops: speed falls by a fifth).
+  carriage stops: speed falls by a fifth),
+- a stretch with no samples longer than a quarter of a half-period (its peaks
+  are missing; a few dropped packets are no end).
 
 Used by both readers (a CSV with several releases splits at each new
 excitation) and ident; it imports only ``records`` and ``ident.signals``.
@@ -50,6 +52,8 @@ MOVING_M_S = 0.05
 CHANNEL_SPREADS = 8.0
 CHANNEL_FLOORS = {"yaw": math.radians(1.0), "sway": 0.05}
 
+#: A stretch without samples longer than this many half-periods (and time steps) ends the free part.
+GAP_HALF_PERIODS, GAP_STEPS = 0.25, 5.0
 #: Kinds of end after which a CSV record may hold another release (a carriage stop ends the record).
 SPLIT_AFTER = ("excitation", "noise")
 
@@ -120,6 +124,35 @@ def _parabola_peak(y: np.ndarray, i: int, w: int) -> float:
 def find_free_end(run: DecayRun) -> FreeDecayEnd:
     """Where the free decay of ``run`` (starting at its release) ends; see the module docstring."""
     peaks = _peaks(run)
+    found = _motion_end(run, peaks)
+    if peaks is None:
+        return found
+    half_period = float(np.median(np.diff(peaks.t)))
+    gap = _gap_end(run, half_period)
+    # the swings just before a gap look out of step (its peaks are missing): the gap is the reason
+    return gap if gap is not None and gap.t_s <= found.t_s + 2 * half_period else found
+
+
+def _gap_end(run: DecayRun, half_period: float) -> FreeDecayEnd | None:
+    """The first stretch with no samples longer than ``GAP_HALF_PERIODS`` of a half-period (and than
+    ``GAP_STEPS`` time steps): peaks in it are missing, so the swings after it cannot be judged. A few
+    dropped packets are far shorter and are no end (the fit runs over the times there are)."""
+    steps = np.diff(run.t)
+    if steps.size < 2:
+        return None
+    longest = max(GAP_STEPS * float(np.median(steps)), GAP_HALF_PERIODS * half_period)
+    gaps = np.flatnonzero(steps > longest)
+    if not gaps.size:
+        return None
+    i = int(gaps[0])
+    return _end_at(
+        run, i + 1, "record",
+        f"no samples for {steps[i]:.3g} s after {run.t[i] - run.t[0]:.2f} s: a gap in the record",
+    )  # fmt: skip
+
+
+def _motion_end(run: DecayRun, peaks: _Peaks | None) -> FreeDecayEnd:
+    """Where the angle or a channel shows the decay is no longer free (the record's end if nowhere)."""
     angle_end, channel_end = _angle_end(run, peaks), _channel_end(run, peaks)
     if angle_end is None and channel_end is None:
         return FreeDecayEnd(run.t.size, float(run.t[-1] - run.t[0]), "record", "no end found: whole record")
