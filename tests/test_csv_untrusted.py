@@ -253,6 +253,16 @@ def test_a_cell_longer_than_the_csv_module_takes_is_one_line(tmp_path, separator
     assert "data line 6 (200" in one_error_line(result)
 
 
+def test_a_file_given_twice_is_one_decay(tmp_path):
+    """``identify a.csv a.csv`` (a shell glob that names a file twice): the file is read once, said so."""
+    t, angle, _ = held_tilt()
+    path = write_csv(tmp_path / "d.csv", {"time_s": t, "angle_deg": np.degrees(angle)})
+    result = runner.invoke(app, ["identify", str(path), str(path), "--json", "--catalogue", "none"])
+    assert result.exit_code == 0, result.output
+    assert len(json.loads(result.stdout)["runs"]) == 1
+    assert f"not read again: {path} is given twice" in result.stderr
+
+
 def test_rows_out_of_time_order_are_named_as_such(tmp_path):
     """A sheet sorted by another column: the time goes back. Its "period" was read as -1.84 time units
     and the line asked for --time-unit; it names the samples that go back instead."""

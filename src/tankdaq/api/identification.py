@@ -222,11 +222,12 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
         raise InputError("no decays given: give a recording, a CSV file or decays read with tankdaq.read")
     r = reading
     runs: list[DecayRun] = []
-    files = [Path(str(item)) for item in items if isinstance(item, str | Path)]
-    twice = set(files) - set(drop_read_twice(files, progress))
+    wanted = drop_read_twice([Path(str(item)) for item in items if isinstance(item, str | Path)], progress)
     for item in items:
-        if isinstance(item, str | Path) and Path(str(item)) in twice:
-            continue
+        if isinstance(item, str | Path):
+            if Path(str(item)) not in wanted:
+                continue  # a copy or an export of another file, or a file given a second time
+            wanted.remove(Path(str(item)))
         given = runs_of(item)
         runs += given if given is not None else read_decays(
             Path(str(item)), r.axis, r.time_col, r.angle_col, r.rate_col, r.angle_unit, r.keep_all,
@@ -246,10 +247,17 @@ def drop_read_twice(
     copy, or a CSV export of a recording given too), each left out said in one line."""
     from ..store.inputs import read_twice
 
-    twice = read_twice(paths, digests)
+    once: dict[Path, Path] = {}  # resolved -> as given: a file given twice is read once
+    for path in paths:
+        if path.resolve() in once:
+            progress.line(f"not read again: {path} is given twice")
+        else:
+            once[path.resolve()] = path
+    unique = list(once.values())
+    twice = read_twice(unique, digests)
     for path, why in twice.items():
         progress.line(f"not read: {path} {why} (the same decays, which would count twice)")
-    return [path for path in paths if path not in twice]
+    return [path for path in unique if path not in twice]
 
 
 def truncations(runs: Sequence[DecayRun]) -> dict[str, str]:
