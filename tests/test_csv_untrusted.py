@@ -102,6 +102,24 @@ def test_time_in_milliseconds_is_read_as_milliseconds(tmp_path):
     assert len(said) == 1 and "a model decay's period is 0.3-60 s" in said[0], result.stderr
 
 
+def test_an_xsens_sample_time_column_is_read_in_its_ticks(tmp_path):
+    """MT Manager exports the device's time as SampleTimeFine, 10 kHz ticks from a day's start. Read as
+    milliseconds (the only unit that made its 1.68 s period a decay's: 16.8 "s") c1 came out 100 times
+    too small, with at most a time-step warning. The column's name says tick."""
+    t, angle, _ = held_tilt()
+    ticks = np.round(4_562_336 + t * 10_000)
+    path = write_csv(tmp_path / "mtm.csv", {"SampleTimeFine": ticks, "Roll": np.degrees(angle)})
+    result = identify(
+        path, "--time-col", "SampleTimeFine", "--angle-col", "Roll", "--model", "ittc-quadratic", "--json"
+    )
+    for term, value in coefficients(result).items():
+        assert value == pytest.approx(TRUTH[term], rel=1e-3), term
+    assert "time unit: tick, 0.1 ms ('SampleTimeFine' is an Xsens SampleTimeFine)" in result.stderr
+    other = write_csv(tmp_path / "t.csv", {"t": ticks, "angle_deg": np.degrees(angle)})
+    told = identify(other, "--time-col", "t", "--time-unit", "tick", "--model", "ittc-quadratic", "--json")
+    assert coefficients(told) == coefficients(result)
+
+
 @pytest.mark.parametrize(
     ("columns", "args", "says"),
     [
@@ -116,7 +134,7 @@ def test_time_in_milliseconds_is_read_as_milliseconds(tmp_path):
         ({"time_s": 1.0, "angle_deg": 1e3 * 180 / math.pi}, (), "no decay angle"),
         ({"time_s": 1.0, "angle_deg": 1e30}, (), "no decay angle"),
         ({"time_s": 1.0, "angle_deg": 180 / math.pi}, ("--angle-unit", "grad"), "use deg or rad"),
-        ({"time_s": 1.0, "angle_deg": 180 / math.pi}, ("--time-unit", "min"), "use s or ms"),
+        ({"time_s": 1.0, "angle_deg": 180 / math.pi}, ("--time-unit", "min"), "use s, ms or tick (0.1 ms)"),
     ],
 )
 def test_a_unit_that_makes_no_decay_is_refused_in_one_line(tmp_path, columns, args, says):

@@ -45,7 +45,11 @@ AngleUnit = Annotated[
     typer.Option("--angle-unit", help="Unit of the CSV angle and rate: deg or rad [default: from the data]."),
 ]
 TimeUnit = Annotated[
-    str | None, typer.Option("--time-unit", help="Unit of the CSV time: s or ms [default: from the data].")
+    str | None,
+    typer.Option(
+        "--time-unit",
+        help="Unit of the CSV time: s, ms or tick (0.1 ms: an Xsens SampleTimeFine) [default: the data].",
+    ),
 ]
 KeepAll = Annotated[bool, typer.Option("--keep-all", help="Do not cut the CSV record at the release.")]
 SkipHalfCycles = Annotated[

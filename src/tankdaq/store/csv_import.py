@@ -63,7 +63,7 @@ class CsvOptions:
         if self.angle_unit not in (None, *ANGLE_UNITS):
             raise InputError(f"angle unit {self.angle_unit!r} not understood: use deg or rad")
         if self.time_unit not in (None, *TIME_UNITS):
-            raise InputError(f"time unit {self.time_unit!r} not understood: use s or ms")
+            raise InputError(f"time unit {self.time_unit!r} not understood: use s, ms or tick (0.1 ms)")
 
 
 DEFAULT_CSV = CsvOptions()

@@ -20,7 +20,12 @@ import numpy as np
 from ..errors import InputError
 
 ANGLE_UNITS: dict[str, float] = {"deg": math.pi / 180.0, "rad": 1.0}
-TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3}
+TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "tick": 1e-4}
+#: The time units the data may choose between. A column of an Xsens device's 10 kHz ticks (0.1 ms) reads as
+#: milliseconds as plausibly (a 2.5 s period is 25 "s" in ms): only its name or --time-unit says tick.
+DATA_TIME_UNITS = ("s", "ms")
+#: Time columns that are an Xsens device's SampleTimeFine (MT Manager's export, a logger of the packets).
+TICK_COLUMNS = ("sampletimefine",)
 #: A model decay's largest swing from equilibrium, deg (below it: sensor noise; above it: capsizing).
 AMPLITUDE_DEG = (0.5, 45.0)
 #: A model decay's natural period, s (a small model's pitch to a large model's roll).
@@ -122,8 +127,10 @@ def time_unit(column: str, t: np.ndarray, angle: np.ndarray, given: str | None) 
     found = period(t, angle)
     steps = np.diff(t[np.isfinite(t)])
     step = float(np.median(steps)) if steps.size else math.nan
-    seconds = {unit: (found or math.nan) * scale for unit, scale in TIME_UNITS.items()}
-    step_s = {unit: step * scale for unit, scale in TIME_UNITS.items()}
+    named = "tick" if column.lower() in TICK_COLUMNS else _suffix_unit(column, TIME_UNITS)
+    units = {unit: scale for unit, scale in TIME_UNITS.items() if unit in (*DATA_TIME_UNITS, named, given)}
+    seconds = {unit: (found or math.nan) * scale for unit, scale in units.items()}
+    step_s = {unit: step * scale for unit, scale in units.items()}
     low, high = PERIOD_S
     if found is not None:
         plausible = [unit for unit, value in seconds.items() if low <= value <= high]
@@ -135,14 +142,13 @@ def time_unit(column: str, t: np.ndarray, angle: np.ndarray, given: str | None) 
         why = f"a decay is sampled every {STEP_S[0] * 1e3:g} ms to {STEP_S[1]:g} s"
     if given is not None:
         if given not in TIME_UNITS:
-            raise InputError(f"time unit {given!r} not understood: use s or ms")
+            raise InputError(f"time unit {given!r} not understood: use s, ms or tick (0.1 ms)")
         if given not in plausible and plausible:
             raise InputError(
                 f"--time-unit {given} does not fit column {column!r}: {looks} ({why}); the data look like "
                 f"{plausible[0]}: use --time-unit {plausible[0]} or leave it out"
             )
         return UnitChoice(given)
-    named = _suffix_unit(column, TIME_UNITS)
     if found is not None and not plausible:
         raise InputError(
             f"column {column!r} is no decay's time in s or ms: {looks} ({why}); check --time-col, "
@@ -151,4 +157,6 @@ def time_unit(column: str, t: np.ndarray, angle: np.ndarray, given: str | None) 
     if len(plausible) == 1 and plausible[0] != (named or "s"):
         unit = plausible[0]
         return UnitChoice(unit, f"time unit: {unit} ({column!r}: {looks}; {why}); --time-unit overrides")
+    if named == "tick" and named in plausible:  # said: a tick reads as ms as plausibly
+        return UnitChoice("tick", f"time unit: tick, 0.1 ms ({column!r} is an Xsens SampleTimeFine)")
     return UnitChoice(plausible[0] if len(plausible) == 1 else named or "s")
