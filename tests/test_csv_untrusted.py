@@ -118,6 +118,10 @@ def test_an_xsens_sample_time_column_is_read_in_its_ticks(tmp_path):
     other = write_csv(tmp_path / "t.csv", {"t": ticks, "angle_deg": np.degrees(angle)})
     told = identify(other, "--time-col", "t", "--time-unit", "tick", "--model", "ittc-quadratic", "--json")
     assert coefficients(told) == coefficients(result)
+    unnamed = identify(other, "--time-col", "t", "--model", "ittc-quadratic", "--json")  # data cannot tell
+    assert (
+        "time unit: ms" in unnamed.stderr and "ticks the period is 1.7 s: --time-unit tick" in unnamed.stderr
+    )
 
 
 @pytest.mark.parametrize(

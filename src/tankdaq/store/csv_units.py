@@ -156,7 +156,11 @@ def time_unit(column: str, t: np.ndarray, angle: np.ndarray, given: str | None) 
         )
     if len(plausible) == 1 and plausible[0] != (named or "s"):
         unit = plausible[0]
-        return UnitChoice(unit, f"time unit: {unit} ({column!r}: {looks}; {why}); --time-unit overrides")
+        line = f"time unit: {unit} ({column!r}: {looks}; {why}); --time-unit overrides"
+        as_ticks = (found or math.nan) * TIME_UNITS["tick"]
+        if unit == "ms" and low <= as_ticks <= high:  # the data cannot tell: said
+            line += f" (in an Xsens device's 0.1 ms ticks the period is {as_ticks:.3g} s: --time-unit tick)"
+        return UnitChoice(unit, line)
     if named == "tick" and named in plausible:  # said: a tick reads as ms as plausibly
         return UnitChoice("tick", f"time unit: tick, 0.1 ms ({column!r} is an Xsens SampleTimeFine)")
     return UnitChoice(plausible[0] if len(plausible) == 1 else named or "s")
