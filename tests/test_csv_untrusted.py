@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import warnings
 from pathlib import Path
 
@@ -372,6 +373,32 @@ def test_a_campaign_goes_on_past_bad_files(recordings, tmp_path):
     assert "dangling.mcap is a dangling link" in skipped[1] and "foreign.mcap" in skipped[2]
     assert "error: 3 of 4 files skipped" in result.stderr
     assert "| trimaran |" in result.stdout  # the good recording's group is in the table
+
+
+@pytest.mark.parametrize("nominal", ["-6", "nan", "90"])
+def test_a_recording_whose_nominal_angle_is_no_release_angle_is_skipped(recordings, tmp_path, nominal):
+    """An edited recording whose metadata gives the nominal angle -6 or nan grouped and reported as a
+    "-6 deg" or "nan deg" condition (B_eq nan ± nan), with no word: it is skipped with its line."""
+    from tankdaq.samples import SAMPLE_DTYPE
+    from tankdaq.store.writer import RecordingWriter
+
+    folder = tmp_path / "campaign"
+    folder.mkdir()
+    shutil.copy(recordings["good"], folder)
+    t, angle, rate = held_tilt(6.0)
+    samples = np.zeros(t.size, dtype=SAMPLE_DTYPE)
+    samples["t"], samples["ticks"], samples["az"] = t, np.round(t * 1e4).astype(np.int64), 9.81
+    samples["roll"], samples["p"] = angle, rate
+    meta = {"axis": "roll", "hull": "trimaran", "draft": "T", "angle_nominal_deg": nominal}
+    with RecordingWriter(folder / "edited.mcap", meta, {}) as writer:
+        writer.write_samples(samples)
+        writer.write_event("release", "by hand", t_s=2.0)
+    result = runner.invoke(app, ["campaign", str(folder), "--jobs", "1", "--model", "b1,c1"])
+    assert result.exit_code == 1, result.output
+    (skipped,) = [line for line in result.stderr.splitlines() if line.startswith("skipped: ")]
+    assert "edited.mcap: its metadata gives the nominal angle" in skipped and "not a release angle" in skipped
+    groups = [line for line in result.stdout.splitlines() if line.startswith("| trimaran |")]
+    assert len(groups) == 1 and "| 6 |" in groups[0]
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -208,7 +208,9 @@ def _read_labelled_runs(path: Path) -> list[DecayRun]:
             if missing:
                 raise InputError(f"{path}: the recording's metadata lacks {', '.join(missing)}")
             nominal = run.meta.get("angle_nominal_deg")
-            run.meta["angle_deg"] = float(nominal) if nominal is not None else _rounded_first_peak_deg(run)
+            run.meta["angle_deg"] = (
+                _nominal_deg(path, nominal) if nominal is not None else _rounded_first_peak_deg(run)
+            )
         return runs
     labels = csv_labels(path)
     if labels["axis"] not in AXIS_FIELDS:
@@ -217,6 +219,21 @@ def _read_labelled_runs(path: Path) -> list[DecayRun]:
     for run in runs:
         run.meta.update(labels)
     return runs
+
+
+def _nominal_deg(path: Path, value: object) -> float:
+    """A recording's nominal release angle, which names its group: a number above 0 and up to 45 deg
+    (one that is not, an edited or damaged file's, would group and report as -6 or nan deg)."""
+    try:
+        angle = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        angle = math.nan
+    if not 0.0 < angle <= 45.0:
+        raise InputError(
+            f"{path}: its metadata gives the nominal angle {value!r}, not a release angle (above 0 and up to "
+            "45 deg): the file was edited or damaged; fix its angle_nominal_deg or leave the file out"
+        )
+    return angle
 
 
 def _rounded_first_peak_deg(run: DecayRun) -> float:
