@@ -81,8 +81,12 @@ def test_a_file_that_is_not_such_a_record_is_one_clear_error(tmp_path: Path) -> 
         read_mcap(other, LAYOUT)
     text = tmp_path / "notes.csv"
     text.write_text("t_s,heave_m\n0.0,calm\n")
-    with pytest.raises(BadRecordingInput, match="not a readable CSV record"):
+    with pytest.raises(BadRecordingInput, match="sample row 1, column 'heave': 'calm' is not a number"):
         read_csv(text, LAYOUT)
+    ragged = tmp_path / "ragged.csv"  # said in zip()'s words before: "argument 2 is longer than argument 1"
+    ragged.write_text("t_s,heave_m\n0.0,0.1\n0.1,0.2,0.3\n")
+    with pytest.raises(BadRecordingInput, match="sample row 2 has 3 fields, the header 2"):
+        read_csv(ragged, LAYOUT)
 
 
 def test_an_mcap_record_cut_anywhere_is_one_clear_error(

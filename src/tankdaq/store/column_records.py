@@ -133,15 +133,24 @@ def read_csv(path: Path, layout: ColumnLayout) -> tuple[Columns, dict[str, str]]
             else:
                 body.append(line)
         rows = list(csv.reader(body))
-        if not rows:
-            raise BadRecordingInput(f"{path}: no header row and no samples")
-        header = [by_header.get(h.strip(), h.strip()) for h in rows[0]]
-        columns: Columns = {h: [] for h in header}
-        for row in rows[1:]:
-            for h, value in zip(header, row, strict=True):
-                columns[h].append(float(value))
-    except (ValueError, UnicodeDecodeError) as exc:
+    except (csv.Error, UnicodeDecodeError) as exc:
         raise BadRecordingInput(f"{path}: not a readable CSV record ({exc})") from None
+    if not rows:
+        raise BadRecordingInput(f"{path}: no header row and no samples")
+    header = [by_header.get(h.strip(), h.strip()) for h in rows[0]]
+    columns: Columns = {h: [] for h in header}
+    for number, row in enumerate(rows[1:], start=1):
+        if len(row) != len(header):
+            raise BadRecordingInput(
+                f"{path}: sample row {number} has {len(row)} fields, the header {len(header)}"
+            )
+        for h, value in zip(header, row, strict=True):
+            try:
+                columns[h].append(float(value))
+            except ValueError:
+                raise BadRecordingInput(
+                    f"{path}: sample row {number}, column {h!r}: {value.strip()[:30]!r} is not a number"
+                ) from None
     return columns, meta
 
 
