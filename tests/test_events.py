@@ -4,6 +4,7 @@ uses once, names runs in the orchestrator's words and shows a session's repeated
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
@@ -80,6 +81,13 @@ def test_every_event_is_a_line_and_a_json_object_of_its_values() -> None:
     settled = next(e for e in events if isinstance(e, Settled))
     assert settled.record()["coefficients"] == {"b1": 0.2, "c1": 14.2}
     assert settled.line() == "run 2: amplitude; b1=0.2  c1=14.2, T0 1.667 s, R2 0.9980 -> rec/run02.mcap"
+    early = dataclasses.replace(
+        settled.outcome, settle_reason="note", fit=dataclasses.replace(_fit(), half_cycles=3)
+    )
+    assert Settled(early).line() == (  # stopped a cycle after the release: its live fit is no result
+        "run 2: note; b1=0.2  c1=14.2, T0 1.667 s, R2 0.9980; a live fit over 3 half-cycle(s) only: "
+        "fit the file with tankdaq identify -> rec/run02.mcap"
+    )
     assert Note("note", "x").line() == "note: x" and Note("warning", "x", 3).line() == "warning: run 3: x"
     assert Stopping("SIGHUP").line() == "stopping (SIGHUP): closing files"
     assert Held(math.nan, "roll").record()["angle_deg"] is None  # NaN is no JSON

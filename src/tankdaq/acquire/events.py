@@ -210,6 +210,11 @@ class Fitted(Event):
         }
 
 
+#: A decay's final live fit over fewer half-cycles than this (a run stopped or unplugged within a cycle or
+#: so of its release) is said to be no result where its line shows it.
+FEW_HALF_CYCLES = 4
+
+
 @dataclass(frozen=True)
 class Settled(Event):
     """Run ``outcome.run`` ended (``outcome.settle_reason``, see ``SETTLE_REASONS``), its file closed."""
@@ -225,6 +230,10 @@ class Settled(Event):
         status = outcome.status
         said = (status.describe_after(), status.describe_before()) if status else ()
         flags = "".join(f"; {line}" for line in said if line)
+        if fit and fit.half_cycles < FEW_HALF_CYCLES:  # a run stopped early: its live fit is no result
+            flags += (
+                f"; a live fit over {fit.half_cycles} half-cycle(s) only: fit the file with tankdaq identify"
+            )
         return f"{_run(outcome.run, run_name)}: {outcome.settle_reason}; {coeffs}{period}{flags}{where}"
 
     def record(self) -> dict[str, object]:
