@@ -89,9 +89,9 @@ def test_a_campaigns_rows_of_files_not_catalogued_are_the_rows_index_makes(
     assert _table(by_campaign, hulls) == _table(by_index, hulls)
 
 
-def _made_here(path: Path) -> tuple[dict[str, Any], dict[str, Any] | None, int] | None:
+def _made_here(path: Path, sha256: str) -> tuple[dict[str, Any], dict[str, Any] | None, int] | None:
     """``worker_row``, and the process that made it."""
-    made = worker_row(path)
+    made = worker_row(path, sha256)
     return None if made is None else (*made, os.getpid())
 
 

@@ -266,15 +266,16 @@ def decay_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], di
     return recording_row(path, sha256)
 
 
-def worker_row(path: Path) -> tuple[dict[str, Any], dict[str, Any] | None] | None:
-    """``decay_row`` of a file a campaign's worker has just read (``ident.campaign_stream.FileWork``),
-    so the catalogue's writer only writes it: the row ``index`` makes of the file. None for an exported
+def worker_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict[str, Any] | None] | None:
+    """``decay_row`` of a file a campaign's worker has just read (``ident.campaign_stream.FileWork``; its
+    ``sha256`` from that reading), so the catalogue's writer only writes it: the row ``index`` makes of
+    the file. None for an exported
     CSV (its recording holds the decay) and for a file whose row cannot be made here: the writer then
     makes it itself and says in one line why it could not."""
     try:
         if path.suffix.lower() == ".csv" and export_metadata(path) is not None:
             return None
-        return decay_row(path)
+        return decay_row(path, sha256)
     except Exception:  # the catalogue's trouble, never the campaign's
         return None
 

@@ -341,18 +341,19 @@ class SimulationComparison(EstimatorMixin):
         """``effect`` added to the current model, only its term(s) fitted; None unless it closes
         ``MIN_CLOSED`` of the gap above the floor (``gaps``: now, floor) and passes the BIC margin."""
         spec = effect.extend(current.spec, runs, diag)
-        freed = fixed
+        freed, held = fixed, None  # held: a term of the simulation's this effect frees (its b1 or c1)
         if spec is None:
             if effect.increments not in fixed:
                 return None
-            spec, freed = current.spec, {k: v for k, v in fixed.items() if k != effect.increments}
+            held = effect.increments
+            spec, freed = current.spec, {k: v for k, v in fixed.items() if k != held}
         self._say(effect.name)
         try:
             after = fit_spec(runs, spec, start=current, guess=ringing_guess(diag), fixed=freed)
         except BadIdentificationInput:
             after = None  # the candidate diverged from here
-        if freed is not fixed:  # a held term freed: from the simulation's value, a period far off wraps
-            after = _better(after, _cold_fit(runs, spec, freed))  # the phase (a local minimum)
+        if held is not None:  # from the simulation's value, a period far off wraps the phase (a local
+            after = _better(after, _cold_fit(runs, spec, freed))  # minimum): from the data's start too
         if after is None:
             return None  # it is not what is missing
         new = {k: v for k, v in after.coefficients.items() if k not in current.coefficients}
@@ -365,9 +366,8 @@ class SimulationComparison(EstimatorMixin):
         if delta_bic >= DELTA_BIC or not closes:
             return None
         added = dict(new)
-        if effect.increments in fixed and effect.increments not in freed:
-            term = effect.increments
-            added[term] = after.coefficients[term] - fixed[term]
+        if held is not None:
+            added[held] = after.coefficients[held] - fixed[held]
         return CorrectionStep(effect, after, freed, added, delta_bic, gap, gap_after)
 
     def _compare_curves(self, runs: list[DecayRun]) -> None:

@@ -118,11 +118,12 @@ class FileWork:
     yet, ``catalogue.hooks.CatalogueWriter.file_rows``).
 
     ``wanted`` runs here, once, before the scan, and picks the files; ``make`` runs in the worker right
-    after a file scanned well (a module-level function: a pool or Dask sends it by name) and returns
-    something small, or None; ``take`` runs here with each chunk's results as the chunk returns."""
+    after a file scanned well, with the file and its SHA-256 from the scan (a module-level function: a
+    pool or Dask sends it by name), and returns something small, or None; ``take`` runs here with each
+    chunk's results as the chunk returns."""
 
     wanted: Callable[[Sequence[Path]], Collection[Path]]
-    make: Callable[[Path], Any]
+    make: Callable[[Path, str], Any]
     take: Callable[[list[Any]], None]
 
 
@@ -130,7 +131,7 @@ def scan_chunk(
     paths: Sequence[Path],
     start_s: float | None,
     end_s: float | None,
-    make: Callable[[Path], Any] | None = None,
+    make: Callable[[Path, str], Any] | None = None,
     wanted: Collection[Path] = (),
 ) -> tuple[list[FileScan | SkippedFile], list[Any]]:
     """``scan_file`` of a chunk of files (one task for a worker), and ``make`` of each ``wanted`` file
@@ -138,8 +139,8 @@ def scan_chunk(
     scans = [scan_file(path, start_s, end_s) for path in paths]
     made = []
     if make is not None:
-        for scan in scans:
-            if scan.path in wanted and isinstance(scan, FileScan) and (found := make(scan.path)) is not None:
+        for scan in (s for s in scans if isinstance(s, FileScan) and s.path in wanted):
+            if (found := make(scan.path, scan.sha256)) is not None:
                 made.append(found)
     return scans, made
 
