@@ -295,7 +295,7 @@ def test_cli_simulate_campaign_writes_the_seeds_matrix(tmp_path: Path) -> None:
     ("args", "message"),
     [
         (["campaign", "/no/such/folder"], "no such file or folder"),
-        (["campaign", "{empty}"], "no .mcap or .csv recordings"),
+        (["campaign", "{empty}"], "no decay files (.mcap, .csv,"),
         (["campaign", "{unnamed}"], "cannot tell hull, draft, axis and angle"),
         (["campaign", "{notes}"], "not a recording"),
         (["campaign", "{campaign}", "--model", "b1,zz"], "unknown model term"),

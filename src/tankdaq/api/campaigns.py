@@ -201,7 +201,8 @@ def _scan(
             work,
         )
     read = [found.path for found in scan.files]  # a copy or an export of another: its decays once
-    kept_paths = set(drop_read_twice(read, kept, {found.path: found.sha256 for found in scan.files}))
+    digests = {found.path: found.sha256 for found in scan.files}
+    kept_paths = set(drop_read_twice(read, kept, digests, {found.path: found.origin for found in scan.files}))
     scan.files = [found for found in scan.files if found.path in kept_paths]
     if not scan.decays:
         if len(scan.skipped) == 1:

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from ..config import Hull
+    from ..store.export_layout import ExportOrigin
     from ..viz.plots import Figure
 
 #: What ``identify`` takes: a path, a ``Recording``, a ``Decay`` or a ``DecayRun``, or a list of them.
@@ -241,10 +242,14 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
 
 
 def drop_read_twice(
-    paths: list[Path], progress: Progress, digests: Mapping[Path, str] | None = None
+    paths: list[Path],
+    progress: Progress,
+    digests: Mapping[Path, str] | None = None,
+    origins: Mapping[Path, ExportOrigin | None] | None = None,
 ) -> list[Path]:
     """``paths`` without the files whose decays another of them holds (``store.inputs.read_twice``: a
-    copy, or a CSV export of a recording given too), each left out said in one line."""
+    copy, an export of a recording given too, two exports of one recording), each left out said in one
+    line; ``digests``, ``origins``: ``read_twice``'s."""
     from ..store.inputs import read_twice
 
     once: dict[Path, Path] = {}  # resolved -> as given: a file given twice is read once
@@ -254,7 +259,7 @@ def drop_read_twice(
         else:
             once[path.resolve()] = path
     unique = list(once.values())
-    twice = read_twice(unique, digests)
+    twice = read_twice(unique, digests, origins)
     for path, why in twice.items():
         progress.line(f"not read: {path} {why} (the same decays, which would count twice)")
     return [path for path in unique if path not in twice]

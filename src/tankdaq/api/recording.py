@@ -1,4 +1,5 @@
-"""``tankdaq.read``: a recording (MCAP) or a decay CSV as pandas DataFrames with units in the column names.
+"""``tankdaq.read``: a recording (MCAP) or a decay file (CSV, HDF5, MATLAB, Parquet) as pandas DataFrames
+with units in the column names.
 
 The library keeps SI units and radians inside (``samples.SAMPLE_DTYPE``, ``records.DecayRun``); this is an
 edge, so angles and rates come out in degrees and every column name ends in its unit (``roll_deg``,
@@ -225,8 +226,9 @@ def read(
     angle_unit: str | None = None,
     time_unit: str | None = None,
 ) -> Recording:
-    """Read a tankdaq recording (``.mcap``) or a decay CSV (any spreadsheet dialect; the column settings
-    are ``tankdaq identify``'s) into a ``Recording``; its decays are found as ``identify`` finds them.
+    """Read a tankdaq recording (``.mcap``) or a decay file (a CSV in any spreadsheet dialect, HDF5, MATLAB
+    or Parquet; the column settings are ``tankdaq identify``'s) into a ``Recording``; its decays are found
+    as ``identify`` finds them.
 
     >>> rec = tankdaq.read("run.mcap")  # doctest: +SKIP
     >>> rec.decays[0].samples.plot(x="time_s", y="roll_deg")  # doctest: +SKIP
@@ -241,7 +243,7 @@ def read(
     options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit)
     if path.suffix.lower() == ".mcap":
         return _read_recording(path, axis, kind)
-    return _read_csv(path, axis, options, kind)
+    return _read_columns(path, axis, options, kind)
 
 
 def _meta(path: Path, kind: str, axis: str, runs: list[DecayRun]) -> RecordingMeta:
@@ -276,8 +278,9 @@ def _read_recording(path: Path, axis: str | None, kind: str) -> Recording:
     return Recording(path, samples, meta, decays, notices)
 
 
-def _read_csv(path: Path, axis: str | None, options: CsvOptions, kind: str) -> Recording:
-    """A decay CSV: the record whole, and its decays as ``identify`` finds them."""
+def _read_columns(path: Path, axis: str | None, options: CsvOptions, kind: str) -> Recording:
+    """A decay file of columns (CSV, HDF5, MATLAB, Parquet): the record whole, and its decays as
+    ``identify`` finds them."""
     from dataclasses import replace
 
     from ..ident.inputs import input_notices, read_decays

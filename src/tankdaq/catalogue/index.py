@@ -18,7 +18,7 @@ import sqlalchemy as sa
 from ..errors import RecordingError
 from ..store.inputs import file_sha256
 from .database import Catalogue, decays, exports, in_batches
-from .rows import DECAY_SUFFIXES, EXPORT_SUFFIXES, decay_row, export_metadata, utc_now
+from .rows import DECAY_SUFFIXES, decay_row, export_metadata, utc_now
 from .writing import Made, add_export, add_rows, record_session
 
 #: New decay rows go into the catalogue this many to a transaction (one transaction a file cost more than
@@ -51,8 +51,7 @@ def index_folder(
 ) -> IndexReport:
     """Catalogue every decay file and export under ``folder`` and every session log in it."""
     report = IndexReport()
-    suffixes = (*DECAY_SUFFIXES, *EXPORT_SUFFIXES)
-    files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in suffixes and p.is_file())
+    files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in DECAY_SUFFIXES and p.is_file())
     files.sort(key=lambda p: p.suffix.lower() != ".mcap")  # recordings first: exports find their rows
     hashes = {path: file_sha256(path) for path in files}
     known = _known_paths(catalogue, list(hashes.values()))
@@ -68,7 +67,8 @@ def index_folder(
             try:
                 table = _add(catalogue, path, sha, pending)
             except RecordingError as exc:  # not a decay tankdaq reads, nor an export of one
-                report.skipped.append(f"{path}: {exc}")
+                said = str(exc)  # a reader's line names the file itself
+                report.skipped.append(said if said.startswith(str(path)) else f"{path}: {said}")
             else:
                 report.added.append(path)
                 report.exports += table is exports
@@ -86,7 +86,7 @@ def index_folder(
 def _add(catalogue: Catalogue, path: Path, sha: str, pending: list[Made]) -> sa.Table:
     """A new file into its table: an export (``rows.export_metadata``), after the decay rows made
     before it (its recording's among them), or a decay's row into ``pending``; returns the table."""
-    metadata = export_metadata(path) if path.suffix.lower() != ".mcap" else None
+    metadata = export_metadata(path)
     if metadata is not None:
         _flush(catalogue, pending)
         add_export(catalogue, path, metadata, sha)

@@ -84,8 +84,8 @@ def fit_fields(
     model: str | None = None,
 ) -> dict[str, Any]:
     """A fit's columns: coefficients with their 95 % intervals, period, B_eq (and B̂44 for roll, where
-    the hull gives beam and displacement) at ``STANDARD_AMPLITUDES_DEG``. ``condition``: hull, draft,
-    axis."""
+    the hull gives beam and displacement) at ``STANDARD_AMPLITUDES_DEG``, and the axis fitted.
+    ``condition``: hull, draft, axis."""
     from ..ident.derived import b_eq, natural_period
 
     values = {term: float(value) for term, value in coefficients.items()}
@@ -104,7 +104,7 @@ def fit_fields(
         "r2_angle": _finite(r2_angle),
         "warnings": list(warnings),
         "updated_utc": utc_now(),
-    }
+    } | ({"axis": condition[2]} if condition[2] else {})
 
 
 def _b44_hat(
@@ -172,24 +172,26 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
     return row, version
 
 
-#: The files ``index`` and the hooks catalogue, by suffix: decays (rows of ``decays``)...
-DECAY_SUFFIXES = (".mcap", ".csv")
-#: ...and what else ``tankdaq export`` writes (rows of ``exports``): HDF5 one file per decay, Parquet and
-#: MATLAB one file per recording; an exported CSV (its ``<stem>.json`` sidecar says so) is an export too.
-EXPORT_SUFFIXES = (".h5", ".parquet", ".mat")
+#: The files ``index`` and the hooks catalogue, by suffix: those tankdaq reads decays from
+#: (``store.inputs.INPUT_FORMATS``), rows of ``decays``; but a file ``tankdaq export`` wrote (HDF5 one file
+#: per decay, Parquet and MATLAB one per recording, a CSV with its ``<stem>.json`` sidecar) is a row of
+#: ``exports``: its recording holds the decay.
+DECAY_SUFFIXES = (".mcap", ".csv", ".h5", ".hdf5", ".parquet", ".mat")
 
 
 def export_metadata(path: Path) -> dict[str, Any] | None:
     """The metadata of a file ``tankdaq export`` wrote (HDF5 root attributes, Parquet schema metadata,
-    a .mat file's ``tankdaq.meta``, a CSV's sidecar); None for any other CSV. Any other file of an export
-    suffix (another tool's, or one whose reading library is not installed) raises ``RecordingError``."""
+    a .mat file's ``tankdaq.meta``, a CSV's sidecar); None for another tool's file (a lab's decay). A file
+    of an export's kind that cannot be read here (broken, or its library is not installed) raises
+    ``RecordingError``."""
     from ..store import export_layout
 
     suffix = path.suffix.lower()
-    if suffix == ".csv":
-        return export_layout.read_sidecar(path)
+    if suffix in (".csv", ".mcap"):
+        return export_layout.read_sidecar(path) if suffix == ".csv" else None
     kind, library, reader = {  # what the file is, what reads it (and how to get it), its reader
         ".h5": ("HDF5", "h5py", export_layout.read_h5_metadata),
+        ".hdf5": ("HDF5", "h5py", export_layout.read_h5_metadata),
         ".parquet": ("Parquet", "pyarrow: pip install tankdaq[parquet]", export_layout.read_parquet_metadata),
         ".mat": ("MATLAB", "scipy", export_layout.read_mat_metadata),
     }[suffix]
@@ -199,8 +201,6 @@ def export_metadata(path: Path) -> dict[str, Any] | None:
         raise RecordingError(f"{path}: reading a {kind} export needs {library}") from None
     except (OSError, ValueError, TypeError, KeyError) as exc:
         raise RecordingError(f"{path}: not a {kind} file tankdaq can read ({one_line(exc)})") from None
-    if found is None:
-        raise RecordingError(f"{path}: a {kind} file, but not one tankdaq export wrote (no format metadata)")
     return found
 
 
@@ -221,21 +221,27 @@ def export_row(path: Path, metadata: Mapping[str, Any], sha256: str | None = Non
     }
 
 
-def csv_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict[str, Any] | None]:
-    """The row of a lab's CSV decay: as ``recording_row``, its condition from its JSON sidecar or its
-    name (``ident.campaign.csv_labels``; unknown columns stay empty when neither says). Raises
-    ``RecordingError`` for a CSV that holds no decay tankdaq can read."""
+def lab_file_row(
+    path: Path, sha256: str | None = None, axis: str | None = None
+) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """The row of a lab's decay file (CSV, HDF5, MATLAB, Parquet): as ``recording_row``, its condition
+    from its JSON sidecar or its name (``ident.campaign.csv_labels``; unknown columns stay empty when
+    neither says). ``axis``: the file's, when a command has just read its decay (with the columns the
+    user named): it is not read again. Raises ``RecordingError`` for a file that holds no decay
+    tankdaq can read with its default columns."""
     from ..config import format_draft
     from ..errors import InputError
     from ..ident.campaign import csv_labels
     from ..store.inputs import read_runs
 
-    try:
-        runs = read_runs(path)
-    except InputError as exc:
-        raise RecordingError(str(exc)) from None
-    if not runs:
-        raise RecordingError(f"{path}: no decay in it")
+    if axis is None:
+        try:
+            runs = read_runs(path)
+        except InputError as exc:
+            raise RecordingError(str(exc)) from None
+        if not runs:
+            raise RecordingError(f"{path}: no decay in it")
+        axis = runs[0].axis
     try:
         labels = csv_labels(path)
     except InputError:  # a decay all the same: its row says where and what, the condition unknown
@@ -251,7 +257,7 @@ def csv_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict
         "hull": labels.get("hull"),
         "hull_sha256": version["sha256"] if version else None,
         "draft": format_draft(labels["draft"]) if "draft" in labels else None,
-        "axis": labels.get("axis", runs[0].axis),
+        "axis": labels.get("axis", axis),
         "angle_nominal_deg": _finite(labels.get("angle_deg")),
         "created_utc": now,
         "updated_utc": now,
@@ -259,10 +265,12 @@ def csv_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict
     return row, version
 
 
-def decay_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict[str, Any] | None]:
-    """``recording_row`` or ``csv_row``, by the file's suffix."""
-    if path.suffix.lower() == ".csv":
-        return csv_row(path, sha256)
+def decay_row(
+    path: Path, sha256: str | None = None, axis: str | None = None
+) -> tuple[dict[str, Any], dict[str, Any] | None]:
+    """``recording_row`` or ``lab_file_row``, by the file's suffix (``axis``: ``lab_file_row``'s)."""
+    if path.suffix.lower() != ".mcap":
+        return lab_file_row(path, sha256, axis)
     return recording_row(path, sha256)
 
 
@@ -273,7 +281,7 @@ def worker_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], d
     CSV (its recording holds the decay) and for a file whose row cannot be made here: the writer then
     makes it itself and says in one line why it could not."""
     try:
-        if path.suffix.lower() == ".csv" and export_metadata(path) is not None:
+        if export_metadata(path) is not None:
             return None
         return decay_row(path, sha256)
     except Exception:  # the catalogue's trouble, never the campaign's

@@ -103,12 +103,13 @@ def add_file(
     file that cannot be read raises ``RecordingError``, or with ``unreadable`` gets a bare row (a
     session's decay cut early). ``sha256``: the file's, when the caller has just hashed it."""
     try:
-        row, version = decay_row(path, sha256)
+        row, version = decay_row(path, sha256, (extra or {}).get("axis"))
     except RecordingError:
         if not unreadable:
             raise
         row, version = bare_row(path), None
     row |= dict(extra or {})
+    row["updated_utc"] = max(row["updated_utc"], row["created_utc"])  # a fit made before its row was
     add_rows(catalogue, [(row, version)], [*LOCATION_COLUMNS, *(extra or {})])
     return str(row["sha256"])
 
@@ -142,7 +143,7 @@ def update_fits(catalogue: Catalogue, fits: Sequence[tuple[Sequence[Path], Mappi
         for paths, fields in fits:
             files = [p.resolve() for p in paths if p.suffix.lower() in DECAY_SUFFIXES and p.is_file()]
             for path in files:
-                if path.suffix.lower() == ".csv" and export_metadata(path) is not None:
+                if _exported(path):
                     continue
                 written += 1
                 statement = decays.update().where(decays.c.path == str(path)).values(**fields)
@@ -151,6 +152,15 @@ def update_fits(catalogue: Catalogue, fits: Sequence[tuple[Sequence[Path], Mappi
     for path, fields in missing:
         add_file(catalogue, path, fields)
     return written
+
+
+def _exported(path: Path) -> bool:
+    """A file ``tankdaq export`` wrote: its recording's copy, not a decay of its own (so no fit of its
+    own); a file the export readers cannot read counts as the lab's own decay file."""
+    try:
+        return export_metadata(path) is not None
+    except RecordingError:
+        return False
 
 
 def session_id(log_path: Path) -> str:

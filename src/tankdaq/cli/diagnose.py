@@ -63,7 +63,7 @@ def diagnose_command(
         list[Path] | None,
         typer.Argument(
             callback=checked(validation.input_file),
-            help="Decay recordings (.mcap) or CSV files, one decay each (or --runs).",
+            help="Recordings (.mcap) or decay files (.csv .h5 .mat .parquet), one decay each (or --runs).",
         ),
     ] = None,
     axis: DecayAxis = "roll",

@@ -37,12 +37,18 @@ ReadAxis = Annotated[
 JsonOutput = Annotated[bool, typer.Option("--json", help="Print the result as JSON on stdout.")]
 
 # How other labs' CSV files are read (identify, diagnose: ``tankdaq.Reading``).
-TimeColumn = Annotated[str, typer.Option("--time-col", help="CSV time column (s).")]
-AngleColumn = Annotated[str, typer.Option("--angle-col", help="CSV angle column.")]
-RateColumn = Annotated[str, typer.Option("--rate-col", help="CSV rate column (ignored when absent).")]
+TimeColumn = Annotated[
+    str, typer.Option("--time-col", help="Time column of a CSV, HDF5, .mat or Parquet file.")
+]
+AngleColumn = Annotated[str, typer.Option("--angle-col", help="Angle column of such a file.")]
+RateColumn = Annotated[
+    str, typer.Option("--rate-col", help="Rate column of such a file (ignored when absent).")
+]
 AngleUnit = Annotated[
     str | None,
-    typer.Option("--angle-unit", help="Unit of the CSV angle and rate: deg or rad [default: from the data]."),
+    typer.Option(
+        "--angle-unit", help="Unit of the file's angle and rate: deg or rad [default: from the data]."
+    ),
 ]
 TimeUnit = Annotated[
     str | None,

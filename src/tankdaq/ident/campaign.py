@@ -26,7 +26,8 @@ from ..errors import IdentificationError, InputError, TankdaqError
 from ..physics.models import is_auto
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS
-from ..store.inputs import INPUT_FORMATS, input_format
+from ..store.export_layout import export_metadata_of
+from ..store.inputs import INPUT_FORMATS, input_format, suffixes
 from ..store.naming import parse_recording_name
 from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
 from .executors import executor_map
@@ -140,7 +141,7 @@ def find_recordings(inputs: Sequence[str | Path], recurse: bool = True) -> list[
     """The files tankdaq reads decays from (``store.inputs.INPUT_FORMATS``: .mcap, .csv) among ``inputs``
     (folders searched recursively unless ``recurse`` is False: then only the folder's own files), sorted."""
     found: list[Path] = []
-    known = " or ".join(INPUT_FORMATS)
+    known = suffixes(INPUT_FORMATS)
     for item in map(Path, inputs):
         if item.is_dir():
             files = item.rglob("*") if recurse else item.iterdir()
@@ -153,13 +154,17 @@ def find_recordings(inputs: Sequence[str | Path], recurse: bool = True) -> list[
         else:
             raise InputError(f"{item}: no such file or folder")
     if not found:
-        raise InputError(f"no {known} recordings in {', '.join(map(str, inputs))}")
+        raise InputError(f"no decay files ({known}) in {', '.join(map(str, inputs))}")
     return sorted(set(found))
 
 
 def csv_labels(path: Path) -> dict[str, Any]:
-    """hull, draft, axis, angle_deg of a CSV decay: its JSON sidecar, else its file name."""
+    """hull, draft, axis, angle_deg of a decay file that is not a recording (CSV, HDF5, MATLAB, Parquet):
+    its JSON sidecar, else the metadata ``tankdaq export`` wrote into it, else its file name."""
     sidecar = path.with_suffix(".json")
+    exported = export_metadata_of(path) if path.suffix.lower() != ".csv" else None
+    if exported is not None and not sidecar.is_file() and {"hull", "axis", "angle_deg"} <= set(exported):
+        return _export_labels(path, exported)
     if sidecar.is_file():
         try:
             data = json.loads(sidecar.read_text())
@@ -180,6 +185,23 @@ def csv_labels(path: Path) -> dict[str, Any]:
             f"or put {sidecar.name} beside it with hull, draft, axis, angle_deg"
         )
     return {"hull": named.hull, "draft": named.draft, "axis": named.axis, "angle_deg": named.angle_deg}
+
+
+def _export_labels(path: Path, meta: dict[str, object]) -> dict[str, Any]:
+    """The labels an export's own metadata gives (hull, draft, axis, angle_deg); one line when one is
+    not of its kind (an edited file)."""
+    try:
+        return {
+            "hull": str(meta["hull"]),
+            "draft": parse_draft(str(meta.get("draft", "T"))),
+            "axis": str(meta["axis"]),
+            "angle_deg": float(meta["angle_deg"]),  # type: ignore[arg-type]
+        }
+    except (TypeError, ValueError) as exc:
+        raise InputError(
+            f"{path}: its export metadata does not give hull, draft, axis and angle_deg as such ({exc}): "
+            "fix them, or put a JSON sidecar beside it"
+        ) from None
 
 
 def read_campaign_runs(

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..config import Hull
 from ..records import DecayRun
+from ..store.export_layout import ExportOrigin
 from ..store.inputs import file_sha256
 from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
 from .executors import DaskExecutor
@@ -66,6 +67,7 @@ class FileScan:
     truncation: str | None  # the recording was cut short (meta["truncation"])
     cuts: tuple[str, ...]  # where each decay's free part was cut, and why
     sha256: str  # of its bytes: a copy among the campaign's files is read once (``store.inputs.read_twice``)
+    origin: ExportOrigin | None = None  # an export's recording and releases: two exports of them, read once
 
 
 @dataclass
@@ -108,7 +110,9 @@ def scan_file(path: Path, start_s: float | None = None, end_s: float | None = No
     truncation = next((str(r.meta["truncation"]) for r in runs if r.meta.get("truncation")), None)
     keys = tuple(run_key(run) for run in runs)
     digest = file_sha256(path)
-    return FileScan(path, keys, tuple(input_notices(runs)), truncation, tuple(cut_lines(runs)), digest)
+    origin = ExportOrigin.of(runs[0].meta) if runs else None
+    notices, cuts = tuple(input_notices(runs)), tuple(cut_lines(runs))
+    return FileScan(path, keys, notices, truncation, cuts, digest, origin)
 
 
 @dataclass(frozen=True)

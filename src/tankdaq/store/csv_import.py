@@ -21,7 +21,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +78,36 @@ def read_csv_file(
     in ``meta[NOTICES]``."""
     path = Path(path)
     table, header = _read_columns(path, options)
+    notices = [f"{path.name}: read as {table.dialect.describe()}"] if not table.dialect.plain else []
+    if table.ignored:
+        notices.append(f"{path.name}: text columns not read: {', '.join(table.ignored)}")
+    found = ColumnData(table.columns, dict.fromkeys(table.ignored, "holds text"), header, notices=notices)
+    return runs_of_columns(path, found, options, axis)
+
+
+@dataclass
+class ColumnData:
+    """What a file's reader found: its numeric columns by name (each one value per row), the columns it
+    left out and why (``holds text``), a ``tankdaq export``'s metadata (else empty), the unit the file
+    states for a column (an HDF5 ``unit`` attribute: read as a name's unit suffix is), and its lines
+    for the user."""
+
+    columns: dict[str, np.ndarray]
+    ignored: dict[str, str]
+    header: dict[str, object]
+    stated: dict[str, str] = field(default_factory=dict)
+    notices: list[str] = field(default_factory=list)
+
+
+def runs_of_columns(
+    path: Path, data: ColumnData, options: CsvOptions = DEFAULT_CSV, axis: str | None = None
+) -> list[DecayRun]:
+    """The runs of a file's columns (a CSV's, or another column file's: ``store.column_files``), as
+    ``read_csv_file`` makes them."""
+    columns, header = dict(data.columns), data.header
+    rows = len(next(iter(columns.values()))) if columns else 0
+    if rows < MIN_SAMPLES:
+        raise BadIdentificationInput(f"{path}: {rows} data rows; a decay needs at least {MIN_SAMPLES}")
     if axis is None and "axis" in header and header["axis"] not in ("roll", "pitch"):
         raise InputError(
             f"{path}: its metadata says axis {json.dumps(header['axis'])[:40]}: fix it to roll or pitch, or "
@@ -86,7 +116,6 @@ def read_csv_file(
     axis = axis or str(header.get("axis", "roll"))
     if axis not in ("roll", "pitch"):
         raise InputError(f"axis {axis!r} not understood: use roll or pitch")
-    columns = table.columns
     angle_col, given_unit, rate_col = options.angle_col, options.angle_unit, options.rate_col
     si_columns = ("angle_rad", "rate_rad_s")  # an export's angle and rate; before the sidecar: these
     if header and axis_columns(axis)[0] in columns:
@@ -94,17 +123,16 @@ def read_csv_file(
     if angle_col == "angle_deg" and "angle_deg" not in columns and si_columns[0] in columns:  # SI (export)
         angle_col, given_unit = si_columns[0], "rad"
         rate_col = si_columns[1] if rate_col == DEFAULT_RATE_COL else rate_col
-    _check_columns(path, table, options.time_col, angle_col, rate_col)
-    notices = [f"{path.name}: read as {table.dialect.describe()}"] if not table.dialect.plain else []
-    if table.ignored:
-        notices.append(f"{path.name}: text columns not read: {', '.join(table.ignored)}")
+    _check_columns(path, data, options.time_col, angle_col, rate_col)
+    notices = list(data.notices)
     t_raw, angle_raw = columns.pop(options.time_col), columns.pop(angle_col)
+    said = data.stated
     if header and angle_col == si_columns[0] and options.time_col == "time_s":  # an export says its units
         units = (UnitChoice("rad"), UnitChoice("s"))
     else:
         units = (
-            angle_unit(angle_col, angle_raw, given_unit),
-            time_unit(options.time_col, t_raw, angle_raw, options.time_unit),
+            angle_unit(angle_col, angle_raw, given_unit, said.get(angle_col)),
+            time_unit(options.time_col, t_raw, angle_raw, options.time_unit, said.get(options.time_col)),
         )
     notices += [f"{path.name}: {choice.line}" for choice in units if choice.line]
     to_rad, to_s = ANGLE_UNITS[units[0].unit], TIME_UNITS[units[1].unit]
@@ -131,13 +159,13 @@ def read_csv_file(
     return [run]
 
 
-def _check_columns(path: Path, table: Table, time_col: str, angle_col: str, rate_col: str | None) -> None:
+def _check_columns(path: Path, data: ColumnData, time_col: str, angle_col: str, rate_col: str | None) -> None:
     """The columns asked for exist, are numbers, and are not the same column twice."""
-    columns = table.columns
+    columns = data.columns
     for label, name in (("time", time_col), ("angle", angle_col)):
         if name not in columns:
-            text = name in table.ignored
-            what = f"the {label} column {name!r} holds text" if text else f"no {label} column {name!r}"
+            why = data.ignored.get(name)
+            what = f"the {label} column {name!r} {why}" if why else f"no {label} column {name!r}"
             raise InputError(
                 f"{path}: {what}; numeric columns are {', '.join(columns)} (choose with --{label}-col)"
             )
@@ -191,9 +219,6 @@ def _read_columns(path: Path, options: CsvOptions) -> tuple[Table, dict[str, obj
         exported = fh.read(len(EXPORT_MARK) + 3).lstrip(b"\xef\xbb\xbf").startswith(EXPORT_MARK.encode())
     table = read_table(path, wanted, skip_rows=1 if exported else 0)  # an old export's units row
     header = sidecar if sidecar is not None else _metadata(table.comments) if exported else {}
-    rows = len(next(iter(table.columns.values()))) if table.columns else 0
-    if rows < MIN_SAMPLES:
-        raise BadIdentificationInput(f"{path}: {rows} data rows; a decay needs at least {MIN_SAMPLES}")
     return table, header
 
 

@@ -6,7 +6,8 @@ confidently wrong answer (c3 scaled by 3283, a period a thousand times long). Th
 differ by a factor (57.3, 1000), so the data decide: a model decay swings by 0.5-45 deg
 (``AMPLITUDE_DEG``) with a natural period of 0.3-60 s (``PERIOD_S``), sampled every 0.2 ms to 0.2 s
 (``STEP_S``). Without a unit given, the one reading that is a decay wins, with one line saying so
-(a column name ending ``_deg``/``_rad``/``_s``/``_ms`` breaks a tie); a unit given that makes no decay
+(a column name ending ``_deg``/``_rad``/``_s``/``_ms``, or the unit a file states for the column,
+breaks a tie); a unit given that makes no decay
 while the other does, and a record no unit makes a decay of, are refused in one line.
 """
 
@@ -26,6 +27,14 @@ TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "tick": 1e-4}
 DATA_TIME_UNITS = ("s", "ms")
 #: Time columns that are an Xsens device's SampleTimeFine (MT Manager's export, a logger of the packets).
 TICK_COLUMNS = ("sampletimefine",)
+#: How other tools write those units in a file (an HDF5 ``unit`` attribute), lower case -> the unit.
+UNIT_SPELLINGS = {
+    **{name: "deg" for name in ("deg", "degree", "degrees", "\N{DEGREE SIGN}")},
+    **{name: "rad" for name in ("rad", "radian", "radians")},
+    **{name: "s" for name in ("s", "sec", "second", "seconds")},
+    **{name: "ms" for name in ("ms", "millisecond", "milliseconds")},
+    **{name: "tick" for name in ("tick", "ticks", "0.1 ms")},
+}
 #: A model decay's largest swing from equilibrium, deg (below it: sensor noise; above it: capsizing).
 AMPLITUDE_DEG = (0.5, 45.0)
 #: A model decay's natural period, s (a small model's pitch to a large model's roll).
@@ -42,6 +51,13 @@ class UnitChoice:
 
     unit: str
     line: str | None = None
+
+
+def stated_unit(text: object) -> str | None:
+    """The angle or time unit a file's own unit text names (``UNIT_SPELLINGS``); None for any other."""
+    if isinstance(text, bytes):
+        text = text.decode("utf-8", "replace")
+    return UNIT_SPELLINGS.get(text.strip().lower()) if isinstance(text, str) else None
 
 
 def amplitude(angle: np.ndarray) -> float:
@@ -73,8 +89,9 @@ def _suffix_unit(column: str, units: dict[str, float]) -> str | None:
     return next((unit for unit in units if column.lower().endswith(f"_{unit}")), None)
 
 
-def angle_unit(column: str, angle: np.ndarray, given: str | None) -> UnitChoice:
-    """The unit of the angle column: ``given`` when it makes a decay (else refused), else decided."""
+def angle_unit(column: str, angle: np.ndarray, given: str | None, stated: str | None = None) -> UnitChoice:
+    """The unit of the angle column: ``given`` when it makes a decay (else refused), else decided; what
+    the file says (``stated``, else the name's suffix) when both units would be a decay."""
     size = amplitude(angle)
     degrees = {unit: size * scale * 180.0 / math.pi for unit, scale in ANGLE_UNITS.items()}
     low, high = AMPLITUDE_DEG
@@ -98,7 +115,7 @@ def angle_unit(column: str, angle: np.ndarray, given: str | None) -> UnitChoice:
                 f"({degrees[plausible[0]]:.3g} deg): use --angle-unit {plausible[0]} or leave it out"
             )
         return UnitChoice(given)
-    named = _suffix_unit(column, ANGLE_UNITS)
+    named = stated or _suffix_unit(column, ANGLE_UNITS)
     if len(plausible) == 1:
         unit = plausible[0]
         said = None if unit == (named or "deg") else f"angle unit: {unit} ({column!r}: {looks}; "
@@ -113,9 +130,12 @@ def angle_unit(column: str, angle: np.ndarray, given: str | None) -> UnitChoice:
     return UnitChoice(unit)  # too small in either unit: the motion check speaks
 
 
-def time_unit(column: str, t: np.ndarray, angle: np.ndarray, given: str | None) -> UnitChoice:
-    """The unit of the time column: ``given`` when it makes a decay (else refused), else decided. A column
-    that goes back in time is refused first: its period and step mean nothing (rows out of order)."""
+def time_unit(
+    column: str, t: np.ndarray, angle: np.ndarray, given: str | None, stated: str | None = None
+) -> UnitChoice:
+    """The unit of the time column: ``given`` when it makes a decay (else refused), else decided, as
+    ``angle_unit`` is. A column that goes back in time is refused first: its period and step mean
+    nothing (rows out of order)."""
     finite = t[np.isfinite(t)]
     back = np.flatnonzero(np.diff(finite) <= 0)
     if back.size:
@@ -127,7 +147,7 @@ def time_unit(column: str, t: np.ndarray, angle: np.ndarray, given: str | None) 
     found = period(t, angle)
     steps = np.diff(t[np.isfinite(t)])
     step = float(np.median(steps)) if steps.size else math.nan
-    named = "tick" if column.lower() in TICK_COLUMNS else _suffix_unit(column, TIME_UNITS)
+    named = stated or ("tick" if column.lower() in TICK_COLUMNS else _suffix_unit(column, TIME_UNITS))
     units = {unit: scale for unit, scale in TIME_UNITS.items() if unit in (*DATA_TIME_UNITS, named, given)}
     seconds = {unit: (found or math.nan) * scale for unit, scale in units.items()}
     step_s = {unit: step * scale for unit, scale in units.items()}

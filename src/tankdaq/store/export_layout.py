@@ -10,8 +10,9 @@ root attributes and inside Parquet as schema metadata, always marked ``"format":
 
 from __future__ import annotations
 
+import contextlib
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -75,8 +76,20 @@ def read_h5_metadata(path: Path) -> dict[str, object] | None:
     import h5py
 
     with h5py.File(path, "r") as h5:
-        found = {key: h5.attrs[key] for key in h5.attrs}
+        found = {key: plain_value(h5.attrs[key]) for key in h5.attrs}
     return found if found.get("format") == EXPORT_FORMAT else None
+
+
+def plain_value(value: object) -> object:
+    """A value read from HDF5 or MATLAB as JSON would hold it: arrays as lists, numpy scalars as
+    numbers, bytes as text."""
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    if isinstance(value, np.ndarray):
+        return [plain_value(v) for v in value.tolist()]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
 
 
 def read_parquet_metadata(path: Path) -> dict[str, object] | None:
@@ -98,9 +111,9 @@ def read_parquet_metadata(path: Path) -> dict[str, object] | None:
 
 
 def read_mat_metadata(path: Path) -> dict[str, object] | None:
-    """The metadata of a MATLAB file ``tankdaq export`` wrote (its struct ``tankdaq``'s ``meta``, lists
-    and booleans as the JSON text they were written as); None for another tool's .mat file. A file
-    scipy cannot read raises ``ValueError`` or ``OSError``."""
+    """The metadata of a MATLAB file ``tankdaq export`` wrote (its struct ``tankdaq``'s ``meta``, the lists
+    and booleans written as JSON text read back); None for another tool's .mat file. A file scipy
+    cannot read raises ``ValueError`` or ``OSError``."""
     from scipy.io import loadmat, whosmat
 
     try:
@@ -111,27 +124,98 @@ def read_mat_metadata(path: Path) -> dict[str, object] | None:
         raise
     except Exception as exc:  # scipy fails in many ways on bytes that are no MATLAB file (IndexError...)
         raise ValueError(f"{type(exc).__name__}: {exc}") from None
-    meta = struct.get("meta") if isinstance(struct, dict) else None
+    return mat_export_meta(struct.get("meta") if isinstance(struct, dict) else None)
+
+
+def mat_export_meta(meta: object) -> dict[str, object] | None:
+    """An export's ``tankdaq.meta`` struct as JSON would hold it (the values ``store.export_writers``
+    wrote as JSON text, lists and booleans, read back); None when it is not an export's."""
     if not isinstance(meta, dict) or meta.get("format") != EXPORT_FORMAT:
         return None
-    return {str(key): value.item() if isinstance(value, np.generic) else value for key, value in meta.items()}
+    found: dict[str, object] = {}
+    for key, value in meta.items():
+        if isinstance(value, str) and (value[:1] in ("[", "{") or value in ("true", "false")):
+            with contextlib.suppress(json.JSONDecodeError):
+                value = json.loads(value)
+        found[str(key)] = plain_value(value)
+    return found
 
 
-def exports_among(paths: Sequence[Path]) -> dict[Path, Path]:
-    """The CSV exports among ``paths`` whose own recording is among them too (export -> recording). Read
-    both, each decay would count twice: as a repeat, narrowing every interval. An export names its
-    recording in its sidecar (``source``, as given to ``tankdaq export``): found at that path, or by
-    that name in the export's own folder (the default, ``export`` writes beside each recording)."""
+def export_metadata_of(path: Path) -> dict[str, object] | None:
+    """The metadata of any file ``tankdaq export`` wrote (a CSV's sidecar, HDF5 root attributes, Parquet
+    schema metadata, a .mat file's ``tankdaq.meta``); None for a recording, another tool's file, or one
+    that cannot be read here (its reader says why when the decays are read)."""
+    readers = {".csv": read_sidecar, ".h5": read_h5_metadata, ".hdf5": read_h5_metadata}
+    readers |= {".parquet": read_parquet_metadata, ".mat": read_mat_metadata}
+    reader = readers.get(path.suffix.lower())
+    try:
+        return reader(path) if reader is not None else None
+    except (ImportError, OSError, ValueError, TypeError, KeyError):
+        return None
+
+
+@dataclass(frozen=True)
+class ExportOrigin:
+    """Which decays an export holds: its recording (``source`` as given to ``tankdaq export``, and the
+    recording's ``created_utc``) and its releases on the device clock (ms), so two exports of one
+    recording (HDF5 and MATLAB, or renamed) are known as the same decays."""
+
+    source: str
+    created_utc: str
+    releases: frozenset[float]
+
+    @classmethod
+    def of(cls, meta: Mapping[str, object] | None) -> ExportOrigin | None:
+        """The origin an export's metadata gives; None for any other file's, or an edited one's."""
+        if meta is None or meta.get("format") != EXPORT_FORMAT:
+            return None
+        source, created, origin = meta.get("source"), meta.get("created_utc"), meta.get("time_origin_s", 0.0)
+        releases = meta.get("release_t_s")
+        if not (isinstance(source, str) and source and isinstance(created, str)):
+            return None
+        if not isinstance(releases, list):
+            return None
+        try:
+            held = frozenset(round(float(origin) + float(r), 3) for r in releases)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            return None
+        return cls(source, created, held)
+
+    def same_recording(self, other: ExportOrigin) -> bool:
+        return Path(self.source).name == Path(other.source).name and self.created_utc == other.created_utc
+
+
+def exports_read_twice(
+    paths: Sequence[Path], origins: Mapping[Path, ExportOrigin | None] | None = None
+) -> dict[Path, str]:
+    """The exports among ``paths`` (any format) whose decays another file among them holds, each with
+    why. Read both, each decay would count twice: as a repeat, narrowing every interval.
+
+    - An export of a recording that is among them: it names its recording (``source``), found at that
+      path or by that name in the export's own folder (``export`` writes beside each recording).
+    - An export of the same decays as an earlier one (the recording exported to HDF5 and MATLAB, or a
+      copy renamed): the one holding the most decays is kept.
+
+    ``origins``: each file's ``ExportOrigin`` where the caller has it (a campaign's workers read it as
+    they scan); else read here from each file's metadata."""
+    if origins is None:
+        origins = {path: ExportOrigin.of(export_metadata_of(path)) for path in paths}
     recordings = {path.resolve(): path for path in paths if path.suffix.lower() == ".mcap"}
-    found: dict[Path, Path] = {}
-    for path in paths:
-        meta = read_sidecar(path) if path.suffix.lower() == ".csv" else None
-        source = meta.get("source") if meta is not None else None
-        if not isinstance(source, str) or not source:
-            continue
-        for candidate in (Path(source), path.parent / Path(source).name):
+    twice: dict[Path, str] = {}
+    exported = [(path, origin) for path in paths if (origin := origins.get(path)) is not None]
+    for path, origin in exported:
+        for candidate in (Path(origin.source), path.parent / Path(origin.source).name):
             recording = recordings.get(candidate.resolve())
             if recording is not None:
-                found[path] = recording
+                twice[path] = f"is the export of {recording}"
                 break
-    return found
+    kept: list[tuple[Path, ExportOrigin]] = []
+    for path, origin in sorted(exported, key=lambda found: -len(found[1].releases)):
+        if path in twice:
+            continue
+        first = next((p for p, o in kept if o.same_recording(origin) and origin.releases <= o.releases), None)
+        if first is not None:
+            twice[path] = f"holds the same decays as {first} (exports of {Path(origin.source).name})"
+        else:
+            kept.append((path, origin))
+    return twice

@@ -14,11 +14,14 @@ from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 from ..errors import InputError
 from ..records import DecayRun
-from .csv_import import DEFAULT_CSV, CsvOptions, read_csv_file
+from .csv_import import DEFAULT_CSV, CsvOptions, read_csv_file, runs_of_columns
+
+if TYPE_CHECKING:
+    from .export_layout import ExportOrigin
 
 T = TypeVar("T")
 
@@ -44,10 +47,26 @@ def _read_csv(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRu
     return read_csv_file(path, options, axis)
 
 
-#: Suffix (lower case) -> format.
+def _column_reader(name: str) -> Callable[[Path, str | None, CsvOptions], list[DecayRun]]:
+    """The runs of a column file (``store.column_files``: HDF5, MATLAB, Parquet), read as a CSV's."""
+
+    def read(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun]:
+        from . import column_files
+
+        return runs_of_columns(path, getattr(column_files, name)(path, options), options, axis)
+
+    return read
+
+
+#: Suffix (lower case) -> format. A column file's test condition comes from its metadata when
+#: ``tankdaq export`` wrote it, else from its name or sidecar, as a CSV's.
 INPUT_FORMATS: dict[str, InputFormat] = {
     ".mcap": InputFormat("tankdaq recording", _read_mcap, self_labelled=True),
     ".csv": InputFormat("CSV", _read_csv, self_labelled=False),
+    ".h5": InputFormat("HDF5", _column_reader("read_h5_columns"), self_labelled=False),
+    ".hdf5": InputFormat("HDF5", _column_reader("read_h5_columns"), self_labelled=False),
+    ".mat": InputFormat("MATLAB", _column_reader("read_mat_columns"), self_labelled=False),
+    ".parquet": InputFormat("Parquet", _column_reader("read_parquet_columns"), self_labelled=False),
 }
 
 
@@ -55,9 +74,16 @@ def by_suffix(path: str | Path, table: Mapping[str, T], what: str = "decays") ->
     """``table``'s entry for the file's suffix; an unknown one is one line naming the known ones."""
     suffix = Path(path).suffix.lower()
     if suffix not in table:
-        known = " or ".join(table)
-        raise InputError(f"{path}: unknown file type {suffix or '(no suffix)'}; {what}: use a {known} file")
+        raise InputError(
+            f"{path}: unknown file type {suffix or '(no suffix)'}; {what}: use a {suffixes(table)} file"
+        )
     return table[suffix]
+
+
+def suffixes(table: Mapping[str, object]) -> str:
+    """The suffixes of a table, as a line names them: ``.mcap, .csv or .h5``."""
+    names = list(table)
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
 
 
 def input_format(path: str | Path) -> InputFormat:
@@ -72,15 +98,20 @@ def read_runs(path: str | Path, axis: str | None = None, csv: CsvOptions = DEFAU
     return input_format(path).read(Path(path), axis, csv)
 
 
-def read_twice(paths: Sequence[Path], digests: Mapping[Path, str] | None = None) -> dict[Path, str]:
+def read_twice(
+    paths: Sequence[Path],
+    digests: Mapping[Path, str] | None = None,
+    origins: Mapping[Path, ExportOrigin | None] | None = None,
+) -> dict[Path, str]:
     """The files among ``paths`` whose decays another one among them holds already, each with why:
-    a byte-for-byte copy of an earlier file (the same folder copied into a "selected" one), or a CSV
-    export whose recording is read (``export_layout.exports_among``). Read twice, a decay would count as
-    two repeats and narrow every interval. ``digests``: each file's SHA-256 where the caller has it (a
-    campaign's workers hash what they scan); else only files of equal size are hashed, here."""
-    from .export_layout import exports_among
+    a byte-for-byte copy of an earlier file (the same folder copied into a "selected" one), or an
+    export of decays read from another file (``export_layout.exports_read_twice``). Read twice, a decay
+    would count as two repeats and narrow every interval. ``digests`` and ``origins``: each file's
+    SHA-256 and ``ExportOrigin`` where the caller has them (a campaign's workers find them as they
+    scan); else only files of equal size are hashed, here, and the exports' metadata read."""
+    from .export_layout import exports_read_twice
 
-    twice = {export: f"is the export of {recording}" for export, recording in exports_among(paths).items()}
+    twice = exports_read_twice(paths, origins)
     if digests is None:
         by_size: dict[int, list[Path]] = defaultdict(list)
         for path in paths:

@@ -1,0 +1,186 @@
+"""Decays from the column files other tools write: HDF5 (h5py), MATLAB (scipy.io; a v7.3 file is HDF5)
+and Parquet (pyarrow, ``pip install 'tankdaq[parquet]'``).
+
+A lab's archive keeps runs in these (SSPA's run database points at each run's HDF5 file), and
+``tankdaq export`` writes them. Each reader gives what a CSV gives (``csv_import.ColumnData``): the
+numeric columns of one length, what it left out, a ``tankdaq export``'s metadata, and the unit a column
+states; ``csv_import.runs_of_columns`` then reads them exactly as a CSV's, so the columns, the units
+decided from the data and every check are the same.
+
+Columns are named as the file names them: an HDF5 dataset by its path (``roll`` at the root,
+``run/roll`` in a group), a MATLAB variable by its name and a struct's field as ``s.roll`` (an export's
+struct ``tankdaq`` by the field alone), a Parquet column by its name.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from ..validation import input_file
+from .csv_import import ColumnData, CsvOptions
+from .csv_units import stated_unit
+from .export_layout import EXPORT_FORMAT, mat_export_meta, plain_value
+
+#: What a MATLAB v7.3 file (HDF5 with a 512-byte header) starts with.
+MAT73_MARK = b"MATLAB 7.3 MAT-file"
+#: Why a dataset or variable is not a column.
+NOT_A_VECTOR = "is not a vector of numbers"
+#: The struct ``tankdaq export`` writes a .mat file's columns into.
+EXPORT_STRUCT = "tankdaq"
+
+
+def read_h5_columns(path: Path, options: CsvOptions) -> ColumnData:
+    """The 1-D numeric datasets of an HDF5 file (and the fields of a 1-D table of records), their ``unit``
+    attributes, and the root attributes of a ``tankdaq export``."""
+    h5py = _library(path, "h5py", "HDF5", "h5py")
+    columns: dict[str, np.ndarray] = {}
+    stated: dict[str, str] = {}
+    left: dict[str, str] = {}
+
+    def take(name: str, node: Any) -> None:
+        if not isinstance(node, h5py.Dataset):
+            return
+        if node.dtype.names:  # a table of records: each numeric field a column
+            if node.ndim == 1:
+                for field in node.dtype.names:
+                    _take(f"{name}/{field}", node[field], columns, left)
+            else:
+                left[name] = NOT_A_VECTOR
+            return
+        if node.dtype.kind not in "biuf" or len(node.shape) not in (1, 2) or node.size != max(node.shape):
+            left[name] = NOT_A_VECTOR  # a matrix, a scalar or text (a vector is N, N x 1 or 1 x N)
+        elif _take(name, node[()], columns, left):
+            unit = stated_unit(node.attrs.get("unit", node.attrs.get("units")))
+            if unit is not None:
+                stated[name] = unit
+
+    input_file(path)
+    try:
+        with h5py.File(path, "r") as h5:
+            h5.visititems(take)
+            attrs = {key: plain_value(h5.attrs[key]) for key in h5.attrs}
+    except OSError as exc:
+        raise InputError(f"{path}: not an HDF5 file h5py can read ({exc})") from None
+    header = attrs if attrs.get("format") == EXPORT_FORMAT else {}
+    return _one_length(path, ColumnData(columns, left, header, stated), options, "datasets")
+
+
+def read_mat_columns(path: Path, options: CsvOptions) -> ColumnData:
+    """The numeric vectors of a MATLAB file (variables, and the fields of a struct), and the metadata of
+    a ``tankdaq export``'s struct; a v7.3 file (HDF5) through ``read_h5_columns``, its fields named
+    with a dot as MATLAB names them."""
+    input_file(path)
+    with path.open("rb") as fh:
+        if fh.read(len(MAT73_MARK)) == MAT73_MARK:
+            found = read_h5_columns(path, options)
+            found.columns = {name.replace("/", "."): values for name, values in found.columns.items()}
+            found.stated = {name.replace("/", "."): unit for name, unit in found.stated.items()}
+            return found
+    loadmat = _library(path, "scipy.io", "MATLAB", "scipy").loadmat
+    try:
+        variables = loadmat(path, simplify_cells=True)
+    except OSError:
+        raise
+    except Exception as exc:  # scipy fails in many ways on bytes that are no MATLAB file (IndexError...)
+        raise InputError(f"{path}: not a MATLAB file scipy can read ({type(exc).__name__}: {exc})") from None
+    columns: dict[str, np.ndarray] = {}
+    left: dict[str, str] = {}
+    header: dict[str, object] = {}
+    for name, value in variables.items():
+        if name.startswith("__"):
+            continue
+        if isinstance(value, dict):
+            export = name == EXPORT_STRUCT and mat_export_meta(value.get("meta"))
+            if export:
+                header = export
+            for field, inner in value.items():
+                if not (export and field in ("meta", "units")):
+                    _take(field if export else f"{name}.{field}", inner, columns, left)
+        else:
+            _take(name, value, columns, left)
+    return _one_length(path, ColumnData(columns, left, header), options, "variables")
+
+
+def read_parquet_columns(path: Path, options: CsvOptions) -> ColumnData:
+    """The numeric columns of a Parquet file, their fields' ``unit`` metadata, and the metadata of a
+    ``tankdaq export`` (the JSON under the schema key ``tankdaq``)."""
+    parquet = _library(path, "pyarrow.parquet", "Parquet", "pyarrow: pip install 'tankdaq[parquet]'")
+    input_file(path)
+    try:
+        table = parquet.read_table(path)
+    except Exception as exc:  # pyarrow's own errors (ArrowInvalid...), whatever the bytes were
+        why = f"{type(exc).__name__}: {exc}"
+        raise InputError(f"{path}: not a Parquet file pyarrow can read ({why})") from None
+    columns: dict[str, np.ndarray] = {}
+    stated: dict[str, str] = {}
+    left: dict[str, str] = {}
+    for field in table.schema:
+        values = table.column(field.name).to_numpy(zero_copy_only=False)
+        if _take(field.name, values, columns, left):
+            unit = stated_unit((field.metadata or {}).get(b"unit"))
+            if unit is not None:
+                stated[field.name] = unit
+    try:
+        meta = json.loads((table.schema.metadata or {}).get(b"tankdaq", b"null"))
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        meta = None
+    header = meta if isinstance(meta, dict) and meta.get("format") == EXPORT_FORMAT else {}
+    return _one_length(path, ColumnData(columns, left, header, stated), options, "columns")
+
+
+def _library(path: Path, module: str, kind: str, install: str) -> Any:
+    """The library a file kind is read with; one line naming what to install where it is missing."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        raise InputError(f"{path}: reading a {kind} file needs {install}") from None
+
+
+def _take(name: str, value: object, columns: dict[str, np.ndarray], left: dict[str, str]) -> bool:
+    """A value as a column when it is a vector of numbers (a MATLAB column or row, N x 1 or 1 x N);
+    else its name among those left out. True when taken."""
+    array = np.asarray(value) if isinstance(value, np.ndarray | list) else None
+    if array is not None and array.ndim == 2 and 1 in array.shape:
+        array = array.reshape(-1)
+    if array is None or array.ndim != 1 or array.dtype.kind not in "biuf" or array.size == 0:
+        left[name] = NOT_A_VECTOR
+        return False
+    columns[name] = array.astype(float) if array.dtype.kind == "b" else array
+    return True
+
+
+def _one_length(path: Path, data: ColumnData, options: CsvOptions, what: str) -> ColumnData:
+    """The columns of the record the time column belongs to (the most common length without one); those
+    of another length, and what was not a vector of numbers, said in one line."""
+    if not data.columns:
+        raise InputError(
+            f"{path}: no {what} that are vectors of numbers; a decay needs a time and an angle column"
+        )
+    lengths = Counter(len(values) for values in data.columns.values())
+    time = data.columns.get(options.time_col)
+    rows = len(time) if time is not None else lengths.most_common(1)[0][0]
+    other = [name for name, values in data.columns.items() if len(values) != rows]
+    data.columns = {name: values for name, values in data.columns.items() if len(values) == rows}
+    if data.ignored:
+        data.notices.append(
+            f"{path.name}: {what} not read (not vectors of numbers): {_names(list(data.ignored))}"
+        )
+    if other:
+        longer = f"is not {rows} values long, as {options.time_col!r} is" if time is not None else None
+        data.notices.append(f"{path.name}: {what} not read (not {rows} values long): {_names(other)}")
+        data.ignored |= dict.fromkeys(other, longer or f"is not {rows} values long, as most are")
+    return data
+
+
+def _names(names: list[str]) -> str:
+    """Up to eight names, then how many more."""
+    more = f" and {len(names) - 8} more" if len(names) > 8 else ""
+    return ", ".join(names[:8]) + more
