@@ -97,7 +97,8 @@ def diagnose_command(
     simulation: list[str] = typer.Option(
         None,
         "--simulation",
-        help="Compare with a simulation: a CSV or MCAP file (repeatable), hull (--hull, --draft), or ikeda.",
+        help="Compare with a simulation: a decay file (.csv .h5 .mat .parquet .mcap), hull or ikeda "
+        "(repeatable).",
     ),
     sim_time_col: SimTimeColumn = None,
     sim_angle_col: SimAngleColumn = None,
