@@ -6,10 +6,12 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test lint docs bench clean venv viewer-test-deps catalogue-test-deps
 
+# --no-compile: pip byte-compiles every module of every package it installs, 45 s of a 96 s install on
+# this machine (docs/benchmarks.md); Python compiles the modules a run imports, once, when first imported.
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -60,11 +62,12 @@ catalogue-test-deps:
 		echo "make: apt-get could not install postgresql; the PostgreSQL catalogue tests skip"; \
 	fi
 
-# The kernels build on one core while the lint, the type check and the docs run on the other.
+# The kernels build, then the docs, on one core while the lint and the type check run on the other
+# (about 45 and 50 s on this machine; the docs after the kernels: no two processes build one kernel).
 test: $(STAMP) viewer-test-deps catalogue-test-deps
-	$(BIN)/python -m tankdaq.prepare & prepare=$$!; \
-		$(MAKE) --no-print-directory lint docs; checked=$$?; \
-		wait $$prepare && exit $$checked
+	($(BIN)/python -m tankdaq.prepare && $(MAKE) --no-print-directory docs) & built=$$!; \
+		$(MAKE) --no-print-directory lint; checked=$$?; \
+		wait $$built && exit $$checked
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal --durations=25
 
 bench: $(STAMP)

@@ -7,6 +7,7 @@ signals (reference §4), so it is not the answer.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Sequence
 
@@ -40,10 +41,21 @@ def exogenous_input(run: DecayRun, channel: str | None, cutoff_hz: float | None 
     centred = values - np.mean(values)
     if centred.size < 30:
         return centred
-    from scipy.signal import butter, sosfiltfilt  # about a second to import: only when asked for
+    from scipy.signal import sosfiltfilt  # about a second to import: only when asked for
 
-    sos = butter(4, min(cutoff_hz, 0.4 * run.sample_rate), fs=run.sample_rate, output="sos")
-    return sosfiltfilt(sos, centred)
+    sos = _low_pass(min(cutoff_hz, 0.4 * run.sample_rate), run.sample_rate)
+    return sosfiltfilt(sos.copy(), centred)  # a copy: scipy's filter takes a writable array
+
+
+@functools.lru_cache(maxsize=64)
+def _low_pass(cutoff_hz: float, sample_rate_hz: float) -> np.ndarray:
+    """The 4th-order Butterworth low-pass of ``exogenous_input`` (second-order sections), designed once
+    per cutoff and rate: a diagnosis asks for it at every fit of every run (a tenth of a draw's time)."""
+    from scipy.signal import butter
+
+    sos = butter(4, cutoff_hz, fs=sample_rate_hz, output="sos")
+    sos.flags.writeable = False  # shared by every caller: never changed
+    return sos
 
 
 def check_runs(runs: Sequence[DecayRun] | DecayRun) -> list[DecayRun]:
