@@ -158,6 +158,22 @@ def _cli(*args: object) -> tuple[int, list[str]]:
     return result.exit_code, [line for line in result.stderr.splitlines() if line.strip()]
 
 
+@pytest.mark.skipif(
+    __import__("importlib").util.find_spec("pyarrow") is None, reason="the parquet extra is not installed"
+)
+def test_timestamps_in_a_parquet_file_are_seconds_from_the_first_and_said(tmp_path: Path) -> None:
+    t = np.arange(3000) * 0.01
+    start = pd.Timestamp("2026-03-12 14:30:05")
+    frame = pd.DataFrame({"stamp": start + pd.to_timedelta(t, unit="s"), "heel": _decay(np.radians(6.0))})
+    frame.to_parquet(tmp_path / "logger.parquet")
+    rec = tankdaq.read(tmp_path / "logger.parquet", time_col="stamp", angle_col="heel", rate_col=None)
+    assert rec.decays[0].duration_s == pytest.approx(29.99, abs=0.011)
+    assert rec.decays[0].initial_angle_deg == pytest.approx(6.0, rel=0.01)
+    assert any(
+        "column 'stamp': timestamps read as seconds from the first (2026-03-12" in n for n in rec.notices
+    )
+
+
 def test_a_broken_or_foreign_column_file_is_one_line(tmp_path: Path) -> None:
     (tmp_path / "cut.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(40))
     (tmp_path / "cut.mat").write_bytes(b"MATLAB 5.0 MAT-file, cut")

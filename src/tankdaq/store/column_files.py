@@ -42,6 +42,7 @@ def read_h5_columns(path: Path, options: CsvOptions) -> ColumnData:
     columns: dict[str, np.ndarray] = {}
     stated: dict[str, str] = {}
     left: dict[str, str] = {}
+    said: list[str] = []
 
     def take(name: str, node: Any) -> None:
         if not isinstance(node, h5py.Dataset):
@@ -49,13 +50,13 @@ def read_h5_columns(path: Path, options: CsvOptions) -> ColumnData:
         if node.dtype.names:  # a table of records: each numeric field a column
             if node.ndim == 1:
                 for field in node.dtype.names:
-                    _take(f"{name}/{field}", node[field], columns, left)
+                    _take(f"{name}/{field}", node[field], columns, left, said)
             else:
                 left[name] = NOT_A_VECTOR
             return
         if node.dtype.kind not in "biuf" or len(node.shape) not in (1, 2) or node.size != max(node.shape):
             left[name] = NOT_A_VECTOR  # a matrix, a scalar or text (a vector is N, N x 1 or 1 x N)
-        elif _take(name, node[()], columns, left):
+        elif _take(name, node[()], columns, left, said):
             unit = stated_unit(node.attrs.get("unit", node.attrs.get("units")))
             if unit is not None:
                 stated[name] = unit
@@ -68,7 +69,7 @@ def read_h5_columns(path: Path, options: CsvOptions) -> ColumnData:
     except OSError as exc:
         raise InputError(f"{path}: not an HDF5 file h5py can read ({exc})") from None
     header = attrs if attrs.get("format") == EXPORT_FORMAT else {}
-    return _one_length(path, ColumnData(columns, left, header, stated), options, "datasets")
+    return _one_length(path, ColumnData(columns, left, header, stated, said), options, "datasets")
 
 
 def read_mat_columns(path: Path, options: CsvOptions) -> ColumnData:
@@ -91,6 +92,7 @@ def read_mat_columns(path: Path, options: CsvOptions) -> ColumnData:
         raise InputError(f"{path}: not a MATLAB file scipy can read ({type(exc).__name__}: {exc})") from None
     columns: dict[str, np.ndarray] = {}
     left: dict[str, str] = {}
+    said: list[str] = []
     header: dict[str, object] = {}
     for name, value in variables.items():
         if name.startswith("__"):
@@ -101,10 +103,10 @@ def read_mat_columns(path: Path, options: CsvOptions) -> ColumnData:
                 header = export
             for field, inner in value.items():
                 if not (export and field in ("meta", "units")):
-                    _take(field if export else f"{name}.{field}", inner, columns, left)
+                    _take(field if export else f"{name}.{field}", inner, columns, left, said)
         else:
-            _take(name, value, columns, left)
-    return _one_length(path, ColumnData(columns, left, header), options, "variables")
+            _take(name, value, columns, left, said)
+    return _one_length(path, ColumnData(columns, left, header, notices=said), options, "variables")
 
 
 def read_parquet_columns(path: Path, options: CsvOptions) -> ColumnData:
@@ -120,9 +122,10 @@ def read_parquet_columns(path: Path, options: CsvOptions) -> ColumnData:
     columns: dict[str, np.ndarray] = {}
     stated: dict[str, str] = {}
     left: dict[str, str] = {}
+    said: list[str] = []
     for field in table.schema:
         values = table.column(field.name).to_numpy(zero_copy_only=False)
-        if _take(field.name, values, columns, left):
+        if _take(field.name, values, columns, left, said):
             unit = stated_unit((field.metadata or {}).get(b"unit"))
             if unit is not None:
                 stated[field.name] = unit
@@ -131,7 +134,7 @@ def read_parquet_columns(path: Path, options: CsvOptions) -> ColumnData:
     except (UnicodeDecodeError, json.JSONDecodeError):
         meta = None
     header = meta if isinstance(meta, dict) and meta.get("format") == EXPORT_FORMAT else {}
-    return _one_length(path, ColumnData(columns, left, header, stated), options, "columns")
+    return _one_length(path, ColumnData(columns, left, header, stated, said), options, "columns")
 
 
 def _library(path: Path, module: str, kind: str, install: str) -> Any:
@@ -144,12 +147,18 @@ def _library(path: Path, module: str, kind: str, install: str) -> Any:
         raise InputError(f"{path}: reading a {kind} file needs {install}") from None
 
 
-def _take(name: str, value: object, columns: dict[str, np.ndarray], left: dict[str, str]) -> bool:
-    """A value as a column when it is a vector of numbers (a MATLAB column or row, N x 1 or 1 x N);
-    else its name among those left out. True when taken."""
+def _take(
+    name: str, value: object, columns: dict[str, np.ndarray], left: dict[str, str], notices: list[str]
+) -> bool:
+    """A value as a column when it is a vector of numbers (a MATLAB column or row, N x 1 or 1 x N), or of
+    times (pandas' timestamps: seconds from the first); else its name among those left out. True when
+    taken."""
     array = np.asarray(value) if isinstance(value, np.ndarray | list) else None
     if array is not None and array.ndim == 2 and 1 in array.shape:
         array = array.reshape(-1)
+    if array is not None and array.ndim == 1 and array.dtype.kind in "mM" and array.size:
+        array = (array - array[0]) / np.timedelta64(1, "ns") * 1e-9  # NaT becomes NaN
+        notices.append(f"column {name!r}: timestamps read as seconds from the first ({np.asarray(value)[0]})")
     if array is None or array.ndim != 1 or array.dtype.kind not in "biuf" or array.size == 0:
         left[name] = NOT_A_VECTOR
         return False
@@ -160,6 +169,7 @@ def _take(name: str, value: object, columns: dict[str, np.ndarray], left: dict[s
 def _one_length(path: Path, data: ColumnData, options: CsvOptions, what: str) -> ColumnData:
     """The columns of the record the time column belongs to (the most common length without one); those
     of another length, and what was not a vector of numbers, said in one line."""
+    data.notices = [f"{path.name}: {line}" for line in data.notices]
     if not data.columns:
         raise InputError(
             f"{path}: no {what} that are vectors of numbers; a decay needs a time and an angle column"

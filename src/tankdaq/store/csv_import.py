@@ -185,7 +185,8 @@ def _release_times(path: Path, value: object) -> list[float]:
         times = [float(v) for v in value]
         if times == sorted(times):
             return times
-    where = sidecar_path(path).name if read_sidecar(path) is not None else "its metadata line"
+    where = "its metadata line" if path.suffix.lower() == ".csv" else "its metadata"
+    where = sidecar_path(path).name if read_sidecar(path) is not None else where
     raise InputError(
         f"{path}: release_t_s = {json.dumps(value)[:60]} in {where} is not a list of increasing times "
         "in s; fix or delete it"
