@@ -26,6 +26,13 @@ from ..errors import InputError
 from ..ident.inputs import input_notices, read_decays
 from ..records import DecayRun
 from ..validation import input_file
+from .prediction_table import (
+    coverage_note,
+    equivalent_model,
+    is_prediction_table,
+    per_unit_inertia,
+    read_prediction_table,
+)
 
 SERIES, MODEL, PREDICTION = "series", "model", "prediction"
 #: A simulated run matches a measured one when their initial angles differ by at most this fraction.
@@ -126,13 +133,41 @@ RESOLVERS: dict[str, Resolver] = {"hull": from_hull, "ikeda": from_ikeda}
 def resolve_simulation(sources: Sequence[str], request: SimulationRequest) -> Simulation:
     """The simulation ``--simulation`` names: a resolver by name, or one or more files (CSV, MCAP)."""
     if not sources:
-        raise InputError("--simulation needs a source: a CSV or MCAP file, hull, or ikeda")
+        raise InputError("--simulation needs a source: a decay file, a damping table, hull, or ikeda")
     named = [s for s in sources if s in RESOLVERS]
     if named and len(sources) > 1:
         raise InputError(f"--simulation {named[0]} stands alone; files are given one --simulation each")
     if named:
         return RESOLVERS[named[0]](request)
-    return from_series([Path(s) for s in sources], request)
+    paths = [Path(s) for s in sources]
+    tables = [path for path in paths if is_prediction_table(path)]
+    if tables and len(paths) > 1:
+        raise InputError(f"--simulation {tables[0]} (a prediction table) stands alone; give one table")
+    return from_table(tables[0], request) if tables else from_series(paths, request)
+
+
+def from_table(path: Path, request: SimulationRequest) -> Simulation:
+    """A damping prediction made elsewhere, a table of damping against amplitude
+    (``diagnose.prediction_table``), as a decay model at the measured period."""
+    if request.axis != "roll":
+        raise InputError(
+            f"--simulation {path.name}: a damping table is a roll prediction; these are {request.axis}"
+        )
+    period_s = dominant_period_s(request.measured)
+    omega = 2.0 * math.pi / period_s
+    amplitudes, damping, column = read_prediction_table(path)
+    b_eq, how = per_unit_inertia(
+        damping, column, request.hull, request.draft, request.axis, omega**2, path.name
+    )
+    model = equivalent_model(amplitudes, b_eq, omega)
+    notes = [
+        f"a damping prediction ({column}, {amplitudes.size} amplitude(s)) at the measured period "
+        f"{period_s:.4g} s",
+        *([how] if how else []),
+    ]
+    if (outside := coverage_note(amplitudes, request.amplitudes_rad())) is not None:
+        notes.append(outside)
+    return Simulation(path.name, PREDICTION, model, notes=tuple(notes))
 
 
 def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation:
