@@ -86,8 +86,6 @@ def read_mat_columns(path: Path, options: CsvOptions) -> ColumnData:
     loadmat = _library(path, "scipy.io", "MATLAB", "scipy").loadmat
     try:
         variables = loadmat(path, simplify_cells=True)
-    except OSError:
-        raise
     except Exception as exc:  # scipy fails in many ways on bytes that are no MATLAB file (IndexError...)
         raise InputError(f"{path}: not a MATLAB file scipy can read ({type(exc).__name__}: {exc})") from None
     columns: dict[str, np.ndarray] = {}
