@@ -70,13 +70,18 @@ INPUT_FORMATS: dict[str, InputFormat] = {
 }
 
 
+#: Spreadsheet workbooks: not read, but said to be what they are (a lab's first try is its Excel file).
+WORKBOOKS = (".xlsx", ".xlsm", ".xls", ".ods", ".numbers")
+
+
 def by_suffix(path: str | Path, table: Mapping[str, T], what: str = "decays") -> T:
     """``table``'s entry for the file's suffix; an unknown one is one line naming the known ones."""
     suffix = Path(path).suffix.lower()
     if suffix not in table:
-        raise InputError(
-            f"{path}: unknown file type {suffix or '(no suffix)'}; {what}: use a {suffixes(table)} file"
-        )
+        kind = suffix or "(no suffix)"
+        if suffix in WORKBOOKS:
+            kind += " (a spreadsheet workbook: save its sheet as CSV)"
+        raise InputError(f"{path}: unknown file type {kind}; {what}: use a {suffixes(table)} file")
     return table[suffix]
 
 
