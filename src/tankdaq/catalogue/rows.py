@@ -18,7 +18,7 @@ from typing import Any
 from .. import __version__
 from ..config import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError
-from ..store.inputs import file_sha256
+from ..store.inputs import INPUT_FORMATS, file_sha256
 from .database import one_line
 
 #: The amplitudes B_eq and B̂44 are kept at (deg): what a lab compares across campaigns.
@@ -176,7 +176,7 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
 #: (``store.inputs.INPUT_FORMATS``), rows of ``decays``; but a file ``tankdaq export`` wrote (HDF5 one file
 #: per decay, Parquet and MATLAB one per recording, a CSV with its ``<stem>.json`` sidecar) is a row of
 #: ``exports``: its recording holds the decay.
-DECAY_SUFFIXES = (".mcap", ".csv", ".h5", ".hdf5", ".parquet", ".mat")
+DECAY_SUFFIXES = tuple(INPUT_FORMATS)
 
 
 def export_metadata(path: Path) -> dict[str, Any] | None:
@@ -187,13 +187,14 @@ def export_metadata(path: Path) -> dict[str, Any] | None:
     from ..store import export_layout
 
     suffix = path.suffix.lower()
-    if suffix in (".csv", ".mcap"):
-        return export_layout.read_sidecar(path) if suffix == ".csv" else None
-    kind, library, reader = {  # what the file is, what reads it (and how to get it), its reader
-        ".h5": ("HDF5", "h5py", export_layout.read_h5_metadata),
-        ".hdf5": ("HDF5", "h5py", export_layout.read_h5_metadata),
-        ".parquet": ("Parquet", "pyarrow: pip install tankdaq[parquet]", export_layout.read_parquet_metadata),
-        ".mat": ("MATLAB", "scipy", export_layout.read_mat_metadata),
+    reader = export_layout.METADATA_READERS.get(suffix)
+    if reader is None or suffix == ".csv":
+        return reader(path) if reader is not None else None
+    kind, library = {  # what the file is, what reads it (and how to get it)
+        ".h5": ("HDF5", "h5py"),
+        ".hdf5": ("HDF5", "h5py"),
+        ".parquet": ("Parquet", "pyarrow: pip install tankdaq[parquet]"),
+        ".mat": ("MATLAB", "scipy"),
     }[suffix]
     try:
         found = reader(path)

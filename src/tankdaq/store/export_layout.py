@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -141,13 +141,21 @@ def mat_export_meta(meta: object) -> dict[str, object] | None:
     return found
 
 
+#: How an export's metadata is read, by the file's suffix (lower case); a recording has none.
+METADATA_READERS: dict[str, Callable[[Path], dict[str, object] | None]] = {
+    ".csv": read_sidecar,
+    ".h5": read_h5_metadata,
+    ".hdf5": read_h5_metadata,
+    ".parquet": read_parquet_metadata,
+    ".mat": read_mat_metadata,
+}
+
+
 def export_metadata_of(path: Path) -> dict[str, object] | None:
     """The metadata of any file ``tankdaq export`` wrote (a CSV's sidecar, HDF5 root attributes, Parquet
     schema metadata, a .mat file's ``tankdaq.meta``); None for a recording, another tool's file, or one
     that cannot be read here (its reader says why when the decays are read)."""
-    readers = {".csv": read_sidecar, ".h5": read_h5_metadata, ".hdf5": read_h5_metadata}
-    readers |= {".parquet": read_parquet_metadata, ".mat": read_mat_metadata}
-    reader = readers.get(path.suffix.lower())
+    reader = METADATA_READERS.get(path.suffix.lower())
     try:
         return reader(path) if reader is not None else None
     except (ImportError, OSError, ValueError, TypeError, KeyError):
