@@ -71,13 +71,15 @@ def test_a_table_reaching_less_far_than_the_decays_says_it_extrapolates(
     measured: Path, tmp_path: Path
 ) -> None:
     runs = cut_free_decays(read_decays(measured), None, None)
-    table = _table(tmp_path / "p.csv", ["Amplitude_deg", "b_eq_per_s"], [[2.0, 0.3], [4.0, 0.35]])
+    rows = [[2.0, 0.3], [3.0, float("inf")], [4.0, 0.35]]  # a cell of 1e400 reads as inf
+    table = _table(tmp_path / "p.csv", ["Amplitude_deg", "b_eq_per_s"], rows)
     simulation = resolve_simulation([str(table)], SimulationRequest(tuple(runs)))
     omega = 2 * math.pi / dominant_period_s(runs)
     assert simulation.coefficients["b2"] == pytest.approx(
         0.05 / (8 / (3 * math.pi) * omega * math.radians(2))
     )
     assert any("the table covers 2-4 deg" in note and "extrapolated" in note for note in simulation.notes)
+    assert "p.csv: 1 row(s) without a finite amplitude and b_eq_per_s left out" in simulation.notes
 
 
 @pytest.mark.parametrize(

@@ -54,9 +54,9 @@ def is_prediction_table(path: Path) -> bool:
     return bool(names & set(AMPLITUDE_COLUMNS)) and bool(names & set(DAMPING_COLUMNS))
 
 
-def read_prediction_table(path: Path) -> tuple[np.ndarray, np.ndarray, str]:
-    """Amplitudes (rad), the damping values and their column's name, sorted by amplitude; a table that
-    cannot be a prediction is one line that says why."""
+def read_prediction_table(path: Path) -> tuple[np.ndarray, np.ndarray, str, list[str]]:
+    """Amplitudes (rad), the damping values, their column's name, sorted by amplitude, and the lines to
+    say (rows left out); a table that cannot be a prediction is one line that says why."""
     table = read_table(path)
     columns = {name.lower(): values for name, values in table.columns.items()}
     amplitude_col = next((c for c in AMPLITUDE_COLUMNS if c in columns), None)
@@ -72,6 +72,7 @@ def read_prediction_table(path: Path) -> tuple[np.ndarray, np.ndarray, str]:
     keep = np.isfinite(amplitudes) & np.isfinite(damping)
     if keep.sum() < 1:
         raise InputError(f"{path}: no row with a finite amplitude and {damping_col}")
+    said = [f"{path.name}: {int((~keep).sum())} row(s) without a finite amplitude and {damping_col} left out"]
     amplitudes, damping = amplitudes[keep], damping[keep]
     low, high = AMPLITUDE_RANGE_RAD
     if amplitudes.min() < low or amplitudes.max() > high:
@@ -85,7 +86,7 @@ def read_prediction_table(path: Path) -> tuple[np.ndarray, np.ndarray, str]:
             "damping prediction; check the column"
         )
     order = np.argsort(amplitudes)
-    return amplitudes[order], damping[order], damping_col
+    return amplitudes[order], damping[order], damping_col, said if not keep.all() else []
 
 
 def per_unit_inertia(

@@ -155,7 +155,7 @@ def from_table(path: Path, request: SimulationRequest) -> Simulation:
         )
     period_s = dominant_period_s(request.measured)
     omega = 2.0 * math.pi / period_s
-    amplitudes, damping, column = read_prediction_table(path)
+    amplitudes, damping, column, left_out = read_prediction_table(path)
     b_eq, how = per_unit_inertia(
         damping, column, request.hull, request.draft, request.axis, omega**2, path.name
     )
@@ -164,6 +164,7 @@ def from_table(path: Path, request: SimulationRequest) -> Simulation:
         f"a damping prediction ({column}, {amplitudes.size} amplitude(s)) at the measured period "
         f"{period_s:.4g} s",
         *([how] if how else []),
+        *left_out,
     ]
     if (outside := coverage_note(amplitudes, request.amplitudes_rad())) is not None:
         notes.append(outside)
