@@ -6,12 +6,13 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test lint docs bench clean venv viewer-test-deps catalogue-test-deps
 
-# --no-compile: pip byte-compiles every module of every package it installs, 45 s of a 96 s install on
-# this machine (docs/benchmarks.md); Python compiles the modules a run imports, once, when first imported.
+# pip byte-compiles every package it installs (about 45 s of a 96 s install here). It must: where
+# PYTHONDONTWRITEBYTECODE is set (as on this project's CI) Python never caches what it compiles, and every
+# process would compile pandas, rerun and the rest from source again (docs/benchmarks.md).
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -64,8 +65,11 @@ catalogue-test-deps:
 
 # The kernels build, then the docs, on one core while the lint and the type check run on the other
 # (about 45 and 50 s on this machine; the docs after the kernels: no two processes build one kernel).
+# compileall: pip does not byte-compile an editable install's own source, and with PYTHONDONTWRITEBYTECODE
+# set every tankdaq process a test starts would compile the package from source again.
 test: $(STAMP) viewer-test-deps catalogue-test-deps
-	($(BIN)/python -m tankdaq.prepare && $(MAKE) --no-print-directory docs) & built=$$!; \
+	($(BIN)/python -m compileall -q src && $(BIN)/python -m tankdaq.prepare && \
+		$(MAKE) --no-print-directory docs) & built=$$!; \
 		$(MAKE) --no-print-directory lint; checked=$$?; \
 		wait $$built && exit $$checked
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal --durations=25
