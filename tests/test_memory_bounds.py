@@ -121,7 +121,7 @@ def test_a_saving_view_leaves_no_rerun_recording_behind_its_runs(tmp_path: Path)
         view.log_samples(samples)
         view.log_event("settled", "decay ended", 0.1)
         view.end_run()
-    view.close(timeout_s=600)  # bounded; every run's end is done on the view thread by then
+    view.close(limit_s=600)  # bounded; every run's end is done on the view thread by then
     assert all((tmp_path / f"run{run}.rrd").stat().st_size > 0 for run in range(4))
     assert _rerun_threads() <= before + 1  # at most the last run's, freed at the next run's end
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import rerun as rr
 import rerun.blueprint as rrb
 
-from .live import APPLICATION_ID, CLOSE_TIMEOUT_S, term_title
+from .live import APPLICATION_ID, CLOSE_LIMIT_S, CLOSE_STALL_S, term_title, unfinished_note
 from .view_feed import ViewFeed
 from .viewer import URL_SCHEMES, check_mode, url_listening
 
@@ -146,14 +146,18 @@ class CampaignView:
         values = dict(coefficients)
         self._put(lambda: self._log_condition(draft, angle_deg, values, b_eq_per_s))
 
-    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+    def close(self, stall_s: float = CLOSE_STALL_S, limit_s: float = CLOSE_LIMIT_S) -> None:
         """Finish the queue and flush the recording: the .rrd is complete after."""
         feed, self._feed = self._feed, None
         if feed is None:
             return
         feed.put(self._flush, droppable=False)
-        if not feed.stop(timeout_s):
-            self.on_note(f"the campaign panel did not finish in {timeout_s:g} s; campaign.rrd may be cut")
+        if not feed.stop(stall_s, limit_s):
+            self.on_note(
+                unfinished_note(
+                    "the campaign panel stopped unfinished; campaign.rrd may be cut", stall_s, limit_s
+                )
+            )
 
     # -- the view thread's side -----------------------------------------------------------------------
 

@@ -41,8 +41,17 @@ APPLICATION_ID = "tankdaq"
 TIMELINE = "t"
 #: At the end of a run rerun gets this long to take what was logged (file and viewer).
 FLUSH_TIMEOUT_S = 5.0
-#: Closing the view waits at most this long for the view thread to finish its queue.
-CLOSE_TIMEOUT_S = 15.0
+#: Closing the view waits for the view thread to finish its queue as long as it gets on with it: it gives up
+#: once no update has been done for ``CLOSE_STALL_S`` (a stuck view), or after ``CLOSE_LIMIT_S`` in all (a
+#: view minutes behind). A view that is only slow, on a loaded machine, finishes its .rrd.
+CLOSE_STALL_S = 15.0
+CLOSE_LIMIT_S = 120.0
+
+
+def unfinished_note(what: str, stall_s: float, limit_s: float) -> str:
+    """The line for a view closed before it finished: ``what`` names the view and what may be cut."""
+    return f"{what} (nothing done for {stall_s:g} s, or {limit_s:g} s in all)"
+
 
 MEASURED_COLOR = (31, 119, 180)
 MODEL_COLOR = (214, 39, 40)
@@ -228,16 +237,18 @@ class LiveView:
             self._run_open = False
             self._feed.put(self._end_run, droppable=False)
 
-    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
-        """End the run and the view thread (waiting at most ``timeout_s``): the .rrd is complete after.
+    def close(self, stall_s: float = CLOSE_STALL_S, limit_s: float = CLOSE_LIMIT_S) -> None:
+        """End the run and the view thread (see ``CLOSE_STALL_S``): the .rrd is complete after.
 
         A spawned viewer stays open: the window belongs to the operator now.
         """
         self.end_run()
         feed, self._feed = self._feed, None
         if feed is not None:
-            if not feed.stop(timeout_s):
-                self.on_note(f"the view did not finish in {timeout_s:g} s; the last .rrd may be cut")
+            if not feed.stop(stall_s, limit_s):
+                self.on_note(
+                    unfinished_note("the view stopped unfinished; the last .rrd may be cut", stall_s, limit_s)
+                )
             self._dropped_before += feed.dropped
 
     def __enter__(self) -> Self:

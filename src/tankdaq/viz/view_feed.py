@@ -49,20 +49,26 @@ class ViewFeed:
             self._cond.notify_all()
             return True
 
-    def wait_idle(self, timeout_s: float) -> bool:
-        """Wait until every queued job has run; False if that took longer than ``timeout_s``."""
-        deadline = time.monotonic() + timeout_s
+    def wait_idle(self, stall_s: float, limit_s: float | None = None) -> bool:
+        """Wait until every queued job has run; False once no job has finished for ``stall_s`` (a view
+        that is stuck), or after ``limit_s`` in all. A view that is only slow (a loaded machine) is
+        waited for: what it finishes is what the .rrd keeps."""
+        start = time.monotonic()
         with self._cond:
+            done, stalled_at = self.done, start + stall_s
             while self._jobs or self._busy:
-                left = deadline - time.monotonic()
-                if left <= 0:
+                now = time.monotonic()
+                if self.done != done:
+                    done, stalled_at = self.done, now + stall_s
+                deadline = stalled_at if limit_s is None else min(stalled_at, start + limit_s)
+                if now >= deadline:
                     return False
-                self._cond.wait(left)
+                self._cond.wait(deadline - now)
             return True
 
-    def stop(self, timeout_s: float) -> bool:
-        """Run what is queued (within ``timeout_s``), then end the thread; False if it did not finish."""
-        idle = self.wait_idle(timeout_s)
+    def stop(self, stall_s: float, limit_s: float | None = None) -> bool:
+        """Run what is queued (see ``wait_idle``), then end the thread; False if it did not finish."""
+        idle = self.wait_idle(stall_s, limit_s)
         with self._cond:
             self._stopping = True
             self._cond.notify_all()

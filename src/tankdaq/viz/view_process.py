@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..store.disk import RESERVE_BYTES
-from .live import CLOSE_TIMEOUT_S, LiveView
+from .live import CLOSE_LIMIT_S, CLOSE_STALL_S, LiveView, unfinished_note
 from .view_feed import QUEUE_LIMIT, SAVE_QUEUE_LIMIT, ViewFeed
 from .viewer import DEFAULT_BIND, note_to_stderr, settle_mode
 
@@ -199,9 +199,9 @@ class ViewProcess:
         """The view processes started and not yet reaped (the current one last)."""
         return [child.process.pid for child in self._children()]
 
-    def wait_idle(self, timeout_s: float) -> bool:
-        """Wait until every call so far has been handed to a view process; False past ``timeout_s``."""
-        return self._feed.wait_idle(timeout_s)
+    def wait_idle(self, stall_s: float, limit_s: float | None = None) -> bool:
+        """Wait until every call so far has been handed to a view process (as ``ViewFeed.wait_idle``)."""
+        return self._feed.wait_idle(stall_s, limit_s)
 
     def new_run(
         self,
@@ -244,15 +244,17 @@ class ViewProcess:
         ``runs_per_process`` runs is replaced now, between decays, while the model rests."""
         self._feed.put(self._end_run, droppable=False)
 
-    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> None:
+    def close(self, stall_s: float = CLOSE_STALL_S, limit_s: float = CLOSE_LIMIT_S) -> None:
         """End the view: every queued update sent, each view process finished (its .rrd complete) or,
-        past ``timeout_s``, stopped with a note. A spawned viewer stays open."""
-        if not self._feed.stop(timeout_s):
-            self.on_note(f"the view did not finish in {timeout_s:g} s; the last .rrd may be cut")
+        stuck for ``stall_s`` or past ``limit_s``, stopped with a note. A spawned viewer stays open."""
+        if not self._feed.stop(stall_s, limit_s):
+            self.on_note(
+                unfinished_note("the view stopped unfinished; the last .rrd may be cut", stall_s, limit_s)
+            )
         children, self._child, self._retired = self._children(), None, []
-        for child in children:  # each bounds its own end by ``timeout_s`` and says so: this is the backstop
-            if not child.finish(timeout_s + CHILD_GRACE_S):
-                self.on_note(f"the view process did not end in {timeout_s + CHILD_GRACE_S:g} s: stopped")
+        for child in children:  # each bounds its own end and says so: this is the backstop
+            if not child.finish(limit_s + CHILD_GRACE_S):
+                self.on_note(f"the view process did not end in {limit_s + CHILD_GRACE_S:g} s: stopped")
             self._children_dropped += child.dropped
 
     def __enter__(self) -> Self:
