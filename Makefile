@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 .PHONY: demo test lint docs bench clean venv viewer-test-deps catalogue-test-deps
 
 # pip byte-compiles every package it installs (about 45 s of a 96 s install here). It must: where
-# PYTHONDONTWRITEBYTECODE is set (as on this project's CI) Python never caches what it compiles, and every
+# PYTHONDONTWRITEBYTECODE is set (as in this machine's environment) Python never caches what it compiles: every
 # process would compile pandas, rerun and the rest from source again (docs/benchmarks.md).
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
