@@ -7,7 +7,9 @@ about 15 minutes on a loaded 2-core machine). Two tables, markdown, printed and 
 1. The work (scan and fit, no report) in this process, the executor already started (the pool forked,
    the client connected to a real ``dask scheduler`` with two ``dask worker`` processes): wall, the
    parent's (the Dask client's) CPU, the workers' CPU, and the ratios ``--jobs 1`` / ``--jobs 2`` and
-   Dask / ``--jobs 2``; median of --repeats, the modes interleaved.
+   Dask / ``--jobs 2``; median of --repeats, the modes interleaved. A fourth row is the machine's own
+   ceiling for that ratio: two ``--jobs 1`` campaigns of N at once, in two forked processes (``2 x
+   --jobs 1`` wall over the slower one's wall): what two cores give this work with no pool at all.
 2. ``tankdaq campaign DIR`` end to end (process start included), one run per N and mode: wall, CPU
    (the command and its reaped workers; Dask workers measured apart), peak RSS of the command and the
    sum of its workers' (sampled every 50 ms). With --baseline SRC (``git archive COMMIT src | tar -x -C
@@ -26,6 +28,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
 import datetime
+import gc
+import multiprocessing
 import platform
 import resource
 import statistics
@@ -48,6 +52,7 @@ from tankdaq.ident.executors import campaign_executor
 
 TANKDAQ = [sys.executable, "-c", "from tankdaq.cli import main; main()"]
 MODES = ("--jobs 1", "--jobs 2", "dask, 2 workers")
+CEILING = "two --jobs 1 at once (the machine's ceiling)"
 SAMPLE_S = 0.05
 #: The campaign whose first run warms each executor and tree (not timed).
 WARM_N = 36
@@ -90,6 +95,26 @@ def work(folder: Path, executor: Executor | None) -> int:
     return sum(1 for _ in fit_campaign(scan.groups(), executor=executor))
 
 
+def timed_serial_work(folder: Path) -> tuple[float, float]:
+    """(wall, CPU) of ``--jobs 1``'s work in this process: one of the two at once of the ceiling row."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    work(folder, None)
+    return time.perf_counter() - wall, time.process_time() - cpu
+
+
+def two_at_once(folder: Path) -> tuple[float, float, float]:
+    """The ceiling row: two serial campaigns at once in forked processes (the kernels loaded here)."""
+    gc.freeze()  # forked as the local pool forks (``ident.executors.campaign_executor``)
+    try:
+        pool = multiprocessing.get_context("fork").Pool(2)
+        pool.map(int, [0, 1])  # both forked and started before the clock
+    finally:
+        gc.unfreeze()
+    with pool:
+        results = pool.map(timed_serial_work, [folder, folder])
+    return max(wall for wall, _ in results), 0.0, sum(cpu for _, cpu in results)
+
+
 def executors(address: str) -> dict[str, Callable[[], AbstractContextManager]]:
     return {
         "--jobs 1": lambda: campaign_executor(1),
@@ -106,7 +131,7 @@ def work_table(sizes: list[int], data: Path, repeats: int, address: str, dask_pi
     ]
     for n in sizes:
         folder = decays(data, n)
-        figures: dict[str, list[tuple[float, float, float]]] = {mode: [] for mode in MODES}
+        figures: dict[str, list[tuple[float, float, float]]] = {mode: [] for mode in (*MODES, CEILING)}
         warm = decays(data, WARM_N)
         for _ in range(repeats):
             for mode, make in executors(address).items():
@@ -118,13 +143,18 @@ def work_table(sizes: list[int], data: Path, repeats: int, address: str, dask_pi
                     figures[mode].append(
                         (time.perf_counter() - wall, self_cpu() - own, cpu_of(workers) - theirs)
                     )
-        median = {mode: [statistics.median(f[i] for f in figures[mode]) for i in range(3)] for mode in MODES}
-        for mode in MODES:
+            figures[CEILING].append(two_at_once(folder))
+        median = {
+            mode: [statistics.median(f[i] for f in runs) for i in range(3)] for mode, runs in figures.items()
+        }
+        serial = median["--jobs 1"][0]
+        for mode in (*MODES, CEILING):
             wall, own, theirs = median[mode]
-            speedup = f"{median['--jobs 1'][0] / median['--jobs 2'][0]:.2f}×" if mode == "--jobs 2" else ""
+            speedup = f"{serial / wall:.2f}×" if mode == "--jobs 2" else ""
+            speedup = f"{2 * serial / wall:.2f}× (ceiling)" if mode == CEILING else speedup
             dask = f"{wall / median['--jobs 2'][0]:.2f}×" if mode.startswith("dask") else ""
             lines.append(f"| {n} | {mode} | {wall:.2f} | {own:.2f} | {theirs:.2f} | {speedup} | {dask} |")
-        print("\n".join(lines[-3:]), flush=True)
+        print("\n".join(lines[-4:]), flush=True)
     return "\n".join(lines)
 
 
