@@ -213,3 +213,66 @@ def test_identify_names_the_column_formats_it_reads(tmp_path: Path) -> None:
     formats = r"use a \.mcap, \.csv, \.h5, \.hdf5, \.mat or \.parquet file"
     with pytest.raises(InputError, match=rf"unknown file type \.xlsx {workbook}; decays: {formats}"):
         tankdaq.read(tmp_path / "run.xlsx")
+
+
+# ---- frames pandas wrote (DataFrame.to_hdf, through PyTables) ---------------------------------------
+
+
+def _frame(amplitude_deg: float = 8.0) -> pd.DataFrame:
+    t = np.arange(3000) * 0.01
+    angle = _decay(amplitude_deg)
+    rate = np.gradient(angle, t)
+    return pd.DataFrame({"time_s": t, "roll_deg": angle, "roll_rate_deg_s": rate, "tag": ["run"] * t.size})
+
+
+PANDAS_LAYOUTS = {  # how a lab's notebook saves a frame: pandas' default (fixed), the time as the index,
+    # and the two table layouts (the columns in a block named by a pickle, or each a field of its own)
+    "fixed": {},
+    "fixed, time as index": {"index": "time_s"},
+    "table": {"format": "table"},
+    "table, data columns": {"format": "table", "data_columns": True},
+}
+
+
+@pytest.mark.parametrize("layout", list(PANDAS_LAYOUTS))
+def test_a_frame_pandas_saved_to_hdf5_reads_as_the_csv_of_that_frame(tmp_path: Path, layout: str) -> None:
+    pytest.importorskip("tables", reason="PyTables (pandas' HDF5 writer) is not installed")
+    options = dict(PANDAS_LAYOUTS[layout])
+    frame = _frame()
+    frame.to_csv(tmp_path / "run.csv", index=False)
+    numeric = frame.drop(columns="tag") if options.get("format") == "table" else frame  # text needs a size
+    if index := options.pop("index", None):
+        numeric = numeric.set_index(index)
+    numeric.to_hdf(tmp_path / "run.h5", key="run21", mode="w", **options)
+    columns = {"angle_col": "roll_deg", "rate_col": "roll_rate_deg_s"}
+    csv, h5 = tankdaq.read(tmp_path / "run.csv", **columns), tankdaq.read(tmp_path / "run.h5", **columns)
+    assert len(h5.decays) == len(csv.decays) == 1
+    for name in ("t", "angle", "rate"):
+        np.testing.assert_array_equal(getattr(h5.decays[0].run, name), getattr(csv.decays[0].run, name))
+    assert not any("_i_table" in line or "indicesLR" in line for line in h5.notices)  # PyTables' indexes
+
+
+def test_several_frames_in_one_file_are_named_by_their_keys(tmp_path: Path) -> None:
+    pytest.importorskip("tables", reason="PyTables (pandas' HDF5 writer) is not installed")
+    path = tmp_path / "runs.h5"
+    _frame(8.0).drop(columns="tag").to_hdf(path, key="run21", mode="w")
+    _frame(5.0).drop(columns="tag").to_hdf(path, key="run22", mode="a")
+    second = tankdaq.read(path, time_col="run22/time_s", angle_col="run22/roll_deg", rate_col=None)
+    assert second.decays[0].initial_angle_deg == pytest.approx(5.0, rel=0.01)
+    with pytest.raises(InputError, match="run21/roll_deg"):  # the file's columns named in the one line
+        tankdaq.read(path, angle_col="roll_deg")
+
+
+def test_a_pickle_in_a_pandas_file_is_never_loaded(tmp_path: Path) -> None:
+    """The names of a table's block live in a pickled attribute. One that holds code is refused unrun."""
+    pytest.importorskip("tables", reason="PyTables (pandas' HDF5 writer) is not installed")
+    path, marker = tmp_path / "run.h5", tmp_path / "ran"
+    _frame().drop(columns="tag").to_hdf(path, key="run", mode="w", format="table")
+    hostile = b"cos\nsystem\n(V" + f"touch {marker}".encode() + b"\ntR."  # os.system("touch ...")
+    with h5py.File(path, "r+") as h5:
+        h5["run/table"].attrs["values_block_0_kind"] = np.bytes_(hostile)
+        h5["extra_time_s"] = np.arange(3000) * 0.01  # one column to read, so the refusal is a note
+        h5["extra_roll_deg"] = _decay(8.0)
+    rec = tankdaq.read(path, time_col="extra_time_s", angle_col="extra_roll_deg", rate_col=None)
+    assert not marker.exists()
+    assert any("values_block_0" in line for line in rec.notices)

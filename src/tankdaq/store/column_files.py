@@ -26,26 +26,31 @@ from ..validation import input_file
 from .csv_import import ColumnData, CsvOptions
 from .csv_units import stated_unit
 from .export_layout import EXPORT_FORMAT, mat_export_meta, plain_value
+from .pandas_hdf import NOT_A_VECTOR, is_frame, is_pytables_index, read_frame
 
 #: What a MATLAB v7.3 file (HDF5 with a 512-byte header) starts with.
 MAT73_MARK = b"MATLAB 7.3 MAT-file"
-#: Why a dataset or variable is not a column.
-NOT_A_VECTOR = "is not a vector of numbers"
 #: The struct ``tankdaq export`` writes a .mat file's columns into.
 EXPORT_STRUCT = "tankdaq"
 
 
 def read_h5_columns(path: Path, options: CsvOptions) -> ColumnData:
     """The 1-D numeric datasets of an HDF5 file (and the fields of a 1-D table of records), their ``unit``
-    attributes, and the root attributes of a ``tankdaq export``."""
+    attributes, the frames pandas wrote (``pandas_hdf``: named as pandas names their columns, with the
+    frame's key in front where a file holds several), and the root attributes of a ``tankdaq export``."""
     h5py = _library(path, "h5py", "HDF5", "h5py")
     columns: dict[str, np.ndarray] = {}
     stated: dict[str, str] = {}
     left: dict[str, str] = {}
     said: list[str] = []
+    apart: list[str] = []  # the groups of pandas frames and of PyTables' indexes: read apart, or not data
+
+    def find_apart(name: str, node: Any) -> None:
+        if isinstance(node, h5py.Group) and (is_frame(node) or is_pytables_index(node)):
+            apart.append(name)
 
     def take(name: str, node: Any) -> None:
-        if not isinstance(node, h5py.Dataset):
+        if not isinstance(node, h5py.Dataset) or any(name.startswith(f"{group}/") for group in apart):
             return
         if node.dtype.names:  # a table of records: each numeric field a column
             if node.ndim == 1:
@@ -64,10 +69,16 @@ def read_h5_columns(path: Path, options: CsvOptions) -> ColumnData:
     input_file(path)
     try:
         with h5py.File(path, "r") as h5:
+            h5.visititems(find_apart)
             h5.visititems(take)
+            frames = [read_frame(h5[name], name) for name in apart if is_frame(h5[name])]
             attrs = {key: plain_value(h5.attrs[key]) for key in h5.attrs}
     except OSError as exc:
         raise InputError(f"{path}: not an HDF5 file h5py can read ({exc})") from None
+    for frame in frames:
+        prefix = "" if len(frames) == 1 else f"{frame.key}/"
+        columns |= {prefix + column: values for column, values in frame.columns.items()}
+        left |= {prefix + column: why for column, why in frame.left.items()}
     header = attrs if attrs.get("format") == EXPORT_FORMAT else {}
     return _one_length(path, ColumnData(columns, left, header, stated, said), options, "datasets")
 
@@ -177,10 +188,12 @@ def _one_length(path: Path, data: ColumnData, options: CsvOptions, what: str) ->
     rows = len(time) if time is not None else lengths.most_common(1)[0][0]
     other = [name for name, values in data.columns.items() if len(values) != rows]
     data.columns = {name: values for name, values in data.columns.items() if len(values) == rows}
-    if data.ignored:
-        data.notices.append(
-            f"{path.name}: {what} not read (not vectors of numbers): {_names(list(data.ignored))}"
-        )
+    plain = [name for name, why in data.ignored.items() if why == NOT_A_VECTOR]
+    if plain:
+        data.notices.append(f"{path.name}: {what} not read (not vectors of numbers): {_names(plain)}")
+    data.notices += [
+        f"{path.name}: {name} not read: it {why}" for name, why in data.ignored.items() if why != NOT_A_VECTOR
+    ]
     if other:
         longer = f"is not {rows} values long, as {options.time_col!r} is" if time is not None else None
         data.notices.append(f"{path.name}: {what} not read (not {rows} values long): {_names(other)}")
