@@ -112,3 +112,69 @@ def test_a_single_amplitude_gives_linear_damping_alone(measured: Path, tmp_path:
     with pytest.raises(InputError, match="roll prediction"):
         resolve_simulation([str(table)], SimulationRequest(tuple(runs), axis="pitch"))
     assert np.isfinite(simulation.coefficients["c1"])
+
+
+COMPONENT_KEYS = ["B_F", "B_W", "B_E", "B_L", "B_BK"]
+
+
+@pytest.mark.skipif(not KVLCC2.is_file(), reason=f"the KVLCC2 roll decay is not at {KVLCC2}")
+def test_a_table_with_ikedas_components_explains_the_gap_as_tankdaqs_own_prediction_does(
+    tmp_path: Path,
+) -> None:
+    """The KVLCC2 prediction written with its components beside B̂44 (as ``tankdaq predict --json`` rows
+    are): the same lines of which component would have to change, and by how much, as ``ikeda``."""
+    runs = cut_free_decays(read_decays(KVLCC2, "roll", "time", "phi", None, "rad"), None, None)
+    hull = load_hull("kvlcc2")
+    request = SimulationRequest(tuple(runs), "roll", hull, 1.0)
+    prediction = ikeda_prediction(hull, 1.0, period_s=dominant_period_s(runs))
+    rows = prediction.summary([math.radians(a) for a in (2, 4, 6, 8, 10, 12)])["amplitudes"]
+    header = ["amplitude_deg", "B_44", *COMPONENT_KEYS]
+    table = _table(tmp_path / "ikeda_sheet.csv", header, [[r[k] for k in header] for r in rows])
+    from_table, own = resolve_simulation([str(table)], request), resolve_simulation(["ikeda"], request)
+    assert from_table.component_changes is not None and own.component_changes is not None
+    measured_b1, measured_b2 = 0.5 * own.coefficients["b1"], 0.7 * own.coefficients["b2"]
+    amplitudes = request.amplitudes_rad()
+    assert from_table.component_changes(measured_b1, measured_b2, amplitudes) == own.component_changes(
+        measured_b1, measured_b2, amplitudes
+    )
+
+
+def test_components_are_shares_of_the_damping_and_must_add_up_to_a_b44_hat(
+    measured: Path, tmp_path: Path
+) -> None:
+    """Components in any unit beside ``b_eq_per_s`` are its shares; beside ``b44_hat`` they must add up to
+    it, or they are left out with a line (a sheet whose columns slipped explains nothing)."""
+    runs = cut_free_decays(read_decays(measured), None, None)
+    omega = 2 * math.pi / dominant_period_s(runs)
+    slope = 8 / (3 * math.pi) * omega
+    # linear components 3 + 1 + 0 (friction, wave, lift), quadratic 2 * phi_a / 2deg (eddy, none of keel)
+    amplitudes = [2.0, 4.0, 6.0]
+    rows = [[a, 3.0, 1.0, 2.0 * a / 2.0, 0.0, 0.0] for a in amplitudes]
+    total = [r[1] + r[2] + r[3] for r in rows]
+    b_eq = [0.02 * t for t in total]  # 1/s: the table's totals, in another unit than its components
+    shares = _table(
+        tmp_path / "shares.csv",
+        ["amplitude_deg", "b_eq_per_s", *COMPONENT_KEYS],
+        [[r[0], b, *r[1:]] for r, b in zip(rows, b_eq, strict=True)],
+    )
+    simulation = resolve_simulation([str(shares)], SimulationRequest(tuple(runs)))
+    linear_b1 = 0.02 * 4.0  # the linear components' share of B_eq / I: amplitude-free
+    quadratic_b2 = 0.02 * 2.0 / math.radians(2.0) / slope  # the eddy's: proportional to the amplitude
+    assert simulation.coefficients["b1"] == pytest.approx(linear_b1)
+    assert simulation.coefficients["b2"] == pytest.approx(quadratic_b2)
+    assert simulation.component_changes is not None
+    linear, quadratic = simulation.component_changes(2 * linear_b1, quadratic_b2, [])
+    assert linear.startswith("b1:") and "would have to change x2 " in linear  # the measured b1 is twice
+    assert quadratic.startswith("b2:") and "would have to change x1 " in quadratic  # as predicted
+
+    off = _table(
+        tmp_path / "off.csv",
+        ["amplitude_deg", "b44_hat", *COMPONENT_KEYS],
+        [[r[0], 1.1 * t, *r[1:]] for r, t in zip(rows, total, strict=True)],  # 10 % more than its parts
+    )
+    simulation = resolve_simulation([str(off)], SimulationRequest(tuple(runs), hull=load_hull("swath")))
+    assert simulation.component_changes is None
+    assert any(
+        "components (B_F, B_W, B_E, B_L, B_BK) not used" in n and "off by up to 9%" in n
+        for n in simulation.notes
+    )

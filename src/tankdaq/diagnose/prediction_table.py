@@ -12,12 +12,18 @@ A CSV (any dialect ``identify`` reads) with an amplitude column and one damping 
 
 A prediction gives damping, not stiffness: it is evaluated at the measured period, and B_eq / I =
 b1 + 8/(3π) ω φa b2 is fitted over the table's amplitudes (``ident.derived.b_eq``'s convention).
+
+Ikeda's components beside the total (``B_F``, ``B_W``, ``B_E``, ``B_L``, ``B_BK``, as ``tankdaq predict``
+names them) let the comparison say which of them would have to change to meet the measurement, as
+tankdaq's own prediction does (``physics.ikeda.change_lines``). They are taken as shares of the damping
+column at each amplitude, so their unit does not matter; beside a B̂44 column they must add up to it.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +31,7 @@ import numpy as np
 from ..config import Hull
 from ..errors import InputError
 from ..ident.derived import G, b44_hat_factor
+from ..physics.ikeda import COMPONENTS, change_lines
 from ..store.csv_dialect import read_table
 
 PER_INERTIA, HAT, DIMENSIONAL = "B_eq / I", "B̂44", "B44"
@@ -37,6 +44,10 @@ AMPLITUDE_COLUMNS = {
 }
 #: Damping columns (lower case) -> what they hold: B_eq per unit inertia (1/s), B̂44, or B44 (N·m·s).
 DAMPING_COLUMNS = {"b_eq_per_s": PER_INERTIA, "b44_hat": HAT, "b_44": HAT, "b44_n_m_s": DIMENSIONAL}
+#: Component columns (lower case) -> the key of Ikeda's component (``physics.ikeda.COMPONENTS``).
+COMPONENT_COLUMNS = {key.lower(): key for key in COMPONENTS}
+#: How far a table's components may be from its B̂44 column and still be its parts.
+COMPONENTS_ADD_UP = 0.02
 #: Amplitudes a decay test reaches (rad): a table outside them is a unit slip.
 AMPLITUDE_RANGE_RAD = (math.radians(0.1), math.radians(60.0))
 
@@ -54,9 +65,21 @@ def is_prediction_table(path: Path) -> bool:
     return bool(names & set(AMPLITUDE_COLUMNS)) and bool(names & set(DAMPING_COLUMNS))
 
 
-def read_prediction_table(path: Path) -> tuple[np.ndarray, np.ndarray, str, list[str]]:
-    """Amplitudes (rad), the damping values, their column's name, sorted by amplitude, and the lines to
-    say (rows left out); a table that cannot be a prediction is one line that says why."""
+@dataclass
+class PredictionTable:
+    """A damping table read: amplitudes (rad, sorted), the damping column's values and name, its
+    components (``COMPONENT_COLUMNS``, row for row; may be empty), and the lines to say."""
+
+    amplitudes_rad: np.ndarray
+    damping: np.ndarray
+    column: str
+    components: dict[str, np.ndarray] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def read_prediction_table(path: Path) -> PredictionTable:
+    """The table, its rows without a finite amplitude and damping left out (said); a table that cannot be
+    a prediction is one line that says why."""
     table = read_table(path)
     columns = {name.lower(): values for name, values in table.columns.items()}
     amplitude_col = next((c for c in AMPLITUDE_COLUMNS if c in columns), None)
@@ -86,7 +109,52 @@ def read_prediction_table(path: Path) -> tuple[np.ndarray, np.ndarray, str, list
             "damping prediction; check the column"
         )
     order = np.argsort(amplitudes)
-    return amplitudes[order], damping[order], damping_col, said if not keep.all() else []
+    parts = {key: columns[name][keep][order] for name, key in COMPONENT_COLUMNS.items() if name in columns}
+    found = PredictionTable(
+        amplitudes[order], damping[order], damping_col, parts, said if not keep.all() else []
+    )
+    _check_components(found, path.name)
+    return found
+
+
+def _check_components(table: PredictionTable, source: str) -> None:
+    """Components that cannot be the damping's parts are dropped, with the line that says why."""
+    if not table.components:
+        return
+    values = np.array(list(table.components.values()))
+    why = None
+    if not np.all(np.isfinite(values)) or np.any(values < 0):
+        why = "a component is missing or negative in some row"
+    elif np.any(values.sum(axis=0) <= 0):
+        why = "they add up to no damping in some row"
+    elif DAMPING_COLUMNS[table.column] == HAT:
+        off = float(np.max(np.abs(values.sum(axis=0) / table.damping - 1.0)))
+        if off > COMPONENTS_ADD_UP:
+            why = f"they do not add up to {table.column} (off by up to {off:.0%})"
+    if why is not None:
+        table.notes.append(f"{source}: its components ({', '.join(table.components)}) not used: {why}")
+        table.components = {}
+
+
+def component_changes(
+    table: PredictionTable, b_eq: np.ndarray, omega: float
+) -> Callable[[float, float, Sequence[float]], list[str]] | None:
+    """The table's own account of a measured b1, b2: which of its components would have to change, and by
+    how much (``physics.ikeda.change_lines``, over the table's amplitudes); None without components."""
+    if not table.components:
+        return None
+    amplitudes, first = np.unique(table.amplitudes_rad, return_index=True)
+    totals = np.sum(list(table.components.values()), axis=0)
+    given = table.components
+    parts = [
+        {key: float(given[key][i] / totals[i] * b_eq[i]) if key in given else 0.0 for key in COMPONENTS}
+        for i in first
+    ]
+
+    def explain(b1: float, b2: float, _measured_amplitudes: Sequence[float]) -> list[str]:
+        return change_lines(omega, list(amplitudes), parts, b1, b2)
+
+    return explain
 
 
 def per_unit_inertia(

@@ -27,6 +27,7 @@ from ..ident.inputs import input_notices, read_decays
 from ..records import DecayRun
 from ..validation import input_file
 from .prediction_table import (
+    component_changes,
     coverage_note,
     equivalent_model,
     is_prediction_table,
@@ -155,20 +156,22 @@ def from_table(path: Path, request: SimulationRequest) -> Simulation:
         )
     period_s = dominant_period_s(request.measured)
     omega = 2.0 * math.pi / period_s
-    amplitudes, damping, column, left_out = read_prediction_table(path)
+    table = read_prediction_table(path)
     b_eq, how = per_unit_inertia(
-        damping, column, request.hull, request.draft, request.axis, omega**2, path.name
+        table.damping, table.column, request.hull, request.draft, request.axis, omega**2, path.name
     )
-    model = equivalent_model(amplitudes, b_eq, omega)
+    model = equivalent_model(table.amplitudes_rad, b_eq, omega)
+    parts = f", components {', '.join(table.components)}" if table.components else ""
     notes = [
-        f"a damping prediction ({column}, {amplitudes.size} amplitude(s)) at the measured period "
-        f"{period_s:.4g} s",
+        f"a damping prediction ({table.column}{parts}, {table.amplitudes_rad.size} amplitude(s)) at the "
+        f"measured period {period_s:.4g} s",
         *([how] if how else []),
-        *left_out,
+        *table.notes,
     ]
-    if (outside := coverage_note(amplitudes, request.amplitudes_rad())) is not None:
+    if (outside := coverage_note(table.amplitudes_rad, request.amplitudes_rad())) is not None:
         notes.append(outside)
-    return Simulation(path.name, PREDICTION, model, notes=tuple(notes))
+    explain = component_changes(table, b_eq, omega)
+    return Simulation(path.name, PREDICTION, model, notes=tuple(notes), component_changes=explain)
 
 
 def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation:

@@ -16,7 +16,7 @@ equivalent linear damping at the amplitude asked (B44 in N·m·s/rad). Pure: num
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -297,6 +297,54 @@ def _lift(inputs: IkedaInputs) -> float:
     )  # fmt: skip
 
 
+def fit_parts(
+    omega_rad_s: float,
+    amplitudes_rad: Sequence[float],
+    parts: Sequence[Mapping[str, float]],
+    keys: Sequence[str],
+) -> tuple[float, float]:
+    """(b1, b2) of B_eq(φa)/I = b1 + 8/(3π) ω φa b2 fitted to the sum of the components ``keys`` (per unit
+    inertia, ``parts[i]`` at ``amplitudes_rad[i]``, distinct); one amplitude: the linear components give
+    b1, the quadratic ones b2."""
+    if not len(amplitudes_rad):
+        raise InputError("give at least one roll amplitude for the equivalent model")
+    slope = [QUADRATIC_EQUIVALENT * omega_rad_s * a for a in amplitudes_rad]
+    if len(amplitudes_rad) == 1:
+        b1 = sum(parts[0][k] for k in keys if k in LINEAR_PART)
+        return b1, sum(parts[0][k] for k in keys if k in QUADRATIC_PART) / slope[0]
+    y = np.array([sum(row[k] for k in keys) for row in parts])
+    design = np.column_stack([np.ones(len(amplitudes_rad)), slope])
+    (b1, b2), *_ = np.linalg.lstsq(design, y, rcond=None)
+    return float(b1), float(b2)
+
+
+def change_lines(
+    omega_rad_s: float,
+    amplitudes_rad: Sequence[float],
+    parts: Sequence[Mapping[str, float]],
+    measured_b1: float,
+    measured_b2: float,
+) -> list[str]:
+    """Which components (per unit inertia at each amplitude, as ``fit_parts``) would have to change, by how
+    much, to meet a measured b1, b2: the linear part (friction, wave, lift) carries b1, the quadratic part
+    (eddy, bilge keel) b2."""
+    lines = []
+    for name, measured, keys, index, unit in (
+        ("b1", measured_b1, LINEAR_PART, 0, "1/s"),
+        ("b2", measured_b2, QUADRATIC_PART, 1, "1/rad"),
+    ):
+        predicted = fit_parts(omega_rad_s, amplitudes_rad, parts, keys)[index]
+        other = fit_parts(omega_rad_s, amplitudes_rad, parts, [k for k in COMPONENTS if k not in keys])[index]
+        need = measured - other  # what this part would have to give
+        labels = ", ".join(f"{COMPONENTS[k][1]} {COMPONENTS[k][0]}" for k in keys)
+        factor = f"x{need / predicted:.3g}" if predicted > 0 else "from zero (the prediction has none)"
+        lines.append(
+            f"{name}: predicted {predicted + other:.4g} {unit}, measured {measured:.4g} {unit}: "
+            f"{labels} would have to change {factor} ({predicted:.4g} -> {need:.4g} {unit})"
+        )
+    return lines
+
+
 @dataclass(frozen=True)
 class IkedaPrediction:
     """The prediction at one roll frequency, ready to compare with a fit: components at any amplitude,
@@ -321,22 +369,14 @@ class IkedaPrediction:
         """A non-dimensional B̂ as damping per unit total inertia, B44 / I (1/s)."""
         return b_hat / self.inputs.hat_factor / self.total_inertia_kg_m2
 
-    def _fit(self, amplitudes_rad: Sequence[float], keys: Sequence[str]) -> tuple[float, float]:
-        """(b1, b2) of B_eq(φa)/I = b1 + 8/(3π) ω φa b2 fitted to the sum of ``keys`` over the amplitudes;
-        one amplitude: the linear components give b1, the quadratic ones b2."""
+    def _parts(self, amplitudes_rad: Sequence[float]) -> tuple[list[float], list[dict[str, float]]]:
+        """The distinct amplitudes, sorted, and each component per unit inertia (1/s) at each."""
         amplitudes = sorted({float(a) for a in amplitudes_rad})
-        if not amplitudes:
-            raise InputError("give at least one roll amplitude for the equivalent model")
         rows = [self.components(a) for a in amplitudes]
-        slope = [QUADRATIC_EQUIVALENT * self.omega_rad_s * a for a in amplitudes]
-        if len(amplitudes) == 1:
-            b1 = self.per_inertia(sum(rows[0][k] for k in keys if k in LINEAR_PART))
-            b2 = self.per_inertia(sum(rows[0][k] for k in keys if k in QUADRATIC_PART)) / slope[0]
-            return b1, b2
-        y = np.array([self.per_inertia(sum(row[k] for k in keys)) for row in rows])
-        design = np.column_stack([np.ones(len(amplitudes)), slope])
-        (b1, b2), *_ = np.linalg.lstsq(design, y, rcond=None)
-        return float(b1), float(b2)
+        return amplitudes, [{k: self.per_inertia(row[k]) for k in COMPONENTS} for row in rows]
+
+    def _fit(self, amplitudes_rad: Sequence[float], keys: Sequence[str]) -> tuple[float, float]:
+        return fit_parts(self.omega_rad_s, *self._parts(amplitudes_rad), keys)
 
     def equivalent_model(self, amplitudes_rad: Sequence[float]) -> dict[str, float]:
         """{"b1", "b2", "c1"} per unit total inertia (1/s, 1/rad, 1/s²): the prediction as a decay model,
@@ -347,21 +387,9 @@ class IkedaPrediction:
     def required_change(
         self, measured_b1: float, measured_b2: float, amplitudes_rad: Sequence[float]
     ) -> list[str]:
-        """Which components would have to change, by how much, for the prediction to meet a measured b1, b2:
-        the linear part (friction, wave, lift) carries b1, the quadratic part (eddy, bilge keel) b2."""
-        lines = []
-        parts = (("b1", measured_b1, LINEAR_PART, 0, "1/s"), ("b2", measured_b2, QUADRATIC_PART, 1, "1/rad"))
-        for name, measured, keys, index, unit in parts:
-            predicted = self._fit(amplitudes_rad, keys)[index]
-            other = self._fit(amplitudes_rad, tuple(k for k in COMPONENTS if k not in keys))[index]
-            need = measured - other  # what this part would have to give
-            labels = ", ".join(f"{COMPONENTS[k][1]} {COMPONENTS[k][0]}" for k in keys)
-            factor = f"x{need / predicted:.3g}" if predicted > 0 else "from zero (the prediction has none)"
-            lines.append(
-                f"{name}: predicted {predicted + other:.4g} {unit}, measured {measured:.4g} {unit}: "
-                f"{labels} would have to change {factor} ({predicted:.4g} -> {need:.4g} {unit})"
-            )
-        return lines
+        """Which components would have to change, by how much, for the prediction to meet a measured b1, b2
+        (``change_lines``)."""
+        return change_lines(self.omega_rad_s, *self._parts(amplitudes_rad), measured_b1, measured_b2)
 
     def summary(self, amplitudes_rad: Sequence[float], scale: FroudeScale | None = None) -> dict[str, Any]:
         """What ``tankdaq predict --json`` prints: the components and B44 at each amplitude (deg at this
