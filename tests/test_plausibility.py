@@ -26,6 +26,7 @@ from tankdaq.ident.plausibility import (
     ADDED_INERTIA_BOUNDS,
     check_amplitude,
     check_damping,
+    check_flat_tops,
     check_period,
     check_runs,
     check_stiffness,
@@ -34,6 +35,7 @@ from tankdaq.ident.plausibility import (
 )
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.models import MODEL_FAMILY, resolve_model
+from tankdaq.records import DecayRun
 
 runner = CliRunner()
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -128,19 +130,31 @@ def test_kvlcc2_read_as_degrees_is_implausible(kvlcc2_fits: dict) -> None:
     assert "radians read as degrees" in found[0].message
 
 
-@pytest.mark.parametrize(("edit", "clipped"), [("clip 6 deg", True), ("0.2 deg steps", False)])
+EDITS = {  # what each edit does to the degrees, and whether the decay is then clipped
+    "clip 6 deg": (lambda deg, rng: np.clip(deg, -6.0, 6.0), True),
+    "clip 6 deg, then a sensor's noise": (
+        lambda deg, rng: np.clip(deg, -6.0, 6.0) + rng.normal(0.0, 0.01, deg.size),
+        True,
+    ),
+    "0.2 deg steps": (lambda deg, rng: np.round(deg / 0.2) * 0.2, False),
+    "a sensor's noise": (lambda deg, rng: deg + rng.normal(0.0, 0.01, deg.size), False),
+}
+
+
+@pytest.mark.parametrize(("edit", "clipped"), [(name, clipped) for name, (_, clipped) in EDITS.items()])
 def test_kvlcc2_clipped_in_a_csv_is_doubted_and_a_coarse_sensor_is_not(
     tmp_path: Path, edit: str, clipped: bool
 ) -> None:
     """Run 21338 (10.4 deg) as another lab's CSV with no sensor flags: clipped at 6 deg, its peaks are
     flat for 0.74 s on 11 swings (b1 came out at half the true one with no warning but a non-white
     residual); read at 0.2 deg resolution, its peaks are flat for a few % of a period and nothing is
-    said."""
+    said. An analog inclinometer's rail carries its noise: the top is then no exact repeat, and is found
+    all the same; that noise on a whole decay is no flat top."""
     if not KVLCC2.is_file():
         pytest.skip(f"KVLCC2 data not at {KVLCC2} (the shared data folder is absent)")
     table = np.genfromtxt(KVLCC2, delimiter=",", names=True)
     degrees = np.degrees(table["phi"])
-    angle = np.clip(degrees, -6.0, 6.0) if clipped else np.round(degrees / 0.2) * 0.2
+    angle = EDITS[edit][0](degrees, np.random.default_rng(21338))
     path = tmp_path / "21338.csv"
     np.savetxt(path, np.column_stack([table["time"], angle]), delimiter=",", header="time_s,angle_deg",
                comments="", fmt="%.6f")  # fmt: skip
@@ -250,3 +264,21 @@ def test_campaign_and_diagnose_say_an_implausible_fit(swath: list[Path]) -> None
     assert warning.startswith("implausible damping: B_eq -")
     told = runner.invoke(app, args)
     assert f"warning: {warning}" in told.output
+
+
+@pytest.mark.parametrize("noise_deg", [0.0, 0.01, 0.05])
+def test_a_rail_is_found_flat_with_or_without_the_sensors_noise_on_it(noise_deg: float) -> None:
+    """A 12 deg decay (b1 0.1, T 1.7 s, 100 Hz) through an inclinometer of +-8 deg range: the rail is found
+    at its level whatever noise rides on it; the same decay within range, with that noise, is no flat
+    top."""
+    t = np.arange(2000) * 0.01
+    angle, _ = simulate_decay({"b1": 0.1, "c1": (2 * math.pi / 1.7) ** 2}, t, math.radians(12.0))
+    rng = np.random.default_rng(8)
+    noise = rng.normal(0.0, math.radians(noise_deg), t.size) if noise_deg else np.zeros(t.size)
+    rail = math.radians(8.0)
+    clipped = DecayRun(t, np.clip(angle, -rail, rail) + noise, name="clipped")
+    free = DecayRun(t, angle + noise, name="free")
+    (found,) = check_flat_tops([clipped, free], 1.7)
+    assert found.check == "clipped" and found.message.startswith("clipped: the angle is flat at +")
+    level_deg = float(found.message.split("flat at ")[1].split()[0])
+    assert abs(level_deg - 8.0) <= max(0.005, noise_deg / 2)  # the rail, to within half its noise

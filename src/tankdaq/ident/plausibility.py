@@ -40,6 +40,7 @@ from ..physics.decay import acceleration
 from ..physics.terms import RESTORING_TERMS
 from ..records import DecayRun
 from .derived import G, b_eq, natural_period, tested_amplitudes_deg
+from .signals import white_noise_level
 
 #: Peak angle of a decay test, deg: ITTC stops a decay at 0.5 deg; beyond 45 deg a model has capsized or
 #: the angle is not in the unit it was read in.
@@ -59,6 +60,9 @@ DATA_CHECKS = ("clipped",)
 #: a coarse sensor's 0.1 deg step of its top for 4.5 % of a period at 10 deg; clipped 5 % below its top,
 #: flat for 10 %).
 FLAT_TOP_FRACTION = 0.1
+#: A sample within this many noise levels of a flat top is on it: a clipped analog sensor's rail carries
+#: the sensor's noise, so its top is no exact repeat of one value.
+FLAT_TOP_NOISE = 4.0
 #: Points of the amplitude grids the damping and stiffness checks look at.
 GRID_POINTS = 41
 
@@ -249,23 +253,26 @@ def check_excluded(runs: Sequence[DecayRun]) -> list[Finding]:
 
 
 def check_flat_tops(runs: Sequence[DecayRun], period_s: float) -> list[Finding]:
-    """Runs whose angle sits at exactly its largest (or smallest) value on two or more peaks, each for
+    """Runs whose angle sits at its largest (or smallest) level on two or more peaks, each for
     ``FLAT_TOP_FRACTION`` of a period or longer: clipped by the sensor's range or stopped by the rig, which
     no free decay does (the peaks of a decay shrink; a coarse sensor's steps flatten a peak for a few %
-    of a period). For records no sensor flagged (another lab's CSV); one finding each."""
+    of a period). The level is a value repeated, or held within ``FLAT_TOP_NOISE`` noise levels (a rail
+    with the sensor's noise on it). For records no sensor flagged (another lab's CSV); one finding each."""
     found = []
     for run in runs:
         if run.angle.size < 3 or not math.isfinite(period_s):
             continue
         dt = float(np.median(np.diff(run.t)))
-        for extreme in (float(np.max(run.angle)), float(np.min(run.angle))):
-            lengths = _plateaus(run.angle == extreme)
-            long = [n * dt for n in lengths if n * dt >= FLAT_TOP_FRACTION * period_s]
+        tolerance = FLAT_TOP_NOISE * white_noise_level(run.angle)
+        for sign in (1.0, -1.0):
+            level, on_top = _top(sign * run.angle, tolerance)
+            long = [n * dt for n in _plateaus(on_top) if n * dt >= FLAT_TOP_FRACTION * period_s]
             if len(long) >= 2:
+                at_deg = math.degrees(sign * level)
                 found.append(
                     Finding(
                         "clipped",
-                        f"{run.name}: the angle is flat at {math.degrees(extreme):+.2f} deg on {len(long)} "
+                        f"{run.name}: the angle is flat at {at_deg:+.2f} deg on {len(long)} "
                         f"peaks (up to {max(long):.2f} s, {100 * max(long) / period_s:.0f} % of a period): "
                         "clipped by the sensor's range or a stop; the fit does not see the true peaks: "
                         "record again with a wider range, or fit from after the clipping (--start S)",
@@ -275,6 +282,17 @@ def check_flat_tops(runs: Sequence[DecayRun], period_s: float) -> list[Finding]:
                 )
                 break
     return found
+
+
+def _top(y: np.ndarray, tolerance: float) -> tuple[float, np.ndarray]:
+    """The level of ``y``'s top and which samples are on it: its largest value repeated exactly, or, with
+    noise (``tolerance`` > 0), the median of the samples near the largest, and those within ``tolerance``
+    of it (the largest of a noisy rail stands a few noise levels above the rail itself)."""
+    top = float(np.max(y))
+    if tolerance <= 0:
+        return top, y == top
+    level = float(np.median(y[y >= top - 2.0 * tolerance]))
+    return level, y >= level - tolerance
 
 
 def _plateaus(mask: np.ndarray) -> list[int]:
