@@ -217,6 +217,7 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
     part ends (``ident.free_decay``). What the reading decided is said in one line each."""
     from ..ident.free_decay import cut_free_decays
     from ..ident.inputs import input_notices, read_decays
+    from ..ident.repeats import repeat_line, repeated_decays
 
     items = [sources] if isinstance(sources, str | Path | Recording | Decay | DecayRun) else list(sources)
     if not items:
@@ -238,7 +239,11 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
         raise InputError("no decay to fit: the recordings given hold no release (tankdaq.read says so)")
     for line in input_notices(runs):
         progress.line(line)
-    return cut_free_decays(runs, r.start_s, r.end_s)
+    runs = cut_free_decays(runs, r.start_s, r.end_s)
+    repeats = repeated_decays(runs)
+    for repeat, first in repeats.items():
+        progress.line(f"not used: {repeat_line(runs, repeat, first)}")
+    return [run for i, run in enumerate(runs) if i not in repeats]
 
 
 def drop_read_twice(

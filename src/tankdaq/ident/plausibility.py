@@ -25,6 +25,8 @@ and why.
   flagged (clipping, orientation not valid; ``DecayRun.excluded``) were left out of the fit: the result
   stands on the rest, and the decay was not a clean measurement. A finding about the data
   (``Finding.about_data``), not about the model: choosing a model ignores it.
+- repeated: one decay among the fitted ones twice (two files holding the same samples, ``ident.repeats``):
+  it would count as two repeats and narrow every interval. About the data too.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from ..physics.decay import acceleration
 from ..physics.terms import RESTORING_TERMS
 from ..records import DecayRun
 from .derived import G, b_eq, natural_period, tested_amplitudes_deg
+from .repeats import repeat_line, repeated_decays
 from .signals import white_noise_level
 
 #: Peak angle of a decay test, deg: ITTC stops a decay at 0.5 deg; beyond 45 deg a model has capsized or
@@ -55,7 +58,7 @@ MIN_SAMPLES_PER_PERIOD = 10
 #: widened by 0.1 and 0.15 for a gyradius known to about 5 % and GM to 2 % (k^2 / GM: about 12 %).
 ADDED_INERTIA_BOUNDS = (-0.05, 0.55)
 #: Checks about the measurement rather than the fitted model (every candidate model carries them alike).
-DATA_CHECKS = ("clipped",)
+DATA_CHECKS = ("clipped", "repeated")
 #: A peak flat at the record's extreme for this fraction of a natural period is clipped (a peak is within
 #: a coarse sensor's 0.1 deg step of its top for 4.5 % of a period at 10 deg; clipped 5 % below its top,
 #: flat for 10 %).
@@ -71,7 +74,7 @@ GRID_POINTS = 41
 class Finding:
     """One implausibility: which check, the one-line message, the value and the bounds it broke."""
 
-    check: str  # damping, stiffness, period, amplitude, time_step, clipped
+    check: str  # damping, stiffness, period, amplitude, time_step, clipped, repeated
     message: str
     value: float
     bounds: tuple[float, float]
@@ -337,7 +340,16 @@ def check_runs(
     steps = np.concatenate([np.diff(run.t) for run in runs if run.t.size > 1] or [np.zeros(0)])
     dt_s = float(np.median(steps)) if steps.size else None
     checks = check_fit(coefficients, top, dt_s, particulars, hull) + check_excluded(runs)
-    return checks + check_flat_tops(runs, natural_period(coefficients))
+    return checks + check_flat_tops(runs, natural_period(coefficients)) + check_repeats(runs)
+
+
+def check_repeats(runs: Sequence[DecayRun]) -> list[Finding]:
+    """One decay read twice among the fitted ones (``ident.repeats``): it counts as two repeats and
+    narrows every interval. ``identify`` leaves such a copy out; a campaign's group says so here."""
+    return [
+        Finding("repeated", f"{repeat_line(runs, i, first)}: leave one of the files out", 1.0, (0.0, 0.0))
+        for i, first in repeated_decays(runs).items()
+    ]
 
 
 def messages(findings: Sequence[Finding]) -> list[str]:
