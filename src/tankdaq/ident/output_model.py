@@ -50,6 +50,10 @@ class OutputModel:
             self.codes = np.concatenate([self.codes, _KU_CODE])
         self.channels = channels
         self.kept = [run.kept for run in runs]  # residuals of excluded samples (clipped) are left out
+        # ...indexed by a slice where none is: a view of each prediction at every evaluation, not a copy
+        self._fitted: list[np.ndarray | slice] = [
+            kept if not kept.all() else slice(None) for kept in self.kept
+        ]
         self.has_rate = has_rate
         self.friction_eps = friction_eps
         self.n_sub = n_sub
@@ -162,7 +166,7 @@ class OutputModel:
         for r, run in enumerate(self.runs):
             pred = self.predict_run(params, r, with_jacobian=True)
             ok_all &= bool(pred["ok"])
-            sig, kept = self.sigmas[r], self.kept[r]
+            sig, kept = self.sigmas[r], self._fitted[r]
             run_jac = [-pred["ja"][kept] / sig["angle"]]
             run_res = [(run.angle - pred["angle"])[kept] / sig["angle"]]
             if self.has_rate[r]:
