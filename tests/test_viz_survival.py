@@ -116,6 +116,29 @@ def test_a_view_that_is_behind_drops_updates_and_returns_at_once(tmp_path: Path)
     assert _rrd_rows(tmp_path / "behind.rrd", "/angle/measured") == 5 * (1 + QUEUE_LIMIT)
 
 
+def test_a_view_behind_drops_refits_but_never_a_decays_final_fit(tmp_path: Path) -> None:
+    """The view thread is held while the identifier refits far more often than the queue holds, then the
+    decay ends: the refits beyond the queue are dropped, the final fit (the decay's verdict) is drawn."""
+    view = LiveView("save", rrd_path=tmp_path / "final.rrd", on_note=lambda _line: None, queue_limit=4)
+    held, release = threading.Event(), threading.Event()
+    t = np.linspace(0.0, 2.0, 50)
+    try:
+        view.log_samples(empty_samples(5))  # opens the run
+        assert view._feed is not None
+        view._feed.put(lambda: (held.set(), release.wait()), droppable=False)
+        assert held.wait(timeout=30)
+        for k in range(20):
+            view.log_fit(t, np.cos(t + k), -np.sin(t + k), {"b1": 0.1 + k, "c1": 14.0})
+        view.log_fit(t, np.cos(t), -np.sin(t), {"b1": 0.5, "c1": 14.0}, final=True)
+        assert view.dropped == 20 - 4
+    finally:
+        release.set()
+        view.close()
+    # the four refits queued, then the final one: five revisions, the last the final fit's coefficients
+    assert _rrd_rows(tmp_path / "final.rrd", "/angle/model/fit_005") > 0
+    assert _rrd_rows(tmp_path / "final.rrd", "/angle/model/fit_006") == 0
+
+
 def test_record_keeps_its_read_cadence_while_the_view_saves(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

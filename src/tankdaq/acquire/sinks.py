@@ -257,8 +257,8 @@ class IdentifierSink(Sink):
             self._publish(decay, result)
         self._note_abandoned(live, decay)
         self._implausible = []  # the final fit's implausibilities are said again: they are the verdict's
+        decay.final_fit = final  # before it goes out: a sink tells the final fit from a refit by it
         self._publish(decay, final)
-        decay.final_fit = final
 
     def close(self) -> None:
         live, self._live = self._live, None
@@ -444,8 +444,9 @@ class ViewSink(Sink):
         t = result.predicted_t
         rate = np.gradient(result.predicted_angle, t) if t.size > 1 else np.zeros_like(result.predicted_angle)
         self.view.log_fit(
-            t, result.predicted_angle, rate, result.coefficients, result.ci95, t_fit=result.t_end
-        )
+            t, result.predicted_angle, rate, result.coefficients, result.ci95, t_fit=result.t_end,
+            final=result is decay.final_fit,  # the decay's verdict: never dropped, however far behind
+        )  # fmt: skip
 
     def on_settle(self, decay: Decay) -> None:
         try:

@@ -273,17 +273,19 @@ class LiveView:
         coefficients: Mapping[str, float],
         ci95: Mapping[str, object] | None = None,
         t_fit: float | None = None,
+        final: bool = False,
     ) -> None:
         """A refit: model angle and rate over ``t`` (rad, rad/s), its residual, and the coefficients.
 
         ``ci95`` per term is [low, high] or a half-width. The coefficients are
         plotted at ``t_fit`` (default: the last time of ``t``) so they converge
-        along the same time axis as the decay.
+        along the same time axis as the decay. A refit is dropped when the view is behind; the
+        ``final`` fit of a decay, what the operator judges it by, never is.
         """
         if self.mode != "none":
             args = (np.array(t, dtype=float), np.array(predicted_angle), np.array(predicted_rate))
             fit = (dict(coefficients), dict(ci95 or {}), t_fit)
-            self._submit(lambda: self._log_fit(*args, *fit), droppable=True)
+            self._submit(lambda: self._log_fit(*args, *fit), droppable=not final)
 
     def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
         """A run event (release, settled, warning, ...) in the Events panel, at its time."""

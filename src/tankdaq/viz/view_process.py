@@ -230,10 +230,11 @@ class ViewProcess:
         coefficients: Mapping[str, float],
         ci95: Mapping[str, object] | None = None,
         t_fit: float | None = None,
+        final: bool = False,
     ) -> None:
-        """As ``LiveView.log_fit`` (dropped when the view is behind)."""
+        """As ``LiveView.log_fit`` (a refit dropped when the view is behind, the final fit never)."""
         args = (np.array(t, dtype=float), np.array(predicted_angle), np.array(predicted_rate))
-        self._put("log_fit", (*args, dict(coefficients), dict(ci95 or {}), t_fit), droppable=True)
+        self._put("log_fit", (*args, dict(coefficients), dict(ci95 or {}), t_fit, final), droppable=not final)
 
     def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
         """As ``LiveView.log_event``."""
