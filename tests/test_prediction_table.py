@@ -137,6 +137,19 @@ def test_a_table_with_ikedas_components_explains_the_gap_as_tankdaqs_own_predict
     assert from_table.component_changes(measured_b1, measured_b2, amplitudes) == own.component_changes(
         measured_b1, measured_b2, amplitudes
     )
+    # the components alone, no total: their sum is the B̂44
+    alone = _table(
+        tmp_path / "parts.csv",
+        ["amplitude_deg", *COMPONENT_KEYS],
+        [[r[k] for k in ["amplitude_deg", *COMPONENT_KEYS]] for r in rows],
+    )
+    parts = resolve_simulation([str(alone)], request)
+    for term in ("b1", "b2", "c1"):
+        assert parts.coefficients[term] == pytest.approx(own.coefficients[term], rel=1e-6), term
+    assert parts.component_changes is not None
+    assert parts.component_changes(measured_b1, measured_b2, amplitudes) == own.component_changes(
+        measured_b1, measured_b2, amplitudes
+    )
 
 
 def test_components_are_shares_of_the_damping_and_must_add_up_to_a_b44_hat(

@@ -17,6 +17,7 @@ Ikeda's components beside the total (``B_F``, ``B_W``, ``B_E``, ``B_L``, ``B_BK`
 names them) let the comparison say which of them would have to change to meet the measurement, as
 tankdaq's own prediction does (``physics.ikeda.change_lines``). They are taken as shares of the damping
 column at each amplitude, so their unit does not matter; beside a B̂44 column they must add up to it.
+Components alone (no total) are B̂ values, as ``tankdaq predict`` prints them: their sum is the B̂44.
 """
 
 from __future__ import annotations
@@ -46,6 +47,8 @@ AMPLITUDE_COLUMNS = {
 DAMPING_COLUMNS = {"b_eq_per_s": PER_INERTIA, "b44_hat": HAT, "b_44": HAT, "b44_n_m_s": DIMENSIONAL}
 #: Component columns (lower case) -> the key of Ikeda's component (``physics.ikeda.COMPONENTS``).
 COMPONENT_COLUMNS = {key.lower(): key for key in COMPONENTS}
+#: The damping column of a table of components alone: their sum, a B̂44.
+SUM_OF_COMPONENTS = "b44_hat"
 #: How far a table's components may be from its B̂44 column and still be its parts.
 COMPONENTS_ADD_UP = 0.02
 #: Amplitudes a decay test reaches (rad): a table outside them is a unit slip.
@@ -62,7 +65,9 @@ def is_prediction_table(path: Path) -> bool:
     except OSError:
         return False
     names = {name.strip().strip('"') for separator in ",;\t" for name in head.split(separator)}
-    return bool(names & set(AMPLITUDE_COLUMNS)) and bool(names & set(DAMPING_COLUMNS))
+    return bool(names & set(AMPLITUDE_COLUMNS)) and bool(
+        names & (set(DAMPING_COLUMNS) | set(COMPONENT_COLUMNS))
+    )
 
 
 @dataclass
@@ -84,10 +89,15 @@ def read_prediction_table(path: Path) -> PredictionTable:
     columns = {name.lower(): values for name, values in table.columns.items()}
     amplitude_col = next((c for c in AMPLITUDE_COLUMNS if c in columns), None)
     damping_cols = [c for c in DAMPING_COLUMNS if c in columns]
+    given = [name for name in COMPONENT_COLUMNS if name in columns]
+    if not damping_cols and given:  # Ikeda's components alone (B̂, as ``tankdaq predict``): their sum
+        columns[SUM_OF_COMPONENTS] = np.sum([columns[name] for name in given], axis=0)
+        damping_cols = [SUM_OF_COMPONENTS]
     if amplitude_col is None or len(damping_cols) != 1:
         raise InputError(
             f"{path}: a prediction table needs one amplitude column ({', '.join(AMPLITUDE_COLUMNS)}) and one "
-            f"damping column ({', '.join(DAMPING_COLUMNS)}); it has {', '.join(table.columns)}"
+            f"damping column ({', '.join(DAMPING_COLUMNS)}) or Ikeda's components "
+            f"({', '.join(COMPONENTS)}); it has {', '.join(table.columns)}"
         )
     (damping_col,) = damping_cols
     amplitudes = columns[amplitude_col] * AMPLITUDE_COLUMNS[amplitude_col]
