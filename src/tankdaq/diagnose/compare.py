@@ -29,6 +29,7 @@ from ..ident.derived import (
     tested_amplitudes_deg,
 )
 from ..ident.output_error import OutputError
+from ..physics.ikeda import linear_quadratic_fit
 from ..physics.models import canonical_order
 from ..records import DecayRun
 from .correction import Correction, correction
@@ -440,10 +441,8 @@ class SimulationComparison(EstimatorMixin):
             return []
         omega = math.sqrt(max(linear_stiffness(self.reference_.coefficients_), 1e-12))
         amplitudes = np.radians([point.amplitude_deg for point in self.damping_])
-        design = np.column_stack([np.ones_like(amplitudes), 8.0 / (3.0 * math.pi) * omega * amplitudes])
-        measured = np.array([point.measured[0] for point in self.damping_])
-        (b1, b2), *_ = np.linalg.lstsq(design, measured, rcond=None)
-        return explain(float(b1), float(b2), list(amplitudes))
+        b1, b2 = linear_quadratic_fit(omega, amplitudes, [point.measured[0] for point in self.damping_])
+        return explain(b1, b2, list(amplitudes))
 
     def _warnings(self) -> list[str]:
         """What physics or the inputs say not to trust: shown wherever the comparison is."""

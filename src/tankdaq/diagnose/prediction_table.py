@@ -32,7 +32,7 @@ import numpy as np
 from ..config import Hull
 from ..errors import InputError
 from ..ident.derived import G, b44_hat_factor
-from ..physics.ikeda import COMPONENTS, change_lines
+from ..physics.ikeda import COMPONENTS, change_lines, linear_quadratic_fit
 from ..store.csv_dialect import read_table
 
 PER_INERTIA, HAT, DIMENSIONAL = "B_eq / I", "B̂44", "B44"
@@ -197,9 +197,8 @@ def equivalent_model(amplitudes_rad: np.ndarray, b_eq: np.ndarray, omega: float)
     alone), c1 = ω² (the measured period: a prediction gives damping, not stiffness)."""
     if np.unique(amplitudes_rad).size < 2:
         return {"b1": float(np.mean(b_eq)), "b2": 0.0, "c1": omega**2}
-    design = np.column_stack([np.ones_like(amplitudes_rad), 8.0 / (3.0 * math.pi) * omega * amplitudes_rad])
-    (b1, b2), *_ = np.linalg.lstsq(design, b_eq, rcond=None)
-    return {"b1": float(b1), "b2": float(b2), "c1": omega**2}
+    b1, b2 = linear_quadratic_fit(omega, amplitudes_rad, b_eq)
+    return {"b1": b1, "b2": b2, "c1": omega**2}
 
 
 def coverage_note(amplitudes_rad: np.ndarray, measured_rad: Sequence[float]) -> str | None:

@@ -25,11 +25,6 @@ SAME_TO = 2e-4
 TIME_TO = 0.1
 
 
-def _bucket(run: DecayRun) -> tuple[int, float]:
-    """Runs that may be one another: as many samples over as long a time."""
-    return run.t.size, round(float(run.t[-1] - run.t[0]), 3) if run.t.size else 0.0
-
-
 def same_decay(first: DecayRun, second: DecayRun) -> bool:
     """True when ``second`` holds ``first``'s samples (instants from its start to ``TIME_TO`` of a step,
     angles to ``SAME_TO`` of the amplitude)."""
@@ -45,10 +40,10 @@ def same_decay(first: DecayRun, second: DecayRun) -> bool:
 
 def repeated_decays(runs: Sequence[DecayRun]) -> dict[int, int]:
     """Index of each decay that repeats an earlier one -> the index of that one."""
-    earlier: dict[tuple[int, float], list[int]] = defaultdict(list)
+    earlier: dict[int, list[int]] = defaultdict(list)  # by sample count: only those can be one
     repeats: dict[int, int] = {}
     for i, run in enumerate(runs):
-        bucket = earlier[_bucket(run)]
+        bucket = earlier[run.t.size]
         first = next((j for j in bucket if same_decay(runs[j], run)), None)
         if first is None:
             bucket.append(i)

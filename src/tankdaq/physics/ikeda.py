@@ -297,6 +297,17 @@ def _lift(inputs: IkedaInputs) -> float:
     )  # fmt: skip
 
 
+def linear_quadratic_fit(
+    omega_rad_s: float, amplitudes_rad: Sequence[float] | np.ndarray, b_eq: Sequence[float] | np.ndarray
+) -> tuple[float, float]:
+    """(b1, b2) of B_eq(φa)/I = b1 + 8/(3π) ω φa b2, least squares over two or more amplitudes
+    (``ident.derived.b_eq``'s convention): a prediction's or a measurement's damping in one form."""
+    amplitudes = np.asarray(amplitudes_rad, dtype=float)
+    design = np.column_stack([np.ones(amplitudes.size), QUADRATIC_EQUIVALENT * omega_rad_s * amplitudes])
+    (b1, b2), *_ = np.linalg.lstsq(design, np.asarray(b_eq, dtype=float), rcond=None)
+    return float(b1), float(b2)
+
+
 def fit_parts(
     omega_rad_s: float,
     amplitudes_rad: Sequence[float],
@@ -312,10 +323,7 @@ def fit_parts(
     if len(amplitudes_rad) == 1:
         b1 = sum(parts[0][k] for k in keys if k in LINEAR_PART)
         return b1, sum(parts[0][k] for k in keys if k in QUADRATIC_PART) / slope[0]
-    y = np.array([sum(row[k] for k in keys) for row in parts])
-    design = np.column_stack([np.ones(len(amplitudes_rad)), slope])
-    (b1, b2), *_ = np.linalg.lstsq(design, y, rcond=None)
-    return float(b1), float(b2)
+    return linear_quadratic_fit(omega_rad_s, amplitudes_rad, [sum(row[k] for k in keys) for row in parts])
 
 
 def change_lines(

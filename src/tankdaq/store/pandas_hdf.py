@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from .export_layout import plain_value
+
 #: Why a dataset, variable or frame column is not a column (``store.column_files`` too).
 NOT_A_VECTOR = "is not a vector of numbers"
 #: ``pandas_type`` of a frame in the fixed and in the table format.
@@ -71,10 +73,6 @@ def pickled_names(raw: object) -> list[str] | None:
     return names
 
 
-def _text(value: object) -> str:
-    return value.decode("utf-8", "replace") if isinstance(value, bytes | np.bytes_) else str(value)
-
-
 def _index(frame: Frame, values: np.ndarray, name: str | None) -> None:
     """The frame's index as a column: by its name, or as ``index`` unless it only numbers the rows."""
     if values.dtype.kind not in "iuf" or values.ndim != 1:
@@ -90,12 +88,12 @@ def read_fixed(group: Any, key: str) -> Frame:
     axis = group.get("axis1")
     if axis is not None:
         raw_name = bytes(axis.attrs.get("name", PICKLED_NONE))
-        _index(frame, axis[()], None if raw_name == PICKLED_NONE else _text(raw_name))
+        _index(frame, axis[()], None if raw_name == PICKLED_NONE else str(plain_value(raw_name)))
     block = -1
     while f"block{block + 1}_items" in group and f"block{block + 1}_values" in group:  # not ``nblocks``:
         block += 1  # the file's own count, which a damaged file may overstate without end
         items, values = group[f"block{block}_items"], group[f"block{block}_values"]
-        names = [_text(item) for item in items[()]]
+        names = [str(plain_value(item)) for item in items[()]]
         if values.ndim != 2 or values.dtype.kind not in "biuf" or values.shape[1] != len(names):
             frame.left |= dict.fromkeys(names, NOT_A_VECTOR)
             continue
