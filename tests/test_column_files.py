@@ -276,3 +276,15 @@ def test_a_pickle_in_a_pandas_file_is_never_loaded(tmp_path: Path) -> None:
     rec = tankdaq.read(path, time_col="extra_time_s", angle_col="extra_roll_deg", rate_col=None)
     assert not marker.exists()
     assert any("values_block_0" in line for line in rec.notices)
+
+
+def test_a_pandas_file_with_nothing_readable_says_why_in_its_one_line(tmp_path: Path) -> None:
+    pytest.importorskip("tables", reason="PyTables (pandas' HDF5 writer) is not installed")
+    path = tmp_path / "run.h5"
+    _frame().drop(columns="tag").to_hdf(path, key="run", mode="w", format="table")
+    with h5py.File(path, "r+") as h5:
+        h5["run/table"].attrs["values_block_0_kind"] = np.int64(5)  # damaged: no list of names
+    with pytest.raises(
+        InputError, match=r"values_block_0 is a block of columns whose names are no plain list"
+    ):
+        tankdaq.read(path, angle_col="roll_deg")

@@ -180,8 +180,10 @@ def _one_length(path: Path, data: ColumnData, options: CsvOptions, what: str) ->
     of another length, and what was not a vector of numbers, said in one line."""
     data.notices = [f"{path.name}: {line}" for line in data.notices]
     if not data.columns:
+        why = [f"{name} {reason}" for name, reason in data.ignored.items() if reason != NOT_A_VECTOR][:2]
+        said = f" ({'; '.join(why)})" if why else ""
         raise InputError(
-            f"{path}: no {what} that are vectors of numbers; a decay needs a time and an angle column"
+            f"{path}: no {what} that are vectors of numbers{said}; a decay needs a time and an angle column"
         )
     lengths = Counter(len(values) for values in data.columns.values())
     time = data.columns.get(options.time_col)
