@@ -106,6 +106,19 @@ def test_each_limit_is_named_on_both_sides(name: str, side: str) -> None:
     assert validity(inside, omega_inside) == []
 
 
+@pytest.mark.parametrize("name", sorted(set(LIMITS) - {"omega_hat"}))
+@pytest.mark.parametrize("side", [0, 1])
+def test_a_ratio_on_its_limit_is_inside_whatever_the_rounding(name: str, side: int) -> None:
+    """OG = -1.5 d makes OG/d = -1.5000000000000002: on the limit, not "-1.5 below -1.5"."""
+    limit = LIMITS[name][side]
+    assert validity(*_with_ratio(name, limit)) == []
+    if name == "OG/d":  # and at drafts whose products round the other way
+        for beam_over_draft in (2.5, 3.167913730965956, 3.7, 4.5):
+            draft = BEAM / beam_over_draft
+            inputs = IkedaInputs(**{**STANDARD, "draft_m": draft, "og_m": limit * draft})
+            assert validity(inputs, OMEGA) == [], draft
+
+
 def test_bilge_keel_limits_do_not_apply_without_a_bilge_keel() -> None:
     bare = IkedaInputs(**{**STANDARD, "bilge_keel_length_m": 0.0, "bilge_keel_breadth_m": 0.0})
     assert validity(bare, OMEGA) == []

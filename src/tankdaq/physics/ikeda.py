@@ -121,6 +121,11 @@ class Finding:
     line: str
 
 
+#: A ratio made of two lengths may miss a limit it equals by a rounding (OG = -1.5 d gives OG/d =
+#: -1.5000000000000002): within this it is on the limit, not beyond it.
+RATIO_ROUNDING = 1e-9
+
+
 def validity(inputs: IkedaInputs, omega_rad_s: float) -> list[Finding]:
     """Every input outside the paper's limits, named, one line each; plus the speed caveat."""
     values = {
@@ -136,7 +141,7 @@ def validity(inputs: IkedaInputs, omega_rad_s: float) -> list[Finding]:
     findings = []
     for name, value in values.items():
         low, high, what = LIMITS[name]
-        if not low <= value <= high:
+        if not low - RATIO_ROUNDING <= value <= high + RATIO_ROUNDING:
             side = "below" if value < low else "above"
             findings.append(
                 Finding(
