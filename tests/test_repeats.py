@@ -66,6 +66,52 @@ def test_two_real_decays_of_one_condition_are_two(lab_csvs: list[Path]) -> None:
     assert len(found.fits[0].runs) == 2
 
 
+def _rows(source: Path, target: Path, start: float, stop: float) -> Path:
+    """A colleague's copy of ``source``: only the rows from fraction ``start`` to ``stop`` of it, with the
+    time column as it was (re-saved by pandas: other decimals)."""
+    table = pd.read_csv(source)
+    table.iloc[round(start * len(table)) : round(stop * len(table))].to_csv(
+        target, index=False, float_format="%.6g"
+    )
+    return target
+
+
+def _free_decays(*paths: Path) -> list:
+    return [run for path in paths for run in cut_free_decays(read_decays(path, rate_col=None), None, None)]
+
+
+@pytest.mark.parametrize(
+    ("start", "stop"),
+    [(0.0, 0.6), (0.0, 0.9), (0.45, 1.0), (0.3, 0.8)],
+    ids=["first-60%", "first-90%", "from-the-middle", "a-middle-half"],
+)
+def test_a_copy_cut_at_another_point_is_the_same_decay(
+    lab_csvs: list[Path], tmp_path: Path, start: float, stop: float
+) -> None:
+    original = lab_csvs[0]
+    cut = _rows(original, tmp_path / "21337 selected.csv", start, stop)
+    runs = _free_decays(original, cut)
+    assert runs[0].t.size != runs[1].t.size  # their sample counts differ: not the same file re-saved
+    (finding,) = check_repeats(runs)
+    assert "a cut of the same decay" in finding.message and cut.name in finding.message, finding.message
+    alone = tankdaq.identify(original, "b1,b3,c1,c3", reading=tankdaq.Reading(rate_col=None))
+    both = tankdaq.identify([cut, original], "b1,b3,c1,c3", reading=tankdaq.Reading(rate_col=None))
+    said = [line for line in both.notices if line.startswith("not used: ")]
+    assert len(said) == 1 and said[0].startswith(f"not used: {runs[1].name}"), (
+        both.notices
+    )  # the longer stays
+    pd.testing.assert_frame_equal(both.coefficients, alone.coefficients)
+
+
+def test_two_real_decays_cut_alike_or_apart_stay_two(lab_csvs: list[Path], tmp_path: Path) -> None:
+    """Parts of two real decays of one condition share no stretch, however they are cut."""
+    first = _rows(lab_csvs[0], tmp_path / "a.csv", 0.0, 0.6)
+    second = _rows(lab_csvs[1], tmp_path / "b.csv", 0.2, 1.0)
+    assert check_repeats(_free_decays(first, lab_csvs[1])) == []
+    assert check_repeats(_free_decays(lab_csvs[0], second)) == []
+    assert check_repeats(_free_decays(first, second)) == []
+
+
 def test_a_group_holding_one_decay_twice_is_doubted(lab_csvs: list[Path], tmp_path: Path) -> None:
     original = lab_csvs[0]
     copy = _resaved(original, tmp_path / "copy.csv", "time_s", "angle_deg", np.pi / 180, "angle_rad")
@@ -81,3 +127,7 @@ def test_the_kvlcc2_run_resaved_in_degrees_is_the_same_decay(tmp_path: Path) -> 
     runs = cut_free_decays(read_decays(KVLCC2, "roll", "time", "phi", None, "rad"), None, None)
     runs += cut_free_decays(read_decays(copy, "roll", "time", "phi_deg", None), None, None)
     assert [f.check for f in check_repeats(runs)] == ["repeated"]
+    trimmed = _rows(KVLCC2, tmp_path / "21338_first_cycles.csv", 0.0, 0.5)
+    runs[1:] = cut_free_decays(read_decays(trimmed, "roll", "time", "phi", None, "rad"), None, None)
+    (finding,) = check_repeats(runs)
+    assert "a cut of the same decay" in finding.message
