@@ -95,14 +95,17 @@ def test_saved_rrd_holds_measurement_fits_and_blueprint(tmp_path: Path) -> None:
     # every refit is its own series: no timestamp holds two model values
     last_angle, _ = simulate_decay(coefficient_sets[-1], samples["t"], np.radians(6.0))
     for revision in (1, 2, 3):
-        t_model, model = series(rows[f"/angle/model/fit_{revision:03d}"])
+        t_model, model = series(rows[f"/angle/fits/fit_{revision:03d}"])
         assert np.unique(t_model).size == t_model.size == samples.size
     np.testing.assert_allclose(model[:, 0], np.degrees(last_angle), rtol=1e-12)
-    assert static["/angle/model/fit_003"]["SeriesLines:names"] == ["model (fit 3, t = 16.0 s)"]
-    assert static["/angle/model/fit_002"]["SeriesLines:names"] == ["previous fit"]
-    assert static["/angle/model/fit_001"]["SeriesLines:visible_series"] == [False]
+    assert static["/angle/fits/fit_003"]["SeriesLines:names"] == ["model (fit 3, t = 16.0 s)"]
+    assert static["/angle/fits/fit_002"]["SeriesLines:names"] == ["previous fit"]
+    assert static["/angle/fits/fit_001"]["SeriesLines:names"] == ["earlier fits"]
+    # never hidden: a viewer keeps hidden series in its blueprint, and a later decay's fit_001 would start
+    # hidden there (a short decay's final model never drawn)
+    assert not any("SeriesLines:visible_series" in components for components in static.values())
 
-    _, residual = series(rows["/residual/model/fit_003"])
+    _, residual = series(rows["/residual/fits/fit_003"])
     np.testing.assert_allclose(residual[:, 0], np.degrees(samples["roll"] - last_angle), atol=1e-9)
 
     t_fit, b1 = series(rows["/coefficients/b1"])
@@ -210,8 +213,8 @@ def test_a_forecast_beyond_the_measurement_has_no_residual_there(tmp_path: Path)
         view.log_samples(samples)
         view.log_fit(ahead, angle, rate, TRUTH)
     rows, _, _ = read_rrd(tmp_path / "ahead.rrd")
-    t_model, _ = series(rows["/angle/model/fit_001"])
-    t_residual, residual = series(rows["/residual/model/fit_001"])
+    t_model, _ = series(rows["/angle/fits/fit_001"])
+    t_residual, residual = series(rows["/residual/fits/fit_001"])
     assert t_model.size == 500 and t_residual.size == 300
     np.testing.assert_allclose(residual[:, 0], 0.0, atol=1e-9)  # the truth fits its own samples
 

@@ -135,8 +135,8 @@ def test_a_view_behind_drops_refits_but_never_a_decays_final_fit(tmp_path: Path)
         release.set()
         view.close()
     # the four refits queued, then the final one: five revisions, the last the final fit's coefficients
-    assert _rrd_rows(tmp_path / "final.rrd", "/angle/model/fit_005") > 0
-    assert _rrd_rows(tmp_path / "final.rrd", "/angle/model/fit_006") == 0
+    assert _rrd_rows(tmp_path / "final.rrd", "/angle/fits/fit_005") > 0
+    assert _rrd_rows(tmp_path / "final.rrd", "/angle/fits/fit_006") == 0
 
 
 def test_record_keeps_its_read_cadence_while_the_view_saves(

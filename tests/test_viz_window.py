@@ -140,6 +140,9 @@ def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_deca
     with virtual_display() as display:
         env = {k: v for k, v in os.environ.items() if k != "WAYLAND_DISPLAY"}
         env["DISPLAY"] = display
+        # the viewer's own state (its blueprint for tankdaq, kept across its restarts) in this test's folder:
+        # what an earlier viewer on this machine kept must not decide what this one draws
+        env["XDG_DATA_HOME"] = str(tmp_path / "viewer-state")
         record = [
             str(Path(sys.executable).with_name("tankdaq")), "record", "--hull", "swath", "--port", "sim",
             "--draft", "T", "--angle", "8", "--sim-speed", "8", "--viewer", "spawn",

@@ -3,9 +3,13 @@
 One rerun recording per decay (``new_run``), on the device-time timeline ``t``.
 A refit redraws the model over the whole decay, and a time series that gets
 new values at old timestamps draws a zig-zag between the old and new curve.
-So each fit revision is its own entity (``angle/model/fit_007``): the newest is
-drawn bold, the one before it faint (to show what changed), older ones are
-hidden. Nothing is drawn twice at one timestamp in one series.
+So each fit revision is its own entity (``angle/fits/fit_007``): the newest is
+drawn bold, the one before it faint (to show what changed), older ones fainter still.
+Nothing is drawn twice at one timestamp in one series. None is ever hidden
+(``visible_series``): the viewer keeps a hidden series in its blueprint for the
+application, across recordings and its own restarts, so a later decay's fit of the
+same number would start hidden (its final model never drawn). The path is not the
+``model/fit_NNN`` of tankdaq before that: a viewer's blueprint may still hide those.
 
 The recording is what must survive, so the view never holds up acquisition: every call
 only queues a job for one background thread (``ViewFeed``), sample blocks and refits are
@@ -56,8 +60,28 @@ def unfinished_note(what: str, stall_s: float, limit_s: float) -> str:
 MEASURED_COLOR = (31, 119, 180)
 MODEL_COLOR = (214, 39, 40)
 PREVIOUS_COLOR = (150, 150, 150, 140)
+EARLIER_COLOR = (110, 110, 110, 70)
 INTERVAL_COLOR = (31, 119, 180, 90)
 EVENT_LEVELS = {"warning": "WARN", "unplug": "ERROR", "gap": "WARN"}
+#: Where each refit's curves go under angle, rate and residual.
+FITS = "fits"
+
+
+def _previous_style() -> rr.SeriesLines:
+    import rerun as rr
+
+    return rr.SeriesLines(colors=[PREVIOUS_COLOR], widths=[1.0], names=["previous fit"])
+
+
+def _earlier_style() -> rr.SeriesLines:
+    import rerun as rr
+
+    return rr.SeriesLines(colors=[EARLIER_COLOR], widths=[0.5], names=["earlier fits"])
+
+
+#: How a fit is drawn once newer ones came: the one before the newest, then the one before that (from
+#: then on it stays so; one entry in the legend for all of them).
+AGED_STYLES = (_previous_style, _earlier_style)
 
 
 def term_title(term: str) -> str:
@@ -454,21 +478,14 @@ class LiveView:
         for group, (times, values) in curves.items():
             name = label if group != "residual" else f"residual (fit {self._revision})"
             rec.log(
-                f"{group}/model/{fit}",
+                f"{group}/{FITS}/{fit}",
                 rr.SeriesLines(colors=[MODEL_COLOR], widths=[2.0], names=[name]),
                 static=True,
             )
-            self._columns(rec, f"{group}/model/{fit}", times, values)
-            if self._revision >= 2:
-                previous = f"{group}/model/fit_{self._revision - 1:03d}"
-                rec.log(
-                    previous,
-                    rr.SeriesLines(colors=[PREVIOUS_COLOR], widths=[1.0], names=["previous fit"]),
-                    static=True,
-                )
-            if self._revision >= 3:
-                older = f"{group}/model/fit_{self._revision - 2:03d}"
-                rec.log(older, rr.SeriesLines(visible_series=[False]), static=True)
+            self._columns(rec, f"{group}/{FITS}/{fit}", times, values)
+            for age, style in enumerate(AGED_STYLES, start=1):
+                if self._revision > age:
+                    rec.log(f"{group}/{FITS}/fit_{self._revision - age:03d}", style(), static=True)
         rec.set_time(TIMELINE, duration=stamp - self._origin)
         intervals = interval_pairs(coefficients, ci95 or None)
         for term, value in coefficients.items():
