@@ -3,16 +3,19 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+WORKERS := $(shell $(PYTHON) -c "import os; print(len(os.sched_getaffinity(0)) + 1)")
 
 .PHONY: demo test lint docs bench clean venv viewer-test-deps catalogue-test-deps
 
-# pip byte-compiles every package it installs (about 45 s of a 96 s install here). It must: where
-# PYTHONDONTWRITEBYTECODE is set (as in this machine's environment) Python never caches what it compiles: every
-# process would compile pandas, rerun and the rest from source again (docs/benchmarks.md).
+# Everything installed is byte-compiled. It must be: where PYTHONDONTWRITEBYTECODE is set (as in this
+# machine's environment) Python never caches what it compiles, and every process would compile pandas, rerun
+# and the rest from source again (docs/benchmarks.md). pip compiles on one core (about 45 s of a 96 s
+# install here); compileall does it on every core. A file that does not compile is left as pip leaves it.
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
+	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib >/dev/null || true
 	touch $(STAMP)
 
 venv: $(STAMP)
@@ -47,7 +50,8 @@ viewer-test-deps:
 		echo "make: apt-get could not install $(VIEWER_TEST_PACKAGES); the viewer window test skips"; \
 	fi
 
-# One pytest worker per core: most of the suite's wall time is the simulated MTi-G streaming in real time.
+# One pytest worker per core and one more: the suite is mostly CPU, but a sixth of its tests' time is spent
+# waiting on the simulated MTi-G streaming in real time, on servers starting and on subprocesses.
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
 # The run catalogue's PostgreSQL tests start a throwaway server (initdb, pg_ctl) from the Debian
@@ -72,7 +76,7 @@ test: $(STAMP) viewer-test-deps catalogue-test-deps
 		$(MAKE) --no-print-directory docs) & built=$$!; \
 		$(MAKE) --no-print-directory lint; checked=$$?; \
 		wait $$built && exit $$checked
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist worksteal --durations=25
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n $(WORKERS) --dist worksteal --durations=25
 
 bench: $(STAMP)
 	$(BIN)/python bench/run_all.py
