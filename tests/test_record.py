@@ -169,7 +169,7 @@ def test_rrd_beside_each_mcap_holds_angle_rate_and_fit(three_decays) -> None:
     assert rrd is not None and rrd == outcomes[0].path.with_suffix(".rrd") and rrd.exists()
     entities = {chunk.entity_path for chunk in RrdReader(str(rrd)).stream().to_chunks()}
     assert "/angle/measured" in entities and "/rate/measured" in entities
-    assert any(e.startswith("/angle/model") for e in entities)
+    assert any(e.startswith("/angle/fits/") for e in entities)
     assert any(e.startswith("/coefficients") for e in entities)
 
 

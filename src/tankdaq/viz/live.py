@@ -1,15 +1,11 @@
 """The live rerun view of a decay: angle, rate, the model fitted so far, its coefficients and residual.
 
-One rerun recording per decay (``new_run``), on the device-time timeline ``t``.
-A refit redraws the model over the whole decay, and a time series that gets
-new values at old timestamps draws a zig-zag between the old and new curve.
-So each fit revision is its own entity (``angle/fits/fit_007``): the newest is
-drawn bold, the one before it faint (to show what changed), older ones fainter still.
-Nothing is drawn twice at one timestamp in one series. None is ever hidden
-(``visible_series``): the viewer keeps a hidden series in its blueprint for the
-application, across recordings and its own restarts, so a later decay's fit of the
-same number would start hidden (its final model never drawn). The path is not the
-``model/fit_NNN`` of tankdaq before that: a viewer's blueprint may still hide those.
+One rerun recording per decay (``new_run``), on the device-time timeline ``t``. A refit redraws the
+model over the whole decay, and a series that gets new values at old timestamps draws a zig-zag. So
+each fit is its own entity (``angle/fits/fit_007``): the newest bold, the one before faint, older ones
+fainter. None is ever hidden (``visible_series``): a viewer keeps hidden series in its blueprint across
+recordings and restarts, and a later decay's fit of that number would start hidden (a final model never
+drawn). Not tankdaq's old ``model/fit_NNN``: a viewer's blueprint may still hide those.
 
 The recording is what must survive, so the view never holds up acquisition: every call
 only queues a job for one background thread (``ViewFeed``), sample blocks and refits are
@@ -65,23 +61,9 @@ INTERVAL_COLOR = (31, 119, 180, 90)
 EVENT_LEVELS = {"warning": "WARN", "unplug": "ERROR", "gap": "WARN"}
 #: Where each refit's curves go under angle, rate and residual.
 FITS = "fits"
-
-
-def _previous_style() -> rr.SeriesLines:
-    import rerun as rr
-
-    return rr.SeriesLines(colors=[PREVIOUS_COLOR], widths=[1.0], names=["previous fit"])
-
-
-def _earlier_style() -> rr.SeriesLines:
-    import rerun as rr
-
-    return rr.SeriesLines(colors=[EARLIER_COLOR], widths=[0.5], names=["earlier fits"])
-
-
-#: How a fit is drawn once newer ones came: the one before the newest, then the one before that (from
-#: then on it stays so; one entry in the legend for all of them).
-AGED_STYLES = (_previous_style, _earlier_style)
+#: How a fit is drawn once newer ones came, (colour, width, legend name): the one before the newest, then
+#: every older one (one legend entry for all of them).
+AGED_STYLES = ((PREVIOUS_COLOR, 1.0, "previous fit"), (EARLIER_COLOR, 0.5, "earlier fits"))
 
 
 def term_title(term: str) -> str:
@@ -483,9 +465,10 @@ class LiveView:
                 static=True,
             )
             self._columns(rec, f"{group}/{FITS}/{fit}", times, values)
-            for age, style in enumerate(AGED_STYLES, start=1):
+            for age, (color, width, aged) in enumerate(AGED_STYLES, start=1):
                 if self._revision > age:
-                    rec.log(f"{group}/{FITS}/fit_{self._revision - age:03d}", style(), static=True)
+                    style = rr.SeriesLines(colors=[color], widths=[width], names=[aged])
+                    rec.log(f"{group}/{FITS}/fit_{self._revision - age:03d}", style, static=True)
         rec.set_time(TIMELINE, duration=stamp - self._origin)
         intervals = interval_pairs(coefficients, ci95 or None)
         for term, value in coefficients.items():
