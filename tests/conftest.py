@@ -9,6 +9,7 @@
   ``catalogue_url``: a test's catalogue, once a SQLite file and once that server's database.
 
 tankdaq is imported inside the fixtures, so collecting a test that uses none of them costs nothing.
+The modules that hold a long test (marked ``slow``) are run first (``pytest_collection_modifyitems``).
 """
 
 from __future__ import annotations
@@ -23,6 +24,15 @@ import pytest
 if TYPE_CHECKING:
     from tankdaq.acquire.daemon import RecordSettings
     from tankdaq.device.simulator import SimulatedMTi
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The modules holding a long test (marked ``slow``) first, each module's tests together and in their
+    order: the workers then share the short tests at the end instead of two waiting on a third's long one
+    (a module's fixtures are still made once)."""
+    slow = {item.nodeid.split("::")[0] for item in items if item.get_closest_marker("slow") is not None}
+    items.sort(key=lambda item: item.nodeid.split("::")[0] not in slow)  # stable: order kept otherwise
+
 
 #: The simulator fixture's device clock against the wall clock: a decay in a few seconds.
 SIMULATOR_SPEED = 10.0

@@ -22,6 +22,7 @@ N_DECAYS = 360
 SHORT = SimulatedTest(duration_s=3.0)  # three pitch periods: enough to fit, cheap to read
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("error:Sending large graph")  # each group's fit goes to the cluster once
 def test_a_dask_cluster_of_two_workers_gives_the_pools_results(tmp_path: Path) -> None:
     folder = tmp_path / "decays"

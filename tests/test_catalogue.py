@@ -268,6 +268,7 @@ def test_two_processes_writing_1000_rows_each_into_sqlite_make_2000(tmp_path: Pa
     assert _count(url) == 2000
 
 
+@pytest.mark.slow
 def test_two_processes_writing_1000_rows_each_into_postgresql_make_2000(
     postgres_url: str, tmp_path: Path
 ) -> None:

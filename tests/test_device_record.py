@@ -60,6 +60,7 @@ def test_record_connects_to_a_difficult_device(
     assert recording.metadata["baud"] == "115200" and recording.metadata["baud_changed"] == "false"
 
 
+@pytest.mark.slow
 def test_record_400_hz_at_921600_from_a_device_at_115200_has_no_gaps(tmp_path: Path) -> None:
     with SimulatedMTi(_scenario(400, 12.0), speed=SPEED / 3, baud=115200) as sim:  # 400 Hz: a slower clock
         recording = _record(tmp_path, sim, sim.link, 400, baud=921600)

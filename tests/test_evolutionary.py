@@ -233,6 +233,7 @@ def test_no_runs_is_an_input_error() -> None:
         GeneticSeed("b1,c1", settings=QUICK_GA).fit([])
 
 
+@pytest.mark.slow
 def test_identify_cli_runs_the_ga(tmp_path: Path, noisy_run: DecayRun) -> None:
     """``tankdaq identify --method ga`` reaches the GA via the estimator registry; it finds the optimum."""
     import json

@@ -168,6 +168,7 @@ def test_a_final_fit_that_cannot_finish_is_given_up_in_bounded_time() -> None:
         gate.set()
 
 
+@pytest.mark.slow
 def test_a_first_run_after_install_prepares_the_kernels_before_the_device_and_loses_nothing(
     tmp_path: Path,
 ) -> None:

@@ -275,6 +275,7 @@ def _chunk_spans(path: Path) -> list[tuple[int, int]]:
     return spans
 
 
+@pytest.mark.slow
 def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
     """kill -9 in the middle of a decay: every flushed chunk survives and no chunk holds over 1 s.
 

@@ -110,6 +110,7 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     }
 
 
+@pytest.mark.slow
 def test_the_kill_is_real_and_the_resume_finishes(session: dict[str, Any]) -> None:
     assert session["killed_returncode"] == -signal.SIGKILL
     assert session["killed_lock_pid"] == session["killed_pid"]  # its lock was left behind, and did not block

@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import pytest
 from mcap.reader import make_reader
 
 from guided_session import TWO_DRAFT_PLAN
@@ -35,6 +36,7 @@ class Accepting:
         return "a" if question.kind == "verdict" else ""
 
 
+@pytest.mark.slow
 def test_a_session_of_eight_decays_opens_the_device_once(tmp_path: Path) -> None:
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text(TWO_DRAFT_PLAN)

@@ -22,6 +22,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import pytest
 from mcap.reader import make_reader
 
 from guided_session import signal_when
@@ -134,6 +135,7 @@ def _verdict_open(out: Path) -> bool:
     return any(r["type"] == "run" for r in records) and not any(r["type"] == "verdict" for r in records)
 
 
+@pytest.mark.slow
 def test_sigterm_at_the_verdict_question_stops_the_session_and_resume_asks_it_again(tmp_path: Path) -> None:
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text(ONE_CONDITION_PLAN)

@@ -205,6 +205,7 @@ def _grpc_server(port: int) -> Iterator[subprocess.Popen[bytes]]:
     [(signal.SIGKILL, 1), (signal.SIGKILL, 2), (signal.SIGSTOP, 3)],
     ids=["kill-1", "kill-2", "stall"],
 )
+@pytest.mark.slow
 def test_a_viewer_killed_or_stalled_at_any_moment_costs_no_decay(tmp_path: Path, how: int, seed: int) -> None:
     """The viewer's server is killed (SIGKILL) or stalls (SIGSTOP) at a random moment of a two-decay session.
 

@@ -133,6 +133,7 @@ def _pixels_near(image: np.ndarray, color: tuple[int, ...], tolerance: int = 40)
     return int(np.all(np.abs(rgb - np.array(color[:3])) <= tolerance, axis=-1).sum())
 
 
+@pytest.mark.slow
 def test_the_real_viewer_draws_a_simulated_recording_and_its_death_costs_no_decay(tmp_path: Path) -> None:
     port = _free_port()
     shot = tmp_path / "live-view.png"
