@@ -51,7 +51,8 @@ viewer-test-deps:
 	fi
 
 # One pytest worker per core and one more: the suite is mostly CPU, but a sixth of its tests' time is spent
-# waiting on the simulated MTi-G streaming in real time, on servers starting and on subprocesses.
+# waiting on the simulated MTi-G streaming in real time, on servers starting and on subprocesses. A test
+# file goes to one worker whole: a module's fixture (a whole session, killed and resumed: 50 s) is made once.
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
 # The run catalogue's PostgreSQL tests start a throwaway server (initdb, pg_ctl) from the Debian
@@ -76,7 +77,7 @@ test: $(STAMP) viewer-test-deps catalogue-test-deps
 		$(MAKE) --no-print-directory docs) & built=$$!; \
 		$(MAKE) --no-print-directory lint; checked=$$?; \
 		wait $$built && exit $$checked
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n $(WORKERS) --dist worksteal --durations=25
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n $(WORKERS) --dist loadfile --durations=25
 
 bench: $(STAMP)
 	$(BIN)/python bench/run_all.py
