@@ -136,3 +136,21 @@ def test_a_built_module_that_does_not_run_here_is_refused_before_it_is_used(tmp_
     with pytest.raises(RuntimeError, match="does not run on this CPU"):
         compiled.check_runs_here(broken)
     compiled.check_runs_here(compiled.native_path())  # the module in use passes the same trial
+
+
+def test_a_kernel_warmed_by_prepare_is_loaded_from_the_cache_by_a_call_not_compiled_again(
+    tmp_path: Path,
+) -> None:
+    """``make test`` warms the JIT in one process so that the workers load it: a call in a new process must
+    find the code ``warm_jit`` filed (it was filed under the signature, a call looks for its arguments)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    warm = "from tankdaq.ident.compiled import warm_jit; warm_jit(['term_matrix'])"
+    subprocess.run([sys.executable, "-c", warm], env=env, check=True, timeout=300)
+    call = (
+        "from tankdaq.ident import compiled, kernels; "
+        "kernels.term_matrix(*compiled.example_calls()['term_matrix']); "
+        "s = kernels.term_matrix.stats; print(sum(s.cache_hits.values()), sum(s.cache_misses.values()))"
+    )
+    done = subprocess.run([sys.executable, "-c", call], env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["1", "0"], "the call compiled the kernel again instead of loading it"

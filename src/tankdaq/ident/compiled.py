@@ -299,16 +299,20 @@ def ensure_native() -> str | None:
     return None if use_native(path) else f"{path.name} was built but does not load"
 
 
-def warm_jit() -> None:
-    """Compile every kernel with numba's JIT into its on-disk cache, for the signatures exported.
+def warm_jit(names: Sequence[str] = tuple(KERNELS)) -> None:
+    """Compile the kernels with numba's JIT into its on-disk cache, for the argument types they are called
+    with (those of the signatures exported).
 
     What the fallback runs, and what the test holding native and JIT equal compares: compiled
-    once, in one process, before parallel workers could race to write the same cache file.
+    once, in one process, before parallel workers could race to write the same cache file. Each is
+    called, not compiled for its signature: numba files an explicit signature's code under that
+    signature, and a call looks for its arguments' types, so every process compiled it again.
     """
     from . import kernels
 
-    for name in KERNELS:
-        getattr(kernels, name).compile(signature(name))
+    examples = example_calls()
+    for name in names:
+        getattr(kernels, name)(*examples[name])
 
 
 def failure_note() -> Path:
