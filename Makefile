@@ -49,10 +49,10 @@ viewer-test-deps:
 		echo "make: apt-get could not install $(VIEWER_TEST_PACKAGES); the viewer window test skips"; \
 	fi
 
-# One pytest worker per core. One more used the time tests wait on real-time streams (8:23 against 8:32 of
-# pytest), but the load it added let a simulated device miss a 10 s reply (docs/benchmarks.md): a CI that
-# fails costs more than a minute. A test file goes to one worker whole: a module's fixture (a whole
-# session, killed and resumed: 50 s) is made once.
+# One pytest worker per core. A third worker used the time tests wait on real-time streams (pytest 8:23
+# against 10:01 here), but under the load it added a played-back device missed a 10 s reply once
+# (docs/benchmarks.md): a CI that fails costs more than two minutes. A test file goes to one worker whole, so
+# a module's fixture is made once (a whole session, killed and resumed: 50 s).
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
 # The run catalogue's PostgreSQL tests start a throwaway server (initdb, pg_ctl) from the Debian
