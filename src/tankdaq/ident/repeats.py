@@ -31,6 +31,8 @@ SAME_TO = 2e-4
 TIME_TO = 0.1
 #: Fewer shared samples than this never make two decays one (a few samples can agree by rounding).
 MIN_SHARED = 20
+#: No sample.
+NONE = np.zeros(0, dtype=np.int64)
 
 
 def shared_samples(first: DecayRun, second: DecayRun) -> int:
@@ -38,7 +40,12 @@ def shared_samples(first: DecayRun, second: DecayRun) -> int:
     least half of the shorter one."""
     short, long_ = (first, second) if first.t.size <= second.t.size else (second, first)
     index = _SampleIndex([short, long_])
-    return max((_found(short, long_, anchor, index, (0, 1)) for anchor in _anchors(short)), default=0)
+    among = np.array([False, True])
+    return max(
+        (_found(short, long_, anchor, index, (0, 1), index.holding(short, anchor, among).get(1, NONE))
+         for anchor in _anchors(short)),
+        default=0,
+    )  # fmt: skip
 
 
 def repeated_decays(runs: Sequence[DecayRun]) -> dict[int, int]:
@@ -59,8 +66,8 @@ def repeated_decays(runs: Sequence[DecayRun]) -> dict[int, int]:
 def _kept_holder(runs: Sequence[DecayRun], i: int, index: _SampleIndex, kept: np.ndarray) -> int | None:
     """The first kept decay that shares at least half of decay ``i`` with it (None: none does)."""
     for anchor in _anchors(runs[i]):
-        for j in index.holding(runs[i], anchor, kept):
-            if 2 * _found(runs[i], runs[j], anchor, index, (i, j)) >= runs[i].t.size:
+        for j, matches in index.holding(runs[i], anchor, kept).items():
+            if 2 * _found(runs[i], runs[j], anchor, index, (i, j), matches) >= runs[i].t.size:
                 return j
     return None
 
@@ -90,32 +97,34 @@ class _SampleIndex:
         self.step = np.array([np.median(np.diff(run.t)) if run.t.size > 1 else 0.0 for run in runs])
         self.reach = SAME_TO * float(np.max(self.amplitude, initial=0.0))  # every pair's tolerance, at most
 
-    def holding(self, run: DecayRun, anchor: int, among: np.ndarray) -> list[int]:
+    def holding(self, run: DecayRun, anchor: int, among: np.ndarray) -> dict[int, np.ndarray]:
         """The decays in ``among`` (a mask) that may hold ``run``'s sample ``anchor`` and the one after
-        it (to the largest pair's tolerance), in order."""
+        it (to the largest pair's tolerance), in order, each with the samples that may be it."""
         reach = self.reach
         value = float(run.angle[anchor])
         lo, hi = np.searchsorted(self.values, [value - reach, value + reach])
-        owners = self.owner[lo:hi]
+        owners, samples = self.owner[lo:hi], self.sample[lo:hi]
         if anchor + 1 < run.t.size:  # a chance match of one value rarely has the next one too
             after = np.abs(self.following[lo:hi] - float(run.angle[anchor + 1])) <= reach
-            owners = owners[after]
-        return sorted({int(j) for j in owners if among[j]})
-
-    def samples_at(self, owner: int, value: float, tolerance: float) -> np.ndarray:
-        """Decay ``owner``'s samples within ``tolerance`` of ``value``."""
-        lo, hi = np.searchsorted(self.values, [value - tolerance, value + tolerance])
-        return self.sample[lo:hi][self.owner[lo:hi] == owner]
+            owners, samples = owners[after], samples[after]
+        return {int(j): samples[owners == j] for j in np.unique(owners) if among[j]}
 
 
-def _found(short: DecayRun, long_: DecayRun, anchor: int, index: _SampleIndex, pair: tuple[int, int]) -> int:
+def _found(
+    short: DecayRun,
+    long_: DecayRun,
+    anchor: int,
+    index: _SampleIndex,
+    pair: tuple[int, int],
+    matches: np.ndarray,
+) -> int:
     """The samples ``short`` shares with ``long_`` (decays ``pair`` of ``index``) at an alignment that
-    puts short's sample ``anchor`` on one of long's (0: none)."""
+    puts short's sample ``anchor`` on one of long's ``matches`` (0: none)."""
     step = float(index.step[pair[0]])
     if not abs(float(index.step[pair[1]]) - step) <= TIME_TO * step:
         return 0
     tolerance = SAME_TO * float(np.max(index.amplitude[list(pair)]))
-    for match in index.samples_at(pair[1], float(short.angle[anchor]), tolerance):
+    for match in matches:
         if not _stretch(short, long_, int(match) - anchor, tolerance, TIME_TO * step, around=anchor):
             continue  # a chance match: the samples next to it already differ
         shared = _stretch(short, long_, int(match) - anchor, tolerance, TIME_TO * step)
