@@ -7,6 +7,7 @@ so estimators and the discrepancy workflow never care where data came from.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -88,3 +89,43 @@ class DecayRun:
             meta=dict(self.meta),
             excluded=None if self.excluded is None else self.excluded[sl],
         )
+
+
+class DecayEnd(StrEnum):
+    """How a recorded decay ended: part of the record, in its file and its catalogue row.
+
+    Only ``SETTLED`` and ``TIMEOUT`` decays are whole; the others hold what arrived and are left out of
+    ``--runs`` campaigns and reference fits unless asked for (``DecayEnd.whole``).
+    """
+
+    SETTLED = "settled"  #: the swing fell below the settle threshold
+    TIMEOUT = "timeout"  #: the decay went on to the longest a decay may last
+    STOPPED = "stopped"  #: stopped by the operator (Ctrl-C, SIGTERM, a closed terminal) mid-decay
+    STREAM_ENDED = "stream_ended"  #: the stream or replayed file ended mid-decay
+    DEVICE_LOST = "device_lost"  #: the device went away mid-decay
+    ERROR = "error"  #: closed after an exception in the pipeline
+    CUT = "cut"  #: the writer never closed the file (a crash, kill -9, power cut): no footer
+    RECOVERED = "recovered"  #: a cut file rebuilt by ``tankdaq recover``
+
+    @property
+    def whole(self) -> bool:
+        """True when the file holds the whole decay, so its fit may stand for it."""
+        return self in (DecayEnd.SETTLED, DecayEnd.TIMEOUT)
+
+    @classmethod
+    def of_settle_reason(cls, reason: object) -> DecayEnd | None:
+        """The end a recording's ``settle_reason`` metadata names; older files' reasons included."""
+        text = str(reason or "")
+        try:
+            return cls(text)
+        except ValueError:
+            return _LEGACY_SETTLE_REASONS.get(text)
+
+
+#: The ``settle_reason`` words files written before ``DecayEnd`` carry. ``note`` meant stopped or the stream's
+#: end; it cannot be told which, so it counts as stopped (not whole).
+_LEGACY_SETTLE_REASONS = {
+    "amplitude": DecayEnd.SETTLED,
+    "note": DecayEnd.STOPPED,
+    "unplug": DecayEnd.DEVICE_LOST,
+}
