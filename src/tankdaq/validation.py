@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -241,6 +241,39 @@ def output_file(path: Path, option: str = "--out") -> Path:
     return path
 
 
+#: What tankdaq does with a file of the name it would write: the rule ``--help`` says and errors repeat.
+NEVER_OVERWRITES = "tankdaq never writes over a file; move it, or write into another folder"
+
+
+def refuse_existing(paths: Iterable[Path]) -> None:
+    """Every path is free (nothing there, not even a dangling symbolic link), or one line naming the
+    first that is not: tankdaq writes new files only (``store.safe_write``)."""
+    for path in paths:
+        if os.path.lexists(path):
+            kind = (
+                "a symbolic link, not followed"
+                if path.is_symlink()
+                else "a folder"
+                if path.is_dir()
+                else "a file"
+            )
+            raise InputError(f"{path} exists ({kind}): {NEVER_OVERWRITES}")
+
+
+def report_dir(path: Path, names: Sequence[str], option: str = "--report") -> Path:
+    """A report's folder (``output_dir``) holding none of the report's ``names``: refused before any work."""
+    path = output_dir(path, option)
+    refuse_existing(path / name for name in names)
+    return path
+
+
+def new_file(path: Path, option: str = "--out") -> Path:
+    """A file to write (``output_file``) where nothing is yet: tankdaq never writes over a file."""
+    path = output_file(path, option)
+    refuse_existing([path])
+    return path
+
+
 def input_file(path: Path, what: str = "file", error: type[InputError] = InputError) -> Path:
     """An existing, readable regular file (a folder or a missing path says which it is).
 
@@ -277,10 +310,13 @@ __all__ = [
     "input_file",
     "known_hull",
     "live_model",
+    "new_file",
     "output_dir",
     "output_file",
     "output_rate_hz",
     "percent",
+    "refuse_existing",
     "release_angle_deg",
+    "report_dir",
     "usable_cores",
 ]

@@ -131,14 +131,14 @@ def campaign(
     >>> result = tankdaq.campaign("recordings/campaign", hulls=["trimaran"], jobs=2)  # doctest: +SKIP
     >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s"]]  # doctest: +SKIP
     """
-    from ..ident.campaign import find_campaign_hulls, find_recordings
+    from ..ident.campaign import REPORT_TABLES, find_campaign_hulls, find_recordings
     from ..ident.derived import campaign_full_scale
     from ..ident.executors import campaign_executor
     from ..ident.online import prepare_identifier
 
     kept = Kept(progress)
     workers = _check_campaign(model, jobs, executor, scheduler)
-    folder = validation.output_dir(Path(report), option="report") if report is not None else None
+    folder = validation.report_dir(Path(report), REPORT_TABLES, "report") if report is not None else None
     given_hulls = find_campaign_hulls([], [str(hull) for hull in hulls])  # a bad hull: before any file
     paths = find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse)
     prepare_identifier(model, kept.line)  # the native kernels: built once, on the first run

@@ -95,7 +95,8 @@ def diagnose(
         raise InputError("baseline does not apply with a simulation: the simulation is the baseline")
     if hull is not None and simulation is None:
         raise InputError("hull applies with a simulation (the hull's model, and the correction in SI)")
-    folder = validation.output_dir(Path(report), option="report") if report is not None else None
+    names = _teller(simulation is not None).REPORT_FILES  # a report never writes over a file
+    folder = validation.report_dir(Path(report), names, "report") if report is not None else None
     kept = Kept(progress)
     reading = reading or Reading(axis="roll")
     runs = load_runs(sources, reading, kept)

@@ -31,7 +31,9 @@ def export_command(
         typer.Option(
             "--out",
             callback=checked(validation.output_dir),
-            help="Folder for the files (default: beside each).",
+            help="Folder for the files (default: beside each). Existing files are never overwritten: a "
+            "file of an export's name there is refused (move it first), and so are two recordings of one "
+            "name into one folder.",
         ),
     ] = None,
     frame: Annotated[
@@ -46,12 +48,13 @@ def export_command(
     pandas, Excel and MATLAB read the CSV without options; tankdaq identify reads it back exactly.
     Prints each file written."""
     from ..errors import InputError
-    from ..store.export import check_options, export_recording
+    from ..store.export import check_distinct, check_options, export_recording
 
     check_options(file_format, frame)
     for path in recordings:
         if path.suffix.lower() != ".mcap":
             raise InputError(f"{path}: not a tankdaq recording (.mcap)")
+    check_distinct(recordings, out)
     for path in recordings:
         for written in export_recording(path, file_format, out, frame, on_notice=say):
             typer.echo(str(written))

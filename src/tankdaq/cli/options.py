@@ -77,8 +77,14 @@ FullScale = Annotated[
 
 
 def report_option(help: str) -> Any:
-    """``--report DIR`` (campaign, diagnose): a folder checked writable while the arguments are parsed."""
-    return typer.Option("--report", callback=checked(validation.output_dir, option="--report"), help=help)
+    """``--report DIR`` (campaign, diagnose): a folder checked writable while the arguments are parsed
+    (the report's own names are checked free by the library, before any work); the help says the rule."""
+    return typer.Option(
+        "--report",
+        callback=checked(validation.output_dir, option="--report"),
+        help=f"{help} Existing files are never overwritten: a report whose file is there is refused "
+        "before any work (move it first).",
+    )
 
 
 def model_option(help: str = "Terms (b1,b2,c1,c3) or an alias (docs/models.md).") -> Any:

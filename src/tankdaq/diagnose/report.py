@@ -16,6 +16,8 @@ import numpy as np
 from ..errors import RecordingError
 from ..ident.free_decay import cut_lines
 from ..ident.plausibility import check_runs
+from ..store.safe_write import write_text_new
+from ..validation import refuse_existing
 from ..viz import diagnose_view, plots
 from .fitting import Fit
 from .residuals import SPECTRUM_MEANING, residual_spectrum
@@ -202,9 +204,15 @@ def _gap_cells(fit: Fit) -> str:
     )
 
 
-def report_folder(directory: str | Path) -> Path:
-    """The report's folder, made where missing (one line when it cannot be)."""
+#: The files of a diagnosis report: a ``--report`` folder holding one is refused before any fit.
+REPORT_FILES = ("diagnose.md", "models.png", "residuals.png", "spectrum.png")
+
+
+def report_folder(directory: str | Path, names: tuple[str, ...]) -> Path:
+    """The report's folder, made where missing (one line when it cannot be), none of whose ``names``
+    exists (``store.safe_write``: a report never writes over a file)."""
     out = Path(directory)
+    refuse_existing([out / name for name in names])
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -238,7 +246,7 @@ def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
     """``directory/diagnose.md`` with the story, a step table and three PNG figures."""
     from ..viz.plots import save_png
 
-    out = report_folder(directory)
+    out = report_folder(directory, REPORT_FILES)
     for name, fig in figures(diagnoser).items():
         save_png(fig, out / name)
     base = diagnoser.baseline_
@@ -287,12 +295,7 @@ def write_report(diagnoser: Diagnoser, directory: str | Path) -> Path:
             "",
         ]
     )
-    path = out / "diagnose.md"
-    try:
-        path.write_text(text)
-    except OSError as exc:
-        raise RecordingError(f"cannot write {path}: {exc.strerror or exc}") from None
-    return path
+    return write_text_new(out / REPORT_FILES[0], text)
 
 
 def log_to_rerun(diagnoser: Diagnoser, stream: Any) -> None:

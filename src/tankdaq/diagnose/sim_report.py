@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import RecordingError
 from ..ident.derived import b44_hat_factor, extinction_curve
 from ..physics.terms import TERM_TABLE
 from ..records import DecayRun
+from ..store.safe_write import write_text_new
 from ..viz import diagnose_view, plots
 from .compare import CorrectionStep, DampingPoint, SimulationComparison
 from .correction import Correction, moment_name
@@ -308,20 +308,18 @@ def figures(comparison: SimulationComparison) -> dict[str, Any]:
     }
 
 
+#: The files of a simulation's report: a ``--report`` folder holding one is refused before any fit.
+REPORT_FILES = ("simulation.md", "simulation.png", "damping.png")
+
+
 def write_report(comparison: SimulationComparison, directory: str | Path) -> Path:
     """``directory/simulation.md`` with the story, the gap table and two PNG figures."""
     from ..viz.plots import save_png
 
-    out = report_folder(directory)
+    out = report_folder(directory, REPORT_FILES)
     for name, fig in figures(comparison).items():
         save_png(fig, out / name)
-    text = "\n".join(_report_lines(comparison))
-    path = out / "simulation.md"
-    try:
-        path.write_text(text)
-    except OSError as exc:
-        raise RecordingError(f"cannot write {path}: {exc.strerror or exc}") from None
-    return path
+    return write_text_new(out / REPORT_FILES[0], "\n".join(_report_lines(comparison)))
 
 
 def _damping_rows(comparison: SimulationComparison) -> list[str]:

@@ -10,6 +10,7 @@ MCAP files (their metadata says hull, draft, axis, angle) or CSV files (a JSON s
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 from collections import defaultdict
@@ -22,13 +23,15 @@ from typing import Any
 
 from ..config import Hull, format_draft, load_hull, parse_draft
 from ..config_rules import safe_name
-from ..errors import IdentificationError, InputError, TankdaqError
+from ..errors import IdentificationError, InputError, RecordingError, TankdaqError
 from ..physics.models import is_auto
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS
 from ..store.export_layout import export_metadata_of
 from ..store.inputs import INPUT_FORMATS, input_format, suffixes
 from ..store.naming import parse_recording_name
+from ..store.safe_write import write_text_new
+from ..validation import refuse_existing
 from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
 from .executors import executor_map
 from .free_decay import cut_free_decays, cut_lines
@@ -422,13 +425,14 @@ def table_rows(results: Sequence[GroupResult | GroupRow]) -> list[GroupRow]:
 
 
 def write_csv(results: Sequence[GroupResult | GroupRow], path: Path) -> Path:
+    """The campaign's table as a new CSV file (``store.safe_write``: never over a file)."""
     rows = [r.row for r in table_rows(results)]
     columns = list(dict.fromkeys(k for row in rows for k in row))
-    with path.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=columns, restval="")
-        writer.writeheader()
-        writer.writerows(rows)
-    return path
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=columns, restval="")
+    writer.writeheader()
+    writer.writerows(rows)
+    return write_text_new(path, text.getvalue())
 
 
 def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
@@ -460,14 +464,24 @@ def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: The report's tables, by name: a ``--report`` folder holding one is refused before the campaign starts.
+REPORT_TABLES = ("campaign.csv", "campaign.md")
+
+
 def write_tables(results: Sequence[GroupResult], folder: Path) -> list[Path]:
     """campaign.csv and campaign.md (where each record was cut, then the table) into ``folder``
-    (created); the figures are ``viz.campaign_report``'s."""
-    folder.mkdir(parents=True, exist_ok=True)
-    md = folder / "campaign.md"
+    (created), each a new file (``REPORT_TABLES``); the figures are ``viz.campaign_report``'s."""
+    csv_path, md = (folder / name for name in REPORT_TABLES)
+    refuse_existing([csv_path, md])
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RecordingError(f"cannot create report folder {folder}: {exc.strerror or exc}") from None
     cuts = "".join(f"- {line}\n" for r in results for line in cut_lines(r.runs))
-    md.write_text(
+    write_csv(results, csv_path)
+    write_text_new(
+        md,
         "# Decay campaign\n\nWhere each record's free decay was cut, and why:\n\n"
-        f"{cuts}\nCoefficients per unit total inertia (SI, rad), ± 1 sigma.\n\n" + markdown_table(results)
+        f"{cuts}\nCoefficients per unit total inertia (SI, rad), ± 1 sigma.\n\n" + markdown_table(results),
     )
-    return [write_csv(results, folder / "campaign.csv"), md]
+    return [csv_path, md]

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -22,13 +22,13 @@ import numpy as np
 
 from ..errors import BadRecordingInput, InputError
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
+from ..validation import refuse_existing
 from .export_layout import (
     DEVICE_TIME_COLUMN,
     EXPORT_FORMAT,
     TIME_COLUMN,
     ExportTable,
     column_name,
-    read_sidecar,
     sidecar_path,
 )
 from .export_writers import write_csv, write_h5, write_mat, write_parquet
@@ -177,6 +177,9 @@ def export_recording(
     """Write one recording as ``<out_dir>/<stem>.<format>`` (default beside it; one file per decay for
     ``PER_DECAY`` formats, a ``<stem>.json`` sidecar beside a CSV); returns the paths written.
 
+    Never over a file (``store.safe_write``): a name that exists is refused before anything is written;
+    a failure (a full disk) removes what this call wrote, so a recording is exported whole or not at all.
+
     ``on_notice`` hears the lines the user should read: the recording is cut short, or holds no release
     (its times stay device time).
     """
@@ -193,22 +196,33 @@ def export_recording(
             for k, table in enumerate(tables, start=1)
         ]
     folder = out_dir if out_dir is not None else Path(path).parent
-    writer = WRITERS[file_format]
-    if file_format == "csv":
-        _check_sidecar_free(folder / f"{tables[0].name}.csv")
+    targets = [folder / f"{table.name}.{file_format}" for table in tables]
+    refuse_existing([*targets, *(sidecar_path(t) for t in targets if file_format == "csv")])
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        return [path for table in tables for path in writer(table, folder / f"{table.name}.{file_format}")]
     except OSError as exc:
         raise InputError(f"cannot write into {folder}: {exc.strerror or exc}") from None
+    written: list[Path] = []
+    try:
+        for table, target in zip(tables, targets, strict=True):
+            written += WRITERS[file_format](table, target)
+    except BaseException:
+        for done in written:  # this call's own files: a recording is exported whole or not at all
+            done.unlink(missing_ok=True)
+        raise
+    return written
 
 
-def _check_sidecar_free(csv_path: Path) -> None:
-    """A ``<stem>.json`` beside the CSV that is not an earlier export's (a campaign's labels, another
-    tool's file) is never overwritten: one line before anything is written."""
-    sidecar = sidecar_path(csv_path)
-    if sidecar.exists() and read_sidecar(csv_path) is None:
-        raise InputError(
-            f"{sidecar} exists and is not a tankdaq export's metadata: move it, or export with --out "
-            "into another folder"
-        )
+def check_distinct(paths: Sequence[Path], out_dir: Path | None) -> None:
+    """Two recordings that would export to one name (one stem into one folder, whatever the case) are
+    refused before anything is written: one would be lost under the other."""
+    seen: dict[tuple[Path, str], Path] = {}
+    for path in paths:
+        folder = (out_dir if out_dir is not None else path.parent).resolve()
+        first = seen.setdefault((folder, path.stem.casefold()), path)
+        if first is not path:
+            why = "is given twice" if first.resolve() == path.resolve() else f"and {first} would both export"
+            raise InputError(
+                f"{path} {why} to {folder / path.stem}.*: give each once, or export recordings of one name "
+                "into different --out folders"
+            )

@@ -1,18 +1,21 @@
 """The file writers of ``store.export``: each takes an export table and a path, and returns the files it
-wrote. Values are written as the recording holds them (float64 to the last bit, integers as integers),
-so reading a file back gives the recording's samples exactly.
+wrote, each new (``store.safe_write``: never over a file, never half-written under its name). Values
+are written as the recording holds them (float64 to the last bit, integers as integers), so reading a
+file back gives the recording's samples exactly.
 """
 
 from __future__ import annotations
 
+import io
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
 from .export_layout import ExportTable, sidecar_path
+from .safe_write import write_new, write_text_new
 
 
 def json_ready(value: object) -> object:
@@ -37,12 +40,20 @@ def _cells(values: np.ndarray) -> list[str]:
 def write_csv(table: ExportTable, path: Path) -> list[Path]:
     """One header row (names with units), one row per sample; the metadata in ``<stem>.json``."""
     cells = [_cells(values) for values in table.columns.values()]
-    with path.open("w", encoding="ascii", newline="") as out:
-        out.write(",".join(table.columns) + "\n")
-        out.writelines(",".join(row) + "\n" for row in zip(*cells, strict=True))
-    sidecar = sidecar_path(path)
+
+    def rows(out: BinaryIO) -> None:
+        out.write((",".join(table.columns) + "\n").encode("ascii"))
+        out.writelines((",".join(row) + "\n").encode("ascii") for row in zip(*cells, strict=True))
+
+    write_new(path, rows)
     document = {**table.metadata, "units": table.units}
-    sidecar.write_text(json.dumps(json_ready(document), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    try:
+        sidecar = write_text_new(
+            sidecar_path(path), json.dumps(json_ready(document), indent=2, allow_nan=False) + "\n"
+        )
+    except BaseException:
+        path.unlink()  # this call's own CSV: no export without its metadata
+        raise
     return [path, sidecar]
 
 
@@ -59,17 +70,21 @@ def _attribute(value: object) -> Any:
 
 
 def write_h5(table: ExportTable, path: Path) -> list[Path]:
-    """One dataset per column with its ``unit`` attribute; the metadata as typed root attributes."""
+    """One dataset per column with its ``unit`` attribute; the metadata as typed root attributes.
+
+    HDF5 writes into memory and the bytes go to disk in Python: a full disk is one ``OSError`` there,
+    never the HDF5 library failing to close a file (its error stack printed, then a segfault)."""
     import h5py
 
-    with h5py.File(path, "w") as out:
+    image = io.BytesIO()
+    with h5py.File(image, "w") as out:
         for key, value in table.metadata.items():
             attribute = _attribute(value)
             if attribute is not None:
                 out.attrs[key] = attribute
         for name, values in table.columns.items():
             out.create_dataset(name, data=values).attrs["unit"] = table.units[name]
-    return [path]
+    return [write_new(path, lambda disk: disk.write(image.getbuffer()))]
 
 
 def write_parquet(table: ExportTable, path: Path) -> list[Path]:
@@ -85,8 +100,7 @@ def write_parquet(table: ExportTable, path: Path) -> list[Path]:
     meta = {"tankdaq": json.dumps(json_ready(table.metadata), allow_nan=False)}
     schema = pa.schema(fields, metadata=meta)
     arrays = [pa.array(values, from_pandas=False) for values in table.columns.values()]
-    pq.write_table(pa.Table.from_arrays(arrays, schema=schema), path)
-    return [path]
+    return [write_new(path, lambda out: pq.write_table(pa.Table.from_arrays(arrays, schema=schema), out))]
 
 
 def write_mat(table: ExportTable, path: Path) -> list[Path]:
@@ -96,5 +110,8 @@ def write_mat(table: ExportTable, path: Path) -> list[Path]:
     meta = {key: json.dumps(value) if isinstance(value, list | dict | bool) else value for key, value in
             table.metadata.items() if value is not None}  # fmt: skip
     struct = {**table.columns, "units": dict(table.units), "meta": meta}
-    savemat(path, {"tankdaq": struct}, long_field_names=True, oned_as="column")
-    return [path]
+    return [
+        write_new(
+            path, lambda out: savemat(out, {"tankdaq": struct}, long_field_names=True, oned_as="column")
+        )
+    ]

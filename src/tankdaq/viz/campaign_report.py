@@ -21,11 +21,12 @@ from matplotlib.figure import Figure
 
 from ..config import format_draft
 from ..config_rules import path_in
-from ..ident.campaign import GroupKey, GroupResult, write_tables
+from ..ident.campaign import REPORT_TABLES, GroupKey, GroupResult, write_tables
 from ..ident.derived import b_eq_band, extinction_curve, natural_period
 from ..ident.executors import executor_map, send_once
 from ..ident.output_error import OutputError
 from ..physics.terms import TERM_TABLE
+from ..store.safe_write import refuse_existing
 from .plots import report_style, save_png
 
 #: Margins in inches: room for the tick labels and axis label (left, bottom), the figure's title
@@ -51,14 +52,28 @@ def write_report(
     """campaign.csv, campaign.md and the PNG figures into ``folder`` (created); the files written.
 
     ``executor`` (``ident.executors.campaign_executor``) draws the figures in parallel.
+    Every file is new (``store.safe_write``): a name that exists is refused before anything is written.
     """
     fitted = [r for r in results if r.fit is not None]
+    names = [*REPORT_TABLES, *(name for _, _, name in _figures(fitted))]
+    refuse_existing([path_in(folder, name) for name in names])
     return write_tables(results, folder) + write_plots(fitted, folder, executor)
 
 
 def write_plots(results: Sequence[GroupResult], folder: Path, executor: Executor | None = None) -> list[Path]:
     """The seeds' figures and the ITTC ones, one PNG each, in tankdaq's report style (no display needed)."""
-    figures: list[tuple[str, list[GroupResult], str]] = []  # (plot, its groups, file name)
+    figures = _figures(results)
+    plots = [plot for plot, _, _ in figures]
+    each = {id(result): result for _, series, _ in figures for result in series}  # a fit in 3-5 figures
+    sent = dict(zip(each, send_once(executor, list(each.values())), strict=True))
+    groups = [[sent[id(result)] for result in series] for _, series, _ in figures]
+    paths = [path_in(folder, name) for _, _, name in figures]  # a name never leaves the report folder
+    return list(executor_map(executor, draw_plot, plots, groups, paths))
+
+
+def _figures(results: Sequence[GroupResult]) -> list[tuple[str, list[GroupResult], str]]:
+    """The report's figures: (plot, its groups, file name), the longest to draw first."""
+    figures: list[tuple[str, list[GroupResult], str]] = []
     by_series: dict[tuple[str, str], list[GroupResult]] = defaultdict(list)
     for result in results:
         by_series[(result.key.hull, result.key.axis)].append(result)
@@ -74,12 +89,7 @@ def write_plots(results: Sequence[GroupResult], folder: Path, executor: Executor
             compared = [r for r in on_axis if r.key.draft == shared]
             figures.append(("hulls", compared, f"hulls_{axis}_{format_draft(shared)}.png"))
     figures.sort(key=lambda figure: figure[0] not in MULTI_PANEL)  # the longest first: no long last one
-    plots = [plot for plot, _, _ in figures]
-    each = {id(result): result for _, series, _ in figures for result in series}  # a fit in 3-5 figures
-    sent = dict(zip(each, send_once(executor, list(each.values())), strict=True))
-    groups = [[sent[id(result)] for result in series] for _, series, _ in figures]
-    paths = [path_in(folder, name) for _, _, name in figures]  # a name never leaves the report folder
-    return list(executor_map(executor, draw_plot, plots, groups, paths))
+    return figures
 
 
 def draw_plot(plot: str, results: Sequence[GroupResult], path: Path) -> Path:

@@ -17,6 +17,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..errors import InputError
+from ..store.safe_write import new_path
 from .plots import MEASURED_COLOR, MODEL_COLOR, legend_beside, report_style, short_labels
 
 
@@ -190,11 +191,12 @@ def _write_rrd(path: str | Path, log: Callable[[Any], None]) -> Path:
     path = Path(path)
     if not path.parent.is_dir():
         raise InputError(f"cannot write {path}: folder {path.parent} does not exist")
-    stream = rr.RecordingStream(APPLICATION_ID)
-    stream.save(str(path))
-    log(stream)
-    stream.flush()
-    stream.disconnect()
+    with new_path(path) as temporary:  # never over a file, never half-written under its name
+        stream = rr.RecordingStream(APPLICATION_ID)
+        stream.save(str(temporary))
+        log(stream)
+        stream.flush()
+        stream.disconnect()
     return path
 
 

@@ -22,6 +22,7 @@ from ..errors import RecordingError
 from ..ident.conditions import UNKNOWN, condition_of
 from ..records import DecayRun
 from ..store.naming import parse_recording_name
+from ..store.safe_write import write_new
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -163,15 +164,11 @@ def run_labels(runs: Sequence[DecayRun]) -> list[str]:
 
 
 def save_png(fig: Figure, path: str | Path, dpi: int = 150) -> Path:
-    """Write ``fig`` as PNG (overwriting: a figure is derived, not an archive)."""
+    """Write ``fig`` as a new PNG file (``store.safe_write``: never over a file, never half-written)."""
     path = Path(path)
     if not path.parent.is_dir():
         raise RecordingError(f"cannot write {path}: folder {path.parent} does not exist")
-    try:
-        fig.savefig(path, dpi=dpi, format="png")
-    except OSError as exc:
-        raise RecordingError(f"cannot write {path}: {exc.strerror or exc}") from None
-    return path
+    return write_new(path, lambda out: fig.savefig(out, dpi=dpi, format="png"))
 
 
 def save_decay_fits(runs: Sequence[DecayRun], predicted: Sequence[np.ndarray], folder: Path) -> list[Path]:
