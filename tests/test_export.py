@@ -326,8 +326,10 @@ def test_a_json_beside_that_is_not_an_export_is_never_overwritten(recording, tmp
     result = runner.invoke(app, ["export", str(recording), "--out", str(tmp_path)])
     assert result.exit_code == 2 and "Traceback" not in result.output
     (line,) = result.stderr.strip().splitlines()
-    assert str(labels) in line and "--out" in line
+    assert str(labels) in line and "another folder" in line
     assert labels.read_text() == '{"hull": "swath", "axis": "roll", "angle_deg": 8}'
     assert not (tmp_path / f"{recording.stem}.csv").exists()
-    export(recording, "--out", tmp_path / "again")
-    export(recording, "--out", tmp_path / "again")  # an earlier export's sidecar is replaced
+    first = {path: path.read_bytes() for path in export(recording, "--out", tmp_path / "again")}
+    again = runner.invoke(app, ["export", str(recording), "--out", str(tmp_path / "again")])
+    assert again.exit_code == 2 and "never writes over a file" in again.stderr  # not even an earlier export
+    assert {path: path.read_bytes() for path in first} == first

@@ -147,7 +147,7 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
         "sha256": sha256 or file_sha256(path),
         "path": str(path.resolve()),
         "size_bytes": path.stat().st_size,
-        "complete": recording.complete,
+        "complete": recording.complete and recording.corruption is None,  # corrupted chunks: recover too
         "recorded_utc": meta.get("release_utc") or meta.get("created_utc"),
         "hull": meta.get("hull"),
         "draft": meta.get("draft"),

@@ -32,7 +32,14 @@ from .export_layout import (
     sidecar_path,
 )
 from .export_writers import write_csv, write_h5, write_mat, write_parquet
-from .reader import Recording, _finite_increasing, _release_times, read_recording, truncation_notice
+from .reader import (
+    Recording,
+    _finite_increasing,
+    _release_times,
+    corruption_notice,
+    read_recording,
+    truncation_notice,
+)
 from .schemas import TOPIC_SAMPLES
 
 #: Time frames; the first is the default (people read time since the release).
@@ -161,6 +168,7 @@ def _table(usable: _Usable, samples: np.ndarray, decay: int | None, name: str, f
         "release_t_s": [r - origin for r in held],
         "dropped_rows": usable.dropped_rows,
         "complete_file": recording.complete,
+        **({"corruption": recording.corruption} if recording.corruption else {}),
     }
     if isinstance(nominal, int | float) and math.isfinite(nominal):  # the campaign's label sidecar key
         metadata["angle_deg"] = float(nominal)
@@ -186,7 +194,10 @@ def export_recording(
     check_options(file_format, frame)
     tables = decay_tables(path, frame) if file_format in PER_DECAY else [recording_table(path, frame)]
     if on_notice is not None:
-        if not tables[0].metadata["complete_file"]:
+        corruption = tables[0].metadata.get("corruption")
+        if isinstance(corruption, str):
+            on_notice(corruption_notice(path, corruption))
+        elif not tables[0].metadata["complete_file"]:
             on_notice(truncation_notice(path))
         if frame == "release" and tables[0].metadata["frame"] == "device":
             on_notice(f"{path}: no release recorded, so its times are the device clock (--frame device)")

@@ -6,8 +6,10 @@ reads only its small chunks of blocks, events and fits, through the summary.
 Every other file goes through ``store.record_scan.RecordScan``, which reads the file front to
 back with mcap's StreamReader. That path does not need the summary at the end
 of the file, so a file whose writer was killed (no summary, maybe a torn last
-chunk) reads up to its last complete chunk instead of failing, and a file
-recorded before the blocks reads its per-sample JSON.
+chunk) reads up to its last complete chunk instead of failing, a closed file with a
+chunk garbled in its middle (a bad sector) reads every other chunk and names the bad
+one (``Recording.corruption``), and a file recorded before the blocks reads its
+per-sample JSON.
 """
 
 from __future__ import annotations
@@ -57,6 +59,14 @@ class Recording:
     release_index: int | None = None
     metadata_history: list[dict[str, str]] = field(default_factory=list)
     damage: str | None = None  # what stopped the reading early, when something did
+    corruption: str | None = None  # the chunks of a closed file that could not be read, when any
+
+    @property
+    def notice(self) -> str | None:
+        """The one line to print when something of the file is missing: damaged chunks, or a cut end."""
+        if self.corruption is not None:
+            return corruption_notice(self.path, self.corruption)
+        return truncation_notice(self.path, self.damage) if self.truncated else None
 
     @property
     def truncated(self) -> bool:
@@ -201,7 +211,7 @@ def _read_scanned(path: str | Path) -> Recording:
         raise BadRecordingInput(f"{path}: {schemas.TOPIC_SAMPLES} holds malformed JSON ({exc})") from None
     return _assemble(
         path, samples, raw_chunks, events, fits, attachments, channels.values(), history, scan.complete,
-        scan.damage,
+        scan.damage, scan.corruption,
     )  # fmt: skip
 
 
@@ -216,6 +226,7 @@ def _assemble(
     history: list[dict[str, str]],
     complete: bool,
     damage: str | None = None,
+    corruption: str | None = None,
 ) -> Recording:
     """The Recording from what either reading path found (the last ``tankdaq.run`` record is the metadata)."""
     return Recording(
@@ -231,6 +242,15 @@ def _assemble(
         release_index=_release_index(samples, events),
         metadata_history=history,
         damage=damage,
+        corruption=corruption,
+    )
+
+
+def corruption_notice(path: str | Path, corruption: str) -> str:
+    """The one line every command that reads a recording prints when chunks in its middle are garbled."""
+    return (
+        f"warning: {path} is corrupted, not cut short (its writer closed it; its footer is intact): "
+        f"unreadable {corruption}; every other chunk was read, and results cover only what is there"
     )
 
 
@@ -410,7 +430,7 @@ def _run_meta(
         "release_t_s": release_t_s,
         "dropped_samples": dropped,
         "complete_file": recording.complete,
-        "truncation": truncation_notice(recording.path, recording.damage) if recording.truncated else None,
+        "truncation": recording.notice,  # what of the file is missing: a cut end, or corrupted chunks
         "status_flags": tally.metadata(),
     }
     if tally.flagged_after:
@@ -428,6 +448,7 @@ def _run_meta(
 
 __all__ = [
     "Recording",
+    "corruption_notice",
     "iter_raw_chunks",
     "read_decay_runs",
     "read_recording",

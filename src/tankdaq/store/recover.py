@@ -54,6 +54,8 @@ class RecoverReport:
             )
         state = "complete file" if self.source_complete else f"truncated file ({self.damage})"
         loss = "nothing lost" if self.lossless else "the damaged tail was dropped"
+        if self.source_complete and self.damage:  # closed, with garbled chunks in its middle
+            state, loss = f"corrupted, not cut short: unreadable {self.damage}", "those chunks were dropped"
         return (
             f"recovered {self.messages} messages, {self.metadata} metadata records and "
             f"{self.attachments} attachments from {self.chunks} chunks of {self.source} "
@@ -150,5 +152,5 @@ def recover(
         attachments=rewriter.attachments,
         lossless=scan.clean_end,
         source_complete=scan.complete,
-        damage=scan.damage,
+        damage=scan.damage or scan.corruption,
     )
