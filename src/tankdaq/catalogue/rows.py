@@ -135,7 +135,8 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
     """The row of one tankdaq recording and its hull's version (None when the hull is not known here).
 
     A file cut short (no footer), or one with corrupted chunks, is ``complete`` False: ``tankdaq
-    recover`` then ``index`` makes the complete one. Raises ``RecordingError`` (one line) for a file that is not a readable recording.
+    recover`` then ``index`` makes the complete one. Raises ``RecordingError`` (one line) for a file
+    that is not a readable recording.
     """
     from ..store.reader import read_recording
 

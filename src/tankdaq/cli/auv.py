@@ -121,7 +121,9 @@ def simulate_command(
     out: Annotated[
         Path,
         typer.Option(
-            "--out", callback=checked(validation.output_file), help="Output: .mcap or .csv, by suffix."
+            "--out",
+            callback=checked(validation.new_file),
+            help="Output (a new file): .mcap or .csv, by suffix.",
         ),
     ],
     vehicle_name: str = typer.Option(DEFAULT_VEHICLE, "--vehicle", help="Vehicle in configs/vehicles."),
@@ -294,7 +296,7 @@ def validate_command(
         Path | None,
         typer.Option(
             "--plot",
-            callback=checked(validation.output_file, option="--plot"),
+            callback=checked(validation.new_file, option="--plot"),
             help="PNG: measured vs re-simulated.",
         ),
     ] = None,

@@ -18,7 +18,7 @@ import numpy as np
 import typer
 
 from ..errors import InputError, ProtocolError
-from ..validation import input_file, output_file
+from ..validation import input_file, new_file
 from ..xsens.constants import MID
 from .app import app, checked, err_console, handles_errors, progress_bar
 
@@ -107,15 +107,14 @@ def flatten(name: str, value: object) -> dict[str, object]:
 
 @contextmanager
 def open_output(out: Path | None) -> Iterator[IO[str]]:
-    """The output file (or stdout), with a one-line error when it cannot be written."""
+    """The output file (or stdout): a new file, published whole when the decoding ends (``store.safe_write``),
+    with a one-line error when it cannot be written."""
     if out is None:
         yield sys.stdout
         return
-    try:
-        handle = out.open("w", newline="")
-    except OSError as exc:
-        raise InputError(f"cannot write {out}: {exc.strerror}") from None
-    with handle:
+    from ..store.safe_write import new_path
+
+    with new_path(out) as temporary, temporary.open("x", newline="") as handle:
         yield handle
 
 
@@ -243,7 +242,7 @@ def decode_command(
     ] = OutputFormat.jsonl,
     out: Annotated[
         Path | None,
-        typer.Option("--out", callback=checked(output_file), help="Write here instead of stdout."),
+        typer.Option("--out", callback=checked(new_file), help="Write here (a new file) instead of stdout."),
     ] = None,
     legacy_mode: Annotated[
         int | None,

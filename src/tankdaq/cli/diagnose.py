@@ -81,7 +81,7 @@ def diagnose_command(
         Path | None,
         typer.Option(
             "--rrd",
-            callback=checked(validation.output_file, option="--rrd"),
+            callback=checked(validation.new_file, option="--rrd"),
             help="Also write the story to a rerun .rrd file for the viewer.",
         ),
     ] = None,

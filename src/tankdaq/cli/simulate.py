@@ -64,8 +64,8 @@ def simulate_command(
     truth: Path = typer.Option(
         None,
         "--truth",
-        callback=checked(validation.output_file, option="--truth"),
-        help="Write the true release instants and model here (JSON).",
+        callback=checked(validation.new_file, option="--truth"),
+        help="Write the true release instants and model here (JSON; a new file).",
     ),
     speed: float = typer.Option(1.0, "--speed", help="Play the device clock this many times faster."),
     baud: int = typer.Option(
@@ -185,7 +185,6 @@ def _write_truth(path: Path, sim: SimulatedMTi, scenario: DecayScenario) -> None
         "note": "release_s counts from power-up; release_index is at rate_hz (at other rates use the ticks)",
         "runs": [run.to_json() for run in sim.truth],
     }
-    try:
-        path.write_text(json.dumps(document, indent=2) + "\n")
-    except OSError as exc:
-        raise InputError(f"cannot write the truth file {path}: {exc.strerror}") from None
+    from ..store.safe_write import write_text_new
+
+    write_text_new(path, json.dumps(document, indent=2) + "\n")

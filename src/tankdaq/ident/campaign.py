@@ -425,8 +425,12 @@ def table_rows(results: Sequence[GroupResult | GroupRow]) -> list[GroupRow]:
 
 
 def write_csv(results: Sequence[GroupResult | GroupRow], path: Path) -> Path:
-    """The campaign's table as a new CSV file (``store.safe_write``: never over a file)."""
-    rows = [r.row for r in table_rows(results)]
+    """The campaign's table as a new CSV file."""
+    return write_rows([r.row for r in table_rows(results)], path)
+
+
+def write_rows(rows: Sequence[dict[str, Any]], path: Path) -> Path:
+    """Rows as a new CSV file (``store.safe_write``: never over a file), columns in first-seen order."""
     columns = list(dict.fromkeys(k for row in rows for k in row))
     text = io.StringIO(newline="")
     writer = csv.DictWriter(text, fieldnames=columns, restval="")

@@ -11,10 +11,12 @@ unit-suffixed names (``q_rad_s``), then one row per sample. The caller owns the 
 from __future__ import annotations
 
 import csv
+import io
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 from mcap.reader import make_reader
@@ -23,6 +25,7 @@ from mcap.writer import Writer
 from .. import __version__
 from ..errors import BadRecordingInput
 from .record_scan import MCAP_DAMAGE
+from .safe_write import write_new, write_text_new
 
 #: Columns read back, by field name, in file order.
 Columns = dict[str, list[float]]
@@ -77,13 +80,14 @@ def _rows(layout: ColumnLayout, columns: Mapping[str, np.ndarray]) -> np.ndarray
 def write_csv(
     path: Path, layout: ColumnLayout, columns: Mapping[str, np.ndarray], meta: Mapping[str, str]
 ) -> None:
-    """The columns as CSV under ``# key: value`` metadata lines (CSV carries no attachment)."""
-    with path.open("w", newline="") as fh:
-        for key, value in meta.items():
-            fh.write(f"# {key}: {value}\n")
-        writer = csv.writer(fh)
-        writer.writerow([layout.csv_names[f] for f in layout.fields])
-        writer.writerows(_rows(layout, columns).tolist())
+    """The columns as a new CSV file under ``# key: value`` metadata lines (CSV carries no attachment)."""
+    text = io.StringIO(newline="")
+    for key, value in meta.items():
+        text.write(f"# {key}: {value}\n")
+    writer = csv.writer(text)
+    writer.writerow([layout.csv_names[f] for f in layout.fields])
+    writer.writerows(_rows(layout, columns).tolist())
+    write_text_new(path, text.getvalue())
 
 
 def write_mcap(
@@ -93,28 +97,35 @@ def write_mcap(
     meta: Mapping[str, str],
     attachment: FileAttachment | None = None,
 ) -> None:
-    """The columns as one MCAP channel, one message per sample, with the metadata and attachment."""
-    with path.open("wb") as fh:
-        writer = Writer(fh)
-        writer.start(profile="", library=f"tankdaq {__version__}")
-        schema_id = writer.register_schema(
-            layout.schema_name, "jsonschema", json.dumps(layout.schema()).encode()
+    """The columns as a new MCAP file: one channel, one message per sample, the metadata and attachment."""
+    write_new(path, lambda fh: _write_mcap(fh, layout, columns, meta, attachment))
+
+
+def _write_mcap(
+    fh: BinaryIO,
+    layout: ColumnLayout,
+    columns: Mapping[str, np.ndarray],
+    meta: Mapping[str, str],
+    attachment: FileAttachment | None,
+) -> None:
+    writer = Writer(fh)
+    writer.start(profile="", library=f"tankdaq {__version__}")
+    schema_id = writer.register_schema(layout.schema_name, "jsonschema", json.dumps(layout.schema()).encode())
+    channel_id = writer.register_channel(layout.topic, "json", schema_id, metadata=dict(layout.units))
+    for sequence, row in enumerate(_rows(layout, columns)):
+        stamp = round(row[0] * 1e9)
+        data = json.dumps(dict(zip(layout.fields, row.tolist(), strict=True))).encode()
+        writer.add_message(channel_id, log_time=stamp, data=data, publish_time=stamp, sequence=sequence)
+    writer.add_metadata(layout.metadata_name, {k: str(v) for k, v in meta.items()})
+    if attachment is not None:
+        writer.add_attachment(
+            create_time=0,
+            log_time=0,
+            name=attachment.name,
+            media_type=attachment.media_type,
+            data=attachment.data,
         )
-        channel_id = writer.register_channel(layout.topic, "json", schema_id, metadata=dict(layout.units))
-        for sequence, row in enumerate(_rows(layout, columns)):
-            stamp = round(row[0] * 1e9)
-            data = json.dumps(dict(zip(layout.fields, row.tolist(), strict=True))).encode()
-            writer.add_message(channel_id, log_time=stamp, data=data, publish_time=stamp, sequence=sequence)
-        writer.add_metadata(layout.metadata_name, {k: str(v) for k, v in meta.items()})
-        if attachment is not None:
-            writer.add_attachment(
-                create_time=0,
-                log_time=0,
-                name=attachment.name,
-                media_type=attachment.media_type,
-                data=attachment.data,
-            )
-        writer.finish()
+    writer.finish()
 
 
 def read_csv(path: Path, layout: ColumnLayout) -> tuple[Columns, dict[str, str]]:

@@ -55,14 +55,10 @@ def repeat_spreads(groups: dict[Any, list[Any]], model: str) -> list[dict[str, A
 
 
 def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
-    import csv
+    from ...ident.campaign import write_rows
 
-    path = folder / "repeat_spread.csv"
+    path = write_rows(rows, folder / "repeat_spread.csv")  # a new file, as the rest of the report
     columns = list(dict.fromkeys(k for row in rows for k in row))
-    with path.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=columns, restval="")
-        writer.writeheader()
-        writer.writerows(rows)
     terms = [c[: -len("_mean")] for c in columns if c.endswith("_mean")]
     lines = [
         "\n## Repeat-to-repeat spread\n",
