@@ -123,6 +123,23 @@ def test_two_recordings_of_one_name_into_one_folder_are_refused(recording: Path,
     assert [p.parent for p in written] == [first.parent, second.parent] and all(p.is_file() for p in written)
 
 
+@pytest.mark.parametrize(("file_format", "users_name"), [("csv", "second.csv"), ("h5", "second_decay2.h5")])
+def test_a_taken_name_of_a_later_recording_stops_the_export_before_any_file(
+    recording: Path, tmp_path: Path, file_format: str, users_name: str
+) -> None:
+    first, second = tmp_path / "first.mcap", tmp_path / "second.mcap"
+    for copy in (first, second):
+        shutil.copyfile(recording, copy)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / users_name).write_bytes(USERS)
+    result = runner.invoke(
+        app, ["export", str(first), str(second), "--format", file_format, "--out", str(out)]
+    )
+    assert result.exit_code == 2 and users_name in one_line(result.stderr)
+    assert snapshot(out) == {users_name: USERS}  # not even the first recording's export
+
+
 @pytest.fixture
 def full_disk(tmp_path: Path) -> Iterator[Path]:
     """A real 200 kB tmpfs: a disk that fills while an export is written (needs root to mount)."""

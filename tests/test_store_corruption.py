@@ -94,26 +94,31 @@ def intact_sample_times(path: Path) -> tuple[list[int], np.ndarray]:
     return damaged, np.sort(np.asarray(times))
 
 
-def garble(path: Path, offsets: list[int]) -> None:
-    """A bad sector: 200 bytes of noise 300 bytes into each chunk (inside its compressed records)."""
-    noise = np.random.default_rng(37).integers(0, 256, 200, dtype=np.uint8).tobytes()
-    with path.open("r+b") as out:
-        for offset in offsets:
-            out.seek(offset + 300)
-            out.write(noise)
+#: Noise written over a chunk, and where: inside its compressed records, or over its record header (opcode
+#: and length: the file's framing is lost there, and only the summary's index finds the next chunk).
+BAD_SECTORS = {
+    "records": (300, np.random.default_rng(37).integers(0, 256, 200, dtype=np.uint8).tobytes()),
+    "header": (0, bytes([0xAD]) + (2**62 + 12345).to_bytes(8, "little")),
+}
 
 
-@pytest.fixture(scope="module")
-def corrupted(closed: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[int]]:
-    """The closed recording with one chunk of samples and one of sample blocks garbled, a third of the
-    way in: the chunk numbers (1-based) garbled."""
+@pytest.fixture(scope="module", params=sorted(BAD_SECTORS))
+def corrupted(
+    closed: Path, tmp_path_factory: pytest.TempPathFactory, request: pytest.FixtureRequest
+) -> tuple[Path, list[int]]:
+    """The closed recording with one chunk of samples (where ``request.param`` says) and one of sample
+    blocks (inside its records) garbled, a third of the way in: the chunk numbers (1-based) garbled."""
     path = tmp_path_factory.mktemp("corrupted") / closed.name
     shutil.copyfile(closed, path)
     chunks = chunks_of(path)
     data = [n for n, (_, topics) in enumerate(chunks, 1) if schemas.TOPIC_SAMPLES in topics]
     blocks = [n for n, (_, topics) in enumerate(chunks, 1) if topics == {schemas.TOPIC_SAMPLE_BLOCKS}]
     chosen = [data[len(data) // 3], blocks[len(blocks) // 3]]
-    garble(path, [chunks[n - 1][0] for n in chosen])
+    with path.open("r+b") as out:
+        for number, where in zip(chosen, [request.param, "records"], strict=True):
+            skip, noise = BAD_SECTORS[where]
+            out.seek(chunks[number - 1][0] + skip)
+            out.write(noise)
     return path, chosen
 
 

@@ -48,13 +48,13 @@ def export_command(
     pandas, Excel and MATLAB read the CSV without options; tankdaq identify reads it back exactly.
     Prints each file written."""
     from ..errors import InputError
-    from ..store.export import check_distinct, check_options, export_recording
+    from ..store.export import check_options, check_targets, export_recording
 
     check_options(file_format, frame)
     for path in recordings:
         if path.suffix.lower() != ".mcap":
             raise InputError(f"{path}: not a tankdaq recording (.mcap)")
-    check_distinct(recordings, out)
+    check_targets(recordings, file_format, out)
     for path in recordings:
         for written in export_recording(path, file_format, out, frame, on_notice=say):
             typer.echo(str(written))

@@ -12,6 +12,7 @@ writers by suffix; ``PER_DECAY`` formats write one file per release, as labs sto
 
 from __future__ import annotations
 
+import glob
 import json
 import math
 from collections.abc import Callable, Sequence
@@ -224,12 +225,18 @@ def export_recording(
     return written
 
 
-def check_distinct(paths: Sequence[Path], out_dir: Path | None) -> None:
-    """Two recordings that would export to one name (one stem into one folder, whatever the case) are
-    refused before anything is written: one would be lost under the other."""
+def check_targets(paths: Sequence[Path], file_format: str, out_dir: Path | None) -> None:
+    """Before anything is written: no two recordings export to one name (one stem into one folder,
+    whatever the case: one would be lost under the other), and no export's name is taken (a
+    ``PER_DECAY`` format's ``<stem>_decay<k>`` too, whatever the count of decays)."""
     seen: dict[tuple[Path, str], Path] = {}
     for path in paths:
         folder = (out_dir if out_dir is not None else path.parent).resolve()
+        target = folder / f"{path.stem}.{file_format}"
+        taken = [target, sidecar_path(target)] if file_format == "csv" else [target]
+        if file_format in PER_DECAY:
+            taken += sorted(folder.glob(f"{glob.escape(path.stem)}_decay*.{file_format}"))
+        refuse_existing(taken)
         first = seen.setdefault((folder, path.stem.casefold()), path)
         if first is not path:
             why = "is given twice" if first.resolve() == path.resolve() else f"and {first} would both export"

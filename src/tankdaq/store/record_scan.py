@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 import zstandard
-from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError, RecordLengthLimitExceeded
 from mcap.reader import SeekingReader
 from mcap.records import Chunk, ChunkIndex, Footer, Header, McapRecord
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -123,7 +123,14 @@ class RecordScan:
         self.bytes_read = 0
         self.chunks = 0
         self.corrupted: list[DamagedChunk] = []
-        self.corruption: str | None = None
+        self._between: list[str] = []  # damage outside any chunk: "bytes A-B: why"
+        self._origin_ns = 0
+
+    @property
+    def corruption(self) -> str | None:
+        """The damaged chunks of a closed file in one phrase (None when there are none)."""
+        parts = [f"{c.describe(self._origin_ns)}: {c.why}" for c in self.corrupted] + self._between
+        return "; ".join(parts) or None
 
     @property
     def clean_end(self) -> bool:
@@ -152,6 +159,7 @@ class RecordScan:
                 raise BadRecordingInput(f"{self.path} is not a readable MCAP file: no header record")
             yield first
             index: _Index | None = None
+            read: set[int] = set()  # where the chunks read whole start
             while True:
                 self.bytes_read = stream.tell()
                 try:
@@ -173,10 +181,14 @@ class RecordScan:
                         stream, skip_magic=True, emit_chunks=True, validate_crcs=True
                     ).records
                     continue
-                self.chunks += isinstance(record, Chunk)
+                if isinstance(record, Chunk):
+                    self.chunks += 1
+                    read.add(self.bytes_read)
                 self.complete = isinstance(record, Footer)
                 yield from inner
             self.bytes_read = stream.tell() if self.complete else self.bytes_read
+            if index is not None and self.complete:  # a garbled record header may have hidden chunks
+                self._note_missed(index, read)
 
     def _step_over(self, index: _Index, why: str) -> int | None:
         """Where to read on after damage at ``bytes_read`` in a closed file (the next record its summary
@@ -184,20 +196,32 @@ class RecordScan:
         resume = next((offset for offset in index.resume_at if offset > self.bytes_read), None)
         if resume is None:
             return None
+        self._origin_ns = index.origin_ns
         chunk = index.damaged(self.bytes_read, why)
         if chunk is not None:
             self.corrupted.append(chunk)
-        parts = [f"{c.describe(index.origin_ns)}: {c.why}" for c in self.corrupted]
-        if chunk is None:
-            parts.append(f"bytes {self.bytes_read}-{resume}: {why}")
-        self.corruption = f"{'; '.join(parts)}"
+        else:
+            self._between.append(f"bytes {self.bytes_read}-{resume}: {why}")
         return resume
+
+    def _note_missed(self, index: _Index, read: set[int]) -> None:
+        """Chunks of the index the scan never read whole nor named (passed over inside garbled bytes)."""
+        named = {chunk.offset for chunk in self.corrupted}
+        for index_entry in index.chunks:
+            offset = index_entry.chunk_start_offset
+            if offset not in read and offset not in named:
+                missed = index.damaged(offset, "passed over inside garbled bytes")
+                if missed is not None:
+                    self.corrupted.append(missed)
+        self.corrupted.sort(key=lambda chunk: chunk.offset)
 
 
 def _why(exc: Exception) -> str:
     """The damage in a few words (mcap's own text carries CRC values, which tell a person nothing)."""
     if isinstance(exc, EndOfFile):
         return "file ends early"
+    if isinstance(exc, RecordLengthLimitExceeded):
+        return "its record header is garbled"
     if "crc" in str(exc).lower():
         return "its CRC check fails"
     if isinstance(exc, zstandard.ZstdError):
