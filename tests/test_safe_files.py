@@ -266,6 +266,21 @@ def test_diagnose_report_never_overwrites(recording: Path, tmp_path: Path) -> No
     assert snapshot(report) == {"diagnose.md": USERS}
 
 
+def test_a_report_onto_a_full_disk_leaves_only_whole_files(recording: Path, full_disk: Path) -> None:
+    (full_disk / "filler").write_bytes(bytes(150_000))
+    report = full_disk / "report"
+    result = runner.invoke(app, ["campaign", str(recording), "--report", str(report)])
+    assert result.exit_code == 1
+    assert "No space left on device" in error_line(result.stderr)
+    left = {path.name: path.read_bytes() for path in report.iterdir()}
+    assert not [name for name in left if name.startswith(".")]  # no temporary file
+    for name, data in left.items():  # what was written before the disk filled is whole
+        if name.endswith(".png"):
+            assert data.startswith(b"\x89PNG") and data.endswith(b"IEND\xaeB`\x82")
+    if "campaign.csv" in left:
+        assert len(pd.read_csv(report / "campaign.csv")) == 1
+
+
 @pytest.mark.parametrize("command", [["export"], ["campaign"], ["diagnose"]])
 def test_help_says_the_rule(command: list[str]) -> None:
     result = runner.invoke(app, [*command, "--help"], env={"COLUMNS": "200"})
