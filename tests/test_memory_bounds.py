@@ -78,7 +78,9 @@ def test_a_finished_decay_keeps_its_fit_without_the_curve_and_the_detector_no_ev
 
 def test_a_day_of_decays_keeps_the_newest_outcomes_and_counts_them_all() -> None:
     kept = KeptOutcomes()
-    day = [DecayOutcome(run, "roll", None, None, 0.0, 8.0, "amplitude", None, []) for run in range(1, 824)]
+    day = [
+        DecayOutcome(run, "roll", None, None, 0.0, 8.0, DecayEnd.SETTLED, None, []) for run in range(1, 824)
+    ]
     kept.extend(day[:-1])
     kept.append(day[-1])
     assert kept.count == 823

@@ -24,6 +24,7 @@ from mcap.reader import make_reader
 
 from event_stream import events_of, wait_for_event, wait_until
 from run_metadata import run_metadata
+from tankdaq.acquire.replay import replay_recording
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
 
@@ -113,6 +114,9 @@ def test_a_signal_mid_decay_closes_a_complete_file_that_says_it_was_stopped(
             line for line in json.loads(fitted.stdout)["warnings"] if "stopped by the operator" in line
         ]
         assert f"{path.stem}: stopped by the operator {after_s:.1f} s after the release: partial" in warning
+        (replayed,) = replay_recording(path, speed=None, viewer="none")  # the file ends mid-decay
+        assert replayed.ended is DecayEnd.STREAM_ENDED  # the last sample as recorded, the release within one
+        assert replayed.ended_after_s == pytest.approx(after_s, abs=0.011)  # as test_record.py's replay
 
 
 def test_ctrl_c_is_heard_while_a_live_refit_runs_away_and_the_file_closes_complete(tmp_path: Path) -> None:
