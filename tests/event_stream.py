@@ -6,12 +6,21 @@ from __future__ import annotations
 import json
 import subprocess
 import time
+from collections.abc import Callable
 from typing import Any
 
 
 def wait_for_event(proc: subprocess.Popen[str], kind: str, timeout_s: float, **values: Any) -> list[dict]:
     """The events ``proc`` wrote up to the first ``kind`` event holding ``values``; the process is killed
     (and the test fails) when it ends or ``timeout_s`` passes first."""
+    return wait_until(proc, lambda event: all(event.get(k) == v for k, v in values.items()), kind, timeout_s)
+
+
+def wait_until(
+    proc: subprocess.Popen[str], holds: Callable[[dict], bool], kind: str, timeout_s: float
+) -> list[dict]:
+    """The events ``proc`` wrote up to the first ``kind`` event for which ``holds`` is true; the process is
+    killed (and the test fails) when it ends or ``timeout_s`` passes first."""
     assert proc.stdout is not None
     events: list[dict] = []
     deadline = time.monotonic() + timeout_s
@@ -23,11 +32,11 @@ def wait_for_event(proc: subprocess.Popen[str], kind: str, timeout_s: float, **v
             continue
         event = json.loads(line)
         events.append(event)
-        if event["event"] == kind and all(event.get(k) == v for k, v in values.items()):
+        if event["event"] == kind and holds(event):
             return events
     proc.kill()
     proc.communicate(timeout=60)
-    raise AssertionError(f"no {kind} event within {timeout_s:g} s: {events}")
+    raise AssertionError(f"no such {kind} event within {timeout_s:g} s: {events}")
 
 
 def events_of(stdout: str, kind: str) -> list[dict]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from tankdaq.acquire.guided.checks import Measured
+from tankdaq.records import DecayEnd
 
 
 def measured_decay(**changes: Any) -> Measured:
@@ -12,7 +13,7 @@ def measured_decay(**changes: Any) -> Measured:
     base = dict(
         angle_deg=10.2,
         still_water_deg=0.1,
-        settle_reason="amplitude",
+        ended=DecayEnd.SETTLED,
         half_cycles=14,
         r2_angle=0.997,
         coefficients={"b1": 0.02, "b2": 4.6},

@@ -35,7 +35,7 @@ from tankdaq.ident.equation_error import EquationError
 from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.scenario import SCRIPTED_FAULTS, scripted_run
 from tankdaq.plans import load_campaign_plan
-from tankdaq.records import DecayRun
+from tankdaq.records import DecayEnd, DecayRun
 from tankdaq.samples import (
     STATUS_CLIP_ACC,
     STATUS_CLIP_GYR,
@@ -178,7 +178,7 @@ def _measured(**changes: object) -> Measured:
     values: dict[str, object] = {
         "angle_deg": 10.0,
         "still_water_deg": 0.0,
-        "settle_reason": "amplitude",
+        "ended": DecayEnd.SETTLED,
         "half_cycles": 8,
         "r2_angle": 0.999,
         "coefficients": {"b1": 0.2, "c1": 14.0},

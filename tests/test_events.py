@@ -34,6 +34,7 @@ from tankdaq.acquire.events import (
 )
 from tankdaq.acquire.listeners import EventLog, EventPrinter, EventStream
 from tankdaq.ident.online import OnlineResult
+from tankdaq.records import DecayEnd
 
 
 def _fit() -> OnlineResult:
@@ -48,7 +49,7 @@ def _fit() -> OnlineResult:
 def _every_event() -> list[Event]:
     outcome = DecayOutcome(
         run=2, axis="roll", path=Path("rec/run02.mcap"), rrd_path=None, release_t=14.25,
-        angle_initial_deg=-8.3, settle_reason="amplitude", fit=_fit(), warnings=["off the nominal"],
+        angle_initial_deg=-8.3, ended=DecayEnd.SETTLED, fit=_fit(), warnings=["off the nominal"], last_t=40.0,
     )  # fmt: skip
     return [
         Notice("device", "simulated MTi-G on /tmp/x (swath T roll)"), ViewerNote("save, as asked"),
@@ -80,14 +81,22 @@ def test_every_event_is_a_line_and_a_json_object_of_its_values() -> None:
     assert released.line("decay 5") == "decay 5: released at 8.30 deg (roll), t = 14.250 s"
     settled = next(e for e in events if isinstance(e, Settled))
     assert settled.record()["coefficients"] == {"b1": 0.2, "c1": 14.2}
-    assert settled.line() == "run 2: amplitude; b1=0.2  c1=14.2, T0 1.667 s, R2 0.9980 -> rec/run02.mcap"
+    assert settled.line() == "run 2: settled; b1=0.2  c1=14.2, T0 1.667 s, R2 0.9980 -> rec/run02.mcap"
+    assert settled.record()["ended"] == "settled" and settled.record()["whole"] is True
     early = dataclasses.replace(
-        settled.outcome, settle_reason="note", fit=dataclasses.replace(_fit(), half_cycles=3)
+        settled.outcome, ended=DecayEnd.STOPPED, fit=dataclasses.replace(_fit(), half_cycles=3), last_t=17.25
     )
-    assert Settled(early).line() == (  # stopped a cycle after the release: its live fit is no result
-        "run 2: note; b1=0.2  c1=14.2, T0 1.667 s, R2 0.9980; a live fit over 3 half-cycle(s) only: "
+    assert Settled(
+        early
+    ).line() == (  # stopped a cycle after the release: partial, and its live fit no result
+        "run 2: stopped by the operator 3.0 s after the release: partial, left out of campaigns; "
+        "b1=0.2  c1=14.2, T0 1.667 s, R2 0.9980; a live fit over 3 half-cycle(s) only: "
         "fit the file with tankdaq identify -> rec/run02.mcap"
     )
+    said = Settled(early).record()
+    assert (said["ended"], said["whole"], said["ended_after_s"]) == ("stopped", False, 3.0)
+    unplugged = Settled(dataclasses.replace(early, ended=DecayEnd.DEVICE_LOST)).line()
+    assert unplugged.startswith("run 2: the device went away 3.0 s after the release: partial,")
     assert Note("note", "x").line() == "note: x" and Note("warning", "x", 3).line() == "warning: run 3: x"
     assert Stopping("SIGHUP").line() == "stopping (SIGHUP): closing files"
     assert Held(math.nan, "roll").record()["angle_deg"] is None  # NaN is no JSON
@@ -105,7 +114,8 @@ def test_the_printer_explains_its_words_once_and_names_runs_as_asked() -> None:
     settle_legend, note_legend = legend(_every_event()[9]), legend(Note("note", ""))
     assert settle_legend is not None and note_legend is not None
     assert out.count(settle_legend) == 1 and out.count(note_legend) == 1
-    assert all(f"{reason} = " in settle_legend for reason in SETTLE_REASONS)  # every end a run can have
+    assert all(f"{end.value} = " in settle_legend for end in SETTLE_REASONS)  # every end a run can have
+    assert set(SETTLE_REASONS) == set(DecayEnd) - {DecayEnd.CUT, DecayEnd.RECOVERED}  # a recorder's ends
     first_settled = out.index(_every_event()[9].line("decay 7"))
     assert out[first_settled - 1] == settle_legend  # said just before the first line that needs it
     assert out.count(ViewerNote("save, as asked").line()) == 1  # shown once

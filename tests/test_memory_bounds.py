@@ -24,6 +24,7 @@ from tankdaq.acquire.sinks import Decay, IdentifierSink, Sink
 from tankdaq.config import hull_scenario
 from tankdaq.ident.online import OnlineResult
 from tankdaq.ident.signals import SAVGOL_CACHE, _savgol_weights, smoothed_derivatives
+from tankdaq.records import DecayEnd
 from tankdaq.samples import empty_samples
 from tankdaq.viz.live import LiveView
 
@@ -62,7 +63,7 @@ def test_a_finished_decay_keeps_its_fit_without_the_curve_and_the_detector_no_ev
             outcomes += pipeline.feed(Block(samples[i : i + 20], b"", 0.0))
     finally:
         pipeline.close()
-    finished = [o for o in outcomes if o.settle_reason in ("amplitude", "timeout")]
+    finished = [o for o in outcomes if o.ended.whole]
     assert len(finished) == RUNS
     for outcome in finished:
         assert outcome.fit is not None
@@ -77,7 +78,9 @@ def test_a_finished_decay_keeps_its_fit_without_the_curve_and_the_detector_no_ev
 
 def test_a_day_of_decays_keeps_the_newest_outcomes_and_counts_them_all() -> None:
     kept = KeptOutcomes()
-    day = [DecayOutcome(run, "roll", None, None, 0.0, 8.0, "amplitude", None, []) for run in range(1, 824)]
+    day = [
+        DecayOutcome(run, "roll", None, None, 0.0, 8.0, DecayEnd.SETTLED, None, []) for run in range(1, 824)
+    ]
     kept.extend(day[:-1])
     kept.append(day[-1])
     assert kept.count == 823
@@ -164,7 +167,7 @@ def test_a_settled_decay_gives_the_allocators_free_pages_back() -> None:
         outcomes = [
             o for i in range(0, samples.size, 50) for o in pipeline.feed(Block(samples[i : i + 50], b"", 0.0))
         ]
-        assert [o.settle_reason for o in outcomes] == ["amplitude"]
+        assert [o.ended for o in outcomes] == [DecayEnd.SETTLED]
         given_back_kb = held_kb - _anonymous_kb()
     finally:
         libc.free(blocks[-1])

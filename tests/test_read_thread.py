@@ -24,6 +24,7 @@ from tankdaq.acquire.sinks import Block, Decay, Sink
 from tankdaq.device.driver import MTiDriver, StreamBlock
 from tankdaq.device.read_process import Chunk, ReadProcess
 from tankdaq.ident.online import OnlineResult
+from tankdaq.records import DecayEnd
 from tankdaq.store.reader import iter_raw_chunks, read_recording
 from tankdaq.store.writer import RecordingWriter
 
@@ -109,7 +110,7 @@ def test_no_release_detection_fit_or_write_runs_on_the_reading_thread(
     for name in ("write_raw", "write_samples", "write_event", "write_fit"):
         _spy(monkeypatch, RecordingWriter, name, seen)
     (outcome,) = RecordDaemon(_settings(tmp_path), sinks=[_ThreadSink(seen)]).run()
-    assert outcome.settle_reason in ("amplitude", "timeout") and outcome.path is not None
+    assert outcome.ended.whole and outcome.path is not None
     assert reads.threads and {thread.name for thread in reads.threads} == {THREAD_NAME}
     # the reads were made by a process of their own, which has ended; the file's stamps are its reads'
     assert reads.processes
@@ -147,7 +148,7 @@ def test_a_stop_mid_decay_feeds_every_block_already_read_into_the_file(
     daemon = RecordDaemon(_settings(tmp_path, runs=None), sinks=[StopMidDecay()])
     (outcome,) = daemon.run()
     assert held == [True], "the reader went on reading while the pipeline was held"
-    assert outcome.settle_reason == "note" and outcome.path is not None
+    assert outcome.ended is DecayEnd.STOPPED and outcome.path is not None
     assert not read_recording(outcome.path).truncated
     in_file = [host_ns for host_ns, raw in iter_raw_chunks(outcome.path) if raw]
     read = [int(block.host_t * 1e9) for block in reads.blocks if block.raw]

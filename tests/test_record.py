@@ -23,10 +23,12 @@ from typer.testing import CliRunner
 
 from event_stream import wait_for_event
 from record_settings import sim_record_settings
+from run_metadata import run_metadata
 from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.acquire.events import DeviceBack, DeviceLost, Event, Released, Settled
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.cli import app
+from tankdaq.records import DecayEnd
 from tankdaq.samples import AXIS_FIELDS
 from tankdaq.store.reader import iter_raw_chunks, read_recording
 from tankdaq.xsens.batch import to_samples
@@ -100,6 +102,8 @@ def test_three_decays_in_one_run_each_a_valid_mcap(three_decays) -> None:
         assert meta["operator"] == "tester" and meta["draft"] == "1.1T"
         assert abs(abs(float(meta["angle_initial_deg"])) - 8.0) < 1.0
         assert len(_events(recording, "release")) == 1 and len(_events(recording, "settled")) == 1
+        assert recording.ended.whole and meta["ended"] == recording.ended.value  # settled (or timed out)
+        assert run_metadata(path)["ended"] == recording.ended.value  # as the official reader reads it
         assert recording.fits, "the live fit is stored as it evolves"
         assert recording.attachments, "the run configuration is attached"
 
@@ -214,13 +218,14 @@ def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: P
     assert len(heard.of(DeviceLost)) == 1 and len(heard.of(DeviceBack)) == 1
     assert len(outcomes) == 2
     cut, whole = outcomes
-    assert cut.settle_reason == "unplug"
+    assert cut.ended is DecayEnd.DEVICE_LOST
     partial = read_recording(cut.path)
     assert _events(partial, "unplug") and partial.samples.size > 50
+    assert partial.ended is DecayEnd.DEVICE_LOST and run_metadata(cut.path)["ended"] == "device_lost"
     with cut.path.open("rb") as f:
         assert sum(1 for _ in make_reader(f).iter_messages()) > 0
     complete = read_recording(whole.path)
-    assert whole.settle_reason in ("amplitude", "timeout")
+    assert whole.ended.whole and complete.ended is whole.ended
     assert _events(complete, "release") and _events(complete, "settled")
 
 
@@ -295,6 +300,7 @@ def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
     spans = _chunk_spans(path)
+    assert read_recording(path).ended is DecayEnd.CUT
     result = subprocess.run(
         [str(Path(sys.executable).with_name("tankdaq")), "recover", str(path)],
         capture_output=True,
@@ -311,6 +317,10 @@ def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
             json.loads(m.data)["kind"]: m.log_time for *_, m in reader.iter_messages(topics=["/events"])
         }
     assert "release" in events and samples > 0
+    assert (
+        read_recording(recovered).ended is DecayEnd.RECOVERED
+        and run_metadata(recovered)["ended"] == "recovered"
+    )
     assert newest >= max(last for _, last in spans), "a flushed message was lost"
     # chunks that start before the release hold the pre-trigger history, written at once at the release
     decay = [(first, last) for first, last in spans if first >= events["release"]]
@@ -329,6 +339,7 @@ def test_sigterm_closes_the_file_properly(tmp_path: Path) -> None:
     with path.open("rb") as f:
         summary = make_reader(f).get_summary()  # a seeking reader needs the footer: the file was finished
     assert summary is not None and summary.statistics.message_count > 0
+    assert read_recording(path).ended is DecayEnd.STOPPED
 
 
 BAD_INPUTS = [
@@ -409,10 +420,12 @@ def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> 
     last = proc.stderr.strip().splitlines()[-1]
     assert last.startswith("error: disk full writing") and "tankdaq recover" in last
     (cut,) = tmp_path.glob("*.mcap")
+    assert read_recording(cut).ended is DecayEnd.CUT  # never closed: no footer
     result = subprocess.run([exe, "recover", str(cut)], capture_output=True, text=True, timeout=60)
     assert result.returncode in (0, 3), result.stderr
     recovered = read_recording(next(tmp_path.glob("*.recovered.mcap")))
     assert recovered.samples.size > 100 and _events(recovered, "release")
+    assert recovered.ended is DecayEnd.RECOVERED and recovered.metadata["hull"] == "swath"
 
 
 def test_demo_records_identifies_and_plots(tmp_path: Path) -> None:

@@ -1,6 +1,7 @@
 """Signals never cost a decay (issue 19): Ctrl-C, SIGTERM and SIGHUP (a closed terminal or SSH session)
 close the open decay as a complete file, ``record`` exits 130 and its summary counts the files that
-exist; a recorder whose live refit runs away still hears Ctrl-C.
+exist; the file says the decay was stopped (issue 37: partial, never taken for a whole decay); a recorder
+whose live refit runs away still hears Ctrl-C.
 
 Real processes: ``tankdaq record --port sim`` (the simulated MTi-G on a pty) and, for the runaway,
 ``tests/runaway_recorder.py`` (the real daemon whose live identifier is given a gyro 1000x too large).
@@ -21,7 +22,11 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from event_stream import events_of, wait_for_event
+from event_stream import events_of, wait_for_event, wait_until
+from run_metadata import run_metadata
+from tankdaq.acquire.replay import replay_recording
+from tankdaq.records import DecayEnd
+from tankdaq.store.reader import read_recording
 
 TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
 RUNAWAY = Path(__file__).with_name("runaway_recorder.py")
@@ -57,15 +62,24 @@ def _complete(path: Path) -> list[dict]:
         return [json.loads(m.data) for *_, m in reader.iter_messages(topics=["/events"])]
 
 
+#: Device seconds of the decay recorded when the test stops it: the lab's case, stopped 3 s after the release.
+STOPPED_AFTER_S = 3.0
+
+
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGHUP])  # SIGTERM: test_record.py
-def test_a_signal_mid_decay_closes_a_complete_file_exits_130_and_the_summary_counts_it(
+def test_a_signal_mid_decay_closes_a_complete_file_that_says_it_was_stopped(
     tmp_path: Path, signum: signal.Signals
 ) -> None:
+    """Stopped once 3 s of the decay are recorded (the live fits' ends say how far the file has got, in device
+    time): a complete file, exit 130, the summary counts it; the file, its line and ``identify`` say the
+    decay was stopped by the operator and is partial (issue 37: it was catalogued complete)."""
     args = ["record", "--port", "sim", "--hull", "swath", "--draft", "T", "--angle", "8"]
-    args += ["--viewer", "none", "--sim-speed", "4", "--out", str(tmp_path), "--events", "jsonl"]
+    args += ["--viewer", "none", "--sim-speed", "2", "--out", str(tmp_path), "--events", "jsonl"]
     proc = subprocess.Popen([TANKDAQ, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        wait_for_event(proc, "released", START_S)
+        *_, released = wait_for_event(proc, "released", START_S)
+        recorded = released["t_s"] + STOPPED_AFTER_S
+        wait_until(proc, lambda fit: fit["t_end_s"] >= recorded, "fitted", START_S)
         (path,) = tmp_path.glob("*.mcap")
         proc.send_signal(signum)
         out, err = proc.communicate(timeout=STOP_S)
@@ -77,12 +91,32 @@ def test_a_signal_mid_decay_closes_a_complete_file_exits_130_and_the_summary_cou
     assert "Traceback" not in err
     assert [event["signal"] for event in events_of(out, "stopping")] == [signum.name]
     (settled,) = events_of(out, "settled")
-    assert settled["settle_reason"] == "note" and settled["path"] == str(path)
+    assert (settled["ended"], settled["whole"], settled["path"]) == ("stopped", False, str(path))
+    after_s = settled["ended_after_s"]
+    assert after_s >= STOPPED_AFTER_S
+    assert (
+        f"run 1: stopped by the operator {after_s:.1f} s after the release: partial, left out of campaigns"
+        in err
+    )
     events = _complete(path)
     assert events[0]["kind"] == "release" and events[-1]["kind"] == "settled"
+    assert events[-1]["data"] == {"ended": "stopped"}
+    assert run_metadata(path)["ended"] == "stopped"
+    assert read_recording(path).ended is DecayEnd.STOPPED
     files = list(tmp_path.glob("*.mcap"))
     counted = re.search(r"(\d+) decay\(s\) recorded", err)
     assert counted is not None and int(counted.group(1)) == len(files) == 1, err
+    if signum is signal.SIGINT:  # a fit of the file says it covers part of the decay
+        identify = [TANKDAQ, "identify", str(path), "--json"]
+        fitted = subprocess.run(identify, capture_output=True, text=True, timeout=START_S)
+        assert fitted.returncode == 0, fitted.stderr
+        (warning,) = [
+            line for line in json.loads(fitted.stdout)["warnings"] if "stopped by the operator" in line
+        ]
+        assert f"{path.stem}: stopped by the operator {after_s:.1f} s after the release: partial" in warning
+        (replayed,) = replay_recording(path, speed=None, viewer="none")  # the file ends mid-decay
+        assert replayed.ended is DecayEnd.STREAM_ENDED  # the last sample as recorded, the release within one
+        assert replayed.ended_after_s == pytest.approx(after_s, abs=0.011)  # as test_record.py's replay
 
 
 def test_ctrl_c_is_heard_while_a_live_refit_runs_away_and_the_file_closes_complete(tmp_path: Path) -> None:

@@ -30,6 +30,7 @@ from tankdaq.acquire.sinks import Decay, IdentifierSink, RecordingSink, Sink, Vi
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.ident.online import OnlineIdentifier, OnlineResult
+from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
 from tankdaq.viz.live import LiveView
 
@@ -115,7 +116,7 @@ def _feed_recording(
     for host_ns, raw in recording.raw_chunks:
         samples, _ = decoder.feed(raw, host_ns / 1e9)
         session.feed(Block(samples, raw, host_ns / 1e9))
-    session.abort("note", "end of recording")
+    session.abort(DecayEnd.STREAM_ENDED, "end of recording")
     return session
 
 
@@ -143,7 +144,7 @@ def test_a_failure_while_recording_closes_the_file_with_what_arrived(
     kinds = [event["kind"] for event in recording.events]
     assert kinds[-1] == "settled"
     assert any("recording closed after an error" in event["message"] for event in recording.events)
-    assert recording.metadata["settle_reason"] == "error"
+    assert recording.ended is DecayEnd.ERROR
     if method != "new_run":
         assert kinds.count("release") == 1 and recording.samples.size > 0 and recording.raw_chunks
         assert recording.samples.size < len(read_recording(recorded).samples)  # cut where it failed
@@ -157,7 +158,7 @@ def test_an_identifier_that_fails_mid_decay_closes_the_file_with_what_arrived(
     (path,) = tmp_path.glob("*.mcap")
     assert _is_complete_mcap(path)
     recording = read_recording(path)
-    assert recording.metadata["settle_reason"] == "error" and recording.events[-1]["kind"] == "settled"
+    assert recording.ended is DecayEnd.ERROR and recording.events[-1]["kind"] == "settled"
     assert len(recording.fits) >= 1  # the first refit was written before the second failed
     assert 0 < recording.samples.size < len(read_recording(recorded).samples)
 
@@ -177,7 +178,7 @@ def test_a_view_that_fails_at_the_end_still_leaves_a_complete_file_with_the_fina
     (path,) = tmp_path.glob("*.mcap")
     assert _is_complete_mcap(path)
     recording = read_recording(path)
-    assert recording.metadata["settle_reason"] != "error" and "fit_b1" in recording.metadata  # the final fit
+    assert recording.ended is not DecayEnd.ERROR and "fit_b1" in recording.metadata  # the final fit
     assert recording.samples["t"][-1] == read_recording(recorded).samples["t"][-1]  # every sample to the end
 
 
@@ -206,7 +207,7 @@ class Listener(Sink):
         self._hear("fit")
 
     def on_settle(self, decay: Decay) -> None:
-        self._hear(f"settle {decay.settle_reason}")
+        self._hear(f"settle {decay.ended}")
 
     def close(self) -> None:
         self._hear("close")
@@ -222,10 +223,10 @@ def test_one_more_sink_hears_the_decay_in_order_after_the_file_is_open(
     heard = listener.heard
     release, settle = heard.index("release"), next(i for i, h in enumerate(heard) if h.startswith("settle"))
     assert set(heard[:release]) == {"block"} and heard[-1] == "close" and heard.count("close") == 1
-    assert heard[settle] == f"settle {outcome.settle_reason}" and heard.count(heard[settle]) == 1
+    assert heard[settle] == f"settle {outcome.ended}" and heard.count(heard[settle]) == 1
     assert "fit" in heard[release:settle] and heard[settle - 1] == "fit"  # the final fit, then the settle
     assert listener.path_at_release == outcome.path  # the file (before it in the pipeline) was open
-    assert read_recording(outcome.path).metadata["settle_reason"] == outcome.settle_reason
+    assert read_recording(outcome.path).ended is outcome.ended
 
 
 @pytest.mark.parametrize("fail_at", ["release", "fit", "decay block"])
@@ -235,7 +236,7 @@ def test_a_sink_that_fails_never_takes_the_file_down(recorded: Path, tmp_path: P
     (path,) = tmp_path.glob("*.mcap")
     assert _is_complete_mcap(path)
     recording = read_recording(path)
-    assert recording.metadata["settle_reason"] == "error"
+    assert recording.ended is DecayEnd.ERROR
     assert [e["kind"] for e in recording.events][:1] == ["release"]  # the file took what it was given
     assert recording.samples.size > 0 and recording.raw_chunks
 
@@ -250,7 +251,7 @@ def test_a_listener_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Pa
         daemon.run()
     (path,) = tmp_path.glob("*.mcap")
     assert _is_complete_mcap(path)
-    assert read_recording(path).metadata["settle_reason"] == "error"
+    assert read_recording(path).ended is DecayEnd.ERROR
 
 
 def test_a_live_model_with_an_input_the_recorder_lacks_is_refused_before_the_device_opens(

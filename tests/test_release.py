@@ -13,6 +13,7 @@ from tankdaq.errors import InputError
 from tankdaq.physics.scenario import Handling
 from tankdaq.physics.sensor import SensorNoise
 from tankdaq.physics.truth import TICKS_PER_S, still_trace
+from tankdaq.records import DecayEnd
 
 WITH_PUT_BACKS = Handling(put_back_fraction=0.2)
 
@@ -81,7 +82,7 @@ def test_settling_follows_the_ittc_threshold() -> None:
     settled = [e for e in events if e.kind == "settled"]
     assert len(settled) == 3
     for event, run in zip(settled, trace.runs, strict=True):
-        assert event.reason == "amplitude"
+        assert event.ended is DecayEnd.SETTLED
         true_amplitude_after = np.abs(np.degrees(trace.angle[event.index : event.index + 300]))
         assert true_amplitude_after.max() < 0.5 + 0.1  # measured with noise and bias, judged on truth
         assert np.abs(np.degrees(trace.angle[event.index - 300 : event.index])).max() > 0.4

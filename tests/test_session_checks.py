@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from measured_decay import measured_decay
-from tankdaq.acquire.guided.checks import check_decay
+from tankdaq.acquire.guided.checks import Measured, check_decay, usable_measured
 from tankdaq.acquire.guided.plan import Acceptance, Condition
 from tankdaq.config import hull_scenario
 from tankdaq.errors import InputError
 from tankdaq.ident.free_decay import find_free_end
 from tankdaq.physics.scenario import parse_fault_script, scripted_run
-from tankdaq.records import DecayRun
+from tankdaq.records import DecayEnd, DecayRun
 
 
 @pytest.mark.parametrize(
@@ -29,7 +29,7 @@ from tankdaq.records import DecayRun
         ({"max_rate_deg_s": 299.0}, "rate saturated"),
         ({"half_cycles": 3}, "too short"),
         ({"r2_angle": 0.9}, "poor fit"),
-        ({"settle_reason": "unplug"}, "cut short (the device went away)"),
+        ({"ended": DecayEnd.DEVICE_LOST}, "cut short (the device went away)"),
         ({"b_eq_per_s": 3.4}, "not a repeat: B_eq"),
         ({"natural_period_s": 1.75}, "not a repeat: period"),
         ({"fit_warnings": ["implausible damping: B_eq -0.05 1/s at 0.0 deg"]}, "fit: implausible damping"),
@@ -40,6 +40,23 @@ def test_each_check_flags_its_fault_alone(changes: dict[str, Any], phrase: str) 
     assert check_decay(measured_decay(), condition, acceptance, earlier) == []
     reasons = check_decay(measured_decay(**changes), condition, acceptance, earlier)
     assert len(reasons) == 1 and phrase in reasons[0]
+
+
+def test_a_logged_decay_reads_back_with_how_it_ended_also_from_a_log_before_ended() -> None:
+    """The session log keeps each decay's measurements; a log written before ``ended`` says ``settle_reason``
+    (``note`` was a stop: never taken for a whole decay on resume)."""
+    logged = json.loads(json.dumps(dataclasses.asdict(measured_decay(ended=DecayEnd.TIMEOUT))))
+    assert logged["ended"] == "timeout" and Measured.from_log(logged) == measured_decay(
+        ended=DecayEnd.TIMEOUT
+    )
+    del logged["ended"]
+    assert usable_measured({**logged, "settle_reason": "amplitude"})
+    assert Measured.from_log({**logged, "settle_reason": "amplitude"}).ended is DecayEnd.SETTLED
+    stopped = Measured.from_log({**logged, "settle_reason": "note"})
+    assert stopped.ended is DecayEnd.STOPPED
+    assert not usable_measured({**logged, "ended": "gone fishing"}) and not usable_measured(logged)
+    condition, acceptance = Condition("T", 10.0), Acceptance()
+    assert check_decay(stopped, condition, acceptance, []) == ["cut short (stopped by the operator)"]
 
 
 def test_the_scripted_double_push_is_a_second_excitation() -> None:

@@ -32,6 +32,7 @@ from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.sinks import Block, Decay, Sink
 from tankdaq.plans import load_campaign_plan
+from tankdaq.records import DecayEnd
 
 ONE_CONDITION_PLAN = """hulls = ["swath"]
 axis = "roll"
@@ -114,7 +115,7 @@ def test_a_question_keeps_the_stream_fed_and_a_release_meanwhile_is_kept(tmp_pat
     # the decay released while the question was open: recorded whole, kept, logged rejected
     assert [e.run for e in heard.of(Released)] == [1, 2]
     (between,) = [e.outcome for e in heard.of(Settled) if e.outcome.run == 2]
-    assert between.settle_reason == "amplitude" and between.path is not None and between.path.is_file()
+    assert between.ended is DecayEnd.SETTLED and between.path is not None and between.path.is_file()
     runs = {r.decay: r for r in state.runs}
     assert runs[1].verdict == runs[2].verdict == "rejected"
     assert runs[2].file == between.path.name

@@ -17,6 +17,7 @@ from tankdaq.acquire.guided.runner import (
 )
 from tankdaq.acquire.guided.state import SessionState
 from tankdaq.plans import load_campaign_plan
+from tankdaq.records import DecayEnd
 
 PLAN = """description = "one condition, one repeat"
 hulls = ["swath"]
@@ -29,7 +30,16 @@ angle_tolerance_deg = 1.5
 
 MEASURED = dataclasses.asdict(
     Measured(
-        10.1, 0.02, "amplitude", 16, 0.997, {"b1": 0.03, "b2": 4.6, "c1": 14.3}, 1.66, 2.6, 40.0, "record"
+        10.1,
+        0.02,
+        DecayEnd.SETTLED,
+        16,
+        0.997,
+        {"b1": 0.03, "b2": 4.6, "c1": 14.3},
+        1.66,
+        2.6,
+        40.0,
+        "record",
     )
 )
 

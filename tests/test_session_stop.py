@@ -22,6 +22,7 @@ from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.plans import load_campaign_plan
+from tankdaq.records import DecayEnd
 
 ONE_CONDITION_PLAN = """hulls = ["swath"]
 axis = "roll"
@@ -58,7 +59,7 @@ def test_a_signal_stops_the_session_as_an_outcome_and_the_decay_under_way_is_kep
         assert state.decays == 0
         return
     (settled,) = heard.of(Settled)
-    assert settled.outcome.settle_reason == "note" and settled.outcome.path in files
+    assert settled.outcome.ended is DecayEnd.STOPPED and settled.outcome.path in files
     (run,) = runs
     assert run["file"] == settled.outcome.path.name
     assert records[-1]["type"] == "verdict" and records[-1]["action"] == "stopped"

@@ -25,6 +25,7 @@ from tankdaq.device.driver import MTiDriver
 from tankdaq.device.factory import SimPort
 from tankdaq.device.simulator import DeviceIdentity, RecordedSource, SimulatedMTi
 from tankdaq.errors import InputError
+from tankdaq.records import DecayEnd
 from tankdaq.store.playback import recorded_device
 from tankdaq.store.reader import Recording, read_recording
 from tankdaq.xsens.control import parse_output_configuration
@@ -44,7 +45,7 @@ def _record(port: str, out: Path) -> Recording:
         out, port=port, runs=1, sim_speed=SPEED, sim_seed=3, pretrigger_s=PRETRIGGER_S
     )
     (outcome,) = RecordDaemon(settings).run()
-    assert outcome.settle_reason == "amplitude"  # settled as a decay does: not cut short by the end of a tape
+    assert outcome.ended is DecayEnd.SETTLED  # settled as a decay does: not cut short by the end of a tape
     return read_recording(outcome.path)
 
 

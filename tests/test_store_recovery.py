@@ -22,8 +22,9 @@ from typer.testing import CliRunner
 
 from tankdaq.cli import app
 from tankdaq.errors import BadRecordingInput
+from tankdaq.records import DecayEnd
 from tankdaq.store import schemas
-from tankdaq.store.reader import read_recording
+from tankdaq.store.reader import read_decay_runs, read_recording
 from tankdaq.store.record_scan import RecordScan
 from tankdaq.store.recover import recover
 
@@ -111,7 +112,7 @@ def test_killed_writer_loses_at_most_the_last_second(tmp_path: Path) -> None:
     assert len(old_enough) > 150
 
     salvaged = read_recording(path)  # the killed file itself reads, without its summary
-    assert not salvaged.complete
+    assert not salvaged.complete and salvaged.ended is DecayEnd.CUT
 
     report = recover(path)
     assert report.destination == tmp_path / "killed.recovered.mcap"
@@ -120,8 +121,12 @@ def test_killed_writer_loses_at_most_the_last_second(tmp_path: Path) -> None:
         reader = make_reader(stream)
         assert reader.get_summary() is not None
         messages = list(reader.iter_messages())
-        assert [m.name for m in reader.iter_metadata()] == [schemas.RUN_METADATA_NAME]
+        metadata = list(reader.iter_metadata())
     assert len(messages) == report.messages
+    # the cut file's run metadata, then again saying how the decay ended: rebuilt from a cut file (partial)
+    assert [m.name for m in metadata] == [schemas.RUN_METADATA_NAME] * 2
+    assert metadata[-1].metadata == {**metadata[0].metadata, "ended": "recovered"}
+    assert metadata[0].metadata["hull"] == "swath" and "ended" not in metadata[0].metadata
 
     recovered_batches = batches_in(report.destination)
     assert recovered_batches == list(range(len(recovered_batches)))  # a gap-free prefix
@@ -132,6 +137,9 @@ def test_killed_writer_loses_at_most_the_last_second(tmp_path: Path) -> None:
     assert counters.size >= 4 * (max(old_enough) + 1)
     np.testing.assert_array_equal(recovered.samples["roll"], salvaged.samples["roll"])
     assert [e["kind"] for e in recovered.events] == ["release"]
+    assert recovered.ended is DecayEnd.RECOVERED and not recovered.ended.whole
+    (run,) = read_decay_runs(report.destination)
+    assert run.meta["ended"] is DecayEnd.RECOVERED
 
 
 def test_full_disk_is_a_recording_error_and_earlier_files_stay_readable(tmp_path: Path) -> None:
@@ -166,6 +174,9 @@ def test_recover_cli_exit_codes(tmp_path: Path, complete_file: Path) -> None:
     code, output = invoke(str(complete_file), "--out", str(tmp_path / "whole.mcap"))
     assert code == 0 and "nothing lost" in output
     assert batches_in(tmp_path / "whole.mcap") == list(range(300))
+    whole, source = read_recording(tmp_path / "whole.mcap"), read_recording(complete_file)
+    assert whole.metadata_history == source.metadata_history  # a closed file's copy: nothing said again
+    assert whole.ended is source.ended is DecayEnd.SETTLED  # closed by a program that wrote it whole
 
     torn = tmp_path / "torn.mcap"
     torn.write_bytes(data[: len(data) * 2 // 3])

@@ -159,7 +159,7 @@ def test_record_keeps_its_read_cadence_while_the_view_saves(
     assert not heard.of(DeviceLost) and not heard.of(DeviceBack), heard.events
     assert daemon.status.gaps == 0 and daemon.status.bad_frames == 0
     (outcome,) = outcomes
-    assert outcome.settle_reason in ("amplitude", "timeout") and _complete(outcome.path)
+    assert outcome.ended.whole and _complete(outcome.path)
     recording = read_recording(outcome.path)
     counters = recording.samples["counter"].astype(np.int64)
     assert np.all(np.diff(counters) % 65536 == 1), "every sample of the decay reached the file"
@@ -229,7 +229,7 @@ def test_a_viewer_killed_or_stalled_at_any_moment_costs_no_decay(tmp_path: Path,
         assert signalled, "the server was killed while recording"
     assert len(outcomes) == 2
     for outcome in outcomes:
-        assert outcome.settle_reason in ("amplitude", "timeout")
+        assert outcome.ended.whole
         assert _complete(outcome.path), outcome.path
     assert not heard.of(DeviceLost)
     mode, *viewer_lines = heard.of(ViewerNote)
@@ -314,7 +314,7 @@ def test_a_full_disk_takes_the_rrd_never_a_finished_mcap(tmp_path: Path, size_kb
             stopped = None
         except RecordingError as exc:
             stopped = exc
-        finished = [o for o in daemon.outcomes if o.settle_reason in ("amplitude", "timeout")]
+        finished = [o for o in daemon.outcomes if o.ended.whole]
         for outcome in finished:
             assert _complete(outcome.path), outcome.path
             assert read_recording(outcome.path).samples.size > 1000

@@ -111,7 +111,7 @@ def _viewer_said(words: str) -> Callable[[dict], bool]:
 def _settled(run: int | None = None) -> Callable[[dict], bool]:
     """A whole decay's end: run ``run``, or the next one (None)."""
     return lambda event: (
-        event["event"] == "settled" and run in (None, event["run"]) and event["settle_reason"] == "amplitude"
+        event["event"] == "settled" and run in (None, event["run"]) and event["ended"] == "settled"
     )
 
 

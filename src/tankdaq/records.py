@@ -6,6 +6,7 @@ so estimators and the discrepancy workflow never care where data came from.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
@@ -112,6 +113,19 @@ class DecayEnd(StrEnum):
         """True when the file holds the whole decay, so its fit may stand for it."""
         return self in (DecayEnd.SETTLED, DecayEnd.TIMEOUT)
 
+    @property
+    def words(self) -> str:
+        """How it ended in plain words ("stopped by the operator")."""
+        return _END_WORDS[self]
+
+    def said(self, after_s: float | None = None) -> str:
+        """How it ended, for a line a person reads: a decay that is not whole says so (``after_s``: the
+        seconds recorded after its release, when known)."""
+        if self.whole:
+            return self.words
+        when = f" {after_s:.1f} s after the release" if after_s is not None and math.isfinite(after_s) else ""
+        return f"{self.words}{when}: partial, left out of campaigns"
+
     @classmethod
     def of_settle_reason(cls, reason: object) -> DecayEnd | None:
         """The end a recording's ``settle_reason`` metadata names; older files' reasons included."""
@@ -128,4 +142,16 @@ _LEGACY_SETTLE_REASONS = {
     "amplitude": DecayEnd.SETTLED,
     "note": DecayEnd.STOPPED,
     "unplug": DecayEnd.DEVICE_LOST,
+}
+
+#: Each end in the words of a line a person reads (``DecayEnd.said``).
+_END_WORDS = {
+    DecayEnd.SETTLED: "settled",
+    DecayEnd.TIMEOUT: "timed out at the longest a decay may last",
+    DecayEnd.STOPPED: "stopped by the operator",
+    DecayEnd.STREAM_ENDED: "the stream ended",
+    DecayEnd.DEVICE_LOST: "the device went away",
+    DecayEnd.ERROR: "closed after an error",
+    DecayEnd.CUT: "cut: its writer never closed the file",
+    DecayEnd.RECOVERED: "rebuilt by tankdaq recover from a cut file",
 }

@@ -2,8 +2,9 @@
 
 It runs until ``runs`` decays are recorded or it is stopped: Ctrl-C, SIGTERM and SIGHUP (a
 closed terminal or SSH session) all close the decay under way as a complete file (``stopped_by``
-names the signal). A device that vanishes mid-decay closes that file with what arrived, and the
-daemon waits for the device to come back. ``port="sim"`` starts the built-in
+names the signal) that says it was stopped (``DecayEnd.STOPPED``: partial). A device that vanishes
+mid-decay closes that file with what arrived (``DEVICE_LOST``), and the daemon waits for the device
+to come back; an exception closes it as ``ERROR``. ``port="sim"`` starts the built-in
 simulated MTi-G in-process on a pseudo-terminal, opened like hardware
 (``device.factory.open_device``); ``port="sim:FILE.mcap"`` plays the device of that recording
 (its raw bytes, at their pace) through the same pty. The decay pipeline is a ``DecayPipeline``
@@ -34,6 +35,7 @@ from ..device.driver import MTiDriver, StreamCounters
 from ..device.factory import OpenDevice, SimPort, SimulatedSensor, open_device
 from ..errors import DeviceGone, InputError, RecordingError
 from ..ident.online import OnlineIdentifier, prepare_identifier
+from ..records import DecayEnd
 from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
 from ..viz.live import LiveView
@@ -60,6 +62,12 @@ from .sinks import IdentifierSink, RecordingSink, Sink, ViewSink
 if TYPE_CHECKING:
     from ..device.simulator import RecordedSource, SimulatedMTi
     from ..physics.scenario import DecayScenario
+
+#: The note a decay's file gets when the recording ends with the decay under way, by how it ended.
+STOP_NOTES = {
+    DecayEnd.STOPPED: "recording stopped by the operator",
+    DecayEnd.ERROR: "recording ended by an error",
+}
 
 #: What the driver learnt that each recording keeps (``describe_run``).
 DEVICE_METADATA = ("device_id", "product_code", "firmware", "baud", "baud_changed_from")
@@ -320,6 +328,7 @@ class RecordDaemon:
     def _run(self) -> list[DecayOutcome]:
         pipeline: DecayPipeline | None = None
         signals = self._signals
+        ended = DecayEnd.ERROR  # how a decay under way ends: an exception, unless the loop ends as asked
         try:
             driver, pipeline = self._start()
             while not self._done():
@@ -330,26 +339,28 @@ class RecordDaemon:
                     signals.in_loop = False
                 if gone is not None:
                     self._device_gone(driver, pipeline, str(gone))
+            ended = DecayEnd.STOPPED  # stopped (a signal, ``stop()``), or the runs done with none under way
         except KeyboardInterrupt:
             signals.stopped_by = signals.stopped_by or "SIGINT"
+            ended = DecayEnd.STOPPED
         except RecordingError:
             stopped = "recording stopped: a file could not be written (files already closed are intact)"
             self.emit(Notice("recording", stopped))
             raise
         finally:
-            self._finish(pipeline)
+            self._finish(pipeline, ended)
         self.emit(Stopped(signals.stopped_by, self.outcomes.count))
         return list(self.outcomes)
 
-    def _finish(self, pipeline: DecayPipeline | None) -> None:
-        """Stopping: the decay under way closed complete, then the sinks and the device; a second Ctrl-C
-        meanwhile never cuts the file being closed."""
+    def _finish(self, pipeline: DecayPipeline | None, ended: DecayEnd) -> None:
+        """Stopping: the decay under way closed complete (``ended``), then the sinks and the device; a
+        second Ctrl-C meanwhile never cuts the file being closed."""
         signals = self._signals
         signals.closing = True
         if signals.stopped_by:
             self.emit(Stopping(signals.stopped_by))
         try:
-            self._shut_down(pipeline)
+            self._shut_down(pipeline, ended)
         finally:
             signals.closing = False
             self._pipeline = None  # closed: what is said now goes to the listeners given
@@ -358,11 +369,12 @@ class RecordDaemon:
         """Ask ``run`` to return once the blocks already read are fed (from a callback or another thread)."""
         self._stop.set()
 
-    def _shut_down(self, pipeline: DecayPipeline | None) -> None:
-        """Close the decay under way (its file stays readable), the sinks (the viewer), the device."""
+    def _shut_down(self, pipeline: DecayPipeline | None, ended: DecayEnd) -> None:
+        """Close the decay under way as ``ended`` (its file stays readable), the sinks (the viewer), the
+        device."""
         try:
             if pipeline is not None:
-                pipeline.abort("note", "recording stopped by the operator")
+                pipeline.abort(ended, STOP_NOTES[ended])
         except RecordingError as exc:  # the disk is full: the file is left for tankdaq recover
             self.emit(Notice("recording", str(exc)))
         finally:
@@ -414,7 +426,7 @@ class RecordDaemon:
         self.on_status(st)
 
     def _device_gone(self, driver: MTiDriver, pipeline: DecayPipeline, message: str) -> None:
-        pipeline.abort("unplug", message)
+        pipeline.abort(DecayEnd.DEVICE_LOST, message)
         self.status.state = "device gone: waiting for it to come back"
         self.on_status(self.status)
         self.emit(DeviceLost(message, self.settings.reconnect_timeout_s))

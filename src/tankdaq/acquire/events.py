@@ -19,15 +19,19 @@ from pathlib import Path
 from typing import ClassVar
 
 from ..ident.online import OnlineResult
+from ..records import DecayEnd
 from ..samples import StatusTally
 
-#: Why a decay ended (``Settled``'s ``settle_reason``), as the printed legend explains it.
+#: How a recorded decay can end (``Settled``'s ``outcome.ended``), as the printed legend explains it. Only
+#: the first two are whole; the others are partial: their file is complete with what arrived, and they are
+#: left out of campaigns unless asked for.
 SETTLE_REASONS = {
-    "amplitude": "the swing fell below the settle threshold (a whole decay)",
-    "timeout": "the decay went on past the longest a decay may last",
-    "note": "stopped by the operator or the end of the stream (the file is complete with what arrived)",
-    "unplug": "the device went away mid-decay (the file holds what arrived)",
-    "error": "closed after an error (the file holds what arrived; the error is in it)",
+    DecayEnd.SETTLED: "the swing fell below the settle threshold (a whole decay)",
+    DecayEnd.TIMEOUT: "the decay went on to the longest a decay may last (a whole decay)",
+    DecayEnd.STOPPED: "stopped by the operator: Ctrl-C, SIGTERM or a closed terminal (partial)",
+    DecayEnd.STREAM_ENDED: "the stream or the replayed file ended mid-decay (partial)",
+    DecayEnd.DEVICE_LOST: "the device went away mid-decay (partial)",
+    DecayEnd.ERROR: "closed after an error (partial; the error is in the file)",
 }
 
 
@@ -41,10 +45,16 @@ class DecayOutcome:
     rrd_path: Path | None
     release_t: float
     angle_initial_deg: float
-    settle_reason: str
+    ended: DecayEnd
     fit: OnlineResult | None
     warnings: list[str]
     status: StatusTally | None = None  # the status flags of its samples (clipping before and after release)
+    last_t: float = math.nan  # device time of its last sample
+
+    @property
+    def ended_after_s(self) -> float:
+        """Device seconds recorded after the release (nan when unknown)."""
+        return self.last_t - self.release_t
 
 
 #: The outcomes a pipeline or daemon keeps, newest last. Each is 2-4 kB: a lab day of 823 decays kept
@@ -217,7 +227,8 @@ FEW_HALF_CYCLES = 4
 
 @dataclass(frozen=True)
 class Settled(Event):
-    """Run ``outcome.run`` ended (``outcome.settle_reason``, see ``SETTLE_REASONS``), its file closed."""
+    """Run ``outcome.run`` ended (``outcome.ended``, see ``SETTLE_REASONS``), its file closed; the line
+    says how in plain words, and a partial decay says so."""
 
     outcome: DecayOutcome
 
@@ -234,7 +245,8 @@ class Settled(Event):
             flags += (
                 f"; a live fit over {fit.half_cycles} half-cycle(s) only: fit the file with tankdaq identify"
             )
-        return f"{_run(outcome.run, run_name)}: {outcome.settle_reason}; {coeffs}{period}{flags}{where}"
+        ended = outcome.ended.said(outcome.ended_after_s)
+        return f"{_run(outcome.run, run_name)}: {ended}; {coeffs}{period}{flags}{where}"
 
     def record(self) -> dict[str, object]:
         o = self.outcome
@@ -243,7 +255,9 @@ class Settled(Event):
             "event": "settled",
             "run": o.run,
             "axis": o.axis,
-            "settle_reason": o.settle_reason,
+            "ended": o.ended.value,
+            "whole": o.ended.whole,
+            "ended_after_s": _jsonable(o.ended_after_s),
             "path": _jsonable(o.path),
             "release_t_s": o.release_t,
             "angle_initial_deg": o.angle_initial_deg,
@@ -363,10 +377,10 @@ class ModelMoved(Event):
 def legend(event: Event) -> str | None:
     """The words an event's line uses that need explaining, said once before the first such line."""
     if isinstance(event, Settled):
-        reasons = "; ".join(f"{name} = {why}" for name, why in SETTLE_REASONS.items())
+        reasons = "; ".join(f"{end.value} = {why}" for end, why in SETTLE_REASONS.items())
         return (
-            f"(each run's line: RUN: how it ended; the live fit's coefficients, T0 and R2; the file. "
-            f"How a run ends: {reasons})"
+            f"(each run's line: RUN: how it ended (a partial decay says so); the live fit's coefficients, T0 "
+            f"and R2; the file. How a run ends, as the file and the catalogue name it: {reasons})"
         )
     if isinstance(event, Note):
         return "(warning: the decay or its fit may be wrong, check it; note: worth knowing, not a fault)"

@@ -9,8 +9,9 @@ recording, view, replay's the same without the recording. What a person is told 
 a warning, settled) goes to every sink as a typed event (``acquire.events``, ``Sink.on_event``).
 
 A decay is never lost: whatever a sink or callback raises while a decay is open, every sink is
-still told (the file takes the block), then the decay is closed (``settle_reason`` ``error``,
-the file closed with what arrived) before the error is passed on.
+still told (the file takes the block), then the decay is closed (``ended`` ``DecayEnd.ERROR``,
+the file closed with what arrived) before the error is passed on. Every decay ends with a ``DecayEnd``:
+settled or timed out by the detector, else as the one who ends it says (``abort``).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from dataclasses import dataclass, field
 
 from ..ident.online import OnlineResult
 from ..physics.models import resolve_model
+from ..records import DecayEnd
 from ..samples import AXIS_FIELDS
 from .events import DecayOutcome, Event, Fitted, Held, KeptOutcomes, Note, PutBack, Released, Settled
 from .memory import release_free_memory
@@ -123,7 +125,7 @@ class DecayPipeline:
             return
         self.state = "waiting"
         message = f"recording closed after an error: {type(exc).__name__}: {exc}"
-        decay.settle_reason, decay.error = "error", message
+        decay.ended, decay.error = DecayEnd.ERROR, message
         decay.warnings.append(message)
         for sink in self.sinks:  # a sink failing again here is not news: the first error is passed on
             with contextlib.suppress(Exception):
@@ -183,7 +185,7 @@ class DecayPipeline:
         elif event.kind == "released" and decay is None:
             self._start_decay(axis, event)
         elif event.kind == "settled" and decay is not None:
-            return self._finish_decay(event.reason or "amplitude")
+            return self._finish_decay(event.ended or DecayEnd.SETTLED)
         return None
 
     # ---- one decay ----------------------------------------
@@ -257,12 +259,12 @@ class DecayPipeline:
             chosen[0] = Block(head.samples[head.carried :], head.raw, head.host_t)
         return chosen
 
-    def _finish_decay(self, reason: str) -> DecayOutcome:
+    def _finish_decay(self, ended: DecayEnd) -> DecayOutcome:
         """The final fit, then the file closed, then the view told: every sink hears the settle even when
         one raises (the failure is passed on after, the decay already closed)."""
         decay, self.decay = self.decay, None
         assert decay is not None
-        decay.settle_reason = reason
+        decay.ended = ended
         self.state = "settled"
         try:
             self._tell(lambda sink: sink.on_settle(decay))
@@ -273,8 +275,9 @@ class DecayPipeline:
         release_free_memory()  # the decay's buffers, freed now, back to the system (acquire.memory)
         return outcome
 
-    def abort(self, kind: str, message: str) -> DecayOutcome | None:
-        """The stream ended mid-decay (unplug, Ctrl-C): close the file with what arrived."""
+    def abort(self, ended: DecayEnd, message: str) -> DecayOutcome | None:
+        """The decay under way is ended from outside (``ended``: stopped, the stream's end, the device
+        gone): ``message`` noted, the file closed with what arrived. Detection starts again."""
         decay = self.decay
         for detector in self._detectors.values():
             detector.reset()
@@ -283,15 +286,16 @@ class DecayPipeline:
         if decay is None:
             return None
         try:
-            decay.note(kind, message)
+            decay.note("unplug" if ended is DecayEnd.DEVICE_LOST else "note", message)
         finally:
-            outcome = self._finish_decay(kind)  # closes the file even when the note could not be written
+            outcome = self._finish_decay(ended)  # closes the file even when the note could not be written
         self.state = "waiting"
         return outcome
 
     def close(self) -> None:
-        """Close the decay under way, then every sink (each one, whatever another raised)."""
+        """Close the decay under way, then every sink (each one, whatever another raised). A decay still
+        under way here was not ended by its orchestrator (an exception on its way out): ``ERROR``."""
         try:
-            self.abort("note", "session closed")
+            self.abort(DecayEnd.ERROR, "closed before the decay ended")
         finally:
             self._tell(lambda sink: sink.close())

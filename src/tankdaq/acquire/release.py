@@ -31,6 +31,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..ident.base import EstimatorMixin
+from ..records import DecayEnd
 from ..samples import AXIS_FIELDS
 from .release_instant import find_release_instant
 
@@ -51,7 +52,7 @@ class ReleaseEvent:
     instant on the device clock (after the last held sample, at or before the first free one),
     ``release_se_s`` its standard error (s), ``angle_rad``/``rate_rad_s`` the initial state.
     ``put_back``: a hold ended without a release. ``settled``: the amplitude stayed below the
-    threshold for a window (``reason`` "amplitude") or the decay timed out ("timeout");
+    threshold for a window (``ended`` ``DecayEnd.SETTLED``) or the decay timed out (``TIMEOUT``);
     ``settle_s`` is the time from release.
     Every event also carries ``confirmed_index``: the sample at which the detector decided.
     """
@@ -66,7 +67,7 @@ class ReleaseEvent:
     release_t: float = math.nan
     release_se_s: float = math.nan
     settle_s: float = math.nan
-    reason: str = ""
+    ended: DecayEnd | None = None
 
 
 def _first_sustained(mask: np.ndarray, length: int, start: int) -> int | None:
@@ -258,7 +259,7 @@ class ReleaseDetector(EstimatorMixin):
         release_t: float = math.nan,
         release_se_s: float = math.nan,
         settle_s: float = math.nan,
-        reason: str = "",
+        ended: DecayEnd | None = None,
     ) -> ReleaseEvent:
         event = ReleaseEvent(
             kind,
@@ -271,7 +272,7 @@ class ReleaseDetector(EstimatorMixin):
             release_t=release_t,
             release_se_s=release_se_s,
             settle_s=settle_s,
-            reason=reason,
+            ended=ended,
         )
         self.events_.append(event)
         return event
@@ -392,18 +393,18 @@ class ReleaseDetector(EstimatorMixin):
         if quiet is None and timeout is None:
             return self._wait()
         if quiet is not None and (timeout is None or quiet <= timeout):
-            settle, confirmed, reason = quiet - n + 1, quiet, "amplitude"
+            settle, confirmed, ended = quiet - n + 1, quiet, DecayEnd.SETTLED
             self.baseline_rad_ = float(np.mean(self._x[settle : quiet + 1]))
         else:
             assert timeout is not None
-            settle, confirmed, reason = timeout, timeout, "timeout"
+            settle, confirmed, ended = timeout, timeout, DecayEnd.TIMEOUT
         self._emit(
             "settled",
             settle,
             confirmed,
             release_t=self._release.release_t,
             settle_s=float(self._t[settle] - self._release.release_t),
-            reason=reason,
+            ended=ended,
         )
         self._release = None
         return self._go(STILL, confirmed)

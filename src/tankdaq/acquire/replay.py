@@ -18,6 +18,7 @@ from ..device.decoding import SampleDecoder
 from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
 from ..ident.online import prepare_identifier
+from ..records import DecayEnd
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView
 from ..viz.viewer import default_viewer_mode, describe_mode
@@ -106,7 +107,10 @@ def replay_recording(
             pipeline.feed(Block(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
             if on_progress is not None:
                 on_progress(i + 1, len(chunks))
-        pipeline.abort("note", "end of recording")
+        pipeline.abort(DecayEnd.STREAM_ENDED, "end of recording")
+    except KeyboardInterrupt:
+        pipeline.abort(DecayEnd.STOPPED, "replay stopped by the operator")
+        raise
     finally:
         pipeline.close()  # the view (and a decay cut by an error)
     return list(pipeline.outcomes)

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import RecordingError, TankdaqError
 from ..ident.online import REFIT_BUDGET_S, BackgroundFit, OnlineIdentifier, OnlineResult
+from ..records import DecayEnd
 from ..samples import AXIS_FIELDS, StatusTally
 from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter
@@ -55,8 +56,8 @@ class Decay:
     """The decay under way, as the pipeline and its sinks share it.
 
     The pipeline fills in the release; sinks fill in what they made (``path`` by the file, ``rrd_path``
-    by the view, ``fit``/``final_fit`` through ``publish``). ``settle_reason`` is set at the end
-    (``error``: closed after an exception, with ``error`` saying which).
+    by the view, ``fit``/``final_fit`` through ``publish``). ``ended`` is set at the end (``ERROR``:
+    closed after an exception, with ``error`` saying which).
     """
 
     run: int
@@ -74,7 +75,7 @@ class Decay:
     fit: OnlineResult | None = None  # the latest fit published
     final_fit: OnlineResult | None = None
     final_fit_s: float = math.nan
-    settle_reason: str = ""
+    ended: DecayEnd | None = None  # None while it runs
     error: str = ""
     model: str = ""  # the live model as asked ("auto": chosen by the data); ``terms`` is what it may use
     status: StatusTally = field(init=False)  # the status flags counted as samples arrive (the session's)
@@ -111,11 +112,11 @@ class Decay:
         }
 
     def settle_metadata(self) -> dict[str, object]:
-        """What the recording's metadata gains at close: why it ended and the final fit."""
-        if self.settle_reason == "error":
-            return {"settle_reason": "error", "error": self.error, **self.status.metadata()}
+        """What the recording's metadata gains at close: how it ended (``ended``) and the final fit."""
+        if self.ended is DecayEnd.ERROR:
+            return {"ended": self.ended.value, "error": self.error, **self.status.metadata()}
         extra: dict[str, object] = {
-            "settle_reason": self.settle_reason,
+            "ended": self.ended_value,
             "final_fit_s": self.final_fit_s,
             **self.status.metadata(),
         }
@@ -129,7 +130,7 @@ class Decay:
     def outcome(self) -> DecayOutcome:
         """What the decay leaves once it is over: its fit's numbers without the predicted curve (a run
         keeps every outcome: with a curve each, a day of decays at 400 Hz kept about 9 MB an hour)."""
-        fit = self.final_fit if self.settle_reason != "error" else self.fit
+        fit = self.final_fit if self.ended is not DecayEnd.ERROR else self.fit
         return DecayOutcome(
             run=self.run,
             axis=self.axis,
@@ -137,11 +138,18 @@ class Decay:
             rrd_path=self.rrd_path,
             release_t=self.release_t,
             angle_initial_deg=self.angle_deg,
-            settle_reason=self.settle_reason,
+            ended=self.ended_value,
             fit=None if fit is None else fit.without_curve(),
             warnings=list(self.warnings),
             status=self.status,
+            last_t=self.last_t,
         )
+
+    @property
+    def ended_value(self) -> DecayEnd:
+        """How it ended, once it has (the pipeline sets ``ended`` before any sink hears the settle)."""
+        assert self.ended is not None, "the decay has not ended"
+        return self.ended
 
 
 class Sink:
@@ -162,7 +170,7 @@ class Sink:
         """A refit (or the final fit) of the decay."""
 
     def on_settle(self, decay: Decay) -> None:
-        """The decay ended (``decay.settle_reason``; ``error`` after an exception: close, fit nothing)."""
+        """The decay ended (``decay.ended``; ``ERROR`` after an exception: close, fit nothing)."""
 
     def on_event(self, event: Event) -> None:
         """What a person would be told (``acquire.events``): a release, a settle, a warning, the device
@@ -241,7 +249,7 @@ class IdentifierSink(Sink):
         live, self._live = self._live, None
         if live is None:
             return
-        if decay.settle_reason == "error":  # no final fit: the error may be in it
+        if decay.ended is DecayEnd.ERROR:  # no final fit: the error may be in it
             live.close()
             return
         started = time.perf_counter()
@@ -354,11 +362,12 @@ class RecordingSink(Sink):
         )
 
     def on_settle(self, decay: Decay) -> None:
-        reason = decay.settle_reason
+        ended = decay.ended_value
+        said = ended.said(decay.last_t - decay.release_t)
 
         def close(writer: RecordingWriter) -> None:
             try:
-                writer.write_event("settled", f"decay ended ({reason})", None, {"reason": reason})
+                writer.write_event("settled", f"decay {said}", decay.last_t, {"ended": ended.value})
                 writer.update_metadata({**decay.settle_metadata(), **self.closing_metadata()})
             finally:
                 writer.close()
@@ -380,6 +389,7 @@ class RecordingSink(Sink):
     def close(self) -> None:
         writer, self.writer = self.writer, None
         if writer is not None:  # never settled (the pipeline did not close its decay): keep what arrived
+            writer.update_metadata({"ended": DecayEnd.ERROR.value})
             writer.close()
 
 
@@ -450,7 +460,7 @@ class ViewSink(Sink):
 
     def on_settle(self, decay: Decay) -> None:
         try:
-            self.view.log_event("settled", f"decay ended ({decay.settle_reason})", decay.last_t)
+            self.view.log_event("settled", f"decay {decay.ended_value.said()}", decay.last_t)
         finally:
             self.view.end_run()  # the file is closed first (the sink before); the view ends on its thread
 

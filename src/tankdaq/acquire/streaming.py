@@ -22,7 +22,8 @@ from concurrent.futures import Future
 from typing import TypeVar
 
 from ..device.driver import MTiDriver
-from .daemon import RecordDaemon, RecordSettings
+from ..records import DecayEnd
+from .daemon import STOP_NOTES, RecordDaemon, RecordSettings
 from .events import Stopped, Stopping
 from .pipeline import DecayPipeline
 from .read_thread import DeviceReader, Read
@@ -47,11 +48,15 @@ class StreamingDaemon(RecordDaemon):
         yet), between steps it is kept for the next step, which then ends with ``Stopped``."""
         pipeline: DecayPipeline | None = None
         signals = self._signals
+        ended = DecayEnd.STOPPED  # a decay under way at the session's end was stopped, or cut by an error
         with signals.installed():
             try:
                 self._driver, pipeline = self._start()
                 signals.deferred = True
                 yield self
+            except Exception:
+                ended = DecayEnd.ERROR
+                raise
             finally:
                 signals.deferred = False
                 signals.closing = True  # a Ctrl-C now never cuts the file being closed
@@ -60,7 +65,7 @@ class StreamingDaemon(RecordDaemon):
                         self._drain(pipeline)
                 finally:
                     try:
-                        self._shut_down(pipeline)
+                        self._shut_down(pipeline, ended)
                     finally:
                         signals.closing = False
                         self._pipeline = None
@@ -113,7 +118,7 @@ class StreamingDaemon(RecordDaemon):
             signals.closing = True
             try:
                 self.emit(Stopping(signals.stopped_by))
-                pipeline.abort("note", "recording stopped by the operator")
+                pipeline.abort(DecayEnd.STOPPED, STOP_NOTES[DecayEnd.STOPPED])
             finally:
                 signals.closing = False
         stopped = Stopped(signals.stopped_by, self.outcomes.count)

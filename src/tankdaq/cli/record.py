@@ -209,8 +209,9 @@ def record_command(
 ) -> None:
     """Record decays: detect each release, write one MCAP per decay, fit and show it live.
 
-    Each run's line says how it ended: amplitude (a whole decay, the swing below the settle threshold),
-    timeout, note (stopped by the operator: the file is complete), unplug or error; a note line is worth
+    Each run's line says how it ended: settled (a whole decay, the swing below the settle threshold) or
+    timed out, else partial (stopped by the operator, the device went away, closed after an error: the
+    file is complete with what arrived, says so, and campaigns leave it out); a note line is worth
     knowing, a warning line means check that decay.
     """
     from ..acquire.daemon import RecordSettings

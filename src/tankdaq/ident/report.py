@@ -16,7 +16,7 @@ import numpy as np
 
 from ..physics.models import model_name
 from ..physics.terms import TERM_TABLE, equation_text
-from ..records import DecayRun
+from ..records import DecayEnd, DecayRun
 from .compiled import simulate, substeps, term_codes
 from .derived import (
     amplitude_table,
@@ -59,6 +59,18 @@ def covariance_of(estimator: Any, std: Mapping[str, float] | None = None) -> np.
         return cov
     std = estimator.std_ if std is None else std
     return np.diag([std.get(k, 0.0) ** 2 for k in estimator.terms_])
+
+
+def partial_decays(runs: Sequence[DecayRun]) -> list[str]:
+    """One warning per decay its recording holds only part of (stopped, the device gone, cut: its
+    ``meta["ended"]`` is not whole): a fit of it stands for less than the decay."""
+    lines = []
+    for run in runs:
+        ended = DecayEnd.of_settle_reason(run.meta.get("ended"))
+        if ended is not None and not ended.whole:
+            said = ended.said(run.meta.get("ended_after_s"))
+            lines.append(f"{run.name}: {said}; the fit covers only what was recorded")
+    return lines
 
 
 def summarize(
@@ -134,7 +146,9 @@ def summarize(
             "decrement_deg": np.degrees(extinction.decrement).tolist(),
         },
         "plausibility": [finding.as_dict() for finding in findings],
-        "warnings": [finding.message for finding in findings] + list(getattr(estimator, "warnings_", [])),
+        "warnings": partial_decays(runs)
+        + [f.message for f in findings]
+        + list(getattr(estimator, "warnings_", [])),
         "elapsed_s": float(getattr(estimator, "elapsed_s_", math.nan)),
     }
     if hull is not None:

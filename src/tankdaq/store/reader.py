@@ -33,7 +33,7 @@ from mcap.records import Attachment, Channel, Chunk, Message, Metadata
 
 from ..config import parse_draft
 from ..errors import BadRecordingInput, InputError
-from ..records import DecayRun
+from ..records import DecayEnd, DecayRun
 from ..samples import AXIS_FIELDS, StatusTally
 from . import schemas
 from .record_scan import MCAP_DAMAGE, RecordScan
@@ -72,6 +72,18 @@ class Recording:
     def truncated(self) -> bool:
         """The file was never closed (no footer): what followed its last complete chunk is missing."""
         return not self.complete
+
+    @property
+    def ended(self) -> DecayEnd:
+        """How the recorded decay ended: ``CUT`` without a footer, else the final metadata's ``ended`` (a
+        file before it: its ``settle_reason``; a word tankdaq does not know: ``STOPPED``, partial). A
+        closed file that says neither was written whole by a program (a simulation): ``SETTLED``."""
+        if not self.complete:
+            return DecayEnd.CUT
+        said = self.metadata.get("ended", self.metadata.get("settle_reason"))
+        if said is None:
+            return DecayEnd.SETTLED
+        return DecayEnd.of_settle_reason(said) or DecayEnd.STOPPED
 
     @property
     def raw_chunks(self) -> list[tuple[int, bytes]]:
@@ -412,7 +424,14 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
                     "acc_y_m_s2": part_kept["ay"],
                     "acc_z_m_s2": part_kept["az"],
                 },
-                meta=_run_meta(recording, axis, start, dropped=int(part.size - part_kept.size), tally=tally),
+                meta=_run_meta(
+                    recording,
+                    axis,
+                    start,
+                    dropped=int(part.size - part_kept.size),
+                    tally=tally,
+                    last_t_s=float(part_kept["t"][-1]),
+                ),
                 excluded=excluded if excluded.any() else None,
             )
         )
@@ -420,7 +439,7 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
 
 
 def _run_meta(
-    recording: Recording, axis: str, release_t_s: float, dropped: int, tally: StatusTally
+    recording: Recording, axis: str, release_t_s: float, dropped: int, tally: StatusTally, last_t_s: float
 ) -> dict[str, object]:
     meta = recording.metadata
     out: dict[str, object] = {
@@ -435,6 +454,9 @@ def _run_meta(
     }
     if tally.flagged_after:
         out["excluded_why"] = tally.describe_after()
+    if release_t_s == max(_release_times(recording.events)):  # the file's end is its last decay's
+        out["ended"] = recording.ended
+        out["ended_after_s"] = last_t_s - release_t_s
     if "draft" in meta:
         out["draft"] = parse_draft(meta["draft"])
     for key in ("angle_nominal_deg", "angle_initial_deg", "sample_rate_hz"):

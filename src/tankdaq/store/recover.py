@@ -4,6 +4,8 @@ Like ``mcap recover``: read every record that survived, front to back, and
 write it again through a fresh Writer, which adds the chunk indexes, summary
 and footer the killed writer never wrote. Channel and schema ids are remapped;
 messages keep their times, order and bytes; metadata and attachments are kept.
+A recording's copy ends with its run metadata once more, saying how the decay ended:
+``ended = recovered`` (partial: the decay's end is missing) over what the cut file said.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ from mcap.writer import CompressionType, Writer
 
 from .. import __version__
 from ..errors import BadRecordingInput, RecordingError
+from ..records import DecayEnd
+from . import schemas
 from .naming import create_exclusive
 from .record_scan import RecordScan
 
@@ -77,6 +81,7 @@ class _Rewriter:
         self.channel_ids: dict[int, int] = {}
         self.messages = self.metadata = self.attachments = 0
         self.pending: list[Channel] = []
+        self.run_metadata: dict[str, str] | None = None  # the last ``tankdaq.run`` record copied
 
     def add(self, record: object) -> None:
         if isinstance(record, Schema) and record.id not in self.schema_ids:
@@ -102,11 +107,20 @@ class _Rewriter:
         elif isinstance(record, Metadata):
             self.writer.add_metadata(record.name, record.metadata)
             self.metadata += 1
+            if record.name == schemas.RUN_METADATA_NAME:
+                self.run_metadata = dict(record.metadata)
         elif isinstance(record, Attachment):
             self.writer.add_attachment(
                 record.create_time, record.log_time, record.name, record.media_type, record.data
             )
             self.attachments += 1
+
+    def mark_recovered(self) -> None:
+        """A cut recording's copy: its run metadata again, saying how it ended (``recovered``)."""
+        if self.run_metadata is not None:
+            self.writer.add_metadata(
+                schemas.RUN_METADATA_NAME, {**self.run_metadata, "ended": DecayEnd.RECOVERED.value}
+            )
 
 
 def recover(
@@ -134,6 +148,8 @@ def recover(
                 if progress is not None and scan.bytes_read != reported:  # once per chunk, not per message
                     reported = scan.bytes_read
                     progress(reported, scan.size)
+            if not scan.complete:
+                rewriter.mark_recovered()
             writer.finish()
             out.flush()
             os.fsync(out.fileno())

@@ -13,17 +13,10 @@ from typing import Any
 
 import numpy as np
 
+from ...records import DecayEnd
 from ..events import ModelMoved
 from .plan import Acceptance, Condition
 
-#: why a decay ended early, by its settle reason
-CUT_SHORT = {
-    "note": "stopped by the operator",
-    "unplug": "the device went away",
-    "error": "a recording error",
-}
-#: settle reasons of a decay that ended by itself (anything else was cut short)
-COMPLETE_SETTLES = ("amplitude", "timeout")
 #: the still water moves less than this (standard deviation, deg) when the model is at rest
 STILL_SD_DEG = 0.3
 
@@ -34,7 +27,7 @@ class Measured:
 
     angle_deg: float
     still_water_deg: float
-    settle_reason: str
+    ended: DecayEnd
     half_cycles: int = 0
     r2_angle: float = math.nan
     coefficients: dict[str, float] = field(default_factory=dict)
@@ -48,6 +41,22 @@ class Measured:
     flagged_samples: int = 0  # after the release, flagged by the sensor (clipping, orientation not valid)
     flagged_why: str = ""  # the one line the recording's reader gives them
 
+    @classmethod
+    def from_log(cls, values: dict[str, Any]) -> Measured:
+        """A decay's measurements as the session log keeps them (``usable_measured`` says they are)."""
+        values = _logged(values)
+        values["ended"] = DecayEnd.of_settle_reason(values["ended"]) or DecayEnd.STOPPED
+        return cls(**values)
+
+
+def _logged(values: dict[str, Any]) -> dict[str, Any]:
+    """A logged ``measured`` under today's keys: a log written before ``ended`` names the decay's end by its
+    ``settle_reason`` (``amplitude``, ``note``...: ``DecayEnd.of_settle_reason`` reads both)."""
+    values = dict(values)
+    if "ended" not in values and "settle_reason" in values:
+        values["ended"] = values.pop("settle_reason")
+    return values
+
 
 def check_decay(
     measured: Measured, condition: Condition, acceptance: Acceptance, earlier: list[Measured]
@@ -55,9 +64,8 @@ def check_decay(
     """Why this decay should be repeated (empty: it passes). ``earlier``: the condition's accepted repeats."""
     a = acceptance
     reasons = []
-    if measured.settle_reason not in COMPLETE_SETTLES:
-        why = CUT_SHORT.get(measured.settle_reason, measured.settle_reason)
-        reasons.append(f"cut short ({why})")
+    if not measured.ended.whole:
+        reasons.append(f"cut short ({measured.ended.words})")
     off = measured.angle_deg - condition.angle_deg
     if abs(off) > a.angle_tolerance_deg:
         reasons.append(
@@ -125,7 +133,11 @@ def is_level(mean_deg: float, sd_deg: float, acceptance: Acceptance) -> bool:
 
 def usable_measured(measured: dict[str, Any]) -> bool:
     """Whether a logged ``measured`` makes a ``Measured`` (the checks of later repeats read it)."""
+    measured = _logged(measured)
+    if DecayEnd.of_settle_reason(measured.get("ended")) is None:
+        return False
     kinds = {
+        "DecayEnd": (str,),
         "float": (int, float),
         "int": (int, float),
         "str": (str,),

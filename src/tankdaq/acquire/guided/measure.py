@@ -29,7 +29,7 @@ def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
     recording = read_recording(outcome.path)
     release = next((e for e in recording.events if e.get("kind") == "release"), {})
     still = (release.get("data") or {}).get("still_water_deg", math.nan)
-    measured = Measured(abs(outcome.angle_initial_deg), float(still), outcome.settle_reason)
+    measured = Measured(abs(outcome.angle_initial_deg), float(still), outcome.ended)
     runs = read_decay_runs(outcome.path)
     if runs:
         run = runs[0]

@@ -50,7 +50,7 @@ def show_condition(view: CampaignView, state: SessionState, condition: Condition
     status = state.status(condition)
     view.set_status(condition.draft, condition.angle_deg, status, f"{kept}/{state.repeats}")
     if status == "accepted":
-        measured = [Measured(**r.measured) for r in state.accepted(condition)]
+        measured = [Measured.from_log(r.measured) for r in state.accepted(condition)]
         terms = dict.fromkeys(k for m in measured for k in m.coefficients)  # repeats' models may differ:
         mean = {k: float(np.mean([m.coefficients.get(k, 0.0) for m in measured])) for k in terms}  # absent 0
         view.accepted(

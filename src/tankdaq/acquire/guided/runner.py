@@ -47,7 +47,7 @@ from ..events import DecayOutcome, DeviceReady, Event, ModelMoved, Notice, Settl
 from ..listeners import EventLog, EventPrinter
 from ..sinks import Sink
 from ..streaming import StreamingDaemon
-from .checks import COMPLETE_SETTLES, STILL_SD_DEG, Measured, check_decay, is_level, watch_reasons
+from .checks import STILL_SD_DEG, Measured, check_decay, is_level, watch_reasons
 from .journal import LOG_NAME, SessionLock, SessionLog
 from .measure import LEVEL_S, LevelCheck, measure_decay
 from .operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
@@ -397,7 +397,7 @@ class CampaignSession:
             return stopped  # stopped before a release: nothing recorded, nothing to log
         outcome = settled()[0]
         measured = measure_decay(outcome, condition.angle_deg)
-        earlier = [Measured(**r.measured) for r in state.accepted(condition)]
+        earlier = [Measured.from_log(r.measured) for r in state.accepted(condition)]
         reasons = check_decay(measured, condition, self.acceptance, earlier)
         reasons += watch_reasons(self.watch.standing_at(decay))  # a bump not settled from, a drifted level
         self.log.append(
@@ -410,7 +410,7 @@ class CampaignSession:
             measured=dataclasses.asdict(measured),
         )
         if stopped is not None:
-            if outcome.settle_reason not in COMPLETE_SETTLES:  # stopped mid-decay: logged, the session ends
+            if not outcome.ended.whole:  # stopped mid-decay: logged, the session ends
                 self.log.append("verdict", decay=decay, verdict="rejected", action="stopped")
             return stopped  # a whole decay is judged first on resume
         self._decay_seconds.append(time.monotonic() - started)
