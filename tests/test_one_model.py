@@ -34,7 +34,7 @@ def _close(a: float, b: float) -> bool:
     return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
 
 
-def test_demo_identify_and_campaign_report_one_model_and_the_same_coefficients(demo: tuple[Path, str]) -> None:
+def test_demo_identify_and_campaign_report_one_model_and_the_same_numbers(demo: tuple[Path, str]) -> None:
     folder, demo_out = demo
     (recording,) = sorted(folder.glob("*.mcap"))
     identified = runner.invoke(app, ["identify", str(recording), "--json"])
@@ -83,5 +83,6 @@ def test_a_named_model_is_used_only_when_asked_and_says_so(demo: tuple[Path, str
     assert group["model"] == "b1,b2,b3,c1,c2,c3"
     assert group["model_reason"].endswith("given by --model") and "seed001-eq1" in group["model_reason"]
     (recording,) = sorted(folder.glob("*.mcap"))
-    identified = json.loads(runner.invoke(app, ["identify", str(recording), "--json", "--model", "b1,c1"]).stdout)
+    named = runner.invoke(app, ["identify", str(recording), "--json", "--model", "b1,c1"])
+    identified = json.loads(named.stdout)
     assert identified["model_choice"] == {"chosen": "b1,c1", "reason": "model ittc-linear given by --model"}

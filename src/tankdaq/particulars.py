@@ -207,9 +207,8 @@ def _displacement(p: dict[str, float], displacement_kg: float | None, where: obj
         "(the formulas' volume)"
     )
     if not 1 / DISPLACEMENT_REFUSE <= ratio <= DISPLACEMENT_REFUSE:
-        near = {"in g": 1e3, "in t": 1e-3, "or a length, in mm": 1e-9}
-        slip = next((unit for unit, factor in near.items() if 0.5 < ratio / factor < 2.0), "")
-        hint = f"the displacement {slip}?" if slip else "a typo or a unit slip?"
+        slip = next((unit for unit, factor in (("g", 1e3), ("t", 1e-3)) if 0.5 < ratio / factor < 2.0), "")
+        hint = f"the displacement in {slip}?" if slip else "a typo or a unit slip?"
         raise InputError(f"{said}: {hint} fix displacement_kg or the particulars in {where}")
     if abs(ratio - 1.0) > DISPLACEMENT_WARN:
         line = (

@@ -290,29 +290,36 @@ def identify_recordings(
     """``tankdaq identify`` of the recordings (the same call, the same model for the same decays): its
     report, the fitted terms against the truth when known, and each decay's PNG."""
     from ..api.identification import identify
-    from ..ident.comparison import truth_checks
-    from .app import TerminalProgress
     from ..ident.report import predicted_angles
-    from ..physics.models import model_name
     from ..viz.plots import save_decay_fits
+    from .app import TerminalProgress
 
     result = identify(paths, model, progress=TerminalProgress())
     typer.echo(result.text())
     for fit in result.fits:
-        checks = truth_checks(fit.estimator, truth or {})
-        if checks:
-            typer.echo("  identified vs the simulator's truth (hull config):")
-        for check in checks:
-            inside = "inside" if check.inside else "OUTSIDE"
-            typer.echo(f"    {check.term}: {check.value:.5g} vs {check.truth:.5g} ({inside} the 95 % interval)")
-        left_out = [term for term, value in (truth or {}).items() if value and term not in fit.estimator.terms_]
-        if left_out:
-            typer.echo(
-                f"  the truth also has {', '.join(left_out)}, which model {model_name(fit.estimator.terms_)} "
-                f"leaves out: its terms absorb them (--model {DEMO_TRUTH_MODEL} fits the truth's own terms)"
-            )
+        for line in _truth_lines(fit.estimator, truth or {}):
+            typer.echo(line)
         for png in save_decay_fits(fit.runs, predicted_angles(fit.estimator, fit.runs), report_dir):
             typer.echo(f"plot: {png}")
+
+
+def _truth_lines(estimator: Any, truth: dict[str, float]) -> list[str]:
+    """Each fitted term against the simulator's truth, and the truth's terms the model leaves out."""
+    from ..ident.comparison import truth_checks
+    from ..physics.models import model_name
+
+    checks = truth_checks(estimator, truth)
+    lines = ["  identified vs the simulator's truth (hull config):"] if checks else []
+    for check in checks:
+        inside = "inside" if check.inside else "OUTSIDE"
+        lines.append(f"    {check.term}: {check.value:.5g} vs {check.truth:.5g} ({inside} the 95 % interval)")
+    left_out = [term for term, value in truth.items() if value and term not in estimator.terms_]
+    if left_out:
+        lines.append(
+            f"  the truth also has {', '.join(left_out)}, which model {model_name(estimator.terms_)} leaves "
+            f"out: its terms absorb them (--model {DEMO_TRUTH_MODEL} fits the truth's own terms)"
+        )
+    return lines
 
 
 #: The demo's simulated hull rolls by seed 001 eq. (8), whose terms (b1 b2 b3 c1 c2 c3) ``--model
@@ -340,7 +347,8 @@ def demo_command(
     from ..config import load_hull
 
     err_console.print(
-        f"recording {runs} simulated decays (hull {DEMO_HULL}, T, roll, 8 deg) into {out}; live model {model}",
+        f"recording {runs} simulated decays (hull {DEMO_HULL}, T, roll, 8 deg) into {out}; "
+        f"live model {model}",
         markup=False,
     )
     settings = RecordSettings(

@@ -22,7 +22,8 @@ def write_session_report(files: list[Path], folder: Path, model: str, hull: str)
 
     found = campaign(files, model, hulls=[hull], report=folder, keep_fits=True)
     written = list(found.report_files)
-    spread = repeat_spreads({r.key: (r.runs, tuple(r.fit.terms_)) for r in found.results if r.fit is not None})
+    fitted = {r.key: (r.runs, tuple(r.fit.terms_)) for r in found.results if r.fit is not None}
+    spread = repeat_spreads(fitted)
     if spread:
         written.append(_write_spread(spread, folder))
     return written
