@@ -38,10 +38,10 @@ def repeat_spreads(groups: dict[Any, tuple[list[Any], tuple[str, ...]]]) -> list
     from ...ident.output_error import OutputError
 
     rows = []
-    for key, (runs, terms) in groups.items():
+    for key, (runs, model) in groups.items():
         if len(runs) < 2:
             continue
-        summary = repeat_spread(partial(OutputError, terms), runs)
+        summary = repeat_spread(partial(OutputError, model), runs)
         terms = list(summary.std)
         row: dict[str, Any] = {"hull": key.hull, "axis": key.axis, "draft": format_draft(key.draft),
                                "angle_deg": key.angle_deg, "repeats": len(runs)}  # fmt: skip
