@@ -71,6 +71,8 @@ def test_the_session_report_fits_the_model_identify_chose(demo: tuple[Path, str]
     with next(path for path in written if path.name == "campaign.csv").open() as fh:
         (row,) = list(csv.DictReader(fh))
     assert row["model"] == fit["model_choice"]["chosen"]
+    report = (tmp_path / "report" / "campaign.md").read_text()
+    assert f"- swath roll T 8 deg: {fit['model_choice']['reason']}" in report  # which model, and why
     for term, entry in fit["coefficients"].items():
         assert _close(float(row[term]), entry["value"]), term
 

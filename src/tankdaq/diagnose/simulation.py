@@ -131,6 +131,7 @@ def from_ikeda(request: SimulationRequest) -> Simulation:
     validity range is a note, and the prediction explains a measured damping in its components.
     """
     from ..config import ikeda_prediction
+    from ..physics.ikeda import LIMITS
 
     hull = request.require_hull("ikeda")
     if request.axis != "roll":
@@ -140,7 +141,10 @@ def from_ikeda(request: SimulationRequest) -> Simulation:
     model = prediction.equivalent_model(request.amplitudes_rad())
     notes = (
         f"simplified Ikeda (Kawahara, Maekawa and Ikeda 2009) at the measured period {period_s:.4g} s",
-        *(f"outside the method's range: {finding.line}" for finding in prediction.findings),
+        *(
+            f"outside the method's range: {finding.line}" if finding.name in LIMITS else finding.line
+            for finding in prediction.findings
+        ),
     )
     name = f"ikeda {hull.name} at {format_draft(request.draft)}"
     return Simulation(name, PREDICTION, model, notes=notes, component_changes=prediction.required_change)

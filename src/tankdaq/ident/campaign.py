@@ -457,6 +457,9 @@ def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
                 f"{row['r2_angle']:.4f}",
             ]
         lines.append("| " + " | ".join(cells) + " |")
+    chosen = [f"- {r.key.label}: {r.row['model_reason']}" for r in rows if r.row.get("model_reason")]
+    if chosen:  # which model each group was fitted with, and why (ident.model_choice.model_for)
+        lines += ["", "Models (docs/models.md):", "", *chosen]
     implausible = [f"- {r.key.label}: {line}" for r in rows for line in r.warnings]
     if implausible:
         lines += ["", "Warnings (physically implausible fits, docs/models.md):", "", *implausible]
