@@ -327,6 +327,7 @@ def sim_of_swath(
         (lambda d: d / "missing.csv", (), "no such file"),
         (lambda d: "ikeda", (), "--simulation ikeda needs --hull"),
         (lambda d: "hull", (), "needs --hull"),
+        (lambda d: growing_sim(d), (), "simulation sim.csv grows: its swing rises from"),
     ],
 )
 def test_bad_simulations_are_one_line_and_exit_2(
@@ -339,6 +340,36 @@ def test_bad_simulations_are_one_line_and_exit_2(
     errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
     assert len(errors) == 1 and message in errors[0], result.stderr
     assert "Traceback" not in result.output
+
+
+def growing_sim(folder: Path) -> Path:
+    """An unstable simulation (a negative linear damping): its swing grows from 12 deg (issue 37: it was
+    read as "5 decays found" and compared)."""
+    truth = load_hull("swath").simulation_model("roll").coefficients(1.0)
+    t = np.arange(0.0, 8.0, 0.005)
+    angle = simulate_decay({**truth, "b1": -0.3, "b3": 0.0}, t, math.radians(12.0))[0]
+    return write_sim_csv(folder / "sim.csv", t, angle)
+
+
+@pytest.mark.parametrize("source", ["ikeda", "hull"])
+def test_decays_of_another_hull_are_refused_naming_both(tmp_path: Path, swath_decays, source: str) -> None:
+    """SWATH decays (named so: hull, draft, axis, angle) against kvlcc2's prediction or a hull file of
+    another name: one line naming both hulls, no comparison and no full-scale correction (issue 37: a
+    correction of +8.5e12 N m s^3 for the wrong ship)."""
+    named = []
+    for path in swath_decays:
+        named.append(path.rename(path.with_name(f"swath_T_roll_{path.name.split('_')[1]}")))
+    other = (
+        "kvlcc2" if source == "ikeda" else str(write_hull(tmp_path / "other.toml", {"b1": 0.3, "c1": 14.0}))
+    )
+    result = invoke(*named, "--simulation", source, "--hull", other)
+    assert result.exit_code == 2, result.output
+    name = "kvlcc2" if source == "ikeda" else "swath-altered"
+    assert result.stderr.strip() == (
+        f"error: the decays were recorded on hull swath, not {name} (--hull): a simulation of {name} says "
+        "nothing of them; give --hull swath"
+    )
+    assert "correction" not in result.stdout
 
 
 def test_a_hull_without_simulation_coefficients_is_one_line(tmp_path: Path, swath_decays) -> None:

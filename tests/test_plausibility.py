@@ -201,7 +201,7 @@ def test_a_forced_implausible_model_carries_its_warning(swath: list[Path]) -> No
     assert out["coefficients"]["b1"]["value"] < 0
     assert [f["check"] for f in out["plausibility"]] == ["damping"]
     assert out["warnings"][0].startswith("implausible damping: B_eq")
-    assert out["model_choice"]["reason"] == "given by --model"
+    assert out["model_choice"]["reason"] == "model ittc-quadratic-restoring given by --model"
     text = runner.invoke(app, ["identify", str(swath[0]), "--model", "b1,b2,c1,c3"])
     assert "warning: implausible damping" in text.stdout
 

@@ -81,7 +81,8 @@ def test_period_sets_the_frequency_and_the_inertia(tmp_path: Path) -> None:
 
 
 def test_out_of_range_inputs_warn_in_text_and_json(tmp_path: Path) -> None:
-    path = hull_file(tmp_path, PARTICULARS.replace("block_coefficient = 0.65", "block_coefficient = 0.9"))
+    fuller = PARTICULARS.replace("block_coefficient = 0.65", "block_coefficient = 0.9")
+    path = hull_file(tmp_path, fuller.replace("lpp_m = 2.0", "lpp_m = 1.4444444"))  # the same displacement
     text = predict("--hull", path)
     assert text.exit_code == 0 and "warning: block coefficient CB = 0.9 is above" in text.stdout
     out = json.loads(predict("--hull", path, "--json").stdout)
@@ -108,7 +109,10 @@ def test_full_scale_scales_period_and_b44_by_froude(tmp_path: Path) -> None:
         (["--hull", "HULL", "--draft", "1.1T"], 'add [particulars.drafts."1.1T"]'),
         (["--hull", "HULL", "--period", "-2"], "--period -2 must be a positive"),
         (["--hull", "HULL", "--speed", "nan"], "--speed nan must be zero or a positive"),
-        (["--hull", "HULL", "--angle", "60"], "--angle 60 is not a release angle"),
+        (["--hull", "HULL", "--angle", "60"], "--angle 60: give a roll amplitude of 0.1 to 45 deg"),
+        (["--hull", "HULL", "--angle", "1e-300"], "--angle 1e-300: give a roll amplitude of 0.1 to 45 deg"),
+        (["--hull", "HULL", "--period", "1e-300"], "--period 1e-300: give a roll period of 0.1 to 100 s"),
+        (["--hull", "HULL", "--speed", "1e300"], "speed 1e+300 m/s: give a carriage speed of 0 to 20 m/s"),
         (["--hull", "HULL", "--full-scale"], "--full-scale needs scale_factor under [particulars]"),
         (["--hull", "NOGYRADIUS"], "needs radius_of_gyration_m under [axes.roll] and added_inertia_fraction"),
     ],
@@ -121,6 +125,67 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], message: 
     result = predict(*(places.get(a, a) for a in args))
     assert result.exit_code == 2, result.output
     assert message in result.output and len(result.output.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize(
+    "typed, message",
+    [
+        (
+            "lpp_m = 2000.0",
+            "lpp_m / beam_m (2000 / 0.3333) = 6001 is outside 1..30 (Lpp/B of a hull): lpp_m in mm?",
+        ),
+        (
+            "draft_m = 83.33",
+            "beam_m / draft_m (0.3333 / 83.33) = 0.004 is outside 0.5..30 (B/d of a hull): draft_m in mm?",
+        ),
+        (
+            "beam_m = 1e14",
+            "lpp_m / beam_m (2 / 1e+14) = 2e-14 is outside 1..30 (Lpp/B of a hull): a typo or a unit",
+        ),
+        ("og_m = -99.9", "KG / draft_m (from og_m 99.9833) = 1200 is outside 0.05..10"),
+        (
+            "water_density_kg_m3 = 1.0",
+            "water_density_kg_m3 = 1 is outside 990..1030 (fresh to salt water, kg/m^3): t/m^3",
+        ),
+        (
+            "kinematic_viscosity_m2_s = 1.14",
+            "kinematic_viscosity_m2_s = 1.14 is outside 8e-07..1.8e-06 (water at ",
+        ),
+        (
+            "added_inertia_fraction = 20.0",
+            "added_inertia_fraction = 20 is outside 0..2 (added over dry roll inertia",
+        ),
+        ("gm_m = 20.0", "gm_m / beam_m (20 / 0.3333) = 60.01 is outside 0.0001..2 (GM/B): gm_m in mm?"),
+        (
+            "displacement_kg = 361.0",
+            "displacement_kg 361 kg is 10 times rho Lpp B d CB = 36.11 kg (the formulas'",
+        ),
+    ],
+)
+def test_a_unit_slip_or_typo_in_the_hull_is_one_line_naming_the_input(
+    tmp_path: Path, typed: str, message: str
+) -> None:
+    """Issue 37: Lpp in mm gave b1 x1000, rho in t/m^3 x0.001, nu in cSt x283, a displacement typed x10
+    x0.1, all without a word; KG in mm and a beam of 1e14 a traceback. Each is now refused in one line
+    naming the input (and the likely unit), before any formula runs."""
+    path = hull_file(tmp_path)
+    key = typed.split(" = ")[0]
+    text = path.read_text()
+    known = [line for line in text.splitlines() if line.startswith(f"{key} = ")]
+    path.write_text(text.replace(known[0], typed) if known else text + typed + "\n")
+    result = predict("--hull", path, "--angle", 10)
+    assert result.exit_code == 2, result.output
+    assert message in result.output and len(result.output.strip().splitlines()) == 1, result.output
+    assert str(path) in result.output
+
+
+def test_a_displacement_apart_from_the_particulars_is_warned_with_both_numbers(tmp_path: Path) -> None:
+    path = hull_file(tmp_path)
+    path.write_text(path.read_text().replace("displacement_kg = 36.1", "displacement_kg = 40.0"))
+    out = json.loads(predict("--hull", path, "--angle", 10, "--json").stdout)
+    assert out["validity"][0].startswith("displacement_kg 40 kg is 1.11 times rho Lpp B d CB = 36.11 kg")
+    text = predict("--hull", path, "--angle", 10)
+    assert text.exit_code == 0 and "warning: displacement_kg 40 kg is 1.11 times" in text.stdout
 
 
 @pytest.mark.parametrize(

@@ -429,9 +429,14 @@ def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> 
 
 
 def test_demo_records_identifies_and_plots(tmp_path: Path) -> None:
-    """What `make demo` runs, shortened: one simulated decay, identified against the hull's truth."""
-    result = CliRunner().invoke(app, ["demo", "--out", str(tmp_path), "--runs", "1", "--sim-speed", "10"])
+    """What `make demo` runs, shortened: one simulated decay, identified against the hull's truth with the
+    truth's own terms, asked for by name (the default model is the data's: tests/test_one_model.py)."""
+    result = CliRunner().invoke(
+        app, ["demo", "--out", str(tmp_path), "--runs", "1", "--sim-speed", "10", "--model", "seed001-eq1"]
+    )
     assert result.exit_code == 0, result.output
+    (said,) = [line for line in result.stderr.splitlines() if line.endswith("given by --model")]
+    assert "seed001-eq1" in said
     assert len(list(tmp_path.glob("*.mcap"))) == 1
     assert len(list(tmp_path.glob("*.rrd"))) == 1
     assert len(list(tmp_path.glob("*.png"))) == 1

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +25,7 @@ from .config_rules import (
     text,
 )
 from .errors import ConfigError, InputError
-from .particulars import IKEDA_KEYS, MainParticulars, ikeda_inputs, parse_particulars
+from .particulars import IKEDA_KEYS, MainParticulars, ikeda_inputs, parse_particulars, plausible
 from .physics.decay import decay_refusal
 from .physics.ikeda import IkedaPrediction
 from .physics.scaling import FroudeScale
@@ -330,6 +330,10 @@ def _simulation(axis: str, spec: object, path: Path) -> SimulationModel:
     return SimulationModel(axis=axis, drafts=drafts, source=text(spec, "source", where))
 
 
+#: A roll period a prediction is made at: a model's (about 0.5-5 s) to a full-scale ship's (about 30 s).
+MIN_PERIOD_S, MAX_PERIOD_S = 0.1, 100.0
+
+
 def ikeda_prediction(
     hull: Hull, draft: float, speed_m_s: float = 0.0, period_s: float | None = None
 ) -> IkedaPrediction:
@@ -337,7 +341,8 @@ def ikeda_prediction(
 
     The roll frequency is 2 pi / ``period_s`` when given, else sqrt(m g GM / I) with the total inertia
     I = m k^2 (1 + added_inertia_fraction) from the roll gyradius; m is the displacement (scaled with
-    the draft factor, as the dimensional results do). Missing particulars are named in one line.
+    the draft factor, as the dimensional results do). Missing particulars are named in one line, and
+    every number is checked against physics and the others (``particulars.plausible``) first.
     """
     p = hull.main_particulars.at(draft)
     where = f"[particulars] of {hull.path or hull.name}"
@@ -353,6 +358,7 @@ def ikeda_prediction(
             f"hull {hull.name!r} gives its particulars at T only: add "
             f'[particulars.drafts."{format_draft(draft)}"] (draft_m, kg_m, ...) to {hull.path or hull.name}'
         )
+    checked = plausible(p, hull.main_particulars.values, hull)  # one line before any formula runs
     inputs = ikeda_inputs(p, speed_m_s)
     gm = hull.particulars("roll").gm_m
     mass = (
@@ -365,8 +371,10 @@ def ikeda_prediction(
             f"hull {hull.name!r} lacks gm_m under [axes.roll]: the damping per unit inertia needs it"
         )
     if period_s is not None:
-        if not (math.isfinite(period_s) and period_s > 0):
-            raise InputError(f"--period {period_s} must be a positive number of seconds")
+        if not (math.isfinite(period_s) and MIN_PERIOD_S <= period_s <= MAX_PERIOD_S):
+            raise InputError(
+                f"--period {period_s:g}: give a roll period of {MIN_PERIOD_S:g} to {MAX_PERIOD_S:g} s"
+            )
         omega = 2 * math.pi / period_s
         inertia = mass * inputs.g_m_s2 * gm / omega**2
     else:
@@ -378,7 +386,8 @@ def ikeda_prediction(
             )
         inertia = mass * k * k * (1.0 + p["added_inertia_fraction"])
         omega = math.sqrt(mass * inputs.g_m_s2 * gm / inertia)
-    return IkedaPrediction.at(inputs, omega, inertia)
+    prediction = IkedaPrediction.at(inputs, omega, inertia)
+    return replace(prediction, findings=[*checked, *prediction.findings])
 
 
 def full_scale_of(hull: Hull | None, asked: bool) -> FroudeScale | None:

@@ -3,7 +3,10 @@
 
 Parsed and checked where the hull file is read (``config.load_hull``): known keys only, finite
 numbers, positive where physical, KG or OG but not both. ``config.ikeda_prediction`` joins them
-with the hull's GM and gyradius.
+with the hull's GM and gyradius, and ``plausible`` checks them against each other and physics
+before any formula runs: a unit slip (a length in mm, a density in t/m^3, a viscosity in cSt) or a
+typo is refused in one line that names the input, a displacement that disagrees with rho Lpp B d CB
+is warned.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, InputError
-from .physics.ikeda import IkedaInputs
+from .physics.ikeda import Finding, IkedaInputs
 
 #: The optional ``[particulars]`` keys (docs/hulls.md): main particulars for ``tankdaq predict``'s
 #: simplified Ikeda prediction and for full-scale results. Key -> what it is.
@@ -97,8 +100,11 @@ def _particular_values(table: Any, path: Path, where: str) -> dict[str, float]:
 
 def ikeda_inputs(p: dict[str, float], speed_m_s: float) -> IkedaInputs:
     """The formulas' inputs from a hull's particulars (OG = d - KG unless og_m is given)."""
-    if not (math.isfinite(speed_m_s) and speed_m_s >= 0):
-        raise InputError(f"speed {speed_m_s} m/s must be zero or more")
+    if not (math.isfinite(speed_m_s) and 0 <= speed_m_s <= MAX_SPEED_M_S):
+        raise InputError(
+            f"speed {speed_m_s:g} m/s: give a carriage speed of 0 to {MAX_SPEED_M_S:g} m/s "
+            "(not knots or km/h)"
+        )
     return IkedaInputs(
         lpp_m=p["lpp_m"],
         beam_m=p["beam_m"],
@@ -112,3 +118,101 @@ def ikeda_inputs(p: dict[str, float], speed_m_s: float) -> IkedaInputs:
         kinematic_viscosity_m2_s=p.get("kinematic_viscosity_m2_s", 1.14e-6),
         rho_kg_m3=p.get("water_density_kg_m3", 1000.0),
     )
+
+
+#: A towing carriage's speed at most (m/s); beyond it a speed is in knots or km/h, or a typo.
+MAX_SPEED_M_S = 20.0
+
+
+@dataclass(frozen=True)
+class Sane:
+    """The range a real hull in a model basin keeps a number in, and the unit slips that leave it: a
+    value times ``factor`` back inside the range names ``unit`` as the likely slip."""
+
+    low: float
+    high: float
+    what: str
+    slips: tuple[tuple[float, str], ...] = ()
+
+
+#: Water of a model basin, fresh to salt, at about 0-30 degC (ITTC's reporting lists both).
+WATER_DENSITY = Sane(990.0, 1030.0, "fresh to salt water, kg/m^3", ((1e3, "t/m^3 or g/cm^3"),))
+KINEMATIC_VISCOSITY = Sane(
+    0.8e-6, 1.8e-6, "water at 0-30 degC, m^2/s", ((1e-6, "mm^2/s (cSt)"), (1e-4, "cm^2/s (St)"))
+)
+#: Proportions of a hull (monohull to catamaran and SWATH, whose beam is the overall one).
+LENGTH_BEAM = Sane(1.0, 30.0, "Lpp/B of a hull", ((1e-3, "lpp_m in mm"), (1e3, "beam_m in mm")))
+BEAM_DRAFT = Sane(0.5, 30.0, "B/d of a hull", ((1e-3, "beam_m in mm"), (1e3, "draft_m in mm")))
+KG_DRAFT = Sane(0.05, 10.0, "KG/d: G above the keel, within ten drafts", ((1e-3, "kg_m in mm"),))
+GM_BEAM = Sane(1e-4, 2.0, "GM/B", ((1e-3, "gm_m in mm"),))
+GYRADIUS_BEAM = Sane(
+    0.1, 2.0, "roll gyradius k/B (ITTC: 0.35-0.40 B)", ((1e-3, "radius_of_gyration_m in mm"),)
+)
+ADDED_INERTIA = Sane(0.0, 2.0, "added over dry roll inertia, typically 0.05-0.4", ((1e-2, "a percentage"),))
+#: The displacement against rho Lpp B d CB: warned beyond 10 %, refused beyond a factor 1.5.
+DISPLACEMENT_WARN, DISPLACEMENT_REFUSE = 0.10, 1.5
+
+
+def _refuse_outside(value: float, sane: Sane, said: str, where: object) -> None:
+    """One line naming the input, its range and the likely unit slip when ``value`` is outside."""
+    if sane.low <= value <= sane.high:
+        return
+    slip = next((unit for factor, unit in sane.slips if sane.low <= value * factor <= sane.high), None)
+    hint = f"{slip}?" if slip else "a typo or a unit slip?"
+    raise InputError(
+        f"{said} = {value:.4g} is outside {sane.low:g}..{sane.high:g} ({sane.what}): {hint} fix it in {where}"
+    )
+
+
+def plausible(p: dict[str, float], design: dict[str, float], hull: Any) -> list[Finding]:
+    """``p`` (a hull's particulars at a draft; ``design`` at T) against physics and each other, before
+    any formula runs: refused in one line when a number cannot be a model basin's, the displacement
+    warned when it disagrees with rho Lpp B d CB. ``hull``: its file, ``displacement_kg`` and roll GM
+    and gyradius (``config.Hull``)."""
+    where = hull.path or hull.name
+    checks: list[tuple[float, Sane, str]] = [
+        (p.get("water_density_kg_m3", 1000.0), WATER_DENSITY, "water_density_kg_m3"),
+        (p.get("kinematic_viscosity_m2_s", 1.14e-6), KINEMATIC_VISCOSITY, "kinematic_viscosity_m2_s"),
+        (p["lpp_m"] / p["beam_m"], LENGTH_BEAM, f"lpp_m / beam_m ({p['lpp_m']:g} / {p['beam_m']:g})"),
+        (p["beam_m"] / p["draft_m"], BEAM_DRAFT, f"beam_m / draft_m ({p['beam_m']:g} / {p['draft_m']:g})"),
+    ]
+    kg = p["kg_m"] if "kg_m" in p else p["draft_m"] - p["og_m"]
+    checks.append(
+        (kg / p["draft_m"], KG_DRAFT, f"KG / draft_m ({'kg_m' if 'kg_m' in p else 'from og_m'} {kg:g})")
+    )
+    if "added_inertia_fraction" in p:
+        checks.append((p["added_inertia_fraction"], ADDED_INERTIA, "added_inertia_fraction"))
+    roll = hull.particulars("roll")
+    if roll.gm_m is not None:
+        checks.append((roll.gm_m / p["beam_m"], GM_BEAM, f"gm_m / beam_m ({roll.gm_m:g} / {p['beam_m']:g})"))
+    if roll.radius_of_gyration_m is not None:
+        k = roll.radius_of_gyration_m
+        checks.append(
+            (k / p["beam_m"], GYRADIUS_BEAM, f"radius_of_gyration_m / beam_m ({k:g} / {p['beam_m']:g})")
+        )
+    for value, sane, said in checks:
+        _refuse_outside(value, sane, said, where)
+    return _displacement(design, hull.displacement_kg, where)
+
+
+def _displacement(p: dict[str, float], displacement_kg: float | None, where: object) -> list[Finding]:
+    """The hull's displacement against rho Lpp B d CB at its design draft (the formulas' volume)."""
+    needed = ("lpp_m", "beam_m", "draft_m", "block_coefficient")
+    if displacement_kg is None or any(key not in p for key in needed):
+        return []
+    formed = p.get("water_density_kg_m3", 1000.0) * math.prod(p[key] for key in needed)
+    ratio = displacement_kg / formed
+    said = (
+        f"displacement_kg {displacement_kg:.4g} kg is {ratio:.3g} times rho Lpp B d CB = {formed:.4g} kg "
+        "(the formulas' volume)"
+    )
+    if not 1 / DISPLACEMENT_REFUSE <= ratio <= DISPLACEMENT_REFUSE:
+        slip = next((unit for unit, factor in (("g", 1e3), ("t", 1e-3)) if 0.5 < ratio / factor < 2.0), "")
+        hint = f"the displacement in {slip}?" if slip else "a typo or a unit slip?"
+        raise InputError(f"{said}: {hint} fix displacement_kg or the particulars in {where}")
+    if abs(ratio - 1.0) > DISPLACEMENT_WARN:
+        line = (
+            f"{said}: more than {DISPLACEMENT_WARN:.0%} apart; check both (the inertia uses the displacement)"
+        )
+        return [Finding("displacement", ratio, 1 - DISPLACEMENT_WARN, 1 + DISPLACEMENT_WARN, line)]
+    return []

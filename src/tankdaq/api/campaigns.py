@@ -99,7 +99,7 @@ class Campaign:
 
 def campaign(
     inputs: str | Path | Sequence[str | Path],
-    model: str = "ittc-quadratic-restoring",
+    model: str = "auto",
     *,
     hulls: Sequence[str | Path] = (),
     start_s: float | None = None,
@@ -241,7 +241,11 @@ def _fit(
             progress=lambda key: advance(next(count), description=key.label),
             on_result=on_result,
         )
-        return sorted(streamed, key=lambda row: row.key)  # rows only unless keep: a few kB per group
+        rows = sorted(streamed, key=lambda row: row.key)  # rows only unless keep: a few kB per group
+    for row in rows:  # which model each group was fitted with, and why: as identify says it
+        if row.error is None:
+            kept.line(f"{row.key.label}: {row.row['model_reason']}")
+    return rows
 
 
 def folders_line(paths: list[Path]) -> str:

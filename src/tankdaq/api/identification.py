@@ -336,7 +336,7 @@ def identify(
     for condition_runs in parts:
         label = "all conditions (--joint)" if pooled else condition_of(condition_runs[0]).label
         settings = (method, bootstrap, repeats, hull_config, draft)
-        estimator, summary = _fit_condition(condition_runs, terms, settings, label, kept)
+        estimator, summary = _fit_condition(condition_runs, model, settings, label, kept)
         summary["condition"] = None if pooled else condition_of(condition_runs[0]).as_dict()
         if pooled is not None:
             summary["warnings"].insert(0, pooled)
@@ -362,29 +362,23 @@ def _document(fits: list[ConditionFit], conditions: str, cut: list[str]) -> dict
 
 def _fit_condition(
     runs: list[DecayRun],
-    terms: tuple[str, ...] | None,
+    model: str,
     settings: tuple[str, int, bool, Hull | None, float],
     label: str,
     progress: Progress,
 ) -> tuple[Any, dict[str, Any]]:
-    """One fit of ``runs`` (the model chosen by data when ``terms`` is None), and its summary."""
+    """One fit of ``runs`` with the model ``ident.model_choice.model_for`` gives, and its summary."""
     from ..ident.estimators import make_estimator, reports_progress
     from ..ident.intervals import fit_with_intervals
-    from ..ident.model_choice import choose_model
+    from ..ident.model_choice import model_for
     from ..ident.report import summarize
 
     method, bootstrap, repeats, hull_config, draft = settings
-    choice = None
-    if terms is None:
-        with progress.task(f"choosing the model ({label})"):
-            particulars = hull_config.particulars(runs[0].axis) if hull_config is not None else None
-            choice = choose_model(
-                runs, particulars=particulars, hull=getattr(hull_config, "name", "the hull")
-            )
-        terms = choice.terms
-        progress.line(f"{label}: {choice.reason}")
-    fitted_terms = terms
-    repeats_of = (lambda: make_estimator(method, fitted_terms)) if repeats else None
+    with progress.task(f"choosing the model ({label})"):
+        choice = model_for(runs, model)
+    progress.line(f"{label}: {choice.reason}")
+    terms = choice.terms
+    repeats_of = (lambda: make_estimator(method, terms)) if repeats else None
     with progress.task(f"fitting {method}", 1 + bootstrap) as advance:
         if reports_progress(method):  # the seeds' GA/PSO (about 100 s) report their generations
             with progress.task("generations") as generations:
@@ -399,6 +393,5 @@ def _fit_condition(
             )
     summary = summarize(estimator, runs, method, hull_config, draft, intervals)
     summary["condition_label"] = label
-    given = {"chosen": ",".join(terms), "reason": "given by --model"}
-    summary["model_choice"] = choice.as_dict() if choice is not None else given
+    summary["model_choice"] = choice.as_dict()
     return estimator, summary

@@ -41,7 +41,7 @@ def campaign_command(
     report: Annotated[
         Path | None, report_option("Write campaign.csv, campaign.md and PNG plots here.")
     ] = None,
-    model: Annotated[str, model_option()] = "ittc-quadratic-restoring",
+    model: Annotated[str, model_option()] = "auto",
     hulls: Annotated[
         list[str] | None,
         typer.Option("--hull", help="Hull files or names for dimensional results (repeat; else by name)."),

@@ -52,13 +52,7 @@ def identify_command(
         ),
     ] = None,
     axis: ReadAxis = None,
-    model: Annotated[
-        str,
-        model_option(
-            "auto (the best of a small family on held-out data), terms (b1,b2,c1,c3) or an alias "
-            "(docs/models.md)."
-        ),
-    ] = "auto",
+    model: Annotated[str, model_option()] = "auto",
     method: str = typer.Option("oe", "--method", help="oe (output error), ee (equation error), ..."),
     compare: bool = typer.Option(
         False, "--compare", help="Fit every seed formula and ITTC form; print the table."

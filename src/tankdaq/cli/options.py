@@ -87,6 +87,9 @@ def report_option(help: str) -> Any:
     )
 
 
-def model_option(help: str = "Terms (b1,b2,c1,c3) or an alias (docs/models.md).") -> Any:
+def model_option(
+    help: str = "auto (the data choose, as every command does for the same decays), terms (b1,b2,c1,c3) "
+    "or an alias (docs/models.md).",
+) -> Any:
     """``--model`` of the commands that fit (checked by the library before any file is read)."""
     return typer.Option("--model", help=help)

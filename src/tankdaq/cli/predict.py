@@ -14,6 +14,21 @@ from .options import JsonOutput
 
 #: Amplitudes shown when no --angle is given (deg): the band a decay test covers.
 DEFAULT_ANGLES_DEG = (5.0, 10.0, 15.0, 20.0)
+#: The smallest amplitude predicted (deg): ITTC ends a decay at 0.5 deg; far below, the friction
+#: formula's laminar C_F grows without bound.
+MIN_AMPLITUDE_DEG = 0.1
+
+
+def roll_amplitude_deg(value: float) -> float:
+    """A roll amplitude to predict at: a release angle (up to 45 deg) of at least ``MIN_AMPLITUDE_DEG``."""
+    from ..errors import InputError
+
+    if not (math.isfinite(value) and MIN_AMPLITUDE_DEG <= value <= validation.MAX_RELEASE_ANGLE_DEG):
+        raise InputError(
+            f"--angle {value:g}: give a roll amplitude of {MIN_AMPLITUDE_DEG:g} to "
+            f"{validation.MAX_RELEASE_ANGLE_DEG:g} deg"
+        )
+    return float(value)
 
 
 @app.command("predict")
@@ -29,9 +44,7 @@ def predict_command(
     ] = None,
     angles_deg: Annotated[
         list[float] | None,
-        typer.Option(
-            "--angle", callback=checked(validation.release_angle_deg), help="Roll amplitude, deg (repeat)."
-        ),
+        typer.Option("--angle", callback=checked(roll_amplitude_deg), help="Roll amplitude, deg (repeat)."),
     ] = None,
     period: Annotated[
         float | None,

@@ -8,7 +8,8 @@ coefficients or the runs, and notes for the report. A source is one small
 resolver (``RESOLVERS``: a name -> a function of the ``SimulationRequest``);
 anything else given to ``--simulation`` is a file. Files are untrusted: their
 runs are matched to the measured ones by initial angle, and a unit slip
-(degrees read as radians, milliseconds as seconds) is refused in one line.
+(degrees read as radians, milliseconds as seconds) is refused in one line, as is a series that grows
+(an unstable simulation is no decay) and a hull that is not the one the decays were recorded on.
 """
 
 from __future__ import annotations
@@ -23,7 +24,9 @@ import numpy as np
 
 from ..config import Hull, format_draft
 from ..errors import InputError
+from ..ident.conditions import UNKNOWN, condition_of
 from ..ident.inputs import input_notices, read_decays
+from ..ident.signals import half_cycle_peaks
 from ..records import DecayRun
 from ..validation import input_file
 from .prediction_table import (
@@ -41,6 +44,9 @@ MATCH_TOLERANCE = 0.25
 #: Ratios that mean a unit slip rather than another ship: degrees per radian, ms per s.
 DEG_PER_RAD = math.degrees(1.0)
 MS_PER_S = 1000.0
+#: A free decay's swing only shrinks: a series whose half-cycle peaks grow this many times in a row, each
+#: by more than ``GROWTH``, is an unstable simulation (energy fed in), not a set of decays.
+GROWING_HALF_CYCLES, GROWTH = 4, 1.02
 
 
 @dataclass(frozen=True)
@@ -81,6 +87,19 @@ class SimulationRequest:
     draft: float = 1.0
     columns: SeriesColumns = SeriesColumns()
 
+    def __post_init__(self) -> None:
+        """A hull that is not the one the decays say they were recorded on (their metadata or file name,
+        as ``identify`` reads it) is refused: its simulation, prediction or correction in SI would be
+        another ship's."""
+        if self.hull is None:
+            return
+        recorded = sorted({condition_of(run).hull for run in self.measured} - {UNKNOWN})
+        if recorded and recorded != [self.hull.name]:
+            raise InputError(
+                f"the decays were recorded on hull {', '.join(recorded)}, not {self.hull.name} (--hull): "
+                f"a simulation of {self.hull.name} says nothing of them; give --hull {recorded[0]}"
+            )
+
     def require_hull(self, source: str) -> Hull:
         if self.hull is None:
             raise InputError(f"--simulation {source} needs --hull NAME (and --draft) to take it from")
@@ -112,6 +131,7 @@ def from_ikeda(request: SimulationRequest) -> Simulation:
     validity range is a note, and the prediction explains a measured damping in its components.
     """
     from ..config import ikeda_prediction
+    from ..physics.ikeda import LIMITS
 
     hull = request.require_hull("ikeda")
     if request.axis != "roll":
@@ -121,7 +141,10 @@ def from_ikeda(request: SimulationRequest) -> Simulation:
     model = prediction.equivalent_model(request.amplitudes_rad())
     notes = (
         f"simplified Ikeda (Kawahara, Maekawa and Ikeda 2009) at the measured period {period_s:.4g} s",
-        *(f"outside the method's range: {finding.line}" for finding in prediction.findings),
+        *(
+            f"outside the method's range: {finding.line}" if finding.name in LIMITS else finding.line
+            for finding in prediction.findings
+        ),
     )
     name = f"ikeda {hull.name} at {format_draft(request.draft)}"
     return Simulation(name, PREDICTION, model, notes=notes, component_changes=prediction.required_change)
@@ -187,10 +210,29 @@ def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation
         except InputError as exc:  # the reading's own words name the measured files' options
             said = re.sub(r"--(time-col|angle-col|rate-col|angle-unit)\b", r"--sim-\1", str(exc))
             raise type(exc)(f"simulation {path.name}: {said}") from None
+        _refuse_growing(path, read_decays(path, request.axis, cols.time_col, cols.angle_col, cols.rate_col,
+                                          cols.angle_unit, keep_all=True))  # fmt: skip
         runs += [_renamed(run, f"sim:{run.name}") for run in found]
     rates = sorted({round(run.sample_rate, 3) for run in runs})
     notes = (f"simulated at {', '.join(f'{r:g}' for r in rates)} Hz", *input_notices(runs))
     return Simulation(", ".join(p.name for p in paths), SERIES, runs=tuple(runs), notes=notes)
+
+
+def _refuse_growing(path: Path, records: Sequence[DecayRun]) -> None:
+    """One line when a simulated record's swing grows (``GROWING_HALF_CYCLES`` peaks in a row): read as
+    decays it would be cut into 'decays' at each larger swing."""
+    for record in records:
+        y = record.angle - float(np.median(record.angle))
+        peaks = np.abs(y[half_cycle_peaks(y)])
+        grows = np.concatenate([[False], peaks[1:] > GROWTH * peaks[:-1], [False]])
+        edges = np.flatnonzero(np.diff(grows.astype(int)))  # each streak: the peak before it, its last
+        for start, end in zip(edges[::2], edges[1::2], strict=True):
+            if end - start >= GROWING_HALF_CYCLES:
+                raise InputError(
+                    f"simulation {path.name} grows: its swing rises from {math.degrees(peaks[start]):.3g} "
+                    f"to {math.degrees(peaks[end]):.3g} deg over {end - start} half-cycles (unstable: "
+                    "energy fed in, a negative damping or a time step too long); a decay's swing only shrinks"
+                )
 
 
 def _renamed(run: DecayRun, name: str) -> DecayRun:

@@ -24,7 +24,7 @@ from typing import Any
 from ..config import Hull, format_draft, load_hull, parse_draft
 from ..config_rules import safe_name
 from ..errors import IdentificationError, InputError, RecordingError, TankdaqError
-from ..physics.models import is_auto
+from ..physics.models import AUTO
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS
 from ..store.export_layout import export_metadata_of
@@ -36,7 +36,7 @@ from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_per
 from .executors import executor_map
 from .free_decay import cut_free_decays, cut_lines
 from .inputs import read_decays
-from .model_choice import choose_model
+from .model_choice import model_for
 from .output_error import OutputError
 from .plausibility import check_runs
 
@@ -65,6 +65,7 @@ class GroupResult:
     error: str | None = None
     extra: dict[str, float] = field(default_factory=dict)
     hull: Hull | None = None  # the hull file found for key.hull: dimensional results from its GM
+    model_reason: str = ""  # which model was fitted and why (``model_choice.model_for``)
 
     @cached_property
     def warnings(self) -> list[str]:
@@ -90,6 +91,7 @@ class GroupResult:
         if self.fit is None:
             return row | {"error": self.error}
         coefficients = self.fit.coefficients_
+        row |= {"model": ",".join(self.fit.terms_), "model_reason": self.model_reason}
         for term, value in coefficients.items():
             row[term] = value
             row[f"{term}_std"] = self.fit.std_[term]
@@ -305,15 +307,16 @@ def fit_group(key: GroupKey, runs: list[DecayRun], model: str, hull: Hull | None
     A group that cannot be fitted keeps its reason instead of a fit.
     """
     try:
-        terms = choose_model(runs).terms if is_auto(model) else model
-        return GroupResult(key, runs, fit=OutputError(terms).fit(runs), hull=hull)
+        choice = model_for(runs, model)  # as ``identify`` chooses for these decays
+        fit = OutputError(choice.terms).fit(runs)
+        return GroupResult(key, runs, fit=fit, hull=hull, model_reason=choice.reason)
     except IdentificationError as exc:
         return GroupResult(key, runs, error=str(exc), hull=hull)
 
 
 def identify_groups(
     groups: dict[GroupKey, list[DecayRun]],
-    model: str = "ittc-quadratic-restoring",
+    model: str = AUTO,
     progress: Callable[[GroupKey], None] | None = None,
     hulls: dict[str, Hull] | None = None,
     executor: Executor | None = None,
@@ -462,6 +465,9 @@ def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
                 f"{row['r2_angle']:.4f}",
             ]
         lines.append("| " + " | ".join(cells) + " |")
+    chosen = [f"- {r.key.label}: {r.row['model_reason']}" for r in rows if r.row.get("model_reason")]
+    if chosen:  # which model each group was fitted with, and why (ident.model_choice.model_for)
+        lines += ["", "Models (docs/models.md):", "", *chosen]
     implausible = [f"- {r.key.label}: {line}" for r in rows for line in r.warnings]
     if implausible:
         lines += ["", "Warnings (physically implausible fits, docs/models.md):", "", *implausible]

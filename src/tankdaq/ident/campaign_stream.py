@@ -25,6 +25,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from ..config import Hull
+from ..physics.models import AUTO
 from ..records import DecayRun
 from ..store.export_layout import ExportOrigin
 from ..store.inputs import file_sha256
@@ -210,7 +211,7 @@ def _decays(path: Path, read: dict[Path, list[DecayRun]], start_s: float | None,
 
 def fit_campaign(
     groups: dict[GroupKey, list[RunRef]],
-    model: str = "ittc-quadratic-restoring",
+    model: str = AUTO,
     hulls: dict[str, Hull] | None = None,
     executor: Executor | None = None,
     start_s: float | None = None,

@@ -1,5 +1,5 @@
 """Fits made to compare and to report: every model on the same runs (``tankdaq identify --compare``),
-the leave-one-run-out error, and a joint fit checked against a known truth (the demo's hull).
+the leave-one-run-out error, and a fit checked against a known truth (the demo's hull).
 
 The summaries and text they show are ``ident.report``'s; the fitting is here.
 """
@@ -17,7 +17,7 @@ from ..physics.models import MODEL_ALIASES, resolve_model
 from ..records import DecayRun
 from .estimators import make_estimator
 from .output_error import OutputError
-from .report import predicted_angles, summarize
+from .report import summarize
 
 
 def group_models(models: Sequence[str]) -> dict[tuple[str, ...], list[str]]:
@@ -100,28 +100,11 @@ class TruthCheck:
         return self.ci95[0] <= self.truth <= self.ci95[1]
 
 
-@dataclass
-class JointFit:
-    """Decays fitted jointly by output error, with what a report of them needs."""
-
-    estimator: OutputError
-    runs: list[DecayRun]
-    summary: dict[str, Any]
-    predicted: list[np.ndarray]  # each run's model angle (rad)
-    truth: list[TruthCheck]  # empty without a truth
-
-
-def identify_jointly(
-    runs: Sequence[DecayRun], model: str, truth: Mapping[str, float] | None = None
-) -> JointFit:
-    """Fit ``runs`` jointly by output error; compare with ``truth`` (a term absent from it is 0)."""
-    runs = list(runs)
-    estimator = OutputError(resolve_model(model)).fit(runs)
-    truth = truth or {}
-    checks = [
+def truth_checks(estimator: Any, truth: Mapping[str, float]) -> list[TruthCheck]:
+    """Each fitted coefficient against ``truth`` (a term absent from it is 0); none without a truth."""
+    if not truth:
+        return []
+    return [
         TruthCheck(term, value, truth.get(term, 0.0), estimator.ci95_[term])
         for term, value in estimator.coefficients_.items()
-        if truth
     ]
-    summary = summarize(estimator, runs)
-    return JointFit(estimator, runs, summary, predicted_angles(estimator, runs), checks)

@@ -9,6 +9,12 @@ run, which then predicts the rest (its held-out angle RMS, deg: the split-sample
 chosen model is the simplest plausible one within ``PARSIMONY`` of the best plausible held-out
 RMS; when none is plausible, the best by held-out RMS, and its findings stay on the result as
 warnings.
+
+``model_for`` is the one place every command asks which model to fit (``identify``, each ``campaign``
+group, ``demo``, the guided session's report, the measured side of ``diagnose --simulation``): the
+same decays get the same model whatever the command. The choice reads the decays alone, never a hull
+file (a hull's checks warn on the chosen fit), so a campaign that finds the hull by name and an
+``identify`` without ``--hull`` agree.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import IdentificationError
-from ..physics.models import MODEL_FAMILY, model_name, resolve_model
+from ..physics.models import AUTO, MODEL_FAMILY, is_auto, model_name, resolve_model
 from ..records import DecayRun
 from .output_error import OutputError
 from .plausibility import Finding, check_runs
@@ -64,6 +70,8 @@ class ModelChoice:
     candidates: list[Candidate]
 
     def as_dict(self) -> dict[str, Any]:
+        if not self.candidates:  # a model asked for: nothing was scored
+            return {"chosen": ",".join(self.terms), "reason": self.reason}
         return {
             "chosen": ",".join(self.terms),
             "reason": self.reason,
@@ -81,14 +89,12 @@ def split_runs(runs: Sequence[DecayRun], fraction: float = FIT_FRACTION) -> list
     ]
 
 
-def score(
-    terms: tuple[str, ...], runs: Sequence[DecayRun], particulars: Any = None, hull: str = "the hull"
-) -> Candidate:
+def score(terms: tuple[str, ...], runs: Sequence[DecayRun]) -> Candidate:
     """Fit ``terms`` on the whole runs (plausibility) and on their first part (held-out RMS, deg)."""
     candidate = Candidate(terms)
     try:
         whole = OutputError(terms, compute_diagnostics=False).fit(list(runs))
-        candidate.findings = check_runs(whole.coefficients_, runs, whole.offsets_, particulars, hull)
+        candidate.findings = check_runs(whole.coefficients_, runs, whole.offsets_)
         first = split_runs(runs)
         early = OutputError(terms, compute_diagnostics=False).fit(first, start=whole)
     except IdentificationError as exc:
@@ -105,14 +111,9 @@ def score(
     return candidate
 
 
-def choose_model(
-    runs: Sequence[DecayRun],
-    family: Sequence[str] = MODEL_FAMILY,
-    particulars: Any = None,
-    hull: str = "the hull",
-) -> ModelChoice:
+def choose_model(runs: Sequence[DecayRun], family: Sequence[str] = MODEL_FAMILY) -> ModelChoice:
     """The family scored on ``runs``; see the module docstring for the rule."""
-    candidates = [score(resolve_model(m), runs, particulars, hull) for m in family]
+    candidates = [score(resolve_model(m), runs) for m in family]
     scored = [c for c in candidates if math.isfinite(c.held_out_rms_deg)]
     if not scored:
         raise IdentificationError(
@@ -135,3 +136,12 @@ def choose_model(
             f"{chosen.held_out_rms_deg:.3g} deg), but no model of the family is plausible: see the warnings"
         )
     return ModelChoice(chosen.terms, reason, candidates)
+
+
+def model_for(runs: Sequence[DecayRun], model: str | Sequence[str] = AUTO) -> ModelChoice:
+    """The model every command fits to ``runs``: chosen by the data (``choose_model``) for ``auto``,
+    else ``model`` as asked (``--model``), its reason saying so."""
+    if is_auto(model):
+        return choose_model(runs)
+    terms = resolve_model(model)
+    return ModelChoice(terms, f"model {model_name(terms)} given by --model", [])

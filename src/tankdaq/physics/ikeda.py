@@ -172,6 +172,23 @@ def components(inputs: IkedaInputs, omega_rad_s: float, amplitude_rad: float) ->
         raise InputError(f"roll frequency {omega_rad_s} rad/s must be positive")
     if not (math.isfinite(amplitude_rad) and amplitude_rad > 0):
         raise InputError(f"roll amplitude {amplitude_rad} rad must be positive")
+    try:
+        out = _components(inputs, omega_rad_s, amplitude_rad)
+    except (OverflowError, ZeroDivisionError, ValueError):
+        out = {TOTAL: math.inf}
+    if not all(math.isfinite(value) for value in out.values()):
+        raise InputError(
+            f"the simplified Ikeda formulas give no finite damping at {math.degrees(amplitude_rad):.4g} deg "
+            f"and {omega_rad_s:.4g} rad/s for these inputs ({_described(inputs)}): check their units"
+        )
+    return out
+
+
+def _described(inputs: IkedaInputs) -> str:
+    return ", ".join(f"{name} {value:.4g}" for name, value in vars(inputs).items() if name != "g_m_s2")
+
+
+def _components(inputs: IkedaInputs, omega_rad_s: float, amplitude_rad: float) -> dict[str, float]:
     bd = inputs.beam_m / inputs.draft_m
     ogd = inputs.og_m / inputs.draft_m
     omega_hat = inputs.omega_hat(omega_rad_s)

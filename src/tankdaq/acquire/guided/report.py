@@ -22,27 +22,26 @@ def write_session_report(files: list[Path], folder: Path, model: str, hull: str)
 
     found = campaign(files, model, hulls=[hull], report=folder, keep_fits=True)
     written = list(found.report_files)
-    spread = repeat_spreads({result.key: result.runs for result in found.results}, model)
+    fitted = {r.key: (r.runs, tuple(r.fit.terms_)) for r in found.results if r.fit is not None}
+    spread = repeat_spreads(fitted)
     if spread:
         written.append(_write_spread(spread, folder))
     return written
 
 
-def repeat_spreads(groups: dict[Any, list[Any]], model: str) -> list[dict[str, Any]]:
-    """Per condition with repeats: each coefficient fitted on each repeat alone, their mean and spread."""
+def repeat_spreads(groups: dict[Any, tuple[list[Any], tuple[str, ...]]]) -> list[dict[str, Any]]:
+    """Per condition with repeats: each coefficient fitted on each repeat alone (with the terms of the
+    condition's fit, the model the campaign chose), their mean and spread."""
     from functools import partial
 
     from ...ident.intervals import repeat_spread
-    from ...ident.model_choice import choose_model
     from ...ident.output_error import OutputError
-    from ...physics.models import is_auto
 
     rows = []
-    for key, runs in groups.items():
+    for key, (runs, model) in groups.items():
         if len(runs) < 2:
             continue
-        chosen = choose_model(runs).terms if is_auto(model) else model  # the condition's, as its fit's
-        summary = repeat_spread(partial(OutputError, chosen), runs)
+        summary = repeat_spread(partial(OutputError, model), runs)
         terms = list(summary.std)
         row: dict[str, Any] = {"hull": key.hull, "axis": key.axis, "draft": format_draft(key.draft),
                                "angle_deg": key.angle_deg, "repeats": len(runs)}  # fmt: skip
