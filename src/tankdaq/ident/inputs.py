@@ -63,11 +63,20 @@ def read_decays(
     at its release events. What the reading decided or left out is in each run's ``meta[NOTICES]``
     (``input_notices``)."""
     options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all, time_unit)
-    return [
-        decay
-        for run in read_runs(path, axis, options)
-        for decay in (split_releases(run, skip_half_cycles) if run.meta.pop(FIND_RELEASES, False) else [run])
-    ]
+    try:
+        return [
+            decay
+            for run in read_runs(path, axis, options)
+            for decay in (
+                split_releases(run, skip_half_cycles) if run.meta.pop(FIND_RELEASES, False) else [run]
+            )
+        ]
+    except BadIdentificationInput as exc:
+        if not skip_half_cycles:
+            raise
+        raise BadIdentificationInput(
+            f"{exc} (with {skip_half_cycles} half-cycles skipped: give fewer, --skip-half-cycles)"
+        ) from None
 
 
 def input_notices(runs: Iterable[DecayRun]) -> list[str]:
