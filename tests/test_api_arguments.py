@@ -37,6 +37,8 @@ WRONG: dict[str, Any] = {
     "bool": True,
     "nan": math.nan,
     "inf": math.inf,
+    "huge": 1e300,
+    "huge int": 10**30,
     "str": "x",
     "empty str": "",
     "bytes": b"x",

@@ -95,6 +95,24 @@ def test_identify_a_real_decay_with_its_hull(encoding: str, tmp_path: Path) -> N
     assert "B44_hat" in out and "B̂" not in out
 
 
+def test_the_c_locale_with_stdout_to_a_file(tmp_path: Path) -> None:
+    """``LC_ALL=C`` and stdout redirected to a file: Python writes UTF-8 there (PEP 538/540), which shows
+    everything; whatever the locale makes of it, the command finishes and the file reads back."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONIOENCODING", "PYTHONUTF8")}
+    with (tmp_path / "out.txt").open("wb") as out:
+        done = subprocess.run(
+            [EXE, "predict", "--hull", "kvlcc2"],
+            stdout=out,
+            stderr=subprocess.PIPE,
+            env={**env, "LC_ALL": "C"},
+            timeout=300,
+            check=False,
+        )
+    assert done.returncode == 0 and b"Traceback" not in done.stderr, done.stderr
+    text = (tmp_path / "out.txt").read_bytes().decode("utf-8")  # ASCII's plain text is UTF-8 too
+    assert "B̂44" in text or "B44_hat" in text
+
+
 def test_a_utf8_stream_is_left_as_it_is(recordings: list[Path]) -> None:
     out, _ = tankdaq("utf-8", "predict", "--hull", "kvlcc2")
     assert "B̂44" in out and "N·m·s" in out

@@ -332,7 +332,7 @@ def identify(
     joint, repeats = arguments.flag(joint, "joint"), arguments.flag(repeats, "repeats")
     full_scale = arguments.flag(full_scale, "full_scale")
     hull = arguments.optional_path(hull, "hull", "a hull's name, a .toml path, or None")
-    reading = arguments.instance(reading, "reading", Reading, "a tankdaq.Reading")
+    reading = arguments.optional_instance(reading, "reading", Reading, "a Reading or None") or Reading()
     kept = Kept(arguments.progress(progress))
     draft = validation.draft_factor(arguments.draft(draft))
     bootstrap = arguments.whole(bootstrap, "bootstrap", 0, validation.MAX_BOOTSTRAP_REPLICAS)
