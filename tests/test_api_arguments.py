@@ -241,7 +241,10 @@ def test_reading_normalises_what_it_takes_and_names_what_it_refuses() -> None:
     reading = tankdaq.Reading(start_s=np.float64(1.5), end_s=20, skip_half_cycles=np.int64(1))
     assert (reading.start_s, reading.end_s, reading.skip_half_cycles) == (1.5, 20.0, 1)
     assert type(reading.start_s) is float and type(reading.skip_half_cycles) is int
-    with pytest.raises(InputError, match=r"^start_s: give a finite number of s after the release"):
+    with pytest.raises(
+        InputError,
+        match=r"^start_s: give a finite number of seconds from the release, at least 0, or None, not '5'$",
+    ):
         tankdaq.Reading(start_s="5")  # type: ignore[arg-type]
     with pytest.raises(InputError, match=r"^end_s: give a time after start_s \(5 s\), not 2 s$"):
         tankdaq.Reading(start_s=5, end_s=2)

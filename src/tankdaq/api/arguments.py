@@ -126,30 +126,36 @@ def model(value: object, name: str = "model") -> str:
     raise refuse(name, "'auto', terms as 'b1,b2,c1,c3' (a string or a list of them) or an alias", value)
 
 
-def number(value: object, name: str, low: float = -math.inf, high: float = math.inf, unit: str = "") -> float:
-    """A finite real number (int, float, numpy's) from ``low`` to ``high``; not a bool, not a string."""
-    if isinstance(value, numbers.Real) and not isinstance(value, bool):
-        number_value = float(value)
-        if math.isfinite(number_value) and low <= number_value <= high:
-            return number_value
+def _within(value: object, low: float, high: float) -> bool:
+    """A finite real number (not a bool) from ``low`` to ``high``."""
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        return False
+    return math.isfinite(float(value)) and low <= float(value) <= high
+
+
+def _number_takes(low: float, high: float, unit: str) -> str:
     bounds = [
         f"at least {low:g}" if math.isfinite(low) else "",
         f"at most {high:g}" if math.isfinite(high) else "",
     ]
     within = " and ".join(bound for bound in bounds if bound)
-    takes = f"a finite number{' of ' + unit if unit else ''}" + (f", {within}" if within else "")
-    raise refuse(name, takes, value)
+    return f"a finite number{' of ' + unit if unit else ''}" + (f", {within}" if within else "")
+
+
+def number(value: object, name: str, low: float = -math.inf, high: float = math.inf, unit: str = "") -> float:
+    """A finite real number (int, float, numpy's) from ``low`` to ``high``; not a bool, not a string."""
+    if _within(value, low, high):
+        return float(value)  # type: ignore[arg-type]  # a Real
+    raise refuse(name, _number_takes(low, high, unit), value)
 
 
 def optional_number(
     value: object, name: str, low: float = -math.inf, high: float = math.inf, unit: str = ""
 ) -> float | None:
-    if value is None:
-        return None
-    try:
-        return number(value, name, low, high, unit)
-    except InputError as exc:
-        raise InputError(f"{exc} (or None)") from None
+    """``number``, or None."""
+    if value is None or _within(value, low, high):
+        return None if value is None else float(value)  # type: ignore[arg-type]  # a Real
+    raise refuse(name, _number_takes(low, high, unit) + ", or None", value)
 
 
 def whole(value: object, name: str, low: int, high: int) -> int:

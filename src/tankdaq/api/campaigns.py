@@ -184,8 +184,8 @@ def _arguments(
 ) -> tuple[list[Path], list[str], float | None, float | None]:
     """``campaign``'s files, hulls and cut, checked by name (``api.arguments``): one path or hull given
     alone is one, never its characters."""
-    start = arguments.optional_number(start_s, "start_s", 0.0, unit="s after the release")
-    end = arguments.optional_number(end_s, "end_s", 0.0, unit="s after the release")
+    start = arguments.optional_number(start_s, "start_s", 0.0, unit="seconds from the release")
+    end = arguments.optional_number(end_s, "end_s", 0.0, unit="seconds from the release")
     if start is not None and end is not None and end <= start:
         raise InputError(f"end_s: give a time after start_s ({start:g} s), not {end:g} s")
     files = arguments.paths(inputs, "inputs", "a file or folder path, or a list of them")

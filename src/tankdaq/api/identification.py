@@ -212,8 +212,8 @@ class Reading:
         columns = columns_given(
             self.axis, self.time_col, self.angle_col, self.rate_col, self.angle_unit, self.time_unit
         )
-        start_s = arguments.optional_number(self.start_s, "start_s", 0.0, unit="s after the release")
-        end_s = arguments.optional_number(self.end_s, "end_s", 0.0, unit="s after the release")
+        start_s = arguments.optional_number(self.start_s, "start_s", 0.0, unit="seconds from the release")
+        end_s = arguments.optional_number(self.end_s, "end_s", 0.0, unit="seconds from the release")
         if start_s is not None and end_s is not None and end_s <= start_s:
             raise InputError(f"end_s: give a time after start_s ({start_s:g} s), not {end_s:g} s")
         checked = (
