@@ -66,7 +66,7 @@ def test_predict_prints_b44_hat_in_plain_text(encoding: str) -> None:
 
 
 @pytest.mark.parametrize("encoding", ENCODINGS)
-def test_identify_with_a_hull_and_runs_on_its_catalogue(
+def test_identify_with_a_hull_runs_on_its_catalogue_and_campaign(
     encoding: str, recordings: list[Path], tmp_path: Path
 ) -> None:
     catalogue = f"sqlite:///{tmp_path / 'catalogue.sqlite'}"
@@ -85,6 +85,8 @@ def test_identify_with_a_hull_and_runs_on_its_catalogue(
     out, _ = tankdaq(encoding, "runs", "--catalogue", catalogue)
     assert "B44_hat" in out and ("5deg" in out) == (encoding == "ascii")
     assert "swath" in out
+    out, _ = tankdaq(encoding, "campaign", *recordings, "--model", "b1,b2,c1,c3", "--catalogue", "none")
+    assert "| B44_hat |" in out and ("R2 angle" in out) == ("+/-" in out) == (encoding == "ascii")
 
 
 @pytest.mark.skipif(not (DATA / "model_test_21338.csv").is_file(), reason=f"the KVLCC2 data is not at {DATA}")
