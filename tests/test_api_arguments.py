@@ -206,11 +206,15 @@ def test_read_none_and_identify_none_name_the_argument(made: Made) -> None:
         tankdaq.identify(None)  # type: ignore[arg-type]
 
 
-def test_a_dataframe_given_for_decays_is_refused_by_name_with_what_to_do(made: Made) -> None:
-    frame = pd.read_csv(made.csv)
-    with pytest.raises(InputError, match=r"^sources: .*not a DataFrame \(save a DataFrame with df.to_csv"):
-        tankdaq.identify(frame)  # type: ignore[arg-type]
-    with pytest.raises(InputError, match=r"^path: .*not a DataFrame"):
+def test_a_dataframe_of_a_decay_fits_as_its_file_does_and_read_refuses_one_by_name(made: Made) -> None:
+    frame = pd.read_csv(made.csv)  # time_s, angle_deg, rate_deg_s: the documented columns
+    by_file, by_frame = (tankdaq.identify(given, "b1,c1") for given in (made.csv, frame))
+    assert by_frame.coefficients["value"].tolist() == by_file.coefficients["value"].tolist()
+    with pytest.raises(Started):  # tankdaq.read's names (roll_deg) are taken too
+        tankdaq.compare_models(frame.rename(columns={"angle_deg": "roll_deg"}), progress=StopAtWork())
+    with pytest.raises(InputError, match=r"^sources DataFrame: give a DataFrame with columns time_s"):
+        tankdaq.identify(frame.rename(columns={"time_s": "t"}))
+    with pytest.raises(InputError, match=r"^path: .*not a DataFrame \(save a DataFrame with df.to_csv"):
         tankdaq.read(frame)  # type: ignore[arg-type]
 
 

@@ -347,17 +347,59 @@ def _recording_samples(samples: np.ndarray, releases: list[float]) -> pd.DataFra
 
 
 #: What ``identify``, ``compare_models`` and ``diagnose`` take as their decays, as the refusing line says it.
-SOURCES = "a path, a Recording, a Decay or a DecayRun (tankdaq.read gives them), or a list of them"
+SOURCES = (
+    "a path, a Recording, a Decay or a DecayRun (tankdaq.read gives them), a DataFrame of a decay, "
+    "or a list of them"
+)
 
 
 def sources_given(value: object, name: str = "sources") -> list[Any]:
-    """The decays given to a fit, checked (``api.arguments``): a path (str or ``Path``) or a decay read
-    (``Recording``, ``Decay``, ``DecayRun``), or a non-empty list of them; a DataFrame is refused by name
-    with what to do."""
+    """The decays given to a fit, checked (``api.arguments``): a path (str or ``Path``), a decay read
+    (``Recording``, ``Decay``, ``DecayRun``) or a DataFrame of one (``frame_runs``: its decays found
+    here), or a non-empty list of them."""
+    import pandas as pd
+
     read_ones = (Recording, Decay, DecayRun)
-    one = isinstance(value, str | os.PathLike | Recording | Decay | DecayRun)
+    one = isinstance(value, str | os.PathLike | pd.DataFrame | Recording | Decay | DecayRun)
     items = [value] if one else arguments.several(value, name, SOURCES)
-    return [item if isinstance(item, read_ones) else arguments.path(item, name, SOURCES) for item in items]
+    given: list[Any] = []
+    for number, item in enumerate(items, start=1):
+        if isinstance(item, pd.DataFrame):
+            given += frame_runs(item, f"{name} DataFrame {number}" if len(items) > 1 else f"{name} DataFrame")
+        else:
+            given.append(item if isinstance(item, read_ones) else arguments.path(item, name, SOURCES))
+    return given
+
+
+#: A DataFrame's angle column (deg) as ``identify`` takes it, and the axis its name says (None: roll).
+FRAME_ANGLES: dict[str, str | None] = {"angle_deg": None, "roll_deg": "roll", "pitch_deg": "pitch"}
+#: Its rate column (deg/s), when it has one.
+FRAME_RATES = ("rate_deg_s", "p_deg_s", "q_deg_s")
+
+
+def frame_runs(table: pd.DataFrame, name: str) -> list[DecayRun]:
+    """The decays of a DataFrame, found as in a CSV of its columns: ``time_s`` (s, from any origin) and
+    the angle in degrees (``angle_deg``, or ``roll_deg``/``pitch_deg`` as ``tankdaq.read`` names them),
+    the rate (``rate_deg_s``, ``p_deg_s``, ``q_deg_s``) when it is there; other numeric columns are kept
+    as channels. A ``Recording``'s ``samples`` or a ``Decay``'s are such tables."""
+    from pandas.api.types import is_numeric_dtype
+
+    from ..ident.inputs import found_decays
+    from ..store.csv_import import ColumnData, CsvOptions, runs_of_columns
+
+    angle = next((column for column in FRAME_ANGLES if column in table.columns), None)
+    if TIME_COLUMN not in table.columns or angle is None:
+        has = ", ".join(map(str, list(table.columns)[:8])) or "no columns"
+        raise InputError(
+            f"{name}: give a DataFrame with columns time_s (s) and angle_deg, roll_deg or pitch_deg (deg), "
+            f"or a file; this one has {has}"
+        )
+    rate = next((column for column in FRAME_RATES if column in table.columns), None)
+    columns = {str(c): table[c].to_numpy(dtype=float) for c in table.columns if is_numeric_dtype(table[c])}
+    options = CsvOptions(TIME_COLUMN, angle, rate, "deg", False, "s")
+    return found_decays(
+        runs_of_columns(Path(name), ColumnData(columns, {}, {}), options, FRAME_ANGLES[angle])
+    )
 
 
 def runs_of(data: Any) -> list[DecayRun] | None:
