@@ -143,7 +143,7 @@ def test_bad_input_is_one_line(simulated: list[tankdaq.Recording], tmp_path: Pat
     cases = [
         (lambda: tankdaq.identify(tmp_path / "missing.mcap"), "missing.mcap"),
         (lambda: tankdaq.identify(simulated[0], model="b9,c1"), "b9"),
-        (lambda: tankdaq.identify([]), "no decays given"),
+        (lambda: tankdaq.identify([]), "sources: give a path, a Recording"),
         (lambda: tankdaq.identify(simulated[0], draft="3T"), "outside"),
         (lambda: tankdaq.read(tmp_path / "notes.txt"), "unknown file type"),
         (lambda: tankdaq.simulate(tmp_path, axis="yaw"), "roll or pitch"),

@@ -69,7 +69,7 @@ def test_bad_settings_are_one_line_before_any_file_is_read(tmp_path: Path) -> No
     cases = [
         ({"executor": "spark"}, "executor 'spark' not understood"),
         ({"executor": "dask"}, "executor dask needs scheduler"),
-        ({"jobs": 0}, "jobs 0"),
+        ({"jobs": 0}, "jobs: give a whole number from 1"),
         ({"model": "b9"}, "b9"),
     ]
     for settings, said in cases:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from .. import validation
 from ..errors import InputError
+from . import arguments
 from .identification import drop_read_twice, to_json
 from .progress import Kept, Progress
 
@@ -132,15 +133,28 @@ def campaign(
     >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s"]]  # doctest: +SKIP
     """
     from ..ident.campaign import REPORT_TABLES, find_campaign_hulls, find_recordings
+    from ..ident.campaign_stream import FileWork
     from ..ident.derived import campaign_full_scale
     from ..ident.executors import campaign_executor
     from ..ident.online import prepare_identifier
 
-    kept = Kept(progress)
+    inputs, hulls, start_s, end_s = _arguments(inputs, hulls, start_s, end_s)
+    model = arguments.model(model)
+    recurse, full_scale = arguments.flag(recurse, "recurse"), arguments.flag(full_scale, "full_scale")
+    keep_fits = arguments.flag(keep_fits, "keep_fits")
+    jobs = arguments.whole(jobs, "jobs", 1, 4096)
+    executor = arguments.text(executor, "executor", "'local' or 'dask'")
+    scheduler = arguments.optional_text(scheduler, "scheduler", "a Dask scheduler's address or None")
+    report = arguments.optional_path(report, "report", "a folder (str or pathlib.Path) or None")
+    on_result = arguments.callback(on_result, "on_result")
+    file_work = arguments.optional_instance(
+        file_work, "file_work", FileWork, "an ident.campaign_stream.FileWork"
+    )
+    kept = Kept(arguments.progress(progress))
     workers = _check_campaign(model, jobs, executor, scheduler)
     folder = validation.report_dir(Path(report), REPORT_TABLES, "report") if report is not None else None
-    given_hulls = find_campaign_hulls([], [str(hull) for hull in hulls])  # a bad hull: before any file
-    paths = find_recordings([inputs] if isinstance(inputs, str | Path) else list(inputs), recurse=recurse)
+    given_hulls = find_campaign_hulls([], hulls)  # a bad hull: before any file
+    paths = find_recordings(inputs, recurse=recurse)
     prepare_identifier(model, kept.line)  # the native kernels: built once, on the first run
     prepare = []
     if folder is not None:
@@ -165,6 +179,24 @@ def campaign(
     return Campaign(rows, results, paths, skipped, kept.lines, scan.cuts, scaled, list(written))
 
 
+def _arguments(
+    inputs: object, hulls: object, start_s: object, end_s: object
+) -> tuple[list[Path], list[str], float | None, float | None]:
+    """``campaign``'s files, hulls and cut, checked by name (``api.arguments``): one path or hull given
+    alone is one, never its characters."""
+    start = arguments.optional_number(start_s, "start_s", 0.0, unit="seconds from the release")
+    end = arguments.optional_number(end_s, "end_s", 0.0, unit="seconds from the release")
+    if start is not None and end is not None and end <= start:
+        raise InputError(f"end_s: give a time after start_s ({start:g} s), not {end:g} s")
+    files = arguments.paths(inputs, "inputs", "a file or folder path, or a list of them")
+    return (
+        files,
+        arguments.names(hulls, "hulls", "a hull's name or .toml path, or a list of them"),
+        start,
+        end,
+    )
+
+
 def _check_campaign(model: str, jobs: int, executor: str, scheduler: str | None) -> int:
     """The settings checked before any file is read; the worker processes to start (1: none)."""
     from ..ident.executors import check_scheduler
@@ -174,8 +206,6 @@ def _check_campaign(model: str, jobs: int, executor: str, scheduler: str | None)
     validation.campaign_executor(executor, scheduler, option="executor", scheduler_option="scheduler")
     if scheduler is not None:
         check_scheduler(scheduler)  # an address not understood or not answering: one line, at once
-    if jobs < 1:
-        raise InputError(f"jobs {jobs}: give 1 or more worker processes")
     return min(jobs, validation.usable_cores())
 
 

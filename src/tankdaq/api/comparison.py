@@ -14,8 +14,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from . import arguments
 from .identification import Reading, Source, load_runs, to_json, truncations
 from .progress import Kept, Progress
+from .recording import sources_given
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -95,7 +97,10 @@ def compare_models(
     from ..ident.online import prepare_identifier
     from ..physics.models import COMPARE_MODELS, MODEL_FAMILY
 
-    kept = Kept(progress)
+    sources = sources_given(sources)
+    method = arguments.text(method, "method", "an estimator's name: oe, ee, ga or pso")
+    reading = arguments.optional_instance(reading, "reading", Reading, "a tankdaq.Reading or None")
+    kept = Kept(arguments.progress(progress))
     make_estimator(method, MODEL_FAMILY[0])  # an unknown method fails before any reading
     runs = load_runs(sources, reading or Reading(), kept)
     cut = truncations(runs)

@@ -22,8 +22,10 @@ from typing import TYPE_CHECKING, Any
 from .. import validation
 from ..errors import InputError
 from ..records import DecayRun
+from . import arguments
 from .identification import Reading, Source, load_runs, truncations
 from .progress import Kept, Progress
+from .recording import sources_given
 
 if TYPE_CHECKING:
     from ..diagnose.compare import SimulationComparison
@@ -58,6 +60,7 @@ class Diagnosis:
 
     def save_rrd(self, path: str | Path) -> Path:
         """The story as a rerun recording (.rrd) for the viewer."""
+        path = validation.output_file(arguments.path(path, "path", "a file path for the .rrd"), "path")
         fitted = self.comparison if self.comparison is not None else self.diagnoser
         return Path(_teller(self.comparison is not None).save_rrd(fitted, path))
 
@@ -89,8 +92,24 @@ def diagnose(
     >>> tankdaq.diagnose("run.mcap").story  # doctest: +SKIP
     >>> tankdaq.diagnose("run.mcap", simulation="hull", hull="swath").document["verdict"]  # doctest: +SKIP
     """
-    if max_steps < 0:
-        raise InputError(f"max_steps must be 0 or more, not {max_steps}")
+    sources = sources_given(sources)
+    baseline = None if baseline is None else arguments.model(baseline, "baseline")
+    max_steps = arguments.whole(max_steps, "max_steps", 0, 1000)
+    reading = arguments.optional_instance(reading, "reading", Reading, "a tankdaq.Reading or None")
+    if simulation is not None:  # "hull", "ikeda", or files
+        named = isinstance(simulation, str) and simulation in ("hull", "ikeda")
+        takes = "a path, a list of paths, 'hull' or 'ikeda'"
+        files: list[str | Path] = (
+            [str(simulation)] if named else [*arguments.paths(simulation, "simulation", takes)]
+        )
+        simulation = files
+    simulation_reading = arguments.optional_instance(
+        simulation_reading, "simulation_reading", Reading, "a tankdaq.Reading or None"
+    )
+    hull = arguments.optional_path(hull, "hull", "a hull's name, a .toml path, or None")
+    draft = arguments.draft(draft)
+    report = arguments.optional_path(report, "report", "a folder (str or pathlib.Path) or None")
+    progress = arguments.progress(progress)
     if simulation is not None and baseline is not None:
         raise InputError("baseline does not apply with a simulation: the simulation is the baseline")
     if hull is not None and simulation is None:

@@ -20,8 +20,9 @@ from typing import TYPE_CHECKING, Any
 from .. import validation
 from ..errors import InputError
 from ..records import DecayRun
+from . import arguments
 from .progress import Kept, Progress
-from .recording import Decay, Recording, runs_of
+from .recording import Decay, Recording, columns_given, runs_of, sources_given
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -137,7 +138,8 @@ class Identification:
         from ..ident.report import predicted_angles
         from ..viz.plots import decay_fit_figure
 
-        fit = self.fits[condition]
+        fit = self.fits[arguments.index(condition, "condition", len(self.fits), "conditions fitted")]
+        decay = arguments.index(decay, "decay", len(fit.runs), "decays in this condition")
         run = fit.runs[decay]
         model = predicted_angles(fit.estimator, [run] if len(fit.runs) == 1 else fit.runs)
         found = len(fit.summary["warnings"])
@@ -207,8 +209,22 @@ class Reading:
     end_s: float | None = None
 
     def __post_init__(self) -> None:
-        if self.axis is not None:
-            validation.decay_axis(self.axis, option="axis")
+        columns = columns_given(
+            self.axis, self.time_col, self.angle_col, self.rate_col, self.angle_unit, self.time_unit
+        )
+        start_s = arguments.optional_number(self.start_s, "start_s", 0.0, unit="seconds from the release")
+        end_s = arguments.optional_number(self.end_s, "end_s", 0.0, unit="seconds from the release")
+        if start_s is not None and end_s is not None and end_s <= start_s:
+            raise InputError(f"end_s: give a time after start_s ({start_s:g} s), not {end_s:g} s")
+        checked = (
+            *columns,
+            arguments.flag(self.keep_all, "keep_all"),
+            arguments.whole(self.skip_half_cycles, "skip_half_cycles", 0, 1000),
+            start_s,
+            end_s,
+        )
+        for field_name, value in zip(self.__dataclass_fields__, checked, strict=True):
+            object.__setattr__(self, field_name, value)  # normalised: a numpy float is a float
 
 
 def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Progress) -> list[DecayRun]:
@@ -281,7 +297,7 @@ def identify(
     *,
     method: str = "oe",
     joint: bool = False,
-    hull: str | None = None,
+    hull: str | Path | None = None,
     draft: float | str = 1.0,
     full_scale: bool = False,
     bootstrap: int = 0,
@@ -302,7 +318,7 @@ def identify(
     >>> result.coefficients.set_index("term")["value"]  # doctest: +SKIP
     >>> result.derived[["amplitude_deg", "b_eq_per_s", "b44_hat"]]  # doctest: +SKIP
     """
-    from ..config import format_draft, full_scale_of, load_hull
+    from ..config import full_scale_of, load_hull
     from ..ident.conditions import condition_of, group_conditions, grouping_line
     from ..ident.derived import scale_results
     from ..ident.estimators import make_estimator
@@ -310,10 +326,17 @@ def identify(
     from ..ident.online import prepare_identifier
     from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 
-    kept = Kept(progress)
-    draft = validation.draft_factor(draft if isinstance(draft, str) else format_draft(float(draft)))
-    bootstrap = validation.bootstrap_replicas(bootstrap)
-    hull_config = load_hull(hull) if hull else None
+    sources = sources_given(sources)
+    model = arguments.model(model)
+    method = arguments.text(method, "method", "an estimator's name: oe, ee, ga or pso")
+    joint, repeats = arguments.flag(joint, "joint"), arguments.flag(repeats, "repeats")
+    full_scale = arguments.flag(full_scale, "full_scale")
+    hull = arguments.optional_path(hull, "hull", "a hull's name, a .toml path, or None")
+    reading = arguments.optional_instance(reading, "reading", Reading, "a Reading or None") or Reading()
+    kept = Kept(arguments.progress(progress))
+    draft = validation.draft_factor(arguments.draft(draft))
+    bootstrap = arguments.whole(bootstrap, "bootstrap", 0, validation.MAX_BOOTSTRAP_REPLICAS)
+    hull_config = load_hull(str(hull)) if hull else None
     scale = full_scale_of(hull_config, full_scale)
     terms = None if is_auto(model) else resolve_model(model)
     probe = make_estimator(method, terms or MODEL_FAMILY[0])  # an unknown method fails before any reading

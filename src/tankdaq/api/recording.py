@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import html
 import itertools
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict
@@ -24,6 +25,7 @@ from ..errors import InputError
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
 from ..store.export_layout import DEVICE_TIME_COLUMN, TIME_COLUMN, column_name
+from . import arguments
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -174,11 +176,14 @@ class Recording:
         sidecar, ``h5`` one file per decay, ``parquet``, ``mat``) into ``out_dir`` (default: beside it);
         returns the files written. The files hold the recording's SI values exactly; ``frame`` is the
         time origin, ``"release"`` (time since the release) or ``"device"``."""
-        from ..store.export import export_recording
+        from ..store.export import FRAMES, WRITERS, export_recording
 
+        file_format = arguments.text(file_format, "file_format", choices=tuple(WRITERS))
+        folder = arguments.optional_path(out_dir, "out_dir", "a folder (str or pathlib.Path) or None")
+        frame = arguments.text(frame, "frame", choices=FRAMES)
         if self.meta.get("format") != "tankdaq recording":
             raise InputError(f"{self.path} is a CSV file already: only a recording (.mcap) is exported")
-        return export_recording(self.path, file_format, Path(out_dir) if out_dir is not None else None, frame)
+        return export_recording(self.path, file_format, folder, frame)
 
     def to_csv(self, out_dir: str | Path | None = None, frame: str = "release") -> Path:
         """The CSV ``pd.read_csv`` reads without options (units in the column names, the metadata in a
@@ -236,14 +241,37 @@ def read(
     from ..store.csv_import import CsvOptions
     from ..store.inputs import input_format
 
-    if axis is not None:
-        validation.decay_axis(axis, option="axis")
-    path = Path(path)
+    path = arguments.path(path, "path", "a recording or decay file's path (str or pathlib.Path)")
+    axis, time_col, angle_col, rate_col, angle_unit, time_unit = columns_given(
+        axis, time_col, angle_col, rate_col, angle_unit, time_unit
+    )
     kind = input_format(path).name  # an unknown suffix is one line before anything is read
     options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit)
     if path.suffix.lower() == ".mcap":
         return _read_recording(path, axis, kind)
     return _read_columns(path, axis, options, kind)
+
+
+def columns_given(
+    axis: object,
+    time_col: object,
+    angle_col: object,
+    rate_col: object,
+    angle_unit: object,
+    time_unit: object,
+) -> tuple[str | None, str, str, str | None, str | None, str | None]:
+    """The reading settings ``read`` and ``Reading`` take, checked by name (``api.arguments``)."""
+    from ..store.csv_units import ANGLE_UNITS, TIME_UNITS
+
+    axis = arguments.optional_text(axis, "axis", "roll, pitch or None")
+    return (
+        None if axis is None else validation.decay_axis(axis, option="axis"),
+        arguments.text(time_col, "time_col", "a column name"),
+        arguments.text(angle_col, "angle_col", "a column name"),
+        arguments.optional_text(rate_col, "rate_col", "a column name or None"),
+        arguments.optional_text(angle_unit, "angle_unit", choices=tuple(ANGLE_UNITS)),
+        arguments.optional_text(time_unit, "time_unit", choices=tuple(TIME_UNITS)),
+    )
 
 
 def _meta(path: Path, kind: str, axis: str, runs: list[DecayRun]) -> RecordingMeta:
@@ -316,6 +344,62 @@ def _recording_samples(samples: np.ndarray, releases: list[float]) -> pd.DataFra
         column, unit, values = people_column(name, samples[name])
         columns[column] = (unit, values)
     return units_frame(columns)
+
+
+#: What ``identify``, ``compare_models`` and ``diagnose`` take as their decays, as the refusing line says it.
+SOURCES = (
+    "a path, a Recording, a Decay or a DecayRun (tankdaq.read gives them), a DataFrame of a decay, "
+    "or a list of them"
+)
+
+
+def sources_given(value: object, name: str = "sources") -> list[Any]:
+    """The decays given to a fit, checked (``api.arguments``): a path (str or ``Path``), a decay read
+    (``Recording``, ``Decay``, ``DecayRun``) or a DataFrame of one (``frame_runs``: its decays found
+    here), or a non-empty list of them."""
+    import pandas as pd
+
+    read_ones = (Recording, Decay, DecayRun)
+    one = isinstance(value, str | os.PathLike | pd.DataFrame | Recording | Decay | DecayRun)
+    items = [value] if one else arguments.several(value, name, SOURCES)
+    given: list[Any] = []
+    for number, item in enumerate(items, start=1):
+        if isinstance(item, pd.DataFrame):
+            given += frame_runs(item, f"{name} DataFrame {number}" if len(items) > 1 else f"{name} DataFrame")
+        else:
+            given.append(item if isinstance(item, read_ones) else arguments.path(item, name, SOURCES))
+    return given
+
+
+#: A DataFrame's angle column (deg) as ``identify`` takes it, and the axis its name says (None: roll).
+FRAME_ANGLES: dict[str, str | None] = {"angle_deg": None, "roll_deg": "roll", "pitch_deg": "pitch"}
+#: Its rate column (deg/s), when it has one.
+FRAME_RATES = ("rate_deg_s", "p_deg_s", "q_deg_s")
+
+
+def frame_runs(table: pd.DataFrame, name: str) -> list[DecayRun]:
+    """The decays of a DataFrame, found as in a CSV of its columns: ``time_s`` (s, from any origin) and
+    the angle in degrees (``angle_deg``, or ``roll_deg``/``pitch_deg`` as ``tankdaq.read`` names them),
+    the rate (``rate_deg_s``, ``p_deg_s``, ``q_deg_s``) when it is there; other numeric columns are kept
+    as channels. A ``Recording``'s ``samples`` or a ``Decay``'s are such tables."""
+    from pandas.api.types import is_numeric_dtype
+
+    from ..ident.inputs import found_decays
+    from ..store.csv_import import ColumnData, CsvOptions, runs_of_columns
+
+    angle = next((column for column in FRAME_ANGLES if column in table.columns), None)
+    if TIME_COLUMN not in table.columns or angle is None:
+        has = ", ".join(map(str, list(table.columns)[:8])) or "no columns"
+        raise InputError(
+            f"{name}: give a DataFrame with columns time_s (s) and angle_deg, roll_deg or pitch_deg (deg), "
+            f"or a file; this one has {has}"
+        )
+    rate = next((column for column in FRAME_RATES if column in table.columns), None)
+    columns = {str(c): table[c].to_numpy(dtype=float) for c in table.columns if is_numeric_dtype(table[c])}
+    options = CsvOptions(TIME_COLUMN, angle, rate, "deg", False, "s")
+    return found_decays(
+        runs_of_columns(Path(name), ColumnData(columns, {}, {}), options, FRAME_ANGLES[angle])
+    )
 
 
 def runs_of(data: Any) -> list[DecayRun] | None:

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .. import validation
-from ..errors import InputError
+from . import arguments
 from .recording import Recording, read
 
 if TYPE_CHECKING:
@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 def simulate(
     out_dir: str | Path = "recordings/simulated",
     *,
-    hull: str = "swath",
+    hull: str | Path = "swath",
     draft: float | str = 1.0,
     axis: str = "roll",
     angle_deg: float = 8.0,
@@ -39,14 +39,20 @@ def simulate(
     >>> (rec,) = tankdaq.simulate("sim", hull="swath", angle_deg=8.0, seed=1)  # doctest: +SKIP
     >>> tankdaq.identify(rec).coefficients  # doctest: +SKIP
     """
-    from ..config import format_draft, hull_scenario, load_hull
+    from ..config import hull_scenario, load_hull
 
-    validation.decay_axis(axis, option="axis")
-    factor = validation.draft_factor(draft if isinstance(draft, str) else format_draft(float(draft)))
-    folder = validation.output_dir(Path(out_dir), option="out_dir")
-    if not 1 <= runs <= 100:
-        raise InputError(f"runs {runs}: give 1 to 100 decays")
-    loaded = load_hull(hull)
+    folder = validation.output_dir(
+        arguments.path(out_dir, "out_dir", "a folder (str or pathlib.Path)"), "out_dir"
+    )
+    hull_name = str(arguments.path(hull, "hull", "a hull's name or a .toml path"))
+    axis = validation.decay_axis(arguments.text(axis, "axis", "roll or pitch"), option="axis")
+    factor = validation.draft_factor(arguments.draft(draft))
+    angle_deg = arguments.number(angle_deg, "angle_deg", unit="degrees")
+    runs = arguments.whole(runs, "runs", 1, 100)
+    rate_hz = arguments.number(rate_hz, "rate_hz", unit="Hz")
+    seed = arguments.whole(seed, "seed", 0, 2**63 - 1)
+    decay_s = arguments.number(decay_s, "decay_s", 1.0, 3600.0, unit="s")
+    loaded = load_hull(hull_name)
     validation.hull_draft(loaded, factor, axis)
     scenario = hull_scenario(
         loaded,

@@ -276,6 +276,11 @@ def runs(
     ``catalogue``: a URL or path (default: as the CLI)."""
     import pandas as pd
 
+    from ..api.arguments import run_filters
+
+    given = {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict, "since": since, "where": where}
+    filters, catalogue, exports = run_filters(given, catalogue, exports)  # by name, before any connection
+    hull, draft, axis, verdict, since, where = filters.values()
     equal = {k: v for k, v in {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict}.items() if v}
     url = resolve_url(catalogue)
     if url is None:

@@ -63,7 +63,11 @@ def __getattr__(name: str) -> Any:
 
 
 def main() -> None:
-    """Console-script entry point: only the module of the command asked for is imported."""
+    """Console-script entry point: only the module of the command asked for is imported; stdout and stderr
+    write what their encoding cannot show as plain text (``cli.plain_text``)."""
+    from .plain_text import install
+
+    install()
     registered_app(sys.argv[1] if len(sys.argv) > 1 else None)()
 
 

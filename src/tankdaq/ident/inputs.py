@@ -63,9 +63,22 @@ def read_decays(
     at its release events. What the reading decided or left out is in each run's ``meta[NOTICES]``
     (``input_notices``)."""
     options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all, time_unit)
+    try:
+        return found_decays(read_runs(path, axis, options), skip_half_cycles)
+    except BadIdentificationInput as exc:
+        if not skip_half_cycles:
+            raise
+        raise BadIdentificationInput(
+            f"{exc} (with {skip_half_cycles} half-cycles skipped: give fewer, --skip-half-cycles)"
+        ) from None
+
+
+def found_decays(runs: Iterable[DecayRun], skip_half_cycles: int = 0) -> list[DecayRun]:
+    """Each run as its reader gave it, or, where the reader left the releases to the data (a CSV's
+    record, ``FIND_RELEASES``), the decays found in it (``split_releases``)."""
     return [
         decay
-        for run in read_runs(path, axis, options)
+        for run in runs
         for decay in (split_releases(run, skip_half_cycles) if run.meta.pop(FIND_RELEASES, False) else [run])
     ]
 
