@@ -19,6 +19,7 @@ import tankdaq
 from tankdaq import validation
 from tankdaq.catalogue.database import (
     PATH_INDEXES,
+    SCHEMA_VERSION,
     decays,
     hulls,
     open_catalogue,
@@ -170,4 +171,4 @@ def test_a_catalogue_of_schema_2_gets_its_path_indexes_when_opened(tmp_path: Pat
         inspector = sa.inspect(connection)
         names = {found["name"] for table in ("decays", "exports") for found in inspector.get_indexes(table)}
         version = connection.execute(sa.select(sa.func.max(schema_version.c.version))).scalar()
-    assert {"ix_decays_path", "ix_exports_source_path"} <= names and version == 3
+    assert {"ix_decays_path", "ix_exports_source_path"} <= names and version == SCHEMA_VERSION

@@ -2,7 +2,7 @@
 
 The catalogue is an index of files, never their only copy: every row can be rebuilt from the files
 (``catalogue.index``). So the schema is migrated by ordered functions recorded in a ``schema_version``
-table (lighter than Alembic for five tables), and a catalogue that cannot be opened is one line
+table (lighter than Alembic for six tables), and a catalogue that cannot be opened is one line
 (``CatalogueError``), never a lost recording.
 """
 
@@ -107,7 +107,7 @@ decays = sa.Table(
     sa.Column("decay_number", sa.Integer),
     sa.Column("verdict", sa.String(16), index=True),
     sa.Column("checks", sa.JSON),  # the reasons a check gave, one line each
-    # the fit (the newest: the live final fit, then identify, campaign or diagnose)
+    # the reference fit (``fits``: every fit is kept; these columns copy the one the lab's number is)
     sa.Column("fit_source", sa.String(16)),
     sa.Column("fit_model", sa.Text),
     sa.Column("coefficients", sa.JSON),  # {term: {"value", "ci_low", "ci_high"}}
@@ -119,6 +119,12 @@ decays = sa.Table(
     sa.Column("code_version", sa.String(32)),
     sa.Column("created_utc", sa.String(40), nullable=False),
     sa.Column("updated_utc", sa.String(40), nullable=False),
+    # version 4: how the decay ended, its reference fit, and a row whose path now holds other bytes
+    sa.Column("ended", sa.String(16)),  # records.DecayEnd; None: not said (a lab's file)
+    sa.Column("fit_method", sa.String(32)),
+    sa.Column("reference_fit_id", sa.Integer),
+    sa.Column("reference_chosen", sa.Boolean),  # True: set by the lab (--set-reference), never by a rule
+    sa.Column("retired_utc", sa.String(40)),  # its path holds other bytes now: kept, never listed
 )
 
 
@@ -136,6 +142,35 @@ exports = sa.Table(
     sa.Column("decay", sa.Integer),  # which of the recording's decays (HDF5: one file per decay)
     sa.Column("created_utc", sa.String(40), nullable=False),
     sa.Column("updated_utc", sa.String(40), nullable=False),
+)
+
+
+#: Every fit of a decay, kept (version 4): what was fitted (the bytes' SHA-256), how (source: the
+#: command; method: the estimator), the model, the numbers, and who, where, when and with which command.
+fits = sa.Table(
+    "fits",
+    metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("decay_id", sa.Integer, nullable=False, index=True),
+    sa.Column("sha256", sa.String(64), nullable=False, index=True),  # the bytes the fit read
+    sa.Column("path", sa.Text, nullable=False),
+    sa.Column("source", sa.String(16), nullable=False),  # catalogue.fits.FitSource
+    sa.Column("method", sa.String(32), nullable=False),  # catalogue.fits.FitMethod
+    sa.Column("model", sa.Text),
+    sa.Column("terms", sa.JSON),
+    sa.Column("model_by_data", sa.Boolean, nullable=False),  # chosen by the data (``auto``), not named
+    sa.Column("coefficients", sa.JSON),
+    sa.Column("natural_period_s", sa.Float),
+    sa.Column("b_eq_per_s", sa.JSON),
+    sa.Column("b44_hat", sa.JSON),
+    sa.Column("r2_angle", sa.Float),
+    sa.Column("warnings", sa.JSON),
+    sa.Column("settings", sa.JSON),
+    sa.Column("software_version", sa.String(32)),
+    sa.Column("host", sa.String(255)),
+    sa.Column("user_name", sa.String(255)),
+    sa.Column("command", sa.Text),
+    sa.Column("created_utc", sa.String(40), nullable=False),
 )
 
 
@@ -161,8 +196,22 @@ def _v3_path_indexes(connection: sa.Connection) -> None:
         index.create(connection, checkfirst=True)
 
 
+def _v4_fits(connection: sa.Connection) -> None:
+    """The ``fits`` table and the decay columns of version 4; each older row's one fit becomes its first
+    kept fit and its reference, and a row of a file without its footer ended ``cut``."""
+    from .fits import migrate_fits
+
+    present = {column["name"] for column in sa.inspect(connection).get_columns("decays")}
+    for column in decays.columns:
+        if column.name not in present:
+            kind = column.type.compile(connection.dialect)
+            connection.exec_driver_sql(f"ALTER TABLE decays ADD COLUMN {column.name} {kind}")
+    fits.create(connection, checkfirst=True)
+    migrate_fits(connection)
+
+
 #: Ordered migrations: index i brings the schema to version i + 1. Append, never edit.
-MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports, _v3_path_indexes]
+MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports, _v3_path_indexes, _v4_fits]
 SCHEMA_VERSION = len(MIGRATIONS)
 
 
