@@ -35,8 +35,9 @@ from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.store.export import export_recording
 
 runner = CliRunner()
-#: What differs between two catalogues of the same files: when each row was written, and its number.
-WHEN = ("id", "created_utc", "updated_utc", "first_seen_utc")
+#: What differs between two catalogues of the same files: when each row was written, its number and its
+#: reference fit's.
+WHEN = ("id", "created_utc", "updated_utc", "first_seen_utc", "reference_fit_id")
 
 
 @pytest.fixture(scope="module")

@@ -19,6 +19,7 @@ import pytest
 import sqlalchemy as sa
 from typer.testing import CliRunner
 
+import tankdaq
 from tankdaq.catalogue.database import decays, fits, metadata, open_catalogue, resolve_url, schema_version
 from tankdaq.catalogue.fits import FitMethod, command_line
 from tankdaq.catalogue.index import index_folder
@@ -93,6 +94,8 @@ def test_a_ga_fit_after_an_output_error_fit_leaves_the_reference_and_both_are_li
         (oe["id"], "output-error", True),
         (ga["id"], "ga", False),
     ]
+    frame = tankdaq.runs(catalogue=empty_url, fits="all")
+    assert list(frame["method"]) == ["output-error", "ga"] and list(frame["reference"]) == [True, False]
     assert ga["host"] and ga["command"] == command_line(sys.argv) and ga["software_version"]
     assert ga["settings"]["method"] == "ga-quick" and oe["settings"]["model_choice"]
 

@@ -11,12 +11,14 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, TypeVar
 
 import sqlalchemy as sa
 
 from ..errors import InputError, TankdaqError
+from ..records import DecayEnd
 
 T = TypeVar("T")
 
@@ -145,6 +147,55 @@ exports = sa.Table(
 )
 
 
+class FitSource(StrEnum):
+    """Which command made a fit."""
+
+    RECORD = "record"  #: the live final fit the recorder stored in the file
+    SESSION = "session"  #: that fit, of a decay a guided session's operator accepted
+    IDENTIFY = "identify"
+    IDENTIFY_JOINT = "identify-joint"  #: a ``--joint`` fit of several conditions, on each one's rows
+    CAMPAIGN = "campaign"  #: a campaign group's joint fit of its repeats
+    DIAGNOSE = "diagnose"
+
+
+class FitMethod(StrEnum):
+    """How a fit was made (the estimator)."""
+
+    OUTPUT_ERROR = "output-error"
+    EQUATION_ERROR = "equation-error"
+    GA = "ga"
+    PSO = "pso"
+    LIVE = "live"  #: the recorder's online fit
+    OTHER = "other"  #: an estimator registered by a user (its name in the fit's settings)
+    UNKNOWN = "unknown"  #: a fit catalogued before fits were kept (schema version 4)
+
+    @classmethod
+    def of_option(cls, method: str) -> FitMethod:
+        """The method ``--method`` names: ``oe``, ``ee``, ``ga``, ``pso`` and the seeds' ``ga-seed000``."""
+        name = method.strip().lower()
+        named = {"oe": cls.OUTPUT_ERROR, "ee": cls.EQUATION_ERROR}
+        if name in named:
+            return named[name]
+        for family in (cls.GA, cls.PSO):
+            if name == family or name.startswith(f"{family}-"):
+                return family
+        return cls.OTHER
+
+
+#: What a decay row copies from its reference fit: fit column -> decay column.
+REFERENCE_COPY = {
+    "source": "fit_source",
+    "method": "fit_method",
+    "model": "fit_model",
+    "coefficients": "coefficients",
+    "natural_period_s": "natural_period_s",
+    "b_eq_per_s": "b_eq_per_s",
+    "b44_hat": "b44_hat",
+    "r2_angle": "r2_angle",
+    "warnings": "warnings",
+}
+
+
 #: Every fit of a decay, kept (version 4): what was fitted (the bytes' SHA-256), how (source: the
 #: command; method: the estimator), the model, the numbers, and who, where, when and with which command.
 fits = sa.Table(
@@ -199,15 +250,35 @@ def _v3_path_indexes(connection: sa.Connection) -> None:
 def _v4_fits(connection: sa.Connection) -> None:
     """The ``fits`` table and the decay columns of version 4; each older row's one fit becomes its first
     kept fit and its reference, and a row of a file without its footer ended ``cut``."""
-    from .fits import migrate_fits
-
     present = {column["name"] for column in sa.inspect(connection).get_columns("decays")}
     for column in decays.columns:
         if column.name not in present:
             kind = column.type.compile(connection.dialect)
             connection.exec_driver_sql(f"ALTER TABLE decays ADD COLUMN {column.name} {kind}")
     fits.create(connection, checkfirst=True)
-    migrate_fits(connection)
+    _migrate_fits(connection)
+
+
+def _migrate_fits(connection: sa.Connection) -> None:
+    """Version 4 over an older catalogue: each row's one fit kept as its first (method unknown) and made
+    its reference; a row of a file without its footer ended ``cut``."""
+    connection.execute(decays.update().where(decays.c.complete.is_(False)).values(ended=DecayEnd.CUT.value))
+    columns = [decays.c.id, decays.c.sha256, decays.c.path, decays.c.updated_utc]
+    columns += [decays.c[column] for column in REFERENCE_COPY.values() if column not in ("fit_method",)]
+    olds = connection.execute(sa.select(*columns).where(decays.c.fit_source.is_not(None))).all()
+    for old in olds:
+        values = {
+            name: getattr(old, column) for name, column in REFERENCE_COPY.items() if column != "fit_method"
+        }
+        values |= {"method": FitMethod.UNKNOWN.value, "model_by_data": False, "created_utc": old.updated_utc}
+        fit_id = connection.execute(
+            fits.insert().values(decay_id=old.id, sha256=old.sha256, path=old.path, **values)
+        ).inserted_primary_key[0]  # type: ignore[index]
+        connection.execute(
+            decays.update()
+            .where(decays.c.id == old.id)
+            .values(reference_fit_id=fit_id, reference_chosen=False, fit_method=FitMethod.UNKNOWN.value)
+        )
 
 
 #: Ordered migrations: index i brings the schema to version i + 1. Append, never edit.
@@ -318,6 +389,13 @@ def _engine(url: str, cache_kb: int | None) -> sa.Engine:
             connection.exec_driver_sql("BEGIN IMMEDIATE")  # the write lock first: no deadlock on upgrade
 
     return engine
+
+
+def utc_now() -> str:
+    """Now, as every catalogue time is written (UTC, ISO 8601, to the millisecond)."""
+    from datetime import UTC, datetime
+
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def migrate(connection: sa.Connection) -> int:

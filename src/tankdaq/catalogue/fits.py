@@ -16,70 +16,30 @@ import shlex
 import socket
 import sys
 from collections.abc import Iterable, Mapping, Sequence
-from enum import StrEnum
 from typing import Any
 
 import sqlalchemy as sa
 
 from .. import __version__
 from ..records import DecayEnd
-from .database import BadCatalogueQuery, Catalogue, decays, fits, in_batches
+from .database import (
+    REFERENCE_COPY,
+    BadCatalogueQuery,
+    Catalogue,
+    FitMethod,
+    FitSource,
+    decays,
+    fits,
+    in_batches,
+    utc_now,
+)
 
-
-class FitSource(StrEnum):
-    """Which command made a fit."""
-
-    RECORD = "record"  #: the live final fit the recorder stored in the file
-    SESSION = "session"  #: that fit, of a decay a guided session's operator accepted
-    IDENTIFY = "identify"
-    IDENTIFY_JOINT = "identify-joint"  #: a ``--joint`` fit of several conditions, on each one's rows
-    CAMPAIGN = "campaign"  #: a campaign group's joint fit of its repeats
-    DIAGNOSE = "diagnose"
-
-
-class FitMethod(StrEnum):
-    """How a fit was made (the estimator)."""
-
-    OUTPUT_ERROR = "output-error"
-    EQUATION_ERROR = "equation-error"
-    GA = "ga"
-    PSO = "pso"
-    LIVE = "live"  #: the recorder's online fit
-    OTHER = "other"  #: an estimator registered by a user (its name in the fit's settings)
-    UNKNOWN = "unknown"  #: a fit catalogued before fits were kept (schema version 4)
-
-    @classmethod
-    def of_option(cls, method: str) -> FitMethod:
-        """The method ``--method`` names: ``oe``, ``ee``, ``ga``, ``pso`` and the seeds' ``ga-seed000``."""
-        name = method.strip().lower()
-        named = {"oe": cls.OUTPUT_ERROR, "ee": cls.EQUATION_ERROR}
-        if name in named:
-            return named[name]
-        for family in (cls.GA, cls.PSO):
-            if name == family or name.startswith(f"{family}-"):
-                return family
-        return cls.OTHER
-
-
-#: What a decay row copies from its reference fit: fit column -> decay column.
-REFERENCE_COPY = {
-    "source": "fit_source",
-    "method": "fit_method",
-    "model": "fit_model",
-    "coefficients": "coefficients",
-    "natural_period_s": "natural_period_s",
-    "b_eq_per_s": "b_eq_per_s",
-    "b44_hat": "b44_hat",
-    "r2_angle": "r2_angle",
-    "warnings": "warnings",
-}
+__all__ = ["FitMethod", "FitSource", "add_fits", "choose_reference", "fits_of", "set_reference"]
 
 
 def provenance() -> dict[str, Any]:
     """Who made a fit, where, with which tankdaq and command (a catalogue URL in it is left out: it may
     hold a password)."""
-    from .rows import utc_now
-
     try:
         user: str | None = getpass.getuser()
     except (OSError, KeyError, ImportError):  # no login name (a container's uid without a passwd entry)
@@ -258,25 +218,3 @@ def fits_of(catalogue: Catalogue, rows: Sequence[Mapping[str, Any]]) -> list[dic
                     entry = dict(fit._mapping) | {"reference": fit.id == row.get("reference_fit_id")}
                     found.append({"decay_path": row["path"], **{k: entry.get(k) for k in FIT_LISTING}})
     return sorted(found, key=lambda f: f["id"])
-
-
-def migrate_fits(connection: sa.Connection) -> None:
-    """Version 4 over an older catalogue: each row's one fit kept as its first (method unknown) and made
-    its reference; a row of a file without its footer ended ``cut``."""
-    connection.execute(decays.update().where(decays.c.complete.is_(False)).values(ended=DecayEnd.CUT.value))
-    columns = [decays.c.id, decays.c.sha256, decays.c.path, decays.c.updated_utc]
-    columns += [decays.c[column] for column in REFERENCE_COPY.values() if column not in ("fit_method",)]
-    olds = connection.execute(sa.select(*columns).where(decays.c.fit_source.is_not(None))).all()
-    for old in olds:
-        values = {
-            name: getattr(old, column) for name, column in REFERENCE_COPY.items() if column != "fit_method"
-        }
-        values |= {"method": FitMethod.UNKNOWN.value, "model_by_data": False, "created_utc": old.updated_utc}
-        fit_id = connection.execute(
-            fits.insert().values(decay_id=old.id, sha256=old.sha256, path=old.path, **values)
-        ).inserted_primary_key[0]  # type: ignore[index]
-        connection.execute(
-            decays.update()
-            .where(decays.c.id == old.id)
-            .values(reference_fit_id=fit_id, reference_chosen=False, fit_method=FitMethod.UNKNOWN.value)
-        )

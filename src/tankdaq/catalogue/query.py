@@ -312,11 +312,14 @@ def runs(
     where: str | None = None,
     catalogue: str | None = None,
     exports: bool = False,
+    fits: str = "reference",
 ) -> pd.DataFrame:
     """The catalogued runs that match, as a pandas DataFrame (one row per decay; coefficients, B_eq
     and B̂44 at 2, 5 and 10 deg as columns; ``exports`` the paths of the files ``tankdaq export`` wrote
     of each, joined by `` | ``). ``exports=True``: one row per exported file instead (``export`` its
     path, ``format``, ``decay``, then its run's condition and ``recording``), as ``runs --exports``.
+    ``fits="all"``: one row per fit kept of the decays that match (``id``, ``reference``, ``method``,
+    ``model``, who and when), as ``runs --fits all``; the default reads each decay's reference fit.
     ``catalogue``: a URL or path (default: as the CLI)."""
     import pandas as pd
 
@@ -324,9 +327,20 @@ def runs(
     url = resolve_url(catalogue)
     if url is None:
         raise BadCatalogueQuery("the catalogue is switched off (none): give a catalogue")
+    if fits not in ("reference", "all"):
+        raise BadCatalogueQuery(f"fits={fits!r}: give reference or all")
     with open_catalogue(url) as opened:
         rows = select_rows(opened, RunQuery(equal, since, None, where), with_exports=True)
+        if fits == "all":
+            return pd.DataFrame(every_fit(opened, rows))
     return pd.DataFrame(export_listing(rows) if exports else [flat(row) for row in rows])
+
+
+def every_fit(catalogue: Catalogue, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Every fit kept of the decays ``rows`` (``fits.fits_of``), flat as ``runs`` shows a row."""
+    from .fits import fits_of
+
+    return [{k: v for k, v in flat(fit).items() if k != "checks"} for fit in fits_of(catalogue, rows)]
 
 
 #: What ``compare`` groups by: the condition a lab compares across campaigns.

@@ -12,7 +12,6 @@ import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +20,8 @@ from ..config import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError
 from ..records import DecayEnd
 from ..store.inputs import INPUT_FORMATS, file_sha256
-from .database import one_line
-from .fits import FitMethod, FitSource, provenance
+from .database import FitMethod, FitSource, one_line, utc_now
+from .fits import provenance
 
 #: The amplitudes B_eq and B̂44 are kept at (deg): what a lab compares across campaigns.
 STANDARD_AMPLITUDES_DEG = (2.0, 5.0, 10.0)
@@ -35,10 +34,6 @@ class FitHow:
     method: FitMethod
     model_by_data: bool = False
     settings: Mapping[str, Any] = field(default_factory=dict)
-
-
-def utc_now() -> str:
-    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def _finite(value: object) -> float | None:

@@ -260,10 +260,9 @@ def _set_reference(fit_id: int, given: str | None) -> None:
 
 def _list_fits(opened: Any, found: list[dict[str, Any]], as_json: bool, as_csv: bool) -> None:
     """``runs --fits all``: every fit kept of the decays ``found``, oldest first."""
-    from ..catalogue.fits import fits_of
-    from ..catalogue.query import flat
+    from ..catalogue.query import every_fit
 
-    listed = [flat(fit) for fit in fits_of(opened, found)]
+    listed = every_fit(opened, found)
     if not as_json and not as_csv:
         say(f"{len(listed)} fit(s) of {len(found)} run(s)")
     _emit(listed, as_json, as_csv, list(FIT_TABLE_COLUMNS))
