@@ -260,3 +260,16 @@ def test_a_decay_stopped_3_s_after_release_says_so_and_runs_campaigns_leave_it_o
     assert done.exit_code == 0, done.output
     campaigned = {f["path"] for f in _table(empty_url, fits) if f["source"] == "campaign"}
     assert campaigned == {str(p.resolve()) for p in whole}
+
+
+def test_a_path_that_now_holds_a_copy_of_another_file_retires_its_row(empty_url: str, tmp_path: Path) -> None:
+    folder = tmp_path / "lab"
+    first, second = write_simulated_campaign(folder, ["swath"], "roll", [1.0], [6.0, 8.0], "csv")
+    _invoke("identify", str(first), "--catalogue", empty_url)
+    _invoke("catalogue", "index", str(folder), "--catalogue", empty_url)
+    first.write_bytes(second.read_bytes())  # the 6-deg file's name now holds the 8-deg decay
+    said = _invoke("catalogue", "index", str(folder), "--catalogue", empty_url)
+    assert "1 row(s) retired" in said
+    listed = json.loads(_invoke("runs", "--json", "--catalogue", empty_url))
+    assert [r["path"] for r in listed] == [str(second.resolve())]  # each decay once, each path once
+    assert len(_table(empty_url, fits)) == 1  # the retired row's fit is kept
