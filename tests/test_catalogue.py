@@ -35,6 +35,7 @@ from tankdaq.catalogue.database import (
     CatalogueError,
     decays,
     exports,
+    fits,
     open_catalogue,
     resolve_url,
     schema_version,
@@ -493,4 +494,7 @@ def test_identify_and_diagnose_by_query_read_what_the_paths_read(
     )
     assert diagnosed.exit_code == 0, diagnosed.output
     (row,) = [r for r in _rows(url) if r["path"] == str(path.resolve())]
-    assert row["fit_source"] == "diagnose" and row["coefficients"]["b1"]["value"] > 0
+    kept = [f for f in _table(url, fits) if f["decay_id"] == row["id"]]
+    assert [f["source"] for f in kept] == ["identify", "identify", "diagnose"]  # every fit kept
+    assert kept[-1]["coefficients"]["b1"]["value"] > 0 and kept[-1]["sha256"] == row["sha256"]
+    assert row["reference_fit_id"] == kept[0]["id"]  # a later fit never replaces the reference

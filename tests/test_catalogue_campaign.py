@@ -19,6 +19,7 @@ import tankdaq
 from tankdaq import validation
 from tankdaq.catalogue.database import (
     PATH_INDEXES,
+    SCHEMA_VERSION,
     decays,
     hulls,
     open_catalogue,
@@ -34,8 +35,9 @@ from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.store.export import export_recording
 
 runner = CliRunner()
-#: What differs between two catalogues of the same files: when each row was written, and its number.
-WHEN = ("id", "created_utc", "updated_utc", "first_seen_utc")
+#: What differs between two catalogues of the same files: when each row was written, its number and its
+#: reference fit's.
+WHEN = ("id", "created_utc", "updated_utc", "first_seen_utc", "reference_fit_id")
 
 
 @pytest.fixture(scope="module")
@@ -170,4 +172,4 @@ def test_a_catalogue_of_schema_2_gets_its_path_indexes_when_opened(tmp_path: Pat
         inspector = sa.inspect(connection)
         names = {found["name"] for table in ("decays", "exports") for found in inspector.get_indexes(table)}
         version = connection.execute(sa.select(sa.func.max(schema_version.c.version))).scalar()
-    assert {"ix_decays_path", "ix_exports_source_path"} <= names and version == 3
+    assert {"ix_decays_path", "ix_exports_source_path"} <= names and version == SCHEMA_VERSION

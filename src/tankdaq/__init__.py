@@ -42,6 +42,7 @@ __all__ = [
     "identify",
     "read",
     "runs",
+    "set_reference",
     "simulate",
 ]
 
@@ -61,6 +62,7 @@ _PUBLIC = {
     "Diagnosis": "api.diagnosis",
     "simulate": "api.workflows",
     "runs": "catalogue.query",
+    "set_reference": "catalogue.fits",
 }
 
 if TYPE_CHECKING:
@@ -72,6 +74,7 @@ if TYPE_CHECKING:
     from .api.identification import Identification, Reading, identify
     from .api.recording import Decay, Recording, read
     from .api.workflows import simulate
+    from .catalogue.fits import set_reference
     from .catalogue.query import runs
 
 

@@ -2,7 +2,7 @@
 
 The catalogue is an index of files, never their only copy: every row can be rebuilt from the files
 (``catalogue.index``). So the schema is migrated by ordered functions recorded in a ``schema_version``
-table (lighter than Alembic for five tables), and a catalogue that cannot be opened is one line
+table (lighter than Alembic for six tables), and a catalogue that cannot be opened is one line
 (``CatalogueError``), never a lost recording.
 """
 
@@ -11,12 +11,14 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, TypeVar
 
 import sqlalchemy as sa
 
 from ..errors import InputError, TankdaqError
+from ..records import DecayEnd
 
 T = TypeVar("T")
 
@@ -107,7 +109,7 @@ decays = sa.Table(
     sa.Column("decay_number", sa.Integer),
     sa.Column("verdict", sa.String(16), index=True),
     sa.Column("checks", sa.JSON),  # the reasons a check gave, one line each
-    # the fit (the newest: the live final fit, then identify, campaign or diagnose)
+    # the reference fit (``fits``: every fit is kept; these columns copy the one the lab's number is)
     sa.Column("fit_source", sa.String(16)),
     sa.Column("fit_model", sa.Text),
     sa.Column("coefficients", sa.JSON),  # {term: {"value", "ci_low", "ci_high"}}
@@ -119,6 +121,12 @@ decays = sa.Table(
     sa.Column("code_version", sa.String(32)),
     sa.Column("created_utc", sa.String(40), nullable=False),
     sa.Column("updated_utc", sa.String(40), nullable=False),
+    # version 4: how the decay ended, its reference fit, and a row whose path now holds other bytes
+    sa.Column("ended", sa.String(16)),  # records.DecayEnd; None: not said (a lab's file)
+    sa.Column("fit_method", sa.String(32)),
+    sa.Column("reference_fit_id", sa.Integer),
+    sa.Column("reference_chosen", sa.Boolean),  # True: set by the lab (--set-reference), never by a rule
+    sa.Column("retired_utc", sa.String(40)),  # its path holds other bytes now: kept, never listed
 )
 
 
@@ -136,6 +144,84 @@ exports = sa.Table(
     sa.Column("decay", sa.Integer),  # which of the recording's decays (HDF5: one file per decay)
     sa.Column("created_utc", sa.String(40), nullable=False),
     sa.Column("updated_utc", sa.String(40), nullable=False),
+)
+
+
+class FitSource(StrEnum):
+    """Which command made a fit."""
+
+    RECORD = "record"  #: the live final fit the recorder stored in the file
+    SESSION = "session"  #: that fit, of a decay a guided session's operator accepted
+    IDENTIFY = "identify"
+    IDENTIFY_JOINT = "identify-joint"  #: a ``--joint`` fit of several conditions, on each one's rows
+    CAMPAIGN = "campaign"  #: a campaign group's joint fit of its repeats
+    DIAGNOSE = "diagnose"
+
+
+class FitMethod(StrEnum):
+    """How a fit was made (the estimator)."""
+
+    OUTPUT_ERROR = "output-error"
+    EQUATION_ERROR = "equation-error"
+    GA = "ga"
+    PSO = "pso"
+    LIVE = "live"  #: the recorder's online fit
+    OTHER = "other"  #: an estimator registered by a user (its name in the fit's settings)
+    UNKNOWN = "unknown"  #: a fit catalogued before fits were kept (schema version 4)
+
+    @classmethod
+    def of_option(cls, method: str) -> FitMethod:
+        """The method ``--method`` names: ``oe``, ``ee``, ``ga``, ``pso`` and the seeds' ``ga-seed000``."""
+        name = method.strip().lower()
+        named = {"oe": cls.OUTPUT_ERROR, "ee": cls.EQUATION_ERROR}
+        if name in named:
+            return named[name]
+        for family in (cls.GA, cls.PSO):
+            if name == family or name.startswith(f"{family}-"):
+                return family
+        return cls.OTHER
+
+
+#: What a decay row copies from its reference fit: fit column -> decay column.
+REFERENCE_COPY = {
+    "source": "fit_source",
+    "method": "fit_method",
+    "model": "fit_model",
+    "coefficients": "coefficients",
+    "natural_period_s": "natural_period_s",
+    "b_eq_per_s": "b_eq_per_s",
+    "b44_hat": "b44_hat",
+    "r2_angle": "r2_angle",
+    "warnings": "warnings",
+}
+
+
+#: Every fit of a decay, kept (version 4): what was fitted (the bytes' SHA-256), how (source: the
+#: command; method: the estimator), the model, the numbers, and who, where, when and with which command.
+fits = sa.Table(
+    "fits",
+    metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("decay_id", sa.Integer, nullable=False, index=True),
+    sa.Column("sha256", sa.String(64), nullable=False, index=True),  # the bytes the fit read
+    sa.Column("path", sa.Text, nullable=False),
+    sa.Column("source", sa.String(16), nullable=False),  # catalogue.fits.FitSource
+    sa.Column("method", sa.String(32), nullable=False),  # catalogue.fits.FitMethod
+    sa.Column("model", sa.Text),
+    sa.Column("terms", sa.JSON),
+    sa.Column("model_by_data", sa.Boolean, nullable=False),  # chosen by the data (``auto``), not named
+    sa.Column("coefficients", sa.JSON),
+    sa.Column("natural_period_s", sa.Float),
+    sa.Column("b_eq_per_s", sa.JSON),
+    sa.Column("b44_hat", sa.JSON),
+    sa.Column("r2_angle", sa.Float),
+    sa.Column("warnings", sa.JSON),
+    sa.Column("settings", sa.JSON),
+    sa.Column("software_version", sa.String(32)),
+    sa.Column("host", sa.String(255)),
+    sa.Column("user_name", sa.String(255)),
+    sa.Column("command", sa.Text),
+    sa.Column("created_utc", sa.String(40), nullable=False),
 )
 
 
@@ -161,8 +247,42 @@ def _v3_path_indexes(connection: sa.Connection) -> None:
         index.create(connection, checkfirst=True)
 
 
+def _v4_fits(connection: sa.Connection) -> None:
+    """The ``fits`` table and the decay columns of version 4; each older row's one fit becomes its first
+    kept fit and its reference, and a row of a file without its footer ended ``cut``."""
+    present = {column["name"] for column in sa.inspect(connection).get_columns("decays")}
+    for column in decays.columns:
+        if column.name not in present:
+            kind = column.type.compile(connection.dialect)
+            connection.exec_driver_sql(f"ALTER TABLE decays ADD COLUMN {column.name} {kind}")
+    fits.create(connection, checkfirst=True)
+    _migrate_fits(connection)
+
+
+def _migrate_fits(connection: sa.Connection) -> None:
+    """Version 4 over an older catalogue: each row's one fit kept as its first (method unknown) and made
+    its reference; a row of a file without its footer ended ``cut``."""
+    connection.execute(decays.update().where(decays.c.complete.is_(False)).values(ended=DecayEnd.CUT.value))
+    columns = [decays.c.id, decays.c.sha256, decays.c.path, decays.c.updated_utc]
+    columns += [decays.c[column] for column in REFERENCE_COPY.values() if column not in ("fit_method",)]
+    olds = connection.execute(sa.select(*columns).where(decays.c.fit_source.is_not(None))).all()
+    for old in olds:
+        values = {
+            name: getattr(old, column) for name, column in REFERENCE_COPY.items() if column != "fit_method"
+        }
+        values |= {"method": FitMethod.UNKNOWN.value, "model_by_data": False, "created_utc": old.updated_utc}
+        fit_id = connection.execute(
+            fits.insert().values(decay_id=old.id, sha256=old.sha256, path=old.path, **values)
+        ).inserted_primary_key[0]  # type: ignore[index]
+        connection.execute(
+            decays.update()
+            .where(decays.c.id == old.id)
+            .values(reference_fit_id=fit_id, reference_chosen=False, fit_method=FitMethod.UNKNOWN.value)
+        )
+
+
 #: Ordered migrations: index i brings the schema to version i + 1. Append, never edit.
-MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports, _v3_path_indexes]
+MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports, _v3_path_indexes, _v4_fits]
 SCHEMA_VERSION = len(MIGRATIONS)
 
 
@@ -269,6 +389,13 @@ def _engine(url: str, cache_kb: int | None) -> sa.Engine:
             connection.exec_driver_sql("BEGIN IMMEDIATE")  # the write lock first: no deadlock on upgrade
 
     return engine
+
+
+def utc_now() -> str:
+    """Now, as every catalogue time is written (UTC, ISO 8601, to the millisecond)."""
+    from datetime import UTC, datetime
+
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
 
 
 def migrate(connection: sa.Connection) -> int:

@@ -54,7 +54,9 @@ class CatalogueWriter:
         self._thread: threading.Thread | None = None
         self._catalogue: Catalogue | None = None
         self._closing = False
-        self._campaign: list[tuple[list[Path], dict[str, Any]]] = []  # fits not yet handed to the thread
+        self._campaign: list[
+            tuple[list[tuple[Path, str | None]], dict[str, Any]]
+        ] = []  # fits not yet handed to the thread
         self._rows: list[Made] = []  # rows made by a campaign's workers, not yet handed to the thread
 
     @classmethod
@@ -129,11 +131,13 @@ class CatalogueWriter:
         for path in paths:
             self.submit(functools.partial(add_file, path=path))
 
-    def add_fit(self, paths: Iterable[Path], fields: dict[str, Any]) -> None:
+    def add_fit(self, files: Iterable[tuple[Path, str | None]], fit: dict[str, Any]) -> None:
+        """Keep ``fit`` on the rows of the bytes it read: each file with the SHA-256 of what was read
+        (``writing.run_files``)."""
         from .writing import update_fit
 
-        listed = list(paths)
-        self.submit(lambda catalogue: update_fit(catalogue, listed, fields))
+        listed = list(files)
+        self.submit(lambda catalogue: update_fit(catalogue, listed, fit))
 
     def add_session(self, folder: Path, only: str | None = None) -> None:
         from .writing import record_session

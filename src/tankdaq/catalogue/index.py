@@ -36,10 +36,13 @@ class IndexReport:
     skipped: list[str] = field(default_factory=list)  # one line each: the file and why
     sessions: int = 0
     exports: int = 0  # of those added, files exported from a recording
+    retired: list[Path] = field(default_factory=list)  # rows of bytes their path no longer holds
 
     @property
     def line(self) -> str:
         exported = f"; {self.exports} of those added are exports of a recording" if self.exports else ""
+        if self.retired:
+            exported += f"; {len(self.retired)} row(s) retired: their path holds other bytes now"
         return (
             f"{len(self.added)} added, {len(self.moved)} moved, {len(self.unchanged)} unchanged, "
             f"{len(self.skipped)} skipped, {self.sessions} session(s){exported}"
@@ -54,11 +57,15 @@ def index_folder(
     files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in DECAY_SUFFIXES and p.is_file())
     files.sort(key=lambda p: p.suffix.lower() != ".mcap")  # recordings first: exports find their rows
     hashes = {path: file_sha256(path) for path in files}
-    known = _known_paths(catalogue, list(hashes.values()))
+    known, retired = _known_paths(catalogue, list(hashes.values()))
     pending: list[Made] = []  # new decay rows, written INDEX_BATCH to a transaction
     for path, sha in hashes.items():
         where = known.get(sha)
-        if where is not None and (where[0] == str(path.resolve()) or Path(where[0]).is_file()):
+        if sha in retired:  # bytes whose row was retired, seen again: the row comes back, here
+            _move(catalogue, decays, sha, path)
+            retired.discard(sha)
+            report.moved.append(path)
+        elif where is not None and (where[0] == str(path.resolve()) or Path(where[0]).is_file()):
             report.unchanged.append(path)  # seen here before, or a copy of a file still in its place
         elif where is not None:
             _move(catalogue, where[1], sha, path)
@@ -78,6 +85,7 @@ def index_folder(
         if progress is not None:
             progress(path)
     _flush(catalogue, pending)
+    report.retired = retire_stale(catalogue, hashes)
     for log in sorted(folder.rglob("session.jsonl")):
         report.sessions += bool(record_session(catalogue, log.parent))
     return report
@@ -101,17 +109,22 @@ def _flush(catalogue: Catalogue, pending: list[Made]) -> None:
         pending.clear()
 
 
-def _known_paths(catalogue: Catalogue, hashes: list[str]) -> dict[str, tuple[str, sa.Table]]:
-    """Where each hash already catalogued is, and in which table."""
+def _known_paths(catalogue: Catalogue, hashes: list[str]) -> tuple[dict[str, tuple[str, sa.Table]], set[str]]:
+    """Where each hash already catalogued is, and in which table; and the decays' retired ones."""
     found: dict[str, tuple[str, sa.Table]] = {}
+    retired: set[str] = set()
     with catalogue.reading() as connection:
         for table in (decays, exports):
+            gone = table.c.retired_utc.is_not(None) if table is decays else sa.false()
             for batch in in_batches(hashes):
                 rows = connection.execute(
-                    sa.select(table.c.sha256, table.c.path).where(table.c.sha256.in_(batch))
+                    sa.select(table.c.sha256, table.c.path, gone).where(table.c.sha256.in_(batch))
                 )
-                found.update({sha: (path, table) for sha, path in rows})
-    return found
+                for sha, path, is_retired in rows:
+                    found[sha] = (path, table)
+                    if is_retired:
+                        retired.add(sha)
+    return found, retired
 
 
 def _move(catalogue: Catalogue, table: sa.Table, sha: str, path: Path) -> None:
@@ -121,3 +134,24 @@ def _move(catalogue: Catalogue, table: sa.Table, sha: str, path: Path) -> None:
             .where(table.c.sha256 == sha)
             .values(path=str(path.resolve()), size_bytes=path.stat().st_size, updated_utc=utc_now())
         )
+        if table is decays:
+            connection.execute(decays.update().where(decays.c.sha256 == sha).values(retired_utc=None))
+
+
+def retire_stale(catalogue: Catalogue, hashes: dict[Path, str]) -> list[Path]:
+    """Retire the rows at these paths that hold other bytes than the files there now (replaced by a
+    copy of a file catalogued elsewhere): a path lists one row, the retired one keeps its fits."""
+    by_path = {str(path.resolve()): sha for path, sha in hashes.items()}
+    stale: list[tuple[int, str]] = []
+    with catalogue.reading() as connection:
+        for batch in in_batches(list(by_path)):
+            statement = sa.select(decays.c.id, decays.c.path, decays.c.sha256)
+            statement = statement.where(decays.c.path.in_(batch), decays.c.retired_utc.is_(None))
+            stale += [
+                (row.id, row.path) for row in connection.execute(statement) if row.sha256 != by_path[row.path]
+            ]
+    if stale:
+        with catalogue.engine.begin() as connection:
+            ids = [found for found, _ in stale]
+            connection.execute(decays.update().where(decays.c.id.in_(ids)).values(retired_utc=utc_now()))
+    return [Path(path) for _, path in stale]

@@ -17,6 +17,7 @@ import sqlalchemy as sa
 
 from ..config import format_draft, parse_draft
 from ..errors import InputError
+from ..records import DecayEnd
 from .database import BadCatalogueQuery, Catalogue, decays, exports, in_batches, open_catalogue, resolve_url
 from .rows import STANDARD_AMPLITUDES_DEG
 
@@ -39,6 +40,8 @@ FIELDS: dict[str, sa.Column[Any]] = {
     "verdict": decays.c.verdict,
     "model": decays.c.fit_model,
     "source": decays.c.fit_source,
+    "method": decays.c.fit_method,
+    "ended": decays.c.ended,
     "period": decays.c.natural_period_s,
     "r2": decays.c.r2_angle,
     "complete": decays.c.complete,
@@ -76,7 +79,8 @@ class RunQuery:
     def conditions(self) -> list[sa.ColumnElement[bool]]:
         equal = dict(self.equal)
         verdict = equal.pop("verdict", None)
-        found = [FIELDS[name] == _value(name, value) for name, value in equal.items()]
+        found = ended_conditions(equal.pop("ended", None))
+        found += [FIELDS[name] == _value(name, value) for name, value in equal.items()]
         if verdict is None:  # a rejected decay is listed only when asked for: the lab's list is the kept
             found.append(sa.or_(decays.c.verdict.is_(None), decays.c.verdict != "rejected"))
         elif verdict != "any":
@@ -88,6 +92,38 @@ class RunQuery:
         if self.until:
             found.append(decays.c.recorded_utc < _date(self.until))
         return found + (parse_where(self.where) if self.where else [])
+
+
+#: ``ended=whole``: the decays whose file holds all of the decay (``records.DecayEnd.whole``, or not
+#: said: a lab's own file); ``ended=any``: every one.
+WHOLE, ANY = "whole", "any"
+
+
+def ended_conditions(ended: str | None) -> list[sa.ColumnElement[bool]]:
+    """A row is listed once, where its path holds its bytes (never a retired one); ``ended``: how its
+    decay ended (a ``DecayEnd`` value, ``whole`` or ``any``; None: any)."""
+    found: list[sa.ColumnElement[bool]] = [decays.c.retired_utc.is_(None)]
+    if ended is None or ended == ANY:
+        return found
+    if ended == WHOLE:
+        whole = [end.value for end in DecayEnd if end.whole]
+        return [
+            *found,
+            decays.c.complete.is_(True),
+            sa.or_(decays.c.ended.is_(None), decays.c.ended.in_(whole)),
+        ]
+    if ended not in {end.value for end in DecayEnd}:
+        known = ", ".join([*(end.value for end in DecayEnd), WHOLE, ANY])
+        raise BadCatalogueQuery(f"ended={ended!r}: give one of {known}")
+    return [*found, decays.c.ended == ended]
+
+
+def whole_unless_asked(query: RunQuery) -> RunQuery:
+    """``query`` over the decays that ended whole, unless it names ``ended`` itself (``ended=any``):
+    a stopped, cut or recovered decay's fit never stands for its condition by default."""
+    if "ended" in query.equal:
+        return query
+    return RunQuery({**query.equal, "ended": WHOLE}, query.since, query.until, query.where)
 
 
 def _date(text: str) -> str:
@@ -227,7 +263,8 @@ def _decoded(row: dict[str, Any]) -> dict[str, Any]:
 
 def flat(row: dict[str, Any]) -> dict[str, Any]:
     """One row as a table shows it: coefficients as columns, B_eq and B̂44 per standard amplitude."""
-    out = {k: v for k, v in row.items() if k not in ("coefficients", "b_eq_per_s", "b44_hat")}
+    hidden = ("coefficients", "b_eq_per_s", "b44_hat", "retired_utc")
+    out = {k: v for k, v in row.items() if k not in hidden}
     for term, entry in (row.get("coefficients") or {}).items():
         out[term] = entry.get("value")
         out[f"{term}_ci_low"] = entry.get("ci_low")
@@ -252,10 +289,17 @@ def paths_for(text: str, catalogue_url: str | None = None) -> list[Path]:
     query = parse_runs(text)
     with open_catalogue(url) as catalogue:
         complete = {**query.equal, "complete": "true"}
-        rows = select_rows(catalogue, RunQuery(complete, query.since, query.until))
+        rows = select_rows(catalogue, whole_unless_asked(RunQuery(complete, query.since, query.until)))
+        partial = (
+            []
+            if "ended" in query.equal
+            else select_rows(catalogue, RunQuery(complete, query.since, query.until))
+        )
     paths = [Path(row["path"]) for row in rows if Path(row["path"]).is_file()]
+    left_out = len(partial) - len(rows)
+    said = f" ({left_out} that did not end whole left out: add ended=any)" if left_out > 0 else ""
     if not paths:
-        raise BadCatalogueQuery(f"--runs {text!r}: no complete recording in the catalogue matches")
+        raise BadCatalogueQuery(f"--runs {text!r}: no complete recording in the catalogue matches{said}")
     return paths
 
 
@@ -268,11 +312,14 @@ def runs(
     where: str | None = None,
     catalogue: str | None = None,
     exports: bool = False,
+    fits: str = "reference",
 ) -> pd.DataFrame:
     """The catalogued runs that match, as a pandas DataFrame (one row per decay; coefficients, B_eq
     and B̂44 at 2, 5 and 10 deg as columns; ``exports`` the paths of the files ``tankdaq export`` wrote
     of each, joined by `` | ``). ``exports=True``: one row per exported file instead (``export`` its
     path, ``format``, ``decay``, then its run's condition and ``recording``), as ``runs --exports``.
+    ``fits="all"``: one row per fit kept of the decays that match (``id``, ``reference``, ``method``,
+    ``model``, who and when), as ``runs --fits all``; the default reads each decay's reference fit.
     ``catalogue``: a URL or path (default: as the CLI)."""
     import pandas as pd
 
@@ -285,9 +332,20 @@ def runs(
     url = resolve_url(catalogue)
     if url is None:
         raise BadCatalogueQuery("the catalogue is switched off (none): give a catalogue")
+    if fits not in ("reference", "all"):
+        raise BadCatalogueQuery(f"fits={fits!r}: give reference or all")
     with open_catalogue(url) as opened:
         rows = select_rows(opened, RunQuery(equal, since, None, where), with_exports=True)
+        if fits == "all":
+            return pd.DataFrame(every_fit(opened, rows))
     return pd.DataFrame(export_listing(rows) if exports else [flat(row) for row in rows])
+
+
+def every_fit(catalogue: Catalogue, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Every fit kept of the decays ``rows`` (``fits.fits_of``), flat as ``runs`` shows a row."""
+    from .fits import fits_of
+
+    return [{k: v for k, v in flat(fit).items() if k != "checks"} for fit in fits_of(catalogue, rows)]
 
 
 #: What ``compare`` groups by: the condition a lab compares across campaigns.
@@ -299,7 +357,7 @@ def selection(catalogue: Catalogue, text: str) -> list[dict[str, Any]]:
     """One side of ``runs --compare``: a session id (or its first characters), a session folder, a
     plan name, or a ``--runs`` query."""
     if "=" in text:
-        return select_rows(catalogue, parse_runs(text))
+        return select_rows(catalogue, whole_unless_asked(parse_runs(text)))
     folder = Path(text)
     if (folder / "session.jsonl").is_file():
         from .writing import session_id
@@ -307,7 +365,7 @@ def selection(catalogue: Catalogue, text: str) -> list[dict[str, Any]]:
         text = session_id(folder / "session.jsonl")
     statement = sa.select(decays).where(
         sa.or_(decays.c.session_id.startswith(text, autoescape=True), decays.c.plan == text),
-        *RunQuery().conditions(),  # the decays kept, as ``runs`` lists them
+        *whole_unless_asked(RunQuery()).conditions(),  # the decays kept, that ended whole
     )
     with catalogue.reading() as connection:
         rows = [_decoded(dict(row._mapping)) for row in connection.execute(statement)]

@@ -11,22 +11,29 @@ import hashlib
 import json
 import math
 from collections.abc import Mapping, Sequence
-from datetime import UTC, datetime
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from .. import __version__
 from ..config import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError
+from ..records import DecayEnd
 from ..store.inputs import INPUT_FORMATS, file_sha256
-from .database import one_line
+from .database import FitMethod, FitSource, one_line, utc_now
+from .fits import provenance
 
 #: The amplitudes B_eq and B̂44 are kept at (deg): what a lab compares across campaigns.
 STANDARD_AMPLITUDES_DEG = (2.0, 5.0, 10.0)
 
 
-def utc_now() -> str:
-    return datetime.now(UTC).isoformat(timespec="milliseconds")
+@dataclass(frozen=True)
+class FitHow:
+    """How a fit was made: its method, whether the data chose its model (``auto``), its settings."""
+
+    method: FitMethod
+    model_by_data: bool = False
+    settings: Mapping[str, Any] = field(default_factory=dict)
 
 
 def _finite(value: object) -> float | None:
@@ -75,19 +82,22 @@ def find_hull(name: str | None) -> Hull | None:
 
 
 def fit_fields(
-    source: str,
+    source: FitSource,
     coefficients: Mapping[str, float],
     ci95: Mapping[str, Sequence[float]] | None = None,
     r2_angle: float | None = None,
     warnings: Sequence[str] = (),
     condition: tuple[Hull | None, str | None, str | None] = (None, None, None),
     model: str | None = None,
+    how: FitHow | None = None,
 ) -> dict[str, Any]:
-    """A fit's columns: coefficients with their 95 % intervals, period, B_eq (and B̂44 for roll, where
-    the hull gives beam and displacement) at ``STANDARD_AMPLITUDES_DEG``, and the axis fitted.
+    """A fit as the catalogue keeps it (``fits``): coefficients with their 95 % intervals, period, B_eq
+    (and B̂44 for roll, where the hull gives beam and displacement) at ``STANDARD_AMPLITUDES_DEG``, how
+    it was made and by whom (``fits.provenance``); ``axis``: the axis fitted, for its decay's row.
     ``condition``: hull, draft, axis."""
     from ..ident.derived import b_eq, natural_period
 
+    how = how or FitHow(FitMethod.UNKNOWN)
     values = {term: float(value) for term, value in coefficients.items()}
     table: dict[str, dict[str, float | None]] = {}
     for term, value in values.items():
@@ -95,16 +105,20 @@ def fit_fields(
         table[term] = {"value": value, "ci_low": _finite(low), "ci_high": _finite(high)}
     b_eqs = {f"{a:g}": _finite(b_eq(values, math.radians(a))) for a in STANDARD_AMPLITUDES_DEG}
     return {
-        "fit_source": source,
-        "fit_model": model or ",".join(values),
+        "source": source.value,
+        "method": how.method.value,
+        "model": model or ",".join(values),
+        "terms": list(values),
+        "model_by_data": how.model_by_data,
         "coefficients": table,
         "natural_period_s": _finite(natural_period(values)),
         "b_eq_per_s": b_eqs,
         "b44_hat": _b44_hat(values, b_eqs, condition),
         "r2_angle": _finite(r2_angle),
         "warnings": list(warnings),
-        "updated_utc": utc_now(),
-    } | ({"axis": condition[2]} if condition[2] else {})
+        "settings": dict(how.settings),
+        "axis": condition[2],
+    } | provenance()
 
 
 def _b44_hat(
@@ -158,6 +172,7 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
         "release_angle_deg": _release_angle(meta, recording.events),
         "device_id": meta.get("device_id"),
         "firmware": meta.get("firmware"),
+        "ended": ended_of(meta, recording.complete),
         "code_version": meta.get("software_version") or __version__,
         "created_utc": now,
         "updated_utc": now,
@@ -169,8 +184,26 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
         ci95 = {term: pair for term, pair in (last.get("ci95") or {}).items() if isinstance(pair, list)}
         warnings = json.loads(meta.get("warnings", "[]") or "[]")
         condition = (hull, row["draft"], row["axis"])
-        row |= fit_fields("record", last["coefficients"], ci95, last.get("r2"), warnings, condition)
+        how = FitHow(FitMethod.LIVE, settings={"fit": "the recorder's final fit, stored in the file"})
+        fit = fit_fields(
+            FitSource.RECORD, last["coefficients"], ci95, last.get("r2"), warnings, condition, how=how
+        )
+        made = {"software_version": row["code_version"], "host": meta.get("host"), "user_name": None}
+        row["fit"] = fit | made | {"command": None, "created_utc": row["recorded_utc"] or now}
     return row, version
+
+
+def ended_of(meta: Mapping[str, Any], complete: bool) -> str | None:
+    """How a recording's decay ended (``records.DecayEnd``): ``cut`` without its footer, else its
+    ``ended`` metadata, else what an older file's ``settle_reason`` says; None when it says nothing."""
+    if not complete:
+        return DecayEnd.CUT.value
+    ended = meta.get("ended")
+    try:
+        found = DecayEnd(str(ended)) if ended else DecayEnd.of_settle_reason(meta.get("settle_reason"))
+    except ValueError:
+        found = DecayEnd.of_settle_reason(ended)
+    return None if found is None else found.value
 
 
 #: The files ``index`` and the hooks catalogue, by suffix: those tankdaq reads decays from
@@ -299,6 +332,7 @@ def bare_row(path: Path) -> dict[str, Any]:
         "path": str(path.resolve()),
         "size_bytes": path.stat().st_size,
         "complete": False,
+        "ended": DecayEnd.CUT.value,
         "code_version": __version__,
         "created_utc": now,
         "updated_utc": now,

@@ -14,9 +14,12 @@ import sqlalchemy as sa
 
 from ..config import Hull
 from ..errors import RecordingError
-from .database import Catalogue, decays, exports, hulls, in_batches, sessions
+from ..store.inputs import file_sha256
+from .database import Catalogue, CatalogueError, decays, exports, hulls, in_batches, sessions
+from .fits import FitMethod, FitSource, add_fits, choose_reference, provenance
 from .rows import (
     DECAY_SUFFIXES,
+    FitHow,
     bare_row,
     decay_row,
     export_metadata,
@@ -28,7 +31,7 @@ from .rows import (
 
 #: What a file seen again (moved, re-indexed, recovered) changes in its row: where it is, not what was
 #: said about it (verdicts, later fits, the hull version it was recorded with).
-LOCATION_COLUMNS = ("path", "size_bytes", "complete", "updated_utc")
+LOCATION_COLUMNS = ("path", "size_bytes", "complete", "ended", "updated_utc")
 
 
 def _insert(connection: sa.Connection, table: sa.Table) -> Any:
@@ -43,11 +46,16 @@ def _insert(connection: sa.Connection, table: sa.Table) -> Any:
 
 
 def upsert_rows(connection: sa.Connection, rows: Sequence[Mapping[str, Any]], update: Iterable[str]) -> None:
-    """Insert decay rows; a hash already there gets only the ``update`` columns. Rows with the same
-    columns go as one statement with many parameter sets (compiled once, cached)."""
-    wanted = tuple(update)
+    """Insert decay rows; a hash already there gets only the ``update`` columns. A new hash at a path
+    whose row holds other bytes takes that row (``_take_paths``); the fit a row carries (``fit``: the
+    one stored in its file) is kept (``fits.add_fits``). Rows with the same columns go as one statement
+    with many parameter sets (compiled once, cached)."""
+    wanted = tuple(update) + (("retired_utc",) if "path" in update else ())
+    carried = {row["sha256"]: row["fit"] for row in rows if row.get("fit")}
+    plain = [{k: v for k, v in row.items() if k != "fit"} | {"retired_utc": None} for row in rows]
+    plain, replaced = _take_paths(connection, plain)
     shapes: dict[tuple[str, ...], list[Mapping[str, Any]]] = {}
-    for row in rows:
+    for row in plain:
         shapes.setdefault(tuple(sorted(row)), []).append(row)
     for columns, group in shapes.items():
         statement = _insert(connection, decays)
@@ -58,6 +66,83 @@ def upsert_rows(connection: sa.Connection, rows: Sequence[Mapping[str, Any]], up
             else statement.on_conflict_do_nothing(index_elements=["sha256"])
         )
         connection.execute(upsert, [dict(row) for row in group])
+    _retire_others(connection, [*plain, *replaced])
+    _keep_fits(connection, carried, [row["sha256"] for row in replaced])
+
+
+def _take_paths(
+    connection: sa.Connection, rows: list[dict[str, Any]]
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """Rows of new bytes at a path whose (live) row holds other bytes: that row is given these bytes
+    (a file replaced under its name; a recording catalogued while it was written, now closed), so a
+    path has one row. A row that describes bytes the path no longer holds (read before the file grew,
+    or cut where a complete row is there) is dropped. Returns (rows to upsert, rows that replaced)."""
+    known = _found(connection, decays.c.sha256, [row["sha256"] for row in rows])
+    new = [row for row in rows if row["sha256"] not in known]
+    live = _found(connection, decays.c.path, [row["path"] for row in new], live=True)
+    keep, replaced = [], []
+    for row in rows:
+        old = live.get(row["path"]) if row["sha256"] not in known else None
+        if old is None:
+            keep.append(row)
+        elif not _stale(row, old):
+            fresh = {k: v for k, v in row.items() if k not in ("created_utc", "retired_utc")}
+            connection.execute(decays.update().where(decays.c.id == old.id).values(**fresh, retired_utc=None))
+            replaced.append(row)
+    return keep, replaced
+
+
+def _found(connection: sa.Connection, column: Any, values: list[Any], live: bool = False) -> dict[Any, Any]:
+    """The rows whose ``column`` is one of ``values``, by that value (``live``: rows not retired)."""
+    found: dict[Any, Any] = {}
+    for batch in in_batches(values):
+        statement = sa.select(decays.c.id, decays.c.sha256, decays.c.path, decays.c.complete)
+        statement = statement.where(column.in_(batch))
+        if live:
+            statement = statement.where(decays.c.retired_utc.is_(None))
+        found |= {getattr(row, column.name): row for row in connection.execute(statement)}
+    return found
+
+
+def _stale(row: Mapping[str, Any], old: Any) -> bool:
+    """A row made of bytes its path no longer holds: a provisional row arriving after the complete one,
+    or a file whose size has changed since it was read."""
+    if old.complete and not row.get("complete"):
+        return True
+    path = Path(row["path"])
+    return path.is_file() and path.stat().st_size != row.get("size_bytes")
+
+
+def _retire_others(connection: sa.Connection, rows: Sequence[Mapping[str, Any]]) -> None:
+    """A path has one live row: any other row there (of bytes the path no longer holds) is retired —
+    kept with its fits, never listed."""
+    if rows:
+        statement = (
+            decays.update()
+            .where(
+                decays.c.path == sa.bindparam("at"),
+                decays.c.sha256 != sa.bindparam("bytes"),
+                decays.c.retired_utc.is_(None),
+            )
+            .values(retired_utc=utc_now())
+        )
+        connection.execute(statement, [{"at": row["path"], "bytes": row["sha256"]} for row in rows])
+
+
+def _keep_fits(
+    connection: sa.Connection, carried: Mapping[str, Mapping[str, Any]], replaced: list[str]
+) -> None:
+    """The fits rows carried kept on their rows; a replaced row's reference chosen anew (its old
+    bytes' fits are not its bytes')."""
+    rows = _found(connection, decays.c.sha256, [*carried, *replaced])
+    add_fits(connection, [(_decay(rows[sha]), fit) for sha, fit in carried.items() if sha in rows])
+    for sha in replaced:
+        if sha in rows and sha not in carried:
+            choose_reference(connection, rows[sha].id)
+
+
+def _decay(row: Any) -> dict[str, Any]:
+    return {"id": row.id, "sha256": row.sha256, "path": row.path}
 
 
 def _add_hull(connection: sa.Connection, version: Mapping[str, Any] | None) -> None:
@@ -86,7 +171,10 @@ def missing_paths(catalogue: Catalogue, paths: Sequence[Path]) -> list[Path]:
     names = list(resolved)
     with catalogue.reading() as connection:
         for batch in in_batches(names):
-            for (found,) in connection.execute(sa.select(decays.c.path).where(decays.c.path.in_(batch))):
+            statement = sa.select(decays.c.path).where(
+                decays.c.path.in_(batch), decays.c.retired_utc.is_(None)
+            )
+            for (found,) in connection.execute(statement):
                 resolved.pop(found, None)
     return list(resolved.values())
 
@@ -97,11 +185,14 @@ def add_file(
     extra: Mapping[str, Any] | None = None,
     unreadable: bool = False,
     sha256: str | None = None,
+    fit: Mapping[str, Any] | None = None,
 ) -> str:
     """Catalogue one decay file, a recording or a lab's CSV (after the file is closed); returns its
-    hash. ``extra`` columns (a verdict, a session) are written too, on a new row or an existing one. A
+    hash. ``extra`` columns (a verdict, a session) are written too, on a new row or an existing one; a
+    decay a session accepted keeps the fit its file holds as the session's (``FitSource.SESSION``). A
     file that cannot be read raises ``RecordingError``, or with ``unreadable`` gets a bare row (a
-    session's decay cut early). ``sha256``: the file's, when the caller has just hashed it."""
+    session's decay cut early). ``sha256``: the file's, when the caller has just hashed it; ``fit``: a
+    fit of these bytes to keep too."""
     try:
         row, version = decay_row(path, sha256, (extra or {}).get("axis"))
     except RecordingError:
@@ -111,6 +202,14 @@ def add_file(
     row |= dict(extra or {})
     row["updated_utc"] = max(row["updated_utc"], row["created_utc"])  # a fit made before its row was
     add_rows(catalogue, [(row, version)], [*LOCATION_COLUMNS, *(extra or {})])
+    kept = [dict(fit)] if fit is not None else []
+    if row.get("fit") and (extra or {}).get("verdict") == "accepted":
+        kept.append(dict(row["fit"]) | {"source": FitSource.SESSION.value} | provenance())
+    if kept:
+        with catalogue.engine.begin() as connection:
+            found = _found(connection, decays.c.sha256, [row["sha256"]]).get(row["sha256"])
+            if found is not None:  # else dropped: the path holds newer bytes than these
+                add_fits(connection, [(_decay(found), one) for one in kept])
     return str(row["sha256"])
 
 
@@ -128,30 +227,54 @@ def add_export(catalogue: Catalogue, path: Path, metadata: dict[str, Any], sha25
     return str(row["sha256"])
 
 
-def update_fit(catalogue: Catalogue, paths: Sequence[Path], fields: Mapping[str, Any]) -> int:
-    """Give the rows of ``paths`` a fit (identify, campaign, diagnose) in one transaction; a decay file
-    (a recording, a lab's CSV) not catalogued yet is added first. A CSV ``tankdaq export`` wrote is its
-    recording's copy, not a decay of its own: its fit is not written. Returns the rows written."""
-    return update_fits(catalogue, [(paths, fields)])
+#: The files a fit read: each path with the SHA-256 of the bytes read (None: not known).
+Files = Sequence[tuple[Path, str | None]]
 
 
-def update_fits(catalogue: Catalogue, fits: Sequence[tuple[Sequence[Path], Mapping[str, Any]]]) -> int:
-    """``update_fit`` of many fits (a campaign's batch of groups) in one transaction."""
-    missing: list[tuple[Path, Mapping[str, Any]]] = []
+def update_fit(catalogue: Catalogue, files: Files, fit: Mapping[str, Any]) -> int:
+    """Keep a fit (identify, campaign, diagnose) on the rows of the bytes it read, in one transaction
+    (the reference fit changes only by ``fits.rank``); a decay file (a recording, a lab's CSV) not
+    catalogued yet is added first. A CSV ``tankdaq export`` wrote is its recording's copy, not a decay
+    of its own: its fit is not kept. Returns the rows written."""
+    return update_fits(catalogue, [(files, fit)])
+
+
+def update_fits(catalogue: Catalogue, fitted: Sequence[tuple[Files, Mapping[str, Any]]]) -> int:
+    """``update_fit`` of many fits (a campaign's batch of groups) in one transaction. A file whose
+    bytes are no longer the ones read (replaced since) gets no fit: one line names it."""
+    missing: list[tuple[Path, str, Mapping[str, Any]]] = []
+    unknown: list[Path] = []
     written = 0
     with catalogue.engine.begin() as connection:
-        for paths, fields in fits:
-            files = [p.resolve() for p in paths if p.suffix.lower() in DECAY_SUFFIXES and p.is_file()]
-            for path in files:
-                if _exported(path):
-                    continue
-                written += 1
-                statement = decays.update().where(decays.c.path == str(path)).values(**fields)
-                if not connection.execute(statement).rowcount:
-                    missing.append((path, fields))
-    for path, fields in missing:
-        add_file(catalogue, path, fields)
+        for files, fit in fitted:
+            kept = [(p.resolve(), sha) for p, sha in files if p.suffix.lower() in DECAY_SUFFIXES]
+            read = [(path, sha) for path, sha in kept if not _exported(path)]
+            unknown += [path for path, sha in read if sha is None]
+            shas = [sha for _, sha in read if sha is not None]
+            rows = _found(connection, decays.c.sha256, shas)
+            add_fits(connection, [(_decay(rows[sha]), _fit(fit)) for sha in shas if sha in rows])
+            axis = fit.get("axis")
+            if axis and (ids := [rows[sha].id for sha in shas if sha in rows]):
+                connection.execute(decays.update().where(decays.c.id.in_(ids)).values(axis=axis))
+            missing += [(path, sha, fit) for path, sha in read if sha is not None and sha not in rows]
+            written += len(shas)
+    for path, sha, fit in missing:
+        if path.is_file() and file_sha256(path) == sha:
+            add_file(
+                catalogue, path, {"axis": fit["axis"]} if fit.get("axis") else None, sha256=sha, fit=_fit(fit)
+            )
+        else:
+            unknown.append(path)
+    if unknown:
+        names = ", ".join(str(path) for path in unknown[:3]) + (" ..." if len(unknown) > 3 else "")
+        raise CatalogueError(
+            f"{names}: the bytes fitted are no longer in the file; that fit is not catalogued"
+        )
     return written
+
+
+def _fit(fit: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in fit.items() if k != "axis"}
 
 
 def _exported(path: Path) -> bool:
@@ -245,33 +368,52 @@ def _condition(runs: Sequence[Any], hull: Hull | None = None) -> tuple[Hull | No
 
 
 def fit_of_estimator(
-    source: str,
+    source: FitSource,
     fit: Any,
     runs: Sequence[Any],
     warnings: Sequence[str] = (),
     model: str | None = None,
     hull: Hull | None = None,
+    how: FitHow | None = None,
 ) -> dict[str, Any]:
-    """A fitted estimator's columns (``coefficients_``, ``ci95_``, ``r2_angle_`` when it has one) for
-    the condition its runs carry in their metadata (``hull``: theirs, when the caller has it)."""
+    """A fitted estimator's fit (``coefficients_``, ``ci95_``, ``r2_angle_`` when it has one) for
+    the condition its runs carry in their metadata (``hull``: theirs, when the caller has it); ``how``:
+    its method (default: the estimator's own class, output error or equation error)."""
     condition = _condition(runs, hull)
     ci95 = {term: tuple(pair) for term, pair in getattr(fit, "ci95_", {}).items()}
     r2 = getattr(fit, "r2_angle_", None)
-    return fit_fields(source, fit.coefficients_, ci95, r2, warnings, condition, model)
+    how = how or FitHow(_method_of(fit))
+    return fit_fields(source, fit.coefficients_, ci95, r2, warnings, condition, model, how)
 
 
-def run_paths(runs: Sequence[Any]) -> list[Path]:
-    """The files runs were read from (``meta["file"]``), once each."""
-    return [Path(p) for p in dict.fromkeys(str(r.meta["file"]) for r in runs if r.meta.get("file"))]
+def _method_of(estimator: Any) -> FitMethod:
+    from ..ident.equation_error import EquationError
+    from ..ident.output_error import OutputError
+
+    if isinstance(estimator, OutputError):
+        return FitMethod.OUTPUT_ERROR
+    return FitMethod.EQUATION_ERROR if isinstance(estimator, EquationError) else FitMethod.OTHER
 
 
-def campaign_fit(result: Any) -> tuple[list[Path], dict[str, Any]] | None:
-    """A campaign group's fit (``ident.campaign.GroupResult``) as (its files, its columns); None for a
+def run_files(runs: Sequence[Any]) -> list[tuple[Path, str | None]]:
+    """The files runs were read from (``meta["file"]``), once each, with the SHA-256 of the bytes read
+    (``meta["sha256"]``, set by ``store.inputs.read_runs``)."""
+    found = {str(r.meta["file"]): r.meta.get("sha256") for r in runs if r.meta.get("file")}
+    return [(Path(path), sha) for path, sha in found.items()]
+
+
+def campaign_fit(result: Any) -> tuple[list[tuple[Path, str | None]], dict[str, Any]] | None:
+    """A campaign group's fit (``ident.campaign.GroupResult``) as (its files, its fit); None for a
     group that was not fitted. Uses the group's own hull and warnings: nothing is read or found again."""
     if result.fit is None:
         return None
-    fields = fit_of_estimator("campaign", result.fit, result.runs, result.warnings, hull=result.hull)
-    return run_paths(result.runs), fields
+    how = FitHow(
+        _method_of(result.fit), settings={"joint": "the group's repeats together", "runs": len(result.runs)}
+    )
+    fit = fit_of_estimator(
+        FitSource.CAMPAIGN, result.fit, result.runs, result.warnings, hull=result.hull, how=how
+    )
+    return run_files(result.runs), fit
 
 
 def record_fits(catalogue: Catalogue, results: Iterable[Any]) -> int:
@@ -280,12 +422,17 @@ def record_fits(catalogue: Catalogue, results: Iterable[Any]) -> int:
     return update_fits(catalogue, [fit for result in results if (fit := campaign_fit(result)) is not None])
 
 
-def fit_of_summary(source: str, summary: Mapping[str, Any], runs: Sequence[Any]) -> dict[str, Any]:
-    """An identify or diagnose summary's fit (``ident.report.summarize``) as catalogue columns."""
+def fit_of_summary(source: FitSource, summary: Mapping[str, Any], runs: Sequence[Any]) -> dict[str, Any]:
+    """An identify or diagnose summary's fit (``ident.report.summarize``) as the catalogue keeps it:
+    its method, and whether the data chose its model (``summary["model_choice"]`` holds the scores)."""
     condition = _condition(runs)
     table = summary["coefficients"]
     coefficients = {term: entry["value"] for term, entry in table.items()}
     ci95 = {term: tuple(entry["ci95"]) for term, entry in table.items() if entry.get("ci95")}
     model = summary.get("model", {}).get("name")
     warnings = summary.get("warnings", [])
-    return fit_fields(source, coefficients, ci95, summary.get("r2_angle"), warnings, condition, model)
+    choice = summary.get("model_choice") or {}
+    option = str(summary.get("method", ""))
+    settings = {"method": option, "intervals": summary.get("intervals"), "model_choice": choice.get("reason")}
+    how = FitHow(FitMethod.of_option(option), model_by_data="scores" in choice, settings=settings)
+    return fit_fields(source, coefficients, ci95, summary.get("r2_angle"), warnings, condition, model, how)

@@ -29,9 +29,25 @@ TABLE_COLUMNS = (
     ("b_eq_5deg_per_s", "B_eq 5° 1/s"),
     ("b44_hat_5deg", "B̂44 5°"),
     ("r2_angle", "R²"),
+    ("fit_model", "model"),
+    ("fit_method", "method"),
     ("complete", "complete"),
+    ("ended", "ended"),
     ("warnings", "warnings"),
     ("path", "file"),
+)
+#: The table of ``runs --fits all``: one row per fit kept.
+FIT_TABLE_COLUMNS = (
+    ("id", "fit"),
+    ("reference", "reference"),
+    ("decay_path", "file"),
+    ("source", "source"),
+    ("method", "method"),
+    ("model", "model"),
+    ("natural_period_s", "T0 s"),
+    ("r2_angle", "R²"),
+    ("user_name", "user"),
+    ("created_utc", "made"),
 )
 #: The table of ``runs --exports``: one row per exported file.
 EXPORT_TABLE_COLUMNS = (
@@ -102,6 +118,8 @@ def _shown(key: str, value: object) -> object:
         return f"{str(value).count(' | ') + 1} warning(s)"
     if key == "complete":
         return "yes" if value else "CUT"
+    if key == "reference":
+        return "yes" if value else ""
     return value
 
 
@@ -171,12 +189,30 @@ def runs_command(
             "where they are.",
         ),
     ] = False,
+    fits: Annotated[
+        str,
+        typer.Option(
+            "--fits",
+            metavar="reference|all",
+            help="reference: each decay's reference fit (the lab's number); all: one row per fit kept "
+            "of the decays listed (with its id for --set-reference).",
+        ),
+    ] = "reference",
+    set_reference: Annotated[
+        int | None,
+        typer.Option(
+            "--set-reference",
+            metavar="FIT_ID",
+            help="Make this fit (an id of --fits all) its decay's reference fit; says what it replaced.",
+        ),
+    ] = None,
     as_json: JsonOutput = False,
     as_csv: Annotated[bool, typer.Option("--csv", help="CSV on stdout.")] = False,
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
-    """List catalogued decays (one row each, with the paths of their exports), their exported files
-    (--exports), or compare two campaigns per condition."""
+    """List catalogued decays (one row each: the reference fit's numbers, model and method, how the decay
+    ended, the paths of its exports), every fit kept (--fits all), their exported files (--exports), or
+    compare two campaigns per condition (decays that ended whole)."""
     from ..catalogue.query import RunQuery, export_listing, flat, select_rows, selection
     from ..catalogue.query import compare as compare_rows
     from ..errors import InputError
@@ -185,6 +221,11 @@ def runs_command(
         raise InputError("--json and --csv: give one")
     if exports and compare is not None:
         raise InputError("--exports and --compare: give one")
+    if set_reference is not None:
+        _set_reference(set_reference, catalogue)
+        return
+    if fits not in ("reference", "all"):
+        raise InputError(f"--fits {fits!r}: give reference or all")
     equal = {k: v for k, v in {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict}.items() if v}
     query = RunQuery(equal, since, None, where)
     query.conditions()  # a bad filter is one line before the catalogue opens
@@ -194,6 +235,9 @@ def runs_command(
             _emit(table, as_json, as_csv, [(k, k) for k in (table[0] if table else {})])
             return
         found = select_rows(opened, query, with_exports=True)
+        if fits == "all":
+            _list_fits(opened, found, as_json, as_csv)
+            return
     if exports:
         listing = export_listing(found)
         if not as_json and not as_csv:
@@ -205,3 +249,20 @@ def runs_command(
         say(f"{len(rows)} run(s)")
     exported = [("exports", "exports")] if any(row["exports"] for row in rows) else []
     _emit(rows, as_json, as_csv, [*TABLE_COLUMNS[:-1], *exported, TABLE_COLUMNS[-1]])
+
+
+def _set_reference(fit_id: int, given: str | None) -> None:
+    """``runs --set-reference FIT_ID``: the lab's choice of a decay's number (a write)."""
+    from ..catalogue.fits import set_reference
+
+    say(set_reference(fit_id, given))
+
+
+def _list_fits(opened: Any, found: list[dict[str, Any]], as_json: bool, as_csv: bool) -> None:
+    """``runs --fits all``: every fit kept of the decays ``found``, oldest first."""
+    from ..catalogue.query import every_fit
+
+    listed = every_fit(opened, found)
+    if not as_json and not as_csv:
+        say(f"{len(listed)} fit(s) of {len(found)} run(s)")
+    _emit(listed, as_json, as_csv, list(FIT_TABLE_COLUMNS))

@@ -117,9 +117,10 @@ def diagnose_command(
     """
     from ..api.diagnosis import diagnose
     from ..api.identification import Reading, to_json
+    from ..catalogue.fits import FitSource
     from ..catalogue.hooks import CatalogueWriter
     from ..catalogue.query import inputs_or_query
-    from ..catalogue.writing import fit_of_estimator, run_paths
+    from ..catalogue.writing import fit_of_estimator, run_files
 
     if simulation and baseline is not None:
         raise InputError("--baseline does not apply with --simulation: the simulation is the baseline")
@@ -140,7 +141,7 @@ def diagnose_command(
     warnings = getattr(found.estimator, "warnings_", [])  # the decays' final fit onto their rows
     with writer:
         writer.add_fit(
-            run_paths(found.runs), fit_of_estimator("diagnose", found.estimator, found.runs, warnings)
+            run_files(found.runs), fit_of_estimator(FitSource.DIAGNOSE, found.estimator, found.runs, warnings)
         )
     if found.report is not None:
         err_console.print(f"report: {found.report}", markup=False, highlight=False)

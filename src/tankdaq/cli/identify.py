@@ -130,9 +130,10 @@ def _catalogue_fit(writer: CatalogueWriter, fit: ConditionFit) -> None:
     """A fit onto its recordings' catalogue rows: a condition's as ``identify``; a ``--joint`` fit of
     several conditions as ``identify-joint`` (its warnings say it pooled them) on each condition's
     rows, its B̂44 at that condition's draft."""
-    from ..catalogue.writing import fit_of_summary, run_paths
+    from ..catalogue.fits import FitSource
+    from ..catalogue.writing import fit_of_summary, run_files
     from ..ident.conditions import group_conditions
 
-    source = "identify-joint" if fit.pooled else "identify"
+    source = FitSource.IDENTIFY_JOINT if fit.pooled else FitSource.IDENTIFY
     for runs in group_conditions(fit.runs).values() if fit.pooled else [fit.runs]:
-        writer.add_fit(run_paths(runs), fit_of_summary(source, fit.summary, runs))
+        writer.add_fit(run_files(runs), fit_of_summary(source, fit.summary, runs))

@@ -110,7 +110,7 @@ def scan_file(path: Path, start_s: float | None = None, end_s: float | None = No
         return runs
     truncation = next((str(r.meta["truncation"]) for r in runs if r.meta.get("truncation")), None)
     keys = tuple(run_key(run) for run in runs)
-    digest = file_sha256(path)
+    digest = next((str(r.meta["sha256"]) for r in runs if r.meta.get("sha256")), None) or file_sha256(path)
     origin = ExportOrigin.of(runs[0].meta) if runs else None
     notices, cuts = tuple(input_notices(runs)), tuple(cut_lines(runs))
     return FileScan(path, keys, notices, truncation, cuts, digest, origin)

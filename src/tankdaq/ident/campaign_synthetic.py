@@ -6,7 +6,7 @@ recording, held tilt, release and all.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -99,9 +99,10 @@ def write_simulated_recording(
     angle: np.ndarray,
     rate: np.ndarray,
     test: SimulatedTest,
+    extra: Mapping[str, object] | None = None,
 ) -> Path:
     """A tankdaq recording of a simulated decay (a held tilt, the samples, a release event), labelled
-    (hull, axis, draft, nominal angle) in its metadata."""
+    (hull, axis, draft, nominal angle) in its metadata; ``extra``: more run metadata (how it ended)."""
     from ..store.writer import RecordingWriter
 
     hull, axis, draft, angle_deg = labels
@@ -122,6 +123,7 @@ def write_simulated_recording(
         "angle_nominal_deg": angle_deg,
         "sample_rate_hz": test.rate_hz,
         "note": "simulated from configs/hulls",
+        **(extra or {}),
     }
     with RecordingWriter(path, metadata, {"simulated": True, "hull": hull}) as writer:
         writer.write_samples(samples)

@@ -99,8 +99,30 @@ def input_format(path: str | Path) -> InputFormat:
 def read_runs(path: str | Path, axis: str | None = None, csv: CsvOptions = DEFAULT_CSV) -> list[DecayRun]:
     """The runs of one file as stored (a recording's decays from each release event; a CSV as
     ``csv_import.read_csv_file`` reads it). Without ``axis`` a recording is read on the axis it names,
-    a CSV as roll."""
-    return input_format(path).read(Path(path), axis, csv)
+    a CSV as roll. Each run's ``meta["sha256"]`` is the SHA-256 of the bytes read (so a fit is
+    catalogued on the row of those bytes, not of whatever the path holds later); absent when the file
+    changed while it was read."""
+    path = Path(path)
+    reader = input_format(path).read
+    before = _identity(path)
+    try:
+        digest = file_sha256(path) if before is not None else None
+    except OSError:  # unreadable: the reader says so in its own line
+        digest = None
+    runs = reader(path, axis, csv)
+    if digest is not None and _identity(path) == before:
+        for run in runs:
+            run.meta["sha256"] = digest
+    return runs
+
+
+def _identity(path: Path) -> tuple[int, int, int] | None:
+    """What changes when a file's bytes do (size, modification time, inode); None for no file."""
+    try:
+        found = path.stat()
+    except OSError:
+        return None
+    return (found.st_size, found.st_mtime_ns, found.st_ino) if path.is_file() else None
 
 
 def read_twice(
