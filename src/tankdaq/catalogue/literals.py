@@ -97,9 +97,10 @@ def parse_number(name: str, text: str, column_type: sa.types.TypeEngine[Any]) ->
     if not isinstance(column_type, sa.Integer):
         return number
     limit = next(value for kind, value in INTEGER_LIMITS.items() if isinstance(column_type, kind))
-    if abs(number) > limit:
+    whole = int(text) if re.fullmatch(r"\s*[+-]?\d+\s*", text) else number  # exact, not rounded
+    if abs(whole) > limit:
         raise BadCatalogueQuery(f"{name}: {text!r} is out of range (a whole number up to {limit})")
-    return int(text) if re.fullmatch(r"[+-]?\d+", text.strip()) else number
+    return whole
 
 
 def split_clauses(text: str) -> list[str]:

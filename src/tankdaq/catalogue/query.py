@@ -332,7 +332,9 @@ def runs(
     and B̂44 at 2, 5 and 10 deg as columns; ``exports`` the paths of the files ``tankdaq export`` wrote
     of each, joined by `` | ``). ``exports=True``: one row per exported file instead (``export`` its
     path, ``format``, ``decay``, then its run's condition and ``recording``), as ``runs --exports``.
-    ``catalogue``: a URL or path (default: as the CLI)."""
+    ``catalogue``: a URL or path (default: as the CLI), read only. ``since``: a date or time in UTC
+    (``literals.parse_date``). Nothing found because a value is not there: a ``UserWarning`` names
+    those that are; the empty frame keeps the columns (``empty_columns``)."""
     import pandas as pd
 
     equal = {k: v for k, v in {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict}.items() if v}
