@@ -198,3 +198,9 @@ def test_an_empty_result_has_the_documented_columns(catalogue: str) -> None:
     assert {"export", "format", "decay", "recording"} <= set(exported.columns) and exported.empty
     exports_csv = _runs(catalogue, "--since", "2030", "--exports", "--csv").stdout.splitlines()
     assert exports_csv == [",".join(empty_columns(exports=True))]
+
+
+def test_a_value_no_backend_binds_is_one_line_and_recorded_contains_is_text(catalogue: str) -> None:
+    assert "holds a NUL character" in _refused(catalogue, "--where", "plan = trial\x002")
+    assert "not text (UTF-8)" in _refused(catalogue, "--hull", "sw\udcffath")  # undecodable argv bytes
+    assert _listed(catalogue, "--where", "recorded ~ T00:30") == ["swath_T_roll_6deg"]

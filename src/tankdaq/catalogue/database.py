@@ -192,7 +192,9 @@ CONNECT_TIMEOUT_S = 10
 SQLITE_SUFFIXES = (".sqlite", ".sqlite3", ".db")
 SQLITE_HEADER = b"SQLite format 3\x00"
 ELSEWHERE = "give a tankdaq catalogue or a new path"
-OPEN_FAILURES = (sa.exc.SQLAlchemyError, OSError, ImportError, json.JSONDecodeError)
+#: What opening a catalogue may raise besides ``CatalogueError`` (ValueError: a JSON column that does not
+#: parse, a path that is not text).
+OPEN_FAILURES = (sa.exc.SQLAlchemyError, OSError, ImportError, ValueError)
 
 
 def failure(url: str, exc: BaseException) -> CatalogueError:

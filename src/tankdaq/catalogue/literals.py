@@ -103,6 +103,17 @@ def parse_number(name: str, text: str, column_type: sa.types.TypeEngine[Any]) ->
     return whole
 
 
+def checked_text(name: str, text: str) -> str:
+    """``text`` as a value any backend binds: no NUL (PostgreSQL refuses it), no undecodable bytes."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise BadCatalogueQuery(f"{name}: {text!r} holds bytes that are not text (UTF-8)") from None
+    if "\x00" in text:
+        raise BadCatalogueQuery(f"{name}: {text!r} holds a NUL character")
+    return text
+
+
 def split_clauses(text: str) -> list[str]:
     """``--where`` cut at each ``and`` outside quotes; an unclosed quote or too many clauses is one line."""
     clauses, current = [], ""

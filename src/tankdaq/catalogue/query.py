@@ -19,7 +19,7 @@ import sqlalchemy as sa
 from ..config import format_draft, parse_draft
 from ..errors import InputError
 from .database import BadCatalogueQuery, Catalogue, decays, exports, in_batches, read_catalogue, resolve_url
-from .literals import operator_slip, parse_date, parse_number, split_clauses
+from .literals import checked_text, operator_slip, parse_date, parse_number, split_clauses
 from .rows import STANDARD_AMPLITUDES_DEG
 
 if TYPE_CHECKING:
@@ -103,7 +103,7 @@ def _date(text: str) -> str:
 
 def _value(name: str, text: str) -> Any:
     """A value as its column holds it: numbers for numeric columns, drafts written as tankdaq writes."""
-    column = FIELDS[name]
+    column, text = FIELDS[name], checked_text(name, text)
     if name == "draft":
         try:
             return format_draft(parse_draft(text))
@@ -137,7 +137,9 @@ def parse_where(text: str) -> list[sa.ColumnElement[bool]]:
         if name in ("since", "until"):
             raise BadCatalogueQuery("--where: use --since/--until for dates, or recorded >= 2026-03")
         try:
-            found.append(OPERATORS[op](FIELDS[name], _value(name, value)))
+            contains_text = op == "~" and name == "recorded"  # a part of the stored text, not a date
+            bound = checked_text(name, value) if contains_text else _value(name, value)
+            found.append(OPERATORS[op](FIELDS[name], bound))
         except BadCatalogueQuery as exc:
             raise BadCatalogueQuery(f"--where {clause!r}: {exc}") from None
     return found
