@@ -204,3 +204,11 @@ def test_a_value_no_backend_binds_is_one_line_and_recorded_contains_is_text(cata
     assert "holds a NUL character" in _refused(catalogue, "--where", "plan = trial\x002")
     assert "not text (UTF-8)" in _refused(catalogue, "--hull", "sw\udcffath")  # undecodable argv bytes
     assert _listed(catalogue, "--where", "recorded ~ T00:30") == ["swath_T_roll_6deg"]
+
+
+def test_from_python_a_filter_that_is_not_text_is_refused_by_name(catalogue: str, tmp_path: Path) -> None:
+    for given, name in ((dict(since=2026), "date"), (dict(hull=123), "hull"), (dict(where=0.99), "--where")):
+        with pytest.raises(BadCatalogueQuery, match=f"^{name}: give text .* not (int|float)$"):
+            tankdaq.runs(catalogue=catalogue, **given)
+    if catalogue.startswith("sqlite:///"):  # a pathlib.Path is a path
+        assert len(tankdaq.runs(catalogue=Path(catalogue.removeprefix("sqlite:///")))) == 4

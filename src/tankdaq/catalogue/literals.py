@@ -35,10 +35,17 @@ _SLIP = re.compile(r"^\s*([a-z_0-9]+)\s*([=<>!~][=<>!~\s]*[=<>!~]|[=<>!~])(.*)$"
 _TOKEN = re.compile(r"\"[^\"]*\"|'[^']*'|[\"']|\s+and\s+|[^\"'\s]+|\s+", re.IGNORECASE)
 
 
+def _text(name: str, value: object) -> str:
+    """A filter is text (from Python, too: ``since=2026`` is refused by name, not an AttributeError)."""
+    if not isinstance(value, str):
+        raise BadCatalogueQuery(f"{name}: give text such as '2026-03' or 'swath', not {type(value).__name__}")
+    return value
+
+
 def parse_date(text: str) -> tuple[str, str | None]:
     """A date or time as the catalogue compares it (UTC, ISO with a ``T``: a prefix of the stored
     ``recorded_utc``), and a note when a zone or local time was converted (None: taken as UTC)."""
-    found = _DATE.match(text.strip())
+    found = _DATE.match(_text("date", text).strip())
     if not found:
         raise BadCatalogueQuery(f"date {text!r} not understood: {DATE_HELP}")
     parts = {k: v for k, v in found.groupdict().items() if v is not None}
@@ -106,7 +113,7 @@ def parse_number(name: str, text: str, column_type: sa.types.TypeEngine[Any]) ->
 def checked_text(name: str, text: str) -> str:
     """``text`` as a value any backend binds: no NUL (PostgreSQL refuses it), no undecodable bytes."""
     try:
-        text.encode("utf-8")
+        _text(name, text).encode("utf-8")
     except UnicodeEncodeError:
         raise BadCatalogueQuery(f"{name}: {text!r} holds bytes that are not text (UTF-8)") from None
     if "\x00" in text:
@@ -117,7 +124,7 @@ def checked_text(name: str, text: str) -> str:
 def split_clauses(text: str) -> list[str]:
     """``--where`` cut at each ``and`` outside quotes; an unclosed quote or too many clauses is one line."""
     clauses, current = [], ""
-    for token in _TOKEN.findall(text.strip()):
+    for token in _TOKEN.findall(_text("--where", text).strip()):
         if token in ('"', "'"):
             raise BadCatalogueQuery(
                 f'--where {text!r}: a quote {token} is not closed; quote a value whole: plan = "trial 2"'

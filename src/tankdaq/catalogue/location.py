@@ -120,6 +120,10 @@ def resolve_url(given: str | None = None) -> str | None:
     data folder); None when switched off (``none``). A path is a SQLite file (a folder: its own
     ``catalogue.sqlite``); every PostgreSQL form is served by psycopg 3 (``POSTGRES_FORMS``)."""
     value = os.environ.get(ENV_VAR) if given is None else given
+    if isinstance(value, os.PathLike):  # tankdaq.runs(catalogue=Path(...))
+        value = os.fspath(value)
+    if value is not None and not isinstance(value, str):
+        raise BadCatalogueQuery(f"catalogue {type(value).__name__}: {USAGE}")
     if value is not None and value.strip().lower() in OFF:
         return None
     if value is None:
