@@ -9,6 +9,7 @@ SQLite and a real throwaway PostgreSQL server (tests/pg_server.py) where both ap
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import socket
 import sqlite3
@@ -344,3 +345,15 @@ def test_an_unreadable_file_in_index_is_listed_and_the_others_indexed(
         next(line for line in result.stderr.splitlines() if str(bad) in line and "not readable" in line)
     ]
     assert len(tankdaq.runs(catalogue=catalogue_at)) == len(good)
+
+
+def test_a_writers_catalogue_line_hides_the_password_and_the_fit_still_answers(recordings: Path) -> None:
+    decay = sorted(recordings.glob("*.csv"))[0]
+    for url in _url_forms(free_port())[:8]:  # the forms that parse: the writer's thread fails to connect
+        result = _invoke("identify", str(decay), "--model", "b1,c1", "--json", "--catalogue", url)
+        assert result.exit_code == 0, result.output
+        assert json.loads(result.stdout)["coefficients"]["b1"]["value"] > 0
+        said = [line for line in result.stderr.splitlines() if line.startswith("catalogue: ")]
+        assert len(said) == 1, result.stderr
+        assert "lab:***@" in said[0] or "password=***" in said[0], said[0]
+        assert not _shows_a_secret(result.output), url
