@@ -383,6 +383,7 @@ def test_a_campaign_by_query_equals_the_campaign_by_paths(campaign_folder: Path,
 
 
 def test_runs_with_a_query_no_recording_matches_is_one_line(tmp_path: Path) -> None:
+    open_catalogue(_url(tmp_path)).close()  # a read never makes one (tests/test_catalogue_reading.py)
     with pytest.raises(BadCatalogueQuery, match="no complete recording"):
         paths_for("hull=nothing_here", _url(tmp_path))
 

@@ -8,7 +8,7 @@ table (lighter than Alembic for six tables), and a catalogue that cannot be open
 
 from __future__ import annotations
 
-import os
+import json
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
@@ -17,18 +17,16 @@ from typing import Any, TypeVar
 
 import sqlalchemy as sa
 
-from ..errors import InputError, TankdaqError
 from ..records import DecayEnd
+from .location import ENV_VAR as ENV_VAR
+from .location import FILE_NAME as FILE_NAME
+from .location import BadCatalogueQuery as BadCatalogueQuery
+from .location import CatalogueError, NoCatalogue, describe, resolve_url, scrub, sqlite_path
 
 T = TypeVar("T")
 
-#: The environment variable that names the catalogue (a URL, a path, or ``none``).
-ENV_VAR = "TANKDAQ_CATALOGUE"
-#: The default file name, in the user data folder (platformdirs) or in a folder given as a path.
-FILE_NAME = "catalogue.sqlite"
 #: How long a writer waits for another one's lock before giving up (SQLite), in ms.
 BUSY_TIMEOUT_MS = 30_000
-OFF = ("none", "off", "")
 #: The execution option that marks a connection as a reader (``Catalogue.reading``).
 READ_ONLY = "tankdaq_read_only"
 #: How many values one look-up asks for (a bound parameter list, well under every driver's limit).
@@ -39,16 +37,6 @@ def in_batches(values: Sequence[T]) -> Iterator[Sequence[T]]:
     """``values`` in slices of at most ``LOOKUP_BATCH``: one look-up's ``IN`` list each."""
     for start in range(0, len(values), LOOKUP_BATCH):
         yield values[start : start + LOOKUP_BATCH]
-
-
-class CatalogueError(TankdaqError):
-    """The catalogue cannot be opened or written (locked, corrupt, unreachable): the files are unaffected."""
-
-
-class BadCatalogueQuery(CatalogueError, InputError):
-    """A ``--where``, ``--runs`` or filter the catalogue does not understand."""
-
-    exit_code = 2
 
 
 metadata = sa.MetaData()
@@ -286,42 +274,11 @@ MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports, _v
 SCHEMA_VERSION = len(MIGRATIONS)
 
 
-def resolve_url(given: str | None = None) -> str | None:
-    """The catalogue's SQLAlchemy URL from ``--catalogue`` (else ``TANKDAQ_CATALOGUE``, else the user
-    data folder); None when switched off (``none``). A path is a SQLite file (a folder: its own
-    ``catalogue.sqlite``); ``postgresql://`` is served by psycopg 3."""
-    value = os.environ.get(ENV_VAR) if given is None else given
-    if value is not None and value.strip().lower() in OFF:
-        return None
-    if value is None:
-        import platformdirs
-
-        return _sqlite_url(Path(platformdirs.user_data_dir("tankdaq")) / FILE_NAME)
-    value = value.strip()
-    if value.startswith("postgresql://"):
-        return "postgresql+psycopg://" + value.removeprefix("postgresql://")
-    if "://" in value:
-        if not value.startswith(("sqlite://", "postgresql+psycopg://")):
-            raise BadCatalogueQuery(
-                f"catalogue {value!r}: give a path, sqlite:///FILE or postgresql://USER@HOST/DB, or none"
-            )
-        return value
-    path = Path(value).expanduser()
-    return _sqlite_url(path / FILE_NAME if path.is_dir() else path)
-
-
-def _sqlite_url(path: Path) -> str:
-    return f"sqlite:///{path.resolve()}"
-
-
-def describe(url: str) -> str:
-    """The URL as a person reads it (no password)."""
-    return sa.make_url(url).render_as_string(hide_password=True)
-
-
 @dataclass
 class Catalogue:
-    """An open catalogue: ``engine`` and the URL it came from (``open_catalogue``)."""
+    """An open catalogue: ``engine`` and the URL it came from (``open_catalogue``, ``read_catalogue``).
+    A database error inside ``with`` (a damaged page, a JSON column edited by hand) leaves it as one
+    ``CatalogueError`` line."""
 
     url: str
     engine: sa.Engine
@@ -337,48 +294,181 @@ class Catalogue:
     def __enter__(self) -> Catalogue:
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, kind: object, exc: BaseException | None, trace: object) -> None:
         self.close()
+        if isinstance(exc, sa.exc.SQLAlchemyError | json.JSONDecodeError):
+            raise failure(self.url, exc) from None
 
 
 #: SQLite's page cache for a recorder's catalogue writer: it appends a row a decay, so a small cache
 #: costs it nothing, while SQLite's own 2 MB filled over a lab day (+1.5 MB of a recorder's 8-hour
 #: growth, bench_memory_day; the pages stay in the system's file cache).
 WRITER_CACHE_KB = 256
+#: How long a PostgreSQL connection may take to be made, in s (libpq's ``connect_timeout``): a server
+#: that accepts and never answers is one line after this, not a 131 s stall.
+CONNECT_TIMEOUT_S = 10
+#: What an empty existing file may be called for a writer to make it a catalogue (``touch x.sqlite``);
+#: any other empty file (``notes.txt``) is a user's, never turned into a database.
+SQLITE_SUFFIXES = (".sqlite", ".sqlite3", ".db")
+SQLITE_HEADER = b"SQLite format 3\x00"
+ELSEWHERE = "give a tankdaq catalogue or a new path"
+#: What opening a catalogue may raise besides ``CatalogueError`` (ValueError: a JSON column that does not
+#: parse, a path that is not text).
+OPEN_FAILURES = (sa.exc.SQLAlchemyError, OSError, ImportError, ValueError)
+
+
+def failure(url: str, exc: BaseException) -> CatalogueError:
+    """What went wrong with the catalogue at ``url``, as one line without its password."""
+    why = one_line(exc)
+    if isinstance(exc, json.JSONDecodeError):
+        why = f"a JSON column holds text that is not JSON (edited by hand?): {exc.msg}"
+    return CatalogueError(f"catalogue {describe(url)} not usable: {scrub(why, url)}")
 
 
 def open_catalogue(url: str, cache_kb: int | None = None) -> Catalogue:
-    """Connect, create or migrate the schema; SQLite in WAL mode with a busy timeout, so several
-    recorders and an analysis write at once. Whatever fails is one ``CatalogueError`` line.
+    """Connect, create or migrate the schema (for a writer); SQLite in WAL mode with a busy timeout, so
+    several recorders and an analysis write at once. Another application's database is refused and left
+    as it was. Whatever fails is one ``CatalogueError`` line.
     ``cache_kb``: SQLite's page cache per connection (None: SQLite's own, 2 MB; ``WRITER_CACHE_KB``)."""
+    url = resolve_url(url) or url
     try:
+        path = sqlite_path(url)
+        if path is not None and path.exists():
+            _refuse_foreign_file(url, path)  # looked at read-only, before WAL mode would change it
         engine = _engine(url, cache_kb)
         with engine.begin() as connection:
+            check_schema(connection, url, writing=True)
             migrate(connection)
     except CatalogueError:
         raise
-    except (sa.exc.SQLAlchemyError, OSError, ImportError) as exc:
-        raise CatalogueError(f"catalogue {describe(url)} not usable: {one_line(exc)}") from None
+    except OPEN_FAILURES as exc:
+        raise failure(url, exc) from None
     return Catalogue(url, engine)
+
+
+def read_catalogue(url: str) -> Catalogue:
+    """Open to read only (``runs``, ``--runs``, ``tankdaq.runs``): never created, migrated or written.
+    A file that is not there is "no catalogue at X"; a database tankdaq did not make is refused,
+    untouched; the schema check reads without the write lock, so a writer never makes it wait."""
+    url = resolve_url(url) or url
+    try:
+        engine = _reader_engine(url)
+        with Catalogue(url, engine).reading() as connection, connection.begin():
+            check_schema(connection, url, writing=False)
+    except CatalogueError:
+        raise
+    except OPEN_FAILURES as exc:
+        raise failure(url, exc) from None
+    return Catalogue(url, engine)
+
+
+def _refuse_foreign_file(url: str, path: Path) -> None:
+    """An existing file a writer was pointed at: a tankdaq catalogue (or an empty ``.sqlite``), else
+    refused, its bytes untouched."""
+    if path.stat().st_size == 0:
+        if path.suffix.lower() in SQLITE_SUFFIXES:
+            return
+        raise CatalogueError(f"{path} is an empty file, not a catalogue: left untouched; give another path")
+    with path.open("rb") as file:
+        if file.read(len(SQLITE_HEADER)) != SQLITE_HEADER:
+            raise CatalogueError(f"{path} is not a SQLite database: left untouched; give another path")
+    engine = _reader_engine(url)
+    try:
+        with Catalogue(url, engine).reading() as connection, connection.begin():
+            check_schema(connection, url, writing=True)
+    finally:
+        engine.dispose()
+
+
+def check_schema(connection: sa.Connection, url: str, writing: bool) -> None:
+    """Refuse a database that is not tankdaq's (another application's tables, another tool's
+    ``schema_version``) and one newer than this tankdaq; a reader also one it would have to migrate.
+    Only reads (the caller's transaction: a reader's takes no write lock)."""
+    where = f"catalogue {describe(url)}"
+    names = set(sa.inspect(connection).get_table_names())
+    if "schema_version" not in names:
+        if writing and not names:
+            return  # a new catalogue
+        held = f"it holds tables {', '.join(sorted(names)[:6])}" if names else "it holds no table"
+        raise CatalogueError(f"{where} is not a tankdaq catalogue ({held}): left untouched; {ELSEWHERE}")
+    columns = {column["name"] for column in sa.inspect(connection).get_columns("schema_version")}
+    if columns != set(schema_version.c.keys()):
+        raise CatalogueError(
+            f"{where} is not a tankdaq catalogue (another tool's schema_version table): left untouched; "
+            + ELSEWHERE
+        )
+    found = connection.execute(sa.select(sa.func.max(schema_version.c.version))).scalar() or 0
+    if not isinstance(found, int):
+        raise CatalogueError(f"{where}: its schema_version holds {found!r}, not a version: left untouched")
+    if found > SCHEMA_VERSION:
+        raise CatalogueError(
+            f"catalogue schema version {found} is newer than this tankdaq's ({SCHEMA_VERSION}): "
+            "upgrade tankdaq"
+        )
+    missing = sorted(set(metadata.tables) - names)
+    if not writing and (found < SCHEMA_VERSION or missing):
+        raise CatalogueError(
+            f"{where} is at schema version {found} (this tankdaq's: {SCHEMA_VERSION}"
+            + (f"; missing {', '.join(missing)}" if missing else "")
+            + "): a read never changes it; `tankdaq catalogue index FOLDER` brings it up to date"
+        )
 
 
 def _engine(url: str, cache_kb: int | None) -> sa.Engine:
     parsed = sa.make_url(url)
     if parsed.get_backend_name() != "sqlite":
-        return sa.create_engine(url, pool_pre_ping=True)
+        return _server_engine(url)
     if parsed.database:
         Path(parsed.database).parent.mkdir(parents=True, exist_ok=True)
     engine = sa.create_engine(url, connect_args={"timeout": BUSY_TIMEOUT_MS / 1000})
+    pragmas = ["PRAGMA journal_mode = WAL", "PRAGMA synchronous = NORMAL"]
+    if cache_kb is not None:
+        pragmas.append(f"PRAGMA cache_size = {-int(cache_kb)}")  # negative: KiB, not pages
+    _sqlite_events(engine, pragmas)
+    return engine
+
+
+def _reader_engine(url: str) -> sa.Engine:
+    """An engine that cannot write: SQLite opened ``mode=ro`` (no journal mode set, nothing made)."""
+    import sqlite3
+    from urllib.parse import quote
+
+    path = sqlite_path(url)
+    if path is None:
+        return _server_engine(url)
+    if not path.is_file():
+        what = "a folder without catalogue.sqlite" if path.is_dir() else "nothing there"
+        raise NoCatalogue(
+            f"no catalogue at {path} ({what}): give --catalogue PATH of one; "
+            "a command that writes (record, identify, `tankdaq catalogue index FOLDER`) makes one"
+        )
+    uri = f"file:{quote(str(path))}?mode=ro"
+
+    def connect() -> sqlite3.Connection:
+        return sqlite3.connect(uri, uri=True, timeout=BUSY_TIMEOUT_MS / 1000, check_same_thread=False)
+
+    engine = sa.create_engine("sqlite://", creator=connect, poolclass=sa.pool.NullPool)
+    _sqlite_events(engine, [])
+    return engine
+
+
+def _server_engine(url: str) -> sa.Engine:
+    """A server's engine that gives up connecting after ``CONNECT_TIMEOUT_S`` (unless the URL says)."""
+    given = sa.make_url(url).query
+    timeout = {} if "connect_timeout" in given else {"connect_timeout": CONNECT_TIMEOUT_S}
+    return sa.create_engine(url, pool_pre_ping=True, connect_args=timeout)
+
+
+def _sqlite_events(engine: sa.Engine, pragmas: list[str]) -> None:
+    """Every connection: a busy timeout and ``pragmas``; a writer's BEGIN IMMEDIATE, a reader's BEGIN."""
 
     @sa.event.listens_for(engine, "connect")
     def _pragmas(dbapi_connection: Any, _record: Any) -> None:
         dbapi_connection.isolation_level = None  # BEGIN IMMEDIATE below, not pysqlite's deferred BEGIN
         cursor = dbapi_connection.cursor()
         cursor.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
-        cursor.execute("PRAGMA journal_mode = WAL")
-        cursor.execute("PRAGMA synchronous = NORMAL")
-        if cache_kb is not None:
-            cursor.execute(f"PRAGMA cache_size = {-int(cache_kb)}")  # negative: KiB, not pages
+        for pragma in pragmas:
+            cursor.execute(pragma)
         cursor.close()
 
     @sa.event.listens_for(engine, "begin")
@@ -387,8 +477,6 @@ def _engine(url: str, cache_kb: int | None) -> sa.Engine:
             connection.exec_driver_sql("BEGIN")
         else:
             connection.exec_driver_sql("BEGIN IMMEDIATE")  # the write lock first: no deadlock on upgrade
-
-    return engine
 
 
 def utc_now() -> str:

@@ -56,7 +56,7 @@ def index_folder(
     report = IndexReport()
     files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in DECAY_SUFFIXES and p.is_file())
     files.sort(key=lambda p: p.suffix.lower() != ".mcap")  # recordings first: exports find their rows
-    hashes = {path: file_sha256(path) for path in files}
+    hashes = _readable(files, report)
     known, retired = _known_paths(catalogue, list(hashes.values()))
     pending: list[Made] = []  # new decay rows, written INDEX_BATCH to a transaction
     for path, sha in hashes.items():
@@ -73,7 +73,7 @@ def index_folder(
         else:
             try:
                 table = _add(catalogue, path, sha, pending)
-            except RecordingError as exc:  # not a decay tankdaq reads, nor an export of one
+            except (RecordingError, OSError) as exc:  # not a decay tankdaq reads, nor an export of one
                 said = str(exc)  # a reader's line names the file itself
                 report.skipped.append(said if said.startswith(str(path)) else f"{path}: {said}")
             else:
@@ -89,6 +89,18 @@ def index_folder(
     for log in sorted(folder.rglob("session.jsonl")):
         report.sessions += bool(record_session(catalogue, log.parent))
     return report
+
+
+def _readable(files: list[Path], report: IndexReport) -> dict[Path, str]:
+    """Each file's SHA-256; one that cannot be read (permissions, a bad sector) is listed as skipped,
+    and the others are indexed."""
+    hashes = {}
+    for path in files:
+        try:
+            hashes[path] = file_sha256(path)
+        except OSError as exc:
+            report.skipped.append(f"{path}: not readable ({exc.strerror or exc})")
+    return hashes
 
 
 def _add(catalogue: Catalogue, path: Path, sha: str, pending: list[Made]) -> sa.Table:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,7 +19,8 @@ import sqlalchemy as sa
 from ..config import format_draft, parse_draft
 from ..errors import InputError
 from ..records import DecayEnd
-from .database import BadCatalogueQuery, Catalogue, decays, exports, in_batches, open_catalogue, resolve_url
+from .database import BadCatalogueQuery, Catalogue, decays, exports, in_batches, read_catalogue, resolve_url
+from .literals import checked_text, operator_slip, parse_date, parse_number, split_clauses
 from .rows import STANDARD_AMPLITUDES_DEG
 
 if TYPE_CHECKING:
@@ -61,7 +63,6 @@ OPERATORS = {
     "~": lambda c, v: c.contains(v, autoescape=True),
 }
 _CLAUSE = re.compile(r"^\s*([a-z_0-9]+)\s*(<=|>=|!=|=|<|>|~)\s*(\"[^\"]*\"|'[^']*'|\S+)\s*$")
-_DATE = re.compile(r"^\d{4}(-\d{2}(-\d{2}([T ][0-9:.]+)?)?)?$")
 #: What ``--verdict`` takes (absent: every decay not rejected; ``any``: all, rejected included).
 VERDICTS = ("accepted", "rejected")
 WHERE_HELP = "field op value [and ...]; op = != < <= > >= ~ (contains); fields: " + ", ".join(FIELDS)
@@ -92,6 +93,11 @@ class RunQuery:
         if self.until:
             found.append(decays.c.recorded_utc < _date(self.until))
         return found + (parse_where(self.where) if self.where else [])
+
+    def notes(self) -> list[str]:
+        """How the dates were read where a zone or local time was converted to UTC (one line each)."""
+        dates = {"since": self.since, "until": self.until}
+        return [f"{key} {note}" for key, text in dates.items() if text and (note := parse_date(text)[1])]
 
 
 #: ``ended=whole``: the decays whose file holds all of the decay (``records.DecayEnd.whole``, or not
@@ -127,14 +133,13 @@ def whole_unless_asked(query: RunQuery) -> RunQuery:
 
 
 def _date(text: str) -> str:
-    if not _DATE.match(text.strip()):
-        raise BadCatalogueQuery(f"date {text!r} not understood: write 2026, 2026-03 or 2026-03-15")
-    return text.strip()
+    """A date as the catalogue compares it: UTC, ISO with a ``T`` (``literals.parse_date``)."""
+    return parse_date(text)[0]
 
 
 def _value(name: str, text: str) -> Any:
     """A value as its column holds it: numbers for numeric columns, drafts written as tankdaq writes."""
-    column = FIELDS[name]
+    column, text = FIELDS[name], checked_text(name, text)
     if name == "draft":
         try:
             return format_draft(parse_draft(text))
@@ -145,33 +150,83 @@ def _value(name: str, text: str) -> Any:
             raise BadCatalogueQuery(f"complete={text!r}: give true or false")
         return text.lower() in ("true", "yes", "1")
     if isinstance(column.type, sa.Float | sa.Integer):
-        try:
-            number = float(text)
-        except ValueError:
-            raise BadCatalogueQuery(f"{name}: {text!r} is not a number") from None
-        return int(number) if isinstance(column.type, sa.Integer) and number.is_integer() else number
+        return parse_number(name, text, column.type)
+    if name == "recorded":
+        return _date(text)
     return text
 
 
 def parse_where(text: str) -> list[sa.ColumnElement[bool]]:
     """``field op value [and field op value ...]`` as bound conditions; anything else is one line."""
-    clauses = re.split(r"\s+and\s+", text.strip(), flags=re.IGNORECASE)
     found = []
-    for clause in clauses:
+    for clause in split_clauses(text):
+        slip = operator_slip(clause)
+        if slip is not None:
+            raise BadCatalogueQuery(f"--where {clause.strip()!r}: {slip}")
         match = _CLAUSE.match(clause)
         if not match:
             raise BadCatalogueQuery(f"--where {clause!r} not understood: {WHERE_HELP}")
         name, op, value = match.groups()
         if name not in FIELDS:
             raise BadCatalogueQuery(f"--where: no field {name!r}; fields: {', '.join(FIELDS)}")
-        if value[:1] in "\"'":
-            value = value[1:-1]
+        value = _unquoted(value)
         if name in ("since", "until"):
             raise BadCatalogueQuery("--where: use --since/--until for dates, or recorded >= 2026-03")
         try:
-            found.append(OPERATORS[op](FIELDS[name], _value(name, value)))
+            contains_text = op == "~" and name == "recorded"  # a part of the stored text, not a date
+            bound = checked_text(name, value) if contains_text else _value(name, value)
+            found.append(OPERATORS[op](FIELDS[name], bound))
         except BadCatalogueQuery as exc:
             raise BadCatalogueQuery(f"--where {clause!r}: {exc}") from None
+    return found
+
+
+def _unquoted(value: str) -> str:
+    return value[1:-1] if value[:1] in "\"'" else value
+
+
+#: The fields a query that found nothing names the values of (the catalogue's words, not hashes or paths).
+LISTED = ("hull", "draft", "axis", "plan", "device", "firmware", "model", "source", "version")
+LISTED_AT_MOST = 12
+
+
+def absent_values(catalogue: Catalogue, query: RunQuery) -> list[str]:
+    """For a query that found nothing: each ``=`` filter on a value no row holds, with the values the
+    catalogue holds (``no hull 'SWATH'; the catalogue holds: kvlcc2, swath``), one line each."""
+    lines = []
+    with catalogue.reading() as connection:
+        for name, text in _equalities(query):
+            column = FIELDS[name]
+            if connection.execute(sa.select(column).where(column == _value(name, text)).limit(1)).first():
+                continue
+            held = (
+                connection.execute(
+                    sa.select(column)
+                    .where(column.is_not(None))
+                    .distinct()
+                    .order_by(column)
+                    .limit(LISTED_AT_MOST + 1)
+                )
+                .scalars()
+                .all()
+            )
+            shown = ", ".join(map(str, held[:LISTED_AT_MOST])) + (
+                ", ..." if len(held) > LISTED_AT_MOST else ""
+            )
+            lines.append(
+                f"no {name} {text!r}; "
+                + (f"the catalogue holds: {shown}" if held else f"no run has a {name}")
+            )
+    return lines
+
+
+def _equalities(query: RunQuery) -> list[tuple[str, str]]:
+    """The ``name = value`` filters of ``query`` on ``LISTED`` fields (options, ``--runs``, ``--where``)."""
+    found = [(name, value) for name, value in query.equal.items() if name in LISTED]
+    for clause in split_clauses(query.where) if query.where else []:
+        match = _CLAUSE.match(clause)
+        if match and match.group(2) == "=" and match.group(1) in LISTED:
+            found.append((match.group(1), _unquoted(match.group(3))))
     return found
 
 
@@ -185,6 +240,10 @@ def parse_runs(text: str) -> RunQuery:
         if not sep or not value:
             raise BadCatalogueQuery(
                 f"--runs {word!r}: write key=value, e.g. hull=swath draft=1.1T since=2026-03"
+            )
+        if value[0] in "=<>!~":
+            raise BadCatalogueQuery(
+                f"--runs {word!r}: write {key}={value.lstrip('=<>!~')} (one =, no other operator)"
             )
         if key in ("since", "until"):
             dates[key] = value
@@ -287,7 +346,7 @@ def paths_for(text: str, catalogue_url: str | None = None) -> list[Path]:
     if url is None:
         raise BadCatalogueQuery("--runs needs a catalogue: drop --catalogue none")
     query = parse_runs(text)
-    with open_catalogue(url) as catalogue:
+    with read_catalogue(url) as catalogue:
         complete = {**query.equal, "complete": "true"}
         rows = select_rows(catalogue, whole_unless_asked(RunQuery(complete, query.since, query.until)))
         partial = (
@@ -295,11 +354,13 @@ def paths_for(text: str, catalogue_url: str | None = None) -> list[Path]:
             if "ended" in query.equal
             else select_rows(catalogue, RunQuery(complete, query.since, query.until))
         )
+        absent = absent_values(catalogue, query) if not rows else []
     paths = [Path(row["path"]) for row in rows if Path(row["path"]).is_file()]
     left_out = len(partial) - len(rows)
     said = f" ({left_out} that did not end whole left out: add ended=any)" if left_out > 0 else ""
     if not paths:
-        raise BadCatalogueQuery(f"--runs {text!r}: no complete recording in the catalogue matches{said}")
+        why = "".join(f"; {line}" for line in absent)
+        raise BadCatalogueQuery(f"--runs {text!r}: no complete recording in the catalogue matches{said}{why}")
     return paths
 
 
@@ -320,7 +381,9 @@ def runs(
     path, ``format``, ``decay``, then its run's condition and ``recording``), as ``runs --exports``.
     ``fits="all"``: one row per fit kept of the decays that match (``id``, ``reference``, ``method``,
     ``model``, who and when), as ``runs --fits all``; the default reads each decay's reference fit.
-    ``catalogue``: a URL or path (default: as the CLI)."""
+    ``catalogue``: a URL or path (default: as the CLI), read only. ``since``: a date or time in UTC
+    (``literals.parse_date``). Nothing found because a value is not there: a ``UserWarning`` names
+    those that are; the empty frame keeps the columns (``empty_columns``)."""
     import pandas as pd
 
     from ..api.arguments import run_filters
@@ -334,11 +397,26 @@ def runs(
         raise BadCatalogueQuery("the catalogue is switched off (none): give a catalogue")
     if fits not in ("reference", "all"):
         raise BadCatalogueQuery(f"fits={fits!r}: give reference or all")
-    with open_catalogue(url) as opened:
-        rows = select_rows(opened, RunQuery(equal, since, None, where), with_exports=True)
+    query = RunQuery(equal, since, None, where)
+    with read_catalogue(url) as opened:
+        rows = select_rows(opened, query, with_exports=True)
         if fits == "all":
             return pd.DataFrame(every_fit(opened, rows))
-    return pd.DataFrame(export_listing(rows) if exports else [flat(row) for row in rows])
+        absent = absent_values(opened, query) if not rows else []
+    for line in absent:  # a notebook shows it: the frame is empty because the value is not there
+        warnings.warn(line, UserWarning, stacklevel=2)
+    listing = export_listing(rows) if exports else [flat(row) for row in rows]
+    return pd.DataFrame(listing, columns=None if listing else empty_columns(exports))
+
+
+def empty_columns(exports: bool = False) -> list[str]:
+    """The columns of a result with no row (``tankdaq.runs()``, ``runs --csv``): those a row would have
+    (``flat``, ``export_listing``), but the coefficients, which come with the fits found."""
+    row: dict[str, Any] = {column.name: None for column in decays.c} | {"exports": []}
+    if exports:
+        row["exports"] = [dict.fromkeys(EXPORT_FIELDS)]
+        return list(export_listing([row])[0])
+    return list(flat(row))
 
 
 def every_fit(catalogue: Catalogue, rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

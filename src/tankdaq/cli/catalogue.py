@@ -63,13 +63,15 @@ EXPORT_TABLE_COLUMNS = (
 )
 
 
-def _open(given: str | None) -> Any:
-    from ..catalogue.database import BadCatalogueQuery, open_catalogue, resolve_url
+def _open(given: str | None, reading: bool = False) -> Any:
+    """The catalogue ``--catalogue`` names: to write (made or migrated as needed) or, ``reading``, to
+    read only (never made, migrated or written: ``database.read_catalogue``)."""
+    from ..catalogue.database import BadCatalogueQuery, open_catalogue, read_catalogue, resolve_url
 
     url = resolve_url(given)
     if url is None:
         raise BadCatalogueQuery("the catalogue is switched off (none): give --catalogue URL|PATH")
-    return open_catalogue(url)
+    return read_catalogue(url) if reading else open_catalogue(url)
 
 
 @catalogue_app.command("index")
@@ -138,7 +140,14 @@ def _print_table(rows: list[dict[str, Any]], columns: list[tuple[str, str]]) -> 
     console.print(table)
 
 
-def _emit(rows: list[dict[str, Any]], as_json: bool, as_csv: bool, columns: list[tuple[str, str]]) -> None:
+def _emit(
+    rows: list[dict[str, Any]],
+    as_json: bool,
+    as_csv: bool,
+    columns: list[tuple[str, str]],
+    empty: list[str] | None = None,
+) -> None:
+    """``rows`` as JSON, CSV or a table; ``empty``: the CSV header of a result without a row."""
     if as_json:
         clean = [
             {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in r.items()} for r in rows
@@ -148,7 +157,7 @@ def _emit(rows: list[dict[str, Any]], as_json: bool, as_csv: bool, columns: list
         import csv
         import sys
 
-        names = list(dict.fromkeys(k for row in rows for k in row))
+        names = list(dict.fromkeys(k for row in rows for k in row)) or (empty or [])
         writer = csv.DictWriter(sys.stdout, fieldnames=names, lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
@@ -163,7 +172,13 @@ def runs_command(
     draft: Annotated[str | None, typer.Option("--draft", metavar="0.9T|T|1.1T", help="Draft.")] = None,
     axis: Annotated[str | None, typer.Option("--axis", help="roll or pitch.")] = None,
     since: Annotated[
-        str | None, typer.Option("--since", metavar="DATE", help="From 2026, 2026-03 ...")
+        str | None,
+        typer.Option(
+            "--since",
+            metavar="DATE",
+            help="From 2026, 2026-03, 2026-03-15 or 2026-03-15 14:30, in UTC (a zone such as +01:00, or "
+            "`local` for this PC's time, after a time).",
+        ),
     ] = None,
     verdict: Annotated[
         str | None,
@@ -213,7 +228,15 @@ def runs_command(
     """List catalogued decays (one row each: the reference fit's numbers, model and method, how the decay
     ended, the paths of its exports), every fit kept (--fits all), their exported files (--exports), or
     compare two campaigns per condition (decays that ended whole)."""
-    from ..catalogue.query import RunQuery, export_listing, flat, select_rows, selection
+    from ..catalogue.query import (
+        RunQuery,
+        absent_values,
+        empty_columns,
+        export_listing,
+        flat,
+        select_rows,
+        selection,
+    )
     from ..catalogue.query import compare as compare_rows
     from ..errors import InputError
 
@@ -229,12 +252,16 @@ def runs_command(
     equal = {k: v for k, v in {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict}.items() if v}
     query = RunQuery(equal, since, None, where)
     query.conditions()  # a bad filter is one line before the catalogue opens
-    with _open(catalogue) as opened:
+    for line in query.notes():  # a zone or local time converted to UTC
+        say(line)
+    with _open(catalogue, reading=True) as opened:
         if compare is not None:
             table = compare_rows(selection(opened, compare[0]), selection(opened, compare[1]))
             _emit(table, as_json, as_csv, [(k, k) for k in (table[0] if table else {})])
             return
         found = select_rows(opened, query, with_exports=True)
+        for line in absent_values(opened, query) if not found else []:
+            say(line)
         if fits == "all":
             _list_fits(opened, found, as_json, as_csv)
             return
@@ -242,13 +269,13 @@ def runs_command(
         listing = export_listing(found)
         if not as_json and not as_csv:
             say(f"{len(listing)} exported file(s) of {len(found)} run(s)")
-        _emit(listing, as_json, as_csv, list(EXPORT_TABLE_COLUMNS))
+        _emit(listing, as_json, as_csv, list(EXPORT_TABLE_COLUMNS), empty_columns(exports=True))
         return
     rows = [flat(row) for row in found]
     if not as_json and not as_csv:
         say(f"{len(rows)} run(s)")
     exported = [("exports", "exports")] if any(row["exports"] for row in rows) else []
-    _emit(rows, as_json, as_csv, [*TABLE_COLUMNS[:-1], *exported, TABLE_COLUMNS[-1]])
+    _emit(rows, as_json, as_csv, [*TABLE_COLUMNS[:-1], *exported, TABLE_COLUMNS[-1]], empty_columns())
 
 
 def _set_reference(fit_id: int, given: str | None) -> None:
