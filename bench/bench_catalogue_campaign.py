@@ -36,9 +36,10 @@ import sqlalchemy as sa
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from campaign_scale import write_many_decays
 from tankdaq.api.campaigns import campaign
-from tankdaq.catalogue.database import decays, open_catalogue
+from tankdaq.catalogue.database import open_catalogue
 from tankdaq.catalogue.hooks import CatalogueWriter
 from tankdaq.catalogue.index import index_folder
+from tankdaq.catalogue.schema import decays
 
 MODES = (
     "no catalogue",

@@ -28,21 +28,17 @@ from typer.testing import CliRunner
 import tankdaq
 import tankdaq.config
 from tankdaq.catalogue.database import (
-    SCHEMA_VERSION,
     WRITER_CACHE_KB,
     BadCatalogueQuery,
     Catalogue,
     CatalogueError,
-    decays,
-    exports,
-    fits,
     open_catalogue,
     resolve_url,
-    schema_version,
 )
 from tankdaq.catalogue.hooks import CatalogueWriter
 from tankdaq.catalogue.index import index_folder
 from tankdaq.catalogue.query import RunQuery, paths_for, select_rows
+from tankdaq.catalogue.schema import SCHEMA_VERSION, decays, exports, fits, schema_version
 from tankdaq.cli import app
 from tankdaq.ident.campaign import group_runs, identify_groups, read_campaign
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign

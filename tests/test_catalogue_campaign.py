@@ -17,17 +17,10 @@ from typer.testing import CliRunner
 
 import tankdaq
 from tankdaq import validation
-from tankdaq.catalogue.database import (
-    PATH_INDEXES,
-    SCHEMA_VERSION,
-    decays,
-    hulls,
-    open_catalogue,
-    resolve_url,
-    schema_version,
-)
+from tankdaq.catalogue.database import open_catalogue, resolve_url
 from tankdaq.catalogue.hooks import CatalogueWriter
 from tankdaq.catalogue.rows import find_hull, hull_version, worker_row
+from tankdaq.catalogue.schema import PATH_INDEXES, SCHEMA_VERSION, decays, hulls, schema_version
 from tankdaq.cli import app
 from tankdaq.config import load_hull
 from tankdaq.ident.campaign_stream import FileWork

@@ -20,7 +20,8 @@ from scipy.io import savemat
 from typer.testing import CliRunner
 
 import tankdaq
-from tankdaq.catalogue.database import exports, open_catalogue, resolve_url
+from tankdaq.catalogue.database import open_catalogue, resolve_url
+from tankdaq.catalogue.schema import exports
 from tankdaq.cli import app
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 

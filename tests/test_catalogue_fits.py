@@ -20,10 +20,11 @@ import sqlalchemy as sa
 from typer.testing import CliRunner
 
 import tankdaq
-from tankdaq.catalogue.database import decays, fits, metadata, open_catalogue, resolve_url, schema_version
+from tankdaq.catalogue.database import open_catalogue, resolve_url
 from tankdaq.catalogue.fits import FitMethod, command_line
 from tankdaq.catalogue.index import index_folder
 from tankdaq.catalogue.query import paths_for
+from tankdaq.catalogue.schema import decays, fits, metadata, schema_version
 from tankdaq.cli import app
 from tankdaq.config import load_hull
 from tankdaq.errors import RecordingError

@@ -19,8 +19,9 @@ from typer.testing import CliRunner, Result
 
 import tankdaq
 from catalogue_fresh import fresh_catalogue
-from tankdaq.catalogue.database import BadCatalogueQuery, decays, open_catalogue
+from tankdaq.catalogue.database import BadCatalogueQuery, open_catalogue
 from tankdaq.catalogue.query import empty_columns, paths_for
+from tankdaq.catalogue.schema import decays
 from tankdaq.cli import app
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 

@@ -15,7 +15,8 @@ import sqlalchemy as sa
 from typer.testing import CliRunner
 
 import tankdaq
-from tankdaq.catalogue.database import decays, open_catalogue
+from tankdaq.catalogue.database import open_catalogue
+from tankdaq.catalogue.schema import decays
 from tankdaq.cli import app
 
 runner = CliRunner()

@@ -22,17 +22,8 @@ import sqlalchemy as sa
 
 from .. import __version__
 from ..records import DecayEnd
-from .database import (
-    REFERENCE_COPY,
-    BadCatalogueQuery,
-    Catalogue,
-    FitMethod,
-    FitSource,
-    decays,
-    fits,
-    in_batches,
-    utc_now,
-)
+from .database import BadCatalogueQuery, Catalogue, in_batches
+from .schema import REFERENCE_COPY, FitMethod, FitSource, decays, fits, utc_now
 
 __all__ = ["FitMethod", "FitSource", "add_fits", "choose_reference", "fits_of", "set_reference"]
 

@@ -27,6 +27,7 @@ from .database import (
     open_catalogue,
     resolve_url,
 )
+from .location import scrub
 
 if TYPE_CHECKING:  # the session's module is imported by the session command only
     from ..acquire.guided.state import RunEntry
@@ -97,7 +98,7 @@ class CatalogueWriter:
             self._catalogue.close()
 
     def _fail(self, exc: BaseException) -> None:
-        why = str(exc) if isinstance(exc, CatalogueError) else one_line(exc)
+        why = scrub(str(exc) if isinstance(exc, CatalogueError) else one_line(exc), self.url)
         if why not in self.failures:
             self.failures.append(why)
             self.on_line(f"catalogue: {why}; {CATCH_UP}")

@@ -17,8 +17,9 @@ import sqlalchemy as sa
 
 from ..errors import RecordingError
 from ..store.inputs import file_sha256
-from .database import Catalogue, decays, exports, in_batches
+from .database import Catalogue, in_batches
 from .rows import DECAY_SUFFIXES, decay_row, export_metadata, utc_now
+from .schema import decays, exports
 from .writing import Made, add_export, add_rows, record_session
 
 #: New decay rows go into the catalogue this many to a transaction (one transaction a file cost more than

@@ -19,9 +19,10 @@ import sqlalchemy as sa
 from ..config import format_draft, parse_draft
 from ..errors import InputError
 from ..records import DecayEnd
-from .database import BadCatalogueQuery, Catalogue, decays, exports, in_batches, read_catalogue, resolve_url
+from .database import BadCatalogueQuery, Catalogue, in_batches, read_catalogue, resolve_url
 from .literals import checked_text, operator_slip, parse_date, parse_number, split_clauses
 from .rows import STANDARD_AMPLITUDES_DEG
+from .schema import decays, exports
 
 if TYPE_CHECKING:
     import pandas as pd

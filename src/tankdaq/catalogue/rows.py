@@ -20,8 +20,9 @@ from ..config import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError
 from ..records import DecayEnd
 from ..store.inputs import INPUT_FORMATS, file_sha256
-from .database import FitMethod, FitSource, one_line, utc_now
+from .database import one_line
 from .fits import provenance
+from .schema import FitMethod, FitSource, utc_now
 
 #: The amplitudes B_eq and B̂44 are kept at (deg): what a lab compares across campaigns.
 STANDARD_AMPLITUDES_DEG = (2.0, 5.0, 10.0)

@@ -15,7 +15,7 @@ import sqlalchemy as sa
 from ..config import Hull
 from ..errors import RecordingError
 from ..store.inputs import file_sha256
-from .database import Catalogue, CatalogueError, decays, exports, hulls, in_batches, sessions
+from .database import Catalogue, CatalogueError, in_batches
 from .fits import FitMethod, FitSource, add_fits, choose_reference, provenance
 from .rows import (
     DECAY_SUFFIXES,
@@ -28,6 +28,7 @@ from .rows import (
     fit_fields,
     utc_now,
 )
+from .schema import decays, exports, hulls, sessions
 
 #: What a file seen again (moved, re-indexed, recovered) changes in its row: where it is, not what was
 #: said about it (verdicts, later fits, the hull version it was recorded with).
