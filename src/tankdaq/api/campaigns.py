@@ -112,6 +112,7 @@ def campaign(
     report: str | Path | None = None,
     full_scale: bool = False,
     keep_fits: bool = False,
+    include_partial: bool = False,
     on_result: Callable[[GroupResult], None] | None = None,
     file_work: FileWork | None = None,
     progress: Progress | None = None,
@@ -123,7 +124,9 @@ def campaign(
     decay as ``identify`` does. ``jobs`` worker processes (at most the cores), or ``executor="dask"``
     with a ``scheduler`` address. ``report`` a folder for campaign.csv, campaign.md and the figures;
     ``full_scale`` the ship's period and damping by Froude. ``on_result`` is handed each group's whole
-    fit as it arrives (the run catalogue writes it), which is then let go unless ``keep_fits``;
+    fit as it arrives (the run catalogue writes it), which is then let go unless ``keep_fits``; a decay
+    its recording holds only part of (stopped, the device gone, cut) is left out with a line unless
+    ``include_partial``;
     ``file_work`` is made of the files it wants by the workers that read them (the run catalogue: the
     rows of files it does not hold, ``ident.campaign_stream.FileWork``). A file that cannot be read is
     skipped with its line in ``skipped``; bad input raises ``tankdaq.errors.InputError`` before any file
@@ -142,6 +145,7 @@ def campaign(
     model = arguments.model(model)
     recurse, full_scale = arguments.flag(recurse, "recurse"), arguments.flag(full_scale, "full_scale")
     keep_fits = arguments.flag(keep_fits, "keep_fits")
+    include_partial = arguments.flag(include_partial, "include_partial")
     jobs = arguments.whole(jobs, "jobs", 1, 4096)
     executor = arguments.text(executor, "executor", "'local' or 'dask'")
     scheduler = arguments.optional_text(scheduler, "scheduler", "a Dask scheduler's address or None")
@@ -163,7 +167,7 @@ def campaign(
         prepare.append(load_plotting)  # loaded before a pool forks: its workers draw the figures
     with campaign_executor(workers, scheduler, prepare) as pool:
         scan = _scan(paths, (start_s, end_s), pool, kept, file_work)
-        groups = scan.groups()
+        groups = _whole_groups(scan, include_partial, kept)
         known = given_hulls | find_campaign_hulls({key.hull for key in groups} - set(given_hulls))
         keep = keep_fits or folder is not None or full_scale  # their figures and lines draw the fits
         rows = _fit(groups, model, known, pool, (start_s, end_s), keep, on_result, kept)
@@ -244,6 +248,20 @@ def _scan(
     for line in [*(skipped.line for skipped in scan.skipped), *scan.notices]:
         kept.line(line)  # one bad file does not stop the campaign: listed
     return scan
+
+
+def _whole_groups(scan: CampaignScan, include_partial: bool, kept: Kept) -> dict[GroupKey, list[RunRef]]:
+    """The scan's groups, without the decays not recorded whole unless ``include_partial`` (each said
+    in a line); a campaign left with nothing to fit is refused in one line."""
+    for line in scan.partial_lines(include_partial):
+        kept.line(line)
+    groups = scan.groups(include_partial)
+    if not groups:
+        raise InputError(
+            "every decay read was recorded only in part (listed above): --include-partial "
+            "(include_partial=True) fits them anyway"
+        )
+    return groups
 
 
 def _fit(

@@ -133,6 +133,12 @@ def whole_unless_asked(query: RunQuery) -> RunQuery:
     return RunQuery({**query.equal, "ended": WHOLE}, query.since, query.until, query.where)
 
 
+def asks_ended(text: str | None) -> bool:
+    """True when a ``--runs`` query names how its decays ended (``ended=any``, ``ended=stopped``): the
+    decays it selects are then fitted as asked, partial ones included."""
+    return text is not None and "ended" in parse_runs(text).equal
+
+
 def _date(text: str) -> str:
     """A date as the catalogue compares it: UTC, ISO with a ``T`` (``literals.parse_date``)."""
     return parse_date(text)[0]

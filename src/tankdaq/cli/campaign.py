@@ -68,6 +68,13 @@ def campaign_command(
         bool,
         typer.Option("--no-recurse", help="Read only the given folders' own files, not their subfolders."),
     ] = False,
+    include_partial: Annotated[
+        bool,
+        typer.Option(
+            "--include-partial",
+            help="Fit decays recorded only in part too (stopped, the device gone, cut); left out by default.",
+        ),
+    ] = False,
     as_json: JsonOutput = False,
     runs_query: RunsQuery = None,
     catalogue: CatalogueOption = None,
@@ -82,7 +89,7 @@ def campaign_command(
     """
     from ..api.campaigns import campaign
     from ..catalogue.hooks import CatalogueWriter
-    from ..catalogue.query import inputs_or_query
+    from ..catalogue.query import asks_ended, inputs_or_query
 
     validation.campaign_executor(executor, scheduler)  # the pair checked before anything is opened
     writer = CatalogueWriter.from_option(catalogue, say)
@@ -97,7 +104,8 @@ def campaign_command(
         result = campaign(
             inputs, model, hulls=hulls or [], start_s=start, end_s=end, recurse=not no_recurse,
             jobs=min(jobs or cores, cores), executor=executor, scheduler=scheduler, report=report,
-            full_scale=full_scale, on_result=catalogued, file_work=rows, progress=TerminalProgress(),
+            full_scale=full_scale, include_partial=include_partial or asks_ended(runs_query),
+            on_result=catalogued, file_work=rows, progress=TerminalProgress(),
         )  # fmt: skip
     say_cuts(result.cuts)
     typer.echo(result.to_json() if as_json else result.text(), nl=as_json)

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..config import Hull
 from ..physics.models import AUTO
-from ..records import DecayRun
+from ..records import DecayEnd, DecayRun
 from ..store.export_layout import ExportOrigin
 from ..store.inputs import file_sha256
 from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
@@ -69,6 +69,7 @@ class FileScan:
     cuts: tuple[str, ...]  # where each decay's free part was cut, and why
     sha256: str  # of its bytes: a copy among the campaign's files is read once (``store.inputs.read_twice``)
     origin: ExportOrigin | None = None  # an export's recording and releases: two exports of them, read once
+    partial: tuple[tuple[int, str], ...] = ()  # decays not recorded whole: (index, how it ended, in words)
 
 
 @dataclass
@@ -78,13 +79,21 @@ class CampaignScan:
     files: list[FileScan]
     skipped: list[SkippedFile]
 
-    def groups(self) -> dict[GroupKey, list[RunRef]]:
-        """Decays by group, in sorted key order; within a group in path order (as ``group_runs``)."""
+    def groups(self, include_partial: bool = False) -> dict[GroupKey, list[RunRef]]:
+        """Decays by group, in sorted key order; within a group in path order (as ``group_runs``). A decay
+        not recorded whole (stopped, the device gone, cut) is left out unless ``include_partial``."""
         groups: dict[GroupKey, list[RunRef]] = defaultdict(list)
         for scan in self.files:
+            partial = set() if include_partial else {index for index, _ in scan.partial}
             for index, key in enumerate(scan.keys):
-                groups[key].append(RunRef(scan.path, index))
+                if index not in partial:
+                    groups[key].append(RunRef(scan.path, index))
         return dict(sorted(groups.items()))
+
+    def partial_lines(self, included: bool) -> list[str]:
+        """One line per decay not recorded whole: how it ended, and whether the campaign fits it."""
+        what = "fitted as asked" if included else "left out (--include-partial fits it)"
+        return [f"{scan.path.name}: {said}; {what}" for scan in self.files for _, said in scan.partial]
 
     @property
     def decays(self) -> int:
@@ -113,7 +122,18 @@ def scan_file(path: Path, start_s: float | None = None, end_s: float | None = No
     digest = next((str(r.meta["sha256"]) for r in runs if r.meta.get("sha256")), None) or file_sha256(path)
     origin = ExportOrigin.of(runs[0].meta) if runs else None
     notices, cuts = tuple(input_notices(runs)), tuple(cut_lines(runs))
-    return FileScan(path, keys, notices, truncation, cuts, digest, origin)
+    return FileScan(path, keys, notices, truncation, cuts, digest, origin, partial_runs(runs))
+
+
+def partial_runs(runs: Sequence[DecayRun]) -> tuple[tuple[int, str], ...]:
+    """The decays among ``runs`` whose recording holds only part of them (``meta["ended"]`` not whole),
+    with how each ended in words: a campaign leaves them out unless asked."""
+    found = []
+    for index, run in enumerate(runs):
+        ended = DecayEnd.of_settle_reason(run.meta.get("ended"))
+        if ended is not None and not ended.whole:
+            found.append((index, ended.said(run.meta.get("ended_after_s"))))
+    return tuple(found)
 
 
 @dataclass(frozen=True)
