@@ -274,3 +274,17 @@ def test_a_path_that_now_holds_a_copy_of_another_file_retires_its_row(empty_url:
     listed = json.loads(_invoke("runs", "--json", "--catalogue", empty_url))
     assert [r["path"] for r in listed] == [str(second.resolve())]  # each decay once, each path once
     assert len(_table(empty_url, fits)) == 1  # the retired row's fit is kept
+
+
+def test_a_campaign_fit_of_the_datas_model_is_a_reference_a_later_identify_keeps(
+    empty_url: str, tmp_path: Path
+) -> None:
+    folder = tmp_path / "rec"
+    (recording,) = write_simulated_campaign(folder, ["swath"], "roll", [1.0], [6.0], "mcap")
+    _invoke("campaign", str(folder), "--jobs", "1", "--catalogue", empty_url)  # the model the data choose
+    _invoke("identify", str(recording), "--catalogue", empty_url)
+    kept = _table(empty_url, fits)
+    by_source = {f["source"]: f for f in kept}
+    assert by_source["campaign"]["model_by_data"] and by_source["identify"]["model_by_data"]
+    (row,) = _table(empty_url, decays)
+    assert row["reference_fit_id"] == by_source["campaign"]["id"]  # the first of its rank stays

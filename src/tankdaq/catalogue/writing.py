@@ -408,9 +408,12 @@ def campaign_fit(result: Any) -> tuple[list[tuple[Path, str | None]], dict[str, 
     group that was not fitted. Uses the group's own hull and warnings: nothing is read or found again."""
     if result.fit is None:
         return None
-    how = FitHow(
-        _method_of(result.fit), settings={"joint": "the group's repeats together", "runs": len(result.runs)}
-    )
+    settings = {
+        "joint": "the group's repeats together",
+        "runs": len(result.runs),
+        "model_choice": result.model_reason,
+    }
+    how = FitHow(_method_of(result.fit), model_by_data=result.model_by_data, settings=settings)
     fit = fit_of_estimator(
         FitSource.CAMPAIGN, result.fit, result.runs, result.warnings, hull=result.hull, how=how
     )

@@ -66,6 +66,7 @@ class GroupResult:
     extra: dict[str, float] = field(default_factory=dict)
     hull: Hull | None = None  # the hull file found for key.hull: dimensional results from its GM
     model_reason: str = ""  # which model was fitted and why (``model_choice.model_for``)
+    model_by_data: bool = False  # the data chose it (``auto``), not ``--model``
 
     @cached_property
     def warnings(self) -> list[str]:
@@ -309,7 +310,9 @@ def fit_group(key: GroupKey, runs: list[DecayRun], model: str, hull: Hull | None
     try:
         choice = model_for(runs, model)  # as ``identify`` chooses for these decays
         fit = OutputError(choice.terms).fit(runs)
-        return GroupResult(key, runs, fit=fit, hull=hull, model_reason=choice.reason)
+        return GroupResult(
+            key, runs, fit=fit, hull=hull, model_reason=choice.reason, model_by_data=choice.by_data
+        )
     except IdentificationError as exc:
         return GroupResult(key, runs, error=str(exc), hull=hull)
 

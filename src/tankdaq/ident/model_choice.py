@@ -69,6 +69,11 @@ class ModelChoice:
     reason: str
     candidates: list[Candidate]
 
+    @property
+    def by_data(self) -> bool:
+        """True when the data chose the model (candidates were scored), False for a model asked for."""
+        return bool(self.candidates)
+
     def as_dict(self) -> dict[str, Any]:
         if not self.candidates:  # a model asked for: nothing was scored
             return {"chosen": ",".join(self.terms), "reason": self.reason}
