@@ -185,3 +185,16 @@ def test_export_says_corrupted(corrupted: tuple[Path, list[int]], tmp_path: Path
     result = runner.invoke(app, ["export", str(path), "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
     assert "corrupted, not cut short" in result.stderr and "never closed" not in result.stderr
+
+
+def test_index_names_a_corrupted_recording_as_not_complete(
+    corrupted: tuple[Path, list[int]], tmp_path: Path
+) -> None:
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    copy = Path(shutil.copy(corrupted[0], folder / corrupted[0].name))
+    catalogue = str(tmp_path / "catalogue.sqlite")
+    result = runner.invoke(app, ["catalogue", "index", str(folder), "--catalogue", catalogue])
+    assert result.exit_code == 0, result.output
+    assert f"not complete (cut short or corrupted): {copy}" in result.stderr
+    assert "1 added" in result.stdout

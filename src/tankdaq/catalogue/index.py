@@ -38,6 +38,7 @@ class IndexReport:
     sessions: int = 0
     exports: int = 0  # of those added, files exported from a recording
     retired: list[Path] = field(default_factory=list)  # rows of bytes their path no longer holds
+    incomplete: list[Path] = field(default_factory=list)  # added as not complete: cut short or corrupted
 
     @property
     def line(self) -> str:
@@ -80,6 +81,8 @@ def index_folder(
             else:
                 report.added.append(path)
                 report.exports += table is exports
+                if table is decays and not pending[-1][0]["complete"]:
+                    report.incomplete.append(path)
                 known[sha] = (str(path.resolve()), table)
         if len(pending) >= INDEX_BATCH:
             _flush(catalogue, pending)

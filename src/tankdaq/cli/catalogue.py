@@ -96,6 +96,8 @@ def index_command(
         report = index_folder(opened, folder, lambda path: progress.update(task, description=path.name))
     for line in report.skipped:
         say(f"skipped {line}")
+    for path in report.incomplete:  # catalogued, never as a whole decay: --runs leaves it out
+        say(f"not complete (cut short or corrupted): {path}: `tankdaq recover {path}` makes a whole copy")
     typer.echo(f"{describe(opened.url)}: {report.line}")
 
 
