@@ -23,9 +23,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pytest
+from typer.testing import CliRunner
 
 import tankdaq
 from tankdaq.catalogue.database import open_catalogue
+from tankdaq.cli import app
 from tankdaq.errors import InputError, TankdaqError
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
@@ -61,6 +63,7 @@ PUBLIC: dict[str, Callable[..., Any]] = {
     "diagnose": tankdaq.diagnose,
     "simulate": tankdaq.simulate,
     "runs": tankdaq.runs,
+    "set_reference": tankdaq.set_reference,
     "Identification.plot": tankdaq.Identification.plot,
     "Recording.export": tankdaq.Recording.export,
     "Recording.to_csv": tankdaq.Recording.to_csv,
@@ -92,7 +95,8 @@ class StopAtWork:
 
 @dataclass
 class Made:
-    """What the calls need: decay files, a recording, a fit, a diagnosis, an empty catalogue."""
+    """What the calls need: decay files, a recording, a fit, a diagnosis, an empty catalogue and one
+    holding a fit (``fitted``: its fit 1 is a decay's, for ``set_reference``)."""
 
     folder: Path
     csv: Path
@@ -101,6 +105,7 @@ class Made:
     result: tankdaq.Identification
     diagnosis: tankdaq.Diagnosis
     catalogue: str
+    fitted: str
 
 
 @pytest.fixture(scope="module")
@@ -116,7 +121,10 @@ def made(tmp_path_factory: pytest.TempPathFactory) -> Made:
         pass  # an empty catalogue of tankdaq's
     result = tankdaq.identify(run, "b1,c1")
     diagnosis = tankdaq.diagnose(run, max_steps=0)
-    return Made(folder, csvs[0], tankdaq.read(mcap), run, result, diagnosis, url)
+    fitted = f"sqlite:///{tmp_path_factory.mktemp('fitted') / 'catalogue.sqlite'}"
+    done = CliRunner().invoke(app, ["identify", str(csvs[0]), "--model", "b1,c1", "--catalogue", fitted])
+    assert done.exit_code == 0, done.output
+    return Made(folder, csvs[0], tankdaq.read(mcap), run, result, diagnosis, url, fitted)
 
 
 def _base(name: str, made: Made, here: Path) -> tuple[Callable[..., Any], dict[str, Any]]:
@@ -141,6 +149,7 @@ def _base(name: str, made: Made, here: Path) -> tuple[Callable[..., Any], dict[s
         "diagnose": (tankdaq.diagnose, {"sources": made.run, **stop}),
         "simulate": (tankdaq.simulate, {"out_dir": here / "sim", "decay_s": 2.0}),
         "runs": (tankdaq.runs, {"catalogue": made.catalogue}),
+        "set_reference": (tankdaq.set_reference, {"fit_id": 1, "catalogue": made.fitted}),
         "Identification.plot": (made.result.plot, {}),
         "Diagnosis.save_rrd": (made.diagnosis.save_rrd, {"path": here / "story.rrd"}),
     }

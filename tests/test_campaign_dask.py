@@ -53,7 +53,10 @@ def test_a_dask_cluster_of_two_workers_gives_the_pools_results(tmp_path: Path) -
     assert len(rows) == N_DECAYS // 2 and sum(row.row["runs"] for row in rows) == N_DECAYS
     assert len(on_dask) == len(rows)
     for mine, expected in zip(on_dask, (row.row for row in rows), strict=True):
-        assert mine["error"] == expected["error"] == "" and mine.keys() == expected.keys()
+        assert mine["error"] == expected["error"] == "" and mine.keys() >= expected.keys()
+        # campaign.csv's columns are every group's terms (the data choose each group's model): another
+        # group's terms are empty in this row
+        assert all(mine[column] == "" for column in mine.keys() - expected.keys())
         for column, value in expected.items():
             if isinstance(value, float):
                 assert float(mine[column]) == pytest.approx(value, rel=1e-12, abs=1e-12), column

@@ -23,6 +23,7 @@ from tankdaq.catalogue.database import BadCatalogueQuery, open_catalogue
 from tankdaq.catalogue.query import empty_columns, paths_for
 from tankdaq.catalogue.schema import decays
 from tankdaq.cli import app
+from tankdaq.errors import InputError
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 #: Each file's recorded time (the stored form: ISO, milliseconds, +00:00).
@@ -208,8 +209,11 @@ def test_a_value_no_backend_binds_is_one_line_and_recorded_contains_is_text(cata
 
 
 def test_from_python_a_filter_that_is_not_text_is_refused_by_name(catalogue: str, tmp_path: Path) -> None:
-    for given, name in ((dict(since=2026), "date"), (dict(hull=123), "hull"), (dict(where=0.99), "--where")):
-        with pytest.raises(BadCatalogueQuery, match=f"^{name}: give text .* not (int|float)$"):
+    for given, name in ((dict(hull=123), "hull"), (dict(where=0.99), "where"), (dict(fits=[1]), "fits")):
+        with pytest.raises(InputError, match=f"^{name}\\W.*give "):
             tankdaq.runs(catalogue=catalogue, **given)
+    # a year as a number is the year (api.arguments.when), as "2026" is
+    by_number = tankdaq.runs(catalogue=catalogue, since=2026)
+    assert by_number.equals(tankdaq.runs(catalogue=catalogue, since="2026"))
     if catalogue.startswith("sqlite:///"):  # a pathlib.Path is a path
         assert len(tankdaq.runs(catalogue=Path(catalogue.removeprefix("sqlite:///")))) == 4

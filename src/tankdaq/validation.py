@@ -79,6 +79,24 @@ def decay_axis(value: str, option: str = "--axis") -> str:
     return value
 
 
+#: The units a decay file's columns may be given in (``store.csv_units`` holds their factors).
+ANGLE_UNIT_WORDS, TIME_UNIT_WORDS = "deg or rad", "s, ms or tick (0.1 ms)"
+
+
+def angle_unit(value: str, option: str = "--angle-unit") -> str:
+    """The unit of a file's angle and rate: deg or rad."""
+    if value not in ("deg", "rad"):
+        raise InputError(f"{option} {value!r} not understood: use {ANGLE_UNIT_WORDS}")
+    return value
+
+
+def time_unit(value: str, option: str = "--time-unit") -> str:
+    """The unit of a file's time: s, ms or tick (an Xsens SampleTimeFine, 0.1 ms)."""
+    if value not in ("s", "ms", "tick"):
+        raise InputError(f"{option} {value!r} not understood: use {TIME_UNIT_WORDS}")
+    return value
+
+
 def draft_factor(text: str) -> float:
     """A draft as people write it: ``0.9T``, ``T``, ``1.1T`` -> factor of the design draft."""
     from .config import parse_draft

@@ -149,13 +149,15 @@ def set_reference(fit_id: int, catalogue: str | None = None) -> str:
     """Make fit ``fit_id`` (an ``id`` of ``runs --fits all``) its decay's reference fit: the lab's choice,
     which no later fit or rule changes. Returns the line that says what it replaced. ``catalogue``: a
     URL or path (default: as the CLI)."""
-    from .database import open_catalogue, resolve_url
+    from ..api.arguments import run_filters, whole
+    from .database import open_catalogue, read_catalogue, resolve_url
 
-    if isinstance(fit_id, bool) or not isinstance(fit_id, int):
-        raise BadCatalogueQuery(f"set_reference: fit_id is a fit's id (an int), not {fit_id!r}")
+    fit_id = whole(fit_id, "fit_id", 1, 2**63 - 1)
+    _, catalogue, _ = run_filters({}, catalogue, False)
     url = resolve_url(catalogue)
     if url is None:
         raise BadCatalogueQuery("the catalogue is switched off (none): give a catalogue")
+    read_catalogue(url).close()  # one that is not there, or not tankdaq's, is refused, never made
     with open_catalogue(url) as opened:
         return reference_to(opened, fit_id)
 
@@ -167,12 +169,13 @@ def reference_to(catalogue: Catalogue, fit_id: int) -> str:
         fit = connection.execute(sa.select(fits).where(fits.c.id == fit_id)).first()
         if fit is None:
             raise BadCatalogueQuery(
-                f"--set-reference {fit_id}: no such fit; `tankdaq runs --fits all` lists them"
+                f"--set-reference (fit_id) {fit_id}: no such fit; `tankdaq runs --fits all` lists them"
             )
         row = connection.execute(sa.select(decays).where(decays.c.id == fit.decay_id)).first()
         if row is None or row.sha256 != fit.sha256:
             raise BadCatalogueQuery(
-                f"--set-reference {fit_id}: that fit read bytes its file no longer holds; fit the file again"
+                f"--set-reference (fit_id) {fit_id}: that fit read bytes its file no longer holds; "
+                "fit the file again"
             )
         before = connection.execute(sa.select(fits).where(fits.c.id == row.reference_fit_id)).first()
         _copy_reference(connection, row.id, dict(fit._mapping), chosen=True)

@@ -393,8 +393,9 @@ def runs(
     those that are; the empty frame keeps the columns (``empty_columns``)."""
     import pandas as pd
 
-    from ..api.arguments import run_filters
+    from ..api.arguments import run_filters, text
 
+    fits = text(fits, "fits", choices=("reference", "all"))
     given = {"hull": hull, "draft": draft, "axis": axis, "verdict": verdict, "since": since, "where": where}
     filters, catalogue, exports = run_filters(given, catalogue, exports)  # by name, before any connection
     hull, draft, axis, verdict, since, where = filters.values()
@@ -402,8 +403,6 @@ def runs(
     url = resolve_url(catalogue)
     if url is None:
         raise BadCatalogueQuery("the catalogue is switched off (none): give a catalogue")
-    if fits not in ("reference", "all"):
-        raise BadCatalogueQuery(f"fits={fits!r}: give reference or all")
     query = RunQuery(equal, since, None, where)
     with read_catalogue(url) as opened:
         rows = select_rows(opened, query, with_exports=True)

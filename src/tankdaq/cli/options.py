@@ -47,13 +47,16 @@ RateColumn = Annotated[
 AngleUnit = Annotated[
     str | None,
     typer.Option(
-        "--angle-unit", help="Unit of the file's angle and rate: deg or rad [default: from the data]."
+        "--angle-unit",
+        callback=checked(validation.angle_unit),
+        help="Unit of the file's angle and rate: deg or rad [default: from the data].",
     ),
 ]
 TimeUnit = Annotated[
     str | None,
     typer.Option(
         "--time-unit",
+        callback=checked(validation.time_unit),
         help="Unit of the CSV time: s, ms or tick (0.1 ms: an Xsens SampleTimeFine) [default: the data].",
     ),
 ]
