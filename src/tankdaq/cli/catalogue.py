@@ -230,6 +230,8 @@ def runs_command(
     """List catalogued decays (one row each: the reference fit's numbers, model and method, how the decay
     ended, the paths of its exports), every fit kept (--fits all), their exported files (--exports), or
     compare two campaigns per condition (decays that ended whole)."""
+    from ..catalogue.comparison import compare as compare_rows
+    from ..catalogue.comparison import selection
     from ..catalogue.query import (
         RunQuery,
         absent_values,
@@ -237,9 +239,7 @@ def runs_command(
         export_listing,
         flat,
         select_rows,
-        selection,
     )
-    from ..catalogue.query import compare as compare_rows
     from ..errors import InputError
 
     if as_json and as_csv:
