@@ -119,3 +119,16 @@ def catalogue_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'catalogue.sqlite'}"
     return str(request.getfixturevalue("postgres_url"))
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A real recording of one swath roll decay from 8 deg, 20 s at the simulated sensor's rate (about
+    150 kB of MCAP); a module that needs another defines its own."""
+    from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
+
+    folder = tmp_path_factory.mktemp("rec")
+    (path,) = write_simulated_campaign(
+        folder, ["swath"], "roll", [1.0], [8.0], "mcap", test=SimulatedTest(duration_s=20.0)
+    )
+    return path

@@ -20,7 +20,6 @@ from typer.testing import CliRunner
 
 from tankdaq.cli import app
 from tankdaq.ident.campaign import csv_labels
-from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store.export import ExportTable
 from tankdaq.store.export_layout import column_name
@@ -32,15 +31,6 @@ runner = CliRunner()
 #: The device clock of a real MTi session is hours in: times since release are differences of large numbers.
 DEVICE_T0_S = 22568.0
 RELEASES_S = (DEVICE_T0_S + 2.0, DEVICE_T0_S + 9.0)
-
-
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    folder = tmp_path_factory.mktemp("rec")
-    (path,) = write_simulated_campaign(
-        folder, ["swath"], "roll", [1.0], [8.0], "mcap", test=SimulatedTest(duration_s=20.0)
-    )
-    return path
 
 
 @pytest.fixture(scope="module")

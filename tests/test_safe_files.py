@@ -23,23 +23,12 @@ from typer.testing import CliRunner
 
 from tankdaq.cli import app
 from tankdaq.errors import InputError, RecordingError
-from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
 from tankdaq.store.safe_write import write_new, write_text_new
 
 runner = CliRunner()
 TANKDAQ = str(Path(sys.executable).with_name("tankdaq"))
 FORMATS = ("csv", "h5", "parquet", "mat")
 USERS = b"a user's own file: never to be touched\n"
-
-
-@pytest.fixture(scope="module")
-def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A real recording, 20 s at the simulated sensor's rate (about 150 kB of MCAP)."""
-    folder = tmp_path_factory.mktemp("rec")
-    (path,) = write_simulated_campaign(
-        folder, ["swath"], "roll", [1.0], [8.0], "mcap", test=SimulatedTest(duration_s=20.0)
-    )
-    return path
 
 
 def snapshot(folder: Path) -> dict[str, bytes]:
