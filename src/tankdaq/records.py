@@ -155,3 +155,12 @@ _END_WORDS = {
     DecayEnd.CUT: "cut: its writer never closed the file",
     DecayEnd.RECOVERED: "rebuilt by tankdaq recover from a cut file",
 }
+
+
+def partial_end(run: DecayRun) -> str | None:
+    """How ``run``'s decay ended, in words, when its recording holds only part of it (``meta["ended"]``
+    not whole); None for a whole decay or a file that does not say."""
+    ended = DecayEnd.of_settle_reason(run.meta.get("ended"))
+    if ended is None or ended.whole:
+        return None
+    return ended.said(run.meta.get("ended_after_s"))

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..config import Hull
 from ..physics.models import AUTO
-from ..records import DecayEnd, DecayRun
+from ..records import DecayRun, partial_end
 from ..store.export_layout import ExportOrigin
 from ..store.inputs import file_sha256
 from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
@@ -126,14 +126,9 @@ def scan_file(path: Path, start_s: float | None = None, end_s: float | None = No
 
 
 def partial_runs(runs: Sequence[DecayRun]) -> tuple[tuple[int, str], ...]:
-    """The decays among ``runs`` whose recording holds only part of them (``meta["ended"]`` not whole),
-    with how each ended in words: a campaign leaves them out unless asked."""
-    found = []
-    for index, run in enumerate(runs):
-        ended = DecayEnd.of_settle_reason(run.meta.get("ended"))
-        if ended is not None and not ended.whole:
-            found.append((index, ended.said(run.meta.get("ended_after_s"))))
-    return tuple(found)
+    """The decays among ``runs`` whose recording holds only part of them, with how each ended in words
+    (``records.partial_end``): a campaign leaves them out unless asked."""
+    return tuple((index, said) for index, run in enumerate(runs) if (said := partial_end(run)) is not None)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..physics.models import model_name
 from ..physics.terms import TERM_TABLE, equation_text
-from ..records import DecayEnd, DecayRun
+from ..records import DecayRun, partial_end
 from .compiled import simulate, substeps, term_codes
 from .derived import (
     amplitude_table,
@@ -64,13 +64,11 @@ def covariance_of(estimator: Any, std: Mapping[str, float] | None = None) -> np.
 def partial_decays(runs: Sequence[DecayRun]) -> list[str]:
     """One warning per decay its recording holds only part of (stopped, the device gone, cut: its
     ``meta["ended"]`` is not whole): a fit of it stands for less than the decay."""
-    lines = []
-    for run in runs:
-        ended = DecayEnd.of_settle_reason(run.meta.get("ended"))
-        if ended is not None and not ended.whole:
-            said = ended.said(run.meta.get("ended_after_s"))
-            lines.append(f"{run.name}: {said}; the fit covers only what was recorded")
-    return lines
+    return [
+        f"{run.name}: {said}; the fit covers only what was recorded"
+        for run in runs
+        if (said := partial_end(run)) is not None
+    ]
 
 
 def summarize(
