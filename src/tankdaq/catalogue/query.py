@@ -350,6 +350,11 @@ def flat(row: dict[str, Any]) -> dict[str, Any]:
 def paths_for(text: str, catalogue_url: str | None = None) -> list[Path]:
     """The files a ``--runs`` query names (complete recordings that exist), for identify, campaign
     and diagnose; none found is one line saying so."""
+    return [Path(row["path"]) for row in rows_for(text, catalogue_url)]
+
+
+def rows_for(text: str, catalogue_url: str | None = None) -> list[dict[str, Any]]:
+    """The rows of ``paths_for``'s files (their ``id`` for a report's provenance), oldest first."""
     url = resolve_url(catalogue_url)
     if url is None:
         raise BadCatalogueQuery("--runs needs a catalogue: drop --catalogue none")
@@ -363,13 +368,13 @@ def paths_for(text: str, catalogue_url: str | None = None) -> list[Path]:
             else select_rows(catalogue, RunQuery(complete, query.since, query.until))
         )
         absent = absent_values(catalogue, query) if not rows else []
-    paths = [Path(row["path"]) for row in rows if Path(row["path"]).is_file()]
+    found = [row for row in rows if Path(row["path"]).is_file()]
     left_out = len(partial) - len(rows)
     said = f" ({left_out} that did not end whole left out: add ended=any)" if left_out > 0 else ""
-    if not paths:
+    if not found:
         why = "".join(f"; {line}" for line in absent)
         raise BadCatalogueQuery(f"--runs {text!r}: no complete recording in the catalogue matches{said}{why}")
-    return paths
+    return found
 
 
 def runs(
