@@ -35,11 +35,13 @@ __all__ = [
     "ModelComparison",
     "Reading",
     "Recording",
+    "Report",
     "__version__",
     "campaign",
     "compare_models",
     "diagnose",
     "identify",
+    "make_report",
     "read",
     "runs",
     "set_reference",
@@ -63,6 +65,8 @@ _PUBLIC = {
     "simulate": "api.workflows",
     "runs": "catalogue.query",
     "set_reference": "catalogue.fits",
+    "make_report": "report.make",
+    "Report": "report.make",
 }
 
 if TYPE_CHECKING:
@@ -76,6 +80,7 @@ if TYPE_CHECKING:
     from .api.workflows import simulate
     from .catalogue.fits import set_reference
     from .catalogue.query import runs
+    from .report.make import Report, make_report
 
 
 def __getattr__(name: str) -> Any:

@@ -40,6 +40,7 @@ COMMAND_MODULES = {
     "session": "session",
     "diagnose": "diagnose",
     "predict": "predict",
+    "report": "report",
     "auv": "auv",
     "hulls": "hulls",
     "catalogue": "catalogue",

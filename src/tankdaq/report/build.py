@@ -1,0 +1,76 @@
+"""A report's content from its fits: the conditions, one section per condition (coefficients, B_eq and
+Bertin's N, full scale, figures, the condition's warnings beside its numbers), every warning together,
+and the provenance last. Nothing is rendered here."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from .content import FIT_95, Figure, ReportContent, Section, Table
+from .tables import coefficients_table, conditions_table, damping_table, decays_table, full_scale_tables
+
+if TYPE_CHECKING:
+    from ..api.identification import ConditionFit
+
+TITLE = "Decay test report"
+
+
+def condition_section(number: int, fit: ConditionFit, extra: Sequence[Table] = ()) -> Section:
+    """One condition: its coefficients, its B_eq/N table, its full scale (when asked), then ``extra``
+    (an uncertainty budget, the IMO table, the friction-corrected full scale: ``report.slots``), its
+    figures, and its warnings as notes beside the numbers."""
+    summary = fit.summary
+    key = f"c{number}"
+    tables = [
+        coefficients_table(f"{key}-coefficients", summary),
+        damping_table(f"{key}-damping", summary),
+        *full_scale_tables(f"{key}-full-scale", summary),
+        *extra,
+    ]
+    notes = [*(f"warning: {line}" for line in summary["warnings"]), summary["model_choice"]["reason"]]
+    return Section(key, summary["condition_label"], tables, condition_figures(key, fit), notes)
+
+
+def condition_figures(key: str, fit: ConditionFit) -> list[Figure]:
+    """B_eq/I and Bertin's N with their 95 % (fit) intervals, then each decay with the model over it."""
+    from ..ident.report import covariance_of, predicted_angles
+    from ..viz.plots import decay_fit_figure, run_labels
+    from ..viz.report_figures import damping_figure, png_bytes
+
+    summary = fit.summary
+    amplitudes = [row["amplitude_deg"] for row in summary["b_eq"]]
+    bertin = [(row["value_per_deg"], row["std"]) for row in summary["bertin_n"]]
+    coefficients = {term: c["value"] for term, c in summary["coefficients"].items()}
+    damping = damping_figure(
+        coefficients, covariance_of(fit.estimator), amplitudes, bertin, FIT_95.label,
+        f"{summary['condition_label']}: damping",
+    )  # fmt: skip
+    figures = [
+        Figure(
+            f"{key}-damping-figure",
+            "B_eq/I and Bertin's N against amplitude",
+            png_bytes(damping),
+            f"Band and bars: {FIT_95.label}, 1.96 × the standard deviation propagated from the fit's "
+            "covariance (delta method).",
+            (FIT_95,),
+        )
+    ]
+    predicted = predicted_angles(fit.estimator, fit.runs)
+    for number, (run, model, label) in enumerate(
+        zip(fit.runs, predicted, run_labels(fit.runs), strict=True), 1
+    ):
+        figure = decay_fit_figure(run.t - run.t[0], run.angle, model, axis=run.axis, title=label)
+        caption = f"{run.name}: measured, the fitted model ({summary['model']['name']}) and the residual."
+        figures.append(Figure(f"{key}-decay-{number}", f"Decay {label}", png_bytes(figure), caption))
+    return figures
+
+
+def report_content(
+    fits: Sequence[ConditionFit], warnings: Sequence[str], provenance: Section, made_utc: str
+) -> ReportContent:
+    """The whole report: conditions and decays, each condition's section, every warning, provenance."""
+    summaries = [fit.summary for fit in fits]
+    conditions = Section("conditions", "Conditions", [conditions_table(summaries), decays_table(summaries)])
+    sections = [conditions, *(condition_section(n, fit) for n, fit in enumerate(fits, 1)), provenance]
+    return ReportContent(TITLE, sections, list(warnings), made_utc)

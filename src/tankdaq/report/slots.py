@@ -1,0 +1,48 @@
+"""The report's places for what other parts of tankdaq compute as DataFrames: a quantity's
+uncertainty budget, the IMO table of Bertin's N against mean amplitude, and full scale with the
+friction correction. Each is a ``Table`` the renderers show as any other (title, caption, interval
+labels), added to a condition's section by ``report.make`` (``condition_section(extra=...)``)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+from .content import Coverage, Interval, IntervalKind, Table
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+#: An expanded uncertainty, k = 2 (about 95 %).
+EXPANDED_95 = Interval(Coverage.P95, IntervalKind.EXPANDED)
+
+
+def budget_table(
+    key: str, quantity: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] | None = None
+) -> Table:
+    """A quantity's uncertainty budget (columns source, value, sensitivity, contribution, share):
+    the sources' contributions combined, and expanded with k = 2."""
+    caption = (
+        f"Uncertainty budget of {quantity} (ISO-GUM, ITTC 7.5-02-01-01): each source's value, its "
+        f"sensitivity and its contribution to the combined standard uncertainty; {EXPANDED_95.label}: "
+        "expanded with k = 2."
+    )
+    return Table.from_frame(key, f"Uncertainty budget: {quantity}", frame, caption, intervals)
+
+
+def imo_table(key: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] | None = None) -> Table:
+    """Bertin's N against mean amplitude at 10, 15, 20 and 25 deg where the decays cover them."""
+    caption = (
+        "Bertin's N against mean amplitude (MSC.1/Circ.1200), interpolated where the decays cover the "
+        "amplitude; an amplitude not reached says so."
+    )
+    return Table.from_frame(key, "IMO table: Bertin's N", frame, caption, intervals)
+
+
+def friction_table(key: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] | None = None) -> Table:
+    """Full scale by Froude beside the friction-corrected extrapolation (ITTC 7.5-02-07-04.5)."""
+    caption = (
+        "Full scale: Froude scaling and the extrapolation corrected for skin friction at the model's "
+        "and the ship's Reynolds numbers (ITTC 7.5-02-07-04.5), side by side."
+    )
+    return Table.from_frame(key, "Full scale, friction corrected", frame, caption, intervals)
