@@ -64,6 +64,7 @@ PUBLIC: dict[str, Callable[..., Any]] = {
     "simulate": tankdaq.simulate,
     "runs": tankdaq.runs,
     "set_reference": tankdaq.set_reference,
+    "make_report": tankdaq.make_report,
     "Identification.plot": tankdaq.Identification.plot,
     "Recording.export": tankdaq.Recording.export,
     "Recording.to_csv": tankdaq.Recording.to_csv,
@@ -150,6 +151,7 @@ def _base(name: str, made: Made, here: Path) -> tuple[Callable[..., Any], dict[s
         "simulate": (tankdaq.simulate, {"out_dir": here / "sim", "decay_s": 2.0}),
         "runs": (tankdaq.runs, {"catalogue": made.catalogue}),
         "set_reference": (tankdaq.set_reference, {"fit_id": 1, "catalogue": made.fitted}),
+        "make_report": (tankdaq.make_report, {"inputs": made.folder, **stop}),
         "Identification.plot": (made.result.plot, {}),
         "Diagnosis.save_rrd": (made.diagnosis.save_rrd, {"path": here / "story.rrd"}),
     }
