@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint docs bench clean venv viewer-test-deps catalogue-test-deps
+.PHONY: demo test lint docs bench clean venv viewer-test-deps catalogue-test-deps report-test-deps
 
 # Everything installed is byte-compiled. It must be: where PYTHONDONTWRITEBYTECODE is set (as in this
 # machine's environment) Python never caches what it compiles, and every process would compile pandas, rerun
@@ -68,11 +68,25 @@ catalogue-test-deps:
 		echo "make: apt-get could not install postgresql; the PostgreSQL catalogue tests skip"; \
 	fi
 
+# The report's tests open its HTML in a real browser (Debian's chromium, driven by playwright from the
+# test extra) and render its PDF to pages (pdftoppm, pdftotext: poppler-utils). Installed where this
+# machine allows; otherwise say why: those tests then skip with their reason.
+REPORT_TEST_PACKAGES := chromium poppler-utils
+report-test-deps:
+	@if [ -x /usr/bin/chromium ] && command -v pdftoppm >/dev/null 2>&1 && command -v pdftotext >/dev/null 2>&1; then \
+		:; \
+	elif [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then \
+		echo "make: not root or no apt-get: cannot install $(REPORT_TEST_PACKAGES); the report's browser and PDF tests skip"; \
+	elif ! (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+			$(REPORT_TEST_PACKAGES)) >/dev/null 2>&1; then \
+		echo "make: apt-get could not install $(REPORT_TEST_PACKAGES); the report's browser and PDF tests skip"; \
+	fi
+
 # The kernels build, then the docs, on one core while the lint and the type check run on the other
 # (about 45 and 50 s on this machine; the docs after the kernels: no two processes build one kernel).
 # compileall: pip does not byte-compile an editable install's own source, and with PYTHONDONTWRITEBYTECODE
 # set every tankdaq process a test starts would compile the package from source again.
-test: $(STAMP) viewer-test-deps catalogue-test-deps
+test: $(STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	($(BIN)/python -m compileall -q src && $(BIN)/python -m tankdaq.prepare && \
 		$(MAKE) --no-print-directory docs) & built=$$!; \
 		$(MAKE) --no-print-directory lint; checked=$$?; \
