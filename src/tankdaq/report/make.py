@@ -25,6 +25,8 @@ if TYPE_CHECKING:
     from ..api.identification import ConditionFit
     from ..api.recording import Recording
     from ..config import Hull
+    from ..ident.conditions import Condition
+    from .sources import ReportInputs
 
 #: The names written into ``out``.
 HTML_NAME, PDF_NAME = "report.html", "report.pdf"
@@ -177,16 +179,17 @@ def _read(files: list[Path], kept: Kept) -> tuple[list[Recording], list[str]]:
     return recordings, skipped
 
 
-def _by_condition(recordings: list[Recording]) -> dict[Any, list[Recording]]:
+def _by_condition(recordings: list[Recording]) -> dict[Condition, list[Recording]]:
+    """The recordings by the condition their first decay says (a recording is one condition)."""
     from ..ident.conditions import condition_of
 
-    groups: dict[Any, list[Recording]] = {}
+    groups: dict[Condition, list[Recording]] = {}
     for recording in recordings:
         groups.setdefault(condition_of(recording.decays[0].run), []).append(recording)
     return groups
 
 
-def _hull_named(condition: Any, kept: Kept) -> Hull | None:
+def _hull_named(condition: Condition, kept: Kept) -> Hull | None:
     """The hull a condition's recordings name, when it can be found (else a line: no dimensional
     results for it)."""
     from ..config import load_hull
@@ -204,7 +207,7 @@ def _hull_named(condition: Any, kept: Kept) -> Hull | None:
 
 
 def _fit(
-    group: list[Recording], condition: Any, hull: Hull | None, model: str, full_scale: bool, kept: Kept
+    group: list[Recording], condition: Condition, hull: Hull | None, model: str, full_scale: bool, kept: Kept
 ) -> ConditionFit:
     """One condition fitted by ``tankdaq.identify`` at its draft (T where the recordings do not say)."""
     from ..api.identification import identify
@@ -212,6 +215,8 @@ def _fit(
     from ..ident.conditions import UNKNOWN
 
     draft = 1.0 if condition.draft == UNKNOWN else parse_draft(condition.draft)
+    if condition.draft == UNKNOWN and hull is not None:
+        kept.line(f"{condition.label}: the recordings give no draft; dimensional results at T")
     hull_file = None if hull is None else hull.path or hull.name
     found = identify(group, model, hull=hull_file, draft=draft, full_scale=full_scale, progress=kept)
     (fit,) = found.fits
@@ -220,7 +225,7 @@ def _fit(
 
 def _content(
     fits: list[ConditionFit], skipped: list[str], recordings: list[Recording], hulls: list[Hull],
-    found: Any, command: str, made: str,
+    found: ReportInputs, command: str, made: str,
 ) -> ReportContent:  # fmt: skip
     from .build import report_content
     from .provenance import provenance_section
