@@ -29,13 +29,14 @@ def tankdaq(*args: str, cwd: Path) -> subprocess.CompletedProcess[str]:
 
 @pytest.fixture(scope="module")
 def made(recording: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    """The report of one recording with a hull that has a scale factor (full scale included), made
-    twice by the same command into the same folder: the first moved aside before the second."""
+    """The report of one recording with a hull that has a scale factor (full scale included) and a
+    gyradius its period contradicts (an implausible result, warned), made twice by the same command
+    into the same folder: the first moved aside before the second."""
     work = tmp_path_factory.mktemp("report")
     hull = work / "swath_scaled.toml"
-    hull.write_text(
-        (ROOT / "configs" / "hulls" / "swath.toml").read_text() + "\n[particulars]\nscale_factor = 12.5\n"
-    )
+    swath = (ROOT / "configs" / "hulls" / "swath.toml").read_text()
+    swath = swath.replace("gm_m = 0.08\n", "gm_m = 0.08\nradius_of_gyration_m = 1.0\n", 1)
+    hull.write_text(swath + "\n[particulars]\nscale_factor = 12.5\n")
     shutil.copy(recording, work / recording.name)
     args = (
         "report",
@@ -90,6 +91,9 @@ def test_the_report_holds_what_a_reviewer_asks(made: dict[str, Any], recording: 
     hull_sha = hashlib.sha256((made["work"] / "swath_scaled.toml").read_bytes()).hexdigest()
     assert tables["hulls"]["rows"][0][2] == hull_sha
     assert tables["recordings"]["rows"][0][1] == hashlib.sha256(recording.read_bytes()).hexdigest()
+    (warning,) = document["warnings"]  # the period the gyradius contradicts, also beside the numbers
+    assert "natural period" in warning
+    assert f"warning: {warning.split(': ', 1)[1]}" in document["sections"][1]["notes"]
     about = dict(tables["report"]["rows"])
     assert about["command"] == "tankdaq " + " ".join(made["args"])
     assert about["software"].startswith("tankdaq ")
@@ -163,8 +167,10 @@ def test_the_html_opens_in_chromium_with_the_json_numbers_and_loads_nothing(
     shown = page.evaluate(READ_TABLES)
     images = page.evaluate("() => [...document.images].map(i => [i.complete, i.naturalWidth])")
     made_utc = page.text_content("#made-utc")
+    warnings = page.eval_on_selector_all("#warning-list li", "items => items.map(i => i.textContent)")
     page.close()
     assert made_utc == made["document"]["made_utc"]
+    assert warnings == made["document"]["warnings"] != []
     for section in made["document"]["sections"]:
         for table in section["tables"]:
             rows = shown[table["key"]]
@@ -198,8 +204,10 @@ def test_the_pdf_renders_to_pages_with_the_json_numbers(made: dict[str, Any], tm
     printed = {float(n) for n in NUMBER.findall(text)}
     missing = [n for n in numeric_cells(made["document"]) if float(n) not in printed]
     assert missing == []
+    words = " ".join(text.split())
     for key, value in dict(made["document"]["sections"][-1]["tables"][0]["rows"]).items():
-        assert " ".join(value.split()) in " ".join(text.split()) or key == "command"
+        assert " ".join(value.split()) in words or key == "command"
+    assert all(" ".join(line.split()[:8]) in words for line in made["document"]["warnings"])
 
 
 def test_a_session_folder_reports_its_accepted_decays(recording: Path, tmp_path: Path) -> None:
