@@ -26,6 +26,8 @@ from .config_rules import (
 )
 from .errors import ConfigError, InputError
 from .particulars import IKEDA_KEYS, MainParticulars, ikeda_inputs, parse_particulars, plausible
+from .particulars import WaterSettings as WaterSettings  # for --full-scale's friction correction
+from .particulars import friction_scaling as friction_scaling
 from .physics.decay import decay_refusal
 from .physics.ikeda import IkedaPrediction
 from .physics.scaling import FroudeScale

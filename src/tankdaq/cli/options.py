@@ -75,7 +75,29 @@ EndS = Annotated[
 #: ``--full-scale`` (identify, campaign): the ship's results by Froude from the hull's scale factor.
 FullScale = Annotated[
     bool,
-    typer.Option("--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."),
+    typer.Option(
+        "--full-scale",
+        help="Also report at full scale (the hull's scale_factor): Froude and friction-corrected (ITTC).",
+    ),
+]
+#: The water of ``--full-scale``'s friction correction (identify, campaign), degC: else the hull's keys.
+WaterTemperature = Annotated[
+    float | None,
+    typer.Option(
+        "--water-temperature",
+        callback=checked(validation.water_temperature_c, option="--water-temperature"),
+        help="Tank water temperature of the decays, degC, for --full-scale's friction [default: the hull's, "
+        "else 15].",
+    ),
+]
+SeaTemperature = Annotated[
+    float | None,
+    typer.Option(
+        "--sea-temperature",
+        callback=checked(validation.water_temperature_c, option="--sea-temperature"),
+        help="The ship's sea water temperature, degC, for --full-scale's friction [default: the hull's, "
+        "else 15].",
+    ),
 ]
 
 

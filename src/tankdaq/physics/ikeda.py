@@ -109,6 +109,11 @@ class IkedaInputs:
     def omega_hat(self, omega_rad_s: float) -> float:
         return omega_rad_s * math.sqrt(self.beam_m / (2 * self.g_m_s2))
 
+    @property
+    def kato(self) -> Kato:
+        """The hull's skin friction (Kato) from these particulars."""
+        return Kato(self.lpp_m, self.beam_m, self.draft_m, self.block_coefficient, self.og_m)
+
 
 @dataclass(frozen=True)
 class Finding:
@@ -194,7 +199,7 @@ def _components(inputs: IkedaInputs, omega_rad_s: float, amplitude_rad: float) -
     omega_hat = inputs.omega_hat(omega_rad_s)
     phi_deg = math.degrees(amplitude_rad)
     out = {
-        "B_F": _friction(inputs, bd, ogd, omega_rad_s, amplitude_rad),
+        "B_F": _friction(inputs, omega_rad_s, amplitude_rad),
         "B_W": _wave(bd, inputs.block_coefficient, inputs.midship_coefficient, ogd, omega_hat),
         "B_E": _eddy(bd, inputs.block_coefficient, inputs.midship_coefficient, ogd, omega_hat, amplitude_rad),
         "B_L": _lift(inputs) * inputs.hat_factor,
@@ -202,21 +207,65 @@ def _components(inputs: IkedaInputs, omega_rad_s: float, amplitude_rad: float) -
     }
     if inputs.speed_m_s > 0:
         reduced = omega_rad_s * inputs.lpp_m / inputs.speed_m_s  # K = ωL/U
-        out["B_F"] *= 1.0 + 4.1 / reduced
         out["B_E"] *= (0.04 * reduced) ** 2 / (1.0 + (0.04 * reduced) ** 2)
     out[TOTAL] = sum(out[k] for k in COMPONENTS)
     return out
 
 
-def _friction(inputs: IkedaInputs, bd: float, ogd: float, omega: float, phi: float) -> float:
-    """Kato's skin friction on the mean radius r_f and wetted surface S_f (laminar C_F)."""
-    cb, d, b = inputs.block_coefficient, inputs.draft_m, inputs.beam_m
-    radius = d * ((0.887 + 0.145 * cb) * (1.7 + cb * bd) - 2.0 * ogd) / math.pi
-    surface = inputs.lpp_m * (1.75 * d + cb * b)
-    period = 2 * math.pi / omega
-    cf = 1.328 * (3.22 * radius**2 * phi**2 / (period * inputs.kinematic_viscosity_m2_s)) ** -0.5
-    b_f = 4.0 / (3.0 * math.pi) * inputs.rho_kg_m3 * surface * radius**3 * phi * omega * cf
-    return b_f * inputs.hat_factor
+def _friction(inputs: IkedaInputs, omega: float, phi: float) -> float:
+    """Kato's skin friction as the simplified method takes it (laminar C_F, speed factor), B̂F."""
+    return inputs.kato.damping(omega, phi, inputs.kinematic_viscosity_m2_s, inputs.rho_kg_m3,
+                               inputs.speed_m_s) * inputs.hat_factor  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Kato:
+    """Kato's skin friction of a rolling hull (ITTC 7.5-02-07-04.5 §2.2.3), from the main particulars:
+    the wetted surface S_f = Lpp (1.75 d + CB B) and mean radius r_f = d ((0.887 + 0.145 CB)(1.7 + CB B/d)
+    - 2 OG/d) / π of the authors' program; OG downward positive. One formula for the simplified Ikeda
+    prediction (laminar) and the friction correction of full-scale results (with the turbulent term)."""
+
+    lpp_m: float
+    beam_m: float
+    draft_m: float
+    block_coefficient: float
+    og_m: float
+
+    @property
+    def radius_m(self) -> float:
+        cb, d = self.block_coefficient, self.draft_m
+        return d * ((0.887 + 0.145 * cb) * (1.7 + cb * self.beam_m / d) - 2.0 * self.og_m / d) / math.pi
+
+    @property
+    def surface_m2(self) -> float:
+        return self.lpp_m * (1.75 * self.draft_m + self.block_coefficient * self.beam_m)
+
+    def reynolds(self, omega_rad_s: float, amplitude_rad: float, nu_m2_s: float) -> float:
+        """Kato's Reynolds number of the roll, 3.22 r_f² φa² / (T ν) = 0.512 (r_f φa)² ω / ν."""
+        period = 2 * math.pi / omega_rad_s
+        return 3.22 * self.radius_m**2 * amplitude_rad**2 / (period * nu_m2_s)
+
+    def damping(
+        self,
+        omega_rad_s: float,
+        amplitude_rad: float,
+        nu_m2_s: float,
+        rho_kg_m3: float,
+        speed_m_s: float = 0.0,
+        turbulent: bool = False,
+    ) -> float:
+        """B_F (N·m·s/rad) = 4/(3π) ρ S_f r_f³ φa ω C_f × (1 + 4.1 U/(ωL)) (Ikeda's speed factor), with
+        C_f = 1.328 Re^-1/2, plus 0.014 Re^-0.114 with ``turbulent`` (Kato's turbulent term)."""
+        reynolds = self.reynolds(omega_rad_s, amplitude_rad, nu_m2_s)
+        cf = 1.328 * reynolds**-0.5 + (0.014 * reynolds**-0.114 if turbulent else 0.0)
+        b_f = (4.0 / (3.0 * math.pi) * rho_kg_m3 * self.surface_m2 * self.radius_m**3 * amplitude_rad
+               * omega_rad_s * cf)  # fmt: skip
+        return b_f * friction_speed_factor(speed_m_s, omega_rad_s, self.lpp_m)
+
+
+def friction_speed_factor(speed_m_s: float, omega_rad_s: float, lpp_m: float) -> float:
+    """Ikeda's forward-speed factor of friction, 1 + 4.1 U/(ωL): the same at both scales by Froude."""
+    return 1.0 + 4.1 * speed_m_s / (omega_rad_s * lpp_m)
 
 
 def _poly(x: float, *coefficients: float) -> float:
