@@ -297,6 +297,9 @@ def test_campaign_full_scale_uses_each_hulls_scale_factor(tmp_path: Path, monkey
     period_ship = float(line.split("natural period ")[1].split(" s")[0])
     assert period_ship == pytest.approx(period_model * 4.0, rel=1e-3)  # both printed to 4 digits
     assert "B44" in line and "Reynolds" in result.stdout
+    # swath gives no main particulars: the Froude column stays, and the line says which keys to add
+    assert "no friction correction: add lpp_m, beam_m, draft_m, block_coefficient, kg_m to" in line
+    assert line.index("B44") < line.index("(Froude)") < line.index("no friction correction")
 
 
 def test_library_errors_are_input_errors() -> None:

@@ -104,9 +104,12 @@ def _particular_values(table: Any, path: Path, where: str) -> dict[str, float]:
     for key, value in table.items():
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise ConfigError(f"{path}: [{where}] {key} = {value!r} must be a finite number")
-        if key in _TEMPERATURES:
+        if key in _TEMPERATURES or key == "sea_kinematic_viscosity_m2_s":
             try:
-                checked_temperature_c(value, f"{path}: [{where}] {key}")
+                if key in _TEMPERATURES:
+                    checked_temperature_c(value, f"{path}: [{where}] {key}")
+                else:
+                    _refuse_outside(value, SEA_VISCOSITY, key, f"{path} [{where}]")
             except InputError as exc:
                 raise ConfigError(str(exc)) from None
         elif (key in _NON_NEGATIVE and value < 0) or (key not in _SIGNED | _NON_NEGATIVE and value <= 0):

@@ -369,11 +369,12 @@ def identify(
     parts = [runs] if joint or len(groups) == 1 else list(groups.values())
     for condition_runs in parts:  # impossible interval requests fail before any fit
         check_intervals(probe, len(condition_runs), bootstrap, repeats, method)
+    frictions = [friction_for(hull_config, draft, scale, runs_of, water) for runs_of in parts]  # before fits
     prepare_identifier(terms or MODEL_FAMILY[-1], kept.line)  # native kernels: built on the first run
     if len(parts) > 1:
         kept.line(grouping_line(groups))
     fits = []
-    for condition_runs in parts:
+    for condition_runs, friction in zip(parts, frictions, strict=True):
         label = "all conditions (--joint)" if pooled else condition_of(condition_runs[0]).label
         settings = (method, bootstrap, repeats, hull_config, draft)
         estimator, summary = _fit_condition(condition_runs, model, settings, label, kept)
@@ -381,7 +382,6 @@ def identify(
         if pooled is not None:
             summary["warnings"].insert(0, pooled)
             summary["conditions"] = pooled
-        friction = friction_for(hull_config, draft, scale, condition_runs, water)
         lines = scale_results(summary, scale, friction)  # the ship's (B̂44 is summarize's)
         fits.append(ConditionFit(label, condition_runs, estimator, summary, lines, pooled is not None))
     return Identification(_document(fits, grouping_line(groups), list(cut)), fits, kept.lines, list(cut))

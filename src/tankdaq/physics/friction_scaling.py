@@ -23,7 +23,7 @@ from enum import Enum
 from typing import Any
 
 from ..errors import InputError
-from .ikeda import Kato
+from .kato import Kato
 from .scaling import FroudeScale
 
 #: ITTC 7.5-02-01-03's sea water: absolute salinity 35.16504 g/kg (practical salinity 35).
