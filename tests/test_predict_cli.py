@@ -98,8 +98,13 @@ def test_full_scale_scales_period_and_b44_by_froude(tmp_path: Path) -> None:
     assert ship["amplitudes"][0]["B_44"] == out["amplitudes"][0]["B_44"]
     assert ship["equivalent_model"]["b2"] == out["equivalent_model"]["b2"]
     assert "friction" in ship["note"]
+    row = ship["amplitudes"][0]  # and the friction moved to the ship's Reynolds number (ITTC)
+    assert row["b44_corrected_n_m_s"] == pytest.approx(row["b44_n_m_s"] + row["friction_correction_n_m_s"])
+    water = ship["friction"]["model_viscosity_m2_s"] / ship["friction"]["ship_viscosity_m2_s"]
+    assert row["reynolds_ship"] == pytest.approx(25.0**1.5 * row["reynolds_model"] * water, rel=1e-9)
+    assert row["friction_correction_n_m_s"] < 0  # by Froude alone the friction is too large
     text = predict("--hull", path, "--full-scale").stdout
-    assert "full scale (1:25)" in text and "Reynolds" in text
+    assert "full scale (1:25)" in text and "Reynolds" in text and "friction-corrected" in text
 
 
 @pytest.mark.parametrize(

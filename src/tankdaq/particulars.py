@@ -261,7 +261,12 @@ class WaterSettings:
 
 
 def friction_scaling(
-    hull: Any, draft: float, scale: FroudeScale, speed_m_s: float | None, settings: WaterSettings
+    hull: Any,
+    draft: float,
+    scale: FroudeScale,
+    speed_m_s: float | None,
+    settings: WaterSettings,
+    speed_from: str = "the recordings' speed_m_s",
 ) -> FrictionScaling | str:
     """The friction correction of a hull at a draft factor (``physics.friction_scaling``), or the one line
     that says which ``[particulars]`` key to add. ``speed_m_s``: the decays' carriage speed where the
@@ -276,7 +281,7 @@ def friction_scaling(
     og = p["og_m"] if "og_m" in p else p["draft_m"] - p["kg_m"]
     kato = Kato(p["lpp_m"], p["beam_m"], p["draft_m"], p["block_coefficient"], og)
     if speed_m_s is not None:
-        speed, speed_from = speed_m_s, "the recordings' speed_m_s"
+        speed = speed_m_s
     elif "speed_m_s" in p:
         speed, speed_from = p["speed_m_s"], f"speed_m_s in {where}"
     else:

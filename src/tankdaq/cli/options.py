@@ -80,25 +80,20 @@ FullScale = Annotated[
         help="Also report at full scale (the hull's scale_factor): Froude and friction-corrected (ITTC).",
     ),
 ]
-#: The water of ``--full-scale``'s friction correction (identify, campaign), degC: else the hull's keys.
-WaterTemperature = Annotated[
-    float | None,
-    typer.Option(
-        "--water-temperature",
-        callback=checked(validation.water_temperature_c, option="--water-temperature"),
-        help="Tank water temperature of the decays, degC, for --full-scale's friction [default: the hull's, "
-        "else 15].",
-    ),
-]
-SeaTemperature = Annotated[
-    float | None,
-    typer.Option(
-        "--sea-temperature",
-        callback=checked(validation.water_temperature_c, option="--sea-temperature"),
-        help="The ship's sea water temperature, degC, for --full-scale's friction [default: the hull's, "
-        "else 15].",
-    ),
-]
+
+
+def _water_temperature(flag: str, whose: str) -> Any:
+    """``--water-temperature`` / ``--sea-temperature`` (identify, campaign): the water of ``--full-scale``'s
+    friction correction, degC, checked 0-40 while parsed; else the hull's keys, else 15 degC."""
+    return typer.Option(
+        flag,
+        callback=checked(validation.water_temperature_c, option=flag),
+        help=f"{whose} temperature, degC, for --full-scale's friction [default: the hull's, else 15].",
+    )
+
+
+WaterTemperature = Annotated[float | None, _water_temperature("--water-temperature", "Tank water")]
+SeaTemperature = Annotated[float | None, _water_temperature("--sea-temperature", "The ship's sea water")]
 
 
 def report_option(help: str) -> Any:

@@ -224,3 +224,41 @@ def assumption_lines(assumptions: dict[str, Any]) -> list[str]:
         f"density {assumptions['density_kg_m3']:g} kg/m^3 at both scales (Froude's lambda^4.5)",
         f"  water properties: {assumptions['water_properties']}",
     ]
+
+
+def correct_prediction(summary: dict[str, Any], friction: FrictionScaling | str) -> None:
+    """Adds the friction-corrected B44 to each amplitude of a prediction's ``full_scale`` part
+    (``physics.ikeda.IkedaPrediction.summary``), or the line that says why it could not be made."""
+    ship = summary["full_scale"]
+    if isinstance(friction, str):
+        ship["friction_missing"] = friction
+        return
+    ship["friction"] = friction.assumptions()
+    for row, model in zip(ship["amplitudes"], summary["amplitudes"], strict=True):
+        found = friction.at(model["b44_n_m_s"], summary["omega_rad_s"], math.radians(model["amplitude_deg"]))
+        row |= {
+            "b44_corrected_n_m_s": found.corrected_n_m_s,
+            "friction_correction_n_m_s": found.correction_n_m_s,
+            "friction_share": found.share,
+            "reynolds_model": found.reynolds_model,
+            "reynolds_ship": found.reynolds_ship,
+        }
+
+
+def amplitude_lines(ship: dict[str, Any]) -> list[str]:
+    """A prediction's full-scale B44 per amplitude, Froude and, where made, friction-corrected."""
+    lines = []
+    for r in ship["amplitudes"]:
+        line = f"  {r['amplitude_deg']:>6.2f} deg  B44 {r['b44_n_m_s']:.4g} N·m·s/rad (Froude)"
+        if "b44_corrected_n_m_s" in r:
+            line += (
+                f", friction-corrected {r['b44_corrected_n_m_s']:.4g} (correction "
+                f"{r['friction_correction_n_m_s']:+.4g}, {r['friction_share']:+.1%}; Reynolds "
+                f"{r['reynolds_model']:.3g} model, {r['reynolds_ship']:.3g} ship)"
+            )
+        lines.append(line)
+    if "friction" in ship:
+        lines += assumption_lines(ship["friction"])
+    elif "friction_missing" in ship:
+        lines.append(f"  {ship['friction_missing']}")
+    return lines

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from .friction_scaling import amplitude_lines
 from .kato import Kato
 from .scaling import FRICTION_NOTE, FroudeScale
 
@@ -487,10 +488,7 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
         lines += [
             f"  full scale (1:{ship['scale_factor']:g}): period {ship['period_s']:.4g} s (B̂44 unchanged), "
             f"b1 {scaled['b1']:.5g} 1/s, b2 {scaled['b2']:.5g} 1/rad, c1 {scaled['c1']:.5g} 1/s^2",
-            *(
-                f"  {r['amplitude_deg']:>6.2f} deg  B44 {r['b44_n_m_s']:.4g} N·m·s/rad"
-                for r in ship["amplitudes"]
-            ),
+            *amplitude_lines(ship),
             f"  note: {ship['note']}",
         ]
     return lines + [f"warning: {line}" for line in summary["validity"]]
