@@ -213,13 +213,15 @@ def test_particulars_are_checked_where_the_hull_is_read(tmp_path: Path, extra: s
 def test_the_template_documents_every_particulars_key(tmp_path: Path) -> None:
     text = write_hull_template("new-hull", tmp_path).read_text()
     for key in ("lpp_m", "block_coefficient", "midship_coefficient", "kg_m", "og_m", "bilge_keel_length_m",
-                "bilge_keel_breadth_m", "speed_m_s", "scale_factor", "added_inertia_fraction"):  # fmt: skip
+                "bilge_keel_breadth_m", "speed_m_s", "scale_factor", "added_inertia_fraction",
+                "water_temperature_c", "sea_temperature_c"):  # fmt: skip
         assert f"# {key} = " in text or f"or {key} = " in text, key
     block = text.split("# [particulars]\n")[1].split("\n\n")[0]
     filled = "[particulars]\n" + "\n".join(line[2:].split("#")[0] for line in block.splitlines())
     (tmp_path / "filled.toml").write_text(filled)
     hull = load_hull(str(tmp_path / "filled.toml"))  # the template's values parse as they stand
     assert hull.main_particulars.values["scale_factor"] == 40.0
+    assert hull.main_particulars.values["sea_temperature_c"] == 15.0
 
 
 def test_kvlcc2_is_shipped_at_model_scale_from_the_parameters_file() -> None:

@@ -12,7 +12,7 @@ The water (ITTC 7.5-02-01-03, "Fresh Water and Seawater Properties", 2011): kine
 standard absolute salinity 35.16504 g/kg by their eq. 22, and ρ by the UNESCO one-atmosphere equation of
 state (Millero and Poisson 1981) at practical salinity 0 and 35: ITTC's tables computed their sea water
 this way, and these formulas give them within 0.03 % over 1-30 °C (tests/test_friction_scaling.py).
-Both water properties are the table's, a temperature of 0-40 °C in; a lab may give ν itself instead.
+A temperature of 0-40 °C goes in; a lab may give ν itself instead (``Water`` says which it was).
 """
 
 from __future__ import annotations
