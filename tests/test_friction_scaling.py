@@ -16,6 +16,7 @@ from tankdaq.api.identification import Identification, Reading
 from tankdaq.cli import app
 from tankdaq.config import load_hull
 from tankdaq.errors import InputError
+from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.ident.full_scale import full_scale_b44
 from tankdaq.physics.friction_scaling import (
     FrictionScaling,
@@ -224,3 +225,35 @@ def test_the_api_refuses_bad_temperatures_by_name(tmp_path: Path, name: str) -> 
     data.write_text("not a decay\n")
     with pytest.raises(InputError, match=name):
         tankdaq.identify(data, hull="kvlcc2", full_scale=True, **{name: 45.0})
+
+
+def test_campaign_shows_both_columns_and_the_water_it_assumed(tmp_path: Path, monkeypatch) -> None:
+    """A roll group whose hull gives the particulars: Froude and friction-corrected B44 on its line, the
+    correction adding up, and the water each side was taken at (the hull's key, the option)."""
+    hulls = tmp_path / "hulls"
+    hulls.mkdir()
+    shipped = load_hull("swath").path
+    assert shipped is not None
+    particulars = "scale_factor = 16.0\nlpp_m = 2.0\nbeam_m = 0.6\ndraft_m = 0.15\n"
+    particulars += "block_coefficient = 0.5\nkg_m = 0.2\n"
+    (hulls / "swath.toml").write_text(
+        f"{shipped.read_text()}\n[particulars]\n{particulars}water_temperature_c = 18.0\n"
+    )
+    monkeypatch.setenv("TANKDAQ_HULLS_DIR", str(hulls))
+    write_simulated_campaign(tmp_path / "runs", ["swath"], "roll", [1.0], [6.0], "csv", seed=3)
+    result = runner.invoke(app, ["campaign", str(tmp_path / "runs"), "--jobs", "1", "--full-scale",
+                                 "--sea-temperature", "12"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    (line,) = [x for x in result.stdout.splitlines() if x.startswith("swath") and "1:16" in x]
+    froude = float(line.split("B44 ")[1].split(" ")[0])
+    corrected = float(line.split("friction-corrected ")[1].split(" ")[0])
+    correction = float(line.split("(correction ")[1].split(" ")[0])
+    share = float(line.split("N·m·s/rad, ")[-1].split("%")[0])
+    assert corrected == pytest.approx(froude + correction, rel=1e-3) and correction < 0
+    assert share == pytest.approx(100 * correction / froude, abs=0.06)
+    reynolds_model = float(line.split("Reynolds ")[1].split(" model")[0])
+    reynolds_ship = float(line.split("model, ")[1].split(" ship")[0])
+    water = fresh_water_viscosity(18.0) / sea_water_viscosity(12.0)
+    assert reynolds_ship == pytest.approx(reynolds_model * 16.0**1.5 * water, rel=1e-2)  # printed to 3 digits
+    assert "fresh water 18 degC (water_temperature_c in" in result.stdout
+    assert "sea water 12 degC (--sea-temperature)" in result.stdout
