@@ -9,7 +9,7 @@ import math
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
+from typer.testing import CliRunner, Result
 
 import tankdaq
 from tankdaq.api.identification import Identification, Reading
@@ -175,6 +175,12 @@ def test_kvlcc2_friction_correction_matches_a_hand_calculation(kvlcc2: Identific
     assert list(table["b44_corrected_n_m_s"]) == [r["b44_corrected_n_m_s"] for r in ship["b_eq"]]
 
 
+def _refused_in_one_line(result: Result, message: str) -> None:
+    """Exit 2 with one line that says what to do, and nothing else."""
+    assert result.exit_code == 2, result.output
+    assert message in result.output and len(result.output.strip().splitlines()) == 1
+
+
 @pytest.mark.parametrize(
     "extra, message",
     [
@@ -190,8 +196,7 @@ def test_bad_water_temperatures_are_refused_before_any_work(
     data.write_text("not a decay\n")
     for command in ("identify", "campaign"):
         result = runner.invoke(app, [command, str(data), "--hull", "kvlcc2", "--full-scale", *extra])
-        assert result.exit_code == 2, result.output
-        assert message in result.output and len(result.output.strip().splitlines()) == 1
+        _refused_in_one_line(result, message)
 
 
 @pytest.mark.parametrize(
@@ -213,8 +218,7 @@ def test_bad_water_keys_in_a_hull_are_refused_in_one_line(tmp_path: Path, key: s
     data = tmp_path / "never-read.csv"
     data.write_text("not a decay\n")
     result = runner.invoke(app, ["identify", str(data), "--hull", str(hull), "--full-scale"])
-    assert result.exit_code == 2, result.output
-    assert message in result.output and len(result.output.strip().splitlines()) == 1
+    _refused_in_one_line(result, message)
     with pytest.raises(InputError, match=r"water temperature|outside"):
         tankdaq.identify(data, hull=hull, full_scale=True)
 
