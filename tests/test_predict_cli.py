@@ -98,8 +98,13 @@ def test_full_scale_scales_period_and_b44_by_froude(tmp_path: Path) -> None:
     assert ship["amplitudes"][0]["B_44"] == out["amplitudes"][0]["B_44"]
     assert ship["equivalent_model"]["b2"] == out["equivalent_model"]["b2"]
     assert "friction" in ship["note"]
+    row = ship["amplitudes"][0]  # and the friction moved to the ship's Reynolds number (ITTC)
+    assert row["b44_corrected_n_m_s"] == pytest.approx(row["b44_n_m_s"] + row["friction_correction_n_m_s"])
+    water = ship["friction"]["model_viscosity_m2_s"] / ship["friction"]["ship_viscosity_m2_s"]
+    assert row["reynolds_ship"] == pytest.approx(25.0**1.5 * row["reynolds_model"] * water, rel=1e-9)
+    assert row["friction_correction_n_m_s"] < 0  # by Froude alone the friction is too large
     text = predict("--hull", path, "--full-scale").stdout
-    assert "full scale (1:25)" in text and "Reynolds" in text
+    assert "full scale (1:25)" in text and "Reynolds" in text and "friction-corrected" in text
 
 
 @pytest.mark.parametrize(
@@ -208,13 +213,15 @@ def test_particulars_are_checked_where_the_hull_is_read(tmp_path: Path, extra: s
 def test_the_template_documents_every_particulars_key(tmp_path: Path) -> None:
     text = write_hull_template("new-hull", tmp_path).read_text()
     for key in ("lpp_m", "block_coefficient", "midship_coefficient", "kg_m", "og_m", "bilge_keel_length_m",
-                "bilge_keel_breadth_m", "speed_m_s", "scale_factor", "added_inertia_fraction"):  # fmt: skip
+                "bilge_keel_breadth_m", "speed_m_s", "scale_factor", "added_inertia_fraction",
+                "water_temperature_c", "sea_temperature_c"):  # fmt: skip
         assert f"# {key} = " in text or f"or {key} = " in text, key
     block = text.split("# [particulars]\n")[1].split("\n\n")[0]
     filled = "[particulars]\n" + "\n".join(line[2:].split("#")[0] for line in block.splitlines())
     (tmp_path / "filled.toml").write_text(filled)
     hull = load_hull(str(tmp_path / "filled.toml"))  # the template's values parse as they stand
     assert hull.main_particulars.values["scale_factor"] == 40.0
+    assert hull.main_particulars.values["sea_temperature_c"] == 15.0
 
 
 def test_kvlcc2_is_shipped_at_model_scale_from_the_parameters_file() -> None:
@@ -297,6 +304,9 @@ def test_campaign_full_scale_uses_each_hulls_scale_factor(tmp_path: Path, monkey
     period_ship = float(line.split("natural period ")[1].split(" s")[0])
     assert period_ship == pytest.approx(period_model * 4.0, rel=1e-3)  # both printed to 4 digits
     assert "B44" in line and "Reynolds" in result.stdout
+    # swath gives no main particulars: the Froude column stays, and the line says which keys to add
+    assert "no friction correction: add lpp_m, beam_m, draft_m, block_coefficient, kg_m to" in line
+    assert line.index("B44") < line.index("(Froude)") < line.index("no friction correction")
 
 
 def test_library_errors_are_input_errors() -> None:

@@ -26,6 +26,8 @@ from .config_rules import (
 )
 from .errors import ConfigError, InputError
 from .particulars import IKEDA_KEYS, MainParticulars, ikeda_inputs, parse_particulars, plausible
+from .particulars import WaterSettings as WaterSettings  # for --full-scale's friction correction
+from .particulars import friction_scaling as friction_scaling
 from .physics.decay import decay_refusal
 from .physics.ikeda import IkedaPrediction
 from .physics.scaling import FroudeScale
@@ -445,6 +447,8 @@ gm_m = 0.05
 # speed_m_s = 0.0                 # carriage speed of the decay tests
 # scale_factor = 40.0             # lambda = ship length / model length
 # added_inertia_fraction = 0.15   # added / dry roll inertia (with radius_of_gyration_m: the roll period)
+# water_temperature_c = 15.0      # tank water (degC): the model's viscosity, --full-scale's friction
+# sea_temperature_c = 15.0        # the ship's sea water (degC) for the friction correction
 
 # [simulation] is optional: decay coefficients per unit total inertia (x'' + b1 x' + b2|x'|x' + c1 x
 # + c3 x^3 = 0, rad, s) that only the simulator (record --port sim, simulate) needs. Leave it out for a

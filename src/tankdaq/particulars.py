@@ -18,7 +18,15 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError, InputError
-from .physics.ikeda import Finding, IkedaInputs
+from .physics.friction_scaling import (
+    DEFAULT_TEMPERATURE_C,
+    FrictionScaling,
+    Water,
+    WaterKind,
+    checked_temperature_c,
+)
+from .physics.ikeda import Finding, IkedaInputs, Kato
+from .physics.scaling import FroudeScale
 
 #: The optional ``[particulars]`` keys (docs/hulls.md): main particulars for ``tankdaq predict``'s
 #: simplified Ikeda prediction and for full-scale results. Key -> what it is.
@@ -37,10 +45,15 @@ PARTICULAR_KEYS = {
     "added_inertia_fraction": "added roll inertia over the dry inertia (for the natural frequency)",
     "water_density_kg_m3": "tank water density (kg/m^3), default 1000",
     "kinematic_viscosity_m2_s": "kinematic viscosity (m^2/s), default 1.14e-6",
+    "water_temperature_c": "tank water temperature of the decays (degC), for --full-scale's friction",
+    "sea_temperature_c": "the ship's sea water temperature (degC), default 15, for --full-scale's friction",
+    "sea_kinematic_viscosity_m2_s": "the ship's sea water viscosity (m^2/s), instead of sea_temperature_c",
 }
 #: Keys that may be zero or negative (the rest must be positive).
 _SIGNED = {"og_m"}
 _NON_NEGATIVE = {"bilge_keel_length_m", "bilge_keel_breadth_m", "speed_m_s", "added_inertia_fraction"}
+#: Water temperatures, checked against the range ITTC's water properties are used at.
+_TEMPERATURES = {"water_temperature_c", "sea_temperature_c"}
 #: What a prediction cannot do without.
 IKEDA_KEYS = ("lpp_m", "beam_m", "draft_m", "block_coefficient", "midship_coefficient")
 
@@ -91,7 +104,15 @@ def _particular_values(table: Any, path: Path, where: str) -> dict[str, float]:
     for key, value in table.items():
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise ConfigError(f"{path}: [{where}] {key} = {value!r} must be a finite number")
-        if (key in _NON_NEGATIVE and value < 0) or (key not in _SIGNED | _NON_NEGATIVE and value <= 0):
+        if key in _TEMPERATURES or key == "sea_kinematic_viscosity_m2_s":
+            try:
+                if key in _TEMPERATURES:
+                    checked_temperature_c(value, f"{path}: [{where}] {key}")
+                else:
+                    _refuse_outside(value, SEA_VISCOSITY, key, f"{path} [{where}]")
+            except InputError as exc:
+                raise ConfigError(str(exc)) from None
+        elif (key in _NON_NEGATIVE and value < 0) or (key not in _SIGNED | _NON_NEGATIVE and value <= 0):
             sign = "zero or more" if key in _NON_NEGATIVE else "positive"
             raise ConfigError(f"{path}: [{where}] {key} = {value!r} must be {sign} ({PARTICULAR_KEYS[key]})")
         values[key] = float(value)
@@ -216,3 +237,74 @@ def _displacement(p: dict[str, float], displacement_kg: float | None, where: obj
         )
         return [Finding("displacement", ratio, 1 - DISPLACEMENT_WARN, 1 + DISPLACEMENT_WARN, line)]
     return []
+
+
+#: What the full-scale friction correction needs of ``[particulars]`` (with kg_m or og_m).
+FRICTION_KEYS = ("lpp_m", "beam_m", "draft_m", "block_coefficient")
+#: The ship's sea water at 0-30 degC (ITTC 7.5-02-01-03: 1.83e-6 at 0 degC).
+SEA_VISCOSITY = Sane(0.8e-6, 1.9e-6, "sea water at 0-30 degC, m^2/s", KINEMATIC_VISCOSITY.slips)
+
+
+@dataclass(frozen=True)
+class WaterSettings:
+    """The water temperatures given for the friction correction (``--water-temperature``,
+    ``--sea-temperature``; degC), None where the hull's keys or ITTC's 15 degC decide."""
+
+    water_temperature_c: float | None = None
+    sea_temperature_c: float | None = None
+
+    def __post_init__(self) -> None:
+        for name, value in (("--water-temperature", self.water_temperature_c),
+                            ("--sea-temperature", self.sea_temperature_c)):  # fmt: skip
+            if value is not None:
+                checked_temperature_c(value, name)
+
+
+def friction_scaling(
+    hull: Any,
+    draft: float,
+    scale: FroudeScale,
+    speed_m_s: float | None,
+    settings: WaterSettings,
+    speed_from: str = "the recordings' speed_m_s",
+) -> FrictionScaling | str:
+    """The friction correction of a hull at a draft factor (``physics.friction_scaling``), or the one line
+    that says which ``[particulars]`` key to add. ``speed_m_s``: the decays' carriage speed where the
+    recordings say it, else the hull's ``speed_m_s``, else 0. Given viscosities are checked against water."""
+    where = f"[particulars] of {hull.path or hull.name}"
+    p = hull.main_particulars.at(draft)
+    missing = [k for k in FRICTION_KEYS if k not in p] + ([] if {"kg_m", "og_m"} & set(p) else ["kg_m"])
+    if missing:
+        return f"no friction correction: add {', '.join(missing)} to {where} (Froude only)"
+    if abs(draft - 1.0) > 1e-9 and not any(abs(f - draft) < 1e-9 for f in hull.main_particulars.drafts):
+        return f'no friction correction at this draft: add [particulars.drafts."{draft:g}T"] to {where}'
+    og = p["og_m"] if "og_m" in p else p["draft_m"] - p["kg_m"]
+    kato = Kato(p["lpp_m"], p["beam_m"], p["draft_m"], p["block_coefficient"], og)
+    if speed_m_s is not None:
+        speed = speed_m_s
+    elif "speed_m_s" in p:
+        speed, speed_from = p["speed_m_s"], f"speed_m_s in {where}"
+    else:
+        speed, speed_from = 0.0, f"assumed: the recordings and {where} give no speed_m_s"
+    model = _water(p, WaterKind.FRESH, settings.water_temperature_c, where)
+    ship = _water(p, WaterKind.SEA, settings.sea_temperature_c, where)
+    rho = p.get("water_density_kg_m3", 1000.0)
+    return FrictionScaling(scale, kato, speed, model, ship, rho, speed_from)
+
+
+def _water(p: dict[str, float], kind: WaterKind, option_c: float | None, where: str) -> Water:
+    """One side's water: the option's temperature, else the hull's viscosity, else its temperature, else
+    ITTC's 15 degC (said so)."""
+    fresh = kind is WaterKind.FRESH
+    option, viscosity_key = ("--water-temperature", "kinematic_viscosity_m2_s") if fresh else (
+        "--sea-temperature", "sea_kinematic_viscosity_m2_s")  # fmt: skip
+    temperature_key = "water_temperature_c" if fresh else "sea_temperature_c"
+    if option_c is not None:
+        return Water.at(kind, option_c, option)
+    if viscosity_key in p:
+        sane = KINEMATIC_VISCOSITY if fresh else SEA_VISCOSITY
+        _refuse_outside(p[viscosity_key], sane, viscosity_key, where)
+        return Water(kind, p[viscosity_key], None, f"{viscosity_key} in {where}")
+    if temperature_key in p:
+        return Water.at(kind, p[temperature_key], f"{temperature_key} in {where}")
+    return Water.at(kind, DEFAULT_TEMPERATURE_C, f"assumed: set {temperature_key} or {option}")

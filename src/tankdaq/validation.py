@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 from .config_rules import MAX_RELEASE_ANGLE_DEG
 from .errors import InputError
+from .physics.friction_scaling import checked_temperature_c
 from .physics.models import resolve_model
 from .physics.terms import TERM_TABLE, TERMS
 from .xsens.constants import BAUD_CODES
@@ -152,6 +153,11 @@ def bootstrap_replicas(value: int, option: str = "--bootstrap") -> int:
             "(1000 is plenty for a 95 % interval)"
         )
     return value
+
+
+def water_temperature_c(value: float, option: str = "--water-temperature") -> float:
+    """A water temperature (degC) ITTC's water properties hold at: 0 to 40."""
+    return checked_temperature_c(value, option)
 
 
 def percent(value: float, option: str, low: float = 0.0, high: float = 100.0) -> float:

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from .. import validation
 from ..errors import InputError
 from . import arguments
-from .identification import drop_read_twice, to_json
+from .identification import drop_read_twice, to_json, water_settings
 from .progress import Kept, Progress
 
 if TYPE_CHECKING:
@@ -111,6 +111,8 @@ def campaign(
     scheduler: str | None = None,
     report: str | Path | None = None,
     full_scale: bool = False,
+    water_temperature_c: float | None = None,
+    sea_temperature_c: float | None = None,
     keep_fits: bool = False,
     include_partial: bool = False,
     on_result: Callable[[GroupResult], None] | None = None,
@@ -123,10 +125,11 @@ def campaign(
     results and B̂44 (else each group's hull is looked up by name); ``start_s``/``end_s`` cut each free
     decay as ``identify`` does. ``jobs`` worker processes (at most the cores), or ``executor="dask"``
     with a ``scheduler`` address. ``report`` a folder for campaign.csv, campaign.md and the figures;
-    ``full_scale`` the ship's period and damping by Froude. ``on_result`` is handed each group's whole
-    fit as it arrives (the run catalogue writes it), which is then let go unless ``keep_fits``; a decay
-    its recording holds only part of (stopped, the device gone, cut) is left out with a line unless
-    ``include_partial``;
+    ``full_scale`` the ship's period and damping by Froude and friction-corrected (the tank's and the
+    sea's ``water_temperature_c``, ``sea_temperature_c`` in degC, as ``identify``). ``on_result`` is
+    handed each group's whole fit as it arrives (the run catalogue writes it), which is then let go
+    unless ``keep_fits``; a decay its recording holds only part of (stopped, the device gone, cut) is
+    left out with a line unless ``include_partial``;
     ``file_work`` is made of the files it wants by the workers that read them (the run catalogue: the
     rows of files it does not hold, ``ident.campaign_stream.FileWork``). A file that cannot be read is
     skipped with its line in ``skipped``; bad input raises ``tankdaq.errors.InputError`` before any file
@@ -137,13 +140,14 @@ def campaign(
     """
     from ..ident.campaign import REPORT_TABLES, find_campaign_hulls, find_recordings
     from ..ident.campaign_stream import FileWork
-    from ..ident.derived import campaign_full_scale
     from ..ident.executors import campaign_executor
+    from ..ident.full_scale import campaign_full_scale
     from ..ident.online import prepare_identifier
 
     inputs, hulls, start_s, end_s = _arguments(inputs, hulls, start_s, end_s)
     model = arguments.model(model)
     recurse, full_scale = arguments.flag(recurse, "recurse"), arguments.flag(full_scale, "full_scale")
+    water = water_settings(water_temperature_c, sea_temperature_c)
     keep_fits = arguments.flag(keep_fits, "keep_fits")
     include_partial = arguments.flag(include_partial, "include_partial")
     jobs = arguments.whole(jobs, "jobs", 1, 4096)
@@ -175,7 +179,7 @@ def campaign(
             kept.line(line)
         results = [row.result for row in rows if row.result is not None]
         written = write_report(results, folder, pool) if folder is not None else []
-    scaled = campaign_full_scale(results) if full_scale else []
+    scaled = campaign_full_scale(results, water) if full_scale else []
     if not keep_fits:  # the fits were kept for the report and the full-scale lines only
         results = []
         rows = [replace(row, result=None) for row in rows]

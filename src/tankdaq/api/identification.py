@@ -4,7 +4,7 @@ This is the one identification pipeline of ``tankdaq identify`` (the command par
 ``identify`` and prints ``Identification.document``): read through ``ident.inputs`` and cut to the free
 decay, grouped by condition (hull, draft, axis) unless ``joint``, the model chosen by the data unless
 given, fitted with its intervals, summarised by ``ident.report.summarize`` (plausibility warnings
-included), with B̂44 and the full-scale results where a hull allows (``ident.derived.scale_results``).
+included), with B̂44 and the full-scale results where a hull allows (``ident.full_scale.scale_results``).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from .recording import Decay, Recording, columns_given, runs_of, sources_given
 if TYPE_CHECKING:
     import pandas as pd
 
-    from ..config import Hull
+    from ..config import Hull, WaterSettings
     from ..store.export_layout import ExportOrigin
     from ..viz.plots import Figure
 
@@ -106,6 +106,18 @@ class Identification:
             }
             for fit in self.fits
             for b_eq, bertin in zip(fit.summary["b_eq"], fit.summary["bertin_n"], strict=True)
+        ]
+        return self._with_warnings(_table(rows))
+
+    @property
+    def full_scale(self) -> pd.DataFrame:
+        """With ``full_scale=True``, per tested amplitude: B_eq/I and B44 (N·m·s/rad) at full scale by
+        Froude and friction-corrected, the correction and its share of B44, both Reynolds numbers (roll,
+        where the hull gives the particulars; the corrected columns are absent where it does not)."""
+        rows = [
+            {**self._condition(fit), **row}
+            for fit in self.fits
+            for row in fit.summary.get("full_scale", {}).get("b_eq", [])
         ]
         return self._with_warnings(_table(rows))
 
@@ -300,6 +312,8 @@ def identify(
     hull: str | Path | None = None,
     draft: float | str = 1.0,
     full_scale: bool = False,
+    water_temperature_c: float | None = None,
+    sea_temperature_c: float | None = None,
     bootstrap: int = 0,
     repeats: bool = False,
     reading: Reading = Reading(),
@@ -310,7 +324,9 @@ def identify(
     ``model``: ``"auto"`` (the data choose from a small family, held-out), terms (``"b1,b2,c1,c3"``) or an
     alias (docs/models.md); ``method``: ``oe`` (output error), ``ee``, ``ga``, ``pso``; decays of different
     conditions are fitted apart unless ``joint``. ``hull`` (a name or a .toml) and ``draft`` (``1.0`` or
-    ``"1.1T"``) give dimensional results and B̂44; ``full_scale`` adds the ship's by Froude. Intervals
+    ``"1.1T"``) give dimensional results and B̂44; ``full_scale`` adds the ship's by Froude and, for roll,
+    friction-corrected (ITTC 7.5-02-07-04.5; the tank's and the sea's ``water_temperature_c`` and
+    ``sea_temperature_c`` in degC, else the hull's keys, else 15 degC; docs/ikeda.md). Intervals
     from the fit, a moving-block ``bootstrap`` or the spread of ``repeats``. Bad input raises
     ``tankdaq.errors.InputError`` with one line that says what to do.
 
@@ -320,8 +336,8 @@ def identify(
     """
     from ..config import full_scale_of, load_hull
     from ..ident.conditions import condition_of, group_conditions, grouping_line
-    from ..ident.derived import scale_results
     from ..ident.estimators import make_estimator
+    from ..ident.full_scale import friction_for, scale_results
     from ..ident.intervals import check_intervals
     from ..ident.online import prepare_identifier
     from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
@@ -331,6 +347,7 @@ def identify(
     method = arguments.text(method, "method", "an estimator's name: oe, ee, ga or pso")
     joint, repeats = arguments.flag(joint, "joint"), arguments.flag(repeats, "repeats")
     full_scale = arguments.flag(full_scale, "full_scale")
+    water = water_settings(water_temperature_c, sea_temperature_c)
     hull = arguments.optional_path(hull, "hull", "a hull's name, a .toml path, or None")
     reading = arguments.optional_instance(reading, "reading", Reading, "a Reading or None") or Reading()
     kept = Kept(arguments.progress(progress))
@@ -352,11 +369,12 @@ def identify(
     parts = [runs] if joint or len(groups) == 1 else list(groups.values())
     for condition_runs in parts:  # impossible interval requests fail before any fit
         check_intervals(probe, len(condition_runs), bootstrap, repeats, method)
+    frictions = [friction_for(hull_config, draft, scale, runs_of, water) for runs_of in parts]  # before fits
     prepare_identifier(terms or MODEL_FAMILY[-1], kept.line)  # native kernels: built on the first run
     if len(parts) > 1:
         kept.line(grouping_line(groups))
     fits = []
-    for condition_runs in parts:
+    for condition_runs, friction in zip(parts, frictions, strict=True):
         label = "all conditions (--joint)" if pooled else condition_of(condition_runs[0]).label
         settings = (method, bootstrap, repeats, hull_config, draft)
         estimator, summary = _fit_condition(condition_runs, model, settings, label, kept)
@@ -364,9 +382,20 @@ def identify(
         if pooled is not None:
             summary["warnings"].insert(0, pooled)
             summary["conditions"] = pooled
-        lines = scale_results(summary, scale)  # the ship's (B̂44 is summarize's)
+        lines = scale_results(summary, scale, friction)  # the ship's (B̂44 is summarize's)
         fits.append(ConditionFit(label, condition_runs, estimator, summary, lines, pooled is not None))
     return Identification(_document(fits, grouping_line(groups), list(cut)), fits, kept.lines, list(cut))
+
+
+def water_settings(water_temperature_c: object, sea_temperature_c: object) -> WaterSettings:
+    """The water temperatures of ``full_scale``'s friction correction, checked by name (degC)."""
+    from ..config import WaterSettings
+
+    unit = "degC"
+    return WaterSettings(
+        arguments.optional_number(water_temperature_c, "water_temperature_c", 0.0, 40.0, unit=unit),
+        arguments.optional_number(sea_temperature_c, "sea_temperature_c", 0.0, 40.0, unit=unit),
+    )
 
 
 def _document(fits: list[ConditionFit], conditions: str, cut: list[str]) -> dict[str, Any]:

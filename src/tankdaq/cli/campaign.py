@@ -26,7 +26,9 @@ from .options import (
     FullScale,
     JsonOutput,
     RunsQuery,
+    SeaTemperature,
     StartS,
+    WaterTemperature,
     model_option,
     report_option,
 )
@@ -64,6 +66,8 @@ def campaign_command(
         typer.Option("--scheduler", help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (tankdaq[dask])."),
     ] = None,
     full_scale: FullScale = False,
+    water_temperature: WaterTemperature = None,
+    sea_temperature: SeaTemperature = None,
     no_recurse: Annotated[
         bool,
         typer.Option("--no-recurse", help="Read only the given folders' own files, not their subfolders."),
@@ -104,7 +108,8 @@ def campaign_command(
         result = campaign(
             inputs, model, hulls=hulls or [], start_s=start, end_s=end, recurse=not no_recurse,
             jobs=min(jobs or cores, cores), executor=executor, scheduler=scheduler, report=report,
-            full_scale=full_scale, include_partial=include_partial or asks_ended(runs_query),
+            full_scale=full_scale, water_temperature_c=water_temperature,
+            sea_temperature_c=sea_temperature, include_partial=include_partial or asks_ended(runs_query),
             on_result=catalogued, file_work=rows, progress=TerminalProgress(),
         )  # fmt: skip
     say_cuts(result.cuts)

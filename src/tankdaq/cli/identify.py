@@ -29,10 +29,12 @@ from .options import (
     RateColumn,
     ReadAxis,
     RunsQuery,
+    SeaTemperature,
     SkipHalfCycles,
     StartS,
     TimeColumn,
     TimeUnit,
+    WaterTemperature,
     model_option,
 )
 
@@ -82,6 +84,8 @@ def identify_command(
     hull: str = typer.Option(None, "--hull", help="Hull config for dimensional results."),
     draft: float = draft_option(help="Draft with --hull."),
     full_scale: FullScale = False,
+    water_temperature: WaterTemperature = None,
+    sea_temperature: SeaTemperature = None,
     runs_query: RunsQuery = None,
     catalogue: CatalogueOption = None,
 ) -> None:
@@ -105,7 +109,8 @@ def identify_command(
     build_kernels_shown()
     result = identify(
         inputs, model, method=method, joint=joint, hull=hull, draft=draft, full_scale=full_scale,
-        bootstrap=bootstrap, repeats=repeats, reading=reading, progress=TerminalProgress(),
+        water_temperature_c=water_temperature, sea_temperature_c=sea_temperature, bootstrap=bootstrap,
+        repeats=repeats, reading=reading, progress=TerminalProgress(),
     )  # fmt: skip
     with writer:
         for fit in result.fits:

@@ -75,8 +75,25 @@ EndS = Annotated[
 #: ``--full-scale`` (identify, campaign): the ship's results by Froude from the hull's scale factor.
 FullScale = Annotated[
     bool,
-    typer.Option("--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."),
+    typer.Option(
+        "--full-scale",
+        help="Also report at full scale (the hull's scale_factor): Froude and friction-corrected (ITTC).",
+    ),
 ]
+
+
+def _water_temperature(flag: str, whose: str) -> Any:
+    """``--water-temperature`` / ``--sea-temperature`` (identify, campaign): the water of ``--full-scale``'s
+    friction correction, degC, checked 0-40 while parsed; else the hull's keys, else 15 degC."""
+    return typer.Option(
+        flag,
+        callback=checked(validation.water_temperature_c, option=flag),
+        help=f"{whose} temperature, degC, for --full-scale's friction [default: the hull's, else 15].",
+    )
+
+
+WaterTemperature = Annotated[float | None, _water_temperature("--water-temperature", "Tank water")]
+SeaTemperature = Annotated[float | None, _water_temperature("--sea-temperature", "The ship's sea water")]
 
 
 def report_option(help: str) -> Any:

@@ -10,7 +10,7 @@ import typer
 
 from .. import validation
 from .app import app, checked, draft_option, handles_errors
-from .options import JsonOutput
+from .options import FullScale, JsonOutput, SeaTemperature, WaterTemperature
 
 #: Amplitudes shown when no --angle is given (deg): the band a decay test covers.
 DEFAULT_ANGLES_DEG = (5.0, 10.0, 15.0, 20.0)
@@ -50,15 +50,15 @@ def predict_command(
         float | None,
         typer.Option("--period", help="Roll period, s (default: from GM, gyradius and added inertia)."),
     ] = None,
-    full_scale: Annotated[
-        bool,
-        typer.Option("--full-scale", help="Also report at full scale (Froude; the hull's scale_factor)."),
-    ] = False,
+    full_scale: FullScale = False,
+    water_temperature: WaterTemperature = None,
+    sea_temperature: SeaTemperature = None,
     as_json: JsonOutput = False,
 ) -> None:
     """Predict the roll damping components at the natural roll frequency (simplified Ikeda method)."""
-    from ..config import full_scale_of, ikeda_prediction, load_hull
+    from ..config import WaterSettings, friction_scaling, full_scale_of, ikeda_prediction, load_hull
     from ..errors import InputError
+    from ..physics.friction_scaling import correct_prediction
     from ..physics.ikeda import summary_lines
 
     if speed is not None and not (math.isfinite(speed) and speed >= 0):
@@ -67,11 +67,16 @@ def predict_command(
         raise InputError(f"--period {period:g} must be a positive roll period in s")
     loaded = load_hull(hull)
     scale = full_scale_of(loaded, full_scale)
+    water = WaterSettings(water_temperature, sea_temperature)
+    known = "speed_m_s" in loaded.main_particulars.at(draft)
+    said = "--speed" if speed is not None else "the hull's speed_m_s" if known else "assumed: no speed given"
     if speed is None:
         speed = loaded.main_particulars.at(draft).get("speed_m_s", 0.0)
     prediction = ikeda_prediction(loaded, draft, speed, period)
     amplitudes = [math.radians(a) for a in sorted(set(angles_deg or DEFAULT_ANGLES_DEG))]
     summary = {"hull": loaded.name, "draft_factor": draft, **prediction.summary(amplitudes, scale)}
+    if scale is not None:  # the ship's friction at its own Reynolds number (ITTC 7.5-02-07-04.5)
+        correct_prediction(summary, friction_scaling(loaded, draft, scale, speed, water, said))
     if as_json:
         typer.echo(json.dumps(summary))
         return

@@ -3,7 +3,7 @@
 Formulas from ITTC 7.5-02-07-04.5 (reference §2): equivalent linear damping by
 equal energy per cycle (eq. 13/15), Bertin's N (eq. 18; "Bertin N", unrelated
 to the seeds' N), the extinction curve from successive peaks, and dimensional
-coefficients once Delta*GM fixes the inertia scale (§5). Uncertainties of
+coefficients once Delta*GM fixes the inertia scale (§5); full scale is ``ident.full_scale``. Uncertainties of
 derived quantities come from the coefficient covariance by the delta method.
 """
 
@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from ..physics.ikeda import hat_factor
-from ..physics.scaling import FRICTION_NOTE, FroudeScale
 from ..records import DecayRun
 from .signals import half_cycle_peaks
 
@@ -271,82 +270,3 @@ def b44_hat_factor(hull: Any, draft: float = 1.0) -> float | None:
     if beam is None or hull.displacement_kg is None:
         return None
     return hat_factor(beam, hull.displacement_kg * draft, G)  # rho * volume = the displacement
-
-
-def scale_results(summary: dict[str, Any], scale: FroudeScale | None) -> list[str]:
-    """With ``scale``, adds the full-scale results to an identify summary (``summarize`` has put B̂44
-    beside B_eq/I already); returns the lines the text report prints for them."""
-    inertia = summary.get("dimensional", {}).get("total_inertia_kg_m2")
-    lines: list[str] = []
-    if scale is not None:
-        coefficients = {k: v["value"] for k, v in summary["coefficients"].items()}
-        ship: dict[str, Any] = {
-            "scale_factor": scale.scale,
-            "axis": summary["axis"],
-            "natural_period_s": scale.time_s(summary["natural_period_s"]),
-            "coefficients": scale.coefficients(coefficients),
-            "b_eq": [
-                {
-                    "amplitude_deg": r["amplitude_deg"],
-                    "value_per_s": r["value_per_s"] / math.sqrt(scale.scale),
-                }
-                for r in summary["b_eq"]
-            ],
-            "note": FRICTION_NOTE,
-        }
-        if inertia is not None:
-            for row, model in zip(ship["b_eq"], summary["b_eq"], strict=True):
-                row["b_eq_n_m_s"] = scale.damping_n_m_s(model["value_per_s"] * inertia)
-        summary["full_scale"] = ship
-        lines += full_scale_lines(ship)
-    return lines
-
-
-def full_scale_lines(ship: dict[str, Any]) -> list[str]:
-    """The text of a ``full_scale`` part: period, coefficients, B_eq/I and B_eq (B44 for roll, B55 for
-    pitch) per amplitude, the note."""
-    name = damping_name(ship["axis"])
-    coefficients = "  ".join(f"{k}={v:.5g}" for k, v in ship["coefficients"].items())
-    lines = [
-        f"  full scale (1:{ship['scale_factor']:g}): natural period {ship['natural_period_s']:.4g} s",
-        f"  {coefficients}",
-    ]
-    for row in ship["b_eq"]:
-        b44 = f", {name} {row['b_eq_n_m_s']:.4g} N·m·s/rad" if "b_eq_n_m_s" in row else ""
-        lines.append(f"  {row['amplitude_deg']:>8.2f} deg  B_eq/I {row['value_per_s']:.5g} 1/s{b44}")
-    return [*lines, f"  note: {FRICTION_NOTE}"]
-
-
-def damping_name(axis: str) -> str:
-    """What people call the dimensional damping of an axis: B44 (roll), B55 (pitch)."""
-    return "B44" if axis == "roll" else "B55"
-
-
-def campaign_full_scale(results: Sequence[Any]) -> list[str]:
-    """``campaign --full-scale``: each fitted group's period, B_eq/I and B44 at full scale (its hull's
-    scale factor), B̂44 where the hull gives beam and displacement; a group whose hull lacks a scale
-    factor says so in its line."""
-    lines = [f"full scale (Froude): {FRICTION_NOTE}"]
-    for result in results:
-        if result.fit is None:
-            continue
-        row = result.summary()
-        label = result.key.label
-        scale = result.hull.main_particulars.values.get("scale_factor") if result.hull is not None else None
-        if scale is None:
-            lines.append(f"{label}: no full scale (its hull gives no scale_factor under [particulars])")
-            continue
-        froude = FroudeScale(scale)
-        text = (
-            f"{label}: 1:{scale:g}, natural period {froude.time_s(row['natural_period_s']):.4g} s, "
-            f"B_eq/I {row['b_eq_per_s'] / math.sqrt(scale):.4g} 1/s"
-        )
-        if "b_eq_n_m_s" in row:
-            text += (
-                f", {damping_name(result.key.axis)} {froude.damping_n_m_s(row['b_eq_n_m_s']):.4g} N·m·s/rad"
-            )
-            factor = b44_hat_factor(result.hull, result.key.draft)
-            if factor is not None and result.key.axis == "roll":
-                text += f", B̂44 {row['b_eq_n_m_s'] * factor:.4g}"
-        lines.append(text)
-    return lines

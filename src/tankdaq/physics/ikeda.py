@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from .friction_scaling import amplitude_lines
+from .kato import Kato
 from .scaling import FRICTION_NOTE, FroudeScale
 
 #: The components, in the order they are shown: key -> (symbol, what it is, linear or quadratic).
@@ -109,6 +111,11 @@ class IkedaInputs:
     def omega_hat(self, omega_rad_s: float) -> float:
         return omega_rad_s * math.sqrt(self.beam_m / (2 * self.g_m_s2))
 
+    @property
+    def kato(self) -> Kato:
+        """The hull's skin friction (Kato) from these particulars."""
+        return Kato(self.lpp_m, self.beam_m, self.draft_m, self.block_coefficient, self.og_m)
+
 
 @dataclass(frozen=True)
 class Finding:
@@ -194,7 +201,7 @@ def _components(inputs: IkedaInputs, omega_rad_s: float, amplitude_rad: float) -
     omega_hat = inputs.omega_hat(omega_rad_s)
     phi_deg = math.degrees(amplitude_rad)
     out = {
-        "B_F": _friction(inputs, bd, ogd, omega_rad_s, amplitude_rad),
+        "B_F": _friction(inputs, omega_rad_s, amplitude_rad),
         "B_W": _wave(bd, inputs.block_coefficient, inputs.midship_coefficient, ogd, omega_hat),
         "B_E": _eddy(bd, inputs.block_coefficient, inputs.midship_coefficient, ogd, omega_hat, amplitude_rad),
         "B_L": _lift(inputs) * inputs.hat_factor,
@@ -202,21 +209,15 @@ def _components(inputs: IkedaInputs, omega_rad_s: float, amplitude_rad: float) -
     }
     if inputs.speed_m_s > 0:
         reduced = omega_rad_s * inputs.lpp_m / inputs.speed_m_s  # K = ωL/U
-        out["B_F"] *= 1.0 + 4.1 / reduced
         out["B_E"] *= (0.04 * reduced) ** 2 / (1.0 + (0.04 * reduced) ** 2)
     out[TOTAL] = sum(out[k] for k in COMPONENTS)
     return out
 
 
-def _friction(inputs: IkedaInputs, bd: float, ogd: float, omega: float, phi: float) -> float:
-    """Kato's skin friction on the mean radius r_f and wetted surface S_f (laminar C_F)."""
-    cb, d, b = inputs.block_coefficient, inputs.draft_m, inputs.beam_m
-    radius = d * ((0.887 + 0.145 * cb) * (1.7 + cb * bd) - 2.0 * ogd) / math.pi
-    surface = inputs.lpp_m * (1.75 * d + cb * b)
-    period = 2 * math.pi / omega
-    cf = 1.328 * (3.22 * radius**2 * phi**2 / (period * inputs.kinematic_viscosity_m2_s)) ** -0.5
-    b_f = 4.0 / (3.0 * math.pi) * inputs.rho_kg_m3 * surface * radius**3 * phi * omega * cf
-    return b_f * inputs.hat_factor
+def _friction(inputs: IkedaInputs, omega: float, phi: float) -> float:
+    """Kato's skin friction as the simplified method takes it (laminar C_F, speed factor), B̂F."""
+    return inputs.kato.damping(omega, phi, inputs.kinematic_viscosity_m2_s, inputs.rho_kg_m3,
+                               inputs.speed_m_s) * inputs.hat_factor  # fmt: skip
 
 
 def _poly(x: float, *coefficients: float) -> float:
@@ -487,10 +488,7 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
         lines += [
             f"  full scale (1:{ship['scale_factor']:g}): period {ship['period_s']:.4g} s (B̂44 unchanged), "
             f"b1 {scaled['b1']:.5g} 1/s, b2 {scaled['b2']:.5g} 1/rad, c1 {scaled['c1']:.5g} 1/s^2",
-            *(
-                f"  {r['amplitude_deg']:>6.2f} deg  B44 {r['b44_n_m_s']:.4g} N·m·s/rad"
-                for r in ship["amplitudes"]
-            ),
+            *amplitude_lines(ship),
             f"  note: {ship['note']}",
         ]
     return lines + [f"warning: {line}" for line in summary["validity"]]

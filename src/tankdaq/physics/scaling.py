@@ -4,7 +4,7 @@ Time and periods × √λ, angles unchanged, lengths × λ, mass × λ³, inerti
 non-dimensional B̂44 unchanged (lab-practice §1). A decay coefficient per unit inertia scales with the
 power of time in its unit (``physics.terms.TERM_TABLE``): b1 (1/s) × λ^-1/2, b2 (1/rad) unchanged,
 c1 (1/s²) × 1/λ. Friction is a Reynolds effect and does not follow Froude's law: FRICTION_NOTE says so
-wherever a result is shown at full scale.
+wherever a result is shown at full scale, and ``physics.friction_scaling`` makes the ITTC correction.
 """
 
 from __future__ import annotations
@@ -18,8 +18,9 @@ from ..errors import InputError
 from .terms import TERM_TABLE
 
 FRICTION_NOTE = (
-    "full scale by Froude's law; skin friction (a Reynolds effect) does not scale so: the model's "
-    "friction share of the damping is too large at full scale (ITTC 7.5-02-07-04.5 notes the correction)"
+    "Froude's law scales skin friction too, which is a Reynolds effect: by Froude alone the model's friction "
+    "share is too large at full scale; the friction-corrected B44 moves Kato's friction component from the "
+    "model's to the ship's Reynolds number (ITTC 7.5-02-07-04.5)"
 )
 
 
