@@ -10,7 +10,21 @@ import typer
 
 from .. import validation
 from .app import TerminalProgress, app, build_kernels_shown, checked, err_console, fail, handles_errors, say
-from .options import CatalogueOption, FullScale, JsonOutput, RunsQuery, model_option
+from .options import (
+    AngleColumn,
+    AngleUnit,
+    CatalogueOption,
+    FullScale,
+    JsonOutput,
+    RateColumn,
+    ReadAxis,
+    RunsQuery,
+    SeaTemperature,
+    TimeColumn,
+    TimeUnit,
+    WaterTemperature,
+    model_option,
+)
 
 NEVER_OVER = "A file of that name is never overwritten: the report is refused before any work."
 
@@ -49,6 +63,14 @@ def report_command(
         typer.Option("--hull", help="Hull file or name for every condition [default: the recordings' hull]."),
     ] = None,
     full_scale: FullScale = False,
+    water_temperature: WaterTemperature = None,
+    sea_temperature: SeaTemperature = None,
+    axis: ReadAxis = None,
+    time_col: TimeColumn = "time_s",
+    angle_col: AngleColumn = "angle_deg",
+    rate_col: RateColumn = "rate_deg_s",
+    angle_unit: AngleUnit = None,
+    time_unit: TimeUnit = None,
     as_json: JsonOutput = False,
     runs_query: RunsQuery = None,
     catalogue: CatalogueOption = None,
@@ -56,16 +78,19 @@ def report_command(
     """Fit each condition and write the report: conditions, fits with labelled intervals, B_eq and
     Bertin's N, full scale, figures, every warning and the provenance (hull and recording hashes,
     device, firmware, software, catalogue ids, this command line). --json prints the same numbers."""
+    from ..api.identification import Reading
     from ..report.make import make_report
     from ..report.provenance import masked_command
 
     if out is None and html is None and pdf is None and not as_json:
         raise fail("give --out FOLDER, or --html/--pdf file names (or --json for the numbers only)")
+    reading = Reading(axis, time_col, angle_col, rate_col, angle_unit, time_unit)
     command = masked_command(["tankdaq", *sys.argv[1:]])
     build_kernels_shown()
     report = make_report(
         inputs or None, runs=runs_query, catalogue=catalogue, out=out, html=html, pdf=pdf, model=model,
-        hull=hull, full_scale=full_scale, command=command, progress=TerminalProgress(),
+        hull=hull, full_scale=full_scale, water_temperature_c=water_temperature,
+        sea_temperature_c=sea_temperature, reading=reading, command=command, progress=TerminalProgress(),
     )  # fmt: skip
     for line in report.warnings:
         err_console.print(f"warning: {line}", markup=False, soft_wrap=True)

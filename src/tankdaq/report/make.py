@@ -22,9 +22,9 @@ from ..errors import InputError
 from .content import ReportContent
 
 if TYPE_CHECKING:
-    from ..api.identification import ConditionFit
+    from ..api.identification import ConditionFit, Reading
     from ..api.recording import Recording
-    from ..config import Hull
+    from ..config import Hull, WaterSettings
     from ..ident.conditions import Condition
     from .sources import ReportInputs
 
@@ -76,6 +76,9 @@ def make_report(
     model: str = "auto",
     hull: str | Path | None = None,
     full_scale: bool = False,
+    water_temperature_c: float | None = None,
+    sea_temperature_c: float | None = None,
+    reading: Reading | None = None,
     command: str | None = None,
     made_utc: datetime.datetime | None = None,
     progress: Progress | None = None,
@@ -85,13 +88,16 @@ def make_report(
     ``catalogue``), written to ``out`` (a folder: report.html and report.pdf) and/or the names ``html``
     and ``pdf``; none: nothing written (``Report.document`` still holds the numbers). Each condition is
     fitted with ``model``; ``hull`` (a name or .toml) for every condition, else each condition's own
-    hull by the name its recordings give; ``full_scale`` adds the ship's (the hull's scale factor).
+    hull by the name its recordings give; ``full_scale`` adds the ship's (the hull's scale factor) by
+    Froude and friction-corrected at ``water_temperature_c``/``sea_temperature_c`` (as ``identify``);
+    ``reading`` says how decay files (CSV, HDF5, ...) are read (its column settings).
     ``command`` is the command line the provenance names; ``made_utc`` the time it says (default now).
     Bad input raises ``tankdaq.errors.InputError`` before any file is read; an existing output name is
     refused.
 
     >>> tankdaq.make_report("sessions/try", out="sessions/try/handover")  # doctest: +SKIP
     """
+    from ..api.identification import Reading, water_settings
     from ..config import full_scale_of, load_hull
     from ..physics.models import resolve_model
     from .provenance import API_CALL
@@ -108,6 +114,9 @@ def make_report(
     model = arguments.model(model)
     hull = arguments.optional_path(hull, "hull", "a hull's name, a .toml path, or None")
     full_scale = arguments.flag(full_scale, "full_scale")
+    water = water_settings(water_temperature_c, sea_temperature_c)
+    if reading is not None and not isinstance(reading, Reading):
+        raise arguments.refuse("reading", "a tankdaq.Reading or None", reading)
     command = arguments.optional_text(command, "command", "the command line as text, or None") or API_CALL
     made = _made(made_utc)
     kept = Kept(arguments.progress(progress))
@@ -118,14 +127,14 @@ def make_report(
     found = report_inputs(paths, runs, url)
     for line in found.lines:
         kept.line(line)
-    recordings, skipped = _read(found.files, kept)
+    recordings, skipped = _read(found.files, reading or Reading(), kept)
     groups = _by_condition(recordings)
     hulls = {condition: given_hull or _hull_named(condition, kept) for condition in groups}
     read_hulls = list({id(h): h for h in hulls.values() if h is not None}.values())
     for condition_hull in read_hulls:
         full_scale_of(condition_hull, full_scale)  # every condition's hull has its scale: before any fit
     fits = [
-        _fit(group, condition, hulls[condition], model, full_scale, kept)
+        _fit(group, condition, hulls[condition], model, full_scale, water, kept)
         for condition, group in groups.items()
     ]
     content = _content(fits, skipped, recordings, read_hulls, found, command, made)
@@ -161,7 +170,7 @@ def _made(value: object) -> str:
     raise arguments.refuse("made_utc", "a datetime with its time zone, or None", value)
 
 
-def _read(files: list[Path], kept: Kept) -> tuple[list[Recording], list[str]]:
+def _read(files: list[Path], reading: Reading, kept: Kept) -> tuple[list[Recording], list[str]]:
     """Every file read once (a copy or an export of another left out, said); one without a decay is
     left out with a warning; none with a decay is refused."""
     from ..api.identification import drop_read_twice
@@ -169,7 +178,10 @@ def _read(files: list[Path], kept: Kept) -> tuple[list[Recording], list[str]]:
 
     recordings, skipped = [], []
     for path in drop_read_twice(files, kept):
-        recording = read(path)
+        recording = read(
+            path, axis=reading.axis, time_col=reading.time_col, angle_col=reading.angle_col,
+            rate_col=reading.rate_col, angle_unit=reading.angle_unit, time_unit=reading.time_unit,
+        )  # fmt: skip
         if recording.decays:
             recordings.append(recording)
         else:
@@ -207,8 +219,9 @@ def _hull_named(condition: Condition, kept: Kept) -> Hull | None:
 
 
 def _fit(
-    group: list[Recording], condition: Condition, hull: Hull | None, model: str, full_scale: bool, kept: Kept
-) -> ConditionFit:
+    group: list[Recording], condition: Condition, hull: Hull | None, model: str, full_scale: bool,
+    water: WaterSettings, kept: Kept,
+) -> ConditionFit:  # fmt: skip
     """One condition fitted by ``tankdaq.identify`` at its draft (T where the recordings do not say)."""
     from ..api.identification import identify
     from ..config import parse_draft
@@ -218,7 +231,10 @@ def _fit(
     if condition.draft == UNKNOWN and hull is not None:
         kept.line(f"{condition.label}: the recordings give no draft; dimensional results at T")
     hull_file = None if hull is None else hull.path or hull.name
-    found = identify(group, model, hull=hull_file, draft=draft, full_scale=full_scale, progress=kept)
+    found = identify(
+        group, model, hull=hull_file, draft=draft, full_scale=full_scale, progress=kept,
+        water_temperature_c=water.water_temperature_c, sea_temperature_c=water.sea_temperature_c,
+    )  # fmt: skip
     (fit,) = found.fits
     return fit
 

@@ -1,7 +1,7 @@
 """The report's places for what other parts of tankdaq compute as DataFrames: a quantity's
-uncertainty budget, the IMO table of Bertin's N against mean amplitude, and full scale with the
-friction correction. Each is a ``Table`` the renderers show as any other (title, caption, interval
-labels), added to a condition's section by ``report.make`` (``condition_section(extra=...)``)."""
+uncertainty budget and the IMO table of Bertin's N against mean amplitude. Each is a ``Table`` the
+renderers show as any other (title, caption, interval labels), added to a condition's section by
+``report.make`` (``condition_section(extra=...)``)."""
 
 from __future__ import annotations
 
@@ -37,12 +37,3 @@ def imo_table(key: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] |
         "amplitude; an amplitude not reached says so."
     )
     return Table.from_frame(key, "IMO table: Bertin's N", frame, caption, intervals)
-
-
-def friction_table(key: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] | None = None) -> Table:
-    """Full scale by Froude beside the friction-corrected extrapolation (ITTC 7.5-02-07-04.5)."""
-    caption = (
-        "Full scale: Froude scaling and the extrapolation corrected for skin friction at the model's "
-        "and the ship's Reynolds numbers (ITTC 7.5-02-07-04.5), side by side."
-    )
-    return Table.from_frame(key, "Full scale, friction corrected", frame, caption, intervals)

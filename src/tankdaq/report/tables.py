@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from ..ident.derived import damping_name
+from ..ident.full_scale import damping_name
 from .content import FIT_95, FIT_SIGMA, Table
 
 #: The fit's own intervals: the coefficient's standard deviation and its 95 % interval.
@@ -116,4 +116,32 @@ def full_scale_tables(key: str, summary: dict[str, Any]) -> list[Table]:
         Table(f"{key}-coefficients", f"Full scale ({scale}): period and coefficients",
               ["quantity", "model", "ship", "unit"], coefficients, ship["note"]),
         Table(f"{key}-damping", f"Full scale ({scale}): damping", columns, rows, ship["note"]),
+        *friction_tables(f"{key}-friction", ship),
     ]  # fmt: skip
+
+
+def friction_tables(key: str, ship: dict[str, Any]) -> list[Table]:
+    """Froude's B44 beside the friction-corrected one per amplitude, with both Reynolds numbers and the
+    assumptions in the caption; where the hull cannot give the correction, the line that says why."""
+    if "friction_missing" in ship:
+        return [Table(key, "Full scale, friction corrected", ["why not"], [[ship["friction_missing"]]])]
+    friction = ship.get("friction")
+    if friction is None:
+        return []
+    name = damping_name(ship["axis"])
+    columns = [
+        "amplitude (deg)", f"{name} Froude (N·m·s/rad)", f"{name} corrected (N·m·s/rad)",
+        "correction (N·m·s/rad)", "share of Froude B44", "Re model", "Re ship",
+    ]  # fmt: skip
+    rows = [
+        [r["amplitude_deg"], r["b_eq_n_m_s"], r["b44_corrected_n_m_s"], r["friction_correction_n_m_s"],
+         r["friction_share"], r["reynolds_model"], r["reynolds_ship"]]
+        for r in ship["b_eq"]
+    ]  # fmt: skip
+    caption = (
+        "Froude scaling beside the extrapolation corrected for skin friction at the model's and the "
+        f"ship's Reynolds numbers: {friction['method']}. Model: {friction['model_water']}; ship: "
+        f"{friction['ship_water']}; speed {friction['model_speed_m_s']:g} m/s at model scale "
+        f"({friction['speed_from']})."
+    )
+    return [Table(key, "Full scale, friction corrected", columns, rows, caption)]
