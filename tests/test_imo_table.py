@@ -136,9 +136,23 @@ def test_kvlcc2_decay_gives_n_up_to_its_initial_angle_and_says_what_it_misses() 
     for row in reached:  # the model's N runs through the measured decrements per half cycle there
         near = [
             d / m**2
-            for m, d in zip(cover.mean_amplitude_deg, cover.decrement_deg)
+            for m, d in zip(cover.mean_amplitude_deg, cover.decrement_deg, strict=True)
             if abs(m - row.amplitude_deg) < 1.0
         ]
         assert row.interval == FIT_STD and row.bertin_n_per_deg == pytest.approx(np.median(near), rel=0.25)
     for row in table.missing:  # above its initial angle: a larger one, estimated
         assert row.needed_initial_deg is not None and row.needed_initial_deg > row.amplitude_deg
+
+
+def test_an_amplitude_beyond_any_release_is_said_to_be_out_of_reach() -> None:
+    heavy = {"b1": 0.05, "b2": 15.0, "c1": 4.0}  # N about 0.35/deg: 15 deg needs a release from 54 deg
+    cover = DecayCover("swath", "roll", 1.0, 8.0, 8.0, (2.0, 6.0), (0.4, 3.5), heavy, np.zeros((3, 3)))
+    table = imo_table([cover])
+    needed = {row.amplitude_deg: row.needed_initial_deg for row in table.missing}
+    for amplitude in (10.0, 15.0, 20.0, 25.0):  # by hand: phi0 = phi_m + N(phi_m) phi_m^2 / 2
+        n = bertin_n_per_deg(heavy, math.radians(amplitude))
+        assert needed[amplitude] == pytest.approx(amplitude + 0.5 * n * amplitude**2, rel=1e-12)
+    assert needed[10.0] < 45.0 < needed[15.0]
+    line = table.missing_line()
+    assert f"10° (needs an initial angle of about {needed[10.0]:.1f}°)" in line
+    assert "15° (needs an initial angle of about" in line and "beyond any release (45°)" in line

@@ -26,6 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..config import format_draft
+from ..config_rules import MAX_RELEASE_ANGLE_DEG
 from ..records import DecayRun
 from .derived import amplitude_table
 from .interval_labels import ANGLES_STD, FIT_STD, IntervalLabel
@@ -38,10 +39,16 @@ FLOOR_DEG = 0.5
 
 
 class _Condition(Protocol):
-    hull: str
-    axis: str
-    draft: float
-    angle_deg: float
+    """A group's condition (``campaign.GroupKey``)."""
+
+    @property
+    def hull(self) -> str: ...
+    @property
+    def axis(self) -> str: ...
+    @property
+    def draft(self) -> float: ...
+    @property
+    def angle_deg(self) -> float: ...
 
 
 def initial_angle_deg(runs: Sequence[DecayRun], offsets: Sequence[float]) -> float:
@@ -172,6 +179,11 @@ class ImoTable:
         for row in self.missing:
             if row.amplitude_deg < low:
                 parts.append(f"{row.amplitude_deg:g}° (the decays end at {low:.1f}°: record them longer)")
+            elif row.needed_initial_deg is not None and row.needed_initial_deg > MAX_RELEASE_ANGLE_DEG:
+                parts.append(
+                    f"{row.amplitude_deg:g}° (needs an initial angle of about {row.needed_initial_deg:.0f}°, "
+                    f"beyond any release ({MAX_RELEASE_ANGLE_DEG:g}°): decays cannot give N there)"
+                )
             elif row.needed_initial_deg is not None:
                 parts.append(
                     f"{row.amplitude_deg:g}° (needs an initial angle of about {row.needed_initial_deg:.1f}°)"

@@ -4,7 +4,7 @@ repeats, initial angles, standard, expanded).
 A reader misjudges an uncertainty by 2x when a figure's 95 % bars stand beside a table's "± 1σ" and
 neither says which. So every ± in a table, every interval column of a CSV, JSON object or DataFrame,
 and every bar or band in a figure is labelled from an ``IntervalLabel`` here, in one form:
-``<symbol> (<coverage>, <kind>)``, e.g. ``± (1σ, fit)``, ``± (95 %, fit)``, ``± (range, initial
+``<symbol> (<coverage>, <kind>)``; e.g. ``± (1σ, fit)``, ``± (95 %, fit)``, ``± (range, initial
 angles)``, ``u (1σ, standard)``, ``U (k=2, ≈95 %, expanded)`` (docs/intervals.md).
 """
 
@@ -43,6 +43,7 @@ class Kind(Enum):
     FIT = "fit"
     BOOTSTRAP = "bootstrap"
     REPEATS = "repeats"
+    SCATTER = "scatter of repeats"
     ANGLES = "initial angles"
     STANDARD = "standard"
     EXPANDED = "expanded"
@@ -56,8 +57,12 @@ class Kind(Enum):
 _DESCRIPTIONS = {
     Kind.FIT: "the fit's own covariance (through the delta method for derived quantities)",
     Kind.BOOTSTRAP: "a moving-block bootstrap of the fit's residuals",
-    Kind.REPEATS: "the spread between repeat decays of one condition (sample standard deviation)",
-    Kind.ANGLES: "the spread between the fits at different initial angles of one hull, axis and draft",
+    Kind.REPEATS: "repeat decays of one condition fitted one by one: the standard deviation of their mean "
+    "(GUM Type A; 95 % with Student's t, n - 1)",
+    Kind.SCATTER: "repeat decays fitted one by one: their sample standard deviation (one decay's scatter, "
+    "not the mean's uncertainty)",
+    Kind.ANGLES: "the fits at different initial angles of one hull, axis and draft: the standard deviation "
+    "of their mean, or half their range",
     Kind.STANDARD: "the combined standard uncertainty of the budget (GUM)",
     Kind.EXPANDED: "the expanded uncertainty of the budget, k = 2 (GUM)",
 }
@@ -97,6 +102,7 @@ BOOTSTRAP_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.BOOTSTRAP)
 BOOTSTRAP_95 = IntervalLabel(Coverage.P95, Kind.BOOTSTRAP)
 REPEATS_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.REPEATS)
 REPEATS_95 = IntervalLabel(Coverage.P95, Kind.REPEATS)
+SCATTER_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.SCATTER)
 ANGLES_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.ANGLES)
 ANGLES_RANGE = IntervalLabel(Coverage.RANGE, Kind.ANGLES)
 #: The uncertainty budget's (``ident.budget``): the combined standard and the expanded uncertainty.
@@ -104,8 +110,8 @@ STANDARD_U = IntervalLabel(Coverage.ONE_SIGMA, Kind.STANDARD, "u")
 EXPANDED_U = IntervalLabel(Coverage.K2, Kind.EXPANDED, "U")
 
 ALL_LABELS = (
-    FIT_STD, FIT_95, BOOTSTRAP_STD, BOOTSTRAP_95, REPEATS_STD, REPEATS_95, ANGLES_STD, ANGLES_RANGE,
-    STANDARD_U, EXPANDED_U,
+    FIT_STD, FIT_95, BOOTSTRAP_STD, BOOTSTRAP_95, REPEATS_STD, REPEATS_95, SCATTER_STD, ANGLES_STD,
+    ANGLES_RANGE, STANDARD_U, EXPANDED_U,
 )  # fmt: skip
 
 

@@ -55,14 +55,14 @@ def repeat_spreads(groups: dict[Any, tuple[list[Any], tuple[str, ...]]]) -> list
 
 def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
     from ...ident.campaign import write_rows
-    from ...ident.interval_labels import REPEATS_STD
+    from ...ident.interval_labels import SCATTER_STD
 
     path = write_rows(rows, folder / "repeat_spread.csv")  # a new file, as the rest of the report
     columns = list(dict.fromkeys(k for row in rows for k in row))
     terms = [c[: -len("_mean")] for c in columns if c.endswith("_mean")]
     lines = [
         "\n## Repeat-to-repeat spread\n",
-        f"Each repeat fitted alone; the mean {REPEATS_STD}: the repeats' sample standard deviation.\n",
+        f"Each repeat fitted alone; the mean {SCATTER_STD}: the repeats' sample standard deviation.\n",
         "| draft | angle deg | repeats | " + " | ".join(terms) + " |",
         "|" + "---|" * (3 + len(terms)),
     ]
