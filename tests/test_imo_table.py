@@ -113,6 +113,13 @@ def test_one_table_per_condition_and_its_markdown(covers: list[DecayCover]) -> N
     text = imo_markdown(tables)
     assert text.count("Bertin's N (MSC.1/Circ.1200)") == 2 and "± (1σ, initial angles)" in text
     assert imo_markdown([]) == ""
+    points = tables[0].as_dict()["points"]  # mean angle against decrement per half cycle, as measured
+    assert len(points) == sum(len(c.mean_amplitude_deg) for c in covers)
+    assert points[0] == {
+        "initial_angle_deg": covers[0].initial_deg,
+        "mean_amplitude_deg": covers[0].mean_amplitude_deg[0],
+        "decrement_deg": covers[0].decrement_deg[0],
+    }
     record = tables[0].records()[0]
     assert record["draft"] == "T" and record["interval"] == ANGLES_STD.text
 

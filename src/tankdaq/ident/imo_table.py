@@ -34,6 +34,8 @@ from .signals import half_cycle_peaks
 
 #: The amplitudes MSC.1/Circ.1200's example reports N at (deg).
 IMO_AMPLITUDES_DEG = (10.0, 15.0, 20.0, 25.0)
+#: The keys of a measured point in ``--json`` (``ImoTable.points``).
+POINT_KEYS = ("initial_angle_deg", "mean_amplitude_deg", "decrement_deg")
 #: Peaks below this are not a tested amplitude (ITTC stops a decay at 0.5°), or 20 % of the largest.
 FLOOR_DEG = 0.5
 
@@ -150,6 +152,7 @@ class ImoTable:
     rows: tuple[ImoRow, ...]
     covered_deg: tuple[float, float]  # the mean amplitudes the decays pass through, lowest and highest
     initial_angles_deg: tuple[float, ...]  # measured, one per group
+    points: tuple[tuple[float, float, float], ...] = ()  # measured: initial angle, φm, decrement (deg)
 
     @property
     def label(self) -> str:
@@ -165,11 +168,13 @@ class ImoTable:
         return [condition | row.as_dict() for row in self.rows]
 
     def as_dict(self) -> dict[str, Any]:
-        """``--json``'s object of this table."""
+        """``--json``'s object of this table, with the measured points: mean angle against decrement per half
+        cycle, as MSC.1/Circ.1200's example reports them beside N."""
         return {
             "hull": self.hull, "axis": self.axis, "draft": format_draft(self.draft),
             "covered_deg": list(self.covered_deg), "initial_angles_deg": list(self.initial_angles_deg),
             "rows": [row.as_dict() for row in self.rows], "missing": self.missing_line(),
+            "points": [dict(zip(POINT_KEYS, point, strict=True)) for point in self.points],
         }  # fmt: skip
 
     def missing_line(self) -> str:
@@ -232,7 +237,12 @@ def imo_table(covers: Sequence[DecayCover], amplitudes_deg: Sequence[float] = IM
     largest = max(covering, key=lambda c: c.initial_deg)
     rows = [_row(covering, amplitude, largest) for amplitude in amplitudes_deg]
     angles = tuple(sorted(c.initial_deg for c in covers))
-    return ImoTable(*condition, tuple(rows), (low, high), angles)
+    points = tuple(
+        (c.initial_deg, m, d)
+        for c in covering
+        for m, d in zip(c.mean_amplitude_deg, c.decrement_deg, strict=True)
+    )
+    return ImoTable(*condition, tuple(rows), (low, high), angles, points)
 
 
 def _row(covers: Sequence[DecayCover], amplitude_deg: float, largest: DecayCover) -> ImoRow:
