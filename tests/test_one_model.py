@@ -73,6 +73,7 @@ def test_the_session_report_fits_the_model_identify_chose(demo: tuple[Path, str]
     assert row["model"] == fit["model_choice"]["chosen"]
     report = (tmp_path / "report" / "campaign.md").read_text()
     assert f"- swath roll T 8 deg: {fit['model_choice']['reason']}" in report  # which model, and why
+    assert "## IMO table" in report and "Bertin's N (MSC.1/Circ.1200), swath roll T" in report  # and N
     for term, entry in fit["coefficients"].items():
         assert _close(float(row[term]), entry["value"]), term
 

@@ -29,6 +29,7 @@ from tankdaq.ident.campaign import (
     read_campaign_runs,
 )
 from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.ident.interval_labels import FIT_STD
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 from tankdaq.viz import campaign_report, diagnose_view, plots
@@ -79,7 +80,9 @@ def test_decay_figure_in_time_since_release_with_its_legend_beside() -> None:
     assert top.get_lines()[0].get_xdata()[0] == 0.0
     assert_fit_to_hand_on(fig, "decay")
     x = np.array([2.0, 4.0, 8.0])
-    two = series_figure(x, {"T": (x, None), "1.1T": (2 * x, 0.1 * x)}, xlabel="a (deg)", ylabel="B (1/s)")
+    two = series_figure(
+        x, {"T": (x, None), "1.1T": (2 * x, 0.1 * x)}, xlabel="a (deg)", ylabel="B (1/s)", interval=FIT_STD
+    )
     assert_fit_to_hand_on(two, "series")
 
 

@@ -213,7 +213,9 @@ def test_the_report_covers_only_the_accepted_decays(session: dict[str, Any]) -> 
     assert len(spread) == 4 and all(float(row["c1_repeat_sd"]) > 0 for row in spread)
     (report,) = [r for r in records if r["type"] == "report"]
     assert sorted(report["decays"]) == sorted(accepted)
-    assert "## Repeat-to-repeat spread" in (out / "report" / "campaign.md").read_text()
+    text = (out / "report" / "campaign.md").read_text()
+    assert "## Repeat-to-repeat spread" in text and "(1σ, scatter of repeats)" in text
+    assert "## IMO table" in text and "Bertin's N" in text  # the session's decays give its IMO table
 
 
 def _rrd_rows(path: Path) -> tuple[dict[str, int], dict[str, dict[str, Any]]]:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tankdaq.errors import RecordingError
+from tankdaq.ident.interval_labels import FIT_STD
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.viz.plots import decay_fit_figure, save_png, series_figure
 
@@ -48,8 +49,10 @@ def test_series_figure_with_error_bars(tmp_path: Path) -> None:
         {"T": (amplitude * 0.01, amplitude * 0.001), "1.1T": (amplitude * 0.012, None)},
         xlabel="amplitude (deg)",
         ylabel="B_eq (1/s)",
+        interval=FIT_STD,
     )
     (ax,) = fig.axes
+    assert ax.get_title() == "(bars: ± (1σ, fit))"  # the bars say what they are
     assert ax.get_xlabel() == "amplitude (deg)" and ax.get_ylabel() == "B_eq (1/s)"
     first, second = ax.containers
     np.testing.assert_allclose(first.lines[0].get_ydata(), amplitude * 0.01)
@@ -58,6 +61,8 @@ def test_series_figure_with_error_bars(tmp_path: Path) -> None:
     np.testing.assert_allclose(high_caps.get_ydata() - low_caps.get_ydata(), amplitude * 0.002)
     assert [text.get_text() for text in ax.get_legend().get_texts()] == ["T", "1.1T"]
     assert save_png(fig, tmp_path / "beq.png").stat().st_size > 0
+    with pytest.raises(ValueError, match="interval"):  # bars that would not say what they are
+        series_figure(amplitude, {"T": (amplitude, amplitude)}, xlabel="a (deg)", ylabel="B (1/s)")
 
 
 def test_save_into_missing_folder_is_a_one_line_error(tmp_path: Path) -> None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import html
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -30,6 +31,7 @@ if TYPE_CHECKING:
     from ..config import Hull
     from ..ident.campaign import GroupKey, GroupResult, GroupRow
     from ..ident.campaign_stream import CampaignScan, FileWork, RunRef
+    from ..ident.imo_table import ImoTable
 
 
 @dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
@@ -61,9 +63,27 @@ class Campaign:
         """One row per group: coefficients per unit inertia and their std, period, B_eq, B̂44, R²."""
         import pandas as pd
 
+        from ..ident.interval_labels import FIT_STD
+
         table = pd.DataFrame([row.row for row in self.rows])
         table.attrs["warnings"] = self.warnings  # an implausible result is never shown without them
+        table.attrs["intervals"] = {
+            column: FIT_STD.text for column in table.columns if column.endswith("_std")
+        }
         return table
+
+    @cached_property
+    def imo(self) -> list[ImoTable]:
+        """Bertin's N against mean amplitude at 10, 15, 20 and 25 deg per hull, axis and draft, from the
+        decays at its initial angles, with what they do not reach (``ident.imo_table``)."""
+        from ..ident.imo_table import imo_tables
+
+        return imo_tables(row.cover for row in self.rows if row.cover is not None)
+
+    @property
+    def imo_table(self) -> pd.DataFrame:
+        """``imo`` as one DataFrame (``imo_frame``)."""
+        return imo_frame(self.imo)
 
     @property
     def warnings(self) -> list[str]:
@@ -75,8 +95,12 @@ class Campaign:
     def document(self) -> dict[str, Any]:
         """The object ``tankdaq campaign --json`` prints: ``groups`` (the table's rows), ``warnings``,
         ``skipped``, ``cuts`` and, with ``full_scale``, its lines."""
+        from ..ident.interval_labels import FIT_STD
+
         document = {
             "groups": [row.row for row in self.rows],
+            "imo": [table.as_dict() for table in self.imo],
+            "intervals": {"groups: <column>_std": FIT_STD.text, "imo: bertin_n_std": "each row's interval"},
             "warnings": self.warnings,
             "skipped": self.skipped,
             "cuts": self.cuts,
@@ -88,14 +112,30 @@ class Campaign:
         return to_json(self.document)
 
     def text(self) -> str:
-        """The Markdown table ``tankdaq campaign`` prints, then the full-scale lines."""
+        """The Markdown table ``tankdaq campaign`` prints, then the IMO tables and the full-scale lines."""
         from ..ident.campaign import markdown_table
+        from ..ident.imo_table import imo_markdown
 
-        return markdown_table(self.rows) + "".join(f"{line}\n" for line in self.full_scale)
+        return (
+            markdown_table(self.rows)
+            + imo_markdown(self.imo)
+            + "".join(f"{line}\n" for line in self.full_scale)
+        )
 
     def _repr_html_(self) -> str:
         lines = "".join(f"<li>{html.escape(line)}</li>" for line in [*self.skipped, *self.warnings])
         return (f"<ul>{lines}</ul>" if lines else "") + self.table.to_html(index=False)
+
+
+def imo_frame(tables: Sequence[ImoTable]) -> pd.DataFrame:
+    """IMO tables (``ident.imo_table.ImoTable``) as one DataFrame: a row per hull, axis, draft and asked
+    amplitude (N in 1/deg, its ``bertin_n_std`` labelled per row in ``interval``); ``attrs["missing"]``
+    says per table which amplitudes the decays do not reach and which initial angles would."""
+    import pandas as pd
+
+    frame = pd.DataFrame([record for table in tables for record in table.records()])
+    frame.attrs["missing"] = [f"{t.label}: {t.missing_line()}" for t in tables if t.missing]
+    return frame
 
 
 def campaign(

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from ..ident.derived import b44_hat_factor, extinction_curve
+from ..ident.interval_labels import FIT_95
 from ..physics.terms import TERM_TABLE
 from ..records import DecayRun
 from ..store.safe_write import write_text_new
@@ -360,7 +361,7 @@ def _report_lines(comparison: SimulationComparison) -> list[str]:
         "",
         f"Gap reduction (1 - corrected / simulation): {100 * comparison.gap_reduction_:.1f} %",
         "",
-        "## B_eq per unit inertia (1/s, ± 95 %)",
+        f"## B_eq per unit inertia (1/s, {FIT_95})",
         "",
         *_damping_rows(comparison),
         "",

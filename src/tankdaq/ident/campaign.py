@@ -35,7 +35,9 @@ from ..validation import refuse_existing
 from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
 from .executors import executor_map
 from .free_decay import cut_free_decays, cut_lines
+from .imo_table import DecayCover, decay_cover, imo_markdown, imo_tables
 from .inputs import read_decays
+from .interval_labels import FIT_STD
 from .model_choice import model_for
 from .output_error import OutputError
 from .plausibility import check_runs
@@ -138,9 +140,7 @@ class GroupResult:
         return float(found["total_inertia_kg_m2"] * factor)
 
 
-# --------------------------------------------------------------------------------------------------
-# Finding and reading recordings
-# --------------------------------------------------------------------------------------------------
+# -- Finding and reading recordings ----------------------------------------------------------------
 
 
 def find_recordings(inputs: Sequence[str | Path], recurse: bool = True) -> list[Path]:
@@ -284,9 +284,7 @@ def group_runs(runs: Iterable[DecayRun]) -> dict[GroupKey, list[DecayRun]]:
     return dict(sorted(groups.items()))
 
 
-# --------------------------------------------------------------------------------------------------
-# Identifying
-# --------------------------------------------------------------------------------------------------
+# -- Identifying -----------------------------------------------------------------------------------
 
 
 def find_campaign_hulls(names: Iterable[str], given: Sequence[str] = ()) -> dict[str, Hull]:
@@ -333,11 +331,8 @@ def identify_groups(
     keys = list(groups)
     found = [(hulls or {}).get(key.hull) for key in keys]
     results = []
-    for key, result in zip(
-        keys,
-        executor_map(executor, fit_group, keys, [groups[k] for k in keys], [model] * len(keys), found),
-        strict=True,
-    ):
+    fits = executor_map(executor, fit_group, keys, [groups[k] for k in keys], [model] * len(keys), found)
+    for key, result in zip(keys, fits, strict=True):
         results.append(result)
         if progress is not None:
             progress(key)
@@ -397,9 +392,7 @@ def read_campaign(
     return found
 
 
-# --------------------------------------------------------------------------------------------------
-# Tables: CSV and Markdown (the figures are drawn by viz.campaign_report)
-# --------------------------------------------------------------------------------------------------
+# -- Tables: CSV and Markdown (the figures are drawn by viz.campaign_report) -----------------------
 
 
 @dataclass(frozen=True)
@@ -413,11 +406,13 @@ class GroupRow:
     terms: tuple[str, ...]  # empty when the group was not fitted
     warnings: tuple[str, ...]
     result: GroupResult | None = None
+    cover: DecayCover | None = None  # what the group gives the IMO table (``ident.imo_table``)
 
     @classmethod
     def of(cls, result: GroupResult, keep: bool = False) -> GroupRow:
-        terms = tuple(result.fit.terms_) if result.fit is not None else ()
-        return cls(result.key, result.summary(), terms, tuple(result.warnings), result if keep else None)
+        fit, kept = result.fit, result if keep else None
+        terms, cover = (tuple(fit.terms_), decay_cover(result.key, result.runs, fit)) if fit else ((), None)
+        return cls(result.key, result.summary(), terms, tuple(result.warnings), kept, cover)
 
     @property
     def error(self) -> str | None:
@@ -446,7 +441,7 @@ def write_rows(rows: Sequence[dict[str, Any]], path: Path) -> Path:
 
 
 def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
-    """The campaign as a Markdown table: coefficients ± 1 sigma, period, B_eq at the initial angle, R²."""
+    """The campaign as a Markdown table: coefficients ± (1σ, fit), period, B_eq at the initial angle, R²."""
     rows = table_rows(results)
     terms = list(dict.fromkeys(t for r in rows for t in r.terms))
     hat = any("b44_hat" in r.row for r in rows)  # B̂44 where a hull gives the beam and the inertia
@@ -471,6 +466,7 @@ def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
     chosen = [f"- {r.key.label}: {r.row['model_reason']}" for r in rows if r.row.get("model_reason")]
     if chosen:  # which model each group was fitted with, and why (ident.model_choice.model_for)
         lines += ["", "Models (docs/models.md):", "", *chosen]
+    lines += ["", f"Every ± is {FIT_STD} (docs/intervals.md)."]
     implausible = [f"- {r.key.label}: {line}" for r in rows for line in r.warnings]
     if implausible:
         lines += ["", "Warnings (physically implausible fits, docs/models.md):", "", *implausible]
@@ -491,10 +487,13 @@ def write_tables(results: Sequence[GroupResult], folder: Path) -> list[Path]:
     except OSError as exc:
         raise RecordingError(f"cannot create report folder {folder}: {exc.strerror or exc}") from None
     cuts = "".join(f"- {line}\n" for r in results for line in cut_lines(r.runs))
-    write_csv(results, csv_path)
+    rows = table_rows(results)
+    write_csv(rows, csv_path)
     write_text_new(
         md,
         "# Decay campaign\n\nWhere each record's free decay was cut, and why:\n\n"
-        f"{cuts}\nCoefficients per unit total inertia (SI, rad), ± 1 sigma.\n\n" + markdown_table(results),
+        f"{cuts}\nCoefficients per unit total inertia (SI, rad), {FIT_STD} (docs/intervals.md).\n\n"
+        + markdown_table(rows)
+        + imo_markdown(imo_tables(r.cover for r in rows if r.cover is not None)),
     )
     return [csv_path, md]

@@ -27,6 +27,7 @@ from .derived import (
     natural_period,
     tested_amplitudes_deg,
 )
+from .interval_labels import Coverage, IntervalLabel, kind_of
 from .intervals import IntervalSummary
 from .one_step import seed_objective
 from .output_error import OutputError
@@ -101,6 +102,7 @@ def summarize(
     findings = check_runs(
         coefficients, runs, estimator.offsets_, particulars, getattr(hull, "name", "the hull")
     )
+    described = intervals.description if intervals else getattr(estimator, "cov_type", "classic")
     summary: dict[str, Any] = {
         "model": {"name": model_name(terms), "terms": list(terms)},
         "method": method,
@@ -114,7 +116,8 @@ def summarize(
             }
             for k in terms
         },
-        "intervals": intervals.description if intervals else getattr(estimator, "cov_type", "classic"),
+        "intervals": described,
+        "interval_labels": {"std": labels_of(described)[0].text, "ci95": labels_of(described)[1].text},
         "offset_deg": [math.degrees(o) for o in estimator.offsets_],
         "natural_period_s": natural_period(coefficients),
         "damping_ratio": damping_ratio(coefficients),
@@ -153,6 +156,13 @@ def summarize(
         summary["dimensional"] = dimensional_summary(coefficients, hull, runs[0].axis, draft)
         add_b44_hat(summary, hull, draft)
     return summary
+
+
+def labels_of(intervals: str) -> tuple[IntervalLabel, IntervalLabel]:
+    """The labels of an identify summary's ``std`` and ``ci95`` (every ``std`` in it, B_eq's and N's too)
+    from how its intervals were found."""
+    kind = kind_of(intervals)
+    return IntervalLabel(Coverage.ONE_SIGMA, kind), IntervalLabel(Coverage.P95, kind)
 
 
 def add_b44_hat(summary: dict[str, Any], hull: Any, draft: float) -> None:
@@ -209,7 +219,7 @@ def text_report(summary: dict[str, Any]) -> str:
             f"  {k:<5}{c['value']:>13.6g}{c['std']:>12.3g}   [{lo:>11.5g}, {hi:>11.5g}]  {c['unit']}"
         )
     lines += [
-        f"  (intervals: {summary['intervals']})",
+        "  (std {}, interval {}: {})".format(*labels_of(summary["intervals"]), summary["intervals"]),
         "",
         f"  natural period {summary['natural_period_s']:.4f} s, damping ratio {summary['damping_ratio']:.4f}",
         f"  angle R^2 {summary['r2_angle']:.5f}, NRMSE {summary['nrmse']:.4f}, "

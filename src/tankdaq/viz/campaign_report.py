@@ -24,10 +24,12 @@ from ..config_rules import path_in
 from ..ident.campaign import REPORT_TABLES, GroupKey, GroupResult, write_tables
 from ..ident.derived import b_eq_band, extinction_curve, natural_period
 from ..ident.executors import executor_map, send_once
+from ..ident.imo_table import initial_angle_deg
+from ..ident.interval_labels import ANGLES_RANGE, FIT_95
 from ..ident.output_error import OutputError
 from ..physics.terms import TERM_TABLE
 from ..store.safe_write import refuse_existing
-from .plots import report_style, save_png
+from .plots import interval_caption, report_style, save_png
 
 #: Margins in inches: room for the tick labels and axis label (left, bottom), the figure's title
 #: (top) and the panels' titles above their axes, and the tick labels between panels (gap).
@@ -143,12 +145,17 @@ def _terms(results: Sequence[GroupResult]) -> list[str]:
     return list(dict.fromkeys(t for r in results for t in _fit(r).terms_))
 
 
+def _measured_angle(result: GroupResult) -> float:
+    """The group's initial angle as its decays measured it (deg), not the nominal one its key holds."""
+    return initial_angle_deg(result.runs, _fit(result).offsets_)
+
+
 def _errorbar_series(ax: Axes, points: Sequence[GroupResult], term: str, label: str) -> None:
     points = sorted((r for r in points if term in _fit(r).coefficients_), key=lambda r: r.key.angle_deg)
     ax.errorbar(
-        [r.key.angle_deg for r in points],
+        [_measured_angle(r) for r in points],
         [_fit(r).coefficients_[term] for r in points],
-        yerr=[1.96 * _fit(r).std_[term] for r in points],
+        yerr=[FIT_95.half_width(_fit(r).std_[term]) for r in points],
         marker="o",
         capsize=3,
         label=label,
@@ -156,7 +163,8 @@ def _errorbar_series(ax: Axes, points: Sequence[GroupResult], term: str, label: 
 
 
 def _plot_coefficients(series: Sequence[GroupResult]) -> Figure:
-    """Each coefficient against the initial angle, one line per draft (the seeds' Fig. 5), 95 % bars."""
+    """Each coefficient against the measured initial angle, one line per draft (the seeds' Fig. 5), bars
+    ± (95 %, fit)."""
     first = series[0].key
     title = f"{first.hull} {first.axis}: coefficients vs initial angle"
     return _per_coefficient(series, title, lambda key: (key.draft, format_draft(key.draft)), "draft")
@@ -175,31 +183,32 @@ def _per_coefficient(
     line_of: Callable[[GroupKey], tuple[float | str, str]],
     legend_title: str | None,
 ) -> Figure:
-    """A panel per coefficient against the initial angle, one line per ``line_of(key)`` (its sort key and
-    label), 95 % bars."""
+    """A panel per coefficient against the measured initial angle, one line per ``line_of(key)`` (its sort
+    key and label), bars ± (95 %, fit), said in the legend's title."""
     terms = _terms(results)
     fig, axes = _figure(len(terms), title, True)
     lines = sorted({line_of(r.key) for r in results})
     for ax, term in zip(axes, terms, strict=True):
         for line in lines:
             _errorbar_series(ax, [r for r in results if line_of(r.key) == line], term, line[1])
-        ax.set_xlabel("initial angle (deg)")
+        ax.set_xlabel("initial angle, measured (deg)")
         ax.set_title(f"{term} ({TERM_TABLE[term].unit})")
-    _legend_beside(fig, axes, legend_title)
+    _legend_beside(fig, axes, _titled(legend_title, interval_caption(FIT_95)))
     return fig
 
 
 def _plot_b_eq(series: Sequence[GroupResult]) -> Figure:
-    """B_eq(phi_a) of each group's fit over 0 ... its initial angle with its 95 % band; colour by draft.
+    """B_eq(phi_a) of each group's fit over 0 ... its measured initial angle with its band ± (95 %, fit);
+    colour by draft.
     Beside it B̂44 (ITTC's non-dimensional damping) where every group's hull gives beam and inertia."""
 
     def draw(scale: Callable[[GroupResult], float]) -> Callable[[Axes, GroupResult, str], None]:
         def band(ax: Axes, result: GroupResult, colour: str) -> None:
-            grid_deg = np.linspace(0.2, result.key.angle_deg, 25)
+            grid_deg = np.linspace(0.2, _measured_angle(result), 25)
             values, std = b_eq_band(_fit(result).coefficients_, _fit(result).covariance_, grid_deg)
-            values, std = values * scale(result), std * scale(result)
+            values, half = values * scale(result), FIT_95.half_width(1.0) * std * scale(result)
             ax.plot(grid_deg, values, color=colour, alpha=0.8)
-            ax.fill_between(grid_deg, values - 1.96 * std, values + 1.96 * std, color=colour, alpha=0.15)
+            ax.fill_between(grid_deg, values - half, values + half, color=colour, alpha=0.15)
             ax.plot(grid_deg[-1], values[-1], "o", color=colour)
 
         return band
@@ -208,7 +217,9 @@ def _plot_b_eq(series: Sequence[GroupResult]) -> Figure:
     hats = {id(r): r.b44_hat_per_b_eq() for r in series}
     if all(hat is not None for hat in hats.values()):
         panels.append((draw(lambda r: float(hats[id(r)] or 0.0)), "B̂44 = B44 √(B/2g) / (ρ∇B²)"))
-    return _per_draft(series, "equivalent linear damping", panels, "amplitude (deg)")
+    return _per_draft(
+        series, "equivalent linear damping", panels, "amplitude (deg)", interval_caption(FIT_95, "band")
+    )
 
 
 def _plot_extinction(series: Sequence[GroupResult]) -> Figure:
@@ -232,9 +243,10 @@ def _per_draft(
     title: str,
     panels: Sequence[tuple[Callable[[Axes, GroupResult, str], None], str]],
     xlabel: str,
+    caption: str | None = None,
 ) -> Figure:
     """One hull and axis, a panel per ``(draw, ylabel)``: ``draw`` each group in its draft's colour, one
-    legend entry a draft, beside the panels."""
+    legend entry a draft, beside the panels; ``caption`` (what its intervals are) under the legend's title."""
     first = series[0].key
     fig, axes = _figure(len(panels), f"{first.hull} {first.axis}: {title}")
     drafts = sorted({r.key.draft for r in series})
@@ -245,12 +257,13 @@ def _per_draft(
         ax.set_ylabel(ylabel)
     for i, draft in enumerate(drafts):
         axes[0].plot([], [], color=f"C{i}", label=format_draft(draft))
-    _legend_beside(fig, axes, "draft")
+    _legend_beside(fig, axes, _titled("draft", caption))
     return fig
 
 
 def _plot_period(results: Sequence[GroupResult]) -> Figure:
-    """Natural period against draft, one line per hull (mean over initial angles, bars = spread)."""
+    """Natural period against draft, one line per hull: the mean over the initial angles, bars half their
+    range (± (range, initial angles))."""
     fig, (ax,) = _figure(1, f"{results[0].key.axis}: natural period vs draft")
     for hull in sorted({r.key.hull for r in results}):
         drafts = sorted({r.key.draft for r in results if r.key.hull == hull})
@@ -261,15 +274,20 @@ def _plot_period(results: Sequence[GroupResult]) -> Figure:
         ax.errorbar(
             drafts,
             [np.mean(p) for p in periods],
-            yerr=[np.ptp(p) / 2 for p in periods],
+            yerr=[np.ptp(p) / 2 for p in periods],  # a half-range, not a multiple of a std
             marker="o",
             capsize=3,
             label=hull,
         )
     ax.set_xlabel("draft / design draft")
     ax.set_ylabel("natural period (s)")
-    _legend_beside(fig, [ax], "hull")
+    _legend_beside(fig, [ax], _titled("hull", interval_caption(ANGLES_RANGE)))
     return fig
+
+
+def _titled(title: str | None, caption: str | None) -> str | None:
+    """A legend's title with the caption of the figure's intervals under it."""
+    return "\n".join(part for part in (title, caption) if part) or None
 
 
 _PLOTS: dict[str, Callable[[Sequence[GroupResult]], Figure]] = {

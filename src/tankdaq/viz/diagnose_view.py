@@ -17,8 +17,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ..errors import InputError
+from ..ident.interval_labels import FIT_95
 from ..store.safe_write import new_path
-from .plots import MEASURED_COLOR, MODEL_COLOR, legend_beside, report_style, short_labels
+from .plots import MEASURED_COLOR, MODEL_COLOR, interval_caption, legend_beside, report_style, short_labels
 
 
 class PredictedRun(Protocol):
@@ -249,7 +250,7 @@ def damping_figure(
     decrements: dict[str, tuple[np.ndarray, np.ndarray]],
     b44_hat_per_b_eq: float | None = None,
 ) -> Figure:
-    """B_eq(phi_a) with 95 % bands (``b_eq``: name -> value, std in 1/s) and the decrement per half
+    """B_eq(phi_a) with bands ± (95 %, fit) (``b_eq``: name -> value, std in 1/s) and the decrement per half
     cycle against the mean amplitude (``decrements``: name -> amplitude, decrement in rad), side by side;
     names are measured, simulation and corrected. ``b44_hat_per_b_eq`` (I √(B/2g) / (ρ∇B²), where the
     hull gives them) adds B̂44's scale beside B_eq/I."""
@@ -262,16 +263,15 @@ def damping_figure(
         amplitudes = np.asarray(amplitudes_deg, dtype=float)
         for name, (value, std) in b_eq.items():
             left.plot(amplitudes, value, color=colors[name], marker=markers[name], label=name)
-            left.fill_between(
-                amplitudes, value - 1.96 * std, value + 1.96 * std, color=colors[name], alpha=0.2
-            )
+            half = FIT_95.half_width(1.0) * std
+            left.fill_between(amplitudes, value - half, value + half, color=colors[name], alpha=0.2)
         left.set_xlabel("amplitude (deg)")
         left.set_ylabel("B_eq / I (1/s)")
         if b44_hat_per_b_eq is not None:
             k = b44_hat_per_b_eq
             hat = left.secondary_yaxis("right", functions=(lambda b: b * k, lambda h: h / k))
             hat.set_ylabel("B̂44 = B44 √(B/2g) / (ρ∇B²)")
-        left.set_title("equivalent linear damping, 95 % bands")
+        left.set_title(f"equivalent linear damping ({interval_caption(FIT_95, 'bands')})")
         for name, (amplitude, decrement) in decrements.items():
             right.plot(
                 np.degrees(amplitude),

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Self
 import numpy as np
 
 from ..errors import InputError
+from ..ident.interval_labels import FIT_95
 from ..physics.terms import TERM_TABLE
 from ..samples import AXIS_FIELDS
 from ..store.disk import RESERVE_BYTES, free_bytes, megabytes
@@ -479,7 +480,7 @@ class LiveView:
                     rr.SeriesLines(
                         colors=[MEASURED_COLOR, INTERVAL_COLOR, INTERVAL_COLOR],
                         widths=[2.0, 1.0, 1.0],
-                        names=[term_title(term), f"{term} 95 % low", f"{term} 95 % high"],
+                        names=[term_title(term), f"{term} {FIT_95} low", f"{term} {FIT_95} high"],
                     ),
                     static=True,
                 )

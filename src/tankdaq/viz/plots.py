@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 
 from ..errors import RecordingError
 from ..ident.conditions import UNKNOWN, condition_of
+from ..ident.interval_labels import IntervalLabel
 from ..records import DecayRun
 from ..store.naming import parse_recording_name
 from ..store.safe_write import write_new
@@ -58,6 +59,11 @@ def legend_beside(ax: Axes, **kwargs: Any) -> Legend:
     """``ax``'s legend right of it, outside the data: the layout engine (constrained) makes room for it.
     Every legend of a report figure is outside its axes or in the figure's own margin, never on data."""
     return ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kwargs)
+
+
+def interval_caption(label: IntervalLabel, what: str = "bars") -> str:
+    """What a figure says of its intervals, in its legend or title: ``bars: ± (95 %, fit)``."""
+    return f"{what}: {label}"
 
 
 def _figure(
@@ -111,11 +117,17 @@ def series_figure(
     xlabel: str,
     ylabel: str,
     title: str | None = None,
+    interval: IntervalLabel | None = None,
 ) -> Figure:
-    """Several named series against one x, each with optional symmetric error bars (``(y, yerr)``).
+    """Several named series against one x, each with optional symmetric error bars (``(y, yerr)``), whose
+    ``interval`` (coverage and kind) the title says: bars without one are refused.
 
     Labels must carry their units, e.g. ``xlabel="amplitude (deg)"``.
     """
+    bars = any(yerr is not None for _, yerr in series.values())
+    if bars and interval is None:
+        raise ValueError("series_figure: error bars need their interval (coverage and kind) to say")
+    caption = interval_caption(interval) if bars and interval is not None else None
     with report_style():
         fig, (ax,) = _figure(1)
         for label, (y, yerr) in series.items():
@@ -124,8 +136,8 @@ def series_figure(
         ax.set_ylabel(ylabel)
         if len(series) > 1:
             legend_beside(ax)
-        if title:
-            ax.set_title(title)
+        if title or caption:
+            ax.set_title(" ".join(part for part in (title, f"({caption})" if caption else None) if part))
     return fig
 
 

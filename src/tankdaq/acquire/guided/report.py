@@ -1,6 +1,6 @@
 """The report at the end of a guided session: ``tankdaq campaign``'s report of the accepted decays (the same
-pipeline, ``tankdaq.campaign``), plus each coefficient's repeat-to-repeat spread for the conditions with
-two or more repeats.
+pipeline, ``tankdaq.campaign``, its IMO table of Bertin's N included), plus each coefficient's
+repeat-to-repeat spread for the conditions with two or more repeats.
 """
 
 from __future__ import annotations
@@ -55,13 +55,14 @@ def repeat_spreads(groups: dict[Any, tuple[list[Any], tuple[str, ...]]]) -> list
 
 def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
     from ...ident.campaign import write_rows
+    from ...ident.interval_labels import SCATTER_STD
 
     path = write_rows(rows, folder / "repeat_spread.csv")  # a new file, as the rest of the report
     columns = list(dict.fromkeys(k for row in rows for k in row))
     terms = [c[: -len("_mean")] for c in columns if c.endswith("_mean")]
     lines = [
         "\n## Repeat-to-repeat spread\n",
-        "Each repeat fitted alone; mean ± sample standard deviation of the repeats.\n",
+        f"Each repeat fitted alone; the mean {SCATTER_STD}: the repeats' sample standard deviation.\n",
         "| draft | angle deg | repeats | " + " | ".join(terms) + " |",
         "|" + "---|" * (3 + len(terms)),
     ]
