@@ -4,9 +4,15 @@ and the provenance last. Nothing is rendered here."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
+
+from ..ident.conditions import UNKNOWN
+from . import slots
 from .content import FIT_95, Figure, ReportContent, Section, Table
 from .tables import coefficients_table, conditions_table, damping_table, decays_table, full_scale_tables
 
@@ -30,6 +36,47 @@ def condition_section(number: int, fit: ConditionFit, extra: Sequence[Table] = (
     ]
     notes = [*(f"warning: {line}" for line in summary["warnings"]), summary["model_choice"]["reason"]]
     return Section(key, summary["condition_label"], tables, condition_figures(key, fit), notes)
+
+
+#: The IMO table's columns as the report names them.
+IMO_COLUMNS = {
+    "amplitude_deg": "φm (deg)", "bertin_n_per_deg": "Bertin N (1/deg)", "bertin_n_std": "N ±",
+    "interval": "interval", "reached": "reached", "initial_angles_deg": "from initial angles (deg, measured)",
+    "needed_initial_deg": "initial angle needed (deg)",
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _ImoCondition:
+    """The condition an IMO table is labelled with (``ident.imo_table``'s key)."""
+
+    hull: str
+    axis: str
+    draft: float
+    angle_deg: float
+
+
+def imo_section(key: str, fit: ConditionFit) -> Table:
+    """Bertin's N at 10, 15, 20 and 25 deg from the condition's fit where its decays pass through them,
+    and the line on what they do not reach (which initial angles would)."""
+    from ..api.campaigns import imo_frame
+    from ..config import parse_draft
+    from ..ident.imo_table import decay_cover, imo_table
+
+    condition = fit.summary.get("condition") or {}
+    draft = condition.get("draft", UNKNOWN)
+    angles = [run["initial_angle_deg"] for run in fit.summary["runs"]]
+    named = _ImoCondition(
+        str(condition.get("hull", UNKNOWN)), fit.summary["axis"],
+        math.nan if draft == UNKNOWN else parse_draft(str(draft)), float(np.mean(np.abs(angles))),
+    )  # fmt: skip
+    table = imo_table([decay_cover(named, fit.runs, fit.estimator)])
+    frame = imo_frame([table]).drop(columns=["hull", "axis", "draft"])
+    frame["initial_angles_deg"] = [
+        ", ".join(f"{a:.2f}" for a in angles) for angles in frame.initial_angles_deg
+    ]
+    frame = frame.rename(columns=IMO_COLUMNS)
+    return slots.imo_table(key, frame, note=table.missing_line())
 
 
 def condition_figures(key: str, fit: ConditionFit) -> list[Figure]:
@@ -72,5 +119,9 @@ def report_content(
     """The whole report: conditions and decays, each condition's section, every warning, provenance."""
     summaries = [fit.summary for fit in fits]
     conditions = Section("conditions", "Conditions", [conditions_table(summaries), decays_table(summaries)])
-    sections = [conditions, *(condition_section(n, fit) for n, fit in enumerate(fits, 1)), provenance]
+    sections = [
+        conditions,
+        *(condition_section(n, fit, [imo_section(f"c{n}-imo", fit)]) for n, fit in enumerate(fits, 1)),
+        provenance,
+    ]
     return ReportContent(TITLE, sections, list(warnings), made_utc)

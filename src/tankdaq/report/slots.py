@@ -30,10 +30,13 @@ def budget_table(
     return Table.from_frame(key, f"Uncertainty budget: {quantity}", frame, caption, intervals)
 
 
-def imo_table(key: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] | None = None) -> Table:
-    """Bertin's N against mean amplitude at 10, 15, 20 and 25 deg where the decays cover them."""
+def imo_table(
+    key: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] | None = None, note: str = ""
+) -> Table:
+    """Bertin's N against mean amplitude at 10, 15, 20 and 25 deg where the decays cover them; ``note``
+    says which amplitudes they do not reach."""
     caption = (
         "Bertin's N against mean amplitude (MSC.1/Circ.1200), interpolated where the decays cover the "
         "amplitude; an amplitude not reached says so."
-    )
+    ) + (f" {note}" if note else "")
     return Table.from_frame(key, "IMO table: Bertin's N", frame, caption, intervals)
