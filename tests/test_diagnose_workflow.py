@@ -15,53 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hidden_effects import NAMED_SHARE, diagnose_draw, draw_faults, named_first
 from tankdaq.diagnose.effects import EFFECTS, LIBRARY
 from tankdaq.diagnose.synthetic import make_decay_set
 from tankdaq.diagnose.workflow import Diagnoser
 from tankdaq.errors import InputError
 
-DRAWS = 20
-#: The fitted parameter that measures each hidden effect (the truth uses the same names).
-MEASURED_BY = {
-    "damping.quadratic": "b2",
-    "damping.cubic": "b3",
-    "restoring.cubic": "c3",
-    "restoring.sine": "s1",
-    "sensor.offset": "angle_offset_rad",
-    "restoring.asymmetric": "c2",
-    "sensor.gyro_bias": "gyro_bias_rad_s",
-    "sensor.lag": "angle_lag_s",
-    "sensor.gain": "angle_gain_error",
-    "friction.coulomb": "fc",
-    "coupling.heave": "k_heave_m",
-    "coupling.other_rotation": "k_other_angle",
-    "coupling.unmeasured": "ring_omega_rad_s",  # heave not recorded: its frequency is what can be measured
-}
+#: Draws of each effect here; ``bench/bench_hidden_effects.py`` makes 20 of each (bench/results/).
+DRAWS = 6
 KVLCC2 = Path(__file__).parents[2] / "shared" / "data" / "kvlcc2-roll-decay" / "model_test_21338.csv"
-
-
-def final_value(diagnoser: Diagnoser, name: str) -> float | None:
-    final = diagnoser.final_
-    if name == "angle_offset_rad":
-        return float(np.mean(final.offsets)) if final.offsets else None
-    return final.coefficients.get(name)
-
-
-def diagnose_draw(effects: tuple[str, ...], seed: int) -> dict[str, object]:
-    """One draw, reduced to what the assertions need (runs in a worker process)."""
-    data = make_decay_set(effects, seed=seed)
-    diagnoser = Diagnoser().fit(data.runs)
-    values = {e: final_value(diagnoser, MEASURED_BY[e]) for e in effects if e in MEASURED_BY}
-    return {
-        "families": [s.effect.family for s in diagnoser.steps_],
-        "rms_over_noise": diagnoser.final_.rms_angle / data.noise_angle_rad,
-        "gap_all_outputs": 1 - diagnoser.final_.rms_noise_units / diagnoser.baseline_.rms_noise_units,
-        "relative_error": {
-            e: None if v is None else abs(v / data.truth[MEASURED_BY[e]] - 1) for e, v in values.items()
-        },
-        "cut_s": [c for s in diagnoser.steps_ for c in s.cut_s],
-        "onset_s": data.onset_s,
-    }
 
 
 @pytest.fixture(scope="module")
@@ -79,24 +41,17 @@ def draws(pool: ProcessPoolExecutor, effects: tuple[str, ...], first_seed: int) 
 @pytest.mark.parametrize("key", [e.key for e in LIBRARY])
 def test_every_hidden_effect_is_named_added_and_closes_the_gap(pool: ProcessPoolExecutor, key: str) -> None:
     outcomes = draws(pool, (key,), first_seed=1000)
-    family = EFFECTS[key].family
-    named = sum(o["families"][:1] == [family] for o in outcomes)
-    assert named >= 0.9 * DRAWS, [o["families"] for o in outcomes]
-    for o in outcomes:
-        assert o["rms_over_noise"] <= 1.3
-        # the gap over all outputs in noise units: a gyro bias lives in the rate, not the angle
-        assert o["gap_all_outputs"] >= 0.5
-        if key in MEASURED_BY:
-            assert o["relative_error"][key] is not None and o["relative_error"][key] <= 0.2
-        if key == "disturbance.late":
-            assert max(o["cut_s"]) <= o["onset_s"] + 0.5  # nothing of the burst is kept
+    assert sum(named_first(key, o) for o in outcomes) >= NAMED_SHARE * DRAWS, [
+        o["families"] for o in outcomes
+    ]
+    assert [draw_faults(key, o) for o in outcomes] == [[]] * DRAWS
 
 
 @pytest.mark.slow
 def test_negative_control_adds_nothing(pool: ProcessPoolExecutor) -> None:
     outcomes = draws(pool, (), first_seed=2000)
-    assert sum(not o["families"] for o in outcomes) >= 0.9 * DRAWS
-    assert all(o["rms_over_noise"] <= 1.3 for o in outcomes)
+    assert sum(named_first("", o) for o in outcomes) >= NAMED_SHARE * DRAWS
+    assert [draw_faults("", o) for o in outcomes] == [[]] * DRAWS
 
 
 @pytest.mark.parametrize(

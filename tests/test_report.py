@@ -84,8 +84,8 @@ def test_the_report_holds_what_a_reviewer_asks(made: dict[str, Any], recording: 
     document = made["document"]
     tables = {t["key"]: t for s in document["sections"] for t in s["tables"]}
     assert {"conditions", "decays", "c1-coefficients", "c1-damping", "c1-full-scale-damping"} <= set(tables)
-    assert tables["c1-coefficients"]["intervals"]["± 1σ (fit)"] == "± 1σ (fit)"
-    assert set(tables["c1-coefficients"]["intervals"].values()) == {"± 1σ (fit)", "± 95 % (fit)"}
+    assert tables["c1-coefficients"]["intervals"]["± (1σ, fit)"] == "± (1σ, fit)"
+    assert set(tables["c1-coefficients"]["intervals"].values()) == {"± (1σ, fit)", "± (95 %, fit)"}
     ship = tables["c1-full-scale-coefficients"]["rows"][0]  # the natural period: model, ship
     assert ship[2] == pytest.approx(ship[1] * 12.5**0.5, rel=1e-5)
     hull_sha = hashlib.sha256((made["work"] / "swath_scaled.toml").read_bytes()).hexdigest()
@@ -259,17 +259,20 @@ def test_a_budget_plugs_in_as_a_table(tmp_path: Path) -> None:
     its rows in the HTML and the PDF, its interval labelled."""
     import pandas as pd
 
+    from tankdaq.ident.interval_labels import EXPANDED_U
     from tankdaq.report.content import ReportContent, Section
     from tankdaq.report.html import render_html
     from tankdaq.report.pdf import write_pdf
-    from tankdaq.report.slots import EXPANDED_95, budget_table
+    from tankdaq.report.slots import budget_table
 
     frame = pd.DataFrame({"source": ["repeats", "GM"], "value": [0.01, 0.002], "sensitivity": [1.0, 3.5],
                           "contribution": [0.01, 0.007], "share": [0.67, 0.33]})  # fmt: skip
-    table = budget_table("c1-budget-period", "the natural period", frame, {"contribution": EXPANDED_95})
+    table = budget_table("c1-budget-period", "the natural period", frame, {"contribution": EXPANDED_U})
     content = ReportContent("t", [Section("c1", "swath T roll", [table])], [], "2026-11-28T12:00:00+00:00")
     page = render_html(content)
-    assert 'data-key="c1-budget-period"' in page and "[± 95 % (expanded)]" in page and ">repeats<" in page
+    assert (
+        'data-key="c1-budget-period"' in page and "[U (k=2, ≈95 %, expanded)]" in page and ">repeats<" in page
+    )
     write_pdf(content, tmp_path / "b.pdf")
     if shutil.which("pdftotext") is None:
         pytest.skip("no pdftotext")

@@ -79,7 +79,12 @@ class IntervalLabel:
     @property
     def text(self) -> str:
         """``± (95 %, fit)``: what a legend, a table's header or a caption says."""
-        return f"{self.symbol} ({self.coverage.value}, {self.kind.value})"
+        return f"{self.symbol} {self.said}"
+
+    @property
+    def said(self) -> str:
+        """``(95 %, fit)``: the coverage and kind alone, as a bound's column names them (``... low``)."""
+        return f"({self.coverage.value}, {self.kind.value})"
 
     def __str__(self) -> str:
         return self.text

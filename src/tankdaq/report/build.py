@@ -90,7 +90,7 @@ def condition_figures(key: str, fit: ConditionFit) -> list[Figure]:
     bertin = [(row["value_per_deg"], row["std"]) for row in summary["bertin_n"]]
     coefficients = {term: c["value"] for term, c in summary["coefficients"].items()}
     damping = damping_figure(
-        coefficients, covariance_of(fit.estimator), amplitudes, bertin, FIT_95.label,
+        coefficients, covariance_of(fit.estimator), amplitudes, bertin, FIT_95.text,
         f"{summary['condition_label']}: damping",
     )  # fmt: skip
     figures = [
@@ -98,7 +98,7 @@ def condition_figures(key: str, fit: ConditionFit) -> list[Figure]:
             f"{key}-damping-figure",
             "B_eq/I and Bertin's N against amplitude",
             png_bytes(damping),
-            f"Band and bars: {FIT_95.label}, 1.96 × the standard deviation propagated from the fit's "
+            f"Band and bars: {FIT_95.text}, 1.96 × the standard deviation propagated from the fit's "
             "covariance (delta method).",
             (FIT_95,),
         )

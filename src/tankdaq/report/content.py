@@ -2,8 +2,8 @@
 
 The renderers (``report.html``, ``report.pdf``) and ``--json`` read only a ``ReportContent``, so they
 hold the same numbers: every number is rounded here, once, to ``SIGNIFICANT`` digits (``rounded``), and
-shown by ``cell_text`` with exactly those digits. An interval says what it is (``Interval``: its
-coverage and its kind, ``± 95 % (fit)``) wherever it is shown.
+shown by ``cell_text`` with exactly those digits. An interval says what it is (``IntervalLabel``: its
+coverage and its kind, ``± (95 %, fit)``: ``ident.interval_labels``) wherever it is shown.
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ import math
 import numbers
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from enum import Enum
 from typing import TYPE_CHECKING, Any
+
+from ..ident.interval_labels import FIT_95, FIT_STD, IntervalLabel
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -25,40 +26,8 @@ Cell = float | int | str | None
 NOT_KNOWN = "–"
 
 
-class Coverage(Enum):
-    """How much of the distribution an interval covers."""
-
-    P95 = "95 %"
-    SIGMA1 = "1σ"
-
-
-class IntervalKind(Enum):
-    """Where an interval comes from: the fit's own covariance, or an expanded uncertainty (k = 2)."""
-
-    FIT = "fit"
-    EXPANDED = "expanded"
-
-
-@dataclass(frozen=True)
-class Interval:
-    """An interval's coverage and kind; ``label`` is how every table and figure says it."""
-
-    coverage: Coverage
-    kind: IntervalKind
-
-    @property
-    def short(self) -> str:
-        """``95 % (fit)``: the coverage and kind, as a bound's column names them."""
-        return f"{self.coverage.value} ({self.kind.value})"
-
-    @property
-    def label(self) -> str:
-        """``± 95 % (fit)``: as every table and figure says it."""
-        return f"± {self.short}"
-
-
-FIT_SIGMA = Interval(Coverage.SIGMA1, IntervalKind.FIT)
-FIT_95 = Interval(Coverage.P95, IntervalKind.FIT)
+#: The fit's own intervals (``ident.interval_labels``: one convention for every view).
+FIT_SIGMA, FIT_95 = FIT_STD, FIT_95
 
 
 def rounded(value: object) -> Cell:
@@ -88,7 +57,7 @@ def cell_text(value: Cell) -> str:
 @dataclass(frozen=True)
 class Table:
     """A titled table: ``columns`` (units in the names), ``rows`` of rounded cells, a ``caption``, and
-    the ``intervals`` its columns hold (column -> ``Interval``). ``key`` names it in the JSON and the
+    the ``intervals`` its columns hold (column -> ``IntervalLabel``). ``key`` names it in the JSON and the
     HTML (``data-key``), unique in a report."""
 
     key: str
@@ -96,7 +65,7 @@ class Table:
     columns: list[str]
     rows: list[list[Any]]  # each cell made a ``Cell`` (``rounded``) when the table is made
     caption: str = ""
-    intervals: Mapping[str, Interval] = field(default_factory=dict)
+    intervals: Mapping[str, IntervalLabel] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rows", [[rounded(cell) for cell in row] for row in self.rows])
@@ -112,7 +81,7 @@ class Table:
     def interval_said(self, column: str) -> str:
         """The interval ``column`` holds, for its header, where its name does not say it already."""
         interval = self.intervals.get(column)
-        return interval.label if interval is not None and interval.short not in column else ""
+        return interval.text if interval is not None and interval.said not in column else ""
 
     @classmethod
     def from_frame(
@@ -121,7 +90,7 @@ class Table:
         title: str,
         frame: pd.DataFrame,
         caption: str = "",
-        intervals: Mapping[str, Interval] | None = None,
+        intervals: Mapping[str, IntervalLabel] | None = None,
     ) -> Table:
         """A DataFrame as a report table (its columns and rows as they are; the index is dropped)."""
         rows = [list(row) for row in frame.itertuples(index=False, name=None)]
@@ -138,7 +107,7 @@ class Table:
             "title": self.title,
             "caption": self.caption,
             "columns": self.columns,
-            "intervals": {column: interval.label for column, interval in self.intervals.items()},
+            "intervals": {column: interval.text for column, interval in self.intervals.items()},
             "rows": self.rows,
         }
 
@@ -151,14 +120,14 @@ class Figure:
     title: str
     png: bytes = field(repr=False)
     caption: str = ""
-    intervals: Sequence[Interval] = ()
+    intervals: Sequence[IntervalLabel] = ()
 
     def document(self) -> dict[str, Any]:
         return {
             "key": self.key,
             "title": self.title,
             "caption": self.caption,
-            "intervals": [i.label for i in self.intervals],
+            "intervals": [i.text for i in self.intervals],
         }
 
 

@@ -8,30 +8,28 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
-from .content import Coverage, Interval, IntervalKind, Table
+from ..ident.interval_labels import EXPANDED_U, IntervalLabel
+from .content import Table
 
 if TYPE_CHECKING:
     import pandas as pd
 
-#: An expanded uncertainty, k = 2 (about 95 %).
-EXPANDED_95 = Interval(Coverage.P95, IntervalKind.EXPANDED)
-
 
 def budget_table(
-    key: str, quantity: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] | None = None
+    key: str, quantity: str, frame: pd.DataFrame, intervals: Mapping[str, IntervalLabel] | None = None
 ) -> Table:
     """A quantity's uncertainty budget (columns source, value, sensitivity, contribution, share):
     the sources' contributions combined, and expanded with k = 2."""
     caption = (
         f"Uncertainty budget of {quantity} (ISO-GUM, ITTC 7.5-02-01-01): each source's value, its "
-        f"sensitivity and its contribution to the combined standard uncertainty; {EXPANDED_95.label}: "
+        f"sensitivity and its contribution to the combined standard uncertainty; {EXPANDED_U.text}: "
         "expanded with k = 2."
     )
     return Table.from_frame(key, f"Uncertainty budget: {quantity}", frame, caption, intervals)
 
 
 def imo_table(
-    key: str, frame: pd.DataFrame, intervals: Mapping[str, Interval] | None = None, note: str = ""
+    key: str, frame: pd.DataFrame, intervals: Mapping[str, IntervalLabel] | None = None, note: str = ""
 ) -> Table:
     """Bertin's N against mean amplitude at 10, 15, 20 and 25 deg where the decays cover them; ``note``
     says which amplitudes they do not reach."""

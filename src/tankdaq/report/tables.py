@@ -11,8 +11,8 @@ from ..ident.full_scale import damping_name
 from .content import FIT_95, FIT_SIGMA, Table
 
 #: The fit's own intervals: the coefficient's standard deviation and its 95 % interval.
-SIGMA_COLUMN = FIT_SIGMA.label
-LOW_COLUMN, HIGH_COLUMN = f"{FIT_95.short} low", f"{FIT_95.short} high"
+SIGMA_COLUMN = FIT_SIGMA.text
+LOW_COLUMN, HIGH_COLUMN = f"{FIT_95.said} low", f"{FIT_95.said} high"
 
 
 def conditions_table(summaries: Sequence[dict[str, Any]]) -> Table:
@@ -64,8 +64,8 @@ def coefficients_table(key: str, summary: dict[str, Any]) -> Table:
     intervals = {SIGMA_COLUMN: FIT_SIGMA, LOW_COLUMN: FIT_95, HIGH_COLUMN: FIT_95}
     caption = (
         f"Model {summary['model']['name']} ({summary['method']}); per unit total inertia, angles in rad. "
-        f"{FIT_SIGMA.label}: the fit's standard deviation ({summary['intervals']} covariance); "
-        f"{FIT_95.label}: its 95 % interval."
+        f"{FIT_SIGMA.text}: the fit's standard deviation ({summary['intervals']} covariance); "
+        f"{FIT_95.text}: its 95 % interval."
     )
     columns = ["term", "value", "unit", SIGMA_COLUMN, LOW_COLUMN, HIGH_COLUMN]
     return Table(key, "Coefficients", columns, rows, caption, intervals)
@@ -74,18 +74,18 @@ def coefficients_table(key: str, summary: dict[str, Any]) -> Table:
 def damping_table(key: str, summary: dict[str, Any]) -> Table:
     """B_eq/I (with B̂44 where the hull allows) and Bertin's N at the amplitudes the decays cover."""
     hat = any("b44_hat" in row for row in summary["b_eq"])
-    columns = ["amplitude (deg)", "B_eq/I (1/s)", f"B_eq/I {FIT_SIGMA.label}"]
+    columns = ["amplitude (deg)", "B_eq/I (1/s)", f"B_eq/I {FIT_SIGMA.text}"]
     columns += ["B̂44"] if hat else []
-    columns += ["Bertin N (1/deg)", f"Bertin N {FIT_SIGMA.label}"]
+    columns += ["Bertin N (1/deg)", f"Bertin N {FIT_SIGMA.text}"]
     rows = []
     for b, n in zip(summary["b_eq"], summary["bertin_n"], strict=True):
         row = [b["amplitude_deg"], b["value_per_s"], b["std"]]
         row += [b.get("b44_hat")] if hat else []
         rows.append([*row, n["value_per_deg"], n["std"]])
-    intervals = {f"B_eq/I {FIT_SIGMA.label}": FIT_SIGMA, f"Bertin N {FIT_SIGMA.label}": FIT_SIGMA}
+    intervals = {f"B_eq/I {FIT_SIGMA.text}": FIT_SIGMA, f"Bertin N {FIT_SIGMA.text}": FIT_SIGMA}
     caption = (
         "Equivalent linear damping B_eq/I and Bertin's N (MSC.1/Circ.1200) at amplitudes the decays "
-        f"cover; {FIT_SIGMA.label}: propagated from the fit's covariance (delta method)."
+        f"cover; {FIT_SIGMA.text}: propagated from the fit's covariance (delta method)."
         + (" B̂44 = B44 √(B/2g) / (ρ∇B²), non-dimensional." if hat else "")
     )
     return Table(key, "B_eq and Bertin's N", columns, rows, caption, intervals)
