@@ -77,6 +77,9 @@ class Campaign:
         ``skipped``, ``cuts`` and, with ``full_scale``, its lines."""
         document = {
             "groups": [row.row for row in self.rows],
+            "budgets": [
+                {"group": row.key.label, "budget": list(row.budget)} for row in self.rows if row.budget
+            ],
             "warnings": self.warnings,
             "skipped": self.skipped,
             "cuts": self.cuts,
@@ -88,10 +91,22 @@ class Campaign:
         return to_json(self.document)
 
     def text(self) -> str:
-        """The Markdown table ``tankdaq campaign`` prints, then the full-scale lines."""
+        """The Markdown table ``tankdaq campaign`` prints, the periods and B_eq/I with their expanded
+        uncertainty (the whole budgets: ``budget``), then the full-scale lines."""
+        from ..ident.budget import EXPANDED_LABEL, short_lines
         from ..ident.campaign import markdown_table
 
-        return markdown_table(self.rows) + "".join(f"{line}\n" for line in self.full_scale)
+        budget = [line for row in self.rows for line in short_lines(row.key.label, row.budget)]
+        head = [f"\nUncertainty (GUM budget; {EXPANDED_LABEL}; every source in --json):\n"] if budget else []
+        return markdown_table(self.rows) + "".join(f"{line}\n" for line in [*head, *budget, *self.full_scale])
+
+    @property
+    def budget(self) -> pd.DataFrame:
+        """Each group's uncertainty budget, Type A from its repeats: one row per group, quantity and
+        source (the columns of ``Identification.budget`` plus the group's ``condition``)."""
+        from .identification import budget_table
+
+        return budget_table([(row.key.label, row.budget) for row in self.rows])
 
     def _repr_html_(self) -> str:
         lines = "".join(f"<li>{html.escape(line)}</li>" for line in [*self.skipped, *self.warnings])

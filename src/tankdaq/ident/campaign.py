@@ -32,6 +32,7 @@ from ..store.inputs import INPUT_FORMATS, input_format, suffixes
 from ..store.naming import parse_recording_name
 from ..store.safe_write import write_text_new
 from ..validation import refuse_existing
+from .budget_fit import group_budgets
 from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
 from .executors import executor_map
 from .free_decay import cut_free_decays, cut_lines
@@ -77,6 +78,11 @@ class GroupResult:
         particulars = self.hull.particulars(self.key.axis) if self.hull is not None else None
         found = check_runs(self.fit.coefficients_, self.runs, self.fit.offsets_, particulars, self.key.hull)
         return [finding.message for finding in found]
+
+    @cached_property
+    def budget(self) -> tuple[dict[str, Any], ...]:
+        """The uncertainty budgets, Type A from the group's repeats (``budget_fit.group_budgets``); once."""
+        return group_budgets(self.fit, self.runs, self.hull, self.key.draft)
 
     def summary(self) -> dict[str, Any]:
         """One row of the campaign table (angles in deg, coefficients per unit inertia, SI)."""
@@ -138,11 +144,7 @@ class GroupResult:
         return float(found["total_inertia_kg_m2"] * factor)
 
 
-# --------------------------------------------------------------------------------------------------
 # Finding and reading recordings
-# --------------------------------------------------------------------------------------------------
-
-
 def find_recordings(inputs: Sequence[str | Path], recurse: bool = True) -> list[Path]:
     """The files tankdaq reads decays from (``store.inputs.INPUT_FORMATS``: .mcap, .csv) among ``inputs``
     (folders searched recursively unless ``recurse`` is False: then only the folder's own files), sorted."""
@@ -284,11 +286,7 @@ def group_runs(runs: Iterable[DecayRun]) -> dict[GroupKey, list[DecayRun]]:
     return dict(sorted(groups.items()))
 
 
-# --------------------------------------------------------------------------------------------------
 # Identifying
-# --------------------------------------------------------------------------------------------------
-
-
 def find_campaign_hulls(names: Iterable[str], given: Sequence[str] = ()) -> dict[str, Hull]:
     """The hull file of each name: ``given`` (paths or names, e.g. ``campaign --hull``) first, then the
     user folder and the shipped ones; a name with no file is left out (its groups get no dimensional
@@ -397,9 +395,7 @@ def read_campaign(
     return found
 
 
-# --------------------------------------------------------------------------------------------------
 # Tables: CSV and Markdown (the figures are drawn by viz.campaign_report)
-# --------------------------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -413,11 +409,13 @@ class GroupRow:
     terms: tuple[str, ...]  # empty when the group was not fitted
     warnings: tuple[str, ...]
     result: GroupResult | None = None
+    budget: tuple[dict[str, Any], ...] = ()  # ``Budget.as_dict``s, Type A from the repeats
 
     @classmethod
     def of(cls, result: GroupResult, keep: bool = False) -> GroupRow:
         terms = tuple(result.fit.terms_) if result.fit is not None else ()
-        return cls(result.key, result.summary(), terms, tuple(result.warnings), result if keep else None)
+        keeps = result if keep else None
+        return cls(result.key, result.summary(), terms, tuple(result.warnings), keeps, result.budget)
 
     @property
     def error(self) -> str | None:
