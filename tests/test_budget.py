@@ -209,3 +209,40 @@ def test_the_kvlcc2_decay_has_a_finite_plausible_budget() -> None:
     assert 2.4 < period["value"] < 2.7
     assert 1e-6 * period["value"] < period["expanded_u"] < 0.01 * period["value"]
     assert {"B_eq/I at 5 deg", "B̂44 at 5 deg", "full-scale B44 at 5 deg"} <= set(table["quantity"])
+
+
+def test_the_catalogue_keeps_each_fits_budget(catalogue_url: str, tmp_path: Path) -> None:
+    """A campaign's group fit (Type A from its two repeats) and an identify fit (one decay) each keep
+    their budget in ``budgets``, a row per quantity and source that adds up as the fit's own did."""
+    import sqlalchemy as sa
+    from typer.testing import CliRunner
+
+    from tankdaq.catalogue.database import open_catalogue
+    from tankdaq.catalogue.schema import budgets, fits
+    from tankdaq.cli import app
+    from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
+
+    test = SimulatedTest(duration_s=6.0)
+    paths = [
+        write_simulated_campaign(tmp_path / "rec" / f"r{seed}", ["catamaran"], "roll", [1.0], [10.0], "mcap",
+                                 test=test, seed=seed)[0]
+        for seed in range(2)
+    ]  # fmt: skip
+    for args in (["campaign", str(tmp_path / "rec")], ["identify", str(paths[0]), "--json"]):
+        done = CliRunner().invoke(app, [*args, "--catalogue", catalogue_url])
+        assert done.exit_code == 0, done.output
+    said = json.loads(done.stdout)
+    with open_catalogue(catalogue_url) as catalogue, catalogue.reading() as connection:
+        kept = {row.id: row.source for row in connection.execute(sa.select(fits.c.id, fits.c.source))}
+        rows = [r._mapping for r in connection.execute(sa.select(budgets).order_by(budgets.c.id))]
+    assert sorted(kept.values()) == ["campaign", "campaign", "identify"]
+    assert {r["fit_id"] for r in rows} == set(kept)
+    for fit_id, source in kept.items():
+        period = [r for r in rows if r["fit_id"] == fit_id and r["quantity_key"] == "natural_period_s"]
+        assert period[0]["kind"] == "A" and ("n=2" in period[0]["source"]) == (source == "campaign")
+        total = math.sqrt(sum(r["contribution"] ** 2 for r in period))
+        assert total == pytest.approx(period[0]["combined_u"], rel=1e-9)
+        assert period[0]["expanded_u"] == pytest.approx(2 * total, rel=1e-9)
+    identify_id = next(i for i, s in kept.items() if s == "identify")
+    stored = next(r for r in rows if r["fit_id"] == identify_id and r["quantity_key"] == "natural_period_s")
+    assert stored["expanded_u"] == pytest.approx(said["budget"][0]["expanded_u"], rel=1e-12)
