@@ -48,12 +48,14 @@ def truth() -> dict[str, float]:
     return load_hull("catamaran").simulation_model("roll").coefficients(1.0)
 
 
-def campaign(seed: int, coefficients: dict[str, float]) -> Outcome:
-    """One simulated campaign fitted and budgeted as ``identify`` does."""
+def campaign(seed: int, coefficients: dict[str, float], device_error: bool = True) -> Outcome:
+    """One simulated campaign fitted and budgeted as ``identify`` does; without ``device_error`` the
+    device's scale and clock are exact (the budget's Type B then covers an error that is not there)."""
     rng = np.random.default_rng([seed, 38])
     profile = MTI_G_710
-    gain = 1.0 + rng.standard_normal() * profile.angle_accuracy_deg / INITIAL_DEG
-    clock = 1.0 + rng.standard_normal() * profile.clock_ppm * 1e-6
+    errors = rng.standard_normal(2) if device_error else np.zeros(2)
+    gain = 1.0 + errors[0] * profile.angle_accuracy_deg / INITIAL_DEG
+    clock = 1.0 + errors[1] * profile.clock_ppm * 1e-6
     bias = math.radians(0.2) * rng.standard_normal()
     runs = []
     for i in range(REPEATS):

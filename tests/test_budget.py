@@ -132,6 +132,10 @@ def test_type_a_is_from_repeats_or_says_that_repeats_are_needed(fitted) -> None:
     alone = {b.key: b for b in fit_budgets(one, runs[:1], tested)}["natural_period_s"]
     assert alone.rows[0].source.startswith("the fit (hac")
     assert any("repeat the decay" in note for note in alone.notes)
+    joint = {b.key: b for b in fit_budgets(fit, runs, tested, per_decay=())}["natural_period_s"]  # GA, PSO
+    assert joint.rows[0].note == "3 decays fitted together" and not any(
+        "repeat the" in n for n in joint.notes
+    )
 
 
 def test_monte_carlo_agrees_with_the_sensitivities(fitted, hull) -> None:

@@ -171,24 +171,23 @@ class FitUncertainty:
     covariance: np.ndarray
     cov_type: str
     per_decay: tuple[dict[str, float], ...] = ()
+    decays: int = 1  # how many decays the fit holds (repeats not refitted one by one have no per_decay)
 
 
 def type_a_row(quantity: Quantity, fit: FitUncertainty, inputs: Mapping[str, float]) -> tuple[BudgetRow, str]:
     """The Type A row (the decays' scatter) and the line that says how it was found."""
     from_fit = fit_u(quantity, fit.coefficients, inputs, fit.covariance)
+    own = f"the fit ({fit.cov_type} covariance)"
     n = len(fit.per_decay)
     if n < 2:
-        row = BudgetRow(
-            f"the fit ({fit.cov_type} covariance)",
-            Kind.A,
-            from_fit,
-            quantity.unit,
-            1.0,
-            from_fit,
-            math.nan,
-            "one decay",
+        alone = fit.decays < 2
+        note = "one decay" if alone else f"{fit.decays} decays fitted together"
+        said = (
+            "one decay: Type A is the fit's own interval; repeat the decay (3 or more) for repeats"
+            if alone
+            else f"Type A is the fit's own interval: its {fit.decays} decays were not fitted one by one"
         )
-        return row, "one decay: Type A is the fit's own interval; repeat the decay (3 or more) for repeats"
+        return BudgetRow(own, Kind.A, from_fit, quantity.unit, 1.0, from_fit, math.nan, note), said
     values = np.array([evaluate(quantity, c, inputs) for c in fit.per_decay])
     of_mean = float(np.std(values, ddof=1)) / math.sqrt(n)
     said = (
@@ -196,28 +195,14 @@ def type_a_row(quantity: Quantity, fit: FitUncertainty, inputs: Mapping[str, flo
         "(both estimate the same scatter; counted once)"
     )
     if of_mean >= from_fit:
-        row = BudgetRow(
-            f"repeats (std of the mean, n={n})",
-            Kind.A,
-            of_mean,
-            quantity.unit,
-            1.0,
-            of_mean,
-            math.nan,
-            f"the fit's own: {from_fit:.3g}",
-        )
+        name, u, note = f"repeats (std of the mean, n={n})", of_mean, f"the fit's own: {from_fit:.3g}"
     else:
-        row = BudgetRow(
-            f"the fit ({fit.cov_type} covariance; n={n} repeats)",
-            Kind.A,
+        name, u, note = (
+            f"{own[:-1]}; n={n} repeats)",
             from_fit,
-            quantity.unit,
-            1.0,
-            from_fit,
-            math.nan,
             f"the repeats' std of the mean: {of_mean:.3g}",
         )
-    return row, said
+    return BudgetRow(name, Kind.A, u, quantity.unit, 1.0, u, math.nan, note), said
 
 
 def quantity_budget(

@@ -100,6 +100,7 @@ def fit_budgets(
         covariance_of(estimator),
         str(getattr(estimator, "cov_type", "classic")),
         tuple(dict(c) for c in decays),
+        len(runs),
     )
     duration = float(np.mean([run.t[-1] - run.t[0] for run in runs]))
     sources = device_sources(profile, initial_amplitude_deg(runs, estimator.offsets_), duration)
