@@ -91,14 +91,11 @@ class Campaign:
         return to_json(self.document)
 
     def text(self) -> str:
-        """The Markdown table ``tankdaq campaign`` prints, the periods and B_eq/I with their expanded
-        uncertainty (the whole budgets: ``budget``), then the full-scale lines."""
-        from ..ident.budget import EXPANDED_LABEL, short_lines
+        """The Markdown table ``tankdaq campaign`` prints (with each group's period and B_eq/I and their
+        expanded uncertainty; the whole budgets: ``budget``), then the full-scale lines."""
         from ..ident.campaign import markdown_table
 
-        budget = [line for row in self.rows for line in short_lines(row.key.label, row.budget)]
-        head = [f"\nUncertainty (GUM budget; {EXPANDED_LABEL}; every source in --json):\n"] if budget else []
-        return markdown_table(self.rows) + "".join(f"{line}\n" for line in [*head, *budget, *self.full_scale])
+        return markdown_table(self.rows) + "".join(f"{line}\n" for line in self.full_scale)
 
     @property
     def budget(self) -> pd.DataFrame:

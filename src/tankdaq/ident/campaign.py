@@ -32,6 +32,7 @@ from ..store.inputs import INPUT_FORMATS, input_format, suffixes
 from ..store.naming import parse_recording_name
 from ..store.safe_write import write_text_new
 from ..validation import refuse_existing
+from .budget import EXPANDED_LABEL, short_lines
 from .budget_fit import group_budgets
 from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
 from .executors import executor_map
@@ -396,8 +397,6 @@ def read_campaign(
 
 
 # Tables: CSV and Markdown (the figures are drawn by viz.campaign_report)
-
-
 @dataclass(frozen=True)
 class GroupRow:
     """One group's row of the campaign table (``GroupResult.summary``), its fitted terms and warnings:
@@ -469,6 +468,9 @@ def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
     chosen = [f"- {r.key.label}: {r.row['model_reason']}" for r in rows if r.row.get("model_reason")]
     if chosen:  # which model each group was fitted with, and why (ident.model_choice.model_for)
         lines += ["", "Models (docs/models.md):", "", *chosen]
+    budget = [line for r in rows for line in short_lines(r.key.label, r.budget)]
+    if budget:  # each group's period and B_eq/I with their expanded uncertainty (every source: --json)
+        lines += ["", f"Uncertainty (GUM budget; {EXPANDED_LABEL}; every source in --json):", "", *budget]
     implausible = [f"- {r.key.label}: {line}" for r in rows for line in r.warnings]
     if implausible:
         lines += ["", "Warnings (physically implausible fits, docs/models.md):", "", *implausible]
