@@ -250,3 +250,22 @@ def test_the_catalogue_keeps_each_fits_budget(catalogue_url: str, tmp_path: Path
     identify_id = next(i for i, s in kept.items() if s == "identify")
     stored = next(r for r in rows if r["fit_id"] == identify_id and r["quantity_key"] == "natural_period_s")
     assert stored["expanded_u"] == pytest.approx(said["budget"][0]["expanded_u"], rel=1e-12)
+
+
+def test_the_device_profile_follows_the_recordings_product_code(tmp_path: Path) -> None:
+    """A recording made with a 2007-era MTi-G gets its datasheet's figures; a lab's own profile wins."""
+    from tankdaq.ident.budget_inputs import DeviceProfile
+    from tankdaq.ident.campaign_synthetic import SimulatedTest, simulated_decay, write_simulated_recording
+
+    test = SimulatedTest(duration_s=6.0)
+    t, angle, rate = simulated_decay(truth(), 10.0, test, np.random.default_rng(2))
+    labels = ("catamaran", "roll", 1.0, 10.0)
+    path = write_simulated_recording(
+        tmp_path / "old.mcap", labels, t, angle, rate, test, {"product_code": "MTi-G"}
+    )
+    sources = set(tankdaq.identify(path, model="b1,b2,c1,c3").budget["source"])
+    assert "angle accuracy (MTi-G (legacy))" in sources and "angle accuracy (MTi-G-710)" not in sources
+    ours = DeviceProfile("our MTi-G", 0.1, 0.01, 5.0, 1e-4, "our calibration, 2026")
+    table = tankdaq.identify(path, model="b1,b2,c1,c3", device=ours).budget
+    row = table[(table["quantity"] == "B_eq/I at 5 deg") & (table["source"] == "angle accuracy (our MTi-G)")]
+    assert row["u"].iloc[0] == 0.1
