@@ -269,7 +269,11 @@ def monte_carlo(
 
 def text_table(found: Sequence[Mapping[str, Any]]) -> list[str]:
     """Budgets (``Budget.as_dict``) as the text reports print them: per quantity, its rows, u_c and U."""
-    lines = [f"  uncertainty budget (GUM; {STANDARD_LABEL}; {EXPANDED_LABEL})"]
+    lines = [
+        f"  uncertainty budget (GUM; {STANDARD_LABEL}; {EXPANDED_LABEL})",
+        "  per source: Type A/B, its u in its unit, c the sensitivity (quantity's unit per source's unit),",
+        "  the contribution |c| u in the quantity's unit, its share of u_c^2; u_c = root sum of squares",
+    ]
     for b in found:
         lines.append(
             f"  {b['quantity']}: {b['value']:.6g} {b['unit']}, u_c {b['combined_u']:.3g}, "
