@@ -21,6 +21,7 @@ from .budget_inputs import (
     reference_amplitudes,
     reported_quantities,
 )
+from .conditions import condition_of
 from .derived import b44_hat_factor, tested_amplitudes_deg
 from .equation_error import EquationError
 from .output_error import OutputError
@@ -50,9 +51,12 @@ def hull_figures(hull: Any, axis: str, draft: float, scale_factor: float | None 
 
 def per_decay_coefficients(estimator: Any, runs: Sequence[DecayRun]) -> tuple[dict[str, float], ...]:
     """Each decay fitted alone, for Type A from repeats: an output-error fit warm-started from the joint
-    fit's coefficients, an equation-error fit as it is; none for one decay or for the seeds' searches
-    (GA, PSO: minutes per fit), whose budgets use the fit's covariance and say so."""
+    fit's coefficients, an equation-error fit as it is; none for one decay, for the seeds' searches (GA,
+    PSO: minutes per fit) or for decays of several conditions (``--joint``), whose budgets use the fit's
+    covariance and say so."""
     if len(runs) < 2 or not isinstance(estimator, OutputError | EquationError):
+        return ()
+    if len({condition_of(run) for run in runs}) > 1:  # pooled conditions (--joint) are not repeats
         return ()
     out = []
     for run in runs:
