@@ -132,6 +132,8 @@ def test_type_a_is_from_repeats_or_says_that_repeats_are_needed(fitted) -> None:
     alone = {b.key: b for b in fit_budgets(one, runs[:1], tested)}["natural_period_s"]
     assert alone.rows[0].source.startswith("the fit (hac")
     assert any("repeat the decay" in note for note in alone.notes)
+    pooled = [replace(run, meta={**run.meta, "hull": hull}) for run, hull in zip(runs, "abb", strict=True)]
+    assert per_decay_coefficients(fit, pooled) == ()  # --joint: decays of two hulls are not repeats
     joint = {b.key: b for b in fit_budgets(fit, runs, tested, per_decay=())}["natural_period_s"]  # GA, PSO
     assert joint.rows[0].note == "3 decays fitted together" and not any(
         "repeat the" in n for n in joint.notes
