@@ -271,3 +271,23 @@ def test_the_device_profile_follows_the_recordings_product_code(tmp_path: Path) 
     table = tankdaq.identify(path, model="b1,b2,c1,c3", device=ours).budget
     row = table[(table["quantity"] == "B_eq/I at 5 deg") & (table["source"] == "angle accuracy (our MTi-G)")]
     assert row["u"].iloc[0] == 0.1
+
+
+def test_the_cli_takes_a_labs_angle_accuracy_and_refuses_a_bad_one(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from tankdaq.cli import app
+    from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
+
+    (path,) = write_simulated_campaign(
+        tmp_path, ["catamaran"], "roll", [1.0], [10.0], test=SimulatedTest(6.0)
+    )
+    args = ["identify", str(path), "--model", "b1,b2,c1,c3", "--angle-accuracy", "0.1", "--json"]
+    done = CliRunner().invoke(app, args)
+    assert done.exit_code == 0, done.output
+    b_eq = next(b for b in json.loads(done.stdout)["budget"] if b["key"] == "b_eq_per_s@5")
+    (row,) = [r for r in b_eq["rows"] if r["source"].startswith("angle accuracy")]
+    assert row["u"] == 0.1 and "the lab's" in row["source"] and "--angle-accuracy 0.1" in row["note"]
+    bad = CliRunner().invoke(app, ["identify", str(path), "--angle-accuracy", "0"])
+    assert bad.exit_code == 2 and "roll/pitch accuracy in degrees RMS" in bad.output
+    assert "Traceback" not in bad.output

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 from functools import partial
 
@@ -73,6 +73,14 @@ MTI_G_LEGACY = DeviceProfile(
         "resolution 0.05 deg; clock as the MTi 100-series"
     ),
 )
+
+
+def with_accuracy(accuracy_deg: float, base: DeviceProfile = MTI_G_710) -> DeviceProfile:
+    """``base`` with a lab's own roll/pitch accuracy (``identify --angle-accuracy``), its source said."""
+    return replace(
+        base, name=f"{base.name}, the lab's accuracy", angle_accuracy_deg=accuracy_deg,
+        source=f"the lab's --angle-accuracy {accuracy_deg:g} deg; the rest: {base.source}",
+    )  # fmt: skip
 
 
 def device_profile(product_code: str | None) -> DeviceProfile:
