@@ -74,6 +74,12 @@ def test_the_session_report_fits_the_model_identify_chose(demo: tuple[Path, str]
     report = (tmp_path / "report" / "campaign.md").read_text()
     assert f"- swath roll T 8 deg: {fit['model_choice']['reason']}" in report  # which model, and why
     assert "## IMO table" in report and "Bertin's N (MSC.1/Circ.1200), swath roll T" in report  # and N
+    assert "## Uncertainty budget" in report and "U (k=2, ≈95 %, expanded)" in report  # each condition's
+    with next(path for path in written if path.name == "budget.csv").open() as fh:
+        period = [r for r in csv.DictReader(fh) if r["quantity"] == "natural period"]
+    assert period[0]["kind"] == "A" and float(period[0]["expanded_u"]) == 2 * float(period[0]["combined_u"])
+    said = next(b for b in fit["budget"] if b["key"] == "natural_period_s")
+    assert float(period[0]["value"]) == pytest.approx(said["value"], rel=1e-6)
     for term, entry in fit["coefficients"].items():
         assert _close(float(row[term]), entry["value"]), term
 

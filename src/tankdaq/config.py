@@ -23,6 +23,7 @@ from .config_rules import (
     shown,
     table,
     text,
+    uncertainty,
 )
 from .errors import ConfigError, InputError
 from .particulars import IKEDA_KEYS, MainParticulars, ikeda_inputs, parse_particulars, plausible
@@ -76,6 +77,8 @@ class AxisParticulars:
     gm_m: float | None = None
     radius_of_gyration_m: float | None = None
     note: str = ""
+    gm_uncertainty_m: float | None = None  # standard uncertainties (the uncertainty budget's Type B)
+    radius_of_gyration_uncertainty_m: float | None = None
 
 
 @dataclass
@@ -127,6 +130,11 @@ class Hull:
     @property
     def displacement_kg(self) -> float | None:
         return self.dimensions.get("displacement_kg")
+
+    @property
+    def displacement_uncertainty_kg(self) -> float | None:
+        """The displacement's standard uncertainty ``[dimensions] displacement_uncertainty_kg``, if given."""
+        return self.dimensions.get("displacement_uncertainty_kg")
 
     def particulars(self, axis: str) -> AxisParticulars:
         """GM and gyradius of an axis (both None when the file does not give them)."""
@@ -270,6 +278,7 @@ def _parse_hull(data: dict[str, Any], path: Path, origin: str) -> Hull:
     }  # fmt: skip
     for key in POSITIVE_DIMENSIONS & set(dimensions):  # sizes results divide by: a 0 is a typo
         number(dimensions[key], f"{path}: dimensions.{key}", 0.0, PARTICULAR_RANGES["displacement_kg"])
+    uncertainty(dimensions, "displacement_kg", dimensions, f"{path}: dimensions")
     return Hull(
         name=safe_name(data.get("name", path.stem), f"{path}: hull name"),
         description=text(data, "description", str(path)),
@@ -295,9 +304,11 @@ def _particulars(axis: str, spec: object, path: Path) -> AxisParticulars:
         for key in ("gm_m", "radius_of_gyration_m")
         if spec.get(key) is not None
     }
+    uncertain = {key: uncertainty(spec, key, values, where) for key in ("gm_m", "radius_of_gyration_m")}
     return AxisParticulars(
-        axis, values.get("gm_m"), values.get("radius_of_gyration_m"), text(spec, "note", where)
-    )
+        axis, values.get("gm_m"), values.get("radius_of_gyration_m"), text(spec, "note", where),
+        uncertain["gm_m"], uncertain["radius_of_gyration_m"],
+    )  # fmt: skip
 
 
 def _simulation(axis: str, spec: object, path: Path) -> SimulationModel:

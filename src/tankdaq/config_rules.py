@@ -164,3 +164,26 @@ def listed(value: object, where: str, what: str, example: str) -> list[Any]:
     if not isinstance(value, list) or not value:
         raise ConfigError(f"{where} must be a non-empty list of {what}, e.g. {example}; not {shown(value)}")
     return value
+
+
+def uncertainty_key(key: str) -> str:
+    """The key of a value's standard uncertainty: gm_m -> gm_uncertainty_m, displacement_kg ->
+    displacement_uncertainty_kg (docs/hulls.md)."""
+    name, unit = key.rsplit("_", 1)
+    return f"{name}_uncertainty_{unit}"
+
+
+def uncertainty(spec: dict[str, Any], key: str, values: dict[str, float], where: str) -> float | None:
+    """The standard uncertainty of ``key`` the table gives (None: not given): zero or more and below
+    the value itself, which it needs beside it."""
+    said = uncertainty_key(key)
+    if spec.get(said) is None:
+        return None
+    if key not in values:
+        raise ConfigError(f"{where}.{said} is given without {key}: give {key} too, or remove it")
+    u = number(spec[said], f"{where}.{said}", 0.0, values[key], low_open=False)
+    if u >= values[key]:
+        raise ConfigError(
+            f"{where}.{said} = {u:g} must be below {key} = {values[key]:g} (a standard uncertainty)"
+        )
+    return u

@@ -145,6 +145,16 @@ def baud_carries_rate(baud: int | None, rate_hz: float, option: str = "--baud") 
     return baud
 
 
+def angle_accuracy_deg(value: float | None, option: str = "--angle-accuracy") -> float | None:
+    """A device's roll/pitch accuracy for the uncertainty budget (deg, RMS): above 0, at most 10."""
+    if value is not None and not (math.isfinite(value) and 0 < value <= 10):
+        raise InputError(
+            f"{option} {value:g}: give the device's roll/pitch accuracy in degrees RMS, above 0 and at "
+            "most 10 (the MTi-G-710 datasheet's dynamic figure is 0.3)"
+        )
+    return value
+
+
 def bootstrap_replicas(value: int, option: str = "--bootstrap") -> int:
     """0 (no bootstrap) up to MAX_BOOTSTRAP_REPLICAS replicas."""
     if not 0 <= value <= MAX_BOOTSTRAP_REPLICAS:

@@ -101,6 +101,9 @@ class Campaign:
             "groups": [row.row for row in self.rows],
             "imo": [table.as_dict() for table in self.imo],
             "intervals": {"groups: <column>_std": FIT_STD.text, "imo: bertin_n_std": "each row's interval"},
+            "budgets": [
+                {"group": row.key.label, "budget": list(row.budget)} for row in self.rows if row.budget
+            ],
             "warnings": self.warnings,
             "skipped": self.skipped,
             "cuts": self.cuts,
@@ -112,7 +115,9 @@ class Campaign:
         return to_json(self.document)
 
     def text(self) -> str:
-        """The Markdown table ``tankdaq campaign`` prints, then the IMO tables and the full-scale lines."""
+        """The Markdown table ``tankdaq campaign`` prints (with each group's period and B_eq/I and their
+        expanded uncertainty; the whole budgets: ``budget``), then the IMO tables and the full-scale
+        lines."""
         from ..ident.campaign import markdown_table
         from ..ident.imo_table import imo_markdown
 
@@ -121,6 +126,14 @@ class Campaign:
             + imo_markdown(self.imo)
             + "".join(f"{line}\n" for line in self.full_scale)
         )
+
+    @property
+    def budget(self) -> pd.DataFrame:
+        """Each group's uncertainty budget, Type A from its repeats: one row per group, quantity and
+        source (the columns of ``Identification.budget`` plus the group's ``condition``)."""
+        from .identification import budget_table
+
+        return budget_table([(row.key.label, row.budget) for row in self.rows])
 
     def _repr_html_(self) -> str:
         lines = "".join(f"<li>{html.escape(line)}</li>" for line in [*self.skipped, *self.warnings])

@@ -28,6 +28,9 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from ..config import Hull, WaterSettings
+    from ..ident.budget_inputs import DeviceProfile
+    from ..ident.intervals import IntervalSummary
+    from ..physics.scaling import FroudeScale
     from ..store.export_layout import ExportOrigin
     from ..viz.plots import Figure
 
@@ -121,6 +124,15 @@ class Identification:
         ]
         return self._with_warnings(_table(rows))
 
+    @property
+    def budget(self) -> pd.DataFrame:
+        """The uncertainty budget (GUM; docs/models.md): one row per quantity and source, with the
+        quantity's value, the source's kind (A/B), standard uncertainty u and unit, sensitivity,
+        contribution and share, and the quantity's combined u_c (1σ, standard) and expanded U
+        (k=2, ≈95 %, expanded)."""
+        table = budget_table([(fit.label, fit.summary.get("budget", [])) for fit in self.fits])
+        return self._with_warnings(table if len(self.fits) > 1 else table.drop(columns="condition"))
+
     def _condition(self, fit: ConditionFit) -> dict[str, str]:
         return {"condition": fit.label} if len(self.fits) > 1 else {}
 
@@ -176,6 +188,27 @@ class Identification:
             + self.coefficients.to_html(index=False)
             + self.derived.to_html(index=False)
         )
+
+
+#: The columns of a budget's DataFrame (``Identification.budget``, ``Campaign.budget``).
+BUDGET_COLUMNS = ["condition", "quantity", "value", "unit", "source", "kind", "u", "u_unit", "sensitivity",
+                  "contribution", "share", "combined_u", "expanded_u", "coverage"]  # fmt: skip
+
+
+def budget_table(conditions: Sequence[tuple[str, Sequence[dict[str, Any]]]]) -> pd.DataFrame:
+    """Budgets (``Budget.as_dict``) of each condition as one DataFrame, a row per quantity and source."""
+    import pandas as pd
+
+    rows = [
+        {"condition": label, "quantity": b["quantity"], "value": b["value"], "unit": b["unit"]}
+        | {"source": r["source"], "kind": r["kind"], "u": r["u"], "u_unit": r["unit"]}
+        | {key: r[key] for key in ("sensitivity", "contribution", "share")}
+        | {key: b[key] for key in ("combined_u", "expanded_u", "coverage")}
+        for label, found in conditions
+        for b in found
+        for r in b["rows"]
+    ]
+    return pd.DataFrame(rows, columns=BUDGET_COLUMNS)
 
 
 def _table(rows: list[dict[str, Any]]) -> pd.DataFrame:
@@ -318,6 +351,7 @@ def identify(
     repeats: bool = False,
     reading: Reading = Reading(),
     progress: Progress | None = None,
+    device: DeviceProfile | None = None,
 ) -> Identification:
     """Identify the decay equation's coefficients from free decays; ``tankdaq identify`` is this call.
 
@@ -327,7 +361,8 @@ def identify(
     ``"1.1T"``) give dimensional results and B̂44; ``full_scale`` adds the ship's by Froude and, for roll,
     friction-corrected (ITTC 7.5-02-07-04.5; the tank's and the sea's ``water_temperature_c`` and
     ``sea_temperature_c`` in degC, else the hull's keys, else 15 degC; docs/ikeda.md). Intervals
-    from the fit, a moving-block ``bootstrap`` or the spread of ``repeats``. Bad input raises
+    from the fit, a moving-block ``bootstrap`` or the spread of ``repeats``; each quantity's uncertainty
+    budget (``Identification.budget``) with ``device``'s figures (default: the MTi-G's). Bad input raises
     ``tankdaq.errors.InputError`` with one line that says what to do.
 
     >>> result = tankdaq.identify("run.mcap", model="b1,b2,c1,c3", hull="swath")  # doctest: +SKIP
@@ -335,6 +370,7 @@ def identify(
     >>> result.derived[["amplitude_deg", "b_eq_per_s", "b44_hat"]]  # doctest: +SKIP
     """
     from ..config import full_scale_of, load_hull
+    from ..ident.budget_inputs import DeviceProfile as Profile
     from ..ident.conditions import condition_of, group_conditions, grouping_line
     from ..ident.estimators import make_estimator
     from ..ident.full_scale import friction_for, scale_results
@@ -350,6 +386,9 @@ def identify(
     water = water_settings(water_temperature_c, sea_temperature_c)
     hull = arguments.optional_path(hull, "hull", "a hull's name, a .toml path, or None")
     reading = arguments.optional_instance(reading, "reading", Reading, "a Reading or None") or Reading()
+    device = arguments.optional_instance(
+        device, "device", Profile, "a tankdaq.ident.budget_inputs.DeviceProfile"
+    )
     kept = Kept(arguments.progress(progress))
     draft = validation.draft_factor(arguments.draft(draft))
     bootstrap = arguments.whole(bootstrap, "bootstrap", 0, validation.MAX_BOOTSTRAP_REPLICAS)
@@ -376,7 +415,7 @@ def identify(
     fits = []
     for condition_runs, friction in zip(parts, frictions, strict=True):
         label = "all conditions (--joint)" if pooled else condition_of(condition_runs[0]).label
-        settings = (method, bootstrap, repeats, hull_config, draft)
+        settings = (method, bootstrap, repeats, hull_config, draft, scale, device)
         estimator, summary = _fit_condition(condition_runs, model, settings, label, kept)
         summary["condition"] = None if pooled else condition_of(condition_runs[0]).as_dict()
         if pooled is not None:
@@ -415,17 +454,18 @@ def _document(fits: list[ConditionFit], conditions: str, cut: list[str]) -> dict
 def _fit_condition(
     runs: list[DecayRun],
     model: str,
-    settings: tuple[str, int, bool, Hull | None, float],
+    settings: tuple[str, int, bool, Hull | None, float, FroudeScale | None, DeviceProfile | None],
     label: str,
     progress: Progress,
 ) -> tuple[Any, dict[str, Any]]:
     """One fit of ``runs`` with the model ``ident.model_choice.model_for`` gives, and its summary."""
+    from ..ident.budget_fit import fit_budgets, hull_figures
     from ..ident.estimators import make_estimator, reports_progress
     from ..ident.intervals import fit_with_intervals
     from ..ident.model_choice import model_for
     from ..ident.report import summarize
 
-    method, bootstrap, repeats, hull_config, draft = settings
+    method, bootstrap, repeats, hull_config, draft, scale, device = settings
     with progress.task(f"choosing the model ({label})"):
         choice = model_for(runs, model)
     progress.line(f"{label}: {choice.reason}")
@@ -446,4 +486,15 @@ def _fit_condition(
     summary = summarize(estimator, runs, method, hull_config, draft, intervals)
     summary["condition_label"] = label
     summary["model_choice"] = choice.as_dict()
+    per_decay = None if intervals is None or intervals.counted != "runs" else repeat_rows(intervals)
+    figures = hull_figures(hull_config, runs[0].axis, draft, None if scale is None else scale.scale)
+    tested = [row["amplitude_deg"] for row in summary["b_eq"]]
+    summary["budget"] = [
+        b.as_dict() for b in fit_budgets(estimator, runs, tested, figures, device, per_decay)
+    ]
     return estimator, summary
+
+
+def repeat_rows(intervals: IntervalSummary) -> list[dict[str, float]]:
+    """Each repeat's coefficients from a ``--repeats`` interval (its samples are the runs' own fits)."""
+    return [dict(zip(intervals.std, row, strict=True)) for row in intervals.samples.tolist()]

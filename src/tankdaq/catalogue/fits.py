@@ -23,7 +23,7 @@ import sqlalchemy as sa
 from .. import __version__
 from ..records import DecayEnd
 from .database import BadCatalogueQuery, Catalogue, in_batches
-from .schema import REFERENCE_COPY, FitMethod, FitSource, decays, fits, utc_now
+from .schema import REFERENCE_COPY, FitMethod, FitSource, budgets, decays, fits, utc_now
 
 __all__ = ["FitMethod", "FitSource", "add_fits", "choose_reference", "fits_of", "set_reference"]
 
@@ -105,12 +105,27 @@ def add_fits(connection: sa.Connection, found: Iterable[tuple[Mapping[str, Any],
         values = {
             k: v for k, v in fit.items() if k in fits.c and k not in ("id", "decay_id", "sha256", "path")
         }
-        connection.execute(
+        kept = connection.execute(
             fits.insert().values(decay_id=decay["id"], sha256=decay["sha256"], path=decay["path"], **values)
         )
+        add_budget(connection, int(kept.inserted_primary_key[0]), fit.get("budget") or ())  # type: ignore[index]
         touched.add(int(decay["id"]))
     for decay_id in sorted(touched):
         choose_reference(connection, decay_id)
+
+
+def add_budget(connection: sa.Connection, fit_id: int, found: Iterable[Mapping[str, Any]]) -> None:
+    """A fit's uncertainty budget (``Budget.as_dict``s) as ``budgets`` rows, one per quantity and source."""
+    rows = [
+        {"fit_id": fit_id, "quantity": b["quantity"], "quantity_key": b["key"], "unit": b["unit"]}
+        | {"value": b["value"], "combined_u": b["combined_u"], "expanded_u": b["expanded_u"]}
+        | {"coverage_factor": b["coverage_factor"], "u_unit": r["unit"]}
+        | {key: r[key] for key in ("source", "kind", "u", "sensitivity", "contribution", "share")}
+        for b in found
+        for r in b["rows"]
+    ]
+    if rows:
+        connection.execute(budgets.insert(), rows)
 
 
 def choose_reference(connection: sa.Connection, decay_id: int) -> None:

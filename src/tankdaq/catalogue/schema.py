@@ -190,6 +190,30 @@ fits = sa.Table(
 )
 
 
+#: Each kept fit's uncertainty budget (``ident.budget``): one row per reported quantity and source, with
+#: the quantity's combined standard uncertainty and expanded U (coverage factor k).
+budgets = sa.Table(
+    "budgets",
+    metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("fit_id", sa.Integer, nullable=False, index=True),
+    sa.Column("quantity", sa.Text, nullable=False),
+    sa.Column("quantity_key", sa.String(64), nullable=False),
+    sa.Column("unit", sa.String(32)),
+    sa.Column("value", sa.Float),
+    sa.Column("source", sa.Text, nullable=False),
+    sa.Column("kind", sa.String(1), nullable=False),  # GUM's Type A or B
+    sa.Column("u", sa.Float),
+    sa.Column("u_unit", sa.String(32)),
+    sa.Column("sensitivity", sa.Float),
+    sa.Column("contribution", sa.Float),
+    sa.Column("share", sa.Float),
+    sa.Column("combined_u", sa.Float),
+    sa.Column("expanded_u", sa.Float),
+    sa.Column("coverage_factor", sa.Float),
+)
+
+
 #: A fit is written onto its files' rows by path (identify, campaign, diagnose), and a campaign asks
 #: which of its files have a row: by an index, not a scan of every row (10 ms an update at 36 000 rows).
 PATH_INDEXES = (
@@ -246,8 +270,14 @@ def _migrate_fits(connection: sa.Connection) -> None:
         )
 
 
+def _budgets_table(connection: sa.Connection) -> None:
+    """The ``budgets`` table (each fit's uncertainty budget); fits kept before it have none."""
+    budgets.create(connection, checkfirst=True)
+
+
 #: Ordered migrations: index i brings the schema to version i + 1. Append, never edit.
 MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports, _v3_path_indexes, _v4_fits]
+MIGRATIONS.append(_budgets_table)  # the budgets' table: after any migration added before it
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

@@ -417,7 +417,7 @@ def campaign_fit(result: Any) -> tuple[list[tuple[Path, str | None]], dict[str, 
     fit = fit_of_estimator(
         FitSource.CAMPAIGN, result.fit, result.runs, result.warnings, hull=result.hull, how=how
     )
-    return run_files(result.runs), fit
+    return run_files(result.runs), fit | {"budget": list(result.budget)}
 
 
 def record_fits(catalogue: Catalogue, results: Iterable[Any]) -> int:
@@ -439,4 +439,5 @@ def fit_of_summary(source: FitSource, summary: Mapping[str, Any], runs: Sequence
     option = str(summary.get("method", ""))
     settings = {"method": option, "intervals": summary.get("intervals"), "model_choice": choice.get("reason")}
     how = FitHow(FitMethod.of_option(option), model_by_data="scores" in choice, settings=settings)
-    return fit_fields(source, coefficients, ci95, summary.get("r2_angle"), warnings, condition, model, how)
+    fit = fit_fields(source, coefficients, ci95, summary.get("r2_angle"), warnings, condition, model, how)
+    return fit | {"budget": list(summary.get("budget", []))}

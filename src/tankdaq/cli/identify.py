@@ -81,6 +81,13 @@ def identify_command(
     repeats: bool = typer.Option(
         False, "--repeats", help="The runs are repeats: intervals from their spread (t, n-1 dof)."
     ),
+    angle_accuracy: float = typer.Option(
+        None,
+        "--angle-accuracy",
+        metavar="DEG",
+        callback=checked(validation.angle_accuracy_deg),
+        help="The device's roll/pitch accuracy (deg RMS) for the uncertainty budget (default: datasheet).",
+    ),
     hull: str = typer.Option(None, "--hull", help="Hull config for dimensional results."),
     draft: float = draft_option(help="Draft with --hull."),
     full_scale: FullScale = False,
@@ -97,6 +104,7 @@ def identify_command(
     from ..api.identification import Reading, identify
     from ..catalogue.hooks import CatalogueWriter
     from ..catalogue.query import inputs_or_query
+    from ..ident.budget_inputs import with_accuracy
 
     writer = CatalogueWriter.from_option(catalogue, say)  # a --catalogue not understood: one line, now
     inputs = inputs_or_query(inputs, runs_query, catalogue)
@@ -111,6 +119,7 @@ def identify_command(
         inputs, model, method=method, joint=joint, hull=hull, draft=draft, full_scale=full_scale,
         water_temperature_c=water_temperature, sea_temperature_c=sea_temperature, bootstrap=bootstrap,
         repeats=repeats, reading=reading, progress=TerminalProgress(),
+        device=None if angle_accuracy is None else with_accuracy(angle_accuracy),
     )  # fmt: skip
     with writer:
         for fit in result.fits:

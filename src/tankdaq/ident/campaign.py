@@ -9,8 +9,6 @@ MCAP files (their metadata says hull, draft, axis, angle) or CSV files (a JSON s
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import math
 from collections import defaultdict
@@ -30,8 +28,10 @@ from ..samples import AXIS_FIELDS
 from ..store.export_layout import export_metadata_of
 from ..store.inputs import INPUT_FORMATS, input_format, suffixes
 from ..store.naming import parse_recording_name
-from ..store.safe_write import write_text_new
+from ..store.safe_write import write_rows, write_text_new
 from ..validation import refuse_existing
+from .budget import EXPANDED_LABEL, short_lines
+from .budget_fit import group_budgets
 from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
 from .executors import executor_map
 from .free_decay import cut_free_decays, cut_lines
@@ -79,6 +79,11 @@ class GroupResult:
         particulars = self.hull.particulars(self.key.axis) if self.hull is not None else None
         found = check_runs(self.fit.coefficients_, self.runs, self.fit.offsets_, particulars, self.key.hull)
         return [finding.message for finding in found]
+
+    @cached_property
+    def budget(self) -> tuple[dict[str, Any], ...]:
+        """The uncertainty budgets, Type A from the group's repeats (``budget_fit.group_budgets``); once."""
+        return group_budgets(self.fit, self.runs, self.hull, self.key.draft)
 
     def summary(self) -> dict[str, Any]:
         """One row of the campaign table (angles in deg, coefficients per unit inertia, SI)."""
@@ -140,9 +145,7 @@ class GroupResult:
         return float(found["total_inertia_kg_m2"] * factor)
 
 
-# -- Finding and reading recordings ----------------------------------------------------------------
-
-
+# Finding and reading recordings
 def find_recordings(inputs: Sequence[str | Path], recurse: bool = True) -> list[Path]:
     """The files tankdaq reads decays from (``store.inputs.INPUT_FORMATS``: .mcap, .csv) among ``inputs``
     (folders searched recursively unless ``recurse`` is False: then only the folder's own files), sorted."""
@@ -284,9 +287,7 @@ def group_runs(runs: Iterable[DecayRun]) -> dict[GroupKey, list[DecayRun]]:
     return dict(sorted(groups.items()))
 
 
-# -- Identifying -----------------------------------------------------------------------------------
-
-
+# Identifying
 def find_campaign_hulls(names: Iterable[str], given: Sequence[str] = ()) -> dict[str, Hull]:
     """The hull file of each name: ``given`` (paths or names, e.g. ``campaign --hull``) first, then the
     user folder and the shipped ones; a name with no file is left out (its groups get no dimensional
@@ -392,9 +393,7 @@ def read_campaign(
     return found
 
 
-# -- Tables: CSV and Markdown (the figures are drawn by viz.campaign_report) -----------------------
-
-
+# Tables: CSV and Markdown (the figures are drawn by viz.campaign_report)
 @dataclass(frozen=True)
 class GroupRow:
     """One group's row of the campaign table (``GroupResult.summary``), its fitted terms and warnings:
@@ -407,12 +406,13 @@ class GroupRow:
     warnings: tuple[str, ...]
     result: GroupResult | None = None
     cover: DecayCover | None = None  # what the group gives the IMO table (``ident.imo_table``)
+    budget: tuple[dict[str, Any], ...] = ()  # ``Budget.as_dict``s, Type A from the repeats
 
     @classmethod
     def of(cls, result: GroupResult, keep: bool = False) -> GroupRow:
         fit, kept = result.fit, result if keep else None
         terms, cover = (tuple(fit.terms_), decay_cover(result.key, result.runs, fit)) if fit else ((), None)
-        return cls(result.key, result.summary(), terms, tuple(result.warnings), kept, cover)
+        return cls(result.key, result.summary(), terms, tuple(result.warnings), kept, cover, result.budget)
 
     @property
     def error(self) -> str | None:
@@ -428,16 +428,6 @@ def table_rows(results: Sequence[GroupResult | GroupRow]) -> list[GroupRow]:
 def write_csv(results: Sequence[GroupResult | GroupRow], path: Path) -> Path:
     """The campaign's table as a new CSV file."""
     return write_rows([r.row for r in table_rows(results)], path)
-
-
-def write_rows(rows: Sequence[dict[str, Any]], path: Path) -> Path:
-    """Rows as a new CSV file (``store.safe_write``: never over a file), columns in first-seen order."""
-    columns = list(dict.fromkeys(k for row in rows for k in row))
-    text = io.StringIO(newline="")
-    writer = csv.DictWriter(text, fieldnames=columns, restval="")
-    writer.writeheader()
-    writer.writerows(rows)
-    return write_text_new(path, text.getvalue())
 
 
 def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
@@ -467,6 +457,9 @@ def markdown_table(results: Sequence[GroupResult | GroupRow]) -> str:
     if chosen:  # which model each group was fitted with, and why (ident.model_choice.model_for)
         lines += ["", "Models (docs/models.md):", "", *chosen]
     lines += ["", f"Every ± is {FIT_STD} (docs/intervals.md)."]
+    budget = [line for r in rows for line in short_lines(r.key.label, r.budget)]
+    if budget:  # each group's period and B_eq/I with their expanded uncertainty (every source: --json)
+        lines += ["", f"Uncertainty (GUM budget; {EXPANDED_LABEL}; every source in --json):", "", *budget]
     implausible = [f"- {r.key.label}: {line}" for r in rows for line in r.warnings]
     if implausible:
         lines += ["", "Warnings (physically implausible fits, docs/models.md):", "", *implausible]

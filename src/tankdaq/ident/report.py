@@ -17,6 +17,7 @@ import numpy as np
 from ..physics.models import model_name
 from ..physics.terms import TERM_TABLE, equation_text
 from ..records import DecayRun, partial_end
+from .budget import text_table
 from .compiled import simulate, substeps, term_codes
 from .derived import (
     amplitude_table,
@@ -250,6 +251,8 @@ def text_report(summary: dict[str, Any]) -> str:
         dim = summary["dimensional"]
         lines.append(f"  total inertia {dim['total_inertia_kg_m2']:.4g} kg m^2 ({dim['note']})")
         lines.append("  " + ", ".join(f"{k.upper()} = {v:.4g}" for k, v in dim["coefficients_si"].items()))
+    if summary.get("budget"):
+        lines += ["", *text_table(summary["budget"])]
     for warning in summary["warnings"]:
         lines.append(f"  warning: {warning}")
     return "\n".join(lines)

@@ -462,7 +462,7 @@ def _run_meta(
     for key in ("angle_nominal_deg", "angle_initial_deg", "sample_rate_hz"):
         if key in meta:
             out[key] = float(meta[key])
-    for key in ("device_id", "operator", "note"):
+    for key in ("device_id", "product_code", "operator", "note"):
         if key in meta:
             out[key] = meta[key]
     return out

@@ -15,13 +15,15 @@ while writing (a full disk) is one line (``RecordingError``, exit 1) and leaves 
 
 from __future__ import annotations
 
+import csv
 import errno
+import io
 import os
 import secrets
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from ..errors import InputError, RecordingError
 from ..validation import NEVER_OVERWRITES, refuse_existing
@@ -69,6 +71,16 @@ def write_new(path: str | Path, write: Callable[[BinaryIO], object]) -> Path:
 def write_text_new(path: str | Path, text: str, encoding: str = "utf-8") -> Path:
     """A new text file at ``path`` (``new_path``'s rules), newlines as written."""
     return write_new(path, lambda out: out.write(text.encode(encoding)))
+
+
+def write_rows(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:
+    """Rows as a new CSV file, columns in first-seen order (a row without a column leaves it empty)."""
+    columns = list(dict.fromkeys(k for row in rows for k in row))
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=columns, restval="")
+    writer.writeheader()
+    writer.writerows(rows)
+    return write_text_new(path, text.getvalue())
 
 
 def _fsync(path: Path, flags: int) -> None:

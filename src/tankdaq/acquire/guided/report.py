@@ -1,6 +1,7 @@
 """The report at the end of a guided session: ``tankdaq campaign``'s report of the accepted decays (the same
 pipeline, ``tankdaq.campaign``, its IMO table of Bertin's N included), plus each coefficient's
-repeat-to-repeat spread for the conditions with two or more repeats.
+repeat-to-repeat spread for the conditions with two or more repeats, and each condition's uncertainty
+budget (``ident.budget``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ def write_session_report(files: list[Path], folder: Path, model: str, hull: str)
     spread = repeat_spreads(fitted)
     if spread:
         written.append(_write_spread(spread, folder))
+    budgets = [(r.key.label, r.budget) for r in found.results if r.budget]
+    if budgets:
+        written.append(_write_budgets(budgets, folder))
     return written
 
 
@@ -54,8 +58,8 @@ def repeat_spreads(groups: dict[Any, tuple[list[Any], tuple[str, ...]]]) -> list
 
 
 def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
-    from ...ident.campaign import write_rows
     from ...ident.interval_labels import SCATTER_STD
+    from ...store.safe_write import write_rows
 
     path = write_rows(rows, folder / "repeat_spread.csv")  # a new file, as the rest of the report
     columns = list(dict.fromkeys(k for row in rows for k in row))
@@ -70,6 +74,22 @@ def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
         cells = [row["draft"], f"{row['angle_deg']:g}", str(row["repeats"])]
         cells += [f"{row[t + '_mean']:.4g} ± {row[t + '_repeat_sd']:.2g}" for t in terms]
         lines.append("| " + " | ".join(cells) + " |")
+    with (folder / "campaign.md").open("a") as fh:
+        fh.write("\n".join(lines) + "\n")
+    return path
+
+
+def _write_budgets(budgets: list[tuple[str, tuple[dict[str, Any], ...]]], folder: Path) -> Path:
+    """Each condition's uncertainty budget: every row in ``budget.csv``, the tables in campaign.md."""
+    from ...api.identification import budget_table
+    from ...ident.budget import text_table
+    from ...store.safe_write import write_rows
+
+    rows = [{str(k): v for k, v in row.items()} for row in budget_table(budgets).to_dict("records")]
+    path = write_rows(rows, folder / "budget.csv")
+    lines = ["\n## Uncertainty budget\n", "Type A from each condition's repeats (ISO GUM; docs/models.md).\n"]
+    for label, found in budgets:
+        lines += [f"\n### {label}\n", "```", *text_table(found), "```"]
     with (folder / "campaign.md").open("a") as fh:
         fh.write("\n".join(lines) + "\n")
     return path
