@@ -12,8 +12,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..ident.conditions import UNKNOWN
+from ..ident.interval_labels import EXPANDED_U, STANDARD_U
 from . import slots
-from .content import FIT_95, Figure, ReportContent, Section, Table
+from .content import FIT_95, NOT_KNOWN, Figure, ReportContent, Section, Table
 from .tables import coefficients_table, conditions_table, damping_table, decays_table, full_scale_tables
 
 if TYPE_CHECKING:
@@ -36,6 +37,39 @@ def condition_section(number: int, fit: ConditionFit, extra: Sequence[Table] = (
     ]
     notes = [*(f"warning: {line}" for line in summary["warnings"]), summary["model_choice"]["reason"]]
     return Section(key, summary["condition_label"], tables, condition_figures(key, fit), notes)
+
+
+def budget_tables(key: str, fit: ConditionFit) -> list[Table]:
+    """The condition's uncertainty: each reported quantity with u_c and U (k = 2) in one table, then each
+    quantity's budget (source, kind, u, sensitivity, contribution, share)."""
+    from ..api.identification import budget_table
+
+    budgets = fit.summary.get("budget") or []
+    if not budgets:
+        return []
+    columns = ["quantity", "value", "unit", STANDARD_U.text, EXPANDED_U.text, "largest source"]
+    rows = [
+        [b["quantity"], b["value"], b["unit"], b["combined_u"], b["expanded_u"],
+         max(b["rows"], key=lambda r: r["share"])["source"] if b["rows"] else NOT_KNOWN]
+        for b in budgets
+    ]  # fmt: skip
+    notes = sorted({note for b in budgets for note in b.get("notes", [])})
+    summary = Table(
+        f"{key}-uncertainty", "Uncertainty of each reported quantity (ISO GUM)", columns, rows,
+        " ".join([f"{STANDARD_U.text}: combined standard uncertainty; {EXPANDED_U.text}: expanded, k = 2.",
+                  *notes]),
+        {STANDARD_U.text: STANDARD_U, EXPANDED_U.text: EXPANDED_U},
+    )  # fmt: skip
+    frame = budget_table([(fit.label, budgets)])
+    per_quantity = [
+        slots.budget_table(
+            f"{key}-budget-{b['key']}", b["quantity"],
+            frame[frame.quantity == b["quantity"]][["source", "kind", "u", "u_unit", "sensitivity",
+                                                    "contribution", "share"]],
+        )
+        for b in budgets
+    ]  # fmt: skip
+    return [summary, *per_quantity]
 
 
 #: The IMO table's columns as the report names them.
@@ -121,7 +155,10 @@ def report_content(
     conditions = Section("conditions", "Conditions", [conditions_table(summaries), decays_table(summaries)])
     sections = [
         conditions,
-        *(condition_section(n, fit, [imo_section(f"c{n}-imo", fit)]) for n, fit in enumerate(fits, 1)),
+        *(
+            condition_section(n, fit, [*budget_tables(f"c{n}", fit), imo_section(f"c{n}-imo", fit)])
+            for n, fit in enumerate(fits, 1)
+        ),
         provenance,
     ]
     return ReportContent(TITLE, sections, list(warnings), made_utc)
