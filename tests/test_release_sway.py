@@ -3,11 +3,13 @@ bench/bench_release_sway.py), and the interval read back: an older file without 
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 import tankdaq
 from tankdaq.acquire import release_instant
@@ -71,6 +73,19 @@ def test_a_cubic_hold_alone_is_moved_by_the_sway(monkeypatch: pytest.MonkeyPatch
     monkeypatch.setattr(release_instant, "SWAY_KNOTS_S", ())
     errors, _, _ = _errors(200)
     assert max(abs(e) for e in errors) > 0.010, errors
+
+
+def test_the_interval_is_in_the_file_the_api_and_the_catalogue(decay_recording: Path) -> None:
+    """A decay recorded end to end: the release event's data carries the instant's 95 % half-width (read
+    with the official mcap reader); ``tankdaq.read`` and the catalogue's row give the same."""
+    with open(decay_recording, "rb") as stream:
+        events = [json.loads(m.data) for _, _, m in make_reader(stream).iter_messages(topics=["/events"])]
+    (release,) = [event for event in events if event["kind"] == "release"]
+    u95 = release["data"]["release_u95_s"]
+    assert release["data"]["release_se_s"] < u95 < 0.02
+    assert tankdaq.read(decay_recording).decays[0].release_u95_s == u95
+    row, _ = recording_row(decay_recording)
+    assert (row["release_t_s"], row["release_u95_s"]) == (release["t_s"], u95)
 
 
 def test_a_file_without_the_interval_reads_as_unknown(tmp_path: Path) -> None:

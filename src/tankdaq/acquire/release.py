@@ -8,10 +8,11 @@ A streaming state machine on the samples of one axis:
 Two questions are kept apart. *Whether* the model was released is decided late and safely:
 the angle must swing through the still-water angle, which a hand putting the model back does
 not do, and hand tremor cannot. *When* it was released is then found looking back: the release
-is the instant the held-with-tremor motion stops explaining the data and the restoring moment
-takes over, i.e. where the angular acceleration jumps. A smooth polynomial (the hand) before
-the instant and the decay equation after it, sharing the state at the instant, are fitted
-jointly to angle and rate over three quarter cycles, and the instant is scanned. Right after
+is the instant the held motion (swaying or trembling: the rate at release need not be zero) stops
+explaining the data and the restoring moment takes over, i.e. where the angular acceleration
+jumps. A cubic in time (a still hand), or a cubic spline where the hand sways, before the instant
+and the decay equation after it, sharing the state at the instant, are fitted jointly to angle and
+rate over three quarter cycles, and the instant is scanned; the event carries its 95 % interval. Right after
 release the motion is tiny against the noise; the later swing, run back through the
 equation, pins the start down. The event reports the first sample of free motion, not the
 sample at which the detector became sure (about 3/4 of a period later).

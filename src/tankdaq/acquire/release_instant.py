@@ -3,7 +3,9 @@ after it, fitted jointly to angle and rate; the instant that explains both best 
 
 ``acquire.release.ReleaseDetector`` decides *whether* a release happened; ``find_release_instant`` then
 scans candidate instants through this fit, which answers for each how well (``sse``), with what state
-(``state_at``) and how sure (``instant_se``).
+(``state_at``) and how sure (``instant_se``; the 95 % interval is ``COVERAGE_FACTOR`` of it). A hand that
+sways (the rate at release not zero) is followed by a cubic spline rather than one cubic, where the data
+ask for it.
 """
 
 from __future__ import annotations
@@ -59,8 +61,8 @@ def find_release_instant(
     full, symmetric = (ReleaseInstantFit(t, angle, rate, hold, rest_rad=rest_rad, asymmetric=asymmetric)
                        for asymmetric in (True, False))  # fmt: skip
     earliest = float(t[2])
+    tau = min((float(t[k]) for k in scan), key=full.sse)  # a sway moves it by 20 ms at most: refined below
     swaying = full.with_knots(SWAY_KNOTS_S)
-    tau = min((float(t[k]) for k in scan), key=swaying.sse)
     # Each freedom only where it earns its place (BIC on noise-weighted rows). The hand's sway: a still
     # hold's cubic is the more precise, but a hand that sways a few tenths of a degree at 1-3 Hz bends
     # it, and the instant with it, by up to 20 ms. c2: when the hull is nearly symmetric it is almost
@@ -93,7 +95,8 @@ class ReleaseInstantFit:
     tau): the angle sample read at tau would shift all rate rows by b1 times its noise, which
     trades one for one against the instant (a heavily damped pitch, b1 ~ 2, lost a sample to it
     at 400 Hz); b1 times the gyro bias is a constant acceleration, taken up by k0. Before tau a
-    cubic in time (the hand's slow sway) with a free gyro bias; the state at tau is shared, so
+    cubic in time (the hand's slow sway; with ``knots_s``, a cubic spline knotted that long before tau)
+    with a free gyro bias; the state at tau is shared, so
     the decay must start where the hand left the model. Rows are weighted by each channel's
     noise, estimated from sample-to-sample differences during the hold. Parameter 0 is the
     angle at tau, 2 its rate.
@@ -190,9 +193,10 @@ class ReleaseInstantFit:
         Near its minimum SSE(tau) ~ SSE_min + (tau - tau_hat)^2 * SSE''/2, so se = sqrt(2 s^2 / SSE'')
         with s^2 the residual variance. The curvature is read over +-``step`` (the sum of squares is
         piecewise in the sample a candidate falls in). A flat or wrongly bent curve (no information)
-        answers ``step`` rather than a falsely small error; the quarter-sample grid of the scan is the
-        floor. Measured against the truth (bench/bench_release_bias.py) it is optimistic: the true
-        instant lies within 1.96 se in 77-96 % of releases, not 95 %: a scale, not a calibrated interval.
+        answers ``step`` rather than a falsely small error; a quarter of the step, read as uniform, is the
+        floor (1.4 ms with the 20 ms step). Measured against the truth it is optimistic: from a swaying
+        hold the instants spread 2-2.6 ms where the curvature alone said 1.1-1.3 ms, and the floor is what
+        the interval (``COVERAGE_FACTOR``) needs to cover them (bench/bench_release_sway.py).
         """
         centre = self.sse(tau)
         curvature = (self.sse(tau - step) + self.sse(tau + step) - 2.0 * centre) / step**2
