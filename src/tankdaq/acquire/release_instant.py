@@ -177,12 +177,13 @@ class ReleaseInstantFit:
         normal equations, so the sums of squares compared between instants stay exact.
         """
         design = self._design(tau)
-        norms = np.sqrt(np.einsum("ij,ij->j", design, design))
+        gram = design.T @ design  # scaled to unit-norm columns here, not the design: one pass less over it
+        norms = np.sqrt(np.diag(gram))
         norms[norms == 0] = 1.0
-        scaled = design / norms
-        coef = np.linalg.lstsq(scaled.T @ scaled, scaled.T @ self.y, rcond=None)[0]  # robust if singular
-        residual = self.y - scaled @ coef
-        return coef / norms, float(residual @ residual)
+        scaled = np.linalg.lstsq(gram / np.outer(norms, norms), (design.T @ self.y) / norms, rcond=None)[0]
+        coef = scaled / norms  # robust if singular
+        residual = self.y - design @ coef
+        return coef, float(residual @ residual)
 
     def sse(self, tau: float) -> float:
         return self._solve(tau)[1]
