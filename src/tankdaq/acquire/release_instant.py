@@ -18,10 +18,10 @@ import numpy as np
 
 #: The 95 % interval is this many standard errors either side. The standard error from the profile's
 #: curvature assumes the hold and decay models are exact; they are not quite (a sway is followed by a
-#: spline, the decay by a cubic equation), so 1.96 of them covered the truth in only 80 % of 200 simulated
-#: releases from a swaying hold at 100 Hz, and 2.6 of them in 92.5 %. The factor is calibrated on the
-#: simulator, not derived (with the curvature read over 20 ms, 3 of them covered 95 % of 60 releases at 200 Hz
-#: and 97 % at 400 Hz); bench/bench_release_sway.py measures what it covers.
+#: spline, the decay by a cubic equation): from a swaying hold 1.96 of them covered the truth in only
+#: 74-82 % of releases. The factor is calibrated on the simulator, not derived: 3 of them (with the floor of
+#: ``instant_se``) cover 95.0, 95.5 and 94.0 % of 200 releases from a swaying hold at 100, 200 and 400 Hz,
+#: and all of a still hold's, where the interval is wider than it need be (bench/results/release_sway.json).
 COVERAGE_FACTOR = 3.0
 #: The profile's curvature is read over at least this (s) either side: over +-2 samples at 200 or 400 Hz
 #: it sees only the bottom of a profile that the sway's spline flattens further out.
