@@ -42,10 +42,10 @@ def _errors(rate_hz: int) -> tuple[list[float], list[float], list[float]]:
 def test_the_swaying_hold_leaves_the_model_with_a_rate() -> None:
     """The scenario's swaying hold: the lines asked for, at random phases (the still hold's stream kept)."""
     assert Handling.swaying().sway_lines == SWAY_LINES == ((0.15, 0.9), (0.05, 2.3))
-    still, _ = hull_scenario(runs=2, seed=5).samples()
-    again, _ = hull_scenario(runs=2, seed=5, handling=Handling()).samples()
-    np.testing.assert_array_equal(still["roll"], again["roll"])
-    _, trace = hull_scenario(runs=12, seed=6, decay_s=12, handling=Handling.swaying()).samples()
+    still = hull_scenario(runs=2, seed=5).trace()
+    again = hull_scenario(runs=2, seed=5, handling=Handling()).trace()
+    np.testing.assert_array_equal(still.angle, again.angle)
+    trace = hull_scenario(runs=12, seed=6, decay_s=12, handling=Handling.swaying()).trace()
     rates = np.degrees([abs(r.rate0_rad_s or 0.0) for r in trace.runs])
     # the hand's rate from the sway alone reaches 0.15*2pi*0.9 + 0.05*2pi*2.3 = 1.57 deg/s; phases spread it
     assert rates.max() > 0.8 and np.median(rates) > 0.2, rates
@@ -53,9 +53,9 @@ def test_the_swaying_hold_leaves_the_model_with_a_rate() -> None:
 
 def test_the_release_from_a_swaying_hold_is_within_10_ms_and_its_interval_covers() -> None:
     """30 releases at 100, 200 and 400 Hz. Tolerance: the bench finds 100 % within 10 ms and a coverage of
-    about 97 % over 600; here at least 28 of 30 within 10 ms (a true 95 % share gives that with probability
-    0.81, the bench's share with ~1) and at least 26 of 30 covered (a true 95 % gives that with 0.98).
-    The still hold's cubic alone (no spline) misses 10 ms in these same releases."""
+    94-95.5 % over 200 per rate; here at least 28 of 30 within 10 ms (a true 95 % share gives that with
+    probability 0.81, the bench's share with ~1) and at least 26 of 30 covered (a true 95 % gives that with
+    0.98, 94 % with 0.96). The still hold's cubic alone (no spline) misses 10 ms (next test)."""
     errors, u95s = [], []
     for rate_hz in (100, 200, 400):
         e, u, rates = _errors(rate_hz)
