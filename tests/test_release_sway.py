@@ -107,3 +107,29 @@ def test_a_file_without_the_interval_reads_as_unknown(tmp_path: Path) -> None:
     assert recording.decays[0].release_u95_s is None and recording.meta["release_u95_s"] == [None]
     row, _ = recording_row(path)
     assert row["release_t_s"] == 2.0 and row["release_u95_s"] is None
+
+
+def test_a_catalogue_of_version_4_gains_the_release_columns_empty(tmp_path: Path) -> None:
+    """The migration: a version 4 catalogue's rows keep their values and say the release unknown (NULL)."""
+    import sqlalchemy as sa
+
+    from tankdaq.catalogue.database import open_catalogue
+    from tankdaq.catalogue.schema import SCHEMA_VERSION, decays, schema_version
+
+    url = f"sqlite:///{tmp_path / 'old.sqlite'}"
+    open_catalogue(url).close()
+    engine = sa.create_engine(url)
+    with engine.begin() as connection:  # back to version 4: without the columns, with a row
+        for column in ("release_t_s", "release_u95_s"):
+            connection.exec_driver_sql(f"ALTER TABLE decays DROP COLUMN {column}")
+        connection.execute(schema_version.delete().where(schema_version.c.version > 4))
+        connection.exec_driver_sql(
+            "INSERT INTO decays (sha256, path, size_bytes, complete, created_utc, updated_utc) "
+            "VALUES ('ab', '/old.mcap', 1, 1, 'then', 'then')"
+        )
+    engine.dispose()
+    with open_catalogue(url) as catalogue, catalogue.engine.connect() as connection:
+        row = connection.execute(sa.select(decays)).one()
+        version = connection.execute(sa.select(sa.func.max(schema_version.c.version))).scalar()
+    assert SCHEMA_VERSION == version >= 5
+    assert (row.path, row.release_t_s, row.release_u95_s) == ("/old.mcap", None, None)
