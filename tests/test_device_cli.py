@@ -67,3 +67,22 @@ def test_bad_values_exit_2_with_one_line(args: list[str], message: str) -> None:
     assert message in err
     assert "Traceback" not in err
     assert out == ""
+
+
+def test_simulate_sway_plays_the_swaying_hold(tmp_path: Path) -> None:
+    """``--sway``: the truth is the swaying hold's (``Handling.swaying()``), not the still one's."""
+    from tankdaq.config import hull_scenario
+    from tankdaq.physics.scenario import Handling
+
+    truth_path = tmp_path / "truth.json"
+    process = _start("--sway", "--runs", "2", "--seed", "3", "--truth", str(truth_path))
+    try:
+        assert os.path.exists(process.stdout.readline().strip())  # type: ignore[union-attr]
+    finally:
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=10)
+    assert process.returncode == 0, err
+    rates = [run["rate0_rad_s"] for run in json.loads(truth_path.read_text())["runs"]]
+    holds = (Handling.swaying(), Handling())
+    swaying, still = (hull_scenario(runs=2, seed=3, handling=hold).trace().runs for hold in holds)
+    assert rates == [run.rate0_rad_s for run in swaying] != [run.rate0_rad_s for run in still]

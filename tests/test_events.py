@@ -76,9 +76,12 @@ def test_every_event_is_a_line_and_a_json_object_of_its_values() -> None:
         "angle_deg": -8.3,
         "axis": "roll",
         "t_s": 14.25,
+        "u95_s": None,  # unknown: never said as zero
     }
-    assert released.line() == "run 2: released at 8.30 deg (roll), t = 14.250 s"
-    assert released.line("decay 5") == "decay 5: released at 8.30 deg (roll), t = 14.250 s"
+    assert released.line() == "run 2: released at 8.30 deg (roll), t = 14.250 s (interval unknown)"
+    assert released.line("decay 5") == "decay 5: released at 8.30 deg (roll), t = 14.250 s (interval unknown)"
+    bracketed = Released(2, -8.3, "roll", 14.25, 0.0021)
+    assert bracketed.line() == "run 2: released at 8.30 deg (roll), t = 14.2500 s ± 2.1 ms (95 %)"
     settled = next(e for e in events if isinstance(e, Settled))
     assert settled.record()["coefficients"] == {"b1": 0.2, "c1": 14.2}
     assert settled.line() == "run 2: settled; b1=0.2  c1=14.2, T0 1.667 s, R2 0.9980 -> rec/run02.mcap"

@@ -50,6 +50,7 @@ class DecayOutcome:
     warnings: list[str]
     status: StatusTally | None = None  # the status flags of its samples (clipping before and after release)
     last_t: float = math.nan  # device time of its last sample
+    release_u95_s: float = math.nan  # half-width of the release instant's 95 % interval (NaN: unknown)
 
     @property
     def ended_after_s(self) -> float:
@@ -171,16 +172,26 @@ class PutBack(Event):
 
 @dataclass(frozen=True)
 class Released(Event):
-    """A confirmed release: run ``run`` starts (``t_s``: device time of the release)."""
+    """A confirmed release: run ``run`` starts (``t_s``: device time of the release, ``u95_s`` the half-width
+    of its 95 % interval; NaN: unknown, and said so)."""
 
     run: int
     angle_deg: float  # signed, from the still water
     axis: str
     t_s: float
+    u95_s: float = math.nan
 
     def line(self, run_name: str | None = None) -> str:
         where = _run(self.run, run_name)
-        return f"{where}: released at {abs(self.angle_deg):.2f} deg ({self.axis}), t = {self.t_s:.3f} s"
+        when = said_instant(self.t_s, self.u95_s)
+        return f"{where}: released at {abs(self.angle_deg):.2f} deg ({self.axis}), t = {when}"
+
+
+def said_instant(t_s: float, u95_s: float) -> str:
+    """A release instant as people read it: with its 95 % interval in ms, or saying that it is unknown."""
+    if math.isfinite(u95_s):
+        return f"{t_s:.4f} s ± {1e3 * u95_s:.1f} ms (95 %)"
+    return f"{t_s:.3f} s (interval unknown)"
 
 
 @dataclass(frozen=True)
@@ -260,6 +271,7 @@ class Settled(Event):
             "ended_after_s": _jsonable(o.ended_after_s),
             "path": _jsonable(o.path),
             "release_t_s": o.release_t,
+            "release_u95_s": _jsonable(o.release_u95_s),
             "angle_initial_deg": o.angle_initial_deg,
             "coefficients": dict(fit.coefficients) if fit else None,
             "natural_period_s": _jsonable(fit.natural_period_s) if fit else None,

@@ -225,7 +225,7 @@ class DecayPipeline:
         self.state = "decaying"
         self.next_run += 1
         self._tell(lambda sink: sink.on_release(decay, blocks))
-        self.emit(Released(decay.run, angle_deg, axis, release_t))
+        self.emit(Released(decay.run, angle_deg, axis, release_t, event.release_u95_s))
         for line in warnings:
             self.emit(Note("warning", line))
         if tilt := decay.status.describe_before():

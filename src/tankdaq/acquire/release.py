@@ -8,10 +8,11 @@ A streaming state machine on the samples of one axis:
 Two questions are kept apart. *Whether* the model was released is decided late and safely:
 the angle must swing through the still-water angle, which a hand putting the model back does
 not do, and hand tremor cannot. *When* it was released is then found looking back: the release
-is the instant the held-with-tremor motion stops explaining the data and the restoring moment
-takes over, i.e. where the angular acceleration jumps. A smooth polynomial (the hand) before
-the instant and the decay equation after it, sharing the state at the instant, are fitted
-jointly to angle and rate over three quarter cycles, and the instant is scanned. Right after
+is the instant the held motion (swaying or trembling: the rate at release need not be zero) stops
+explaining the data and the restoring moment takes over, i.e. where the angular acceleration
+jumps. A cubic in time (a still hand), or a cubic spline where the hand sways, before the instant
+and the decay equation after it, sharing the state at the instant, are fitted jointly to angle and
+rate over three quarter cycles, and the instant is scanned; the event carries its 95 % interval. Right after
 release the motion is tiny against the noise; the later swing, run back through the
 equation, pins the start down. The event reports the first sample of free motion, not the
 sample at which the detector became sure (about 3/4 of a period later).
@@ -50,7 +51,8 @@ class ReleaseEvent:
     ``held``: the model is held away from rest (``angle_rad`` the held angle).
     ``released``: ``index`` is the first sample of free motion, ``release_t`` the estimated
     instant on the device clock (after the last held sample, at or before the first free one),
-    ``release_se_s`` its standard error (s), ``angle_rad``/``rate_rad_s`` the initial state.
+    ``release_se_s`` its standard error (s), ``release_u95_s`` the half-width of its 95 % interval (s; NaN:
+    unknown), ``angle_rad``/``rate_rad_s`` the initial state.
     ``put_back``: a hold ended without a release. ``settled``: the amplitude stayed below the
     threshold for a window (``ended`` ``DecayEnd.SETTLED``) or the decay timed out (``TIMEOUT``);
     ``settle_s`` is the time from release.
@@ -66,6 +68,7 @@ class ReleaseEvent:
     baseline_rad: float = math.nan
     release_t: float = math.nan
     release_se_s: float = math.nan
+    release_u95_s: float = math.nan
     settle_s: float = math.nan
     ended: DecayEnd | None = None
 
@@ -258,6 +261,7 @@ class ReleaseDetector(EstimatorMixin):
         rate_rad_s: float = math.nan,
         release_t: float = math.nan,
         release_se_s: float = math.nan,
+        release_u95_s: float = math.nan,
         settle_s: float = math.nan,
         ended: DecayEnd | None = None,
     ) -> ReleaseEvent:
@@ -271,6 +275,7 @@ class ReleaseDetector(EstimatorMixin):
             baseline_rad=self.baseline_rad_,
             release_t=release_t,
             release_se_s=release_se_s,
+            release_u95_s=release_u95_s,
             settle_s=settle_s,
             ended=ended,
         )
@@ -425,7 +430,8 @@ class ReleaseDetector(EstimatorMixin):
         jointly over several quarter cycles, explain best (``release_instant``)."""
         lo = max(0, leave - self._n(self.fit_before_s))
         dt = 1.0 / float(self.rate_hz_ or 1.0)
-        if leave - lo < 4:  # streamed in while already moving: no hold to fit, report the departure
+        if leave - lo < 4:  # streamed in while already moving: no hold to fit, report the departure (the
+            # instant's interval unknown: the hand may have let go any time before)
             return self._emit("released", leave, end, angle_rad=float(self._x[leave]),
                               rate_rad_s=float(self._r[leave]), release_t=float(self._t[leave]),
                               release_se_s=dt)  # fmt: skip
@@ -438,7 +444,7 @@ class ReleaseDetector(EstimatorMixin):
         index = int(np.searchsorted(self._t, tau - 1e-9 * dt))
         tau = min(tau, float(self._t[index]))  # a rounding hair past the first free sample is that sample
         return self._emit("released", index, end, angle_rad=found.angle_rad, rate_rad_s=found.rate_rad_s,
-                          release_t=tau, release_se_s=found.se_s)  # fmt: skip
+                          release_t=tau, release_se_s=found.se_s, release_u95_s=found.u95_s)  # fmt: skip
 
 
 def detect_releases(samples: np.ndarray, axis: str = "auto", **settings: Any) -> list[ReleaseEvent]:

@@ -109,6 +109,7 @@ class Decay:
             "still_water_deg": math.degrees(ev.baseline_rad),
             "first_free_sample_t_s": ev.t,
             "release_se_s": ev.release_se_s if math.isfinite(ev.release_se_s) else None,
+            "release_u95_s": ev.release_u95_s if math.isfinite(ev.release_u95_s) else None,
         }
 
     def settle_metadata(self) -> dict[str, object]:
@@ -137,6 +138,7 @@ class Decay:
             path=self.path,
             rrd_path=self.rrd_path,
             release_t=self.release_t,
+            release_u95_s=self.release_event.release_u95_s,
             angle_initial_deg=self.angle_deg,
             ended=self.ended_value,
             fit=None if fit is None else fit.without_curve(),

@@ -51,6 +51,7 @@ class RecordingMeta(TypedDict, total=False):
     operator: str
     note: str
     release_device_time_s: list[float]  # each decay's release on the device clock
+    release_u95_s: list[float | None]  # the half-width of each release's 95 % interval (None: unknown)
     complete_file: bool  # False: the file was cut short (``truncation`` says what to do)
     truncation: str | None
     stored: dict[str, object]  # a recording's metadata as written, every key, typed
@@ -90,6 +91,11 @@ def _release_of(run: DecayRun) -> float:
     return float(run.t[0])
 
 
+def _release_u95(run: DecayRun) -> float | None:
+    value = run.meta.get("release_u95_s")
+    return float(value) if isinstance(value, int | float) else None
+
+
 @dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
 class Decay:
     """One free decay of a recording: from its release to the next release (or the file's end).
@@ -114,6 +120,12 @@ class Decay:
     @property
     def duration_s(self) -> float:
         return self.run.duration
+
+    @property
+    def release_u95_s(self) -> float | None:
+        """Half-width (s) of the 95 % interval of the release instant; None: unknown (a file written before
+        the interval, a lab's CSV), never zero."""
+        return _release_u95(self.run)
 
 
 def decay_frame(run: DecayRun) -> pd.DataFrame:
@@ -281,6 +293,7 @@ def _meta(path: Path, kind: str, axis: str, runs: list[DecayRun]) -> RecordingMe
         if runs and key in runs[0].meta and key not in ("source", "axis", "format"):
             meta[key] = runs[0].meta[key]  # type: ignore[literal-required]
     meta["release_device_time_s"] = [_release_of(run) for run in runs]
+    meta["release_u95_s"] = [_release_u95(run) for run in runs]
     return meta
 
 

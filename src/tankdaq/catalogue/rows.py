@@ -171,6 +171,7 @@ def recording_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any]
         "speed_m_s": _finite(meta.get("speed_m_s")) or 0.0,
         "angle_nominal_deg": _finite(meta.get("angle_nominal_deg")),
         "release_angle_deg": _release_angle(meta, recording.events),
+        **_release_instant(recording.events),
         "device_id": meta.get("device_id"),
         "firmware": meta.get("firmware"),
         "ended": ended_of(meta, recording.complete),
@@ -338,6 +339,16 @@ def bare_row(path: Path) -> dict[str, Any]:
         "created_utc": now,
         "updated_utc": now,
     }
+
+
+def _release_instant(events: list[dict[str, Any]]) -> dict[str, float | None]:
+    """The first release's instant on the device clock and its 95 % half-width (None: unknown, as in a
+    file written before the interval; never zero)."""
+    from ..store.reader import release_u95_of
+
+    release = next((e for e in events if e.get("kind") == "release"), {})
+    t_s = _finite(release.get("t_s"))
+    return {"release_t_s": t_s, "release_u95_s": None if t_s is None else release_u95_of(events, t_s)}
 
 
 def _release_angle(meta: Mapping[str, str], events: list[dict[str, Any]]) -> float | None:

@@ -92,6 +92,9 @@ decays = sa.Table(
     sa.Column("reference_fit_id", sa.Integer),
     sa.Column("reference_chosen", sa.Boolean),  # True: set by the lab (--set-reference), never by a rule
     sa.Column("retired_utc", sa.String(40)),  # its path holds other bytes now: kept, never listed
+    # ``_release_interval``: the release instant on the device clock and its 95 % half-width (None: unknown)
+    sa.Column("release_t_s", sa.Float),
+    sa.Column("release_u95_s", sa.Float),
 )
 
 
@@ -239,13 +242,24 @@ def _v3_path_indexes(connection: sa.Connection) -> None:
 def _v4_fits(connection: sa.Connection) -> None:
     """The ``fits`` table and the decay columns of version 4; each older row's one fit becomes its first
     kept fit and its reference, and a row of a file without its footer ended ``cut``."""
+    _add_decay_columns(connection)
+    fits.create(connection, checkfirst=True)
+    _migrate_fits(connection)
+
+
+def _add_decay_columns(connection: sa.Connection) -> None:
+    """The ``decays`` columns an older catalogue lacks, added empty (its rows: not known)."""
     present = {column["name"] for column in sa.inspect(connection).get_columns("decays")}
     for column in decays.columns:
         if column.name not in present:
             kind = column.type.compile(connection.dialect)
             connection.exec_driver_sql(f"ALTER TABLE decays ADD COLUMN {column.name} {kind}")
-    fits.create(connection, checkfirst=True)
-    _migrate_fits(connection)
+
+
+def _release_interval(connection: sa.Connection) -> None:
+    """The release instant and its 95 % half-width: empty (unknown) on the rows already there; ``index``
+    of a new file fills them from its release event."""
+    _add_decay_columns(connection)
 
 
 def _migrate_fits(connection: sa.Connection) -> None:
@@ -276,8 +290,9 @@ def _budgets_table(connection: sa.Connection) -> None:
 
 
 #: Ordered migrations: index i brings the schema to version i + 1. Append, never edit.
-MIGRATIONS: list[Callable[[sa.Connection], None]] = [_v1_tables, _v2_exports, _v3_path_indexes, _v4_fits]
-MIGRATIONS.append(_budgets_table)  # the budgets' table: after any migration added before it
+MIGRATIONS: list[Callable[[sa.Connection], None]] = [
+    _v1_tables, _v2_exports, _v3_path_indexes, _v4_fits, _release_interval, _budgets_table,
+]  # fmt: skip
 SCHEMA_VERSION = len(MIGRATIONS)
 
 

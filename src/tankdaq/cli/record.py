@@ -266,6 +266,7 @@ def replay_command(
     events: EventsOption = None,
 ) -> None:
     """Replay recordings: re-decode the raw bytes, re-detect the release, re-fit, show it again."""
+    from ..acquire.events import said_instant
     from ..acquire.replay import replay_recording
 
     pace = _speed(speed)
@@ -280,9 +281,8 @@ def replay_command(
         for o in outcomes if events is None else ():  # with --events the settled events say it
             fit = o.fit
             coeffs = "  ".join(f"{k}={v:.4g}" for k, v in fit.coefficients.items()) if fit else "no fit"
-            typer.echo(
-                f"{path.name}: release t={o.release_t:.3f} s at {abs(o.angle_initial_deg):.2f} deg; {coeffs}"
-            )
+            when = said_instant(o.release_t, o.release_u95_s)
+            typer.echo(f"{path.name}: release t={when} at {abs(o.angle_initial_deg):.2f} deg; {coeffs}")
 
 
 def identify_recordings(

@@ -87,6 +87,9 @@ def simulate_command(
     refuse: str = typer.Option(
         "", "--refuse", help="Orientation outputs to refuse with Error 0x21: euler, euler,quaternion, ..."
     ),
+    sway: bool = typer.Option(
+        False, "--sway", help="The hand sways as it holds (0.15 deg at 0.9 Hz + 0.05 deg at 2.3 Hz)."
+    ),
     replay: Path = typer.Option(
         None,
         "--replay",
@@ -103,6 +106,7 @@ def simulate_command(
         SimulatedMTi,
         refused_orientation,
     )
+    from ..physics.scenario import Handling
     from ..physics.sensor import SensorNoise
     from ..store.playback import recorded_device
 
@@ -121,7 +125,7 @@ def simulate_command(
         )
     scenario = hull_scenario(
         hull_config, draft, axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
-        release_after_s=release_after_s, decay_s=decay_s,
+        release_after_s=release_after_s, decay_s=decay_s, handling=Handling.swaying() if sway else Handling(),
         noise=SensorNoise.mti_100() if imu else SensorNoise(),  # an IMU's gyro and accelerometer
     )  # fmt: skip
     fault_set = Faults.parse(faults)

@@ -18,6 +18,7 @@ second per hour of 100 Hz data apart from the decay integrations themselves.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -71,12 +72,19 @@ SIMULATION_RULE = (
 )
 
 
+#: A swaying hold (``Handling.swaying``): the hand sways slowly, (amplitude deg, frequency Hz) at random
+#: phases, so the model leaves the hand with a rate and an acceleration that are not zero (issue 38).
+SWAY_LINES = ((0.15, 0.9), (0.05, 2.3))
+
+
 @dataclass(frozen=True)
 class Handling:
     """How the engineer handles the model: timings (s) and hand tremor.
 
-    The hand's sway (0.1-0.8 Hz, ``sway_deg`` rms) and physiological tremor (8-12 Hz,
-    ``tremor_deg`` rms) act during the tilt and the hold and stop at release. Tremor reaches a
+    The hand's sway (0.1-0.8 Hz, ``sway_deg`` rms; plus ``sway_lines``, sinusoids of given amplitude (deg)
+    and frequency (Hz) at random phases: ``swaying()``) and physiological tremor (8-12 Hz,
+    ``tremor_deg`` rms) act during the tilt and the hold and stop at release. The default is a still
+    hold; a swaying one moves a release found by a smooth hold model by several samples. Tremor reaches a
     floating model as a force: ~1 % of the ~0.6 N holding force at 0.3 m is 2e-3 N m, which a
     0.12 kg m^2 model at 10 Hz turns into ~4e-4 deg, so 0.001 deg is on the generous side; the model then
     starts from the hand's angle *and rate*, as in a real release. A fraction
@@ -91,6 +99,12 @@ class Handling:
     put_back_s: tuple[float, float] = (1.5, 2.5)
     put_back_fraction: float = 0.0
     lead_in_s: float = 1.0
+    sway_lines: tuple[tuple[float, float], ...] = ()
+
+    @classmethod
+    def swaying(cls, **settings: object) -> Handling:
+        """A swaying hold: ``SWAY_LINES`` instead of the band's sway (the still hold's other settings)."""
+        return cls(**{"sway_deg": 0.0, "sway_lines": SWAY_LINES, **settings})  # type: ignore[arg-type]
 
 
 def _quintic_step(s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -118,6 +132,16 @@ class _Wobble:
         amps = rng.uniform(0.5, 1.0, count)
         amps *= rms * math.sqrt(2) / np.sqrt(np.sum(amps**2))
         return cls(rng.uniform(*band_hz, count), rng.uniform(0, 2 * np.pi, count), amps)
+
+    @classmethod
+    def lines(cls, rng: np.random.Generator, lines: tuple[tuple[float, float], ...]) -> _Wobble:
+        """Sinusoids of given (amplitude, frequency Hz) at random phases."""
+        amps, freqs = (np.array([line[k] for line in lines], dtype=float) for k in (0, 1))
+        return cls(freqs, rng.uniform(0, 2 * np.pi, len(lines)), amps)
+
+    def __add__(self, other: _Wobble) -> _Wobble:
+        mine, theirs = (self.freqs_hz, self.phases, self.amps), (other.freqs_hz, other.phases, other.amps)
+        return _Wobble(*(np.concatenate(pair) for pair in zip(mine, theirs, strict=True)))
 
     def __call__(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Value and time derivative at t."""
@@ -297,6 +321,8 @@ class DecayScenario:
                 _Wobble.draw(rng, h.tremor_deg, (8.0, 12.0)),
             )
             put_back_s = rng.uniform(*h.put_back_s) if rng.uniform() < h.put_back_fraction else None
+            if h.sway_lines:  # drawn last: a still hold's random stream (and truth) is as it always was
+                hand = dataclasses.replace(hand, sway=hand.sway + _Wobble.lines(rng, h.sway_lines))
             hands.append((release, hand, put_back_s))
         return hands
 
@@ -384,7 +410,8 @@ class _Hand:
     tremor: _Wobble
 
     def __call__(self, t: np.ndarray, base: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Angle, rate and acceleration at t (the wobble's own acceleration is left out: it is tiny)."""
+        """Angle, rate and acceleration at t (the wobble's own acceleration is left out: it only reaches the
+        accelerometers, through the lever arm, and is small there)."""
         s, ds, dds = _quintic_step((t - self.start_s) / self.tilt_s)
         grip_time = 0.5 * self.tilt_s  # the hand's wobble fades in during the first half of the tilt
         grip, dgrip, _ = _quintic_step((t - self.start_s) / grip_time)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import struct
 import zlib
 from collections.abc import Iterable, Iterator
@@ -122,6 +123,16 @@ def _check_tankdaq(path: Path, channels: dict[int, Channel], has_run_metadata: b
 
 def _release_times(events: list[dict[str, Any]]) -> list[float]:
     return sorted(e["t_s"] for e in events if e.get("kind") == "release" and e.get("t_s") is not None)
+
+
+def release_u95_of(events: list[dict[str, Any]], t_s: float) -> float | None:
+    """The 95 % half-width (s) of the release at ``t_s`` as its event says it; None: unknown (a file written
+    before the interval, or a release the detector could not bracket), never zero."""
+    for event in events:
+        if event.get("kind") == "release" and event.get("t_s") == t_s:
+            value = (event.get("data") or {}).get("release_u95_s")
+            return float(value) if isinstance(value, int | float) and math.isfinite(value) else None
+    return None
 
 
 def _release_index(samples: np.ndarray, events: list[dict[str, Any]]) -> int | None:
@@ -447,6 +458,7 @@ def _run_meta(
         "hull": meta.get("hull"),
         "axis": axis,
         "release_t_s": release_t_s,
+        "release_u95_s": release_u95_of(recording.events, release_t_s),
         "dropped_samples": dropped,
         "complete_file": recording.complete,
         "truncation": recording.notice,  # what of the file is missing: a cut end, or corrupted chunks
