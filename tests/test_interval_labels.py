@@ -40,7 +40,7 @@ from tankdaq.ident.interval_labels import (
     kind_of,
 )
 from tankdaq.ident.report import text_report
-from tankdaq.viz import campaign_report, diagnose_view, plots
+from tankdaq.viz import campaign_report, diagnose_view, plots, report_figures
 
 
 def intervals_drawn(fig: Figure) -> int:
@@ -96,6 +96,12 @@ def every_figure(results: list[GroupResult]) -> dict[str, Figure]:
         amplitudes, {"T": band}, xlabel="amplitude (deg)", ylabel="B_eq (1/s)", interval=FIT_STD
     )
     drawn["decay"] = plots.decay_fit_figure(np.arange(0.0, 2.0, 0.01), np.zeros(200), np.zeros(200))
+    (group, *_) = results  # the report's damping figure of a fit, its band and bars as the report draws them
+    coefficients, covariance = group.fit.coefficients_, np.asarray(group.fit.covariance_)
+    bertin = [(0.05 * a, 0.001) for a in amplitudes]
+    drawn["report damping"] = report_figures.damping_figure(
+        coefficients, covariance, amplitudes, bertin, FIT_95, "report"
+    )
     return drawn
 
 
@@ -103,7 +109,8 @@ def test_every_figure_that_draws_an_interval_says_its_coverage_and_kind(results:
     drawn = every_figure(results)
     with_intervals = {name for name, fig in drawn.items() if intervals_drawn(fig)}
     # the check sees the intervals: these figures draw bars or bands, the others none
-    assert with_intervals == {"coefficients", "hulls", "b_eq", "period", "damping", "series"}
+    drawing = {"coefficients", "hulls", "b_eq", "period", "damping", "series", "report damping"}
+    assert with_intervals == drawing
     for name in with_intervals:
         said = said_labels(drawn[name])
         assert said, f"{name}: its intervals do not say their coverage ({captions(drawn[name])})"
@@ -113,6 +120,11 @@ def test_every_figure_that_draws_an_interval_says_its_coverage_and_kind(results:
     assert said_labels(drawn["coefficients"]) == {FIT_95.text} == said_labels(drawn["b_eq"])
     assert said_labels(drawn["period"]) == {ANGLES_RANGE.text}
     assert said_labels(drawn["damping"]) == {FIT_95.text} and said_labels(drawn["series"]) == {FIT_STD.text}
+    assert said_labels(drawn["report damping"]) == {FIT_95.text}
+    (bars,) = drawn["report damping"].axes[1].containers  # Bertin N's bars: 1.96 sigma, as said
+    low, high = bars.lines[1]
+    half = (np.asarray(high.get_ydata(), dtype=float) - np.asarray(low.get_ydata(), dtype=float)) / 2
+    np.testing.assert_allclose(half, 1.96 * 0.001, rtol=1e-12)
 
 
 def test_bars_are_what_their_label_says_and_the_angle_axis_is_measured(results: list[GroupResult]) -> None:

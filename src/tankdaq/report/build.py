@@ -124,7 +124,7 @@ def condition_figures(key: str, fit: ConditionFit) -> list[Figure]:
     bertin = [(row["value_per_deg"], row["std"]) for row in summary["bertin_n"]]
     coefficients = {term: c["value"] for term, c in summary["coefficients"].items()}
     damping = damping_figure(
-        coefficients, covariance_of(fit.estimator), amplitudes, bertin, FIT_95.text,
+        coefficients, covariance_of(fit.estimator), amplitudes, bertin, FIT_95,
         f"{summary['condition_label']}: damping",
     )  # fmt: skip
     figures = [

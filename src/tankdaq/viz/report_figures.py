@@ -11,12 +11,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..ident.derived import b_eq_band
+from ..ident.interval_labels import IntervalLabel
 from .plots import _figure, legend_beside, report_style
 
 #: Resolution of the embedded figures: sharp on a page, a few tens of kB each.
 REPORT_DPI = 100
-#: The normal quantile of a two-sided 95 % interval.
-Z95 = 1.959963984540054
 
 
 def png_bytes(fig: Figure, dpi: int = REPORT_DPI) -> bytes:
@@ -31,27 +30,28 @@ def damping_figure(
     covariance: np.ndarray,
     amplitudes_deg: Sequence[float],
     bertin_n: Sequence[tuple[float, float]],
-    interval_label: str,
+    interval: IntervalLabel,
     title: str,
 ) -> Figure:
-    """B_eq/I against amplitude with its 95 % band from the fit's covariance (delta method), the table's
-    amplitudes marked, and Bertin's N (value, std) at those amplitudes with 95 % bars; the legend says
-    ``interval_label`` for both."""
+    """B_eq/I against amplitude with its band from the fit's covariance (delta method), the table's
+    amplitudes marked, and Bertin's N (value, std) at those amplitudes with bars; band and bars are
+    ``interval``'s half-width of the standard deviation, and the legend says which."""
     with report_style():
         fig, (top, bottom) = _figure(2, sharex=True)
         grid = np.linspace(min(0.2, min(amplitudes_deg)), max(amplitudes_deg), 60)
         values, std = b_eq_band(coefficients, covariance, grid)
         top.plot(grid, values, color="C0", label="B_eq/I (fit)")
-        top.fill_between(grid, values - Z95 * std, values + Z95 * std, color="C0", alpha=0.25,
-                         label=f"B_eq/I {interval_label}")  # fmt: skip
+        half = interval.half_width(1.0)
+        top.fill_between(grid, values - half * std, values + half * std, color="C0", alpha=0.25,
+                         label=f"B_eq/I {interval.text}")  # fmt: skip
         at, _ = b_eq_band(coefficients, covariance, amplitudes_deg)
         top.plot(amplitudes_deg, at, "o", color="C0", label="table amplitudes")
         top.set_ylabel("B_eq / I (1/s)")
         legend_beside(top)
         n = np.array([value for value, _ in bertin_n])
         n_std = np.array([s for _, s in bertin_n])
-        bottom.errorbar(amplitudes_deg, n, yerr=Z95 * n_std, marker="o", capsize=3, color="C1",
-                        label=f"Bertin N {interval_label}")  # fmt: skip
+        bottom.errorbar(amplitudes_deg, n, yerr=half * n_std, marker="o", capsize=3, color="C1",
+                        label=f"Bertin N {interval.text}")  # fmt: skip
         bottom.set_ylabel("Bertin N (1/deg)")
         bottom.set_xlabel("amplitude (deg)")
         legend_beside(bottom)
