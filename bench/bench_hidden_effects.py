@@ -36,9 +36,7 @@ def main() -> int:
             outcomes = list(pool.map(diagnose_draw, [effects] * DRAWS, range(first_seed, first_seed + DRAWS)))
             named = sum(named_first(key, o) for o in outcomes)
             faults = {seed: f for seed, o in enumerate(outcomes, first_seed) if (f := draw_faults(key, o))}
-            rows.append(
-                {"effect": key or "none", "draws": DRAWS, "named_first": named, "faulty_draws": faults}
-            )
+            rows.append({"effect": key or "none", "draws": DRAWS, "named_first": named, "faulty": faults})
             print(f"{key or 'none':28s} named first {named}/{DRAWS}, faulty draws {len(faults)}", flush=True)
     passed = all(r["named_first"] >= NAMED_SHARE * DRAWS and not r["faulty"] for r in rows)
     RESULT.parent.mkdir(exist_ok=True)
