@@ -77,7 +77,12 @@ def test_a_sqlite_catalogue_its_version_and_counts_and_a_newer_one_refused(tmp_p
     assert f"{version}: this tankdaq reads and writes it" in out
     assert "hulls 3" in out and "sessions 2" in out and "decays 0" in out
     engine = sa.create_engine(url)
+    with engine.begin() as connection:  # the last migration's mark taken away: an older catalogue
+        connection.execute(sa.delete(schema_version).where(schema_version.c.version == SCHEMA_VERSION))
+    code, out = _check(url)
+    assert code == 0 and f"schema version {SCHEMA_VERSION - 1} " in out and "migrates it" in out, out
     with engine.begin() as connection:
+        connection.execute(sa.insert(schema_version).values(version=SCHEMA_VERSION, applied_utc="now"))
         connection.execute(sa.insert(schema_version).values(version=SCHEMA_VERSION + 1, applied_utc="later"))
     engine.dispose()
     code, out = _check(url)
