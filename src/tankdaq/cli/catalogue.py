@@ -110,8 +110,8 @@ def check_command(
     url: Annotated[
         str | None,
         typer.Argument(
-            metavar="[URL|PATH]",
-            help="The catalogue to check [default: --catalogue's: TANKDAQ_CATALOGUE, else the user's].",
+            metavar="URL|PATH",
+            help="The catalogue to check [default: TANKDAQ_CATALOGUE, else the user data folder's].",
         ),
     ] = None,
 ) -> None:
