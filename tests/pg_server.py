@@ -30,8 +30,9 @@ def why_not() -> str | None:
 
 
 @contextmanager
-def throwaway_postgres() -> Iterator[str]:
-    """The server's URL (``postgresql://tankdaq@127.0.0.1:PORT/postgres``, trust authentication)."""
+def throwaway_postgres(password: str | None = None) -> Iterator[str]:
+    """The server's URL (``postgresql://tankdaq@127.0.0.1:PORT/postgres``): trust authentication, or
+    with ``password`` the role's password asked (scram-sha-256) and left out of the URL."""
     bin_dir = sorted(Path("/usr/lib/postgresql").glob("*/bin/pg_ctl"))[-1].parent
     folder = Path(tempfile.mkdtemp(prefix="tankdaq-pg-"))
     as_user: list[str] = []
@@ -46,10 +47,15 @@ def throwaway_postgres() -> Iterator[str]:
         str(data),
         "-U",
         "tankdaq",
-        "--auth=trust",
+        "--auth=trust" if password is None else "--auth=scram-sha-256",
         "-E",
         "UTF8",
     ]
+    if password is not None:
+        (folder / "pwfile").write_text(password + "\n")
+        if as_user:
+            shutil.chown(folder / "pwfile", "postgres")
+        initdb.append(f"--pwfile={folder / 'pwfile'}")
     pg_ctl = [*as_user, str(bin_dir / "pg_ctl"), "-D", str(data)]
     options = f"-p {port} -k {folder} -c listen_addresses=127.0.0.1"
     try:

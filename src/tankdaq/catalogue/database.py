@@ -144,15 +144,15 @@ def _refuse_foreign_file(url: str, path: Path) -> None:
         engine.dispose()
 
 
-def check_schema(connection: sa.Connection, url: str, writing: bool) -> None:
+def check_schema(connection: sa.Connection, url: str, writing: bool) -> int:
     """Refuse a database that is not tankdaq's (another application's tables, another tool's
     ``schema_version``) and one newer than this tankdaq; a reader also one it would have to migrate.
-    Only reads (the caller's transaction: a reader's takes no write lock)."""
+    Only reads (the caller's transaction: a reader's takes no write lock). Its schema version (0: new)."""
     where = f"catalogue {describe(url)}"
     names = set(sa.inspect(connection).get_table_names())
     if "schema_version" not in names:
         if writing and not names:
-            return  # a new catalogue
+            return 0  # a new catalogue
         held = f"it holds tables {', '.join(sorted(names)[:6])}" if names else "it holds no table"
         raise CatalogueError(f"{where} is not a tankdaq catalogue ({held}): left untouched; {ELSEWHERE}")
     columns = {column["name"] for column in sa.inspect(connection).get_columns("schema_version")}
@@ -176,6 +176,7 @@ def check_schema(connection: sa.Connection, url: str, writing: bool) -> None:
             + (f"; missing {', '.join(missing)}" if missing else "")
             + "): a read never changes it; `tankdaq catalogue index FOLDER` brings it up to date"
         )
+    return found
 
 
 def _engine(url: str, cache_kb: int | None) -> sa.Engine:
@@ -216,11 +217,22 @@ def _reader_engine(url: str) -> sa.Engine:
     return engine
 
 
+#: What a PostgreSQL catalogue needs installed (psycopg 3, the ``postgres`` extra), as the line says it.
+POSTGRES_EXTRA = "pip install 'tankdaq[postgres]'"
+
+
 def _server_engine(url: str) -> sa.Engine:
-    """A server's engine that gives up connecting after ``CONNECT_TIMEOUT_S`` (unless the URL says)."""
+    """A server's engine that gives up connecting after ``CONNECT_TIMEOUT_S`` (unless the URL says).
+    Without its driver (the ``postgres`` extra) the line names the install, not "No module named"."""
     given = sa.make_url(url).query
     timeout = {} if "connect_timeout" in given else {"connect_timeout": CONNECT_TIMEOUT_S}
-    return sa.create_engine(url, pool_pre_ping=True, connect_args=timeout)
+    try:
+        return sa.create_engine(url, pool_pre_ping=True, connect_args=timeout)
+    except ImportError as exc:
+        raise CatalogueError(
+            f"catalogue {describe(url)} not usable: PostgreSQL's driver psycopg is not installed here "
+            f"({one_line(exc)}): {POSTGRES_EXTRA}"
+        ) from None
 
 
 def _sqlite_events(engine: sa.Engine, pragmas: list[str]) -> None:

@@ -1,5 +1,6 @@
-"""``tankdaq catalogue index DIR`` (rows rebuilt from the files) and ``tankdaq runs`` (asked like a lab
-asks: filters, ``--where``, ``--compare``; a table, ``--json`` or ``--csv``)."""
+"""``tankdaq catalogue index DIR`` (rows rebuilt from the files), ``catalogue check URL`` (can this PC use
+it) and ``tankdaq runs`` (asked like a lab asks: filters, ``--where``, ``--compare``; a table, ``--json``
+or ``--csv``)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ import typer
 from .app import app, catalogue_option, handles_errors, progress_bar, say
 from .options import JsonOutput
 
-catalogue_app = typer.Typer(no_args_is_help=True, help="The run catalogue: rebuild its rows from files.")
+catalogue_app = typer.Typer(
+    no_args_is_help=True, help="The run catalogue: rebuild its rows from files, check a catalogue."
+)
 app.add_typer(catalogue_app, name="catalogue")
 
 #: The columns the default table shows (``--json``/``--csv`` give every column).
@@ -99,6 +102,30 @@ def index_command(
     for path in report.incomplete:  # catalogued, never as a whole decay: --runs leaves it out
         say(f"not complete (cut short or corrupted): {path}: `tankdaq recover {path}` makes a whole copy")
     typer.echo(f"{describe(opened.url)}: {report.line}")
+
+
+@catalogue_app.command("check")
+@handles_errors
+def check_command(
+    url: Annotated[
+        str | None,
+        typer.Argument(
+            metavar="URL|PATH",
+            help="The catalogue to check [default: TANKDAQ_CATALOGUE, else the user data folder's].",
+        ),
+    ] = None,
+) -> None:
+    """Can this PC use the catalogue? Whether it connects (why not, in one line, its password never
+    shown), its schema version against this tankdaq's, and its tables' row counts; only reads.
+    Exit 0: usable; 1: not."""
+    from ..catalogue.check import check_catalogue
+    from ..catalogue.database import CatalogueError
+
+    found = check_catalogue(url)
+    if found.reason is not None:
+        raise CatalogueError(found.reason)
+    for line in found.lines():
+        typer.echo(line)
 
 
 def _cell(value: object) -> str:
