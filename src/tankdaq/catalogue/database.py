@@ -218,7 +218,7 @@ def _reader_engine(url: str) -> sa.Engine:
 
 
 #: What a PostgreSQL catalogue needs installed (psycopg 3, the ``postgres`` extra), as the line says it.
-POSTGRES_EXTRA = "pip install 'tankdaq[postgres]'"
+POSTGRES_EXTRA = "pip install 'tankdaq[postgres]' (from a clone: pip install '.[postgres]')"
 
 
 def _server_engine(url: str) -> sa.Engine:
