@@ -12,6 +12,7 @@ the folder, the second line of defence wherever a path is made from one.
 
 from __future__ import annotations
 
+import codecs
 import difflib
 import math
 import re
@@ -69,7 +70,7 @@ def read_toml(path: Path) -> dict[str, Any]:
         if size > MAX_TOML_BYTES:
             raise ConfigError(f"{path}: {size} bytes is not a hull or plan file (at most {MAX_TOML_BYTES})")
         with path.open("rb") as fh:
-            data = tomllib.loads(fh.read(MAX_TOML_BYTES + 1).decode("utf-8"))
+            data = toml_text(fh.read(MAX_TOML_BYTES + 1), path)
     except UnicodeDecodeError as exc:
         raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start}); save it as UTF-8") from None
     except (tomllib.TOMLDecodeError, ValueError) as exc:  # ValueError: an integer of over 4300 digits
@@ -80,6 +81,14 @@ def read_toml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: cannot read it: {exc.strerror or exc}") from None
     _check_tree(data, path)
     return data
+
+
+def toml_text(raw: bytes, path: Path) -> dict[str, Any]:
+    """The TOML in ``raw``: a UTF-8 byte-order mark (Windows Notepad's "UTF-8 with BOM") is dropped, as
+    TOML itself refuses it at line 1, column 1; a UTF-16 file is named, not reported as a bad byte."""
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        raise ConfigError(f"{path}: saved as UTF-16 (Unicode); save it as UTF-8")
+    return tomllib.loads(raw.removeprefix(codecs.BOM_UTF8).decode("utf-8"))
 
 
 def _check_tree(data: dict[str, Any], path: Path) -> None:

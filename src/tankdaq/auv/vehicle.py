@@ -139,7 +139,7 @@ def load_vehicle(name: str) -> Vehicle:
     if not path.is_file():
         raise InputError(f"unknown vehicle {name!r}; known vehicles: {', '.join(list_vehicles()) or 'none'}")
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))  # a BOM from Notepad is dropped
     except (tomllib.TOMLDecodeError, OSError) as exc:
         raise ConfigError(f"{path}: {exc}") from exc
     vehicle = vehicle_from_dict(data, default_name=name)

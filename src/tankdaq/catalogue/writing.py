@@ -321,13 +321,25 @@ def record_session(catalogue: Catalogue, folder: Path, only: str | None = None) 
             "plan": plan_name,
             "decay_number": decay,
             "verdict": verdict.get("verdict"),
-            "checks": list(verdict.get("reasons", run.get("reasons", []))),
+            "checks": _reasons(run, verdict),
         }
         add_file(catalogue, path, extra, unreadable=True)  # cut before any data: still the session's
         done += 1
     hull_name = str(plan["hull"]) if plan.get("hull") else None
     _upsert_session(catalogue, folder, sid, plan_name, hull_name, records, runs, verdicts)
     return done
+
+
+def _reasons(run: Mapping[str, Any], verdict: Mapping[str, Any]) -> list[str]:
+    """Why a decay was judged as it was: the checks' reasons; a rejection no check asked for says who
+    rejected it (the operator's answer, or the session stopping during the decay)."""
+    reasons = [str(r) for r in verdict.get("reasons", run.get("reasons", []))]
+    if reasons or verdict.get("verdict") != "rejected":
+        return reasons
+    action = verdict.get("action")
+    if action == "stopped":
+        return ["the session stopped during this decay"]
+    return [f"the operator chose: {action}" if action else "rejected by the operator"]
 
 
 def _upsert_session(

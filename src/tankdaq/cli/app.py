@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import sys
+import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, TypeVar, cast
@@ -282,16 +283,25 @@ def build_kernels_shown() -> None:
 
 class TerminalProgress:
     """The API's ``Progress`` on the terminal: lines through ``say``, tasks as rows of one transient
-    ``progress_bar`` (a task opened inside another joins its display: rich draws one live display)."""
+    ``progress_bar`` (a task opened inside another joins its display: rich draws one live display).
+    When stderr is not a terminal (a pipe, a log file), where a live bar draws nothing, tasks are plain
+    lines instead, one at least every ``api.progress.EVERY_S`` of ``clock`` (``api.progress.Lines``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self._bar: Progress | None = None
+        self._clock = clock
 
     def line(self, text: str) -> None:
         say(text)
 
     @contextlib.contextmanager
     def task(self, description: str, total: int | None = None) -> Iterator[Callable[..., None]]:
+        if not err_console.is_terminal:
+            from ..api.progress import Lines
+
+            with Lines(say, clock=self._clock).task(description, total) as update:
+                yield update
+            return
         if self._bar is not None:
             yield self._updater(self._bar, self._bar.add_task(description, total=total))
             return

@@ -4,6 +4,7 @@ or ``--csv``)."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from collections import Counter
@@ -12,7 +13,7 @@ from typing import Annotated, Any
 
 import typer
 
-from .app import app, catalogue_option, handles_errors, progress_bar, say
+from .app import TerminalProgress, app, catalogue_option, handles_errors, say
 from .options import JsonOutput
 
 catalogue_app = typer.Typer(
@@ -94,9 +95,9 @@ def index_command(
     from ..catalogue.database import describe
     from ..catalogue.index import index_folder
 
-    with _open(catalogue) as opened, progress_bar() as progress:
-        task = progress.add_task("indexing", total=None)
-        report = index_folder(opened, folder, lambda path: progress.update(task, description=path.name))
+    seen = itertools.count(1)
+    with _open(catalogue) as opened, TerminalProgress().task("indexing") as update:
+        report = index_folder(opened, folder, lambda p: update(next(seen), description=f"indexing {p.name}"))
     for line in report.skipped:
         say(f"skipped {line}")
     for path in report.incomplete:  # catalogued, never as a whole decay: --runs leaves it out
@@ -303,8 +304,9 @@ def runs_command(
     rows = [flat(row) for row in found]
     if not as_json and not as_csv:
         say(f"{len(rows)} run(s)")
-    exported = [("exports", "exports")] if any(row["exports"] for row in rows) else []
-    _emit(rows, as_json, as_csv, [*TABLE_COLUMNS[:-1], *exported, TABLE_COLUMNS[-1]], empty_columns())
+    shown = [("checks", "reason")] if any(row["checks"] for row in rows) else []  # why rejected, flagged
+    shown += [("exports", "exports")] if any(row["exports"] for row in rows) else []
+    _emit(rows, as_json, as_csv, [*TABLE_COLUMNS[:-1], *shown, TABLE_COLUMNS[-1]], empty_columns())
 
 
 def _set_reference(fit_id: int, given: str | None) -> None:

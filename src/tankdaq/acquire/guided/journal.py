@@ -21,7 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ...errors import InputError
+from ...errors import InputError, TankdaqError
 
 LOG_NAME = "session.jsonl"
 LOCK_NAME = "session.lock"
@@ -78,6 +78,26 @@ class SessionLog:
         with self.path.open("rb") as fh:
             fh.seek(-1, os.SEEK_END)
             return fh.read(1) == b"\n"
+
+
+def check_resumable(log: SessionLog, records: list[dict[str, Any]]) -> None:
+    """``--resume`` needs a log that holds the session's plan (its first record): else one line naming
+    what is wrong with the log and what to do (exit 2: nothing to resume; exit 1: the log is damaged)."""
+    folder, name = log.path.parent, log.path.name
+    if not log.path.is_file():
+        raise InputError(f"no session to resume in {folder} ({name} is missing); start it without --resume")
+    if not records and not log.skipped:
+        raise InputError(
+            f"no session to resume in {folder}: {name} is empty (a session stopped before its first "
+            "line); start it without --resume, the recordings in the folder are kept"
+        )
+    if any(r.get("type") == "plan" for r in records):
+        return
+    why = log.skipped[0] if log.skipped else f"{name} line {log.lines[0]} is not the session's plan"
+    raise TankdaqError(
+        f"cannot resume {folder}: {name} has lost the session's plan ({why}); restore {name} from "
+        "a backup, or start the session again with another --out (the recordings here are kept)"
+    )
 
 
 def _parse_line(raw: bytes) -> tuple[dict[str, Any] | None, str]:

@@ -48,7 +48,7 @@ from ..listeners import EventLog, EventPrinter
 from ..sinks import Sink
 from ..streaming import StreamingDaemon
 from .checks import STILL_SD_DEG, Measured, check_decay, is_level, watch_reasons
-from .journal import LOG_NAME, SessionLock, SessionLog
+from .journal import SessionLock, SessionLog, check_resumable
 from .measure import LEVEL_S, LevelCheck, measure_decay
 from .operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
 from .panel import open_panel, show_condition
@@ -208,9 +208,9 @@ class CampaignSession:
             raise InputError(
                 f"{self.folder} already holds a session; give --resume to continue it, or another --out"
             )
+        if self.resume:
+            check_resumable(self.log, records)
         if not records:
-            if self.resume:
-                raise InputError(f"no session to resume in {self.folder} ({LOG_NAME} is missing)")
             self.log.append(
                 "plan",
                 plan=plan,
