@@ -202,9 +202,10 @@ def test_a_server_that_accepts_and_never_answers_is_one_line_not_a_hang(recordin
         silent.bind(("127.0.0.1", 0))
         silent.listen(8)  # the kernel accepts the connection; nothing ever answers it
         url = f"postgresql://lab:{SECRET}@127.0.0.1:{silent.getsockname()[1]}/catalogue"
-        for args in (["runs"], ["catalogue", "index", str(recordings)]):
+        # tankdaq's own 10 s, then the URL's own connect_timeout, which wins
+        for args, query in ((["runs"], ""), (["catalogue", "index", str(recordings)], "?connect_timeout=2")):
             done = subprocess.run(
-                [EXE, *args, "--catalogue", url], capture_output=True, text=True, timeout=HANG_S
+                [EXE, *args, "--catalogue", url + query], capture_output=True, text=True, timeout=HANG_S
             )
             assert done.returncode == 1
             line = _one_line(done)
