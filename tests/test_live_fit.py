@@ -68,7 +68,9 @@ def _scenario_samples(settings: RecordSettings) -> np.ndarray:
 
 
 def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_path: Path) -> None:
-    settings = RecordSettings(port="sim", hull="swath", draft=1.0, angle_deg=8.0, runs=1, out_dir=tmp_path)
+    settings = RecordSettings(
+        port="sim", hull="swath", draft=1.0, angle_deg=8.0, runs=1, out_dir=tmp_path, sim_seed=0
+    )
     samples = _scenario_samples(settings)
     hull = load_hull("swath")
     gate = threading.Event()

@@ -47,6 +47,8 @@ def _session_args(plan: Path, out: Path, *extra: str) -> list[str]:
         "20",
         "--sim-faults",
         "2:wrong-angle,6:double-push",
+        "--seed",
+        "0",
         "--catalogue",
         str(out.parent / "catalogue.sqlite"),
         *extra,

@@ -35,6 +35,7 @@ from ..device.driver import MTiDriver, StreamCounters
 from ..device.factory import OpenDevice, SimPort, SimulatedSensor, open_device
 from ..errors import DeviceGone, InputError, RecordingError
 from ..ident.online import OnlineIdentifier, prepare_identifier
+from ..physics.scenario import fresh_seed
 from ..records import DecayEnd
 from ..store.disk import RESERVE_BYTES
 from ..store.playback import recorded_device
@@ -97,7 +98,7 @@ class RecordSettings:
     angle_tolerance_deg: float = 1.0
     reconnect_timeout_s: float = 120.0
     sim_speed: float = 1.0
-    sim_seed: int = 0
+    sim_seed: int | None = None  # None: a fresh one (``seeded``); the same seed plays the same test
     sim_legacy: bool = False  # the built-in sensor plays a 2007-era MTi-G (legacy MTData)
     sim_overrides: dict[str, object] = field(default_factory=dict)  # DecayScenario settings of a session
     extra: dict[str, object] = field(default_factory=dict)
@@ -131,6 +132,14 @@ class RecordSettings:
             hz = recorded.nominal_rate_hz
             raise InputError(f"{sim_port.recording} was recorded at {hz:g} Hz: give --rate {hz:g}")
         return recorded
+
+    def seeded(self) -> RecordSettings:
+        """These settings with the scripted simulated sensor's seed drawn when none was given: each
+        ``record --port sim`` plays decays of its own, and its files say the seed (``sim_seed``)."""
+        sim_port = SimPort.parse(self.port)
+        if self.sim_seed is not None or sim_port is None or sim_port.recording is not None:
+            return self
+        return dataclasses.replace(self, sim_seed=fresh_seed())
 
     @property
     def simulated_axis(self) -> str:
@@ -169,7 +178,7 @@ class RecordDaemon:
         sinks: Sequence[Sink] = (),  # more listeners: the printer of the events, a session's level check
         identifier: Callable[..., OnlineIdentifier] = OnlineIdentifier,  # the live fit (IdentifierSink's)
     ) -> None:
-        self.settings = settings
+        self.settings = settings.seeded()
         self.on_status = on_status or (lambda _status: None)
         self.status = DaemonStatus()
         self.hull: Hull | None = settings.check()  # before a simulator starts or the port opens
@@ -218,7 +227,7 @@ class RecordDaemon:
     def simulation_scenario(self) -> DecayScenario:
         """What the built-in simulated sensor plays (deterministic: its runs are the truth)."""
         s = self.settings
-        assert self.hull is not None  # check() refuses the simulator without one
+        assert self.hull is not None and s.sim_seed is not None  # check() and seeded() on port sim
         scenario = hull_scenario(
             self.hull, s.draft, s.simulated_axis, angle_deg=s.angle_deg, rate_hz=s.rate_hz,
             runs=(s.runs or 20) + 1, seed=s.sim_seed,
@@ -230,7 +239,7 @@ class RecordDaemon:
         sim = SimulatedSensor(
             self.simulation_scenario,
             speed=s.sim_speed,
-            seed=s.sim_seed,
+            seed=s.sim_seed or 0,  # played on port sim only, where seeded() drew it
             legacy=s.sim_legacy,
             recorded=self.replayed,
         )
@@ -259,6 +268,8 @@ class RecordDaemon:
         )
         metadata["port"] = info.port if info else s.port
         metadata["legacy_protocol"] = bool(info.legacy) if info else False
+        if s.sim_seed is not None:  # the scripted simulator's: --seed N plays this test again
+            metadata["sim_seed"] = s.sim_seed
         if info is not None:
             metadata.update(info.orientation.metadata())  # orientation_source (and what was refused)
         config = {"record": {k: str(v) if isinstance(v, Path) else v for k, v in asdict(s).items()}}

@@ -29,17 +29,20 @@ def simulate(
     angle_deg: float = 8.0,
     runs: int = 1,
     rate_hz: float = 100.0,
-    seed: int = 0,
+    seed: int | None = None,
     decay_s: float = 25.0,
 ) -> list[Recording]:
     """Simulated decay tests without hardware: the hull's scripted test (still water, a tilt by hand, the
     release, the free decay; MTi-G noise) written as tankdaq recordings into ``out_dir``, one per decay,
-    and read back. The truth (release, coefficients) is in each file's run configuration.
+    and read back. The truth (release, coefficients) is in each file's run configuration; ``seed``
+    None draws a new one (every call its own decays), which each file's metadata says (``sim_seed``):
+    that seed plays the same test again.
 
     >>> (rec,) = tankdaq.simulate("sim", hull="swath", angle_deg=8.0, seed=1)  # doctest: +SKIP
     >>> tankdaq.identify(rec).coefficients  # doctest: +SKIP
     """
     from ..config import hull_scenario, load_hull
+    from ..physics.scenario import fresh_seed
 
     folder = validation.output_dir(
         arguments.path(out_dir, "out_dir", "a folder (str or pathlib.Path)"), "out_dir"
@@ -50,7 +53,7 @@ def simulate(
     angle_deg = arguments.number(angle_deg, "angle_deg", unit="degrees")
     runs = arguments.whole(runs, "runs", 1, 100)
     rate_hz = arguments.number(rate_hz, "rate_hz", unit="Hz")
-    seed = arguments.whole(seed, "seed", 0, 2**63 - 1)
+    seed = fresh_seed(None if seed is None else arguments.whole(seed, "seed", 0, 2**63 - 1))
     decay_s = arguments.number(decay_s, "decay_s", 1.0, 3600.0, unit="s")
     loaded = load_hull(hull_name)
     validation.hull_draft(loaded, factor, axis)
@@ -67,7 +70,7 @@ def simulate(
     samples, trace = scenario.samples()
     folder.mkdir(parents=True, exist_ok=True)
     paths = [
-        _write_decay(folder, loaded, factor, angle_deg, samples, truth, trace.start_ticks)
+        _write_decay(folder, loaded, factor, angle_deg, seed, samples, truth, trace.start_ticks)
         for truth in trace.runs
         if truth.kind == "release"
     ]
@@ -79,11 +82,13 @@ def _write_decay(
     hull: Any,
     draft: float,
     angle_deg: float,
+    seed: int,
     samples: np.ndarray,
     truth: RunTruth,
     start_ticks: int,
 ) -> Path:
-    """One decay's samples (from the tilt to the end of its run) as a recording with its release event."""
+    """One decay's samples (from the tilt to the end of its run) as a recording with its release event
+    and the seed that played it."""
     from ..physics.truth import TICKS_PER_S
     from ..store.naming import recording_name
     from ..store.writer import RecordingWriter, describe_run
@@ -93,6 +98,7 @@ def _write_decay(
     rate_hz = float(1.0 / (part["t"][1] - part["t"][0]))
     metadata = describe_run(truth.axis, angle_deg, hull, draft, rate_hz, operator="tankdaq.simulate")
     metadata["note"] = "simulated (tankdaq.simulate): the truth is in the run configuration"
+    metadata["sim_seed"] = seed
     name = recording_name(hull.name, draft, truth.axis, angle_deg, truth.run + 1)
     with RecordingWriter(folder / name, metadata, {"simulated": True, "truth": truth.to_json()}) as writer:
         writer.write_samples(part)

@@ -19,6 +19,7 @@ from .app import (
     handles_errors,
     say,
 )
+from .way_in import demo_next_steps
 
 if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
     from ..acquire.daemon import RecordSettings
@@ -70,7 +71,16 @@ ViewerOption = Annotated[
     ),
 ]
 SimSpeedOption = Annotated[float, typer.Option("--sim-speed", min=0.1, max=50.0, hidden=True)]
-SimSeedOption = Annotated[int, typer.Option("--sim-seed", hidden=True)]
+SimSeedOption = Annotated[
+    int | None,
+    typer.Option(
+        "--seed",
+        "--sim-seed",
+        min=0,
+        help="Port sim: the simulator's seed (default: a new one each run, said in every file); the same "
+        "seed plays the same test.",
+    ),
+]
 
 
 class EventsFormat(StrEnum):
@@ -203,7 +213,7 @@ def record_command(
     note: str = typer.Option("", "--note", help="A note stored in the file."),
     model: LiveModelOption = DEFAULT_LIVE_MODEL,
     sim_speed: SimSpeedOption = 1.0,
-    sim_seed: SimSeedOption = 0,
+    sim_seed: SimSeedOption = None,
     catalogue: Annotated[str | None, catalogue_option()] = None,
     events: EventsOption = None,
 ) -> None:
@@ -341,6 +351,7 @@ def demo_command(
     runs: int = typer.Option(3, "--runs", min=1, help="How many decays to record."),
     sim_speed: float = typer.Option(4.0, "--sim-speed", min=0.1, max=50.0, help="Simulated clock speed-up."),
     model: LiveModelOption = DEFAULT_LIVE_MODEL,
+    sim_seed: SimSeedOption = None,
 ) -> None:
     """The whole chain on the built-in simulated MTi-G: record decays, then identify them jointly
     (``tankdaq identify`` of the recordings: the model the data choose, or --model)."""
@@ -364,8 +375,11 @@ def demo_command(
         note="make demo",
         model=model,
         sim_speed=sim_speed,
+        sim_seed=sim_seed,
     )
     outcomes = run_record(settings)
     paths = [o.path for o in outcomes if o.path is not None]
     truth = load_hull(DEMO_HULL).simulation_model("roll").coefficients(1.0)
     identify_recordings(paths, out, model, truth)
+    for line in demo_next_steps(out):
+        typer.echo(line)

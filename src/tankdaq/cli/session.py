@@ -98,7 +98,7 @@ def session_command(
     model: LiveModelOption = DEFAULT_LIVE_MODEL,
     operator: str = typer.Option("", "--operator", help="Who runs the session (stored in every file)."),
     sim_speed: SimSpeedOption = 1.0,
-    sim_seed: SimSeedOption = 0,
+    sim_seed: SimSeedOption = None,
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:

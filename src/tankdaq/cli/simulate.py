@@ -51,7 +51,13 @@ def simulate_command(
         callback=checked(validation.output_rate_hz),
         help=f"Output rate the scenario is prepared at (Hz): {validation.OUTPUT_RATES_TEXT}.",
     ),
-    seed: int = typer.Option(0, "--seed", help="Seed: the same seed plays the same test."),
+    seed: int | None = typer.Option(
+        None,
+        "--seed",
+        min=0,
+        help="Seed (default: a new one each run, said here and in --truth); the same "
+        "seed plays the same test.",
+    ),
     runs: int = typer.Option(3, "--runs", min=0, help="Decay runs before the water stays still."),
     release_after_s: float = typer.Option(10.0, "--release-after", help="Seconds from run start to release."),
     decay_s: float = typer.Option(25.0, "--decay", help="Seconds of free decay per run."),
@@ -106,7 +112,7 @@ def simulate_command(
         SimulatedMTi,
         refused_orientation,
     )
-    from ..physics.scenario import Handling
+    from ..physics.scenario import Handling, fresh_seed
     from ..physics.sensor import SensorNoise
     from ..store.playback import recorded_device
 
@@ -123,6 +129,7 @@ def simulate_command(
         raise InputError(
             "--imu and --refuse play an MTData2 device of their own: no --legacy, --mti-600 or --replay"
         )
+    seed = fresh_seed(seed)
     scenario = hull_scenario(
         hull_config, draft, axis, angle_deg=angle_deg, rate_hz=rate_hz, runs=runs, seed=seed,
         release_after_s=release_after_s, decay_s=decay_s, handling=Handling.swaying() if sway else Handling(),
@@ -133,7 +140,7 @@ def simulate_command(
     playing = (
         f"playing the device of {replay}"
         if replay is not None
-        else f"{hull} {format_draft(draft)} {axis} {angle_deg:g} deg, {runs} runs"
+        else f"{hull} {format_draft(draft)} {axis} {angle_deg:g} deg, {runs} runs, seed {seed}"
     )
     sim = SimulatedMTi(
         source=source,

@@ -147,7 +147,7 @@ def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[DeviceNote]
         simulator = SimulatedMTi(
             scenario, speed=sim.speed, baud=baud, seed=sim.seed, legacy=sim.legacy
         ).start()
-        label = f"{scenario.hull} {format_draft(scenario.draft)} {scenario.axis}"
+        label = f"{scenario.hull} {format_draft(scenario.draft)} {scenario.axis}, seed {scenario.seed}"
     try:
         say(DeviceNote(f"simulated MTi-G on {simulator.link} ({label})", simulator.link))
     except BaseException:  # a Ctrl-C as it is said: nothing started is left running

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import secrets
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,6 +29,16 @@ from ..errors import InputError
 from .decay import acceleration, decay_refusal, simulate_decay
 from .sensor import SensorModel, SensorNoise
 from .truth import TICK_MODULUS, TICKS_PER_S, RunTruth, ScenarioTrace
+
+#: A fresh seed is below this: short enough to read off a file and type again after ``--seed``.
+FRESH_SEED_BELOW = 2**32
+
+
+def fresh_seed(seed: int | None = None) -> int:
+    """``seed`` when given (the same test again), else a new one from the OS: every simulated test
+    differs from the last unless asked, so two of its files never hold the same decay."""
+    return secrets.randbelow(FRESH_SEED_BELOW) if seed is None else seed
+
 
 #: The release falls this much (uniformly) after the scripted instant: off the sample grid at any rate.
 RELEASE_JITTER_S = 0.01

@@ -169,6 +169,7 @@ RUN_METADATA_KEYS: dict[str, str] = {
     "false_syncs (false frames turned away), gaps, lost",
     "software_version": "tankdaq version that wrote the file",
     "operator": "who ran the test",
+    "sim_seed": "the built-in simulator's seed (absent: a real device); --seed with it plays the same test",
     "note": "free text",
     "warnings": "JSON list of warnings raised during the run (written at close)",
     "created_utc": "when the file was started",

@@ -103,7 +103,7 @@ class CampaignSession:
         first = plan_conditions(plan)[0]  # a placeholder condition: each decay gets its own
         self.record = RecordSettings(
             **{"draft": first.draft_factor, "angle_deg": first.angle_deg} | settings.record
-        )
+        ).seeded()  # port sim: one seed for the session, said in every file (each decay's is seed + decay)
         self.folder = self.record.out_dir
         self.acceptance = Acceptance.from_plan(plan.acceptance, f"plan {plan.name}")
         self.conditions = plan_conditions(plan)
@@ -148,7 +148,7 @@ class CampaignSession:
             angle_deg=condition.angle_deg,
             angle_tolerance_deg=self.acceptance.angle_tolerance_deg,
             runs=None,  # the device streams the whole session
-            sim_seed=base.sim_seed + decay,
+            sim_seed=None if base.sim_seed is None else base.sim_seed + decay,
             sim_overrides=overrides,
             note=f"session {self.settings.plan.name}, decay {decay}",
         )
