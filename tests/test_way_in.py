@@ -55,7 +55,11 @@ def two_demos(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     return folder, said
 
 
-def test_the_way_in_is_the_shells_tankdaq_or_the_scripts_path(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_way_in_is_the_shells_tankdaq_or_the_scripts_path(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.chdir(tmp_path)  # outside the venv's folder: its path is said whole
+    monkeypatch.setenv("PATH", f"{SCRIPTS}{os.pathsep}{_without_venv()['PATH']}")
     assert way_in() == ("tankdaq", None)  # the venv active (its bin on PATH): tankdaq alone
     monkeypatch.setenv("PATH", _without_venv()["PATH"])
     command, how = way_in()

@@ -19,7 +19,6 @@ from .app import (
     handles_errors,
     say,
 )
-from .way_in import demo_next_steps
 
 if TYPE_CHECKING:  # the daemon imports numba, scipy and rerun: imported by the commands that run it
     from ..acquire.daemon import RecordSettings
@@ -381,5 +380,7 @@ def demo_command(
     paths = [o.path for o in outcomes if o.path is not None]
     truth = load_hull(DEMO_HULL).simulation_model("roll").coefficients(1.0)
     identify_recordings(paths, out, model, truth)
+    from .way_in import demo_next_steps
+
     for line in demo_next_steps(out):
         typer.echo(line)
