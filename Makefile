@@ -3,6 +3,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+TEST_STAMP := $(VENV)/.installed-test
 
 .PHONY: demo test lint docs bench clean venv viewer-test-deps catalogue-test-deps report-test-deps
 
@@ -10,20 +11,27 @@ STAMP := $(VENV)/.installed
 # machine's environment) Python never caches what it compiles, and every process would compile pandas, rerun
 # and the rest from source again (docs/benchmarks.md). pip compiles on one core (about 45 s of a 96 s
 # install here); compileall does it on every core. A file that does not compile is left as pip leaves it.
+# `make demo` installs what tankdaq needs to run, not the test toolchain; `make test` (and lint, docs,
+# bench) adds the `test` extra on top.
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
+	$(BIN)/python -m pip install --quiet --no-compile -e .
 	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib >/dev/null || true
 	touch $(STAMP)
 
-venv: $(STAMP)
+$(TEST_STAMP): $(STAMP)
+	$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
+	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib >/dev/null || true
+	touch $(TEST_STAMP)
+
+venv: $(TEST_STAMP)
 
 demo: $(STAMP)
 	$(BIN)/python -m tankdaq.prepare
 	$(BIN)/tankdaq demo
 
-lint: $(STAMP)
+lint: $(TEST_STAMP)
 	$(BIN)/ruff check src tests bench
 	$(BIN)/ruff format --check src tests bench
 	$(BIN)/mypy
@@ -32,7 +40,7 @@ lint: $(STAMP)
 # a module that does not import, a name in __all__ that resolves to nothing. pdoc stops imports from
 # running programs; matplotlib runs fc-list once per machine to build its font cache, so on a fresh
 # machine the plotting modules would not import under pdoc (PDOC_ALLOW_EXEC lets it).
-docs: $(STAMP)
+docs: $(TEST_STAMP)
 	PDOC_ALLOW_EXEC=1 $(BIN)/python -W error -m pdoc --docformat restructuredtext -o build/api tankdaq
 
 # The live-view window test runs the real viewer under Xvfb with Mesa's software Vulkan driver
@@ -86,14 +94,14 @@ report-test-deps:
 # (about 45 and 50 s on this machine; the docs after the kernels: no two processes build one kernel).
 # compileall: pip does not byte-compile an editable install's own source, and with PYTHONDONTWRITEBYTECODE
 # set every tankdaq process a test starts would compile the package from source again.
-test: $(STAMP) viewer-test-deps catalogue-test-deps report-test-deps
+test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	($(BIN)/python -m compileall -q src && $(BIN)/python -m tankdaq.prepare && \
 		$(MAKE) --no-print-directory docs) & built=$$!; \
 		$(MAKE) --no-print-directory lint; checked=$$?; \
 		wait $$built && exit $$checked
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=25
 
-bench: $(STAMP)
+bench: $(TEST_STAMP)
 	$(BIN)/python bench/run_all.py
 
 clean:
