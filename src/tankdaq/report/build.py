@@ -12,9 +12,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..ident.conditions import UNKNOWN
-from ..ident.interval_labels import EXPANDED_U, STANDARD_U
+from ..ident.interval_labels import EXPANDED_U, FIT_95, STANDARD_U
 from . import slots
-from .content import FIT_95, NOT_KNOWN, Figure, ReportContent, Section, Table
+from .content import NOT_KNOWN, Figure, ReportContent, Section, Table
 from .tables import coefficients_table, conditions_table, damping_table, decays_table, full_scale_tables
 
 if TYPE_CHECKING:

@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from ..ident.interval_labels import FIT_95, FIT_STD, IntervalLabel
+from ..ident.interval_labels import IntervalLabel
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -24,10 +24,6 @@ SIGNIFICANT = 6
 #: A cell: a number, a word, or nothing (NaN, not known: shown as ``NOT_KNOWN``).
 Cell = float | int | str | None
 NOT_KNOWN = "–"
-
-
-#: The fit's own intervals (``ident.interval_labels``: one convention for every view).
-FIT_SIGMA, FIT_95 = FIT_STD, FIT_95
 
 
 def rounded(value: object) -> Cell:
