@@ -428,16 +428,11 @@ def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> 
     assert recovered.ended is DecayEnd.RECOVERED and recovered.metadata["hull"] == "swath"
 
 
-DEMO_ARGS = ["demo", "--runs", "1", "--sim-speed", "10", "--model", "seed001-eq1", "--seed", "0"]
-
-
 def test_demo_records_identifies_and_plots(tmp_path: Path) -> None:
     """What `make demo` runs, shortened: one simulated decay, identified against the hull's truth with the
     truth's own terms, asked for by name (the default model is the data's: tests/test_one_model.py)."""
-    result = CliRunner().invoke(
-        app,
-        [*DEMO_ARGS, "--out", str(tmp_path)],  # one decay, the same every run: checked against its truth
-    )
+    demo = ["demo", "--runs", "1", "--sim-speed", "10", "--model", "seed001-eq1", "--seed", "0"]  # one decay
+    result = CliRunner().invoke(app, [*demo, "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
     (said,) = [line for line in result.stderr.splitlines() if line.endswith("given by --model")]
     assert "seed001-eq1" in said
