@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -24,7 +25,13 @@ from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
 from tankdaq.config import load_hull
 from tankdaq.errors import IdentificationError
-from tankdaq.ident.online import BackgroundFit, OnlineIdentifier, OnlineResult, prepare_kernels
+from tankdaq.ident.online import (
+    FINAL_FIT_WALL_FACTOR,
+    BackgroundFit,
+    OnlineIdentifier,
+    OnlineResult,
+    prepare_kernels,
+)
 from tankdaq.records import DecayRun
 from tankdaq.store.reader import read_recording
 from tankdaq.store.writer import describe_run
@@ -164,7 +171,9 @@ def test_a_final_fit_that_cannot_finish_is_given_up_in_bounded_time() -> None:
     try:
         live.submit(t, angle, rate)
         assert identifier.entered.wait(DEADLINE_S)
-        with pytest.raises(IdentificationError, match=r"did not finish within 0\.1 s"):
+        # the budget is the worker's CPU time; held outside its solver, it is left at the wall-clock cap
+        cap = re.escape(f"{0.1 * FINAL_FIT_WALL_FACTOR:g}")
+        with pytest.raises(IdentificationError, match=rf"did not finish within {cap} s"):
             live.finish(timeout_s=0.1)
     finally:
         gate.set()

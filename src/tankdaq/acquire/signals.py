@@ -21,7 +21,8 @@ class SignalStop:
     steps): it only sets ``stop``, which the session's next step reads; anywhere else
     (preparing the kernels, opening the device, waiting for it to come back) it raises
     KeyboardInterrupt at once. Only the first signal does anything: later ones wait for the files
-    to close, and the closing is bounded (the final fit at most ``FINAL_FIT_WAIT_S``, the view 15 s).
+    to close, and the closing is bounded (the final fit at most ``FINAL_FIT_WAIT_S`` of computing,
+    the view 15 s).
     """
 
     def __init__(self, stop: threading.Event) -> None:

@@ -36,8 +36,9 @@ if TYPE_CHECKING:
     from ..viz.view_process import ViewProcess
     from .release import ReleaseEvent
 
-#: How long the final fit at settle may hold the loop (it normally takes well under 0.1 s once the
-#: kernels are prepared); past it the file is closed without it and says so.
+#: How long the final fit at settle may compute (CPU time on its worker; it normally takes well under
+#: 0.1 s once the kernels are prepared); past it, or past ``FINAL_FIT_WALL_FACTOR`` times it on the wall
+#: clock, the file is closed without it and says so.
 FINAL_FIT_WAIT_S = 5.0
 
 

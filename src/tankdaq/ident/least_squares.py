@@ -63,20 +63,25 @@ class FitAbandoned(IdentificationError):
 
 @dataclass
 class SolveBudget:
-    """Until when the solves inside ``solve_budget`` may run, and the flag that cancels them at once."""
+    """How long the solves inside ``solve_budget`` may compute, and the flag that cancels them at once.
+
+    The budget is the solving thread's CPU time, not the wall clock: a fit on a busy PC (another program,
+    a viewer) is slower, not a runaway, and keeps its result; a runaway computes, and is stopped at the
+    same point on any machine load.
+    """
 
     seconds: float
     cancel: threading.Event = field(default_factory=threading.Event)
-    started: float = field(default_factory=time.monotonic)
+    started: float = field(default_factory=time.thread_time)  # made on the thread that solves
     abandoned: bool = False  # a solve was stopped by this budget
 
     def check(self) -> None:
-        """Raise ``FitAbandoned`` past the deadline or once cancelled."""
-        elapsed = time.monotonic() - self.started
-        if self.cancel.is_set() or elapsed > self.seconds:
+        """Raise ``FitAbandoned`` past the budget or once cancelled."""
+        computed = time.thread_time() - self.started
+        if self.cancel.is_set() or computed > self.seconds:
             self.abandoned = True
             why = "cancelled" if self.cancel.is_set() else f"past its budget of {self.seconds:g} s"
-            raise FitAbandoned(f"the fit was abandoned after {elapsed:.1f} s ({why})")
+            raise FitAbandoned(f"the fit was abandoned after {computed:.1f} s of computing ({why})")
 
 
 _BUDGET: ContextVar[SolveBudget | None] = ContextVar("tankdaq_solve_budget", default=None)

@@ -255,9 +255,13 @@ class OnlineIdentifier(EstimatorMixin):
         return result
 
 
-#: How long one live refit may run (they take 10-50 ms; 1 s on the JIT under load): past it, it is
-#: abandoned at its next evaluation and the next refit starts from the last good one.
+#: How long one live refit may compute (they take 10-50 ms of CPU): past it, it is abandoned at its next
+#: evaluation and the next refit starts from the last good one. CPU time on the worker: a loaded PC makes
+#: a fit slower, not a runaway (``least_squares.SolveBudget``).
 REFIT_BUDGET_S = 5.0
+#: The final fit computes for at most its budget (CPU time, as a refit); the caller waits at most this
+#: many times the budget on the wall clock, for a worker stuck outside its solver.
+FINAL_FIT_WALL_FACTOR = 6.0
 
 
 #: Samples handed to the worker: time, angle, rate (or None), excluded.
@@ -343,11 +347,11 @@ class BackgroundFit:
             self._finish_requested = True
             self._final_budget_s = timeout_s
             self._wake.notify_all()
-        if not self._done.wait(timeout_s):
+        if not self._done.wait(timeout_s * FINAL_FIT_WALL_FACTOR):
             self.close()
             raise IdentificationError(
-                f"the final fit did not finish within {timeout_s:g} s; fit the file afterwards "
-                "(tankdaq identify)"
+                f"the final fit did not finish within {timeout_s * FINAL_FIT_WALL_FACTOR:g} s; fit the file "
+                "afterwards (tankdaq identify)"
             )
         with self._wake:
             results, self._results = self._results, []
