@@ -90,16 +90,27 @@ report-test-deps:
 		echo "make: apt-get could not install $(REPORT_TEST_PACKAGES); the report's browser and PDF tests skip"; \
 	fi
 
-# The kernels build, then the docs, on one core while the lint and the type check run on the other
-# (about 45 and 50 s on this machine; the docs after the kernels: no two processes build one kernel).
+# The kernels are built first (the tests need them; the API docs import the package, so they start after).
+# The lint and the type check start beside them, the API docs after them, at the lowest priority (nice 19),
+# and go on while the tests run: they take what the tests leave idle (a test waiting on a real-time device
+# or server) and do not slow one that waits. Their output is shown at the end; any failing fails the target.
 # compileall: pip does not byte-compile an editable install's own source, and with PYTHONDONTWRITEBYTECODE
 # set every tankdaq process a test starts would compile the package from source again.
+CHECKS_LOG := build/checks.log
+DOCS_LOG := build/docs.log
 test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
-	($(BIN)/python -m compileall -q src && $(BIN)/python -m tankdaq.prepare && \
-		$(MAKE) --no-print-directory docs) & built=$$!; \
-		$(MAKE) --no-print-directory lint; checked=$$?; \
-		wait $$built && exit $$checked
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=25
+	mkdir -p build
+	$(BIN)/python -m compileall -q src
+	nice -n 19 $(MAKE) --no-print-directory lint >$(CHECKS_LOG) 2>&1 & checks=$$!; \
+	$(BIN)/python -m tankdaq.prepare || { wait $$checks; cat $(CHECKS_LOG); exit 1; }; \
+	nice -n 19 $(MAKE) --no-print-directory docs >$(DOCS_LOG) 2>&1 & docs=$$!; \
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=25; tested=$$?; \
+	wait $$checks; checked=$$?; wait $$docs; documented=$$?; \
+	echo "--- lint and types (make lint) ---"; cat $(CHECKS_LOG); \
+	echo "--- API docs (make docs) ---"; cat $(DOCS_LOG); \
+	test $$checked = 0 || echo "make: the lint or the type check failed (above)"; \
+	test $$documented = 0 || echo "make: the API docs failed (above)"; \
+	test $$tested = 0 && test $$checked = 0 && test $$documented = 0
 
 bench: $(TEST_STAMP)
 	$(BIN)/python bench/run_all.py
