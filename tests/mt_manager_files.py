@@ -83,9 +83,11 @@ def write_export(
     crlf: bool = True,
     counter_start: int = 65_000,
     axis: str = "roll",
+    decimal_comma: bool = False,
 ) -> Path:
     """The decay as MT Manager ``generation`` exports it (``missing``: what an output not logged
-    shows, empty or ``NaN``; ``sample_time`` False: SampleTimeFine not logged)."""
+    shows, empty or ``NaN``; ``sample_time`` False: SampleTimeFine not logged; ``decimal_comma``: a
+    European locale's numbers, behind a byte-order mark and a blank line)."""
     t, roll, _ = held_tilt()
     names, values = orientation(kind, roll, axis)
     header = ["PacketCounter", "SampleTimeFine", "Year", "Month", "Acc_X", "Acc_Y", "Acc_Z", *names]
@@ -95,9 +97,10 @@ def write_export(
     for i in range(t.size):
         cells = [f"{counter[i]:05d}", str(ticks[i]) if sample_time else missing, missing, missing]
         cells += ["0.012345", "-0.170000", "9.810000"] + [f"{v:.6f}" for v in values[i]]
-        rows.append(delimiter.join(cells))
+        rows.append(delimiter.join(cells).replace(".", ",") if decimal_comma else delimiter.join(cells))
     end = "\r\n" if crlf else "\n"
-    text = end.join([*HEADERS[generation], delimiter.join(header), *rows]) + end
+    block = [*HEADERS[generation], *([""] if decimal_comma else [])]
+    text = ("\ufeff" if decimal_comma else "") + end.join([*block, delimiter.join(header), *rows]) + end
     path.write_bytes(text.encode())
     return path
 

@@ -113,6 +113,30 @@ def test_every_mt_manager_style_gives_the_plain_csvs_fit(
     assert f"{path.name}: read as an MT Manager" in result.stderr
 
 
+def test_decimal_commas_a_byte_order_mark_and_a_blank_line_are_read(tmp_path: Path) -> None:
+    path = write_export(tmp_path / "de.txt", generation="2019.2", delimiter=";", decimal_comma=True)
+    recording = tankdaq.read(path)
+    assert (
+        recording.notices[0]
+        == "de.txt: read as an MT Manager 2019.2.1 text export, semicolon-separated, decimal commas"
+    )
+    t, roll, _ = held_tilt()
+    whole = recording.samples
+    assert np.allclose(whole["roll_deg"], np.degrees(roll), atol=1e-6)
+    assert np.allclose(np.diff(whole["time_s"]), np.diff(t))
+
+
+def test_a_clock_that_wraps_at_one_day_is_unwrapped_so_whatever_the_product_says(tmp_path: Path) -> None:
+    """The header's MTi-680G is a 2**32 device; a clock that wraps at one day all the same (a product
+    the family table misplaces) runs forward only at one day: the data decide, and the line says so."""
+    path = write_export(tmp_path / "day.txt", generation="2022.2", start_tick=864_000_000 - 20_000)
+    recording = tankdaq.read(path)
+    assert (np.diff(recording.samples["time_s"]) > 0).all()
+    assert "day.txt: time from SampleTimeFine (10 kHz ticks, unwrapped at one day (864e6 ticks): 1 wrap)" in (
+        recording.notices
+    )
+
+
 def test_a_quaternion_or_matrix_component_is_refused_as_the_angle(tmp_path: Path) -> None:
     """``--angle-col Quat_q1`` read a 10 deg decay as "1.8 deg" without a word; now one line naming the
     options that do it right, in an export and in a plain CSV of the same columns alike."""

@@ -55,6 +55,8 @@ HEADER_FACTS = {
     "coordinatesystem": "coordinate_system",
     "starttime": "start_time",
     "updaterate": "update_rate",
+    "samplerate": "update_rate",
+    "outputrate": "update_rate",
 }
 #: The columns time is taken from, as MT Manager names them (lower case).
 SAMPLE_TIME, COUNTER = "sampletimefine", "packetcounter"
@@ -87,9 +89,10 @@ def read_mt_manager(path: Path, options: CsvOptions) -> ColumnData:
     separator = _separator(path, rows[0][1])
     names = [name.strip() for name in rows[0][1].split(separator)]
     split = [(number, line.split(separator)) for number, line in rows[1:]]
-    columns, text, empty = _columns(path, names, split, separator)
+    columns, text, empty, decimal_comma = _columns(path, names, split, separator)
     kind = _generation(facts)
-    said = [f"{path.name}: read as an MT Manager {kind}, {DELIMITERS[separator]}-separated"]
+    commas = ", decimal commas" if decimal_comma else ""
+    said = [f"{path.name}: read as an MT Manager {kind}, {DELIMITERS[separator]}-separated{commas}"]
     if empty:
         said.append(f"{path.name}: empty columns not read: {', '.join(empty)}")
     stated = {name: "deg" for name in columns if euler_index(name) is not None}
@@ -158,9 +161,9 @@ def _separator(path: Path, header: str) -> str:
 
 def _columns(
     path: Path, names: list[str], numbered: list[tuple[int, list[str]]], separator: str
-) -> tuple[dict[str, np.ndarray], list[str], list[str]]:
-    """(numeric columns, text columns, empty columns) of the rows; an empty field or ``NaN`` is NaN, a
-    row with more fields than the header is refused in one line naming it."""
+) -> tuple[dict[str, np.ndarray], list[str], list[str], bool]:
+    """(numeric columns, text columns, empty columns, decimal commas) of the rows; an empty field or
+    ``NaN`` is NaN, a row with more fields than the header is refused in one line naming it."""
     width = len(names)
     while width and not names[width - 1]:  # a delimiter ending the header line
         width -= 1
@@ -191,7 +194,7 @@ def _columns(
             empty.append(name)
         else:
             columns[name] = values
-    return columns, text, empty
+    return columns, text, empty, decimal_comma
 
 
 def _generation(facts: dict[str, str]) -> str:
@@ -250,9 +253,10 @@ def device_time(
 
 
 def _unwrapped(path: Path, name: str, raw: np.ndarray, facts: dict[str, str]) -> tuple[np.ndarray, int, int]:
-    """SampleTimeFine ticks unwrapped at the device's modulus (2**32 when a tick passes one day, whatever
-    the product code says), with the modulus and the number of wraps; a value no tick count can be is
-    one line."""
+    """SampleTimeFine ticks unwrapped at the device's modulus, with the modulus and the number of wraps;
+    a value no tick count can be is one line. The product code's family is taken unless the data say
+    otherwise: 2**32 when a tick passes one day, one day when only that makes the clock run forward
+    (a product code the family table does not know)."""
     bad = np.flatnonzero((raw < 0) | (raw >= MODULUS_32_BIT) | (raw != np.round(raw)))
     if bad.size:
         raise InputError(
@@ -260,9 +264,18 @@ def _unwrapped(path: Path, name: str, raw: np.ndarray, facts: dict[str, str]) ->
             "number 0 to 2^32 - 1): a column of something else, or give --time-col"
         )
     ticks = raw.astype(np.int64)
-    family = sample_time_modulus(facts.get("product_code", ""))
-    modulus = MODULUS_32_BIT if family == MODULUS_32_BIT or int(ticks.max()) >= MODULUS_ONE_DAY else family
-    unwrapped = SampleTimeUnwrapper(modulus).update_many(ticks)
+    past_a_day = int(ticks.max()) >= MODULUS_ONE_DAY
+    family = MODULUS_32_BIT if past_a_day else sample_time_modulus(facts.get("product_code", ""))
+    candidates = (
+        [family] if past_a_day else sorted({MODULUS_ONE_DAY, MODULUS_32_BIT}, key=lambda m: m != family)
+    )
+    for modulus in candidates:  # the family's first; the other only where it alone runs forward
+        unwrapped = SampleTimeUnwrapper(modulus).update_many(ticks)
+        if (np.diff(unwrapped) > 0).all():
+            break
+    else:
+        modulus = family
+        unwrapped = SampleTimeUnwrapper(modulus).update_many(ticks)
     wraps = int(np.sum(np.diff(ticks) < -(modulus // 2)))
     return unwrapped, modulus, wraps
 
