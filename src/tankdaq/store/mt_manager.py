@@ -235,7 +235,7 @@ def device_time(
     if rate is None:
         raise InputError(
             f"{path}: {missing} and no update rate in its header (MT Manager 2019.2 and later write none): "
-            "give the sample rate with --rate HZ"
+            "give the sample rate with --rate HZ (identify, diagnose, report; tankdaq.read's sample_rate_hz)"
         )
     counter = _named(columns, COUNTER)
     if counter is None or not np.isfinite(columns[counter]).all():
