@@ -188,6 +188,12 @@ def test_an_explicit_sample_time_column_is_unwrapped_too(tmp_path: Path) -> None
     result = identify(path, "--time-col", "SampleTimeFine", "--angle-col", "Roll", *MODEL, "--json")
     assert fitted(result)["c1"] == pytest.approx(TRUTH["c1"], rel=0.01)
     assert "sort the rows" not in result.stderr and "time unit: tick" in result.stderr
+    counted = tankdaq.read(path, time_col="PacketCounter", angle_col="Roll", sample_rate_hz=100.0)
+    assert (np.diff(counted.samples["time_s"]) > 0).all()  # the counter wraps at 2**16 (from 65000)
+    assert (
+        "wrap.csv: time from PacketCounter at --rate 100 Hz (--time-col PacketCounter; counter wrapped at "
+        "2^16 1 time, 0 packets missing)" in counted.notices
+    )
 
 
 def test_the_headers_facts_are_the_runs_metadata(tmp_path: Path) -> None:

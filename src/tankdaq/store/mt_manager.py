@@ -96,14 +96,13 @@ def read_mt_manager(path: Path, options: CsvOptions) -> ColumnData:
     if empty:
         said.append(f"{path.name}: empty columns not read: {', '.join(empty)}")
     stated = {name: "deg" for name in columns if euler_index(name) is not None}
-    if options.time_col == "time_s" and "time_s" not in columns:
-        columns["time_s"], line = device_time(path, columns, facts, options.sample_rate_hz)
-        stated["time_s"] = "s"
+    asked, derived = options.time_col, options.time_col == "time_s" and "time_s" not in columns
+    if derived or (asked in columns and asked.lower() == COUNTER):  # a counter asked for: in s, at a rate
+        columns[asked], line = device_time(path, columns, facts, options.sample_rate_hz, not derived)
+        stated[asked] = "s"
         said.append(f"{path.name}: {line}")
-    else:
-        asked = next((name for name in columns if name == options.time_col), None)
-        if asked is not None and asked.lower() == SAMPLE_TIME and np.isfinite(columns[asked]).all():
-            columns[asked] = _unwrapped(path, asked, columns[asked], facts)[0].astype(float)  # in ticks
+    elif asked in columns and asked.lower() == SAMPLE_TIME and np.isfinite(columns[asked]).all():
+        columns[asked] = _unwrapped(path, asked, columns[asked], facts)[0].astype(float)  # in ticks
     header: dict[str, object] = {key: value for key, value in facts.items() if key != "update_rate"}
     rate = _header_rate(facts)
     if rate is not None:
@@ -218,11 +217,12 @@ def _named(columns: dict[str, np.ndarray], lower: str) -> str | None:
 
 
 def device_time(
-    path: Path, columns: dict[str, np.ndarray], facts: dict[str, str], rate_hz: float | None
+    path: Path, columns: dict[str, np.ndarray], facts: dict[str, str], rate_hz: float | None, counter: bool
 ) -> tuple[np.ndarray, str]:
-    """Each row's time (s) and the one line saying where it came from: SampleTimeFine, else
-    PacketCounter at the header's update rate or ``rate_hz``, else the row number at ``rate_hz``."""
-    ticks = _named(columns, SAMPLE_TIME)
+    """Each row's time (s) and the one line saying where it came from: SampleTimeFine (unless
+    ``counter``: PacketCounter asked for), else PacketCounter at the header's update rate or
+    ``rate_hz``, else the row number at ``rate_hz``."""
+    ticks = None if counter else _named(columns, SAMPLE_TIME)
     if ticks is not None and np.isfinite(columns[ticks]).all():
         unwrapped, modulus, wraps = _unwrapped(path, ticks, columns[ticks], facts)
         unused = f"; --rate {rate_hz:g} not used" if rate_hz is not None else ""
@@ -230,6 +230,7 @@ def device_time(
             f"time from {ticks} (10 kHz ticks, {_wraps(wraps, modulus)}){unused}"
         )
     missing = f"{ticks} has empty cells" if ticks is not None else "no SampleTimeFine values"
+    missing = "--time-col PacketCounter" if counter else missing
     header_rate = _header_rate(facts)
     rate, whose = (header_rate, "the header's Update Rate") if header_rate else (rate_hz, "--rate")
     if rate is None:
@@ -237,17 +238,17 @@ def device_time(
             f"{path}: {missing} and no update rate in its header (MT Manager 2019.2 and later write none): "
             "give the sample rate with --rate HZ (identify, diagnose, report; tankdaq.read's sample_rate_hz)"
         )
-    counter = _named(columns, COUNTER)
-    if counter is None or not np.isfinite(columns[counter]).all():
+    name = _named(columns, COUNTER)
+    if name is None or not np.isfinite(columns[name]).all():
         count = np.arange(len(next(iter(columns.values()))), dtype=float)
         return count / rate, f"time from the row number at {whose} {rate:g} Hz ({missing}, no PacketCounter)"
-    raw = columns[counter].astype(np.int64)
+    raw = columns[name].astype(np.int64)
     steps = np.diff(raw) % COUNTER_MODULUS
     lost = int(np.sum(steps[steps > 0] - 1))
     count = np.concatenate([[0], np.cumsum(steps)]).astype(float)
     wraps = int(np.sum(np.diff(raw) < 0))
     return count / rate, (
-        f"time from {counter} at {whose} {rate:g} Hz ({missing}; counter wrapped at 2^16 {wraps} "
+        f"time from {name} at {whose} {rate:g} Hz ({missing}; counter wrapped at 2^16 {wraps} "
         f"time{'s' if wraps != 1 else ''}, {lost} packets missing)"
     )
 
