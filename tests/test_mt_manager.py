@@ -126,6 +126,19 @@ def test_decimal_commas_a_byte_order_mark_and_a_blank_line_are_read(tmp_path: Pa
     assert np.allclose(np.diff(whole["time_s"]), np.diff(t))
 
 
+def test_rows_before_the_filter_has_an_orientation_are_left_out_and_said(tmp_path: Path) -> None:
+    path = write_export(tmp_path / "late.txt", generation="2022.2", kind="Quat", missing="NaN")
+    lines = path.read_bytes().split(b"\r\n")
+    first = next(k for k, line in enumerate(lines) if line.startswith(b"PacketCounter")) + 1
+    for k in range(first, first + 5):
+        lines[k] = b"\t".join([*lines[k].split(b"\t")[:-4], *[b"NaN"] * 4])
+    path.write_bytes(b"\r\n".join(lines))
+    recording = tankdaq.read(path)
+    assert "late.txt: rows without an orientation not read: 5 at the start, 0 at the end" in recording.notices
+    roll = held_tilt()[1]
+    assert np.allclose(recording.samples["roll_deg"], np.degrees(roll[5:]), atol=1e-4)
+
+
 def test_a_clock_that_wraps_at_one_day_is_unwrapped_so_whatever_the_product_says(tmp_path: Path) -> None:
     """The header's MTi-680G is a 2**32 device; a clock that wraps at one day all the same (a product
     the family table misplaces) runs forward only at one day: the data decide, and the line says so."""

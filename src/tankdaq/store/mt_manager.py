@@ -38,7 +38,7 @@ from ..xsens.timebase import (
     sample_time_modulus,
 )
 from .csv_import import ColumnData, CsvOptions
-from .orientation_columns import euler_index
+from .orientation_columns import euler_index, matrix_index, quaternion_index
 
 #: The delimiters MT Manager writes, in the order tried, and their names.
 DELIMITERS = {"\t": "tab", ";": "semicolon", ",": "comma", " ": "space"}
@@ -95,6 +95,7 @@ def read_mt_manager(path: Path, options: CsvOptions) -> ColumnData:
     said = [f"{path.name}: read as an MT Manager {kind}, {DELIMITERS[separator]}-separated{commas}"]
     if empty:
         said.append(f"{path.name}: empty columns not read: {', '.join(empty)}")
+    columns = _oriented_rows(path, columns, said)
     stated = {name: "deg" for name in columns if euler_index(name) is not None}
     asked, derived = options.time_col, options.time_col == "time_s" and "time_s" not in columns
     if derived or (asked in columns and asked.lower() == COUNTER):  # a counter asked for: in s, at a rate
@@ -194,6 +195,26 @@ def _columns(
         else:
             columns[name] = values
     return columns, text, empty, decimal_comma
+
+
+def _oriented_rows(path: Path, columns: dict[str, np.ndarray], said: list[str]) -> dict[str, np.ndarray]:
+    """The rows from the first to the last with every orientation value (before the filter has a
+    solution, or after the logging stopped, MT Manager leaves them empty), the rows left out said."""
+    oriented = [
+        values
+        for name, values in columns.items()
+        if any(index(name) is not None for index in (euler_index, quaternion_index, matrix_index))
+    ]
+    if not oriented:
+        return columns
+    whole = np.flatnonzero(np.isfinite(np.column_stack(oriented)).all(axis=1))
+    rows = len(oriented[0])
+    if whole.size == 0 or (whole[0] == 0 and whole[-1] == rows - 1):
+        return columns
+    first, last = int(whole[0]), int(whole[-1])
+    left = f"{first} at the start, {rows - 1 - last} at the end"
+    said.append(f"{path.name}: rows without an orientation not read: {left}")
+    return {name: values[first : last + 1] for name, values in columns.items()}
 
 
 def _generation(facts: dict[str, str]) -> str:
