@@ -176,6 +176,15 @@ def test_a_pitch_decay_comes_from_the_same_quaternion(tmp_path: Path) -> None:
     assert "pitch angle from the quaternion Quat_q0..Quat_q3" in result.stderr
 
 
+def test_an_export_without_orientation_says_so(tmp_path: Path) -> None:
+    path = write_export(tmp_path / "imu.txt", kind="Quat")
+    lines = [line.rsplit(b"\t", 1)[0] for line in path.read_bytes().split(b"\r\n")]  # no Quat_q3
+    path.write_bytes(b"\r\n".join(lines))
+    result = identify(path, *MODEL)
+    assert result.exit_code == 2
+    assert "no orientation in this MT Manager 2022.2.0 text export" in one_error_line(result)
+
+
 def test_an_export_without_time_or_rate_asks_for_rate(tmp_path: Path) -> None:
     path = write_export(tmp_path / "norate.txt", generation="2022.2", sample_time=False, missing="NaN")
     result = identify(path, *MODEL)
