@@ -184,7 +184,7 @@ def _orientation(
     if angle_col != "angle_deg" or angle_col in data.columns:
         return angle_col, given_unit
     found = find_orientation(data.columns, axis)
-    if found is None and "source_format" in data.header:  # a device's export without its orientation
+    if found is None and str(data.header.get("source_format", "")).startswith("MT Manager"):  # no orientation
         raise InputError(
             f"{path}: no orientation in this {data.header['source_format']} (Roll/Pitch/Yaw, Euler_X..Z, a "
             "whole Quat_q0..q3 or Mat[1][1]..Mat[3][3]): export it with the orientation, or give --angle-col"
