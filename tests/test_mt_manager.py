@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 import tankdaq
 from held_tilt import TRUTH, held_tilt
-from mt_manager_files import write_export
+from mt_manager_files import orientation, write_export
 from tankdaq.catalogue.database import open_catalogue
 from tankdaq.catalogue.index import index_folder
 from tankdaq.catalogue.schema import decays
@@ -148,6 +148,16 @@ def test_a_clock_that_wraps_at_one_day_is_unwrapped_so_whatever_the_product_says
     assert "day.txt: time from SampleTimeFine (10 kHz ticks, unwrapped at one day (864e6 ticks): 1 wrap)" in (
         recording.notices
     )
+
+
+def test_any_column_file_gives_its_orientation_as_the_angle(tmp_path: Path) -> None:
+    """Not only MT Manager's: a plain CSV of a logger's time and quaternion gives the roll, said."""
+    t, roll, _ = held_tilt()
+    quaternion = orientation("Quat", roll)[1]
+    columns = {"time_s": t, **{f"Quat_q{k}": quaternion[:, k] for k in range(4)}}
+    recording = tankdaq.read(write_csv(tmp_path / "logger.csv", columns))
+    assert np.allclose(recording.samples["roll_deg"], np.degrees(roll), atol=1e-6)
+    assert any("roll angle from the quaternion Quat_q0..Quat_q3" in line for line in recording.notices)
 
 
 def test_a_quaternion_or_matrix_component_is_refused_as_the_angle(tmp_path: Path) -> None:
