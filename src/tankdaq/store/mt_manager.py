@@ -83,8 +83,8 @@ def read_mt_manager(path: Path, options: CsvOptions) -> ColumnData:
     rows = [
         (number, line) for number, line in enumerate(lines, 1) if line.strip() and not line.startswith("//")
     ]
-    if not rows:
-        raise InputError(f"{path}: an MT Manager export with no header line and no data")
+    if len(rows) < 2:
+        raise InputError(f"{path}: an MT Manager export with no data rows after its header line")
     facts = header_facts(block)
     separator = _separator(path, rows[0][1])
     names = [name.strip() for name in rows[0][1].split(separator)]
@@ -181,20 +181,31 @@ def _columns(
     columns: dict[str, np.ndarray] = {}
     text: list[str] = []
     empty: list[str] = []
-    for i, name in enumerate(names[:width]):
-        cells = [row[i].strip() or "nan" for row in padded]
-        if decimal_comma:
-            cells = [cell.replace(",", ".") for cell in cells]
-        try:
-            values = np.asarray(cells, dtype=float)
-        except ValueError:
+    for name, cells in zip(names[:width], zip(*padded, strict=True), strict=True):
+        values = _numbers(cells, decimal_comma)
+        if values is None:
             text.append(name)
-            continue
-        if np.isnan(values).all():
+        elif np.isnan(values).all():
             empty.append(name)
         else:
             columns[name] = values
     return columns, text, empty, decimal_comma
+
+
+def _numbers(cells: tuple[str, ...], decimal_comma: bool) -> np.ndarray | None:
+    """A column's cells as numbers (an empty cell or ``NaN``: NaN), None for a column of text; a column
+    with no empty cell is read in one numpy call."""
+    if decimal_comma:
+        cells = tuple(cell.replace(",", ".") for cell in cells)
+    else:
+        try:
+            return np.asarray(cells, dtype=float)
+        except ValueError:  # an empty cell, or text
+            pass
+    try:
+        return np.asarray([cell.strip() or "nan" for cell in cells], dtype=float)
+    except ValueError:
+        return None
 
 
 def _oriented_rows(path: Path, columns: dict[str, np.ndarray], said: list[str]) -> dict[str, np.ndarray]:
