@@ -212,6 +212,14 @@ def test_a_row_with_more_fields_than_the_header_is_one_line(tmp_path: Path) -> N
     assert "joined.txt: line 101 has 12 fields, the header 10 (tab-separated)" in one_error_line(result)
 
 
+def test_an_export_of_its_header_alone_is_one_line(tmp_path: Path) -> None:
+    path = write_export(tmp_path / "head.txt", generation="4.x")
+    path.write_bytes(b"\r\n".join(path.read_bytes().split(b"\r\n")[:6]))  # the block and the header
+    result = identify(path, *MODEL)
+    assert result.exit_code == 2
+    assert "head.txt: an MT Manager export with no data rows after its header line" in one_error_line(result)
+
+
 def test_an_explicit_sample_time_column_is_unwrapped_too(tmp_path: Path) -> None:
     """``--time-col SampleTimeFine`` over a 2**32 wrap said "does not increase ... sort the rows by
     time": the rows were in order, the device's clock had wrapped."""
