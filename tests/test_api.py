@@ -145,7 +145,7 @@ def test_bad_input_is_one_line(simulated: list[tankdaq.Recording], tmp_path: Pat
         (lambda: tankdaq.identify(simulated[0], model="b9,c1"), "b9"),
         (lambda: tankdaq.identify([]), "sources: give a path, a Recording"),
         (lambda: tankdaq.identify(simulated[0], draft="3T"), "outside"),
-        (lambda: tankdaq.read(tmp_path / "notes.txt"), "unknown file type"),
+        (lambda: tankdaq.read(tmp_path / "notes.md"), "unknown file type"),
         (lambda: tankdaq.simulate(tmp_path, axis="yaw"), "roll or pitch"),
         (lambda: tankdaq.Reading(axis="heave"), "roll or pitch"),
     ]

@@ -312,11 +312,11 @@ def test_bad_input_is_one_line_and_exit_2(
     (tmp_path / "empty").mkdir()
     (tmp_path / "unnamed").mkdir()
     shutil.copy(csv_campaign / "trimaran_0.9T_pitch_8deg_run01.csv", tmp_path / "unnamed" / "decay1.csv")
-    (tmp_path / "notes.txt").write_text("hello")
+    (tmp_path / "notes.md").write_text("hello")
     places = {
         "{empty}": tmp_path / "empty",
         "{unnamed}": tmp_path / "unnamed",
-        "{notes}": tmp_path / "notes.txt",
+        "{notes}": tmp_path / "notes.md",
         "{campaign}": csv_campaign,
     }
     result = runner.invoke(app, [str(places.get(a, a)) for a in args])

@@ -50,10 +50,15 @@ def test_every_draft_option_shows_the_forms_it_takes() -> None:
 
 
 def test_every_rate_option_lists_every_accepted_rate() -> None:
+    """A device's or a simulation's --rate lists the output rates; the --rate of a command that reads
+    files is that file's own sample rate (``cli.options.SampleRate``), any, and says so."""
     found = commands_with("--rate")
-    assert {"record", "simulate", "session"} <= set(found)
+    files = {"identify", "diagnose", "report"}
+    assert {"record", "simulate", "session"} <= set(found) and files <= set(found)
     assert validation.OUTPUT_RATES_HZ[:5] == (1, 2, 4, 5, 8) and validation.OUTPUT_RATES_HZ[-1] == 400
-    for path in found:
+    for path in files:
+        assert "--rate <float range> Sample rate, Hz, of a text export that does not say it" in help_of(path)
+    for path in set(found) - files:
         listed = re.search(r"--rate \S+ [^:]*: ([\d, ]+)", help_of(path))
         assert listed is not None, path
         rates = tuple(int(r) for r in listed.group(1).replace(",", " ").split())

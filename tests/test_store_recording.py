@@ -379,10 +379,12 @@ def test_one_way_in_picks_the_reader_by_suffix_and_names_the_known_ones(tmp_path
     from tankdaq.errors import InputError
     from tankdaq.store.inputs import INPUT_FORMATS, read_runs
 
-    assert list(INPUT_FORMATS) == [".mcap", ".csv", ".h5", ".hdf5", ".mat", ".parquet"]
-    known = r"unknown file type \.txt; decays: use a \.mcap, \.csv, \.h5, \.hdf5, \.mat or \.parquet file"
+    assert list(INPUT_FORMATS) == [".mcap", ".csv", ".txt", ".h5", ".hdf5", ".mat", ".parquet"]
+    known = (
+        r"unknown file type \.dat; decays: use a \.mcap, \.csv, \.txt, \.h5, \.hdf5, \.mat or \.parquet file"
+    )
     with pytest.raises(InputError, match=known):
-        read_runs(tmp_path / "x.txt")
+        read_runs(tmp_path / "x.dat")
 
 
 def test_describe_run_fills_the_ittc_keys_from_the_hull() -> None:

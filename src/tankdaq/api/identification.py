@@ -240,7 +240,8 @@ def _clean(value: object) -> object:
 @dataclass(frozen=True)
 class Reading:
     """How decay files are read (``tankdaq identify``'s CSV options) and where each free decay is cut
-    (``start_s``/``end_s`` from the release; None: from the release to the end found)."""
+    (``start_s``/``end_s`` from the release; None: from the release to the end found);
+    ``sample_rate_hz``: the sample rate of a text export that does not say it (``--rate``)."""
 
     axis: str | None = None
     time_col: str = "time_s"
@@ -252,6 +253,7 @@ class Reading:
     skip_half_cycles: int = 0
     start_s: float | None = None
     end_s: float | None = None
+    sample_rate_hz: float | None = None
 
     def __post_init__(self) -> None:
         columns = columns_given(
@@ -262,12 +264,10 @@ class Reading:
         if start_s is not None and end_s is not None and end_s <= start_s:
             raise InputError(f"end_s: give a time after start_s ({start_s:g} s), not {end_s:g} s")
         checked = (
-            *columns,
-            arguments.flag(self.keep_all, "keep_all"),
-            arguments.whole(self.skip_half_cycles, "skip_half_cycles", 0, 1000),
-            start_s,
-            end_s,
-        )
+            *columns, arguments.flag(self.keep_all, "keep_all"),
+            arguments.whole(self.skip_half_cycles, "skip_half_cycles", 0, 1000), start_s, end_s,
+            arguments.optional_number(self.sample_rate_hz, "sample_rate_hz", 0.1, 100_000, "Hz"),
+        )  # fmt: skip
         for field_name, value in zip(self.__dataclass_fields__, checked, strict=True):
             object.__setattr__(self, field_name, value)  # normalised: a numpy float is a float
 
@@ -294,7 +294,7 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
         given = runs_of(item)
         runs += given if given is not None else read_decays(
             Path(str(item)), r.axis, r.time_col, r.angle_col, r.rate_col, r.angle_unit, r.keep_all,
-            r.skip_half_cycles, r.time_unit,
+            r.skip_half_cycles, r.time_unit, r.sample_rate_hz,
         )  # fmt: skip
     if not runs:  # a recording read with no release in it
         raise InputError("no decay to fit: the recordings given hold no release (tankdaq.read says so)")

@@ -48,6 +48,12 @@ class RecordingMeta(TypedDict, total=False):
     angle_initial_deg: float
     sample_rate_hz: float
     device_id: str
+    product_code: str  # a text export's header (an MT Manager export's // block), as written
+    firmware: str
+    filter_profile: str
+    mt_manager_version: str
+    source_format: str
+    update_rate_hz: float
     operator: str
     note: str
     release_device_time_s: list[float]  # each decay's release on the device clock
@@ -242,10 +248,12 @@ def read(
     rate_col: str | None = "rate_deg_s",
     angle_unit: str | None = None,
     time_unit: str | None = None,
+    sample_rate_hz: float | None = None,
 ) -> Recording:
     """Read a tankdaq recording (``.mcap``) or a decay file (a CSV in any spreadsheet dialect, HDF5, MATLAB
     or Parquet; the column settings are ``tankdaq identify``'s) into a ``Recording``; its decays are found
-    as ``identify`` finds them.
+    as ``identify`` finds them. ``sample_rate_hz``: the sample rate of a text export that does not say it
+    (an MT Manager 2019.2+ export without SampleTimeFine; ``--rate``).
 
     >>> rec = tankdaq.read("run.mcap")  # doctest: +SKIP
     >>> rec.decays[0].samples.plot(x="time_s", y="roll_deg")  # doctest: +SKIP
@@ -258,7 +266,8 @@ def read(
         axis, time_col, angle_col, rate_col, angle_unit, time_unit
     )
     kind = input_format(path).name  # an unknown suffix is one line before anything is read
-    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit)
+    rate_hz = arguments.optional_number(sample_rate_hz, "sample_rate_hz", 0.1, 100_000, "Hz")
+    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit, rate_hz)
     if path.suffix.lower() == ".mcap":
         return _read_recording(path, axis, kind)
     return _read_columns(path, axis, options, kind)
@@ -328,7 +337,9 @@ def _read_columns(path: Path, axis: str | None, options: CsvOptions, kind: str) 
     from ..store.inputs import read_runs
 
     o = options
-    runs = read_decays(path, axis, o.time_col, o.angle_col, o.rate_col, o.angle_unit, False, 0, o.time_unit)
+    runs = read_decays(
+        path, axis, o.time_col, o.angle_col, o.rate_col, o.angle_unit, False, 0, o.time_unit, o.sample_rate_hz
+    )
     meta = _meta(path, kind, runs[0].axis, runs)
     (whole,) = read_runs(path, axis, replace(options, keep_all=True))
     samples = decay_frame(whole)

@@ -270,6 +270,7 @@ def lab_file_row(
     from ..errors import InputError
     from ..ident.campaign import csv_labels
     from ..store.inputs import read_runs
+    from ..store.mt_manager import file_facts
 
     if axis is None:
         try:
@@ -286,6 +287,7 @@ def lab_file_row(
     hull = find_hull(labels.get("hull"))
     version = hull_version(hull) if hull is not None else None
     now = utc_now()
+    device = file_facts(path)  # an MT Manager export's // block: its device
     row = {
         "sha256": sha256 or file_sha256(path),
         "path": str(path.resolve()),
@@ -296,6 +298,8 @@ def lab_file_row(
         "draft": format_draft(labels["draft"]) if "draft" in labels else None,
         "axis": labels.get("axis", axis),
         "angle_nominal_deg": _finite(labels.get("angle_deg")),
+        "device_id": device.get("device_id", "")[:32] or None,
+        "firmware": device.get("firmware", "")[:32] or None,
         "created_utc": now,
         "updated_utc": now,
     }

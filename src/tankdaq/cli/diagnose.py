@@ -30,6 +30,7 @@ from .options import (
     KeepAll,
     RateColumn,
     RunsQuery,
+    SampleRate,
     SkipHalfCycles,
     StartS,
     TimeColumn,
@@ -90,6 +91,7 @@ def diagnose_command(
     rate_col: RateColumn = "rate_deg_s",
     angle_unit: AngleUnit = None,
     time_unit: TimeUnit = None,
+    sample_rate: SampleRate = None,
     keep_all: KeepAll = False,
     skip_half_cycles: SkipHalfCycles = 0,
     start: StartS = None,
@@ -129,8 +131,9 @@ def diagnose_command(
     writer = CatalogueWriter.from_option(catalogue, say)
     inputs = inputs_or_query(inputs, runs_query, catalogue)
     reading = Reading(
-        axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end
-    )
+        axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end,
+        sample_rate,
+    )  # fmt: skip
     columns = (sim_time_col or time_col, sim_angle_col or angle_col, sim_rate_col or rate_col)
     sim_reading = Reading(axis, *columns, sim_angle_unit or angle_unit)
     build_kernels_shown()

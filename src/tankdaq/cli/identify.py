@@ -29,6 +29,7 @@ from .options import (
     RateColumn,
     ReadAxis,
     RunsQuery,
+    SampleRate,
     SeaTemperature,
     SkipHalfCycles,
     StartS,
@@ -68,6 +69,7 @@ def identify_command(
     rate_col: RateColumn = "rate_deg_s",
     angle_unit: AngleUnit = None,
     time_unit: TimeUnit = None,
+    sample_rate: SampleRate = None,
     keep_all: KeepAll = False,
     skip_half_cycles: SkipHalfCycles = 0,
     start: StartS = None,
@@ -109,8 +111,9 @@ def identify_command(
     writer = CatalogueWriter.from_option(catalogue, say)  # a --catalogue not understood: one line, now
     inputs = inputs_or_query(inputs, runs_query, catalogue)
     reading = Reading(
-        axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end
-    )
+        axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end,
+        sample_rate,
+    )  # fmt: skip
     if compare:
         _compare(inputs, reading, method, as_json)
         return

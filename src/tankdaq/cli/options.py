@@ -60,6 +60,16 @@ TimeUnit = Annotated[
         help="Unit of the CSV time: s, ms or tick (0.1 ms: an Xsens SampleTimeFine) [default: the data].",
     ),
 ]
+SampleRate = Annotated[
+    float | None,
+    typer.Option(
+        "--rate",
+        min=0.1,
+        max=100_000.0,
+        help="Sample rate, Hz, of a text export that does not say it (MT Manager 2019.2+ without "
+        "SampleTimeFine) [default: the file's].",
+    ),
+]
 KeepAll = Annotated[bool, typer.Option("--keep-all", help="Do not cut the CSV record at the release.")]
 SkipHalfCycles = Annotated[
     int, typer.Option("--skip-half-cycles", min=0, help="Half-cycles dropped after it.")

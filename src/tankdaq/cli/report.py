@@ -19,6 +19,7 @@ from .options import (
     RateColumn,
     ReadAxis,
     RunsQuery,
+    SampleRate,
     SeaTemperature,
     TimeColumn,
     TimeUnit,
@@ -71,6 +72,7 @@ def report_command(
     rate_col: RateColumn = "rate_deg_s",
     angle_unit: AngleUnit = None,
     time_unit: TimeUnit = None,
+    sample_rate: SampleRate = None,
     as_json: JsonOutput = False,
     runs_query: RunsQuery = None,
     catalogue: CatalogueOption = None,
@@ -84,7 +86,7 @@ def report_command(
 
     if out is None and html is None and pdf is None and not as_json:
         raise fail("give --out FOLDER, or --html/--pdf file names (or --json for the numbers only)")
-    reading = Reading(axis, time_col, angle_col, rate_col, angle_unit, time_unit)
+    reading = Reading(axis, time_col, angle_col, rate_col, angle_unit, time_unit, sample_rate_hz=sample_rate)
     command = masked_command(["tankdaq", *sys.argv[1:]])
     build_kernels_shown()
     report = make_report(

@@ -56,13 +56,14 @@ def read_decays(
     keep_all: bool = False,
     skip_half_cycles: int = 0,
     time_unit: str | None = None,
+    sample_rate_hz: float | None = None,
 ) -> list[DecayRun]:
     """The decays of one file, each from its release. The CSV settings (columns, units (None: decided
     from the data), ``keep_all``: the record whole from its first sample; ``skip_half_cycles`` more
-    half-cycles dropped after a release found in the data) apply to CSV files; a recording's runs start
-    at its release events. What the reading decided or left out is in each run's ``meta[NOTICES]``
-    (``input_notices``)."""
-    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all, time_unit)
+    half-cycles dropped after a release found in the data; ``sample_rate_hz``: ``--rate``, for a text
+    export that does not say its own) apply to CSV files; a recording's runs start at its release events.
+    What the reading decided or left out is in each run's ``meta[NOTICES]`` (``input_notices``)."""
+    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all, time_unit, sample_rate_hz)
     try:
         return found_decays(read_runs(path, axis, options), skip_half_cycles)
     except BadIdentificationInput as exc:

@@ -17,6 +17,7 @@ import numpy as np
 from ..physics.models import model_name
 from ..physics.terms import TERM_TABLE, equation_text
 from ..records import DecayRun, partial_end
+from ..store.csv_import import source_facts
 from .budget import text_table
 from .compiled import simulate, substeps, term_codes
 from .derived import (
@@ -135,6 +136,7 @@ def summarize(
                 "offset_deg": math.degrees(offset),
                 "r2_angle": _r2(run.angle, pred),
                 "cut": run.meta.get("cut"),
+                **({"source": facts} if (facts := source_facts(run.meta)) else {}),
             }
             for run, pred, offset in zip(runs, predicted, estimator.offsets_, strict=True)
         ],

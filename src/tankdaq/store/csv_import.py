@@ -32,6 +32,7 @@ from ..validation import input_file
 from .csv_dialect import Table, read_table
 from .csv_units import ANGLE_UNITS, TIME_UNITS, UnitChoice, angle_unit, time_unit
 from .export_layout import axis_columns, read_sidecar, sidecar_path
+from .orientation_columns import find_orientation, refuse_component
 
 #: A decay needs at least this many samples.
 MIN_SAMPLES = 20
@@ -44,6 +45,12 @@ FIND_RELEASES = "find_releases"
 #: ``meta`` key of the lines a reader has for the user (dialect, units decided from the data, parts
 #: of the file not used): the commands print them, once per file.
 NOTICES = "notices"
+#: ``meta`` keys of what a file's own header says of the device and the tool that wrote it (an MT Manager
+#: export's ``//`` block): kept with each run, shown by ``identify --json`` and ``tankdaq.read``.
+SOURCE_KEYS = (
+    "source_format", "device_id", "product_code", "firmware", "hardware", "filter_profile", "option_flags",
+    "mt_manager_version", "xda_version", "coordinate_system", "start_time", "update_rate_hz",
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -58,12 +65,18 @@ class CsvOptions:
     angle_unit: str | None = None
     keep_all: bool = False
     time_unit: str | None = None
+    #: Samples per second of a file that does not say (an MT Manager 2019.2+ export without
+    #: SampleTimeFine): ``--rate``.
+    sample_rate_hz: float | None = None
 
     def __post_init__(self) -> None:  # checked whatever the files are: a typo fails on a recording too
         if self.angle_unit not in (None, *ANGLE_UNITS):
             raise InputError(f"angle unit {self.angle_unit!r} not understood: use deg or rad")
         if self.time_unit not in (None, *TIME_UNITS):
             raise InputError(f"time unit {self.time_unit!r} not understood: use s, ms or tick (0.1 ms)")
+        rate = self.sample_rate_hz
+        if rate is not None and not (isinstance(rate, int | float) and 0.1 <= rate <= 100_000):
+            raise InputError(f"--rate {rate!r}: give the file's sample rate in Hz, 0.1 to 100000")
 
 
 DEFAULT_CSV = CsvOptions()
@@ -123,8 +136,10 @@ def runs_of_columns(
     if angle_col == "angle_deg" and "angle_deg" not in columns and si_columns[0] in columns:  # SI (export)
         angle_col, given_unit = si_columns[0], "rad"
         rate_col = si_columns[1] if rate_col == DEFAULT_RATE_COL else rate_col
-    _check_columns(path, data, options.time_col, angle_col, rate_col)
     notices = list(data.notices)
+    angle_col, given_unit = _orientation(path, data, axis, angle_col, given_unit, notices)
+    _check_columns(path, data, options.time_col, angle_col, rate_col)
+    columns = dict(data.columns)
     t_raw, angle_raw = columns.pop(options.time_col), columns.pop(angle_col)
     said = data.stated
     if header and angle_col == si_columns[0] and options.time_col == "time_s":  # an export says its units
@@ -157,6 +172,36 @@ def runs_of_columns(
         return _exported_releases(run, releases)
     run.meta[FIND_RELEASES] = True
     return [run]
+
+
+def _orientation(
+    path: Path, data: ColumnData, axis: str, angle_col: str, given_unit: str | None, notices: list[str]
+) -> tuple[str, str | None]:
+    """The angle column and its unit: a quaternion or matrix component given is refused; without an
+    angle column (the default ``angle_deg`` absent) the axis' angle from the file's orientation columns
+    (``store.orientation_columns``: Euler as written, else converted, put in ``data.columns``)."""
+    refuse_component(path, angle_col, axis)
+    if angle_col != "angle_deg" or angle_col in data.columns:
+        return angle_col, given_unit
+    found = find_orientation(data.columns, axis)
+    if found is None and str(data.header.get("source_format", "")).startswith("MT Manager"):  # no orientation
+        raise InputError(
+            f"{path}: no orientation in this {data.header['source_format']} (Roll/Pitch/Yaw, Euler_X..Z, a "
+            "whole Quat_q0..q3 or Mat[1][1]..Mat[3][3]): export it with the orientation, or give --angle-col"
+        )
+    if found is None:
+        return angle_col, given_unit
+    notices.append(f"{path.name}: {found.line}")
+    if found.angle_rad is None:
+        return str(found.column), given_unit
+    name = f"{axis}_from_orientation"
+    data.columns[name] = found.angle_rad
+    return name, "rad"
+
+
+def source_facts(meta: dict[str, object]) -> dict[str, object]:
+    """What a run's file header said of its device and tool (``SOURCE_KEYS``), as found."""
+    return {key: meta[key] for key in SOURCE_KEYS if key in meta}
 
 
 def _check_columns(path: Path, data: ColumnData, time_col: str, angle_col: str, rate_col: str | None) -> None:

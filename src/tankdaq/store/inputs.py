@@ -44,6 +44,13 @@ def _read_mcap(path: Path, axis: str | None, _options: CsvOptions) -> list[Decay
 
 
 def _read_csv(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun]:
+    """A CSV or text table; an Xsens MT Manager export (``store.mt_manager``) by its own reader."""
+    from ..validation import input_file
+    from .mt_manager import is_mt_manager, read_mt_manager
+
+    input_file(path)
+    if is_mt_manager(path):
+        return runs_of_columns(path, read_mt_manager(path, options), options, axis)
     return read_csv_file(path, options, axis)
 
 
@@ -63,6 +70,7 @@ def _column_reader(name: str) -> Callable[[Path, str | None, CsvOptions], list[D
 INPUT_FORMATS: dict[str, InputFormat] = {
     ".mcap": InputFormat("tankdaq recording", _read_mcap, self_labelled=True),
     ".csv": InputFormat("CSV", _read_csv, self_labelled=False),
+    ".txt": InputFormat("text table", _read_csv, self_labelled=False),  # MT Manager's default export
     ".h5": InputFormat("HDF5", _column_reader("read_h5_columns"), self_labelled=False),
     ".hdf5": InputFormat("HDF5", _column_reader("read_h5_columns"), self_labelled=False),
     ".mat": InputFormat("MATLAB", _column_reader("read_mat_columns"), self_labelled=False),
