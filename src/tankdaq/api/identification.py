@@ -252,6 +252,8 @@ class Reading:
     skip_half_cycles: int = 0
     start_s: float | None = None
     end_s: float | None = None
+    device: str | None = None  # the device of an MT Manager log that holds several (None: each one a run)
+    speed_col: str | None = None  # a carriage-speed column: each decay's mean speed in its metadata
 
     def __post_init__(self) -> None:
         columns = columns_given(
@@ -267,6 +269,8 @@ class Reading:
             arguments.whole(self.skip_half_cycles, "skip_half_cycles", 0, 1000),
             start_s,
             end_s,
+            arguments.optional_text(self.device, "device", "a device id (hex) or bus id, or None"),
+            arguments.optional_text(self.speed_col, "speed_col", "a column name or None"),
         )
         for field_name, value in zip(self.__dataclass_fields__, checked, strict=True):
             object.__setattr__(self, field_name, value)  # normalised: a numpy float is a float
@@ -294,7 +298,7 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
         given = runs_of(item)
         runs += given if given is not None else read_decays(
             Path(str(item)), r.axis, r.time_col, r.angle_col, r.rate_col, r.angle_unit, r.keep_all,
-            r.skip_half_cycles, r.time_unit,
+            r.skip_half_cycles, r.time_unit, device=r.device, speed_col=r.speed_col,
         )  # fmt: skip
     if not runs:  # a recording read with no release in it
         raise InputError("no decay to fit: the recordings given hold no release (tankdaq.read says so)")

@@ -48,6 +48,11 @@ class RecordingMeta(TypedDict, total=False):
     angle_initial_deg: float
     sample_rate_hz: float
     device_id: str
+    firmware: str  # an MT Manager log's device firmware (its Configuration message)
+    filter_profile: int  # an MT Manager log's device filter profile
+    log_date: str  # when an MT Manager log was started, as it says it (YYYYMMDD, HHMMSSss)
+    log_time: str
+    speed_m_s: float  # the first decay's carriage speed (a --speed-col)
     operator: str
     note: str
     release_device_time_s: list[float]  # each decay's release on the device clock
@@ -242,10 +247,14 @@ def read(
     rate_col: str | None = "rate_deg_s",
     angle_unit: str | None = None,
     time_unit: str | None = None,
+    device: str | None = None,
+    speed_col: str | None = None,
 ) -> Recording:
-    """Read a tankdaq recording (``.mcap``) or a decay file (a CSV in any spreadsheet dialect, HDF5, MATLAB
-    or Parquet; the column settings are ``tankdaq identify``'s) into a ``Recording``; its decays are found
-    as ``identify`` finds them.
+    """Read a tankdaq recording (``.mcap``) or a decay file (a CSV in any spreadsheet dialect, HDF5, MATLAB,
+    Parquet, LabVIEW TDMS, an MT Manager ``.mtb`` log; the column settings are ``tankdaq identify``'s) into a
+    ``Recording``; its decays are found as ``identify`` finds them. ``device``: the device of a log that
+    holds several (its id in hex, or its bus id); ``speed_col``: a carriage-speed column (each decay's
+    ``speed_m_s``).
 
     >>> rec = tankdaq.read("run.mcap")  # doctest: +SKIP
     >>> rec.decays[0].samples.plot(x="time_s", y="roll_deg")  # doctest: +SKIP
@@ -258,7 +267,9 @@ def read(
         axis, time_col, angle_col, rate_col, angle_unit, time_unit
     )
     kind = input_format(path).name  # an unknown suffix is one line before anything is read
-    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit)
+    device = arguments.optional_text(device, "device", "a device id (hex) or bus id, or None")
+    speed_col = arguments.optional_text(speed_col, "speed_col", "a column name or None")
+    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit, device, speed_col)
     if path.suffix.lower() == ".mcap":
         return _read_recording(path, axis, kind)
     return _read_columns(path, axis, options, kind)
@@ -328,9 +339,14 @@ def _read_columns(path: Path, axis: str | None, options: CsvOptions, kind: str) 
     from ..store.inputs import read_runs
 
     o = options
-    runs = read_decays(path, axis, o.time_col, o.angle_col, o.rate_col, o.angle_unit, False, 0, o.time_unit)
+    wholes = read_runs(path, axis, replace(options, keep_all=True))
+    if len(wholes) > 1:  # a log of several devices: one Recording is one device's
+        names = ", ".join(str(run.meta.get("device_id", run.meta.get("bus_id"))) for run in wholes)
+        raise InputError(f"{path} holds {len(wholes)} devices ({names}): choose one with device=")
+    (whole,) = wholes
+    runs = read_decays(path, axis, o.time_col, o.angle_col, o.rate_col, o.angle_unit, False, 0, o.time_unit,
+                       device=o.device, speed_col=o.speed_col)  # fmt: skip
     meta = _meta(path, kind, runs[0].axis, runs)
-    (whole,) = read_runs(path, axis, replace(options, keep_all=True))
     samples = decay_frame(whole)
     samples[TIME_COLUMN] -= meta["release_device_time_s"][0] - float(whole.t[0])
     decays = [Decay(n, run, decay_frame(run)) for n, run in enumerate(runs, start=1)]

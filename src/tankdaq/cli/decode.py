@@ -118,12 +118,20 @@ def open_output(out: Path | None) -> Iterator[IO[str]]:
         yield handle
 
 
-def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
-    """Stream-decode ``data`` in 1 MiB pieces (progress in KiB)."""
+def is_log(path: Path, data: bytes) -> bool:
+    """An MT Manager log (``.mtb``, or bytes that start with the Configuration message a log starts with):
+    its frames are read from every bus id (``xsens.mtb``), not only from the master's."""
+    return path.suffix.lower() == ".mtb" or data[:3] == bytes((0xFA, 0xFF, MID.CONFIGURATION))
+
+
+def decode_all(data: bytes, bar: Progress, label: str, log: bool = False) -> DecodedBlock:
+    """Stream-decode ``data`` in 1 MiB pieces (progress in KiB); ``log``: as an MT Manager log."""
     from ..xsens.batch import DecodedBlock
+    from ..xsens.framer import ANY_BID
+    from ..xsens.mtb import LOG_MAX_DATA_LENGTH
     from ..xsens.stream import StreamDecoder
 
-    decoder = StreamDecoder()
+    decoder = StreamDecoder(LOG_MAX_DATA_LENGTH, ANY_BID) if log else StreamDecoder()
     task = bar.add_task(f"decoding {label} (KiB)", total=len(data) // 1024 + 1)
     blocks = []
     for start in range(0, len(data), CHUNK_BYTES):
@@ -223,6 +231,13 @@ def summary_line(block: DecodedBlock, legacy: int, tracker: CounterTracker) -> s
     return ", ".join(parts)
 
 
+def _log_summary(block: DecodedBlock) -> str:
+    """What was in an MT Manager log, per device (``xsens.mtb.DecodedLog.summary``)."""
+    from ..xsens.mtb import split_log
+
+    return split_log(block).summary()
+
+
 def parse_register(value: str | None) -> int | None:
     """typer parser for --legacy-mode/--legacy-settings: '0x0006', '6' or None."""
     if value is None:
@@ -270,8 +285,9 @@ def decode_command(
         except ProtocolError as exc:
             raise InputError(str(exc)) from None
     data = read_capture(capture)
+    log = is_log(capture, data)
     with progress_bar() as bar:
-        block = decode_all(data, bar, capture.name)
+        block = decode_all(data, bar, capture.name, log)
         if block.frames == 0:
             raise InputError(f"no Xbus frames in {capture} ({len(data)} bytes): is it a raw serial capture?")
         legacy = [] if legacy_mode is None else decode_legacy(block, legacy_mode, legacy_settings or 0)
@@ -282,7 +298,7 @@ def decode_command(
     tracker = CounterTracker()
     tracker.update_many(np.array(counters, dtype=np.int64))
     err_console.print(
-        f"{capture.name}: {summary_line(block, len(legacy), tracker)}",
+        f"{capture.name}: {_log_summary(block) if log else summary_line(block, len(legacy), tracker)}",
         markup=False,
         highlight=False,
         soft_wrap=True,

@@ -26,11 +26,13 @@ from .options import (
     FullScale,
     JsonOutput,
     KeepAll,
+    LogDevice,
     RateColumn,
     ReadAxis,
     RunsQuery,
     SeaTemperature,
     SkipHalfCycles,
+    SpeedColumn,
     StartS,
     TimeColumn,
     TimeUnit,
@@ -72,6 +74,8 @@ def identify_command(
     skip_half_cycles: SkipHalfCycles = 0,
     start: StartS = None,
     end: EndS = None,
+    device: LogDevice = None,
+    speed_col: SpeedColumn = None,
     bootstrap: int = typer.Option(
         0,
         "--bootstrap",
@@ -109,7 +113,18 @@ def identify_command(
     writer = CatalogueWriter.from_option(catalogue, say)  # a --catalogue not understood: one line, now
     inputs = inputs_or_query(inputs, runs_query, catalogue)
     reading = Reading(
-        axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end
+        axis,
+        time_col,
+        angle_col,
+        rate_col,
+        angle_unit,
+        time_unit,
+        keep_all,
+        skip_half_cycles,
+        start,
+        end,
+        device,
+        speed_col,
     )
     if compare:
         _compare(inputs, reading, method, as_json)

@@ -175,6 +175,51 @@ def _take(
     return True
 
 
+def read_tdms_columns(path: Path, options: CsvOptions) -> ColumnData:
+    """The numeric channels of a LabVIEW TDMS file (npTDMS), each named ``GROUP/CHANNEL``, with the unit
+    its ``unit_string`` property states; without a time channel (``--time-col``), the time of the angle
+    channel's waveform (``wf_start_offset`` + i * ``wf_increment``, in s). The file's properties and the
+    waveform's start time are kept in the header, as ``tdms_<property>``."""
+    nptdms = _library(path, "nptdms", "TDMS", "npTDMS: pip install npTDMS")
+    input_file(path)
+    try:
+        tdms = nptdms.TdmsFile.read(path)
+    except Exception as exc:  # npTDMS' own errors (ValueError, struct.error...), whatever the bytes were
+        raise InputError(f"{path}: not a TDMS file npTDMS can read ({type(exc).__name__}: {exc})") from None
+    columns: dict[str, np.ndarray] = {}
+    stated: dict[str, str] = {}
+    left: dict[str, str] = {}
+    said: list[str] = []
+    properties: dict[str, dict[str, Any]] = {}
+    for group in tdms.groups():
+        for channel in group.channels():
+            name = f"{group.name}/{channel.name}"
+            properties[name] = dict(channel.properties)
+            if _take(name, channel[:], columns, left, said):
+                unit = stated_unit(channel.properties.get("unit_string"))
+                if unit is not None:
+                    stated[name] = unit
+    header = {f"tdms_{key}": _plain(value) for key, value in tdms.properties.items()}
+    wave = properties.get(options.angle_col, {})
+    if options.time_col not in columns and "wf_increment" in wave and options.angle_col in columns:
+        step, start = float(wave["wf_increment"]), float(wave.get("wf_start_offset", 0.0))
+        columns[options.time_col] = start + step * np.arange(len(columns[options.angle_col]))
+        stated[options.time_col] = "s"
+        said.append(f"time from {options.angle_col}'s waveform: {step:g} s a sample")
+        if "wf_start_time" in wave:
+            header["tdms_wf_start_time"] = _plain(wave["wf_start_time"])
+    return _one_length(path, ColumnData(columns, left, header, stated, said), options, "channels")
+
+
+def _plain(value: object) -> object:
+    """A TDMS property as JSON keeps it (a number, or text: a timestamp in ISO form)."""
+    if isinstance(value, np.datetime64):
+        return str(value)
+    if isinstance(value, np.generic):
+        value = value.item()
+    return value if isinstance(value, int | float | str) else str(value)
+
+
 def _one_length(path: Path, data: ColumnData, options: CsvOptions, what: str) -> ColumnData:
     """The columns of the record the time column belongs to (the most common length without one); those
     of another length, and what was not a vector of numbers, said in one line."""

@@ -44,6 +44,10 @@ FIND_RELEASES = "find_releases"
 #: ``meta`` key of the lines a reader has for the user (dialect, units decided from the data, parts
 #: of the file not used): the commands print them, once per file.
 NOTICES = "notices"
+#: The channel a ``--speed-col`` becomes (m/s), and the ``meta`` key naming the column it came from: each
+#: decay's mean of it is its ``speed_m_s`` (``ident.inputs``).
+SPEED_CHANNEL = "carriage_speed_m_s"
+SPEED_FROM = "speed_from"
 
 
 @dataclass(frozen=True)
@@ -58,6 +62,10 @@ class CsvOptions:
     angle_unit: str | None = None
     keep_all: bool = False
     time_unit: str | None = None
+    #: the device of an MT Manager log that holds several (hex device id or bus id; None: each one a run)
+    device: str | None = None
+    #: a carriage-speed column (m/s): each decay's mean speed goes into its metadata (``speed_m_s``)
+    speed_col: str | None = None
 
     def __post_init__(self) -> None:  # checked whatever the files are: a typo fails on a recording too
         if self.angle_unit not in (None, *ANGLE_UNITS):
@@ -124,6 +132,8 @@ def runs_of_columns(
         angle_col, given_unit = si_columns[0], "rad"
         rate_col = si_columns[1] if rate_col == DEFAULT_RATE_COL else rate_col
     _check_columns(path, data, options.time_col, angle_col, rate_col)
+    if options.speed_col is not None and options.speed_col not in columns:
+        raise InputError(f"{path}: no speed column {options.speed_col!r}; columns are {', '.join(columns)}")
     notices = list(data.notices)
     t_raw, angle_raw = columns.pop(options.time_col), columns.pop(angle_col)
     said = data.stated
@@ -137,6 +147,8 @@ def runs_of_columns(
     notices += [f"{path.name}: {choice.line}" for choice in units if choice.line]
     to_rad, to_s = ANGLE_UNITS[units[0].unit], TIME_UNITS[units[1].unit]
     rate = columns.pop(rate_col) * to_rad if rate_col is not None and rate_col in columns else None
+    if options.speed_col is not None:
+        columns[SPEED_CHANNEL] = columns.pop(options.speed_col)  # found by ``_check_columns``
     channels = {_channel_name(name): _to_si(name, values) for name, values in columns.items()}
     run = DecayRun(
         t=t_raw * to_s,
@@ -149,6 +161,8 @@ def runs_of_columns(
     )
     run.meta.update({key: value for key, value in header.items() if key != "units"})
     run.meta[NOTICES] = notices
+    if options.speed_col is not None:
+        run.meta[SPEED_FROM] = options.speed_col
     _check_motion(run, units[0].unit)
     if options.keep_all:
         return [run]

@@ -47,6 +47,12 @@ def _read_csv(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRu
     return read_csv_file(path, options, axis)
 
 
+def _read_mtb(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun]:
+    from .mtb_file import read_mtb
+
+    return read_mtb(path, axis, options)
+
+
 def _column_reader(name: str) -> Callable[[Path, str | None, CsvOptions], list[DecayRun]]:
     """The runs of a column file (``store.column_files``: HDF5, MATLAB, Parquet), read as a CSV's."""
 
@@ -67,6 +73,8 @@ INPUT_FORMATS: dict[str, InputFormat] = {
     ".hdf5": InputFormat("HDF5", _column_reader("read_h5_columns"), self_labelled=False),
     ".mat": InputFormat("MATLAB", _column_reader("read_mat_columns"), self_labelled=False),
     ".parquet": InputFormat("Parquet", _column_reader("read_parquet_columns"), self_labelled=False),
+    ".tdms": InputFormat("LabVIEW TDMS", _column_reader("read_tdms_columns"), self_labelled=False),
+    ".mtb": InputFormat("MT Manager log", _read_mtb, self_labelled=False),
 }
 
 
