@@ -239,8 +239,8 @@ def _clean(value: object) -> object:
 
 @dataclass(frozen=True)
 class Reading:
-    """How decay files are read (``tankdaq identify``'s CSV options) and where each free decay is cut
-    (``start_s``/``end_s`` from the release; None: from the release to the end found)."""
+    """How files are read (``tankdaq identify``'s options; ``device``: of a log of several; ``speed_col``)
+    and where each free decay is cut (``start_s``/``end_s`` from the release; None: to the end found)."""
 
     axis: str | None = None
     time_col: str = "time_s"
@@ -252,8 +252,8 @@ class Reading:
     skip_half_cycles: int = 0
     start_s: float | None = None
     end_s: float | None = None
-    device: str | None = None  # the device of an MT Manager log that holds several (None: each one a run)
-    speed_col: str | None = None  # a carriage-speed column: each decay's mean speed in its metadata
+    device: str | None = None
+    speed_col: str | None = None
 
     def __post_init__(self) -> None:
         columns = columns_given(
@@ -269,8 +269,7 @@ class Reading:
             arguments.whole(self.skip_half_cycles, "skip_half_cycles", 0, 1000),
             start_s,
             end_s,
-            arguments.optional_text(self.device, "device", "a device id (hex) or bus id, or None"),
-            arguments.optional_text(self.speed_col, "speed_col", "a column name or None"),
+            *[arguments.optional_text(getattr(self, n), n, "text or None") for n in ("device", "speed_col")],
         )
         for field_name, value in zip(self.__dataclass_fields__, checked, strict=True):
             object.__setattr__(self, field_name, value)  # normalised: a numpy float is a float
@@ -390,9 +389,7 @@ def identify(
     water = water_settings(water_temperature_c, sea_temperature_c)
     hull = arguments.optional_path(hull, "hull", "a hull's name, a .toml path, or None")
     reading = arguments.optional_instance(reading, "reading", Reading, "a Reading or None") or Reading()
-    device = arguments.optional_instance(
-        device, "device", Profile, "a tankdaq.ident.budget_inputs.DeviceProfile"
-    )
+    device = arguments.optional_instance(device, "device", Profile, "an ident.budget_inputs.DeviceProfile")
     kept = Kept(arguments.progress(progress))
     draft = validation.draft_factor(arguments.draft(draft))
     bootstrap = arguments.whole(bootstrap, "bootstrap", 0, validation.MAX_BOOTSTRAP_REPLICAS)
@@ -434,10 +431,9 @@ def water_settings(water_temperature_c: object, sea_temperature_c: object) -> Wa
     """The water temperatures of ``full_scale``'s friction correction, checked by name (degC)."""
     from ..config import WaterSettings
 
-    unit = "degC"
     return WaterSettings(
-        arguments.optional_number(water_temperature_c, "water_temperature_c", 0.0, 40.0, unit=unit),
-        arguments.optional_number(sea_temperature_c, "sea_temperature_c", 0.0, 40.0, unit=unit),
+        arguments.optional_number(water_temperature_c, "water_temperature_c", 0.0, 40.0, unit="degC"),
+        arguments.optional_number(sea_temperature_c, "sea_temperature_c", 0.0, 40.0, unit="degC"),
     )
 
 

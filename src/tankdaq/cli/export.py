@@ -53,7 +53,10 @@ def export_command(
     check_options(file_format, frame)
     for path in recordings:
         if path.suffix.lower() != ".mcap":
-            raise InputError(f"{path}: not a tankdaq recording (.mcap)")
+            raise InputError(
+                f"{path}: not a tankdaq recording (.mcap); make recordings of a lab's files with "
+                "tankdaq import FOLDER --out recordings/"
+            )
     check_targets(recordings, file_format, out)
     for path in recordings:
         for written in export_recording(path, file_format, out, frame, on_notice=say):

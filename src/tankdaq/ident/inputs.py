@@ -30,7 +30,6 @@ from ..store.csv_import import (
     MIN_SAMPLES,
     NOTICES,
     SPEED_CHANNEL,
-    SPEED_FROM,
     CsvOptions,
     number_parts,
 )
@@ -89,7 +88,7 @@ def found_decays(runs: Iterable[DecayRun], skip_half_cycles: int = 0) -> list[De
         for decay in (split_releases(run, skip_half_cycles) if run.meta.pop(FIND_RELEASES, False) else [run])
     ]
     for decay in decays:
-        if SPEED_FROM in decay.meta and SPEED_CHANNEL in decay.channels:
+        if SPEED_CHANNEL in decay.channels:
             decay.meta["speed_m_s"] = round(float(np.nanmean(decay.channels[SPEED_CHANNEL])), 4)
     return decays
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..validation import input_file
-from .csv_import import ColumnData, CsvOptions
+from .csv_import import SPEED_CHANNEL, ColumnData, CsvOptions
 from .csv_units import stated_unit
 from .export_layout import EXPORT_FORMAT, mat_export_meta, plain_value
 from .pandas_hdf import NOT_A_VECTOR, is_frame, is_pytables_index, read_frame
@@ -200,15 +200,40 @@ def read_tdms_columns(path: Path, options: CsvOptions) -> ColumnData:
                 if unit is not None:
                     stated[name] = unit
     header = {f"tdms_{key}": _plain(value) for key, value in tdms.properties.items()}
-    wave = properties.get(options.angle_col, {})
+    angle_col = options.angle_col
+    if angle_col not in columns:  # the default name: the one channel whose name says the axis (Roll)
+        angle_col = _named_channel(columns, (options.axis,), angle_col, said)
+    if angle_col != options.angle_col:
+        columns[options.angle_col] = columns.pop(angle_col)
+        if angle_col in stated:
+            stated[options.angle_col] = stated.pop(angle_col)
+    if options.speed_col is None and SPEED_CHANNEL not in columns:
+        speed = _named_channel(columns, ("speed",), "", said)
+        if speed:
+            columns[SPEED_CHANNEL] = columns.pop(speed)
+    wave = properties.get(angle_col, {})
     if options.time_col not in columns and "wf_increment" in wave and options.angle_col in columns:
         step, start = float(wave["wf_increment"]), float(wave.get("wf_start_offset", 0.0))
         columns[options.time_col] = start + step * np.arange(len(columns[options.angle_col]))
         stated[options.time_col] = "s"
-        said.append(f"time from {options.angle_col}'s waveform: {step:g} s a sample")
+        said.append(f"time from {angle_col}'s waveform: {step:g} s a sample")
         if "wf_start_time" in wave:
             header["tdms_wf_start_time"] = _plain(wave["wf_start_time"])
     return _one_length(path, ColumnData(columns, left, header, stated, said), options, "channels")
+
+
+def _named_channel(
+    columns: dict[str, np.ndarray], words: tuple[str, ...], given: str, said: list[str]
+) -> str:
+    """The one channel whose own name (after ``GROUP/``) is one of ``words`` or starts with one (``Roll``,
+    ``roll_deg``, ``Speed``), said in a line; ``given`` where none or several are."""
+    found = [
+        name for name in columns if any(name.rpartition("/")[2].lower().startswith(word) for word in words)
+    ]
+    if len(found) != 1:
+        return given
+    said.append(f"channel {found[0]} read as the {words[0]} (its name says so)")
+    return found[0]
 
 
 def _plain(value: object) -> object:

@@ -66,6 +66,8 @@ class CsvOptions:
     device: str | None = None
     #: a carriage-speed column (m/s): each decay's mean speed goes into its metadata (``speed_m_s``)
     speed_col: str | None = None
+    #: the decay's axis, for a reader that finds the angle by a channel's name (TDMS: ``Roll``)
+    axis: str = "roll"
 
     def __post_init__(self) -> None:  # checked whatever the files are: a typo fails on a recording too
         if self.angle_unit not in (None, *ANGLE_UNITS):

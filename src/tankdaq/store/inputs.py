@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
@@ -59,7 +59,8 @@ def _column_reader(name: str) -> Callable[[Path, str | None, CsvOptions], list[D
     def read(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun]:
         from . import column_files
 
-        return runs_of_columns(path, getattr(column_files, name)(path, options), options, axis)
+        found = getattr(column_files, name)(path, replace(options, axis=axis or options.axis))
+        return runs_of_columns(path, found, options, axis)
 
     return read
 

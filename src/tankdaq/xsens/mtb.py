@@ -140,6 +140,8 @@ class DecodedLog:
             f"{self.device_label(b)}: {block.n_messages}{_lost(block)}" for b, block in self.devices.items()
         )
         parts = [f"{self.whole.n_messages} MTData2 messages of {len(self.devices)} device(s) ({per_device})"]
+        if not self.devices:
+            parts = ["no MTData2 messages"]
         if self.not_read:
             skipped = ", ".join(f"{_mid_name(mid)} x{n}" for mid, n in sorted(self.not_read.items()))
             parts.append(f"skipped {sum(self.not_read.values())} messages not read ({skipped})")
