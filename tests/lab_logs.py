@@ -3,6 +3,7 @@ after the Configuration and eMTS messages MT Manager's log starts with) and LabV
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -27,8 +28,12 @@ def scenario(seed: int = 3) -> DecayScenario:
     )
 
 
+@functools.cache
 def samples_of(seed: int = 3) -> np.ndarray:
-    return scenario(seed).samples()[0]
+    """The scenario's samples (made once per seed: the tests only read them)."""
+    samples = scenario(seed).samples()[0]
+    samples.flags.writeable = False
+    return samples
 
 
 def mtdata2_frames(samples: np.ndarray, bid: int = 0xFF) -> list[bytes]:
@@ -91,8 +96,8 @@ def bus_log(path: Path, devices: int = 3, seed: int = 3) -> tuple[Path, int]:
     return path, count
 
 
-def tdms_file(path: Path, t: np.ndarray, roll_deg: np.ndarray, speed_m_s: np.ndarray) -> Path:
-    """A LabVIEW-like TDMS file: group ``Carriage`` with a waveform roll channel (deg) and a speed
+def tdms_file(path: Path, t: np.ndarray, roll: np.ndarray, speed_m_s: np.ndarray, unit: str = "deg") -> Path:
+    """A LabVIEW-like TDMS file: group ``Carriage`` with a waveform roll channel (in ``unit``) and a speed
     channel (m/s), as npTDMS writes them."""
     from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
@@ -102,7 +107,7 @@ def tdms_file(path: Path, t: np.ndarray, roll_deg: np.ndarray, speed_m_s: np.nda
         writer.write_segment([
             RootObject({"name": "tow 12", "operator": "lab"}),
             GroupObject("Carriage"),
-            ChannelObject("Carriage", "Roll", roll_deg, {**wave, "unit_string": "deg"}),
+            ChannelObject("Carriage", "Roll", roll, {**wave, "unit_string": unit}),
             ChannelObject("Carriage", "Speed", speed_m_s, {**wave, "unit_string": "m/s"}),
         ])  # fmt: skip
     return path

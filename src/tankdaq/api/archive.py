@@ -186,6 +186,7 @@ def _imported_from(path: Path) -> tuple[str, int] | None:
 
 def _metadata(run: DecayRun, source: Path, sha: str, index: int, kind: str) -> dict[str, object]:
     """The run metadata of an imported decay: the condition where known, the device, the provenance."""
+    from ..config import format_draft
     from ..ident.campaign import csv_labels
     from ..store.csv_import import NOTICES
 
@@ -199,8 +200,8 @@ def _metadata(run: DecayRun, source: Path, sha: str, index: int, kind: str) -> d
     described: dict[str, object] = {"axis": run.axis, "angle_nominal_deg": float(nominal or measured)}
     for key in ("hull", "draft"):
         value = meta.get(key, labels.get(key))
-        if value is not None:
-            described[key] = value
+        if value is not None:  # a draft as a recording writes it (1.1T), from the factor read
+            described[key] = format_draft(float(value)) if key == "draft" else value
     if run.t.size > 1:
         described["sample_rate_hz"] = round(float(1.0 / np.median(np.diff(run.t))), 6)
     for key in ("device_id", "product_code", "firmware", "speed_m_s", "operator", "note"):
