@@ -81,7 +81,7 @@ def read_decays(
 def found_decays(runs: Iterable[DecayRun], skip_half_cycles: int = 0) -> list[DecayRun]:
     """Each run as its reader gave it, or, where the reader left the releases to the data (a CSV's
     record, ``FIND_RELEASES``), the decays found in it (``split_releases``); a decay with a carriage-speed
-    channel (``--speed-col``) has its mean speed as ``meta["speed_m_s"]``."""
+    channel (``--speed-col``) has its mean speed, to the cm/s, as ``meta["speed_m_s"]``."""
     decays = [
         decay
         for run in runs
@@ -89,7 +89,8 @@ def found_decays(runs: Iterable[DecayRun], skip_half_cycles: int = 0) -> list[De
     ]
     for decay in decays:
         if SPEED_CHANNEL in decay.channels:
-            decay.meta["speed_m_s"] = round(float(np.nanmean(decay.channels[SPEED_CHANNEL])), 4)
+            # to the cm/s, as a carriage is set: repeats at one speed are one condition (ident.conditions)
+            decay.meta["speed_m_s"] = round(float(np.nanmean(decay.channels[SPEED_CHANNEL])), 2)
     return decays
 
 
