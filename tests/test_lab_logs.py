@@ -161,3 +161,16 @@ def test_tdms_channels_are_found_by_name_and_units_by_unit_string(
 def test_a_missing_tdms_channel_is_one_line(tow: dict[str, Path]) -> None:
     with pytest.raises(InputError, match="no speed column 'Carriage/Sped'"):
         tankdaq.read(tow["tdms"], angle_col="Carriage/Roll", speed_col="Carriage/Sped")
+
+
+def test_catalogue_index_adds_a_log_with_its_device(
+    logs: dict[str, tuple[Path, int]], tmp_path: Path
+) -> None:
+    """``catalogue index`` reads .mtb logs as decay files: one row each, its device from the Configuration."""
+    catalogue = f"sqlite:///{tmp_path / 'catalogue.sqlite'}"
+    result = runner.invoke(app, ["catalogue", "index", str(logs["one"][0].parent), "--catalogue", catalogue])
+    assert result.exit_code == 0, result.output
+    assert "2 added" in result.output and "0 skipped" in result.output
+    rows = tankdaq.runs(catalogue=catalogue)
+    assert sorted(Path(p).name for p in rows["path"]) == ["bus.mtb", "one.mtb"]
+    assert set(rows["device_id"]) == {f"{DEVICE_ID:08X}"} and set(rows["firmware"]) == {"1.8.2"}

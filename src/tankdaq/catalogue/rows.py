@@ -271,6 +271,7 @@ def lab_file_row(
     from ..ident.campaign import csv_labels
     from ..store.inputs import read_runs
 
+    device: dict[str, Any] = {}  # what a file says of its device (an MT Manager log's Configuration)
     if axis is None:
         try:
             runs = read_runs(path)
@@ -279,6 +280,7 @@ def lab_file_row(
         if not runs:
             raise RecordingError(f"{path}: no decay in it")
         axis = runs[0].axis
+        device = {key: str(runs[0].meta[key]) for key in ("device_id", "firmware") if key in runs[0].meta}
     try:
         labels = csv_labels(path)
     except InputError:  # a decay all the same: its row says where and what, the condition unknown
@@ -298,6 +300,7 @@ def lab_file_row(
         "angle_nominal_deg": _finite(labels.get("angle_deg")),
         "created_utc": now,
         "updated_utc": now,
+        **device,
     }
     return row, version
 
