@@ -14,6 +14,8 @@ from lab_logs import DEVICE_ID, TRUE, bus_log, samples_of, single_device_log, td
 from tankdaq.api.identification import Reading
 from tankdaq.cli import app
 from tankdaq.errors import InputError
+from tankdaq.store.csv_import import CsvOptions
+from tankdaq.store.mtb_file import read_mtb
 from tankdaq.xsens.batch import decode_capture
 from tankdaq.xsens.framer import ANY_BID, StreamFramer
 from tankdaq.xsens.mtb import LOG_MAX_DATA_LENGTH, decode_log
@@ -174,3 +176,40 @@ def test_catalogue_index_adds_a_log_with_its_device(
     rows = tankdaq.runs(catalogue=catalogue)
     assert sorted(Path(p).name for p in rows["path"]) == ["bus.mtb", "one.mtb"]
     assert set(rows["device_id"]) == {f"{DEVICE_ID:08X}"} and set(rows["firmware"]) == {"1.8.2"}
+
+
+@pytest.mark.parametrize(
+    ("frame", "name"), [("NED", "EulerAngles"), ("NWU", "Quaternion"), ("NED", "RotationMatrix")]
+)
+def test_orientation_logged_in_ned_or_nwu_is_read_as_enu(frame: str, name: str, tmp_path: Path) -> None:
+    """A log whose orientation is in another earth frame (its local frame turned, as RotLocal turns it):
+    the same roll and pitch as in ENU, said in a line, never dropped as a foreign frame."""
+    from tankdaq.xsens.constants import MID
+    from tankdaq.xsens.frame import build_frame
+    from tankdaq.xsens.mtdata2 import encode_mtdata2, make_xdi
+    from tankdaq.xsens.orientation import euler_from_matrix, quaternion, rotation_matrix
+
+    samples = samples_of(3)[::4]
+    turn = {"NED": [[0, 1, 0], [1, 0, 0], [0, 0, -1]], "NWU": [[0, 1, 0], [-1, 0, 0], [0, 0, 1]]}[frame]
+    wire = (
+        rotation_matrix(samples["roll"], samples["pitch"], samples["yaw"])
+        .reshape(-1, 3, 3)
+        .transpose(0, 2, 1)
+    )
+    logged = euler_from_matrix((np.array(turn, float) @ wire).transpose(0, 2, 1).reshape(-1, 9))
+    forms = {"EulerAngles": lambda e: tuple(np.degrees(e)), "Quaternion": lambda e: tuple(quaternion(*e)),
+             "RotationMatrix": lambda e: tuple(rotation_matrix(*e))}  # fmt: skip
+    time_xdi, orientation_xdi = make_xdi("SampleTimeFine"), make_xdi(name, "float64", frame)
+    path = tmp_path / "framed.mtb"
+    path.write_bytes(
+        b"".join(
+            build_frame(
+                MID.MTDATA2, encode_mtdata2([(time_xdi, int(s["ticks"])), (orientation_xdi, forms[name](e))])
+            )
+            for s, e in zip(samples, logged, strict=True)
+        )
+    )
+    (run,) = read_mtb(path, None, CsvOptions(keep_all=True))
+    assert run.angle == pytest.approx(samples["roll"], abs=1e-9)
+    assert run.channels["other_angle_pitch"] == pytest.approx(samples["pitch"], abs=1e-9)
+    assert f"turned to ENU ({samples.size} in {frame})" in run.meta["notices"][1]

@@ -20,7 +20,7 @@ from ..records import DecayRun
 from ..samples import AXIS_FIELDS
 from ..validation import input_file
 from ..xsens.batch import to_samples
-from ..xsens.mtb import DecodedLog, decode_log
+from ..xsens.mtb import DecodedLog, decode_log, orientation_in_enu
 from ..xsens.timebase import MODULUS_32_BIT, MODULUS_ONE_DAY, SampleTimeUnwrapper, sample_time_modulus
 from .csv_import import FIND_RELEASES, MIN_SAMPLES, NOTICES, CsvOptions
 
@@ -71,6 +71,7 @@ def _device_run(path: Path, log: DecodedLog, bus_id: int, axis: str, several: bo
     modulus = sample_time_modulus(product)
     if ticks is not None and ticks.size and int(np.nanmax(ticks)) >= MODULUS_ONE_DAY:
         modulus = MODULUS_32_BIT  # a clock beyond one day is a 2**32 family's, whatever the header says
+    turned = orientation_in_enu(block)
     samples = to_samples(block, SampleTimeUnwrapper(modulus))
     angle_field, rate_field = AXIS_FIELDS[axis]
     keep = np.isfinite(samples["t"]) & np.isfinite(samples[angle_field])
@@ -87,7 +88,7 @@ def _device_run(path: Path, log: DecodedLog, bus_id: int, axis: str, several: bo
     meta: dict[str, object] = {"file": str(path), "axis": axis, "bus_id": bus_id}
     meta.update(config.metadata(bus_id) if config else {})
     meta["sample_rate_hz"] = round(float(1.0 / np.median(np.diff(kept["t"]))), 6)
-    notices = []
+    notices = [f"{path.name}: device {log.device_label(bus_id)}: {turned}"] if turned else []
     if kept.size < samples.size or samples.size < block.n_messages:
         notices.append(
             f"{path.name}: device {label}: {block.n_messages - kept.size} of {block.n_messages} messages not "

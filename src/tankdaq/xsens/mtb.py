@@ -17,10 +17,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .batch import DecodedBlock, decode_capture
+from .batch import ORIENTATION_COLUMNS, DecodedBlock, decode_capture
 from .constants import MASTER_BID, MID
 from .frame import Frame
 from .framer import ANY_BID
+from .mtdata2 import FRAME_MASK, FRAME_NAMES, FRAMES
+from .orientation import euler_from_matrix, quaternion, rotation_matrix
 from .timebase import CounterTracker
 
 #: Largest frame data in a log (xspublic ``XS_MAXDATALEN``): an Awinda eMTS is longer than a live frame.
@@ -29,6 +31,18 @@ LOG_MAX_DATA_LENGTH = 8185
 _MASTER_SIZE = 98
 _DEVICE_SIZE = 20
 _EMTS = 0x91
+#: Earth frame -> ENU, per frame an orientation may be logged in: vectors in ENU are ``M.T @ v`` (the
+#: local frame turned as MT Manager's RotLocal turns it; the sensor frame stays, MTi User Manual §NED/NWU).
+_TO_ENU = {
+    FRAMES["NED"]: np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]).T,
+    FRAMES["NWU"]: np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).T,
+}
+#: Each orientation output from (roll, pitch, yaw) in rad, as it goes on the wire.
+_FROM_EULER = {
+    "EulerAngles": lambda r, p, y: np.degrees(np.stack((r, p, y), axis=-1)),
+    "Quaternion": quaternion,
+    "RotationMatrix": rotation_matrix,
+}
 
 
 @dataclass(frozen=True)
@@ -151,6 +165,32 @@ class DecodedLog:
         if self.whole.pending_bytes:
             parts.append(f"{self.whole.pending_bytes} bytes of a cut last frame")
         return "; ".join(parts)
+
+
+def orientation_in_enu(block: DecodedBlock) -> str | None:
+    """Turn the orientation a device logged in NED or NWU into ENU, in place (the frame tankdaq reads:
+    ``batch.to_samples`` leaves any other out); the line that says so, None when all was ENU. Roll and
+    pitch are the same in NWU (a turn about the vertical); NED's local frame is turned back to ENU."""
+    turned: Counter[str] = Counter()
+    for name, to_rad in ORIENTATION_COLUMNS.items():
+        if name not in block.xdis:
+            continue
+        frames = block.xdis[name] & FRAME_MASK
+        for bits, to_enu in _TO_ENU.items():
+            rows = np.flatnonzero(block.present[name] & (frames == bits))
+            if not rows.size:
+                continue
+            euler = to_rad(block.columns[name][rows])
+            wire = rotation_matrix(euler[:, 0], euler[:, 1], euler[:, 2])  # column by column
+            matrix = to_enu @ wire.reshape(-1, 3, 3).transpose(0, 2, 1)
+            enu = euler_from_matrix(matrix.transpose(0, 2, 1).reshape(-1, 9))
+            block.columns[name][rows] = _FROM_EULER[name](enu[:, 0], enu[:, 1], enu[:, 2])
+            block.xdis[name][rows] &= ~FRAME_MASK
+            turned[FRAME_NAMES[bits]] += rows.size
+    if not turned:
+        return None
+    said = ", ".join(f"{count} in {frame}" for frame, count in sorted(turned.items()))
+    return f"orientation logged in another earth frame turned to ENU ({said}): roll and pitch as in ENU"
 
 
 def _lost(block: DecodedBlock) -> str:
