@@ -13,7 +13,7 @@ import tankdaq
 from lab_logs import DEVICE_ID, TRUE, bus_log, samples_of, single_device_log, tdms_file
 from tankdaq.api.identification import Reading
 from tankdaq.cli import app
-from tankdaq.errors import InputError
+from tankdaq.errors import BadIdentificationInput, InputError
 from tankdaq.store.csv_import import CsvOptions
 from tankdaq.store.mtb_file import read_mtb
 from tankdaq.xsens.batch import decode_capture
@@ -213,3 +213,25 @@ def test_orientation_logged_in_ned_or_nwu_is_read_as_enu(frame: str, name: str, 
     assert run.angle == pytest.approx(samples["roll"], abs=1e-9)
     assert run.channels["other_angle_pitch"] == pytest.approx(samples["pitch"], abs=1e-9)
     assert f"turned to ENU ({samples.size} in {frame})" in run.meta["notices"][1]
+
+
+def test_a_device_without_orientation_is_named_and_the_others_read(tmp_path: Path) -> None:
+    """A station's own MTData2 (no orientation, no time) beside a sensor's: the sensor is read, the
+    station named in a line with what it sent; a log of nothing usable is one line."""
+    from lab_logs import header_frames, mtdata2_frames
+    from tankdaq.xsens.constants import MID
+    from tankdaq.xsens.frame import build_frame
+    from tankdaq.xsens.mtdata2 import encode_mtdata2, make_xdi
+
+    station = build_frame(MID.MTDATA2, encode_mtdata2([(make_xdi("PacketCounter"), 7)]))
+    sensor = mtdata2_frames(samples_of(3), bid=1)
+    path = tmp_path / "station.mtb"
+    path.write_bytes(b"".join([*header_frames(1), *(f + station for f in sensor)]))
+    (run,) = read_mtb(path, None, CsvOptions())
+    assert run.meta["bus_id"] == 1 and run.t.size == len(sensor)
+    assert any("not read: " in line and "(master): 0 samples" in line and "PacketCounter" in line
+               for line in run.meta["notices"])  # fmt: skip
+    only = tmp_path / "only.mtb"
+    only.write_bytes(station * 50)
+    with pytest.raises(BadIdentificationInput, match=r"it sent PacketCounter\); a decay needs at least"):
+        read_mtb(only, None, CsvOptions())

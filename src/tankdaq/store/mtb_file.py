@@ -37,15 +37,20 @@ def read_mtb(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun
         raise BadIdentificationInput(
             f"{path}: no MTData2 message in {len(data)} bytes ({log.summary()}): is it an MT Manager log?"
         )
-    notice = f"{path.name}: {log.summary()}"
     axis = axis or "roll"
-    runs = []
+    runs, refused = [], []
     for bus_id in _chosen(path, log, options.device):
-        run = _device_run(path, log, bus_id, axis, several=len(log.devices) > 1)
-        run.meta[NOTICES] = [notice, *run.meta.get(NOTICES, ())]
+        try:
+            runs.append(_device_run(path, log, bus_id, axis, several=len(log.devices) > 1))
+        except BadIdentificationInput as exc:  # a station's own messages, a device without orientation
+            refused.append(str(exc))
+    if not runs:
+        raise BadIdentificationInput("; ".join(refused))
+    lines = [f"{path.name}: {log.summary()}", *(f"not read: {line}" for line in refused)]
+    for run in runs:
+        run.meta[NOTICES] = [*lines, *run.meta.get(NOTICES, ())]
         if not options.keep_all:
             run.meta[FIND_RELEASES] = True
-        runs.append(run)
     return runs
 
 
@@ -78,8 +83,9 @@ def _device_run(path: Path, log: DecodedLog, bus_id: int, axis: str, several: bo
     label = log.device_label(bus_id)
     if np.count_nonzero(keep) < MIN_SAMPLES:
         raise BadIdentificationInput(
-            f"{path}: device {label}: {np.count_nonzero(keep)} samples with a time and an orientation "
-            f"(of {block.n_messages} messages); a decay needs at least {MIN_SAMPLES} (no orientation output?)"
+            f"{path}: device {label}: {np.count_nonzero(keep)} samples with a time and an orientation of "
+            f"{block.n_messages} messages (it sent {', '.join(block.columns) or 'no outputs'}); a decay "
+            f"needs at least {MIN_SAMPLES}"
         )
     kept = samples[keep]
     other = next(name for name in AXIS_FIELDS if name != axis)
