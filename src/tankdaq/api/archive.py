@@ -90,13 +90,16 @@ def import_folder(
     already in ``out`` are not read as sources. Reading settings as ``tankdaq identify``'s."""
     from ..store.inputs import INPUT_FORMATS
     from ..validation import output_dir
+    from .recording import columns_given
 
     source = arguments.path(folder, "folder", "the archive folder's path (str or pathlib.Path)")
     if not source.is_dir():
-        raise InputError(f"{source} is not a folder: give the folder that holds the lab's files")
-    target = output_dir(arguments.path(out, "out", "the recordings folder's path"))
+        raise InputError(f"folder: {source} is not a folder: give the folder that holds the lab's files")
+    axis, time_col, angle_col, *_ = columns_given(axis, time_col, angle_col, None, None, None)
+    speed_col = arguments.optional_text(speed_col, "speed_col", "a column name or None")
+    shown = arguments.progress(progress) or Quiet()
+    target = output_dir(arguments.path(out, "out", "the recordings folder's path (str or pathlib.Path)"))
     target.mkdir(parents=True, exist_ok=True)
-    shown = progress or Quiet()
     inside = target.resolve()
     files = sorted(
         p

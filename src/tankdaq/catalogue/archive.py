@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..api import arguments
 from ..api.archive import ArchiveImport, import_folder
 from ..api.progress import Progress
 from .database import describe, open_catalogue, resolve_url
@@ -43,7 +44,8 @@ def import_archive(
 ) -> ArchiveReport:
     """Every decay of every file under ``folder`` as a recording in ``out``, each with its provenance, and
     catalogued (``catalogue``: a URL or path, None: ``$TANKDAQ_CATALOGUE`` or the user's, "none": off)."""
-    url = resolve_url(catalogue)  # a catalogue not understood: one line before any file is read
+    given = arguments.optional_text(catalogue, "catalogue", "a catalogue URL or path, 'none', or None")
+    url = resolve_url(given)  # a catalogue not understood: one line before any file is read
     imported = import_folder(
         folder, out, axis=axis, time_col=time_col, angle_col=angle_col, speed_col=speed_col, progress=progress
     )
