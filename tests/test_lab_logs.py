@@ -111,9 +111,20 @@ def test_decode_reports_a_log_per_device(logs: dict[str, tuple[Path, int]], tmp_
     assert len((tmp_path / "out.jsonl").read_text().splitlines()) == 3 * frames
 
 
-def test_export_of_a_log_names_the_way(logs: dict[str, tuple[Path, int]]) -> None:
-    result = runner.invoke(app, ["export", str(logs["one"][0])])
-    assert result.exit_code == 2 and "tankdaq import FOLDER --out recordings/" in result.output
+def test_export_of_a_log_writes_each_device_decay_with_its_device(
+    logs: dict[str, tuple[Path, int]], tmp_path: Path
+) -> None:
+    """``export`` of a log: its decays become recordings (as import makes them), then CSV files whose
+    sidecars say the device and the source."""
+    import json
+
+    result = runner.invoke(app, ["export", str(logs["bus"][0]), "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    sidecars = sorted(tmp_path.glob("bus-*.json"))
+    assert len(sidecars) == 3 and len(list(tmp_path.glob("bus-*.csv"))) == 3
+    meta = [json.loads(path.read_text()) for path in sidecars]
+    assert sorted(m["device_id"] for m in meta) == ["077B1A2C", "077B1A2D", "077B1A2E"]
+    assert {m["source_format"] for m in meta} == {"MT Manager log"}
 
 
 # ---- LabVIEW TDMS ---------------------------------------------------------------------------------------

@@ -118,6 +118,19 @@ def import_folder(
     return result
 
 
+def import_file(path: Path, out: Path, progress: Progress | None = None) -> ArchiveImport:
+    """The decays of one lab file as recordings in ``out`` (``tankdaq export`` of a file that is not a
+    recording: its decays become recordings first, then they are exported); as ``import_folder``."""
+    result = ArchiveImport()
+    out.mkdir(parents=True, exist_ok=True)
+    _import_file(path, out, (None, "time_s", "angle_deg", None), result, progress or Quiet())
+    if path in result.not_decays:
+        raise InputError(f"{path}: {result.not_decays[path]}")
+    if result.not_written:
+        raise InputError(result.not_written[0])
+    return result
+
+
 def _import_file(
     path: Path,
     target: Path,
