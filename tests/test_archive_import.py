@@ -44,6 +44,13 @@ def archive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, str, 
     (folder / "swath_T_roll_8deg.csv").write_text(
         "time_s,angle_deg\n" + "".join(f"{a},{b}\n" for a, b in rows)
     )
+    sidecar = {
+        "hull": "swath",
+        "draft": "1.1T",
+        "axis": "roll",
+        "angle_deg": 8,
+    }  # read with the CSV, not listed
+    (folder / "swath_T_roll_8deg.json").write_text(json.dumps(sidecar))
     (folder / "notes.txt").write_text("carriage log, not a decay\n")
     (folder / "empty.csv").write_text("time_s,angle_deg\n0,1\n")
     (folder / "2024" / "noise.mtb").write_bytes(
@@ -90,6 +97,8 @@ def test_each_recording_holds_its_provenance(first: ArchiveReport) -> None:
         header = json.loads(meta["source_header"])
         if decay.source.suffix == ".mtb":
             assert meta["device_id"].startswith("077B1A2") and header["log_date"] == "20241105"
+        if decay.source.suffix == ".csv":  # its condition from its sidecar
+            assert (meta["hull"], meta["draft"], float(meta["angle_nominal_deg"])) == ("swath", "1.1T", 8.0)
         if decay.source.suffix == ".tdms":
             assert header["tdms_name"] == "tow 12"
             assert float(meta["speed_m_s"]) == pytest.approx(0.8 if decay.index == 1 else 1.4)

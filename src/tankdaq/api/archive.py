@@ -110,12 +110,23 @@ def import_folder(
     with shown.task("importing", total=len(files)) as update:
         for done, path in enumerate(files, start=1):
             update(done - 1, description=f"reading {path.name}")
+            if _sidecar_of(path, files):
+                continue  # read with its decay file (a CSV's labels and metadata)
             if path.suffix.lower() not in INPUT_FORMATS:
                 result.not_decays[path] = f"not a file tankdaq reads ({path.suffix or 'no suffix'})"
             else:
                 _import_file(path, target, (axis, time_col, angle_col, speed_col), result, shown)
         update(len(files))
     return result
+
+
+def _sidecar_of(path: Path, files: list[Path]) -> bool:
+    """Whether ``path`` is the ``<stem>.json`` beside a decay file of that stem (read with it)."""
+    from ..store.inputs import INPUT_FORMATS
+
+    return path.suffix.lower() == ".json" and any(
+        path.with_suffix(suffix) in files for suffix in INPUT_FORMATS if suffix != ".json"
+    )
 
 
 def import_file(path: Path, out: Path, progress: Progress | None = None) -> ArchiveImport:
