@@ -161,6 +161,9 @@ def _import_file(
         said = str(exc) if isinstance(exc, TankdaqError) else (exc.strerror or str(exc))
         result.not_decays[path] = said.removeprefix(f"{path}: ").removeprefix(f"{path} ")
         return
+    except Exception as exc:  # a library failing on bytes it never expected: one file lost, not the archive
+        result.not_decays[path] = f"could not be read ({type(exc).__name__}: {exc})"
+        return
     for line in input_notices(runs):
         progress.line(line)
         result.notices.append(line)
