@@ -108,7 +108,11 @@ def test_decode_reports_a_log_per_device(logs: dict[str, tuple[Path, int]], tmp_
         f"077B1A2C (bus 1): {frames}, 077B1A2D (bus 2): {frames}, 077B1A2E (bus 3): {frames}" in result.output
     )
     assert "0x8B x1" in result.output and "0 bad checksums, 0 skipped bytes" in result.output
-    assert len((tmp_path / "out.jsonl").read_text().splitlines()) == 3 * frames
+    import json
+
+    rows = [json.loads(line) for line in (tmp_path / "out.jsonl").read_text().splitlines()]
+    assert len(rows) == 3 * frames
+    assert [row["BusId"] for row in rows[:6]] == [1, 2, 3, 1, 2, 3]  # which device sent each
 
 
 def test_export_of_a_log_writes_each_device_decay_with_its_device(
