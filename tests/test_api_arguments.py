@@ -65,6 +65,7 @@ PUBLIC: dict[str, Callable[..., Any]] = {
     "runs": tankdaq.runs,
     "set_reference": tankdaq.set_reference,
     "make_report": tankdaq.make_report,
+    "import_archive": tankdaq.import_archive,
     "Identification.plot": tankdaq.Identification.plot,
     "Recording.export": tankdaq.Recording.export,
     "Recording.to_csv": tankdaq.Recording.to_csv,
@@ -152,6 +153,10 @@ def _base(name: str, made: Made, here: Path) -> tuple[Callable[..., Any], dict[s
         "runs": (tankdaq.runs, {"catalogue": made.catalogue}),
         "set_reference": (tankdaq.set_reference, {"fit_id": 1, "catalogue": made.fitted}),
         "make_report": (tankdaq.make_report, {"inputs": made.folder, **stop}),
+        "import_archive": (
+            tankdaq.import_archive,
+            {"folder": made.folder, "out": here / "in", "catalogue": "none", **stop},
+        ),
         "Identification.plot": (made.result.plot, {}),
         "Diagnosis.save_rrd": (made.diagnosis.save_rrd, {"path": here / "story.rrd"}),
     }

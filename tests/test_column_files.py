@@ -210,7 +210,7 @@ def test_a_csv_read_with_named_columns_gets_its_catalogue_row_and_fit(tmp_path: 
 def test_identify_names_the_column_formats_it_reads(tmp_path: Path) -> None:
     (tmp_path / "run.xlsx").write_bytes(b"PK")
     workbook = r"\(a spreadsheet workbook: save its sheet as CSV\)"
-    formats = r"use a \.mcap, \.csv, \.txt, \.h5, \.hdf5, \.mat or \.parquet file"
+    formats = r"use a \.mcap, \.csv, \.txt, \.h5, \.hdf5, \.mat, \.parquet, \.tdms or \.mtb file"
     with pytest.raises(InputError, match=rf"unknown file type \.xlsx {workbook}; decays: {formats}"):
         tankdaq.read(tmp_path / "run.xlsx")
 

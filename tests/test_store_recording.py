@@ -379,9 +379,20 @@ def test_one_way_in_picks_the_reader_by_suffix_and_names_the_known_ones(tmp_path
     from tankdaq.errors import InputError
     from tankdaq.store.inputs import INPUT_FORMATS, read_runs
 
-    assert list(INPUT_FORMATS) == [".mcap", ".csv", ".txt", ".h5", ".hdf5", ".mat", ".parquet"]
+    assert list(INPUT_FORMATS) == [
+        ".mcap",
+        ".csv",
+        ".txt",
+        ".h5",
+        ".hdf5",
+        ".mat",
+        ".parquet",
+        ".tdms",
+        ".mtb",
+    ]
     known = (
-        r"unknown file type \.dat; decays: use a \.mcap, \.csv, \.txt, \.h5, \.hdf5, \.mat or \.parquet file"
+        r"unknown file type \.dat; decays: use a \.mcap, \.csv, \.txt, \.h5, \.hdf5, \.mat, \.parquet, "
+        r"\.tdms or \.mtb file"
     )
     with pytest.raises(InputError, match=known):
         read_runs(tmp_path / "x.dat")

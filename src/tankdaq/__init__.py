@@ -41,6 +41,7 @@ __all__ = [
     "compare_models",
     "diagnose",
     "identify",
+    "import_archive",
     "make_report",
     "read",
     "runs",
@@ -66,6 +67,7 @@ _PUBLIC = {
     "runs": "catalogue.query",
     "set_reference": "catalogue.fits",
     "make_report": "report.make",
+    "import_archive": "catalogue.archive",
     "Report": "report.make",
 }
 
@@ -78,6 +80,7 @@ if TYPE_CHECKING:
     from .api.identification import Identification, Reading, identify
     from .api.recording import Decay, Recording, read
     from .api.workflows import simulate
+    from .catalogue.archive import import_archive
     from .catalogue.fits import set_reference
     from .catalogue.query import runs
     from .report.make import Report, make_report

@@ -239,9 +239,9 @@ def _clean(value: object) -> object:
 
 @dataclass(frozen=True)
 class Reading:
-    """How decay files are read (``tankdaq identify``'s CSV options) and where each free decay is cut
-    (``start_s``/``end_s`` from the release; None: from the release to the end found);
-    ``sample_rate_hz``: the sample rate of a text export that does not say it (``--rate``)."""
+    """How files are read (``tankdaq identify``'s options; ``device``: of a log of several; ``speed_col``;
+    ``sample_rate_hz``: the rate of a text export that does not say it, ``--rate``) and where each free decay
+    is cut (``start_s``/``end_s`` from the release; None: to the end found)."""
 
     axis: str | None = None
     time_col: str = "time_s"
@@ -254,6 +254,8 @@ class Reading:
     start_s: float | None = None
     end_s: float | None = None
     sample_rate_hz: float | None = None
+    device: str | None = None
+    speed_col: str | None = None
 
     def __post_init__(self) -> None:
         columns = columns_given(
@@ -267,6 +269,7 @@ class Reading:
             *columns, arguments.flag(self.keep_all, "keep_all"),
             arguments.whole(self.skip_half_cycles, "skip_half_cycles", 0, 1000), start_s, end_s,
             arguments.optional_number(self.sample_rate_hz, "sample_rate_hz", 0.1, 100_000, "Hz"),
+            *[arguments.optional_text(getattr(self, n), n, "text or None") for n in ("device", "speed_col")],
         )  # fmt: skip
         for field_name, value in zip(self.__dataclass_fields__, checked, strict=True):
             object.__setattr__(self, field_name, value)  # normalised: a numpy float is a float
@@ -294,7 +297,7 @@ def load_runs(sources: Source | Sequence[Source], reading: Reading, progress: Pr
         given = runs_of(item)
         runs += given if given is not None else read_decays(
             Path(str(item)), r.axis, r.time_col, r.angle_col, r.rate_col, r.angle_unit, r.keep_all,
-            r.skip_half_cycles, r.time_unit, r.sample_rate_hz,
+            r.skip_half_cycles, r.time_unit, r.sample_rate_hz, device=r.device, speed_col=r.speed_col,
         )  # fmt: skip
     if not runs:  # a recording read with no release in it
         raise InputError("no decay to fit: the recordings given hold no release (tankdaq.read says so)")
@@ -386,9 +389,7 @@ def identify(
     water = water_settings(water_temperature_c, sea_temperature_c)
     hull = arguments.optional_path(hull, "hull", "a hull's name, a .toml path, or None")
     reading = arguments.optional_instance(reading, "reading", Reading, "a Reading or None") or Reading()
-    device = arguments.optional_instance(
-        device, "device", Profile, "a tankdaq.ident.budget_inputs.DeviceProfile"
-    )
+    device = arguments.optional_instance(device, "device", Profile, "an ident.budget_inputs.DeviceProfile")
     kept = Kept(arguments.progress(progress))
     draft = validation.draft_factor(arguments.draft(draft))
     bootstrap = arguments.whole(bootstrap, "bootstrap", 0, validation.MAX_BOOTSTRAP_REPLICAS)
@@ -430,10 +431,9 @@ def water_settings(water_temperature_c: object, sea_temperature_c: object) -> Wa
     """The water temperatures of ``full_scale``'s friction correction, checked by name (degC)."""
     from ..config import WaterSettings
 
-    unit = "degC"
     return WaterSettings(
-        arguments.optional_number(water_temperature_c, "water_temperature_c", 0.0, 40.0, unit=unit),
-        arguments.optional_number(sea_temperature_c, "sea_temperature_c", 0.0, 40.0, unit=unit),
+        arguments.optional_number(water_temperature_c, "water_temperature_c", 0.0, 40.0, unit="degC"),
+        arguments.optional_number(sea_temperature_c, "sea_temperature_c", 0.0, 40.0, unit="degC"),
     )
 
 

@@ -49,11 +49,14 @@ class RecordingMeta(TypedDict, total=False):
     sample_rate_hz: float
     device_id: str
     product_code: str  # a text export's header (an MT Manager export's // block), as written
-    firmware: str
-    filter_profile: str
+    firmware: str  # the export's header or an MT Manager log's Configuration message
+    filter_profile: str | int  # an export's header says it as text, a log's Configuration as a number
     mt_manager_version: str
     source_format: str
     update_rate_hz: float
+    log_date: str  # when an MT Manager log was started, as it says it (YYYYMMDD, HHMMSSss)
+    log_time: str
+    speed_m_s: float  # the first decay's carriage speed (a --speed-col)
     operator: str
     note: str
     release_device_time_s: list[float]  # each decay's release on the device clock
@@ -249,11 +252,15 @@ def read(
     angle_unit: str | None = None,
     time_unit: str | None = None,
     sample_rate_hz: float | None = None,
+    device: str | None = None,
+    speed_col: str | None = None,
 ) -> Recording:
-    """Read a tankdaq recording (``.mcap``) or a decay file (a CSV in any spreadsheet dialect, HDF5, MATLAB
-    or Parquet; the column settings are ``tankdaq identify``'s) into a ``Recording``; its decays are found
-    as ``identify`` finds them. ``sample_rate_hz``: the sample rate of a text export that does not say it
-    (an MT Manager 2019.2+ export without SampleTimeFine; ``--rate``).
+    """Read a tankdaq recording (``.mcap``) or a decay file (a CSV in any spreadsheet dialect, an MT Manager
+    text export, HDF5, MATLAB, Parquet, LabVIEW TDMS, an MT Manager ``.mtb`` log; the column settings are
+    ``tankdaq identify``'s) into a ``Recording``; its decays are found as ``identify`` finds them.
+    ``sample_rate_hz``: the sample rate of a text export that does not say it (``--rate``); ``device``: the
+    device of a log that holds several (its id in hex, or its bus id); ``speed_col``: a carriage-speed
+    column (each decay's ``speed_m_s``).
 
     >>> rec = tankdaq.read("run.mcap")  # doctest: +SKIP
     >>> rec.decays[0].samples.plot(x="time_s", y="roll_deg")  # doctest: +SKIP
@@ -267,7 +274,11 @@ def read(
     )
     kind = input_format(path).name  # an unknown suffix is one line before anything is read
     rate_hz = arguments.optional_number(sample_rate_hz, "sample_rate_hz", 0.1, 100_000, "Hz")
-    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, False, time_unit, rate_hz)
+    device = arguments.optional_text(device, "device", "a device id (hex) or bus id, or None")
+    speed_col = arguments.optional_text(speed_col, "speed_col", "a column name or None")
+    options = CsvOptions(
+        time_col, angle_col, rate_col, angle_unit, False, time_unit, rate_hz, device, speed_col
+    )
     if path.suffix.lower() == ".mcap":
         return _read_recording(path, axis, kind)
     return _read_columns(path, axis, options, kind)
@@ -337,11 +348,14 @@ def _read_columns(path: Path, axis: str | None, options: CsvOptions, kind: str) 
     from ..store.inputs import read_runs
 
     o = options
-    runs = read_decays(
-        path, axis, o.time_col, o.angle_col, o.rate_col, o.angle_unit, False, 0, o.time_unit, o.sample_rate_hz
-    )
+    wholes = read_runs(path, axis, replace(options, keep_all=True))
+    if len(wholes) > 1:  # a log of several devices: one Recording is one device's
+        names = ", ".join(str(run.meta.get("device_id", run.meta.get("bus_id"))) for run in wholes)
+        raise InputError(f"{path} holds {len(wholes)} devices ({names}): choose one with device=")
+    (whole,) = wholes
+    runs = read_decays(path, axis, o.time_col, o.angle_col, o.rate_col, o.angle_unit, False, 0, o.time_unit,
+                       o.sample_rate_hz, device=o.device, speed_col=o.speed_col)  # fmt: skip
     meta = _meta(path, kind, runs[0].axis, runs)
-    (whole,) = read_runs(path, axis, replace(options, keep_all=True))
     samples = decay_frame(whole)
     samples[TIME_COLUMN] -= meta["release_device_time_s"][0] - float(whole.t[0])
     decays = [Decay(n, run, decay_frame(run)) for n, run in enumerate(runs, start=1)]

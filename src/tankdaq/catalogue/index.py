@@ -55,9 +55,20 @@ def index_folder(
     catalogue: Catalogue, folder: Path, progress: Callable[[Path], None] | None = None
 ) -> IndexReport:
     """Catalogue every decay file and export under ``folder`` and every session log in it."""
-    report = IndexReport()
     files = sorted(p for p in folder.rglob("*") if p.suffix.lower() in DECAY_SUFFIXES and p.is_file())
-    files.sort(key=lambda p: p.suffix.lower() != ".mcap")  # recordings first: exports find their rows
+    report = index_files(catalogue, files, progress)
+    for log in sorted(folder.rglob("session.jsonl")):
+        report.sessions += bool(record_session(catalogue, log.parent))
+    return report
+
+
+def index_files(
+    catalogue: Catalogue, files: list[Path], progress: Callable[[Path], None] | None = None
+) -> IndexReport:
+    """Catalogue the decay files and exports ``files`` (``index_folder`` without the sessions: what
+    ``tankdaq import`` has just written)."""
+    report = IndexReport()
+    files = sorted(files, key=lambda p: p.suffix.lower() != ".mcap")  # recordings first: exports find rows
     hashes = _readable(files, report)
     known, retired = _known_paths(catalogue, list(hashes.values()))
     pending: list[Made] = []  # new decay rows, written INDEX_BATCH to a transaction
@@ -90,8 +101,6 @@ def index_folder(
             progress(path)
     _flush(catalogue, pending)
     report.retired = retire_stale(catalogue, hashes)
-    for log in sorted(folder.rglob("session.jsonl")):
-        report.sessions += bool(record_session(catalogue, log.parent))
     return report
 
 

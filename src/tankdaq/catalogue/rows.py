@@ -272,6 +272,7 @@ def lab_file_row(
     from ..store.inputs import read_runs
     from ..store.mt_manager import file_facts
 
+    device: dict[str, Any] = {}  # what a file says of its device (an MT Manager log's Configuration)
     if axis is None:
         try:
             runs = read_runs(path)
@@ -280,6 +281,7 @@ def lab_file_row(
         if not runs:
             raise RecordingError(f"{path}: no decay in it")
         axis = runs[0].axis
+        device = {key: str(runs[0].meta[key]) for key in ("device_id", "firmware") if key in runs[0].meta}
     try:
         labels = csv_labels(path)
     except InputError:  # a decay all the same: its row says where and what, the condition unknown
@@ -287,7 +289,7 @@ def lab_file_row(
     hull = find_hull(labels.get("hull"))
     version = hull_version(hull) if hull is not None else None
     now = utc_now()
-    device = file_facts(path)  # an MT Manager export's // block: its device
+    device = {**file_facts(path), **device}  # an MT Manager export's // block, or a log's Configuration
     row = {
         "sha256": sha256 or file_sha256(path),
         "path": str(path.resolve()),

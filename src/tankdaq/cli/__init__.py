@@ -34,6 +34,7 @@ COMMAND_MODULES = {
     "decode": "decode",
     "recover": "store",
     "export": "export",
+    "import": "archive",
     "identify": "identify",
     "campaign": "campaign",
     "simulate-campaign": "campaign",

@@ -30,6 +30,8 @@ if TYPE_CHECKING:  # the decoders (and mcap) are imported by the command itself:
     from ..xsens.timebase import CounterTracker
 
 CHUNK_BYTES = 1 << 20
+#: The column (JSON key) of a log's rows that says which device sent it, when the log holds several.
+BUS_ID = "BusId"
 WRITE_BATCH = 10_000
 
 #: Component labels of vector outputs in CSV headers (x, y, z for the rest).
@@ -118,12 +120,20 @@ def open_output(out: Path | None) -> Iterator[IO[str]]:
         yield handle
 
 
-def decode_all(data: bytes, bar: Progress, label: str) -> DecodedBlock:
-    """Stream-decode ``data`` in 1 MiB pieces (progress in KiB)."""
+def is_log(path: Path, data: bytes) -> bool:
+    """An MT Manager log (``.mtb``, or bytes that start with the Configuration message a log starts with):
+    its frames are read from every bus id (``xsens.mtb``), not only from the master's."""
+    return path.suffix.lower() == ".mtb" or data[:3] == bytes((0xFA, 0xFF, MID.CONFIGURATION))
+
+
+def decode_all(data: bytes, bar: Progress, label: str, log: bool = False) -> DecodedBlock:
+    """Stream-decode ``data`` in 1 MiB pieces (progress in KiB); ``log``: as an MT Manager log."""
     from ..xsens.batch import DecodedBlock
+    from ..xsens.framer import ANY_BID
+    from ..xsens.mtb import LOG_MAX_DATA_LENGTH
     from ..xsens.stream import StreamDecoder
 
-    decoder = StreamDecoder()
+    decoder = StreamDecoder(LOG_MAX_DATA_LENGTH, ANY_BID) if log else StreamDecoder()
     task = bar.add_task(f"decoding {label} (KiB)", total=len(data) // 1024 + 1)
     blocks = []
     for start in range(0, len(data), CHUNK_BYTES):
@@ -147,17 +157,29 @@ def decode_legacy(block: DecodedBlock, mode: int, settings: int) -> list[tuple[i
 
 
 def in_stream_order(
-    block: DecodedBlock, legacy: list[tuple[int, MTData2Message]]
+    block: DecodedBlock, legacy: list[tuple[int, MTData2Message]], by_device: bool = False
 ) -> Iterator[MTData2Message]:
-    """MTData2 rows (converted in batches) and legacy messages, merged in the order they were sent."""
+    """MTData2 rows (converted in batches) and legacy messages, merged in the order they were sent
+    (``by_device``: each MTData2 row says the bus id of the device that sent it, first, as ``BusId``)."""
 
     def mtdata2() -> Iterator[tuple[int, MTData2Message]]:
         for start in range(0, block.n_messages, WRITE_BATCH):
             indices = block.frame_index[start : start + WRITE_BATCH].tolist()
-            yield from zip(indices, block.messages(start, start + WRITE_BATCH), strict=True)
+            messages = block.messages(start, start + WRITE_BATCH)
+            if by_device:
+                buses = block.bus_ids[start : start + WRITE_BATCH].tolist()
+                messages = (_from(bus, message) for bus, message in zip(buses, messages, strict=True))
+            yield from zip(indices, messages, strict=True)
 
     for _, message in heapq.merge(mtdata2(), legacy, key=itemgetter(0)):
         yield message
+
+
+def _from(bus_id: int, message: MTData2Message) -> MTData2Message:
+    """``message`` with the bus id of its device first."""
+    from ..xsens.mtdata2 import MTData2Message
+
+    return MTData2Message({BUS_ID: bus_id, **message}, message.xdis, message.unknown_xdis)
 
 
 def csv_header(block: DecodedBlock, legacy: list[tuple[int, MTData2Message]]) -> list[str]:
@@ -223,6 +245,13 @@ def summary_line(block: DecodedBlock, legacy: int, tracker: CounterTracker) -> s
     return ", ".join(parts)
 
 
+def _log_summary(block: DecodedBlock) -> str:
+    """What was in an MT Manager log, per device (``xsens.mtb.DecodedLog.summary``)."""
+    from ..xsens.mtb import split_log
+
+    return split_log(block).summary()
+
+
 def parse_register(value: str | None) -> int | None:
     """typer parser for --legacy-mode/--legacy-settings: '0x0006', '6' or None."""
     if value is None:
@@ -270,19 +299,23 @@ def decode_command(
         except ProtocolError as exc:
             raise InputError(str(exc)) from None
     data = read_capture(capture)
+    log = is_log(capture, data)
     with progress_bar() as bar:
-        block = decode_all(data, bar, capture.name)
+        block = decode_all(data, bar, capture.name, log)
         if block.frames == 0:
             raise InputError(f"no Xbus frames in {capture} ({len(data)} bytes): is it a raw serial capture?")
         legacy = [] if legacy_mode is None else decode_legacy(block, legacy_mode, legacy_settings or 0)
+        by_device = log and np.unique(block.bus_ids).size > 1  # an Awinda station's log: which device
         header = csv_header(block, legacy) if output_format is OutputFormat.csv else None
+        if header is not None and by_device:
+            header.insert(0, BUS_ID)
         with open_output(out) as handle:
             total = block.n_messages + len(legacy)
-            counters = write_messages(in_stream_order(block, legacy), total, handle, header, bar)
+            counters = write_messages(in_stream_order(block, legacy, by_device), total, handle, header, bar)
     tracker = CounterTracker()
     tracker.update_many(np.array(counters, dtype=np.int64))
     err_console.print(
-        f"{capture.name}: {summary_line(block, len(legacy), tracker)}",
+        f"{capture.name}: {_log_summary(block) if log else summary_line(block, len(legacy), tracker)}",
         markup=False,
         highlight=False,
         soft_wrap=True,

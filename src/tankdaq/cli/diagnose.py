@@ -28,10 +28,12 @@ from .options import (
     EndS,
     JsonOutput,
     KeepAll,
+    LogDevice,
     RateColumn,
     RunsQuery,
     SampleRate,
     SkipHalfCycles,
+    SpeedColumn,
     StartS,
     TimeColumn,
     TimeUnit,
@@ -96,6 +98,8 @@ def diagnose_command(
     skip_half_cycles: SkipHalfCycles = 0,
     start: StartS = None,
     end: EndS = None,
+    device: LogDevice = None,
+    speed_col: SpeedColumn = None,
     simulation: list[str] = typer.Option(
         None,
         "--simulation",
@@ -132,7 +136,7 @@ def diagnose_command(
     inputs = inputs_or_query(inputs, runs_query, catalogue)
     reading = Reading(
         axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end,
-        sample_rate,
+        sample_rate, device, speed_col,
     )  # fmt: skip
     columns = (sim_time_col or time_col, sim_angle_col or angle_col, sim_rate_col or rate_col)
     sim_reading = Reading(axis, *columns, sim_angle_unit or angle_unit)

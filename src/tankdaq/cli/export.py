@@ -16,7 +16,11 @@ from .app import app, checked, handles_errors, say
 def export_command(
     recordings: Annotated[
         list[Path],
-        typer.Argument(callback=checked(validation.input_file), help="tankdaq recordings (.mcap)."),
+        typer.Argument(
+            callback=checked(validation.input_file),
+            help="tankdaq recordings (.mcap), or a lab's files (an MT Manager .mtb, a TDMS, a CSV...): their "
+            "decays become recordings in --out first (as tankdaq import makes them).",
+        ),
     ],
     file_format: Annotated[
         str,
@@ -47,13 +51,19 @@ def export_command(
     time_s, roll_rad, p_rad_s, ...) with the run metadata as typed values, exactly as recorded.
     pandas, Excel and MATLAB read the CSV without options; tankdaq identify reads it back exactly.
     Prints each file written."""
-    from ..errors import InputError
+    from ..api.archive import import_file
     from ..store.export import check_options, check_targets, export_recording
+    from ..store.inputs import input_format
 
     check_options(file_format, frame)
-    for path in recordings:
-        if path.suffix.lower() != ".mcap":
-            raise InputError(f"{path}: not a tankdaq recording (.mcap)")
+    lab_files = [path for path in recordings if path.suffix.lower() != ".mcap"]
+    for path in lab_files:
+        input_format(path)  # a file tankdaq does not read: one line before any is written
+    for path in lab_files:
+        made = import_file(path, out or path.parent).decays
+        say(f"{path}: {len(made)} decay(s) as recordings first: {', '.join(d.path.name for d in made)}")
+        recordings = [*recordings, *(decay.path for decay in made)]
+    recordings = [path for path in recordings if path not in lab_files]
     check_targets(recordings, file_format, out)
     for path in recordings:
         for written in export_recording(path, file_format, out, frame, on_notice=say):

@@ -26,12 +26,14 @@ from .options import (
     FullScale,
     JsonOutput,
     KeepAll,
+    LogDevice,
     RateColumn,
     ReadAxis,
     RunsQuery,
     SampleRate,
     SeaTemperature,
     SkipHalfCycles,
+    SpeedColumn,
     StartS,
     TimeColumn,
     TimeUnit,
@@ -74,6 +76,8 @@ def identify_command(
     skip_half_cycles: SkipHalfCycles = 0,
     start: StartS = None,
     end: EndS = None,
+    device: LogDevice = None,
+    speed_col: SpeedColumn = None,
     bootstrap: int = typer.Option(
         0,
         "--bootstrap",
@@ -112,7 +116,7 @@ def identify_command(
     inputs = inputs_or_query(inputs, runs_query, catalogue)
     reading = Reading(
         axis, time_col, angle_col, rate_col, angle_unit, time_unit, keep_all, skip_half_cycles, start, end,
-        sample_rate,
+        sample_rate, device, speed_col,
     )  # fmt: skip
     if compare:
         _compare(inputs, reading, method, as_json)

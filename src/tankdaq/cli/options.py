@@ -70,6 +70,16 @@ SampleRate = Annotated[
         "SampleTimeFine) [default: the file's].",
     ),
 ]
+#: ``--device``: one device of an MT Manager log that holds several (an Awinda station's MTw sensors).
+LogDevice = Annotated[
+    str | None,
+    typer.Option("--device", help="Device of an MT Manager .mtb log: id (hex) or bus id [default: each]."),
+]
+#: ``--speed-col``: a carriage-speed column (m/s) of a CSV, HDF5 or TDMS file; each decay's speed.
+SpeedColumn = Annotated[
+    str | None,
+    typer.Option("--speed-col", help="Carriage-speed column (m/s), e.g. GROUP/CHANNEL of a TDMS file."),
+]
 KeepAll = Annotated[bool, typer.Option("--keep-all", help="Do not cut the CSV record at the release.")]
 SkipHalfCycles = Annotated[
     int, typer.Option("--skip-half-cycles", min=0, help="Half-cycles dropped after it.")

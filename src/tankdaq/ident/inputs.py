@@ -29,6 +29,7 @@ from ..store.csv_import import (
     FIND_RELEASES,
     MIN_SAMPLES,
     NOTICES,
+    SPEED_CHANNEL,
     CsvOptions,
     number_parts,
 )
@@ -57,13 +58,20 @@ def read_decays(
     skip_half_cycles: int = 0,
     time_unit: str | None = None,
     sample_rate_hz: float | None = None,
+    *,
+    device: str | None = None,
+    speed_col: str | None = None,
 ) -> list[DecayRun]:
     """The decays of one file, each from its release. The CSV settings (columns, units (None: decided
     from the data), ``keep_all``: the record whole from its first sample; ``skip_half_cycles`` more
     half-cycles dropped after a release found in the data; ``sample_rate_hz``: ``--rate``, for a text
     export that does not say its own) apply to CSV files; a recording's runs start at its release events.
-    What the reading decided or left out is in each run's ``meta[NOTICES]`` (``input_notices``)."""
-    options = CsvOptions(time_col, angle_col, rate_col, angle_unit, keep_all, time_unit, sample_rate_hz)
+    What the reading decided or left out is in each run's ``meta[NOTICES]`` (``input_notices``).
+    ``device``: the device of an MT Manager log that holds several; ``speed_col``: a carriage-speed
+    column, whose mean over each decay is its ``meta["speed_m_s"]``."""
+    options = CsvOptions(
+        time_col, angle_col, rate_col, angle_unit, keep_all, time_unit, sample_rate_hz, device, speed_col
+    )
     try:
         return found_decays(read_runs(path, axis, options), skip_half_cycles)
     except BadIdentificationInput as exc:
@@ -76,12 +84,18 @@ def read_decays(
 
 def found_decays(runs: Iterable[DecayRun], skip_half_cycles: int = 0) -> list[DecayRun]:
     """Each run as its reader gave it, or, where the reader left the releases to the data (a CSV's
-    record, ``FIND_RELEASES``), the decays found in it (``split_releases``)."""
-    return [
+    record, ``FIND_RELEASES``), the decays found in it (``split_releases``); a decay with a carriage-speed
+    channel (``--speed-col``) has its mean speed, to the cm/s, as ``meta["speed_m_s"]``."""
+    decays = [
         decay
         for run in runs
         for decay in (split_releases(run, skip_half_cycles) if run.meta.pop(FIND_RELEASES, False) else [run])
     ]
+    for decay in decays:
+        if SPEED_CHANNEL in decay.channels:
+            # to the cm/s, as a carriage is set: repeats at one speed are one condition (ident.conditions)
+            decay.meta["speed_m_s"] = round(float(np.nanmean(decay.channels[SPEED_CHANNEL])), 2)
+    return decays
 
 
 def input_notices(runs: Iterable[DecayRun]) -> list[str]:

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..validation import input_file
-from .csv_import import ColumnData, CsvOptions
+from .csv_import import SPEED_CHANNEL, ColumnData, CsvOptions
 from .csv_units import stated_unit
 from .export_layout import EXPORT_FORMAT, mat_export_meta, plain_value
 from .pandas_hdf import NOT_A_VECTOR, is_frame, is_pytables_index, read_frame
@@ -173,6 +173,76 @@ def _take(
         return False
     columns[name] = array.astype(float) if array.dtype.kind == "b" else array
     return True
+
+
+def read_tdms_columns(path: Path, options: CsvOptions) -> ColumnData:
+    """The numeric channels of a LabVIEW TDMS file (npTDMS), each named ``GROUP/CHANNEL``, with the unit
+    its ``unit_string`` property states; without a time channel (``--time-col``), the time of the angle
+    channel's waveform (``wf_start_offset`` + i * ``wf_increment``, in s). The file's properties and the
+    waveform's start time are kept in the header, as ``tdms_<property>``."""
+    nptdms = _library(path, "nptdms", "TDMS", "npTDMS: pip install npTDMS")
+    input_file(path)
+    try:
+        tdms = nptdms.TdmsFile.read(path)
+    except Exception as exc:  # npTDMS' own errors (ValueError, struct.error...), whatever the bytes were
+        raise InputError(f"{path}: not a TDMS file npTDMS can read ({type(exc).__name__}: {exc})") from None
+    columns: dict[str, np.ndarray] = {}
+    stated: dict[str, str] = {}
+    left: dict[str, str] = {}
+    said: list[str] = []
+    properties: dict[str, dict[str, Any]] = {}
+    for group in tdms.groups():
+        for channel in group.channels():
+            name = f"{group.name}/{channel.name}"
+            properties[name] = dict(channel.properties)
+            if _take(name, channel[:], columns, left, said):
+                unit = stated_unit(channel.properties.get("unit_string"))
+                if unit is not None:
+                    stated[name] = unit
+    header = {f"tdms_{key}": _plain(value) for key, value in tdms.properties.items()}
+    angle_col = options.angle_col
+    if angle_col not in columns:  # the default name: the one channel whose name says the axis (Roll)
+        angle_col = _named_channel(columns, (options.axis,), angle_col, said)
+    if angle_col != options.angle_col:
+        columns[options.angle_col] = columns.pop(angle_col)
+        if angle_col in stated:
+            stated[options.angle_col] = stated.pop(angle_col)
+    if options.speed_col is None and SPEED_CHANNEL not in columns:
+        speed = _named_channel(columns, ("speed",), "", said)
+        if speed:
+            columns[SPEED_CHANNEL] = columns.pop(speed)
+    wave = properties.get(angle_col, {})
+    if options.time_col not in columns and "wf_increment" in wave and options.angle_col in columns:
+        step, start = float(wave["wf_increment"]), float(wave.get("wf_start_offset", 0.0))
+        columns[options.time_col] = start + step * np.arange(len(columns[options.angle_col]))
+        stated[options.time_col] = "s"
+        said.append(f"time from {angle_col}'s waveform: {step:g} s a sample")
+        if "wf_start_time" in wave:
+            header["tdms_wf_start_time"] = _plain(wave["wf_start_time"])
+    return _one_length(path, ColumnData(columns, left, header, stated, said), options, "channels")
+
+
+def _named_channel(
+    columns: dict[str, np.ndarray], words: tuple[str, ...], given: str, said: list[str]
+) -> str:
+    """The one channel whose own name (after ``GROUP/``) is one of ``words`` or starts with one (``Roll``,
+    ``roll_deg``, ``Speed``), said in a line; ``given`` where none or several are."""
+    found = [
+        name for name in columns if any(name.rpartition("/")[2].lower().startswith(word) for word in words)
+    ]
+    if len(found) != 1:
+        return given
+    said.append(f"channel {found[0]} read as the {words[0]} (its name says so)")
+    return found[0]
+
+
+def _plain(value: object) -> object:
+    """A TDMS property as JSON keeps it (a number, or text: a timestamp in ISO form)."""
+    if isinstance(value, np.datetime64):
+        return str(value)
+    if isinstance(value, np.generic):
+        value = value.item()
+    return value if isinstance(value, int | float | str) else str(value)
 
 
 def _one_length(path: Path, data: ColumnData, options: CsvOptions, what: str) -> ColumnData:

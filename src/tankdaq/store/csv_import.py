@@ -51,6 +51,10 @@ SOURCE_KEYS = (
     "source_format", "device_id", "product_code", "firmware", "hardware", "filter_profile", "option_flags",
     "mt_manager_version", "xda_version", "coordinate_system", "start_time", "update_rate_hz",
 )  # fmt: skip
+#: The channel a ``--speed-col`` becomes (m/s), and the ``meta`` key naming the column it came from: each
+#: decay's mean of it is its ``speed_m_s`` (``ident.inputs``).
+SPEED_CHANNEL = "carriage_speed_m_s"
+SPEED_FROM = "speed_from"
 
 
 @dataclass(frozen=True)
@@ -68,6 +72,12 @@ class CsvOptions:
     #: Samples per second of a file that does not say (an MT Manager 2019.2+ export without
     #: SampleTimeFine): ``--rate``.
     sample_rate_hz: float | None = None
+    #: the device of an MT Manager log that holds several (hex device id or bus id; None: each one a run)
+    device: str | None = None
+    #: a carriage-speed column (m/s): each decay's mean speed goes into its metadata (``speed_m_s``)
+    speed_col: str | None = None
+    #: the decay's axis, for a reader that finds the angle by a channel's name (TDMS: ``Roll``)
+    axis: str = "roll"
 
     def __post_init__(self) -> None:  # checked whatever the files are: a typo fails on a recording too
         if self.angle_unit not in (None, *ANGLE_UNITS):
@@ -136,6 +146,8 @@ def runs_of_columns(
     if angle_col == "angle_deg" and "angle_deg" not in columns and si_columns[0] in columns:  # SI (export)
         angle_col, given_unit = si_columns[0], "rad"
         rate_col = si_columns[1] if rate_col == DEFAULT_RATE_COL else rate_col
+    if options.speed_col is not None and options.speed_col not in columns:
+        raise InputError(f"{path}: no speed column {options.speed_col!r}; columns are {', '.join(columns)}")
     notices = list(data.notices)
     angle_col, given_unit = _orientation(path, data, axis, angle_col, given_unit, notices)
     _check_columns(path, data, options.time_col, angle_col, rate_col)
@@ -152,6 +164,8 @@ def runs_of_columns(
     notices += [f"{path.name}: {choice.line}" for choice in units if choice.line]
     to_rad, to_s = ANGLE_UNITS[units[0].unit], TIME_UNITS[units[1].unit]
     rate = columns.pop(rate_col) * to_rad if rate_col is not None and rate_col in columns else None
+    if options.speed_col is not None:
+        columns[SPEED_CHANNEL] = columns.pop(options.speed_col)  # found by ``_check_columns``
     channels = {_channel_name(name): _to_si(name, values) for name, values in columns.items()}
     run = DecayRun(
         t=t_raw * to_s,
@@ -164,6 +178,8 @@ def runs_of_columns(
     )
     run.meta.update({key: value for key, value in header.items() if key != "units"})
     run.meta[NOTICES] = notices
+    if options.speed_col is not None:
+        run.meta[SPEED_FROM] = options.speed_col
     _check_motion(run, units[0].unit)
     if options.keep_all:
         return [run]

@@ -12,7 +12,7 @@ from __future__ import annotations
 import hashlib
 from collections import defaultdict
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
 
@@ -54,13 +54,20 @@ def _read_csv(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRu
     return read_csv_file(path, options, axis)
 
 
+def _read_mtb(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun]:
+    from .mtb_file import read_mtb
+
+    return read_mtb(path, axis, options)
+
+
 def _column_reader(name: str) -> Callable[[Path, str | None, CsvOptions], list[DecayRun]]:
     """The runs of a column file (``store.column_files``: HDF5, MATLAB, Parquet), read as a CSV's."""
 
     def read(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun]:
         from . import column_files
 
-        return runs_of_columns(path, getattr(column_files, name)(path, options), options, axis)
+        found = getattr(column_files, name)(path, replace(options, axis=axis or options.axis))
+        return runs_of_columns(path, found, options, axis)
 
     return read
 
@@ -75,6 +82,8 @@ INPUT_FORMATS: dict[str, InputFormat] = {
     ".hdf5": InputFormat("HDF5", _column_reader("read_h5_columns"), self_labelled=False),
     ".mat": InputFormat("MATLAB", _column_reader("read_mat_columns"), self_labelled=False),
     ".parquet": InputFormat("Parquet", _column_reader("read_parquet_columns"), self_labelled=False),
+    ".tdms": InputFormat("LabVIEW TDMS", _column_reader("read_tdms_columns"), self_labelled=False),
+    ".mtb": InputFormat("MT Manager log", _read_mtb, self_labelled=False),
 }
 
 

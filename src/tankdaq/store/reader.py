@@ -410,7 +410,8 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
     bounds = [*releases, np.inf]
     for number, (start, stop) in enumerate(itertools.pairwise(bounds), start=1):
         part = samples[(samples["t"] >= start) & (samples["t"] < stop)]
-        keep = _finite_increasing(part["t"], part[angle_field], part[rate_field])
+        rated = bool(np.isfinite(part[rate_field]).any())  # no rate at all: a decay imported without one
+        keep = _finite_increasing(part["t"], part[angle_field], *([part[rate_field]] if rated else []))
         part_kept = part[keep]
         if part_kept.size < 2:
             raise BadRecordingInput(
@@ -425,7 +426,7 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
             DecayRun(
                 t=part_kept["t"],
                 angle=part_kept[angle_field],
-                rate=part_kept[rate_field],
+                rate=part_kept[rate_field] if rated else None,
                 axis=axis,
                 name=recording.path.stem if len(releases) == 1 else f"{recording.path.stem}#{number}",
                 channels={

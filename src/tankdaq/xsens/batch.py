@@ -18,6 +18,7 @@ from ..samples import empty_samples
 from .constants import MAX_DATA_LENGTH, MID
 from .frame import Frame
 from .frame_scan import MTDATA2, scan_frames
+from .framer import RESYNC_BIDS
 from .layouts import Layout, LayoutCache
 from .mtdata2 import FRAME_MASK, FRAMES, GnssPvt, MTData2Message, UtcTime
 from .orientation import euler_from_matrix, euler_from_quaternion
@@ -52,6 +53,7 @@ class DecodedBlock:
     xdis: dict[str, np.ndarray] = field(default_factory=dict)
     unknown_counts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     frame_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    bus_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.uint8))  # each message's
     other_frames: list[Frame] = field(default_factory=list)
     other_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     frames: int = 0
@@ -113,12 +115,24 @@ class DecodedBlock:
             [out.other_index, *(b.other_index + o for b, o in zip(blocks, offsets[:-1], strict=True))]
         )
         out.unknown_counts = np.concatenate([out.unknown_counts, *(b.unknown_counts for b in blocks)])
+        out.bus_ids = np.concatenate([out.bus_ids, *(b.bus_ids for b in blocks)])
         for block in blocks:
             out.other_frames += block.other_frames
         for counter in ("n_messages", "frames", "bad_checksums", "skipped_bytes", "malformed", "false_syncs"):
             setattr(out, counter, sum(getattr(b, counter) for b in blocks))
         out.pending_bytes = blocks[-1].pending_bytes if blocks else 0
         out.sync = blocks[-1].sync if blocks else b""
+        return out
+
+    def take(self, rows: np.ndarray) -> DecodedBlock:
+        """The messages at ``rows`` (one device's of a log), with their columns; frames and counters stay
+        the whole block's."""
+        out = DecodedBlock(rows.size, frame_index=self.frame_index[rows], bus_ids=self.bus_ids[rows])
+        out.unknown_counts = self.unknown_counts[rows]
+        for name, column in self.columns.items():
+            out.columns[name] = column[rows]
+            out.present[name] = self.present[name][rows]
+            out.xdis[name] = self.xdis[name][rows]
         return out
 
 
@@ -153,14 +167,16 @@ def decode_buffer(
     final: bool = False,
     carried_below: int = 0,
     ended: bool = False,
+    bids: frozenset[int] = RESYNC_BIDS,
 ) -> DecodedBlock:
     """Decode every complete frame of ``buf`` (uint8); bytes from ``consumed`` on are left pending.
 
     ``sync``, ``final`` and ``ended`` as in ``scan_frames``; ``carried_below``: bytes of ``buf`` held
-    over from earlier input (the data messages starting there are counted in ``carried``).
+    over from earlier input (the data messages starting there are counted in ``carried``); ``bids``: the
+    bus ids a resync may land on (``framer.ANY_BID``: a log of several devices).
     """
     layouts = LayoutCache() if layouts is None else layouts
-    scan = scan_frames(buf, max_length, sync, final, layouts, ended)
+    scan = scan_frames(buf, max_length, sync, final, layouts, ended, bids)
     held_over = scan.starts[: int(np.searchsorted(scan.starts, carried_below))].tolist()  # 0, 1 or 2 frames
     block = DecodedBlock(
         carried=sum(int(buf[start + 2]) in (MTDATA2, MTDATA) for start in held_over),
@@ -195,6 +211,7 @@ def decode_buffer(
             buf, scan.payload_starts[data_frames], scan.lengths[data_frames], layouts
         )
     _fill_columns(block, data_frames, groups, malformed)
+    block.bus_ids = buf[scan.starts[block.frame_index] + 1]
     return block
 
 
@@ -292,9 +309,11 @@ def _payload_rows(buf: np.ndarray, starts: np.ndarray, length: int) -> np.ndarra
     return np.lib.stride_tricks.sliding_window_view(buf, length)[starts]
 
 
-def decode_capture(data: bytes, max_length: int = MAX_DATA_LENGTH) -> DecodedBlock:
+def decode_capture(
+    data: bytes, max_length: int = MAX_DATA_LENGTH, bids: frozenset[int] = RESYNC_BIDS
+) -> DecodedBlock:
     """Batch-decode a whole raw capture (bytes as read from the serial port; nothing follows them)."""
-    return decode_buffer(np.frombuffer(data, dtype=np.uint8), max_length, ended=True)
+    return decode_buffer(np.frombuffer(data, dtype=np.uint8), max_length, ended=True, bids=bids)
 
 
 # ----------------------------------------------------------------------------------- to samples

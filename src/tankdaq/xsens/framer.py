@@ -27,11 +27,20 @@ from .mtdata2 import payload_well_formed
 #: Bus ids a resync may land on: tankdaq addresses the device as master (0xFF); a stand-alone
 #: MT also answers 0x01 with the id it was sent (reference §1.1).
 RESYNC_BIDS = frozenset((0xFF, 0x01))
+#: Every bus id: a log file (MT Manager's ``.mtb``) holds the frames of several devices (an Awinda
+#: station's MTw sensors at bus ids 1-N), each a frame to keep, not a false sync.
+ANY_BID = frozenset(range(0x01, 0x100))
 MTDATA2 = int(MID.MTDATA2)
 
 
 def confirm(
-    buf: bytes | bytearray, start: int, header: int, stop: int, sync: bytes | None, final: bool
+    buf: bytes | bytearray,
+    start: int,
+    header: int,
+    stop: int,
+    sync: bytes | None,
+    final: bool,
+    bids: frozenset[int] = RESYNC_BIDS,
 ) -> bool | None:
     """Is the checksum-valid candidate ``buf[start:stop]`` a real frame, in sync state ``sync``?
 
@@ -42,7 +51,7 @@ def confirm(
     """
     bid, mid = buf[start + 1], buf[start + 2]
     trusted = sync is not None and buf[start : start + header] == sync
-    if not trusted and bid not in RESYNC_BIDS:
+    if not trusted and bid not in bids:
         return False
     resync = sync is None
     if resync and mid == MTDATA2 and not payload_well_formed(bytes(buf[start + header : stop - 1])):
@@ -58,8 +67,9 @@ def confirm(
 class StreamFramer:
     """Incremental framer: ``feed`` bytes as they arrive, get the complete frames back."""
 
-    def __init__(self, max_length: int = MAX_DATA_LENGTH) -> None:
+    def __init__(self, max_length: int = MAX_DATA_LENGTH, bids: frozenset[int] = RESYNC_BIDS) -> None:
         self.max_length = max_length
+        self.bids = bids  # the bus ids a resync may land on (``ANY_BID`` for a log of several devices)
         self.frames = 0
         self.bad_checksums = 0
         self.skipped_bytes = 0
@@ -136,7 +146,7 @@ class StreamFramer:
                 pos += 1
                 sync = None
                 continue
-            confirmed = confirm(buf, pos, header, stop, sync, final)
+            confirmed = confirm(buf, pos, header, stop, sync, final, self.bids)
             if confirmed is None:
                 break
             if not confirmed:

@@ -12,14 +12,16 @@ import numpy as np
 
 from .batch import DecodedBlock, decode_buffer
 from .constants import MAX_DATA_LENGTH
+from .framer import RESYNC_BIDS
 from .layouts import LayoutCache
 
 
 class StreamDecoder:
     """Feed raw serial chunks, get ``DecodedBlock``s; running totals in the counter attributes."""
 
-    def __init__(self, max_length: int = MAX_DATA_LENGTH) -> None:
+    def __init__(self, max_length: int = MAX_DATA_LENGTH, bids: frozenset[int] = RESYNC_BIDS) -> None:
         self.max_length = max_length
+        self.bids = bids  # the bus ids a resync may land on (``framer.ANY_BID``: a log of several devices)
         self.frames = 0
         self.messages = 0
         self.bad_checksums = 0
@@ -53,7 +55,7 @@ class StreamDecoder:
     def _decode(self, buf: np.ndarray, final: bool, ended: bool = False) -> DecodedBlock:
         block = decode_buffer(
             buf, self.max_length, self._layouts, sync=self._sync, final=final, carried_below=self._tail.size,
-            ended=ended,
+            ended=ended, bids=self.bids,
         )  # fmt: skip
         self._tail = buf[buf.size - block.pending_bytes :].copy()
         self._sync = block.sync
