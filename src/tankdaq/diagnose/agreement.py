@@ -96,12 +96,13 @@ def period_check(measured: CycleTrend, simulation: Mapping[str, float]) -> Perio
 def differs_sentence(points: list[DampingPoint], what: str = "simulation") -> str:
     """What differs in the damping, from the smallest to the largest tested amplitude, with no cause."""
     small, large = points[0], points[-1]
+    made = "predicted" if what == "prediction" else "simulated"
     shares = (
         f"the {what} has {100 * small.ratio:.0f} % of the measured damping at {small.amplitude_deg:.2g} deg "
         f"and {100 * large.ratio:.0f} % at {large.amplitude_deg:.3g} deg"
     )
     if small.ratio < (1 - DAMPING_TOLERANCE) * large.ratio:
-        return f"{shares}: more damping at small amplitude than predicted"
+        return f"{shares}: more damping at small amplitude than {made}"
     if large.ratio < (1 - DAMPING_TOLERANCE) * small.ratio:
-        return f"{shares}: more damping at large amplitude than predicted"
+        return f"{shares}: more damping at large amplitude than {made}"
     return f"{shares}: off by about the same share at every amplitude"

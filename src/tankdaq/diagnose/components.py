@@ -114,7 +114,8 @@ class ComponentScaling:
         times = "more than" if math.isinf(self.times_measured) else f"{self.times_measured:.3g}x"
         head = self.verdict_word
         alone = ", ".join(
-            f"{name} alone x{f:.3g}" if f >= 0 else f"not {name} alone" for name, f in self.alone().items()
+            f"{name} alone x{f:.3g}" if f >= 0 else f"{name} alone cannot (below zero)"
+            for name, f in self.alone().items()
         )
         text = (
             f"{head}: {self.label} is {times} the measured: scaled x{self.factor:.3g} "

@@ -155,7 +155,8 @@ def decay_speed(runs: Sequence[DecayRun], asked: float | None, hull_speed: float
     if len(speeds) > 1:
         each = "; ".join(f"{v:g} m/s: {', '.join(names)}" for v, names in speeds.items())
         raise InputError(
-            f"the decays were recorded at {len(speeds)} speeds ({each}): compare one speed at a time"
+            f"the decays were recorded at {len(speeds)} speeds ({each}): compare one speed at a time "
+            "(its files, or --runs 'speed=...')"
         )
     if speeds:
         (recorded,) = speeds
