@@ -29,9 +29,10 @@ from ..ident.inputs import input_notices, read_decays
 from ..ident.signals import half_cycle_peaks
 from ..records import DecayRun
 from ..validation import input_file
-from .components import prediction_shares
+from .components import prediction_shares, table_shares
 from .prediction_table import (
     component_changes,
+    component_parts,
     coverage_note,
     equivalent_model,
     is_prediction_table,
@@ -260,7 +261,10 @@ def from_table(path: Path, request: SimulationRequest) -> Simulation:
     if (outside := coverage_note(table.amplitudes_rad, request.amplitudes_rad())) is not None:
         notes.append(outside)
     explain = component_changes(table, b_eq, omega)
-    return Simulation(path.name, PREDICTION, model, notes=tuple(notes), component_changes=explain)
+    shares = table_shares(omega, *component_parts(table, b_eq)) if table.components else None
+    return Simulation(
+        path.name, PREDICTION, model, notes=tuple(notes), component_changes=explain, shares=shares
+    )
 
 
 def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation:
