@@ -59,6 +59,29 @@ def test_the_prediction_is_made_at_the_speed_the_decays_were_recorded_at() -> No
         decay_speed([_run("a", 0.967), _run("b", None)], None, None)
 
 
+def test_a_recordings_speed_reaches_its_decays(tmp_path: Path) -> None:
+    """A recording whose metadata says its carriage speed: its decays carry it, and the prediction is
+    made at it (not at the hull's speed_m_s), a --speed against it refused."""
+    from held_tilt import held_tilt
+    from tankdaq.samples import SAMPLE_DTYPE
+    from tankdaq.store.writer import RecordingWriter
+
+    t, angle, rate = held_tilt(6.0)
+    samples = np.zeros(t.size, dtype=SAMPLE_DTYPE)
+    samples["t"], samples["ticks"], samples["az"] = t, np.round(t * 1e4).astype(np.int64), 9.81
+    samples["roll"], samples["p"] = angle, rate
+    path = tmp_path / "kvlcc2_T_roll_6deg.mcap"
+    meta = {"axis": "roll", "hull": "kvlcc2", "draft": "T", "speed_m_s": "0.967"}
+    with RecordingWriter(path, meta, {}) as writer:
+        writer.write_samples(samples)
+        writer.write_event("release", "by hand", t_s=2.0)
+    runs = read_decays(path, "roll")
+    assert [run.meta["speed_m_s"] for run in runs] == [0.967]
+    assert decay_speed(runs, None, 0.0)[0] == 0.967
+    with pytest.raises(InputError, match=r"--speed 0 m/s, but the decays were recorded at 0\.967 m/s"):
+        decay_speed(runs, 0.0, None)
+
+
 def test_an_ikeda_prediction_at_speed_holds_lift() -> None:
     """Decays recorded at 0.967 m/s get the prediction at 0.967 m/s: lift is one of its components and
     its linear damping is the speed's (tankdaq predict's 0.0639 1/s), not the 0.0267 at rest."""

@@ -285,7 +285,15 @@ def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation
         runs += [_renamed(run, f"sim:{run.name}") for run in found]
     rates = sorted({round(run.sample_rate, 3) for run in runs})
     notes = (f"simulated at {', '.join(f'{r:g}' for r in rates)} Hz", *input_notices(runs))
-    return Simulation(", ".join(p.name for p in paths), SERIES, runs=tuple(runs), notes=notes)
+    name = ", ".join(p.name for p in paths)
+    simulated, measured = set(recorded_speeds(runs)), set(recorded_speeds(request.measured))
+    if simulated and measured and simulated != measured:
+        raise InputError(
+            f"simulation {name} is at {', '.join(f'{v:g}' for v in sorted(simulated))} m/s, the decays were "
+            f"recorded at {', '.join(f'{v:g}' for v in sorted(measured))} m/s: simulate at the decays' speed"
+        )
+    speed = simulated.pop() if len(simulated) == 1 else None
+    return Simulation(name, SERIES, runs=tuple(runs), notes=notes, speed_m_s=speed)
 
 
 def _refuse_growing(path: Path, records: Sequence[DecayRun]) -> None:
