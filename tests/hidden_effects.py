@@ -76,3 +76,66 @@ def draw_faults(key: str, outcome: dict[str, Any]) -> list[str]:
     if key == "disturbance.late" and max(outcome["cut_s"]) > outcome["onset_s"] + 0.5:
         faults.append("the late burst is kept")
     return faults
+
+
+#: The prediction sets: the KVLCC2 model's simplified Ikeda prediction at the 15.5 kn carriage speed
+#: (0.967 m/s at model scale), one component scaled by a factor drawn from a band on either side of 1.
+PREDICTION_HULL, PREDICTION_SPEED_M_S = "kvlcc2", 0.967
+PREDICTION_CASES: tuple[tuple[str, tuple[float, float]], ...] = (
+    ("", (1.0, 1.0)),
+    ("B_L", (1.5, 2.0)),
+    ("B_L", (0.4, 0.65)),
+    ("B_W", (0.3, 0.6)),
+    ("B_F", (2.0, 3.0)),
+    ("B_E", (2.5, 4.0)),
+)
+
+
+def prediction_draw(component: str, band: tuple[float, float], seed: int) -> dict[str, Any]:
+    """One draw of a prediction set (decays from the prediction's components, one scaled) compared with
+    the prediction at the decays' speed, reduced to what the criteria need."""
+    from tankdaq.config import ikeda_prediction, load_hull
+    from tankdaq.diagnose.compare import SimulationComparison
+    from tankdaq.diagnose.simulation import SimulationRequest, resolve_simulation
+    from tankdaq.diagnose.synthetic import make_prediction_set
+    from tankdaq.physics.ikeda import COMPONENTS
+
+    hull = load_hull(PREDICTION_HULL)
+    factor = float(np.random.default_rng(seed).uniform(*band))
+    data = make_prediction_set(ikeda_prediction(hull, 1.0, PREDICTION_SPEED_M_S), component, factor, seed)
+    simulation = resolve_simulation(["ikeda"], SimulationRequest(tuple(data.runs), "roll", hull, 1.0))
+    comparison = SimulationComparison(simulation, max_steps=3, hull=hull).fit(data.runs)
+    name = COMPONENTS[component][1] if component else ""
+    scaled = [s for s in comparison.scalings_ if name in s.members]
+    return {
+        "factor": factor,
+        "speed_m_s": simulation.speed_m_s,
+        "lift_predicted": "B_L" in (simulation.shares or {}),
+        "effects": [s.effect.key for s in comparison.steps_],
+        "scaled_terms": [s.term for s in comparison.scalings_],
+        "named": bool(scaled) and comparison.steps_[0].effect.increments == scaled[0].term,
+        "factor_alone": scaled[0].alone()[name] if scaled else None,
+        "gap_reduction": comparison.gap_reduction_,
+        "verdict": comparison.verdict_,
+    }
+
+
+def prediction_faults(component: str, outcome: dict[str, Any]) -> list[str]:
+    """What is wrong with one draw: the prediction is made at the decays' speed (lift in it), no rig
+    friction is named, the scaled component is named first (its part of the model; for the control,
+    nothing), the gap shrinks by >= 70 % and the component's own factor is within 20 % of the truth."""
+    faults = []
+    if not outcome["lift_predicted"] or outcome["speed_m_s"] != PREDICTION_SPEED_M_S:
+        faults.append(f"predicted at {outcome['speed_m_s']} m/s without lift")
+    if "friction.coulomb" in outcome["effects"]:
+        faults.append("rig friction named")
+    if not component:
+        return faults + ([f"named {outcome['effects']}"] if outcome["effects"] else [])
+    if not outcome["named"]:
+        faults.append(f"named {outcome['effects']} ({outcome['scaled_terms']})")
+    if outcome["gap_reduction"] < 0.7:
+        faults.append(f"gap shrank {outcome['gap_reduction']:.0%}")
+    alone = outcome["factor_alone"]
+    if alone is None or abs(alone / outcome["factor"] - 1) > 0.2:
+        faults.append(f"factor {alone} against {outcome['factor']:.3g}")
+    return faults

@@ -134,6 +134,13 @@ def test_a_table_with_ikedas_components_explains_the_gap_as_tankdaqs_own_predict
     assert from_table.component_changes is not None and own.component_changes is not None
     measured_b1, measured_b2 = 0.5 * own.coefficients["b1"], 0.7 * own.coefficients["b2"]
     amplitudes = request.amplitudes_rad()
+    # its components are corrections of their own, as the prediction's: each the same part of b1 or b2
+    assert from_table.shares is not None and own.shares is not None
+    assert set(from_table.shares) == set(own.shares) == {"B_F", "B_W", "B_E"}
+    for key, (term, value) in own.shares.items():
+        assert from_table.shares[key][0] == term and from_table.shares[key][1] == pytest.approx(
+            value, rel=1e-4
+        )
     assert from_table.component_changes(measured_b1, measured_b2, amplitudes) == own.component_changes(
         measured_b1, measured_b2, amplitudes
     )

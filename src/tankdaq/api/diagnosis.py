@@ -78,6 +78,7 @@ def diagnose(
     simulation_reading: Reading | None = None,
     hull: str | Path | None = None,
     draft: float | str = 1.0,
+    speed: float | None = None,
     report: str | Path | None = None,
     progress: Progress | None = None,
 ) -> Diagnosis:
@@ -86,7 +87,9 @@ def diagnose(
     or MCAP files, ``"hull"`` for ``hull``'s ``[simulation]`` model at ``draft``, or ``"ikeda"`` for its
     simplified Ikeda prediction) the simulation is the baseline: compared with the decays, what it misses
     named and added, the correction given in SI with ``hull``. ``simulation_reading`` reads the
-    simulation's files (default: as ``reading`` reads the decays); ``report`` a folder for the Markdown
+    simulation's files (default: as ``reading`` reads the decays); ``speed`` the carriage speed (m/s) a
+    prediction is made at (default: the recordings' own, else the hull's ``speed_m_s``, else 0; decays
+    recorded at another speed, or at two, are refused in one line); ``report`` a folder for the Markdown
     report. Bad input raises ``tankdaq.errors.InputError`` before any fit.
 
     >>> tankdaq.diagnose("run.mcap").story  # doctest: +SKIP
@@ -110,6 +113,10 @@ def diagnose(
     draft = arguments.draft(draft)
     report = arguments.optional_path(report, "report", "a folder (str or pathlib.Path) or None")
     progress = arguments.progress(progress)
+    if speed is not None:
+        speed = arguments.number(speed, "speed", 0.0, unit="m/s")
+        if simulation is None:
+            raise InputError("speed applies with a simulation (the speed a prediction is made at)")
     if simulation is not None and baseline is not None:
         raise InputError("baseline does not apply with a simulation: the simulation is the baseline")
     if hull is not None and simulation is None:
@@ -128,7 +135,7 @@ def diagnose(
         estimator, comparison = diagnoser.final_.estimator, None
     else:
         given = [simulation] if isinstance(simulation, str | Path) else list(simulation)
-        setting = (simulation_reading or reading, hull, draft, max_steps)
+        setting = (simulation_reading or reading, hull, draft, speed, max_steps)
         comparison = _compare(runs, given, *setting, kept)
         fitted, runs, estimator, diagnoser = comparison, comparison.runs_, comparison.reference_, None
     teller = _teller(comparison is not None)
@@ -163,6 +170,7 @@ def _compare(
     simulation_reading: Reading,
     hull_name: str | Path | None,
     draft: float | str,
+    speed: float | None,
     max_steps: int,
     kept: Kept,
 ) -> SimulationComparison:
@@ -179,7 +187,7 @@ def _compare(
         validation.hull_draft(hull, factor, axis)
     r = simulation_reading
     columns = SeriesColumns(r.time_col, r.angle_col, r.rate_col, r.angle_unit)
-    request = SimulationRequest(tuple(runs), axis, hull, factor, columns)
+    request = SimulationRequest(tuple(runs), axis, hull, factor, columns, speed)
     sim = resolve_simulation([str(source) for source in simulation], request)
     prepare_identifier("b1,b2,c1,c3", kept.line)  # the native kernels: built once, on the first run
     with kept.task("comparing", 4 + max_steps * len(CANDIDATES)) as advance:

@@ -114,6 +114,12 @@ def diagnose_command(
         None, "--hull", help="Hull config: --simulation hull, and the correction in SI."
     ),
     draft: float = draft_option(help="Draft with --hull."),
+    speed: float = typer.Option(
+        None,
+        "--speed",
+        help="Carriage speed of the decays, m/s, for --simulation ikeda (default: the recordings' speed, "
+        "else the hull's speed_m_s, else 0).",
+    ),
     runs_query: RunsQuery = None,
     catalogue: CatalogueOption = None,
 ) -> None:
@@ -130,6 +136,8 @@ def diagnose_command(
 
     if simulation and baseline is not None:
         raise InputError("--baseline does not apply with --simulation: the simulation is the baseline")
+    if speed is not None and not simulation:
+        raise InputError("--speed applies with --simulation (the speed the prediction is made at)")
     if hull is not None and not simulation:
         raise InputError("--hull applies with --simulation (the hull's model, and the correction in SI)")
     writer = CatalogueWriter.from_option(catalogue, say)
@@ -143,7 +151,8 @@ def diagnose_command(
     build_kernels_shown()
     found = diagnose(
         inputs, baseline=baseline, max_steps=max_steps, reading=reading, simulation=simulation or None,
-        simulation_reading=sim_reading, hull=hull, draft=draft, report=report, progress=TerminalProgress(),
+        simulation_reading=sim_reading, hull=hull, draft=draft, speed=speed, report=report,
+        progress=TerminalProgress(),
     )  # fmt: skip
     warnings = getattr(found.estimator, "warnings_", [])  # the decays' final fit onto their rows
     with writer:

@@ -31,99 +31,32 @@ from ..ident.derived import (
 from ..ident.output_error import OutputError
 from ..physics.ikeda import linear_quadratic_fit
 from ..physics.models import canonical_order
+from ..physics.terms import RESTORING_TERMS
 from ..records import DecayRun
+from .agreement import DampingPoint, PeriodPoint, differs_sentence, period_check
+from .components import ComponentScaling, component_scalings
 from .correction import Correction, correction
-from .effects import INCREMENTS, LIBRARY, Effect
+from .effects import HEAVE_CHANNELS, INCREMENTS, LIBRARY, OTHER_ROTATION_CHANNELS, Effect, measured_channel
+from .evidence import Evidence, coupling_evidence, friction_evidence
 from .fitting import Fit, ModelSpec, RunPrediction, fit_spec
-from .residuals import CycleTrend, Diagnostics, cycle_trend
+from .residuals import Diagnostics, cycle_trend
 from .sim_equation import SimEquation, best_damping_form, identify_series
-from .simulation import SERIES, Match, Simulation, check_time_scale, match_runs
+from .simulation import PREDICTION, SERIES, Match, Simulation, check_time_scale, match_runs
 from .workflow import diagnose_fit, ringing_guess
 
 #: Nothing is missing once the gap is within this multiple of what a model fitted to the measurement leaves.
 FLOOR_FACTOR = 1.5
 #: A step must close at least this fraction of the gap left above that floor, and pass the BIC margin.
 MIN_CLOSED, DELTA_BIC = 0.25, -10.0
-#: Periods agree within this fraction; damping disagrees when its 95 % intervals part by more than 10 %.
-PERIOD_TOLERANCE, DAMPING_TOLERANCE = 0.005, 0.10
 #: A series' equation reproducing it worse than this fraction of its amplitude (RMS) is warned about.
 SERIES_FIT_LIMIT = 0.05
 #: Terms that take energy out of the motion: a negative one in a fit is not physical.
 DISSIPATIVE = ("b1", "b2", "b3", "fc")
+#: A step must also predict held-out data better: fitted to this first part of every run, the model from
+#: the measured release must be closer on the rest than the model before the step (fitted alike).
+FIT_FRACTION = 0.6
 #: Effects a comparison may add: increments of terms the simulation holds, then the library's.
 CANDIDATES: tuple[Effect, ...] = (*INCREMENTS, *(e for e in LIBRARY if e.kind != "truncation"))
-
-
-@dataclass
-class DampingPoint:
-    """B_eq (1/s) of the measurement, the simulation and the corrected model at one amplitude, +-1.96 std."""
-
-    amplitude_deg: float
-    measured: tuple[float, float]  # value, std
-    simulation: tuple[float, float]
-    corrected: tuple[float, float]
-
-    @property
-    def ratio(self) -> float:
-        return self.simulation[0] / self.measured[0]
-
-    @property
-    def ratio_ci95(self) -> tuple[float, float]:
-        (bm, sm), (bs, ss) = self.measured, self.simulation
-        rel = math.hypot(sm / bm, ss / bs) if bm and bs else math.inf
-        return self.ratio * (1 - 1.96 * rel), self.ratio * (1 + 1.96 * rel)
-
-    @property
-    def disagrees(self) -> bool:
-        (bm, sm), (bs, ss) = self.measured, self.simulation
-        return abs(bs - bm) > max(1.96 * math.hypot(sm, ss), DAMPING_TOLERANCE * abs(bm))
-
-
-@dataclass
-class PeriodPoint:
-    """The undamped period (s) at one amplitude from each equation (describing function, ITTC eq. 14)."""
-
-    amplitude_deg: float
-    measured: float
-    simulation: float
-    corrected: float
-
-    @property
-    def simulation_error(self) -> float:
-        return self.simulation / self.measured - 1.0
-
-
-@dataclass
-class PeriodCheck:
-    """Measured cycle periods against the simulation's period at each cycle's amplitude (model-free side)."""
-
-    error: float  # median of T_simulation / T_measured - 1 over the measured cycles
-    ci95: float  # half-width of its 95 % interval (median's standard error, 1.2533 s / sqrt(n))
-    cycles: int
-    measured_s: float  # median measured cycle period
-    simulation_s: float  # the simulation's period at the measured cycles' median amplitude
-
-    @property
-    def disagrees(self) -> bool:
-        return self.cycles > 0 and abs(self.error) > max(PERIOD_TOLERANCE, self.ci95)
-
-
-def period_check(measured: CycleTrend, simulation: Mapping[str, float]) -> PeriodCheck:
-    """Each measured cycle's period against the simulation equation's at the cycle's amplitude
-    (describing function; damping moves a period by ~zeta^2/2, negligible here)."""
-    if measured.period_s.size == 0:
-        return PeriodCheck(math.nan, math.nan, 0, math.nan, math.nan)
-    sim = np.array([2 * math.pi / equivalent_frequency(simulation, a) for a in measured.amplitude_rad])
-    ratio = sim / measured.period_s
-    spread = float(np.std(ratio, ddof=1)) if ratio.size > 1 else math.inf
-    median_amplitude = float(np.median(measured.amplitude_rad))
-    return PeriodCheck(
-        float(np.median(ratio)) - 1.0,
-        1.96 * 1.2533 * spread / math.sqrt(ratio.size),
-        int(ratio.size),
-        float(np.median(measured.period_s)),
-        2 * math.pi / equivalent_frequency(simulation, median_amplitude),
-    )
 
 
 @dataclass
@@ -271,6 +204,17 @@ class SimulationComparison(EstimatorMixin):
         }
         stiffness = linear_stiffness(self.reference_.coefficients_)
         self.correction_: Correction = correction(self.added_, stiffness, self.hull, runs[0].axis)
+        self.scalings_: list[ComponentScaling] = component_scalings(
+            self.simulation.shares, sim, final, list(self.added_), math.sqrt(max(stiffness, 1e-12)),
+            math.radians(max(self.amplitudes_deg_)), self.correction_,
+        )  # fmt: skip
+        self.differs_ = (
+            differs_sentence(
+                self.damping_, "prediction" if self.simulation.kind == PREDICTION else "simulation"
+            )
+            if self.withheld_ and self.damping_
+            else None
+        )
         self.component_changes_ = self._component_changes()
         self.warnings_ = self._warnings()
         self.verdict_ = self._verdict()
@@ -301,6 +245,10 @@ class SimulationComparison(EstimatorMixin):
             self._say("the simulation's equation")
             return identify_series(self._series_runs)
         coefficients = dict(self.simulation.coefficients)
+        if self.simulation.kind == PREDICTION:  # a damping prediction: its restoring is the measured one
+            measured = self.reference_.coefficients_
+            coefficients = {k: v for k, v in coefficients.items() if k not in RESTORING_TERMS}
+            coefficients |= {k: v for k, v in measured.items() if k in RESTORING_TERMS}
         if not {"c1", "s1"} & set(coefficients):
             raise BadIdentificationInput(
                 f"simulation {self.simulation.name} has no linear restoring (c1 or s1)"
@@ -317,6 +265,8 @@ class SimulationComparison(EstimatorMixin):
         """Add effects one at a time while the gap is above the floor and a step closes a real part of it."""
         floor = float(np.sqrt(np.mean(np.concatenate([r["angle"] for r in self.reference_.residuals_]) ** 2)))
         self.floor_rad_ = floor
+        self.evidence_ = self._evidence(runs)
+        self.withheld_: dict[str, str] = {}
         current, fixed = self.simulation_fit_, dict(self.equation_.coefficients)
         gap = self._gap(current, runs)
         steps: list[CorrectionStep] = []
@@ -342,6 +292,10 @@ class SimulationComparison(EstimatorMixin):
         """``effect`` added to the current model, only its term(s) fitted; None unless it closes
         ``MIN_CLOSED`` of the gap above the floor (``gaps``: now, floor) and passes the BIC margin."""
         spec = effect.extend(current.spec, runs, diag)
+        evidence = self.evidence_.get(effect.key)
+        if spec is not None and evidence is not None and not evidence.seen:
+            self.withheld_[effect.name] = evidence.line  # it may fit, but nothing says it is there
+            return None
         freed, held = fixed, None  # held: a term of the simulation's this effect frees (its b1 or c1)
         if spec is None:
             if effect.increments not in fixed:
@@ -364,12 +318,49 @@ class SimulationComparison(EstimatorMixin):
         gap, floor = gaps
         gap_after = self._gap(after, runs)
         closes = gap - gap_after >= MIN_CLOSED * (gap - floor)  # False for a diverging candidate (NaN)
-        if delta_bic >= DELTA_BIC or not closes:
+        if (
+            delta_bic >= DELTA_BIC
+            or not closes
+            or not self._predicts_held_out((current, fixed), (after, freed), runs)
+        ):
             return None
         added = dict(new)
+        if any(after.coefficients.get(k, 0.0) < 0 for k in DISSIPATIVE):
+            return None  # a damping that feeds energy in: no component is scaled below zero, none traded off
         if held is not None:
             added[held] = after.coefficients[held] - fixed[held]
         return CorrectionStep(effect, after, freed, added, delta_bic, gap, gap_after)
+
+    def _evidence(self, runs: list[DecayRun]) -> dict[str, Evidence]:
+        """What the measurement shows of the effects only their own signature may name (``evidence``)."""
+        omega = math.sqrt(max(linear_stiffness(self.reference_.coefficients_), 1e-12))
+        return {
+            "friction.coulomb": friction_evidence(runs),
+            "coupling.heave": coupling_evidence(runs, measured_channel(runs, HEAVE_CHANNELS), omega),
+            "coupling.other_rotation": coupling_evidence(
+                runs, measured_channel(runs, OTHER_ROTATION_CHANNELS), omega
+            ),
+            "coupling.unmeasured": Evidence(False, "no channel of the other motion is recorded to name it"),
+        }
+
+    def _held_out_rms(self, fit: Fit, fixed: dict[str, float], runs: list[DecayRun]) -> float:
+        """``fit``'s model refitted to the first ``FIT_FRACTION`` of every run (``fixed`` held), from the
+        measured release: the angle's RMS over the rest."""
+        first = [run.window(0, int(FIT_FRACTION * run.t.size)) for run in runs]
+        try:
+            part = fit_spec(first, fit.spec, start=fit, fixed=fixed)
+        except BadIdentificationInput:
+            return math.inf
+        curves = from_release(part, runs, self.release_states_)
+        rest = [c.residual_angle[int(FIT_FRACTION * c.t.size) :] for c in curves]
+        return float(np.sqrt(np.mean(np.concatenate(rest) ** 2)))
+
+    def _predicts_held_out(
+        self, before: tuple[Fit, dict[str, float]], after: tuple[Fit, dict[str, float]], runs: list[DecayRun]
+    ) -> bool:
+        """Chosen on held-out data, as the workflow's effects are: the step (a fit and the terms it holds)
+        predicts the rest of every run better from a fit to its first part."""
+        return self._held_out_rms(*after, runs) < self._held_out_rms(*before, runs)
 
     def _compare_curves(self, runs: list[DecayRun]) -> None:
         states = self.release_states_
@@ -425,7 +416,8 @@ class SimulationComparison(EstimatorMixin):
             name
             for name, off in (
                 ("damping", any(p.disagrees for p in self.damping_)),
-                ("stiffness", self.period_check_.disagrees),
+                # a prediction's stiffness is the measured one (it predicts damping): nothing to disagree
+                ("stiffness", self.period_check_.disagrees and self.simulation.kind != PREDICTION),
             )
             if off
         )
@@ -484,8 +476,11 @@ class SimulationComparison(EstimatorMixin):
                 f"{FLOOR_FACTOR:g} times what a model fitted to it leaves ({floor:.3f} deg)"
                 + (f", although its {differs} differs beyond the intervals" if differs else "")
             )
-        names = "; ".join(f"{s.effect.name} ({s.effect.family})" for s in self.steps_)
+        scaled = {s.term for s in self.scalings_}
+        named = [f"{s.verdict_word}: {s.label}, {s.times_measured:.2g}x the measured" for s in self.scalings_]
+        missing = [f"{s.effect.name} ({s.effect.family})" for s in self.steps_ if not set(s.added) <= scaled]
+        names = "; ".join(([f"missing: {'; '.join(missing)}"] if missing else []) + named)
         return (
-            f"missing: {names}; gap (RMS of the angle, simulation vs measured) "
+            f"{names}; gap (RMS of the angle, simulation vs measured) "
             f"{before:.3f} -> {after:.3f} deg, reduced by {100 * self.gap_reduction_:.0f} %"
         )

@@ -153,6 +153,16 @@ def component_changes(
     how much (``physics.ikeda.change_lines``, over the table's amplitudes); None without components."""
     if not table.components:
         return None
+    amplitudes, parts = component_parts(table, b_eq)
+
+    def explain(b1: float, b2: float, _measured_amplitudes: Sequence[float]) -> list[str]:
+        return change_lines(omega, list(amplitudes), parts, b1, b2)
+
+    return explain
+
+
+def component_parts(table: PredictionTable, b_eq: np.ndarray) -> tuple[list[float], list[dict[str, float]]]:
+    """The table's distinct amplitudes (rad) and each component's share of B_eq / I (1/s) at each."""
     amplitudes, first = np.unique(table.amplitudes_rad, return_index=True)
     totals = np.sum(list(table.components.values()), axis=0)
     given = table.components
@@ -160,11 +170,7 @@ def component_changes(
         {key: float(given[key][i] / totals[i] * b_eq[i]) if key in given else 0.0 for key in COMPONENTS}
         for i in first
     ]
-
-    def explain(b1: float, b2: float, _measured_amplitudes: Sequence[float]) -> list[str]:
-        return change_lines(omega, list(amplitudes), parts, b1, b2)
-
-    return explain
+    return list(amplitudes), parts
 
 
 def per_unit_inertia(

@@ -19,7 +19,9 @@ from ..physics.terms import TERM_TABLE
 from ..records import DecayRun
 from ..store.safe_write import write_text_new
 from ..viz import diagnose_view, plots
-from .compare import CorrectionStep, DampingPoint, SimulationComparison
+from .agreement import DampingPoint
+from .compare import CorrectionStep, SimulationComparison
+from .components import ComponentScaling
 from .correction import Correction, moment_name
 from .fitting import RunPrediction
 from .report import diagnostics_summary, finite_json, report_folder
@@ -62,15 +64,18 @@ def period_sentence(comparison: SimulationComparison) -> str:
     return f"simulation period is {100 * abs(check.error):.1f} % {longer} {where}: stiffness disagrees"
 
 
-def _step_line(step: CorrectionStep) -> str:
+def _step_line(step: CorrectionStep, simulated: dict[str, float]) -> str:
+    """'added' for a new term; a term of the simulation's own is 'raised' or 'lowered' (an excess)."""
     effect = step.effect
+    held = effect.increments if effect.increments in simulated else None
+    verb = "added" if held is None else "lowered" if step.added.get(held, 0.0) < 0 else "raised"
     added = ", ".join(
         f"{k} {v:+.4g} {TERM_TABLE[k].unit if k in TERM_TABLE else ''}".rstrip()
         for k, v in step.added.items()
     )
     kept = ",".join(step.fixed) or "none"
     return (
-        f"added {effect.name} ({effect.family}; {effect.physics}): {added}, fitted with the simulation's "
+        f"{verb} {effect.name} ({effect.family}; {effect.physics}): {added}, fitted with the simulation's "
         f"{kept} fixed; RMS {_deg(step.rms_before_rad):.3f} -> {_deg(step.rms_after_rad):.3f} deg, "
         f"dBIC {step.delta_bic:.0f}"
     )
@@ -132,9 +137,13 @@ def story(comparison: SimulationComparison) -> list[str]:
         f"{SPECTRUM_MEANING[diag.spectrum.location]}; Ljung-Box p {diag.ljung_box_p:.2g}",
         "disagreement: " + (" and ".join(comparison.disagrees_in_) or "none beyond the intervals"),
     ]
-    lines += [_step_line(step) for step in comparison.steps_]
+    lines += [_step_line(step, eq.coefficients) for step in comparison.steps_]
     if comparison.steps_:
         lines += [_free_line(comparison), correction_line(comparison.correction_, comparison.runs_[0].axis)]
+    lines += [scaling.line for scaling in comparison.scalings_]
+    lines += [f"not named: {name} ({why})" for name, why in comparison.withheld_.items()]
+    if comparison.differs_ is not None:
+        lines.append(f"what differs: {comparison.differs_}")
     lines += [f"to meet the measurement: {line}" for line in comparison.component_changes_]
     lines += [f"warning: {w}" for w in comparison.warnings_]
     lines.append(comparison.verdict_)
@@ -233,6 +242,26 @@ def _step_part(s: CorrectionStep) -> dict[str, Any]:
     }
 
 
+def _scaling_part(s: ComponentScaling) -> dict[str, Any]:
+    """A changed term as a scaling of its components (``diagnose.components``), for the JSON."""
+    return {
+        "term": s.term,
+        "label": s.label,
+        "excess": s.excess,
+        "times_measured": s.times_measured,
+        "predicted": s.predicted,
+        "final": s.final,
+        "factor": s.factor,
+        "members": s.members,
+        "factor_alone": s.alone(),
+        "amplitude_deg": s.amplitude_deg,
+        "b44_model_n_m_s": s.b44_model_n_m_s,
+        "b44_full_n_m_s": s.b44_full_n_m_s,
+        "notes": s.notes,
+        "line": s.line,
+    }
+
+
 def summary(comparison: SimulationComparison) -> dict[str, Any]:
     """The JSON document of ``tankdaq diagnose --simulation ... --json``."""
     c = comparison
@@ -277,6 +306,11 @@ def summary(comparison: SimulationComparison) -> dict[str, Any]:
         },
         "correction": asdict(c.correction_),
         "component_changes": c.component_changes_,
+        "speed_m_s": c.simulation.speed_m_s,
+        "scalings": [_scaling_part(scaling) for scaling in c.scalings_],
+        "withheld": c.withheld_,
+        "evidence": {key: {"seen": e.seen, "line": e.line} for key, e in c.evidence_.items()},
+        "differs": c.differs_,
         "warnings": c.warnings_,
         "verdict": c.verdict_,
     }

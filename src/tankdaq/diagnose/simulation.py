@@ -29,8 +29,10 @@ from ..ident.inputs import input_notices, read_decays
 from ..ident.signals import half_cycle_peaks
 from ..records import DecayRun
 from ..validation import input_file
+from .components import prediction_shares, table_shares
 from .prediction_table import (
     component_changes,
+    component_parts,
     coverage_note,
     equivalent_model,
     is_prediction_table,
@@ -61,6 +63,11 @@ class Simulation:
     #: A prediction's own account of a measured b1, b2 (per unit inertia) at the amplitudes (rad): which of
     #: its components would have to change, and by how much (simplified Ikeda's ``required_change``).
     component_changes: Callable[[float, float, Sequence[float]], list[str]] | None = None
+    #: A prediction's components: key -> the term of the model it is part of and its part (per unit
+    #: inertia); what the correction is stated in (``diagnose.components``). None: the model's own terms.
+    shares: dict[str, tuple[str, float]] | None = None
+    #: The carriage speed the prediction is made at (m/s); None where the simulation does not say.
+    speed_m_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in (SERIES, MODEL, PREDICTION):
@@ -86,6 +93,7 @@ class SimulationRequest:
     hull: Hull | None = None
     draft: float = 1.0
     columns: SeriesColumns = SeriesColumns()
+    speed_m_s: float | None = None  # --speed: the carriage speed asked for the prediction
 
     def __post_init__(self) -> None:
         """A hull that is not the one the decays say they were recorded on (their metadata or file name,
@@ -99,6 +107,13 @@ class SimulationRequest:
                 f"the decays were recorded on hull {', '.join(recorded)}, not {self.hull.name} (--hull): "
                 f"a simulation of {self.hull.name} says nothing of them; give --hull {recorded[0]}"
             )
+
+    def speed(self) -> tuple[float, str]:
+        """The carriage speed (m/s) a prediction is made at and where it comes from (``decay_speed``)."""
+        hull_speed = None
+        if self.hull is not None:
+            hull_speed = self.hull.main_particulars.at(self.draft).get("speed_m_s")
+        return decay_speed(self.measured, self.speed_m_s, hull_speed)
 
     def require_hull(self, source: str) -> Hull:
         if self.hull is None:
@@ -123,6 +138,52 @@ def from_hull(request: SimulationRequest) -> Simulation:
     return Simulation(name, MODEL, coefficients, notes=notes)
 
 
+def recorded_speeds(runs: Sequence[DecayRun]) -> dict[float, list[str]]:
+    """The carriage speeds the decays' metadata give (m/s, rounded to the mm/s) -> the runs at each."""
+    speeds: dict[float, list[str]] = {}
+    for run in runs:
+        if run.meta.get("speed_m_s") is not None:
+            speeds.setdefault(round(float(run.meta["speed_m_s"]), 3), []).append(run.name)
+    return speeds
+
+
+def decay_speed(runs: Sequence[DecayRun], asked: float | None, hull_speed: float | None) -> tuple[float, str]:
+    """The speed a prediction of these decays is made at, and its source: the recordings' own speed (their
+    metadata, as the catalogue holds it), else ``asked`` (--speed), else the hull's speed_m_s, else 0.
+    Decays at two speeds, or --speed against the speed they were recorded at, are one line: a prediction
+    at one speed says nothing of decays at another."""
+    speeds = recorded_speeds(runs)
+    if len(speeds) > 1:
+        each = "; ".join(f"{v:g} m/s: {', '.join(names)}" for v, names in speeds.items())
+        raise InputError(
+            f"the decays were recorded at {len(speeds)} speeds ({each}): compare one speed at a time "
+            "(its files, or --runs 'speed=...')"
+        )
+    if speeds:
+        (recorded,) = speeds
+        unlabelled = [run.name for run in runs if run.meta.get("speed_m_s") is None]
+        if asked is not None and abs(asked - recorded) > 1e-3:
+            raise InputError(
+                f"--speed {asked:g} m/s, but the decays were recorded at {recorded:g} m/s: a prediction at "
+                f"one speed says nothing of decays at another; drop --speed or give {recorded:g}"
+            )
+        if unlabelled:
+            raise InputError(
+                f"{', '.join(unlabelled)} give no speed, the other decays {recorded:g} m/s: compare the "
+                "decays of one speed (or label them)"
+            )
+        if hull_speed is not None and abs(hull_speed - recorded) > 1e-3:
+            return recorded, f"the recordings; not the hull's speed_m_s {hull_speed:g} m/s"
+        return recorded, "the recordings"
+    if asked is not None:
+        if not (math.isfinite(asked) and asked >= 0):
+            raise InputError(f"--speed {asked:g}: give the carriage speed in m/s, zero or more")
+        return asked, "--speed"
+    if hull_speed is not None:
+        return hull_speed, "the hull's speed_m_s"
+    return 0.0, "assumed: neither the recordings, --speed nor the hull give one"
+
+
 def from_ikeda(request: SimulationRequest) -> Simulation:
     """The hull's simplified Ikeda prediction (``config.ikeda_prediction``) as a decay model.
 
@@ -137,17 +198,23 @@ def from_ikeda(request: SimulationRequest) -> Simulation:
     if request.axis != "roll":
         raise InputError(f"--simulation ikeda predicts roll damping; these decays are {request.axis}")
     period_s = dominant_period_s(request.measured)
-    prediction = ikeda_prediction(hull, request.draft, period_s=period_s)
+    speed, speed_from = request.speed()
+    prediction = ikeda_prediction(hull, request.draft, speed, period_s=period_s)
     model = prediction.equivalent_model(request.amplitudes_rad())
+    shares = prediction_shares(prediction, request.amplitudes_rad())
     notes = (
-        f"simplified Ikeda (Kawahara, Maekawa and Ikeda 2009) at the measured period {period_s:.4g} s",
+        f"simplified Ikeda (Kawahara, Maekawa and Ikeda 2009) at the measured period {period_s:.4g} s "
+        f"and speed {speed:g} m/s ({speed_from})",
         *(
             f"outside the method's range: {finding.line}" if finding.name in LIMITS else finding.line
             for finding in prediction.findings
         ),
     )
     name = f"ikeda {hull.name} at {format_draft(request.draft)}"
-    return Simulation(name, PREDICTION, model, notes=notes, component_changes=prediction.required_change)
+    return Simulation(
+        name, PREDICTION, model, notes=notes, component_changes=prediction.required_change, shares=shares,
+        speed_m_s=speed,
+    )  # fmt: skip
 
 
 #: Named sources; anything else is a file. A prediction method joins with one resolver here.
@@ -194,7 +261,10 @@ def from_table(path: Path, request: SimulationRequest) -> Simulation:
     if (outside := coverage_note(table.amplitudes_rad, request.amplitudes_rad())) is not None:
         notes.append(outside)
     explain = component_changes(table, b_eq, omega)
-    return Simulation(path.name, PREDICTION, model, notes=tuple(notes), component_changes=explain)
+    shares = table_shares(omega, *component_parts(table, b_eq)) if table.components else None
+    return Simulation(
+        path.name, PREDICTION, model, notes=tuple(notes), component_changes=explain, shares=shares
+    )
 
 
 def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation:
@@ -215,7 +285,15 @@ def from_series(paths: Sequence[Path], request: SimulationRequest) -> Simulation
         runs += [_renamed(run, f"sim:{run.name}") for run in found]
     rates = sorted({round(run.sample_rate, 3) for run in runs})
     notes = (f"simulated at {', '.join(f'{r:g}' for r in rates)} Hz", *input_notices(runs))
-    return Simulation(", ".join(p.name for p in paths), SERIES, runs=tuple(runs), notes=notes)
+    name = ", ".join(p.name for p in paths)
+    simulated, measured = set(recorded_speeds(runs)), set(recorded_speeds(request.measured))
+    if simulated and measured and simulated != measured:
+        raise InputError(
+            f"simulation {name} is at {', '.join(f'{v:g}' for v in sorted(simulated))} m/s, the decays were "
+            f"recorded at {', '.join(f'{v:g}' for v in sorted(measured))} m/s: simulate at the decays' speed"
+        )
+    speed = simulated.pop() if len(simulated) == 1 else None
+    return Simulation(name, SERIES, runs=tuple(runs), notes=notes, speed_m_s=speed)
 
 
 def _refuse_growing(path: Path, records: Sequence[DecayRun]) -> None:

@@ -16,8 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..physics.decay import integrate_reference, terms_sum
+from ..physics.decay import integrate_reference, simulate_decay, terms_sum
+from ..physics.ikeda import IkedaPrediction
 from ..records import DecayRun
+from .components import prediction_shares
 from .effects import EFFECTS
 from .fitting import COULOMB_EPS_RAD_S
 
@@ -173,3 +175,52 @@ def make_decay_set(
         noise_rate_rad_s=noise_rate_rad_s,
         onset_s=truth.get("onset_s"),
     )
+
+
+@dataclass
+class PredictionSet:
+    """Decays made from a prediction's own components with one scaled, and what was scaled."""
+
+    runs: list[DecayRun]
+    component: str  # the Ikeda component scaled (``physics.ikeda.COMPONENTS`` key), "" for none
+    factor: float
+    speed_m_s: float
+    truth: dict[str, float]  # b1, b2, c1 per unit inertia
+    noise_angle_rad: float
+
+
+def make_prediction_set(
+    prediction: IkedaPrediction,
+    component: str,
+    factor: float,
+    seed: int | None = None,
+    angles_deg: Sequence[float] = (10.0, 7.0, 4.0),
+    duration_s: float = 40.0,
+    rate_hz: float = 100.0,
+) -> PredictionSet:
+    """Decays at the prediction's speed and frequency whose damping is the prediction's own components,
+    ``component`` times ``factor`` (the equivalent b1 + b2 model over the release angles), simulated by
+    the independent reference integrator with MTi-class noise; the runs carry their speed as a recording
+    does. A hidden-effect set for predictions: what is scaled is known."""
+    rng = np.random.default_rng(seed)
+    releases = [np.deg2rad(a + rng.uniform(-0.5, 0.5)) * rng.choice([-1.0, 1.0]) for a in angles_deg]
+    amplitudes = [abs(float(a)) for a in releases]
+    truth = prediction.equivalent_model(amplitudes)
+    if component:
+        term, share = prediction_shares(prediction, amplitudes)[component]
+        truth[term] += (factor - 1.0) * share
+    t = np.arange(round(duration_s * rate_hz)) / rate_hz
+    speed = prediction.inputs.speed_m_s
+    runs = []
+    for i, angle0 in enumerate(releases):
+        angle, rate = simulate_decay(truth, t, float(angle0))
+        runs.append(
+            DecayRun(
+                t=t.copy(),
+                angle=angle + rng.normal(0.0, NOISE_ANGLE_RAD, t.size),
+                rate=rate + rng.normal(0.0, NOISE_RATE_RAD_S, t.size),
+                name=f"prediction-{i + 1}",
+                meta={"release_angle_deg": float(np.rad2deg(angle0)), "speed_m_s": speed},
+            )
+        )
+    return PredictionSet(runs, component, factor, speed, truth, NOISE_ANGLE_RAD)

@@ -472,7 +472,7 @@ def _run_meta(
         out["ended_after_s"] = last_t_s - release_t_s
     if "draft" in meta:
         out["draft"] = parse_draft(meta["draft"])
-    for key in ("angle_nominal_deg", "angle_initial_deg", "sample_rate_hz"):
+    for key in ("angle_nominal_deg", "angle_initial_deg", "sample_rate_hz", "speed_m_s"):
         if key in meta:
             out[key] = float(meta[key])
     for key in ("device_id", "product_code", "operator", "note"):
