@@ -40,6 +40,7 @@ __all__ = [
     "campaign",
     "compare_models",
     "diagnose",
+    "docs",
     "identify",
     "make_report",
     "read",
@@ -63,6 +64,7 @@ _PUBLIC = {
     "diagnose": "api.diagnosis",
     "Diagnosis": "api.diagnosis",
     "simulate": "api.workflows",
+    "docs": "api.pages",
     "runs": "catalogue.query",
     "set_reference": "catalogue.fits",
     "make_report": "report.make",
@@ -76,6 +78,7 @@ if TYPE_CHECKING:
     from .api.comparison import ModelComparison, compare_models
     from .api.diagnosis import Diagnosis, diagnose
     from .api.identification import Identification, Reading, identify
+    from .api.pages import docs
     from .api.recording import Decay, Recording, read
     from .api.workflows import simulate
     from .catalogue.fits import set_reference

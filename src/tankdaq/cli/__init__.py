@@ -45,6 +45,7 @@ COMMAND_MODULES = {
     "hulls": "hulls",
     "catalogue": "catalogue",
     "runs": "catalogue",
+    "docs": "docs",
 }
 
 
