@@ -7,9 +7,12 @@ finds them there, or in the source checkout's ``docs/`` and ``examples/``.
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
+from .. import validation
 from ..errors import ConfigError, InputError
+from ..store.safe_write import new_path
 
 _HERE = Path(__file__).resolve().parent.parent  # the tankdaq package
 
@@ -55,3 +58,17 @@ def docs(topic: str | None = None) -> str:
     if name not in known:
         raise InputError(f"no docs page {topic!r}: the topics are {', '.join(known)}")
     return (docs_folder() / f"{name}.md").read_text(encoding="utf-8")
+
+
+def copy_examples(folder: str | Path) -> list[Path]:
+    """Copy the example notebook and the small files the docs' examples read into ``folder`` (created;
+    a file already there is refused, never replaced): a pip user's ``examples/``. The files written."""
+    target = validation.output_dir(Path(folder), "--examples")
+    written = []
+    for source in sorted(examples_folder().iterdir()):
+        if source.is_file() and not source.name.startswith("."):
+            target.mkdir(parents=True, exist_ok=True)
+            with new_path(target / source.name) as temporary:
+                shutil.copyfile(source, temporary)
+            written.append(target / source.name)
+    return written
