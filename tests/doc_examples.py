@@ -198,7 +198,8 @@ def problem(example: Example, outcome: Outcome) -> str | None:
 
 def shell_env(venv: Path, home: Path) -> dict[str, str]:
     """The environment of a shell where ``venv`` is active (``. .venv/bin/activate``), with ``home``."""
-    keep = {k: v for k, v in os.environ.items() if not k.startswith(("TANKDAQ_", "PYTHON", "VIRTUAL_ENV"))}
+    steering = ("TANKDAQ_", "PYTHON", "VIRTUAL_ENV", "MAKEFLAGS", "MFLAGS", "MAKELEVEL")  # make test's too
+    keep = {k: v for k, v in os.environ.items() if not k.startswith(steering)}
     path = [str(venv / "bin"), *(p for p in keep.get("PATH", "").split(os.pathsep) if p)]
     return keep | {"PATH": os.pathsep.join(path), "VIRTUAL_ENV": str(venv), "HOME": str(home)}
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from doc_examples import READ_ONLY, Example, blocks, examples, pages, problem, run, shell_env
+from doc_examples import READ_ONLY, Example, blocks, examples, in_a_clone, pages, problem, run, shell_env
 from tankdaq.ident.compiled import kernel_folder
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -84,6 +84,7 @@ def clone(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, str
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # the fixture's make demo: installs, byte-compiles and runs the demo
 def test_make_demo_says_something_every_10_s_and_installs_no_test_tool(clone) -> None:
     folder, _, arrived = clone
     gaps = [(later - earlier, line) for (earlier, _), (later, line) in itertools.pairwise(arrived)]
@@ -100,11 +101,12 @@ def test_make_demo_says_something_every_10_s_and_installs_no_test_tool(clone) ->
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600)  # about a hundred commands, a few of them fits of a minute
 def test_every_example_runs_as_written_after_make_demo(clone) -> None:
     folder, env, _ = clone
     ran: list[Example] = []
     wrong: list[str] = []
-    for example in examples(folder):
+    for example in in_a_clone(folder):  # docs/pypi.md: tests/test_wheel.py, from the wheel
         if example.kind == "make":
             assert example.text in ("make demo", "make test"), example  # the fixture ran the first
             continue

@@ -196,6 +196,7 @@ def test_the_wheel_installed_read_only_runs_the_demo_from_another_folder(
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)  # the demo, a particle swarm, a campaign and a diagnosis, from the wheel
 def test_every_command_of_the_pypi_page_runs_as_written_from_the_wheel(
     installed: tuple[Path, Path], tmp_path: Path
 ) -> None:
