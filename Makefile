@@ -15,20 +15,26 @@ TEST_STAMP := $(VENV)/.installed-test
 # left out.
 # `make demo` installs what tankdaq needs to run, not the test toolchain; `make test` (and lint, docs,
 # bench) adds the `test` extra on top.
+# Each long step runs under tankdaq's heartbeat (src/tankdaq/heartbeat.py, standard library only, run from
+# the source before tankdaq is installed): a line when it starts, one every 5 s, one when it ends.
+HEARTBEAT := PYTHONPATH=src $(PYTHON) -m tankdaq.heartbeat
+COMPILE := sh -c '$(BIN)/python -m compileall -q -j 0 -x "/tests?/" $(VENV)/lib >/dev/null || true'
 $(STAMP): pyproject.toml
-	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet --no-compile -e .
-	$(BIN)/python -m compileall -q -j 0 -x '/tests?/' $(VENV)/lib >/dev/null || true
+	test -x $(BIN)/python || $(HEARTBEAT) "making the environment .venv" $(PYTHON) -m venv $(VENV)
+	$(HEARTBEAT) "updating pip" $(BIN)/python -m pip install --quiet --upgrade pip
+	$(HEARTBEAT) "installing tankdaq and what it needs to run (the first time: a few minutes)" \
+		$(BIN)/python -m pip install --quiet --no-compile -e .
+	$(HEARTBEAT) "byte-compiling the installed packages (once)" $(COMPILE)
 	touch $(STAMP)
 
 # One install for the tests (the runtime and the test extra in one pass of pip and one byte-compilation):
 # on a fresh clone `make test` does not install the runtime first and then walk the venv again.
 $(TEST_STAMP): pyproject.toml
-	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
-	$(BIN)/python -m compileall -q -j 0 -x '/tests?/' $(VENV)/lib >/dev/null || true
+	test -x $(BIN)/python || $(HEARTBEAT) "making the environment .venv" $(PYTHON) -m venv $(VENV)
+	$(HEARTBEAT) "updating pip" $(BIN)/python -m pip install --quiet --upgrade pip
+	$(HEARTBEAT) "installing tankdaq, what it needs and the test toolchain" \
+		$(BIN)/python -m pip install --quiet --no-compile -e '.[test]'
+	$(HEARTBEAT) "byte-compiling the installed packages" $(COMPILE)
 	touch $(STAMP) $(TEST_STAMP)
 
 venv: $(TEST_STAMP)

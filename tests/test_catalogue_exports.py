@@ -112,7 +112,7 @@ def test_another_tools_files_and_a_missing_pyarrow_are_skipped_with_their_reason
     skipped = sorted(line for line in result.stderr.splitlines() if line.startswith("skipped "))
     assert len(skipped) == 4
     assert "not a MATLAB file tankdaq can read" in next(line for line in skipped if "cut.mat" in line)
-    assert "needs pyarrow: pip install tankdaq[parquet]" in next(
+    assert "needs pyarrow: pip install 'tankdaq[parquet]' (from a clone: pip install '.[parquet]')" in next(
         line for line in skipped if ".parquet" in line
     )
     # another tool's files are read as a lab's decay files: each says why it holds no decay

@@ -249,7 +249,7 @@ def test_parquet_without_pyarrow_says_how_to_get_it(recording, tmp_path, monkeyp
     result = runner.invoke(app, ["export", str(recording), "--format", "parquet", "--out", str(tmp_path)])
     assert result.exit_code == 2 and "Traceback" not in result.output
     (line,) = result.stderr.strip().splitlines()
-    assert "pip install tankdaq[parquet]" in line
+    assert "pip install 'tankdaq[parquet]' (from a clone: pip install '.[parquet]')" in line
     assert not list(tmp_path.iterdir())
 
 

@@ -27,7 +27,7 @@ def _without_venv() -> dict[str, str]:
 
 def _fenced(text: str) -> list[list[str]]:
     """Every fenced block of a Markdown text, its lines."""
-    return [block.strip("\n").splitlines() for block in re.findall(r"```\n(.*?)```", text, re.S)]
+    return [block.strip("\n").splitlines() for block in re.findall(r"```\w*\n(.*?)```", text, re.S)]
 
 
 def _readme_after_demo() -> tuple[str, list[str]]:

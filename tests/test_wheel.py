@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import pty
 import re
+import shutil
 import stat
 import subprocess
 import sys
@@ -24,6 +25,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
+from doc_examples import PIP_PAGE, examples, problem, run, shell_env
+from tankdaq.ident.compiled import kernel_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -91,9 +95,11 @@ def _writable_again(folder: Path) -> None:
         path.chmod(path.stat().st_mode | stat.S_IWUSR)
 
 
-@pytest.fixture
-def installed(tmp_path: Path) -> Iterator[tuple[Path, Path]]:
-    """(venv, its site-packages): the wheel of this tree installed alone, site-packages read-only."""
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, Path]]:
+    """(venv, its site-packages): the wheel of this tree installed alone, site-packages read-only (once
+    for the module: the wheel is built once)."""
+    tmp_path = tmp_path_factory.mktemp("wheel")
     dist = tmp_path / "dist"
     built = subprocess.run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", dist, ROOT],
@@ -144,7 +150,7 @@ def test_the_wheel_installed_read_only_runs_the_demo_from_another_folder(
     (info,) = site.glob("tankdaq-*.dist-info")
     assert "MIT License" in (info / "licenses" / "LICENSE").read_text()
     page = (info / "METADATA").read_text().split("\n\n", 1)[1]  # the long description, after the headers
-    assert page.index("pip install tankdaq") < page.index("tankdaq demo") and "make demo" not in page
+    assert page.index("pip install dist/tankdaq-") < page.index("tankdaq demo") and "make demo" not in page
     assert "](https://" in page and "](docs/" not in page, "the PyPI page links to files not in the wheel"
 
     helped = run(venv / "bin" / "python", "-c", HELP)
@@ -187,3 +193,36 @@ def test_the_wheel_installed_read_only_runs_the_demo_from_another_folder(
     assert truth and all("(inside" in line for line in truth), shown
     assert len(list((work / "demo").glob("*.mcap"))) == 1
     assert len(list((work / "demo").glob("*.png"))) == 1
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1800)  # the demo, a particle swarm, a campaign and a diagnosis, from the wheel
+def test_every_command_of_the_pypi_page_runs_as_written_from_the_wheel(
+    installed: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """docs/pypi.md, block by block, in a pip user's folder holding the wheel in ``dist/`` (its ``pip
+    install`` lines resolved with ``--dry-run``); ``tankdaq docs`` prints the pages from the wheel."""
+    venv, site = installed
+    before = _listing(site)
+    work, home = tmp_path / "work", tmp_path / "home"
+    (work / "dist").mkdir(parents=True)
+    home.mkdir()
+    (wheel,) = (site.parents[3] / "dist").glob("tankdaq-*.whl")  # venv/lib/pythonX.Y/site-packages
+    shutil.copy(wheel, work / "dist" / wheel.name)
+    env = shell_env(venv, home) | {"TANKDAQ_KERNEL_DIR": str(kernel_folder())}  # built by the test above
+    env["PATH"] += os.pathsep + str(Path(sys.executable).parent)  # pip: the venv has none of its own
+    page = [e for e in examples(ROOT) if e.page == PIP_PAGE]
+    assert [e.kind for e in page][:2] == ["pip", "pip"] and any(e.marker == "[hardware]" for e in page)
+    wrong = [said for e in page if (said := problem(e, run(e, work, env))) is not None]
+    assert not wrong, "\n\n".join(wrong)
+    listed = run(next(e for e in page if e.text == "tankdaq docs"), work, env).out
+    assert f"pages in {site / 'tankdaq' / '_docs'}" in listed and "catalogue " in listed
+    models = run(next(e for e in page if e.text == "tankdaq docs models"), work, env).out
+    assert models.startswith("# ") and "Plausibility checks" in models
+    copied = {path.name for path in (work / "examples").iterdir()}
+    assert {"decay_in_a_notebook.ipynb", "kvlcc2_roll_decay.csv"} <= copied
+    unknown = subprocess.run(
+        [venv / "bin" / "tankdaq", "docs", "nosuchpage"], cwd=work, env=env, capture_output=True, text=True
+    )
+    assert unknown.returncode == 2 and unknown.stderr.count("\n") == 1 and "catalogue, " in unknown.stderr
+    assert _listing(site) == before

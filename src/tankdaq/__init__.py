@@ -40,6 +40,7 @@ __all__ = [
     "campaign",
     "compare_models",
     "diagnose",
+    "docs",
     "identify",
     "import_archive",
     "make_report",
@@ -64,6 +65,7 @@ _PUBLIC = {
     "diagnose": "api.diagnosis",
     "Diagnosis": "api.diagnosis",
     "simulate": "api.workflows",
+    "docs": "api.pages",
     "runs": "catalogue.query",
     "set_reference": "catalogue.fits",
     "make_report": "report.make",
@@ -78,6 +80,7 @@ if TYPE_CHECKING:
     from .api.comparison import ModelComparison, compare_models
     from .api.diagnosis import Diagnosis, diagnose
     from .api.identification import Identification, Reading, identify
+    from .api.pages import docs
     from .api.recording import Decay, Recording, read
     from .api.workflows import simulate
     from .catalogue.archive import import_archive

@@ -6,6 +6,12 @@ missing port), 1 for failures at run time (device vanished, disk full).
 """
 
 
+def install_hint(extra: str) -> str:
+    """How to install an optional extra (``postgres``, ``parquet``, ``dask``, ``notebook``), from an
+    index and from a clone, as every line that reports it missing says it."""
+    return f"pip install 'tankdaq[{extra}]' (from a clone: pip install '.[{extra}]')"
+
+
 class TankdaqError(Exception):
     """Base of every error tankdaq raises on purpose."""
 

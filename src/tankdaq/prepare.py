@@ -12,11 +12,9 @@ and before the test workers start. ``record`` and ``replay`` prepare the identif
 from __future__ import annotations
 
 import math
-import threading
 import time
 
-#: Seconds between the lines that say the kernels are still being prepared (no silent half minute).
-HEARTBEAT_S = 8.0
+from .heartbeat import heartbeat
 
 
 def prepare() -> None:
@@ -34,21 +32,12 @@ def prepare() -> None:
 
 
 def prepare_said() -> None:
-    """``prepare`` with a line when it starts, one every ``HEARTBEAT_S`` while it works (the first build
+    """``prepare`` with a line when it starts, one every few seconds while it works (the first build
     takes about half a minute, with nothing else to show), and one when it is done."""
     start = time.monotonic()
-    done = threading.Event()
-
-    def heartbeat() -> None:
-        while not done.wait(HEARTBEAT_S):
-            print(f"  still preparing the kernels ({time.monotonic() - start:.0f} s)", flush=True)
-
     print("tankdaq: preparing the kernels (built once per machine, about 30 s the first time)", flush=True)
-    threading.Thread(target=heartbeat, name="tankdaq-prepare-heartbeat", daemon=True).start()
-    try:
+    with heartbeat("preparing the kernels"):
         prepare()
-    finally:
-        done.set()
     print(f"tankdaq: kernels ready ({time.monotonic() - start:.0f} s)", flush=True)
 
 

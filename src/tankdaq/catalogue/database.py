@@ -16,6 +16,7 @@ from typing import Any, TypeVar
 
 import sqlalchemy as sa
 
+from ..errors import install_hint
 from .location import ENV_VAR as ENV_VAR
 from .location import FILE_NAME as FILE_NAME
 from .location import BadCatalogueQuery as BadCatalogueQuery
@@ -218,7 +219,7 @@ def _reader_engine(url: str) -> sa.Engine:
 
 
 #: What a PostgreSQL catalogue needs installed (psycopg 3, the ``postgres`` extra), as the line says it.
-POSTGRES_EXTRA = "pip install 'tankdaq[postgres]' (from a clone: pip install '.[postgres]')"
+POSTGRES_EXTRA = install_hint("postgres")
 
 
 def _server_engine(url: str) -> sa.Engine:

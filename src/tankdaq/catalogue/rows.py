@@ -17,7 +17,7 @@ from typing import Any
 
 from .. import __version__
 from ..config import Hull, load_hull, locate_hull, parse_draft
-from ..errors import RecordingError, TankdaqError
+from ..errors import RecordingError, TankdaqError, install_hint
 from ..records import DecayEnd
 from ..store.inputs import INPUT_FORMATS, file_sha256
 from .database import one_line
@@ -229,7 +229,7 @@ def export_metadata(path: Path) -> dict[str, Any] | None:
     kind, library = {  # what the file is, what reads it (and how to get it)
         ".h5": ("HDF5", "h5py"),
         ".hdf5": ("HDF5", "h5py"),
-        ".parquet": ("Parquet", "pyarrow: pip install tankdaq[parquet]"),
+        ".parquet": ("Parquet", f"pyarrow: {install_hint('parquet')}"),
         ".mat": ("MATLAB", "scipy"),
     }[suffix]
     try:

@@ -46,6 +46,7 @@ COMMAND_MODULES = {
     "hulls": "hulls",
     "catalogue": "catalogue",
     "runs": "catalogue",
+    "docs": "docs",
 }
 
 

@@ -88,7 +88,8 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
-    help="tankdaq: record towing-tank decay tests from an Xsens MTi-G and identify damping and restoring.",
+    help="tankdaq: record towing-tank decay tests from an Xsens MTi-G and identify damping and restoring."
+    " A page cited as docs/TOPIC.md is printed by `tankdaq docs TOPIC` (`tankdaq docs` lists them).",
 )
 
 
@@ -268,7 +269,8 @@ def runs_option() -> Any:
 
 def build_kernels_shown() -> None:
     """On a first run, build the native kernels under the line that says how long, how big and where,
-    with a spinner and the elapsed time; the library then finds them built (or says why not itself)."""
+    with a spinner and the elapsed time (not on a terminal: a line every few seconds and one at the end);
+    the library then finds them built (or says why not itself)."""
     from ..ident import compiled
     from ..ident.online import first_run_notice
 
@@ -276,6 +278,14 @@ def build_kernels_shown() -> None:
     if notice is None:
         return
     say(notice)
+    if not err_console.is_terminal:  # a pipe or a log: lines, since a spinner draws nothing there
+        from ..heartbeat import heartbeat
+
+        start = time.monotonic()
+        with heartbeat("building native kernels", say):
+            compiled.ensure_native()
+        say(f"native kernels built ({time.monotonic() - start:.0f} s)")
+        return
     with progress_bar() as progress:
         progress.add_task("building native kernels", total=None)
         compiled.ensure_native()

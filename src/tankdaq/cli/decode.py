@@ -20,11 +20,10 @@ import typer
 from ..errors import InputError, ProtocolError
 from ..validation import input_file, new_file
 from ..xsens.constants import MID
-from .app import app, checked, err_console, handles_errors, progress_bar
+from .app import TerminalProgress, app, checked, err_console, handles_errors
 
 if TYPE_CHECKING:  # the decoders (and mcap) are imported by the command itself: --help stays quick
-    from rich.progress import Progress
-
+    from ..api.progress import Progress
     from ..xsens.batch import DecodedBlock
     from ..xsens.mtdata2 import MTData2Message
     from ..xsens.timebase import CounterTracker
@@ -126,7 +125,7 @@ def is_log(path: Path, data: bytes) -> bool:
     return path.suffix.lower() == ".mtb" or data[:3] == bytes((0xFA, 0xFF, MID.CONFIGURATION))
 
 
-def decode_all(data: bytes, bar: Progress, label: str, log: bool = False) -> DecodedBlock:
+def decode_all(data: bytes, progress: Progress, label: str, log: bool = False) -> DecodedBlock:
     """Stream-decode ``data`` in 1 MiB pieces (progress in KiB); ``log``: as an MT Manager log."""
     from ..xsens.batch import DecodedBlock
     from ..xsens.framer import ANY_BID
@@ -134,11 +133,11 @@ def decode_all(data: bytes, bar: Progress, label: str, log: bool = False) -> Dec
     from ..xsens.stream import StreamDecoder
 
     decoder = StreamDecoder(LOG_MAX_DATA_LENGTH, ANY_BID) if log else StreamDecoder()
-    task = bar.add_task(f"decoding {label} (KiB)", total=len(data) // 1024 + 1)
     blocks = []
-    for start in range(0, len(data), CHUNK_BYTES):
-        blocks.append(decoder.feed(data[start : start + CHUNK_BYTES]))
-        bar.advance(task, CHUNK_BYTES // 1024)
+    with progress.task(f"decoding {label} (KiB)", total=len(data) // 1024 + 1) as update:
+        for start in range(0, len(data), CHUNK_BYTES):
+            blocks.append(decoder.feed(data[start : start + CHUNK_BYTES]))
+            update(min(start + CHUNK_BYTES, len(data)) // 1024)
     return DecodedBlock.concat([*blocks, decoder.finish()])  # the capture ends: nothing follows it
 
 
@@ -194,30 +193,41 @@ def csv_header(block: DecodedBlock, legacy: list[tuple[int, MTData2Message]]) ->
 
 
 def write_messages(
-    messages: Iterator[MTData2Message], total: int, handle: IO[str], header: list[str] | None, bar: Progress
+    messages: Iterator[MTData2Message],
+    total: int,
+    handle: IO[str],
+    header: list[str] | None,
+    progress: Progress,
 ) -> list[int]:
     """One JSON object (``header`` None) or CSV row per message; returns the PacketCounters seen, in order."""
-    from ..xsens.mtdata2 import to_jsonable
-
-    task = bar.add_task("writing messages", total=total)
     writer = None
     if header is not None:
         writer = csv.DictWriter(handle, fieldnames=header, restval="", lineterminator="\n")
         writer.writeheader()
     counters: list[int] = []
-    for count, message in enumerate(messages, 1):
-        if "PacketCounter" in message:
-            counters.append(cast(int, message["PacketCounter"]))
-        if writer is None:
-            values = {name: to_jsonable(value) for name, value in message.items()}
-            handle.write(json.dumps(values, separators=(",", ":")) + "\n")
-        else:
-            writer.writerow(
-                {col: cell for name, value in message.items() for col, cell in flatten(name, value).items()}
-            )
-        if count % WRITE_BATCH == 0:
-            bar.advance(task, WRITE_BATCH)
+    with progress.task("writing messages", total=total) as update:
+        for count, message in enumerate(messages, 1):
+            _write_one(message, handle, writer, counters)
+            if count % WRITE_BATCH == 0:
+                update(count)
     return counters
+
+
+def _write_one(
+    message: MTData2Message, handle: IO[str], writer: csv.DictWriter[str] | None, counters: list[int]
+) -> None:
+    """One message as a JSON line (``writer`` None) or a CSV row; its PacketCounter kept in ``counters``."""
+    from ..xsens.mtdata2 import to_jsonable
+
+    if "PacketCounter" in message:
+        counters.append(cast(int, message["PacketCounter"]))
+    if writer is None:
+        values = {name: to_jsonable(value) for name, value in message.items()}
+        handle.write(json.dumps(values, separators=(",", ":")) + "\n")
+    else:
+        writer.writerow(
+            {col: cell for name, value in message.items() for col, cell in flatten(name, value).items()}
+        )
 
 
 def summary_line(block: DecodedBlock, legacy: int, tracker: CounterTracker) -> str:
@@ -300,18 +310,18 @@ def decode_command(
             raise InputError(str(exc)) from None
     data = read_capture(capture)
     log = is_log(capture, data)
-    with progress_bar() as bar:
-        block = decode_all(data, bar, capture.name, log)
-        if block.frames == 0:
-            raise InputError(f"no Xbus frames in {capture} ({len(data)} bytes): is it a raw serial capture?")
-        legacy = [] if legacy_mode is None else decode_legacy(block, legacy_mode, legacy_settings or 0)
-        by_device = log and np.unique(block.bus_ids).size > 1  # an Awinda station's log: which device
-        header = csv_header(block, legacy) if output_format is OutputFormat.csv else None
-        if header is not None and by_device:
-            header.insert(0, BUS_ID)
-        with open_output(out) as handle:
-            total = block.n_messages + len(legacy)
-            counters = write_messages(in_stream_order(block, legacy, by_device), total, handle, header, bar)
+    progress = TerminalProgress()  # where stderr is not a terminal: a line every 10 s, not a bar
+    block = decode_all(data, progress, capture.name, log)
+    if block.frames == 0:
+        raise InputError(f"no Xbus frames in {capture} ({len(data)} bytes): is it a raw serial capture?")
+    legacy = [] if legacy_mode is None else decode_legacy(block, legacy_mode, legacy_settings or 0)
+    by_device = log and np.unique(block.bus_ids).size > 1  # an Awinda station's log: which device
+    header = csv_header(block, legacy) if output_format is OutputFormat.csv else None
+    if header is not None and by_device:
+        header.insert(0, BUS_ID)
+    with open_output(out) as handle:
+        total = block.n_messages + len(legacy)
+        counters = write_messages(in_stream_order(block, legacy, by_device), total, handle, header, progress)
     tracker = CounterTracker()
     tracker.update_many(np.array(counters, dtype=np.int64))
     err_console.print(

@@ -27,7 +27,7 @@ def export_command(
         typer.Option(
             "--format",
             help="csv (with a <name>.json of the run metadata), h5 (one file per decay), "
-            "parquet (needs pip install tankdaq[parquet]) or mat.",
+            "parquet (needs the parquet extra: pip install 'tankdaq[parquet]') or mat.",
         ),
     ] = "csv",
     out: Annotated[

@@ -10,7 +10,7 @@ from contextlib import contextmanager
 from multiprocessing import get_context
 from typing import Any, TypeVar
 
-from ..errors import InputError, TankdaqError
+from ..errors import InputError, TankdaqError, install_hint
 from .online import prepare_kernels
 
 T = TypeVar("T")
@@ -142,7 +142,9 @@ def check_scheduler(scheduler: str) -> None:
     try:
         from distributed.comm import get_address_host_port, parse_address
     except ImportError:
-        raise InputError("--executor dask needs the dask extra: pip install 'tankdaq[dask]'") from None
+        raise InputError(
+            f"--executor dask needs the dask extra (distributed): {install_hint('dask')}"
+        ) from None
     try:
         parse_address(scheduler, strict=True)
     except (ValueError, TypeError) as exc:

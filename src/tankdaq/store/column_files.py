@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, install_hint
 from ..validation import input_file
 from .csv_import import SPEED_CHANNEL, ColumnData, CsvOptions
 from .csv_units import stated_unit
@@ -121,7 +121,7 @@ def read_mat_columns(path: Path, options: CsvOptions) -> ColumnData:
 def read_parquet_columns(path: Path, options: CsvOptions) -> ColumnData:
     """The numeric columns of a Parquet file, their fields' ``unit`` metadata, and the metadata of a
     ``tankdaq export`` (the JSON under the schema key ``tankdaq``)."""
-    parquet = _library(path, "pyarrow.parquet", "Parquet", "pyarrow: pip install 'tankdaq[parquet]'")
+    parquet = _library(path, "pyarrow.parquet", "Parquet", f"pyarrow: {install_hint('parquet')}")
     input_file(path)
     try:
         table = parquet.read_table(path)

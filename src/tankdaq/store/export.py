@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import BadRecordingInput, InputError
+from ..errors import BadRecordingInput, InputError, install_hint
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
 from ..validation import refuse_existing
 from .export_layout import (
@@ -62,7 +62,7 @@ WRITERS: dict[str, Callable[[ExportTable, Path], list[Path]]] = {
 #: Formats written as one file per decay (``<stem>_decay<k>``), the way a lab's run database holds runs.
 PER_DECAY = frozenset({"h5"})
 #: What a format needs beyond the core install, and the line that says how to get it.
-EXTRAS = {"parquet": ("pyarrow", "parquet export needs pyarrow: pip install tankdaq[parquet]")}
+EXTRAS = {"parquet": ("pyarrow", f"parquet export needs pyarrow: {install_hint('parquet')}")}
 
 
 def check_options(file_format: str, frame: str) -> None:
