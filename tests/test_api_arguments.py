@@ -66,6 +66,7 @@ PUBLIC: dict[str, Callable[..., Any]] = {
     "set_reference": tankdaq.set_reference,
     "make_report": tankdaq.make_report,
     "import_archive": tankdaq.import_archive,
+    "docs": tankdaq.docs,
     "Identification.plot": tankdaq.Identification.plot,
     "Recording.export": tankdaq.Recording.export,
     "Recording.to_csv": tankdaq.Recording.to_csv,
@@ -157,6 +158,7 @@ def _base(name: str, made: Made, here: Path) -> tuple[Callable[..., Any], dict[s
             tankdaq.import_archive,
             {"folder": made.folder, "out": here / "in", "catalogue": "none", **stop},
         ),
+        "docs": (tankdaq.docs, {}),
         "Identification.plot": (made.result.plot, {}),
         "Diagnosis.save_rrd": (made.diagnosis.save_rrd, {"path": here / "story.rrd"}),
     }

@@ -13,6 +13,7 @@ from pathlib import Path
 from .. import validation
 from ..errors import ConfigError, InputError
 from ..store.safe_write import new_path
+from . import arguments
 
 _HERE = Path(__file__).resolve().parent.parent  # the tankdaq package
 
@@ -49,6 +50,7 @@ def topics() -> dict[str, str]:
 def docs(topic: str | None = None) -> str:
     """One documentation page's text (Markdown), e.g. ``docs("catalogue")``; without a topic, the list of
     topics with their titles. An unknown topic is an ``InputError`` naming the topics there are."""
+    topic = arguments.optional_text(topic, "topic", "a page's name (tankdaq.docs() lists them) or None")
     known = topics()
     if topic is None:
         width = max(map(len, known), default=0)
