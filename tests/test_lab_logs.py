@@ -178,6 +178,9 @@ def test_tdms_channels_are_found_by_name_and_units_by_unit_string(
 def test_a_missing_tdms_channel_is_one_line(tow: dict[str, Path]) -> None:
     with pytest.raises(InputError, match="no speed column 'Carriage/Sped'"):
         tankdaq.read(tow["tdms"], angle_col="Carriage/Roll", speed_col="Carriage/Sped")
+    # a channel named and absent is refused, never replaced by the Roll found by its name
+    with pytest.raises(InputError, match="no channel 'Carriage/Rol'"):
+        tankdaq.read(tow["tdms"], angle_col="Carriage/Rol")
 
 
 def test_catalogue_index_adds_a_log_with_its_device(

@@ -201,8 +201,12 @@ def read_tdms_columns(path: Path, options: CsvOptions) -> ColumnData:
                     stated[name] = unit
     header = {f"tdms_{key}": _plain(value) for key, value in tdms.properties.items()}
     angle_col = options.angle_col
-    if angle_col not in columns:  # the default name: the one channel whose name says the axis (Roll)
+    if angle_col == CsvOptions.angle_col and angle_col not in columns:  # none named: the one whose name says
+        # the axis (Roll); a channel the user named and the file lacks is refused, never replaced
         angle_col = _named_channel(columns, (options.axis,), angle_col, said)
+    elif angle_col not in columns:
+        names = ", ".join(columns) or "none with numbers"
+        raise InputError(f"{path}: no channel {angle_col!r}; it has {names} (--angle-col GROUP/NAME)")
     if angle_col != options.angle_col:
         columns[options.angle_col] = columns.pop(angle_col)
         if angle_col in stated:
