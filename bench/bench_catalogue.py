@@ -2,7 +2,7 @@
 as a campaign writes back) into SQLite and a throwaway PostgreSQL server, and a lab's query at 10^5 rows.
 
 Run: ``.venv/bin/python bench/bench_catalogue.py`` (the PostgreSQL part needs the server binaries:
-``make test`` installs them where it can). Figures go into docs/benchmarks.md by hand.
+``make test`` installs them where it can). What users need of its figures is in docs/performance.md.
 """
 
 from __future__ import annotations

@@ -10,8 +10,8 @@ The recordings are ``tests/campaign_scale.write_many_decays``'s (kept in --data 
 ``bench_campaign_scale.py``). The parent's CPU is ``getrusage(RUSAGE_SELF)`` around ``tankdaq.campaign``
 and the writer's close, the workers' ``RUSAGE_CHILDREN`` (the pool's workers are reaped when the campaign
 ends). CPU, not wall, is the figure to read on a shared machine. It also says what ``catalogue index``
-of the same files into a new catalogue costs. Medians of --repeats; figures go into
-docs/benchmarks.md by hand.
+of the same files into a new catalogue costs. Medians of --repeats; what users need of them is in
+docs/performance.md.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Where two processes at once each spend more CPU than one alone (shared execution units, a throttled
 host), no pool of two can be twice as fast as one process; where they spend the same, a campaign's
-``--jobs 2`` shortfall against 2x is its own overhead (bench_campaign_scale.py, docs/benchmarks.md).
+``--jobs 2`` shortfall against 2x is its own overhead (bench_campaign_scale.py).
 
 Run: .venv/bin/python bench/bench_two_cores.py [--repeats 3]
 """

@@ -58,8 +58,8 @@ class DecayOutcome:
         return self.last_t - self.release_t
 
 
-#: The outcomes a pipeline or daemon keeps, newest last. Each is 2-4 kB: a lab day of 823 decays kept
-#: every one, 3 MB of that day's growth (bench_memory_day). Every outcome is also a ``Settled`` event
+#: The outcomes a pipeline or daemon keeps, newest last. Each is 2-4 kB, so keeping all of a lab day's
+#: would grow the recorder by megabytes. Every outcome is also a ``Settled`` event
 #: for every listener and, once recorded, a file and a catalogue row.
 KEPT_OUTCOMES = 100
 

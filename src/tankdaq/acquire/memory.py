@@ -3,16 +3,16 @@
 A decay's buffers (its fit, its file, its .rrd) are freed when it ends, but glibc's malloc keeps the
 freed pages of its arenas (each thread that allocates attaches to one, up to 8 per core: the pipeline,
 the live fit's worker, the view, rerun's threads) for later, and only the top of each arena is ever
-returned by itself. Over a lab day that is some 30 MB held free with the view saving, and the resident
-size swings and drifts with it (docs/benchmarks.md, "Memory over a lab day"). ``malloc_trim(0)``
+returned by itself. Over a lab day that is tens of MB held free with the view saving, and the resident
+size swings and drifts with it (``bench/bench_memory_day.py``). ``malloc_trim(0)``
 returns every whole free page of every arena; it is done once a decay has settled, on the pipeline's
 thread (never the reading one). ``limit_arenas`` caps the arenas at the record daemon's start (rerun's
-threads alone took 15 on 2 cores, each keeping its own free pages); what ``MALLOC_ARENA_MAX`` does.
+threads alone take 15 on 2 cores, each keeping its own free pages); what ``MALLOC_ARENA_MAX`` does.
 
 ``fix_mmap_threshold`` keeps large blocks (a fit's arrays over a decay, 80-250 kB at 400 Hz) in mappings
 of their own, given back whole when freed. glibc raises its threshold for that each time such a block is
-freed (up to 32 MB), after which they are cut from the arenas instead, and the holes they leave there are
-what kept growing over a day (docs/benchmarks.md).
+freed (up to 32 MB), after which they are cut from the arenas instead, and the holes they leave there
+grow over a day.
 
 ``uncache_numpy_small_blocks`` stops numpy keeping freed array buffers under 1 kB for reuse (up to 7 of
 each size in bytes: 3.7 MB when full). A recorder meets new block sizes all day (a read's samples, a
@@ -69,8 +69,8 @@ def _mallopt(parameter: int, value: int, variable: str, tunable: str) -> bool:
 
 #: glibc's ``mallopt`` parameter for the most arenas (malloc.h's ``M_ARENA_MAX``).
 M_ARENA_MAX = -8
-#: Arenas a recording process uses at most: over 1.5 simulated hours of the memory bench, glibc's memory
-#: held free went from 32-59 MB with its own 15 arenas to 7-9 MB with 2 (docs/benchmarks.md).
+#: Arenas a recording process uses at most: each arena keeps free pages of its own, so fewer arenas hold
+#: several times less memory free (``bench/bench_memory_day.py``).
 ARENAS = 2
 
 

@@ -1,9 +1,9 @@
 """The thread that takes the device's reads and does nothing else.
 
-Release confirmation, pre-trigger writing, fit hand-off and file work took 0.14–0.54 s once per
-decay at 400 Hz when they ran on the reading thread: that long the bytes waited in the port's
-buffers. A thread of their own was not enough: it shared the interpreter with the pipeline, the
-live fit and the view (up to 0.3 s, docs/benchmarks.md). So where the port is a path the reads
+Release confirmation, pre-trigger writing, fit hand-off and file work take a good part of a second
+once per decay: run on the reading thread, they would leave the bytes that long in the port's
+buffers. A thread of its own is not enough either, since it shares the interpreter with the
+pipeline, the live fit and the view. So where the port is a path the reads
 are made by a process of their own (``device.read_process``: every ``READ_INTERVAL_S``, stamped
 there), and ``DeviceReader``'s thread (``tankdaq-read``) only decodes them into blocks; for a
 pyserial URL it reads itself. Each block is queued with the link counters as of that read; the

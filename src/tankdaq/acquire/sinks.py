@@ -130,8 +130,8 @@ class Decay:
         return extra
 
     def outcome(self) -> DecayOutcome:
-        """What the decay leaves once it is over: its fit's numbers without the predicted curve (a run
-        keeps every outcome: with a curve each, a day of decays at 400 Hz kept about 9 MB an hour)."""
+        """What the decay leaves once it is over: its fit's numbers without the predicted curve (a curve is
+        some 90 kB a decay at 400 Hz, too much to keep for each of a day's decays)."""
         fit = self.final_fit if self.ended is not DecayEnd.ERROR else self.fit
         return DecayOutcome(
             run=self.run,

@@ -23,7 +23,7 @@ from .schema import decays, exports
 from .writing import Made, add_export, add_rows, record_session
 
 #: New decay rows go into the catalogue this many to a transaction (one transaction a file cost more than
-#: making its row: bench/bench_catalogue_campaign.py, docs/benchmarks.md).
+#: making its row: ``bench/bench_catalogue_campaign.py``).
 INDEX_BATCH = 200
 
 

@@ -13,7 +13,8 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 # tankdaq's linear algebra is many small problems: BLAS threads only add start-up and contention
-# (a 0.4 ms QR took 38 ms on a loaded 2-core machine). Set before numpy is first imported.
+# (on a loaded machine a small QR waits for its threads many times its own cost). Set before numpy is
+# first imported.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from .app import app as _app

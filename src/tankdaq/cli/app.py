@@ -76,7 +76,7 @@ class OneLineUsageErrors(TyperGroup):
 
 def _absent_is_false(help_option: TyperOption | None) -> TyperOption | None:
     """``--help`` not given reads as False, not None: typer 0.29 passes a None through a pydantic
-    TypeAdapter, and importing pydantic for that was 0.1 s of every ``tankdaq COMMAND --help``."""
+    TypeAdapter, and importing pydantic for that costs 0.1 s of every ``tankdaq COMMAND --help``."""
     if help_option is not None:
         help_option.default = False
     return help_option

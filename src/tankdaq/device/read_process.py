@@ -1,8 +1,8 @@
 """The reads of a streaming device, in a process of their own that does nothing else.
 
 A thread of the recorder shares the interpreter with the pipeline, the live fit, the view and the
-files: reads waited for them, over 0.1 s in the median decay at 400 Hz on a busy host
-(docs/benchmarks.md), that long the bytes sat in the port's buffers. ``ReadProcess`` runs this
+files: on a busy host its reads wait for them, and the bytes sit that long in the port's buffers
+(``bench/bench_read_loop.py`` measures the wait). ``ReadProcess`` runs this
 file as a small Python process (``python -I -S``: the standard library only, nothing of tankdaq,
 no site packages) on the serial port's file descriptor, inherited. Every ``interval_s`` it reads
 what has arrived, stamps the host arrival time (wall and monotonic clock) and sends (stamps, bytes)

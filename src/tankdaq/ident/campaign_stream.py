@@ -4,9 +4,9 @@ the recordings nor the fits' per-sample state.
 Two passes over the files, both in the workers (``ident.executors``), in chunks. The scan reads each file,
 cuts its free decays and returns what groups them (hull, axis, draft, nominal angle per decay) and the
 lines to say; the fit sends each worker a chunk of groups as file paths, the worker reads those files
-again, fits each group and returns its row (``GroupRow``). Reading a decay twice costs about 2 ms of
-CPU against its 5-6 ms fit; handing the decays and fits to the parent cost it 0.8 MB per decay
-(``bench/bench_campaign_scale.py``, docs/benchmarks.md). ``fit_campaign`` yields the rows as workers
+again, fits each group and returns its row (``GroupRow``). Reading a decay twice costs less than its
+fit, while handing the decays and fits to the parent would grow it by the size of every decay
+(``bench/bench_campaign_scale.py``). ``fit_campaign`` yields the rows as workers
 finish them, so a consumer (a table, a catalogue) can write them as they come. Whatever else a caller
 wants of a file (the run catalogue: the row of a file it does not hold) is made by the worker that scans
 it (``FileWork``), so the parent never reads a file.
@@ -42,8 +42,8 @@ CHUNKS = 32
 #: ...and no chunk holds more decays (or files) than this (a worker's memory; the parent's progress).
 MAX_CHUNK_DECAYS = 64
 #: The scan costs about its files' bytes: one chunk per worker, of equal bytes (``scan_chunks``). On a
-#: Dask cluster a task costs about 5 ms of CPU between client, scheduler and worker (and a round trip;
-#: bench_campaign_scale), so the fits too go in fewer tasks (one group can cost 7x another): in chunks
+#: Dask cluster a task costs milliseconds of CPU between client, scheduler and worker (and a round trip),
+#: so the fits too go in fewer tasks (one group can cost several times another): in chunks
 #: that shrink as the work runs out, each this fraction of what is left per thread (guided
 #: self-scheduling): a few large tasks first, single groups at the end, so no worker waits long on
 #: another's last chunk.
@@ -281,9 +281,8 @@ def fit_chunks(
 
 def scan_chunks(paths: Sequence[Path], executor: Executor | None = None) -> list[list[Path]]:
     """The files cut for the scan: each alone here (progress after each); on a pool or a cluster one
-    run of neighbouring files per worker, of about equal bytes (a scan costs about its file's size and a
-    task about 0.4 ms on a pool, 5 ms on Dask: N = 36 on a pool of two scanned in 34 ms as two tasks, 40
-    as 18), at most ``MAX_CHUNK_DECAYS`` files each."""
+    run of neighbouring files per worker, of about equal bytes (a scan costs about its file's size, and
+    every task a fixed overhead: more on Dask than on a pool), at most ``MAX_CHUNK_DECAYS`` files each."""
     workers = executor_workers(executor)
     if workers is None or not paths:
         return [[path] for path in paths]

@@ -101,7 +101,7 @@ def cpu_identity() -> str:
 
     A native module tuned for this CPU must never load on another one (an install shared over
     NFS by different machines): the identity is part of its name, and without one the build is
-    generic (fits about 25 % slower, measured).
+    generic (its fits are about a quarter slower).
     """
     try:
         first_cpu = Path("/proc/cpuinfo").read_text().split("\n\n", 1)[0]

@@ -81,8 +81,8 @@ class DaskExecutor(Executor):
 
     A pass of a campaign goes out as one message (``completed``), and this client's own batching of
     what it sends the scheduler is cut from distributed's 10 ms to ``CLIENT_BATCH_S``: a campaign sends
-    a handful of messages, and each one that followed another within 10 ms waited for the rest
-    (bench_campaign_scale, N = 36: a pass started 12-22 ms after it was submitted). Only this client's
+    a handful of messages, and each one that followed another within 10 ms would wait for the rest of
+    the batch. Only this client's
     side of its own connection changes; the cluster is left as it was.
     """
 

@@ -72,7 +72,7 @@ class OnlineResult:
 
     def without_curve(self) -> OnlineResult:
         """This result without its predicted curve (empty arrays): what a finished decay keeps. The curve
-        is for the view at the time of the fit; kept, it was about 90 kB a decay at 400 Hz (9 MB an hour)."""
+        is for the view at the time of the fit; kept, it would be some 90 kB a decay at 400 Hz."""
         return dataclasses.replace(self, predicted_t=np.empty(0), predicted_angle=np.empty(0))
 
 
@@ -447,7 +447,7 @@ def prepare_kernels(terms: str | Sequence[str] = "ittc-quadratic-restoring") -> 
     return reason
 
 
-#: What compiling the kernels took on the 2-core benchmark machine, quiet to loaded (bench_live_fit.py).
+#: How long compiling the kernels takes on a 2-core PC, quiet to loaded (``bench/bench_live_fit.py``).
 FIRST_RUN_S = "10–40"
 
 

@@ -177,8 +177,8 @@ def integrate_reference(
     """The state at each of the increasing times ``t`` (shape (len(t), len(state0))), from ``state0`` at
     ``t[0]``: ODEPACK's LSODA (``scipy.integrate.odeint``), which switches to a stiff method where
     Coulomb friction's steep slope at rest needs one. It is the reference that makes known-truth data,
-    independent of the fits' own kernels, and about six times faster than scipy's DOP853 at the same
-    tolerance (docs/benchmarks.md). ``max_step`` > 0 bounds its steps (a forcing with short pulses)."""
+    independent of the fits' own kernels, and several times faster than scipy's DOP853 at the same
+    tolerance. ``max_step`` > 0 bounds its steps (a forcing with short pulses)."""
     from scipy.integrate import odeint  # scipy.integrate costs a second to import: only when simulating
 
     states, info = odeint(

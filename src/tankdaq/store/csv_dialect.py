@@ -4,7 +4,7 @@ Excel alone writes four dialects of "CSV": comma-separated (``CSV``), the same w
 mark (``CSV UTF-8``), semicolon-separated with decimal commas (every European locale) and tab-separated
 (``Text``), all with CRLF line ends. ``sniff`` tells them apart from the first lines; ``read_table``
 parses the rows with numpy's C reader (``np.loadtxt`` streaming the lines: a 10^7-row file in seconds
-and only its columns in memory, ``docs/benchmarks.md``) and falls back to a row-by-row reading that
+and only its columns in memory) and falls back to a row-by-row reading that
 finds empty cells (NaN) and names the row and column of a value that is not a number. Text columns
 (dates, comments, a run label) are left out unless they are asked for.
 """

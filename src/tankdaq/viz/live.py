@@ -104,8 +104,8 @@ def set_sinks_with_blueprint(
     """``rec.set_sinks(*sinks, default_blueprint=blueprint)``, leaving nothing behind.
 
     rerun 0.41 builds a default blueprint in a stream of its own that it never frees (its memory sink and
-    the stream hold each other): two threads and 1.5-2 MB a decay, 200 MB an hour at 400 Hz in save mode
-    (docs/benchmarks.md). Built here, the same way, the stream is disconnected once the sinks have taken
+    the stream hold each other): two threads and 1.5-2 MB a decay, hundreds of MB over a lab day.
+    Built here, the same way, the stream is disconnected once the sinks have taken
     the blueprint, and ``release_recordings`` frees it.
     """
     import rerun as rr

@@ -1,7 +1,7 @@
 """The live view in a process of its own (``ViewProcess``), as the record daemon runs it all day.
 
 rerun's SDK keeps a little of every recording made with it, in its own allocator and threads' heaps
-(about 1 MB an hour at 400 Hz with the view saving, docs/benchmarks.md "Memory over a lab day"), and a
+(some 1 MB an hour at 400 Hz with the view saving, ``bench/bench_memory_day.py``), and a
 native failure in it would take the process with it. Here a ``LiveView`` runs in a child process, fed
 through a pipe by one thread of this process (``ViewFeed``: ``put`` never waits, sample blocks and
 refits beyond the limit are dropped and counted, as the view's own thread does). Every
