@@ -9,7 +9,7 @@ TEST_STAMP := $(VENV)/.installed-test
 
 # Everything installed is byte-compiled. It must be: where PYTHONDONTWRITEBYTECODE is set (as in this
 # machine's environment) Python never caches what it compiles, and every process would compile pandas, rerun
-# and the rest from source again (docs/benchmarks.md). pip compiles on one core (about 45 s of a 96 s
+# and the rest from source again. pip compiles on one core (about 45 s of a 96 s
 # install here); compileall does it on every core. A file that does not compile is left as pip leaves it.
 # The packages' own test suites (folders named test or tests, a quarter of the files) are never imported:
 # left out.
@@ -71,7 +71,7 @@ viewer-test-deps:
 
 # One pytest worker per core. A third worker used the time tests wait on real-time streams (pytest 8:23
 # against 10:01 here), but under the load it added a played-back device missed a 10 s reply once
-# (docs/benchmarks.md): a CI that fails costs more than two minutes. A test file goes to one worker whole, so
+# (a run's timings: git history): a CI that fails costs more than two minutes. A test file goes to one worker whole, so
 # a module's fixture is made once (a whole session, killed and resumed: 50 s).
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
