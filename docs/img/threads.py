@@ -34,14 +34,14 @@ BOXES = [
         "reads the port every 20 ms,", "stamps host time; lives while", "the device streams"), 9.5),
     ((22, 45, 39, 59), THREAD, "tankdaq-read", (
         "acquire/read_thread.py", "decodes the reads: bytes ->", "frames -> samples", "(device/decoding.py,",
-        "xsens/stream.py)"), 9.5),
+        "xsens/stream_decoder.py)"), 9.5),
     ((43, 40, 67, 59), THREAD, "pipeline thread", (
         "the thread that calls run(): the main", "thread of record and of session",
         "acquire/pipeline.py: release, settle", "acquire/sinks.py, in this order:",
         "  identifier  (submits samples, takes fits)", "  file  (store/writer.py, one MCAP a decay)",
         "  view  (queues blocks, fits, events)", "  listeners: printer, catalogue sink"), 9.5),
     ((71, 46, 97, 59), THREAD, "tankdaq-live-fit", (
-        "ident/online.py (BackgroundFit)", "refits at every half-cycle, warm-started,",
+        "live/worker.py (BackgroundFit)", "refits at every half-cycle, warm-started,",
         "coalesced on the newest samples;", "the final fit at settle; each under a budget"), 9.5),
     ((22, 22, 39, 36), THREAD, "tankdaq-ask", (
         "acquire/streaming.py", "guided session only: waits for", "the operator's answer while",
