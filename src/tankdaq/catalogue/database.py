@@ -66,8 +66,8 @@ class Catalogue:
 
 
 #: SQLite's page cache for a recorder's catalogue writer: it appends a row a decay, so a small cache
-#: costs it nothing, while SQLite's own 2 MB filled over a lab day (+1.5 MB of a recorder's 8-hour
-#: growth, bench_memory_day; the pages stay in the system's file cache).
+#: costs it nothing, while SQLite's own 2 MB would fill over a lab day and grow the recorder by as much
+#: (``bench/bench_memory_day.py``; the pages stay in the system's file cache).
 WRITER_CACHE_KB = 256
 #: How long a PostgreSQL connection may take to be made, in s (libpq's ``connect_timeout``): a server
 #: that accepts and never answers is one line after this, not a 131 s stall.

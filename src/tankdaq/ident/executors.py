@@ -55,8 +55,8 @@ def campaign_executor(
         with LocalPool(jobs) as pool:
             # The workers fork now (before the caller starts a progress thread), with the objects
             # loaded so far frozen out of the cyclic garbage collector: a worker's collections then
-            # leave the pages it shares with this process unwritten (bench_campaign: a pool of two
-            # spent 2.7 s CPU where one process spends 2.3 s; 2.3 s frozen). Thawed once forked.
+            # leave the pages it shares with this process unwritten, which copying them would cost in CPU
+            # (``bench/bench_campaign.py``). Thawed once forked.
             gc.freeze()
             try:
                 pool.submit(int).result()

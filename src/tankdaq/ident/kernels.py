@@ -44,7 +44,7 @@ MAX_ANGLE_RAD = 2.0 * math.pi
 #: Far beyond any model's rate (a 2 s roll period at 90 deg is 5 rad/s): beyond it, diverged.
 MAX_RATE_RAD_S = 1000.0
 #: RK4 steps one call may take, (samples - 1) * sub-steps: 4x a 5-minute decay at 400 Hz with 4
-#: sub-steps, about 1 s with 4 terms' sensitivities (native, loaded 2-core machine: bench_runaway);
+#: sub-steps, about a second with 4 terms' sensitivities (``bench/bench_runaway.py``);
 #: a call asking more is refused before it starts.
 MAX_STEPS = 2_000_000
 
