@@ -2,11 +2,12 @@
 
 This file is the picture's source: edit the boxes and arrows below, run
 ``.venv/bin/python docs/img/threads.py`` and commit both files. The same source gives the same bytes
-(fixed ids, no date).
+(fixed ids, no date), and the SVG says which source drew it (its SHA-256: a test checks it is this file's).
 """
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 from typing import Any
 
@@ -142,9 +143,10 @@ def draw() -> Figure:
 
 
 def main() -> None:
-    matplotlib.rcParams["svg.hashsalt"] = "tankdaq-threads"  # the same ids every run
+    matplotlib.rcParams["svg.hashsalt"] = "threads.svg"  # the same ids every run
+    source = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()
     fig = draw()
-    fig.savefig(OUT, format="svg", metadata={"Date": None})
+    fig.savefig(OUT, format="svg", metadata={"Date": None, "Source": f"docs/img/threads.py sha256 {source}"})
     plt.close(fig)
     print(OUT)
 
