@@ -249,7 +249,7 @@ class RecordingWriter:
         self._add(schemas.TOPIC_EVENTS, [json.dumps(record, default=float).encode()], [stamp])
         if kind == "warning":
             self._warnings.append(message)
-        if kind == "release" and t_s is not None:
+        if kind == schemas.EventKind.RELEASE and t_s is not None:
             self._release = (float(t_s), stamp / 1e9)
         self.flush()
 
