@@ -53,10 +53,10 @@ def test_intervals_are_returned_beside_the_fit_which_keeps_its_own() -> None:
     assert fitted.std_ == pytest.approx(alone.std_) and fitted.ci95_ == alone.ci95_
     assert intervals.std != pytest.approx(fitted.std_)  # the spread of three repeats is another number
     summary = summarize(fitted, runs, intervals=intervals)
-    assert summary["intervals"] == "repeat runs, 3 runs"
+    assert summary.intervals == "repeat runs, 3 runs"
     for k in TERMS:
-        assert summary["coefficients"][k]["std"] == intervals.std[k]
-        assert summary["coefficients"][k]["ci95"] == list(intervals.ci95[k])
+        assert summary.coefficients[k].std == intervals.std[k]
+        assert summary.to_dict()["coefficients"][k]["ci95"] == list(intervals.ci95[k])
 
 
 @pytest.mark.parametrize(

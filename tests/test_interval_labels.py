@@ -190,5 +190,5 @@ def test_identify_says_the_kind_of_its_intervals(results: list[GroupResult]) -> 
 
     (group, *_) = results
     summary = summarize(group.fit, group.runs)
-    assert summary["interval_labels"] == {"std": "± (1σ, fit)", "ci95": "± (95 %, fit)"}
+    assert summary.interval_labels == {"std": "± (1σ, fit)", "ci95": "± (95 %, fit)"}
     assert "(std ± (1σ, fit), interval ± (95 %, fit):" in text_report(summary)

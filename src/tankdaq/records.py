@@ -92,6 +92,13 @@ class DecayRun:
         )
 
 
+class Verdict(StrEnum):
+    """What a guided session's operator said of a decay (its log, its catalogue row, the report's list)."""
+
+    ACCEPTED = "accepted"
+    REJECTED = "rejected"
+
+
 class DecayEnd(StrEnum):
     """How a recorded decay ended: part of the record, in its file and its catalogue row.
 

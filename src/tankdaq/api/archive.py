@@ -219,10 +219,11 @@ def _metadata(run: DecayRun, source: Path, sha: str, index: int, kind: str) -> d
     from ..config import format_draft
     from ..ident.campaign import csv_labels
     from ..store.csv_import import NOTICES
+    from ..store.inputs import RECORDING_FORMAT
 
     meta = run.meta
     try:
-        labels = csv_labels(source) if kind != "tankdaq recording" else {}
+        labels = csv_labels(source) if kind != RECORDING_FORMAT else {}
     except InputError:
         labels = {}
     nominal = labels.get("angle_deg", meta.get("angle_nominal_deg"))

@@ -13,7 +13,8 @@ import html
 import json
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from contextlib import nullcontext
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -30,6 +31,7 @@ if TYPE_CHECKING:
     from ..config import Hull, WaterSettings
     from ..ident.budget_inputs import DeviceProfile
     from ..ident.intervals import IntervalSummary
+    from ..ident.summary import FitSummary
     from ..physics.scaling import FroudeScale
     from ..store.export_layout import ExportOrigin
     from ..viz.plots import Figure
@@ -46,9 +48,22 @@ class ConditionFit:
     label: str
     runs: list[DecayRun]
     estimator: Any
-    summary: dict[str, Any]
+    summary: FitSummary
     scaled_lines: list[str]
     pooled: bool = False
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """How ``identify`` fits each condition (its arguments, checked): one object, not a tuple by position."""
+
+    method: str
+    bootstrap: int
+    repeats: bool
+    hull: Hull | None
+    draft: float
+    scale: FroudeScale | None
+    device: DeviceProfile | None
 
 
 @dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
@@ -77,18 +92,11 @@ class Identification:
         """One row per term (and condition, when several were fitted apart): the value per unit total
         inertia in SI units and rad, its unit, its standard deviation and 95 % interval."""
         rows = [
-            {
-                **self._condition(fit),
-                "term": term,
-                "value": entry["value"],
-                "unit": entry["unit"],
-                "std": entry["std"],
-                "ci95_low": entry["ci95"][0],
-                "ci95_high": entry["ci95"][1],
-            }
+            {**self._condition(fit), "term": term, "value": entry.value, "unit": entry.unit, "std": entry.std,
+             "ci95_low": entry.ci95[0], "ci95_high": entry.ci95[1]}
             for fit in self.fits
-            for term, entry in fit.summary["coefficients"].items()
-        ]
+            for term, entry in fit.summary.coefficients.items()
+        ]  # fmt: skip
         return self._with_warnings(_table(rows))
 
     @property
@@ -96,20 +104,14 @@ class Identification:
         """Per tested amplitude: the natural period, B_eq/I, B̂44 (roll, where the hull gives its beam and
         displacement; else NaN) and Bertin's N, with their standard deviations."""
         rows = [
-            {
-                **self._condition(fit),
-                "amplitude_deg": b_eq["amplitude_deg"],
-                "natural_period_s": fit.summary["natural_period_s"],
-                "damping_ratio": fit.summary["damping_ratio"],
-                "b_eq_per_s": b_eq["value_per_s"],
-                "b_eq_std_per_s": b_eq["std"],
-                "b44_hat": b_eq.get("b44_hat", math.nan),
-                "bertin_n_per_deg": bertin["value_per_deg"],
-                "bertin_n_std_per_deg": bertin["std"],
-            }
+            {**self._condition(fit), "amplitude_deg": b_eq.amplitude_deg,
+             "natural_period_s": fit.summary.natural_period_s, "damping_ratio": fit.summary.damping_ratio,
+             "b_eq_per_s": b_eq.value_per_s, "b_eq_std_per_s": b_eq.std,
+             "b44_hat": math.nan if b_eq.b44_hat is None else b_eq.b44_hat,
+             "bertin_n_per_deg": bertin.value_per_deg, "bertin_n_std_per_deg": bertin.std}
             for fit in self.fits
-            for b_eq, bertin in zip(fit.summary["b_eq"], fit.summary["bertin_n"], strict=True)
-        ]
+            for b_eq, bertin in zip(fit.summary.b_eq, fit.summary.bertin_n, strict=True)
+        ]  # fmt: skip
         return self._with_warnings(_table(rows))
 
     @property
@@ -120,7 +122,7 @@ class Identification:
         rows = [
             {**self._condition(fit), **row}
             for fit in self.fits
-            for row in fit.summary.get("full_scale", {}).get("b_eq", [])
+            for row in (fit.summary.full_scale or {}).get("b_eq", [])
         ]
         return self._with_warnings(_table(rows))
 
@@ -130,7 +132,7 @@ class Identification:
         quantity's value, the source's kind (A/B), standard uncertainty u and unit, sensitivity,
         contribution and share, and the quantity's combined u_c (1σ, standard) and expanded U
         (k=2, ≈95 %, expanded)."""
-        table = budget_table([(fit.label, fit.summary.get("budget", [])) for fit in self.fits])
+        table = budget_table([(fit.label, fit.summary.budget or ()) for fit in self.fits])
         return self._with_warnings(table if len(self.fits) > 1 else table.drop(columns="condition"))
 
     def _condition(self, fit: ConditionFit) -> dict[str, str]:
@@ -152,7 +154,7 @@ class Identification:
 
         parts = []
         for fit in self.fits:
-            head = [f"== {fit.summary['condition_label']} =="] if len(self.fits) > 1 else []
+            head = [f"== {fit.label} =="] if len(self.fits) > 1 else []
             parts.append("\n".join([*head, text_report(fit.summary), *fit.scaled_lines]))
         return "\n\n".join(parts)
 
@@ -166,19 +168,19 @@ class Identification:
         decay = arguments.index(decay, "decay", len(fit.runs), "decays in this condition")
         run = fit.runs[decay]
         model = predicted_angles(fit.estimator, [run] if len(fit.runs) == 1 else fit.runs)
-        found = len(fit.summary["warnings"])
+        found = len(fit.summary.warnings)
         said = f" ({found} warning{'s' if found > 1 else ''}: result.warnings)" if found else ""
-        title = f"{run.name}: {fit.summary['model']['name']}{said}"
+        title = f"{run.name}: {fit.summary.model.name}{said}"
         return decay_fit_figure(
             run.t - run.t[0], run.angle, model[0 if len(fit.runs) == 1 else decay], axis=run.axis, title=title
         )
 
     def _repr_html_(self) -> str:
         heads = "".join(
-            f"<p><b>{html.escape(fit.label)}</b>: model {html.escape(fit.summary['model']['name'])} "
-            f"({html.escape(', '.join(fit.summary['model']['terms']))}), method "
-            f"{html.escape(fit.summary['method'])}, {len(fit.runs)} run(s), natural period "
-            f"{fit.summary['natural_period_s']:.4f} s</p>"
+            f"<p><b>{html.escape(fit.label)}</b>: model {html.escape(fit.summary.model.name)} "
+            f"({html.escape(', '.join(fit.summary.model.terms))}), method "
+            f"{html.escape(fit.summary.method)}, {len(fit.runs)} run(s), natural period "
+            f"{fit.summary.natural_period_s:.4f} s</p>"
             for fit in self.fits
         )
         warnings = "".join(f"<li>warning: {html.escape(line)}</li>" for line in self.warnings)
@@ -195,7 +197,7 @@ BUDGET_COLUMNS = ["condition", "quantity", "value", "unit", "source", "kind", "u
                   "contribution", "share", "combined_u", "expanded_u", "coverage"]  # fmt: skip
 
 
-def budget_table(conditions: Sequence[tuple[str, Sequence[dict[str, Any]]]]) -> pd.DataFrame:
+def budget_table(conditions: Sequence[tuple[str, Sequence[Mapping[str, Any]]]]) -> pd.DataFrame:
     """Budgets (``Budget.as_dict``) of each condition as one DataFrame, a row per quantity and source."""
     import pandas as pd
 
@@ -416,13 +418,12 @@ def identify(
     fits = []
     for condition_runs, friction in zip(parts, frictions, strict=True):
         label = "all conditions (--joint)" if pooled else condition_of(condition_runs[0]).label
-        settings = (method, bootstrap, repeats, hull_config, draft, scale, device)
-        estimator, summary = _fit_condition(condition_runs, model, settings, label, kept)
-        summary["condition"] = None if pooled else condition_of(condition_runs[0]).as_dict()
-        if pooled is not None:
-            summary["warnings"].insert(0, pooled)
-            summary["conditions"] = pooled
-        lines = scale_results(summary, scale, friction)  # the ship's (B̂44 is summarize's)
+        settings = FitSettings(method, bootstrap, repeats, hull_config, draft, scale, device)
+        estimator, fitted = _fit_condition(condition_runs, model, settings, label, kept)
+        condition = None if pooled else condition_of(condition_runs[0]).as_dict()
+        warnings = (*([pooled] if pooled else []), *fitted.warnings)
+        fitted = replace(fitted, condition=condition, conditions=pooled, warnings=warnings)
+        summary, lines = scale_results(fitted, scale, friction)  # the ship's (B̂44 is summarize's)
         fits.append(ConditionFit(label, condition_runs, estimator, summary, lines, pooled is not None))
     return Identification(_document(fits, grouping_line(groups), list(cut)), fits, kept.lines, list(cut))
 
@@ -441,23 +442,19 @@ def _document(fits: list[ConditionFit], conditions: str, cut: list[str]) -> dict
     """``tankdaq identify --json``: the one fit's summary, or each condition's under ``groups``."""
     truncated = {"truncated": bool(cut), "truncated_files": cut}
     if len(fits) == 1:
-        return {**fits[0].summary, **truncated}
-    warnings = [f"{fit.label}: {line}" for fit in fits for line in fit.summary["warnings"]]
+        return {**fits[0].summary.to_dict(), **truncated}
+    warnings = [f"{fit.label}: {line}" for fit in fits for line in fit.summary.warnings]
     return {
         "conditions": conditions,
-        "groups": [fit.summary for fit in fits],
+        "groups": [fit.summary.to_dict() for fit in fits],
         "warnings": warnings,
         **truncated,
     }
 
 
 def _fit_condition(
-    runs: list[DecayRun],
-    model: str,
-    settings: tuple[str, int, bool, Hull | None, float, FroudeScale | None, DeviceProfile | None],
-    label: str,
-    progress: Progress,
-) -> tuple[Any, dict[str, Any]]:
+    runs: list[DecayRun], model: str, settings: FitSettings, label: str, progress: Progress
+) -> tuple[Any, FitSummary]:
     """One fit of ``runs`` with the model ``ident.model_choice.model_for`` gives, and its summary."""
     from ..ident.budget_fit import fit_budgets, hull_figures
     from ..ident.estimators import make_estimator, reports_progress
@@ -465,34 +462,30 @@ def _fit_condition(
     from ..ident.model_choice import model_for
     from ..ident.report import summarize
 
-    method, bootstrap, repeats, hull_config, draft, scale, device = settings
+    method, bootstrap, repeats = settings.method, settings.bootstrap, settings.repeats
     with progress.task(f"choosing the model ({label})"):
         choice = model_for(runs, model)
     progress.line(f"{label}: {choice.reason}")
     terms = choice.terms
     repeats_of = (lambda: make_estimator(method, terms)) if repeats else None
-    with progress.task(f"fitting {method}", 1 + bootstrap) as advance:
-        if reports_progress(method):  # the seeds' GA/PSO (about 100 s) report their generations
-            with progress.task("generations") as generations:
-                estimator = make_estimator(method, terms, progress=generations)
-                estimator, intervals = fit_with_intervals(
-                    estimator, runs, bootstrap, repeats_of, progress=advance, method=method
-                )
-        else:
-            estimator = make_estimator(method, terms)
-            estimator, intervals = fit_with_intervals(
-                estimator, runs, bootstrap, repeats_of, progress=advance, method=method
-            )
-    summary = summarize(estimator, runs, method, hull_config, draft, intervals)
-    summary["condition_label"] = label
-    summary["model_choice"] = choice.as_dict()
+    watched = reports_progress(method)  # the seeds' GA/PSO (about 100 s) report their generations
+    with (
+        progress.task(f"fitting {method}", 1 + bootstrap) as advance,
+        progress.task("generations") if watched else nullcontext() as generations,
+    ):
+        estimator = make_estimator(method, terms, **({"progress": generations} if watched else {}))
+        estimator, intervals = fit_with_intervals(
+            estimator, runs, bootstrap, repeats_of, progress=advance, method=method
+        )
+    summary = summarize(estimator, runs, method, settings.hull, settings.draft, intervals)
     per_decay = None if intervals is None or intervals.counted != "runs" else repeat_rows(intervals)
-    figures = hull_figures(hull_config, runs[0].axis, draft, None if scale is None else scale.scale)
-    tested = [row["amplitude_deg"] for row in summary["b_eq"]]
-    summary["budget"] = [
-        b.as_dict() for b in fit_budgets(estimator, runs, tested, figures, device, per_decay)
-    ]
-    return estimator, summary
+    scale = None if settings.scale is None else settings.scale.scale
+    figures = hull_figures(settings.hull, runs[0].axis, settings.draft, scale)
+    tested = [row.amplitude_deg for row in summary.b_eq]
+    budgets = fit_budgets(estimator, runs, tested, figures, settings.device, per_decay)
+    return estimator, replace(
+        summary, condition_label=label, model_choice=choice, budget=tuple(b.as_dict() for b in budgets)
+    )
 
 
 def repeat_rows(intervals: IntervalSummary) -> list[dict[str, float]]:

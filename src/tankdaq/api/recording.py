@@ -198,11 +198,12 @@ class Recording:
         returns the files written. The files hold the recording's SI values exactly; ``frame`` is the
         time origin, ``"release"`` (time since the release) or ``"device"``."""
         from ..store.export import FRAMES, WRITERS, export_recording
+        from ..store.inputs import RECORDING_FORMAT
 
         file_format = arguments.text(file_format, "file_format", choices=tuple(WRITERS))
         folder = arguments.optional_path(out_dir, "out_dir", "a folder (str or pathlib.Path) or None")
         frame = arguments.text(frame, "frame", choices=FRAMES)
-        if self.meta.get("format") != "tankdaq recording":
+        if self.meta.get("format") != RECORDING_FORMAT:
             raise InputError(f"{self.path} is a CSV file already: only a recording (.mcap) is exported")
         return export_recording(self.path, file_format, folder, frame)
 
@@ -323,9 +324,10 @@ def _read_recording(path: Path, axis: str | None, kind: str) -> Recording:
     from ..ident.inputs import input_notices, read_decays
     from ..store.export import typed_metadata
     from ..store.reader import read_recording
+    from ..store.schemas import EventKind
 
     recording = read_recording(path)
-    released = any(event.get("kind") == "release" for event in recording.events)
+    released = any(event.get("kind") == EventKind.RELEASE for event in recording.events)
     runs = read_decays(path, axis) if released else []
     meta = _meta(path, kind, axis or recording.axis, runs)
     meta["stored"] = typed_metadata(recording.metadata)

@@ -43,6 +43,7 @@ def simulate(
     """
     from ..config import hull_scenario, load_hull
     from ..physics.scenario import fresh_seed
+    from ..physics.truth import RunKind
 
     folder = validation.output_dir(
         arguments.path(out_dir, "out_dir", "a folder (str or pathlib.Path)"), "out_dir"
@@ -72,7 +73,7 @@ def simulate(
     paths = [
         _write_decay(folder, loaded, factor, angle_deg, seed, samples, truth, trace.start_ticks)
         for truth in trace.runs
-        if truth.kind == "release"
+        if truth.kind == RunKind.RELEASE
     ]
     return [read(path) for path in paths]
 

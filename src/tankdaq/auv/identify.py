@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -314,9 +315,15 @@ class SeparateIdentifier(EstimatorMixin):
         """Identify from ``records``; LS-SVM picks gamma on ``holdout`` records if given (OLS ignores it)."""
         if self.method not in ("lssvm", "ols"):
             raise InputError(f"unknown method {self.method!r}; use lssvm or ols")
-        settings = (self.vehicle, self.window_s, self.terms, self.fixed)
-        regressions = build_regressions(_as_list(records), *settings)
-        held_out = build_regressions(_as_list(holdout), *settings) if holdout is not None else None
+        regress = partial(
+            build_regressions,
+            vehicle=self.vehicle,
+            window_s=self.window_s,
+            terms=self.terms,
+            fixed=self.fixed,
+        )
+        regressions = regress(_as_list(records))
+        held_out = regress(_as_list(holdout)) if holdout is not None else None
         self.derivatives_: dict[str, float] = {}
         self.std_: dict[str, float] = {}
         self.bias_: dict[str, float] = {}

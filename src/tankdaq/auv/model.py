@@ -94,7 +94,9 @@ def pack_parameters(vehicle: Vehicle) -> np.ndarray:
 
 
 @njit(cache=True)
-def _rhs(p, s, delta, command):  # pragma: no cover - compiled
+def _rhs(
+    p: np.ndarray, s: np.ndarray, delta: float, command: float
+) -> np.ndarray:  # pragma: no cover - compiled
     u, w, q, theta = s[0], s[1], s[2], s[3]
     mass, weight, buoy, bg, thrust = p[0], p[1], p[2], p[3], p[4]
     r2, r3, r4, r5, servo = p[5], p[6], p[7], p[8], p[9]
@@ -132,7 +134,15 @@ def _rhs(p, s, delta, command):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _rk4(p, s, h, command, table_t, table_delta, t0):  # pragma: no cover - compiled
+def _rk4(
+    p: np.ndarray,
+    s: np.ndarray,
+    h: float,
+    command: float,
+    table_t: np.ndarray,
+    table_delta: np.ndarray,
+    t0: float,
+) -> np.ndarray:  # pragma: no cover - compiled
     """One RK4 step; the plane angle is the servo state, or read from the table when one is given."""
     replay = table_t.size > 0
     k = np.empty((4, 7))
@@ -152,7 +162,9 @@ def _rk4(p, s, h, command, table_t, table_delta, t0):  # pragma: no cover - comp
 
 
 @njit(cache=True)
-def _crossing_fraction(theta0, q0, theta1, q1, h, level):  # pragma: no cover - compiled
+def _crossing_fraction(
+    theta0: float, q0: float, theta1: float, q1: float, h: float, level: float
+) -> float:  # pragma: no cover - compiled
     """Where in [0, 1] the cubic Hermite through (theta, q) at both step ends meets ``level``."""
     f = (theta0 - level) / (theta0 - theta1)
     for _ in range(6):
@@ -177,8 +189,18 @@ def _crossing_fraction(theta0, q0, theta1, q1, h, level):  # pragma: no cover - 
 
 @njit(cache=True)
 def _integrate(
-    p, s0, h, n_sub, n_samples, t_execute, delta_amp, theta_switch, max_switches, table_t, table_delta
-):  # pragma: no cover - compiled
+    p: np.ndarray,
+    s0: np.ndarray,
+    h: float,
+    n_sub: int,
+    n_samples: int,
+    t_execute: float,
+    delta_amp: float,
+    theta_switch: float,
+    max_switches: int,
+    table_t: np.ndarray,
+    table_delta: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Fixed-step RK4 with zigzag switching about the initial (trim) state, or replay of a plane table.
 
     Samples every n_sub steps. The plane command is trim + direction * delta_amp; the switch levels are

@@ -18,7 +18,7 @@ import sqlalchemy as sa
 
 from ..config import format_draft, parse_draft
 from ..errors import InputError
-from ..records import DecayEnd
+from ..records import DecayEnd, Verdict
 from .database import BadCatalogueQuery, Catalogue, in_batches, read_catalogue, resolve_url
 from .literals import checked_text, operator_slip, parse_date, parse_number, split_clauses
 from .rows import STANDARD_AMPLITUDES_DEG
@@ -65,7 +65,7 @@ OPERATORS = {
 }
 _CLAUSE = re.compile(r"^\s*([a-z_0-9]+)\s*(<=|>=|!=|=|<|>|~)\s*(\"[^\"]*\"|'[^']*'|\S+)\s*$")
 #: What ``--verdict`` takes (absent: every decay not rejected; ``any``: all, rejected included).
-VERDICTS = ("accepted", "rejected")
+VERDICTS = tuple(Verdict)
 WHERE_HELP = "field op value [and ...]; op = != < <= > >= ~ (contains); fields: " + ", ".join(FIELDS)
 
 
@@ -84,7 +84,7 @@ class RunQuery:
         found = ended_conditions(equal.pop("ended", None))
         found += [FIELDS[name] == _value(name, value) for name, value in equal.items()]
         if verdict is None:  # a rejected decay is listed only when asked for: the lab's list is the kept
-            found.append(sa.or_(decays.c.verdict.is_(None), decays.c.verdict != "rejected"))
+            found.append(sa.or_(decays.c.verdict.is_(None), decays.c.verdict != Verdict.REJECTED.value))
         elif verdict != "any":
             if verdict not in VERDICTS:
                 raise BadCatalogueQuery(f"verdict {verdict!r}: give {', '.join(VERDICTS)} or any")

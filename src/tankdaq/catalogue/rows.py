@@ -20,6 +20,7 @@ from ..config import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError, install_hint
 from ..records import DecayEnd
 from ..store.inputs import INPUT_FORMATS, file_sha256
+from ..store.schemas import EventKind
 from .database import one_line
 from .fits import provenance
 from .schema import FitMethod, FitSource, utc_now
@@ -352,7 +353,7 @@ def _release_instant(events: list[dict[str, Any]]) -> dict[str, float | None]:
     file written before the interval; never zero)."""
     from ..store.reader import release_u95_of
 
-    release = next((e for e in events if e.get("kind") == "release"), {})
+    release = next((e for e in events if e.get("kind") == EventKind.RELEASE), {})
     t_s = _finite(release.get("t_s"))
     return {"release_t_s": t_s, "release_u95_s": None if t_s is None else release_u95_of(events, t_s)}
 
@@ -360,6 +361,6 @@ def _release_instant(events: list[dict[str, Any]]) -> dict[str, float | None]:
 def _release_angle(meta: Mapping[str, str], events: list[dict[str, Any]]) -> float | None:
     measured = _finite(meta.get("angle_initial_deg"))
     if measured is None:
-        release = next((e for e in events if e.get("kind") == "release"), {})
+        release = next((e for e in events if e.get("kind") == EventKind.RELEASE), {})
         measured = _finite((release.get("data") or {}).get("angle_initial_deg"))
     return None if measured is None else abs(measured)

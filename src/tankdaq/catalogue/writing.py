@@ -14,6 +14,7 @@ import sqlalchemy as sa
 
 from ..config import Hull
 from ..errors import RecordingError
+from ..records import Verdict
 from ..store.inputs import file_sha256
 from .database import Catalogue, CatalogueError, in_batches
 from .fits import FitMethod, FitSource, add_fits, choose_reference, provenance
@@ -204,7 +205,7 @@ def add_file(
     row["updated_utc"] = max(row["updated_utc"], row["created_utc"])  # a fit made before its row was
     add_rows(catalogue, [(row, version)], [*LOCATION_COLUMNS, *(extra or {})])
     kept = [dict(fit)] if fit is not None else []
-    if row.get("fit") and (extra or {}).get("verdict") == "accepted":
+    if row.get("fit") and (extra or {}).get("verdict") == Verdict.ACCEPTED:
         kept.append(dict(row["fit"]) | {"source": FitSource.SESSION.value} | provenance())
     if kept:
         with catalogue.engine.begin() as connection:
@@ -334,7 +335,7 @@ def _reasons(run: Mapping[str, Any], verdict: Mapping[str, Any]) -> list[str]:
     """Why a decay was judged as it was: the checks' reasons; a rejection no check asked for says who
     rejected it (the operator's answer, or the session stopping during the decay)."""
     reasons = [str(r) for r in verdict.get("reasons", run.get("reasons", []))]
-    if reasons or verdict.get("verdict") != "rejected":
+    if reasons or verdict.get("verdict") != Verdict.REJECTED:
         return reasons
     action = verdict.get("action")
     if action == "stopped":
@@ -359,7 +360,7 @@ def _upsert_session(
         "hull": hull_name,
         "started_utc": records[0].get("at"),
         "decays": len(runs),
-        "accepted": sum(1 for v in verdicts.values() if v.get("verdict") == "accepted"),
+        "accepted": sum(1 for v in verdicts.values() if v.get("verdict") == Verdict.ACCEPTED),
         "updated_utc": utc_now(),
     }
     with catalogue.engine.begin() as connection:

@@ -157,4 +157,4 @@ def _catalogue_fit(writer: CatalogueWriter, fit: ConditionFit) -> None:
 
     source = FitSource.IDENTIFY_JOINT if fit.pooled else FitSource.IDENTIFY
     for runs in group_conditions(fit.runs).values() if fit.pooled else [fit.runs]:
-        writer.add_fit(run_files(runs), fit_of_summary(source, fit.summary, runs))
+        writer.add_fit(run_files(runs), fit_of_summary(source, fit.summary.to_dict(), runs))

@@ -148,5 +148,7 @@ def session_command(
     if session.stopped is not None:  # stopped (Ctrl-C, SIGTERM) in a decay or at a question: files closed
         say(STOPPED.format(out=out))
         raise typer.Exit(STOPPED_EXIT_CODE)
-    kept = sum(1 for r in state.runs if r.verdict == "accepted")
+    from ..records import Verdict
+
+    kept = sum(1 for r in state.runs if r.verdict == Verdict.ACCEPTED)
     say(f"session done: {kept} decays accepted of {state.decays} recorded; log {out / 'session.jsonl'}")

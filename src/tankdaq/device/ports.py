@@ -13,6 +13,7 @@ import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 
 from serial.tools import list_ports
 from serial.tools.list_ports_common import ListPortInfo
@@ -49,12 +50,25 @@ def by_id_name(vendor: str, product: str, serial: str) -> str:
     return f"usb-{vendor}_{product}_{serial}-if00-port0"
 
 
+class PortKind(StrEnum):
+    """What a port is, as ``tankdaq ports`` marks it."""
+
+    XSENS = "xsens"
+    FTDI = "ftdi"
+    USB = "usb"
+    OTHER = "other"
+
+
+#: The mark ``tankdaq ports`` prints for each kind.
+MARKS = {PortKind.XSENS: "Xsens", PortKind.FTDI: "FTDI cable", PortKind.USB: "USB", PortKind.OTHER: "not USB"}
+
+
 @dataclass(frozen=True)
 class PortEntry:
     """One serial port as the lab sees it."""
 
     device: str
-    kind: str  # "xsens", "ftdi", "usb" or "other"
+    kind: PortKind
     vid: int | None
     pid: int | None
     serial_number: str | None
@@ -66,7 +80,7 @@ class PortEntry:
         return f"{self.vid:04x}:{self.pid:04x}" if self.vid is not None and self.pid is not None else "-"
 
     def line(self) -> str:
-        mark = {"xsens": "Xsens", "ftdi": "FTDI cable", "usb": "USB", "other": "not USB"}[self.kind]
+        mark = MARKS[self.kind]
         serial = f"  serial {self.serial_number}" if self.serial_number else ""
         link = f"  ({self.link})" if self.link else ""
         return f"{self.device:24s} {mark:10s} {self.usb:9s} {self.description}{serial}{link}"
@@ -80,13 +94,13 @@ def classify(info: ListPortInfo, link: str | None = None) -> PortEntry:
         manufacturer, serial = named["vendor"], named["serial"]
         description = f"{named['vendor']} {named['product']} (by-id link, not USB)"
     if info.vid == XSENS_VID or (info.vid is None and manufacturer == "Xsens"):
-        kind = "xsens"
+        kind = PortKind.XSENS
     elif info.vid == FTDI_VID:
-        kind = "ftdi"
+        kind = PortKind.FTDI
     elif info.vid is not None:
-        kind = "usb"
+        kind = PortKind.USB
     else:
-        kind = "other"
+        kind = PortKind.OTHER
     return PortEntry(info.device, kind, info.vid, info.pid, serial, description or "n/a", link)
 
 
@@ -121,7 +135,7 @@ def resolve_port(port: str, dirs: Sequence[str] | None = None) -> str:
     if port != "auto":
         return port
     entries = list_serial_ports(dirs)
-    xsens = [e for e in entries if e.kind == "xsens"]
+    xsens = [e for e in entries if e.kind == PortKind.XSENS]
     if len(xsens) == 1:
         return xsens[0].link or xsens[0].device
     if not xsens:

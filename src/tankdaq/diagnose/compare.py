@@ -36,7 +36,15 @@ from ..records import DecayRun
 from .agreement import DampingPoint, PeriodPoint, differs_sentence, period_check
 from .components import ComponentScaling, component_scalings
 from .correction import Correction, correction
-from .effects import HEAVE_CHANNELS, INCREMENTS, LIBRARY, OTHER_ROTATION_CHANNELS, Effect, measured_channel
+from .effects import (
+    HEAVE_CHANNELS,
+    INCREMENTS,
+    LIBRARY,
+    OTHER_ROTATION_CHANNELS,
+    Effect,
+    EffectKind,
+    measured_channel,
+)
 from .evidence import Evidence, coupling_evidence, friction_evidence
 from .fitting import Fit, ModelSpec, RunPrediction, fit_spec
 from .residuals import Diagnostics, cycle_trend
@@ -56,7 +64,7 @@ DISSIPATIVE = ("b1", "b2", "b3", "fc")
 #: the measured release must be closer on the rest than the model before the step (fitted alike).
 FIT_FRACTION = 0.6
 #: Effects a comparison may add: increments of terms the simulation holds, then the library's.
-CANDIDATES: tuple[Effect, ...] = (*INCREMENTS, *(e for e in LIBRARY if e.kind != "truncation"))
+CANDIDATES: tuple[Effect, ...] = (*INCREMENTS, *(e for e in LIBRARY if e.kind != EffectKind.TRUNCATION))
 
 
 @dataclass

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 
@@ -37,16 +38,38 @@ OTHER_ROTATION_CHANNELS: tuple[str, ...] = (
 )
 
 
+class Family(StrEnum):
+    """What tests and reports commit to: effects of one family are nearly interchangeable over a decay."""
+
+    AMPLITUDE_DAMPING = "amplitude-dependent damping"
+    NONLINEAR_RESTORING = "nonlinear restoring"
+    OFFSET_OR_ASYMMETRY = "offset or asymmetry"
+    MEASUREMENT_ERROR = "measurement error"
+    DRY_FRICTION = "dry friction"
+    COUPLED_MOTION = "coupled motion"
+    LATE_DISTURBANCE = "late-time disturbance"
+    LINEAR_DAMPING = "linear damping"
+    STIFFNESS = "stiffness"
+
+
+class EffectKind(StrEnum):
+    """Where an effect acts: the equation of motion, the observation equation, or the record's length."""
+
+    DYNAMICS = "dynamics"
+    OBSERVATION = "observation"
+    TRUNCATION = "truncation"
+
+
 @dataclass(frozen=True)
 class Effect:
     """One candidate: what it is, what it adds, what its absence looks like."""
 
     key: str
     name: str
-    family: str
+    family: Family
     adds: str  # the term(s) in words and symbols
     signature: str  # what the residual of a model without it shows
-    kind: str  # "dynamics", "observation" or "truncation"
+    kind: EffectKind
     apply: Extend
     #: A parameter that must stay >= 0 for the fit to mean this effect (friction cannot feed energy in).
     non_negative: str | None = None
@@ -145,10 +168,10 @@ LIBRARY: tuple[Effect, ...] = (
     Effect(
         "damping.quadratic",
         "quadratic damping",
-        "amplitude-dependent damping",
+        Family.AMPLITUDE_DAMPING,
         "b2*|x'|x'",
         "damping ratio grows linearly with amplitude; envelope under-damped early, over-damped late",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _add_term("b2"),
         increments="b2",
         physics=VISCOUS,
@@ -156,10 +179,10 @@ LIBRARY: tuple[Effect, ...] = (
     Effect(
         "damping.cubic",
         "cubic damping",
-        "amplitude-dependent damping",
+        Family.AMPLITUDE_DAMPING,
         "b3*x'^3",
         "damping ratio grows with amplitude squared; envelope mismatch like quadratic damping",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _add_term("b3"),
         increments="b3",
         physics=VISCOUS,
@@ -167,10 +190,10 @@ LIBRARY: tuple[Effect, ...] = (
     Effect(
         "restoring.cubic",
         "cubic restoring",
-        "nonlinear restoring",
+        Family.NONLINEAR_RESTORING,
         "c3*x^3",
         "period changes with amplitude; phase drift growing along the decay; residual peak at 3w",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _add_term("c3"),
         increments="c3",
         physics="a restoring nonlinearity: the GZ curve away from its initial slope (flare, deck edge)",
@@ -178,30 +201,30 @@ LIBRARY: tuple[Effect, ...] = (
     Effect(
         "restoring.sine",
         "GZ-like sine restoring",
-        "nonlinear restoring",
+        Family.NONLINEAR_RESTORING,
         "s1*sin(x) instead of c1*x",
         "period grows with amplitude (softening); phase drift growing along the decay",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _sine_restoring,
         physics="a restoring nonlinearity: a wall-sided GZ curve",
     ),
     Effect(
         "sensor.offset",
         "angle offset",
-        "offset or asymmetry",
+        Family.OFFSET_OR_ASYMMETRY,
         "per-run offset in y = x + b",
         "residual mean not zero; peak near zero frequency; unequal positive and negative peaks",
-        "observation",
+        EffectKind.OBSERVATION,
         _set_flag("offset", needs_rate=False),
         physics="a heel of the model or a zero error of the sensor",
     ),
     Effect(
         "restoring.asymmetric",
         "asymmetric restoring",
-        "offset or asymmetry",
+        Family.OFFSET_OR_ASYMMETRY,
         "c2*x^2",
         "mean shift that shrinks with amplitude; residual peak at 2w and near zero",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _add_term("c2"),
         increments="c2",
         physics="an asymmetric hull or loading (a list, an off-centre weight)",
@@ -209,41 +232,41 @@ LIBRARY: tuple[Effect, ...] = (
     Effect(
         "sensor.gyro_bias",
         "gyro bias",
-        "measurement error",
+        Family.MEASUREMENT_ERROR,
         "rate y = x' + b_gyro",
         "rate residual has a non-zero mean",
-        "observation",
+        EffectKind.OBSERVATION,
         _set_flag("gyro_bias", needs_rate=True),
         physics="the gyro's bias: a measurement error",
     ),
     Effect(
         "sensor.lag",
         "sensor time lag",
-        "measurement error",
+        Family.MEASUREMENT_ERROR,
         "angle y = x(t - tau)",
         "angle residual proportional to the rate (quarter period out of phase with the angle)",
-        "observation",
+        EffectKind.OBSERVATION,
         _set_flag("lag", needs_rate=True),
         physics="the sensor's filter lag: a measurement error",
     ),
     Effect(
         "sensor.gain",
         "sensor gain error",
-        "measurement error",
+        Family.MEASUREMENT_ERROR,
         "angle y = (1 + g) x",
         "angle residual proportional to the angle itself",
-        "observation",
+        EffectKind.OBSERVATION,
         _set_flag("gain", needs_rate=True),
         physics="the sensor's scale: a measurement error",
     ),
     Effect(
         "friction.coulomb",
         "Coulomb friction of the rig",
-        "dry friction",
+        Family.DRY_FRICTION,
         "fc*tanh(x'/eps)",
         "decrement per half cycle tends to a constant at small amplitude; straight-line envelope; "
         "damping ratio falls with amplitude",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _set_flag("coulomb", needs_rate=False),
         non_negative="fc",
         physics="dry friction of the rig (gimbals, cables): not the ship's, keep it out of its damping",
@@ -251,30 +274,30 @@ LIBRARY: tuple[Effect, ...] = (
     Effect(
         "coupling.heave",
         "coupling with heave",
-        "coupled motion",
+        Family.COUPLED_MOTION,
         "k*z(t) with z the measured heave",
         "residual peak at the heave frequency; residual correlated with the measured heave",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _couple(HEAVE_CHANNELS),
         physics="a coupled heave motion the simulation does not have",
     ),
     Effect(
         "coupling.other_rotation",
         "coupling with the other rotation",
-        "coupled motion",
+        Family.COUPLED_MOTION,
         "k*theta(t) with theta the measured other rotation",
         "residual peak at the other axis' frequency; residual correlated with the measured other angle",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _couple(OTHER_ROTATION_CHANNELS),
         physics="a coupled pitch or roll motion the simulation does not have",
     ),
     Effect(
         "coupling.unmeasured",
         "coupling with an unmeasured motion",
-        "coupled motion",
+        Family.COUPLED_MOTION,
         "exp(-l t) (p cos wt + q sin wt), w and l shared, p and q per run",
         "residual peak at a frequency that is no harmonic of the natural one, and no measured channel",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _ringing,
         non_negative="ring_decay_1_s",  # a motion released with the model rings down; a growing one is later
         off_swing="ring_omega_rad_s",
@@ -283,10 +306,10 @@ LIBRARY: tuple[Effect, ...] = (
     Effect(
         "disturbance.late",
         "reflected tank waves arriving late",
-        "late-time disturbance",
+        Family.LATE_DISTURBANCE,
         "nothing: the records are cut before the disturbance arrives",
         "residual near noise level early, then a burst after the reflection time",
-        "truncation",
+        EffectKind.TRUNCATION,
         _never,
         physics="the tank: reflected waves (no model term; cut the record before them)",
     ),
@@ -298,10 +321,10 @@ INCREMENTS: tuple[Effect, ...] = (
     Effect(
         "damping.linear",
         "linear damping",
-        "linear damping",
+        Family.LINEAR_DAMPING,
         "more (or less) b1*x'",
         "damping ratio off by the same amount at every amplitude; envelope off from the first cycle",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _held,
         increments="b1",
         physics="linear damping: skin friction or wave radiation (or dry friction of the rig)",
@@ -309,10 +332,10 @@ INCREMENTS: tuple[Effect, ...] = (
     Effect(
         "restoring.linear",
         "stiffness",
-        "stiffness",
+        Family.STIFFNESS,
         "another c1*x",
         "period off at every amplitude; phase drift growing linearly along the decay",
-        "dynamics",
+        EffectKind.DYNAMICS,
         _held,
         increments="c1",
         physics="the stiffness: GM (or displacement, or the roll inertia the period implies) differs",
@@ -320,4 +343,4 @@ INCREMENTS: tuple[Effect, ...] = (
 )
 
 EFFECTS: dict[str, Effect] = {e.key: e for e in LIBRARY}
-FAMILIES: tuple[str, ...] = tuple(dict.fromkeys(e.family for e in LIBRARY))
+FAMILIES: tuple[Family, ...] = tuple(dict.fromkeys(e.family for e in LIBRARY))

@@ -19,6 +19,7 @@ from ..ident.plausibility import check_runs
 from ..store.safe_write import write_text_new
 from ..validation import refuse_existing
 from ..viz import diagnose_view, plots
+from .effects import EffectKind
 from .fitting import Fit
 from .residuals import SPECTRUM_MEANING, residual_spectrum
 from .workflow import Diagnoser, Diagnostics, Step, signature_seen
@@ -146,7 +147,7 @@ def summary_json(diagnoser: Diagnoser) -> str:
 def _step_line(step: Step, diagnoser: Diagnoser) -> str:
     effect = step.effect
     after = step.after
-    if effect.kind == "truncation":
+    if effect.kind == EffectKind.TRUNCATION:
         cuts = ", ".join(f"{c:.1f}" for c in step.cut_s)
         action = f"cut the records at {cuts} s ({effect.name}, {effect.family})"
     else:

@@ -18,6 +18,7 @@ import math
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +41,16 @@ from .prediction_table import (
     read_prediction_table,
 )
 
-SERIES, MODEL, PREDICTION = "series", "model", "prediction"
+
+class SimulationKind(StrEnum):
+    """What a simulation gives: simulated decays, a model's coefficients, or a damping prediction."""
+
+    SERIES = "series"
+    MODEL = "model"
+    PREDICTION = "prediction"
+
+
+SERIES, MODEL, PREDICTION = SimulationKind.SERIES, SimulationKind.MODEL, SimulationKind.PREDICTION
 #: A simulated run matches a measured one when their initial angles differ by at most this fraction.
 MATCH_TOLERANCE = 0.25
 #: Ratios that mean a unit slip rather than another ship: degrees per radian, ms per s.
@@ -56,7 +66,7 @@ class Simulation:
     """A simulation, typed: what the comparison needs whatever code or method made it."""
 
     name: str
-    kind: str  # SERIES, MODEL or PREDICTION
+    kind: SimulationKind
     coefficients: dict[str, float] = field(default_factory=dict)  # per unit inertia (model, prediction)
     runs: tuple[DecayRun, ...] = ()  # the simulated decays (series)
     notes: tuple[str, ...] = ()

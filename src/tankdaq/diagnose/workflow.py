@@ -20,7 +20,7 @@ from ..ident.base import EstimatorMixin
 from ..ident.signals import white_noise_level
 from ..records import DecayRun
 from ..validation import equation_model
-from .effects import LIBRARY, Effect
+from .effects import LIBRARY, Effect, EffectKind, Family
 from .fitting import Fit, ModelSpec, fit_spec, predict
 from .residuals import (
     SPECTRUM_MEANING,
@@ -153,16 +153,16 @@ def signature_seen(effect: Effect, diag: Diagnostics, trend: CycleTrend) -> list
     """
     seen: list[str] = []
     spectrum = diag.spectrum.location
-    if effect.family == "amplitude-dependent damping" and trend.damping_grows_with_amplitude:
+    if effect.family == Family.AMPLITUDE_DAMPING and trend.damping_grows_with_amplitude:
         seen.append(f"damping ratio grows with amplitude ({trend.zeta_slope_per_rad:.3f} per rad)")
-    if effect.family == "dry friction" and trend.damping_falls_with_amplitude:
+    if effect.family == Family.DRY_FRICTION and trend.damping_falls_with_amplitude:
         seen.append(f"damping ratio falls with amplitude ({trend.zeta_slope_per_rad:.3f} per rad)")
-    if effect.family == "nonlinear restoring":
+    if effect.family == Family.NONLINEAR_RESTORING:
         if trend.period_changes_with_amplitude:
             seen.append(f"period changes with amplitude ({trend.period_slope_s_per_rad2:.3f} s per rad^2)")
         if spectrum == "triple":
             seen.append("residual peak at three times the natural frequency")
-    if effect.family == "offset or asymmetry":
+    if effect.family == Family.OFFSET_OR_ASYMMETRY:
         if spectrum in ("zero", "double"):
             seen.append(SPECTRUM_MEANING[spectrum])
         if abs(diag.residual_mean_angle_rad) > 0.5 * diag.noise_angle_rad:
@@ -178,11 +178,11 @@ def signature_seen(effect: Effect, diag: Diagnostics, trend: CycleTrend) -> list
         seen.append(f"angle residual follows the rate (correlation {diag.corr_with_rate:.2f})")
     if effect.key == "sensor.gain" and diag.corr_with_angle > 0.5:
         seen.append(f"angle residual follows the angle (correlation {diag.corr_with_angle:.2f})")
-    if effect.family == "coupled motion":
+    if effect.family == Family.COUPLED_MOTION:
         seen += [f"residual correlated with {ch} ({c:.2f})" for ch, c in diag.channel_corr.items() if c > 0.3]
         if spectrum == "other":
             seen.append(f"residual peak at {diag.spectrum.peak_rad_s:.2f} rad/s, not a harmonic")
-    if effect.kind == "truncation":
+    if effect.kind == EffectKind.TRUNCATION:
         burst = [o for o in diag.late if o.ratio > LATE_RATIO]
         seen += [f"residual {o.ratio:.1f}x louder after {o.onset_s:.1f} s" for o in burst]
     return seen
@@ -256,7 +256,7 @@ class Diagnoser(EstimatorMixin):
         return self
 
     def _was_truncated(self) -> bool:
-        return any(s.effect.kind == "truncation" for s in self.steps_)
+        return any(s.effect.kind == EffectKind.TRUNCATION for s in self.steps_)
 
     def _truncate(
         self, current: Fit, runs: list[DecayRun], diag: Diagnostics, best: Step | None
@@ -269,7 +269,7 @@ class Diagnoser(EstimatorMixin):
         kept when the model fits the rest to the noise level, the burst is loud,
         and the best added term would not have explained it.
         """
-        effect = next((e for e in self.library if e.kind == "truncation"), None)
+        effect = next((e for e in self.library if e.kind == EffectKind.TRUNCATION), None)
         if effect is None:
             return None
         noise = diag.noise_angle_rad

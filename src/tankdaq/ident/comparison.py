@@ -51,9 +51,9 @@ def compare_models(
                 "models": names,
                 "terms": list(terms),
                 "n_terms": len(terms),
-                "seed_objective": summary["seed_objective"],
-                "r2_angle": summary["r2_angle"],
-                "bic": summary["bic"],
+                "seed_objective": summary.seed_objective,
+                "r2_angle": summary.r2_angle,
+                "bic": summary.bic,
                 "held_out_rms_deg": held_out_rms_deg(terms, runs) if len(runs) > 1 else None,
             }
         )

@@ -28,12 +28,33 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from enum import StrEnum
 
 import numpy as np
 
 from ..errors import InputError
 from ..records import DecayRun
 from .signals import half_cycle_peaks, white_noise_level
+
+
+class EndKind(StrEnum):
+    """Why a free decay ends (``FreeDecayEnd.kind``, ``Cut.kind``; the cut's JSON says its value)."""
+
+    EXCITATION = "excitation"
+    DISTURBANCE = "disturbance"
+    NOISE = "noise"
+    CHANNEL = "channel"
+    RECORD = "record"
+    GIVEN = "given"
+
+
+class ChannelKind(StrEnum):
+    """What a recorded channel beside the angle measures, when its name says so (``channel_kind``)."""
+
+    SPEED = "speed"
+    SWAY = "sway"
+    YAW = "yaw"
+
 
 #: A peak within this many noise sigmas of the equilibrium is noise.
 NOISE_PEAKS = 5.0
@@ -50,12 +71,11 @@ MOVING_M_S = 0.05
 #: A yaw or sway channel leaves its level by this many times its spread over the first two periods,
 #: and by at least the floor (rad for yaw, m for sway).
 CHANNEL_SPREADS = 8.0
-CHANNEL_FLOORS = {"yaw": math.radians(1.0), "sway": 0.05}
-
+CHANNEL_FLOORS = {ChannelKind.YAW: math.radians(1.0), ChannelKind.SWAY: 0.05}
 #: A stretch without samples longer than this many half-periods (and time steps) ends the free part.
 GAP_HALF_PERIODS, GAP_STEPS = 0.25, 5.0
 #: Kinds of end after which a CSV record may hold another release (a carriage stop ends the record).
-SPLIT_AFTER = ("excitation", "noise")
+SPLIT_AFTER = (EndKind.EXCITATION, EndKind.NOISE)
 
 
 @dataclass(frozen=True)
@@ -64,7 +84,7 @@ class FreeDecayEnd:
 
     index: int
     t_s: float
-    kind: str  # excitation, disturbance, noise, channel, record, given
+    kind: EndKind
     reason: str
 
 
@@ -75,7 +95,7 @@ class Cut:
     run: str
     start_s: float
     end_s: float
-    kind: str
+    kind: EndKind
     reason: str
 
     @property
@@ -84,7 +104,7 @@ class Cut:
         return f"{self.run}: free decay {self.start_s:.2f}..{self.end_s:.2f} s after release ({self.reason})"
 
     def as_dict(self) -> dict[str, object]:
-        return asdict(self) | {"line": self.line}
+        return asdict(self) | {"kind": self.kind.value, "line": self.line}  # plain text in files
 
 
 @dataclass(frozen=True)
@@ -146,7 +166,7 @@ def _gap_end(run: DecayRun, half_period: float) -> FreeDecayEnd | None:
         return None
     i = int(gaps[0])
     return _end_at(
-        run, i + 1, "record",
+        run, i + 1, EndKind.RECORD,
         f"no samples for {steps[i]:.3g} s after {run.t[i] - run.t[0]:.2f} s: a gap in the record",
     )  # fmt: skip
 
@@ -155,7 +175,9 @@ def _motion_end(run: DecayRun, peaks: _Peaks | None) -> FreeDecayEnd:
     """Where the angle or a channel shows the decay is no longer free (the record's end if nowhere)."""
     angle_end, channel_end = _angle_end(run, peaks), _channel_end(run, peaks)
     if angle_end is None and channel_end is None:
-        return FreeDecayEnd(run.t.size, float(run.t[-1] - run.t[0]), "record", "no end found: whole record")
+        return FreeDecayEnd(
+            run.t.size, float(run.t[-1] - run.t[0]), EndKind.RECORD, "no end found: whole record"
+        )
     if angle_end is None or channel_end is None:
         return angle_end or channel_end  # type: ignore[return-value]
     if channel_end.index <= angle_end.index:
@@ -163,12 +185,12 @@ def _motion_end(run: DecayRun, peaks: _Peaks | None) -> FreeDecayEnd:
     period_s = 2 * float(np.median(np.diff(peaks.t)))  # type: ignore[union-attr]
     if channel_end.t_s - angle_end.t_s < period_s:  # the roll felt the carriage stop first
         return FreeDecayEnd(
-            angle_end.index, angle_end.t_s, "channel", f"{channel_end.reason}; the roll reacts first"
+            angle_end.index, angle_end.t_s, EndKind.CHANNEL, f"{channel_end.reason}; the roll reacts first"
         )
     return angle_end
 
 
-def _end_at(run: DecayRun, index: int, kind: str, reason: str) -> FreeDecayEnd:
+def _end_at(run: DecayRun, index: int, kind: EndKind, reason: str) -> FreeDecayEnd:
     index = int(min(max(index, 1), run.t.size))
     return FreeDecayEnd(index, float(run.t[index - 1] - run.t[0]), kind, reason)
 
@@ -190,21 +212,21 @@ def _angle_end(run: DecayRun, peaks: _Peaks | None) -> FreeDecayEnd | None:
     return _tail_end(run, peaks, swing)
 
 
-def _swing_end(peaks: _Peaks, swing: np.ndarray, k: int) -> tuple[int, str, str] | None:
+def _swing_end(peaks: _Peaks, swing: np.ndarray, k: int) -> tuple[int, EndKind, str] | None:
     """Whether swing k is one a free decay cannot make: (the index where it ends, kind, reason)."""
     v, sigma = peaks.value, peaks.sigma
     before = int(peaks.index[k]) + 1
     if swing[k] / 2 < NOISE_PEAKS * sigma:
         return (
             int(peaks.index[k + 1]),
-            "noise",
+            EndKind.NOISE,
             f"the signal sinks into the noise: swing {math.degrees(swing[k]):.3g} deg, "
             f"noise {math.degrees(sigma):.2g} deg",
         )
     if swing[k] > swing[k - 1] + 4 * math.sqrt(2) * sigma:
         return (
             before,
-            "excitation",
+            EndKind.EXCITATION,
             f"a second excitation: the swing grows from {math.degrees(swing[k - 1]):.3g} "
             f"to {math.degrees(swing[k]):.3g} deg",
         )
@@ -214,7 +236,7 @@ def _swing_end(peaks: _Peaks, swing: np.ndarray, k: int) -> tuple[int, str, str]
     if loss > LOSS_JUMP * usual_loss + 4 * math.sqrt(2) * sigma / swing[k - 1]:
         return (
             before,
-            "disturbance",
+            EndKind.DISTURBANCE,
             f"a disturbance: a half-cycle loses {100 * loss:.0f} % of its swing, "
             f"{100 * usual_loss:.0f} % before",
         )
@@ -224,7 +246,7 @@ def _swing_end(peaks: _Peaks, swing: np.ndarray, k: int) -> tuple[int, str, str]
         bias = swing[k - 2] * (1.0 - min(ratio[k - 2], 1.0)) ** 2 / 4
         if abs(midline - previous) > MIDLINE_FRACTION * swing[k] / 2 + bias + 5 * sigma:
             jump_deg = math.degrees(midline - previous)
-            return before, "disturbance", f"a disturbance: the equilibrium jumps by {jump_deg:+.3g} deg"
+            return before, EndKind.DISTURBANCE, f"a disturbance: the equilibrium jumps by {jump_deg:+.3g} deg"
     if k >= 3:
         half_periods = np.diff(peaks.t)
         usual = float(np.median(half_periods[k - 3 : k]))
@@ -232,7 +254,7 @@ def _swing_end(peaks: _Peaks, swing: np.ndarray, k: int) -> tuple[int, str, str]
         if abs(half_periods[k] - usual) > (HALF_PERIOD_FRACTION + jitter) * usual:
             return (
                 before,
-                "disturbance",
+                EndKind.DISTURBANCE,
                 f"a disturbance: a half-period of {half_periods[k]:.3g} s, {usual:.3g} s before",
             )
     return None
@@ -251,24 +273,24 @@ def _tail_end(run: DecayRun, peaks: _Peaks, swing: np.ndarray) -> FreeDecayEnd |
         return _end_at(
             run,
             last + period_samples // 2,
-            "disturbance",
+            EndKind.DISTURBANCE,
             f"a disturbance: the angle leaves its equilibrium by {math.degrees(shift):+.3g} deg",
         )
     return _end_at(
         run,
         last + period_samples // 2,
-        "noise",
+        EndKind.NOISE,
         f"the signal sinks into the noise after a last swing of {math.degrees(swing[-1]):.3g} deg",
     )
 
 
-def channel_kind(name: str) -> str | None:
+def channel_kind(name: str) -> ChannelKind | None:
     """speed, sway or yaw for a channel whose name says so (``carriage_speed_m_s``, ``psi``...), else None."""
     lowered = name.lower()
     for kind, words, exact in (
-        ("speed", ("speed",), ("u", "u_m_s")),
-        ("sway", ("sway",), ("v", "v_m_s")),
-        ("yaw", ("yaw",), ("psi",)),
+        (ChannelKind.SPEED, ("speed",), ("u", "u_m_s")),
+        (ChannelKind.SWAY, ("sway",), ("v", "v_m_s")),
+        (ChannelKind.YAW, ("yaw",), ("psi",)),
     ):
         if any(w in lowered for w in words) or lowered in exact:
             return kind
@@ -289,7 +311,7 @@ def _channel_end(run: DecayRun, peaks: _Peaks | None) -> FreeDecayEnd | None:
             continue
         level = np.convolve(values, np.ones(period) / period, mode="valid")  # level[i]: mean of i..i+period
         reference = float(level[0])
-        if kind == "speed":
+        if kind == ChannelKind.SPEED:
             if abs(reference) < MOVING_M_S:
                 continue
             changed = np.abs(level - reference) > SPEED_DROP * abs(reference)
@@ -301,13 +323,13 @@ def _channel_end(run: DecayRun, peaks: _Peaks | None) -> FreeDecayEnd | None:
         hits = np.flatnonzero(changed)
         if hits.size:
             i = int(hits[0]) + period // 2  # the window's middle: where the change is under way
-            unit = "m/s" if kind == "speed" else ("deg" if kind == "yaw" else "m")
-            scale = math.degrees(1.0) if kind == "yaw" else 1.0
+            unit = "m/s" if kind == ChannelKind.SPEED else ("deg" if kind == ChannelKind.YAW else "m")
+            scale = math.degrees(1.0) if kind == ChannelKind.YAW else 1.0
             ends.append(
                 _end_at(
                     run,
                     i,
-                    "channel",
+                    EndKind.CHANNEL,
                     f"{what}: {name} {reference * scale:.3g} -> {level[hits[0]] * scale:.3g} {unit}",
                 )
             )
@@ -323,12 +345,12 @@ def cut_free_decay(run: DecayRun, start_s: float | None = None, end_s: float | N
     first = 0 if start_s is None else int(np.searchsorted(elapsed, start_s, side="left"))
     if end_s is not None:
         stop = int(np.searchsorted(elapsed, end_s, side="right"))
-        kind, reason = "given", f"--end {end_s:g} s"
+        kind, reason = EndKind.GIVEN, f"--end {end_s:g} s"
     else:
         found = find_free_end(run)
         stop, kind, reason = found.index, found.kind, found.reason
-        if found.kind == "record" and "split" in run.meta:  # the reader ended it at the next release
-            kind, reason = run.meta["split"]
+        if found.kind == EndKind.RECORD and "split" in run.meta:  # the reader ended it at the next release
+            kind, reason = EndKind(run.meta["split"][0]), run.meta["split"][1]
     if start_s is not None:
         reason += f"; --start {start_s:g} s"
     if stop - first < 20:

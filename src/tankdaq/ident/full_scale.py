@@ -2,7 +2,7 @@
 (ITTC 7.5-02-07-04.5, ``physics.friction_scaling``) side by side, for ``identify`` and ``campaign``.
 
 ``full_scale_b44`` is the one way a fit's B44 reaches full scale both ways (the uncertainty budget calls
-it too); ``scale_results`` adds the ship's part to an identify summary, ``campaign_full_scale`` gives the
+it too); ``scale_results`` gives an identify summary its ship's part, ``campaign_full_scale`` gives the
 campaign's lines. Where the hull lacks a particular the correction needs, one line names the key and the
 Froude column is still shown.
 """
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 from ..config import WaterSettings, friction_scaling
@@ -18,6 +19,7 @@ from ..physics.friction_scaling import FrictionScaling, FullScaleB44, assumption
 from ..physics.scaling import FRICTION_NOTE, FroudeScale
 from ..records import DecayRun
 from .derived import b44_hat_factor, b_eq, equivalent_frequency
+from .summary import FitSummary
 
 #: Why a pitch result has no friction correction.
 ROLL_ONLY = "no friction correction for pitch: Kato's friction component is a roll damping (Froude only)"
@@ -61,30 +63,30 @@ def friction_for(
 
 
 def scale_results(
-    summary: dict[str, Any], scale: FroudeScale | None, friction: FrictionScaling | str | None = None
-) -> list[str]:
-    """With ``scale``, adds the full-scale results to an identify summary (``summarize`` has put B̂44
+    summary: FitSummary, scale: FroudeScale | None, friction: FrictionScaling | str | None = None
+) -> tuple[FitSummary, list[str]]:
+    """With ``scale``, the identify summary with its full-scale results (``summarize`` has put B̂44
     beside B_eq/I already): Froude's and, for roll with the hull's inertia and particulars, the
-    friction-corrected B44 per amplitude; returns the lines the text report prints for them."""
+    friction-corrected B44 per amplitude; and the lines the text report prints for them."""
     if scale is None:
-        return []
-    inertia = summary.get("dimensional", {}).get("total_inertia_kg_m2")
-    coefficients = {k: v["value"] for k, v in summary["coefficients"].items()}
+        return summary, []
+    inertia = summary.total_inertia_kg_m2
+    coefficients = summary.values
     ship: dict[str, Any] = {
         "scale_factor": scale.scale,
-        "axis": summary["axis"],
-        "natural_period_s": scale.time_s(summary["natural_period_s"]),
+        "axis": summary.axis,
+        "natural_period_s": scale.time_s(summary.natural_period_s),
         "coefficients": scale.coefficients(coefficients),
         "b_eq": [
-            {"amplitude_deg": r["amplitude_deg"], "value_per_s": r["value_per_s"] / math.sqrt(scale.scale)}
-            for r in summary["b_eq"]
+            {"amplitude_deg": r.amplitude_deg, "value_per_s": r.value_per_s / math.sqrt(scale.scale)}
+            for r in summary.b_eq
         ],
         "note": FRICTION_NOTE,
     }
     if inertia is not None:
-        for row, model in zip(ship["b_eq"], summary["b_eq"], strict=True):
-            row["b_eq_n_m_s"] = scale.damping_n_m_s(model["value_per_s"] * inertia)
-    why = ROLL_ONLY if summary["axis"] != "roll" else NO_INERTIA if inertia is None else friction
+        for row, model in zip(ship["b_eq"], summary.b_eq, strict=True):
+            row["b_eq_n_m_s"] = scale.damping_n_m_s(model.value_per_s * inertia)
+    why = ROLL_ONLY if summary.axis != "roll" else NO_INERTIA if inertia is None else friction
     if isinstance(why, str):
         ship["friction_missing"] = why
     elif isinstance(friction, FrictionScaling) and inertia is not None:
@@ -93,8 +95,7 @@ def scale_results(
         for row in ship["b_eq"]:
             found = full_scale_b44(coefficients, math.radians(row["amplitude_deg"]), inertia, friction)
             row |= corrected_columns(found, ship_inertia)
-    summary["full_scale"] = ship
-    return full_scale_lines(ship)
+    return replace(summary, full_scale=ship), full_scale_lines(ship)
 
 
 def corrected_columns(found: FullScaleB44, ship_inertia_kg_m2: float) -> dict[str, float]:

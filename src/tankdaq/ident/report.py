@@ -9,7 +9,7 @@ offsets, so every method is scored the same way.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -34,6 +34,7 @@ from .intervals import IntervalSummary
 from .one_step import seed_objective
 from .output_error import OutputError
 from .plausibility import check_runs
+from .summary import BertinRow, Coefficient, DampingRow, FitSummary, ModelTerms
 
 
 def predicted_angles(estimator: Any, runs: Sequence[DecayRun]) -> list[np.ndarray]:
@@ -81,8 +82,8 @@ def summarize(
     hull: Any = None,
     draft: float = 1.0,
     intervals: IntervalSummary | None = None,
-) -> dict[str, Any]:
-    """The one JSON object ``tankdaq identify --json`` prints (angles in deg at this edge).
+) -> FitSummary:
+    """What ``tankdaq identify --json`` prints (``FitSummary.to_dict``; angles in deg at this edge).
 
     ``intervals`` (a bootstrap or the repeats' spread) replace the fit's own std and 95 % interval.
     """
@@ -105,29 +106,26 @@ def summarize(
         coefficients, runs, estimator.offsets_, particulars, getattr(hull, "name", "the hull")
     )
     described = intervals.description if intervals else getattr(estimator, "cov_type", "classic")
-    summary: dict[str, Any] = {
-        "model": {"name": model_name(terms), "terms": list(terms)},
-        "method": method,
-        "axis": runs[0].axis,
-        "coefficients": {
-            k: {
-                "value": coefficients[k],
-                "std": std[k],
-                "ci95": list(ci95[k]),
-                "unit": TERM_TABLE[k].unit,
-            }
+    dimensions = None if hull is None else dimensional_summary(coefficients, hull, runs[0].axis, draft)
+    b44_hat = b44_hat_of(dimensions, hull, runs[0].axis, draft)
+    return FitSummary(
+        model=ModelTerms(model_name(terms), tuple(terms)),
+        method=method,
+        axis=runs[0].axis,
+        coefficients={
+            k: Coefficient(coefficients[k], std[k], (ci95[k][0], ci95[k][1]), TERM_TABLE[k].unit)
             for k in terms
         },
-        "intervals": described,
-        "interval_labels": {"std": labels_of(described)[0].text, "ci95": labels_of(described)[1].text},
-        "offset_deg": [math.degrees(o) for o in estimator.offsets_],
-        "natural_period_s": natural_period(coefficients),
-        "damping_ratio": damping_ratio(coefficients),
-        "seed_objective": seed_obj,
-        "r2_angle": _r2(all_measured, all_predicted),
-        "nrmse": rms / float(np.ptp(all_measured)),
-        "bic": getattr(estimator, "bic_", None),
-        "runs": [
+        intervals=described,
+        interval_labels={"std": labels_of(described)[0].text, "ci95": labels_of(described)[1].text},
+        offset_deg=tuple(math.degrees(o) for o in estimator.offsets_),
+        natural_period_s=natural_period(coefficients),
+        damping_ratio=damping_ratio(coefficients),
+        seed_objective=seed_obj,
+        r2_angle=_r2(all_measured, all_predicted),
+        nrmse=rms / float(np.ptp(all_measured)),
+        bic=getattr(estimator, "bic_", None),
+        runs=tuple(
             {
                 "file": str(run.meta.get("file", run.name)),
                 "name": run.name,
@@ -139,26 +137,22 @@ def summarize(
                 **({"source": facts} if (facts := source_facts(run.meta)) else {}),
             }
             for run, pred, offset in zip(runs, predicted, estimator.offsets_, strict=True)
-        ],
-        "b_eq": [{"amplitude_deg": p.amplitude_deg, "value_per_s": p.b_eq, "std": p.b_eq_std} for p in table],
-        "bertin_n": [
-            {"amplitude_deg": p.amplitude_deg, "value_per_deg": p.bertin_n_per_deg, "std": p.bertin_n_std}
-            for p in table
-        ],
-        "extinction": {
+        ),
+        b_eq=tuple(DampingRow(p.amplitude_deg, p.b_eq, p.b_eq_std, b44_hat(p.b_eq)) for p in table),
+        bertin_n=tuple(BertinRow(p.amplitude_deg, p.bertin_n_per_deg, p.bertin_n_std) for p in table),
+        extinction={
             "mean_amplitude_deg": np.degrees(extinction.mean_amplitude).tolist(),
             "decrement_deg": np.degrees(extinction.decrement).tolist(),
         },
-        "plausibility": [finding.as_dict() for finding in findings],
-        "warnings": partial_decays(runs)
-        + [f.message for f in findings]
-        + list(getattr(estimator, "warnings_", [])),
-        "elapsed_s": float(getattr(estimator, "elapsed_s_", math.nan)),
-    }
-    if hull is not None:
-        summary["dimensional"] = dimensional_summary(coefficients, hull, runs[0].axis, draft)
-        add_b44_hat(summary, hull, draft)
-    return summary
+        plausibility=tuple(finding.as_dict() for finding in findings),
+        warnings=(
+            *partial_decays(runs),
+            *(f.message for f in findings),
+            *getattr(estimator, "warnings_", []),
+        ),
+        elapsed_s=float(getattr(estimator, "elapsed_s_", math.nan)),
+        dimensional=dimensions,
+    )
 
 
 def labels_of(intervals: str) -> tuple[IntervalLabel, IntervalLabel]:
@@ -168,15 +162,16 @@ def labels_of(intervals: str) -> tuple[IntervalLabel, IntervalLabel]:
     return IntervalLabel(Coverage.ONE_SIGMA, kind), IntervalLabel(Coverage.P95, kind)
 
 
-def add_b44_hat(summary: dict[str, Any], hull: Any, draft: float) -> None:
-    """B̂44 = B_eq/I · I · √(B/2g) / (ρ∇B²) into each ``b_eq`` row (``b44_hat``) of a roll summary whose
-    hull gives the inertia (displacement, GM) and the beam; nothing otherwise (the rows say B_eq/I only)."""
-    inertia = summary.get("dimensional", {}).get("total_inertia_kg_m2")
-    factor = b44_hat_factor(hull, draft) if summary["axis"] == "roll" else None
+def b44_hat_of(
+    dimensions: Mapping[str, Any] | None, hull: Any, axis: str, draft: float
+) -> Callable[[float], float | None]:
+    """B̂44 = B_eq/I · I · √(B/2g) / (ρ∇B²) from B_eq/I, for a roll summary whose hull gives the inertia
+    (displacement, GM) and the beam; None otherwise (the rows say B_eq/I only)."""
+    inertia = (dimensions or {}).get("total_inertia_kg_m2")
+    factor = b44_hat_factor(hull, draft) if axis == "roll" and inertia is not None else None
     if inertia is None or factor is None:
-        return
-    for row in summary["b_eq"]:
-        row["b44_hat"] = row["value_per_s"] * inertia * factor
+        return lambda b_eq_per_s: None
+    return lambda b_eq_per_s: b_eq_per_s * inertia * factor
 
 
 def dimensional_summary(coefficients: dict[str, float], hull: Any, axis: str, draft: float) -> dict[str, Any]:
@@ -203,45 +198,42 @@ def dimensional_summary(coefficients: dict[str, float], hull: Any, axis: str, dr
     }
 
 
-def text_report(summary: dict[str, Any]) -> str:
+def text_report(summary: FitSummary) -> str:
     """A readable report of ``summarize``'s output."""
-    angle_name = "phi" if summary["axis"] == "roll" else "theta"
-    hat_head = f"{'B̂44':>11}" if any("b44_hat" in row for row in summary["b_eq"]) else ""
+    angle_name = "phi" if summary.axis == "roll" else "theta"
+    hat_head = f"{'B̂44':>11}" if any(row.b44_hat is not None for row in summary.b_eq) else ""
     lines = [
-        f"model {summary['model']['name']} ({', '.join(summary['model']['terms'])}), "
-        f"method {summary['method']}, "
-        f"{len(summary['runs'])} run(s), {summary['axis']}",
+        f"model {summary.model.name} ({', '.join(summary.model.terms)}), "
+        f"method {summary.method}, "
+        f"{len(summary.runs)} run(s), {summary.axis}",
         "",
-        "  " + equation_text({k: v["value"] for k, v in summary["coefficients"].items()}, angle_name),
+        "  " + equation_text(summary.values, angle_name),
         "",
         f"  {'term':<5}{'value':>13}{'std':>12}{'95 % interval':>28}  unit",
     ]
-    for k, c in summary["coefficients"].items():
-        lo, hi = c["ci95"]
-        lines.append(
-            f"  {k:<5}{c['value']:>13.6g}{c['std']:>12.3g}   [{lo:>11.5g}, {hi:>11.5g}]  {c['unit']}"
-        )
+    for k, c in summary.coefficients.items():
+        lo, hi = c.ci95
+        lines.append(f"  {k:<5}{c.value:>13.6g}{c.std:>12.3g}   [{lo:>11.5g}, {hi:>11.5g}]  {c.unit}")
     lines += [
-        "  (std {}, interval {}: {})".format(*labels_of(summary["intervals"]), summary["intervals"]),
+        "  (std {}, interval {}: {})".format(*labels_of(summary.intervals), summary.intervals),
         "",
-        f"  natural period {summary['natural_period_s']:.4f} s, damping ratio {summary['damping_ratio']:.4f}",
-        f"  angle R^2 {summary['r2_angle']:.5f}, NRMSE {summary['nrmse']:.4f}, "
-        f"seed objective {summary['seed_objective']:.4g} rad/s",
+        f"  natural period {summary.natural_period_s:.4f} s, damping ratio {summary.damping_ratio:.4f}",
+        f"  angle R^2 {summary.r2_angle:.5f}, NRMSE {summary.nrmse:.4f}, "
+        f"seed objective {summary.seed_objective:.4g} rad/s",
         "",
         f"  {'amplitude':>10}{'B_eq/I (1/s)':>16}{'std':>11}{hat_head}{'Bertin N (1/deg)':>19}",
     ]
-    for b, n in zip(summary["b_eq"], summary["bertin_n"], strict=True):
-        hat = f"{b['b44_hat']:>11.4g}" if "b44_hat" in b else ""
+    for b, n in zip(summary.b_eq, summary.bertin_n, strict=True):
+        hat = f"{b.b44_hat:>11.4g}" if b.b44_hat is not None else ""
         lines.append(
-            f"  {b['amplitude_deg']:>8.2f} deg{b['value_per_s']:>14.5g}{b['std']:>11.2g}{hat}"
-            f"{n['value_per_deg']:>19.4g}"
+            f"  {b.amplitude_deg:>8.2f} deg{b.value_per_s:>14.5g}{b.std:>11.2g}{hat}{n.value_per_deg:>19.4g}"
         )
     if hat_head:
         lines.append(
             "  B̂44 = B44 / (ρ ∇ B²) · √(B/2g), B44 = B_eq/I · I (non-dimensional; unchanged at full scale)"
         )
     lines.append("")
-    for run in summary["runs"]:
+    for run in summary.runs:
         lines.append(
             f"  run {run['name']}: start {run['initial_angle_deg']:+.2f} deg, "
             f"offset {run['offset_deg']:+.4f} deg, "
@@ -249,12 +241,12 @@ def text_report(summary: dict[str, Any]) -> str:
         )
         if run.get("cut"):
             lines.append(f"    cut: {run['cut']['line']}")
-    if "dimensional" in summary and "total_inertia_kg_m2" in summary["dimensional"]:
-        dim = summary["dimensional"]
+    dim = summary.dimensional or {}
+    if "total_inertia_kg_m2" in dim:
         lines.append(f"  total inertia {dim['total_inertia_kg_m2']:.4g} kg m^2 ({dim['note']})")
         lines.append("  " + ", ".join(f"{k.upper()} = {v:.4g}" for k, v in dim["coefficients_si"].items()))
-    if summary.get("budget"):
-        lines += ["", *text_table(summary["budget"])]
-    for warning in summary["warnings"]:
+    if summary.budget:
+        lines += ["", *text_table(summary.budget)]
+    for warning in summary.warnings:
         lines.append(f"  warning: {warning}")
     return "\n".join(lines)

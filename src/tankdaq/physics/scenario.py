@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import InputError
 from .decay import acceleration, decay_refusal, simulate_decay
 from .sensor import SensorModel, SensorNoise
-from .truth import TICK_MODULUS, TICKS_PER_S, RunTruth, ScenarioTrace
+from .truth import TICK_MODULUS, TICKS_PER_S, RunKind, RunTruth, ScenarioTrace
 
 #: A fresh seed is below this: short enough to read off a file and type again after ``--seed``.
 FRESH_SEED_BELOW = 2**32
@@ -264,7 +264,7 @@ class DecayScenario:
                 x[free] = rest + (x0 - rest) * (1 - step)
                 v[free] = -(x0 - rest) * dstep / put_back_s
                 a[free] = -(x0 - rest) * ddstep / put_back_s**2
-                truths.append(RunTruth(run, "put_back", self.axis, hand.start_s, end_s=run_end))
+                truths.append(RunTruth(run, RunKind.PUT_BACK, self.axis, hand.start_s, end_s=run_end))
                 continue
             # Integrated from the off-grid release instant (the first point is the release itself), about
             # the rest angle: a heeling moment shifts the equilibrium (its small change of the restoring
@@ -281,7 +281,7 @@ class DecayScenario:
             truths.append(
                 RunTruth(
                     run,
-                    "release",
+                    RunKind.RELEASE,
                     self.axis,
                     hand.start_s,
                     release,

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
@@ -18,12 +19,19 @@ TICKS_PER_S = 10_000
 TICK_MODULUS = 864_000_000
 
 
+class RunKind(StrEnum):
+    """How a simulated run went: released into a decay, or put back by hand without a release."""
+
+    RELEASE = "release"
+    PUT_BACK = "put_back"
+
+
 @dataclass(frozen=True)
 class RunTruth:
     """What really happened in one run (angles in rad; times on the device clock)."""
 
     run: int
-    kind: str  # "release" or "put_back"
+    kind: RunKind
     axis: str
     tilt_start_s: float
     release_s: float | None = None
@@ -41,7 +49,7 @@ class RunTruth:
 
     def to_json(self) -> dict[str, object]:
         """Plain JSON: SI values, plus degrees for people."""
-        out: dict[str, object] = asdict(self)
+        out: dict[str, object] = asdict(self) | {"kind": self.kind.value}
         out["terms"] = self.terms
         if self.angle0_rad is not None:
             out["angle0_deg"] = math.degrees(self.angle0_rad)

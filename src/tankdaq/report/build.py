@@ -35,8 +35,9 @@ def condition_section(number: int, fit: ConditionFit, extra: Sequence[Table] = (
         *full_scale_tables(f"{key}-full-scale", summary),
         *extra,
     ]
-    notes = [*(f"warning: {line}" for line in summary["warnings"]), summary["model_choice"]["reason"]]
-    return Section(key, summary["condition_label"], tables, condition_figures(key, fit), notes)
+    chosen = [summary.model_choice.reason] if summary.model_choice else []
+    notes = [*(f"warning: {line}" for line in summary.warnings), *chosen]
+    return Section(key, fit.label, tables, condition_figures(key, fit), notes)
 
 
 def budget_tables(key: str, fit: ConditionFit) -> list[Table]:
@@ -44,7 +45,7 @@ def budget_tables(key: str, fit: ConditionFit) -> list[Table]:
     quantity's budget (source, kind, u, sensitivity, contribution, share)."""
     from ..api.identification import budget_table
 
-    budgets = fit.summary.get("budget") or []
+    budgets = fit.summary.budget or ()
     if not budgets:
         return []
     columns = ["quantity", "value", "unit", STANDARD_U.text, EXPANDED_U.text, "largest source"]
@@ -97,11 +98,11 @@ def imo_section(key: str, fit: ConditionFit) -> Table:
     from ..config import parse_draft
     from ..ident.imo_table import decay_cover, imo_table
 
-    condition = fit.summary.get("condition") or {}
+    condition = fit.summary.condition or {}
     draft = condition.get("draft", UNKNOWN)
-    angles = [run["initial_angle_deg"] for run in fit.summary["runs"]]
+    angles = [run["initial_angle_deg"] for run in fit.summary.runs]
     named = _ImoCondition(
-        str(condition.get("hull", UNKNOWN)), fit.summary["axis"],
+        str(condition.get("hull", UNKNOWN)), fit.summary.axis,
         math.nan if draft == UNKNOWN else parse_draft(str(draft)), float(np.mean(np.abs(angles))),
     )  # fmt: skip
     table = imo_table([decay_cover(named, fit.runs, fit.estimator)])
@@ -120,12 +121,10 @@ def condition_figures(key: str, fit: ConditionFit) -> list[Figure]:
     from ..viz.report_figures import damping_figure, png_bytes
 
     summary = fit.summary
-    amplitudes = [row["amplitude_deg"] for row in summary["b_eq"]]
-    bertin = [(row["value_per_deg"], row["std"]) for row in summary["bertin_n"]]
-    coefficients = {term: c["value"] for term, c in summary["coefficients"].items()}
+    amplitudes = [row.amplitude_deg for row in summary.b_eq]
+    bertin = [(row.value_per_deg, row.std) for row in summary.bertin_n]
     damping = damping_figure(
-        coefficients, covariance_of(fit.estimator), amplitudes, bertin, FIT_95,
-        f"{summary['condition_label']}: damping",
+        summary.values, covariance_of(fit.estimator), amplitudes, bertin, FIT_95, f"{fit.label}: damping",
     )  # fmt: skip
     figures = [
         Figure(
@@ -142,7 +141,7 @@ def condition_figures(key: str, fit: ConditionFit) -> list[Figure]:
         zip(fit.runs, predicted, run_labels(fit.runs), strict=True), 1
     ):
         figure = decay_fit_figure(run.t - run.t[0], run.angle, model, axis=run.axis, title=label)
-        caption = f"{run.name}: measured, the fitted model ({summary['model']['name']}) and the residual."
+        caption = f"{run.name}: measured, the fitted model ({summary.model.name}) and the residual."
         figures.append(Figure(f"{key}-decay-{number}", f"Decay {label}", png_bytes(figure), caption))
     return figures
 

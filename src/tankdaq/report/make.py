@@ -246,7 +246,7 @@ def _content(
     from .build import report_content
     from .provenance import provenance_section
 
-    warnings = skipped + [f"{fit.label}: {line}" for fit in fits for line in fit.summary["warnings"]]
+    warnings = skipped + [f"{fit.label}: {line}" for fit in fits for line in fit.summary.warnings]
     provenance = provenance_section(recordings, hulls, found.catalogue_ids, found.sessions, command)
     return report_content(fits, warnings, provenance, made)
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
+from ..records import Verdict
 
 #: What makes a path given a pattern to expand (when no file has that very name).
 GLOB_CHARACTERS = frozenset("*?[")
@@ -76,7 +77,7 @@ def session_files(folder: Path) -> list[Path]:
     from ..config_rules import path_in
 
     state = SessionState.from_log(SessionLog(folder).read(), [], 0)
-    accepted = [path_in(folder, run.file) for run in state.runs if run.verdict == "accepted"]
+    accepted = [path_in(folder, run.file) for run in state.runs if run.verdict == Verdict.ACCEPTED]
     if not accepted:
         raise InputError(f"session {folder}: no decay accepted yet; nothing to report")
     gone = [path for path in accepted if not path.is_file()]

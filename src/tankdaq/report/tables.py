@@ -4,11 +4,12 @@ as it is there; the intervals labelled by coverage and kind)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from ..ident.full_scale import damping_name
 from ..ident.interval_labels import FIT_95, FIT_STD
+from ..ident.summary import FitSummary
 from .content import Table
 
 #: The fit's own intervals: the coefficient's standard deviation and its 95 % interval.
@@ -16,16 +17,15 @@ SIGMA_COLUMN = FIT_STD.text
 LOW_COLUMN, HIGH_COLUMN = f"{FIT_95.said} low", f"{FIT_95.said} high"
 
 
-def conditions_table(summaries: Sequence[dict[str, Any]]) -> Table:
+def conditions_table(summaries: Sequence[FitSummary]) -> Table:
     """One row per condition fitted: what was tested and how it was fitted."""
     rows = []
     for s in summaries:
-        condition = s.get("condition") or {}
-        angles = ", ".join(f"{run['initial_angle_deg']:.2f}" for run in s["runs"])
+        condition = s.condition or {}
+        angles = ", ".join(f"{run['initial_angle_deg']:.2f}" for run in s.runs)
         rows.append([
-            s["condition_label"], condition.get("hull"), condition.get("draft"), s["axis"], len(s["runs"]),
-            angles, s["model"]["name"], s["method"], s["intervals"], s["r2_angle"],
-            s["natural_period_s"], s["damping_ratio"],
+            s.condition_label, condition.get("hull"), condition.get("draft"), s.axis, len(s.runs),
+            angles, s.model.name, s.method, s.intervals, s.r2_angle, s.natural_period_s, s.damping_ratio,
         ])  # fmt: skip
     columns = [
         "condition", "hull", "draft", "axis", "decays", "initial angles measured (deg)", "model",
@@ -35,13 +35,13 @@ def conditions_table(summaries: Sequence[dict[str, Any]]) -> Table:
     return Table("conditions", "Conditions", columns, rows, caption)
 
 
-def decays_table(summaries: Sequence[dict[str, Any]]) -> Table:
+def decays_table(summaries: Sequence[FitSummary]) -> Table:
     """One row per decay: its file, measured initial angle, samples kept and the fit's R² on it."""
     rows = [
-        [s["condition_label"], run["name"], run["file"], run["initial_angle_deg"], run["offset_deg"],
+        [s.condition_label, run["name"], run["file"], run["initial_angle_deg"], run["offset_deg"],
          run["samples"], run["r2_angle"], (run.get("cut") or {}).get("line")]
         for s in summaries
-        for run in s["runs"]
+        for run in s.runs
     ]  # fmt: skip
     columns = [
         "condition",
@@ -56,33 +56,30 @@ def decays_table(summaries: Sequence[dict[str, Any]]) -> Table:
     return Table("decays", "Decays", columns, rows, "Every decay fitted, as read and cut.")
 
 
-def coefficients_table(key: str, summary: dict[str, Any]) -> Table:
+def coefficients_table(key: str, summary: FitSummary) -> Table:
     """The coefficients per unit total inertia (SI, rad) with the fit's 1σ and 95 % interval."""
-    rows = [
-        [term, c["value"], c["unit"], c["std"], c["ci95"][0], c["ci95"][1]]
-        for term, c in summary["coefficients"].items()
-    ]
+    rows = [[term, c.value, c.unit, c.std, c.ci95[0], c.ci95[1]] for term, c in summary.coefficients.items()]
     intervals = {SIGMA_COLUMN: FIT_STD, LOW_COLUMN: FIT_95, HIGH_COLUMN: FIT_95}
     caption = (
-        f"Model {summary['model']['name']} ({summary['method']}); per unit total inertia, angles in rad. "
-        f"{FIT_STD.text}: the fit's standard deviation ({summary['intervals']} covariance); "
+        f"Model {summary.model.name} ({summary.method}); per unit total inertia, angles in rad. "
+        f"{FIT_STD.text}: the fit's standard deviation ({summary.intervals} covariance); "
         f"{FIT_95.text}: its 95 % interval."
     )
     columns = ["term", "value", "unit", SIGMA_COLUMN, LOW_COLUMN, HIGH_COLUMN]
     return Table(key, "Coefficients", columns, rows, caption, intervals)
 
 
-def damping_table(key: str, summary: dict[str, Any]) -> Table:
+def damping_table(key: str, summary: FitSummary) -> Table:
     """B_eq/I (with B̂44 where the hull allows) and Bertin's N at the amplitudes the decays cover."""
-    hat = any("b44_hat" in row for row in summary["b_eq"])
+    hat = any(row.b44_hat is not None for row in summary.b_eq)
     columns = ["amplitude (deg)", "B_eq/I (1/s)", f"B_eq/I {FIT_STD.text}"]
     columns += ["B̂44"] if hat else []
     columns += ["Bertin N (1/deg)", f"Bertin N {FIT_STD.text}"]
     rows = []
-    for b, n in zip(summary["b_eq"], summary["bertin_n"], strict=True):
-        row = [b["amplitude_deg"], b["value_per_s"], b["std"]]
-        row += [b.get("b44_hat")] if hat else []
-        rows.append([*row, n["value_per_deg"], n["std"]])
+    for b, n in zip(summary.b_eq, summary.bertin_n, strict=True):
+        row: list[float | None] = [b.amplitude_deg, b.value_per_s, b.std]
+        row += [b.b44_hat] if hat else []
+        rows.append([*row, n.value_per_deg, n.std])
     intervals = {f"B_eq/I {FIT_STD.text}": FIT_STD, f"Bertin N {FIT_STD.text}": FIT_STD}
     caption = (
         "Equivalent linear damping B_eq/I and Bertin's N (MSC.1/Circ.1200) at amplitudes the decays "
@@ -92,17 +89,17 @@ def damping_table(key: str, summary: dict[str, Any]) -> Table:
     return Table(key, "B_eq and Bertin's N", columns, rows, caption, intervals)
 
 
-def full_scale_tables(key: str, summary: dict[str, Any]) -> list[Table]:
+def full_scale_tables(key: str, summary: FitSummary) -> list[Table]:
     """The ship's period and coefficients, and B_eq per amplitude, by Froude (``--full-scale``); none
     when not asked."""
-    ship = summary.get("full_scale")
+    ship = summary.full_scale
     if ship is None:
         return []
     scale = f"1:{ship['scale_factor']:g}"
     coefficients = [
-        ["natural period", summary["natural_period_s"], ship["natural_period_s"], "s"],
+        ["natural period", summary.natural_period_s, ship["natural_period_s"], "s"],
         *[
-            [term, summary["coefficients"][term]["value"], value, summary["coefficients"][term]["unit"]]
+            [term, summary.coefficients[term].value, value, summary.coefficients[term].unit]
             for term, value in ship["coefficients"].items()
         ],
     ]
@@ -121,7 +118,7 @@ def full_scale_tables(key: str, summary: dict[str, Any]) -> list[Table]:
     ]  # fmt: skip
 
 
-def friction_tables(key: str, ship: dict[str, Any]) -> list[Table]:
+def friction_tables(key: str, ship: Mapping[str, Any]) -> list[Table]:
     """Froude's B44 beside the friction-corrected one per amplitude, with both Reynolds numbers and the
     assumptions in the caption; where the hull cannot give the correction, the line that says why."""
     if "friction_missing" in ship:

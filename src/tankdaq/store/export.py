@@ -17,6 +17,7 @@ import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -43,8 +44,17 @@ from .reader import (
 )
 from .schemas import TOPIC_SAMPLES
 
-#: Time frames; the first is the default (people read time since the release).
-FRAMES = ("release", "device")
+
+class TimeFrame(StrEnum):
+    """Where an export's time starts: at the release (the default: people read time since it) or as the
+    device clock has it."""
+
+    RELEASE = "release"
+    DEVICE = "device"
+
+
+#: The frames as ``--frame`` takes them; the first is the default.
+FRAMES = tuple(frame.value for frame in TimeFrame)
 #: Run metadata that stays text even when it reads as a number (an id, a draft like ``1.1T``).
 TEXT_KEYS = frozenset(
     {"hull", "hull_description", "draft", "axis", "device_id", "product_code", "firmware", "software_version",
@@ -144,15 +154,15 @@ def _table(usable: _Usable, samples: np.ndarray, decay: int | None, name: str, f
     recording) in the release frame; the metadata lists the releases the table holds."""
     recording = usable.recording
     axis = recording.axis
-    frame = frame if usable.releases else "device"
+    frame = frame if usable.releases else TimeFrame.DEVICE.value  # plain text: it goes into the files
     held = usable.releases if decay is None else usable.releases[decay : decay + 1]
-    origin = held[0] if frame == "release" else 0.0
+    origin = held[0] if frame == TimeFrame.RELEASE else 0.0
     angle_field, rate_field = AXIS_FIELDS[axis]
     fields = [angle_field, rate_field]
     fields += [f for f in samples.dtype.names or () if f not in (*fields, "t")]
     columns = {TIME_COLUMN: samples["t"] - origin}
     units = {TIME_COLUMN: "s"}
-    if frame == "release":
+    if frame == TimeFrame.RELEASE:
         columns[DEVICE_TIME_COLUMN], units[DEVICE_TIME_COLUMN] = samples["t"].copy(), "s"
     for field in fields:
         columns[column_name(field)] = samples[field].copy()
@@ -200,7 +210,7 @@ def export_recording(
             on_notice(corruption_notice(path, corruption))
         elif not tables[0].metadata["complete_file"]:
             on_notice(truncation_notice(path))
-        if frame == "release" and tables[0].metadata["frame"] == "device":
+        if frame == TimeFrame.RELEASE and tables[0].metadata["frame"] == TimeFrame.DEVICE:
             on_notice(f"{path}: no release recorded, so its times are the device clock (--frame device)")
     if file_format in PER_DECAY and len(tables) > 1:  # each decay file says which decay it holds
         tables = [

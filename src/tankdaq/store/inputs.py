@@ -72,10 +72,12 @@ def _column_reader(name: str) -> Callable[[Path, str | None, CsvOptions], list[D
     return read
 
 
+#: The format name of tankdaq's own recordings (``InputFormat.name``; a recording's ``meta["format"]``).
+RECORDING_FORMAT = "tankdaq recording"
 #: Suffix (lower case) -> format. A column file's test condition comes from its metadata when
 #: ``tankdaq export`` wrote it, else from its name or sidecar, as a CSV's.
 INPUT_FORMATS: dict[str, InputFormat] = {
-    ".mcap": InputFormat("tankdaq recording", _read_mcap, self_labelled=True),
+    ".mcap": InputFormat(RECORDING_FORMAT, _read_mcap, self_labelled=True),
     ".csv": InputFormat("CSV", _read_csv, self_labelled=False),
     ".txt": InputFormat("text table", _read_csv, self_labelled=False),  # MT Manager's default export
     ".h5": InputFormat("HDF5", _column_reader("read_h5_columns"), self_labelled=False),

@@ -38,6 +38,7 @@ from ..records import DecayEnd, DecayRun
 from ..samples import AXIS_FIELDS, StatusTally
 from . import schemas
 from .record_scan import MCAP_DAMAGE, RecordScan
+from .schemas import EventKind
 
 
 @dataclass
@@ -122,14 +123,14 @@ def _check_tankdaq(path: Path, channels: dict[int, Channel], has_run_metadata: b
 
 
 def _release_times(events: list[dict[str, Any]]) -> list[float]:
-    return sorted(e["t_s"] for e in events if e.get("kind") == "release" and e.get("t_s") is not None)
+    return sorted(e["t_s"] for e in events if e.get("kind") == EventKind.RELEASE and e.get("t_s") is not None)
 
 
 def release_u95_of(events: list[dict[str, Any]], t_s: float) -> float | None:
     """The 95 % half-width (s) of the release at ``t_s`` as its event says it; None: unknown (a file written
     before the interval, or a release the detector could not bracket), never zero."""
     for event in events:
-        if event.get("kind") == "release" and event.get("t_s") == t_s:
+        if event.get("kind") == EventKind.RELEASE and event.get("t_s") == t_s:
             value = (event.get("data") or {}).get("release_u95_s")
             return float(value) if isinstance(value, int | float) and math.isfinite(value) else None
     return None

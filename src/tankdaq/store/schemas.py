@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -30,7 +31,20 @@ BLOCK_MESSAGE_ENCODING = "tankdaq.sample-block"
 #: The ``/samples/blocks`` payload: packed little-endian records, SI units (the in-memory sample layout).
 BLOCK_DTYPE = SAMPLE_DTYPE.newbyteorder("<")
 
-EVENT_KINDS = ("release", "settled", "gap", "warning", "unplug", "note")
+
+class EventKind(StrEnum):
+    """What a recording's event says happened (``/tankdaq/events``)."""
+
+    RELEASE = "release"
+    SETTLED = "settled"
+    GAP = "gap"
+    WARNING = "warning"
+    UNPLUG = "unplug"
+    NOTE = "note"
+
+
+#: The kinds as plain text (the events' JSON schema and the channel's metadata).
+EVENT_KINDS = tuple(kind.value for kind in EventKind)
 
 #: JSON field -> (sample field, factor from SI to the file's unit, unit). Order is the file's field order.
 SAMPLE_FIELDS: dict[str, tuple[str, float, str]] = {

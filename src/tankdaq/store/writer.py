@@ -247,9 +247,9 @@ class RecordingWriter:
         stamp = time.time_ns() if host_ns is None else int(host_ns)
         record = {"t_s": t_s, "kind": kind, "message": message, "data": dict(data or {})}
         self._add(schemas.TOPIC_EVENTS, [json.dumps(record, default=float).encode()], [stamp])
-        if kind == "warning":
+        if kind == schemas.EventKind.WARNING:
             self._warnings.append(message)
-        if kind == "release" and t_s is not None:
+        if kind == schemas.EventKind.RELEASE and t_s is not None:
             self._release = (float(t_s), stamp / 1e9)
         self.flush()
 

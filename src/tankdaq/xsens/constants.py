@@ -6,7 +6,7 @@ reply to id ``n`` is ``n + 1``.
 
 from __future__ import annotations
 
-from enum import IntEnum
+from enum import IntEnum, StrEnum
 
 from ..errors import ProtocolError
 
@@ -149,3 +149,17 @@ def baud_code(rate: int) -> int:
 def error_name(code: int) -> str:
     """Readable meaning of a device error code (unknown codes are named by their number)."""
     return ERROR_NAMES.get(code, f"unknown device error 0x{code:02X}")
+
+
+class DataKind(StrEnum):
+    """How an output's data bytes read: ``REAL`` (``count`` values in the XDI's precision), ``INT`` (one
+    unsigned field, struct ``fmt``), ``INTS`` (a tuple of integers, ``fmt``), or one of the structured
+    outputs (``DEVICEID``: U4 or U8)."""
+
+    REAL = "real"
+    INT = "int"
+    INTS = "ints"
+    UTC = "utc"
+    PVT = "pvt"
+    SATINFO = "satinfo"
+    DEVICEID = "deviceid"

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ProtocolError
+from .constants import DataKind
 from .mtdata2 import (
     FP1220_SCALE,
     FP1632_SCALE,
@@ -109,7 +110,7 @@ def _item_field(xdi: int, size: int) -> tuple[np.dtype, Field] | None:
     expected = item_size(spec, xdi)
     if expected is not None and size != expected:
         raise ProtocolError(f"0x{xdi:04X} needs {expected} data bytes, a message gives {size}")
-    if spec.kind == "real":
+    if spec.kind == DataKind.REAL:
         precision = xdi & PRECISION_MASK
         shape = () if spec.count == 1 else (spec.count,)
         if precision == PRECISIONS["fp1632"]:
@@ -119,20 +120,20 @@ def _item_field(xdi: int, size: int) -> tuple[np.dtype, Field] | None:
             dtype = np.dtype(({0: ">f4", 1: ">i4", 3: ">f8"}[precision], shape))
             convert = _fp1220 if precision == PRECISIONS["fp1220"] else _to_float
         return dtype, Field(spec.name, xdi, convert, np.dtype(np.float64), shape)
-    if spec.kind == "int":
+    if spec.kind == DataKind.INT:
         return np.dtype(_STRUCT_TO_DTYPE[spec.fmt[-1]]), Field(
             spec.name, xdi, _to_int, np.dtype(np.int64), ()
         )
-    if spec.kind == "deviceid":
+    if spec.kind == DataKind.DEVICEID:
         if size not in (4, 8):
             raise ProtocolError(f"DeviceId needs 4 or 8 data bytes, a message gives {size}")
         return np.dtype(">u4" if size == 4 else ">u8"), Field(
             spec.name, xdi, _to_uint, np.dtype(np.uint64), ()
         )
-    if spec.kind == "satinfo":
+    if spec.kind == DataKind.SATINFO:
         decode_satinfo(bytes(size))  # raises for a size that is not 8 + 4 per satellite
         return np.dtype(("u1", (size,))), Field(spec.name, xdi, _satinfo, np.dtype(object), ())
-    structured = {"utc": UTC_DTYPE, "pvt": PVT_DTYPE, "ints": RAW_IMU_DTYPE}[spec.kind]
+    structured = {DataKind.UTC: UTC_DTYPE, DataKind.PVT: PVT_DTYPE, DataKind.INTS: RAW_IMU_DTYPE}[spec.kind]
     return structured, Field(spec.name, xdi, np.copy, structured, ())
 
 

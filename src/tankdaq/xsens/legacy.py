@@ -11,6 +11,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Mapping
 from dataclasses import astuple, dataclass
+from enum import StrEnum
 from typing import Any
 
 from ..errors import ProtocolError
@@ -76,18 +77,27 @@ class RawGps:
     gps_age: int
 
 
+class BlockKind(StrEnum):
+    """How a legacy block reads: ``REALS`` (``count`` values in the message precision), or by its ``fmt``."""
+
+    REALS = "reals"
+    INTS = "ints"
+    UTC = "utc"
+    RAWGPS = "rawgps"
+
+
 @dataclass(frozen=True)
 class Block:
     """One block of a legacy message: the name it decodes to, its kind and its value count."""
 
     name: str
-    kind: str  # "reals" (``count`` values in the message precision), "ints", "utc", "rawgps" (``fmt``)
+    kind: BlockKind
     count: int = 0
     fmt: struct.Struct = COUNTER
 
     def size(self, precision_bits: int) -> int:
         """Bytes of this block in a message of the given precision."""
-        return self.count * REAL_SIZES[precision_bits] if self.kind == "reals" else self.fmt.size
+        return self.count * REAL_SIZES[precision_bits] if self.kind == BlockKind.REALS else self.fmt.size
 
 
 @dataclass(frozen=True)
@@ -122,33 +132,33 @@ def legacy_layout(output_mode: int, output_settings: int) -> LegacyLayout:
         raise ProtocolError("only LLA position and XYZ velocity output modes are supported")
     blocks: list[Block] = []
     if output_mode & MODE_RAW_INERTIAL:
-        blocks.append(Block("RawAccGyrMagTemp", "ints", fmt=RAW_INERTIAL))
+        blocks.append(Block("RawAccGyrMagTemp", BlockKind.INTS, fmt=RAW_INERTIAL))
     if output_mode & MODE_RAW_GPS:
-        blocks.append(Block("RawGpsPressure", "rawgps", fmt=RAW_GPS))
+        blocks.append(Block("RawGpsPressure", BlockKind.RAWGPS, fmt=RAW_GPS))
     if output_mode & MODE_TEMPERATURE:
-        blocks.append(Block("Temperature", "reals", 1))
+        blocks.append(Block("Temperature", BlockKind.REALS, 1))
     if output_mode & MODE_CALIBRATED:
         for name, disabled in (("Acceleration", DISABLE_ACC), ("RateOfTurn", DISABLE_GYR),
                                ("MagneticField", DISABLE_MAG)):  # fmt: skip
             if not output_settings & disabled:
-                blocks.append(Block(name, "reals", 3))
+                blocks.append(Block(name, BlockKind.REALS, 3))
     if output_mode & MODE_ORIENTATION:
         name, count = ORIENTATIONS[output_settings & ORIENTATION_MASK]
-        blocks.append(Block(name, "reals", count))
+        blocks.append(Block(name, BlockKind.REALS, count))
     if output_mode & MODE_AUXILIARY:
         for name, disabled in (("AnalogIn1", DISABLE_AIN1), ("AnalogIn2", DISABLE_AIN2)):
             if not output_settings & disabled:
-                blocks.append(Block(name, "ints", fmt=COUNTER))
+                blocks.append(Block(name, BlockKind.INTS, fmt=COUNTER))
     if output_mode & MODE_POSITION:
-        blocks += [Block("LatLon", "reals", 2), Block("AltitudeEllipsoid", "reals", 1)]
+        blocks += [Block("LatLon", BlockKind.REALS, 2), Block("AltitudeEllipsoid", BlockKind.REALS, 1)]
     if output_mode & MODE_VELOCITY:
-        blocks.append(Block("VelocityXYZ", "reals", 3))
+        blocks.append(Block("VelocityXYZ", BlockKind.REALS, 3))
     if output_mode & MODE_STATUS:
-        blocks.append(Block("StatusByte", "ints", fmt=STATUS))
+        blocks.append(Block("StatusByte", BlockKind.INTS, fmt=STATUS))
     if timestamp == 1:
-        blocks.append(Block("PacketCounter", "ints", fmt=COUNTER))
+        blocks.append(Block("PacketCounter", BlockKind.INTS, fmt=COUNTER))
     if timestamp == 2:
-        blocks.append(Block("UtcTime", "utc", fmt=UTC_STRUCT))
+        blocks.append(Block("UtcTime", BlockKind.UTC, fmt=UTC_STRUCT))
     frame = "NED" if output_settings & NED_BIT else "ENU"
     return LegacyLayout(tuple(blocks), precision_bits, frame)
 
@@ -178,12 +188,12 @@ def decode_mtdata(payload: bytes, output_mode: int, output_settings: int) -> MTD
     pos = 0
     for block in layout.blocks:
         size = block.size(layout.precision_bits)
-        if block.kind == "reals":
+        if block.kind == BlockKind.REALS:
             reals = decode_reals(payload[pos : pos + size], layout.precision_bits)
             values[block.name] = reals[0] if block.count == 1 else reals
         else:
             fields = block.fmt.unpack_from(payload, pos)
-            kinds = {"utc": UtcTime, "rawgps": RawGps}
+            kinds = {BlockKind.UTC: UtcTime, BlockKind.RAWGPS: RawGps}
             values[block.name] = (
                 kinds[block.kind](*fields)
                 if block.kind in kinds
@@ -206,12 +216,12 @@ def encode_mtdata(values: Mapping[str, object], output_mode: int, output_setting
     for block in layout.blocks:
         value: Any = values[block.name]
         try:
-            if block.kind == "reals":
+            if block.kind == BlockKind.REALS:
                 reals = (value,) if isinstance(value, int | float) else tuple(value)
                 if len(reals) != block.count:
                     raise ProtocolError(f"{block.name} takes {block.count} values, got {len(reals)}")
                 out += encode_reals(reals, layout.precision_bits)
-            elif block.kind in ("utc", "rawgps"):
+            elif block.kind in (BlockKind.UTC, BlockKind.RAWGPS):
                 out += block.fmt.pack(*astuple(value))
             else:
                 out += block.fmt.pack(*(value if isinstance(value, tuple) else (value,)))

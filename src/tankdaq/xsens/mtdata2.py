@@ -15,6 +15,7 @@ from datetime import UTC, datetime
 from typing import Any
 
 from ..errors import ProtocolError
+from .constants import DataKind
 
 TYPE_MASK = 0xFFF0
 PRECISION_MASK = 0x0003
@@ -145,16 +146,11 @@ SATELLITE_STRUCT = struct.Struct(">4B")
 
 @dataclass(frozen=True)
 class DataSpec:
-    """One row of the data-identifier table.
-
-    ``kind``: "real" (``count`` values in the XDI's precision), "int" (one unsigned field,
-    struct ``fmt``), "ints" (a tuple of integers, ``fmt``), or one of the structured
-    outputs "utc", "pvt", "satinfo", "deviceid" (U4 or U8).
-    """
+    """One row of the data-identifier table (``kind``: how its bytes read)."""
 
     name: str
     base: int
-    kind: str
+    kind: DataKind
     unit: str
     count: int = 0
     fmt: str = ""
@@ -163,7 +159,7 @@ class DataSpec:
 
     def precisions(self) -> tuple[str, ...]:
         """Precision names this output can be configured with."""
-        if self.kind != "real":
+        if self.kind != DataKind.REAL:
             return ("float32",)  # format nibble 0: integer and structured outputs have one encoding
         if not self.fixed_point:
             return ("float32", "float64")
@@ -177,20 +173,22 @@ class DataSpec:
 def _real(
     name: str, base: int, count: int, unit: str, has_frame: bool = False, fixed_point: bool = True
 ) -> DataSpec:
-    return DataSpec(name, base, "real", unit, count=count, has_frame=has_frame, fixed_point=fixed_point)
+    return DataSpec(
+        name, base, DataKind.REAL, unit, count=count, has_frame=has_frame, fixed_point=fixed_point
+    )
 
 
 #: Every data identifier of LLCP Table 16 (reference §2.4), keyed by ``xdi & 0xFFF0``.
 DATA_SPECS: tuple[DataSpec, ...] = (
     _real("Temperature", 0x0810, 1, "degC"),
-    DataSpec("UtcTime", 0x1010, "utc", "-"),
-    DataSpec("PacketCounter", 0x1020, "int", "-", fmt=">H"),
-    DataSpec("SampleTimeFine", 0x1060, "int", "0.1 ms", fmt=">I"),
-    DataSpec("SampleTimeCoarse", 0x1070, "int", "s", fmt=">I"),
+    DataSpec("UtcTime", 0x1010, DataKind.UTC, "-"),
+    DataSpec("PacketCounter", 0x1020, DataKind.INT, "-", fmt=">H"),
+    DataSpec("SampleTimeFine", 0x1060, DataKind.INT, "0.1 ms", fmt=">I"),
+    DataSpec("SampleTimeCoarse", 0x1070, DataKind.INT, "s", fmt=">I"),
     _real("Quaternion", 0x2010, 4, "-", has_frame=True),
     _real("RotationMatrix", 0x2020, 9, "-", has_frame=True),
     _real("EulerAngles", 0x2030, 3, "deg", has_frame=True),
-    DataSpec("BaroPressure", 0x3010, "int", "Pa", fmt=">I"),
+    DataSpec("BaroPressure", 0x3010, DataKind.INT, "Pa", fmt=">I"),
     _real("DeltaV", 0x4010, 3, "m/s"),
     _real("Acceleration", 0x4020, 3, "m/s^2"),
     _real("FreeAcceleration", 0x4030, 3, "m/s^2"),
@@ -198,18 +196,18 @@ DATA_SPECS: tuple[DataSpec, ...] = (
     _real("AltitudeEllipsoid", 0x5020, 1, "m"),
     _real("PositionEcef", 0x5030, 3, "m", fixed_point=False),
     _real("LatLon", 0x5040, 2, "deg"),
-    DataSpec("GnssPvtData", 0x7010, "pvt", "-"),
-    DataSpec("GnssSatInfo", 0x7020, "satinfo", "-"),
+    DataSpec("GnssPvtData", 0x7010, DataKind.PVT, "-"),
+    DataSpec("GnssSatInfo", 0x7020, DataKind.SATINFO, "-"),
     _real("RateOfTurn", 0x8020, 3, "rad/s"),
     _real("DeltaQ", 0x8030, 4, "-"),
     _real("RateOfTurnHR", 0x8040, 3, "rad/s"),
-    DataSpec("RawAccGyrMagTemp", 0xA010, "ints", "counts", fmt=">9Hh"),
+    DataSpec("RawAccGyrMagTemp", 0xA010, DataKind.INTS, "counts", fmt=">9Hh"),
     _real("MagneticField", 0xC020, 3, "a.u."),
     _real("VelocityXYZ", 0xD010, 3, "m/s", has_frame=True),
-    DataSpec("StatusByte", 0xE010, "int", "bits", fmt=">B"),
-    DataSpec("StatusWord", 0xE020, "int", "bits", fmt=">I"),
-    DataSpec("DeviceId", 0xE080, "deviceid", "-"),
-    DataSpec("LocationId", 0xE090, "int", "-", fmt=">H"),
+    DataSpec("StatusByte", 0xE010, DataKind.INT, "bits", fmt=">B"),
+    DataSpec("StatusWord", 0xE020, DataKind.INT, "bits", fmt=">I"),
+    DataSpec("DeviceId", 0xE080, DataKind.DEVICEID, "-"),
+    DataSpec("LocationId", 0xE090, DataKind.INT, "-", fmt=">H"),
 )
 SPEC_BY_BASE: dict[int, DataSpec] = {spec.base: spec for spec in DATA_SPECS}
 SPEC_BY_NAME: dict[str, DataSpec] = {spec.name: spec for spec in DATA_SPECS}
@@ -247,7 +245,7 @@ def describe_xdi(xdi: int) -> str:
     spec = SPEC_BY_BASE.get(xdi & TYPE_MASK)
     if spec is None:
         return f"unknown 0x{xdi:04X}"
-    if spec.kind != "real":
+    if spec.kind != DataKind.REAL:
         return spec.name
     parts = [PRECISION_NAMES[xdi & PRECISION_MASK]]
     if spec.has_frame:
@@ -257,13 +255,13 @@ def describe_xdi(xdi: int) -> str:
 
 def item_size(spec: DataSpec, xdi: int) -> int | None:
     """Payload bytes of one item; None for outputs whose size varies (DeviceId, GnssSatInfo)."""
-    if spec.kind == "real":
+    if spec.kind == DataKind.REAL:
         return spec.count * REAL_SIZES[xdi & PRECISION_MASK]
-    if spec.kind in ("int", "ints"):
+    if spec.kind in (DataKind.INT, DataKind.INTS):
         return struct.calcsize(spec.fmt)
-    if spec.kind == "utc":
+    if spec.kind == DataKind.UTC:
         return UTC_STRUCT.size
-    if spec.kind == "pvt":
+    if spec.kind == DataKind.PVT:
         return PVT_STRUCT.size
     return None
 
@@ -314,23 +312,23 @@ def encode_value(xdi: int, value: Any) -> bytes:
         if isinstance(value, bytes | bytearray):
             return bytes(value)  # unknown identifiers can still be sent raw (tests, simulators)
         raise ProtocolError(f"unknown data identifier 0x{xdi:04X}: give its value as bytes")
-    if isinstance(value, bytes | bytearray) and spec.kind != "real":
+    if isinstance(value, bytes | bytearray) and spec.kind != DataKind.REAL:
         return bytes(value)
     try:
-        if spec.kind == "real":
+        if spec.kind == DataKind.REAL:
             values = (value,) if isinstance(value, int | float) else tuple(value)
             if len(values) != spec.count:
                 raise ProtocolError(f"{spec.name} takes {spec.count} values, got {len(values)}")
             return encode_reals(values, xdi & PRECISION_MASK)
-        if spec.kind == "int":
+        if spec.kind == DataKind.INT:
             return struct.pack(spec.fmt, value)
-        if spec.kind == "ints":
+        if spec.kind == DataKind.INTS:
             return struct.pack(spec.fmt, *value)
-        if spec.kind == "deviceid":
+        if spec.kind == DataKind.DEVICEID:
             return struct.pack(">Q" if value > 0xFFFFFFFF else ">I", value)
-        if spec.kind == "utc":
+        if spec.kind == DataKind.UTC:
             return UTC_STRUCT.pack(*astuple(value))
-        if spec.kind == "pvt":
+        if spec.kind == DataKind.PVT:
             return PVT_STRUCT.pack(*astuple(value))
         header = SATINFO_HEADER.pack(value.itow, value.num_svs, value.res1, value.res2, value.res3)
         return header + b"".join(SATELLITE_STRUCT.pack(*astuple(sat)) for sat in value.satellites)
@@ -343,18 +341,18 @@ def decode_value(spec: DataSpec, xdi: int, data: bytes) -> object:
     expected = item_size(spec, xdi)
     if expected is not None and len(data) != expected:
         raise ProtocolError(f"{describe_xdi(xdi)} needs {expected} data bytes, the message gives {len(data)}")
-    if spec.kind == "real":
+    if spec.kind == DataKind.REAL:
         values = decode_reals(data, xdi & PRECISION_MASK)
         return values[0] if spec.count == 1 else values
-    if spec.kind == "int":
+    if spec.kind == DataKind.INT:
         return struct.unpack(spec.fmt, data)[0]
-    if spec.kind == "ints":
+    if spec.kind == DataKind.INTS:
         return struct.unpack(spec.fmt, data)
-    if spec.kind == "utc":
+    if spec.kind == DataKind.UTC:
         return UtcTime(*UTC_STRUCT.unpack(data))
-    if spec.kind == "pvt":
+    if spec.kind == DataKind.PVT:
         return GnssPvt(*PVT_STRUCT.unpack(data))
-    if spec.kind == "deviceid":
+    if spec.kind == DataKind.DEVICEID:
         if len(data) not in (4, 8):
             raise ProtocolError(f"DeviceId needs 4 or 8 data bytes, the message gives {len(data)}")
         return int.from_bytes(data, "big")
@@ -458,7 +456,7 @@ def payload_well_formed(payload: bytes) -> bool:
         if expected is not None:
             if size != expected:
                 return False
-        elif spec.kind == "deviceid":
+        elif spec.kind == DataKind.DEVICEID:
             if size not in (4, 8):
                 return False
         elif size < SATINFO_HEADER.size or (size - SATINFO_HEADER.size) % SATELLITE_STRUCT.size:
