@@ -313,9 +313,8 @@ def child(args: argparse.Namespace) -> None:
         """The real driver's reading and decoding (``read_block``) over a ``CompressedLine``."""
 
         def __init__(self, line: CompressedLine) -> None:
-            super().__init__(
-                "bench", rate_hz=RATE_HZ, silence_timeout_s=3600.0
-            )  # the line waits for the pipeline
+            # the line waits for the pipeline
+            super().__init__("bench", rate_hz=RATE_HZ, silence_timeout_s=3600.0)
             self.line = line
             self._reset_stream_state(None, PRODUCT)
             self._last_data = time.monotonic()

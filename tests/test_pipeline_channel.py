@@ -110,7 +110,8 @@ def test_a_note_kept_with_the_decay_goes_in_its_file_and_is_neither_printed_nor_
 ) -> None:
     log, unplugged = EventLog(), Unplugged()
     recording = RecordingSink(tmp_path, {"hull": "swath"})
-    pipeline = DecayPipeline(DetectionSettings(), [recording, unplugged, log], fit=LiveFit(wait_for_fits=True))
+    sinks = [recording, unplugged, log]
+    pipeline = DecayPipeline(DetectionSettings(), sinks, fit=LiveFit(wait_for_fits=True))
     try:
         for i in range(0, samples.size, 20):
             pipeline.feed(StreamBlock(samples[i : i + 20], b"", 0.0))
