@@ -299,6 +299,7 @@ def probe_sink(args: argparse.Namespace, out: Path, snapshots: dict[str, tracema
 def child(args: argparse.Namespace) -> None:
     """One recording of ``args.decays`` decays in this process; one JSON line per decay on stdout."""
     from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
+    from tankdaq.acquire.recorder import Recorder
     from tankdaq.catalogue.hooks import CatalogueSink, CatalogueWriter
     from tankdaq.device.driver import MTiDriver
     from tankdaq.device.factory import OpenDevice
@@ -312,9 +313,8 @@ def child(args: argparse.Namespace) -> None:
         """The real driver's reading and decoding (``read_block``) over a ``CompressedLine``."""
 
         def __init__(self, line: CompressedLine) -> None:
-            super().__init__(
-                "bench", rate_hz=RATE_HZ, silence_timeout_s=3600.0
-            )  # the line waits for the pipeline
+            # the line waits for the pipeline
+            super().__init__("bench", rate_hz=RATE_HZ, silence_timeout_s=3600.0)
             self.line = line
             self._reset_stream_state(None, PRODUCT)
             self._last_data = time.monotonic()
@@ -322,8 +322,8 @@ def child(args: argparse.Namespace) -> None:
         def _read(self) -> bytes:
             return self.line.read()
 
-    class BenchDaemon(RecordDaemon):
-        """``RecordDaemon`` with the bench driver in place of ``open_device``; the rest is its own."""
+    class BenchRecorder(Recorder):
+        """``record``'s recorder with the bench driver in place of ``open_device``; the rest is its own."""
 
         def _open_device(self) -> MTiDriver:
             scenario = self.simulation_scenario()
@@ -346,7 +346,7 @@ def child(args: argparse.Namespace) -> None:
     catalogue = str(out / "catalogue.sqlite") if args.catalogue == "on" else "none"
     with CatalogueWriter.from_option(catalogue, lambda line: None) as writer:
         sinks = [CatalogueSink(writer)] if writer.enabled else []
-        daemon = BenchDaemon(settings, sinks=[*sinks, probe])  # type: ignore[list-item]
+        daemon = RecordDaemon(settings, sinks=[*sinks, probe], recorder=BenchRecorder)  # type: ignore[list-item]
         daemon.run()
     status = daemon.status
     summary = {"decays": daemon.outcomes.count, "samples": status.samples, "gaps": status.gaps}

@@ -50,8 +50,7 @@ class PausingOperator:
             return ""
         started = time.monotonic()
         while (elapsed := time.monotonic() - started) < self.pause_s:
-            reader = getattr(self.session.daemon, "_reader", None)
-            queued = reader._queue.qsize() if reader is not None else 0
+            queued = self.session.stream.recorder.queued_blocks
             self.samples.append((elapsed, queued, _rss_mb()))
             time.sleep(1.0)
         return "s"

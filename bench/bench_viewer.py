@@ -15,12 +15,16 @@ import platform
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.events import DeviceLost, Event, Settled
 from tankdaq.acquire.listeners import EventLog
+from tankdaq.acquire.pipeline import DecayPipeline
+from tankdaq.acquire.read_thread import Read
+from tankdaq.acquire.recorder import Recorder
 from tankdaq.acquire.sinks import ViewSink
 from tankdaq.config import hull_scenario
 from tankdaq.device.simulator import ScriptedSource
@@ -33,25 +37,32 @@ def scenario_seconds() -> float:
     return time.perf_counter() - started
 
 
+class TimedRecorder(Recorder):
+    """The recorder noting when each block was read (its host arrival time) and what the view dropped. The
+    reads run on their own thread: the time between them is the read cadence."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.read_t: list[float] = []
+        self.dropped = 0
+
+    def _feed(self, pipeline: DecayPipeline, read: Read) -> None:
+        self.read_t.append(read.block.host_t)
+        super()._feed(pipeline, read)
+        self.dropped = next(sink.view.dropped for sink in pipeline.sinks if isinstance(sink, ViewSink))
+
+
 class TimedDaemon(RecordDaemon):
-    """The record daemon noting when each block was read (its host arrival time); it stops after the
-    first decay. The reads run on their own thread: the time between them is the read cadence."""
+    """The record daemon with a ``TimedRecorder``; it stops after the first decay."""
 
     def __init__(self, settings: RecordSettings) -> None:
-        super().__init__(settings, sinks=[EventLog(self._event)])
-        self.read_t: list[float] = []
         self.gone = 0
-        self.dropped = 0
+        super().__init__(settings, sinks=[EventLog(self._event)], recorder=TimedRecorder)
 
     def _event(self, event: Event) -> None:
         self.gone += isinstance(event, DeviceLost)
         if isinstance(event, Settled):
             self.stop()
-
-    def _feed(self, pipeline, read) -> None:  # type: ignore[no-untyped-def]
-        self.read_t.append(read.block.host_t)
-        super()._feed(pipeline, read)
-        self.dropped = next(sink.view.dropped for sink in pipeline.sinks if isinstance(sink, ViewSink))
 
 
 def read_loop(viewer: str, out: Path) -> tuple[np.ndarray, int, int]:
@@ -60,7 +71,9 @@ def read_loop(viewer: str, out: Path) -> tuple[np.ndarray, int, int]:
     )
     daemon = TimedDaemon(settings)
     daemon.run()
-    return np.diff(daemon.read_t), daemon.gone, daemon.dropped
+    recorder = daemon.recorder
+    assert isinstance(recorder, TimedRecorder)
+    return np.diff(recorder.read_t), daemon.gone, recorder.dropped
 
 
 def main() -> None:

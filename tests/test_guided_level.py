@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.guided.measure import LEVEL_S, LevelCheck
-from tankdaq.acquire.sinks import Block
+from tankdaq.device.driver import StreamBlock
 from tankdaq.samples import empty_samples
 
 
-def _block(t_s: np.ndarray, roll_deg: np.ndarray) -> Block:
+def _block(t_s: np.ndarray, roll_deg: np.ndarray) -> StreamBlock:
     samples = empty_samples(t_s.size)
     samples["t"] = t_s
     samples["roll"] = np.radians(roll_deg)
-    return Block(samples, b"", 0.0)
+    return StreamBlock(samples, b"", 0.0)
 
 
 def test_blocks_after_the_still_water_do_not_count() -> None:

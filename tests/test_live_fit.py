@@ -21,9 +21,11 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
-from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
+from tankdaq.acquire.decay import LiveFit
+from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
+from tankdaq.acquire.sinks import RecordingSink, ViewSink
 from tankdaq.config import load_hull
+from tankdaq.device.driver import StreamBlock
 from tankdaq.errors import IdentificationError
 from tankdaq.ident.online import (
     FINAL_FIT_WALL_FACTOR,
@@ -91,13 +93,13 @@ def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_
         tmp_path, describe_run("roll", 8.0, hull=hull, draft=1.0, sample_rate_hz=100.0), draft=1.0
     )
     session = DecayPipeline(
-        DetectionSettings(), [IdentifierSink(make_identifier), recording, ViewSink(LiveView("none"))]
+        DetectionSettings(), [recording, ViewSink(LiveView("none"))], fit=LiveFit(make_identifier)
     )
     blocks = (samples[i : i + 2] for i in range(0, samples.size, 2))  # 20 ms reads at 100 Hz
     outcomes = []
     try:
         for block in blocks:  # up to the release and the first refit, which is then held
-            outcomes += session.feed(Block(block, b"", 0.0))
+            outcomes += session.feed(StreamBlock(block, b"", 0.0))
             active = session.decay
             if active is not None and block["t"][-1] > active.release_t + 8.0:  # 4 periods: a refit is due
                 assert identifiers[0].entered.wait(DEADLINE_S), "the first refit never started"
@@ -110,7 +112,7 @@ def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_
         written = writer.samples_written
         fed = 0
         for block in blocks:  # 3 s of the decay while the refit is held
-            outcomes += session.feed(Block(block, b"", 0.0))
+            outcomes += session.feed(StreamBlock(block, b"", 0.0))
             fed += block.size
             if fed >= 300:
                 break
@@ -119,7 +121,7 @@ def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_
         assert active.fit is None  # nothing published yet
         gate.set()
         for block in blocks:
-            outcomes += session.feed(Block(block, b"", 0.0))
+            outcomes += session.feed(StreamBlock(block, b"", 0.0))
             if outcomes:
                 break
     finally:

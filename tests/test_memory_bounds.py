@@ -11,18 +11,19 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from tankdaq.acquire.events import KEPT_OUTCOMES, DecayOutcome, KeptOutcomes
+from tankdaq.acquire.decay import LiveFit
+from tankdaq.acquire.events import KEPT_OUTCOMES, DecayOutcome, Event, Fitted, KeptOutcomes
 from tankdaq.acquire.memory import ARENAS
-from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
+from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
 from tankdaq.acquire.release import ReleaseDetector
-from tankdaq.acquire.sinks import Decay, IdentifierSink, Sink
+from tankdaq.acquire.sinks import Sink
 from tankdaq.config import hull_scenario
+from tankdaq.device.driver import StreamBlock
 from tankdaq.ident.online import OnlineResult
 from tankdaq.ident.signals import SAVGOL_CACHE, _savgol_weights, smoothed_derivatives
 from tankdaq.records import DecayEnd
@@ -45,23 +46,19 @@ class FinalFits(Sink):
     def __init__(self) -> None:
         self.last: dict[int, OnlineResult] = {}
 
-    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
-        self.last[decay.run] = result
-
-    def on_note(
-        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
-    ) -> None:
-        """Notes are not what this sink listens for."""
+    def on_event(self, event: Event) -> None:
+        if isinstance(event, Fitted):  # notes are not what this sink listens for
+            self.last[event.run] = event.result
 
 
 def test_a_finished_decay_keeps_its_fit_without_the_curve_and_the_detector_no_event_list() -> None:
     samples = _samples()
     fits = FinalFits()
-    pipeline = DecayPipeline(DetectionSettings(), [IdentifierSink(wait_for_fits=True), fits])
+    pipeline = DecayPipeline(DetectionSettings(), [fits], fit=LiveFit(wait_for_fits=True))
     outcomes = []
     try:
         for i in range(0, samples.size, 20):  # 0.2 s reads at 100 Hz
-            outcomes += pipeline.feed(Block(samples[i : i + 20], b"", 0.0))
+            outcomes += pipeline.feed(StreamBlock(samples[i : i + 20], b"", 0.0))
     finally:
         pipeline.close()
     finished = [o for o in outcomes if o.ended.whole]
@@ -171,7 +168,9 @@ def test_a_settled_decay_gives_the_allocators_free_pages_back() -> None:
             libc.free(block)
         held_kb = _anonymous_kb()
         outcomes = [
-            o for i in range(0, samples.size, 50) for o in pipeline.feed(Block(samples[i : i + 50], b"", 0.0))
+            o
+            for i in range(0, samples.size, 50)
+            for o in pipeline.feed(StreamBlock(samples[i : i + 50], b"", 0.0))
         ]
         assert [o.ended for o in outcomes] == [DecayEnd.SETTLED]
         given_back_kb = held_kb - _anonymous_kb()

@@ -18,12 +18,13 @@ import pytest
 
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
+from tankdaq.acquire.decay import Decay
+from tankdaq.acquire.events import Event, Fitted
 from tankdaq.acquire.read_thread import THREAD_NAME
 from tankdaq.acquire.release import ReleaseDetector
-from tankdaq.acquire.sinks import Block, Decay, Sink
+from tankdaq.acquire.sinks import Sink
 from tankdaq.device.driver import MTiDriver, StreamBlock
 from tankdaq.device.read_process import Chunk, ReadProcess
-from tankdaq.ident.online import OnlineResult
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import iter_raw_chunks, read_recording
 from tankdaq.store.writer import RecordingWriter
@@ -88,14 +89,15 @@ class _ThreadSink(Sink):
     def _note(self, what: str) -> None:
         self.seen.setdefault(f"sink.{what}", set()).add(threading.current_thread())
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
         self._note("on_block")
 
     def on_release(self, decay: Decay, pretrigger: object) -> None:
         self._note("on_release")
 
-    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
-        self._note("on_fit")
+    def on_event(self, event: Event) -> None:
+        if isinstance(event, Fitted):
+            self._note("on_event(Fitted)")
 
     def on_settle(self, decay: Decay) -> None:
         self._note("on_settle")
@@ -119,7 +121,7 @@ def test_no_release_detection_fit_or_write_runs_on_the_reading_thread(
     in_file = [host_ns for host_ns, raw in iter_raw_chunks(outcome.path) if raw]
     assert in_file and set(in_file) <= stamps
     wanted = {"ReleaseDetector.feed", "RecordingWriter.write_raw", "RecordingWriter.write_fit"}
-    wanted |= {"sink.on_block", "sink.on_release", "sink.on_fit", "sink.on_settle"}
+    wanted |= {"sink.on_block", "sink.on_release", "sink.on_event(Fitted)", "sink.on_settle"}
     assert wanted <= set(seen), sorted(seen)
     for what, threads in seen.items():
         assert not threads & reads.threads, f"{what} ran on the reading thread"
@@ -135,7 +137,7 @@ def test_a_stop_mid_decay_feeds_every_block_already_read_into_the_file(
     held: list[bool] = []
 
     class StopMidDecay(Sink):
-        def on_block(self, block: Block, decay: Decay | None) -> None:
+        def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
             if decay is None or held or block.samples.size == 0:
                 return
             if float(block.samples["t"][-1]) - decay.release_t < 3.0:

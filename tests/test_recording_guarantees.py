@@ -23,12 +23,14 @@ from typer.testing import CliRunner
 
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
-from tankdaq.acquire.events import Event, Released
+from tankdaq.acquire.decay import Decay, LiveFit
+from tankdaq.acquire.events import Event, Fitted, Released
 from tankdaq.acquire.listeners import EventLog
-from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
-from tankdaq.acquire.sinks import Decay, IdentifierSink, RecordingSink, Sink, ViewSink
+from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
+from tankdaq.acquire.sinks import RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
+from tankdaq.device.driver import StreamBlock
 from tankdaq.ident.online import OnlineIdentifier, OnlineResult
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
@@ -107,15 +109,13 @@ def _feed_recording(
 ) -> DecayPipeline:
     """The source's raw bytes, re-decoded, through a session that writes into ``out``."""
     recording = read_recording(source)
-    sinks = [  # the daemon's pipeline; fed from a file: each refit in its block
-        IdentifierSink(identifier, wait_for_fits=True), RecordingSink(out, {"hull": "swath"}), ViewSink(view),
-        *extra,
-    ]  # fmt: skip
-    session = DecayPipeline(DetectionSettings(angle_deg=8.0), sinks)
+    sinks = [RecordingSink(out, {"hull": "swath"}), ViewSink(view), *extra]  # the daemon's pipeline
+    fit = LiveFit(identifier, wait_for_fits=True)  # fed from a file: each refit in its block
+    session = DecayPipeline(DetectionSettings(angle_deg=8.0), sinks, fit=fit)
     decoder = SampleDecoder()
     for host_ns, raw in recording.raw_chunks:
         samples, _ = decoder.feed(raw, host_ns / 1e9)
-        session.feed(Block(samples, raw, host_ns / 1e9))
+        session.feed(StreamBlock(samples, raw, host_ns / 1e9))
     session.abort(DecayEnd.STREAM_ENDED, "end of recording")
     return session
 
@@ -196,15 +196,16 @@ class Listener(Sink):
         if name == self.fail_at:
             raise Injected(f"{name} failed")
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
         self._hear("block" if decay is None else "decay block")
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
+    def on_release(self, decay: Decay, pretrigger: Sequence[StreamBlock]) -> None:
         self.path_at_release = decay.path
         self._hear("release")
 
-    def on_fit(self, decay: Decay, result: object) -> None:
-        self._hear("fit")
+    def on_event(self, event: Event) -> None:
+        if isinstance(event, Fitted):
+            self._hear("fit")
 
     def on_settle(self, decay: Decay) -> None:
         self._hear(f"settle {decay.ended}")

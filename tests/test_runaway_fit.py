@@ -22,9 +22,11 @@ import pytest
 from mcap.reader import make_reader
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
-from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
+from tankdaq.acquire.decay import LiveFit
+from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
+from tankdaq.acquire.sinks import RecordingSink, ViewSink
 from tankdaq.config import load_hull
+from tankdaq.device.driver import StreamBlock
 from tankdaq.errors import IdentificationError
 from tankdaq.ident import compiled, kernels
 from tankdaq.ident.least_squares import FitAbandoned, levenberg_marquardt, solve_budget
@@ -248,12 +250,12 @@ def test_a_runaway_refit_in_the_recorder_is_abandoned_and_the_file_closes_comple
     )
     # a budget no refit can keep (a microsecond): every refit is abandoned whatever this machine's speed,
     # so the test does not hang on a machine fast enough to finish a runaway refit within a looser one
-    sinks = [IdentifierSink(make_identifier, refit_budget_s=1e-6), recording, ViewSink(LiveView("none"))]
-    session = DecayPipeline(DetectionSettings(), sinks)
+    sinks = [recording, ViewSink(LiveView("none"))]
+    session = DecayPipeline(DetectionSettings(), sinks, fit=LiveFit(make_identifier, refit_budget_s=1e-6))
     outcomes = []
     try:
         for start in range(0, samples.size, 2):  # 20 ms reads at 100 Hz
-            outcomes += session.feed(Block(samples[start : start + 2], b"", 0.0))
+            outcomes += session.feed(StreamBlock(samples[start : start + 2], b"", 0.0))
             if identifiers and not identifiers[0].failures_:
                 active = session.decay
                 if active is not None and samples["t"][start] > active.release_t + 8.0:

@@ -56,8 +56,8 @@ def test_a_session_of_eight_decays_opens_the_device_once(tmp_path: Path) -> None
     assert session.stopped is None
     accepted = [r for r in state.runs if r.verdict == "accepted"]
     assert len(accepted) == state.decays == 8
-    assert session.daemon is not None and session.daemon.simulator is not None
-    sent = [message.mid for message in session.daemon.simulator.received]
+    assert session.stream is not None and session.stream.recorder.simulator is not None
+    sent = [message.mid for message in session.stream.recorder.simulator.received]
     assert sent.count(MID.GOTO_CONFIG) == 1 and sent.count(MID.REQ_DID) == 1, sent  # one handshake
     assert len(heard.of(DeviceReady)) == 1
     assert heard.of(ModelMoved) == []  # watched between the eight decays: no drift, bump or level said

@@ -26,11 +26,13 @@ import pytest
 from mcap.reader import make_reader
 
 from guided_session import signal_when
+from tankdaq.acquire.decay import Decay
 from tankdaq.acquire.events import Released, Settled
 from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
-from tankdaq.acquire.sinks import Block, Decay, Sink
+from tankdaq.acquire.sinks import Sink
+from tankdaq.device.driver import StreamBlock
 from tankdaq.plans import load_campaign_plan
 from tankdaq.records import DecayEnd
 
@@ -56,7 +58,7 @@ class Fed(Sink):
         self.blocks = 0
         self._fed = threading.Condition()
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
         with self._fed:
             self.blocks += 1
             self._fed.notify_all()
@@ -82,8 +84,8 @@ class Pausing:
         self.asked.append(question.kind)
         if question.kind == "draft" or len(self.asked) > 2:
             return "" if question.kind == "draft" else "s"
-        assert self.session is not None and self.session.daemon is not None
-        daemon = self.session.daemon
+        assert self.session is not None and self.session.stream is not None
+        daemon = self.session.stream.recorder
         assert daemon.simulator is not None
         daemon.simulator.play(dataclasses.replace(daemon.simulation_scenario(), seed=77))
         start = self.fed.blocks

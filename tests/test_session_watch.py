@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from guided_session import ONE_CONDITION_TWICE, Repeating
+from tankdaq.acquire.decay import Decay
 from tankdaq.acquire.events import MOVED_KINDS, Event, ModelMoved, Released, Settled, legend
 from tankdaq.acquire.guided.checks import watch_reasons
 from tankdaq.acquire.guided.journal import SessionLog
@@ -31,7 +32,7 @@ from tankdaq.acquire.guided.watch import (
     creep_deg_min,
 )
 from tankdaq.acquire.listeners import EventLog, EventPrinter
-from tankdaq.acquire.sinks import Block
+from tankdaq.device.driver import StreamBlock
 from tankdaq.plans import load_campaign_plan
 from tankdaq.samples import SAMPLE_DTYPE
 
@@ -69,15 +70,27 @@ def _feed(watch: ModelWatch, angle_deg: np.ndarray, seed: int = 1) -> float:
     samples["roll"] = true + np.radians(0.02) * rng.standard_normal(angle_deg.size)
     samples["p"] = np.gradient(true, 1 / RATE_HZ) + np.radians(0.2) * rng.standard_normal(angle_deg.size)
     for start in range(0, samples.size, 2):
-        watch.on_block(Block(samples[start : start + 2], b"", 0.0), None)
+        watch.on_block(StreamBlock(samples[start : start + 2], b"", 0.0), None)
     return float(samples["t"][-1])
 
 
+class SaidWatch(ModelWatch):
+    """The watch keeping what its blocks said (``said``), as the pipeline it rides broadcasts it."""
+
+    def __init__(self) -> None:
+        super().__init__("roll", level_tolerance_deg=1.0)
+        self.said: list[Event] = []
+
+    def on_block(self, block: StreamBlock, decay: Decay | None) -> list[ModelMoved]:
+        said = super().on_block(block, decay)
+        self.said += said
+        return said
+
+
 def _watch(reference_deg: float) -> tuple[ModelWatch, list[Event]]:
-    said: list[Event] = []
-    watch = ModelWatch("roll", level_tolerance_deg=1.0, emit=said.append)
+    watch = SaidWatch()
     watch.arm(reference_deg)
-    return watch, said
+    return watch, watch.said
 
 
 @pytest.mark.parametrize(

@@ -13,8 +13,9 @@ from __future__ import annotations
 import math
 import re
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, fields
+from enum import StrEnum
 from pathlib import Path
 from typing import ClassVar
 
@@ -89,9 +90,11 @@ class KeptOutcomes:
 
 
 class Event:
-    """One thing that happened. ``printed`` False: a listener's event, not a line for the terminal."""
+    """One thing that happened. ``printed`` False: a listener's event, not a line for the terminal;
+    ``streamed`` False: kept with the decay (its file, its view), not a program's event either."""
 
     printed: ClassVar[bool] = True
+    streamed: ClassVar[bool] = True
 
     def line(self, run_name: str | None = None) -> str:
         """The line a person reads (``run_name`` replaces "run N" where the event names a run)."""
@@ -194,27 +197,52 @@ def said_instant(t_s: float, u95_s: float) -> str:
     return f"{t_s:.3f} s (interval unknown)"
 
 
+class NoteKind(StrEnum):
+    """What a note of a decay is: the file's event kind and the word its printed line starts with."""
+
+    WARNING = "warning"  # the decay or its fit may be wrong
+    NOTE = "note"  # worth knowing, not a fault
+    UNPLUG = "unplug"  # the device went away mid-decay (kept with the decay; the person hears ``DeviceLost``)
+
+
 @dataclass(frozen=True)
 class Note(Event):
     """A note of a decay: ``kind`` warning (the decay or its fit may be wrong) or note (worth knowing,
-    not a fault); ``run`` None: said at the release, before the run is named."""
+    not a fault); ``run`` None: said at the release, before the run is named. The decay's file and view
+    keep it at device time ``t_s`` (None: when it is said) with ``data``."""
 
-    kind: str
+    kind: NoteKind
     text: str
     run: int | None = None
+    t_s: float | None = None
+    data: Mapping[str, object] | None = None
 
     def line(self, run_name: str | None = None) -> str:
         where = "" if self.run is None and run_name is None else f"{_run(self.run, run_name)}: "
         return f"{self.kind}: {where}{self.text}"
 
+    def record(self) -> dict[str, object]:
+        return {"event": "note", "kind": self.kind, "text": self.text, "run": self.run}
+
+
+@dataclass(frozen=True)
+class KeptNote(Note):
+    """A note the decay's file and view keep that a person was told another way (``Stopping``,
+    ``DeviceLost``, the error raised): neither printed nor streamed."""
+
+    printed: ClassVar[bool] = False
+    streamed: ClassVar[bool] = False
+
 
 @dataclass(frozen=True)
 class Fitted(Event):
-    """A refit (or the final fit) of run ``run``: for listeners (a notebook's live table), not printed."""
+    """A refit (or, ``final``, the final fit: the decay's verdict) of run ``run``: for the decay's file and
+    view and for listeners (a notebook's live table), not printed."""
 
     printed: ClassVar[bool] = False
     run: int
     result: OnlineResult
+    final: bool = False
 
     def line(self, run_name: str | None = None) -> str:
         r = self.result
@@ -325,12 +353,23 @@ class Stopped(Event):
         return f"recording {how}: {self.decays} decay(s)"
 
 
-#: What the guided session's watch between decays reports (``ModelMoved.kind``), as the printed legend says.
+class MovedKind(StrEnum):
+    """What the guided session's watch between decays reports (``ModelMoved.kind``)."""
+
+    DRIFT = "drift"
+    BUMP = "bump"
+    LEVEL = "level"
+    TREND = "trend"
+
+
+#: Each ``MovedKind`` as the printed legend says it.
 MOVED_KINDS = {
-    "drift": "its still water moved away from the level measured when the draft was set",
-    "bump": "it moved for a moment while it should have been at rest (not a release)",
-    "level": "it rests off level before the next decay",
-    "trend": "its still water creeps (a slope of its level over the last seconds at rest) before it drifts",
+    MovedKind.DRIFT: "its still water moved away from the level measured when the draft was set",
+    MovedKind.BUMP: "it moved for a moment while it should have been at rest (not a release)",
+    MovedKind.LEVEL: "it rests off level before the next decay",
+    MovedKind.TREND: (
+        "its still water creeps (a slope of its level over the last seconds at rest) before it drifts"
+    ),
 }
 
 
@@ -343,7 +382,7 @@ class ModelMoved(Event):
     level tolerance for drift, level and a trend, the still-water spread for a bump); a trend's
     ``slope_deg_min``, how fast the still water creeps (nan for the others)."""
 
-    kind: str
+    kind: MovedKind
     angle_deg: float
     spread_deg: float
     rate_deg_s: float
@@ -353,14 +392,14 @@ class ModelMoved(Event):
     slope_deg_min: float = math.nan
 
     def line(self, run_name: str | None = None) -> str:
-        if self.kind == "drift":
+        if self.kind == MovedKind.DRIFT:
             moved = self.angle_deg - self.reference_deg
             return (
                 f"drift: still water at {self.angle_deg:+.2f} deg, {moved:+.2f} deg from the "
                 f"{self.reference_deg:+.2f} measured when the draft was set "
                 f"(tolerance {self.limit_deg:g} deg); re-trim before the next decay"
             )
-        if self.kind == "trend":
+        if self.kind == MovedKind.TREND:
             moved = self.angle_deg - self.reference_deg
             left_deg = self.limit_deg - moved * math.copysign(1.0, self.slope_deg_min)  # the way it creeps
             when = (
@@ -374,7 +413,7 @@ class ModelMoved(Event):
                 f"{self.angle_deg:+.2f} deg, {moved:+.2f} deg from the {self.reference_deg:+.2f} measured "
                 f"when the draft was set; {when}; look for water inside or a weight that moved"
             )
-        if self.kind == "bump":
+        if self.kind == MovedKind.BUMP:
             return (
                 f"bump: the model moved at rest (spread {self.spread_deg:.2f} deg, "
                 f"rate {self.rate_deg_s:.1f} deg/s rms; at rest it stays under {self.limit_deg:g} deg); "

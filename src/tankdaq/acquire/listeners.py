@@ -85,6 +85,8 @@ class EventStream(Sink):
         self._lock = threading.Lock()  # the view's notes come from its own thread
 
     def on_event(self, event: Event) -> None:
+        if not event.streamed:  # kept with the decay only (``KeptNote``)
+            return
         text = json.dumps(event.record(), default=str)
         with self._lock:
             self.out.write(text + "\n")

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,15 @@ UNKNOWN = "unknown"
 TILT_MIN_DEG = 1.5
 
 
+class ReleaseKind(StrEnum):
+    """What the detector saw (``ReleaseEvent.kind``)."""
+
+    HELD = "held"
+    RELEASED = "released"
+    PUT_BACK = "put_back"
+    SETTLED = "settled"
+
+
 @dataclass(frozen=True)
 class ReleaseEvent:
     """Something the detector saw. ``index`` counts samples from the first one fed.
@@ -59,7 +69,7 @@ class ReleaseEvent:
     Every event also carries ``confirmed_index``: the sample at which the detector decided.
     """
 
-    kind: str
+    kind: ReleaseKind
     index: int
     t: float
     confirmed_index: int
@@ -253,7 +263,7 @@ class ReleaseDetector(EstimatorMixin):
 
     def _emit(
         self,
-        kind: str,
+        kind: ReleaseKind,
         local: int,
         confirmed_local: int,
         *,
@@ -316,7 +326,7 @@ class ReleaseDetector(EstimatorMixin):
             return self._go(STILL, j)
         self.baseline_rad_ = 0.0
         self._hold_angle = level
-        self._emit("held", j, j, angle_rad=level)
+        self._emit(ReleaseKind.HELD, j, j, angle_rad=level)
         return self._go(HELD, j)
 
     def _step_still(self) -> bool:
@@ -352,7 +362,7 @@ class ReleaseDetector(EstimatorMixin):
             return self._go(STILL, back)
         assert held is not None
         self._hold_angle = float(np.mean(self._x[held - n + 1 : held + 1]))
-        self._emit("held", held, held, angle_rad=self._hold_angle)
+        self._emit(ReleaseKind.HELD, held, held, angle_rad=self._hold_angle)
         return self._go(HELD, held)
 
     def _step_held(self) -> bool:
@@ -386,7 +396,7 @@ class ReleaseDetector(EstimatorMixin):
             return self._go(SWUNG, j)
         if abs(offset[j]) > math.radians(self.tilt_min_deg):
             return self._go(HELD if j == calm else TILTED, j)
-        self._emit("put_back", j, j, angle_rad=self._hold_angle)
+        self._emit(ReleaseKind.PUT_BACK, j, j, angle_rad=self._hold_angle)
         return self._go(STILL, j)
 
     def _step_decaying(self) -> bool:
@@ -404,7 +414,7 @@ class ReleaseDetector(EstimatorMixin):
             assert timeout is not None
             settle, confirmed, ended = timeout, timeout, DecayEnd.TIMEOUT
         self._emit(
-            "settled",
+            ReleaseKind.SETTLED,
             settle,
             confirmed,
             release_t=self._release.release_t,
@@ -432,7 +442,7 @@ class ReleaseDetector(EstimatorMixin):
         dt = 1.0 / float(self.rate_hz_ or 1.0)
         if leave - lo < 4:  # streamed in while already moving: no hold to fit, report the departure (the
             # instant's interval unknown: the hand may have let go any time before)
-            return self._emit("released", leave, end, angle_rad=float(self._x[leave]),
+            return self._emit(ReleaseKind.RELEASED, leave, end, angle_rad=float(self._x[leave]),
                               rate_rad_s=float(self._r[leave]), release_t=float(self._t[leave]),
                               release_se_s=dt)  # fmt: skip
         window = slice(lo, end + 1)
@@ -443,7 +453,8 @@ class ReleaseDetector(EstimatorMixin):
         tau = found.t_s
         index = int(np.searchsorted(self._t, tau - 1e-9 * dt))
         tau = min(tau, float(self._t[index]))  # a rounding hair past the first free sample is that sample
-        return self._emit("released", index, end, angle_rad=found.angle_rad, rate_rad_s=found.rate_rad_s,
+        released = ReleaseKind.RELEASED
+        return self._emit(released, index, end, angle_rad=found.angle_rad, rate_rad_s=found.rate_rad_s,
                           release_t=tau, release_se_s=found.se_s, release_u95_s=found.u95_s)  # fmt: skip
 
 

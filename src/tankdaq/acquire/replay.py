@@ -2,7 +2,7 @@
 
 The raw channel is fed, chunk by chunk with its arrival time, through the same
 stream decoder and the same pipeline as the live daemon without its recording sink
-(identifier and view), so the viewer shows what it showed live. ``speed`` paces by device time
+(the live fit and the view), so the viewer shows what it showed live. ``speed`` paces by device time
 (1.0 = real time); ``None`` runs as fast as possible. What a person is told goes to ``listeners``
 as typed events (``acquire.events``), as the daemon's does.
 """
@@ -15,16 +15,19 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from ..device.decoding import SampleDecoder
+from ..device.driver import StreamBlock
 from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
 from ..ident.online import prepare_identifier
 from ..records import DecayEnd
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView
+from ..viz.view_process import View
 from ..viz.viewer import default_viewer_mode, describe_mode
+from .decay import LiveFit
 from .events import DecayOutcome, Event, Notice, ViewerNote
-from .pipeline import Block, DecayPipeline, DetectionSettings
-from .sinks import IdentifierSink, Sink, ViewSink
+from .pipeline import DecayPipeline, DetectionSettings
+from .sinks import Sink, ViewSink
 
 #: At full speed, serial reads are merged into blocks spanning this much arrival time: the
 #: per-block work is shared and the result is the same (the decoder is a stream decoder).
@@ -78,7 +81,7 @@ def replay_recording(
         raise BadRecordingInput(f"{path}: the recording holds no raw device bytes to replay")
     mode = viewer or default_viewer_mode()
     emit(ViewerNote(describe_mode(mode, default=viewer is None)))
-    view = LiveView(mode, axis=axis, on_note=lambda line: emit(ViewerNote(line)))
+    view: View = LiveView(mode, axis=axis, on_note=lambda line: emit(ViewerNote(line)))
     settings = DetectionSettings(
         axis=axis,
         angle_deg=nominal if math.isfinite(nominal) else 0.0,
@@ -88,8 +91,8 @@ def replay_recording(
     prepare_identifier(settings.model, lambda text: emit(Notice("identifier", text)))
     rrd_base = path.with_name(path.stem + ".replay") if view.mode == "save" else None  # spawn falls back
     # the daemon's pipeline without the recording; each block's refit is done before the next block
-    sinks = [IdentifierSink(wait_for_fits=True), ViewSink(view, rrd_base), *listeners]
-    pipeline = DecayPipeline(settings, sinks)
+    sinks = [ViewSink(view, rrd_base), *listeners]
+    pipeline = DecayPipeline(settings, sinks, fit=LiveFit(wait_for_fits=True))
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))
     output = LegacyOutput.for_decay(rate_hz) if legacy else None  # as the driver asked for
@@ -104,7 +107,7 @@ def replay_recording(
                     wall0, t0 = time.monotonic(), float(samples["t"][0])
                 due = wall0 + (float(samples["t"][-1]) - t0) / speed
                 time.sleep(max(0.0, due - time.monotonic()))
-            pipeline.feed(Block(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
+            pipeline.feed(StreamBlock(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
             if on_progress is not None:
                 on_progress(i + 1, len(chunks))
         pipeline.abort(DecayEnd.STREAM_ENDED, "end of recording")

@@ -17,7 +17,8 @@ from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
-from ..acquire.sinks import Decay, Sink
+from ..acquire.decay import Decay
+from ..acquire.sinks import Sink
 from .database import (
     WRITER_CACHE_KB,
     Catalogue,

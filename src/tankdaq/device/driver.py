@@ -126,13 +126,14 @@ class StreamCounters:
 
 @dataclass
 class StreamBlock:
-    """One read from the port: the samples it completed, the raw bytes, and when they arrived."""
+    """One read from the port: the samples it completed, the raw bytes, and when they arrived. The decay
+    pipeline is fed these as they are (``acquire.pipeline``), as is replay with a file's."""
 
     samples: np.ndarray
     raw: bytes
     host_t: float
-    frames: int
     carried: int = 0  # leading samples whose bytes came in earlier reads (a frame held for its successor)
+    frames: int = 0  # the frames decoded from ``raw`` (the link's count)
 
 
 class MTiDriver(XbusLink):
@@ -386,7 +387,7 @@ class MTiDriver(XbusLink):
             if frame.mid == MID.ERROR:
                 self.counters.device_errors.append(parse_error(frame.payload))
         self._count(raw, decoded.frames, samples)
-        return StreamBlock(samples, raw, host_t, decoded.frames, min(decoded.carried, samples.size))
+        return StreamBlock(samples, raw, host_t, min(decoded.carried, samples.size), decoded.frames)
 
     def _end_of_stream(self, gone: DeviceGone) -> StreamBlock:
         """The stream ended: the frames the decoder still holds whose structure confirms them come out as a
@@ -397,7 +398,7 @@ class MTiDriver(XbusLink):
             raise gone
         self._gone = gone
         self._count(b"", decoded.frames, samples)
-        return StreamBlock(samples, b"", host_t, decoded.frames, samples.size)
+        return StreamBlock(samples, b"", host_t, samples.size, decoded.frames)
 
     def _count(self, raw: bytes, frames: int, samples: np.ndarray) -> None:
         c, d = self.counters, self._samples.stream
@@ -434,8 +435,8 @@ class MTiDriver(XbusLink):
             if max_samples is not None:
                 keep = min(keep, max_samples - count)
             if keep < block.samples.size:
-                self._carry = StreamBlock(block.samples[keep:], b"", block.host_t, 0)
-                block = StreamBlock(block.samples[:keep], block.raw, block.host_t, block.frames)
+                self._carry = StreamBlock(block.samples[keep:], b"", block.host_t)
+                block = StreamBlock(block.samples[:keep], block.raw, block.host_t, frames=block.frames)
             count += block.samples.size
             if block.samples.size:
                 yield block

@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping, Sequence
 from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Self
+from typing import Any, Protocol, Self
 
 import numpy as np
 
@@ -44,6 +44,48 @@ CHILD_GRACE_S = 10.0
 
 #: What a terminal or a service manager sends the whole process group; the child ignores them.
 TERMINAL_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM, signal.SIGHUP})
+
+
+class View(Protocol):
+    """What the decay pipeline's view sink (``acquire.sinks.ViewSink``) needs of a live view: ``LiveView``
+    (in this process) and ``ViewProcess`` (the same in a process of its own) both are one; mypy checks it
+    where the record daemon and replay choose one."""
+
+    mode: str
+    axis: str
+    rrd_path: Path | None
+    rrd_reserve_bytes: int
+
+    @property
+    def dropped(self) -> int: ...
+
+    def new_run(
+        self,
+        name: str = "decay",
+        rrd_path: str | Path | None = None,
+        terms: Sequence[str] | None = None,
+        time_origin_s: float = 0.0,
+    ) -> None: ...
+
+    def log_samples(self, samples: np.ndarray) -> None: ...
+
+    def log_fit(
+        self,
+        t: np.ndarray,
+        predicted_angle: np.ndarray,
+        predicted_rate: np.ndarray,
+        coefficients: Mapping[str, float],
+        ci95: Mapping[str, object] | None = None,
+        t_fit: float | None = None,
+        final: bool = False,
+    ) -> None: ...
+
+    def log_event(self, kind: str, message: str, t_s: float | None = None) -> None: ...
+
+    def end_run(self) -> None: ...
+
+    def close(self, stall_s: float = CLOSE_STALL_S, limit_s: float = CLOSE_LIMIT_S) -> None: ...
+
 
 #: A message to the child: a ``LiveView`` method's name, its positional and keyword arguments.
 Message = tuple[str, tuple[Any, ...], dict[str, Any]]

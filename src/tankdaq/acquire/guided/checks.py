@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from ...records import DecayEnd
-from ..events import ModelMoved
+from ..events import ModelMoved, MovedKind
 from .plan import Acceptance, Condition
 
 #: the still water moves less than this (standard deviation, deg) when the model is at rest
@@ -106,18 +106,18 @@ def watch_reasons(stood: list[ModelMoved]) -> list[str]:
     still-water check's)."""
     reasons = []
     for moved in stood:
-        if moved.kind == "bump":
+        if moved.kind == MovedKind.BUMP:
             reasons.append(
                 f"released after a bump the model had not settled from (spread {moved.spread_deg:.2f} deg, "
                 f"rate {moved.rate_deg_s:.1f} deg/s rms at t = {moved.t_s:.1f} s); wait for still water"
             )
-        elif moved.kind == "trend":
+        elif moved.kind == MovedKind.TREND:
             reasons.append(
                 f"released while the still water crept at {moved.slope_deg_min:+.1f} deg/min "
                 f"(at {moved.angle_deg:+.2f} deg, t = {moved.t_s:.1f} s); find why (water inside, a weight "
                 "that moved) and re-trim"
             )
-        elif moved.kind == "drift":
+        elif moved.kind == MovedKind.DRIFT:
             reasons.append(
                 f"released from a drifted level: still water at {moved.angle_deg:+.2f} deg, "
                 f"{moved.angle_deg - moved.reference_deg:+.2f} deg from the {moved.reference_deg:+.2f} "

@@ -10,10 +10,12 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ...device.driver import StreamBlock
 from ...ident.derived import b_eq
 from ...samples import AXIS_FIELDS
+from ..decay import Decay
 from ..pipeline import DecayOutcome
-from ..sinks import Block, Decay, Sink
+from ..sinks import Sink
 from .checks import Measured
 
 #: device seconds of still water the level check averages after a draft change
@@ -71,9 +73,9 @@ class LevelCheck(Sink):
     def arm(self) -> None:
         """Measure again, from the blocks read from now on."""
         self._blocks = []
-        self._since_host_t = time.time()  # the clock of ``Block.host_t``
+        self._since_host_t = time.time()  # the clock of ``StreamBlock.host_t``
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
         if self.full or block.host_t < self._since_host_t:  # after it is full: not the still water measured
             return
         if block.samples.size:

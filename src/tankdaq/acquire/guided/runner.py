@@ -2,17 +2,17 @@
 condition by condition.
 
 The plan (``guided.plan``) gives the conditions in order, drafts grouped (ballast changes are slow).
-The device is opened once and streams for the whole session (``acquire.streaming.StreamingDaemon``:
-``record``'s pipeline, sinks and signal handling): the session is one more listener of it and moves
-through its plan on its typed events. For each condition the operator is told what to do and the
-session feeds the stream until that decay settles (on port ``sim`` the simulated sensor plays the decay
-asked for); the still water before a draft's first decay is measured from the same stream
-(``LevelCheck``), and from then on the model is watched between decays (``guided.watch``: drift, a
+The device is opened once and streams for the whole session (``acquire.streaming.SessionStream``: a
+``Recorder`` as ``record`` has, the same pipeline, sinks and signal handling): the session is one more
+listener of it and moves through its plan on its typed events. For each condition the operator is told
+what to do and the session feeds the stream until that decay settles (on port ``sim`` the simulated
+sensor plays the decay asked for); the still water before a draft's first decay is measured from the
+same stream (``LevelCheck``), and from then on the model is watched between decays (``guided.watch``: drift, a
 bump, level, each a typed ``ModelMoved``). The decay is measured (``guided.measure``) and checked
 (``guided.checks``, with what the watch saw standing at its release) as soon as it settles, and the
 operator (``guided.operator``) accepts it, repeats it, skips the condition or adds a note. Every
 question is asked on a thread of its own while the session's thread feeds the stream
-(``StreamingDaemon.stream_during``): a long pause piles nothing up, and a decay released while nobody
+(``SessionStream.stream_during``): a long pause piles nothing up, and a decay released while nobody
 asked for one is recorded, then kept and logged as rejected (``guided.recovery``). When every condition
 has its repeats, the device is closed and the report of the accepted decays written (``guided.report``).
 The session hears each recording as typed events (``acquire.events``): it prints them with its decay
@@ -46,7 +46,7 @@ from ..daemon import RecordSettings
 from ..events import DecayOutcome, DeviceReady, Event, ModelMoved, Notice, Settled, Stopped, ViewerNote
 from ..listeners import EventLog, EventPrinter
 from ..sinks import Sink
-from ..streaming import StreamingDaemon
+from ..streaming import SessionStream
 from .checks import STILL_SD_DEG, Measured, check_decay, is_level, watch_reasons
 from .journal import SessionLock, SessionLog, check_resumable
 from .measure import LEVEL_S, LevelCheck, measure_decay
@@ -124,9 +124,9 @@ class CampaignSession:
         self.view: CampaignView | None = None
         self.stopped: Stopped | None = None  # how the recording was stopped, when it was (run() returns)
         self.level = LevelCheck(plan.axis)
-        self.watch = ModelWatch(plan.axis, self.acceptance.level_tolerance_deg, self._emit)
+        self.watch = ModelWatch(plan.axis, self.acceptance.level_tolerance_deg)
         self.heard = EventLog(self._react)  # what the recorder said, typed: the session moves on its events
-        self.daemon: StreamingDaemon | None = None  # opened by the first step that needs the device
+        self.stream: SessionStream | None = None  # opened by the first step that needs the device
         self._device = contextlib.ExitStack()
 
     # ---- settings of one decay ----------------------------------------
@@ -176,25 +176,20 @@ class CampaignSession:
         if settings.port == "sim":  # still water until the session asks for a decay
             settings = dataclasses.replace(settings, sim_overrides={"runs": 0})
         sinks = [self.level, self.watch, self.printer, self.heard, *self.listeners]
-        daemon = StreamingDaemon(settings, sinks=sinks)
+        stream = SessionStream(settings, sinks=sinks)
         try:
-            self._device.enter_context(daemon.streaming())
+            self._device.enter_context(stream.streaming())
         except KeyboardInterrupt:  # nothing was recorded yet
-            stopped = Stopped(daemon.stopped_by or "SIGINT", 0)
-            daemon.emit(stopped)
+            stopped = Stopped(stream.stopped_by or "SIGINT", 0)
+            stream.emit(stopped)
             return stopped
-        self.daemon = daemon
+        self.stream = stream
         return None
 
-    def _stream(self) -> StreamingDaemon:
+    def _stream(self) -> SessionStream:
         """The session's recorder, opened by ``_lead`` before anything is asked."""
-        assert self.daemon is not None, "the stream opens before the session leads any step"
-        return self.daemon
-
-    def _emit(self, event: Event) -> None:
-        """An event of the session's own (the watch's) for every listener of the stream."""
-        if self.daemon is not None:
-            self.daemon.emit(event)
+        assert self.stream is not None, "the stream opens before the session leads any step"
+        return self.stream
 
     def _react(self, event: Event) -> None:
         """What the watch saw goes to the session file as it is heard."""
@@ -245,7 +240,7 @@ class CampaignSession:
         self.printer.on_event(ViewerNote(line))
 
     def _run_name(self, _event: Event) -> str | None:
-        """The daemon's run is the session's decay; a release while none was asked for is between decays."""
+        """The recorder's run is the session's decay; a release while none was asked for is between decays."""
         return "between decays" if self._decay is None else f"decay {self._decay}"
 
     def _show_condition(self, state: SessionState, condition: Condition) -> None:
@@ -287,9 +282,10 @@ class CampaignSession:
     def _settle_unexpected(self) -> Stopped | None:
         """A decay released while none was asked for (the model moved during a question): recorded to its
         settle, then kept and logged as rejected, as a recording the log never heard of is."""
-        daemon = self._stream()
-        if daemon.decay_under_way:
-            stopped = daemon.stream_until(lambda: not daemon.decay_under_way)
+        stream = self._stream()
+        recorder = stream.recorder
+        if recorder.decay_under_way:
+            stopped = stream.stream_until(lambda: not recorder.decay_under_way)
             if stopped is not None:
                 return stopped
         adopt_orphans(self.log, self._reload(), self.on_line, RELEASED_BETWEEN)
@@ -363,9 +359,8 @@ class CampaignSession:
     def _measure_level(self, condition: Condition) -> tuple[float, float] | Stopped:
         """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time, or how
         the recording was stopped before that much arrived."""
-        daemon = self._stream()
         self.level.arm()
-        stopped = daemon.stream_until(lambda: self.level.full)
+        stopped = self._stream().stream_until(lambda: self.level.full)
         return stopped if stopped is not None else self.level.mean_sd_deg()
 
     def _record_one(self, state: SessionState, condition: Condition) -> SessionState | Stopped:
@@ -379,8 +374,8 @@ class CampaignSession:
             condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
         )
         started = time.monotonic()
-        daemon = self._stream()
-        daemon.retarget(self._record_settings(condition, decay), run=decay)
+        stream = self._stream()
+        stream.retarget(self._record_settings(condition, decay), run=decay)
         heard_before = len(self.heard.events)
 
         def settled() -> list[DecayOutcome]:
@@ -389,7 +384,7 @@ class CampaignSession:
 
         self._decay = decay
         try:
-            stopped = daemon.stream_until(lambda: bool(settled()))
+            stopped = stream.stream_until(lambda: bool(settled()))
         finally:
             self._decay = None
         if not settled():

@@ -7,11 +7,23 @@ continues exactly where it stopped. A record that contradicts the ones before it
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 from .checks import usable_measured
 from .journal import LOG_NAME
 from .plan import Condition
+
+
+class LogKind(StrEnum):
+    """The kinds of record a session log holds (each record's ``type``) that move its state."""
+
+    RUN = "run"  # a decay recorded, measured and checked
+    VERDICT = "verdict"  # the operator's (or the recovery's) verdict on a decay
+    SKIP = "skip"  # a condition skipped
+    DRAFT = "draft"  # the draft set and its still water level
+    REPORT = "report"  # the report written
+    START = "start"  # the session (re)started
 
 
 @dataclass
@@ -54,7 +66,7 @@ class SessionState:
 
     def _apply(self, r: dict[str, Any], by_decay: dict[int, RunEntry]) -> str | None:
         kind = r.get("type")
-        if kind == "run":
+        if kind == LogKind.RUN:
             if r["decay"] in by_decay:
                 return f"decay {r['decay']} was logged before"
             if r["measured"] and not usable_measured(r["measured"]):
@@ -68,7 +80,7 @@ class SessionState:
             )
             by_decay[entry.decay] = entry
             self.runs.append(entry)
-        elif kind == "verdict":
+        elif kind == LogKind.VERDICT:
             judged = by_decay.get(r["decay"])
             if judged is None:
                 return f"no decay {r['decay']} was logged"
@@ -76,13 +88,13 @@ class SessionState:
                 return f"decay {judged.decay} has nothing measured to accept"
             judged.verdict = r["verdict"]
             self.report = []  # a verdict after the report: the report no longer covers the accepted decays
-        elif kind == "skip":
+        elif kind == LogKind.SKIP:
             self.skipped.add(Condition(r["draft"], float(r["angle_deg"])))
-        elif kind == "draft":
+        elif kind == LogKind.DRAFT:
             self.draft_ready = r["draft"]
-        elif kind == "report":
+        elif kind == LogKind.REPORT:
             self.report = list(r["files"])
-        elif kind == "start":
+        elif kind == LogKind.START:
             self.draft_ready = None  # after a restart the level is checked again
         return None
 

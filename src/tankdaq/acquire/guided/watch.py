@@ -18,24 +18,25 @@ again, until the next release, it judges the decay axis over windows of ``WINDOW
   (``creep_deg_min``) and ``TREND_DEG_MIN``, is a **trend**: a drift on its way, said before it crosses
   the tolerance (over below half that rate).
 
-Each is said once as a ``ModelMoved`` event (``emit``: to every listener of the pipeline) while it
-stands. At the next release ``at_release`` keeps what stood then: a bump the model had not been quiet
-``SETTLED_S`` after before the tilt began, a trend, a drift or level standing; the session's checks
+Each is said once as a ``ModelMoved`` event while it stands: ``on_block`` returns it and the pipeline
+tells every listener. At the next release ``at_release`` keeps what stood then: a bump the model had not
+been quiet ``SETTLED_S`` after before the tilt began, a trend, a drift or level standing; the session's checks
 flag that decay (``checks.watch_reasons``).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from ...device.driver import StreamBlock
 from ...samples import AXIS_FIELDS
-from ..events import Event, ModelMoved, PutBack, Released
+from ..decay import Decay
+from ..events import Event, ModelMoved, MovedKind, PutBack, Released
 from ..release import TILT_MIN_DEG
-from ..sinks import Block, Decay, Sink
+from ..sinks import Sink
 from .checks import STILL_SD_DEG
 
 #: Device seconds of each window the watch judges (a bump shorter than two of them may pass unseen).
@@ -93,10 +94,10 @@ class _Window:
 class ModelWatch(Sink):
     """Drift, bumps and level between decays; ``arm(reference_deg)`` once a draft's level is measured."""
 
-    def __init__(self, axis: str, level_tolerance_deg: float, emit: Callable[[Event], None]) -> None:
+    def __init__(self, axis: str, level_tolerance_deg: float) -> None:
         self.angle_field, self.rate_field = AXIS_FIELDS[axis]
         self.level_tolerance_deg = level_tolerance_deg
-        self.emit = emit
+        self._said: list[ModelMoved] = []  # what this block's windows found, returned by ``on_block``
         self.reference_deg: float | None = None  # None: disarmed (a draft being set)
         self.at_release: tuple[int, list[ModelMoved]] | None = None  # (decay, what stood at its release)
         self.disarm()
@@ -118,21 +119,22 @@ class ModelWatch(Sink):
         self._bump: ModelMoved | None = None  # the last bump since the last decay
         self._bump_open = False  # said for the disturbance under way
         self._tilted = False  # the hand's tilt seen: windows wait for the release or the put-back
-        self._standing: dict[str, ModelMoved] = {}  # drift or level, said and not yet over
+        self._standing: dict[MovedKind, ModelMoved] = {}  # drift or level, said and not yet over
         self._means: list[tuple[float, float]] = []  # (middle, mean) of the quiet windows of this still water
         self._trend: ModelMoved | None = None  # a creeping still water, said and not yet over
 
     # ---- the sink ----------------------------------------
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: Decay | None) -> list[ModelMoved]:
+        """What the block's windows found (each ``ModelMoved`` once while it stands)."""
         if decay is not None:  # a decay under way: its motion is the recording's
             self._blocks, self._settling, self._pending = [], True, None
-            return
+            return []
         if self.reference_deg is None or not block.samples.size:
-            return
+            return []
         self._blocks.append(block.samples)
         if float(self._blocks[-1]["t"][-1] - self._blocks[0]["t"][0]) < WINDOW_S:
-            return
+            return []
         samples = np.concatenate(self._blocks)
         t, start = samples["t"], 0
         while t[-1] - t[start] >= WINDOW_S:  # windows of device time, however the reads cut the stream
@@ -142,6 +144,8 @@ class ModelWatch(Sink):
                 self._judge(window)
             start = stop
         self._blocks = [samples[start:]]
+        said, self._said = self._said, []
+        return said
 
     def on_event(self, event: Event) -> None:
         if isinstance(event, Released) and self.reference_deg is not None:
@@ -211,16 +215,16 @@ class ModelWatch(Sink):
         if self._bump_open:
             return
         self._bump_open = True
-        self._bump = self._moved("bump", window, STILL_SD_DEG)
-        self.emit(self._bump)
+        self._bump = self._moved(MovedKind.BUMP, window, STILL_SD_DEG)
+        self._said.append(self._bump)
 
     def _check_level(self, window: _Window) -> None:
         reference, tolerance = self.reference_deg, self.level_tolerance_deg
         assert reference is not None
         kind = (
-            "drift"
+            MovedKind.DRIFT
             if abs(window.mean_deg - reference) > tolerance
-            else "level"
+            else MovedKind.LEVEL
             if abs(window.mean_deg) > tolerance
             else None
         )
@@ -228,7 +232,7 @@ class ModelWatch(Sink):
             self._standing = {}
         elif kind not in self._standing:
             self._standing = {kind: self._moved(kind, window, tolerance)}
-            self.emit(self._standing[kind])
+            self._said.append(self._standing[kind])
 
     def _check_trend(self, window: _Window) -> None:
         """Fit the still water's creep over its last ``TREND_S``; say a trend once while it lasts."""
@@ -242,13 +246,13 @@ class ModelWatch(Sink):
             return
         slope_deg_min = creep_deg_min(times_s, means_deg)
         if self._trend is None and abs(slope_deg_min) >= TREND_DEG_MIN:
-            self._trend = self._moved("trend", window, self.level_tolerance_deg, slope_deg_min)
-            self.emit(self._trend)
+            self._trend = self._moved(MovedKind.TREND, window, self.level_tolerance_deg, slope_deg_min)
+            self._said.append(self._trend)
         elif not abs(slope_deg_min) >= TREND_DEG_MIN / 2:  # over (nan: no clear creep): half, not to flicker
             self._trend = None
 
     def _moved(
-        self, kind: str, window: _Window, limit_deg: float, slope_deg_min: float = math.nan
+        self, kind: MovedKind, window: _Window, limit_deg: float, slope_deg_min: float = math.nan
     ) -> ModelMoved:
         assert self.reference_deg is not None
         return ModelMoved(
