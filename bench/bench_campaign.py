@@ -49,7 +49,11 @@ def cpu_s() -> float:
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
 
 
-def pipeline(folder: Path, report: Path, executor: Executor | None) -> int:
+def pipeline(folder: Path, reports: Path, executor: Executor | None) -> int:
+    """Read, fit and report the campaign; the report into a new folder under ``reports`` (tankdaq never
+    writes over a report)."""
+    reports.mkdir(exist_ok=True)
+    report = Path(tempfile.mkdtemp(dir=reports))
     paths = find_recordings([folder])
     read = map if executor is None else executor.map
     runs = [run for found in read(read_campaign_runs, paths) for run in found]
@@ -129,7 +133,15 @@ def command_lines(folder: Path, report: Path, repeats: int) -> dict[str, dict[st
             env = {**os.environ, "PYTHONPATH": path} if path else dict(os.environ)
             wall, cpu = time.perf_counter(), cpu_s()
             subprocess.run(
-                [*TANKDAQ, "campaign", folder, "--report", report, "--jobs", str(jobs)],
+                [
+                    *TANKDAQ,
+                    "campaign",
+                    folder,
+                    "--report",
+                    report / f"{len(walls[i])}-{i}",
+                    "--jobs",
+                    str(jobs),
+                ],
                 check=True,
                 capture_output=True,
                 env=env,

@@ -48,7 +48,8 @@ TANKDAQ = [sys.executable, "-c", "from tankdaq.cli import main; main()"]
 
 
 def cpu_share(rate_hz: int, seconds: float, out: Path) -> tuple[float, int, int]:
-    """Record for ``seconds`` of wall time against a real-time simulator in another process."""
+    """Record for ``seconds`` of wall time against a real-time simulator in another process: CPU share,
+    samples, decays (their files stay in ``out``)."""
     baud = 115200 if rate_hz <= 100 else 460800
     sim = subprocess.Popen(
         [*TANKDAQ, "simulate", "--rate", str(rate_hz), "--baud", str(baud), "--runs", "50", "--seed", "4"],
@@ -88,6 +89,11 @@ def cpu_share(rate_hz: int, seconds: float, out: Path) -> tuple[float, int, int]
     finally:
         sim.terminate()
         sim.wait(timeout=10)
+
+
+def mcap_mb(folder: Path) -> float:
+    """The size of every MCAP under ``folder`` (a decay that is still open at the stop counts too)."""
+    return sum(path.stat().st_size for path in folder.rglob("*.mcap")) / 1e6
 
 
 def ten_minute_file(folder: Path, seconds: float = 600.0, runs: int = 18) -> Path:
@@ -213,6 +219,7 @@ def main() -> None:
                     "cpu_pct_of_one_core": share * 100,
                     "samples": samples,
                     "decays": runs,
+                    "mcap_mb_per_decay": mcap_mb(folder / f"r{rate}") / max(runs, 1),
                 }
         started = time.perf_counter()
         path = ten_minute_file(folder)
