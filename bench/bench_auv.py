@@ -44,7 +44,9 @@ def pipeline(folder: Path) -> dict[str, float]:
     record = add_noise(simulate_zigzag(vehicle, DELTA_RAD, THETA_RAD, rate_hz=100.0), 1.0, seed=0)
     times["simulate (8 reversals, 100 Hz, noise)"] = time.perf_counter() - start
     start = time.perf_counter()
-    path = write_record(folder / "zigzag.mcap", record, vehicle)
+    path = write_record(
+        Path(tempfile.mkdtemp(dir=folder)) / "zigzag.mcap", record, vehicle
+    )  # never over a file
     back = read_record(path)
     times["write + read MCAP"] = time.perf_counter() - start
     start = time.perf_counter()
