@@ -108,8 +108,11 @@ def _change(old: float, new: float) -> str:
     return f"{(new - old) / abs(old):+.1%}"
 
 
-def compare(old: dict[str, dict[str, Any]], new: dict[str, dict[str, Any]]) -> list[str]:
-    """The lines that say, topic by topic and figure by figure, how NEW differs from OLD."""
+def compare(
+    old: dict[str, dict[str, Any]], new: dict[str, dict[str, Any]], changed: bool = False
+) -> list[str]:
+    """The lines that say, topic by topic and figure by figure, how NEW differs from OLD (``changed``: only
+    the figures that differ)."""
     lines: list[str] = []
     for topic in sorted(old.keys() | new.keys()):
         if topic not in new or topic not in old:
@@ -130,6 +133,8 @@ def compare(old: dict[str, dict[str, Any]], new: dict[str, dict[str, Any]]) -> l
                 lines.append(f"  {name:{width}s}  {'(new)':>12s} -> {b[name]:<12.6g}")
             else:
                 change = _change(a[name], b[name])
+                if changed and change == "=":
+                    continue
                 lines.append(f"  {name:{width}s}  {a[name]:>12.6g} -> {b[name]:<12.6g} {change}")
     return lines
 
@@ -139,9 +144,10 @@ def main() -> int:
     parser.add_argument("names", nargs="*", help="run only the scripts whose name holds one of these")
     parser.add_argument("--quick", action="store_true", help="small counts (QUICK_ARGS)")
     parser.add_argument("--compare", nargs=2, metavar=("OLD", "NEW"), help="compare two result sets")
+    parser.add_argument("--changed", action="store_true", help="with --compare: only the figures that differ")
     args = parser.parse_args()
     if args.compare:
-        print("\n".join(compare(load(args.compare[0]), load(args.compare[1]))))
+        print("\n".join(compare(load(args.compare[0]), load(args.compare[1]), args.changed)))
         return 0
     return run(args.names, args.quick)
 

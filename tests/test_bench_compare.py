@@ -39,9 +39,12 @@ def write_set(
         write_result("export", "export", counts={"samples": 10}, figures={"csv": {"mb": 1.5}}, folder=folder)
 
 
-def compare(old: str, new: str, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+def compare(old: str, new: str, cwd: Path = ROOT, *options: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, str(RUN_ALL), "--compare", old, new], cwd=cwd, capture_output=True, text=True
+        [sys.executable, str(RUN_ALL), "--compare", old, new, *options],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
     )
 
 
@@ -79,6 +82,8 @@ def test_compare_two_folders_says_each_figures_relative_change(two_sets: tuple[P
     assert next(line for line in lines if "counts.frames" in line).split()[-1] == "="
     assert "(new)" in next(line for line in lines if "figures.gone_or_new" in line)
     assert "export: only in NEW" in lines
+    changed = compare(str(old), str(new), ROOT, "--changed").stdout
+    assert "counts.frames" not in changed and "figures.oe_ms_cpu" in changed
 
 
 def test_compare_says_when_the_counts_are_not_like_for_like(
