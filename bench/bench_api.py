@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import tankdaq
+from benchjson import write_result
 
 REPEATS = 11
 CHILD_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
@@ -32,7 +33,7 @@ def child_cpu_s(argv: list[str], env: dict[str, str]) -> float:
     return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def starts(lines: dict[str, tuple[list[str], dict[str, str]]]) -> None:
+def starts(lines: dict[str, tuple[list[str], dict[str, str]]]) -> dict[str, dict[str, float]]:
     """Each line started REPEATS times, interleaved; median and least CPU."""
     for argv, env in lines.values():
         child_cpu_s(argv, env)  # bytecode written once
@@ -42,6 +43,10 @@ def starts(lines: dict[str, tuple[list[str], dict[str, str]]]) -> None:
             times[name].append(child_cpu_s(argv, env))
     for name, found in times.items():
         print(f"{name:<40} median {statistics.median(found) * 1e3:7.1f} ms  least {min(found) * 1e3:7.1f} ms")
+    return {
+        name: {"median_ms_cpu": statistics.median(found) * 1e3, "least_ms_cpu": min(found) * 1e3}
+        for name, found in times.items()
+    }
 
 
 def main() -> None:
@@ -57,7 +62,7 @@ def main() -> None:
             [python, "-c", "import tankdaq"],
             {**CHILD_ENV, "PYTHONPATH": baseline},
         )
-    starts(lines)
+    figures: dict[str, dict[str, float]] = starts(lines)
     with tempfile.TemporaryDirectory() as folder:
         (rec,) = tankdaq.simulate(folder, seed=7)
         tankdaq.identify(rec)  # kernels and imports loaded once
@@ -67,8 +72,9 @@ def main() -> None:
             tankdaq.identify(rec)
             spent.append(time.process_time() - began)
         print(f"{'tankdaq.identify(rec), warm process':<40} median {statistics.median(spent) * 1e3:7.1f} ms")
+        figures["tankdaq.identify(rec), warm process"] = {"median_ms_cpu": statistics.median(spent) * 1e3}
         command = str(Path(python).with_name("tankdaq"))
-        starts(
+        figures |= starts(
             {
                 "tankdaq identify --json (fresh process)": (
                     [command, "identify", "--json", str(rec.path)],
@@ -76,6 +82,17 @@ def main() -> None:
                 )
             }
         )
+    bare = figures["python -c pass"]["median_ms_cpu"]
+    write_result(
+        "api",
+        "CPU time (user + system) of `import tankdaq` against bare Python, and tankdaq.identify in a warm "
+        "process "
+        "against `tankdaq identify --json` started afresh, on one simulated recording",
+        counts={"repeats": REPEATS},
+        figures=figures,
+        ratios={f"{name} over python -c pass": row["median_ms_cpu"] / bare for name, row in figures.items()},
+        baseline="`python -c pass`, interleaved in the same run",
+    )
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from benchjson import write_result  # noqa: E402
 from tankdaq.auv.identify import SeparateIdentifier  # noqa: E402
 from tankdaq.auv.io import read_record, write_record  # noqa: E402
 from tankdaq.auv.model import add_noise, simulate_zigzag  # noqa: E402
@@ -43,7 +44,9 @@ def pipeline(folder: Path) -> dict[str, float]:
     record = add_noise(simulate_zigzag(vehicle, DELTA_RAD, THETA_RAD, rate_hz=100.0), 1.0, seed=0)
     times["simulate (8 reversals, 100 Hz, noise)"] = time.perf_counter() - start
     start = time.perf_counter()
-    path = write_record(folder / "zigzag.mcap", record, vehicle)
+    path = write_record(
+        Path(tempfile.mkdtemp(dir=folder)) / "zigzag.mcap", record, vehicle
+    )  # never over a file
     back = read_record(path)
     times["write + read MCAP"] = time.perf_counter() - start
     start = time.perf_counter()
@@ -91,11 +94,13 @@ def main() -> None:
         cli = cli_pipeline(folder)
     print(f"AUV diving-plane pipeline, one core (cpu {_CORE}), median of {REPEATS} runs after warm-up")
     total = 0.0
+    figures: dict[str, float] = {}
     for stage in runs[0]:
-        median = float(np.median([run[stage] for run in runs]))
+        median = figures[f"{stage}: s"] = float(np.median([run[stage] for run in runs]))
         if "OLS" not in stage:
             total += median
         print(f"  {stage:<45} {median:8.3f} s")
+    figures |= {"pipeline_total_s": total, "first_run_s": warm_up}
     print(f"  {'pipeline total (simulate, io, LS-SVM, sensitivity)':<45} {total:8.3f} s   (target <= 10 s)")
     print(f"  {'first run (numba cache load or compile)':<45} {warm_up:8.3f} s")
     if cli is not None:
@@ -104,6 +109,14 @@ def main() -> None:
             f"  {'CLI: simulate + identify + sensitivity':<45} {wall:8.3f} s   wall, {cpu:.3f} s CPU "
             "(3 processes, imports included)"
         )
+        figures |= {"cli_wall_s": wall, "cli_cpu_s": cpu}
+    write_result(
+        "auv",
+        "the AUV diving-plane pipeline on one core (simulate, MCAP write and read, identify, sensitivity; "
+        "median after a warm-up) and the same through the `tankdaq auv` commands",
+        counts={"repeats": REPEATS},
+        figures=figures,
+    )
 
 
 if __name__ == "__main__":

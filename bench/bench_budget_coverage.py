@@ -9,11 +9,10 @@ Run: .venv/bin/python bench/bench_budget_coverage.py [--campaigns 200]
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
-import os
 import sys
 from pathlib import Path
+
+from benchjson import write_result
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from budget_coverage import INITIAL_DEG, REPEATS, TEST, campaign, coverage, truth
@@ -27,31 +26,27 @@ def main() -> None:
     outcomes = [campaign(seed, coefficients) for seed in range(args.campaigns)]
     found = coverage(outcomes)
     exact = coverage([campaign(seed, coefficients, device_error=False) for seed in range(args.campaigns)])
-    result = {
-        "measured": "share of simulated campaigns whose expanded uncertainty U (k=2) covers the truth",
-        "campaigns": args.campaigns,
-        "repeats_per_campaign": REPEATS,
-        "condition": f"catamaran roll at T from {INITIAL_DEG:g} deg, {TEST.duration_s:g} s at "
-        f"{TEST.rate_hz:g} Hz",
-        "noise": "white angle/rate noise (SimulatedTest), 0.01 deg quantisation, angle bias, per-campaign "
-        "angle scale and clock errors at the MTi-G-710 profile's figures",
-        "coverage": found,
-        "coverage_with_an_exact_device": exact,
-        "note": "the first figures are the issue's (device errors drawn at the profile's figures, as the "
+    write_result(
+        "budget_coverage",
+        "share of simulated campaigns whose expanded uncertainty U (k=2) covers the truth",
+        counts={
+            "campaigns": args.campaigns,
+            "repeats_per_campaign": REPEATS,
+            "condition": f"catamaran roll at T from {INITIAL_DEG:g} deg, {TEST.duration_s:g} s at "
+            f"{TEST.rate_hz:g} Hz",
+            "noise": "white angle/rate noise (SimulatedTest), 0.01 deg quantisation, angle bias, "
+            "per-campaign angle scale and clock errors at the MTi-G-710 profile's figures",
+            "target_covered": [0.90, 0.99],
+        },
+        figures={"coverage": found, "coverage_with_an_exact_device": exact},
+        note="the first figures are the issue's (device errors drawn at the profile's figures, as the "
         "budget's Type B assumes); with an exact device the Type B rows cover an error that is not there",
-        "target": [0.90, 0.99],
-        "cpu_count": os.cpu_count(),
-        "date": datetime.date.today().isoformat(),
-    }
-    out = Path(__file__).resolve().parent / "results" / "budget_coverage.json"
-    out.parent.mkdir(exist_ok=True)
-    out.write_text(json.dumps(result, indent=2) + "\n")
+    )
     for key, figures in found.items():
         print(
             f"{key}: U covers the truth in {figures['covered']:.1%} of {args.campaigns} campaigns, "
             f"RMS error/u_c {figures['rms_error_over_u']:.2f} (an exact device: {exact[key]['covered']:.1%})"
         )
-    print(f"written {out}")
 
 
 if __name__ == "__main__":

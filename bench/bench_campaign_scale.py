@@ -41,8 +41,11 @@ from collections.abc import Callable
 from concurrent.futures import Executor
 from contextlib import AbstractContextManager
 from pathlib import Path
+from typing import Any
 
 import psutil
+
+from benchjson import write_result
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from campaign_scale import dask_cluster, write_many_decays
@@ -123,7 +126,9 @@ def executors(address: str) -> dict[str, Callable[[], AbstractContextManager]]:
     }
 
 
-def work_table(sizes: list[int], data: Path, repeats: int, address: str, dask_pids: list[int]) -> str:
+def work_table(
+    sizes: list[int], data: Path, repeats: int, address: str, dask_pids: list[int], results: dict[str, Any]
+) -> str:
     """Table 1: the work in this process, the executor started; medians of ``repeats``, interleaved."""
     lines = [
         "| N | where | wall s | parent (client) CPU s | workers CPU s | jobs1/jobs2 wall | dask/jobs2 wall |",
@@ -154,6 +159,12 @@ def work_table(sizes: list[int], data: Path, repeats: int, address: str, dask_pi
             speedup = f"{2 * serial / wall:.2f}× (ceiling)" if mode == CEILING else speedup
             dask = f"{wall / median['--jobs 2'][0]:.2f}×" if mode.startswith("dask") else ""
             lines.append(f"| {n} | {mode} | {wall:.2f} | {own:.2f} | {theirs:.2f} | {speedup} | {dask} |")
+            results[f"work n{n} {mode}"] = {"wall_s": wall, "parent_cpu_s": own, "workers_cpu_s": theirs}
+        results[f"work n{n} ratios"] = {
+            "jobs1_over_jobs2_wall": serial / median["--jobs 2"][0],
+            "ceiling_2x_jobs1_over_two_at_once_wall": 2 * serial / median[CEILING][0],
+            "dask_over_jobs2_wall": median[MODES[-1]][0] / median["--jobs 2"][0],
+        }
         print("\n".join(lines[-4:]), flush=True)
     return "\n".join(lines)
 
@@ -199,6 +210,7 @@ def command_table(
     dask_pids: list[int],
     baseline: str | None,
     modes: list[str],
+    results: dict[str, Any],
 ) -> str:
     """Table 2: ``tankdaq campaign`` end to end, this tree (and --baseline's), one run per N and mode."""
     lines = [
@@ -219,6 +231,13 @@ def command_table(
                     f"| {parent_mb:.0f} | {workers_mb:.0f} |"
                 )
                 print(lines[-1], flush=True)
+                results[f"command n{n} {tree} {mode}"] = {
+                    "wall_s": wall,
+                    "command_cpu_s": own,
+                    "workers_cpu_s": theirs,
+                    "command_peak_rss_mb": parent_mb,
+                    "workers_peak_rss_mb": workers_mb,
+                }
     return "\n".join(lines)
 
 
@@ -243,21 +262,35 @@ def main() -> None:
     print(header, flush=True)
     with tempfile.TemporaryDirectory() as tmp, dask_cluster(2, Path(tmp)) as (address, processes):
         dask_pids = [p.pid for p in processes[1:]]
-        tables = [header]
+        tables, results = [header], {}
         if not args.no_work:
-            tables += ["", work_table(sizes, args.data, args.repeats, address, dask_pids)]
+            tables += ["", work_table(sizes, args.data, args.repeats, address, dask_pids, results)]
         if not args.no_command:
             modes = [
                 mode
                 for mode in MODES
                 if any(mode.startswith(given.strip()) for given in args.modes.split(",") if given.strip())
             ]
-            tables += ["", command_table(sizes, args.data, address, dask_pids, args.baseline, modes)]
+            tables += ["", command_table(sizes, args.data, address, dask_pids, args.baseline, modes, results)]
         tables.append(f"\nload average at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     text = "\n".join(tables) + "\n"
     print(text)
     if args.out:
         args.out.write_text(text)
+    write_result(
+        "campaign_scale",
+        "campaign scan and fit of N synthetic decays: --jobs 1, --jobs 2 and a 2-worker Dask cluster in this "
+        "process (medians, interleaved; two serial campaigns at once as the machine's ceiling), and the "
+        "`tankdaq campaign` command end to end with peak RSS",
+        counts={
+            "sizes": sizes,
+            "repeats": args.repeats,
+            "command": not args.no_command,
+            "work": not args.no_work,
+        },
+        figures=results,
+        baseline=f"--baseline {args.baseline} (command rows 'baseline')" if args.baseline else None,
+    )
 
 
 if __name__ == "__main__":

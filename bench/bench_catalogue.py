@@ -16,6 +16,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
+from benchjson import write_result
 from pg_server import throwaway_postgres, why_not
 from tankdaq.catalogue.database import Catalogue, open_catalogue, resolve_url
 from tankdaq.catalogue.query import RunQuery, select_rows
@@ -86,7 +87,7 @@ def archive_query(catalogue: Catalogue) -> tuple[int, float]:
     return found, best
 
 
-def measure(name: str, url: str) -> None:
+def measure(name: str, url: str) -> dict[str, float]:
     with open_catalogue(url) as catalogue:
         single, batched = inserts(catalogue, name)
         found, seconds = archive_query(catalogue)
@@ -95,6 +96,12 @@ def measure(name: str, url: str) -> None:
         f"query at {ARCHIVE + SINGLE + 10 * BATCH:,} rows: {found} rows in {seconds * 1e3:.0f} ms",
         flush=True,
     )
+    return {
+        "rows_per_s_one_transaction_each": single,
+        f"rows_per_s_batches_of_{BATCH}": batched,
+        "query_ms": seconds * 1e3,
+        "query_rows_found": found,
+    }
 
 
 def main() -> int:
@@ -102,15 +109,23 @@ def main() -> int:
         f"{platform.node()} {platform.processor() or platform.machine()}, Python {platform.python_version()}"
     )
     with tempfile.TemporaryDirectory() as folder:
-        measure("SQLite (WAL)", f"sqlite:///{Path(folder) / 'catalogue.sqlite'}")
+        figures = {"sqlite_wal": measure("SQLite (WAL)", f"sqlite:///{Path(folder) / 'catalogue.sqlite'}")}
     reason = why_not()
     if reason is not None:
         print(f"PostgreSQL: skipped ({reason})")
-        return 0
-    with throwaway_postgres() as url:
-        resolved = resolve_url(url)
-        assert resolved is not None
-        measure("PostgreSQL", resolved)
+    else:
+        with throwaway_postgres() as url:
+            resolved = resolve_url(url)
+            assert resolved is not None
+            figures["postgresql"] = measure("PostgreSQL", resolved)
+    write_result(
+        "catalogue",
+        "run catalogue inserts per second (one transaction per decay, and in batches) and a lab's query "
+        "(hull, draft, since, accepted; best of 5) at about 10^5 rows, in SQLite and a throwaway PostgreSQL",
+        counts={"single_inserts": SINGLE, "batch": BATCH, "archive_rows": ARCHIVE + SINGLE + 10 * BATCH},
+        figures=figures,
+        note=None if reason is None else f"PostgreSQL skipped: {reason}",
+    )
     return 0
 
 

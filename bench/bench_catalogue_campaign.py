@@ -34,6 +34,7 @@ from pathlib import Path
 import sqlalchemy as sa
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from benchjson import write_result
 from campaign_scale import write_many_decays
 from tankdaq.api.campaigns import campaign
 from tankdaq.catalogue.database import open_catalogue
@@ -115,10 +116,26 @@ def main() -> None:
     print("\n| catalogue | wall s | parent CPU s | workers CPU s | parent CPU over none, ms per decay |")
     print("|---|---:|---:|---:|---:|")
     none = statistics.median(f[1] for f in figures[MODES[0]])
+    results: dict[str, object] = {"catalogue_index_ms_per_file": per_file_ms}
     for mode in MODES:
         wall, own, theirs = (statistics.median(f[i] for f in figures[mode]) for i in range(3))
         extra = 1000 * (own - none) / args.n
         print(f"| {mode} | {wall:.2f} | {own:.2f} | {theirs:.2f} | {extra:.2f} |")
+        results[mode] = {
+            "wall_s": wall,
+            "parent_cpu_s": own,
+            "workers_cpu_s": theirs,
+            "parent_cpu_over_none_ms_per_decay": extra,
+        }
+    write_result(
+        "catalogue_campaign",
+        "a campaign's catalogue write-back in the campaign's own process: the parent's CPU with no "
+        "catalogue, with every row already there, and over files not catalogued yet (rows by the writer or "
+        "the workers)",
+        counts={"n": args.n, "repeats": args.repeats, "jobs": args.jobs},
+        figures=results,
+        baseline=f"{MODES[0]} (parent CPU over it), same run",
+    )
     print(f"\nload average at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
 
 

@@ -14,6 +14,7 @@ import sys
 
 import numpy as np
 
+from benchjson import write_result
 from tankdaq.config import hull_scenario
 from tankdaq.ident.derived import b_eq
 from tankdaq.ident.output_error import OutputError
@@ -47,12 +48,27 @@ def main(seeds: int) -> None:
     print(
         "clipped samples | c3 error median / worst | B_eq(5 deg) error median / worst | rate residual deg/s"
     )
+    figures: dict[str, object] = {"flagged_samples_median": float(np.median(clipped))}
     for label in ("excluded", "kept"):
         c3, beq, rate = (np.array([r[label][k] for r in rows]) for k in range(3))
         print(
             f"{label:8s} | {np.median(c3):6.1%} / {c3.max():6.1%} | {np.median(beq):6.1%} / {beq.max():6.1%} "
             f"| {np.median(rate):.3f}"
         )
+        figures[label] = {
+            "c3_rel_error_median": np.median(c3),
+            "c3_rel_error_worst": c3.max(),
+            "b_eq_5deg_rel_error_median": np.median(beq),
+            "b_eq_5deg_rel_error_worst": beq.max(),
+            "rate_residual_deg_s_median": np.median(rate),
+        }
+    write_result(
+        "clipping",
+        "clipped decays (8 deg, gyro range 16 deg/s) fitted with the flagged samples left out and kept: "
+        "errors of c3 and B_eq(5 deg) against the truth",
+        counts={"seeds": seeds},
+        figures=figures,
+    )
 
 
 if __name__ == "__main__":

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchjson import write_result
+
 RATE_HZ = 100.0
 OMEGA = 2 * math.pi / 1.7
 ZETA = 0.03
@@ -90,11 +92,30 @@ def main() -> None:
         start = time.perf_counter()
         decays = write_record(path, rows)
         took = time.perf_counter() - start
-        print(f"{path.stat().st_size / 1e6:.0f} MB, {decays} decays written in {took:.0f} s")
+        size_mb = path.stat().st_size / 1e6
+        print(f"{size_mb:.0f} MB, {decays} decays written in {took:.0f} s")
+        figures: dict[str, dict[str, float]] = {}
         for reader in READERS:
             wall, peak, what = measure(reader, path)
             unit = "runs" if reader == "read_decays" else "rows"
             print(f"{reader:12s} {wall:7.1f} s  peak {peak:7.0f} MB  ({what} {unit})")
+            figures[reader] = {"wall_s": wall, "peak_rss_mb": peak, unit: int(what)}
+    write_result(
+        "csv_import",
+        "reading a long CSV of hand-stopped decays, each reader in its own process: the csv module row by "
+        "row (baseline), numpy's reader streaming the lines, and read_decays the whole way in",
+        counts={"rows": rows, "decays": decays, "file_mb": size_mb},
+        figures=figures,
+        ratios={
+            name: {
+                "wall_over_baseline": row["wall_s"] / figures["baseline"]["wall_s"],
+                "peak_over_baseline": row["peak_rss_mb"] / figures["baseline"]["peak_rss_mb"],
+            }
+            for name, row in figures.items()
+            if name != "baseline"
+        },
+        baseline="the reader named baseline (READERS), same run, same file",
+    )
     print(f"load average after: {os.getloadavg()[0]:.2f}")
 
 

@@ -4,7 +4,9 @@ Run: ``.venv/bin/python bench/bench_decode.py``. One core (the process is pinned
 Captures: (a) 1 million decay frames (PacketCounter, SampleTimeFine, EulerAngles, RateOfTurn,
 Acceleration, StatusWord, float32: 69 bytes each), generated with array code; (b) the real
 einride-1 capture (100 frames, 6 layouts incl. GNSS PVT messages) repeated to 1 million frames.
-Streaming is fed in 4 KiB chunks. Best of several runs; CPU time is the figure (the machine is shared).
+Streaming is fed in 4 KiB chunks.
+``--frames N`` sets the count (run_all's quick mode: 100 000).
+Best of several runs; CPU time is the figure (the machine is shared).
 
 Confirmation cost (``bench_decode.py confirmation`` runs only this part): the decoders as they were
 before the framer confirmed frames (the ``tankdaq`` tree of commit ``BASELINE``, extracted with
@@ -16,6 +18,7 @@ turn (best of each), so a change of load during the run affects both alike.
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import os
 import subprocess
@@ -27,6 +30,7 @@ from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 
+from benchjson import write_result
 from tankdaq.xsens.batch import decode_capture
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import decode_mtdata2
@@ -84,7 +88,9 @@ def per_message(data: bytes) -> int:
     return sum(1 for frame in StreamFramer().feed(data) for _ in [decode_mtdata2(frame.payload)])
 
 
-def report(label: str, data: bytes) -> None:
+def report(label: str, data: bytes) -> dict[str, float]:
+    """M frames/s of CPU time of each decoder on one capture."""
+    figures = {}
     for name, run, repeats, part in (
         ("batch", batch, 5, data),
         ("streaming 4 KiB", streaming, 3, data),
@@ -93,6 +99,8 @@ def report(label: str, data: bytes) -> None:
         cpu, wall, frames = timed(lambda run=run, part=part: run(part), repeats)
         print(f"{label:27s} {name:19s} {frames / cpu / 1e6:6.2f} M frames/s CPU "
               f"({frames / wall / 1e6:.2f} wall; {frames} frames, {cpu:.3f} s CPU)", flush=True)  # fmt: skip
+        figures[f"{name.split()[0]}_m_frames_per_s_cpu"] = frames / cpu / 1e6
+    return figures
 
 
 def baseline_package(folder: Path) -> ModuleType:
@@ -106,8 +114,9 @@ def baseline_package(folder: Path) -> ModuleType:
     return importlib.import_module("tankdaq_baseline")
 
 
-def confirmation_cost(captures: dict[str, bytes]) -> None:
+def confirmation_cost(captures: dict[str, bytes]) -> dict[str, dict[str, float]]:
     """Batch and streaming throughput before and after the confirmation step, same run, same captures."""
+    ratios: dict[str, dict[str, float]] = {}
     with tempfile.TemporaryDirectory() as folder:
         baseline_package(Path(folder))
         old_batch = importlib.import_module("tankdaq_baseline.xsens.batch")
@@ -124,6 +133,8 @@ def confirmation_cost(captures: dict[str, bytes]) -> None:
                 print(f"{label:27s} {name:16s} before {n_old / before / 1e6:6.2f} M/s ({n_old} msgs), "
                       f"after {n_new / after / 1e6:6.2f} M/s ({n_new} msgs): cost {after / before - 1:+.1%} "
                       "CPU time", flush=True)  # fmt: skip
+                ratios.setdefault(label, {})[f"{name.split()[0]}_cpu_after_over_before"] = after / before
+    return ratios
 
 
 def _stream(decoder: StreamDecoder, data: bytes) -> int:
@@ -133,18 +144,33 @@ def _stream(decoder: StreamDecoder, data: bytes) -> int:
 def main() -> None:
     """All figures; ``bench_decode.py confirmation`` measures only the confirmation cost."""
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    only_confirmation = sys.argv[1:] == ["confirmation"]
-    decay = decay_capture(FRAMES)
-    captures = {"decay, 69-byte frames": decay, "noisy decay (3 %/3 %)": noisy_capture(FRAMES)[0]}
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("part", nargs="?", choices=("confirmation",))
+    parser.add_argument("--frames", type=int, default=FRAMES)
+    args = parser.parse_args()
+    only_confirmation, frames = args.part == "confirmation", args.frames
+    decay = decay_capture(frames)
+    captures = {"decay, 69-byte frames": decay, "noisy decay (3 %/3 %)": noisy_capture(frames)[0]}
+    figures: dict[str, dict[str, float]] = {}
     if not only_confirmation:
-        report("decay, 69-byte frames", decay)
+        figures["decay"] = report("decay, 69-byte frames", decay)
     if EINRIDE.is_file():
-        captures["einride-1 x 10000 (mixed)"] = EINRIDE.read_bytes() * (FRAMES // 100)
+        captures["einride-1 (mixed)"] = EINRIDE.read_bytes() * (frames // 100)
         if not only_confirmation:
-            report("einride-1 x 10000 (mixed)", captures["einride-1 x 10000 (mixed)"])
+            figures["einride_mixed"] = report("einride-1 (mixed)", captures["einride-1 (mixed)"])
     else:
         print(f"einride-1 not found at {EINRIDE}: mixed-capture figures skipped")
-    confirmation_cost(captures)
+    ratios = confirmation_cost(captures)
+    write_result(
+        "decode" if not only_confirmation else "decode_confirmation",
+        "MTData2 decoding throughput on one pinned core (CPU time, best of several): batch, streaming in "
+        "4 KiB "
+        "chunks, per-message Python; and the frame confirmation's cost against the decoders before it",
+        counts={"frames": frames, "chunk_bytes": CHUNK, "einride": EINRIDE.is_file()},
+        figures=figures,
+        ratios=ratios,
+        baseline=f"the decoders of commit {BASELINE} (before frame confirmation), same run, run in turn",
+    )
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from datetime import UTC, datetime
 
 import numpy as np
 
+from benchjson import write_result
 from tankdaq.cli.decode import flatten
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.errors import ProtocolError
@@ -116,6 +117,21 @@ def main() -> None:
     print(
         f"  stream path (SampleDecoder, {frames} frames, {kept} samples): crash {stream_crash}, "
         f"{stream_s * 1e3:.1f} ms"
+    )
+    write_result(
+        "decoder_fuzz",
+        "structured random MTData2 messages through the per-message decoder, JSON and the CSV columns, and "
+        "the whole stream through the driver's sample decoder: refused on purpose, crashed, speed",
+        counts={"messages": args.messages, "seed": args.seed},
+        figures={
+            "refused": refused,
+            "crashed": crashed,
+            "stream_crashed": stream_crash != "none",
+            "baseline_isoformat_crashes": baseline_crashes,
+            "per_message_messages_per_s": rate,
+            "stream_ms": stream_s * 1e3,
+        },
+        baseline="the old isoformat on the same decoded messages, same run",
     )
 
 

@@ -27,6 +27,8 @@ from typing import Any
 
 from rich.progress import track
 
+from benchjson import write_result
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from hidden_effects import (
@@ -103,24 +105,23 @@ def main() -> int:
     parser.add_argument("--set", choices=("all", "workflow", "prediction"), default="all")
     args = parser.parse_args()
     stored = json.loads(RESULT.read_text()) if RESULT.exists() else {}
-    result = {
-        "measured": "discrepancy workflow on three decays with one hidden effect of random size",
-        "criterion": f"named first in >= {NAMED_SHARE:.0%} of draws; no faulty draw",
-        "passed": stored.get("passed"),
-        "cases": stored.get("cases"),
-        "prediction_sets": stored.get("prediction_sets"),
-        "cpu_count": os.cpu_count(),
-        "date": stored.get("date"),
-    }
+    stored = stored.get("figures", stored)
+    result = {key: stored.get(key) for key in ("passed", "cases", "prediction_sets", "workflow_date")}
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=os.cpu_count(), mp_context=context) as pool:
         if args.set in ("all", "workflow"):
             done = workflow_set(pool, args.draws)
-            result.update(passed=done["passed"], cases=done["cases"], date=done["date"])
+            result.update(passed=done["passed"], cases=done["cases"], workflow_date=done["date"])
         if args.set in ("all", "prediction"):
             result["prediction_sets"] = prediction_set(pool, args.draws)
-    RESULT.parent.mkdir(exist_ok=True)
-    RESULT.write_text(json.dumps(result, indent=1) + "\n")
+    write_result(
+        "hidden_effects",
+        "discrepancy workflow on three decays with one hidden effect of random size, and the prediction sets",
+        counts={"draws": args.draws, "sets_run": args.set},
+        figures=result,
+        note=f"criterion: named first in >= {NAMED_SHARE:.0%} of draws; no faulty draw (a set not run keeps "
+        "its stored figures and their own date)",
+    )
     sets = [result["passed"], (result["prediction_sets"] or {}).get("passed")]
     return 0 if all(sets) else 1
 

@@ -1,6 +1,7 @@
 """Identification benchmarks: fit time, online refit time, Monte Carlo efficiency vs the Cramer-Rao bound.
 
-Run as ``.venv/bin/python bench/bench_ident.py [fit]`` (pinned to one core, BLAS single-threaded). Times are
+Run as ``.venv/bin/python bench/bench_ident.py [fit] [--runs 200]``
+(pinned to one core, BLAS single-threaded). Times are
 CPU time of this process (what one core spends; the shared machine's load inflates wall time) with the
 wall time beside it.
 """
@@ -13,14 +14,16 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
+import argparse
 import math
 import statistics
-import sys
 import time
 
 import numpy as np
 
+from benchjson import write_result
 from tankdaq.ident.derived import b_eq
+from tankdaq.ident.equation_error import EquationError
 from tankdaq.ident.online import OnlineIdentifier
 from tankdaq.ident.output_error import OutputError
 from tankdaq.physics.decay import simulate_decay
@@ -40,25 +43,30 @@ def decay(coefficients: dict[str, float], seed: int, n: int = 1500, angle0: floa
     )
 
 
-def bench_fit_time(repeats: int = 40) -> None:
-    """Median time of one output-error fit: 1500 samples, 7 terms (seed001-eq1 + Coulomb friction)."""
+def bench_fit_time(repeats: int = 40) -> dict[str, float]:
+    """Median time of one fit by output error and by equation error: 1500 samples, 7 terms (seed001-eq1 +
+    Coulomb friction)."""
     terms = ("b1", "b2", "b3", "c1", "c2", "c3", "fc")
     run = decay(TRUTH, seed=1)
-    OutputError(terms).fit([run])  # JIT warm-up (compiled code is cached on disk too)
-    cpu, wall = [], []
-    for _ in range(repeats):
-        cpu0, wall0 = time.process_time(), time.perf_counter()
-        fit = OutputError(terms).fit([run])
-        cpu.append(time.process_time() - cpu0)
-        wall.append(time.perf_counter() - wall0)
-    print(
-        f"fit, 1500 samples, 7 terms, oe: median {1e3 * statistics.median(cpu):.1f} ms CPU "
-        f"({1e3 * statistics.median(wall):.1f} ms wall) over {repeats} fits; "
-        f"{fit.nfev_} evaluations in the final solve"
-    )
+    figures = {}
+    for method, estimator in (("oe", OutputError), ("ee", EquationError)):
+        estimator(terms).fit([run])  # JIT warm-up (compiled code is cached on disk too)
+        cpu, wall = [], []
+        for _ in range(repeats):
+            cpu0, wall0 = time.process_time(), time.perf_counter()
+            estimator(terms).fit([run])
+            cpu.append(time.process_time() - cpu0)
+            wall.append(time.perf_counter() - wall0)
+        print(
+            f"fit, 1500 samples, 7 terms, {method}: median {1e3 * statistics.median(cpu):.1f} ms CPU "
+            f"({1e3 * statistics.median(wall):.1f} ms wall) over {repeats} fits"
+        )
+        figures[f"{method}_ms_cpu"] = 1e3 * statistics.median(cpu)
+        figures[f"{method}_ms_wall"] = 1e3 * statistics.median(wall)
+    return figures
 
 
-def bench_online(packet: int = 10) -> None:
+def bench_online(packet: int = 10) -> dict[str, float]:
     """Online refits over a 15 s, 100 Hz decay fed in 10-sample packets (CPU time per refit)."""
     run = decay({k: TRUTH[k] for k in ("b1", "b2", "c1", "c3")}, seed=2)
     OnlineIdentifier("b1,b2,c1,c3").update(run.t, run.angle, run.rate)  # warm-up
@@ -74,9 +82,15 @@ def bench_online(packet: int = 10) -> None:
         f"max {max(refits):.1f} ms; "
         f"the last ones on ~15 s of 100 Hz data: {', '.join(f'{r:.1f}' for r in refits[-3:])} ms"
     )
+    return {
+        "refits": len(refits),
+        "median_ms_cpu": statistics.median(refits),
+        "max_ms_cpu": max(refits),
+        "last_ms_cpu": refits[-1],
+    }
 
 
-def bench_cramer_rao(n_runs: int = 200, amplitude_deg: float = 10.0) -> None:
+def bench_cramer_rao(n_runs: int = 200, amplitude_deg: float = 10.0) -> dict[str, float]:
     """RMSE of b1, c1 and B_eq(amplitude) over white-noise Monte Carlo runs, divided by the Cramer-Rao bound.
 
     The bound is (J'J)^-1 of the noise-weighted exact Jacobian at the truth, nuisance parameters (initial
@@ -106,18 +120,36 @@ def bench_cramer_rao(n_runs: int = 200, amplitude_deg: float = 10.0) -> None:
         errors["b1"].append(fit.coefficients_["b1"] - truth["b1"])
         errors["c1"].append(fit.coefficients_["c1"] - truth["c1"])
         errors["B_eq"].append(b_eq(fit.coefficients_, amplitude) - b_eq(truth, amplitude))
+    ratios = {}
     for name, bound in bounds.items():
         rmse = math.sqrt(float(np.mean(np.square(errors[name]))))
         print(
             f"Cramer-Rao, {name}{f' at {amplitude_deg:g} deg' if name == 'B_eq' else ''}: RMSE {rmse:.3g}, "
             f"bound {bound:.3g}, ratio {rmse / bound:.3f} ({n_runs} runs)"
         )
+        ratios[f"{name}_rmse_over_cramer_rao"] = rmse / bound
+    return ratios
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("part", nargs="?", choices=("fit",), help="the fit time alone")
+    parser.add_argument("--runs", type=int, default=200, help="Monte Carlo runs against the Cramer-Rao bound")
+    args = parser.parse_args()
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    figures: dict[str, dict[str, float]] = {"fit_1500_samples_7_terms": bench_fit_time()}
+    if args.part != "fit":
+        figures["online_refit_15s_100hz"] = bench_online()
+        figures["cramer_rao"] = bench_cramer_rao(args.runs)
+    write_result(
+        "ident",
+        "fit time of one decay (output error, equation error; CPU of one pinned core), the live identifier's "
+        "refits over a 15 s decay, and Monte Carlo RMSE over the Cramer-Rao bound",
+        counts={"fit_repeats": 40, "cramer_rao_runs": 0 if args.part else args.runs},
+        figures=figures,
+    )
 
 
 if __name__ == "__main__":
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    bench_fit_time()
-    if sys.argv[1:] != ["fit"]:  # "fit": the fit time alone (an A/B run against another checkout)
-        bench_online()
-        bench_cramer_rao()
+    main()

@@ -22,6 +22,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from benchjson import write_result  # noqa: E402
 from tankdaq.device.attitude import GyroAttitude  # noqa: E402
 from tankdaq.physics.scenario import DecayScenario  # noqa: E402
 from tankdaq.physics.sensor import GRAVITY_M_S2, SensorNoise  # noqa: E402
@@ -53,6 +54,7 @@ def main() -> None:
     print(
         "| gyro | rate | rest before tilt | bias aside: median | worst | plain: median | worst | us/sample |"
     )
+    figures: dict[str, dict[str, float]] = {}
     for label, noise in (("MTi-100 0.01", SensorNoise.mti_100()), ("MTi-G 0.028", SensorNoise())):
         for rate_hz in (100.0, 400.0):
             for release_after_s in (12.0, 20.0):
@@ -63,6 +65,20 @@ def main() -> None:
                     f"| {label} | {rate_hz:.0f} | {rest} | {aside[0]:.3f} | {plain[0]:.3f} | {aside[1]:.3f} "
                     f"| {plain[1]:.3f} | {cost * 1e6:.1f} |"
                 )
+                figures[f"{label} {rate_hz:.0f} Hz rest {rest}"] = {
+                    "rms_bias_aside_deg_median": aside[0],
+                    "rms_bias_aside_deg_worst": plain[0],
+                    "rms_plain_deg_median": aside[1],
+                    "rms_plain_deg_worst": plain[1],
+                    "us_per_sample": cost * 1e6,
+                }
+    write_result(
+        "imu_attitude",
+        "roll from the integrated rate of turn (GyroAttitude) over scripted decays: RMS error over the first "
+        "20 s after the release (the accelerometer bias's static error aside, and plain), cost per sample",
+        counts={"seeds": SEEDS, "window_s": WINDOW_S},
+        figures=figures,
+    )
 
 
 if __name__ == "__main__":

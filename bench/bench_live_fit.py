@@ -5,13 +5,16 @@ viewer) in a fresh process and notes the wall time of every pass of the read loo
 daemon's status callback) from the release to the first pass after the settle. The longest
 gap between passes is how long acquisition was held up.
 
-"before" is the baseline commit's source (``git archive``, default: the commit this branch
-started from), run in the same session as "after" (this tree). "cold": ``NUMBA_CACHE_DIR`` and
+"before" is ``--baseline REV``'s source (``git archive``; its tree must have ``acquire.events``), run in the
+same session as "after" (this tree); ``--baseline none`` (the default) measures this tree alone.
+"cold": ``NUMBA_CACHE_DIR`` and
 ``TANKDAQ_KERNEL_DIR`` (where the native kernels are built) are a fresh folder (a first run after
 install); "warm": the same folder again.
 
 Third figure: the same 20 ms loop, bare, while the kernels compile (cold) on another thread:
 what warming up in the background during the device's opening would cost the loop.
+Release to fit: in each decay, the seconds of data after the release that the first published live fit
+covers and that fit's own time (at real time the first fit shows about their sum after the release).
 """
 
 from __future__ import annotations
@@ -30,25 +33,31 @@ import time
 from io import BytesIO
 from pathlib import Path
 
+from benchjson import write_result
+
 REPO = Path(__file__).resolve().parents[1]
-BASELINE = "948966e"
+BASELINE = "none"
 
 
 def measure_decay(out: Path) -> dict[str, object]:
     """One decay through the record daemon; the loop's pauses from the release to the settle."""
     from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-    from tankdaq.acquire.events import DeviceLost, Event, Released, Settled
+    from tankdaq.acquire.events import DeviceLost, Event, Fitted, Released, Settled
     from tankdaq.acquire.listeners import EventLog
     from tankdaq.store.reader import read_recording
 
     passes: list[float] = []
     phase = {"state": "before"}
+    fits: list[tuple[float, float]] = []  # (data after the release s, the fit's own s) of each live fit
+    release_t = [0.0]
 
     def on_event(event: Event) -> None:
         if event.printed:
             print(f"{time.monotonic() - started:7.2f} {event.line()}", file=sys.stderr, flush=True)
         if isinstance(event, Released):
-            phase["state"] = "decay"
+            phase["state"], release_t[0] = "decay", event.t_s
+        elif isinstance(event, Fitted):
+            fits.append((event.result.t_end - release_t[0], event.result.elapsed_s))
         elif isinstance(event, Settled) and phase["state"] == "decay":
             phase["state"] = "settled"
 
@@ -73,6 +82,10 @@ def measure_decay(out: Path) -> dict[str, object]:
         "counter_gaps": daemon.status.gaps,
         "wall_s": time.monotonic() - started,
         "fits_in_file": len(read_recording(outcome.path).fits),
+        "fits_published": len(fits),
+        "first_fit_data_after_release_s": fits[0][0] if fits else None,
+        "first_fit_own_s": fits[0][1] if fits else None,
+        "longest_fit_own_s": max((own for _, own in fits), default=None),
     }
 
 
@@ -172,19 +185,42 @@ def main() -> None:
         return
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.1f}, Python {platform.python_version()}")  # fmt: skip
+    figures: dict[str, dict[str, object]] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        sources = {"before": _export(args.baseline, Path(tmp) / "before"), "after": REPO / "src"}
+        sources = {"after": REPO / "src"}
+        if args.baseline != "none":
+            sources = {"before": _export(args.baseline, Path(tmp) / "before")} | sources
         for name, source in sources.items():
             cache = Path(tmp) / f"cache-{name}"
             for temperature in ("cold", "warm"):
                 result = _child("decay", source, cache)
                 label = args.baseline if name == "before" else "this tree"
                 print(f"{name} ({label}), {temperature} cache: {result}", flush=True)
+                figures[f"decay_{name}_{temperature}"] = result
         with tempfile.TemporaryDirectory() as cold:
-            print(
-                f"compiling beside a 20 ms loop (cold cache): {_child('compile', REPO / 'src', Path(cold))}"
-            )
-            print(f"fitting beside a 20 ms loop (warm cache): {_child('fits', REPO / 'src', Path(cold))}")
+            figures["compile_beside_loop_cold"] = _child("compile", REPO / "src", Path(cold))
+            print(f"compiling beside a 20 ms loop (cold cache): {figures['compile_beside_loop_cold']}")
+            figures["fits_beside_loop_warm"] = _child("fits", REPO / "src", Path(cold))
+            print(f"fitting beside a 20 ms loop (warm cache): {figures['fits_beside_loop_warm']}")
+    ratios = (
+        {}
+        if args.baseline == "none"
+        else {
+            f"longest_pause_{t}_after_over_before": float(figures[f"decay_after_{t}"]["longest_pause_s"])  # type: ignore[arg-type]
+            / float(figures[f"decay_before_{t}"]["longest_pause_s"])  # type: ignore[arg-type]
+            for t in ("cold", "warm")
+        }
+    )
+    write_result(
+        "live_fit",
+        "one simulated decay recorded (swath, 100 Hz, simulator at 4x, no viewer) in a fresh process, cold "
+        "and "
+        "warm kernel cache: the read loop's longest pause, and the first live fit after the release",
+        counts={"decays_per_case": 1, "sim_speed": 4.0},
+        figures=figures,
+        ratios=ratios,
+        baseline=f"commit {args.baseline}'s source (git archive), same run",
+    )
 
 
 if __name__ == "__main__":

@@ -13,17 +13,18 @@ Run: .venv/bin/python bench/bench_mt_manager.py [ROWS]   (48 fits and a ROWS-row
 
 from __future__ import annotations
 
-import datetime
 import itertools
 import json
-import os
 import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rich.progress import track
+
+from benchjson import write_result
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
@@ -139,24 +140,21 @@ def main() -> None:
     import tankdaq.store.csv_import  # noqa: F401  (the options of read_runs)
 
     with tempfile.TemporaryDirectory() as folder:
-        results: dict[str, object] = {
-            "measured": "b1 and c1 of a known decay from every MT Manager export style (generation x "
-            "delimiter x orientation, four time sources in turn) against the truth and the plain CSV; "
-            "the time to read a long export against a plain CSV of the same numbers",
-            "model": MODEL,
-            "cpu_count": os.cpu_count(),
-            "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
-            "fits": fits(Path(folder)),
-            "reading": reading_cost(Path(folder), rows),
-        }
-    RESULTS.parent.mkdir(exist_ok=True)
-    RESULTS.write_text(json.dumps(results, indent=2) + "\n")
+        results: dict[str, Any] = {"fits": fits(Path(folder)), "reading": reading_cost(Path(folder), rows)}
+    write_result(
+        "mt_manager",
+        "b1 and c1 of a known decay from every MT Manager export style (generation x delimiter x "
+        "orientation, four time sources in turn) against the truth and the plain CSV; the time to read a "
+        "long export against a plain CSV of the same numbers",
+        counts={"rows": rows, "model": MODEL},
+        figures=results,
+    )
     print(
         json.dumps(
             {k: v for k, v in results.items() if k != "fits"} | {"worst": results["fits"]["worst_abs_pct"]},
             indent=2,
         )
-    )  # type: ignore[index]
+    )
 
 
 if __name__ == "__main__":

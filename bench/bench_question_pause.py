@@ -23,6 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from benchjson import write_result
+
 PLAN = """hulls = ["swath"]
 axis = "roll"
 drafts = ["T"]
@@ -106,12 +108,23 @@ def main() -> None:
         return
     print(f"{platform.node()} {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}, pause {args.pause:g} s")
     trees = [("this tree", None)] + ([("baseline", args.baseline_src)] if args.baseline_src else [])
+    figures = {}
     for name, src in trees:
-        r = run_tree(src, args.pause)
+        r = figures[name] = run_tree(src, args.pause)
         print(
             f"{name:>10}: max queued {r['max_queued_blocks']:.0f} blocks, "
             f"at the end {r['queued_at_end']:.0f}, RSS growth over the pause {r['rss_growth_mb']:+.1f} MB"
         )
+    write_result(
+        "question_pause",
+        "a guided session on the simulated MTi-G paused at its verdict question: blocks queued by the "
+        "reading thread and RSS growth over the pause",
+        counts={"pause_s": args.pause},
+        figures=figures,
+        baseline=f"--baseline-src {args.baseline_src} (row 'baseline'), same run"
+        if args.baseline_src
+        else None,
+    )
 
 
 if __name__ == "__main__":

@@ -35,11 +35,12 @@ import tempfile
 import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
+from benchjson import write_result
 from tankdaq.store.reader import iter_raw_chunks
 
 #: ``tankdaq`` of whichever tankdaq PYTHONPATH gives (the venv's console script ignores it).
@@ -138,16 +139,31 @@ def read_gaps_ms(out: Path) -> list[np.ndarray]:
     return gaps
 
 
-def describe(tree: str, gaps: list[np.ndarray], wall_s: float) -> str:
+def gap_figures(gaps: list[np.ndarray], wall_s: float) -> dict[str, float]:
+    """The gaps between reads over every decay file of one recorder run."""
     if not gaps:
-        return f"{tree}: no decay file"
+        return {"decay_files": 0}
     every = np.concatenate(gaps)
-    worst = np.array([g.max() for g in gaps])
+    return {
+        "decay_files": len(gaps),
+        "reads": every.size,
+        "wall_s": wall_s,
+        "gap_median_ms": np.median(every),
+        "gap_p99_ms": np.percentile(every, 99),
+        "gap_longest_ms": every.max(),
+        "reads_over_50ms": (every > 50).sum(),
+        "longest_per_decay_median_ms": np.median([g.max() for g in gaps]),
+    }
+
+
+def describe(tree: str, f: dict[str, float]) -> str:
+    if not f["decay_files"]:
+        return f"{tree}: no decay file"
     return (
-        f"{tree}: {len(gaps)} decay files, {every.size} reads, {wall_s:.0f} s wall; gap between reads "
-        f"median {np.median(every):.1f} ms, 99th percentile {np.percentile(every, 99):.1f} ms, "
-        f"longest {every.max():.0f} ms; reads over 50 ms {int((every > 50).sum())}; "
-        f"longest per decay median {np.median(worst):.0f} ms"
+        f"{tree}: {f['decay_files']} decay files, {f['reads']} reads, {f['wall_s']:.0f} s wall; gap "
+        f"between reads median {f['gap_median_ms']:.1f} ms, 99th percentile {f['gap_p99_ms']:.1f} ms, "
+        f"longest {f['gap_longest_ms']:.0f} ms; reads over 50 ms {f['reads_over_50ms']}; "
+        f"longest per decay median {f['longest_per_decay_median_ms']:.0f} ms"
     )
 
 
@@ -180,8 +196,20 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(len(runs) if args.parallel else 1) as pool:
         outs = [Path(tmp) / str(i) for i in range(len(runs))]
         walls = pool.map(lambda i: record(runs[i][1], outs[i], setup, runs[i][2]), range(len(runs)))
+        figures = {}
         for (label, _src, _as_user), out, wall_s in zip(runs, outs, walls, strict=True):
-            print(describe(label, read_gaps_ms(out), wall_s), flush=True)
+            figures[label] = gap_figures(read_gaps_ms(out), wall_s)
+            print(describe(label, figures[label]), flush=True)
+    write_result(
+        "read_loop",
+        "the gaps between reads of the device while `tankdaq record` records at 400 Hz with the view saving "
+        "(simulated MTi-G sped up), from the host arrival stamps in the files",
+        counts=asdict(setup) | {"parallel": args.parallel},
+        figures=figures,
+        baseline=f"--baseline-src {args.baseline_src} (row 'baseline'), same run"
+        if args.baseline_src
+        else None,
+    )
     print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchjson import write_result
+
 RATES_HZ = (100, 200, 400)
 RUNS_PER_SCENARIO = 25
 DECAY_S = 25.0
@@ -50,17 +52,32 @@ def errors_at(rate_hz: int, releases: int, axis: str = "roll") -> dict[str, list
     return {"errors_s": errors, "se_s": ses, "missed": [float(missed)]}
 
 
-def summary(rate_hz: int, measured: dict[str, list[float]]) -> str:
+def stats(rate_hz: int, measured: dict[str, list[float]]) -> dict[str, float]:
+    """Bias, spread and coverage of one rate's release instants, in samples and ms."""
     err = np.array(measured["errors_s"])
     ses = np.array(measured["se_s"])
     samples = err * rate_hz
     covered = np.mean(np.abs(err) <= 1.96 * ses) if np.isfinite(ses).all() and ses.size else math.nan
+    return {
+        "n": err.size,
+        "missed": measured["missed"][0],
+        "bias_samples": samples.mean(),
+        "bias_ms": 1e3 * err.mean(),
+        "std_samples": samples.std(ddof=1),
+        "p95_abs_samples": np.percentile(np.abs(samples), 95),
+        "within_1_sample": np.mean(np.abs(samples) <= 1),
+        "median_se_ms": 1e3 * np.median(ses),
+        "within_1_96_se": covered,
+    }
+
+
+def summary(rate_hz: int, s: dict[str, float]) -> str:
     return (
-        f"{rate_hz:4d} Hz n={err.size:3d} missed={int(measured['missed'][0])} "
-        f"bias {samples.mean():+.3f} samples ({1e3 * err.mean():+.2f} ms) "
-        f"std {samples.std(ddof=1):.3f} samples; p95|err| {np.percentile(np.abs(samples), 95):.2f} samples; "
-        f"within 1 sample {np.mean(np.abs(samples) <= 1):.1%}; "
-        f"median se {1e3 * np.median(ses):.2f} ms, true within 1.96 se {covered:.1%}"
+        f"{rate_hz:4d} Hz n={s['n']:3.0f} missed={s['missed']:.0f} "
+        f"bias {s['bias_samples']:+.3f} samples ({s['bias_ms']:+.2f} ms) "
+        f"std {s['std_samples']:.3f} samples; p95|err| {s['p95_abs_samples']:.2f} samples; "
+        f"within 1 sample {s['within_1_sample']:.1%}; "
+        f"median se {s['median_se_ms']:.2f} ms, true within 1.96 se {s['within_1_96_se']:.1%}"
     )
 
 
@@ -77,6 +94,7 @@ def main() -> None:
     trees: list[tuple[str, str | None]] = [("this tree", None)]
     if args.baseline_src:
         trees.insert(0, (f"baseline {args.baseline_src}", args.baseline_src))
+    figures: dict[str, dict[str, dict[str, float]]] = {}
     for name, src in trees:
         # an archived src/ has no configs folder beside it: both trees read this one's hulls
         env = {**os.environ, "TANKDAQ_CONFIG_DIR": str(CONFIGS)}
@@ -86,8 +104,19 @@ def main() -> None:
         done = subprocess.run(child, env=env, check=True, capture_output=True, text=True)
         measured = json.loads(done.stdout)
         print(f"{name}: swath {args.axis}")
+        figures[name] = {f"{rate}hz": stats(rate, measured[str(rate)]) for rate in RATES_HZ}
         for rate in RATES_HZ:
-            print("  " + summary(rate, measured[str(rate)]))
+            print("  " + summary(rate, figures[name][f"{rate}hz"]))
+    write_result(
+        "release_bias",
+        f"release instant on the device clock: bias and spread of release_t against the truth over simulated "
+        f"hand releases of the swath ({args.axis}) per rate",
+        counts={"releases_per_rate": args.releases, "axis": args.axis},
+        figures=figures,
+        baseline=f"--baseline-src {args.baseline_src} (rows 'baseline'), same run"
+        if args.baseline_src
+        else None,
+    )
 
 
 if __name__ == "__main__":

@@ -23,10 +23,12 @@ import subprocess
 import sys
 import tempfile
 import time
-from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from benchjson import write_result
 
 RATES_HZ = (100, 200, 400)
 HOLDS = ("swaying", "still")
@@ -145,16 +147,7 @@ def main() -> None:
     if args.child:
         print(json.dumps(detect(Path(args.child))))
         return
-    results: dict[str, object] = {
-        "measured": "release instant from a swaying and a still hold: error against the truth, 95 % interval "
-        "coverage, detector speed (offline and live in 0.1 s blocks), this tree and the baseline on the "
-        "same samples",
-        "releases_per_case": args.releases,
-        "baseline": args.baseline,
-        "cpu_count": os.cpu_count(),
-        "date": datetime.now(UTC).isoformat(timespec="seconds"),
-        "cases": {},
-    }
+    cases: dict[str, dict[str, dict[str, Any]]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         trees = {"this tree": ROOT / "src"}
         if args.baseline != "none":
@@ -174,9 +167,16 @@ def main() -> None:
             # the baseline on the swaying hold only: its errors there, both trees' speed on the same samples
             chosen = trees if hold == "swaying" else {"this tree": trees["this tree"]}
             case = {name: figures(run_tree(folder, src), truths) for name, src in chosen.items()}
-            results["cases"][f"{hold} {rate} Hz"] = case  # type: ignore[index]
-            RESULTS.parent.mkdir(parents=True, exist_ok=True)  # each case as it is done: a long run
-            RESULTS.write_text(json.dumps(results, indent=2) + "\n")
+            cases[f"{hold} {rate} Hz"] = case
+            write_result(  # each case as it is done: a long run
+                "release_sway",
+                "release instant from a swaying and a still hold: error against the truth, 95 % interval "
+                "coverage, detector speed (offline and live in 0.1 s blocks), this tree and the baseline on "
+                "the same samples",
+                counts={"releases_per_case": args.releases},
+                figures={"cases": cases},
+                baseline=None if args.baseline == "none" else f"the detector of git revision {args.baseline}",
+            )
             for name, f in case.items():
                 cover = "n/a" if f["interval_covers"] is None else f"{f['interval_covers']:.1%}"
                 print(
@@ -189,7 +189,6 @@ def main() -> None:
                     f"live {f['live_us_per_sample']:.2f} us/sample",
                     flush=True,
                 )
-    print(f"written {RESULTS.relative_to(ROOT)}")
 
 
 if __name__ == "__main__":

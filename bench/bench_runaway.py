@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from benchjson import write_result
+
 REPO = Path(__file__).resolve().parents[1]
 RUNAWAY = REPO / "tests" / "runaway_recorder.py"
 
@@ -114,12 +116,14 @@ def main() -> None:
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.1f}, Python {platform.python_version()}, "
           f"native kernels {compiled.ahead_of_time()}")  # fmt: skip
-    seconds, how = fit_seconds(args.cap)
-    print(f"runaway fit without a budget: {seconds:.1f} s ({how}; stopped at --cap {args.cap:g} s)")
-    seconds, how = fit_seconds(REFIT_BUDGET_S)
-    print(f"runaway fit with the live budget {REFIT_BUDGET_S:g} s: {seconds:.2f} s ({how})")
-    print(f"longest kernel call the step cap allows: {longest_kernel_call_s():.2f} s")
+    unbudgeted, how = fit_seconds(args.cap)
+    print(f"runaway fit without a budget: {unbudgeted:.1f} s ({how}; stopped at --cap {args.cap:g} s)")
+    budgeted, how = fit_seconds(REFIT_BUDGET_S)
+    print(f"runaway fit with the live budget {REFIT_BUDGET_S:g} s: {budgeted:.2f} s ({how})")
+    kernel_s = longest_kernel_call_s()
+    print(f"longest kernel call the step cap allows: {kernel_s:.2f} s")
     longest, median = loop_pause_beside_the_runaway(10.0)
+    signals = []
     print(f"20 ms loop beside the runaway fit (10 s): longest pass {longest * 1e3:.1f} ms, "
           f"median {median * 1e3:.1f} ms")  # fmt: skip
     for _ in range(args.repeats):
@@ -127,6 +131,24 @@ def main() -> None:
             heard, exited, what = signal_latency(Path(out))
         print(f"SIGINT during a runaway refit: heard after {heard * 1e3:.0f} ms, exited after {exited:.2f} s "
               f"({what})")  # fmt: skip
+        signals.append((heard, exited))
+    write_result(
+        "runaway",
+        "a runaway live fit (gyro read 1000x too large): its time without and with the refit budget, the "
+        "longest kernel call, a 20 ms loop's pauses beside it, and SIGINT heard during a runaway refit",
+        counts={"cap_s": args.cap, "signal_repeats": args.repeats},
+        figures={
+            "unbudgeted_fit_s": unbudgeted,
+            "budgeted_fit_s": budgeted,
+            "longest_kernel_call_s": kernel_s,
+            "loop_longest_pass_ms": longest * 1e3,
+            "loop_median_pass_ms": median * 1e3,
+            "sigint_heard_ms_median": 1e3 * statistics.median(h for h, _ in signals),
+            "sigint_exit_s_median": statistics.median(e for _, e in signals),
+        },
+        ratios={"budgeted_over_unbudgeted": budgeted / unbudgeted},
+        baseline="the same fit without a budget, same run",
+    )
 
 
 if __name__ == "__main__":

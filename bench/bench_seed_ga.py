@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from benchjson import write_result
 from tankdaq.config import load_hull
 from tankdaq.ident.derived import b_eq, natural_period
 from tankdaq.ident.evolutionary import (
@@ -117,6 +118,30 @@ def main() -> None:
         f"OE {oe.seed_objective_ / truth_objective - 1:+.3%}"
     )
     print(f"GA seed variables: {', '.join(f'{k}={v:.5g}' for k, v in ga.seed_variables_.items())}")
+    figures = {
+        name: {
+            "wall_s": seconds,
+            "seed_objective": fit.seed_objective_,
+            "r2_angle": fit.r2_angle_,
+            "b_eq_5deg_rel_error": b_eq(fit.coefficients_, amplitude) / truth_beq - 1,
+        }
+        for name, (_, seconds, fit) in zip(("ga", "pso", "oe"), rows, strict=True)
+    }
+    write_result(
+        "seed_ga",
+        "the seeds' GA and PSO against output error on one known-truth SWATH decay (15 s, 100 Hz): wall "
+        "time, "
+        "objectives, errors against the truth",
+        counts={
+            "samples": run.t.size,
+            "oe_repeats": OE_REPEATS,
+            "ga_population": ga_settings.population,
+            "ga_generations": ga_settings.generations,
+        },
+        figures=figures,
+        ratios={"ga_wall_over_oe": ga.elapsed_s_ / oe_s, "pso_wall_over_oe": pso.elapsed_s_ / oe_s},
+        baseline="output error, same run",
+    )
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import typer
 
+from benchjson import write_result
 from tankdaq.cli import app
 
 REPEATS = 11
@@ -64,14 +65,26 @@ def main() -> None:
     label = "python -c 'import numpy, typer'"
     print(f"{label:<44} {base * 1e3:6.0f} ms CPU median, {base_least * 1e3:4.0f} least (baseline)")
     worst = worst_least = 0.0
+    figures = {
+        "baseline import numpy, typer": {"median_ms_cpu": base * 1e3, "least_ms_cpu": base_least * 1e3}
+    }
     for i, argv in enumerate(lines[1:], start=1):
         cpu, least = statistics.median(times[i]), min(times[i])
         worst, worst_least = max(worst, cpu / base), max(worst_least, least / base_least)
+        figures[" ".join(["tankdaq", *argv[1:]])] = {"median_ms_cpu": cpu * 1e3, "least_ms_cpu": least * 1e3}
         print(
             f"{' '.join(['tankdaq', *argv[1:]]):<44} {cpu * 1e3:6.0f} ms CPU median {cpu / base:4.2f}x, "
             f"{least * 1e3:4.0f} least {least / base_least:4.2f}x"
         )
     print(f"worst ratio to the baseline: {worst:.2f}x median, {worst_least:.2f}x least (target <= 1.5x)")
+    write_result(
+        "startup",
+        "CPU time (user + system) of `tankdaq --help` and every `tankdaq COMMAND --help` in a fresh process",
+        counts={"repeats": REPEATS, "command_lines": len(lines) - 1},
+        figures=figures,
+        ratios={"worst_median_over_baseline": worst, "worst_least_over_baseline": worst_least},
+        baseline="`python -c 'import numpy, typer'`, interleaved in the same run",
+    )
 
 
 if __name__ == "__main__":

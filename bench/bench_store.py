@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchjson import write_result
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store import schemas
@@ -58,7 +59,7 @@ def per_sample_us(seconds: float, n: int) -> float:
     return seconds / n * 1e6
 
 
-def bench_json(samples: np.ndarray) -> None:
+def bench_json(samples: np.ndarray) -> dict[str, float]:
     """Building the per-sample JSON column-wise against a dict and json.dumps per sample."""
     n = samples.size
     start = time.process_time()
@@ -74,9 +75,13 @@ def bench_json(samples: np.ndarray) -> None:
         f"per-sample dict+json.dumps {per_sample_us(per_dict, n):.2f} us/sample "
         f"({per_dict / column_wise:.1f}x); {sum(map(len, texts)) / n:.0f} bytes/sample"
     )
+    return {
+        "json_column_wise_us_per_sample": per_sample_us(column_wise, n),
+        "json_per_sample_dict_us_per_sample": per_sample_us(per_dict, n),
+    }
 
 
-def bench_write(samples: np.ndarray, frame: bytes, path: Path) -> None:
+def bench_write(samples: np.ndarray, frame: bytes, path: Path) -> dict[str, float]:
     """Writing raw bytes and samples as the daemon does, with its flush and fsync twice a second of data."""
     n = samples.size
     writer = RecordingWriter(path, {"hull": "swath", "axis": "roll"}, {}, flush_interval_s=1.0)
@@ -102,19 +107,27 @@ def bench_write(samples: np.ndarray, frame: bytes, path: Path) -> None:
         f"file size: {size / MINUTES / 1e6:.2f} MB per minute at {RATE_HZ} Hz "
         f"({size / n:.0f} bytes/sample incl. raw)"
     )
+    return {
+        "write_us_cpu_per_sample": per_sample_us(cpu, n),
+        "write_cpu_pct_of_one_core_at_400hz": cpu / (60 * MINUTES) * 100,
+        "file_mb_per_minute_at_400hz": size / MINUTES / 1e6,
+        "file_bytes_per_sample": size / n,
+    }
 
 
-def bench_fsync(folder: Path) -> None:
+def bench_fsync(folder: Path) -> dict[str, float]:
     fd = os.open(folder / "fsync_probe", os.O_WRONLY | os.O_CREAT)
     start = time.perf_counter()
     for _ in range(50):
         os.write(fd, bytes(4096))
         os.fsync(fd)
     os.close(fd)
-    print(f"fsync of a 4 KiB append: {(time.perf_counter() - start) / 50 * 1e3:.2f} ms (this disk)")
+    fsync_ms = (time.perf_counter() - start) / 50 * 1e3
+    print(f"fsync of a 4 KiB append: {fsync_ms:.2f} ms (this disk)")
+    return {"fsync_4kib_ms": fsync_ms}
 
 
-def bench_read_and_recover(path: Path, n: int) -> None:
+def bench_read_and_recover(path: Path, n: int) -> dict[str, float]:
     """Reading the file back (by blocks, and scanning the per-sample JSON), and recovering a torn copy."""
     read_s = min(cpu_seconds(read_recording, path) for _ in range(5))
     scan_s = cpu_seconds(read_recording_scanned, path)
@@ -134,9 +147,14 @@ def bench_read_and_recover(path: Path, n: int) -> None:
         f"({size * 0.75 / 1e6 / recover_s:.1f} MB/s), "
         f"{report.messages} messages kept, exit {report.exit_code}"
     )
+    return {
+        "read_m_samples_per_s_cpu": n / read_s / 1e6,
+        "scan_k_samples_per_s_cpu": n / scan_s / 1e3,
+        "recover_mb_per_s": size * 0.75 / 1e6 / recover_s,
+    }
 
 
-def bench_rerun(samples: np.ndarray, rrd_path: Path) -> None:
+def bench_rerun(samples: np.ndarray, rrd_path: Path) -> dict[str, float]:
     n = samples.size
     view = LiveView("save", rrd_path=rrd_path)
     start = time.process_time()
@@ -148,6 +166,7 @@ def bench_rerun(samples: np.ndarray, rrd_path: Path) -> None:
         f"rerun log_samples (save, 40 per call): {per_sample_us(rr_cpu, n):.1f} us CPU/sample = "
         f"{rr_cpu / (60 * MINUTES) * 100:.2f} % of one core at {RATE_HZ} Hz"
     )
+    return {"rerun_save_us_cpu_per_sample": per_sample_us(rr_cpu, n)}
 
 
 def main() -> None:
@@ -158,13 +177,26 @@ def main() -> None:
         f"workload: {MINUTES} min at {RATE_HZ} Hz = {n} samples, "
         f"batches of {BATCH}, {len(frame)} raw bytes each"
     )
-    bench_json(samples)
+    figures = bench_json(samples)
     with tempfile.TemporaryDirectory(dir=Path.cwd()) as name:
         folder = Path(name)
-        bench_write(samples, frame, folder / "bench.mcap")
-        bench_fsync(folder)
-        bench_read_and_recover(folder / "bench.mcap", n)
-        bench_rerun(samples, folder / "bench.rrd")
+        figures |= bench_write(samples, frame, folder / "bench.mcap")
+        figures |= bench_fsync(folder)
+        figures |= bench_read_and_recover(folder / "bench.mcap", n)
+        figures |= bench_rerun(samples, folder / "bench.rrd")
+    ratios = {
+        "json_column_wise_over_per_sample_dict": figures["json_column_wise_us_per_sample"]
+        / figures["json_per_sample_dict_us_per_sample"]
+    }
+    write_result(
+        "store",
+        "MCAP writing (raw + samples, flush+fsync twice a second), file size, read-back, recovery, rerun "
+        "save",
+        counts={"rate_hz": RATE_HZ, "minutes": MINUTES, "samples": n, "batch": BATCH},
+        figures=figures,
+        ratios=ratios,
+        baseline="per-sample dict + json.dumps, same run",
+    )
 
 
 if __name__ == "__main__":

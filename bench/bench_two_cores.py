@@ -17,6 +17,8 @@ from multiprocessing.queues import Queue
 
 import numpy as np
 
+from benchjson import write_result
+
 #: Rounds of the work: a numpy sort and a pure-Python loop, about 1 s of CPU in all.
 ROUNDS = 300
 
@@ -50,6 +52,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     print(f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average {os.getloadavg()[0]:.1f}")
+    ratios = []
     for _ in range(args.repeats):
         (alone,) = run(1)
         both = run(2)
@@ -58,6 +61,15 @@ def main() -> None:
             f"alone {alone[0]:.3f} s CPU; two at once {both[0][0]:.3f} and {both[1][0]:.3f} s CPU "
             f"(the slower {cpu_ratio:.2f}x alone)"
         )
+        ratios.append(cpu_ratio)
+    write_result(
+        "two_cores",
+        "CPU time of about a second of numpy and interpreter work in one process alone, then in two at once",
+        counts={"repeats": args.repeats},
+        figures={"slower_of_two_cpu_over_alone_median": float(np.median(ratios))},
+        ratios={"slower_of_two_cpu_over_alone_median": float(np.median(ratios))},
+        baseline="the same work in one process alone, same run",
+    )
 
 
 if __name__ == "__main__":
