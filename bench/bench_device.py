@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, SimulatedMTi
 

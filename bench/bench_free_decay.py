@@ -19,7 +19,7 @@ import numpy as np
 
 from tankdaq.ident.free_decay import cut_free_decay, find_free_end
 from tankdaq.ident.inputs import read_decays
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -50,7 +50,7 @@ def record(start_s: float, length_s: float, peak: float, speed: bool) -> DecayRu
 
 def main() -> None:
     terms = tuple(TRUTH)
-    clean = OutputError(terms).fit([record(0.0, 1.0, 0.0, False)])
+    clean = OutputErrorFit(terms).fit([record(0.0, 1.0, 0.0, False)])
     print(
         f"clean record: R² {clean.r2_angle_:.5f}; "
         + ", ".join(f"{k} {v:.4g}" for k, v in clean.coefficients_.items())
@@ -63,10 +63,10 @@ def main() -> None:
     print("| record | cut at (truth) | kind | R² whole | R² cut | max coefficient shift whole | cut |")
     for label, (truth_s, run) in cases.items():
         end = find_free_end(run)
-        whole = OutputError(terms).fit([run])
-        cut = OutputError(terms).fit([cut_free_decay(run)])
+        whole = OutputErrorFit(terms).fit([run])
+        cut = OutputErrorFit(terms).fit([cut_free_decay(run)])
 
-        def shift(fit: OutputError) -> str:
+        def shift(fit: OutputErrorFit) -> str:
             worst = max(TRUTH, key=lambda k: abs(fit.coefficients_[k] / clean.coefficients_[k] - 1))
             return f"{worst} {100 * (fit.coefficients_[worst] / clean.coefficients_[worst] - 1):+.1f} %"
 
@@ -83,7 +83,7 @@ def main() -> None:
         end = find_free_end(kvlcc2)
     cut_s = (time.perf_counter() - start) / 10
     start = time.perf_counter()
-    OutputError(terms).fit([kvlcc2])
+    OutputErrorFit(terms).fit([kvlcc2])
     fit_s = time.perf_counter() - start
     print(
         f"KVLCC2 21338 ({kvlcc2.t.size} samples): cut {1e3 * cut_s:.1f} ms ({end.kind}), "

@@ -21,8 +21,8 @@ import time
 import numpy as np
 
 from tankdaq.ident.derived import b_eq
-from tankdaq.ident.online import OnlineIdentifier
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
+from tankdaq.live.identifier import OnlineIdentifier
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -44,11 +44,11 @@ def bench_fit_time(repeats: int = 40) -> None:
     """Median time of one output-error fit: 1500 samples, 7 terms (seed001-eq1 + Coulomb friction)."""
     terms = ("b1", "b2", "b3", "c1", "c2", "c3", "fc")
     run = decay(TRUTH, seed=1)
-    OutputError(terms).fit([run])  # JIT warm-up (compiled code is cached on disk too)
+    OutputErrorFit(terms).fit([run])  # JIT warm-up (compiled code is cached on disk too)
     cpu, wall = [], []
     for _ in range(repeats):
         cpu0, wall0 = time.process_time(), time.perf_counter()
-        fit = OutputError(terms).fit([run])
+        fit = OutputErrorFit(terms).fit([run])
         cpu.append(time.process_time() - cpu0)
         wall.append(time.perf_counter() - wall0)
     print(
@@ -84,7 +84,7 @@ def bench_cramer_rao(n_runs: int = 200, amplitude_deg: float = 10.0) -> None:
     """
     terms = ("b1", "b2", "c1", "c3")
     truth = {k: TRUTH[k] for k in terms}
-    reference = OutputError(terms).fit([decay(truth, seed=0)])
+    reference = OutputErrorFit(terms).fit([decay(truth, seed=0)])
     p_true = reference.params_.copy()
     p_true[: len(terms)] = [truth[k] for k in terms]
     p_true[len(terms) :] = [0.3, 0.0, 0.01]
@@ -102,7 +102,7 @@ def bench_cramer_rao(n_runs: int = 200, amplitude_deg: float = 10.0) -> None:
     bounds = {"b1": math.sqrt(crb[0, 0]), "c1": math.sqrt(crb[2, 2]), "B_eq": math.sqrt(grad @ crb @ grad)}
     errors: dict[str, list[float]] = {name: [] for name in bounds}
     for seed in range(1, n_runs + 1):
-        fit = OutputError(terms, compute_diagnostics=False).fit([decay(truth, seed=1000 + seed)])
+        fit = OutputErrorFit(terms, compute_diagnostics=False).fit([decay(truth, seed=1000 + seed)])
         errors["b1"].append(fit.coefficients_["b1"] - truth["b1"])
         errors["c1"].append(fit.coefficients_["c1"] - truth["c1"])
         errors["B_eq"].append(b_eq(fit.coefficients_, amplitude) - b_eq(truth, amplitude))

@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from tankdaq.acquire.release import ReleaseDetector
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.physics.scenario import Handling
 
 CASES = [

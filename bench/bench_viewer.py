@@ -22,7 +22,7 @@ from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.events import DeviceLost, Event, Settled
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.sinks import ViewSink
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.simulator import ScriptedSource
 
 

@@ -23,9 +23,9 @@ import pytest
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.errors import IdentificationError
-from tankdaq.ident.online import (
+from tankdaq.live.identifier import (
     FINAL_FIT_WALL_FACTOR,
     BackgroundFit,
     OnlineIdentifier,

@@ -21,10 +21,10 @@ from tankdaq.acquire.events import KEPT_OUTCOMES, DecayOutcome, KeptOutcomes
 from tankdaq.acquire.memory import ARENAS
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.release import ReleaseDetector
-from tankdaq.acquire.sinks import Decay, IdentifierSink, Sink
-from tankdaq.config import hull_scenario
-from tankdaq.ident.online import OnlineResult
+from tankdaq.acquire.sinks import IdentifierSink, LiveDecay, Sink
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.ident.signals import SAVGOL_CACHE, _savgol_weights, smoothed_derivatives
+from tankdaq.live.identifier import OnlineResult
 from tankdaq.records import DecayEnd
 from tankdaq.samples import empty_samples
 from tankdaq.viz.live import LiveView
@@ -45,11 +45,11 @@ class FinalFits(Sink):
     def __init__(self) -> None:
         self.last: dict[int, OnlineResult] = {}
 
-    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
+    def on_fit(self, decay: LiveDecay, result: OnlineResult) -> None:
         self.last[decay.run] = result
 
     def on_note(
-        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
+        self, decay: LiveDecay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
     ) -> None:
         """Notes are not what this sink listens for."""
 

@@ -20,10 +20,10 @@ from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.acquire.read_thread import THREAD_NAME
 from tankdaq.acquire.release import ReleaseDetector
-from tankdaq.acquire.sinks import Block, Decay, Sink
+from tankdaq.acquire.sinks import Block, LiveDecay, Sink
 from tankdaq.device.driver import MTiDriver, StreamBlock
 from tankdaq.device.read_process import Chunk, ReadProcess
-from tankdaq.ident.online import OnlineResult
+from tankdaq.live.identifier import OnlineResult
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import iter_raw_chunks, read_recording
 from tankdaq.store.writer import RecordingWriter
@@ -88,16 +88,16 @@ class _ThreadSink(Sink):
     def _note(self, what: str) -> None:
         self.seen.setdefault(f"sink.{what}", set()).add(threading.current_thread())
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: Block, decay: LiveDecay | None) -> None:
         self._note("on_block")
 
-    def on_release(self, decay: Decay, pretrigger: object) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: object) -> None:
         self._note("on_release")
 
-    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
+    def on_fit(self, decay: LiveDecay, result: OnlineResult) -> None:
         self._note("on_fit")
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         self._note("on_settle")
 
 
@@ -135,7 +135,7 @@ def test_a_stop_mid_decay_feeds_every_block_already_read_into_the_file(
     held: list[bool] = []
 
     class StopMidDecay(Sink):
-        def on_block(self, block: Block, decay: Decay | None) -> None:
+        def on_block(self, block: Block, decay: LiveDecay | None) -> None:
             if decay is None or held or block.samples.size == 0:
                 return
             if float(block.samples["t"][-1]) - decay.release_t < 3.0:

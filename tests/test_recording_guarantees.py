@@ -26,10 +26,10 @@ from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.acquire.events import Event, Released
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
-from tankdaq.acquire.sinks import Decay, IdentifierSink, RecordingSink, Sink, ViewSink
+from tankdaq.acquire.sinks import IdentifierSink, LiveDecay, RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
-from tankdaq.ident.online import OnlineIdentifier, OnlineResult
+from tankdaq.live.identifier import OnlineIdentifier, OnlineResult
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
 from tankdaq.viz.live import LiveView
@@ -196,17 +196,17 @@ class Listener(Sink):
         if name == self.fail_at:
             raise Injected(f"{name} failed")
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: Block, decay: LiveDecay | None) -> None:
         self._hear("block" if decay is None else "decay block")
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[Block]) -> None:
         self.path_at_release = decay.path
         self._hear("release")
 
-    def on_fit(self, decay: Decay, result: object) -> None:
+    def on_fit(self, decay: LiveDecay, result: object) -> None:
         self._hear("fit")
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         self._hear(f"settle {decay.ended}")
 
     def close(self) -> None:

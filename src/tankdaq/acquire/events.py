@@ -18,7 +18,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import ClassVar
 
-from ..ident.online import OnlineResult
+from ..live.identifier import OnlineResult
 from ..records import DecayEnd
 from ..samples import StatusTally
 

@@ -22,14 +22,14 @@ from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-from ..ident.online import OnlineResult
+from ..live.identifier import OnlineResult
 from ..physics.models import resolve_model
 from ..records import DecayEnd
 from ..samples import AXIS_FIELDS
 from .events import DecayOutcome, Event, Fitted, Held, KeptOutcomes, Note, PutBack, Released, Settled
 from .memory import release_free_memory
 from .release import ReleaseDetector, ReleaseEvent
-from .sinks import Block, Decay, Sink
+from .sinks import Block, LiveDecay, Sink
 
 __all__ = ["HISTORY_S", "Block", "DecayOutcome", "DecayPipeline", "DetectionSettings"]
 
@@ -71,7 +71,7 @@ class DecayPipeline:
         self.state = "waiting"
         self.held_deg = math.nan
         self.next_run = 1
-        self.decay: Decay | None = None  # the decay under way
+        self.decay: LiveDecay | None = None  # the decay under way
 
     # ---- telling the sinks ----------------------------------------
 
@@ -90,12 +90,12 @@ class DecayPipeline:
         """An event for every sink (``Sink.on_event``), whatever an earlier one raised."""
         self._tell(lambda sink: sink.on_event(event))
 
-    def _publish_fit(self, decay: Decay, result: OnlineResult) -> None:
+    def _publish_fit(self, decay: LiveDecay, result: OnlineResult) -> None:
         self._tell(lambda sink: sink.on_fit(decay, result))
         self.emit(Fitted(decay.run, result))
 
     def _publish_note(
-        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
+        self, decay: LiveDecay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
     ) -> None:
         if kind == "warning":  # a warning a sink raises during the decay (an implausible fit) is an event too
             self.emit(Note("warning", message, decay.run))
@@ -206,7 +206,7 @@ class DecayPipeline:
         for other in self._detectors.values():
             if other.axis != axis:
                 other.reset()
-        decay = Decay(
+        decay = LiveDecay(
             run=self.next_run,
             axis=axis,
             terms=self.terms,
@@ -233,7 +233,7 @@ class DecayPipeline:
             decay.note("note", f"sensor {tilt}", release_t)
         self._note_flagged(decay)
 
-    def _note_flagged(self, decay: Decay) -> None:
+    def _note_flagged(self, decay: LiveDecay) -> None:
         """The first samples after the release the sensor flags (clipping, orientation not valid): a warning
         event (the file, the view, a record line) as they arrive; the count goes in the file at settle."""
         tally = decay.status

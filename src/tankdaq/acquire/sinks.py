@@ -8,7 +8,7 @@ the same pipeline without the ``RecordingSink``; a guided session adds its own (
 Sinks are told in the order given, and that order is the contract: the identifier comes first (its
 final fit must reach the file before the file closes), then the file (the view's .rrd is named
 after it, and the file closes before the view is told the run ended), then the view. A sink talks
-back through the ``Decay`` it is handed: ``decay.publish(fit)`` and ``decay.note(...)`` reach every
+back through the ``LiveDecay`` it is handed: ``decay.publish(fit)`` and ``decay.note(...)`` reach every
 sink at once, on the feeding thread (the file has one writer thread).
 """
 
@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import RecordingError, TankdaqError
-from ..ident.online import REFIT_BUDGET_S, BackgroundFit, OnlineIdentifier, OnlineResult
+from ..live.identifier import REFIT_BUDGET_S, BackgroundFit, OnlineIdentifier, OnlineResult
 from ..records import DecayEnd
 from ..samples import AXIS_FIELDS, StatusTally
 from ..store.disk import free_bytes, megabytes
@@ -53,7 +53,7 @@ class Block:
 
 
 @dataclass
-class Decay:
+class LiveDecay:
     """The decay under way, as the pipeline and its sinks share it.
 
     The pipeline fills in the release; sinks fill in what they made (``path`` by the file, ``rrd_path``
@@ -68,8 +68,8 @@ class Decay:
     angle_deg: float  # measured initial angle from the still water (signed)
     release_event: ReleaseEvent
     warnings: list[str]
-    publish_fit: Callable[[Decay, OnlineResult], None]
-    publish_note: Callable[[Decay, str, str, float | None, Mapping[str, object] | None], None]
+    publish_fit: Callable[[LiveDecay, OnlineResult], None]
+    publish_note: Callable[[LiveDecay, str, str, float | None, Mapping[str, object] | None], None]
     last_t: float = math.nan
     path: Path | None = None
     rrd_path: Path | None = None
@@ -158,21 +158,21 @@ class Decay:
 class Sink:
     """One listener of a decay pipeline; each method does nothing here: a sink overrides what it hears."""
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: Block, decay: LiveDecay | None) -> None:
         """Every block fed (``decay``: the decay under way, None while waiting for a release)."""
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[Block]) -> None:
         """A confirmed release, with the blocks since the pre-trigger (the first cut to whole frames)."""
 
     def on_note(
-        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
+        self, decay: LiveDecay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
     ) -> None:
         """An event of the decay: a warning, an unplug, a note."""
 
-    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
+    def on_fit(self, decay: LiveDecay, result: OnlineResult) -> None:
         """A refit (or the final fit) of the decay."""
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         """The decay ended (``decay.ended``; ``ERROR`` after an exception: close, fit nothing)."""
 
     def on_event(self, event: Event) -> None:
@@ -205,14 +205,14 @@ class IdentifierSink(Sink):
         self._live: BackgroundFit | None = None
         self._implausible: list[str] = []  # the checks the latest fit failed: each said once in a row
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[Block]) -> None:
         identifier = self.make_identifier(decay.model or decay.terms, axis=decay.axis)
         self._live = BackgroundFit(identifier, refit_budget_s=self.refit_budget_s)
         self._implausible = []
         for block in pretrigger:
             self._submit(block, decay)
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: Block, decay: LiveDecay | None) -> None:
         if decay is None or self._live is None:
             return
         self._submit(block, decay)
@@ -222,7 +222,7 @@ class IdentifierSink(Sink):
             self._publish(decay, result)
         self._note_abandoned(self._live, decay)
 
-    def _publish(self, decay: Decay, result: OnlineResult) -> None:
+    def _publish(self, decay: LiveDecay, result: OnlineResult) -> None:
         """The fit to every sink; an implausibility it carries (a check the last fit passed) as a warning
         note: the file's events, the view's event log, the record lines."""
         decay.publish(result)
@@ -233,12 +233,12 @@ class IdentifierSink(Sink):
             decay.note("warning", f"fit at {result.t_end - decay.release_t:.1f} s: {finding}", result.t_end)
 
     @staticmethod
-    def _note_abandoned(live: BackgroundFit, decay: Decay) -> None:
+    def _note_abandoned(live: BackgroundFit, decay: LiveDecay) -> None:
         """A refit past its budget was abandoned on the worker: the record says so (a warning event)."""
         for line in live.take_notes():
             decay.note("warning", line)
 
-    def _submit(self, block: Block, decay: Decay) -> None:
+    def _submit(self, block: Block, decay: LiveDecay) -> None:
         assert self._live is not None
         after = block.samples[block.samples["t"] >= decay.release_t] if block.samples.size else block.samples
         if after.size:
@@ -248,7 +248,7 @@ class IdentifierSink(Sink):
                 after["t"].copy(), after[angle_field].copy(), after[rate_field].copy(), excluded
             )
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         live, self._live = self._live, None
         if live is None:
             return
@@ -303,7 +303,7 @@ class RecordingSink(Sink):
         self.writer: RecordingWriter | None = None
         self.paths: list[str] = []  # every file opened, in order (as text: a Path holds 3x the bytes)
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[Block]) -> None:
         from ..store.naming import next_run_number, recording_name
 
         hull = str(self.run_metadata.get("hull", "hull"))
@@ -331,7 +331,7 @@ class RecordingSink(Sink):
 
         self._write(mark_release)
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: Block, decay: LiveDecay | None) -> None:
         if decay is not None:
             self._write_block(block)
 
@@ -346,11 +346,11 @@ class RecordingSink(Sink):
         self._write(write)
 
     def on_note(
-        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
+        self, decay: LiveDecay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
     ) -> None:
         self._write(lambda w: w.write_event(kind, message, t_s, data))
 
-    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
+    def on_fit(self, decay: LiveDecay, result: OnlineResult) -> None:
         extra = {
             "half_cycles": result.half_cycles,
             "samples": result.n_samples,
@@ -364,7 +364,7 @@ class RecordingSink(Sink):
             )
         )
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         ended = decay.ended_value
         said = ended.said(decay.last_t - decay.release_t)
 
@@ -409,7 +409,7 @@ class ViewSink(Sink):
         self.view = view
         self.rrd_base = rrd_base
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[Block]) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[Block]) -> None:
         view = self.view
         rrd = None if decay.path is None else decay.path.with_suffix(".rrd")
         if rrd is None and self.rrd_base is not None:
@@ -444,16 +444,16 @@ class ViewSink(Sink):
             "this decay is recorded without an .rrd; free some space"
         )
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: Block, decay: LiveDecay | None) -> None:
         if decay is not None and block.samples.size:
             self.view.log_samples(block.samples)
 
     def on_note(
-        self, decay: Decay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
+        self, decay: LiveDecay, kind: str, message: str, t_s: float | None, data: Mapping[str, object] | None
     ) -> None:
         self.view.log_event(kind, message, t_s)
 
-    def on_fit(self, decay: Decay, result: OnlineResult) -> None:
+    def on_fit(self, decay: LiveDecay, result: OnlineResult) -> None:
         t = result.predicted_t
         rate = np.gradient(result.predicted_angle, t) if t.size > 1 else np.zeros_like(result.predicted_angle)
         self.view.log_fit(
@@ -461,7 +461,7 @@ class ViewSink(Sink):
             final=result is decay.final_fit,  # the decay's verdict: never dropped, however far behind
         )  # fmt: skip
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         try:
             self.view.log_event("settled", f"decay {decay.ended_value.said()}", decay.last_t)
         finally:

@@ -13,7 +13,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ..config import WaterSettings, friction_scaling
+from ..config.hulls import WaterSettings, friction_scaling
 from ..physics.friction_scaling import FrictionScaling, FullScaleB44, assumption_lines
 from ..physics.scaling import FRICTION_NOTE, FroudeScale
 from ..records import DecayRun

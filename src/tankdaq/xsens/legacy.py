@@ -77,7 +77,7 @@ class RawGps:
 
 
 @dataclass(frozen=True)
-class Block:
+class LegacyBlock:
     """One block of a legacy message: the name it decodes to, its kind and its value count."""
 
     name: str
@@ -94,7 +94,7 @@ class Block:
 class LegacyLayout:
     """The blocks of a legacy message and the precision of its real values."""
 
-    blocks: tuple[Block, ...]
+    blocks: tuple[LegacyBlock, ...]
     precision_bits: int
     frame: str
 
@@ -120,35 +120,35 @@ def legacy_layout(output_mode: int, output_settings: int) -> LegacyLayout:
         )
     if output_settings & (POSITION_MODE_MASK | VELOCITY_MODE_MASK):
         raise ProtocolError("only LLA position and XYZ velocity output modes are supported")
-    blocks: list[Block] = []
+    blocks: list[LegacyBlock] = []
     if output_mode & MODE_RAW_INERTIAL:
-        blocks.append(Block("RawAccGyrMagTemp", "ints", fmt=RAW_INERTIAL))
+        blocks.append(LegacyBlock("RawAccGyrMagTemp", "ints", fmt=RAW_INERTIAL))
     if output_mode & MODE_RAW_GPS:
-        blocks.append(Block("RawGpsPressure", "rawgps", fmt=RAW_GPS))
+        blocks.append(LegacyBlock("RawGpsPressure", "rawgps", fmt=RAW_GPS))
     if output_mode & MODE_TEMPERATURE:
-        blocks.append(Block("Temperature", "reals", 1))
+        blocks.append(LegacyBlock("Temperature", "reals", 1))
     if output_mode & MODE_CALIBRATED:
         for name, disabled in (("Acceleration", DISABLE_ACC), ("RateOfTurn", DISABLE_GYR),
                                ("MagneticField", DISABLE_MAG)):  # fmt: skip
             if not output_settings & disabled:
-                blocks.append(Block(name, "reals", 3))
+                blocks.append(LegacyBlock(name, "reals", 3))
     if output_mode & MODE_ORIENTATION:
         name, count = ORIENTATIONS[output_settings & ORIENTATION_MASK]
-        blocks.append(Block(name, "reals", count))
+        blocks.append(LegacyBlock(name, "reals", count))
     if output_mode & MODE_AUXILIARY:
         for name, disabled in (("AnalogIn1", DISABLE_AIN1), ("AnalogIn2", DISABLE_AIN2)):
             if not output_settings & disabled:
-                blocks.append(Block(name, "ints", fmt=COUNTER))
+                blocks.append(LegacyBlock(name, "ints", fmt=COUNTER))
     if output_mode & MODE_POSITION:
-        blocks += [Block("LatLon", "reals", 2), Block("AltitudeEllipsoid", "reals", 1)]
+        blocks += [LegacyBlock("LatLon", "reals", 2), LegacyBlock("AltitudeEllipsoid", "reals", 1)]
     if output_mode & MODE_VELOCITY:
-        blocks.append(Block("VelocityXYZ", "reals", 3))
+        blocks.append(LegacyBlock("VelocityXYZ", "reals", 3))
     if output_mode & MODE_STATUS:
-        blocks.append(Block("StatusByte", "ints", fmt=STATUS))
+        blocks.append(LegacyBlock("StatusByte", "ints", fmt=STATUS))
     if timestamp == 1:
-        blocks.append(Block("PacketCounter", "ints", fmt=COUNTER))
+        blocks.append(LegacyBlock("PacketCounter", "ints", fmt=COUNTER))
     if timestamp == 2:
-        blocks.append(Block("UtcTime", "utc", fmt=UTC_STRUCT))
+        blocks.append(LegacyBlock("UtcTime", "utc", fmt=UTC_STRUCT))
     frame = "NED" if output_settings & NED_BIT else "ENU"
     return LegacyLayout(tuple(blocks), precision_bits, frame)
 

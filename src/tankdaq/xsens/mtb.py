@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .batch import ORIENTATION_COLUMNS, DecodedBlock, decode_capture
+from .column_decoder import ORIENTATION_COLUMNS, DecodedBlock, decode_capture
 from .constants import MASTER_BID, MID
 from .frame import Frame
 from .framer import ANY_BID

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .batch import DecodedBlock, decode_buffer
+from .column_decoder import DecodedBlock, decode_buffer
 from .constants import MAX_DATA_LENGTH
 from .framer import RESYNC_BIDS
 from .layouts import LayoutCache

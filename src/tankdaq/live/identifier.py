@@ -6,7 +6,7 @@ output-error fit is redone on everything so far, started from the previous
 answer, so each refit costs a few Levenberg-Marquardt steps. Results go to a
 callback (the viewer, the recorder's /fit channel) and to ``results_``; a refit
 that fails (too little motion yet) is noted in ``failures_`` and skipped. At the
-end of the decay the last result is the offline OutputError fit of the same data.
+end of the decay the last result is the offline OutputErrorFit fit of the same data.
 
 ``BackgroundFit`` runs an identifier on a worker thread so that the acquisition
 loop only hands samples over: a refit (10-50 ms, more on a loaded machine) never
@@ -29,15 +29,15 @@ from typing import Any
 import numpy as np
 
 from ..errors import IdentificationError
+from ..ident import compiled
+from ..ident.base import EstimatorMixin
+from ..ident.least_squares import solve_budget
+from ..ident.output_error import OutputErrorFit
+from ..ident.plausibility import Implausibility, check_runs
+from ..ident.signals import band_crossings, white_noise_level
+from ..ident.user_cache import shown
 from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 from ..records import DecayRun
-from . import compiled
-from .base import EstimatorMixin
-from .least_squares import solve_budget
-from .output_error import OutputError
-from .plausibility import Finding, check_runs
-from .signals import band_crossings, white_noise_level
-from .user_cache import shown
 
 #: With ``terms="auto"`` a model of k terms is tried live once the decay has this many half-cycles per term.
 HALF_CYCLES_PER_TERM = 2
@@ -61,7 +61,7 @@ class OnlineResult:
     predicted_t: np.ndarray
     predicted_angle: np.ndarray
     elapsed_s: float
-    findings: list[Finding] = field(
+    findings: list[Implausibility] = field(
         default_factory=list
     )  # the fit's implausibilities (``ident.plausibility``)
 
@@ -88,7 +88,7 @@ class OnlineIdentifier(EstimatorMixin):
     (``identify``'s held-out choice costs ten fits: on the JIT at load 8 they passed the final
     fit's budget; docs/models.md). ``particulars`` (the hull's GM and
     gyradius) and ``hull`` feed the plausibility checks every result carries. Other keyword
-    arguments go to the underlying ``OutputError``.
+    arguments go to the underlying ``OutputErrorFit``.
     """
 
     def __init__(
@@ -123,7 +123,7 @@ class OnlineIdentifier(EstimatorMixin):
         self._excluded: list[np.ndarray] = []
         self._fitted_half_cycles = 0
         self._checked_at = -np.inf
-        self.estimator_: OutputError | None = None
+        self.estimator_: OutputErrorFit | None = None
         self.level_ = 0  # with terms="auto": the family's model in use
         self.results_: list[OnlineResult] = []
         self.failures_: list[str] = []
@@ -174,11 +174,11 @@ class OnlineIdentifier(EstimatorMixin):
     def _auto(self) -> bool:
         return isinstance(self.terms, str) and is_auto(self.terms)
 
-    def _fit(self, terms: Sequence[str], run: DecayRun, start: OutputError | None) -> OutputError:
-        estimator = OutputError(terms, compute_diagnostics=False, **self.estimator_settings)
+    def _fit(self, terms: Sequence[str], run: DecayRun, start: OutputErrorFit | None) -> OutputErrorFit:
+        estimator = OutputErrorFit(terms, compute_diagnostics=False, **self.estimator_settings)
         return estimator.fit([run], start=start)
 
-    def _live_fit(self, run: DecayRun, half_cycles: int) -> OutputError:
+    def _live_fit(self, run: DecayRun, half_cycles: int) -> OutputErrorFit:
         """The refit of the model in use; with ``terms="auto"``, a plausible larger model of the family
         the half-cycles allow replaces it when its BIC is lower by ``LIVE_DELTA_BIC``."""
         if not self._auto:

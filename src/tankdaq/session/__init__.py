@@ -7,5 +7,5 @@ recording or the still water), ``watch`` (the model between decays: drift, a bum
 (where the session stands, from its log alone), ``recovery`` (what the folder holds that the log does
 not say), ``panel`` (the campaign panel), ``operator``
 (the questions and who answers them), ``report`` (the report of the accepted decays) and ``runner``
-(``CampaignSession``: the loop). Each is imported from its own module.
+(``GuidedSession``: the loop). Each is imported from its own module.
 """

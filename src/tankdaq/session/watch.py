@@ -32,10 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...samples import AXIS_FIELDS
-from ..events import Event, ModelMoved, PutBack, Released
-from ..release import TILT_MIN_DEG
-from ..sinks import Block, Decay, Sink
+from ..acquire.events import Event, ModelMoved, PutBack, Released
+from ..acquire.release import TILT_MIN_DEG
+from ..acquire.sinks import Block, LiveDecay, Sink
+from ..samples import AXIS_FIELDS
 from .checks import STILL_SD_DEG
 
 #: Device seconds of each window the watch judges (a bump shorter than two of them may pass unseen).
@@ -124,7 +124,7 @@ class ModelWatch(Sink):
 
     # ---- the sink ----------------------------------------
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: Block, decay: LiveDecay | None) -> None:
         if decay is not None:  # a decay under way: its motion is the recording's
             self._blocks, self._settling, self._pending = [], True, None
             return

@@ -10,10 +10,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ...ident.derived import b_eq
-from ...samples import AXIS_FIELDS
-from ..pipeline import DecayOutcome
-from ..sinks import Block, Decay, Sink
+from ..acquire.pipeline import DecayOutcome
+from ..acquire.sinks import Block, LiveDecay, Sink
+from ..ident.derived import b_eq
+from ..samples import AXIS_FIELDS
 from .checks import Measured
 
 #: device seconds of still water the level check averages after a draft change
@@ -22,8 +22,8 @@ LEVEL_S = 2.0
 
 def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
     """Read the decay back from its file (what is checked is what was stored) and its final fit."""
-    from ...ident.free_decay import find_free_end
-    from ...store.reader import read_decay_runs, read_recording
+    from ..ident.free_decay import find_free_end
+    from ..store.reader import read_decay_runs, read_recording
 
     assert outcome.path is not None
     recording = read_recording(outcome.path)
@@ -73,7 +73,7 @@ class LevelCheck(Sink):
         self._blocks = []
         self._since_host_t = time.time()  # the clock of ``Block.host_t``
 
-    def on_block(self, block: Block, decay: Decay | None) -> None:
+    def on_block(self, block: Block, decay: LiveDecay | None) -> None:
         if self.full or block.host_t < self._since_host_t:  # after it is full: not the still water measured
             return
         if block.samples.size:
