@@ -108,7 +108,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     from tankdaq.ident import compiled
-    from tankdaq.live.identifier import REFIT_BUDGET_S, prepare_kernels
+    from tankdaq.live.preparation import prepare_kernels
+    from tankdaq.live.worker import REFIT_BUDGET_S
 
     prepare_kernels()
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "

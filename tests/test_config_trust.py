@@ -41,7 +41,7 @@ angles_deg = [10.0]
 """
 
 
-#: The line ``live.identifier.prepare_identifier`` prints where the native kernels cannot be had and numba's
+#: The line ``live.preparation.prepare_identifier`` prints where the native kernels cannot be had and numba's
 #: JIT serves (a notice, not an error; it comes before the file reading that refuses).
 KERNEL_NOTICE = "identifier kernels on numba's JIT"
 

@@ -25,13 +25,9 @@ from tankdaq.acquire.pipeline import Block, DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import IdentifierSink, RecordingSink, ViewSink
 from tankdaq.config.hulls import load_hull
 from tankdaq.errors import IdentificationError
-from tankdaq.live.identifier import (
-    FINAL_FIT_WALL_FACTOR,
-    BackgroundFit,
-    OnlineIdentifier,
-    OnlineResult,
-    prepare_kernels,
-)
+from tankdaq.live.identifier import OnlineIdentifier, OnlineResult
+from tankdaq.live.preparation import prepare_kernels
+from tankdaq.live.worker import FINAL_FIT_WALL_FACTOR, BackgroundFit
 from tankdaq.records import DecayRun
 from tankdaq.store.reader import read_recording
 from tankdaq.store.writer import describe_run

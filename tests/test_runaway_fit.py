@@ -29,7 +29,9 @@ from tankdaq.errors import IdentificationError
 from tankdaq.ident import compiled, kernels
 from tankdaq.ident.least_squares import FitAbandoned, levenberg_marquardt, solve_budget
 from tankdaq.ident.output_error import OutputErrorFit
-from tankdaq.live.identifier import BackgroundFit, OnlineIdentifier, prepare_kernels
+from tankdaq.live.identifier import OnlineIdentifier
+from tankdaq.live.preparation import prepare_kernels
+from tankdaq.live.worker import BackgroundFit
 from tankdaq.records import DecayRun
 from tankdaq.store.reader import read_recording
 from tankdaq.store.writer import describe_run

@@ -35,7 +35,8 @@ from ..device.driver import MTiDriver, StreamCounters
 from ..device.factory import OpenDevice, SimPort, SimulatedSensor, open_device
 from ..device.simulator.playback import recorded_device
 from ..errors import DeviceGone, InputError, RecordingError
-from ..live.identifier import OnlineIdentifier, prepare_identifier
+from ..live.identifier import OnlineIdentifier
+from ..live.preparation import prepare_identifier
 from ..physics.scenario import fresh_seed
 from ..records import DecayEnd
 from ..store.disk import RESERVE_BYTES

@@ -17,7 +17,7 @@ from pathlib import Path
 from ..device.decoding import SampleDecoder
 from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
-from ..live.identifier import prepare_identifier
+from ..live.preparation import prepare_identifier
 from ..records import DecayEnd
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView

@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import RecordingError, TankdaqError
-from ..live.identifier import REFIT_BUDGET_S, BackgroundFit, OnlineIdentifier, OnlineResult
+from ..live.identifier import OnlineIdentifier, OnlineResult
+from ..live.worker import REFIT_BUDGET_S, BackgroundFit
 from ..records import DecayEnd
 from ..samples import AXIS_FIELDS, StatusTally
 from ..store.disk import free_bytes, megabytes

@@ -195,7 +195,7 @@ def campaign(
     from ..campaign.groups import REPORT_TABLES, find_campaign_hulls, find_recordings
     from ..campaign.stream import FileWork
     from ..ident.full_scale import campaign_full_scale
-    from ..live.identifier import prepare_identifier
+    from ..live.preparation import prepare_identifier
 
     inputs, hulls, start_s, end_s = _arguments(inputs, hulls, start_s, end_s)
     model = arguments.model(model)

@@ -378,7 +378,7 @@ def identify(
     from ..ident.estimators import make_estimator
     from ..ident.full_scale import friction_for, scale_results
     from ..ident.intervals import check_intervals
-    from ..live.identifier import prepare_identifier
+    from ..live.preparation import prepare_identifier
     from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 
     sources = sources_given(sources)

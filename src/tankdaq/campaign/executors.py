@@ -11,7 +11,7 @@ from multiprocessing import get_context
 from typing import Any, TypeVar
 
 from ..errors import InputError, TankdaqError, install_hint
-from ..live.identifier import prepare_kernels
+from ..live.preparation import prepare_kernels
 
 T = TypeVar("T")
 

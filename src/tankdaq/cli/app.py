@@ -272,7 +272,7 @@ def build_kernels_shown() -> None:
     with a spinner and the elapsed time (not on a terminal: a line every few seconds and one at the end);
     the library then finds them built (or says why not itself)."""
     from ..ident import compiled
-    from ..live.identifier import first_run_notice
+    from ..live.preparation import first_run_notice
 
     notice = first_run_notice()
     if notice is None:
