@@ -208,7 +208,7 @@ def campaign(
     scheduler = arguments.optional_text(scheduler, "scheduler", "a Dask scheduler's address or None")
     report = arguments.optional_path(report, "report", "a folder (str or pathlib.Path) or None")
     on_result = arguments.callback(on_result, "on_result")
-    file_work = arguments.optional_instance(file_work, "file_work", FileWork, "an campaign.stream.FileWork")
+    file_work = arguments.optional_instance(file_work, "file_work", FileWork, "a campaign.stream.FileWork")
     kept = Kept(arguments.progress(progress))
     workers = _check_campaign(model, jobs, executor, scheduler)
     folder = validation.report_dir(Path(report), REPORT_TABLES, "report") if report is not None else None

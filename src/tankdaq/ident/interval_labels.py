@@ -57,12 +57,12 @@ class IntervalSource(Enum):
 _DESCRIPTIONS = {
     IntervalSource.FIT: "the fit's own covariance (through the delta method for derived quantities)",
     IntervalSource.BOOTSTRAP: "a moving-block bootstrap of the fit's residuals",
-    IntervalSource.REPEATS: "repeat decays of one condition fitted one by one: the standard deviation of their mean "
-    "(GUM Type A; 95 % with Student's t, n - 1)",
-    IntervalSource.SCATTER: "repeat decays fitted one by one: their sample standard deviation (one decay's scatter, "
-    "not the mean's uncertainty)",
-    IntervalSource.ANGLES: "the fits at different initial angles of one hull, axis and draft: the standard deviation "
-    "of their mean, or half their range",
+    IntervalSource.REPEATS: "repeat decays of one condition fitted one by one: the standard deviation of "
+    "their mean (GUM Type A; 95 % with Student's t, n - 1)",
+    IntervalSource.SCATTER: "repeat decays fitted one by one: their sample standard deviation (one decay's "
+    "scatter, not the mean's uncertainty)",
+    IntervalSource.ANGLES: "the fits at different initial angles of one hull, axis and draft: the standard "
+    "deviation of their mean, or half their range",
     IntervalSource.STANDARD: "the combined standard uncertainty of the budget (GUM)",
     IntervalSource.EXPANDED: "the expanded uncertainty of the budget, k = 2 (GUM)",
 }
