@@ -7,7 +7,7 @@ columns (``column_decoder``), and the tests hold it to this one's values.
 A payload is a run of ``XDI (u16) | SIZE (u8) | DATA``. The XDI's low nibble carries the
 precision (bits 1-0) and, for orientation and velocity, the coordinate frame (bits 3-2);
 dispatch is on ``xdi & 0xFFF0``. Values stay in device units (Euler angles in degrees):
-conversion to SI happens once, when messages become samples (``batch.to_samples``).
+conversion to SI happens once, when messages become samples (``column_decoder.to_samples``).
 """
 
 from __future__ import annotations
