@@ -169,8 +169,9 @@ class DecodedLog:
 
 def orientation_in_enu(block: DecodedBlock) -> str | None:
     """Turn the orientation a device logged in NED or NWU into ENU, in place (the frame tankdaq reads:
-    ``column_decoder.to_samples`` leaves any other out); the line that says so, None when all was ENU. Roll and
-    pitch are the same in NWU (a turn about the vertical); NED's local frame is turned back to ENU."""
+    ``column_decoder.to_samples`` leaves any other out); the line that says so, None when all was ENU.
+    Roll and pitch are the same in NWU (a turn about the vertical); NED's local frame is turned back to
+    ENU."""
     turned: Counter[str] = Counter()
     for name, to_rad in ORIENTATION_COLUMNS.items():
         if name not in block.xdis:
