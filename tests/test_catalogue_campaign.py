@@ -23,7 +23,8 @@ from tankdaq.catalogue.hooks import CatalogueWriter
 from tankdaq.catalogue.rows import find_hull, hull_version, worker_row
 from tankdaq.catalogue.schema import PATH_INDEXES, SCHEMA_VERSION, decays, hulls, schema_version
 from tankdaq.cli import app
-from tankdaq.config.hulls import load_hull, validation
+from tankdaq.config import validation
+from tankdaq.config.hulls import load_hull
 from tankdaq.store.export import export_recording
 
 runner = CliRunner()

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.cli import app
 from tankdaq.cli.app import DRAFT_METAVAR
-from tankdaq.config.hulls import validation
+from tankdaq.config import validation
 
 runner = CliRunner()
 REPO = Path(__file__).resolve().parents[1]

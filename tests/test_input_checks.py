@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from held_tilt import write_held_tilt_csv
 from tankdaq.cli import app
-from tankdaq.config.hulls import validation
+from tankdaq.config import validation
 from tankdaq.errors import InputError
 
 runner = CliRunner()

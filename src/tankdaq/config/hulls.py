@@ -32,7 +32,7 @@ def config_dir() -> Path:
     env = os.environ.get("TANKDAQ_CONFIG_DIR")
     if env:
         return Path(env)
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # the tankdaq package (this is tankdaq/config/hulls.py)
     for candidate in (here.parent.parent / "configs", here / "_configs"):
         if candidate.is_dir():
             return candidate
