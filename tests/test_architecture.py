@@ -253,6 +253,18 @@ def test_the_cycle_check_sees_a_lazy_cycle(tmp_path: Path) -> None:
     assert import_cycles(module_graph(tmp_path)) == expected
 
 
+def test_no_two_public_classes_share_a_name() -> None:
+    """A class name says which class it is: ``Decay`` in one room and ``Decay`` in another made readers
+    (and imports) guess. Nested classes count; a leading underscore is private."""
+    where: dict[str, list[str]] = {}
+    for path in sorted(SRC.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                where.setdefault(node.name, []).append(path.relative_to(SRC).as_posix())
+    shared = {name: paths for name, paths in where.items() if len(paths) > 1}
+    assert not shared, f"public classes sharing a name: {shared}"
+
+
 # ---- sizes: a guideline, reported by `make sizes` (tools/sizes.py), never a failure ------------------
 
 
