@@ -49,9 +49,9 @@ from benchjson import write_result
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from campaign_scale import dask_cluster, write_many_decays
-from tankdaq.ident.campaign import find_recordings
-from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
-from tankdaq.ident.executors import campaign_executor
+from tankdaq.campaign.executors import campaign_executor
+from tankdaq.campaign.groups import find_recordings
+from tankdaq.campaign.stream import fit_campaign, scan_campaign
 
 TANKDAQ = [sys.executable, "-c", "from tankdaq.cli import main; main()"]
 MODES = ("--jobs 1", "--jobs 2", "dask, 2 workers")
@@ -107,7 +107,7 @@ def timed_serial_work(folder: Path) -> tuple[float, float]:
 
 def two_at_once(folder: Path) -> tuple[float, float, float]:
     """The ceiling row: two serial campaigns at once in forked processes (the kernels loaded here)."""
-    gc.freeze()  # forked as the local pool forks (``ident.executors.campaign_executor``)
+    gc.freeze()  # forked as the local pool forks (``campaign.executors.campaign_executor``)
     try:
         pool = multiprocessing.get_context("fork").Pool(2)
         pool.map(int, [0, 1])  # both forked and started before the clock

@@ -20,7 +20,7 @@ import numpy as np
 from benchjson import write_result
 from tankdaq.ident.free_decay import cut_free_decay, find_free_end
 from tankdaq.ident.inputs import read_decays
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -51,7 +51,7 @@ def record(start_s: float, length_s: float, peak: float, speed: bool) -> DecayRu
 
 def main() -> None:
     terms = tuple(TRUTH)
-    clean = OutputError(terms).fit([record(0.0, 1.0, 0.0, False)])
+    clean = OutputErrorFit(terms).fit([record(0.0, 1.0, 0.0, False)])
     print(
         f"clean record: R² {clean.r2_angle_:.5f}; "
         + ", ".join(f"{k} {v:.4g}" for k, v in clean.coefficients_.items())
@@ -65,10 +65,10 @@ def main() -> None:
     figures: dict[str, object] = {"clean_r2_angle": clean.r2_angle_}
     for label, (truth_s, run) in cases.items():
         end = find_free_end(run)
-        whole = OutputError(terms).fit([run])
-        cut = OutputError(terms).fit([cut_free_decay(run)])
+        whole = OutputErrorFit(terms).fit([run])
+        cut = OutputErrorFit(terms).fit([cut_free_decay(run)])
 
-        def shift(fit: OutputError) -> str:
+        def shift(fit: OutputErrorFit) -> str:
             worst = max(TRUTH, key=lambda k: abs(fit.coefficients_[k] / clean.coefficients_[k] - 1))
             return f"{worst} {100 * (fit.coefficients_[worst] / clean.coefficients_[worst] - 1):+.1f} %"
 
@@ -103,7 +103,7 @@ def kvlcc2_cost(terms: tuple[str, ...]) -> dict[str, float]:
         end = find_free_end(kvlcc2)
     cut_s = (time.perf_counter() - start) / 10
     start = time.perf_counter()
-    OutputError(terms).fit([kvlcc2])
+    OutputErrorFit(terms).fit([kvlcc2])
     fit_s = time.perf_counter() - start
     print(
         f"KVLCC2 21338 ({kvlcc2.t.size} samples): cut {1e3 * cut_s:.1f} ms ({end.kind}), "

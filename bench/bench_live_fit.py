@@ -91,7 +91,7 @@ def measure_decay(out: Path) -> dict[str, object]:
 
 def measure_compile_beside_a_loop() -> dict[str, float]:
     """A bare 20 ms loop while the kernels compile on another thread: its longest pause."""
-    from tankdaq.ident.online import prepare_kernels
+    from tankdaq.live.preparation import prepare_kernels
 
     gaps = _ticks_while(threading.Thread(target=prepare_kernels))
     return {
@@ -116,7 +116,8 @@ def measure_fits_beside_a_loop() -> dict[str, float]:
     """The GIL question: a 20 ms loop while final fits of a 25 s decay run back to back on a thread."""
     import numpy as np
 
-    from tankdaq.ident.online import OnlineIdentifier, prepare_kernels
+    from tankdaq.live.identifier import OnlineIdentifier
+    from tankdaq.live.preparation import prepare_kernels
 
     prepare_kernels()
     t = np.arange(0.0, 25.0, 0.01)

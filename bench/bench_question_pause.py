@@ -59,8 +59,8 @@ class PausingOperator:
 
 
 def child(pause_s: float) -> None:
-    from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
-    from tankdaq.plans import load_campaign_plan
+    from tankdaq.config.plans import load_campaign_plan
+    from tankdaq.session.runner import GuidedSession, SessionSettings
 
     with tempfile.TemporaryDirectory() as folder:
         plan = Path(folder) / "plan.toml"
@@ -68,7 +68,7 @@ def child(pause_s: float) -> None:
         record = {"port": "sim", "out_dir": Path(folder) / "out", "viewer": "none", "sim_seed": 1}
         settings = SessionSettings(load_campaign_plan(str(plan)), "swath", record, sim_faults={})
         operator = PausingOperator(pause_s)
-        session = CampaignSession(settings, operator)
+        session = GuidedSession(settings, operator)
         operator.session = session
         session.run()
     first, last = operator.samples[0], operator.samples[-1]

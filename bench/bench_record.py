@@ -38,7 +38,7 @@ from pathlib import Path
 
 from benchjson import write_result
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import SimulatedMTi
 from tankdaq.store.writer import RecordingWriter

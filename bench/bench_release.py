@@ -14,7 +14,7 @@ import numpy as np
 
 from benchjson import write_result
 from tankdaq.acquire.release import ReleaseDetector
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.physics.scenario import Handling
 
 CASES = [

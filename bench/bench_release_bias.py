@@ -33,7 +33,7 @@ CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 def errors_at(rate_hz: int, releases: int, axis: str = "roll") -> dict[str, list[float]]:
     """Errors (s) and reported standard errors (s) of every release found at ``rate_hz``."""
     from tankdaq.acquire.release import ReleaseDetector
-    from tankdaq.config import hull_scenario
+    from tankdaq.config.hulls import hull_scenario
     from tankdaq.physics.truth import TICKS_PER_S
 
     errors, ses, missed = [], [], 0

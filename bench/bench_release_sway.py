@@ -40,7 +40,7 @@ RESULTS = ROOT / "bench" / "results" / "release_sway.json"
 
 def scenarios(hold: str, rate_hz: int, releases: int) -> list[tuple[np.ndarray, list[float], list[int]]]:
     """(samples, true release instants (s), true first free samples) of each scenario."""
-    from tankdaq.config import hull_scenario
+    from tankdaq.config.hulls import hull_scenario
     from tankdaq.physics.scenario import Handling
     from tankdaq.physics.truth import TICKS_PER_S
 

@@ -48,13 +48,13 @@ def runaway_run() -> object:
 
 def fit_seconds(budget_s: float) -> tuple[float, str]:
     from tankdaq.ident.least_squares import solve_budget
-    from tankdaq.ident.output_error import OutputError
+    from tankdaq.ident.output_error import OutputErrorFit
 
     run = runaway_run()
     started = time.perf_counter()
     try:
         with solve_budget(budget_s):
-            OutputError("ittc-quadratic-restoring", compute_diagnostics=False).fit([run])  # type: ignore[list-item]
+            OutputErrorFit("ittc-quadratic-restoring", compute_diagnostics=False).fit([run])  # type: ignore[list-item]
         how = "finished"
     except Exception as exc:  # the abandoned fit
         how = type(exc).__name__
@@ -110,7 +110,8 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     from tankdaq.ident import compiled
-    from tankdaq.ident.online import REFIT_BUDGET_S, prepare_kernels
+    from tankdaq.live.preparation import prepare_kernels
+    from tankdaq.live.worker import REFIT_BUDGET_S
 
     prepare_kernels()
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "

@@ -18,7 +18,7 @@ from benchjson import write_result
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store import schemas
-from tankdaq.store.reader import Recording, read_recording
+from tankdaq.store.reader import StoredRecording, read_recording
 from tankdaq.store.reader import _read_scanned as read_recording_scanned
 from tankdaq.store.recover import recover
 from tankdaq.store.writer import RecordingWriter
@@ -46,7 +46,7 @@ def make_samples(n: int) -> np.ndarray:
     return samples
 
 
-def cpu_seconds(read: Callable[[Path], Recording], path: Path) -> float:
+def cpu_seconds(read: Callable[[Path], StoredRecording], path: Path) -> float:
     """CPU time of one read (the machine is shared: wall time measures the neighbours)."""
     start = time.process_time()
     recording = read(path)

@@ -27,7 +27,7 @@ from tankdaq.acquire.pipeline import DecayPipeline
 from tankdaq.acquire.read_thread import Read
 from tankdaq.acquire.recorder import Recorder
 from tankdaq.acquire.sinks import ViewSink
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.simulator import ScriptedSource
 
 

@@ -16,12 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tankdaq.config import load_hull
+from tankdaq.campaign.synthetic import SimulatedTest, simulated_decay
+from tankdaq.config.hulls import load_hull
 from tankdaq.ident.budget_fit import fit_budgets
 from tankdaq.ident.budget_inputs import MTI_G_710
-from tankdaq.ident.campaign_synthetic import SimulatedTest, simulated_decay
 from tankdaq.ident.derived import b_eq, natural_period, tested_amplitudes_deg
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.records import DecayRun
 
 INITIAL_DEG = 10.0
@@ -71,7 +71,7 @@ def campaign(seed: int, coefficients: dict[str, float], device_error: bool = Tru
                 name=f"run{i}",
             )
         )
-    fit = OutputError(sorted(coefficients)).fit(runs)
+    fit = OutputErrorFit(sorted(coefficients)).fit(runs)
     found = {
         b.key: b for b in fit_budgets(fit, runs, tested_amplitudes_deg(runs, fit.offsets_), device=profile)
     }

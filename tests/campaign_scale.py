@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tankdaq.config import format_draft, load_hull
-from tankdaq.ident.campaign_synthetic import SimulatedTest, simulated_decay, write_simulated_recording
+from tankdaq.campaign.synthetic import SimulatedTest, simulated_decay, write_simulated_recording
+from tankdaq.config.hulls import format_draft, load_hull
 
 #: How long the scheduler and its workers have to come up on a loaded machine.
 START_TIMEOUT_S = 60.0

@@ -54,7 +54,7 @@ def simulator() -> Iterator[SimulatedMTi]:
     It plays the swath's roll decay at 100 Hz, its clock ``SIMULATOR_SPEED`` times the wall clock. When
     the test ends, passed or failed, it is stopped and its pty, links and folder removed.
     """
-    from tankdaq.config import hull_scenario
+    from tankdaq.config.hulls import hull_scenario
     from tankdaq.device.simulator import SimulatedMTi
 
     with SimulatedMTi(hull_scenario(rate_hz=100), speed=SIMULATOR_SPEED) as device:
@@ -125,7 +125,7 @@ def catalogue_url(request: pytest.FixtureRequest, tmp_path: Path) -> str:
 def recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A real recording of one swath roll decay from 8 deg, 20 s at the simulated sensor's rate (about
     150 kB of MCAP); a module that needs another defines its own."""
-    from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
+    from tankdaq.campaign.synthetic import SimulatedTest, write_simulated_campaign
 
     folder = tmp_path_factory.mktemp("rec")
     (path,) = write_simulated_campaign(

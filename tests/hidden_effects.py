@@ -94,7 +94,7 @@ PREDICTION_CASES: tuple[tuple[str, tuple[float, float]], ...] = (
 def prediction_draw(component: str, band: tuple[float, float], seed: int) -> dict[str, Any]:
     """One draw of a prediction set (decays from the prediction's components, one scaled) compared with
     the prediction at the decays' speed, reduced to what the criteria need."""
-    from tankdaq.config import ikeda_prediction, load_hull
+    from tankdaq.config.hulls import ikeda_prediction, load_hull
     from tankdaq.diagnose.compare import SimulationComparison
     from tankdaq.diagnose.simulation import SimulationRequest, resolve_simulation
     from tankdaq.diagnose.synthetic import make_prediction_set

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from tankdaq.acquire.guided.checks import Measured
 from tankdaq.records import DecayEnd
+from tankdaq.session.checks import Measured
 
 
 def measured_decay(**changes: Any) -> Measured:

@@ -22,7 +22,7 @@ import numpy as np
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.events import Event, Stopping
 from tankdaq.acquire.listeners import EventLog, EventPrinter
-from tankdaq.ident.online import OnlineIdentifier, OnlineResult
+from tankdaq.live.identifier import OnlineIdentifier, OnlineResult
 from tankdaq.records import DecayRun
 
 GYRO_SCALE = 1000.0

@@ -26,10 +26,10 @@ import pytest
 from typer.testing import CliRunner
 
 import tankdaq
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.catalogue.database import open_catalogue
 from tankdaq.cli import app
 from tankdaq.errors import InputError, TankdaqError
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 #: A wrong kind of value for any argument: what a notebook user types by mistake.
 WRONG: dict[str, Any] = {

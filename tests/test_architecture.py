@@ -1,53 +1,39 @@
-"""The layer order in docs/architecture.md holds in the code: checked by reading every import in src/.
+"""The layer rules in layers.toml hold in the code: checked by reading every import in src/.
 
-The table in the doc is the rule. Its rows are in layer order, and each row's "may import" column names
-the tankdaq parts and the third-party libraries that package may use.
-Imports inside functions count: a lazy import is still a dependency.
+layers.toml's ``[rooms]`` is in layer order, and each room names the tankdaq rooms and the third-party
+libraries (``[libraries]``) it may use. Imports inside functions count: a lazy import is still a
+dependency. No module imports another that reaches back to it, and none imports ``tankdaq/__init__``
+(which loads the public API) for anything: ``__version__`` is ``tankdaq._version``'s.
 """
 
 from __future__ import annotations
 
 import ast
-import re
+import importlib.util
 import textwrap
+import tomllib
+import types
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src" / "tankdaq"
-DOC = ROOT / "docs" / "architecture.md"
-
-#: Third-party distributions whose use is a design decision (the rest of site-packages never appears).
-THIRD_PARTY = {
-    "numpy": "numpy",
-    "scipy": "scipy",
-    "numba": "numba",
-    "mcap": "mcap",
-    "rerun": "rerun-sdk",
-    "matplotlib": "matplotlib",
-    "serial": "pyserial",
-    "typer": "typer",
-    "rich": "rich",
-    "pymoo": "pymoo",
-    "distributed": "dask",
-    "dask": "dask",
-    "h5py": "h5py",
-    "pyarrow": "pyarrow",
-    "sqlalchemy": "sqlalchemy",
-}
+LAYERS = ROOT / "layers.toml"
 EVERYTHING = "everything"
 
 
+def layer_rules(path: Path = LAYERS) -> tuple[dict[str, set[str]], dict[str, str]]:
+    """``({room: allowed}`` in layer order, ``{import name: library})`` from layers.toml."""
+    rules = tomllib.loads(path.read_text())
+    return {room: set(allowed) for room, allowed in rules["rooms"].items()}, dict(rules["libraries"])
+
+
 def layer_table() -> dict[str, set[str]]:
-    """``{part: allowed}`` in the doc's row order; part is "errors", "ident", ... (no "tankdaq." prefix)."""
-    rows: dict[str, set[str]] = {}
-    for line in DOC.read_text().splitlines():
-        match = re.match(r"\| `tankdaq\.([a-z_]+)` \|.*\| ([^|]*) \|$", line)
-        if match:
-            allowed = {name.strip() for name in match.group(2).split(",") if name.strip() not in ("", "—")}
-            rows[match.group(1)] = allowed
-    return rows
+    return layer_rules()[0]
+
+
+THIRD_PARTY = layer_rules()[1]
 
 
 def part_of(path: Path, root: Path = SRC) -> str:
@@ -72,10 +58,7 @@ def imports_of(path: Path, root: Path = SRC) -> set[str]:
 
 
 def dependencies(path: Path, root: Path = SRC) -> set[str]:
-    """What one file depends on, in the table's words: "ident", "store", "numpy", "rerun-sdk", ...
-
-    A name from ``tankdaq/__init__`` (``__version__``) is no dependency.
-    """
+    """What one file depends on, in layers.toml's words: "ident", "store", "numpy", "rerun-sdk", ..."""
     found: set[str] = set()
     for name in imports_of(path, root):
         parts = name.split(".")
@@ -92,21 +75,80 @@ def allowed(dependency: str, own: str, rule: set[str]) -> bool:
     return dependency == own or EVERYTHING in rule or dependency in rule
 
 
-def test_the_doc_table_is_a_layer_order() -> None:
-    """Each row may name only rows above it: the table itself has no cycle."""
-    table = layer_table()
-    assert {"errors", "xsens", "ident", "cli"} <= set(table), "the may-import table was not found in the doc"
+def rule_problems(table: dict[str, set[str]], libraries: dict[str, str]) -> list[str]:
+    """What is wrong with a set of layer rules: a room that may import one below it, or a name that is
+    neither a room nor a library (a typo is no rule)."""
+    problems: list[str] = []
     seen: list[str] = []
     for part, rule in table.items():
         upward = sorted(name for name in rule if name in table and name not in seen)
-        assert not upward, f"tankdaq.{part} may import {upward}, which sit below it in the table"
+        if upward:
+            problems.append(f"tankdaq.{part} may import {upward}, which sit below it")
+        unknown = sorted(rule - set(table) - set(libraries.values()) - {EVERYTHING})
+        if unknown:
+            problems.append(f"tankdaq.{part} may use {unknown}: no such room or library")
         seen.append(part)
+    return problems
+
+
+def test_the_rules_are_a_layer_order() -> None:
+    """Each room may name only rooms above it: the rules themselves have no cycle."""
+    table, libraries = layer_rules()
+    assert {"errors", "xsens", "ident", "session", "cli"} <= set(table), "layers.toml lost its rooms"
+    assert not rule_problems(table, libraries), f"layers.toml: {rule_problems(table, libraries)}"
+
+
+def test_the_rule_check_sees_an_upward_rule_and_a_typo(tmp_path: Path) -> None:
+    rules = tmp_path / "layers.toml"
+    rules.write_text(
+        '[rooms]\nerrors = []\nxsens = ["errors", "ident", "nunpy"]\nident = ["xsens", "numpy"]\n'
+        '[libraries]\nnumpy = "numpy"\n'
+    )
+    table, libraries = layer_rules(rules)
+    assert list(table) == ["errors", "xsens", "ident"]  # the file's order is the layer order
+    assert rule_problems(table, libraries) == [
+        "tankdaq.xsens may import ['ident'], which sit below it",
+        "tankdaq.xsens may use ['nunpy']: no such room or library",
+    ]
 
 
 def test_every_part_of_src_has_a_row() -> None:
     table = layer_table()
     parts = {part_of(path) for path in SRC.rglob("*.py")} - {"__init__"}
-    assert parts <= set(table), f"no row in docs/architecture.md for {sorted(parts - set(table))}"
+    assert parts <= set(table), f"no room in layers.toml for {sorted(parts - set(table))}"
+
+
+def test_the_session_sits_above_the_api_and_acquisition() -> None:
+    """The guided session drives a recording and reports through the public API: nothing below it
+    (the API, acquisition and what they use) may reach it."""
+    order = list(layer_table())
+    assert order.index("api") < order.index("session") and order.index("acquire") < order.index("session")
+    below = order[: order.index("session")]
+    reaching = sorted(
+        path.relative_to(ROOT).as_posix()
+        for path in SRC.rglob("*.py")
+        if part_of(path) in below and "session" in dependencies(path)
+    )
+    assert not reaching, f"below the session, these import it: {reaching}"
+
+
+def test_no_module_imports_the_package_root() -> None:
+    """``tankdaq/__init__`` loads the public API on first use: a room that imported a name from it
+    (``from .. import __version__``) would sit below the API and on top of it at once."""
+    rooms = set(module_graph())  # every module and package: ``from .. import room`` names a room
+    wrong = []
+    for path in sorted(SRC.rglob("*.py")):
+        if path == SRC / "__init__.py":
+            continue
+        package = ["tankdaq", *path.relative_to(SRC).parent.parts]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom):
+                base = package[: len(package) - node.level + 1] if node.level else []
+                module = ".".join([*base, node.module] if node.module else base)
+                if module == "tankdaq":
+                    names = [f"tankdaq.{alias.name}" for alias in node.names]
+                    wrong += [f"{path.relative_to(ROOT)}: {name}" for name in names if name not in rooms]
+    assert not wrong, f"imported from tankdaq/__init__: {wrong}"
 
 
 @pytest.mark.parametrize("path", sorted(SRC.rglob("*.py")), ids=lambda p: str(p.relative_to(SRC)))
@@ -117,9 +159,7 @@ def test_imports_follow_the_table(path: Path) -> None:
         return
     wrong = sorted(dep for dep in dependencies(path) if not allowed(dep, own, table[own]))
     rule = sorted(table[own])
-    assert not wrong, (
-        f"{path.relative_to(ROOT)} imports {wrong}; docs/architecture.md lets tankdaq.{own} use {rule}"
-    )
+    assert not wrong, f"{path.relative_to(ROOT)} imports {wrong}; layers.toml lets tankdaq.{own} use {rule}"
 
 
 def test_the_check_sees_a_lazy_upward_import(tmp_path: Path) -> None:
@@ -147,7 +187,7 @@ def module_graph(root: Path = SRC) -> dict[str, set[str]]:
             while parts and ".".join(parts) not in modules:
                 parts.pop()
             target = ".".join(parts)
-            if target not in ("", "tankdaq", name):  # tankdaq/__init__ holds only the version
+            if target not in ("", "tankdaq", name):  # ``from .. import room``: the room, not the root
                 targets.add(target)
         graph[name] = targets
     return graph
@@ -213,99 +253,45 @@ def test_the_cycle_check_sees_a_lazy_cycle(tmp_path: Path) -> None:
     assert import_cycles(module_graph(tmp_path)) == expected
 
 
-def test_every_module_is_named_in_the_map() -> None:
-    """docs/architecture.md's "Rooms" names every module, so the map cannot drift from the code."""
-    rooms = DOC.read_text().split("\n## Rooms\n", 1)
-    assert len(rooms) == 2, "no Rooms section in docs/architecture.md"
-    named = set(re.findall(r"`(?:tankdaq\.)?([a-z_][a-z0-9_.]*)`", rooms[1]))
-    missing = []
+def test_no_two_public_classes_share_a_name() -> None:
+    """A class name says which class it is: ``Decay`` in one room and ``Decay`` in another made readers
+    (and imports) guess. Nested classes count; a leading underscore is private."""
+    where: dict[str, list[str]] = {}
     for path in sorted(SRC.rglob("*.py")):
-        parts = path.relative_to(SRC).with_suffix("").parts
-        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-        if module and module not in named:
-            missing.append(module)
-    assert not missing, f"modules docs/architecture.md's Rooms does not name: {missing}"
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                where.setdefault(node.name, []).append(path.relative_to(SRC).as_posix())
+    shared = {name: paths for name, paths in where.items() if len(paths) > 1}
+    assert not shared, f"public classes sharing a name: {shared}"
 
 
-# ---- sizes: rooms that fit in a head -------------------------------------------------------------------
-
-#: A module over this many lines, or a function whose body is over ``MAX_FUNCTION_LINES``, needs a reason
-#: in docs/architecture.md's "Sizes" section.
-MAX_MODULE_LINES = 500
-MAX_FUNCTION_LINES = 80
-#: The code the size rule holds for: the package, its tests and its benches.
-SIZED = ("src/tankdaq", "tests", "bench")
+# ---- sizes: a guideline, reported by `make sizes` (tools/sizes.py), never a failure ------------------
 
 
-def function_lengths(path: Path, root: Path = ROOT) -> dict[str, int]:
-    """``{"src/tankdaq/room/module.py:Class.function": lines}`` for every function in one file.
-
-    A function's lines run from the first line after its signature (the docstring counts) to its last:
-    a command's typer option signature is no part of it, everything the function does is.
-    """
-    where = path.relative_to(root).as_posix()
-    lengths: dict[str, int] = {}
-
-    def visit(node: ast.AST, prefix: str) -> None:
-        for child in ast.iter_child_nodes(node):
-            if not isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
-                visit(child, prefix)
-                continue
-            if not isinstance(child, ast.ClassDef):
-                last = child.end_lineno or child.lineno
-                lengths[f"{where}:{prefix}{child.name}"] = last - child.body[0].lineno + 1
-            visit(child, f"{prefix}{child.name}.")
-
-    visit(ast.parse(path.read_text(), str(path)), "")
-    return lengths
+def load_sizes() -> types.ModuleType:
+    """tools/sizes.py, loaded from its path (tools/ is no package)."""
+    spec = importlib.util.spec_from_file_location("sizes", ROOT / "tools" / "sizes.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
-def oversized(root: Path = ROOT, folders: tuple[str, ...] = SIZED) -> dict[str, int]:
-    """Every module over ``MAX_MODULE_LINES`` and function over ``MAX_FUNCTION_LINES``, with its lines."""
-    found: dict[str, int] = {}
-    for path in sorted(path for folder in folders for path in (root / folder).rglob("*.py")):
-        lines = len(path.read_text().splitlines())
-        if lines > MAX_MODULE_LINES:
-            found[path.relative_to(root).as_posix()] = lines
-        found |= {name: n for name, n in function_lengths(path, root).items() if n > MAX_FUNCTION_LINES}
-    return found
-
-
-def stated_size_exceptions() -> set[str]:
-    """The modules and functions docs/architecture.md's "Sizes" section lets stay over the limits."""
-    section = DOC.read_text().split("\n## Sizes\n", 1)
-    assert len(section) == 2, "no Sizes section in docs/architecture.md"
-    body = section[1].split("\n## ", 1)[0]
-    return set(re.findall(r"^- `([\w/.]+\.py(?::[\w.]+)?)`", body, flags=re.MULTILINE))
-
-
-def test_no_module_or_function_is_over_its_size_unless_the_map_says_why() -> None:
-    unexplained = {name: n for name, n in oversized().items() if name not in stated_size_exceptions()}
-    assert not unexplained, (
-        f"over {MAX_MODULE_LINES} lines a module or {MAX_FUNCTION_LINES} a function body: {unexplained}; "
-        "split it, or say why it must stay in docs/architecture.md's Sizes section"
-    )
-
-
-def test_every_size_exception_the_map_states_is_still_needed() -> None:
-    """An exception that no longer applies is a stale line in the map: it goes."""
-    stale = sorted(stated_size_exceptions() - set(oversized()))
-    assert not stale, f"docs/architecture.md's Sizes section names what is within the limits now: {stale}"
-
-
-def test_the_size_check_sees_a_long_function_and_not_a_long_signature(tmp_path: Path) -> None:
+def test_the_size_report_sees_a_long_function_and_not_a_long_signature(tmp_path: Path) -> None:
+    sizes = load_sizes()
+    limit = sizes.MAX_FUNCTION_LINES
     room = tmp_path / "src" / "cli"
     room.mkdir(parents=True)
     options = "".join(f"    option_{i}: int = 0,\n" for i in range(60))
-    body = "".join(f"x = {i}\n" for i in range(MAX_FUNCTION_LINES))
+    body = "".join(f"x = {i}\n" for i in range(limit))
     (room / "command.py").write_text(
         f'def command(\n{options}) -> None:\n    """Help."""\n{textwrap.indent(body, " " * 4)}\n\n'
         f"class Kind:\n    def method(self) -> None:\n{textwrap.indent(body, ' ' * 8)}"
     )
-    (room / "long.py").write_text("x = 0\n" * (MAX_MODULE_LINES + 1))
-    assert function_lengths(room / "command.py", tmp_path) == {
-        "src/cli/command.py:command": MAX_FUNCTION_LINES + 1,  # its docstring and body, not the 60 options
-        "src/cli/command.py:Kind.method": MAX_FUNCTION_LINES,
+    (room / "long.py").write_text("x = 0\n" * (sizes.MAX_MODULE_LINES + 1))
+    assert sizes.function_lengths(room / "command.py", tmp_path) == {
+        "src/cli/command.py:command": limit + 1,  # its docstring and body, not the 60 options
+        "src/cli/command.py:Kind.method": limit,
     }
-    long_ones = {"src/cli/command.py:command": MAX_FUNCTION_LINES + 1, "src/cli/long.py": 501}
-    assert oversized(tmp_path, ("src",)) == long_ones
+    long_ones = {"src/cli/command.py:command": limit + 1, "src/cli/long.py": sizes.MAX_MODULE_LINES + 1}
+    assert sizes.oversized(tmp_path, ("src",)) == long_ones

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import tankdaq
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.errors import ConfigError
 from tankdaq.ident.budget import EXPANDED_LABEL, FitUncertainty, budgets, monte_carlo, without
 from tankdaq.ident.budget_fit import fit_budgets, hull_figures, per_decay_coefficients
@@ -27,7 +27,7 @@ from tankdaq.ident.budget_inputs import (
     reported_quantities,
 )
 from tankdaq.ident.derived import tested_amplitudes_deg as band_of
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.records import DecayRun
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -61,7 +61,7 @@ c3 = -20.0
 
 
 def _decays(count: int, seed: int = 3) -> list[DecayRun]:
-    from tankdaq.ident.campaign_synthetic import SimulatedTest, simulated_decay
+    from tankdaq.campaign.synthetic import SimulatedTest, simulated_decay
 
     test = SimulatedTest(duration_s=8.0, hold_s=0.2)
     rng = np.random.default_rng(seed)
@@ -81,9 +81,9 @@ def hull(tmp_path_factory: pytest.TempPathFactory) -> object:
 
 
 @pytest.fixture(scope="module")
-def fitted() -> tuple[OutputError, list[DecayRun]]:
+def fitted() -> tuple[OutputErrorFit, list[DecayRun]]:
     runs = _decays(3)
-    return OutputError(sorted(truth())).fit(runs), runs
+    return OutputErrorFit(sorted(truth())).fit(runs), runs
 
 
 def test_the_budget_adds_up_and_a_source_removed_removes_its_row(fitted, hull) -> None:
@@ -128,7 +128,7 @@ def test_type_a_is_from_repeats_or_says_that_repeats_are_needed(fitted) -> None:
     three = {b.key: b for b in fit_budgets(fit, runs, tested)}["natural_period_s"]
     assert three.rows[0].kind.value == "A" and "n=3" in three.rows[0].source
     assert any("3 repeat decays" in note for note in three.notes)
-    one = OutputError(fit.terms_).fit(runs[:1])
+    one = OutputErrorFit(fit.terms_).fit(runs[:1])
     alone = {b.key: b for b in fit_budgets(one, runs[:1], tested)}["natural_period_s"]
     assert alone.rows[0].source.startswith("the fit (hac")
     assert any("repeat the decay" in note for note in alone.notes)
@@ -223,10 +223,10 @@ def test_the_catalogue_keeps_each_fits_budget(catalogue_url: str, tmp_path: Path
     import sqlalchemy as sa
     from typer.testing import CliRunner
 
+    from tankdaq.campaign.synthetic import SimulatedTest, write_simulated_campaign
     from tankdaq.catalogue.database import open_catalogue
     from tankdaq.catalogue.schema import budgets, fits
     from tankdaq.cli import app
-    from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
 
     test = SimulatedTest(duration_s=6.0)
     paths = [
@@ -256,8 +256,8 @@ def test_the_catalogue_keeps_each_fits_budget(catalogue_url: str, tmp_path: Path
 
 def test_the_device_profile_follows_the_recordings_product_code(tmp_path: Path) -> None:
     """A recording made with a 2007-era MTi-G gets its datasheet's figures; a lab's own profile wins."""
+    from tankdaq.campaign.synthetic import SimulatedTest, simulated_decay, write_simulated_recording
     from tankdaq.ident.budget_inputs import DeviceProfile
-    from tankdaq.ident.campaign_synthetic import SimulatedTest, simulated_decay, write_simulated_recording
 
     test = SimulatedTest(duration_s=6.0)
     t, angle, rate = simulated_decay(truth(), 10.0, test, np.random.default_rng(2))
@@ -276,8 +276,8 @@ def test_the_device_profile_follows_the_recordings_product_code(tmp_path: Path) 
 def test_the_cli_takes_a_labs_angle_accuracy_and_refuses_a_bad_one(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
+    from tankdaq.campaign.synthetic import SimulatedTest, write_simulated_campaign
     from tankdaq.cli import app
-    from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
 
     (path,) = write_simulated_campaign(
         tmp_path, ["catamaran"], "roll", [1.0], [10.0], test=SimulatedTest(6.0)

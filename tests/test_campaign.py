@@ -13,10 +13,8 @@ import pytest
 from matplotlib.image import imread
 from typer.testing import CliRunner
 
-from tankdaq.cli import app
-from tankdaq.config import load_hull
-from tankdaq.errors import InputError
-from tankdaq.ident.campaign import (
+from tankdaq.campaign.executors import LocalPool, campaign_executor
+from tankdaq.campaign.groups import (
     GroupKey,
     GroupResult,
     csv_labels,
@@ -27,7 +25,7 @@ from tankdaq.ident.campaign import (
     read_campaign,
     read_campaign_runs,
 )
-from tankdaq.ident.campaign_stream import (
+from tankdaq.campaign.stream import (
     CHUNKS,
     MAX_CHUNK_DECAYS,
     RunRef,
@@ -37,9 +35,11 @@ from tankdaq.ident.campaign_stream import (
     scan_campaign,
     scan_chunks,
 )
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.campaign.synthetic import write_simulated_campaign
+from tankdaq.cli import app
+from tankdaq.config.hulls import load_hull
+from tankdaq.errors import InputError
 from tankdaq.ident.derived import b_eq
-from tankdaq.ident.executors import LocalPool, campaign_executor
 from tankdaq.records import DecayRun
 from tankdaq.viz.campaign_report import load_plotting, write_report
 
@@ -338,8 +338,8 @@ def test_a_group_that_cannot_be_fitted_keeps_its_reason(csv_results: list) -> No
 
 
 def test_every_campaign_plan_loads_and_names_real_hulls_and_drafts():
-    from tankdaq.config import load_hull, parse_draft
-    from tankdaq.plans import list_campaign_plans, load_campaign_plan
+    from tankdaq.config.hulls import load_hull, parse_draft
+    from tankdaq.config.plans import list_campaign_plans, load_campaign_plan
 
     plans = list_campaign_plans()
     assert {"seed000-trimaran-catamaran-pitch", "seed001-swath-roll", "seed002-swath-pitch"} <= set(plans)
@@ -368,7 +368,7 @@ def test_simulate_campaign_follows_a_plan(tmp_path):
 def test_a_streamed_campaign_gives_the_serial_rows_and_keeps_no_recording(
     csv_campaign: Path, csv_results: list
 ) -> None:
-    """Workers read the files themselves and send back rows only (``ident.campaign_stream``)."""
+    """Workers read the files themselves and send back rows only (``campaign.stream``)."""
     paths = find_recordings([csv_campaign])
     with campaign_executor(jobs=2) as pool:
         scan = scan_campaign(paths, executor=pool)

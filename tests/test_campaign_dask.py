@@ -10,11 +10,11 @@ import pytest
 from typer.testing import CliRunner
 
 from campaign_scale import dask_cluster, write_many_decays
+from tankdaq.campaign.executors import CLIENT_BATCH_S, DaskExecutor, campaign_executor
+from tankdaq.campaign.groups import find_campaign_hulls, find_recordings
+from tankdaq.campaign.stream import completed, fit_campaign, scan_campaign, scan_file
+from tankdaq.campaign.synthetic import SimulatedTest
 from tankdaq.cli import app
-from tankdaq.ident.campaign import find_campaign_hulls, find_recordings
-from tankdaq.ident.campaign_stream import completed, fit_campaign, scan_campaign, scan_file
-from tankdaq.ident.campaign_synthetic import SimulatedTest
-from tankdaq.ident.executors import CLIENT_BATCH_S, DaskExecutor, campaign_executor
 
 pytest.importorskip("distributed", reason="the dask extra is not installed (pip install 'tankdaq[dask]')")
 

@@ -10,15 +10,15 @@ import pytest
 from typer.testing import CliRunner
 
 import tankdaq
-from tankdaq.cli import app
-from tankdaq.config import load_hull
-from tankdaq.errors import InputError
-from tankdaq.ident.campaign_synthetic import (
+from tankdaq.campaign.synthetic import (
     SimulatedTest,
     simulated_decay,
     write_simulated_campaign,
     write_simulated_recording,
 )
+from tankdaq.cli import app
+from tankdaq.config.hulls import load_hull
+from tankdaq.errors import InputError
 
 
 def _stopped(folder: Path, angle_deg: float, extra: dict[str, object]) -> Path:

@@ -26,7 +26,9 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import tankdaq
-import tankdaq.config
+import tankdaq.config.hulls
+from tankdaq.campaign.groups import group_runs, identify_groups, read_campaign
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.catalogue.database import (
     WRITER_CACHE_KB,
     BadCatalogueQuery,
@@ -40,8 +42,6 @@ from tankdaq.catalogue.index import index_folder
 from tankdaq.catalogue.query import RunQuery, paths_for, select_rows
 from tankdaq.catalogue.schema import SCHEMA_VERSION, decays, exports, fits, schema_version
 from tankdaq.cli import app
-from tankdaq.ident.campaign import group_runs, identify_groups, read_campaign
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 EXE = str(Path(sys.executable).with_name("tankdaq"))
 HERE = Path(__file__).resolve().parent
@@ -210,7 +210,7 @@ def test_a_recorder_killed_mid_decay_leaves_no_complete_row_until_recover_and_in
     assert [(r["path"], r["complete"]) for r in _rows(url)] == [(str(first.resolve()), True)]
     (live,) = _rows(url)
     assert live["fit_source"] == "record" and live["coefficients"]["b1"]["value"] > 0  # the live final fit
-    hull_file = Path(tankdaq.config.load_hull("swath").path)  # the hull's version it was recorded with
+    hull_file = Path(tankdaq.config.hulls.load_hull("swath").path)  # the hull's version it was recorded with
     assert live["hull_sha256"] == hashlib.sha256(hull_file.read_bytes()).hexdigest()
     run = [EXE, "catalogue", "index", str(out), "--catalogue", url]
     assert subprocess.run(run, capture_output=True, timeout=120).returncode == 0

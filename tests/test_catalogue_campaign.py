@@ -16,15 +16,15 @@ import sqlalchemy as sa
 from typer.testing import CliRunner
 
 import tankdaq
-from tankdaq import validation
+from tankdaq.campaign.stream import FileWork
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.catalogue.database import open_catalogue, resolve_url
 from tankdaq.catalogue.hooks import CatalogueWriter
 from tankdaq.catalogue.rows import find_hull, hull_version, worker_row
 from tankdaq.catalogue.schema import PATH_INDEXES, SCHEMA_VERSION, decays, hulls, schema_version
 from tankdaq.cli import app
-from tankdaq.config import load_hull
-from tankdaq.ident.campaign_stream import FileWork
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.config import validation
+from tankdaq.config.hulls import load_hull
 from tankdaq.store.export import export_recording
 
 runner = CliRunner()

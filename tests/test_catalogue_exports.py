@@ -20,10 +20,10 @@ from scipy.io import savemat
 from typer.testing import CliRunner
 
 import tankdaq
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.catalogue.database import open_catalogue, resolve_url
 from tankdaq.catalogue.schema import exports
 from tankdaq.cli import app
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 runner = CliRunner()
 

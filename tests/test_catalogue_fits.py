@@ -20,22 +20,22 @@ import sqlalchemy as sa
 from typer.testing import CliRunner
 
 import tankdaq
+from tankdaq.campaign.synthetic import (
+    SimulatedTest,
+    simulated_decay,
+    write_simulated_campaign,
+    write_simulated_recording,
+)
 from tankdaq.catalogue.database import open_catalogue, resolve_url
 from tankdaq.catalogue.fits import FitMethod, command_line
 from tankdaq.catalogue.index import index_folder
 from tankdaq.catalogue.query import paths_for
 from tankdaq.catalogue.schema import decays, fits, metadata, schema_version
 from tankdaq.cli import app
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.errors import RecordingError
-from tankdaq.ident.campaign_synthetic import (
-    SimulatedTest,
-    simulated_decay,
-    write_simulated_campaign,
-    write_simulated_recording,
-)
 from tankdaq.ident.estimators import ESTIMATORS
-from tankdaq.ident.evolutionary import GeneticSeed, GeneticSettings
+from tankdaq.ident.evolutionary import GeneticSeedFit, GeneticSettings
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
 
@@ -68,7 +68,7 @@ def test_a_ga_fit_after_an_output_error_fit_leaves_the_reference_and_both_are_li
     empty_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # the seeds' GA itself, with a small population and few generations (the paper's take a minute)
-    quick = partial(GeneticSeed, settings=GeneticSettings(population=40, generations=40))
+    quick = partial(GeneticSeedFit, settings=GeneticSettings(population=40, generations=40))
     monkeypatch.setitem(ESTIMATORS, "ga-quick", quick)
     (path,) = write_simulated_campaign(tmp_path / "rec", ["swath"], "roll", [1.0], [8.0], "mcap")
     _invoke("identify", str(path), "--catalogue", empty_url)  # output error, the model the data chose

@@ -19,12 +19,12 @@ from typer.testing import CliRunner, Result
 
 import tankdaq
 from catalogue_fresh import fresh_catalogue
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.catalogue.database import BadCatalogueQuery, open_catalogue
 from tankdaq.catalogue.query import empty_columns, paths_for
 from tankdaq.catalogue.schema import decays
 from tankdaq.cli import app
 from tankdaq.errors import InputError
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 #: Each file's recorded time (the stored form: ISO, milliseconds, +00:00).
 TIMES = {

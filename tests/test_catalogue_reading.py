@@ -25,9 +25,9 @@ from typer.testing import CliRunner, Result
 import tankdaq
 from catalogue_fresh import fresh_catalogue, table_names
 from pg_server import free_port
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.catalogue.database import CatalogueError, NoCatalogue, open_catalogue, resolve_url
 from tankdaq.cli import app
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 EXE = str(Path(sys.executable).with_name("tankdaq"))
 #: Long enough to catch the 131 s stall and the 30 s lock wait; never a timing the test asserts.

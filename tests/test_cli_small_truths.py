@@ -10,10 +10,10 @@ import click
 from typer.main import get_command
 from typer.testing import CliRunner
 
-from tankdaq import validation
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.cli import app
 from tankdaq.cli.app import DRAFT_METAVAR
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.config import validation
 
 runner = CliRunner()
 REPO = Path(__file__).resolve().parents[1]

@@ -16,25 +16,18 @@ from typer.testing import CliRunner
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.events import Note, Settled
-from tankdaq.acquire.guided.checks import Measured, check_decay
-from tankdaq.acquire.guided.journal import SessionLog
-from tankdaq.acquire.guided.plan import Acceptance, Condition
-from tankdaq.acquire.guided.runner import (
-    CampaignSession,
-    SessionSettings,
-)
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.cli import app
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
+from tankdaq.config.plans import load_campaign_plan
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Faults, SimulatedMTi
 from tankdaq.device.simulator.pty_link import PtyLink
 from tankdaq.errors import DeviceGone, InputError
-from tankdaq.ident.equation_error import EquationError
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.equation_error import EquationErrorFit
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.scenario import SCRIPTED_FAULTS, scripted_run
-from tankdaq.plans import load_campaign_plan
 from tankdaq.records import DecayEnd, DecayRun
 from tankdaq.samples import (
     STATUS_CLIP_ACC,
@@ -44,6 +37,10 @@ from tankdaq.samples import (
     empty_samples,
     sample_flags,
 )
+from tankdaq.session.checks import Measured, check_decay
+from tankdaq.session.journal import SessionLog
+from tankdaq.session.plan import Acceptance, PlannedCondition
+from tankdaq.session.runner import GuidedSession, SessionSettings
 from tankdaq.store.reader import read_decay_runs, read_recording
 from tankdaq.xsens.synthetic import decay_capture
 from xsens_captures import capture
@@ -140,13 +137,13 @@ def test_clipping_in_the_decay_is_flagged_everywhere_and_left_out_of_the_fit(tmp
         for k, v in meta.items()
         if k.startswith("fit_") and k != "fit_r2_angle"
     }
-    offline = OutputError(tuple(live)).fit([run]).coefficients_
+    offline = OutputErrorFit(tuple(live)).fit([run]).coefficients_
     assert all(abs(live[k] - offline[k]) <= 1e-3 * abs(offline[k]) + 1e-3 for k in live), (live, offline)
     # the clipped samples bias a fit that keeps them; left out, the restoring is the truth's
     terms = tuple(k for k in ("b1", "b2", "b3", "c1", "c2", "c3") if truth.get(k))
-    masked = OutputError(terms).fit([run])
+    masked = OutputErrorFit(terms).fit([run])
     run.excluded = None
-    kept = OutputError(terms).fit([run])
+    kept = OutputErrorFit(terms).fit([run])
     error_masked = abs(masked.coefficients_["c3"] - truth["c3"])
     error_kept = abs(kept.coefficients_["c3"] - truth["c3"])
     assert error_masked < 0.1 * truth["c3"] and error_masked < error_kept
@@ -190,7 +187,7 @@ def _measured(**changes: object) -> Measured:
 
 
 def test_a_session_rejects_a_clipped_decay_unless_the_plan_allows_it() -> None:
-    condition = Condition("T", 10.0)
+    condition = PlannedCondition("T", 10.0)
     why = "gyro clipped in 12 samples (0.10-0.40 s after the release): left out of fits"
     clipped = _measured(flagged_samples=12, flagged_why=why)
     (reason,) = check_decay(clipped, condition, Acceptance(), [])
@@ -220,7 +217,7 @@ def test_a_simulated_session_rejects_the_clipped_decay_with_its_reason(tmp_path:
     settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, {1: "clipped-decay"})
     operator = _Operator()
     with pytest.raises(KeyboardInterrupt):
-        CampaignSession(settings, operator).run()
+        GuidedSession(settings, operator).run()
     verdict = operator.asked[-1]
     assert verdict.kind == "verdict" and "failed a check" in verdict.text
     assert verdict.default != "a"  # rejected by default: --yes repeats it
@@ -312,5 +309,5 @@ def test_the_equation_error_fit_leaves_the_clipped_samples_out_too() -> None:
     errors = []
     for mask in (excluded, None):
         run = DecayRun(free["t"], free["roll"], free["p"], excluded=mask)
-        errors.append(abs(EquationError(terms).fit([run]).coefficients_["c1"] / truth["c1"] - 1))
+        errors.append(abs(EquationErrorFit(terms).fit([run]).coefficients_["c1"] / truth["c1"] - 1))
     assert errors[0] < 0.01 and errors[0] < errors[1] / 3

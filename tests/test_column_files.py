@@ -17,9 +17,9 @@ from scipy.io import savemat
 from typer.testing import CliRunner
 
 import tankdaq
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.cli import app
 from tankdaq.errors import InputError
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.store.export import export_recording
 
 KVLCC2 = (

@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
+from tankdaq.config.plans import load_campaign_plan
 from tankdaq.errors import InputError
-from tankdaq.plans import load_campaign_plan
 
 runner = CliRunner()
 
@@ -41,7 +41,7 @@ angles_deg = [10.0]
 """
 
 
-#: The line ``ident.online.prepare_identifier`` prints where the native kernels cannot be had and numba's
+#: The line ``live.preparation.prepare_identifier`` prints where the native kernels cannot be had and numba's
 #: JIT serves (a notice, not an error; it comes before the file reading that refuses).
 KERNEL_NOTICE = "identifier kernels on numba's JIT"
 
@@ -224,7 +224,7 @@ def test_a_hull_folder_with_a_bad_file_lists_the_good_ones(lab: Path, tmp_path: 
 
 
 def test_names_and_paths_stay_in_their_folder(tmp_path: Path) -> None:
-    from tankdaq.config_rules import path_in, safe_name
+    from tankdaq.config.rules import path_in, safe_name
 
     assert safe_name("kvlcc2_model-3", "hull") == "kvlcc2_model-3"
     for bad in ("a/b", "..", "../x", "x" * 65, "a\0b", "", "-x", "a b", "a.b", 7):
@@ -246,7 +246,7 @@ def test_recording_names_refuse_an_unsafe_hull() -> None:
 
 @pytest.fixture
 def one_csv(lab: Path) -> Path:
-    from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+    from tankdaq.campaign.synthetic import write_simulated_campaign
 
     folder = lab / "rec"
     write_simulated_campaign(folder, ["swath"], "roll", [1.0], [8.0], "csv", seed=1)

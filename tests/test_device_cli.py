@@ -71,7 +71,7 @@ def test_bad_values_exit_2_with_one_line(args: list[str], message: str) -> None:
 
 def test_simulate_sway_plays_the_swaying_hold(tmp_path: Path) -> None:
     """``--sway``: the truth is the swaying hold's (``Handling.swaying()``), not the still one's."""
-    from tankdaq.config import hull_scenario
+    from tankdaq.config.hulls import hull_scenario
     from tankdaq.physics.scenario import Handling
 
     truth_path = tmp_path / "truth.json"

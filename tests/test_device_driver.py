@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.release import ReleaseDetector
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.link import open_error_message
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi

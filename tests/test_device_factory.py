@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.factory import DeviceNote, SimulatedSensor, open_device, sim_baud
 from tankdaq.errors import DeviceNotFound, InputError
 

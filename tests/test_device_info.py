@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from tankdaq.cli import app
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.latency import ftdi_latency_ms, latency_note
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, SimulatedMTi

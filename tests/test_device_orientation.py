@@ -19,15 +19,15 @@ import pytest
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.events import Notice
 from tankdaq.acquire.listeners import EventLog
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, ScriptedSource, SimulatedMTi
+from tankdaq.device.simulator.playback import recorded_device
 from tankdaq.errors import InputError
 from tankdaq.physics.scenario import DecayScenario
 from tankdaq.physics.sensor import GRAVITY_M_S2, SensorNoise
-from tankdaq.store.playback import recorded_device
-from tankdaq.store.reader import Recording, iter_raw_chunks, read_recording
+from tankdaq.store.reader import StoredRecording, iter_raw_chunks, read_recording
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.control import ORIENTATION_OUTPUTS, OrientationSource, parse_output_configuration
 from tankdaq.xsens.mtdata2 import SPEC_BY_BASE, TYPE_MASK
@@ -39,7 +39,7 @@ RATE_HZ = 100
 LONG_DECAY = {"b1": 0.2, "c1": 14.2185, "c3": 69.457}
 
 
-def _record(tmp_path: Path, sim: SimulatedMTi) -> tuple[Recording, list[str]]:
+def _record(tmp_path: Path, sim: SimulatedMTi) -> tuple[StoredRecording, list[str]]:
     """One decay; the device's notices (what the factory said about the orientation) as the second."""
     heard = EventLog()
     settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, hull="swath", rate_hz=RATE_HZ,

@@ -12,7 +12,7 @@ import pytest
 
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, Faults, SimulatedMTi
 from tankdaq.physics.scenario import DecayScenario
 from tankdaq.store.reader import read_recording

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import serial
 
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import OWNER_FILE, TEMP_PREFIX, Behaviour, Faults, SimulatedMTi
 from tankdaq.errors import DeviceGone, InputError

@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 from hidden_effects import PREDICTION_SPEED_M_S, prediction_draw, prediction_faults
 from rrd_checks import read_rrd
 from tankdaq.cli import app
-from tankdaq.config import ikeda_prediction, load_hull
+from tankdaq.config.hulls import ikeda_prediction, load_hull
 from tankdaq.diagnose.compare import SimulationComparison
 from tankdaq.diagnose.evidence import coupling_evidence, friction_evidence
 from tankdaq.diagnose.simulation import MODEL, Simulation, SimulationRequest, decay_speed, resolve_simulation

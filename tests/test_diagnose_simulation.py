@@ -20,14 +20,14 @@ from typer.testing import CliRunner
 from figure_checks import assert_fit_to_hand_on, overlapping_texts
 from rrd_checks import read_rrd
 from tankdaq.cli import app
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.diagnose.compare import SimulationComparison
 from tankdaq.diagnose.sim_equation import best_damping_form
 from tankdaq.diagnose.sim_report import figures, story, summary
 from tankdaq.diagnose.simulation import SeriesColumns, SimulationRequest, resolve_simulation
 from tankdaq.ident.free_decay import cut_free_decays
 from tankdaq.ident.inputs import read_decays
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -54,7 +54,7 @@ def write_sim_csv(path: Path, t: np.ndarray, angle_rad: np.ndarray, time_scale: 
 
 
 @pytest.fixture(scope="module")
-def kvlcc2() -> tuple[list[DecayRun], OutputError]:
+def kvlcc2() -> tuple[list[DecayRun], OutputErrorFit]:
     """The measured free decay of run 21338 and the measurement's own fit the comparison makes."""
     if not KVLCC2.exists():
         pytest.skip(f"KVLCC2 data not found at {KVLCC2}")
@@ -62,7 +62,7 @@ def kvlcc2() -> tuple[list[DecayRun], OutputError]:
     return runs, best_damping_form(runs)
 
 
-def simulate_from_release(fit: OutputError, coefficients: dict[str, float], duration_s: float) -> tuple:
+def simulate_from_release(fit: OutputErrorFit, coefficients: dict[str, float], duration_s: float) -> tuple:
     """The coefficients simulated at 50 Hz from the measured fit's release state."""
     t = np.arange(0.0, duration_s, 0.02)
     angle0, rate0 = fit.initial_states_[0]
@@ -285,12 +285,12 @@ def test_the_overlap_check_sees_text_drawn_over_text() -> None:
 
 
 def test_fixed_coefficients_hold_only_the_terms_named() -> None:
-    """A simulation's own terms fixed, the added ones fitted (OutputError's fixed_coefficients)."""
+    """A simulation's own terms fixed, the added ones fitted (OutputErrorFit's fixed_coefficients)."""
     t = np.arange(0.0, 20.0, 0.01)
     truth = {"b1": 0.1, "b2": 0.3, "c1": 4.0}
     angle, rate = simulate_decay(truth, t, 0.2)
     run = DecayRun(t, angle + np.random.default_rng(2).normal(0, 1e-4, t.size), rate)
-    fit = OutputError(("b1", "b2", "c1"), compute_diagnostics=False).fit(
+    fit = OutputErrorFit(("b1", "b2", "c1"), compute_diagnostics=False).fit(
         [run], fixed_coefficients={"c1": 4.0}
     )
     assert fit.coefficients_["c1"] == 4.0 and fit.std_["c1"] == 0.0
@@ -430,7 +430,7 @@ def test_an_ikeda_prediction_of_kvlcc2_is_compared_in_its_own_components(kvlcc2)
     """The shipped KVLCC2's simplified Ikeda prediction against run 21338: damping, not stiffness, differs,
     the inputs outside the method's range are named, and the prediction says which of its components
     would have to change, and by how much, to meet the measurement."""
-    from tankdaq.config import load_hull
+    from tankdaq.config.hulls import load_hull
     from tankdaq.diagnose.compare import SimulationComparison
     from tankdaq.diagnose.simulation import SimulationRequest, resolve_simulation
 

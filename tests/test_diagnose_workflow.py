@@ -178,8 +178,8 @@ def test_simulated_campaign_recordings_reveal_the_hull_model(tmp_path: Path) -> 
     """Recordings from the campaign simulator (its own noise and release model, written as MCAP by the
     store) of the SWATH roll model, whose truth is b1, b3 (cubic damping), c1, c3 (cubic restoring) plus
     negligible b2, c2: from a linear baseline the workflow must find both nonlinear families."""
-    from tankdaq.config import load_hull
-    from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+    from tankdaq.campaign.synthetic import write_simulated_campaign
+    from tankdaq.config.hulls import load_hull
     from tankdaq.store.reader import read_decay_runs
 
     paths = write_simulated_campaign(tmp_path, ["swath"], "roll", [1.0], [4.0, 8.0, 12.0], "mcap", seed=1)

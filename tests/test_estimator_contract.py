@@ -13,15 +13,15 @@ from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.auv.identify import LeastSquaresRegressor, LSSVMRegressor, SeparateIdentifier
 from tankdaq.auv.model import simulate_zigzag
 from tankdaq.auv.vehicle import load_vehicle
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.diagnose.synthetic import make_decay_set
 from tankdaq.diagnose.workflow import Diagnoser
 from tankdaq.errors import InputError, NotFittedError
 from tankdaq.ident.base import Estimator
-from tankdaq.ident.equation_error import EquationError
-from tankdaq.ident.evolutionary import GeneticSeed, GeneticSettings, SwarmSeed, SwarmSettings
-from tankdaq.ident.online import OnlineIdentifier
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.equation_error import EquationErrorFit
+from tankdaq.ident.evolutionary import GeneticSeedFit, GeneticSettings, SwarmSeedFit, SwarmSettings
+from tankdaq.ident.output_error import OutputErrorFit
+from tankdaq.live.identifier import OnlineIdentifier
 
 RUNS = make_decay_set([], seed=21, duration_s=8.0).runs
 RNG = np.random.default_rng(0)
@@ -38,10 +38,10 @@ def _feed_online(identifier: OnlineIdentifier) -> None:
 
 #: (class, settings unlike the defaults, how to fit it)
 CASES: list[tuple[type, dict[str, Any], Callable[[Any], object]]] = [
-    (OutputError, {"terms": "b1,c1", "fit_gain": True, "cov_type": "classic"}, lambda e: e.fit(RUNS)),
-    (EquationError, {"terms": ("b1", "c1"), "window_periods": 0.2}, lambda e: e.fit(RUNS)),
+    (OutputErrorFit, {"terms": "b1,c1", "fit_gain": True, "cov_type": "classic"}, lambda e: e.fit(RUNS)),
+    (EquationErrorFit, {"terms": ("b1", "c1"), "window_periods": 0.2}, lambda e: e.fit(RUNS)),
     (
-        GeneticSeed,
+        GeneticSeedFit,
         {
             "terms": "seed001-eq1",
             "settings": GeneticSettings(population=10, generations=3),
@@ -50,7 +50,7 @@ CASES: list[tuple[type, dict[str, Any], Callable[[Any], object]]] = [
         lambda e: e.fit(RUNS),
     ),
     (
-        SwarmSeed,
+        SwarmSeedFit,
         {"terms": "seed001-eq1", "settings": SwarmSettings(population=10, generations=3), "random_state": 5},
         lambda e: e.fit(RUNS),
     ),
@@ -101,7 +101,7 @@ def test_fit_leaves_the_settings_as_given(cls, settings, fit) -> None:
 
 
 def test_clone_takes_changes() -> None:
-    estimator = OutputError("b1,c1", cov_type="classic")
+    estimator = OutputErrorFit("b1,c1", cov_type="classic")
     assert estimator.clone(compute_diagnostics=False).get_params() == {
         **estimator.get_params(),
         "compute_diagnostics": False,
@@ -114,10 +114,10 @@ def test_clone_takes_changes() -> None:
 @pytest.mark.parametrize(
     "call",
     [
-        lambda: OutputError().predict(np.arange(100) / 100.0),
-        lambda: OutputError().coefficients_,
-        lambda: EquationError().offsets_,
-        lambda: GeneticSeed().coefficients_,
+        lambda: OutputErrorFit().predict(np.arange(100) / 100.0),
+        lambda: OutputErrorFit().coefficients_,
+        lambda: EquationErrorFit().offsets_,
+        lambda: GeneticSeedFit().coefficients_,
         lambda: LSSVMRegressor().predict(X),
         lambda: LeastSquaresRegressor().predict(X),
         lambda: SeparateIdentifier(NPS).model(),
@@ -131,7 +131,7 @@ def test_a_result_before_fit_says_to_call_fit(call: Callable[[], object]) -> Non
 
 
 def test_a_missing_attribute_after_fit_is_a_plain_attribute_error() -> None:
-    fitted = EquationError("b1,c1").fit(RUNS)
+    fitted = EquationErrorFit("b1,c1").fit(RUNS)
     with pytest.raises(AttributeError) as raised:
         _ = fitted.gain_
     assert not isinstance(raised.value, NotFittedError)
@@ -147,7 +147,7 @@ def test_set_params_changes_settings_by_name(cls, settings, fit) -> None:
             estimator.set_params(no_such_setting=1)
 
 
-class _Interruptible(OutputError):
+class _Interruptible(OutputErrorFit):
     """An output-error fit that can be interrupted inside its solve, after its runs and terms are known."""
 
     interrupt = False

@@ -34,7 +34,7 @@ from tankdaq.acquire.events import (
     legend,
 )
 from tankdaq.acquire.listeners import EventLog, EventPrinter, EventStream
-from tankdaq.ident.online import OnlineResult
+from tankdaq.live.identifier import OnlineResult
 from tankdaq.records import DecayEnd
 
 

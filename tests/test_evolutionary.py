@@ -8,21 +8,21 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.errors import BadIdentificationInput, InputError
 from tankdaq.ident.derived import damping_ratio
 from tankdaq.ident.estimators import make_estimator, reports_progress
 from tankdaq.ident.evolutionary import (
     INERTIA_FLOOR,
-    GeneticSeed,
+    GeneticSeedFit,
     GeneticSettings,
     OneStepData,
     SearchSpace,
-    SwarmSeed,
+    SwarmSeedFit,
     SwarmSettings,
 )
 from tankdaq.ident.one_step import seed_objective
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import acceleration, simulate_decay
 from tankdaq.records import DecayRun
 
@@ -46,8 +46,8 @@ def noisy_run() -> DecayRun:
 
 
 @pytest.fixture(scope="module")
-def ga_fit(noisy_run: DecayRun) -> GeneticSeed:
-    return GeneticSeed("seed001-eq1", settings=QUICK_GA, random_state=3).fit(noisy_run)
+def ga_fit(noisy_run: DecayRun) -> GeneticSeedFit:
+    return GeneticSeedFit("seed001-eq1", settings=QUICK_GA, random_state=3).fit(noisy_run)
 
 
 def objective_at(coefficients: dict[str, float], run: DecayRun) -> float:
@@ -128,16 +128,16 @@ def test_a_plain_term_list_gets_seed001_boxes_unless_a_paper_is_named() -> None:
 
 def test_registry_offers_the_seeds_searches() -> None:
     """``--method ga-seed000`` pins seed 000's boxes although the CLI passes a bare term list."""
-    assert isinstance(make_estimator("ga", ("b1", "c1")), GeneticSeed)
-    assert isinstance(make_estimator("pso", ("b1", "c1")), SwarmSeed)
+    assert isinstance(make_estimator("ga", ("b1", "c1")), GeneticSeedFit)
+    assert isinstance(make_estimator("pso", ("b1", "c1")), SwarmSeedFit)
     pinned = make_estimator("ga-seed000", ("b1", "b2", "b3", "s1"))
-    assert isinstance(pinned, GeneticSeed) and pinned.paper == "seed000"
+    assert isinstance(pinned, GeneticSeedFit) and pinned.paper == "seed000"
     assert (
         pinned._resolved_settings(SearchSpace.for_model(pinned.terms, pinned.paper).paper).generations == 2000
     )
 
 
-def test_ga_reaches_the_best_objective_in_the_box(noisy_run: DecayRun, ga_fit: GeneticSeed) -> None:
+def test_ga_reaches_the_best_objective_in_the_box(noisy_run: DecayRun, ga_fit: GeneticSeedFit) -> None:
     best, _ = box_optimum(noisy_run, "seed001-eq1")
     assert ga_fit.seed_objective_ <= best * (1 + 1e-4)
     assert ga_fit.seed_objective_ == pytest.approx(objective_at(ga_fit.coefficients_, noisy_run), rel=1e-9)
@@ -147,7 +147,7 @@ def test_ga_reaches_the_best_objective_in_the_box(noisy_run: DecayRun, ga_fit: G
 
 
 def test_ga_matches_the_truth_objective_with_coefficients_far_from_it(
-    noisy_run: DecayRun, ga_fit: GeneticSeed
+    noisy_run: DecayRun, ga_fit: GeneticSeedFit
 ) -> None:
     """On a noisy decay the seeds' objective is flat: the truth scores no better than the GA's answer."""
     at_truth = objective_at(SWATH_ROLL_T, noisy_run)
@@ -159,8 +159,10 @@ def test_ga_matches_the_truth_objective_with_coefficients_far_from_it(
     assert any(w.startswith("W = ") and "lower bound of the seed001 box" in w for w in ga_fit.warnings_)
 
 
-def test_output_error_recovers_the_truth_better_than_the_ga(noisy_run: DecayRun, ga_fit: GeneticSeed) -> None:
-    oe = OutputError("seed001-eq1").fit(noisy_run)
+def test_output_error_recovers_the_truth_better_than_the_ga(
+    noisy_run: DecayRun, ga_fit: GeneticSeedFit
+) -> None:
+    oe = OutputErrorFit("seed001-eq1").fit(noisy_run)
     for term in ("b1", "c1", "c3"):
         truth = SWATH_ROLL_T[term]
         assert abs(oe.coefficients_[term] - truth) < abs(ga_fit.coefficients_[term] - truth), term
@@ -170,14 +172,14 @@ def test_output_error_recovers_the_truth_better_than_the_ga(noisy_run: DecayRun,
 def test_ga_recovers_the_linear_terms_on_a_clean_gyro() -> None:
     """With little gyro noise the seeds' method works: damping and stiffness come back near the truth."""
     run = swath_decay(angle_noise=1e-4, rate_noise=1e-4)
-    fit = GeneticSeed("seed001-eq1", settings=QUICK_GA).fit(run)
+    fit = GeneticSeedFit("seed001-eq1", settings=QUICK_GA).fit(run)
     assert fit.coefficients_["c1"] == pytest.approx(SWATH_ROLL_T["c1"], rel=0.02)
     assert fit.coefficients_["b1"] == pytest.approx(SWATH_ROLL_T["b1"], abs=0.1)
     assert fit.r2_angle_ > 0.95
 
 
 def test_swarm_reaches_the_best_objective_in_the_box(noisy_run: DecayRun) -> None:
-    fit = SwarmSeed("seed001-eq1", settings=SwarmSettings(population=200, generations=60)).fit(noisy_run)
+    fit = SwarmSeedFit("seed001-eq1", settings=SwarmSettings(population=200, generations=60)).fit(noisy_run)
     assert fit.seed_objective_ <= box_optimum(noisy_run, "seed001-eq1")[0] * (1 + 1e-3)
     assert set(fit.seed_variables_) == {"I", "N", "W", "x", "C1", "C2", "C3"}
 
@@ -185,10 +187,10 @@ def test_swarm_reaches_the_best_objective_in_the_box(noisy_run: DecayRun) -> Non
 def test_fit_is_reproducible_and_reports_progress(noisy_run: DecayRun) -> None:
     calls: list[tuple[int, int]] = []
     settings = GeneticSettings(population=40, generations=12)
-    first = GeneticSeed(
+    first = GeneticSeedFit(
         "b1,c1", settings=settings, random_state=7, progress=lambda d, n: calls.append((d, n))
     )
-    second = GeneticSeed("b1,c1", settings=settings, random_state=7)
+    second = GeneticSeedFit("b1,c1", settings=settings, random_state=7)
     assert first.fit(noisy_run).coefficients_ == second.fit(noisy_run).coefficients_
     assert calls[-1] == (12, 12) and len(calls) == 12
 
@@ -209,28 +211,32 @@ def test_the_searches_by_method_name_take_their_progress_in_the_constructor(
 
 def test_each_alias_defaults_to_its_papers_settings() -> None:
     """Seed 002 ran a population of 400 with crossover 0.7; seed 000 has no PSO, so seed 001's is used."""
-    assert GeneticSeed("seed002-eq1")._resolved_settings("seed002") == GeneticSettings(400, 2000, 0.7, 0.15)
-    assert GeneticSeed("seed000-eq1")._resolved_settings("seed000") == GeneticSettings(200, 2000, 0.8, 0.15)
-    assert SwarmSeed("seed000-eq1")._resolved_settings("seed000") == SwarmSettings(200, 1000, 0.15)
+    assert GeneticSeedFit("seed002-eq1")._resolved_settings("seed002") == GeneticSettings(
+        400, 2000, 0.7, 0.15
+    )
+    assert GeneticSeedFit("seed000-eq1")._resolved_settings("seed000") == GeneticSettings(
+        200, 2000, 0.8, 0.15
+    )
+    assert SwarmSeedFit("seed000-eq1")._resolved_settings("seed000") == SwarmSettings(200, 1000, 0.15)
 
 
 @pytest.mark.parametrize(
     ("estimator", "message"),
     [
-        (GeneticSeed("b1,c1,fc", settings=QUICK_GA), "search only"),
-        (GeneticSeed("b1,c1", settings="seed009"), "no GeneticSeed settings"),
-        (SwarmSeed("b1,c1", settings=QUICK_GA), "takes SwarmSettings"),
-        (GeneticSeed("b1,zz", settings=QUICK_GA), "unknown model term"),
+        (GeneticSeedFit("b1,c1,fc", settings=QUICK_GA), "search only"),
+        (GeneticSeedFit("b1,c1", settings="seed009"), "no GeneticSeedFit settings"),
+        (SwarmSeedFit("b1,c1", settings=QUICK_GA), "takes SwarmSettings"),
+        (GeneticSeedFit("b1,zz", settings=QUICK_GA), "unknown model term"),
     ],
 )
-def test_bad_settings_are_input_errors(noisy_run: DecayRun, estimator: GeneticSeed, message: str) -> None:
+def test_bad_settings_are_input_errors(noisy_run: DecayRun, estimator: GeneticSeedFit, message: str) -> None:
     with pytest.raises(InputError, match=message):
         estimator.fit(noisy_run)
 
 
 def test_no_runs_is_an_input_error() -> None:
     with pytest.raises(BadIdentificationInput):
-        GeneticSeed("b1,c1", settings=QUICK_GA).fit([])
+        GeneticSeedFit("b1,c1", settings=QUICK_GA).fit([])
 
 
 @pytest.mark.slow

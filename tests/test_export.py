@@ -18,8 +18,8 @@ from hypothesis.extra.numpy import arrays
 from scipy.io import loadmat
 from typer.testing import CliRunner
 
+from tankdaq.campaign.groups import csv_labels
 from tankdaq.cli import app
-from tankdaq.ident.campaign import csv_labels
 from tankdaq.samples import SAMPLE_DTYPE
 from tankdaq.store.export import ExportTable
 from tankdaq.store.export_layout import column_name
@@ -297,7 +297,7 @@ def test_help_lists_every_format():
 
 
 def test_campaign_reads_the_exported_csv_as_the_recording(recording, tmp_path):
-    from tankdaq.ident.campaign import read_campaign_runs
+    from tankdaq.campaign.groups import read_campaign_runs
 
     (direct,), (again,) = (
         read_campaign_runs(recording),

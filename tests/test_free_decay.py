@@ -10,7 +10,7 @@ import pytest
 from tankdaq.errors import InputError
 from tankdaq.ident.free_decay import cut_free_decay, find_free_end
 from tankdaq.ident.inputs import read_decays
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 from test_ident_helpers import KVLCC2_21338
@@ -48,7 +48,7 @@ def carriage_stop_run(with_speed: bool) -> DecayRun:
     return DecayRun(t, angle, rate, name="stop", channels=channels)
 
 
-def assert_matches_within_intervals(cut_fit: OutputError, clean_fit: OutputError) -> None:
+def assert_matches_within_intervals(cut_fit: OutputErrorFit, clean_fit: OutputErrorFit) -> None:
     """Every coefficient of the clean record's fit lies in the cut record's 95 % interval."""
     for term, value in clean_fit.coefficients_.items():
         low, high = cut_fit.ci95_[term]
@@ -56,9 +56,9 @@ def assert_matches_within_intervals(cut_fit: OutputError, clean_fit: OutputError
 
 
 @pytest.fixture(scope="module")
-def clean_fit() -> OutputError:
+def clean_fit() -> OutputErrorFit:
     t, angle, rate = forced_decay(lambda _t: 0.0)
-    return OutputError(tuple(TRUTH)).fit([DecayRun(t, angle, rate, name="clean")])
+    return OutputErrorFit(tuple(TRUTH)).fit([DecayRun(t, angle, rate, name="clean")])
 
 
 @pytest.mark.parametrize("with_speed", [True, False], ids=["speed channel", "roll only"])
@@ -69,9 +69,9 @@ def test_a_carriage_stop_ends_the_free_decay_within_a_period(with_speed, clean_f
     assert end.kind == ("channel" if with_speed else "excitation")
     cut = cut_free_decay(run)
     assert cut.meta["cut"]["reason"] == end.reason and "s after release" in cut.meta["cut"]["line"]
-    fit = OutputError(tuple(TRUTH)).fit([cut])
+    fit = OutputErrorFit(tuple(TRUTH)).fit([cut])
     assert_matches_within_intervals(fit, clean_fit)
-    whole = OutputError(tuple(TRUTH)).fit([run])
+    whole = OutputErrorFit(tuple(TRUTH)).fit([run])
     assert whole.r2_angle_ < fit.r2_angle_  # what the issue saw: the whole record fits worse
 
 
@@ -83,7 +83,7 @@ def test_a_second_push_is_an_excitation_and_a_csv_splits_there(tmp_path, clean_f
     run = DecayRun(t, angle, rate, name="push")
     end = find_free_end(run)
     assert end.kind == "excitation" and abs(end.t_s - PUSH_S) <= PERIOD_S, end
-    assert_matches_within_intervals(OutputError(tuple(TRUTH)).fit([cut_free_decay(run)]), clean_fit)
+    assert_matches_within_intervals(OutputErrorFit(tuple(TRUTH)).fit([cut_free_decay(run)]), clean_fit)
     path = tmp_path / "two.csv"
     np.savetxt(path, np.column_stack([t, np.degrees(angle), np.degrees(rate)]), delimiter=",",
                header="time_s,angle_deg,rate_deg_s", comments="")  # fmt: skip

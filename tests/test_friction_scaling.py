@@ -13,10 +13,10 @@ from typer.testing import CliRunner, Result
 
 import tankdaq
 from tankdaq.api.identification import Identification, Reading
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.cli import app
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.errors import InputError
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.ident.full_scale import full_scale_b44
 from tankdaq.physics.friction_scaling import (
     FrictionScaling,

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from held_tilt import write_held_tilt_csv
 from tankdaq.cli import app
-from tankdaq.config import hull_scenario, load_hull, user_hulls_dir
+from tankdaq.config.hulls import hull_scenario, load_hull, user_hulls_dir
 
 runner = CliRunner()
 

@@ -83,7 +83,7 @@ def test_kvlcc2_starts_at_its_first_large_peak():
 
 def test_a_strongly_damped_decay_is_still_a_decay(tmp_path):
     """Seed 001 SWATH roll at 15 deg swings back only a few degrees: still a decay, cut at the release."""
-    from tankdaq.config import load_hull
+    from tankdaq.config.hulls import load_hull
 
     c = load_hull("swath").simulation_model("roll").coefficients(1.0)
     t = np.arange(1700) / 100.0

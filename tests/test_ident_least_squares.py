@@ -138,7 +138,7 @@ def test_fit_path_does_not_import_scipy_optimize() -> None:
     """scipy.optimize costs ~0.4 s to import: the output-error fit (and replay's path) must not pull it."""
     probe = (
         "import json, sys\n"
-        "import tankdaq.ident.output_error, tankdaq.ident.online, tankdaq.acquire.replay\n"
+        "import tankdaq.ident.output_error, tankdaq.live.identifier, tankdaq.acquire.replay\n"
         "print(json.dumps(sorted(m for m in sys.modules if m.startswith('scipy.optimize'))))\n"
     )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)

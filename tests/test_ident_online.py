@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from tankdaq.errors import IdentificationError
-from tankdaq.ident.online import OnlineIdentifier
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
+from tankdaq.live.identifier import OnlineIdentifier
 from test_ident_helpers import synthetic_run, truth_for
 
 
@@ -19,7 +19,7 @@ def test_online_refits_converge_to_the_offline_fit():
     for start in range(0, run.t.size, 10):  # 10-sample packets, as the driver delivers them
         online.update(run.t[start : start + 10], run.angle[start : start + 10], run.rate[start : start + 10])
     final = online.finish()
-    offline = OutputError("b1,b2,c1,c3").fit([run])
+    offline = OutputErrorFit("b1,b2,c1,c3").fit([run])
 
     assert len(published) >= 10  # about two refits per period over 15 s
     assert [r.half_cycles for r in published[:-1]] == sorted({r.half_cycles for r in published[:-1]})

@@ -8,9 +8,9 @@ from scipy import stats
 from scipy.integrate import solve_ivp
 
 from tankdaq.errors import BadIdentificationInput
-from tankdaq.ident.equation_error import EquationError
+from tankdaq.ident.equation_error import EquationErrorFit
 from tankdaq.ident.observation_lag import LagOperator
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.models import MODEL_ALIASES
 from tankdaq.records import DecayRun
@@ -27,7 +27,7 @@ UNIQUE_MODELS = sorted({alias.terms for alias in MODEL_ALIASES.values()})
 def test_every_model_recovers_its_truth(terms):
     truth = truth_for(terms)
     run = synthetic_run(truth, seed=len(terms))
-    fit = OutputError(terms).fit([run])
+    fit = OutputErrorFit(terms).fit([run])
     for k, value in truth.items():
         assert abs(fit.coefficients_[k] - value) < Z999 * fit.std_[k], (k, fit.coefficients_[k], fit.std_[k])
     assert abs(fit.offsets_[0] - 0.01) < 1e-3
@@ -40,7 +40,7 @@ def test_joint_fit_shares_coefficients_and_keeps_per_run_state():
         synthetic_run(truth, seed=s, angle0=a0, offset=off)
         for s, a0, off in ((1, 0.3, 0.01), (2, -0.15, -0.02))
     ]
-    fit = OutputError(tuple(truth)).fit(runs)
+    fit = OutputErrorFit(tuple(truth)).fit(runs)
     for k, value in truth.items():
         assert abs(fit.coefficients_[k] - value) < Z999 * fit.std_[k]
     assert fit.offsets_ == pytest.approx([0.01, -0.02], abs=1e-3)
@@ -50,7 +50,7 @@ def test_joint_fit_shares_coefficients_and_keeps_per_run_state():
 
 def test_angle_only_runs_are_fitted_too():
     truth = truth_for(("b1", "b2", "c1", "c3"))
-    fit = OutputError(tuple(truth)).fit([synthetic_run(truth, seed=5, with_rate=False)])
+    fit = OutputErrorFit(tuple(truth)).fit([synthetic_run(truth, seed=5, with_rate=False)])
     for k, value in truth.items():
         assert abs(fit.coefficients_[k] - value) < Z999 * fit.std_[k]
 
@@ -64,7 +64,7 @@ def test_95_percent_intervals_cover_the_truth_about_95_percent_of_the_time(cov_t
     n = 150
     hits = dict.fromkeys(truth, 0)
     for seed in range(n):
-        fit = OutputError(tuple(truth), cov_type=cov_type, compute_diagnostics=False).fit(
+        fit = OutputErrorFit(tuple(truth), cov_type=cov_type, compute_diagnostics=False).fit(
             [synthetic_run(truth, seed=1000 + seed, duration_s=8.0)]
         )
         for k, value in truth.items():
@@ -77,7 +77,7 @@ def test_95_percent_intervals_cover_the_truth_about_95_percent_of_the_time(cov_t
 
 def test_warnings_name_terms_that_are_not_there_and_coupled_terms():
     truth = truth_for(("b1", "c1", "c3"))
-    fit = OutputError(("b1", "b2", "b3", "c1", "c3")).fit([synthetic_run(truth, seed=3)])
+    fit = OutputErrorFit(("b1", "b2", "b3", "c1", "c3")).fit([synthetic_run(truth, seed=3)])
     text = " ".join(fit.warnings_)
     assert "b3" in text and "not distinguishable from zero" in text
     assert "strongly correlated" in text
@@ -85,7 +85,7 @@ def test_warnings_name_terms_that_are_not_there_and_coupled_terms():
 
 def test_equation_error_gives_usable_starting_values():
     truth = truth_for(("b1", "b2", "c1", "c3"))
-    fit = EquationError(tuple(truth)).fit([synthetic_run(truth, seed=4)])
+    fit = EquationErrorFit(tuple(truth)).fit([synthetic_run(truth, seed=4)])
     assert fit.coefficients_["c1"] == pytest.approx(truth["c1"], rel=0.02)
     assert fit.coefficients_["b1"] == pytest.approx(truth["b1"], rel=0.3)
     assert fit.offsets_[0] == pytest.approx(0.01, abs=3e-3)
@@ -103,7 +103,7 @@ def test_observation_gain_lag_and_gyro_bias_are_recovered():
     x_fine, v_fine = simulate_decay(truth, fine_t, 0.3, 0.0)
     angle = gain * np.interp(clean.t - lag, fine_t, x_fine) + 0.01 + rng.normal(0, 1e-3, clean.t.size)
     run = DecayRun(t=clean.t, angle=angle, rate=v_fine[1:] + bias + rng.normal(0, 5e-3, clean.t.size))
-    fit = OutputError(tuple(truth), fit_gain=True, fit_lag=True, fit_gyro_bias=True).fit([run])
+    fit = OutputErrorFit(tuple(truth), fit_gain=True, fit_lag=True, fit_gyro_bias=True).fit([run])
     se = np.sqrt(np.diag(fit.param_covariance_))
     names = fit.param_names_
     for name, value in (("angle_gain_error", gain - 1), ("angle_lag_s", lag), ("gyro_bias_rad_s", bias)):
@@ -113,7 +113,7 @@ def test_observation_gain_lag_and_gyro_bias_are_recovered():
 def test_observation_effects_need_a_gyro():
     truth = truth_for(("b1", "c1"))
     with pytest.raises(BadIdentificationInput, match="needs a measured rate"):
-        OutputError(tuple(truth), fit_gain=True).fit([synthetic_run(truth, seed=8, with_rate=False)])
+        OutputErrorFit(tuple(truth), fit_gain=True).fit([synthetic_run(truth, seed=8, with_rate=False)])
 
 
 def test_coulomb_friction_and_exogenous_coupling_are_recovered():
@@ -132,7 +132,7 @@ def test_coulomb_friction_and_exogenous_coupling_are_recovered():
         rate=sol.y[1] + rng.normal(0, 5e-3, t.size),
         channels={"heave_m": heave},
     )
-    fit = OutputError(("b1", "c1", "fc", "ku"), exogenous="heave_m", friction_eps=eps).fit([run])
+    fit = OutputErrorFit(("b1", "c1", "fc", "ku"), exogenous="heave_m", friction_eps=eps).fit([run])
     for name, value in (("b1", b1), ("c1", c1), ("fc", fc), ("ku", k)):
         assert abs(fit.coefficients_[name] - value) < Z999 * fit.std_[name], name
 
@@ -140,19 +140,19 @@ def test_coulomb_friction_and_exogenous_coupling_are_recovered():
 def test_missing_exogenous_channel_is_an_input_error():
     truth = truth_for(("b1", "c1"))
     with pytest.raises(BadIdentificationInput, match="no channel"):
-        OutputError(("b1", "c1", "ku"), exogenous="heave_m").fit([synthetic_run(truth, seed=1)])
+        OutputErrorFit(("b1", "c1", "ku"), exogenous="heave_m").fit([synthetic_run(truth, seed=1)])
 
 
 def test_a_record_that_does_not_oscillate_is_refused():
     t = np.arange(500) / 100.0
     with pytest.raises(BadIdentificationInput, match="does not oscillate"):
-        OutputError("ittc-linear").fit([DecayRun(t=t, angle=0.1 * np.exp(-t))])
+        OutputErrorFit("ittc-linear").fit([DecayRun(t=t, angle=0.1 * np.exp(-t))])
 
 
 def test_predict_reproduces_the_fitted_curve_and_seed_objective_is_the_one_step_rms():
     truth = truth_for(("b1", "b2", "c1", "c3"))
     run = synthetic_run(truth, seed=10)
-    fit = OutputError(tuple(truth)).fit([run])
+    fit = OutputErrorFit(tuple(truth)).fit([run])
     angle, _ = fit.predict(run)
     assert np.allclose(angle, fit.fitted_[0]["angle"])
     # with the gyro noise dominating the one-step error, F ~ sqrt(2) * rate noise
@@ -164,13 +164,13 @@ def test_a_record_cut_mid_swing_after_two_cycles_is_still_fitted():
     truth = truth_for(("b1", "b2", "c1", "c3"))
     full = synthetic_run(truth, seed=12)
     cut = full.window(0, int(4.37 * 100))  # 2.6 periods, ending between a peak and a zero crossing
-    fit = OutputError(tuple(truth)).fit([cut])
+    fit = OutputErrorFit(tuple(truth)).fit([cut])
     for k, value in truth.items():
         assert abs(fit.coefficients_[k] - value) < Z999 * fit.std_[k], k
-    assert fit.std_["b1"] > OutputError(tuple(truth)).fit([full]).std_["b1"]
+    assert fit.std_["b1"] > OutputErrorFit(tuple(truth)).fit([full]).std_["b1"]
 
 
-def assert_jacobian_is_central_differences(fit: OutputError, params: np.ndarray) -> None:
+def assert_jacobian_is_central_differences(fit: OutputErrorFit, params: np.ndarray) -> None:
     """The weighted Jacobian at ``params`` column by column against central differences."""
     _, jac, _, _ = fit._model.weighted(params)
     for k, name in enumerate(fit.param_names_):
@@ -184,7 +184,7 @@ def assert_jacobian_is_central_differences(fit: OutputError, params: np.ndarray)
 
 def test_the_full_jacobian_with_observation_parameters_equals_central_differences():
     truth = truth_for(("b1", "b2", "c1", "c3"))
-    fit = OutputError(tuple(truth), fit_gain=True, fit_lag=True, fit_gyro_bias=True).fit(
+    fit = OutputErrorFit(tuple(truth), fit_gain=True, fit_lag=True, fit_gyro_bias=True).fit(
         [synthetic_run(truth, seed=13, duration_s=5.0)]
     )
     params = fit.params_.copy()
@@ -198,7 +198,7 @@ def test_the_full_jacobian_with_forcing_channels_and_ringing_equals_central_diff
     truth = truth_for(("b1", "c1"))
     run = synthetic_run(truth, seed=14, duration_s=5.0)
     run.channels = {"heave_m": 0.02 * np.sin(4.1 * run.t), "other_angle": 0.01 * np.cos(5.3 * run.t)}
-    fit = OutputError(
+    fit = OutputErrorFit(
         ("b1", "c1", "fc"),
         exogenous=("heave_m", "other_angle"),
         ringing=True,
@@ -235,6 +235,6 @@ def test_predict_before_fit_says_to_fit_first():
     from tankdaq.errors import NotFittedError
 
     with pytest.raises(NotFittedError, match="fit"):
-        OutputError().predict(np.arange(10) / 100.0)
+        OutputErrorFit().predict(np.arange(10) / 100.0)
     with pytest.raises(NotFittedError, match="fit"):
-        _ = OutputError().coefficients_
+        _ = OutputErrorFit().coefficients_

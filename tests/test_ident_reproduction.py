@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.errors import BadIdentificationInput
 from tankdaq.ident.derived import amplitude_table
 from tankdaq.ident.inputs import read_decays
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.models import canonical_order
 from tankdaq.records import DecayRun
@@ -33,7 +33,7 @@ def test_published_equations_are_identified_back(hull, axis, angle_deg):
     truth = load_hull(hull).simulation_model(axis).coefficients(1.0)
     terms = canonical_order(list(truth))
     run = synthetic_run(truth, seed=31, angle0=math.radians(angle_deg), duration_s=12.0)
-    fit = OutputError(terms).fit([run])
+    fit = OutputErrorFit(terms).fit([run])
     for k, value in truth.items():
         assert abs(fit.coefficients_[k] - value) < Z999 * fit.std_[k], (
             k,
@@ -49,7 +49,7 @@ def test_seed000_eq_5_1_as_printed_does_not_oscillate_and_is_refused():
     angle, rate = simulate_decay(printed, t, math.radians(2.0))
     assert np.all(np.diff(angle) <= 0)  # creeps towards zero without crossing it
     with pytest.raises(BadIdentificationInput, match="does not oscillate"):
-        OutputError("seed000-eq1").fit([DecayRun(t=t, angle=angle, rate=rate)])
+        OutputErrorFit("seed000-eq1").fit([DecayRun(t=t, angle=angle, rate=rate)])
 
 
 @pytest.mark.skipif(not KVLCC2_21338.is_file(), reason=f"KVLCC2 reference run not found at {KVLCC2_21338}")
@@ -57,7 +57,7 @@ def test_kvlcc2_run_21338():
     """Reference §5/§7: quadratic damping + cubic restoring, first half-cycle cut: R^2 0.9991, C1A ~ 6.06,
     B_eq/I at 5 deg 0.0258 (21338, offsets fitted), offset -0.016 deg, model roll period 2.53 s."""
     runs = read_decays(KVLCC2_21338, time_col="time", angle_col="phi", rate_col=None, angle_unit="rad")
-    fit = OutputError("ittc-quadratic-restoring").fit(runs)
+    fit = OutputErrorFit("ittc-quadratic-restoring").fit(runs)
     assert fit.r2_angle_ >= 0.999
     assert fit.coefficients_["c1"] == pytest.approx(6.06, abs=0.03)
     assert 2.5 < fit.natural_period_s_ < 2.6

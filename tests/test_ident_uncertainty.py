@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from tankdaq.errors import InputError
-from tankdaq.ident.equation_error import EquationError
+from tankdaq.ident.equation_error import EquationErrorFit
 from tankdaq.ident.intervals import fit_with_intervals, moving_block_bootstrap, repeat_spread
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.ident.report import summarize
 from tankdaq.ident.uncertainty import bic, hac_covariance, ljung_box, residual_whiteness
 from test_ident_helpers import synthetic_run, truth_for
@@ -18,7 +18,7 @@ TERMS = ("b1", "b2", "c1", "c3")
 
 def test_block_bootstrap_agrees_with_the_jacobian_under_white_noise():
     truth = truth_for(TERMS)
-    fit = OutputError(TERMS).fit([synthetic_run(truth, seed=41, duration_s=8.0)])
+    fit = OutputErrorFit(TERMS).fit([synthetic_run(truth, seed=41, duration_s=8.0)])
     done = []
     spread = moving_block_bootstrap(fit, n_boot=40, seed=1, progress=done.append)
     assert done[-1] == 40 and spread.samples.shape == (40, len(TERMS))
@@ -32,7 +32,7 @@ def test_block_bootstrap_agrees_with_the_jacobian_under_white_noise():
 def test_repeat_runs_give_a_t_interval_around_the_truth():
     truth = truth_for(TERMS)
     runs = [synthetic_run(truth, seed=50 + i, duration_s=8.0) for i in range(5)]
-    spread = repeat_spread(lambda: OutputError(TERMS, compute_diagnostics=False), runs)
+    spread = repeat_spread(lambda: OutputErrorFit(TERMS, compute_diagnostics=False), runs)
     for k, value in truth.items():
         lo, hi = spread.ci95[k]
         assert lo < value < hi, k
@@ -45,10 +45,10 @@ def test_intervals_are_returned_beside_the_fit_which_keeps_its_own() -> None:
     runs = [synthetic_run(truth, seed=60 + i, duration_s=8.0) for i in range(3)]
     steps: list[int] = []
     fitted, intervals = fit_with_intervals(
-        OutputError(TERMS), runs, repeats_of=lambda: OutputError(TERMS, compute_diagnostics=False),
+        OutputErrorFit(TERMS), runs, repeats_of=lambda: OutputErrorFit(TERMS, compute_diagnostics=False),
         progress=steps.append,
     )  # fmt: skip
-    alone = OutputError(TERMS).fit(runs)
+    alone = OutputErrorFit(TERMS).fit(runs)
     assert steps == [1] and intervals is not None and intervals.description == "repeat runs, 3 runs"
     assert fitted.std_ == pytest.approx(alone.std_) and fitted.ci95_ == alone.ci95_
     assert intervals.std != pytest.approx(fitted.std_)  # the spread of three repeats is another number
@@ -70,9 +70,9 @@ def test_intervals_are_returned_beside_the_fit_which_keeps_its_own() -> None:
 def test_intervals_that_cannot_work_are_refused_before_any_fit(
     method: str, bootstrap: int, n_runs: int, mentions: str
 ) -> None:
-    estimator = EquationError(TERMS) if method == "ee" else OutputError(TERMS)
+    estimator = EquationErrorFit(TERMS) if method == "ee" else OutputErrorFit(TERMS)
     runs = [synthetic_run(truth_for(TERMS), seed=70 + i, duration_s=8.0) for i in range(n_runs)]
-    repeats_of = None if method == "ee" else (lambda: OutputError(TERMS))
+    repeats_of = None if method == "ee" else (lambda: OutputErrorFit(TERMS))
     with pytest.raises(InputError, match=mentions):
         fit_with_intervals(estimator, runs, bootstrap, repeats_of, method=method)
     assert not hasattr(estimator, "coefficients_")  # nothing was fitted

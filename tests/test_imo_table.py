@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tankdaq.ident.campaign import GroupKey
+from tankdaq.campaign.groups import GroupKey
 from tankdaq.ident.derived import bertin_n_per_deg
 from tankdaq.ident.free_decay import cut_free_decays
 from tankdaq.ident.imo_table import (
@@ -24,7 +24,7 @@ from tankdaq.ident.imo_table import (
 )
 from tankdaq.ident.inputs import read_decays
 from tankdaq.ident.interval_labels import ANGLES_STD, FIT_STD
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -46,7 +46,7 @@ def decay(angle_deg: float, duration_s: float, seed: int) -> DecayRun:
 
 def cover_of(angle_deg: float, duration_s: float = 30.0, seed: int = 1) -> DecayCover:
     run = decay(angle_deg, duration_s, seed)
-    fit = OutputError(["b1", "b2", "c1"]).fit([run])
+    fit = OutputErrorFit(["b1", "b2", "c1"]).fit([run])
     return decay_cover(GroupKey("tanker", "roll", 1.0, round(angle_deg)), [run], fit)
 
 
@@ -133,7 +133,7 @@ def test_initial_angle_is_measured_not_nominal() -> None:
 @pytest.mark.skipif(not KVLCC2.is_file(), reason=f"the KVLCC2 roll decay is not at {KVLCC2}")
 def test_kvlcc2_decay_gives_n_up_to_its_initial_angle_and_says_what_it_misses() -> None:
     runs = cut_free_decays(read_decays(KVLCC2, None, "time", "phi", None, "rad"), None, None)
-    fit = OutputError(["b1", "b2", "c1", "c3"]).fit(runs)
+    fit = OutputErrorFit(["b1", "b2", "c1", "c3"]).fit(runs)
     cover = decay_cover(GroupKey("kvlcc2", "roll", 1.0, 10.0), runs, fit)
     table = imo_table([cover])
     low, high = table.covered_deg

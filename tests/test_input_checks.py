@@ -14,8 +14,8 @@ import pytest
 from typer.testing import CliRunner
 
 from held_tilt import write_held_tilt_csv
-from tankdaq import validation
 from tankdaq.cli import app
+from tankdaq.config import validation
 from tankdaq.errors import InputError
 
 runner = CliRunner()

@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from matplotlib.legend import Legend
 
 import tankdaq
-from tankdaq.ident.campaign import (
+from tankdaq.campaign.groups import (
     GroupResult,
     find_campaign_hulls,
     find_recordings,
@@ -26,7 +26,7 @@ from tankdaq.ident.campaign import (
     markdown_table,
     read_campaign_runs,
 )
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.ident.imo_table import initial_angle_deg
 from tankdaq.ident.interval_labels import (
     ALL_LABELS,
@@ -36,7 +36,7 @@ from tankdaq.ident.interval_labels import (
     FIT_STD,
     STANDARD_U,
     Coverage,
-    Kind,
+    IntervalSource,
     kind_of,
 )
 from tankdaq.ident.report import text_report
@@ -160,8 +160,8 @@ def test_the_convention_holds_the_budgets_labels_and_each_kind() -> None:
     with pytest.raises(ValueError, match="range"):
         ANGLES_RANGE.half_width(1.0)
     assert len({label.text for label in ALL_LABELS}) == len(ALL_LABELS)
-    assert kind_of("moving-block bootstrap, 100 replicas") is Kind.BOOTSTRAP
-    assert kind_of("repeat runs, 3 runs") is Kind.REPEATS and kind_of("hac") is Kind.FIT
+    assert kind_of("moving-block bootstrap, 100 replicas") is IntervalSource.BOOTSTRAP
+    assert kind_of("repeat runs, 3 runs") is IntervalSource.REPEATS and kind_of("hac") is IntervalSource.FIT
     docs = (Path(__file__).resolve().parents[1] / "docs" / "intervals.md").read_text()
     for label in ALL_LABELS:
         assert label.coverage.value in docs and label.kind.value in docs

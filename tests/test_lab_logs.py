@@ -16,10 +16,10 @@ from tankdaq.cli import app
 from tankdaq.errors import BadIdentificationInput, InputError
 from tankdaq.store.csv_import import CsvOptions
 from tankdaq.store.mtb_file import read_mtb
-from tankdaq.xsens.batch import decode_capture
+from tankdaq.xsens.column_decoder import decode_capture
 from tankdaq.xsens.framer import ANY_BID, StreamFramer
 from tankdaq.xsens.mtb import LOG_MAX_DATA_LENGTH, decode_log
-from tankdaq.xsens.stream import StreamDecoder
+from tankdaq.xsens.stream_decoder import StreamDecoder
 
 runner = CliRunner()
 

@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from tankdaq.acquire.guided.journal import SessionLog
 from tankdaq.cli import app
-from tankdaq.config import load_hull
-from tankdaq.plans import load_campaign_plan
+from tankdaq.config.hulls import load_hull
+from tankdaq.config.plans import load_campaign_plan
+from tankdaq.session.journal import SessionLog
 
 runner = CliRunner()
 
@@ -135,7 +135,7 @@ def test_long_work_says_where_it_is_when_stderr_is_a_pipe() -> None:
 def test_runs_rejected_shows_why_each_run_was_rejected(tmp_path: Path) -> None:
     """A guided session's log: decay 1 failed a check and was rejected, decay 2 passed and the operator
     rejected it anyway; ``runs --verdict rejected`` on a real SQLite catalogue says both reasons."""
-    from tankdaq.ident.campaign_synthetic import SimulatedTest, write_simulated_campaign
+    from tankdaq.campaign.synthetic import SimulatedTest, write_simulated_campaign
 
     folder = tmp_path / "session"
     files = write_simulated_campaign(

@@ -63,7 +63,7 @@ def test_demo_identify_and_campaign_report_one_model_and_the_same_numbers(demo: 
 
 
 def test_the_session_report_fits_the_model_identify_chose(demo: tuple[Path, str], tmp_path: Path) -> None:
-    from tankdaq.acquire.guided.report import write_session_report
+    from tankdaq.session.report import write_session_report
 
     folder, _ = demo
     (recording,) = sorted(folder.glob("*.mcap"))

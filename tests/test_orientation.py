@@ -14,13 +14,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.attitude import GyroAttitude
 from tankdaq.device.simulator.output import Output, effective_configuration
 from tankdaq.physics.scenario import DecayScenario
 from tankdaq.physics.sensor import GRAVITY_M_S2, SensorNoise
 from tankdaq.samples import empty_samples
-from tankdaq.xsens.batch import decode_capture, to_samples
+from tankdaq.xsens.column_decoder import decode_capture, to_samples
 from tankdaq.xsens.control import (
     ORIENTATION_OUTPUTS,
     OrientationSource,

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.cli.plain_text import HANDLER, install, plain
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 EXE = str(Path(sys.executable).with_name("tankdaq"))
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2-roll-decay"

@@ -13,15 +13,14 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from tankdaq.campaign.groups import GroupKey, fit_group, markdown_table
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.cli import app
-from tankdaq.config import AxisParticulars
-from tankdaq.ident.campaign import GroupKey, fit_group, markdown_table
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.config.hulls import AxisParticulars
 from tankdaq.ident.derived import b_eq
 from tankdaq.ident.free_decay import cut_free_decays
 from tankdaq.ident.inputs import read_decays
-from tankdaq.ident.online import OnlineIdentifier
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.ident.plausibility import (
     ADDED_INERTIA_BOUNDS,
     check_amplitude,
@@ -33,6 +32,7 @@ from tankdaq.ident.plausibility import (
     check_timing,
     expected_period_s,
 )
+from tankdaq.live.identifier import OnlineIdentifier
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.models import MODEL_FAMILY, resolve_model
 from tankdaq.records import DecayRun
@@ -103,7 +103,7 @@ def test_time_step_period_and_samples_per_period() -> None:
 
 
 @pytest.fixture(scope="module")
-def kvlcc2_fits() -> dict[str, tuple[OutputError, list]]:
+def kvlcc2_fits() -> dict[str, tuple[OutputErrorFit, list]]:
     if not KVLCC2.is_file():
         pytest.skip(f"KVLCC2 data not at {KVLCC2} (the shared data folder is absent)")
     fits = {}
@@ -111,7 +111,7 @@ def kvlcc2_fits() -> dict[str, tuple[OutputError, list]]:
     # what a reader that took the radians for degrees would hand the fit (reading the CSV so refuses)
     misread = [dataclasses.replace(run, angle=np.radians(run.angle)) for run in in_radians]
     for unit, runs in (("rad", in_radians), ("deg", misread)):
-        fits[unit] = (OutputError("b1,b2,c1,c3", compute_diagnostics=False).fit(runs), runs)
+        fits[unit] = (OutputErrorFit("b1,b2,c1,c3", compute_diagnostics=False).fit(runs), runs)
     return fits
 
 

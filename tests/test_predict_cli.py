@@ -11,10 +11,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.cli import app
-from tankdaq.config import ikeda_prediction, load_hull, write_hull_template
+from tankdaq.config.hulls import ikeda_prediction, load_hull, write_hull_template
 from tankdaq.errors import ConfigError, InputError
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 
 runner = CliRunner()
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "kvlcc2-roll-decay"

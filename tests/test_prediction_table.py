@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.cli import app
-from tankdaq.config import ikeda_prediction, load_hull
+from tankdaq.config.hulls import ikeda_prediction, load_hull
 from tankdaq.diagnose.simulation import SimulationRequest, dominant_period_s, resolve_simulation
 from tankdaq.errors import InputError
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
 from tankdaq.ident.free_decay import cut_free_decays
 from tankdaq.ident.inputs import read_decays
 

@@ -31,8 +31,8 @@ from tankdaq.cli import app
 from tankdaq.records import DecayEnd
 from tankdaq.samples import AXIS_FIELDS
 from tankdaq.store.reader import iter_raw_chunks, read_recording
-from tankdaq.xsens.batch import to_samples
-from tankdaq.xsens.stream import StreamDecoder
+from tankdaq.xsens.column_decoder import to_samples
+from tankdaq.xsens.stream_decoder import StreamDecoder
 from tankdaq.xsens.timebase import SampleTimeUnwrapper
 
 TICKS_PER_S = 10_000

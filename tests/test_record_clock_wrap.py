@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.simulator import DeviceIdentity, SimulatedMTi
-from tankdaq.store.reader import Recording, iter_raw_chunks, read_recording
+from tankdaq.store.reader import StoredRecording, iter_raw_chunks, read_recording
 
 TICKS_PER_S = 10_000
 RATE_HZ = 100
@@ -58,7 +58,7 @@ def test_a_600_series_clock_wrapping_between_decays_keeps_one_session_timeline(t
 
 def _record_630(
     tmp_path: Path, runs: int, start_ticks: int, start_counter: int, decay_s: float = DECAY_S
-) -> list[Recording]:
+) -> list[StoredRecording]:
     """Record ``runs`` decays of a simulated MTi-630 and check each: one continuous timeline, every
     sample there, the release on the unwrapped clock within a sample of the truth."""
     clocks = {"start_ticks": start_ticks, "start_counter": start_counter}

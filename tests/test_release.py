@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tankdaq.acquire.release import ReleaseDetector, detect_releases, pick_axis
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.errors import InputError
 from tankdaq.physics.scenario import Handling
 from tankdaq.physics.sensor import SensorNoise

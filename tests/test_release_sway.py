@@ -15,7 +15,7 @@ import tankdaq
 from tankdaq.acquire import release_instant
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.catalogue.rows import recording_row
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.physics.scenario import SWAY_LINES, Handling
 from tankdaq.physics.truth import TICKS_PER_S
 from tankdaq.samples import SAMPLE_DTYPE

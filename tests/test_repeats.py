@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 import tankdaq
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.ident.free_decay import cut_free_decays
 from tankdaq.ident.inputs import read_decays
 from tankdaq.ident.plausibility import check_repeats

@@ -212,10 +212,10 @@ def test_the_pdf_renders_to_pages_with_the_json_numbers(made: dict[str, Any], tm
 
 def test_a_session_folder_reports_its_accepted_decays(recording: Path, tmp_path: Path) -> None:
     """The session's accepted decays, not its rejected ones; the session named in the provenance."""
-    from tankdaq.acquire.guided.checks import Measured
-    from tankdaq.acquire.guided.journal import SessionLog
     from tankdaq.records import DecayEnd
     from tankdaq.report.sources import report_inputs
+    from tankdaq.session.checks import Measured
+    from tankdaq.session.journal import SessionLog
 
     for name in ("a.mcap", "b.mcap"):
         shutil.copy(recording, tmp_path / name)

@@ -16,10 +16,7 @@ from matplotlib.figure import Figure
 from figure_checks import assert_fit_to_hand_on, clipped_texts, layout_problems, legends_on_axes
 from tankdaq.auv.model import StateRecord
 from tankdaq.auv.validate import ValidationResult
-from tankdaq.config import load_hull
-from tankdaq.diagnose.residuals import residual_spectrum
-from tankdaq.diagnose.synthetic import make_decay_set
-from tankdaq.ident.campaign import (
+from tankdaq.campaign.groups import (
     GroupResult,
     find_campaign_hulls,
     find_recordings,
@@ -28,7 +25,10 @@ from tankdaq.ident.campaign import (
     markdown_table,
     read_campaign_runs,
 )
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.campaign.synthetic import write_simulated_campaign
+from tankdaq.config.hulls import load_hull
+from tankdaq.diagnose.residuals import residual_spectrum
+from tankdaq.diagnose.synthetic import make_decay_set
 from tankdaq.ident.interval_labels import FIT_STD
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from tankdaq.config import hull_scenario, load_hull
+from tankdaq.config.hulls import hull_scenario, load_hull
 from tankdaq.errors import InputError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.scenario import Handling

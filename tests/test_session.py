@@ -21,8 +21,8 @@ from typer.testing import CliRunner
 
 from guided_session import TWO_DRAFT_PLAN
 from measured_decay import measured_decay
-from tankdaq.acquire.guided.journal import LOG_NAME, SessionLock, SessionLog
 from tankdaq.cli import app
+from tankdaq.session.journal import LOG_NAME, SessionLock, SessionLog
 
 pytestmark = pytest.mark.filterwarnings("ignore:RRD file has no footer")
 
@@ -342,8 +342,8 @@ class _Answers:
 
 def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Path) -> None:
 
-    from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
-    from tankdaq.plans import load_campaign_plan
+    from tankdaq.config.plans import load_campaign_plan
+    from tankdaq.session.runner import GuidedSession, SessionSettings
 
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text(TWO_DRAFT_PLAN)
@@ -361,7 +361,7 @@ def test_a_decay_recorded_but_not_judged_is_judged_first_on_resume(tmp_path: Pat
     settings = SessionSettings(plan, "swath", {"port": "sim", "out_dir": out, "viewer": "none"})
     operator = _Answers("n judged after the restart", "a")
     with pytest.raises(KeyboardInterrupt):
-        CampaignSession(settings, operator, resume=True).run()
+        GuidedSession(settings, operator, resume=True).run()
     assert operator.asked == ["verdict", "verdict", "draft"]  # the verdict first, then the draft again
     records = log.read()
     kinds = [r["type"] for r in records]
@@ -400,7 +400,7 @@ def test_a_swath_session_with_the_default_model_accepts_positive_damping(tmp_pat
 
 
 def test_an_implausible_fit_asks_and_yes_gives_up_after_the_cap(tmp_path: Path) -> None:
-    from tankdaq.acquire.guided.operator import MAX_REJECTED
+    from tankdaq.session.operator import MAX_REJECTED
 
     out, records = _run_session(tmp_path, "--model", "b1,b2,c1,c3")  # b1 < 0 on SWATH decays from 15 deg
     verdicts = [r for r in records if r["type"] == "verdict"]

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from measured_decay import measured_decay
-from tankdaq.acquire.guided.checks import Measured, check_decay, usable_measured
-from tankdaq.acquire.guided.plan import Acceptance, Condition
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.errors import InputError
 from tankdaq.ident.free_decay import find_free_end
 from tankdaq.physics.scenario import parse_fault_script, scripted_run
 from tankdaq.records import DecayEnd, DecayRun
+from tankdaq.session.checks import Measured, check_decay, usable_measured
+from tankdaq.session.plan import Acceptance, PlannedCondition
 
 
 @pytest.mark.parametrize(
@@ -36,7 +36,7 @@ from tankdaq.records import DecayEnd, DecayRun
     ],
 )
 def test_each_check_flags_its_fault_alone(changes: dict[str, Any], phrase: str) -> None:
-    condition, acceptance, earlier = Condition("T", 10.0), Acceptance(), [measured_decay()]
+    condition, acceptance, earlier = PlannedCondition("T", 10.0), Acceptance(), [measured_decay()]
     assert check_decay(measured_decay(), condition, acceptance, earlier) == []
     reasons = check_decay(measured_decay(**changes), condition, acceptance, earlier)
     assert len(reasons) == 1 and phrase in reasons[0]
@@ -55,7 +55,7 @@ def test_a_logged_decay_reads_back_with_how_it_ended_also_from_a_log_before_ende
     stopped = Measured.from_log({**logged, "settle_reason": "note"})
     assert stopped.ended is DecayEnd.STOPPED
     assert not usable_measured({**logged, "ended": "gone fishing"}) and not usable_measured(logged)
-    condition, acceptance = Condition("T", 10.0), Acceptance()
+    condition, acceptance = PlannedCondition("T", 10.0), Acceptance()
     assert check_decay(stopped, condition, acceptance, []) == ["cut short (stopped by the operator)"]
 
 
@@ -86,9 +86,9 @@ def test_fault_scripts_are_parsed_or_refused_in_one_line() -> None:
 
 
 def test_every_shipped_plan_has_valid_acceptance_tolerances() -> None:
-    from tankdaq.acquire.guided.plan import plan_conditions
+    from tankdaq.config.plans import ACCEPTANCE_RANGES, list_campaign_plans, load_campaign_plan
     from tankdaq.errors import ConfigError
-    from tankdaq.plans import ACCEPTANCE_RANGES, list_campaign_plans, load_campaign_plan
+    from tankdaq.session.plan import plan_conditions
 
     for name in list_campaign_plans():
         plan = load_campaign_plan(name)

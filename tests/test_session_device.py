@@ -15,10 +15,10 @@ from mcap.reader import make_reader
 
 from guided_session import TWO_DRAFT_PLAN
 from tankdaq.acquire.events import DeviceReady, ModelMoved, Released, Settled
-from tankdaq.acquire.guided.journal import SessionLog
-from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
-from tankdaq.plans import load_campaign_plan
+from tankdaq.config.plans import load_campaign_plan
+from tankdaq.session.journal import SessionLog
+from tankdaq.session.runner import GuidedSession, SessionSettings
 from tankdaq.store.reader import read_recording
 from tankdaq.xsens.constants import MID
 
@@ -51,7 +51,7 @@ def test_a_session_of_eight_decays_opens_the_device_once(tmp_path: Path) -> None
     }
     settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={})
     heard = EventLog()
-    session = CampaignSession(settings, Accepting(), listeners=[heard])
+    session = GuidedSession(settings, Accepting(), listeners=[heard])
     state = session.run()
     assert session.stopped is None
     accepted = [r for r in state.runs if r.verdict == "accepted"]

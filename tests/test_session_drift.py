@@ -15,14 +15,14 @@ import numpy as np
 
 from guided_session import ONE_CONDITION_TWICE, Repeating
 from tankdaq.acquire.events import ModelMoved, Released, Settled
-from tankdaq.acquire.guided.checks import watch_reasons
-from tankdaq.acquire.guided.journal import SessionLog
-from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
-from tankdaq.acquire.guided.watch import TREND_DEG_MIN
 from tankdaq.acquire.listeners import EventLog
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
+from tankdaq.config.plans import load_campaign_plan
 from tankdaq.physics.scenario import DRIFT_BEFORE_TILT_S, DRIFT_DEG_MIN, parse_fault_script, scripted_run
-from tankdaq.plans import load_campaign_plan
+from tankdaq.session.checks import watch_reasons
+from tankdaq.session.journal import SessionLog
+from tankdaq.session.runner import GuidedSession, SessionSettings
+from tankdaq.session.watch import TREND_DEG_MIN
 
 
 def test_the_drift_fault_creeps_the_still_water_before_the_tilt_and_the_decay_settles_there() -> None:
@@ -49,7 +49,7 @@ def test_a_session_says_a_drift_before_a_decay_and_flags_that_decay_only(tmp_pat
     record = {"port": "sim", "out_dir": out, "viewer": "none", "sim_speed": 20.0, "sim_seed": 2}
     settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={2: "drift"})
     heard = EventLog()
-    session = CampaignSession(settings, Repeating(), listeners=[heard])
+    session = GuidedSession(settings, Repeating(), listeners=[heard])
     state = session.run()
     assert session.stopped is None and [r.decay for r in state.runs] == [1, 2]
     moved = heard.of(ModelMoved)

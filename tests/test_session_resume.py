@@ -9,15 +9,12 @@ import json
 from pathlib import Path
 
 from guided_session import Enter
-from tankdaq.acquire.guided.checks import Measured
-from tankdaq.acquire.guided.journal import SessionLog
-from tankdaq.acquire.guided.runner import (
-    CampaignSession,
-    SessionSettings,
-)
-from tankdaq.acquire.guided.state import SessionState
-from tankdaq.plans import load_campaign_plan
+from tankdaq.config.plans import load_campaign_plan
 from tankdaq.records import DecayEnd
+from tankdaq.session.checks import Measured
+from tankdaq.session.journal import SessionLog
+from tankdaq.session.runner import GuidedSession, SessionSettings
+from tankdaq.session.state import SessionState
 
 PLAN = """description = "one condition, one repeat"
 hulls = ["swath"]
@@ -119,7 +116,7 @@ def test_a_deleted_recording_is_redone_and_the_report_still_written(tmp_path: Pa
         plan, "swath", {"port": "sim", "out_dir": out, "viewer": "none", "sim_speed": 20.0, "sim_seed": 3}
     )
     operator = Enter(limit=6)
-    state = CampaignSession(settings, operator, on_line=lines.append, resume=True).run()
+    state = GuidedSession(settings, operator, on_line=lines.append, resume=True).run()
 
     assert lines[:2] == [
         "session.jsonl line 7 skipped: not UTF-8 text",

@@ -1,4 +1,4 @@
-"""A guided session stopped by a signal ends as a typed outcome (``CampaignSession.stopped``, the
+"""A guided session stopped by a signal ends as a typed outcome (``GuidedSession.stopped``, the
 recording's ``Stopped`` event), never as an exception the session raises for its own control flow; the
 decay under way is closed complete and logged, and a stop before the release logs nothing.
 
@@ -18,11 +18,11 @@ from mcap.reader import make_reader
 
 from guided_session import Enter, signal_when
 from tankdaq.acquire.events import DeviceReady, Event, Held, Notice, Released, Settled, Stopped
-from tankdaq.acquire.guided.journal import SessionLog
-from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
-from tankdaq.plans import load_campaign_plan
+from tankdaq.config.plans import load_campaign_plan
 from tankdaq.records import DecayEnd
+from tankdaq.session.journal import SessionLog
+from tankdaq.session.runner import GuidedSession, SessionSettings
 
 ONE_CONDITION_PLAN = """hulls = ["swath"]
 axis = "roll"
@@ -45,7 +45,7 @@ def test_a_signal_stops_the_session_as_an_outcome_and_the_decay_under_way_is_kep
 
     heard = EventLog(react)
     operator = Enter()
-    session = CampaignSession(settings, operator, listeners=[heard])
+    session = GuidedSession(settings, operator, listeners=[heard])
     state = session.run()  # returns: the stop is not an exception
     assert signalled, "the recording never reached the moment of the stop"
     assert session.stopped is not None and session.stopped.by == "SIGINT"
@@ -103,7 +103,7 @@ def test_a_signal_while_the_device_opens_stops_the_session_before_any_question(
 
     heard = EventLog(react)
     operator = Enter()
-    session = CampaignSession(settings, operator, listeners=[heard])
+    session = GuidedSession(settings, operator, listeners=[heard])
     state = session.run()
     assert signalled and session.stopped == Stopped("SIGINT", 0) and heard.of(Stopped) == [session.stopped]
     assert operator.asked == [] and state.decays == 0 and not list(out.glob("*.mcap"))

@@ -24,10 +24,10 @@ from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.factory import SimPort
 from tankdaq.device.simulator import DeviceIdentity, RecordedSource, SimulatedMTi
+from tankdaq.device.simulator.playback import recorded_device
 from tankdaq.errors import InputError
 from tankdaq.records import DecayEnd
-from tankdaq.store.playback import recorded_device
-from tankdaq.store.reader import Recording, read_recording
+from tankdaq.store.reader import StoredRecording, read_recording
 from tankdaq.xsens.control import parse_output_configuration
 from xsens_captures import capture_dir, read_golden_blocks
 
@@ -40,7 +40,7 @@ PRETRIGGER_S = 30.0
 DEVICE_COLUMNS = ("t", "ticks", "counter", "roll", "pitch", "yaw", "p", "q", "r", "ax", "ay", "az", "status")
 
 
-def _record(port: str, out: Path) -> Recording:
+def _record(port: str, out: Path) -> StoredRecording:
     settings = sim_record_settings(
         out, port=port, runs=1, sim_speed=SPEED, sim_seed=3, pretrigger_s=PRETRIGGER_S
     )
@@ -50,7 +50,7 @@ def _record(port: str, out: Path) -> Recording:
 
 
 @pytest.fixture(scope="module")
-def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Recording, Recording]:
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[StoredRecording, StoredRecording]:
     """A decay from the scripted simulator, and the same decay recorded again from its played-back device."""
     base = tmp_path_factory.mktemp("playback")
     first = _record("sim", base / "first")
@@ -58,7 +58,9 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Recording, Recor
     return first, again
 
 
-def test_a_played_back_recording_records_the_same_samples(recorded: tuple[Recording, Recording]) -> None:
+def test_a_played_back_recording_records_the_same_samples(
+    recorded: tuple[StoredRecording, StoredRecording],
+) -> None:
     first, again = recorded
     a, b = first.samples, again.samples
     offset = int(np.searchsorted(a["ticks"], b["ticks"][0]))
@@ -81,7 +83,9 @@ def test_a_played_back_recording_records_the_same_samples(recorded: tuple[Record
     assert release_b["data"]["release_se_s"] == release_a["data"]["release_se_s"] > 0
 
 
-def test_the_played_back_device_is_the_recorded_one(recorded: tuple[Recording, Recording]) -> None:
+def test_the_played_back_device_is_the_recorded_one(
+    recorded: tuple[StoredRecording, StoredRecording],
+) -> None:
     first, again = recorded
     assert again.metadata["port"].endswith("ttyMTi0") and again.metadata["product_code"] == "MTi-G-710-2A8G4"
     for setting in ("configuration", "device_id", "product_code", "firmware"):
@@ -91,7 +95,7 @@ def test_the_played_back_device_is_the_recorded_one(recorded: tuple[Recording, R
 
 
 def test_a_recording_source_keeps_every_byte_and_reads_its_configuration_off_the_frames(
-    recorded: tuple[Recording, Recording],
+    recorded: tuple[StoredRecording, StoredRecording],
 ) -> None:
     first, _ = recorded
     raw = b"".join(chunk for _, chunk in first.raw_chunks)
@@ -179,7 +183,11 @@ def test_the_sim_port_names_a_recording() -> None:
     ],
 )
 def test_a_bad_recording_is_refused_before_the_device_opens(
-    recorded: tuple[Recording, Recording], tmp_path: Path, private_tempdir: Path, target: str, mentions: str
+    recorded: tuple[StoredRecording, StoredRecording],
+    tmp_path: Path,
+    private_tempdir: Path,
+    target: str,
+    mentions: str,
 ) -> None:
     not_mcap = tmp_path / "notes.mcap"
     not_mcap.write_text("not a recording")
@@ -194,7 +202,9 @@ def test_a_bad_recording_is_refused_before_the_device_opens(
     assert not list(private_tempdir.iterdir()) and not (tmp_path / "out").exists()
 
 
-def test_simulate_replay_serves_the_recorded_device(recorded: tuple[Recording, Recording]) -> None:
+def test_simulate_replay_serves_the_recorded_device(
+    recorded: tuple[StoredRecording, StoredRecording],
+) -> None:
     first, _ = recorded
     tankdaq = str(Path(sys.executable).with_name("tankdaq"))
     process = subprocess.Popen([tankdaq, "simulate", "--replay", str(first.path), "--speed", str(SPEED)],

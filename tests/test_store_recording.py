@@ -12,7 +12,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.errors import BadRecordingInput, InputError, RecordingError
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.physics.terms import TERM_TABLE
@@ -25,7 +25,7 @@ from tankdaq.store.naming import (
     parse_recording_name,
     recording_name,
 )
-from tankdaq.store.reader import Recording, iter_raw_chunks, read_decay_runs, read_recording
+from tankdaq.store.reader import StoredRecording, iter_raw_chunks, read_decay_runs, read_recording
 from tankdaq.store.reader import _read_indexed as read_recording_indexed
 from tankdaq.store.reader import _read_scanned as read_recording_scanned
 from tankdaq.store.writer import RecordingWriter, describe_run
@@ -237,7 +237,7 @@ def without_sample_blocks(source: Path, destination: Path) -> Path:
     return destination
 
 
-def assert_same_recording(read: Recording, expected: Recording) -> None:
+def assert_same_recording(read: StoredRecording, expected: StoredRecording) -> None:
     assert read.samples.dtype == expected.samples.dtype
     for name in SAMPLE_DTYPE.names:  # bit for bit, NaN in the same places
         np.testing.assert_array_equal(read.samples[name], expected.samples[name], err_msg=name)

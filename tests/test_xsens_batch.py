@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from tankdaq.errors import ProtocolError
 from tankdaq.samples import SAMPLE_DTYPE
-from tankdaq.xsens.batch import DecodedBlock, decode_capture, to_samples
+from tankdaq.xsens.column_decoder import DecodedBlock, decode_capture, to_samples
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.frame import Frame, build_frame
 from tankdaq.xsens.frame_scan import RUNNING_SUM_LIMIT
@@ -26,7 +26,7 @@ from tankdaq.xsens.mtdata2 import (
     encode_mtdata2,
     make_xdi,
 )
-from tankdaq.xsens.stream import StreamDecoder
+from tankdaq.xsens.stream_decoder import StreamDecoder
 from tankdaq.xsens.synthetic import decay_capture, decay_signals
 from tankdaq.xsens.timebase import MODULUS_ONE_DAY, SampleTimeUnwrapper
 from xsens_captures import SETS, capture

@@ -8,12 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tankdaq.errors import ProtocolError
-from tankdaq.xsens.batch import decode_capture
+from tankdaq.xsens.column_decoder import decode_capture
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.frame import Frame, build_frame
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import decode_mtdata2, make_xdi, payload_well_formed
-from tankdaq.xsens.stream import StreamDecoder
+from tankdaq.xsens.stream_decoder import StreamDecoder
 from tankdaq.xsens.synthetic import STRAY_HEADER, decay_capture, noisy_capture
 
 FRAMES = 100_000

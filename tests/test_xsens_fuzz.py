@@ -20,7 +20,7 @@ from tankdaq.cli.decode import flatten
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.legacy_output import LegacyOutput
 from tankdaq.errors import ProtocolError
-from tankdaq.xsens.batch import DecodedBlock
+from tankdaq.xsens.column_decoder import DecodedBlock
 from tankdaq.xsens.constants import MID
 from tankdaq.xsens.frame import build_frame
 from tankdaq.xsens.legacy import MODE_ORIENTATION, decode_mtdata, legacy_layout

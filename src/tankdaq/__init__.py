@@ -21,11 +21,11 @@ import importlib
 import sys
 import types
 
+from ._version import __version__
+
 TYPE_CHECKING = (
     False  # not ``typing``'s: importing typing was most of ``import tankdaq`` (mypy knows the name)
 )
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Campaign",

@@ -22,7 +22,7 @@ def prepare() -> None:
     from .auv.model import simulate_zigzag
     from .auv.vehicle import load_vehicle
     from .ident.compiled import warm_jit
-    from .ident.online import prepare_kernels
+    from .live.preparation import prepare_kernels
 
     reason = prepare_kernels()
     if reason is not None:

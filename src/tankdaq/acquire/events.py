@@ -19,7 +19,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import ClassVar
 
-from ..ident.online import OnlineResult
+from ..live.identifier import OnlineResult
 from ..records import DecayEnd
 from ..samples import StatusTally
 

@@ -18,7 +18,7 @@ from ..device.decoding import SampleDecoder
 from ..device.driver import StreamBlock
 from ..device.legacy_output import LegacyOutput
 from ..errors import BadRecordingInput
-from ..ident.online import prepare_identifier
+from ..live.preparation import prepare_identifier
 from ..records import DecayEnd
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView

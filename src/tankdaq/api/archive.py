@@ -88,8 +88,8 @@ def import_folder(
 ) -> ArchiveImport:
     """Every decay of every file under ``folder`` as a recording in ``out`` (made where missing); files
     already in ``out`` are not read as sources. Reading settings as ``tankdaq identify``'s."""
+    from ..config.validation import output_dir
     from ..store.inputs import INPUT_FORMATS
-    from ..validation import output_dir
     from .recording import columns_given
 
     source = arguments.path(folder, "folder", "the archive folder's path (str or pathlib.Path)")
@@ -176,7 +176,7 @@ def _import_file(
 
 def recording_path(target: Path, source: Path, sha: str, index: int) -> Path:
     """Where decay ``index`` of the file of SHA-256 ``sha`` is imported: the same place every time."""
-    from ..config_rules import safe_name
+    from ..config.rules import safe_name
 
     stem = "".join(c if c.isalnum() or c in "-_" else "_" for c in source.stem)[:40] or "decay"
     return target / f"{safe_name(stem, 'file name')}-{sha[:12]}-{index}.mcap"
@@ -216,8 +216,8 @@ def _imported_from(path: Path) -> tuple[str, int] | None:
 
 def _metadata(run: DecayRun, source: Path, sha: str, index: int, kind: str) -> dict[str, object]:
     """The run metadata of an imported decay: the condition where known, the device, the provenance."""
-    from ..config import format_draft
-    from ..ident.campaign import csv_labels
+    from ..campaign.groups import csv_labels
+    from ..config.hulls import format_draft
     from ..store.csv_import import NOTICES
     from ..store.inputs import RECORDING_FORMAT
 

@@ -20,7 +20,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
-from ..config_rules import shown
+from ..config.rules import shown
 from ..errors import InputError
 
 T = TypeVar("T")
@@ -175,11 +175,11 @@ def flag(value: object, name: str) -> bool:
 
 def draft(value: object, name: str = "draft") -> str:
     """A draft as the drafts are written: a factor of the design draft (``1.1``) or ``"0.9T"``, ``"T"``,
-    ``"1.1T"``; returned as text for ``validation.draft_factor`` (which checks its range)."""
+    ``"1.1T"``; returned as text for ``config.validation.draft_factor`` (which checks its range)."""
     if isinstance(value, str) and value.strip():
         return value
     if isinstance(value, numbers.Real) and not isinstance(value, bool) and 0 < float(value) < math.inf:
-        from ..config import format_draft
+        from ..config.hulls import format_draft
 
         return format_draft(float(value))
     raise refuse(name, "a factor of the design draft above 0 (1.1) or text as '0.9T', 'T', '1.1T'", value)

@@ -1,7 +1,7 @@
 """``tankdaq.campaign``: a test campaign fitted group by group; ``tankdaq campaign`` is this call, and so is
-the guided session's report (``acquire.guided.report``).
+the guided session's report (``session.report``).
 
-The campaign streams (``ident.campaign_stream``): the workers read the files and send back each decay's
+The campaign streams (``campaign.stream``): the workers read the files and send back each decay's
 group, then read them again a chunk of groups at a time, fit each group and send back its table row. The
 caller holds the rows (a few kB per group), never the recordings, unless the fits are asked for
 (``keep_fits``, or a report or full-scale results, which draw them). The workers are a process pool
@@ -17,7 +17,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .. import validation
+from ..config import validation
 from ..errors import InputError
 from . import arguments
 from .identification import drop_read_twice, to_json, water_settings
@@ -28,17 +28,17 @@ if TYPE_CHECKING:
 
     import pandas as pd
 
-    from ..config import Hull
-    from ..ident.campaign import GroupKey, GroupResult, GroupRow
-    from ..ident.campaign_stream import CampaignScan, FileWork, RunRef
+    from ..campaign.groups import GroupKey, GroupResult, GroupRow
+    from ..campaign.stream import CampaignScan, FileWork, RunRef
+    from ..config.hulls import Hull
     from ..ident.imo_table import ImoTable
 
 
 @dataclass(frozen=True, eq=False)  # holds DataFrames or fits: compared by identity
 class Campaign:
-    """What ``campaign`` found. ``rows`` are campaign.csv's rows (``ident.campaign.GroupRow``, in group
+    """What ``campaign`` found. ``rows`` are campaign.csv's rows (``campaign.groups.GroupRow``, in group
     order) and ``table`` the same as a DataFrame; ``results`` the groups' fits and decays
-    (``ident.campaign.GroupResult``) when they were kept (``keep_fits``, a report or ``full_scale``), else
+    (``campaign.groups.GroupResult``) when they were kept (``keep_fits``, a report or ``full_scale``), else
     empty; ``files`` the recordings read; ``skipped`` the files that could not be read (one line each:
     the campaign went on without them); ``notices`` the lines the reading had for the user; ``cuts``
     where each decay's free part was cut, and why; ``full_scale`` the Froude lines (``full_scale=True``);
@@ -118,7 +118,7 @@ class Campaign:
         """The Markdown table ``tankdaq campaign`` prints (with each group's period and B_eq/I and their
         expanded uncertainty; the whole budgets: ``budget``), then the IMO tables and the full-scale
         lines."""
-        from ..ident.campaign import markdown_table
+        from ..campaign.groups import markdown_table
         from ..ident.imo_table import imo_markdown
 
         return (
@@ -184,18 +184,18 @@ def campaign(
     unless ``keep_fits``; a decay its recording holds only part of (stopped, the device gone, cut) is
     left out with a line unless ``include_partial``;
     ``file_work`` is made of the files it wants by the workers that read them (the run catalogue: the
-    rows of files it does not hold, ``ident.campaign_stream.FileWork``). A file that cannot be read is
+    rows of files it does not hold, ``campaign.stream.FileWork``). A file that cannot be read is
     skipped with its line in ``skipped``; bad input raises ``tankdaq.errors.InputError`` before any file
     is read.
 
     >>> result = tankdaq.campaign("recordings/campaign", hulls=["trimaran"], jobs=2)  # doctest: +SKIP
     >>> result.table[["hull", "draft", "angle_deg", "b_eq_per_s"]]  # doctest: +SKIP
     """
-    from ..ident.campaign import REPORT_TABLES, find_campaign_hulls, find_recordings
-    from ..ident.campaign_stream import FileWork
-    from ..ident.executors import campaign_executor
+    from ..campaign.executors import campaign_executor
+    from ..campaign.groups import REPORT_TABLES, find_campaign_hulls, find_recordings
+    from ..campaign.stream import FileWork
     from ..ident.full_scale import campaign_full_scale
-    from ..ident.online import prepare_identifier
+    from ..live.preparation import prepare_identifier
 
     inputs, hulls, start_s, end_s = _arguments(inputs, hulls, start_s, end_s)
     model = arguments.model(model)
@@ -208,9 +208,7 @@ def campaign(
     scheduler = arguments.optional_text(scheduler, "scheduler", "a Dask scheduler's address or None")
     report = arguments.optional_path(report, "report", "a folder (str or pathlib.Path) or None")
     on_result = arguments.callback(on_result, "on_result")
-    file_work = arguments.optional_instance(
-        file_work, "file_work", FileWork, "an ident.campaign_stream.FileWork"
-    )
+    file_work = arguments.optional_instance(file_work, "file_work", FileWork, "a campaign.stream.FileWork")
     kept = Kept(arguments.progress(progress))
     workers = _check_campaign(model, jobs, executor, scheduler)
     folder = validation.report_dir(Path(report), REPORT_TABLES, "report") if report is not None else None
@@ -260,7 +258,7 @@ def _arguments(
 
 def _check_campaign(model: str, jobs: int, executor: str, scheduler: str | None) -> int:
     """The settings checked before any file is read; the worker processes to start (1: none)."""
-    from ..ident.executors import check_scheduler
+    from ..campaign.executors import check_scheduler
     from ..physics.models import resolve_model
 
     resolve_model(model)  # a typo fails before any file is read
@@ -280,7 +278,7 @@ def _scan(
     """Every file scanned by the workers (each decay's group and lines, never its samples); the folders
     read, the files skipped and what the reading decided said in one line each. A campaign of which no
     file reads is refused: the one file's reason, or every file's line and a count."""
-    from ..ident.campaign_stream import scan_campaign
+    from ..campaign.stream import scan_campaign
 
     with kept.task("reading", len(paths)) as advance:
         count = iter(range(1, len(paths) + 1))
@@ -332,7 +330,7 @@ def _fit(
     kept: Kept,
 ) -> list[GroupRow]:
     """Each group fitted by the workers; its row kept (with its fit when ``keep``), in group order."""
-    from ..ident.campaign_stream import fit_campaign
+    from ..campaign.stream import fit_campaign
 
     with kept.task("fitting", len(groups)) as advance:
         count = iter(range(1, len(groups) + 1))

@@ -94,7 +94,7 @@ def compare_models(
     from ..ident.conditions import group_conditions, grouping_line
     from ..ident.estimators import make_estimator
     from ..ident.free_decay import cut_lines
-    from ..ident.online import prepare_identifier
+    from ..live.preparation import prepare_identifier
     from ..physics.models import COMPARE_MODELS, MODEL_FAMILY
 
     sources = sources_given(sources)

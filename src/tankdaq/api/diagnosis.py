@@ -19,7 +19,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
-from .. import validation
+from ..config import validation
 from ..errors import InputError
 from ..records import DecayRun
 from . import arguments
@@ -155,7 +155,7 @@ def _teller(simulated: bool) -> ModuleType:
 def _diagnose(runs: list[DecayRun], baseline: str, max_steps: int, kept: Kept) -> Diagnoser:
     from ..diagnose.effects import LIBRARY
     from ..diagnose.workflow import Diagnoser
-    from ..ident.online import prepare_identifier
+    from ..live.preparation import prepare_identifier
 
     prepare_identifier(baseline, kept.line)  # the native kernels: built once, on the first run
     with kept.task("baseline", 1 + max_steps * (len(LIBRARY) + 2)) as advance:
@@ -175,10 +175,10 @@ def _compare(
     kept: Kept,
 ) -> SimulationComparison:
     """The simulation resolved and checked against the decays' axis and the hull's drafts, compared."""
-    from ..config import format_draft, load_hull
+    from ..config.hulls import format_draft, load_hull
     from ..diagnose.compare import CANDIDATES, SimulationComparison
     from ..diagnose.simulation import SeriesColumns, SimulationRequest, resolve_simulation
-    from ..ident.online import prepare_identifier
+    from ..live.preparation import prepare_identifier
 
     factor = validation.draft_factor(draft if isinstance(draft, str) else format_draft(float(draft)))
     hull = load_hull(str(hull_name)) if hull_name is not None else None

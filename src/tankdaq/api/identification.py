@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .. import validation
+from ..config import validation
 from ..errors import InputError
 from ..records import DecayRun
 from . import arguments
@@ -28,7 +28,7 @@ from .recording import Decay, Recording, columns_given, runs_of, sources_given
 if TYPE_CHECKING:
     import pandas as pd
 
-    from ..config import Hull, WaterSettings
+    from ..config.hulls import Hull, WaterSettings
     from ..ident.budget_inputs import DeviceProfile
     from ..ident.intervals import IntervalSummary
     from ..ident.summary import FitSummary
@@ -374,13 +374,13 @@ def identify(
     >>> result.coefficients.set_index("term")["value"]  # doctest: +SKIP
     >>> result.derived[["amplitude_deg", "b_eq_per_s", "b44_hat"]]  # doctest: +SKIP
     """
-    from ..config import full_scale_of, load_hull
+    from ..config.hulls import full_scale_of, load_hull
     from ..ident.budget_inputs import DeviceProfile as Profile
     from ..ident.conditions import condition_of, group_conditions, grouping_line
     from ..ident.estimators import make_estimator
     from ..ident.full_scale import friction_for, scale_results
     from ..ident.intervals import check_intervals
-    from ..ident.online import prepare_identifier
+    from ..live.preparation import prepare_identifier
     from ..physics.models import MODEL_FAMILY, is_auto, resolve_model
 
     sources = sources_given(sources)
@@ -430,7 +430,7 @@ def identify(
 
 def water_settings(water_temperature_c: object, sea_temperature_c: object) -> WaterSettings:
     """The water temperatures of ``full_scale``'s friction correction, checked by name (degC)."""
-    from ..config import WaterSettings
+    from ..config.hulls import WaterSettings
 
     return WaterSettings(
         arguments.optional_number(water_temperature_c, "water_temperature_c", 0.0, 40.0, unit="degC"),

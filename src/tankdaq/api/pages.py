@@ -10,7 +10,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from .. import validation
+from ..config import validation
 from ..errors import ConfigError, InputError
 from ..store.safe_write import new_path
 from . import arguments

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
-from .. import validation
+from ..config import validation
 from ..errors import InputError
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS

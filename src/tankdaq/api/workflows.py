@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .. import validation
+from ..config import validation
 from . import arguments
 from .recording import Recording, read
 
@@ -41,7 +41,7 @@ def simulate(
     >>> (rec,) = tankdaq.simulate("sim", hull="swath", angle_deg=8.0, seed=1)  # doctest: +SKIP
     >>> tankdaq.identify(rec).coefficients  # doctest: +SKIP
     """
-    from ..config import hull_scenario, load_hull
+    from ..config.hulls import hull_scenario, load_hull
     from ..physics.scenario import fresh_seed
     from ..physics.truth import RunKind
 

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
+from .._version import __version__
+from ..config.validation import input_file
 from ..errors import BadRecordingInput, InputError
 from ..store import column_records
 from ..store.column_records import ColumnLayout, FileAttachment
 from ..store.inputs import by_suffix
-from ..validation import input_file
 from .model import STATE_COLUMNS, STATE_UNITS, StateRecord
 from .vehicle import Vehicle, vehicle_from_dict
 

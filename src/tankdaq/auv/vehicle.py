@@ -12,7 +12,7 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..config import config_dir
+from ..config.hulls import config_dir
 from ..errors import ConfigError, InputError
 
 

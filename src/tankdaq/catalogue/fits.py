@@ -20,7 +20,7 @@ from typing import Any
 
 import sqlalchemy as sa
 
-from .. import __version__
+from .._version import __version__
 from ..records import DecayEnd
 from .database import BadCatalogueQuery, Catalogue, in_batches
 from .schema import REFERENCE_COPY, FitMethod, FitSource, budgets, decays, fits, utc_now

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import sqlalchemy as sa
 
-from ..config import format_draft, parse_draft
+from ..config.hulls import format_draft, parse_draft
 from ..errors import InputError
 from ..records import DecayEnd, Verdict
 from .database import BadCatalogueQuery, Catalogue, in_batches, read_catalogue, resolve_url

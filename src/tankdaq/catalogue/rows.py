@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .. import __version__
-from ..config import Hull, load_hull, locate_hull, parse_draft
+from .._version import __version__
+from ..config.hulls import Hull, load_hull, locate_hull, parse_draft
 from ..errors import RecordingError, TankdaqError, install_hint
 from ..records import DecayEnd
 from ..store.inputs import INPUT_FORMATS, file_sha256
@@ -263,13 +263,13 @@ def lab_file_row(
     path: Path, sha256: str | None = None, axis: str | None = None
 ) -> tuple[dict[str, Any], dict[str, Any] | None]:
     """The row of a lab's decay file (CSV, HDF5, MATLAB, Parquet): as ``recording_row``, its condition
-    from its JSON sidecar or its name (``ident.campaign.csv_labels``; unknown columns stay empty when
+    from its JSON sidecar or its name (``campaign.groups.csv_labels``; unknown columns stay empty when
     neither says). ``axis``: the file's, when a command has just read its decay (with the columns the
     user named): it is not read again. Raises ``RecordingError`` for a file that holds no decay
     tankdaq can read with its default columns."""
-    from ..config import format_draft
+    from ..campaign.groups import csv_labels
+    from ..config.hulls import format_draft
     from ..errors import InputError
-    from ..ident.campaign import csv_labels
     from ..store.inputs import read_runs
     from ..store.mt_manager import file_facts
 
@@ -319,7 +319,7 @@ def decay_row(
 
 
 def worker_row(path: Path, sha256: str | None = None) -> tuple[dict[str, Any], dict[str, Any] | None] | None:
-    """``decay_row`` of a file a campaign's worker has just read (``ident.campaign_stream.FileWork``; its
+    """``decay_row`` of a file a campaign's worker has just read (``campaign.stream.FileWork``; its
     ``sha256`` from that reading), so the catalogue's writer only writes it: the row ``index`` makes of
     the file. None for an exported
     CSV (its recording holds the decay) and for a file whose row cannot be made here: the writer then

@@ -12,7 +12,7 @@ from typing import Any
 
 import sqlalchemy as sa
 
-from ..config import Hull
+from ..config.hulls import Hull
 from ..errors import RecordingError
 from ..records import Verdict
 from ..store.inputs import file_sha256
@@ -300,7 +300,7 @@ def record_session(catalogue: Catalogue, folder: Path, only: str | None = None) 
     session, plan, decay number, the operator's verdict and the checks' reasons. Returns the decays
     catalogued (a decay whose file is gone is left out: the log says it was rejected as missing).
     ``only``: the one file just judged (a session's verdict; the others are already there)."""
-    from ..acquire.guided.journal import SessionLog
+    from ..session.journal import SessionLog
 
     log = SessionLog(folder)
     records = log.read()
@@ -401,12 +401,12 @@ def fit_of_estimator(
 
 
 def _method_of(estimator: Any) -> FitMethod:
-    from ..ident.equation_error import EquationError
-    from ..ident.output_error import OutputError
+    from ..ident.equation_error import EquationErrorFit
+    from ..ident.output_error import OutputErrorFit
 
-    if isinstance(estimator, OutputError):
+    if isinstance(estimator, OutputErrorFit):
         return FitMethod.OUTPUT_ERROR
-    return FitMethod.EQUATION_ERROR if isinstance(estimator, EquationError) else FitMethod.OTHER
+    return FitMethod.EQUATION_ERROR if isinstance(estimator, EquationErrorFit) else FitMethod.OTHER
 
 
 def run_files(runs: Sequence[Any]) -> list[tuple[Path, str | None]]:
@@ -417,7 +417,7 @@ def run_files(runs: Sequence[Any]) -> list[tuple[Path, str | None]]:
 
 
 def campaign_fit(result: Any) -> tuple[list[tuple[Path, str | None]], dict[str, Any]] | None:
-    """A campaign group's fit (``ident.campaign.GroupResult``) as (its files, its fit); None for a
+    """A campaign group's fit (``campaign.groups.GroupResult``) as (its files, its fit); None for a
     group that was not fitted. Uses the group's own hull and warnings: nothing is read or found again."""
     if result.fit is None:
         return None
@@ -434,7 +434,7 @@ def campaign_fit(result: Any) -> tuple[list[tuple[Path, str | None]], dict[str, 
 
 
 def record_fits(catalogue: Catalogue, results: Iterable[Any]) -> int:
-    """A campaign's group fits (``ident.campaign.GroupResult``) onto each group's recordings, in one
+    """A campaign's group fits (``campaign.groups.GroupResult``) onto each group's recordings, in one
     transaction. Returns the rows updated."""
     return update_fits(catalogue, [fit for result in results if (fit := campaign_fit(result)) is not None])
 

@@ -153,7 +153,7 @@ class UsageLine(typer.BadParameter):
 
 
 def checked(rule: Callable[..., Any], keep_input: bool = False, **settings: Any) -> Callable[[Any], Any]:
-    """A typer callback/parser applying a ``tankdaq.validation`` rule; None (not given) passes.
+    """A typer callback/parser applying a ``tankdaq.config.validation`` rule; None (not given) passes.
 
     A list option is checked item by item; ``keep_input`` passes the value on as given (a model
     alias stays an alias) instead of the rule's normalised form. The rule's InputError becomes one
@@ -183,7 +183,7 @@ DRAFT_METAVAR = "0.9T|T|1.1T"
 
 def parse_draft_option(value: str) -> float:
     """typer parser for --draft: '0.9T', 'T', '1.1T' -> factor (bad values exit 2)."""
-    from ..validation import draft_factor
+    from ..config.validation import draft_factor
 
     return checked(draft_factor)(value)
 
@@ -216,7 +216,7 @@ def say_cuts(lines: Iterable[str]) -> None:
 
 def _print_version(value: bool) -> None:
     if value:
-        from .. import __version__
+        from .._version import __version__
 
         typer.echo(f"tankdaq {__version__}")
         raise typer.Exit()
@@ -272,7 +272,7 @@ def build_kernels_shown() -> None:
     with a spinner and the elapsed time (not on a terminal: a line every few seconds and one at the end);
     the library then finds them built (or says why not itself)."""
     from ..ident import compiled
-    from ..ident.online import first_run_notice
+    from ..live.preparation import first_run_notice
 
     notice = first_run_notice()
     if notice is None:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from .. import validation
+from ..config import validation
 from .app import app, catalogue_option, checked, handles_errors, say
 from .options import AngleColumn, ReadAxis, SpeedColumn, TimeColumn
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Annotated
 import numpy as np
 import typer
 
-from .. import validation
+from ..config import validation
 from ..errors import InputError
 from .app import app, checked, err_console, handles_errors
 from .options import JsonOutput

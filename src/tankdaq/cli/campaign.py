@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from .. import validation
+from ..config import validation
 from .app import (
     DRAFT_METAVAR,
     TerminalProgress,
@@ -167,9 +167,9 @@ def simulate_campaign_command(
 ) -> None:
     """Simulate a decay campaign from configs/hulls, following a test matrix from configs/campaigns
     (default: seed 000's trimaran and catamaran pitch decays at 0.9T, T, 1.1T from 2, 4, 6, 8 deg)."""
-    from ..config import load_hull
-    from ..ident.campaign_synthetic import write_simulated_campaign
-    from ..plans import load_campaign_plan
+    from ..campaign.synthetic import write_simulated_campaign
+    from ..config.hulls import load_hull
+    from ..config.plans import load_campaign_plan
 
     matrix = load_campaign_plan(plan)
     axis = axis or matrix.axis  # the plan's is checked where it is read

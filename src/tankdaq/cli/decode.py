@@ -17,14 +17,14 @@ from typing import IO, TYPE_CHECKING, Annotated, cast
 import numpy as np
 import typer
 
+from ..config.validation import input_file, new_file
 from ..errors import InputError, ProtocolError
-from ..validation import input_file, new_file
 from ..xsens.constants import MID
 from .app import TerminalProgress, app, checked, err_console, handles_errors
 
 if TYPE_CHECKING:  # the decoders (and mcap) are imported by the command itself: --help stays quick
     from ..api.progress import Progress
-    from ..xsens.batch import DecodedBlock
+    from ..xsens.column_decoder import DecodedBlock
     from ..xsens.mtdata2 import MTData2Message
     from ..xsens.timebase import CounterTracker
 
@@ -127,10 +127,10 @@ def is_log(path: Path, data: bytes) -> bool:
 
 def decode_all(data: bytes, progress: Progress, label: str, log: bool = False) -> DecodedBlock:
     """Stream-decode ``data`` in 1 MiB pieces (progress in KiB); ``log``: as an MT Manager log."""
-    from ..xsens.batch import DecodedBlock
+    from ..xsens.column_decoder import DecodedBlock
     from ..xsens.framer import ANY_BID
     from ..xsens.mtb import LOG_MAX_DATA_LENGTH
-    from ..xsens.stream import StreamDecoder
+    from ..xsens.stream_decoder import StreamDecoder
 
     decoder = StreamDecoder(LOG_MAX_DATA_LENGTH, ANY_BID) if log else StreamDecoder()
     blocks = []

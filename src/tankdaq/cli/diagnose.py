@@ -8,7 +8,7 @@ from typing import Annotated, Any, get_args
 
 import typer
 
-from .. import validation
+from ..config import validation
 from ..errors import InputError
 from .app import (
     TerminalProgress,

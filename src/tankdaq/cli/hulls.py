@@ -9,7 +9,7 @@ import typer
 from .app import app, handles_errors, say
 
 if TYPE_CHECKING:  # the hull files are read by the commands: --help of every command skips config
-    from ..config import Hull
+    from ..config.hulls import Hull
 
 hulls_app = typer.Typer(
     no_args_is_help=False,
@@ -25,7 +25,7 @@ def list_command(ctx: typer.Context) -> None:
     """List every hull found by name and where it came from (the user's folder shadows shipped ones)."""
     if ctx.invoked_subcommand is not None:
         return
-    from ..config import find_hulls, load_hull, user_hulls_dir
+    from ..config.hulls import find_hulls, load_hull, user_hulls_dir
     from ..errors import InputError
 
     typer.echo(f"user hull folder: {user_hulls_dir()} (set TANKDAQ_HULLS_DIR to move it)")
@@ -56,7 +56,7 @@ def _particulars_line(hull: Hull) -> str:
 @handles_errors
 def show_command(name: Annotated[str, typer.Argument(help="Hull name or .toml path.")]) -> None:
     """Show one hull in full: origin, dimensions, GM and gyradius, simulation coefficients."""
-    from ..config import format_draft, load_hull
+    from ..config.hulls import format_draft, load_hull
 
     hull = load_hull(name)
     typer.echo(f"{hull.name}: {hull.description}")
@@ -83,7 +83,7 @@ def new_command(
     name: Annotated[str, typer.Argument(help="Name of the new hull (letters, digits, -).")],
 ) -> None:
     """Write a commented hull template to the user's hull folder; print it, then its path (the last line)."""
-    from ..config import write_hull_template
+    from ..config.hulls import write_hull_template
 
     path = write_hull_template(name)
     typer.echo(path.read_text(), nl=False)  # what to edit, shown where the user is looking

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from .. import validation
+from ..config import validation
 from .app import (
     TerminalProgress,
     app,

@@ -1,8 +1,8 @@
 """The options several commands share, defined once: the same flag, help and check wherever it appears.
 
 Each is an ``Annotated`` type for a command's signature (``axis: DecayAxis = "roll"``) or, where the
-help differs by command, a function giving the ``typer.Option``. Checks are ``tankdaq.validation`` rules
-run while the arguments are parsed (``app.checked``): one ``error:`` line and exit 2 before any work.
+help differs by command, a function giving the ``typer.Option``. Checks are ``tankdaq.config.validation``
+rules run while the arguments are parsed (``app.checked``): one ``error:`` line and exit 2 before any work.
 ``--draft`` is ``app.draft_option``; ``--catalogue`` and ``--runs`` are ``app.catalogue_option`` and
 ``app.runs_option``, typed here.
 """
@@ -13,7 +13,7 @@ from typing import Annotated, Any
 
 import typer
 
-from .. import validation
+from ..config import validation
 from .app import catalogue_option, checked, runs_option
 
 # The run catalogue (identify, campaign, diagnose): where fits are written, and --runs in place of paths.

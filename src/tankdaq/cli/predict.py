@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from .. import validation
+from ..config import validation
 from .app import app, checked, draft_option, handles_errors
 from .options import FullScale, JsonOutput, SeaTemperature, WaterTemperature
 
@@ -56,7 +56,7 @@ def predict_command(
     as_json: JsonOutput = False,
 ) -> None:
     """Predict the roll damping components at the natural roll frequency (simplified Ikeda method)."""
-    from ..config import WaterSettings, friction_scaling, full_scale_of, ikeda_prediction, load_hull
+    from ..config.hulls import WaterSettings, friction_scaling, full_scale_of, ikeda_prediction, load_hull
     from ..errors import InputError
     from ..physics.friction_scaling import correct_prediction
     from ..physics.ikeda import summary_lines

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from .. import validation
+from ..config import validation
 from .app import (
     app,
     build_kernels_shown,
@@ -355,7 +355,7 @@ def demo_command(
     """The whole chain on the built-in simulated MTi-G: record decays, then identify them jointly
     (``tankdaq identify`` of the recordings: the model the data choose, or --model)."""
     from ..acquire.daemon import RecordSettings
-    from ..config import load_hull
+    from ..config.hulls import load_hull
 
     err_console.print(
         f"recording {runs} simulated decays (hull {DEMO_HULL}, T, roll, 8 deg) into {out}; "

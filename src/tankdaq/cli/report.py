@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from .. import validation
+from ..config import validation
 from .app import TerminalProgress, app, build_kernels_shown, checked, err_console, fail, handles_errors, say
 from .options import (
     AngleColumn,

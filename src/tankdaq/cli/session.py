@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from .. import validation
+from ..config import validation
 from ..errors import InputError
 from .app import app, build_kernels_shown, catalogue_option, checked, err_console, handles_errors, say
 from .record import (
@@ -102,11 +102,11 @@ def session_command(
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
     catalogue: Annotated[str | None, catalogue_option()] = None,
 ) -> None:
-    from ..acquire.guided.operator import ScriptedOrTerminalOperator, read_responses
-    from ..acquire.guided.runner import CampaignSession, SessionSettings
     from ..catalogue.hooks import CatalogueWriter, session_listener
+    from ..config.plans import load_campaign_plan
     from ..physics.scenario import parse_fault_script
-    from ..plans import load_campaign_plan
+    from ..session.operator import ScriptedOrTerminalOperator, read_responses
+    from ..session.runner import GuidedSession, SessionSettings
 
     answers = read_responses(responses)
     settings = SessionSettings(
@@ -125,7 +125,7 @@ def session_command(
         sim_faults=parse_fault_script(sim_faults) if port == "sim" else {},
     )
     with CatalogueWriter.from_option(catalogue, say) as writer:
-        session = CampaignSession(
+        session = GuidedSession(
             settings,
             ScriptedOrTerminalOperator(answers, yes, say, _terminal_line),
             on_line=say,

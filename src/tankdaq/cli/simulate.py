@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from .. import validation
+from ..config import validation
 from ..errors import InputError
 from .app import app, checked, draft_option, err_console, handles_errors
 from .options import DecayAxis
@@ -103,7 +103,7 @@ def simulate_command(
     ),
 ) -> None:
     """Serve a simulated MTi-G on a pty; the first stdout line is the port to open."""
-    from ..config import format_draft, hull_scenario, load_hull
+    from ..config.hulls import format_draft, hull_scenario, load_hull
     from ..device.simulator import (
         Behaviour,
         DeviceIdentity,
@@ -112,9 +112,9 @@ def simulate_command(
         SimulatedMTi,
         refused_orientation,
     )
+    from ..device.simulator.playback import recorded_device
     from ..physics.scenario import Handling, fresh_seed
     from ..physics.sensor import SensorNoise
-    from ..store.playback import recorded_device
 
     if speed <= 0:
         raise InputError(f"--speed must be positive, got {speed:g}")
@@ -183,7 +183,7 @@ def simulate_command(
 
 def _write_truth(path: Path, sim: SimulatedMTi, scenario: DecayScenario) -> None:
     """The truth file: every run's release (s from power-up, SampleTimeFine), initial state, model."""
-    from ..config import format_draft
+    from ..config.hulls import format_draft
 
     document = {
         "hull": scenario.hull,

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from .. import validation
+from ..config import validation
 from .app import app, checked, err_console, handles_errors
 
 

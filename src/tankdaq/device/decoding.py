@@ -12,11 +12,11 @@ import numpy as np
 
 from ..errors import ProtocolError
 from ..samples import empty_samples
-from ..xsens.batch import DecodedBlock, to_samples
+from ..xsens.column_decoder import DecodedBlock, to_samples
 from ..xsens.constants import MID
 from ..xsens.control import INTEGRATED_RATE_OF_TURN
 from ..xsens.legacy import decode_mtdata
-from ..xsens.stream import StreamDecoder
+from ..xsens.stream_decoder import StreamDecoder
 from ..xsens.timebase import MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrapper, sample_time_modulus
 from .attitude import GyroAttitude
 from .legacy_output import LegacyOutput

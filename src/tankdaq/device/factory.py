@@ -2,7 +2,7 @@
 
 The port ``sim`` is the built-in simulated MTi-G: it is started on a pseudo-terminal and opened by
 path like hardware; ``sim:FILE.mcap`` is the same simulator playing the device of a recording (the
-caller reads the file: ``store.playback.recorded_device``); any other port is the real driver on
+caller reads the file: ``device.simulator.playback.recorded_device``); any other port is the real driver on
 that path (or pyserial URL). Whoever
 records (the daemon, a guided session) never tests for ``sim`` to get a device.
 """
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..config import format_draft
+from ..config.hulls import format_draft
 from ..errors import InputError
 from ..xsens.control import check_bandwidth, decay_output_configuration
 from .driver import MTiDriver

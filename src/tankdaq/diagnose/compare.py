@@ -18,7 +18,7 @@ from functools import partial
 
 import numpy as np
 
-from ..config import Hull
+from ..config.hulls import Hull
 from ..errors import BadIdentificationInput, IdentificationError, InputError
 from ..ident.base import EstimatorMixin
 from ..ident.derived import (
@@ -28,7 +28,7 @@ from ..ident.derived import (
     linear_stiffness,
     tested_amplitudes_deg,
 )
-from ..ident.output_error import OutputError
+from ..ident.output_error import OutputErrorFit
 from ..physics.ikeda import linear_quadratic_fit
 from ..physics.models import canonical_order
 from ..physics.terms import RESTORING_TERMS
@@ -228,7 +228,7 @@ class SimulationComparison(EstimatorMixin):
         self.verdict_ = self._verdict()
         return self
 
-    def _measured_model(self, runs: list[DecayRun]) -> OutputError:
+    def _measured_model(self, runs: list[DecayRun]) -> OutputErrorFit:
         """The measurement's own model for B_eq and the release states (``best_damping_form``)."""
         self._say("measured model")
         return best_damping_form(runs)

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
-from ..config import Hull
+from ..config.hulls import Hull
 from ..ident.derived import dimensional
 
 #: SI unit of a term times the total inertia, and its Froude exponent (moment lambda^4, rate lambda^-0.5).

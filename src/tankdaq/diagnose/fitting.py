@@ -3,7 +3,7 @@
 A candidate effect changes the model: a term, Coulomb friction, coupling to a
 measured channel, an unmeasured ringing, an observation parameter (per-run
 angle offset, angle gain error, angle lag, gyro bias). ``ModelSpec`` says
-which; ``fit_spec`` configures ``ident.output_error.OutputError`` with it
+which; ``fit_spec`` configures ``ident.output_error.OutputErrorFit`` with it
 (the equation of motion, the observation model, the exact-sensitivity
 Levenberg-Marquardt, the BIC and the standard errors are ident's) and wraps
 the result in ``Fit``, the numbers the workflow and its report read. The
@@ -24,7 +24,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import BadIdentificationInput
-from ..ident.output_error import OutputError
+from ..ident.output_error import OutputErrorFit
 from ..ident.uncertainty import ljung_box
 from ..physics.decay import TERMS
 from ..records import DecayRun
@@ -78,9 +78,9 @@ class ModelSpec:
     def with_(self, **changes: object) -> ModelSpec:
         return replace(self, **changes)  # type: ignore[arg-type]
 
-    def estimator(self) -> OutputError:
+    def estimator(self) -> OutputErrorFit:
         """ident's output-error engine set up for this variant, as the workflow fits it."""
-        return OutputError(
+        return OutputErrorFit(
             (*self.terms, *(("fc",) if self.coulomb else ())),
             exogenous=self.coupling or None,
             exogenous_cutoff_hz=CHANNEL_CUTOFF_HZ,
@@ -115,7 +115,7 @@ class Fit:
     """One converged output-error fit of a ModelSpec: the fitted engine and what the workflow reads of it."""
 
     spec: ModelSpec
-    estimator: OutputError
+    estimator: OutputErrorFit
 
     @property
     def coefficients(self) -> dict[str, float]:

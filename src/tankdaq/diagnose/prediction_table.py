@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Hull
+from ..config.hulls import Hull
 from ..errors import InputError
 from ..ident.derived import G, b44_hat_factor
 from ..physics.ikeda import COMPONENTS, change_lines, linear_quadratic_fit

@@ -13,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
+from ..config.validation import refuse_existing
 from ..errors import RecordingError
 from ..ident.free_decay import cut_lines
 from ..ident.plausibility import check_runs
 from ..store.safe_write import write_text_new
-from ..validation import refuse_existing
 from ..viz import diagnose_view, plots
 from .effects import EffectKind
 from .fitting import Fit

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import BadIdentificationInput
 from ..ident.derived import b_eq, equivalent_frequency
-from ..ident.output_error import OutputError
+from ..ident.output_error import OutputErrorFit
 from ..records import DecayRun
 from .workflow import initial_guess
 
@@ -33,7 +33,7 @@ class SimEquation:
     series_rms_rad: float | None  # how well it reproduces the simulated series (None: a model)
 
 
-def best_damping_form(runs: Sequence[DecayRun], starts: int = 1) -> OutputError:
+def best_damping_form(runs: Sequence[DecayRun], starts: int = 1) -> OutputErrorFit:
     """The better (BIC) of ``REFERENCE_MODELS`` fitted by output error to ``runs``. With ``starts=2`` each
     is also started from the spectrum's frequency and the peaks' decrement (``workflow.initial_guess``):
     over tens of lightly damped cycles either start alone can end in a wrong minimum (a simulated series;
@@ -42,7 +42,7 @@ def best_damping_form(runs: Sequence[DecayRun], starts: int = 1) -> OutputError:
     for terms in REFERENCE_MODELS:
         for guess in (None, initial_guess(runs, terms))[:starts]:
             try:
-                fits.append(OutputError(terms, compute_diagnostics=False).fit(runs, start=guess))
+                fits.append(OutputErrorFit(terms, compute_diagnostics=False).fit(runs, start=guess))
             except BadIdentificationInput:
                 continue  # diverged from this start: the other one counts
     if not fits:
@@ -58,7 +58,7 @@ def identify_series(runs: Sequence[DecayRun]) -> SimEquation:
     terms = fit.terms_
     kept = tuple(t for t in terms if t in ("b1", "c1") or _matters(fit.coefficients_, t, top))
     if kept != terms:
-        fit = OutputError(kept, compute_diagnostics=False).fit(runs, start=fit.coefficients_)
+        fit = OutputErrorFit(kept, compute_diagnostics=False).fit(runs, start=fit.coefficients_)
     residual = np.concatenate([res["angle"] for res in fit.residuals_])
     return SimEquation(kept, dict(fit.coefficients_), fit.covariance_, float(np.sqrt(np.mean(residual**2))))
 

@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Hull, format_draft
+from ..config.hulls import Hull, format_draft
+from ..config.validation import input_file
 from ..errors import InputError
 from ..ident.conditions import UNKNOWN, condition_of
 from ..ident.inputs import input_notices, read_decays
 from ..ident.signals import half_cycle_peaks
 from ..records import DecayRun
-from ..validation import input_file
 from .components import prediction_shares, table_shares
 from .prediction_table import (
     component_changes,
@@ -201,7 +201,7 @@ def from_ikeda(request: SimulationRequest) -> Simulation:
     made a linear + quadratic model over the measured amplitudes; every input outside the method's
     validity range is a note, and the prediction explains a measured damping in its components.
     """
-    from ..config import ikeda_prediction
+    from ..config.hulls import ikeda_prediction
     from ..physics.ikeda import LIMITS
 
     hull = request.require_hull("ikeda")

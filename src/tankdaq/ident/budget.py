@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .budget_inputs import Kind, Quantity, Source, true_coefficients
+from .budget_inputs import EvaluationType, Quantity, Source, true_coefficients
 
 #: The coverage factor and what it covers.
 COVERAGE_FACTOR = 2.0
@@ -47,7 +47,7 @@ class BudgetRow:
     source unit, the contribution |c| u in the quantity's unit, and its share of u_c^2."""
 
     source: str
-    kind: Kind
+    kind: EvaluationType
     u: float
     unit: str
     sensitivity: float
@@ -187,7 +187,7 @@ def type_a_row(quantity: Quantity, fit: FitUncertainty, inputs: Mapping[str, flo
             if alone
             else f"Type A is the fit's own interval: its {fit.decays} decays were not fitted one by one"
         )
-        return BudgetRow(own, Kind.A, from_fit, quantity.unit, 1.0, from_fit, math.nan, note), said
+        return BudgetRow(own, EvaluationType.A, from_fit, quantity.unit, 1.0, from_fit, math.nan, note), said
     values = np.array([evaluate(quantity, c, inputs) for c in fit.per_decay])
     of_mean = float(np.std(values, ddof=1)) / math.sqrt(n)
     said = (
@@ -202,7 +202,7 @@ def type_a_row(quantity: Quantity, fit: FitUncertainty, inputs: Mapping[str, flo
             from_fit,
             f"the repeats' std of the mean: {of_mean:.3g}",
         )
-    return BudgetRow(name, Kind.A, u, quantity.unit, 1.0, u, math.nan, note), said
+    return BudgetRow(name, EvaluationType.A, u, quantity.unit, 1.0, u, math.nan, note), said
 
 
 def quantity_budget(
@@ -217,7 +217,14 @@ def quantity_budget(
         if math.isfinite(c) and abs(c) * source.u > NEGLIGIBLE * abs(value):  # a quantity's non-input: no row
             rows.append(
                 BudgetRow(
-                    source.name, Kind.B, source.u, source.unit, c, abs(c) * source.u, math.nan, source.note
+                    source.name,
+                    EvaluationType.B,
+                    source.u,
+                    source.unit,
+                    c,
+                    abs(c) * source.u,
+                    math.nan,
+                    source.note,
                 )
             )
     return from_rows(quantity, value, rows, [said])

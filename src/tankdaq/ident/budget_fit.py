@@ -23,8 +23,8 @@ from .budget_inputs import (
 )
 from .conditions import condition_of
 from .derived import b44_hat_factor, tested_amplitudes_deg
-from .equation_error import EquationError
-from .output_error import OutputError
+from .equation_error import EquationErrorFit
+from .output_error import OutputErrorFit
 
 
 def hull_figures(hull: Any, axis: str, draft: float, scale_factor: float | None = None) -> HullFigures:
@@ -54,7 +54,7 @@ def per_decay_coefficients(estimator: Any, runs: Sequence[DecayRun]) -> tuple[di
     fit's coefficients, an equation-error fit as it is; none for one decay, for the seeds' searches (GA,
     PSO: minutes per fit) or for decays of several conditions (``--joint``), whose budgets use the fit's
     covariance and say so."""
-    if len(runs) < 2 or not isinstance(estimator, OutputError | EquationError):
+    if len(runs) < 2 or not isinstance(estimator, OutputErrorFit | EquationErrorFit):
         return ()
     if len({condition_of(run) for run in runs}) > 1:  # pooled conditions (--joint) are not repeats
         return ()
@@ -62,10 +62,10 @@ def per_decay_coefficients(estimator: Any, runs: Sequence[DecayRun]) -> tuple[di
     for run in runs:
         alone = (
             estimator.clone(compute_diagnostics=False)
-            if isinstance(estimator, OutputError)
+            if isinstance(estimator, OutputErrorFit)
             else estimator.clone()
         )
-        if isinstance(alone, OutputError):
+        if isinstance(alone, OutputErrorFit):
             alone.fit([run], start=dict(estimator.coefficients_))
         else:
             alone.fit([run])

@@ -24,7 +24,7 @@ from functools import partial
 from .derived import G, b_eq, bertin_n_per_deg, linear_stiffness, natural_period
 
 
-class Kind(Enum):
+class EvaluationType(Enum):
     """GUM's two ways of evaluating a standard uncertainty."""
 
     A = "A"  # from a series of observations: repeat decays, or the fit's own residuals

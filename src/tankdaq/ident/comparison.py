@@ -16,7 +16,7 @@ import numpy as np
 from ..physics.models import MODEL_ALIASES, resolve_model
 from ..records import DecayRun
 from .estimators import make_estimator
-from .output_error import OutputError
+from .output_error import OutputErrorFit
 from .report import summarize
 
 
@@ -65,8 +65,8 @@ def held_out_rms_deg(terms: Sequence[str], runs: Sequence[DecayRun]) -> float:
     squares, count = 0.0, 0
     for i, run in enumerate(runs):
         others = [r for j, r in enumerate(runs) if j != i]
-        coefficients = OutputError(terms, compute_diagnostics=False).fit(others).coefficients_
-        held = OutputError(terms, compute_diagnostics=False).fit([run], fixed_coefficients=coefficients)
+        coefficients = OutputErrorFit(terms, compute_diagnostics=False).fit(others).coefficients_
+        held = OutputErrorFit(terms, compute_diagnostics=False).fit([run], fixed_coefficients=coefficients)
         squares += float(np.sum(held.residuals_[0]["angle"] ** 2))
         count += run.t.size
     return math.degrees(math.sqrt(squares / count))

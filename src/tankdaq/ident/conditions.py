@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..config import format_draft, parse_draft
+from ..config.hulls import format_draft, parse_draft
 from ..records import DecayRun
 from ..store.naming import parse_recording_name
 

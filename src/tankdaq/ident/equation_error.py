@@ -71,7 +71,7 @@ def check_runs(runs: Sequence[DecayRun] | DecayRun) -> list[DecayRun]:
     return runs
 
 
-class EquationError(EstimatorMixin):
+class EquationErrorFit(EstimatorMixin):
     """Least squares of x'' on the model's regressors, pooled over runs.
 
     Derivatives come from Savitzky-Golay filters over ``window_periods`` of the
@@ -97,7 +97,7 @@ class EquationError(EstimatorMixin):
         self.exogenous = exogenous
         self.friction_eps = friction_eps
 
-    def fit(self, runs: Sequence[DecayRun] | DecayRun) -> EquationError:
+    def fit(self, runs: Sequence[DecayRun] | DecayRun) -> EquationErrorFit:
         """Fit on one or several runs of one condition; returns self."""
         started = time.perf_counter()
         runs = check_runs(runs)

@@ -14,13 +14,13 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from ..errors import InputError
-from .equation_error import EquationError
+from .equation_error import EquationErrorFit
 from .evolutionary import SEED_ESTIMATORS
-from .output_error import OutputError
+from .output_error import OutputErrorFit
 
 EstimatorFactory = Callable[..., Any]
 
-ESTIMATORS: dict[str, EstimatorFactory] = {"oe": OutputError, "ee": EquationError}
+ESTIMATORS: dict[str, EstimatorFactory] = {"oe": OutputErrorFit, "ee": EquationErrorFit}
 ESTIMATORS.update(SEED_ESTIMATORS)  # the seeds' GA/PSO: ga, pso, ga-seed000 ... (ident.evolutionary)
 
 
@@ -44,8 +44,8 @@ def reports_progress(method: str) -> bool:
 
 __all__ = [
     "ESTIMATORS",
-    "EquationError",
-    "OutputError",
+    "EquationErrorFit",
+    "OutputErrorFit",
     "make_estimator",
     "register_estimator",
     "reports_progress",

@@ -26,10 +26,10 @@ from pymoo.operators.crossover.sbx import SBX
 from pymoo.operators.mutation.pm import PM
 from pymoo.optimize import minimize
 
+from ..config.validation import equation_model
 from ..errors import InputError
 from ..physics.models import MODEL_ALIASES
 from ..records import DecayRun
-from ..validation import equation_model
 from .base import EstimatorMixin
 from .compiled import simulate, substeps, term_codes, term_matrix
 from .equation_error import check_runs
@@ -255,7 +255,7 @@ class _Recorder(Callback):
 
 
 class _SeedSearch(EstimatorMixin):
-    """Shared fit of GeneticSeed and SwarmSeed: the paper's box, a pymoo run, results as tankdaq terms.
+    """Shared fit of GeneticSeedFit and SwarmSeedFit: the paper's box, a pymoo run, results as tankdaq terms.
 
     Settings: ``terms`` (term list or alias), ``paper`` (whose boxes and preset: ``seed000``,
     ``seed001``, ``seed002``; default the alias's paper, else seed 001), ``settings`` (a preset name
@@ -392,10 +392,10 @@ class _SeedSearch(EstimatorMixin):
         self.natural_period_s_ = 2.0 * math.pi / math.sqrt(stiffness) if stiffness > 0 else float("nan")
 
 
-class GeneticSeed(_SeedSearch):
+class GeneticSeedFit(_SeedSearch):
     """The seeds' genetic algorithm (pymoo GA: SBX crossover, polynomial mutation) on their objective.
 
-    ``GeneticSeed("seed001-eq1").fit(runs)``; ``settings`` takes a preset name (``seed000``,
+    ``GeneticSeedFit("seed001-eq1").fit(runs)``; ``settings`` takes a preset name (``seed000``,
     ``seed001``, ``seed002``) or ``GeneticSettings``.
     """
 
@@ -412,7 +412,7 @@ class GeneticSeed(_SeedSearch):
         )
 
 
-class SwarmSeed(_SeedSearch):
+class SwarmSeedFit(_SeedSearch):
     """Seed 001's particle swarm (pymoo adaptive PSO, inertia weight 0.4-0.9) on the seeds' objective."""
 
     _presets = SWARM_SETTINGS
@@ -426,7 +426,7 @@ class SwarmSeed(_SeedSearch):
 #: ``--method`` names of the seeds' searches; ``ga-seed000`` etc. pin a paper's boxes and preset, since
 #: the CLI hands estimators the model as a term list, not as the alias.
 SEED_ESTIMATORS: dict[str, Callable[..., _SeedSearch]] = {
-    "ga": GeneticSeed,
-    "pso": SwarmSeed,
-    **{f"ga-{paper}": partial(GeneticSeed, paper=paper) for paper in GENETIC_SETTINGS},
+    "ga": GeneticSeedFit,
+    "pso": SwarmSeedFit,
+    **{f"ga-{paper}": partial(GeneticSeedFit, paper=paper) for paper in GENETIC_SETTINGS},
 }

@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
-from ..config import WaterSettings, friction_scaling
+from ..config.hulls import WaterSettings, friction_scaling
 from ..physics.friction_scaling import FrictionScaling, FullScaleB44, assumption_lines
 from ..physics.scaling import FRICTION_NOTE, FroudeScale
 from ..records import DecayRun

@@ -25,8 +25,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..config import format_draft
-from ..config_rules import MAX_RELEASE_ANGLE_DEG
+from ..config.hulls import format_draft
+from ..config.rules import MAX_RELEASE_ANGLE_DEG
 from ..records import DecayRun
 from .derived import amplitude_table
 from .interval_labels import ANGLES_STD, FIT_STD, IntervalLabel
@@ -98,7 +98,7 @@ class DecayCover:
 
 
 def decay_cover(key: _Condition, runs: Sequence[DecayRun], fit: Any) -> DecayCover:
-    """A fitted group's ``DecayCover`` (``key`` a ``campaign.GroupKey``, ``fit`` its ``OutputError``)."""
+    """A fitted group's ``DecayCover`` (``key`` a ``campaign.GroupKey``, ``fit`` its ``OutputErrorFit``)."""
     means: list[float] = []
     drops: list[float] = []
     for run, offset in zip(runs, fit.offsets_, strict=True):

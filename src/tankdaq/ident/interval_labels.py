@@ -37,7 +37,7 @@ _FACTORS = {Coverage.ONE_SIGMA: 1.0, Coverage.P95: 1.96, Coverage.K2: 2.0, Cover
 _SUFFIXES = {Coverage.ONE_SIGMA: "std", Coverage.P95: "ci95", Coverage.K2: "U", Coverage.RANGE: "half_range"}
 
 
-class Kind(Enum):
+class IntervalSource(Enum):
     """Where an interval comes from."""
 
     FIT = "fit"
@@ -55,16 +55,16 @@ class Kind(Enum):
 
 
 _DESCRIPTIONS = {
-    Kind.FIT: "the fit's own covariance (through the delta method for derived quantities)",
-    Kind.BOOTSTRAP: "a moving-block bootstrap of the fit's residuals",
-    Kind.REPEATS: "repeat decays of one condition fitted one by one: the standard deviation of their mean "
-    "(GUM Type A; 95 % with Student's t, n - 1)",
-    Kind.SCATTER: "repeat decays fitted one by one: their sample standard deviation (one decay's scatter, "
-    "not the mean's uncertainty)",
-    Kind.ANGLES: "the fits at different initial angles of one hull, axis and draft: the standard deviation "
-    "of their mean, or half their range",
-    Kind.STANDARD: "the combined standard uncertainty of the budget (GUM)",
-    Kind.EXPANDED: "the expanded uncertainty of the budget, k = 2 (GUM)",
+    IntervalSource.FIT: "the fit's own covariance (through the delta method for derived quantities)",
+    IntervalSource.BOOTSTRAP: "a moving-block bootstrap of the fit's residuals",
+    IntervalSource.REPEATS: "repeat decays of one condition fitted one by one: the standard deviation of "
+    "their mean (GUM Type A; 95 % with Student's t, n - 1)",
+    IntervalSource.SCATTER: "repeat decays fitted one by one: their sample standard deviation (one decay's "
+    "scatter, not the mean's uncertainty)",
+    IntervalSource.ANGLES: "the fits at different initial angles of one hull, axis and draft: the standard "
+    "deviation of their mean, or half their range",
+    IntervalSource.STANDARD: "the combined standard uncertainty of the budget (GUM)",
+    IntervalSource.EXPANDED: "the expanded uncertainty of the budget, k = 2 (GUM)",
 }
 
 
@@ -73,7 +73,7 @@ class IntervalLabel:
     """An interval's coverage and kind, and the symbol it is written with (± for a half-width)."""
 
     coverage: Coverage
-    kind: Kind
+    kind: IntervalSource
     symbol: str = "±"
 
     @property
@@ -101,18 +101,18 @@ class IntervalLabel:
         return {"coverage": self.coverage.value, "kind": self.kind.value, "label": self.text}
 
 
-FIT_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.FIT)
-FIT_95 = IntervalLabel(Coverage.P95, Kind.FIT)
-BOOTSTRAP_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.BOOTSTRAP)
-BOOTSTRAP_95 = IntervalLabel(Coverage.P95, Kind.BOOTSTRAP)
-REPEATS_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.REPEATS)
-REPEATS_95 = IntervalLabel(Coverage.P95, Kind.REPEATS)
-SCATTER_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.SCATTER)
-ANGLES_STD = IntervalLabel(Coverage.ONE_SIGMA, Kind.ANGLES)
-ANGLES_RANGE = IntervalLabel(Coverage.RANGE, Kind.ANGLES)
+FIT_STD = IntervalLabel(Coverage.ONE_SIGMA, IntervalSource.FIT)
+FIT_95 = IntervalLabel(Coverage.P95, IntervalSource.FIT)
+BOOTSTRAP_STD = IntervalLabel(Coverage.ONE_SIGMA, IntervalSource.BOOTSTRAP)
+BOOTSTRAP_95 = IntervalLabel(Coverage.P95, IntervalSource.BOOTSTRAP)
+REPEATS_STD = IntervalLabel(Coverage.ONE_SIGMA, IntervalSource.REPEATS)
+REPEATS_95 = IntervalLabel(Coverage.P95, IntervalSource.REPEATS)
+SCATTER_STD = IntervalLabel(Coverage.ONE_SIGMA, IntervalSource.SCATTER)
+ANGLES_STD = IntervalLabel(Coverage.ONE_SIGMA, IntervalSource.ANGLES)
+ANGLES_RANGE = IntervalLabel(Coverage.RANGE, IntervalSource.ANGLES)
 #: The uncertainty budget's (``ident.budget``): the combined standard and the expanded uncertainty.
-STANDARD_U = IntervalLabel(Coverage.ONE_SIGMA, Kind.STANDARD, "u")
-EXPANDED_U = IntervalLabel(Coverage.K2, Kind.EXPANDED, "U")
+STANDARD_U = IntervalLabel(Coverage.ONE_SIGMA, IntervalSource.STANDARD, "u")
+EXPANDED_U = IntervalLabel(Coverage.K2, IntervalSource.EXPANDED, "U")
 
 ALL_LABELS = (
     FIT_STD, FIT_95, BOOTSTRAP_STD, BOOTSTRAP_95, REPEATS_STD, REPEATS_95, SCATTER_STD, ANGLES_STD,
@@ -120,14 +120,14 @@ ALL_LABELS = (
 )  # fmt: skip
 
 
-def kind_of(description: str) -> Kind:
+def kind_of(description: str) -> IntervalSource:
     """The kind of an identify fit's intervals from how they were found (``IntervalSummary.description``
     or the estimator's ``cov_type``): bootstrap, repeats, else the fit's own."""
     if "bootstrap" in description:
-        return Kind.BOOTSTRAP
+        return IntervalSource.BOOTSTRAP
     if "repeat" in description:
-        return Kind.REPEATS
-    return Kind.FIT
+        return IntervalSource.REPEATS
+    return IntervalSource.FIT
 
 
 def legend(columns: dict[str, IntervalLabel]) -> dict[str, str]:

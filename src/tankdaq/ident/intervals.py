@@ -1,6 +1,6 @@
 """Intervals that refit: a moving-block bootstrap over the residuals, and the spread over repeat runs.
 
-They sit above the estimators (``OutputError`` is what a bootstrap resamples), so
+They sit above the estimators (``OutputErrorFit`` is what a bootstrap resamples), so
 that ``ident.uncertainty``, which the estimators use, needs none of them. For the
 offline answer: blocks of about a cycle keep the residuals' correlation, and each
 replica is refitted warm-started from the fit.
@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..records import DecayRun
-from .output_error import OutputError
+from .output_error import OutputErrorFit
 from .uncertainty import hac_covariance
 
 
@@ -45,7 +45,7 @@ def moving_block_bootstrap(
 ) -> IntervalSummary:
     """Refit on fitted curve + residuals resampled in blocks of about a cycle (keeps their correlation).
 
-    ``estimator`` is a fitted OutputError; each replica is fitted warm-started
+    ``estimator`` is a fitted OutputErrorFit; each replica is fitted warm-started
     from it. Fitted residuals are orthogonal to the Jacobian, which makes
     resampled blocks of them too quiet in the directions the fit used (the same
     bias as in the HAC estimate, whose Bartlett form the moving-block bootstrap
@@ -113,7 +113,7 @@ def repeat_spread(make_estimator: Callable[[], Any], runs: Sequence[DecayRun]) -
 
 def check_intervals(estimator: Any, n_runs: int, bootstrap: int, repeats: bool, method: str = "oe") -> None:
     """Refuse the interval requests that cannot work, before any fit (``InputError``, one line)."""
-    if bootstrap and not isinstance(estimator, OutputError):  # it resamples the output-error residuals
+    if bootstrap and not isinstance(estimator, OutputErrorFit):  # it resamples the output-error residuals
         raise InputError(f"a bootstrap resamples output-error residuals: use method oe, not {method}")
     if repeats and (bootstrap or n_runs < 3):
         raise InputError("intervals from repeats need at least three runs of one condition, and no bootstrap")

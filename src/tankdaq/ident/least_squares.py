@@ -91,7 +91,7 @@ _BUDGET: ContextVar[SolveBudget | None] = ContextVar("tankdaq_solve_budget", def
 def solve_budget(seconds: float, cancel: threading.Event | None = None) -> Iterator[SolveBudget]:
     """Every solve this thread runs inside the block stops past ``seconds`` or once ``cancel`` is set.
 
-    A context variable, so that the fits between (``OutputError``, ``OnlineIdentifier``) need no
+    A context variable, so that the fits between (``OutputErrorFit``, ``OnlineIdentifier``) need no
     setting: the caller that owns the thread (``BackgroundFit``) decides how long its fits may run.
     """
     budget = SolveBudget(seconds, cancel if cancel is not None else threading.Event())

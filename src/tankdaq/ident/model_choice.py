@@ -29,8 +29,8 @@ import numpy as np
 from ..errors import IdentificationError
 from ..physics.models import AUTO, MODEL_FAMILY, is_auto, model_name, resolve_model
 from ..records import DecayRun
-from .output_error import OutputError
-from .plausibility import Finding, check_runs
+from .output_error import OutputErrorFit
+from .plausibility import Implausibility, check_runs
 
 #: Fraction of every run (in time) the split-sample fit sees; the rest is predicted.
 FIT_FRACTION = 0.6
@@ -44,7 +44,7 @@ class Candidate:
 
     terms: tuple[str, ...]
     held_out_rms_deg: float = math.nan
-    findings: list[Finding] = field(default_factory=list)
+    findings: list[Implausibility] = field(default_factory=list)
     error: str = ""
 
     @property
@@ -98,10 +98,10 @@ def score(terms: tuple[str, ...], runs: Sequence[DecayRun]) -> Candidate:
     """Fit ``terms`` on the whole runs (plausibility) and on their first part (held-out RMS, deg)."""
     candidate = Candidate(terms)
     try:
-        whole = OutputError(terms, compute_diagnostics=False).fit(list(runs))
+        whole = OutputErrorFit(terms, compute_diagnostics=False).fit(list(runs))
         candidate.findings = check_runs(whole.coefficients_, runs, whole.offsets_)
         first = split_runs(runs)
-        early = OutputError(terms, compute_diagnostics=False).fit(first, start=whole)
+        early = OutputErrorFit(terms, compute_diagnostics=False).fit(first, start=whole)
     except IdentificationError as exc:
         candidate.error = f"not fitted: {exc}"
         return candidate

@@ -36,7 +36,7 @@ from ..records import DecayRun
 from .base import EstimatorMixin
 from .compiled import substeps
 from .derived import natural_period
-from .equation_error import EquationError, check_runs, exogenous_input
+from .equation_error import EquationErrorFit, check_runs, exogenous_input
 from .fit_statistics import (
     angle_r2,
     initial_noise_levels,
@@ -60,7 +60,7 @@ from .uncertainty import (
 FALLBACK_R2 = 0.9
 
 
-class OutputError(EstimatorMixin):
+class OutputErrorFit(EstimatorMixin):
     """Joint output-error fit of a decay model to one or several runs (scikit-learn style).
 
     Settings: ``terms`` (term list or alias; ``ku`` couples the one ``exogenous``
@@ -131,13 +131,13 @@ class OutputError(EstimatorMixin):
     def fit(
         self,
         runs: Sequence[DecayRun] | DecayRun,
-        start: OutputError | dict[str, float] | None = None,
+        start: OutputErrorFit | dict[str, float] | None = None,
         fixed_coefficients: dict[str, float] | None = None,
         guess: dict[str, float] | None = None,
-    ) -> OutputError:
+    ) -> OutputErrorFit:
         """Fit jointly on ``runs``; returns self.
 
-        ``start``: a fitted OutputError (warm start: every parameter it has, by
+        ``start``: a fitted OutputErrorFit (warm start: every parameter it has, by
         name; each run's own when the runs match, else the equation-error ones)
         or a coefficient dict over the equation-error fit; default: the
         equation-error fit. ``guess`` gives parameters nothing else starts (the
@@ -215,7 +215,7 @@ class OutputError(EstimatorMixin):
     def _start_vector(
         self,
         runs: list[DecayRun],
-        start: OutputError | dict[str, float] | None,
+        start: OutputErrorFit | dict[str, float] | None,
         fixed: dict[str, float] | None,
         guess: dict[str, float],
         linear_only: bool = False,
@@ -228,7 +228,7 @@ class OutputError(EstimatorMixin):
         layout = self._layout
         known: dict[str, float] = {}
         per_run: list[dict[str, float]] = []
-        if isinstance(start, OutputError):
+        if isinstance(start, OutputErrorFit):
             start.check_fitted()
             if start._layout.names == layout.names:
                 return self._fix(start.params_.copy(), fixed)
@@ -255,14 +255,14 @@ class OutputError(EstimatorMixin):
                     p0[self._layout.at(k)] = fixed[k]
         return p0
 
-    def _equation_error_start(self, runs: list[DecayRun], linear_only: bool) -> EquationError:
+    def _equation_error_start(self, runs: list[DecayRun], linear_only: bool) -> EquationErrorFit:
         """Equation error on the dynamics (and the ku channel): the usual start."""
         if linear_only:
             terms: tuple[str, ...] = ("b1", "c1" if "c1" in self.terms_ else "s1")
         else:
             terms = self._layout.dynamics + (("ku",) if "ku" in self.terms_ else ())
         exogenous = self._channel_names[0] if "ku" in terms else None
-        return EquationError(
+        return EquationErrorFit(
             terms, use_rate=self.use_rate, exogenous=exogenous, friction_eps=self.friction_eps
         ).fit(runs)
 

@@ -2,7 +2,7 @@
 
 A least-squares fit always returns numbers; these checks say when physics forbids them, so that no
 command, live view or session shows a confidently wrong answer. Each check is a pure function of the
-coefficients and what was measured, and returns typed ``Finding``s whose ``message`` is one line: what
+coefficients and what was measured, and returns typed ``Implausibility``s whose ``message`` is one line: what
 is wrong, the likely cause, what to do. docs/models.md ("Plausibility checks") lists every threshold
 and why.
 
@@ -71,7 +71,7 @@ GRID_POINTS = 41
 
 
 @dataclass(frozen=True)
-class Finding:
+class Implausibility:
     """One implausibility: which check, the one-line message, the value and the bounds it broke."""
 
     check: str  # damping, stiffness, period, amplitude, time_step, clipped, repeated
@@ -91,7 +91,7 @@ class Finding:
         return self.message
 
 
-def check_damping(coefficients: Mapping[str, float], amplitude_rad: float) -> list[Finding]:
+def check_damping(coefficients: Mapping[str, float], amplitude_rad: float) -> list[Implausibility]:
     """B_eq(phi_a) > 0 from rest (phi_a -> 0: B_eq = b1) to ``amplitude_rad``."""
     grid = np.linspace(0.0, max(amplitude_rad, 0.0), GRID_POINTS)
     values = np.array([b_eq(coefficients, float(a)) for a in grid])
@@ -102,7 +102,7 @@ def check_damping(coefficients: Mapping[str, float], amplitude_rad: float) -> li
         return []
     where = f"{math.degrees(grid[worst]):.1f} deg"
     return [
-        Finding(
+        Implausibility(
             "damping",
             f"implausible damping: B_eq {values[worst]:.3g} 1/s at {where} is not positive (a passive hull "
             "loses energy at every amplitude); linear and nonlinear damping are trading off in this "
@@ -124,7 +124,7 @@ def restoring_slope(coefficients: Mapping[str, float], angle_rad: np.ndarray) ->
     return np.asarray(-(forward - backward) / (2 * step))
 
 
-def check_stiffness(coefficients: Mapping[str, float], amplitude_rad: float) -> list[Finding]:
+def check_stiffness(coefficients: Mapping[str, float], amplitude_rad: float) -> list[Implausibility]:
     """The restoring slope positive over +-``amplitude_rad``."""
     grid = np.linspace(-abs(amplitude_rad), abs(amplitude_rad), GRID_POINTS)
     slope = restoring_slope(coefficients, grid)
@@ -132,7 +132,7 @@ def check_stiffness(coefficients: Mapping[str, float], amplitude_rad: float) -> 
     if slope[worst] > 0:
         return []
     return [
-        Finding(
+        Implausibility(
             "stiffness",
             f"implausible restoring: slope {slope[worst]:.3g} 1/s^2 at {math.degrees(grid[worst]):+.1f} deg "
             "is not positive (the model would capsize inside the tested band); the cubic restoring is "
@@ -155,7 +155,7 @@ def check_period(
     radius_of_gyration_m: float | None,
     hull: str = "the hull",
     axis: str = "",
-) -> list[Finding]:
+) -> list[Implausibility]:
     """The natural period against the hull's GM and gyradius; nothing without both."""
     if gm_m is None or radius_of_gyration_m is None or not gm_m > 0 or not math.isfinite(period_s):
         return []
@@ -164,7 +164,7 @@ def check_period(
         return []
     added = (period_s / expected_period_s(gm_m, radius_of_gyration_m, 0.0)) ** 2 - 1
     return [
-        Finding(
+        Implausibility(
             "period",
             f"natural period {period_s:.3g} s does not match {hull}{' ' + axis if axis else ''} "
             f"(GM {gm_m:g} m, gyradius {radius_of_gyration_m:g} m: {low:.3g}-{high:.3g} s, added inertia "
@@ -176,7 +176,7 @@ def check_period(
     ]
 
 
-def check_amplitude(amplitude_rad: float) -> list[Finding]:
+def check_amplitude(amplitude_rad: float) -> list[Implausibility]:
     """The largest peak of the decay between ``AMPLITUDE_BOUNDS_DEG``."""
     amplitude_deg = math.degrees(abs(amplitude_rad))
     low, high = AMPLITUDE_BOUNDS_DEG
@@ -188,7 +188,7 @@ def check_amplitude(amplitude_rad: float) -> list[Finding]:
         else "degrees read as radians (give --angle-unit deg), or the model capsized"
     )
     return [
-        Finding(
+        Implausibility(
             "amplitude",
             f"implausible amplitude: largest peak {amplitude_deg:.3g} deg, a decay test starts between "
             f"{low:g} and {high:g} deg; likely {cause}",
@@ -198,13 +198,13 @@ def check_amplitude(amplitude_rad: float) -> list[Finding]:
     ]
 
 
-def check_timing(dt_s: float, period_s: float) -> list[Finding]:
+def check_timing(dt_s: float, period_s: float) -> list[Implausibility]:
     """Time step, natural period and samples per period inside their bounds."""
     found = []
     time_unit = "check the time unit (a column in milliseconds read as seconds)"
     if not TIME_STEP_BOUNDS_S[0] <= dt_s <= TIME_STEP_BOUNDS_S[1]:
         found.append(
-            Finding(
+            Implausibility(
                 "time_step",
                 f"implausible time step {dt_s:.3g} s (a decay is sampled at "
                 f"{1 / TIME_STEP_BOUNDS_S[1]:g} Hz to {1 / TIME_STEP_BOUNDS_S[0]:g} Hz): {time_unit}",
@@ -214,7 +214,7 @@ def check_timing(dt_s: float, period_s: float) -> list[Finding]:
         )
     if math.isfinite(period_s) and not PERIOD_BOUNDS_S[0] <= period_s <= PERIOD_BOUNDS_S[1]:
         found.append(
-            Finding(
+            Implausibility(
                 "period",
                 f"implausible natural period {period_s:.3g} s (a model or ship rolls and pitches with "
                 f"{PERIOD_BOUNDS_S[0]:g}-{PERIOD_BOUNDS_S[1]:g} s): {time_unit}",
@@ -224,7 +224,7 @@ def check_timing(dt_s: float, period_s: float) -> list[Finding]:
         )
     elif math.isfinite(period_s) and dt_s > 0 and period_s / dt_s < MIN_SAMPLES_PER_PERIOD:
         found.append(
-            Finding(
+            Implausibility(
                 "time_step",
                 f"{period_s / dt_s:.2g} samples per natural period ({period_s:.3g} s at {dt_s:.3g} s): "
                 f"too few to resolve the oscillation (at least {MIN_SAMPLES_PER_PERIOD}); {time_unit}",
@@ -235,7 +235,7 @@ def check_timing(dt_s: float, period_s: float) -> list[Finding]:
     return found
 
 
-def check_excluded(runs: Sequence[DecayRun]) -> list[Finding]:
+def check_excluded(runs: Sequence[DecayRun]) -> list[Implausibility]:
     """Runs with samples left out of the fit (``DecayRun.excluded``: the sensor clipped after the release,
     or its orientation was not valid): one finding each, with what the recording says of them."""
     found = []
@@ -244,7 +244,7 @@ def check_excluded(runs: Sequence[DecayRun]) -> list[Finding]:
         if count:
             why = run.meta.get("excluded_why") or f"{count} samples flagged by the sensor: left out of fits"
             found.append(
-                Finding(
+                Implausibility(
                     "clipped",
                     f"{run.name}: {why}; the fit stands on the other samples, but the decay was not a clean "
                     "measurement: repeat it at a smaller angle (or with a sensor of wider range)",
@@ -255,7 +255,7 @@ def check_excluded(runs: Sequence[DecayRun]) -> list[Finding]:
     return found
 
 
-def check_flat_tops(runs: Sequence[DecayRun], period_s: float) -> list[Finding]:
+def check_flat_tops(runs: Sequence[DecayRun], period_s: float) -> list[Implausibility]:
     """Runs whose angle sits at its largest (or smallest) level on two or more peaks, each for
     ``FLAT_TOP_FRACTION`` of a period or longer: clipped by the sensor's range or stopped by the rig, which
     no free decay does (the peaks of a decay shrink; a coarse sensor's steps flatten a peak for a few %
@@ -273,7 +273,7 @@ def check_flat_tops(runs: Sequence[DecayRun], period_s: float) -> list[Finding]:
             if len(long) >= 2:
                 at_deg = math.degrees(sign * level)
                 found.append(
-                    Finding(
+                    Implausibility(
                         "clipped",
                         f"{run.name}: the angle is flat at {at_deg:+.2f} deg on {len(long)} "
                         f"peaks (up to {max(long):.2f} s, {100 * max(long) / period_s:.0f} % of a period): "
@@ -310,7 +310,7 @@ def check_fit(
     dt_s: float | None = None,
     particulars: Any = None,
     hull: str = "the hull",
-) -> list[Finding]:
+) -> list[Implausibility]:
     """Every check of one fit. ``amplitude_rad``: the largest tested peak; ``dt_s``: the median time
     step (None: not checked); ``particulars``: the hull's ``config.AxisParticulars`` (GM, gyradius)."""
     period = natural_period(coefficients)
@@ -332,7 +332,7 @@ def check_runs(
     offsets: Sequence[float] | None = None,
     particulars: Any = None,
     hull: str = "the hull",
-) -> list[Finding]:
+) -> list[Implausibility]:
     """``check_fit`` of a fit to ``runs``: the largest tested amplitude and the time step from the runs."""
     offsets = list(offsets) if offsets is not None else [0.0] * len(runs)
     amplitudes = tested_amplitudes_deg(runs, offsets)
@@ -343,15 +343,17 @@ def check_runs(
     return checks + check_flat_tops(runs, natural_period(coefficients)) + check_repeats(runs)
 
 
-def check_repeats(runs: Sequence[DecayRun]) -> list[Finding]:
+def check_repeats(runs: Sequence[DecayRun]) -> list[Implausibility]:
     """One decay read twice among the fitted ones (``ident.repeats``): it counts as two repeats and
     narrows every interval. ``identify`` leaves such a copy out; a campaign's group says so here."""
     return [
-        Finding("repeated", f"{repeat_line(runs, i, first)}: leave one of the files out", 1.0, (0.0, 0.0))
+        Implausibility(
+            "repeated", f"{repeat_line(runs, i, first)}: leave one of the files out", 1.0, (0.0, 0.0)
+        )
         for i, first in repeated_decays(runs).items()
     ]
 
 
-def messages(findings: Sequence[Finding]) -> list[str]:
+def messages(findings: Sequence[Implausibility]) -> list[str]:
     """The findings' one-line messages, as warnings lists carry them."""
     return [finding.message for finding in findings]

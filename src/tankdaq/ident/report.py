@@ -32,14 +32,14 @@ from .derived import (
 from .interval_labels import Coverage, IntervalLabel, kind_of
 from .intervals import IntervalSummary
 from .one_step import seed_objective
-from .output_error import OutputError
+from .output_error import OutputErrorFit
 from .plausibility import check_runs
 from .summary import BertinRow, Coefficient, DampingRow, FitSummary, ModelTerms
 
 
 def predicted_angles(estimator: Any, runs: Sequence[DecayRun]) -> list[np.ndarray]:
     """Each run's angle as the fitted model simulates it from the fitted initial state and offset."""
-    if isinstance(estimator, OutputError):
+    if isinstance(estimator, OutputErrorFit):
         return [estimator.predict(run, run_index=r)[0] for r, run in enumerate(runs)]
     terms = estimator.terms_
     theta = np.array([estimator.coefficients_[k] for k in terms])

@@ -118,7 +118,7 @@ class IkedaInputs:
 
 
 @dataclass(frozen=True)
-class Finding:
+class IkedaOutOfRange:
     """One input outside the range the formulas were fitted on (or a part not applied)."""
 
     name: str
@@ -133,7 +133,7 @@ class Finding:
 RATIO_ROUNDING = 1e-9
 
 
-def validity(inputs: IkedaInputs, omega_rad_s: float) -> list[Finding]:
+def validity(inputs: IkedaInputs, omega_rad_s: float) -> list[IkedaOutOfRange]:
     """Every input outside the paper's limits, named, one line each; plus the speed caveat."""
     values = {
         "CB": inputs.block_coefficient,
@@ -151,7 +151,7 @@ def validity(inputs: IkedaInputs, omega_rad_s: float) -> list[Finding]:
         if not low - RATIO_ROUNDING <= value <= high + RATIO_ROUNDING:
             side = "below" if value < low else "above"
             findings.append(
-                Finding(
+                IkedaOutOfRange(
                     name,
                     value,
                     low,
@@ -161,7 +161,7 @@ def validity(inputs: IkedaInputs, omega_rad_s: float) -> list[Finding]:
             )
     if inputs.speed_m_s > 0:
         findings.append(
-            Finding(
+            IkedaOutOfRange(
                 "speed",
                 inputs.speed_m_s,
                 0.0,
@@ -384,7 +384,7 @@ class IkedaPrediction:
     inputs: IkedaInputs
     omega_rad_s: float
     total_inertia_kg_m2: float
-    findings: list[Finding] = field(default_factory=list)
+    findings: list[IkedaOutOfRange] = field(default_factory=list)
 
     @classmethod
     def at(cls, inputs: IkedaInputs, omega_rad_s: float, total_inertia_kg_m2: float) -> IkedaPrediction:

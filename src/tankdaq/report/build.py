@@ -14,7 +14,7 @@ import numpy as np
 from ..ident.conditions import UNKNOWN
 from ..ident.interval_labels import EXPANDED_U, FIT_95, STANDARD_U
 from . import slots
-from .content import NOT_KNOWN, Figure, ReportContent, Section, Table
+from .content import NOT_KNOWN, Figure, ReportContent, ReportTable, Section
 from .tables import coefficients_table, conditions_table, damping_table, decays_table, full_scale_tables
 
 if TYPE_CHECKING:
@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 TITLE = "Decay test report"
 
 
-def condition_section(number: int, fit: ConditionFit, extra: Sequence[Table] = ()) -> Section:
+def condition_section(number: int, fit: ConditionFit, extra: Sequence[ReportTable] = ()) -> Section:
     """One condition: its coefficients, its B_eq/N table, its full scale (when asked), then ``extra``
     (an uncertainty budget, the IMO table, the friction-corrected full scale: ``report.slots``), its
     figures, and its warnings as notes beside the numbers."""
@@ -40,7 +40,7 @@ def condition_section(number: int, fit: ConditionFit, extra: Sequence[Table] = (
     return Section(key, fit.label, tables, condition_figures(key, fit), notes)
 
 
-def budget_tables(key: str, fit: ConditionFit) -> list[Table]:
+def budget_tables(key: str, fit: ConditionFit) -> list[ReportTable]:
     """The condition's uncertainty: each reported quantity with u_c and U (k = 2) in one table, then each
     quantity's budget (source, kind, u, sensitivity, contribution, share)."""
     from ..api.identification import budget_table
@@ -55,7 +55,7 @@ def budget_tables(key: str, fit: ConditionFit) -> list[Table]:
         for b in budgets
     ]  # fmt: skip
     notes = sorted({note for b in budgets for note in b.get("notes", [])})
-    summary = Table(
+    summary = ReportTable(
         f"{key}-uncertainty", "Uncertainty of each reported quantity (ISO GUM)", columns, rows,
         " ".join([f"{STANDARD_U.text}: combined standard uncertainty; {EXPANDED_U.text}: expanded, k = 2.",
                   *notes]),
@@ -91,11 +91,11 @@ class _ImoCondition:
     angle_deg: float
 
 
-def imo_section(key: str, fit: ConditionFit) -> Table:
+def imo_section(key: str, fit: ConditionFit) -> ReportTable:
     """Bertin's N at 10, 15, 20 and 25 deg from the condition's fit where its decays pass through them,
     and the line on what they do not reach (which initial angles would)."""
     from ..api.campaigns import imo_frame
-    from ..config import parse_draft
+    from ..config.hulls import parse_draft
     from ..ident.imo_table import decay_cover, imo_table
 
     condition = fit.summary.condition or {}

@@ -51,7 +51,7 @@ def cell_text(value: Cell) -> str:
 
 
 @dataclass(frozen=True)
-class Table:
+class ReportTable:
     """A titled table: ``columns`` (units in the names), ``rows`` of rounded cells, a ``caption``, and
     the ``intervals`` its columns hold (column -> ``IntervalLabel``). ``key`` names it in the JSON and the
     HTML (``data-key``), unique in a report."""
@@ -87,7 +87,7 @@ class Table:
         frame: pd.DataFrame,
         caption: str = "",
         intervals: Mapping[str, IntervalLabel] | None = None,
-    ) -> Table:
+    ) -> ReportTable:
         """A DataFrame as a report table (its columns and rows as they are; the index is dropped)."""
         rows = [list(row) for row in frame.itertuples(index=False, name=None)]
         return cls(key, title, [str(c) for c in frame.columns], rows, caption, dict(intervals or {}))
@@ -134,7 +134,7 @@ class Section:
 
     key: str
     title: str
-    tables: Sequence[Table] = ()
+    tables: Sequence[ReportTable] = ()
     figures: Sequence[Figure] = ()
     notes: Sequence[str] = ()
 
@@ -167,7 +167,7 @@ class ReportContent:
             raise ValueError(f"report keys given twice: {twice}")
 
     @property
-    def tables(self) -> list[Table]:
+    def tables(self) -> list[ReportTable]:
         return [table for section in self.sections for table in section.tables]
 
     def document(self, made: bool = True) -> dict[str, Any]:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import base64
 from html import escape
 
-from .content import ReportContent, Section, Table, cell_text
+from .content import ReportContent, ReportTable, Section, cell_text
 
 STYLE = """
 body { font-family: sans-serif; max-width: 72rem; margin: 2rem auto; padding: 0 1rem; color: #222; }
@@ -61,7 +61,7 @@ def _section(section: Section) -> str:
     )
 
 
-def _table(table: Table) -> str:
+def _table(table: ReportTable) -> str:
     heads = "".join(
         f"<th>{escape(column)}"
         + (

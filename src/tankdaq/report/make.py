@@ -15,16 +15,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .. import validation
 from ..api import arguments
 from ..api.progress import Kept, Progress
+from ..config import validation
 from ..errors import InputError
 from .content import ReportContent
 
 if TYPE_CHECKING:
     from ..api.identification import ConditionFit, Reading
     from ..api.recording import Recording
-    from ..config import Hull, WaterSettings
+    from ..config.hulls import Hull, WaterSettings
     from ..ident.conditions import Condition
     from .sources import ReportInputs
 
@@ -98,7 +98,7 @@ def make_report(
     >>> tankdaq.make_report("sessions/try", out="sessions/try/handover")  # doctest: +SKIP
     """
     from ..api.identification import Reading, water_settings
-    from ..config import full_scale_of, load_hull
+    from ..config.hulls import full_scale_of, load_hull
     from ..physics.models import resolve_model
     from .provenance import API_CALL
     from .sources import report_inputs
@@ -204,7 +204,7 @@ def _by_condition(recordings: list[Recording]) -> dict[Condition, list[Recording
 def _hull_named(condition: Condition, kept: Kept) -> Hull | None:
     """The hull a condition's recordings name, when it can be found (else a line: no dimensional
     results for it)."""
-    from ..config import load_hull
+    from ..config.hulls import load_hull
     from ..ident.conditions import UNKNOWN
 
     if condition.hull == UNKNOWN:
@@ -224,7 +224,7 @@ def _fit(
 ) -> ConditionFit:  # fmt: skip
     """One condition fitted by ``tankdaq.identify`` at its draft (T where the recordings do not say)."""
     from ..api.identification import identify
-    from ..config import parse_draft
+    from ..config.hulls import parse_draft
     from ..ident.conditions import UNKNOWN
 
     draft = 1.0 if condition.draft == UNKNOWN else parse_draft(condition.draft)

@@ -18,7 +18,7 @@ from matplotlib.figure import Figure as MplFigure
 from matplotlib.image import imread
 
 from ..store.safe_write import new_path
-from .content import Figure, ReportContent, Table, cell_text
+from .content import Figure, ReportContent, ReportTable, cell_text
 
 if TYPE_CHECKING:
     from matplotlib.typing import RcKeyType
@@ -69,7 +69,7 @@ def _wrapped(text: str, style: str) -> Iterator[Line]:
         yield line, style
 
 
-def _table_lines(table: Table) -> Iterator[Line]:
+def _table_lines(table: ReportTable) -> Iterator[Line]:
     """A table as text: its title, its columns in groups that fit a line, each cell wrapped."""
     yield "", "text"
     yield table.title, "subheading"

@@ -9,11 +9,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .content import Section, Table
+from .content import ReportTable, Section
 
 if TYPE_CHECKING:
     from ..api.recording import Recording
-    from ..config import Hull
+    from ..config.hulls import Hull
 
 #: What the Python API writes where the command line would be.
 API_CALL = "tankdaq.make_report (Python API)"
@@ -70,9 +70,9 @@ def provenance_section(
         "provenance",
         "Provenance",
         [
-            Table("report", "Report", ["item", "value"], about),
-            Table("hulls", "Hull files", ["hull", "file", "SHA-256"], hull_rows, hull_caption),
-            Table(
+            ReportTable("report", "Report", ["item", "value"], about),
+            ReportTable("hulls", "Hull files", ["hull", "file", "SHA-256"], hull_rows, hull_caption),
+            ReportTable(
                 "recordings",
                 "Recordings",
                 [

@@ -1,5 +1,5 @@
 """The report's places for what other parts of tankdaq compute as DataFrames: a quantity's
-uncertainty budget and the IMO table of Bertin's N against mean amplitude. Each is a ``Table`` the
+uncertainty budget and the IMO table of Bertin's N against mean amplitude. Each is a ``ReportTable`` the
 renderers show as any other (title, caption, interval labels), added to a condition's section by
 ``report.make`` (``condition_section(extra=...)``)."""
 
@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from ..ident.interval_labels import EXPANDED_U, IntervalLabel
-from .content import Table
+from .content import ReportTable
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
 def budget_table(
     key: str, quantity: str, frame: pd.DataFrame, intervals: Mapping[str, IntervalLabel] | None = None
-) -> Table:
+) -> ReportTable:
     """A quantity's uncertainty budget (columns source, value, sensitivity, contribution, share):
     the sources' contributions combined, and expanded with k = 2."""
     caption = (
@@ -25,16 +25,16 @@ def budget_table(
         f"sensitivity and its contribution to the combined standard uncertainty; {EXPANDED_U.text}: "
         "expanded with k = 2."
     )
-    return Table.from_frame(key, f"Uncertainty budget: {quantity}", frame, caption, intervals)
+    return ReportTable.from_frame(key, f"Uncertainty budget: {quantity}", frame, caption, intervals)
 
 
 def imo_table(
     key: str, frame: pd.DataFrame, intervals: Mapping[str, IntervalLabel] | None = None, note: str = ""
-) -> Table:
+) -> ReportTable:
     """Bertin's N against mean amplitude at 10, 15, 20 and 25 deg where the decays cover them; ``note``
     says which amplitudes they do not reach."""
     caption = (
         "Bertin's N against mean amplitude (MSC.1/Circ.1200), interpolated where the decays cover the "
         "amplitude; an amplitude not reached says so."
     ) + (f" {note}" if note else "")
-    return Table.from_frame(key, "IMO table: Bertin's N", frame, caption, intervals)
+    return ReportTable.from_frame(key, "IMO table: Bertin's N", frame, caption, intervals)

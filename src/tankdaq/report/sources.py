@@ -53,7 +53,7 @@ def report_inputs(paths: Sequence[Path], runs: str | None, catalogue: str | None
                 lines.append(f"session {path}: {len(accepted)} accepted decay(s)")
                 files += accepted
             else:
-                from ..ident.campaign import find_recordings
+                from ..campaign.groups import find_recordings
 
                 files += find_recordings([path])
     once = list(dict.fromkeys(files))
@@ -72,9 +72,9 @@ def _expanded(path: Path) -> list[Path]:
 
 def session_files(folder: Path) -> list[Path]:
     """The accepted decays of a guided session (its log, ``session.jsonl``), in the order recorded."""
-    from ..acquire.guided.journal import SessionLog
-    from ..acquire.guided.state import SessionState
-    from ..config_rules import path_in
+    from ..config.rules import path_in
+    from ..session.journal import SessionLog
+    from ..session.state import SessionState
 
     state = SessionState.from_log(SessionLog(folder).read(), [], 0)
     accepted = [path_in(folder, run.file) for run in state.runs if run.verdict == Verdict.ACCEPTED]

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from ..config.validation import input_file
 from ..errors import InputError, install_hint
-from ..validation import input_file
 from .csv_import import SPEED_CHANNEL, ColumnData, CsvOptions
 from .csv_units import stated_unit
 from .export_layout import EXPORT_FORMAT, mat_export_meta, plain_value

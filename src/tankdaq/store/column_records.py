@@ -22,7 +22,7 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from .. import __version__
+from .._version import __version__
 from ..errors import BadRecordingInput
 from .record_scan import MCAP_DAMAGE
 from .safe_write import write_new, write_text_new

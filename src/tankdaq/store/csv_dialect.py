@@ -60,7 +60,7 @@ class Dialect:
 
 
 @dataclass
-class Table:
+class CsvTable:
     """The numeric columns of a CSV file, its leading ``#`` comment lines and how it was written."""
 
     columns: dict[str, np.ndarray]
@@ -169,7 +169,7 @@ def _is_number(cell: str, decimal_comma: bool) -> bool:
     return True
 
 
-def read_table(path: Path, wanted: Sequence[str] = (), skip_rows: int = 0) -> Table:
+def read_table(path: Path, wanted: Sequence[str] = (), skip_rows: int = 0) -> CsvTable:
     """The numeric columns of ``path`` (columns named in ``wanted`` must be numbers; other text columns
     are left out and listed); ``skip_rows`` data rows after the header are not read (an export's units)."""
     dialect, comments, header, rows = sniff(path)
@@ -194,7 +194,7 @@ def read_table(path: Path, wanted: Sequence[str] = (), skip_rows: int = 0) -> Ta
         raise InputError(f"{path}: cannot read it as CSV text ({exc})") from None
     columns = {header[i]: data[:, j] for j, i in enumerate(numeric)}
     ignored = [name for i, name in enumerate(header) if i not in numeric and i not in empty]
-    return Table(columns, comments, dialect, ignored)
+    return CsvTable(columns, comments, dialect, ignored)
 
 
 def _load_fast(path: Path, dialect: Dialect, skip: int, columns: list[int]) -> np.ndarray | None:

@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config.validation import input_file
 from ..errors import BadIdentificationInput, InputError
 from ..records import DecayRun
-from ..validation import input_file
-from .csv_dialect import Table, read_table
+from .csv_dialect import CsvTable, read_table
 from .csv_units import ANGLE_UNITS, TIME_UNITS, UnitChoice, angle_unit, time_unit
 from .export_layout import axis_columns, read_sidecar, sidecar_path
 from .orientation_columns import find_orientation, refuse_component
@@ -270,7 +270,7 @@ def number_parts(runs: list[DecayRun]) -> list[DecayRun]:
     return runs
 
 
-def _read_columns(path: Path, options: CsvOptions) -> tuple[Table, dict[str, object]]:
+def _read_columns(path: Path, options: CsvOptions) -> tuple[CsvTable, dict[str, object]]:
     """The numeric columns, and the metadata of a ``tankdaq export`` file: its JSON sidecar, or the
     ``# key = value`` block of an export written before the sidecar."""
     input_file(path)

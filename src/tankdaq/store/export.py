@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config.validation import refuse_existing
 from ..errors import BadRecordingInput, InputError, install_hint
 from ..samples import AXIS_FIELDS, SAMPLE_UNITS
-from ..validation import refuse_existing
 from .export_layout import (
     DEVICE_TIME_COLUMN,
     EXPORT_FORMAT,
@@ -35,7 +35,7 @@ from .export_layout import (
 )
 from .export_writers import write_csv, write_h5, write_mat, write_parquet
 from .reader import (
-    Recording,
+    StoredRecording,
     _finite_increasing,
     _release_times,
     corruption_notice,
@@ -107,7 +107,7 @@ def _typed(text: str) -> object:
 class _Usable:
     """A recording, its samples with finite time, angle and rate (time increasing), its releases."""
 
-    recording: Recording
+    recording: StoredRecording
     samples: np.ndarray
     releases: list[float]
 

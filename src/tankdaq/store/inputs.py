@@ -45,7 +45,7 @@ def _read_mcap(path: Path, axis: str | None, _options: CsvOptions) -> list[Decay
 
 def _read_csv(path: Path, axis: str | None, options: CsvOptions) -> list[DecayRun]:
     """A CSV or text table; an Xsens MT Manager export (``store.mt_manager``) by its own reader."""
-    from ..validation import input_file
+    from ..config.validation import input_file
     from .mt_manager import is_mt_manager, read_mt_manager
 
     input_file(path)

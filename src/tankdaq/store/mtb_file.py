@@ -2,9 +2,9 @@
 
 The bytes are decoded by ``xsens.mtb`` (any bus id, the Configuration message read, messages tankdaq does
 not read counted by id); each device's MTData2 messages become samples as a live recording's do
-(``xsens.batch.to_samples``: time from SampleTimeFine, unwrapped at the device family's modulus, never
-from the Configuration's sampling period, which newer firmware leaves 0), and one record per device comes
-back whole, its releases found by ``ident.inputs`` as a CSV's. ``--device ID`` (a device id in hex, or a
+(``xsens.column_decoder.to_samples``: time from SampleTimeFine, unwrapped at the device family's modulus,
+never from the Configuration's sampling period, which newer firmware leaves 0), and one record per device
+comes back whole, its releases found by ``ident.inputs`` as a CSV's. ``--device ID`` (a device id in hex, or a
 bus id) keeps one device of a log that holds several. The log's header (device id, firmware, filter
 profile, date and time) is each run's metadata, and what was read and skipped is said in one line.
 """
@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config.validation import input_file
 from ..errors import BadIdentificationInput, InputError
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS
-from ..validation import input_file
-from ..xsens.batch import to_samples
+from ..xsens.column_decoder import to_samples
 from ..xsens.mtb import DecodedLog, decode_log, orientation_in_enu
 from ..xsens.timebase import MODULUS_32_BIT, MODULUS_ONE_DAY, SampleTimeUnwrapper, sample_time_modulus
 from .csv_import import FIND_RELEASES, MIN_SAMPLES, NOTICES, CsvOptions

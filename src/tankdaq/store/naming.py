@@ -17,8 +17,8 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 
-from ..config import format_draft, parse_draft
-from ..config_rules import safe_name
+from ..config.hulls import format_draft, parse_draft
+from ..config.rules import safe_name
 from ..errors import RecordingError
 
 _MAX_SUFFIX = 999

@@ -38,7 +38,7 @@ LIST_OPCODES = frozenset(
 
 
 @dataclass
-class Frame:
+class PandasFrame:
     """One pandas frame of a file: its key (its group's path), its numeric columns by the names pandas
     gave them, and what was left out and why."""
 
@@ -73,7 +73,7 @@ def pickled_names(raw: object) -> list[str] | None:
     return names
 
 
-def _index(frame: Frame, values: np.ndarray, name: str | None) -> None:
+def _index(frame: PandasFrame, values: np.ndarray, name: str | None) -> None:
     """The frame's index as a column: by its name, or as ``index`` unless it only numbers the rows."""
     if values.dtype.kind not in "iuf" or values.ndim != 1:
         return
@@ -82,9 +82,9 @@ def _index(frame: Frame, values: np.ndarray, name: str | None) -> None:
     frame.columns[name or "index"] = values
 
 
-def read_fixed(group: Any, key: str) -> Frame:
+def read_fixed(group: Any, key: str) -> PandasFrame:
     """A frame in pandas' fixed format: each ``blockN_values`` matrix cut into its named columns."""
-    frame = Frame(key)
+    frame = PandasFrame(key)
     axis = group.get("axis1")
     if axis is not None:
         raw_name = bytes(axis.attrs.get("name", PICKLED_NONE))
@@ -102,10 +102,10 @@ def read_fixed(group: Any, key: str) -> Frame:
     return frame
 
 
-def read_table(group: Any, key: str) -> Frame:
+def read_table(group: Any, key: str) -> PandasFrame:
     """A frame in pandas' table format: its data columns, and each ``values_block_N`` cut into the
     columns its attribute names."""
-    frame = Frame(key)
+    frame = PandasFrame(key)
     table = group.get("table")
     if table is None or not table.dtype.names:
         return frame
@@ -131,7 +131,7 @@ def read_table(group: Any, key: str) -> Frame:
     return frame
 
 
-def read_frame(group: Any, key: str) -> Frame:
+def read_frame(group: Any, key: str) -> PandasFrame:
     """A frame pandas wrote, in either format."""
     fixed = bytes(group.attrs.get("pandas_type", b"")) == b"frame"
     return read_fixed(group, key) if fixed else read_table(group, key)

@@ -32,7 +32,7 @@ from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
 from mcap.records import Attachment, Channel, Chunk, Message, Metadata
 
-from ..config import parse_draft
+from ..config.hulls import parse_draft
 from ..errors import BadRecordingInput, InputError
 from ..records import DecayEnd, DecayRun
 from ..samples import AXIS_FIELDS, StatusTally
@@ -42,7 +42,7 @@ from .schemas import EventKind
 
 
 @dataclass
-class Recording:
+class StoredRecording:
     """Everything in one tankdaq recording, samples already back in SI units.
 
     ``raw_chunks`` (``(host ns, bytes)`` of ``/xsens/raw``) is read on first use when
@@ -144,12 +144,12 @@ def _release_index(samples: np.ndarray, events: list[dict[str, Any]]) -> int | N
     return index if index < samples.size else None
 
 
-def read_recording(path: str | Path) -> Recording:
+def read_recording(path: str | Path) -> StoredRecording:
     """Read a whole recording (also a truncated one); raise BadRecordingInput if it is not one."""
     return _read_indexed(Path(path)) or _read_scanned(path)
 
 
-def _read_indexed(path: Path) -> Recording | None:
+def _read_indexed(path: Path) -> StoredRecording | None:
     """The recording from its summary and sample blocks; None when the file has no complete blocks.
 
     Blocks count as complete when they hold as many samples as ``/samples`` has
@@ -198,7 +198,7 @@ def _read_indexed(path: Path) -> Recording | None:
     return _assemble(path, samples, None, events, fits, attachments, channels, history, complete=True)
 
 
-def _read_scanned(path: str | Path) -> Recording:
+def _read_scanned(path: str | Path) -> StoredRecording:
     """The recording read front to back: files cut short, and files without sample blocks."""
     scan = RecordScan(path)
     channels: dict[int, Channel] = {}
@@ -251,9 +251,9 @@ def _assemble(
     complete: bool,
     damage: str | None = None,
     corruption: str | None = None,
-) -> Recording:
+) -> StoredRecording:
     """The Recording from what either reading path found (the last ``tankdaq.run`` record is the metadata)."""
-    return Recording(
+    return StoredRecording(
         path=path,
         metadata=history[-1] if history else {},
         samples=samples,
@@ -452,7 +452,12 @@ def read_decay_runs(path: str | Path, axis: str | None = None) -> list[DecayRun]
 
 
 def _run_meta(
-    recording: Recording, axis: str, release_t_s: float, dropped: int, tally: StatusTally, last_t_s: float
+    recording: StoredRecording,
+    axis: str,
+    release_t_s: float,
+    dropped: int,
+    tally: StatusTally,
+    last_t_s: float,
 ) -> dict[str, object]:
     meta = recording.metadata
     out: dict[str, object] = {
@@ -483,7 +488,7 @@ def _run_meta(
 
 
 __all__ = [
-    "Recording",
+    "StoredRecording",
     "corruption_notice",
     "iter_raw_chunks",
     "read_decay_runs",

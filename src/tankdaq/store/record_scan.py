@@ -27,8 +27,8 @@ from mcap.records import Chunk, ChunkIndex, Footer, Header, McapRecord
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import MCAP0_MAGIC
 
+from ..config.validation import input_file
 from ..errors import BadRecordingInput
-from ..validation import input_file
 
 #: What a torn tail can raise inside mcap: short reads, bad lengths, CRC mismatches, broken zstd frames.
 MCAP_DAMAGE = (McapError, ValueError, struct.error, zstandard.ZstdError, RuntimeError)

@@ -18,7 +18,7 @@ from pathlib import Path
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
-from .. import __version__
+from .._version import __version__
 from ..errors import BadRecordingInput, RecordingError
 from ..records import DecayEnd
 from . import schemas

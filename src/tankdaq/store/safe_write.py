@@ -25,8 +25,8 @@ from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any, BinaryIO
 
+from ..config.validation import NEVER_OVERWRITES, refuse_existing
 from ..errors import InputError, RecordingError
-from ..validation import NEVER_OVERWRITES, refuse_existing
 
 __all__ = ["new_path", "refuse_existing", "write_new", "write_text_new"]
 #: Errors of ``os.link`` that mean "this file system has no hard links", not "cannot write".

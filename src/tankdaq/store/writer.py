@@ -25,8 +25,8 @@ import numpy as np
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
-from .. import __version__
-from ..config import Hull, format_draft
+from .._version import __version__
+from ..config.hulls import Hull, format_draft
 from ..errors import RecordingError
 from ..samples import AXIS_FIELDS, SAMPLE_DTYPE
 from . import schemas

@@ -1,6 +1,6 @@
-"""A campaign's report: its tables (``ident.campaign``) and its figures, one PNG each, drawn here.
+"""A campaign's report: its tables (``campaign.groups``) and its figures, one PNG each, drawn here.
 
-``ident.campaign`` returns data (group fits, tables); this module draws the seeds' figures and the
+``campaign.groups`` returns data (group fits, tables); this module draws the seeds' figures and the
 ITTC ones from it. Each figure is one unit of work (``draw_plot``: groups in, PNG out), so a report's
 figures are drawn in parallel on the campaign's executor. Figures have fixed margins (no layout
 engine): constrained layout drew every figure twice, a layout pass and the real one, for 40 % of
@@ -19,14 +19,14 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..config import format_draft
-from ..config_rules import path_in
-from ..ident.campaign import REPORT_TABLES, GroupKey, GroupResult, write_tables
+from ..campaign.executors import executor_map, send_once
+from ..campaign.groups import REPORT_TABLES, GroupKey, GroupResult, write_tables
+from ..config.hulls import format_draft
+from ..config.rules import path_in
 from ..ident.derived import b_eq_band, extinction_curve, natural_period
-from ..ident.executors import executor_map, send_once
 from ..ident.imo_table import initial_angle_deg
 from ..ident.interval_labels import ANGLES_RANGE, FIT_95
-from ..ident.output_error import OutputError
+from ..ident.output_error import OutputErrorFit
 from ..physics.terms import TERM_TABLE
 from ..store.safe_write import refuse_existing
 from .plots import interval_caption, report_style, save_png
@@ -53,7 +53,7 @@ def write_report(
 ) -> list[Path]:
     """campaign.csv, campaign.md and the PNG figures into ``folder`` (created); the files written.
 
-    ``executor`` (``ident.executors.campaign_executor``) draws the figures in parallel.
+    ``executor`` (``campaign.executors.campaign_executor``) draws the figures in parallel.
     Every file is new (``store.safe_write``): a name that exists is refused before anything is written.
     """
     fitted = [r for r in results if r.fit is not None]
@@ -134,7 +134,7 @@ def _legend_beside(fig: Figure, axes: Sequence[Axes], title: str | None = None) 
     legend.set_bbox_to_anchor((1.0 - (right_in + extra - LEGEND_GAP_IN) / wide, params.top))
 
 
-def _fit(result: GroupResult) -> OutputError:
+def _fit(result: GroupResult) -> OutputErrorFit:
     """The group's fit (the report draws fitted groups only)."""
     if result.fit is None:
         raise ValueError(f"{result.key.label} has no fit to draw")

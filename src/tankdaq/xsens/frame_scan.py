@@ -9,7 +9,7 @@ A per-message Python framer manages ~1e5 frames/s; a long capture needs array co
    the next frame is simply the next valid candidate.
 
 The result is a ``FrameScan`` (frame positions and the framer's counters); turning the
-MTData2 payloads into columns is ``xsens.batch``'s job.
+MTData2 payloads into columns is ``xsens.column_decoder``'s job.
 """
 
 from __future__ import annotations

@@ -1,5 +1,9 @@
 """Sequential byte-stream framer: the reference semantics every faster decoder must match.
 
+A reference decoder: recordings, files and the live port are framed by ``frame_scan`` (through
+``stream_decoder`` and ``column_decoder``), which the tests hold to this framer's results; this one frames
+the device's replies during configuration (``device.link``) and the simulator's input.
+
 Rules (reference §5, after xspublic ``findMessage``): look for 0xFA; read the length
 (bounded by ``max_length``); wait while the frame is incomplete; on a bad checksum or an
 impossible length advance ONE byte and rescan, so a real preamble inside a corrupted

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .batch import ORIENTATION_COLUMNS, DecodedBlock, decode_capture
+from .column_decoder import ORIENTATION_COLUMNS, DecodedBlock, decode_capture
 from .constants import MASTER_BID, MID
 from .frame import Frame
 from .framer import ANY_BID
@@ -169,8 +169,9 @@ class DecodedLog:
 
 def orientation_in_enu(block: DecodedBlock) -> str | None:
     """Turn the orientation a device logged in NED or NWU into ENU, in place (the frame tankdaq reads:
-    ``batch.to_samples`` leaves any other out); the line that says so, None when all was ENU. Roll and
-    pitch are the same in NWU (a turn about the vertical); NED's local frame is turned back to ENU."""
+    ``column_decoder.to_samples`` leaves any other out); the line that says so, None when all was ENU.
+    Roll and pitch are the same in NWU (a turn about the vertical); NED's local frame is turned back to
+    ENU."""
     turned: Counter[str] = Counter()
     for name, to_rad in ORIENTATION_COLUMNS.items():
         if name not in block.xdis:

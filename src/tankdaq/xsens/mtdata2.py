@@ -1,9 +1,13 @@
 """MTData2 (MID 0x36): the data-identifier table, value codecs and the per-message decoder.
 
+The table and codecs are everyone's (the live decoder's ``layouts``, the simulator's encoder); the
+per-message decoder ``decode_mtdata2`` is a reference decoder: the live path decodes whole captures in
+columns (``column_decoder``), and the tests hold it to this one's values.
+
 A payload is a run of ``XDI (u16) | SIZE (u8) | DATA``. The XDI's low nibble carries the
 precision (bits 1-0) and, for orientation and velocity, the coordinate frame (bits 3-2);
 dispatch is on ``xdi & 0xFFF0``. Values stay in device units (Euler angles in degrees):
-conversion to SI happens once, when messages become samples (``batch.to_samples``).
+conversion to SI happens once, when messages become samples (``column_decoder.to_samples``).
 """
 
 from __future__ import annotations

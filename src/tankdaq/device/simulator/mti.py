@@ -19,7 +19,7 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
-from ...config import hull_scenario
+from ...config.hulls import hull_scenario
 from ...errors import InputError
 from ...physics.scenario import DecayScenario
 from ...physics.truth import RunTruth

@@ -25,7 +25,7 @@ from ...errors import InputError
 from ...physics.scenario import DecayScenario
 from ...physics.sensor import SensorModel
 from ...physics.truth import RunTruth, still_trace
-from ...xsens.batch import DecodedBlock, decode_buffer
+from ...xsens.column_decoder import DecodedBlock, decode_buffer
 from ...xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS
 from ...xsens.frame_scan import scan_frames
 from ...xsens.timebase import MODULUS_32_BIT, MODULUS_ONE_DAY, TICKS_PER_SECOND, SampleTimeUnwrapper

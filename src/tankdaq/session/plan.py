@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ...config import format_draft, parse_draft
-from ...plans import CampaignPlan, acceptance_values
+from ..config.hulls import format_draft, parse_draft
+from ..config.plans import CampaignPlan, acceptance_values
 
 
 @dataclass(frozen=True)
@@ -26,12 +26,12 @@ class Acceptance:
 
     @classmethod
     def from_plan(cls, table: dict[str, float], where: str) -> Acceptance:
-        """The plan's tolerances, each known and in its range (``plans.ACCEPTANCE_RANGES``)."""
+        """The plan's tolerances, each known and in its range (``config.plans.ACCEPTANCE_RANGES``)."""
         return cls(**acceptance_values(table, f"{where}: [acceptance]"))
 
 
 @dataclass(frozen=True)
-class Condition:
+class PlannedCondition:
     """One cell of the test matrix."""
 
     draft: str  # as people write it: 0.9T, T, 1.1T
@@ -46,7 +46,7 @@ class Condition:
         return f"{self.draft} {self.angle_deg:g} deg"
 
 
-def plan_conditions(plan: CampaignPlan) -> list[Condition]:
+def plan_conditions(plan: CampaignPlan) -> list[PlannedCondition]:
     """The conditions in the order they are run: every angle of a draft, then the next draft."""
     drafts = [format_draft(parse_draft(d)) for d in plan.drafts]
-    return [Condition(d, float(a)) for d in drafts for a in plan.angles_deg]
+    return [PlannedCondition(d, float(a)) for d in drafts for a in plan.angles_deg]

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from ...config import format_draft
+from ..config.hulls import format_draft
 
 #: the report's folder inside the session's
 REPORT_DIR = "report"
@@ -19,7 +19,7 @@ def write_session_report(files: list[Path], folder: Path, model: str, hull: str)
     """``tankdaq campaign``'s report of ``files`` (``tankdaq.campaign``, in this process: the session's
     device may still be streaming), plus each coefficient's repeat-to-repeat spread
     (``repeat_spread.csv`` and a section of campaign.md) for the conditions with two or more repeats."""
-    from ...api.campaigns import campaign
+    from ..api.campaigns import campaign
 
     found = campaign(files, model, hulls=[hull], report=folder, keep_fits=True)
     written = list(found.report_files)
@@ -38,14 +38,14 @@ def repeat_spreads(groups: dict[Any, tuple[list[Any], tuple[str, ...]]]) -> list
     condition's fit, the model the campaign chose), their mean and spread."""
     from functools import partial
 
-    from ...ident.intervals import repeat_spread
-    from ...ident.output_error import OutputError
+    from ..ident.intervals import repeat_spread
+    from ..ident.output_error import OutputErrorFit
 
     rows = []
     for key, (runs, model) in groups.items():
         if len(runs) < 2:
             continue
-        summary = repeat_spread(partial(OutputError, model), runs)
+        summary = repeat_spread(partial(OutputErrorFit, model), runs)
         terms = list(summary.std)
         row: dict[str, Any] = {"hull": key.hull, "axis": key.axis, "draft": format_draft(key.draft),
                                "angle_deg": key.angle_deg, "repeats": len(runs)}  # fmt: skip
@@ -58,8 +58,8 @@ def repeat_spreads(groups: dict[Any, tuple[list[Any], tuple[str, ...]]]) -> list
 
 
 def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
-    from ...ident.interval_labels import SCATTER_STD
-    from ...store.safe_write import write_rows
+    from ..ident.interval_labels import SCATTER_STD
+    from ..store.safe_write import write_rows
 
     path = write_rows(rows, folder / "repeat_spread.csv")  # a new file, as the rest of the report
     columns = list(dict.fromkeys(k for row in rows for k in row))
@@ -81,9 +81,9 @@ def _write_spread(rows: list[dict[str, Any]], folder: Path) -> Path:
 
 def _write_budgets(budgets: list[tuple[str, tuple[dict[str, Any], ...]]], folder: Path) -> Path:
     """Each condition's uncertainty budget: every row in ``budget.csv``, the tables in campaign.md."""
-    from ...api.identification import budget_table
-    from ...ident.budget import text_table
-    from ...store.safe_write import write_rows
+    from ..api.identification import budget_table
+    from ..ident.budget import text_table
+    from ..store.safe_write import write_rows
 
     rows = [{str(k): v for k, v in row.items()} for row in budget_table(budgets).to_dict("records")]
     path = write_rows(rows, folder / "budget.csv")

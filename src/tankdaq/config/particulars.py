@@ -17,16 +17,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import ConfigError, InputError
-from .physics.friction_scaling import (
+from ..errors import ConfigError, InputError
+from ..physics.friction_scaling import (
     DEFAULT_TEMPERATURE_C,
     FrictionScaling,
     Water,
     WaterKind,
     checked_temperature_c,
 )
-from .physics.ikeda import Finding, IkedaInputs, Kato
-from .physics.scaling import FroudeScale
+from ..physics.ikeda import IkedaInputs, IkedaOutOfRange, Kato
+from ..physics.scaling import FroudeScale
 
 #: The optional ``[particulars]`` keys (docs/hulls.md): main particulars for ``tankdaq predict``'s
 #: simplified Ikeda prediction and for full-scale results. Key -> what it is.
@@ -185,7 +185,7 @@ def _refuse_outside(value: float, sane: Sane, said: str, where: object) -> None:
     )
 
 
-def plausible(p: dict[str, float], design: dict[str, float], hull: Any) -> list[Finding]:
+def plausible(p: dict[str, float], design: dict[str, float], hull: Any) -> list[IkedaOutOfRange]:
     """``p`` (a hull's particulars at a draft; ``design`` at T) against physics and each other, before
     any formula runs: refused in one line when a number cannot be a model basin's, the displacement
     warned when it disagrees with rho Lpp B d CB. ``hull``: its file, ``displacement_kg`` and roll GM
@@ -216,7 +216,7 @@ def plausible(p: dict[str, float], design: dict[str, float], hull: Any) -> list[
     return _displacement(design, hull.displacement_kg, where)
 
 
-def _displacement(p: dict[str, float], displacement_kg: float | None, where: object) -> list[Finding]:
+def _displacement(p: dict[str, float], displacement_kg: float | None, where: object) -> list[IkedaOutOfRange]:
     """The hull's displacement against rho Lpp B d CB at its design draft (the formulas' volume)."""
     needed = ("lpp_m", "beam_m", "draft_m", "block_coefficient")
     if displacement_kg is None or any(key not in p for key in needed):
@@ -235,7 +235,7 @@ def _displacement(p: dict[str, float], displacement_kg: float | None, where: obj
         line = (
             f"{said}: more than {DISPLACEMENT_WARN:.0%} apart; check both (the inertia uses the displacement)"
         )
-        return [Finding("displacement", ratio, 1 - DISPLACEMENT_WARN, 1 + DISPLACEMENT_WARN, line)]
+        return [IkedaOutOfRange("displacement", ratio, 1 - DISPLACEMENT_WARN, 1 + DISPLACEMENT_WARN, line)]
     return []
 
 

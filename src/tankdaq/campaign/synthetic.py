@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import format_draft, load_hull
+from ..config.hulls import format_draft, load_hull
 from ..errors import InputError
 from ..physics.decay import simulate_decay
 from ..samples import AXIS_FIELDS, empty_samples

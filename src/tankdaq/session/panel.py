@@ -9,15 +9,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ...config import format_draft, parse_draft
-from ...plans import CampaignPlan
+from ..config.hulls import format_draft, parse_draft
+from ..config.plans import CampaignPlan
 from .checks import Measured
-from .plan import Condition
+from .plan import PlannedCondition
 from .state import SessionState
 
 if TYPE_CHECKING:
-    from ...viz.campaign_view import CampaignView
-    from ..daemon import RecordSettings
+    from ..acquire.daemon import RecordSettings
+    from ..viz.campaign_view import CampaignView
 
 PANEL_NAME = "campaign.rrd"
 
@@ -25,9 +25,9 @@ PANEL_NAME = "campaign.rrd"
 def open_panel(record: RecordSettings, plan: CampaignPlan, on_note: Callable[[str], None]) -> CampaignView:
     """The panel, beside the decay views: a spawned viewer is started first, so it listens before the
     first decay and the decay views reuse it."""
-    from ...physics.models import resolve_model
-    from ...viz.campaign_view import CampaignView
-    from ...viz.viewer import default_viewer_mode, display_available, spawn_viewer
+    from ..physics.models import resolve_model
+    from ..viz.campaign_view import CampaignView
+    from ..viz.viewer import default_viewer_mode, display_available, spawn_viewer
 
     mode = record.viewer or default_viewer_mode()
     url = None
@@ -44,7 +44,7 @@ def open_panel(record: RecordSettings, plan: CampaignPlan, on_note: Callable[[st
     )
 
 
-def show_condition(view: CampaignView, state: SessionState, condition: Condition) -> None:
+def show_condition(view: CampaignView, state: SessionState, condition: PlannedCondition) -> None:
     """The condition's status and kept repeats; once accepted, its mean model and B_eq."""
     kept = len(state.accepted(condition))
     status = state.status(condition)

@@ -15,25 +15,16 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from .config_rules import (
-    number,
-    read_toml,
-    refuse_unknown,
-    safe_name,
-    shown,
-    table,
-    text,
-    uncertainty,
-)
-from .errors import ConfigError, InputError
+from ..errors import ConfigError, InputError
+from ..physics.decay import decay_refusal
+from ..physics.ikeda import IkedaPrediction
+from ..physics.scaling import FroudeScale
+from ..physics.scenario import SIMULATION_RULE, DecayScenario
+from ..physics.terms import TERMS
 from .particulars import IKEDA_KEYS, MainParticulars, ikeda_inputs, parse_particulars, plausible
 from .particulars import WaterSettings as WaterSettings  # for --full-scale's friction correction
 from .particulars import friction_scaling as friction_scaling
-from .physics.decay import decay_refusal
-from .physics.ikeda import IkedaPrediction
-from .physics.scaling import FroudeScale
-from .physics.scenario import SIMULATION_RULE, DecayScenario
-from .physics.terms import TERMS
+from .rules import number, read_toml, refuse_unknown, safe_name, shown, table, text, uncertainty
 
 
 def config_dir() -> Path:
@@ -41,7 +32,7 @@ def config_dir() -> Path:
     env = os.environ.get("TANKDAQ_CONFIG_DIR")
     if env:
         return Path(env)
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # the tankdaq package (this is tankdaq/config/hulls.py)
     for candidate in (here.parent.parent / "configs", here / "_configs"):
         if candidate.is_dir():
             return candidate
@@ -355,7 +346,7 @@ def ikeda_prediction(
     The roll frequency is 2 pi / ``period_s`` when given, else sqrt(m g GM / I) with the total inertia
     I = m k^2 (1 + added_inertia_fraction) from the roll gyradius; m is the displacement (scaled with
     the draft factor, as the dimensional results do). Missing particulars are named in one line, and
-    every number is checked against physics and the others (``particulars.plausible``) first.
+    every number is checked against physics and the others (``config.particulars.plausible``) first.
     """
     p = hull.main_particulars.at(draft)
     where = f"[particulars] of {hull.path or hull.name}"

@@ -1,7 +1,7 @@
 """A campaign that streams: the parent holds each decay's group label and each group's table row, never
 the recordings nor the fits' per-sample state.
 
-Two passes over the files, both in the workers (``ident.executors``), in chunks. The scan reads each file,
+Two passes over the files, both in the workers (``campaign.executors``), in chunks. The scan reads each file,
 cuts its free decays and returns what groups them (hull, axis, draft, nominal angle per decay) and the
 lines to say; the fit sends each worker a chunk of groups as file paths, the worker reads those files
 again, fits each group and returns its row (``GroupRow``). Reading a decay twice costs less than its
@@ -24,15 +24,15 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from ..config import Hull
+from ..config.hulls import Hull
+from ..ident.free_decay import cut_lines
+from ..ident.inputs import input_notices
 from ..physics.models import AUTO
 from ..records import DecayRun, partial_end
 from ..store.export_layout import ExportOrigin
 from ..store.inputs import file_sha256
-from .campaign import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
 from .executors import DaskExecutor
-from .free_decay import cut_lines
-from .inputs import input_notices
+from .groups import GroupKey, GroupResult, GroupRow, SkippedFile, fit_group, read_campaign_file, run_key
 
 T = TypeVar("T")
 
@@ -304,14 +304,14 @@ def _size(path: Path) -> int:
 
 
 def executor_workers(executor: Executor | None) -> int | None:
-    """How many tasks ``executor`` runs at once: a local pool's processes (``ident.executors.LocalPool``),
+    """How many tasks ``executor`` runs at once: a local pool's processes (``campaign.executors.LocalPool``),
     a Dask cluster's threads; None here, without one."""
     workers = getattr(executor, "workers", None)
     return workers if isinstance(workers, int) else cluster_threads(executor)
 
 
 def cluster_threads(executor: Executor | None) -> int | None:
-    """The worker threads of the Dask cluster behind ``executor`` (``ident.executors.DaskExecutor``);
+    """The worker threads of the Dask cluster behind ``executor`` (``campaign.executors.DaskExecutor``);
     None for a local pool or this process."""
     threads = getattr(executor, "threads", None)
     return threads if isinstance(threads, int) else None
@@ -328,7 +328,7 @@ def completed(
 ) -> Generator[tuple[int, T], None, None]:
     """(task index, result) of each task as it completes: all submitted at once (their arguments are
     paths and labels, small), in this process in order without an executor; on a Dask cluster by its
-    own ``completed`` (``ident.executors.DaskExecutor``: a pass in one message)."""
+    own ``completed`` (``campaign.executors.DaskExecutor``: a pass in one message)."""
     if executor is None:
         for index, arguments in enumerate(tasks):
             yield index, function(*arguments)

@@ -21,7 +21,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ...errors import InputError, TankdaqError
+from ..errors import InputError, TankdaqError
 
 LOG_NAME = "session.jsonl"
 LOCK_NAME = "session.lock"

@@ -1,7 +1,7 @@
 """Test matrices (campaign plans): which hulls, axis, drafts, angles and repeats a campaign or a guided
 session covers, and the tolerances a session checks each decay against.
 
-A plan file is read like a hull file (``config_rules``): every key known (the nearest suggested), every
+A plan file is read like a hull file (``config.rules``): every key known (the nearest suggested), every
 value in its range, one line for anything else, before a device opens (docs/session.md).
 """
 
@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .config import config_dir, parse_draft
-from .config_rules import (
+from ..errors import ConfigError, InputError
+from .hulls import config_dir, parse_draft
+from .rules import (
     MAX_RELEASE_ANGLE_DEG,
     listed,
     number,
@@ -23,7 +24,6 @@ from .config_rules import (
     text,
     whole_number,
 )
-from .errors import ConfigError, InputError
 
 
 @dataclass
@@ -31,7 +31,7 @@ class CampaignPlan:
     """A test matrix: which hulls, axis, drafts and initial angles a campaign covers.
 
     A guided session (``tankdaq session``) also reads ``repeats`` (decays kept per condition) and the
-    ``[acceptance]`` table (tolerances of its checks, ``acquire.guided.plan.Acceptance``). The
+    ``[acceptance]`` table (tolerances of its checks, ``session.plan.Acceptance``). The
     conditions run in the order written: all angles of the first draft, then the next draft.
     """
 

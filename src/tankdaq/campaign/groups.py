@@ -19,9 +19,20 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from ..config import Hull, format_draft, load_hull, parse_draft
-from ..config_rules import safe_name
+from ..config.hulls import Hull, format_draft, load_hull, parse_draft
+from ..config.rules import safe_name
+from ..config.validation import refuse_existing
 from ..errors import IdentificationError, InputError, RecordingError, TankdaqError
+from ..ident.budget import EXPANDED_LABEL, short_lines
+from ..ident.budget_fit import group_budgets
+from ..ident.derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
+from ..ident.free_decay import cut_free_decays, cut_lines
+from ..ident.imo_table import DecayCover, decay_cover, imo_markdown, imo_tables
+from ..ident.inputs import read_decays
+from ..ident.interval_labels import FIT_STD
+from ..ident.model_choice import model_for
+from ..ident.output_error import OutputErrorFit
+from ..ident.plausibility import check_runs
 from ..physics.models import AUTO
 from ..records import DecayRun
 from ..samples import AXIS_FIELDS
@@ -29,18 +40,7 @@ from ..store.export_layout import export_metadata_of
 from ..store.inputs import INPUT_FORMATS, input_format, suffixes
 from ..store.naming import parse_recording_name
 from ..store.safe_write import write_rows, write_text_new
-from ..validation import refuse_existing
-from .budget import EXPANDED_LABEL, short_lines
-from .budget_fit import group_budgets
-from .derived import amplitude_table, b44_hat_factor, damping_ratio, natural_period
 from .executors import executor_map
-from .free_decay import cut_free_decays, cut_lines
-from .imo_table import DecayCover, decay_cover, imo_markdown, imo_tables
-from .inputs import read_decays
-from .interval_labels import FIT_STD
-from .model_choice import model_for
-from .output_error import OutputError
-from .plausibility import check_runs
 
 
 @dataclass(frozen=True, order=True)
@@ -63,7 +63,7 @@ class GroupResult:
 
     key: GroupKey
     runs: list[DecayRun]
-    fit: OutputError | None = None
+    fit: OutputErrorFit | None = None
     error: str | None = None
     extra: dict[str, float] = field(default_factory=dict)
     hull: Hull | None = None  # the hull file found for key.hull: dimensional results from its GM
@@ -121,7 +121,7 @@ class GroupResult:
         """Total inertia and B_eq in N m s/rad from the hull's displacement and GM (empty without a hull)."""
         if self.hull is None:
             return {}
-        from .report import dimensional_summary
+        from ..ident.report import dimensional_summary
 
         found = dimensional_summary(coefficients, self.hull, self.key.axis, self.key.draft)
         if "total_inertia_kg_m2" not in found:
@@ -136,7 +136,7 @@ class GroupResult:
         hull gives the displacement, GM and beam; None otherwise (and without a fit)."""
         if self.fit is None or self.hull is None or self.key.axis != "roll":
             return None
-        from .report import dimensional_summary
+        from ..ident.report import dimensional_summary
 
         found = dimensional_summary(self.fit.coefficients_, self.hull, self.key.axis, self.key.draft)
         factor = b44_hat_factor(self.hull, self.key.draft)
@@ -224,7 +224,7 @@ def read_campaign_runs(
 def _labelled_runs(path: Path) -> list[DecayRun]:
     """The decays of a file (``ident.inputs``), labelled from the recording's metadata or, for a file
     that does not say, from its sidecar or name (``csv_labels``); the hull name becomes part of report
-    file names, so it must pass ``config_rules.safe_name``."""
+    file names, so it must pass ``config.rules.safe_name``."""
     runs = _read_labelled_runs(path)
     for run in runs:
         safe_name(run.meta["hull"], f"{path}: hull")
@@ -308,7 +308,7 @@ def fit_group(key: GroupKey, runs: list[DecayRun], model: str, hull: Hull | None
     """
     try:
         choice = model_for(runs, model)  # as ``identify`` chooses for these decays
-        fit = OutputError(choice.terms).fit(runs)
+        fit = OutputErrorFit(choice.terms).fit(runs)
         return GroupResult(
             key, runs, fit=fit, hull=hull, model_reason=choice.reason, model_by_data=choice.by_data
         )
@@ -382,7 +382,7 @@ def read_campaign(
 ) -> CampaignRead:
     """Every recording's free decays (``read_campaign_file``), in path order, and the files skipped,
     all held here: for a few files (a test, a bench); ``tankdaq.campaign``, which the command and the
-    guided session's report call, streams (``ident.campaign_stream``), its parent holding no decay."""
+    guided session's report call, streams (``campaign.stream``), its parent holding no decay."""
     found = CampaignRead([], [])
     n = len(paths)
     for runs in executor_map(executor, read_campaign_file, paths, [start_s] * n, [end_s] * n):
@@ -397,7 +397,7 @@ def read_campaign(
 @dataclass(frozen=True)
 class GroupRow:
     """One group's row of the campaign table (``GroupResult.summary``), its fitted terms and warnings:
-    what a streamed campaign keeps of a group (``ident.campaign_stream``); the whole ``GroupResult``
+    what a streamed campaign keeps of a group (``campaign.stream``); the whole ``GroupResult``
     (fit and runs) only when asked for (the report's figures draw them)."""
 
     key: GroupKey

@@ -20,15 +20,15 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .config_rules import MAX_RELEASE_ANGLE_DEG
-from .errors import InputError
-from .physics.friction_scaling import checked_temperature_c
-from .physics.models import resolve_model
-from .physics.terms import TERM_TABLE, TERMS
-from .xsens.constants import BAUD_CODES
+from ..errors import InputError
+from ..physics.friction_scaling import checked_temperature_c
+from ..physics.models import resolve_model
+from ..physics.terms import TERM_TABLE, TERMS
+from ..xsens.constants import BAUD_CODES
+from .rules import MAX_RELEASE_ANGLE_DEG
 
 if TYPE_CHECKING:
-    from .config import Hull
+    from .hulls import Hull
 
 #: The MTi's output clock: every output rate is an integer divisor of it (LLCP, SetOutputConfiguration).
 MTI_BASE_RATE_HZ = 400
@@ -100,14 +100,14 @@ def time_unit(value: str, option: str = "--time-unit") -> str:
 
 def draft_factor(text: str) -> float:
     """A draft as people write it: ``0.9T``, ``T``, ``1.1T`` -> factor of the design draft."""
-    from .config import parse_draft
+    from .hulls import parse_draft
 
     return parse_draft(text)
 
 
 def known_hull(spec: str) -> Hull:
     """A hull by name (the user's hull folder, then the shipped ones) or by .toml path."""
-    from .config import load_hull
+    from .hulls import load_hull
 
     return load_hull(spec)
 
@@ -137,7 +137,7 @@ def baud_rate(value: int | None, option: str = "--baud") -> int | None:
 
 def baud_carries_rate(baud: int | None, rate_hz: float, option: str = "--baud") -> int | None:
     """A line rate that carries the decay outputs at ``rate_hz`` (None: the recorder picks one)."""
-    from .xsens.control import decay_bits_per_second, line_refusal
+    from ..xsens.control import decay_bits_per_second, line_refusal
 
     refusal = None if baud is None else line_refusal(decay_bits_per_second(rate_hz), rate_hz, baud)
     if refusal is not None:
@@ -224,7 +224,7 @@ def campaign_executor(
     executor: str, scheduler: str | None, option: str = "--executor", scheduler_option: str = "--scheduler"
 ) -> str:
     """Where a campaign runs: ``local``, or ``dask`` with a scheduler address (and a scheduler only then;
-    whether it answers is ``ident.executors.check_scheduler``'s)."""
+    whether it answers is ``campaign.executors.check_scheduler``'s)."""
     if executor not in EXECUTORS:
         raise InputError(f"{option} {executor!r} not understood: use local or dask")
     if (executor == "dask") != (scheduler is not None):

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..device.simulator import DeviceIdentity, RecordedSource
-from ..errors import BadRecordingInput
-from ..validation import input_file
-from .reader import read_recording
+from ...config.validation import input_file
+from ...errors import BadRecordingInput
+from ...store.reader import read_recording
+from . import DeviceIdentity, RecordedSource
 
 
 def recorded_device(path: str | Path) -> RecordedSource:

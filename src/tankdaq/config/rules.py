@@ -21,7 +21,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from .errors import ConfigError, InputError
+from ..errors import ConfigError, InputError
 
 #: A hull or plan file is a few kB; beyond this it is not one (and is not read into memory).
 MAX_TOML_BYTES = 1 << 20

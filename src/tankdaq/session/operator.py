@@ -12,9 +12,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
-from ... import validation
-from ...errors import InputError
-from .plan import Condition
+from ..config import validation
+from ..errors import InputError
+from .plan import PlannedCondition
 
 #: rejected decays of one condition after which the default answer is to skip it, not to repeat it
 #: (``--yes`` answers the default: a condition that keeps failing cannot loop forever)
@@ -38,10 +38,10 @@ class Operator(Protocol):
 
 
 @dataclass
-class Progress:
+class SessionProgress:
     """What the progress line shows."""
 
-    condition: Condition | None
+    condition: PlannedCondition | None
     repeat: int
     done: int
     total: int
@@ -85,7 +85,7 @@ def draft_question(draft: str, angles_deg: list[float]) -> Question:
     )
 
 
-def verdict_question(decay: int, condition: Condition, failed: bool, rejected: int) -> Question:
+def verdict_question(decay: int, condition: PlannedCondition, failed: bool, rejected: int) -> Question:
     """Keep the decay? One that failed a check defaults to a repeat, or, once the condition's
     ``MAX_REJECTED``-th decay failed (``rejected`` before this one), to skipping the condition."""
     if not failed:

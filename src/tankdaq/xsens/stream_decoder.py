@@ -1,7 +1,7 @@
 """Incremental decoding of a live byte stream on the batch machinery (identical results).
 
 Each ``feed`` decodes the complete frames of (held-back tail + new chunk) with
-``batch.decode_buffer`` and keeps the bytes that may start an incomplete frame, exactly as
+``column_decoder.decode_buffer`` and keeps the bytes that may start an incomplete frame, exactly as
 ``StreamFramer`` does (including whether they start in sync), so any chunking of a stream
 gives the same frames, counters and values as decoding it in one piece (then ``flush``).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .batch import DecodedBlock, decode_buffer
+from .column_decoder import DecodedBlock, decode_buffer
 from .constants import MAX_DATA_LENGTH
 from .framer import RESYNC_BIDS
 from .layouts import LayoutCache

@@ -13,9 +13,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from ...config import format_draft, parse_draft
+from ..config.hulls import format_draft, parse_draft
 from .journal import SessionLog
-from .plan import Condition
+from .plan import PlannedCondition
 from .state import SessionState
 
 
@@ -69,12 +69,14 @@ def adopt_orphans(
         on_line(f"decay {decay}: {path.name} {why.said}; kept, marked rejected")
 
 
-def _condition_of(path: Path) -> Condition | None:
+def _condition_of(path: Path) -> PlannedCondition | None:
     """The condition a recording's metadata names (None: a file cut before its metadata)."""
-    from ...store.reader import read_recording
+    from ..store.reader import read_recording
 
     try:
         meta = read_recording(path).metadata
-        return Condition(format_draft(parse_draft(str(meta["draft"]))), float(meta["angle_nominal_deg"]))
+        return PlannedCondition(
+            format_draft(parse_draft(str(meta["draft"]))), float(meta["angle_nominal_deg"])
+        )
     except Exception:  # a file cut before its metadata: the condition under way is the best guess
         return None

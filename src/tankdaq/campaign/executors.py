@@ -11,7 +11,7 @@ from multiprocessing import get_context
 from typing import Any, TypeVar
 
 from ..errors import InputError, TankdaqError, install_hint
-from .online import prepare_kernels
+from ..live.preparation import prepare_kernels
 
 T = TypeVar("T")
 
@@ -67,7 +67,7 @@ def campaign_executor(
 
 class LocalPool(ProcessPoolExecutor):
     """A local pool of ``workers`` processes forked from this one, that knows its size (the work is cut
-    to it, see ``ident.campaign_stream``)."""
+    to it, see ``campaign.stream``)."""
 
     def __init__(self, workers: int) -> None:
         super().__init__(max_workers=workers, mp_context=get_context("fork"))
@@ -76,7 +76,7 @@ class LocalPool(ProcessPoolExecutor):
 
 class DaskExecutor(Executor):
     """A Dask cluster as an executor that knows its size (``threads``: the work is cut to it, see
-    ``ident.campaign_stream``). Tasks are not hashed (``pure=False``): the client spends no CPU
+    ``campaign.stream``). Tasks are not hashed (``pure=False``): the client spends no CPU
     tokenizing their arguments, and a chunk submitted twice runs twice.
 
     A pass of a campaign goes out as one message (``completed``), and this client's own batching of

@@ -1,0 +1,1 @@
+"""Campaigns: many recordings fitted per condition, in parallel, into tables and reports."""

@@ -1,0 +1,1 @@
+"""The guided session (``tankdaq session``): a test plan walked condition by condition, with the operator."""
