@@ -28,9 +28,9 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 
 from benchjson import write_result
-from tankdaq.ident.campaign import find_recordings, group_runs, identify_groups, read_campaign_runs
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
-from tankdaq.ident.executors import campaign_executor
+from tankdaq.campaign.executors import campaign_executor
+from tankdaq.campaign.groups import find_recordings, group_runs, identify_groups, read_campaign_runs
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.viz.campaign_report import load_plotting, write_report
 
 HULLS = ("trimaran", "catamaran", "swath")

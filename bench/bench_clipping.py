@@ -15,9 +15,9 @@ import sys
 import numpy as np
 
 from benchjson import write_result
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.ident.derived import b_eq
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.scenario import scripted_run
 from tankdaq.records import DecayRun
 from tankdaq.samples import sample_flags
@@ -33,7 +33,7 @@ def one(seed: int) -> dict[str, tuple[float, float, float]]:
     out = {}
     for label, mask in (("excluded", excluded), ("kept", None)):
         run = DecayRun(free["t"], free["roll"], free["p"], excluded=mask)
-        fit = OutputError(terms).fit([run])
+        fit = OutputErrorFit(terms).fit([run])
         c3 = abs(fit.coefficients_["c3"] / truth["c3"] - 1)
         beq = abs(b_eq(fit.coefficients_, math.radians(5)) / b_eq(truth, math.radians(5)) - 1)
         out[label] = (c3, beq, math.degrees(fit.sigmas_[0]["rate"]))

@@ -31,10 +31,10 @@ from pathlib import Path
 from types import ModuleType
 
 from benchjson import write_result
-from tankdaq.xsens.batch import decode_capture
+from tankdaq.xsens.column_decoder import decode_capture
 from tankdaq.xsens.framer import StreamFramer
 from tankdaq.xsens.mtdata2 import decode_mtdata2
-from tankdaq.xsens.stream import StreamDecoder
+from tankdaq.xsens.stream_decoder import StreamDecoder
 from tankdaq.xsens.synthetic import decay_capture, noisy_capture
 
 FRAMES = 1_000_000

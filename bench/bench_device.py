@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from benchjson import write_result
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, SimulatedMTi
 from tankdaq.errors import DeviceGone

@@ -23,9 +23,9 @@ import numpy as np
 
 from benchjson import write_result
 from tankdaq.ident.derived import b_eq
-from tankdaq.ident.equation_error import EquationError
-from tankdaq.ident.online import OnlineIdentifier
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.equation_error import EquationErrorFit
+from tankdaq.ident.output_error import OutputErrorFit
+from tankdaq.live.identifier import OnlineIdentifier
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -49,7 +49,7 @@ def bench_fit_time(repeats: int = 40) -> dict[str, float]:
     terms = ("b1", "b2", "b3", "c1", "c2", "c3", "fc")
     run = decay(TRUTH, seed=1)
     figures = {}
-    for method, estimator in (("oe", OutputError), ("ee", EquationError)):
+    for method, estimator in (("oe", OutputErrorFit), ("ee", EquationErrorFit)):
         estimator(terms).fit([run])  # JIT warm-up (compiled code is cached on disk too)
         cpu, wall = [], []
         for _ in range(repeats):
@@ -98,7 +98,7 @@ def bench_cramer_rao(n_runs: int = 200, amplitude_deg: float = 10.0) -> dict[str
     """
     terms = ("b1", "b2", "c1", "c3")
     truth = {k: TRUTH[k] for k in terms}
-    reference = OutputError(terms).fit([decay(truth, seed=0)])
+    reference = OutputErrorFit(terms).fit([decay(truth, seed=0)])
     p_true = reference.params_.copy()
     p_true[: len(terms)] = [truth[k] for k in terms]
     p_true[len(terms) :] = [0.3, 0.0, 0.01]
@@ -116,7 +116,7 @@ def bench_cramer_rao(n_runs: int = 200, amplitude_deg: float = 10.0) -> dict[str
     bounds = {"b1": math.sqrt(crb[0, 0]), "c1": math.sqrt(crb[2, 2]), "B_eq": math.sqrt(grad @ crb @ grad)}
     errors: dict[str, list[float]] = {name: [] for name in bounds}
     for seed in range(1, n_runs + 1):
-        fit = OutputError(terms, compute_diagnostics=False).fit([decay(truth, seed=1000 + seed)])
+        fit = OutputErrorFit(terms, compute_diagnostics=False).fit([decay(truth, seed=1000 + seed)])
         errors["b1"].append(fit.coefficients_["b1"] - truth["b1"])
         errors["c1"].append(fit.coefficients_["c1"] - truth["c1"])
         errors["B_eq"].append(b_eq(fit.coefficients_, amplitude) - b_eq(truth, amplitude))

@@ -22,8 +22,8 @@ from benchjson import write_result
 from tankdaq.ident.free_decay import cut_free_decays
 from tankdaq.ident.inputs import read_decays
 from tankdaq.ident.model_choice import choose_model
-from tankdaq.ident.online import OnlineIdentifier
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
+from tankdaq.live.identifier import OnlineIdentifier
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -42,7 +42,7 @@ def swath(duration_s: float) -> DecayRun:
 
 def timed_choice(name: str, runs: list[DecayRun]) -> dict[str, float]:
     started = time.perf_counter()
-    OutputError("b1,b2,c1,c3").fit(runs)
+    OutputErrorFit("b1,b2,c1,c3").fit(runs)
     one = time.perf_counter() - started
     started = time.perf_counter()
     choice = choose_model(runs)
@@ -53,7 +53,7 @@ def timed_choice(name: str, runs: list[DecayRun]) -> dict[str, float]:
 
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f}")
-    OutputError("b1,c1").fit([swath(5.0)])  # kernels loaded before any timing
+    OutputErrorFit("b1,c1").fit([swath(5.0)])  # kernels loaded before any timing
     figures: dict[str, object] = {}
     for duration in (5.0, 15.0):
         figures[f"swath_{duration:g}s"] = timed_choice(f"SWATH {duration:g} s", [swath(duration)])

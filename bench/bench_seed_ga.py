@@ -17,18 +17,18 @@ import time
 import numpy as np
 
 from benchjson import write_result
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.ident.derived import b_eq, natural_period
 from tankdaq.ident.evolutionary import (
     GENETIC_SETTINGS,
     SWARM_SETTINGS,
-    GeneticSeed,
+    GeneticSeedFit,
     OneStepData,
     SearchSpace,
-    SwarmSeed,
+    SwarmSeedFit,
 )
 from tankdaq.ident.one_step import seed_objective
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -45,7 +45,7 @@ def noisy_decay(truth: dict[str, float]) -> DecayRun:
     )
 
 
-def angle_rms(fit: OutputError | GeneticSeed) -> float:
+def angle_rms(fit: OutputErrorFit | GeneticSeedFit) -> float:
     return float(np.sqrt(np.mean(np.concatenate([r["angle"] for r in fit.residuals_]) ** 2)))
 
 
@@ -64,16 +64,16 @@ def evaluation_only_s(run: DecayRun, population: int, generations: int) -> float
 def main() -> None:
     truth = load_hull("swath").simulation_model("roll").coefficients(1.0)
     run = noisy_decay(truth)
-    OutputError(MODEL).fit(run)  # compile the numba kernels outside the timing
+    OutputErrorFit(MODEL).fit(run)  # compile the numba kernels outside the timing
     oe_times = []
     for _ in range(OE_REPEATS):
         started = time.perf_counter()
-        oe = OutputError(MODEL).fit(run)
+        oe = OutputErrorFit(MODEL).fit(run)
         oe_times.append(time.perf_counter() - started)
     oe_s = statistics.median(oe_times)
     ga_settings, pso_settings = GENETIC_SETTINGS["seed000"], SWARM_SETTINGS["seed001"]
-    ga = GeneticSeed(MODEL, settings=ga_settings, random_state=0).fit(run)
-    pso = SwarmSeed(MODEL, settings=pso_settings, random_state=0).fit(run)
+    ga = GeneticSeedFit(MODEL, settings=ga_settings, random_state=0).fit(run)
+    pso = SwarmSeedFit(MODEL, settings=pso_settings, random_state=0).fit(run)
     eval_s = evaluation_only_s(run, ga_settings.population, ga_settings.generations)
 
     amplitude = np.deg2rad(5.0)

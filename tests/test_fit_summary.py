@@ -11,7 +11,7 @@ import pytest
 
 import tankdaq
 from tankdaq.api.identification import to_json
-from tankdaq.ident.campaign_synthetic import write_simulated_campaign
+from tankdaq.campaign.synthetic import write_simulated_campaign
 from tankdaq.ident.free_decay import EndKind
 from tankdaq.ident.summary import Coefficient, FitSummary
 from tankdaq.physics.scenario import DecayScenario

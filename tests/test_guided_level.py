@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tankdaq.acquire.guided.measure import LEVEL_S, LevelCheck
 from tankdaq.device.driver import StreamBlock
 from tankdaq.samples import empty_samples
+from tankdaq.session.measure import LEVEL_S, LevelCheck
 
 
 def _block(t_s: np.ndarray, roll_deg: np.ndarray) -> StreamBlock:

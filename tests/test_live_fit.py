@@ -24,16 +24,12 @@ from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.decay import LiveFit
 from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import RecordingSink, ViewSink
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.device.driver import StreamBlock
 from tankdaq.errors import IdentificationError
-from tankdaq.ident.online import (
-    FINAL_FIT_WALL_FACTOR,
-    BackgroundFit,
-    OnlineIdentifier,
-    OnlineResult,
-    prepare_kernels,
-)
+from tankdaq.live.identifier import OnlineIdentifier, OnlineResult
+from tankdaq.live.preparation import prepare_kernels
+from tankdaq.live.worker import FINAL_FIT_WALL_FACTOR, BackgroundFit
 from tankdaq.records import DecayRun
 from tankdaq.store.reader import read_recording
 from tankdaq.store.writer import describe_run

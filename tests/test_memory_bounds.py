@@ -22,10 +22,10 @@ from tankdaq.acquire.memory import ARENAS
 from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
 from tankdaq.acquire.release import ReleaseDetector
 from tankdaq.acquire.sinks import Sink
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.driver import StreamBlock
-from tankdaq.ident.online import OnlineResult
 from tankdaq.ident.signals import SAVGOL_CACHE, _savgol_weights, smoothed_derivatives
+from tankdaq.live.identifier import OnlineResult
 from tankdaq.records import DecayEnd
 from tankdaq.samples import empty_samples
 from tankdaq.viz.live import LiveView

@@ -14,13 +14,13 @@ from types import FrameType
 import numpy as np
 import pytest
 
-from tankdaq.acquire.decay import Decay, LiveFit
+from tankdaq.acquire.decay import LiveDecay, LiveFit
 from tankdaq.acquire.events import Event, Fitted, KeptNote, Note, Released, Settled
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
 from tankdaq.acquire.signals import Phase, SignalStop
 from tankdaq.acquire.sinks import RecordingSink, Sink, ViewSink
-from tankdaq.config import hull_scenario
+from tankdaq.config.hulls import hull_scenario
 from tankdaq.device.driver import StreamBlock
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
@@ -99,9 +99,9 @@ class Unplugged(Sink):
     """Stops nothing itself: notes the decay it hears released, for the test to cut from outside."""
 
     def __init__(self) -> None:
-        self.decay: Decay | None = None
+        self.decay: LiveDecay | None = None
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[StreamBlock]) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[StreamBlock]) -> None:
         self.decay = decay
 
 

@@ -18,7 +18,7 @@ import pytest
 
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
-from tankdaq.acquire.decay import Decay
+from tankdaq.acquire.decay import LiveDecay
 from tankdaq.acquire.events import Event, Fitted
 from tankdaq.acquire.read_thread import THREAD_NAME
 from tankdaq.acquire.release import ReleaseDetector
@@ -89,17 +89,17 @@ class _ThreadSink(Sink):
     def _note(self, what: str) -> None:
         self.seen.setdefault(f"sink.{what}", set()).add(threading.current_thread())
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> None:
         self._note("on_block")
 
-    def on_release(self, decay: Decay, pretrigger: object) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: object) -> None:
         self._note("on_release")
 
     def on_event(self, event: Event) -> None:
         if isinstance(event, Fitted):
             self._note("on_event(Fitted)")
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         self._note("on_settle")
 
 
@@ -137,7 +137,7 @@ def test_a_stop_mid_decay_feeds_every_block_already_read_into_the_file(
     held: list[bool] = []
 
     class StopMidDecay(Sink):
-        def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
+        def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> None:
             if decay is None or held or block.samples.size == 0:
                 return
             if float(block.samples["t"][-1]) - decay.release_t < 3.0:

@@ -23,7 +23,7 @@ from typer.testing import CliRunner
 
 from record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
-from tankdaq.acquire.decay import Decay, LiveFit
+from tankdaq.acquire.decay import LiveDecay, LiveFit
 from tankdaq.acquire.events import Event, Fitted, Released
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
@@ -31,7 +31,7 @@ from tankdaq.acquire.sinks import RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import StreamBlock
-from tankdaq.ident.online import OnlineIdentifier, OnlineResult
+from tankdaq.live.identifier import OnlineIdentifier, OnlineResult
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
 from tankdaq.viz.live import LiveView
@@ -196,10 +196,10 @@ class Listener(Sink):
         if name == self.fail_at:
             raise Injected(f"{name} failed")
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> None:
         self._hear("block" if decay is None else "decay block")
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[StreamBlock]) -> None:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[StreamBlock]) -> None:
         self.path_at_release = decay.path
         self._hear("release")
 
@@ -207,7 +207,7 @@ class Listener(Sink):
         if isinstance(event, Fitted):
             self._hear("fit")
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         self._hear(f"settle {decay.ended}")
 
     def close(self) -> None:

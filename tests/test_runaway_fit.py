@@ -25,13 +25,15 @@ from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
 from tankdaq.acquire.decay import LiveFit
 from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import RecordingSink, ViewSink
-from tankdaq.config import load_hull
+from tankdaq.config.hulls import load_hull
 from tankdaq.device.driver import StreamBlock
 from tankdaq.errors import IdentificationError
 from tankdaq.ident import compiled, kernels
 from tankdaq.ident.least_squares import FitAbandoned, levenberg_marquardt, solve_budget
-from tankdaq.ident.online import BackgroundFit, OnlineIdentifier, prepare_kernels
-from tankdaq.ident.output_error import OutputError
+from tankdaq.ident.output_error import OutputErrorFit
+from tankdaq.live.identifier import OnlineIdentifier
+from tankdaq.live.preparation import prepare_kernels
+from tankdaq.live.worker import BackgroundFit
 from tankdaq.records import DecayRun
 from tankdaq.store.reader import read_recording
 from tankdaq.store.writer import describe_run
@@ -181,7 +183,7 @@ def test_a_start_the_model_diverges_from_is_an_identification_error_not_a_crash(
     angle = 0.14 * np.exp(-0.1 * t) * np.cos(np.pi * t)
     run = DecayRun(t=t, angle=angle, rate=np.gradient(angle, t), axis="roll", name="clean")
     with pytest.raises(IdentificationError, match="diverges from its starting point"):
-        OutputError("b1,c1", compute_diagnostics=False).fit([run], start={"b1": 0.1, "c1": 1e9})
+        OutputErrorFit("b1,c1", compute_diagnostics=False).fit([run], start={"b1": 0.1, "c1": 1e9})
 
 
 def test_a_made_up_start_that_runs_away_is_abandoned_at_its_budget() -> None:
@@ -189,7 +191,7 @@ def test_a_made_up_start_that_runs_away_is_abandoned_at_its_budget() -> None:
     t = _decay_t(12.0)
     angle = 0.14 * np.exp(-0.1 * t) * np.cos(np.pi * t)
     run = DecayRun(t=t, angle=angle, rate=np.gradient(angle, t), axis="roll", name="clean")
-    estimator = OutputError("b1,c1", compute_diagnostics=False)
+    estimator = OutputErrorFit("b1,c1", compute_diagnostics=False)
     with solve_budget(0.5) as budget, pytest.raises(FitAbandoned, match=r"budget of 0\.5 s"):
         estimator.fit([run], start={"b1": 5e3, "c1": 10.0})
     assert budget.abandoned

@@ -26,15 +26,15 @@ import pytest
 from mcap.reader import make_reader
 
 from guided_session import signal_when
-from tankdaq.acquire.decay import Decay
+from tankdaq.acquire.decay import LiveDecay
 from tankdaq.acquire.events import Released, Settled
-from tankdaq.acquire.guided.journal import SessionLog
-from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.sinks import Sink
+from tankdaq.config.plans import load_campaign_plan
 from tankdaq.device.driver import StreamBlock
-from tankdaq.plans import load_campaign_plan
 from tankdaq.records import DecayEnd
+from tankdaq.session.journal import SessionLog
+from tankdaq.session.runner import GuidedSession, SessionSettings
 
 ONE_CONDITION_PLAN = """hulls = ["swath"]
 axis = "roll"
@@ -58,7 +58,7 @@ class Fed(Sink):
         self.blocks = 0
         self._fed = threading.Condition()
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> None:
         with self._fed:
             self.blocks += 1
             self._fed.notify_all()
@@ -75,7 +75,7 @@ class Pausing:
 
     def __init__(self, fed: Fed, heard: EventLog) -> None:
         self.fed, self.heard = fed, heard
-        self.session: CampaignSession | None = None
+        self.session: GuidedSession | None = None
         self.asked: list[str] = []
         self.fed_at_question = -1
         self.queued: list[int] = []
@@ -108,7 +108,7 @@ def test_a_question_keeps_the_stream_fed_and_a_release_meanwhile_is_kept(tmp_pat
     settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={})
     fed, heard = Fed(), EventLog()
     operator = Pausing(fed, heard)
-    session = CampaignSession(settings, operator, listeners=[fed, heard])
+    session = GuidedSession(settings, operator, listeners=[fed, heard])
     operator.session = session
     state = session.run()
     assert operator.asked == ["draft", "verdict"] and session.stopped is None

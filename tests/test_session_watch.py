@@ -17,12 +17,16 @@ import numpy as np
 import pytest
 
 from guided_session import ONE_CONDITION_TWICE, Repeating
-from tankdaq.acquire.decay import Decay
+from tankdaq.acquire.decay import LiveDecay
 from tankdaq.acquire.events import MOVED_KINDS, Event, ModelMoved, Released, Settled, legend
-from tankdaq.acquire.guided.checks import watch_reasons
-from tankdaq.acquire.guided.journal import SessionLog
-from tankdaq.acquire.guided.runner import CampaignSession, SessionSettings
-from tankdaq.acquire.guided.watch import (
+from tankdaq.acquire.listeners import EventLog, EventPrinter
+from tankdaq.config.plans import load_campaign_plan
+from tankdaq.device.driver import StreamBlock
+from tankdaq.samples import SAMPLE_DTYPE
+from tankdaq.session.checks import watch_reasons
+from tankdaq.session.journal import SessionLog
+from tankdaq.session.runner import GuidedSession, SessionSettings
+from tankdaq.session.watch import (
     BUMP_RATE_DEG_S,
     BUMP_SD_DEG,
     SETTLED_S,
@@ -31,10 +35,6 @@ from tankdaq.acquire.guided.watch import (
     after_last_step,
     creep_deg_min,
 )
-from tankdaq.acquire.listeners import EventLog, EventPrinter
-from tankdaq.device.driver import StreamBlock
-from tankdaq.plans import load_campaign_plan
-from tankdaq.samples import SAMPLE_DTYPE
 
 RATE_HZ = 100.0
 PERIOD_S = 1.66  # the swath's roll period
@@ -81,7 +81,7 @@ class SaidWatch(ModelWatch):
         super().__init__("roll", level_tolerance_deg=1.0)
         self.said: list[Event] = []
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> list[ModelMoved]:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> list[ModelMoved]:
         said = super().on_block(block, decay)
         self.said += said
         return said
@@ -259,7 +259,7 @@ def test_a_session_says_the_bump_before_a_decay_and_flags_that_decay(tmp_path: P
     settings = SessionSettings(load_campaign_plan(str(plan_file)), "swath", record, sim_faults={2: "bump"})
     heard = EventLog()
     operator = Repeating()
-    session = CampaignSession(settings, operator, listeners=[heard])
+    session = GuidedSession(settings, operator, listeners=[heard])
     state = session.run()
     assert session.stopped is None and [r.decay for r in state.runs] == [1, 2]
     moved = heard.of(ModelMoved)

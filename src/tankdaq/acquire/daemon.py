@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import RecordingError
-from ..ident.online import OnlineIdentifier
+from ..live.identifier import OnlineIdentifier
 from ..records import DecayEnd
 from .events import DecayOutcome, KeptOutcomes, Notice, Stopped, Stopping
 from .recorder import DaemonStatus, Recorder, RecordSettings

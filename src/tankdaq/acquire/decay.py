@@ -1,6 +1,6 @@
 """The decay under way as the pipeline and its sinks share it, and the live fit of it.
 
-``Decay`` is a record: the pipeline fills in the release and how it ended, sinks fill in what they made
+``LiveDecay`` is a record: the pipeline fills in the release and how it ended, sinks fill in what they made
 (``path`` by the file, ``rrd_path`` by the view). It holds no way back into the pipeline: what happens to
 a decay reaches the sinks only as the pipeline's typed events (``acquire.events``).
 
@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING
 
 from ..device.driver import StreamBlock
 from ..errors import TankdaqError
-from ..ident.online import REFIT_BUDGET_S, BackgroundFit, OnlineIdentifier, OnlineResult
+from ..live.identifier import OnlineIdentifier, OnlineResult
+from ..live.worker import REFIT_BUDGET_S, BackgroundFit
 from ..records import DecayEnd
 from ..samples import AXIS_FIELDS, StatusTally
 from .events import DecayOutcome, Event, Fitted, Note, NoteKind
@@ -37,7 +38,7 @@ FINAL_FIT_WAIT_S = 5.0
 
 
 @dataclass
-class Decay:
+class LiveDecay:
     """The decay under way, as the pipeline and its sinks share it.
 
     The pipeline fills in the release, the fits it broadcast (``fit``, ``final_fit``) and ``warnings``;
@@ -156,7 +157,7 @@ class LiveFit:
         self._live: BackgroundFit | None = None
         self._implausible: list[str] = []  # the checks the latest fit failed: each said once in a row
 
-    def start(self, decay: Decay, pretrigger: Sequence[StreamBlock]) -> None:
+    def start(self, decay: LiveDecay, pretrigger: Sequence[StreamBlock]) -> None:
         """A new identifier for the decay released, fed the blocks since the pre-trigger."""
         identifier = self.make_identifier(decay.model or decay.terms, axis=decay.axis)
         self._live = BackgroundFit(identifier, refit_budget_s=self.refit_budget_s)
@@ -164,7 +165,7 @@ class LiveFit:
         for block in pretrigger:
             self._submit(block, decay)
 
-    def feed(self, block: StreamBlock, decay: Decay) -> list[Event]:
+    def feed(self, block: StreamBlock, decay: LiveDecay) -> list[Event]:
         """The block's samples handed over; the refits finished since, and what they say."""
         if self._live is None:
             return []
@@ -176,7 +177,7 @@ class LiveFit:
             said += self._said(decay, result)
         return said + self._abandoned(self._live, decay)
 
-    def finish(self, decay: Decay) -> list[Event]:
+    def finish(self, decay: LiveDecay) -> list[Event]:
         """The decay ended: the last refits and the final fit (none after an error: it may be in it)."""
         live, self._live = self._live, None
         if live is None:
@@ -198,7 +199,7 @@ class LiveFit:
         self._implausible = []  # the final fit's implausibilities are said again: they are the verdict's
         return said + self._said(decay, final, final=True)
 
-    def _said(self, decay: Decay, result: OnlineResult, final: bool = False) -> list[Event]:
+    def _said(self, decay: LiveDecay, result: OnlineResult, final: bool = False) -> list[Event]:
         """The fit, then an implausibility it carries (a check the last fit passed) as a warning: the
         file's events, the view's event log, the record lines."""
         about_fit = [f for f in result.findings if not f.about_data]  # the data's flags: the session's note
@@ -209,11 +210,11 @@ class LiveFit:
         return [Fitted(decay.run, result, final), *warnings]
 
     @staticmethod
-    def _abandoned(live: BackgroundFit, decay: Decay) -> list[Event]:
+    def _abandoned(live: BackgroundFit, decay: LiveDecay) -> list[Event]:
         """A refit past its budget was abandoned on the worker: the record says so (a warning)."""
         return [Note(NoteKind.WARNING, line, decay.run) for line in live.take_notes()]
 
-    def _submit(self, block: StreamBlock, decay: Decay) -> None:
+    def _submit(self, block: StreamBlock, decay: LiveDecay) -> None:
         assert self._live is not None
         after = block.samples[block.samples["t"] >= decay.release_t] if block.samples.size else block.samples
         if after.size:

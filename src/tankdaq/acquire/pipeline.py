@@ -31,7 +31,7 @@ from ..device.driver import StreamBlock
 from ..physics.models import resolve_model
 from ..records import DecayEnd
 from ..samples import AXIS_FIELDS
-from .decay import Decay, LiveFit
+from .decay import LiveDecay, LiveFit
 from .events import (
     DecayOutcome,
     Event,
@@ -103,7 +103,7 @@ class DecayPipeline:
         self.state = PipelineState.WAITING
         self.held_deg = math.nan
         self.next_run = 1
-        self.decay: Decay | None = None  # the decay under way
+        self.decay: LiveDecay | None = None  # the decay under way
 
     # ---- telling the sinks ----------------------------------------
 
@@ -242,7 +242,7 @@ class DecayPipeline:
         for other in self._detectors.values():
             if other.axis != axis:
                 other.reset()
-        decay = Decay(
+        decay = LiveDecay(
             run=self.next_run,
             axis=axis,
             terms=self.terms,
@@ -270,7 +270,7 @@ class DecayPipeline:
             self.emit(Note(NoteKind.NOTE, f"sensor {tilt}", decay.run, release_t))
         self._note_flagged(decay)
 
-    def _note_flagged(self, decay: Decay) -> None:
+    def _note_flagged(self, decay: LiveDecay) -> None:
         """The first samples after the release the sensor flags (clipping, orientation not valid): a warning
         event (the file, the view, a record line) as they arrive; the count goes in the file at settle."""
         tally = decay.status

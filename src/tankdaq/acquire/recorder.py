@@ -27,16 +27,17 @@ from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .. import validation
-from ..config import Hull, hull_scenario, load_hull
+from ..config import validation
+from ..config.hulls import Hull, hull_scenario, load_hull
 from ..device.driver import MTiDriver, StreamCounters
 from ..device.factory import OpenDevice, SimPort, SimulatedSensor, open_device
+from ..device.simulator.playback import recorded_device
 from ..errors import DeviceGone, InputError, RecordingError
-from ..ident.online import OnlineIdentifier, prepare_identifier
+from ..live.identifier import OnlineIdentifier
+from ..live.preparation import prepare_identifier
 from ..physics.scenario import fresh_seed
 from ..records import DecayEnd
 from ..store.disk import RESERVE_BYTES
-from ..store.playback import recorded_device
 from ..viz.live import LiveView
 from ..viz.view_process import View, ViewProcess
 from ..viz.viewer import default_viewer_mode, describe_mode

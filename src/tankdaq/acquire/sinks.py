@@ -28,7 +28,7 @@ from ..errors import RecordingError
 from ..records import DecayEnd
 from ..store.disk import free_bytes, megabytes
 from ..store.writer import RecordingWriter
-from .decay import Decay
+from .decay import LiveDecay
 from .events import Event, Fitted, Note, NoteKind
 
 if TYPE_CHECKING:
@@ -41,15 +41,15 @@ Said = Iterable[Event] | None
 class Sink:
     """One listener of a decay pipeline; each method does nothing here: a sink overrides what it hears."""
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> Said:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> Said:
         """Every block fed (``decay``: the decay under way, None while waiting for a release)."""
         return None
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[StreamBlock]) -> Said:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[StreamBlock]) -> Said:
         """A confirmed release, with the blocks since the pre-trigger (the first cut to whole frames)."""
         return None
 
-    def on_settle(self, decay: Decay) -> Said:
+    def on_settle(self, decay: LiveDecay) -> Said:
         """The decay ended (``decay.ended``; ``ERROR`` after an exception: close, fit nothing); its final
         fit, if any, was broadcast before."""
         return None
@@ -89,7 +89,7 @@ class RecordingSink(Sink):
         self.writer: RecordingWriter | None = None
         self.paths: list[str] = []  # every file opened, in order (as text: a Path holds 3x the bytes)
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[StreamBlock]) -> Said:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[StreamBlock]) -> Said:
         from ..store.naming import next_run_number, recording_name
 
         hull = str(self.run_metadata.get("hull", "hull"))
@@ -115,7 +115,7 @@ class RecordingSink(Sink):
         )
         return None
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> Said:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> Said:
         if decay is not None:
             self._write_block(block)
         return None
@@ -152,7 +152,7 @@ class RecordingSink(Sink):
             )
         )
 
-    def on_settle(self, decay: Decay) -> Said:
+    def on_settle(self, decay: LiveDecay) -> Said:
         ended = decay.ended_value
         said = ended.said(decay.last_t - decay.release_t)
 
@@ -199,7 +199,7 @@ class ViewSink(Sink):
         self.rrd_base = rrd_base
         self._showing = False  # a decay's run is open in the view
 
-    def on_release(self, decay: Decay, pretrigger: Sequence[StreamBlock]) -> Said:
+    def on_release(self, decay: LiveDecay, pretrigger: Sequence[StreamBlock]) -> Said:
         view = self.view
         rrd = None if decay.path is None else decay.path.with_suffix(".rrd")
         if rrd is None and self.rrd_base is not None:
@@ -234,7 +234,7 @@ class ViewSink(Sink):
             "this decay is recorded without an .rrd; free some space"
         )
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> Said:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> Said:
         if decay is not None and block.samples.size:
             self.view.log_samples(block.samples)
         return None
@@ -254,7 +254,7 @@ class ViewSink(Sink):
                 t, angle, rate, result.coefficients, result.ci95, t_fit=result.t_end, final=event.final
             )
 
-    def on_settle(self, decay: Decay) -> Said:
+    def on_settle(self, decay: LiveDecay) -> Said:
         self._showing = False
         try:
             self.view.log_event("settled", f"decay {decay.ended_value.said()}", decay.last_t)

@@ -17,7 +17,7 @@ from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
-from ..acquire.decay import Decay
+from ..acquire.decay import LiveDecay
 from ..acquire.sinks import Sink
 from .database import (
     WRITER_CACHE_KB,
@@ -31,8 +31,8 @@ from .database import (
 from .location import scrub
 
 if TYPE_CHECKING:  # the session's module is imported by the session command only
-    from ..acquire.guided.state import RunEntry
-    from ..ident.campaign_stream import FileWork
+    from ..campaign.stream import FileWork
+    from ..session.state import RunEntry
     from .writing import Made
 
 Job = Callable[[Catalogue], object]
@@ -177,7 +177,7 @@ class CatalogueWriter:
         """A campaign's ``file_work``: the rows of the files this catalogue does not hold, made by the
         workers that scan them (``rows.worker_row``), so this process only writes them, ``CAMPAIGN_BATCH``
         to a transaction."""
-        from ..ident.campaign_stream import FileWork
+        from ..campaign.stream import FileWork
         from .rows import worker_row
 
         return FileWork(self.uncatalogued, worker_row, self.add_rows)
@@ -214,7 +214,7 @@ class CatalogueSink(Sink):
     def __init__(self, writer: CatalogueWriter) -> None:
         self.writer = writer
 
-    def on_settle(self, decay: Decay) -> None:
+    def on_settle(self, decay: LiveDecay) -> None:
         if decay.path is not None and decay.path.is_file():
             self.writer.add_files([decay.path])
 

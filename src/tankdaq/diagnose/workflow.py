@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..config.validation import equation_model
 from ..errors import BadIdentificationInput, InputError
 from ..ident.base import EstimatorMixin
 from ..ident.signals import white_noise_level
 from ..records import DecayRun
-from ..validation import equation_model
 from .effects import LIBRARY, Effect, EffectKind, Family
 from .fitting import Fit, ModelSpec, fit_spec, predict
 from .residuals import (

@@ -10,14 +10,14 @@ from typing import Any
 from ..ident.full_scale import damping_name
 from ..ident.interval_labels import FIT_95, FIT_STD
 from ..ident.summary import FitSummary
-from .content import Table
+from .content import ReportTable
 
 #: The fit's own intervals: the coefficient's standard deviation and its 95 % interval.
 SIGMA_COLUMN = FIT_STD.text
 LOW_COLUMN, HIGH_COLUMN = f"{FIT_95.said} low", f"{FIT_95.said} high"
 
 
-def conditions_table(summaries: Sequence[FitSummary]) -> Table:
+def conditions_table(summaries: Sequence[FitSummary]) -> ReportTable:
     """One row per condition fitted: what was tested and how it was fitted."""
     rows = []
     for s in summaries:
@@ -32,10 +32,10 @@ def conditions_table(summaries: Sequence[FitSummary]) -> Table:
         "method", "covariance", "R² angle", "natural period (s)", "damping ratio",
     ]  # fmt: skip
     caption = "Each condition (hull, draft, axis) fitted apart; initial angles as measured at the release."
-    return Table("conditions", "Conditions", columns, rows, caption)
+    return ReportTable("conditions", "Conditions", columns, rows, caption)
 
 
-def decays_table(summaries: Sequence[FitSummary]) -> Table:
+def decays_table(summaries: Sequence[FitSummary]) -> ReportTable:
     """One row per decay: its file, measured initial angle, samples kept and the fit's R² on it."""
     rows = [
         [s.condition_label, run["name"], run["file"], run["initial_angle_deg"], run["offset_deg"],
@@ -53,10 +53,10 @@ def decays_table(summaries: Sequence[FitSummary]) -> Table:
         "R² angle",
         "free decay",
     ]
-    return Table("decays", "Decays", columns, rows, "Every decay fitted, as read and cut.")
+    return ReportTable("decays", "Decays", columns, rows, "Every decay fitted, as read and cut.")
 
 
-def coefficients_table(key: str, summary: FitSummary) -> Table:
+def coefficients_table(key: str, summary: FitSummary) -> ReportTable:
     """The coefficients per unit total inertia (SI, rad) with the fit's 1σ and 95 % interval."""
     rows = [[term, c.value, c.unit, c.std, c.ci95[0], c.ci95[1]] for term, c in summary.coefficients.items()]
     intervals = {SIGMA_COLUMN: FIT_STD, LOW_COLUMN: FIT_95, HIGH_COLUMN: FIT_95}
@@ -66,10 +66,10 @@ def coefficients_table(key: str, summary: FitSummary) -> Table:
         f"{FIT_95.text}: its 95 % interval."
     )
     columns = ["term", "value", "unit", SIGMA_COLUMN, LOW_COLUMN, HIGH_COLUMN]
-    return Table(key, "Coefficients", columns, rows, caption, intervals)
+    return ReportTable(key, "Coefficients", columns, rows, caption, intervals)
 
 
-def damping_table(key: str, summary: FitSummary) -> Table:
+def damping_table(key: str, summary: FitSummary) -> ReportTable:
     """B_eq/I (with B̂44 where the hull allows) and Bertin's N at the amplitudes the decays cover."""
     hat = any(row.b44_hat is not None for row in summary.b_eq)
     columns = ["amplitude (deg)", "B_eq/I (1/s)", f"B_eq/I {FIT_STD.text}"]
@@ -86,10 +86,10 @@ def damping_table(key: str, summary: FitSummary) -> Table:
         f"cover; {FIT_STD.text}: propagated from the fit's covariance (delta method)."
         + (" B̂44 = B44 √(B/2g) / (ρ∇B²), non-dimensional." if hat else "")
     )
-    return Table(key, "B_eq and Bertin's N", columns, rows, caption, intervals)
+    return ReportTable(key, "B_eq and Bertin's N", columns, rows, caption, intervals)
 
 
-def full_scale_tables(key: str, summary: FitSummary) -> list[Table]:
+def full_scale_tables(key: str, summary: FitSummary) -> list[ReportTable]:
     """The ship's period and coefficients, and B_eq per amplitude, by Froude (``--full-scale``); none
     when not asked."""
     ship = summary.full_scale
@@ -111,18 +111,18 @@ def full_scale_tables(key: str, summary: FitSummary) -> list[Table]:
         for row in ship["b_eq"]
     ]
     return [
-        Table(f"{key}-coefficients", f"Full scale ({scale}): period and coefficients",
+        ReportTable(f"{key}-coefficients", f"Full scale ({scale}): period and coefficients",
               ["quantity", "model", "ship", "unit"], coefficients, ship["note"]),
-        Table(f"{key}-damping", f"Full scale ({scale}): damping", columns, rows, ship["note"]),
+        ReportTable(f"{key}-damping", f"Full scale ({scale}): damping", columns, rows, ship["note"]),
         *friction_tables(f"{key}-friction", ship),
     ]  # fmt: skip
 
 
-def friction_tables(key: str, ship: Mapping[str, Any]) -> list[Table]:
+def friction_tables(key: str, ship: Mapping[str, Any]) -> list[ReportTable]:
     """Froude's B44 beside the friction-corrected one per amplitude, with both Reynolds numbers and the
     assumptions in the caption; where the hull cannot give the correction, the line that says why."""
     if "friction_missing" in ship:
-        return [Table(key, "Full scale, friction corrected", ["why not"], [[ship["friction_missing"]]])]
+        return [ReportTable(key, "Full scale, friction corrected", ["why not"], [[ship["friction_missing"]]])]
     friction = ship.get("friction")
     if friction is None:
         return []
@@ -142,4 +142,4 @@ def friction_tables(key: str, ship: Mapping[str, Any]) -> list[Table]:
         f"{friction['ship_water']}; speed {friction['model_speed_m_s']:g} m/s at model scale "
         f"({friction['speed_from']})."
     )
-    return [Table(key, "Full scale, friction corrected", columns, rows, caption)]
+    return [ReportTable(key, "Full scale, friction corrected", columns, rows, caption)]

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from ...records import DecayEnd
-from ..events import ModelMoved, MovedKind
-from .plan import Acceptance, Condition
+from ..acquire.events import ModelMoved, MovedKind
+from ..records import DecayEnd
+from .plan import Acceptance, PlannedCondition
 
 #: the still water moves less than this (standard deviation, deg) when the model is at rest
 STILL_SD_DEG = 0.3
@@ -59,7 +59,7 @@ def _logged(values: dict[str, Any]) -> dict[str, Any]:
 
 
 def check_decay(
-    measured: Measured, condition: Condition, acceptance: Acceptance, earlier: list[Measured]
+    measured: Measured, condition: PlannedCondition, acceptance: Acceptance, earlier: list[Measured]
 ) -> list[str]:
     """Why this decay should be repeated (empty: it passes). ``earlier``: the condition's accepted repeats."""
     a = acceptance

@@ -10,12 +10,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ...device.driver import StreamBlock
-from ...ident.derived import b_eq
-from ...samples import AXIS_FIELDS
-from ..decay import Decay
-from ..pipeline import DecayOutcome
-from ..sinks import Sink
+from ..acquire.decay import LiveDecay
+from ..acquire.pipeline import DecayOutcome
+from ..acquire.sinks import Sink
+from ..device.driver import StreamBlock
+from ..ident.derived import b_eq
+from ..samples import AXIS_FIELDS
 from .checks import Measured
 
 #: device seconds of still water the level check averages after a draft change
@@ -24,8 +24,8 @@ LEVEL_S = 2.0
 
 def measure_decay(outcome: DecayOutcome, nominal_deg: float) -> Measured:
     """Read the decay back from its file (what is checked is what was stored) and its final fit."""
-    from ...ident.free_decay import find_free_end
-    from ...store.reader import read_decay_runs, read_recording
+    from ..ident.free_decay import find_free_end
+    from ..store.reader import read_decay_runs, read_recording
 
     assert outcome.path is not None
     recording = read_recording(outcome.path)
@@ -75,7 +75,7 @@ class LevelCheck(Sink):
         self._blocks = []
         self._since_host_t = time.time()  # the clock of ``StreamBlock.host_t``
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> None:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> None:
         if self.full or block.host_t < self._since_host_t:  # after it is full: not the still water measured
             return
         if block.samples.size:

@@ -1,4 +1,4 @@
-"""The loop of a guided test session (``CampaignSession``): the campaign plan drives the recording,
+"""The loop of a guided test session (``GuidedSession``): the campaign plan drives the recording,
 condition by condition.
 
 The plan (``guided.plan``) gives the conditions in order, drafts grouped (ballast changes are slow).
@@ -38,28 +38,37 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ...config import load_hull
-from ...config_rules import path_in
-from ...errors import InputError
-from ...plans import PLAN_AXES, CampaignPlan
-from ..daemon import RecordSettings
-from ..events import DecayOutcome, DeviceReady, Event, ModelMoved, Notice, Settled, Stopped, ViewerNote
-from ..listeners import EventLog, EventPrinter
-from ..sinks import Sink
-from ..streaming import SessionStream
+from ..acquire.daemon import RecordSettings
+from ..acquire.events import (
+    DecayOutcome,
+    DeviceReady,
+    Event,
+    ModelMoved,
+    Notice,
+    Settled,
+    Stopped,
+    ViewerNote,
+)
+from ..acquire.listeners import EventLog, EventPrinter
+from ..acquire.sinks import Sink
+from ..acquire.streaming import SessionStream
+from ..config.hulls import load_hull
+from ..config.plans import PLAN_AXES, CampaignPlan
+from ..config.rules import path_in
+from ..errors import InputError
 from .checks import STILL_SD_DEG, Measured, check_decay, is_level, watch_reasons
 from .journal import SessionLock, SessionLog, check_resumable
 from .measure import LEVEL_S, LevelCheck, measure_decay
-from .operator import Operator, Progress, Question, draft_question, keys_line, verdict_question
+from .operator import Operator, Question, SessionProgress, draft_question, keys_line, verdict_question
 from .panel import open_panel, show_condition
-from .plan import Acceptance, Condition, plan_conditions
+from .plan import Acceptance, PlannedCondition, plan_conditions
 from .recovery import RELEASED_BETWEEN, adopt_orphans, mark_missing
 from .report import REPORT_DIR, write_session_report
 from .state import RunEntry, SessionState
 from .watch import ModelWatch
 
 if TYPE_CHECKING:
-    from ...viz.campaign_view import CampaignView
+    from ..viz.campaign_view import CampaignView
 
 #: events shown once in a session (the device's lines; each decay's view says the same viewer line)
 SHOWN_ONCE = (Notice, DeviceReady, ViewerNote)
@@ -75,7 +84,7 @@ class SessionSettings:
     sim_faults: dict[int, str] = field(default_factory=dict)  # decay number -> scripted fault (port sim)
 
 
-class CampaignSession:
+class GuidedSession:
     """``run()`` leads the operator through the plan; see the module docstring."""
 
     def __init__(
@@ -83,7 +92,7 @@ class CampaignSession:
         settings: SessionSettings,
         operator: Operator,
         on_line: Callable[[str], None] | None = None,
-        on_progress: Callable[[Progress], None] | None = None,
+        on_progress: Callable[[SessionProgress], None] | None = None,
         resume: bool = False,
         on_verdict: Callable[[RunEntry], None] | None = None,
         listeners: Sequence[Sink] = (),  # hear every recording's events (a notebook, a test)
@@ -131,8 +140,8 @@ class CampaignSession:
 
     # ---- settings of one decay ----------------------------------------
 
-    def _record_settings(self, condition: Condition, decay: int) -> RecordSettings:
-        from ...physics.scenario import scripted_run
+    def _record_settings(self, condition: PlannedCondition, decay: int) -> RecordSettings:
+        from ..physics.scenario import scripted_run
 
         base = self.record
         overrides = (
@@ -243,7 +252,7 @@ class CampaignSession:
         """The recorder's run is the session's decay; a release while none was asked for is between decays."""
         return "between decays" if self._decay is None else f"decay {self._decay}"
 
-    def _show_condition(self, state: SessionState, condition: Condition) -> None:
+    def _show_condition(self, state: SessionState, condition: PlannedCondition) -> None:
         show_condition(self._panel(), state, condition)
 
     def _lead(self, state: SessionState) -> SessionState:
@@ -294,7 +303,7 @@ class CampaignSession:
     def _reload(self) -> SessionState:
         return SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
 
-    def _progress(self, state: SessionState, condition: Condition | None) -> None:
+    def _progress(self, state: SessionState, condition: PlannedCondition | None) -> None:
         total = sum(state.repeats for c in self.conditions if c not in state.skipped)
         done = sum(
             min(len(state.accepted(c)), state.repeats) for c in self.conditions if c not in state.skipped
@@ -303,7 +312,9 @@ class CampaignSession:
         left = None if per_decay is None else per_decay * state.runs_left()
         repeat = len(state.accepted(condition)) + 1 if condition else 0
         self.on_progress(
-            Progress(condition, repeat, done, total, state.decays, time.monotonic() - self._started, left)
+            SessionProgress(
+                condition, repeat, done, total, state.decays, time.monotonic() - self._started, left
+            )
         )
 
     def _ask(self, question: Question, decay: int | None) -> str | Stopped:
@@ -324,7 +335,7 @@ class CampaignSession:
                 return key
             self.on_line(f"'{answer}' not understood; keys: {keys_line(question)}")
 
-    def _set_draft(self, state: SessionState, condition: Condition) -> SessionState | Stopped:
+    def _set_draft(self, state: SessionState, condition: PlannedCondition) -> SessionState | Stopped:
         """The operator sets the draft and says when; the still water is then measured before the first
         decay: off level (or still moving), the question comes again."""
         angles = [c.angle_deg for c in self.conditions if c.draft == condition.draft]
@@ -356,14 +367,14 @@ class CampaignSession:
             )
         return self._reload()
 
-    def _measure_level(self, condition: Condition) -> tuple[float, float] | Stopped:
+    def _measure_level(self, condition: PlannedCondition) -> tuple[float, float] | Stopped:
         """Mean and standard deviation (deg) of the decay axis over ``LEVEL_S`` of device time, or how
         the recording was stopped before that much arrived."""
         self.level.arm()
         stopped = self._stream().stream_until(lambda: self.level.full)
         return stopped if stopped is not None else self.level.mean_sd_deg()
 
-    def _record_one(self, state: SessionState, condition: Condition) -> SessionState | Stopped:
+    def _record_one(self, state: SessionState, condition: PlannedCondition) -> SessionState | Stopped:
         decay = state.next_decay
         repeat = len(state.accepted(condition)) + 1
         self.on_line(

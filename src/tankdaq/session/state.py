@@ -12,7 +12,7 @@ from typing import Any
 
 from .checks import usable_measured
 from .journal import LOG_NAME
-from .plan import Condition
+from .plan import PlannedCondition
 
 
 class LogKind(StrEnum):
@@ -31,7 +31,7 @@ class RunEntry:
     """A decay as the log knows it."""
 
     decay: int
-    condition: Condition
+    condition: PlannedCondition
     file: str
     reasons: list[str]
     measured: dict[str, Any]
@@ -42,17 +42,17 @@ class RunEntry:
 class SessionState:
     """Where the session stands, from its log alone."""
 
-    conditions: list[Condition]
+    conditions: list[PlannedCondition]
     repeats: int
     runs: list[RunEntry] = field(default_factory=list)
-    skipped: set[Condition] = field(default_factory=set)
+    skipped: set[PlannedCondition] = field(default_factory=set)
     draft_ready: str | None = None  # the draft the operator last confirmed
     report: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)  # records left out, one line each
 
     @classmethod
     def from_log(
-        cls, records: list[dict[str, Any]], conditions: list[Condition], repeats: int
+        cls, records: list[dict[str, Any]], conditions: list[PlannedCondition], repeats: int
     ) -> SessionState:
         """The state the records say (each already checked by ``journal.record_problem``); a record
         that contradicts the ones before it is left out and listed in ``problems``."""
@@ -73,7 +73,7 @@ class SessionState:
                 return "its measured values are incomplete"
             entry = RunEntry(
                 r["decay"],
-                Condition(r["draft"], float(r["angle_deg"])),
+                PlannedCondition(r["draft"], float(r["angle_deg"])),
                 r["file"],
                 r["reasons"],
                 r["measured"],
@@ -89,7 +89,7 @@ class SessionState:
             judged.verdict = r["verdict"]
             self.report = []  # a verdict after the report: the report no longer covers the accepted decays
         elif kind == LogKind.SKIP:
-            self.skipped.add(Condition(r["draft"], float(r["angle_deg"])))
+            self.skipped.add(PlannedCondition(r["draft"], float(r["angle_deg"])))
         elif kind == LogKind.DRAFT:
             self.draft_ready = r["draft"]
         elif kind == LogKind.REPORT:
@@ -98,10 +98,10 @@ class SessionState:
             self.draft_ready = None  # after a restart the level is checked again
         return None
 
-    def accepted(self, condition: Condition) -> list[RunEntry]:
+    def accepted(self, condition: PlannedCondition) -> list[RunEntry]:
         return [r for r in self.runs if r.condition == condition and r.verdict == "accepted"]
 
-    def status(self, condition: Condition) -> str:
+    def status(self, condition: PlannedCondition) -> str:
         """to do, under way, rejected (its last decay: to be repeated), accepted or skipped."""
         if condition in self.skipped:
             return "skipped"
@@ -112,7 +112,7 @@ class SessionState:
             return "to do"
         return "rejected" if mine[-1].verdict == "rejected" else "under way"
 
-    def next_condition(self) -> Condition | None:
+    def next_condition(self) -> PlannedCondition | None:
         return next((c for c in self.conditions if self.status(c) not in ("accepted", "skipped")), None)
 
     def unjudged(self) -> RunEntry | None:

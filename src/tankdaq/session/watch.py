@@ -31,12 +31,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...device.driver import StreamBlock
-from ...samples import AXIS_FIELDS
-from ..decay import Decay
-from ..events import Event, ModelMoved, MovedKind, PutBack, Released
-from ..release import TILT_MIN_DEG
-from ..sinks import Sink
+from ..acquire.decay import LiveDecay
+from ..acquire.events import Event, ModelMoved, MovedKind, PutBack, Released
+from ..acquire.release import TILT_MIN_DEG
+from ..acquire.sinks import Sink
+from ..device.driver import StreamBlock
+from ..samples import AXIS_FIELDS
 from .checks import STILL_SD_DEG
 
 #: Device seconds of each window the watch judges (a bump shorter than two of them may pass unseen).
@@ -125,7 +125,7 @@ class ModelWatch(Sink):
 
     # ---- the sink ----------------------------------------
 
-    def on_block(self, block: StreamBlock, decay: Decay | None) -> list[ModelMoved]:
+    def on_block(self, block: StreamBlock, decay: LiveDecay | None) -> list[ModelMoved]:
         """What the block's windows found (each ``ModelMoved`` once while it stands)."""
         if decay is not None:  # a decay under way: its motion is the recording's
             self._blocks, self._settling, self._pending = [], True, None

@@ -93,7 +93,7 @@ _REALS = BlockKind.REALS
 
 
 @dataclass(frozen=True)
-class Block:
+class LegacyBlock:
     """One block of a legacy message: the name it decodes to, its kind and its value count."""
 
     name: str
@@ -110,7 +110,7 @@ class Block:
 class LegacyLayout:
     """The blocks of a legacy message and the precision of its real values."""
 
-    blocks: tuple[Block, ...]
+    blocks: tuple[LegacyBlock, ...]
     precision_bits: int
     frame: str
 
@@ -121,7 +121,7 @@ class LegacyLayout:
 
 
 def legacy_layout(output_mode: int, output_settings: int) -> LegacyLayout:
-    """Block order for an OutputMode/OutputSettings pair; ProtocolError for combinations that cannot be."""
+    """The order of blocks for an OutputMode/OutputSettings pair; ProtocolError for pairs that cannot be."""
     if output_mode & ~KNOWN_MODE_BITS:
         raise ProtocolError(f"output mode 0x{output_mode:04X} has bits tankdaq does not know")
     timestamp = output_settings & TIMESTAMP_MASK
@@ -136,35 +136,38 @@ def legacy_layout(output_mode: int, output_settings: int) -> LegacyLayout:
         )
     if output_settings & (POSITION_MODE_MASK | VELOCITY_MODE_MASK):
         raise ProtocolError("only LLA position and XYZ velocity output modes are supported")
-    blocks: list[Block] = []
+    blocks: list[LegacyBlock] = []
     if output_mode & MODE_RAW_INERTIAL:
-        blocks.append(Block("RawAccGyrMagTemp", BlockKind.INTS, fmt=RAW_INERTIAL))
+        blocks.append(LegacyBlock("RawAccGyrMagTemp", BlockKind.INTS, fmt=RAW_INERTIAL))
     if output_mode & MODE_RAW_GPS:
-        blocks.append(Block("RawGpsPressure", BlockKind.RAWGPS, fmt=RAW_GPS))
+        blocks.append(LegacyBlock("RawGpsPressure", BlockKind.RAWGPS, fmt=RAW_GPS))
     if output_mode & MODE_TEMPERATURE:
-        blocks.append(Block("Temperature", BlockKind.REALS, 1))
+        blocks.append(LegacyBlock("Temperature", BlockKind.REALS, 1))
     if output_mode & MODE_CALIBRATED:
         for name, disabled in (("Acceleration", DISABLE_ACC), ("RateOfTurn", DISABLE_GYR),
                                ("MagneticField", DISABLE_MAG)):  # fmt: skip
             if not output_settings & disabled:
-                blocks.append(Block(name, BlockKind.REALS, 3))
+                blocks.append(LegacyBlock(name, BlockKind.REALS, 3))
     if output_mode & MODE_ORIENTATION:
         name, count = ORIENTATIONS[output_settings & ORIENTATION_MASK]
-        blocks.append(Block(name, BlockKind.REALS, count))
+        blocks.append(LegacyBlock(name, BlockKind.REALS, count))
     if output_mode & MODE_AUXILIARY:
         for name, disabled in (("AnalogIn1", DISABLE_AIN1), ("AnalogIn2", DISABLE_AIN2)):
             if not output_settings & disabled:
-                blocks.append(Block(name, BlockKind.INTS, fmt=COUNTER))
+                blocks.append(LegacyBlock(name, BlockKind.INTS, fmt=COUNTER))
     if output_mode & MODE_POSITION:
-        blocks += [Block("LatLon", BlockKind.REALS, 2), Block("AltitudeEllipsoid", BlockKind.REALS, 1)]
+        blocks += [
+            LegacyBlock("LatLon", BlockKind.REALS, 2),
+            LegacyBlock("AltitudeEllipsoid", BlockKind.REALS, 1),
+        ]
     if output_mode & MODE_VELOCITY:
-        blocks.append(Block("VelocityXYZ", BlockKind.REALS, 3))
+        blocks.append(LegacyBlock("VelocityXYZ", BlockKind.REALS, 3))
     if output_mode & MODE_STATUS:
-        blocks.append(Block("StatusByte", BlockKind.INTS, fmt=STATUS))
+        blocks.append(LegacyBlock("StatusByte", BlockKind.INTS, fmt=STATUS))
     if timestamp == 1:
-        blocks.append(Block("PacketCounter", BlockKind.INTS, fmt=COUNTER))
+        blocks.append(LegacyBlock("PacketCounter", BlockKind.INTS, fmt=COUNTER))
     if timestamp == 2:
-        blocks.append(Block("UtcTime", BlockKind.UTC, fmt=UTC_STRUCT))
+        blocks.append(LegacyBlock("UtcTime", BlockKind.UTC, fmt=UTC_STRUCT))
     frame = "NED" if output_settings & NED_BIT else "ENU"
     return LegacyLayout(tuple(blocks), precision_bits, frame)
 
