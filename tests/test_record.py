@@ -25,7 +25,7 @@ from event_stream import wait_for_event
 from record_settings import sim_record_settings
 from run_metadata import run_metadata
 from tankdaq.acquire.daemon import RecordDaemon
-from tankdaq.acquire.events import DeviceBack, DeviceLost, Event, Released, Settled
+from tankdaq.acquire.events import DeviceBack, DeviceLost, Event, Fitted, Released, Settled
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.cli import app
 from tankdaq.records import DecayEnd
@@ -200,16 +200,13 @@ def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: P
     daemon: RecordDaemon
 
     def on_event(event: Event) -> None:
-        if isinstance(event, Released) and event.run == 1 and not plugged.is_set():
+        """Unplugged mid-decay (once the first decay's first live fit is out: its samples are in), plugged
+        back once the recorder has said the device is lost: the events, not the test's clock."""
+        if isinstance(event, Fitted) and event.run == 1 and not plugged.is_set():
             plugged.set()
-
-            def pull_and_replug() -> None:
-                time.sleep(0.7)
-                daemon.simulator.unplug()
-                time.sleep(1.0)
-                daemon.simulator.replug()
-
-            threading.Thread(target=pull_and_replug, daemon=True).start()
+            threading.Thread(target=daemon.simulator.unplug, daemon=True).start()
+        elif isinstance(event, DeviceLost):
+            threading.Thread(target=daemon.simulator.replug, daemon=True).start()
 
     heard = EventLog(on_event)
     daemon = RecordDaemon(settings, sinks=[heard])
@@ -331,7 +328,7 @@ def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
 
 def test_sigterm_closes_the_file_properly(tmp_path: Path) -> None:
     proc = _recording_after_release(tmp_path, "--sim-speed", "4")
-    time.sleep(1.0)
+    wait_for_event(proc, "fitted", 60.0)  # mid-decay: a live fit of it is out
     proc.send_signal(signal.SIGTERM)
     proc.wait(timeout=30)
     assert proc.returncode == 130  # as Ctrl-C (docs/recording-format.md)
