@@ -73,6 +73,7 @@ viewer-test-deps:
 # against 10:01 here), but under the load it added a played-back device missed a 10 s reply once
 # (docs/benchmarks.md): a CI that fails costs more than two minutes. A test file goes to one worker whole, so
 # a module's fixture is made once (a whole session, killed and resumed: 50 s).
+# Every test phase over 5 s is listed at the end: such a test is marked slow (`make check` leaves it out).
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
 # The run catalogue's PostgreSQL tests start a throwaway server (initdb, pg_ctl) from the Debian
@@ -116,7 +117,7 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	nice -n 19 $(MAKE) --no-print-directory lint >$(CHECKS_LOG) 2>&1 & checks=$$!; \
 	$(BIN)/python -m tankdaq.prepare || { wait $$checks; cat $(CHECKS_LOG); exit 1; }; \
 	nice -n 19 $(MAKE) --no-print-directory docs >$(DOCS_LOG) 2>&1 & docs=$$!; \
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=25; tested=$$?; \
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=0 --durations-min=5; tested=$$?; \
 	wait $$checks; checked=$$?; wait $$docs; documented=$$?; \
 	echo "--- lint and types (make lint) ---"; cat $(CHECKS_LOG); \
 	echo "--- API docs (make docs) ---"; cat $(DOCS_LOG); \

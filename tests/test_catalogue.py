@@ -187,6 +187,7 @@ def _cut_after_a_catalogued_one(out: Path, url: str) -> bool:
     return any(r["complete"] for r in _rows(url))
 
 
+@pytest.mark.slow
 def test_a_recorder_killed_mid_decay_leaves_no_complete_row_until_recover_and_index(tmp_path: Path) -> None:
     out, url = tmp_path / "rec", _url(tmp_path)
     args = ["record", "--port", "sim", "--hull", "swath", "--draft", "T", "--angle", "8", "--runs", "3"]

@@ -197,6 +197,7 @@ def test_a_postgresql_writer_holding_a_transaction_never_makes_runs_wait(
     assert listed.stdout.count('"sha256"') == 4 and "being written" not in listed.stdout
 
 
+@pytest.mark.slow
 def test_a_server_that_accepts_and_never_answers_is_one_line_not_a_hang(recordings: Path) -> None:
     with socket.socket() as silent:
         silent.bind(("127.0.0.1", 0))

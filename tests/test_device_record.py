@@ -52,6 +52,7 @@ def _scenario(rate_hz: float, release_after_s: float) -> DecayScenario:
     ],
     ids=["stuck-until-reset", "slow-flash-writes"],
 )
+@pytest.mark.slow
 def test_record_connects_to_a_difficult_device(
     tmp_path: Path, behaviour: Behaviour, release_after_s: float
 ) -> None:

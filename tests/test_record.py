@@ -68,6 +68,7 @@ def three_decays(tmp_path_factory: pytest.TempPathFactory) -> tuple[RecordDaemon
     return daemon, outcomes
 
 
+@pytest.mark.slow
 def test_three_decays_in_one_run_each_a_valid_mcap(three_decays) -> None:
     _, outcomes = three_decays
     assert len(outcomes) == 3
@@ -108,6 +109,7 @@ def test_three_decays_in_one_run_each_a_valid_mcap(three_decays) -> None:
         assert recording.attachments, "the run configuration is attached"
 
 
+@pytest.mark.slow
 def test_raw_frames_decode_to_the_decoded_channel(three_decays) -> None:
     _, outcomes = three_decays
     for outcome in outcomes:
@@ -121,6 +123,7 @@ def test_raw_frames_decode_to_the_decoded_channel(three_decays) -> None:
             np.testing.assert_allclose(redecoded[field], stored[field], rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_release_within_one_sample_of_the_truth(three_decays) -> None:
     daemon, outcomes = three_decays
     truths = [r for r in daemon.simulator.truth if r.kind == "release"]
@@ -143,6 +146,7 @@ def test_release_within_one_sample_of_the_truth(three_decays) -> None:
         assert abs(release["t_s"] * TICKS_PER_S - nearest.release_ticks) <= sample_ticks
 
 
+@pytest.mark.slow
 def test_pretrigger_and_settle(three_decays) -> None:
     _, outcomes = three_decays
     for outcome in outcomes:
@@ -155,6 +159,7 @@ def test_pretrigger_and_settle(three_decays) -> None:
         assert tail.max() < 0.75, "recorded until the amplitude is below 0.5 deg (plus sensor noise)"
 
 
+@pytest.mark.slow
 def test_live_fit_converges_to_the_hull_model(three_decays) -> None:
     daemon, outcomes = three_decays
     truth = daemon.simulator.truth[0].coefficients
@@ -165,6 +170,7 @@ def test_live_fit_converges_to_the_hull_model(three_decays) -> None:
         assert abs(fit.natural_period_s - natural_period) / natural_period < 0.02
 
 
+@pytest.mark.slow
 def test_rrd_beside_each_mcap_holds_angle_rate_and_fit(three_decays) -> None:
     from rerun.chunk import RrdReader
 
@@ -177,6 +183,7 @@ def test_rrd_beside_each_mcap_holds_angle_rate_and_fit(three_decays) -> None:
     assert any(e.startswith("/coefficients") for e in entities)
 
 
+@pytest.mark.slow
 def test_replay_redetects_the_release_and_refits(three_decays) -> None:
     from tankdaq.acquire.replay import replay_recording
 
@@ -194,6 +201,7 @@ def test_replay_redetects_the_release_and_refits(three_decays) -> None:
         assert abs(again.fit.coefficients[term] - value) <= half_width + 1e-9, term
 
 
+@pytest.mark.slow
 def test_unplug_mid_decay_closes_the_file_and_the_next_decay_records(tmp_path: Path) -> None:
     settings = sim_record_settings(tmp_path, runs=2, sim_speed=4.0, sim_seed=5, reconnect_timeout_s=30.0)
     plugged = threading.Event()
@@ -326,6 +334,7 @@ def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
     assert longest_s <= 1.0, f"a flush held {longest_s:.2f} s of data"
 
 
+@pytest.mark.slow  # a record subprocess up to a live fit: 21 s measured under load 18
 def test_sigterm_closes_the_file_properly(tmp_path: Path) -> None:
     proc = _recording_after_release(tmp_path, "--sim-speed", "4")
     wait_for_event(proc, "fitted", 60.0)  # mid-decay: a live fit of it is out
@@ -387,6 +396,7 @@ def test_replay_refuses_what_is_not_a_recording(tmp_path: Path, content: bytes |
     assert len([line for line in result.output.splitlines() if line.strip()]) == 1
 
 
+@pytest.mark.slow
 def test_json_metadata_is_plain(three_decays) -> None:
     _, outcomes = three_decays
     recording = read_recording(outcomes[0].path)

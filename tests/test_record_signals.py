@@ -67,6 +67,7 @@ STOPPED_AFTER_S = 3.0
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGHUP])  # SIGTERM: test_record.py
+@pytest.mark.slow
 def test_a_signal_mid_decay_closes_a_complete_file_that_says_it_was_stopped(
     tmp_path: Path, signum: signal.Signals
 ) -> None:

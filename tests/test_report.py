@@ -76,6 +76,7 @@ def numeric_cells(document: dict[str, Any]) -> list[float]:
     ]
 
 
+@pytest.mark.slow
 def test_the_report_holds_what_a_reviewer_asks(made: dict[str, Any], recording: Path) -> None:
     """Conditions, coefficients with labelled intervals, B_eq/N, full scale and the provenance: the
     hull file's hash, the recording's hash, the software and the command line."""
@@ -99,6 +100,7 @@ def test_the_report_holds_what_a_reviewer_asks(made: dict[str, Any], recording: 
     assert about["software"].startswith("tankdaq ")
 
 
+@pytest.mark.slow
 def test_a_rerun_gives_the_same_numbers_and_the_same_page(made: dict[str, Any]) -> None:
     """Everything but the time made is the same: the JSON and the HTML, byte for byte."""
     first, second = dict(made["first"]), dict(made["document"])
@@ -108,6 +110,7 @@ def test_a_rerun_gives_the_same_numbers_and_the_same_page(made: dict[str, Any]) 
     assert MADE.sub("T", pages[0]) == MADE.sub("T", pages[1])
 
 
+@pytest.mark.slow
 def test_an_existing_report_is_refused_before_any_work(made: dict[str, Any]) -> None:
     before = made["html"].read_bytes()
     again = tankdaq(*made["args"], cwd=made["work"])
@@ -156,6 +159,7 @@ READ_TABLES = """() => Object.fromEntries([...document.querySelectorAll('table[d
     [...t.querySelectorAll('tbody tr')].map(r => [...r.querySelectorAll('td')].map(c => c.textContent))]))"""
 
 
+@pytest.mark.slow
 def test_the_html_opens_in_chromium_with_the_json_numbers_and_loads_nothing(
     made: dict[str, Any], browser: Any
 ) -> None:
@@ -185,6 +189,7 @@ def test_the_html_opens_in_chromium_with_the_json_numbers_and_loads_nothing(
     assert [u for u in requested if u != url and not u.startswith("data:")] == []
 
 
+@pytest.mark.slow
 def test_the_pdf_renders_to_pages_with_the_json_numbers(made: dict[str, Any], tmp_path: Path) -> None:
     from PIL import Image
 

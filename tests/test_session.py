@@ -121,6 +121,7 @@ def test_the_kill_is_real_and_the_resume_finishes(session: dict[str, Any]) -> No
     assert "session done: 8 decays accepted" in resumed.stderr
 
 
+@pytest.mark.slow
 def test_every_recording_is_in_the_session_file_with_its_verdict(session: dict[str, Any]) -> None:
     out = session["out"]
     records = _records(out)
@@ -146,6 +147,7 @@ def test_every_recording_is_in_the_session_file_with_its_verdict(session: dict[s
     assert [n["text"] for n in notes] == ["water calm, model trimmed"]
 
 
+@pytest.mark.slow
 def test_the_catalogue_lists_exactly_the_accepted_decays_of_a_draft(session: dict[str, Any]) -> None:
     """``tankdaq runs --hull swath --draft T --json``: the session's accepted decays at T, no other (the
     session killed mid-decay and resumed wrote its catalogue as it went)."""
@@ -173,6 +175,7 @@ def test_the_catalogue_lists_exactly_the_accepted_decays_of_a_draft(session: dic
     }
 
 
+@pytest.mark.slow
 def test_the_wrong_angle_is_flagged_and_repeated(session: dict[str, Any]) -> None:
     records = _records(session["out"])
     runs = {r["decay"]: r for r in records if r["type"] == "run"}
@@ -185,6 +188,7 @@ def test_the_wrong_angle_is_flagged_and_repeated(session: dict[str, Any]) -> Non
     assert runs[3]["reasons"] == [] and verdicts[3]["verdict"] == "accepted"
 
 
+@pytest.mark.slow
 def test_the_decay_cut_by_the_kill_is_kept_and_rejected(session: dict[str, Any]) -> None:
     records = _records(session["out"])
     recovered = [r for r in records if r["type"] == "verdict" and r["action"] == "recovered"]
@@ -194,12 +198,14 @@ def test_the_decay_cut_by_the_kill_is_kept_and_rejected(session: dict[str, Any])
     assert (session["out"] / run["file"]).stat().st_size > 0
 
 
+@pytest.mark.slow
 def test_the_double_push_is_flagged(session: dict[str, Any]) -> None:
     records = _records(session["out"])
     (pushed,) = [r for r in records if r["type"] == "run" and r["decay"] == 6]
     assert any(reason.startswith("release not clean") for reason in pushed["reasons"])
 
 
+@pytest.mark.slow
 def test_the_report_covers_only_the_accepted_decays(session: dict[str, Any]) -> None:
     out = session["out"]
     records = _records(out)
@@ -237,6 +243,7 @@ def _rrd_rows(path: Path) -> tuple[dict[str, int], dict[str, dict[str, Any]]]:
     return counts, static
 
 
+@pytest.mark.slow
 def test_the_campaign_panel_has_one_point_per_accepted_condition(session: dict[str, Any]) -> None:
     counts, static = _rrd_rows(session["out"] / "campaign.rrd")
     records = _records(session["out"])

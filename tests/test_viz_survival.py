@@ -247,6 +247,7 @@ def _free_display() -> str:
 
 
 @pytest.mark.parametrize("display", ["none", "broken"])
+@pytest.mark.slow
 def test_spawn_without_the_venv_on_path_or_a_display_records_and_saves(tmp_path: Path, display: str) -> None:
     """``.venv/bin/tankdaq record --viewer spawn``, the venv not on PATH: no display, or a dead one.
 
@@ -340,6 +341,7 @@ def _events_of(path: Path, kind: str) -> list[dict]:
     return [e for e in read_recording(path).events if e["kind"] == kind]
 
 
+@pytest.mark.slow
 def test_an_rrd_refused_by_the_file_system_is_one_line_and_the_mcaps_finish(tmp_path: Path) -> None:
     """RLIMIT_FSIZE 1 MB: each MCAP fits, the .rrd hits EFBIG mid-decay (rerun's file writer dies)."""
     import resource

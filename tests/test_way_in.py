@@ -67,6 +67,7 @@ def test_the_way_in_is_the_shells_tankdaq_or_the_scripts_path(
     assert how is not None and f". {SCRIPTS / 'activate'}" in how and command in how
 
 
+@pytest.mark.slow
 def test_the_demo_ends_with_the_readmes_way_in_and_its_commands_run_as_written(two_demos) -> None:
     folder, said = two_demos
     command = str(SCRIPTS / "tankdaq")
