@@ -45,7 +45,7 @@ from pathlib import Path
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from campaign_scale import dask_cluster, write_many_decays
+from support.campaign_scale import dask_cluster, write_many_decays
 from tankdaq.ident.campaign import find_recordings
 from tankdaq.ident.campaign_stream import fit_campaign, scan_campaign
 from tankdaq.ident.executors import campaign_executor
