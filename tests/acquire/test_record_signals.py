@@ -66,7 +66,7 @@ def _complete(path: Path) -> list[dict]:
 STOPPED_AFTER_S = 3.0
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGHUP])  # SIGTERM: test_record.py
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGHUP])  # SIGTERM: test_record_stops.py
 @pytest.mark.slow
 def test_a_signal_mid_decay_closes_a_complete_file_that_says_it_was_stopped(
     tmp_path: Path, signum: signal.Signals
