@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 TEST_STAMP := $(VENV)/.installed-test
 
-.PHONY: demo test lint docs bench sizes clean venv viewer-test-deps catalogue-test-deps report-test-deps
+.PHONY: demo test check lint docs bench sizes clean venv viewer-test-deps catalogue-test-deps report-test-deps
 
 # Everything installed is byte-compiled. It must be: where PYTHONDONTWRITEBYTECODE is set (as in this
 # machine's environment) Python never caches what it compiles, and every process would compile pandas, rerun
@@ -73,6 +73,7 @@ viewer-test-deps:
 # against 10:01 here), but under the load it added a played-back device missed a 10 s reply once
 # (a run's timings: git history): a CI that fails costs more than two minutes. A test file goes to one worker whole, so
 # a module's fixture is made once (a whole session, killed and resumed: 50 s).
+# Every test phase over 5 s is listed at the end: such a test is marked slow (`make check` leaves it out).
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
 # The run catalogue's PostgreSQL tests start a throwaway server (initdb, pg_ctl) from the Debian
@@ -116,13 +117,23 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	nice -n 19 $(MAKE) --no-print-directory lint >$(CHECKS_LOG) 2>&1 & checks=$$!; \
 	$(BIN)/python -m tankdaq.prepare || { wait $$checks; cat $(CHECKS_LOG); exit 1; }; \
 	nice -n 19 $(MAKE) --no-print-directory docs >$(DOCS_LOG) 2>&1 & docs=$$!; \
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=25; tested=$$?; \
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=0 --durations-min=5; tested=$$?; \
 	wait $$checks; checked=$$?; wait $$docs; documented=$$?; \
 	echo "--- lint and types (make lint) ---"; cat $(CHECKS_LOG); \
 	echo "--- API docs (make docs) ---"; cat $(DOCS_LOG); \
 	test $$checked = 0 || echo "make: the lint or the type check failed (above)"; \
 	test $$documented = 0 || echo "make: the API docs failed (above)"; \
 	test $$tested = 0 && test $$checked = 0 && test $$documented = 0
+
+# The maintainers' quick loop (README, "Tests"): lint, types, then the tests not marked slow (a test over
+# about 5 s is marked slow: `make test` runs them) on every core, each module's tests on one worker.
+# Under a minute on this 2-core machine.
+check: $(TEST_STAMP)
+	$(BIN)/ruff check src tests bench
+	$(BIN)/ruff format --check src tests bench
+	$(BIN)/mypy
+	$(BIN)/python -m tankdaq.prepare
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile -m "not slow" -q
 
 bench: $(TEST_STAMP)
 	$(BIN)/python bench/run_all.py

@@ -1,7 +1,7 @@
 """Coverage of the uncertainty budget (issue 38, "Coverage"): over simulated campaigns of 3 repeats with
 known truth and realistic noise, how often U (k = 2) of the natural period and of B_eq/I at 5 deg covers
-the truth (the budget is right when 90-99 %). The campaigns are ``tests/budget_coverage.py``'s (the test
-runs a few of the same).
+the truth (the budget is right when 90-99 %). The campaigns are ``tests/support/budget_coverage.py``'s (the
+test runs a few of the same).
 
 Run: .venv/bin/python bench/bench_budget_coverage.py [--campaigns 200]
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 from benchjson import write_result
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from budget_coverage import INITIAL_DEG, REPEATS, TEST, campaign, coverage, truth
+from support.budget_coverage import INITIAL_DEG, REPEATS, TEST, campaign, coverage, truth
 
 
 def main() -> None:

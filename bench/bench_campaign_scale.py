@@ -48,7 +48,7 @@ import psutil
 from benchjson import write_result
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from campaign_scale import dask_cluster, write_many_decays
+from support.campaign_scale import dask_cluster, write_many_decays
 from tankdaq.campaign.executors import campaign_executor
 from tankdaq.campaign.groups import find_recordings
 from tankdaq.campaign.stream import fit_campaign, scan_campaign

@@ -17,7 +17,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from benchjson import write_result
-from pg_server import throwaway_postgres, why_not
+from support.pg_server import throwaway_postgres, why_not
 from tankdaq.catalogue.database import Catalogue, open_catalogue, resolve_url
 from tankdaq.catalogue.query import RunQuery, select_rows
 from tankdaq.catalogue.rows import STANDARD_AMPLITUDES_DEG, utc_now

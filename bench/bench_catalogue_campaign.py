@@ -35,7 +35,7 @@ import sqlalchemy as sa
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from benchjson import write_result
-from campaign_scale import write_many_decays
+from support.campaign_scale import write_many_decays
 from tankdaq.api.campaigns import campaign
 from tankdaq.catalogue.database import open_catalogue
 from tankdaq.catalogue.hooks import CatalogueWriter

@@ -1,4 +1,4 @@
-"""The discrepancy workflow's statistical claims at their full count (``tests/hidden_effects.py``):
+"""The discrepancy workflow's statistical claims at their full count (``tests/support/hidden_effects.py``):
 
 - the workflow's hidden effects: of 20 draws of each hidden effect (and of none), at least 90 % name it
   first, and every draw meets the noise, halves the gap and sizes the effect within 20 % (``make test``
@@ -31,7 +31,7 @@ from benchjson import write_result
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from hidden_effects import (
+from support.hidden_effects import (
     NAMED_SHARE,
     PREDICTION_CASES,
     diagnose_draw,

@@ -6,7 +6,7 @@ Styles: each MT Manager generation (4.x, 2019.2, 2022.2) x delimiter (tab, comma
 orientation (Roll, Euler_X, quaternion, matrix), the time taken in turn from SampleTimeFine without a
 wrap, over a one-day wrap, over a 2**32 wrap, and from PacketCounter at a rate (the header's for 4.x,
 ``--rate`` for the others). The files are written from ``held_tilt``'s decay (``TRUTH``), as the tests
-write them (``tests/mt_manager_files.py``).
+write them (``tests/support/mt_manager_files.py``).
 
 Run: .venv/bin/python bench/bench_mt_manager.py [ROWS]   (48 fits and a ROWS-row read: about two minutes)
 """
@@ -29,8 +29,8 @@ from benchjson import write_result
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 import tankdaq
-from held_tilt import TRUTH, held_tilt
-from mt_manager_files import write_export
+from support.held_tilt import TRUTH, held_tilt
+from support.mt_manager_files import write_export
 from tankdaq.api.identification import Reading
 from tankdaq.store.inputs import read_runs
 
@@ -102,7 +102,7 @@ def fits(folder: Path) -> dict[str, object]:
 def reading_cost(folder: Path, rows: int) -> dict[str, object]:
     """Seconds to read a ROWS-row 2022.2 tab export (28 columns, quaternion) against the plain CSV of the
     same numbers (best of three each, interleaved)."""
-    from mt_manager_files import HEADERS, orientation
+    from support.mt_manager_files import HEADERS, orientation
 
     rng = np.random.default_rng(0)
     roll = np.radians(8.0) * np.exp(-0.02 * np.arange(rows) / 100) * np.cos(np.arange(rows) / 100 * 3.7)

@@ -1,12 +1,12 @@
 """A runaway fit and the recorder (issue 19): what a runaway costs, and how fast a signal is heard.
 
 1. The runaway itself: the live model fitted to the simulated swath decay whose gyro is read 1000x
-   too large (mrad/s taken for rad/s; ``tests/runaway_recorder.py``), cold start, without a budget
+   too large (mrad/s taken for rad/s; ``tests/support/runaway_recorder.py``), cold start, without a budget
    (stopped at ``--cap`` seconds) and with the live refit budget; and the longest single kernel call
    the step cap allows (``kernels.MAX_STEPS`` steps with 4 terms' sensitivities).
 2. The main thread's longest pause (a bare 20 ms loop) while that runaway fit runs on a worker thread:
    the kernels release the interpreter lock.
-3. Ctrl-C heard while a live refit runs away: ``tests/runaway_recorder.py`` (the real daemon on the
+3. Ctrl-C heard while a live refit runs away: ``tests/support/runaway_recorder.py`` (the real daemon on the
    simulated MTi-G) is sent SIGINT at its first ``refit started``; "heard" is when the daemon's loop
    says ``stopping`` (CLOCK_MONOTONIC, shared by the processes), "exit" when the process has ended.
 """
@@ -31,7 +31,7 @@ import numpy as np
 from benchjson import write_result
 
 REPO = Path(__file__).resolve().parents[1]
-RUNAWAY = REPO / "tests" / "runaway_recorder.py"
+RUNAWAY = REPO / "tests" / "support" / "runaway_recorder.py"
 
 
 def runaway_run() -> object:

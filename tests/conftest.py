@@ -73,11 +73,11 @@ def private_tempdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 
 @pytest.fixture
 def record_settings(tmp_path: Path) -> Callable[..., RecordSettings]:
-    """Makes ``RecordSettings`` for the built-in simulated MTi-G (``tests/record_settings.py``: swath roll
-    at T from 8 deg, no viewer) writing into the test's ``tmp_path``; a test names only what it changes,
+    """Makes ``RecordSettings`` for the built-in simulated MTi-G (``tests/support/record_settings.py``: swath
+    roll at T from 8 deg, no viewer) writing into the test's ``tmp_path``; a test names only what it changes,
     ``record_settings(runs=1, port=simulator.link)``, and another folder as ``out_dir=``."""
 
-    from record_settings import sim_record_settings
+    from support.record_settings import sim_record_settings
 
     def make(**overrides: object) -> RecordSettings:
         return sim_record_settings(tmp_path, **overrides)
@@ -90,7 +90,7 @@ def decay_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One roll decay of the swath recorded end to end: the simulated MTi-G on its pty, the driver, the
     release detection, the live fit and the MCAP writer (raw bytes, samples, events, fits), device clock at
     8x, seed 5. One file for the whole session: read it, or copy it before changing anything."""
-    from record_settings import sim_record_settings
+    from support.record_settings import sim_record_settings
     from tankdaq.acquire.daemon import RecordDaemon
 
     settings = sim_record_settings(tmp_path_factory.mktemp("decay"), runs=1, sim_speed=8.0, sim_seed=5)
@@ -101,9 +101,9 @@ def decay_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def postgres_url() -> Iterator[str]:
-    """A throwaway PostgreSQL server (tests/pg_server.py), stopped at the module's end; skipped with the
-    reason where the server binaries are not installed."""
-    from pg_server import throwaway_postgres, why_not
+    """A throwaway PostgreSQL server (tests/support/pg_server.py), stopped at the module's end; skipped with
+    the reason where the server binaries are not installed."""
+    from support.pg_server import throwaway_postgres, why_not
 
     reason = why_not()
     if reason is not None:

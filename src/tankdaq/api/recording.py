@@ -14,6 +14,7 @@ from __future__ import annotations
 import html
 import itertools
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict
@@ -397,14 +398,12 @@ def sources_given(value: object, name: str = "sources") -> list[Any]:
     """The decays given to a fit, checked (``api.arguments``): a path (str or ``Path``), a decay read
     (``Recording``, ``Decay``, ``DecayRun``) or a DataFrame of one (``frame_runs``: its decays found
     here), or a non-empty list of them."""
-    import pandas as pd
-
     read_ones = (Recording, Decay, DecayRun)
-    one = isinstance(value, str | os.PathLike | pd.DataFrame | Recording | Decay | DecayRun)
+    one = isinstance(value, str | os.PathLike | Recording | Decay | DecayRun) or _is_frame(value)
     items = [value] if one else arguments.several(value, name, SOURCES)
     given: list[Any] = []
     for number, item in enumerate(items, start=1):
-        if isinstance(item, pd.DataFrame):
+        if _is_frame(item):
             given += frame_runs(item, f"{name} DataFrame {number}" if len(items) > 1 else f"{name} DataFrame")
         else:
             given.append(item if isinstance(item, read_ones) else arguments.path(item, name, SOURCES))
@@ -415,6 +414,13 @@ def sources_given(value: object, name: str = "sources") -> list[Any]:
 FRAME_ANGLES: dict[str, str | None] = {"angle_deg": None, "roll_deg": "roll", "pitch_deg": "pitch"}
 #: Its rate column (deg/s), when it has one.
 FRAME_RATES = ("rate_deg_s", "p_deg_s", "q_deg_s")
+
+
+def _is_frame(value: object) -> bool:
+    """Whether ``value`` is a DataFrame, without importing pandas (0.4 s) for a path: a DataFrame can
+    exist only where pandas was imported already."""
+    pandas = sys.modules.get("pandas")
+    return pandas is not None and isinstance(value, pandas.DataFrame)
 
 
 def frame_runs(table: pd.DataFrame, name: str) -> list[DecayRun]:

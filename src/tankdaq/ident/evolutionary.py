@@ -14,17 +14,10 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import cached_property, partial
+from functools import cache, cached_property, partial
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from pymoo.algorithms.soo.nonconvex.ga import GA
-from pymoo.algorithms.soo.nonconvex.pso import PSO
-from pymoo.core.algorithm import Algorithm
-from pymoo.core.callback import Callback
-from pymoo.core.problem import Problem
-from pymoo.operators.crossover.sbx import SBX
-from pymoo.operators.mutation.pm import PM
-from pymoo.optimize import minimize
 
 from ..config.validation import equation_model
 from ..errors import InputError
@@ -34,6 +27,9 @@ from .base import EstimatorMixin
 from .compiled import simulate, substeps, term_codes, term_matrix
 from .equation_error import check_runs
 from .uncertainty import coefficient_warnings
+
+if TYPE_CHECKING:  # pymoo is imported when a search runs: 0.3 s no other fit needs (bench_startup.py)
+    from pymoo.core.algorithm import Algorithm
 
 #: Lower bound of the total inertia. The papers write I in [0, 0.1]; 0 itself would divide by zero.
 INERTIA_FLOOR = 1e-3
@@ -227,31 +223,38 @@ SWARM_SETTINGS: dict[str, SwarmSettings] = {
 # --------------------------------------------------------------------------------------------------
 
 
-class _OneStepProblem(Problem):
-    """pymoo problem: the whole population's seed objective in one vectorised call."""
+@cache
+def _pymoo_types() -> tuple[Any, Any]:
+    """(problem, recorder): the pymoo classes the search runs on, made on the first search."""
+    from pymoo.core.callback import Callback
+    from pymoo.core.problem import Problem
 
-    def __init__(self, space: SearchSpace, data: OneStepData) -> None:
-        super().__init__(n_var=len(space.variables) + 1, n_obj=1, xl=space.lower, xu=space.upper)
-        self.space = space
-        self.data = data
+    class OneStepProblem(Problem):
+        """pymoo problem: the whole population's seed objective in one vectorised call."""
 
-    def _evaluate(self, x: np.ndarray, out: dict, *args: object, **kwargs: object) -> None:
-        out["F"] = self.data.rms(self.space.coefficients(x))[:, None]
+        def __init__(self, space: SearchSpace, data: OneStepData) -> None:
+            super().__init__(n_var=len(space.variables) + 1, n_obj=1, xl=space.lower, xu=space.upper)
+            self.space = space
+            self.data = data
 
+        def _evaluate(self, x: np.ndarray, out: dict, *args: object, **kwargs: object) -> None:
+            out["F"] = self.data.rms(self.space.coefficients(x))[:, None]
 
-class _Recorder(Callback):
-    """Keeps the best objective of each generation and reports progress (done, total)."""
+    class Recorder(Callback):
+        """Keeps the best objective of each generation and reports progress (done, total)."""
 
-    def __init__(self, total: int, progress: Callable[[int, int], None] | None) -> None:
-        super().__init__()
-        self.total = total
-        self.progress = progress
-        self.best: list[float] = []
+        def __init__(self, total: int, progress: Callable[[int, int], None] | None) -> None:
+            super().__init__()
+            self.total = total
+            self.progress = progress
+            self.best: list[float] = []
 
-    def notify(self, algorithm: Algorithm) -> None:
-        self.best.append(float(algorithm.opt.get("F").min()))
-        if self.progress is not None:
-            self.progress(algorithm.n_gen, self.total)
+        def notify(self, algorithm: Algorithm) -> None:
+            self.best.append(float(algorithm.opt.get("F").min()))
+            if self.progress is not None:
+                self.progress(algorithm.n_gen, self.total)
+
+    return OneStepProblem, Recorder
 
 
 class _SeedSearch(EstimatorMixin):
@@ -307,9 +310,12 @@ class _SeedSearch(EstimatorMixin):
         self.space_ = SearchSpace.for_model(self.terms, self.paper)
         self.settings_ = self._resolved_settings(self.space_.paper)
         data = OneStepData.from_runs(self.runs_, self.space_.terms)
-        recorder = _Recorder(self.settings_.generations, self.progress)
+        from pymoo.optimize import minimize
+
+        problem, recording = _pymoo_types()
+        recorder = recording(self.settings_.generations, self.progress)
         result = minimize(
-            _OneStepProblem(self.space_, data),
+            problem(self.space_, data),
             self._algorithm(self.settings_),
             termination=("n_gen", self.settings_.generations),
             seed=self.random_state,
@@ -404,6 +410,10 @@ class GeneticSeedFit(_SeedSearch):
 
     def _algorithm(self, settings: GeneticSettings | SwarmSettings) -> Algorithm:
         assert isinstance(settings, GeneticSettings)
+        from pymoo.algorithms.soo.nonconvex.ga import GA
+        from pymoo.operators.crossover.sbx import SBX
+        from pymoo.operators.mutation.pm import PM
+
         return GA(
             pop_size=settings.population,
             crossover=SBX(prob=settings.crossover),
@@ -420,6 +430,8 @@ class SwarmSeedFit(_SeedSearch):
 
     def _algorithm(self, settings: GeneticSettings | SwarmSettings) -> Algorithm:
         assert isinstance(settings, SwarmSettings)
+        from pymoo.algorithms.soo.nonconvex.pso import PSO
+
         return PSO(pop_size=settings.population, max_velocity_rate=settings.max_velocity, adaptive=True)
 
 

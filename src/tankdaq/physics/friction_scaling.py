@@ -11,7 +11,7 @@ The water (ITTC 7.5-02-01-03, "Fresh Water and Seawater Properties", 2011): kine
 μ of pure water by Sharqawy, Lienhard and Zubair (2010) eq. 23 (a fit of IAPWS 2008), of sea water at the
 standard absolute salinity 35.16504 g/kg by their eq. 22, and ρ by the UNESCO one-atmosphere equation of
 state (Millero and Poisson 1981) at practical salinity 0 and 35: ITTC's tables computed their sea water
-this way, and these formulas give them within 0.03 % over 1-30 °C (tests/test_friction_scaling.py).
+this way, and these formulas give them within 0.03 % over 1-30 °C (tests/physics/test_friction_scaling.py).
 A temperature of 0-40 °C goes in; a lab may give ν itself instead (``Water`` says which it was).
 """
 

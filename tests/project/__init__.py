@@ -1,0 +1,1 @@
+"""Tests of the project as a whole: the docs' examples, the wheel, the architecture, make."""
