@@ -240,7 +240,7 @@ def _pymoo_types() -> tuple[Any, Any]:
         def _evaluate(self, x: np.ndarray, out: dict, *args: object, **kwargs: object) -> None:
             out["F"] = self.data.rms(self.space.coefficients(x))[:, None]
 
-    class Recorder(Callback):
+    class GenerationRecorder(Callback):
         """Keeps the best objective of each generation and reports progress (done, total)."""
 
         def __init__(self, total: int, progress: Callable[[int, int], None] | None) -> None:
@@ -254,7 +254,7 @@ def _pymoo_types() -> tuple[Any, Any]:
             if self.progress is not None:
                 self.progress(algorithm.n_gen, self.total)
 
-    return OneStepProblem, Recorder
+    return OneStepProblem, GenerationRecorder
 
 
 class _SeedSearch(EstimatorMixin):
