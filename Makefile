@@ -127,7 +127,6 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 
 # The maintainers' quick loop (README, "Tests"): lint, types, then the tests not marked slow (a test over
 # about 5 s is marked slow: `make test` runs them) on every core, each module's tests on one worker.
-# Under a minute on this 2-core machine.
 check: lint
 	$(BIN)/python -m tankdaq.prepare
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile -m "not slow" -q
