@@ -3,8 +3,8 @@
 ``CatalogueWriter`` runs every write on a thread of its own, after the file it describes is closed:
 a locked SQLite file waits out its busy timeout there, not in the record loop. A failure (locked,
 corrupt, a server that does not answer) is one line, said once; the files are untouched and
-``tankdaq catalogue index FOLDER`` catches up. ``CatalogueSink`` is a listener of the record pipeline
-(after the file's sink: the file closes first); ``session_listener`` hears a guided session's verdicts.
+``tankdaq catalogue index FOLDER`` catches up. ``session_listener`` hears a guided session's verdicts;
+the record pipeline's listener is ``catalogue.sink.CatalogueSink``.
 """
 
 from __future__ import annotations
@@ -17,8 +17,6 @@ from concurrent.futures import Future
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
-from ..acquire.decay import LiveDecay
-from ..acquire.sinks import Sink
 from .database import (
     WRITER_CACHE_KB,
     Catalogue,
@@ -204,22 +202,6 @@ class CatalogueWriter:
         self._rows += made
         if len(self._rows) >= CAMPAIGN_BATCH:
             self._flush_campaign()
-
-
-class CatalogueSink(Sink):
-    """A listener of the record pipeline: each decay's file, once closed, goes into the catalogue.
-
-    It comes after the file's sink in the pipeline, so ``on_settle`` hears a closed file."""
-
-    def __init__(self, writer: CatalogueWriter) -> None:
-        self.writer = writer
-
-    def on_settle(self, decay: LiveDecay) -> None:
-        if decay.path is not None and decay.path.is_file():
-            self.writer.add_files([decay.path])
-
-    def close(self) -> None:
-        """The writer outlives one pipeline (a session opens one per decay): its owner closes it."""
 
 
 def session_listener(writer: CatalogueWriter, folder: Path) -> Callable[[RunEntry], None]:

@@ -147,7 +147,8 @@ def run_record(
     Stopped by a signal, it exits 130 after the summary (typer.Exit), as Ctrl-C does anywhere.
     """
     from ..acquire.daemon import RecordDaemon
-    from ..catalogue.hooks import CatalogueSink, CatalogueWriter
+    from ..catalogue.hooks import CatalogueWriter
+    from ..catalogue.sink import CatalogueSink
 
     build_kernels_shown()
     with CatalogueWriter.from_option(catalogue, say) as writer, _StatusLine(settings.runs) as line:
