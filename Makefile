@@ -73,7 +73,8 @@ viewer-test-deps:
 # against 10:01 here), but under the load it added a played-back device missed a 10 s reply once
 # (a run's timings: git history): a CI that fails costs more than two minutes. A test file goes to one worker whole, so
 # a module's fixture is made once (a whole session, killed and resumed: 50 s).
-# Every test phase over 5 s is listed at the end: such a test is marked slow (`make check` leaves it out).
+# Every test phase over 5 s is listed at the end (a test over about half a second is marked slow, `make check`
+# leaves it out: tools/mark_slow.py marks them from a run with --durations=0).
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
 # because the source may have changed since the install.
 # The run catalogue's PostgreSQL tests start a throwaway server (initdb, pg_ctl) from the Debian
@@ -126,8 +127,10 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	test $$tested = 0 && test $$checked = 0 && test $$documented = 0
 
 # The maintainers' quick loop (README, "Tests"): lint, types, then the tests not marked slow (a test over
-# about 5 s is marked slow: `make test` runs them) on every core, each module's tests on one worker.
+# about half a second is marked slow: `make test` runs them) on every core, each module's tests on one worker.
+# compileall: with PYTHONDONTWRITEBYTECODE set, each worker would compile the edited source again.
 check: lint
+	$(BIN)/python -m compileall -q src
 	$(BIN)/python -m tankdaq.prepare
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile -m "not slow" -q
 

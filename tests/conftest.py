@@ -9,7 +9,7 @@
   ``catalogue_url``: a test's catalogue, once a SQLite file and once that server's database.
 
 tankdaq is imported inside the fixtures, so collecting a test that uses none of them costs nothing.
-The modules that hold a long test (marked ``slow``) are run first (``pytest_collection_modifyitems``).
+The modules that hold a long test are run first (``pytest_collection_modifyitems``).
 """
 
 from __future__ import annotations
@@ -27,11 +27,20 @@ if TYPE_CHECKING:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The modules holding a long test (marked ``slow``) first, each module's tests together and in their
-    order: the workers then share the short tests at the end instead of two waiting on a third's long one
-    (a module's fixtures are still made once)."""
+    """The modules given a timeout beyond the default first (the docs' examples and the wheel: minutes
+    each), then those holding a test marked ``slow``, each module's tests together and in their order:
+    the workers then share the short tests at the end instead of one waiting on another's long one (a
+    module's fixtures are still made once)."""
+    longest: dict[str, float] = {}
+    for item in items:
+        module = item.nodeid.split("::")[0]
+        marker = item.get_closest_marker("timeout")
+        allowed = float(marker.args[0]) if marker is not None and marker.args else 0.0
+        longest[module] = max(longest.get(module, 0.0), allowed)
     slow = {item.nodeid.split("::")[0] for item in items if item.get_closest_marker("slow") is not None}
-    items.sort(key=lambda item: item.nodeid.split("::")[0] not in slow)  # stable: order kept otherwise
+    items.sort(
+        key=lambda item: (-longest[item.nodeid.split("::")[0]], item.nodeid.split("::")[0] not in slow)
+    )
 
 
 #: The simulator fixture's device clock against the wall clock: a decay in a few seconds.

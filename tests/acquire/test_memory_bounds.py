@@ -51,6 +51,7 @@ class FinalFits(Sink):
             self.last[event.run] = event.result
 
 
+@pytest.mark.slow
 def test_a_finished_decay_keeps_its_fit_without_the_curve_and_the_detector_no_event_list() -> None:
     samples = _samples()
     fits = FinalFits()
@@ -85,6 +86,7 @@ def test_a_day_of_decays_keeps_the_newest_outcomes_and_counts_them_all() -> None
     assert list(kept) == day[-KEPT_OUTCOMES:] and len(kept) == KEPT_OUTCOMES
 
 
+@pytest.mark.slow
 def test_the_smoothing_weights_kept_are_bounded_over_many_windows() -> None:
     """Each decay's period sets its smoothing window: a day's windows must not pile up weight sets."""
     t = np.linspace(-1.0, 1.0, 4000)
@@ -95,6 +97,7 @@ def test_the_smoothing_weights_kept_are_bounded_over_many_windows() -> None:
     assert _savgol_weights.cache_info().currsize <= SAVGOL_CACHE
 
 
+@pytest.mark.slow
 def test_a_detector_that_keeps_no_events_returns_the_same_ones() -> None:
     samples = _samples()
     offline = ReleaseDetector().fit(samples).events_
@@ -112,6 +115,7 @@ def _rerun_threads() -> int:
 
 
 @pytest.mark.skipif(not TASKS.is_dir(), reason="counting native threads needs Linux's /proc/self/task")
+@pytest.mark.slow
 def test_a_saving_view_leaves_no_rerun_recording_behind_its_runs(tmp_path: Path) -> None:
     before = _rerun_threads()
     view = LiveView("save", on_note=lambda _line: None)
@@ -149,6 +153,7 @@ def _glibc() -> ctypes.CDLL | None:
     not Path("/proc/self/status").is_file() or _glibc() is None,
     reason="glibc's arenas and Linux's /proc/self/status: what a settle gives back is glibc's to give",
 )
+@pytest.mark.slow
 def test_a_settled_decay_gives_the_allocators_free_pages_back() -> None:
     """Measured on resident memory, which is unavoidable here (what is given back is pages the kernel
     takes), and made robust by size: 64 MB the C allocator holds free under a block still in use (where
@@ -207,6 +212,7 @@ done.set()
 
 
 @pytest.mark.skipif(_glibc() is None, reason="glibc's arenas: other C libraries have none to cap")
+@pytest.mark.slow
 def test_the_record_daemon_caps_glibcs_arenas() -> None:
     """Counted in a fresh process (a test process's arenas are already made): eight threads holding
     memory at once get at most the cap of arenas, where glibc alone gives them one each."""
@@ -239,6 +245,7 @@ libc.free(block)
 
 
 @pytest.mark.skipif(_glibc() is None, reason="glibc's mmap threshold: other C libraries have none")
+@pytest.mark.slow
 def test_large_blocks_keep_mappings_of_their_own_after_a_larger_one_was_freed() -> None:
     """In a fresh process: a 1 MB block after a 4 MB one was freed is still mapped on its own with the
     threshold fixed (given back whole when freed), where glibc alone cuts it from its heap."""
@@ -280,6 +287,7 @@ print(changed, works, held, made[0])
 
 
 @pytest.mark.skipif(_glibc() is None, reason="glibc's mallinfo2 tells what is in use")
+@pytest.mark.slow
 def test_numpys_freed_small_buffers_go_back_to_malloc() -> None:
     """In fresh processes, on a thread as a recorder's reading and fitting threads: 7 buffers of every
     size under 1 kB (3.7 MB) made and freed. numpy's own cache keeps them in use; uncached, they are

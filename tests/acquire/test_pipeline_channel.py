@@ -73,6 +73,7 @@ def _run(samples: np.ndarray, sinks: Sequence[Sink]) -> list:
     return outcomes
 
 
+@pytest.mark.slow
 def test_no_event_reaches_a_sink_from_inside_another_sinks_hook_and_the_file_holds_the_final_fit(
     samples: np.ndarray, tmp_path: Path
 ) -> None:

@@ -103,6 +103,7 @@ class _ThreadSink(Sink):
         self._note("on_settle")
 
 
+@pytest.mark.slow
 def test_no_release_detection_fit_or_write_runs_on_the_reading_thread(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -127,6 +128,7 @@ def test_no_release_detection_fit_or_write_runs_on_the_reading_thread(
         assert not threads & reads.threads, f"{what} ran on the reading thread"
 
 
+@pytest.mark.slow
 def test_a_stop_mid_decay_feeds_every_block_already_read_into_the_file(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -241,6 +241,7 @@ BAD_INPUTS = [
 
 
 @pytest.mark.parametrize(("args", "mentions"), BAD_INPUTS)
+@pytest.mark.slow
 def test_bad_record_input_exit_2_one_line(args: list[str], mentions: str) -> None:
     result = CliRunner().invoke(app, ["record", *args])
     assert result.exit_code == 2, result.output
@@ -248,6 +249,7 @@ def test_bad_record_input_exit_2_one_line(args: list[str], mentions: str) -> Non
     assert mentions.lower() in result.output.lower()
 
 
+@pytest.mark.slow
 def test_missing_port_in_a_real_process_is_one_line_no_traceback(tmp_path: Path) -> None:
     proc = _tankdaq(*record_args("/dev/ttyNOPE0", tmp_path))
     _, err = proc.communicate(timeout=60)
@@ -260,6 +262,7 @@ def test_missing_port_in_a_real_process_is_one_line_no_traceback(tmp_path: Path)
 @pytest.mark.parametrize(
     ("content", "mentions"), [(b"not an mcap at all", "mcap"), (None, "no such"), (b"", "empty")]
 )
+@pytest.mark.slow
 def test_replay_refuses_what_is_not_a_recording(tmp_path: Path, content: bytes | None, mentions: str) -> None:
     path = tmp_path / "x.mcap"
     if content is not None:
@@ -279,6 +282,7 @@ def test_json_metadata_is_plain(three_decays) -> None:
     assert config["record"]["hull"] == "swath"
 
 
+@pytest.mark.slow
 def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> None:
     """A real EFBIG: the recorder runs with a file-size limit below one decay's size."""
     import resource
@@ -309,6 +313,7 @@ def test_full_disk_stops_with_one_line_and_the_file_recovers(tmp_path: Path) -> 
     assert recovered.ended is DecayEnd.RECOVERED and recovered.metadata["hull"] == "swath"
 
 
+@pytest.mark.slow
 def test_demo_records_identifies_and_plots(tmp_path: Path) -> None:
     """What `make demo` runs, shortened: one simulated decay, identified against the hull's truth with the
     truth's own terms, asked for by name (the default model is the data's:
@@ -326,6 +331,7 @@ def test_demo_records_identifies_and_plots(tmp_path: Path) -> None:
     assert sum("inside" in line for line in verdicts) >= 5, "the truth lies inside (nearly) every interval"
 
 
+@pytest.mark.slow
 def test_a_legacy_mti_g_is_recorded_and_replayed(tmp_path: Path) -> None:
     """The 2007-era MTi-G speaks only MTData 0x32: recording and replay decode it all the same."""
     from tankdaq.acquire.replay import replay_recording
@@ -350,6 +356,7 @@ def test_a_legacy_mti_g_is_recorded_and_replayed(tmp_path: Path) -> None:
     assert again.fit is not None and again.fit.r2_angle > 0.99
 
 
+@pytest.mark.slow
 def test_a_live_model_with_coulomb_friction_records_fits_and_views_it(tmp_path: Path) -> None:
     """``record --model b1,c1,fc --viewer save`` (once a KeyError 'fc' in the view): every /fit message
     carries fc with its interval, the channel says its unit, and the .rrd plots /coefficients/fc."""

@@ -35,6 +35,7 @@ CLOCK_MODULUS = 1 << 32
     ],
     ids=["clock-wraps-in-pretrigger", "clock-wraps-mid-decay"],
 )
+@pytest.mark.slow
 def test_a_600_series_recording_is_continuous_across_its_clock_wraps(
     tmp_path: Path, clock_wrap_s: float, counter_wrap_s: float
 ) -> None:
@@ -48,6 +49,7 @@ def test_a_600_series_recording_is_continuous_across_its_clock_wraps(
     assert np.any(np.diff(counters) < 0), "the recording spans the counter's wrap"
 
 
+@pytest.mark.slow
 def test_a_600_series_clock_wrapping_between_decays_keeps_one_session_timeline(tmp_path: Path) -> None:
     decay_s = 20.0  # time for decay 1 to settle before the second tilt
     run_s = RELEASE_AFTER_S + decay_s

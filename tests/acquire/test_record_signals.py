@@ -120,6 +120,7 @@ def test_a_signal_mid_decay_closes_a_complete_file_that_says_it_was_stopped(
         assert replayed.ended_after_s == pytest.approx(after_s, abs=0.011)  # as test_record.py's replay
 
 
+@pytest.mark.slow
 def test_ctrl_c_is_heard_while_a_live_refit_runs_away_and_the_file_closes_complete(tmp_path: Path) -> None:
     """Heard while the refit still runs (the kernels release the lock); a second Ctrl-C while the file
     closes (the final fit waits up to 5 s on the runaway) does not cut it."""

@@ -128,6 +128,7 @@ def _feed_recording(
         ("log_fit", 2, "at the second live fit"),
     ],
 )
+@pytest.mark.slow
 def test_a_failure_while_recording_closes_the_file_with_what_arrived(
     recorded: Path, tmp_path: Path, method: str, after: int | None, where: str
 ) -> None:
@@ -150,6 +151,7 @@ def test_a_failure_while_recording_closes_the_file_with_what_arrived(
         assert recording.samples.size < len(read_recording(recorded).samples)  # cut where it failed
 
 
+@pytest.mark.slow
 def test_an_identifier_that_fails_mid_decay_closes_the_file_with_what_arrived(
     recorded: Path, tmp_path: Path
 ) -> None:
@@ -170,6 +172,7 @@ def _settled(kind: str, *_: object) -> bool:
 # each call is at the decay's end: the view's run ends once, after the file; the settled event (warnings,
 # such as an implausible refit's, may come before it)
 @pytest.mark.parametrize(("method", "when"), [("end_run", None), ("log_event", _settled)])
+@pytest.mark.slow
 def test_a_view_that_fails_at_the_end_still_leaves_a_complete_file_with_the_final_fit(
     recorded: Path, tmp_path: Path, method: str, when: Callable[..., bool] | None
 ) -> None:
@@ -214,6 +217,7 @@ class Listener(Sink):
         self._hear("close")
 
 
+@pytest.mark.slow
 def test_one_more_sink_hears_the_decay_in_order_after_the_file_is_open(
     recorded: Path, tmp_path: Path
 ) -> None:
@@ -231,6 +235,7 @@ def test_one_more_sink_hears_the_decay_in_order_after_the_file_is_open(
 
 
 @pytest.mark.parametrize("fail_at", ["release", "fit", "decay block"])
+@pytest.mark.slow
 def test_a_sink_that_fails_never_takes_the_file_down(recorded: Path, tmp_path: Path, fail_at: str) -> None:
     with pytest.raises(Injected):
         _feed_recording(recorded, tmp_path, LiveView("none"), extra=[Listener(fail_at)])
@@ -242,6 +247,7 @@ def test_a_sink_that_fails_never_takes_the_file_down(recorded: Path, tmp_path: P
     assert recording.samples.size > 0 and recording.raw_chunks
 
 
+@pytest.mark.slow
 def test_a_listener_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Path) -> None:
     def react(event: Event) -> None:
         if isinstance(event, Released):
@@ -280,6 +286,7 @@ def _assert_one_notice(stderr: str, path: Path) -> None:
     assert "Traceback" not in stderr
 
 
+@pytest.mark.slow
 def test_the_reader_knows_a_file_is_cut_short(recorded: Path, cut_in_half: Path) -> None:
     whole, cut = read_recording(recorded), read_recording(cut_in_half)
     assert not whole.truncated and cut.truncated
@@ -287,6 +294,7 @@ def test_the_reader_knows_a_file_is_cut_short(recorded: Path, cut_in_half: Path)
 
 
 @pytest.mark.parametrize("command", ["identify", "diagnose"])
+@pytest.mark.slow
 def test_json_readers_flag_truncation(recorded: Path, cut_in_half: Path, command: str) -> None:
     extra = ["--max-steps", "0"] if command == "diagnose" else []
     result = runner.invoke(app, [command, str(cut_in_half), "--json", *extra])
@@ -299,12 +307,14 @@ def test_json_readers_flag_truncation(recorded: Path, cut_in_half: Path, command
     assert json.loads(whole.stdout)["truncated"] is False and not _notices(whole.stderr)
 
 
+@pytest.mark.slow
 def test_replay_says_the_file_is_cut_short(cut_in_half: Path) -> None:
     result = runner.invoke(app, ["replay", str(cut_in_half), "--viewer", "none", "--speed", "max"])
     assert result.exit_code == 0, result.output
     _assert_one_notice(result.stderr, cut_in_half)
 
 
+@pytest.mark.slow
 def test_campaign_says_which_file_is_cut_short(recorded: Path, cut_in_half: Path, tmp_path: Path) -> None:
     folder = tmp_path / "campaign"
     folder.mkdir()
@@ -316,6 +326,7 @@ def test_campaign_says_which_file_is_cut_short(recorded: Path, cut_in_half: Path
     assert np.isfinite(float(read_recording(folder / "whole.mcap").metadata["fit_b1"]))
 
 
+@pytest.mark.slow
 def test_export_says_the_file_is_cut_short(cut_in_half: Path, tmp_path: Path) -> None:
     result = runner.invoke(app, ["export", str(cut_in_half), "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output

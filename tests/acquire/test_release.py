@@ -48,20 +48,24 @@ def _check_one_sample(rate_hz: float, runs: int, seed: int, **scenario: object) 
     assert len(puts) == sum(r.kind == "put_back" for r in trace.runs)
 
 
+@pytest.mark.slow
 def test_release_within_one_sample_at_100_hz() -> None:
     _check_one_sample(100, runs=40, seed=21)
 
 
+@pytest.mark.slow
 def test_release_within_one_sample_at_400_hz() -> None:
     _check_one_sample(400, runs=40, seed=22)
 
 
+@pytest.mark.slow
 def test_release_within_one_sample_at_other_angles_drafts_and_pitch() -> None:
     _check_one_sample(100, runs=12, seed=23, angle_deg=5.0, draft=0.9)
     _check_one_sample(100, runs=12, seed=24, angle_deg=12.0, draft=1.1)
     _check_one_sample(100, runs=20, seed=32, axis="pitch")
 
 
+@pytest.mark.slow
 def test_heavily_damped_pitch_at_400_hz_mostly_within_one_sample() -> None:
     """Swath pitch (b1 ~ 2) at 400 Hz: one sample is below the gyro noise, so a share, not all.
 
@@ -106,6 +110,7 @@ def test_streaming_in_blocks_gives_the_same_events_as_offline() -> None:
     assert {e.kind for e in offline} >= {"held", "released", "settled"}
 
 
+@pytest.mark.slow
 def test_a_reset_detector_forgets_the_rate_it_learnt() -> None:
     """A detector reused on 50 Hz data after 400 Hz data finds every release (it found 1 of 3)."""
     detector = ReleaseDetector()
@@ -121,6 +126,7 @@ def test_a_reset_detector_forgets_the_rate_it_learnt() -> None:
 
 
 @pytest.mark.parametrize("rate_hz", [100, 400])
+@pytest.mark.slow
 def test_no_false_release_in_an_hour_of_still_water_and_handling(rate_hz: float) -> None:
     """An hour of tilting, holding with tremor and putting back by hand, never letting go."""
     handling = Handling(put_back_fraction=1.0)
@@ -177,6 +183,7 @@ def test_bad_settings_are_input_errors() -> None:
 
 
 @pytest.mark.parametrize("rate_hz", [100, 200, 400])
+@pytest.mark.slow
 def test_release_instant_is_unbiased_on_the_device_clock_with_its_standard_error(rate_hz: int) -> None:
     """``release_t`` against the true instant (SampleTimeFine ticks / 10 kHz), default tremor and noise.
 

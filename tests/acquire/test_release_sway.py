@@ -51,6 +51,7 @@ def test_the_swaying_hold_leaves_the_model_with_a_rate() -> None:
     assert rates.max() > 0.8 and np.median(rates) > 0.2, rates
 
 
+@pytest.mark.slow
 def test_the_release_from_a_swaying_hold_is_within_10_ms_and_its_interval_covers() -> None:
     """30 releases at 100, 200 and 400 Hz. Tolerance: the bench finds 100 % within 10 ms and a coverage of
     94-95.5 % over 200 per rate; here at least 28 of 30 within 10 ms (a true 95 % share gives that with
@@ -68,6 +69,7 @@ def test_the_release_from_a_swaying_hold_is_within_10_ms_and_its_interval_covers
     assert np.sum(err <= np.array(u95s)) >= 26, np.round(1e3 * (err - np.array(u95s)), 2)
 
 
+@pytest.mark.slow
 def test_a_cubic_hold_alone_is_moved_by_the_sway(monkeypatch: pytest.MonkeyPatch) -> None:
     """What the spline is for: without it (the old estimator), a release 10 ms off."""
     monkeypatch.setattr(release_instant, "SWAY_KNOTS_S", ())

@@ -48,6 +48,7 @@ def simulated(tmp_path_factory: pytest.TempPathFactory) -> list[tankdaq.Recordin
     return tankdaq.simulate(tmp_path_factory.mktemp("sim"), seed=5, runs=2, decay_s=15.0)
 
 
+@pytest.mark.slow
 def test_import_is_light_and_every_public_name_resolves() -> None:
     probe = (
         "import sys, json, tankdaq\n"
@@ -102,6 +103,7 @@ def test_read_gives_samples_in_degrees_with_units_in_the_names(simulated: list[t
     assert "<table" in rec._repr_html_() and rec.path.name in rec._repr_html_()
 
 
+@pytest.mark.slow
 def test_identify_gives_the_cli_numbers_with_b44_hat(simulated: list[tankdaq.Recording]) -> None:
     rec = simulated[0]
     result = tankdaq.identify(rec, hull="swath")
@@ -156,6 +158,7 @@ def test_bad_input_is_one_line(simulated: list[tankdaq.Recording], tmp_path: Pat
         assert caught.value.exit_code == 2
 
 
+@pytest.mark.slow
 def test_campaign_and_diagnose_give_their_commands_results(
     simulated: list[tankdaq.Recording], tmp_path: Path
 ) -> None:
@@ -177,6 +180,7 @@ def test_campaign_and_diagnose_give_their_commands_results(
     assert any(line.startswith("baseline b1,c1: RMS") for line in diagnosis.story)
 
 
+@pytest.mark.slow
 def test_conditions_are_fitted_apart_as_the_cli_fits_them(
     simulated: list[tankdaq.Recording], tmp_path: Path
 ) -> None:

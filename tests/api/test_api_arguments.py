@@ -174,6 +174,7 @@ def _names(message: str, argument: str, value: object) -> bool:
 
 
 @pytest.mark.parametrize(("name", "argument"), CASES, ids=[f"{n}-{a}" for n, a in CASES])
+@pytest.mark.slow
 def test_a_wrong_value_works_or_is_one_line_naming_its_argument(
     name: str, argument: str, made: Made, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -217,6 +218,7 @@ def test_the_matrix_covers_every_public_name_that_takes_arguments() -> None:
 # -- what the checks accept on purpose, and the refusals people meet first --------------------------
 
 
+@pytest.mark.slow
 def test_read_none_and_identify_none_name_the_argument(made: Made) -> None:
     with pytest.raises(InputError, match=r"^path: give a recording or decay file's path .*not None$"):
         tankdaq.read(None)  # type: ignore[arg-type]
@@ -224,6 +226,7 @@ def test_read_none_and_identify_none_name_the_argument(made: Made) -> None:
         tankdaq.identify(None)  # type: ignore[arg-type]
 
 
+@pytest.mark.slow
 def test_a_dataframe_of_a_decay_fits_as_its_file_does_and_read_refuses_one_by_name(made: Made) -> None:
     frame = pd.read_csv(made.csv)  # time_s, angle_deg, rate_deg_s: the documented columns
     by_file, by_frame = (tankdaq.identify(given, "b1,c1") for given in (made.csv, frame))
@@ -236,6 +239,7 @@ def test_a_dataframe_of_a_decay_fits_as_its_file_does_and_read_refuses_one_by_na
         tankdaq.read(frame)  # type: ignore[arg-type]
 
 
+@pytest.mark.slow
 def test_plot_of_a_decay_that_is_not_there_says_how_many_there_are(made: Made) -> None:
     with pytest.raises(InputError, match=r"^decay: give a whole number from 0 to 0 \(this result has 1 "):
         made.result.plot(decay=99)
@@ -244,6 +248,7 @@ def test_plot_of_a_decay_that_is_not_there_says_how_many_there_are(made: Made) -
     assert made.result.plot(decay=-1) is not None  # the last, as a list counts
 
 
+@pytest.mark.slow
 def test_one_hull_given_as_a_string_is_one_hull(made: Made) -> None:
     with pytest.raises(Started):
         tankdaq.campaign(made.folder, hulls="swath", progress=StopAtWork())
@@ -251,6 +256,7 @@ def test_one_hull_given_as_a_string_is_one_hull(made: Made) -> None:
         tankdaq.campaign(made.folder, hulls="nohull", progress=StopAtWork())
 
 
+@pytest.mark.slow
 def test_a_path_a_year_and_a_date_are_taken_by_runs(made: Made) -> None:
     path = Path(made.catalogue.removeprefix("sqlite:///"))
     for since in (2026, datetime.date(2026, 1, 1), "2026-01-01"):
@@ -272,6 +278,7 @@ def test_reading_normalises_what_it_takes_and_names_what_it_refuses() -> None:
         tankdaq.Reading(start_s=5, end_s=2)
 
 
+@pytest.mark.slow
 def test_a_refusal_comes_before_any_work(made: Made, tmp_path: Path) -> None:
     """A bad last argument is refused although the first ones would have started the work."""
     with pytest.raises(InputError, match=r"^progress: "):

@@ -35,6 +35,7 @@ def same(a: object, b: object) -> bool:
     return a == b
 
 
+@pytest.mark.slow
 def test_the_command_json_and_the_call_give_the_same_numbers(folder: Path) -> None:
     done = runner.invoke(app, ["campaign", str(folder), "--model", "b1,b2,c1", "--jobs", "1", "--json"])
     assert done.exit_code == 0, done.output
@@ -54,6 +55,7 @@ def test_the_command_json_and_the_call_give_the_same_numbers(folder: Path) -> No
     assert f"read 4 recording(s) from 1 folder(s): {folder}" in done.stderr
 
 
+@pytest.mark.slow
 def test_each_fit_is_handed_over_as_it_arrives_and_kept_only_when_asked(folder: Path) -> None:
     handed: list = []
     light = tankdaq.campaign(folder, "b1,b2,c1", on_result=handed.append)

@@ -46,6 +46,7 @@ def _drop_elapsed(part: dict) -> dict:
     return part
 
 
+@pytest.mark.slow
 def test_identify_joint_writes_each_condition_s_rows(two_drafts: list[Path], tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'catalogue.sqlite'}"
     args = ["identify", *map(str, two_drafts), "--model", "b1,b2,c1", "--joint", "--catalogue", url, "--json"]
@@ -64,6 +65,7 @@ def test_identify_joint_writes_each_condition_s_rows(two_drafts: list[Path], tmp
     assert {rows[p.name]["draft"] for p in two_drafts} == {"T", "1.1T"}
 
 
+@pytest.mark.slow
 def test_diagnose_simulation_is_the_api_and_writes_the_measured_fit(
     two_drafts: list[Path], tmp_path: Path
 ) -> None:
@@ -82,6 +84,7 @@ def test_diagnose_simulation_is_the_api_and_writes_the_measured_fit(
     assert {t: v["value"] for t, v in row["coefficients"].items()} == found.estimator.coefficients_
 
 
+@pytest.mark.slow
 def test_identify_compare_is_compare_models(two_drafts: list[Path]) -> None:
     done = runner.invoke(app, ["identify", str(two_drafts[0]), "--compare", "--json"])
     assert done.exit_code == 0, done.output
@@ -94,6 +97,7 @@ def test_identify_compare_is_compare_models(two_drafts: list[Path]) -> None:
 
 
 @pytest.mark.parametrize("command", ["identify", "diagnose", "simulate", "simulate-campaign"])
+@pytest.mark.slow
 def test_every_axis_option_is_checked_alike_while_parsing(command: str, tmp_path: Path) -> None:
     """``--axis`` is defined once (``cli.options``): the same one line and exit 2 everywhere, before any
     file is read or written."""

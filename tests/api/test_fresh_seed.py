@@ -45,6 +45,7 @@ def two_sim_records(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[Path
     return sorted(out.glob("*.mcap")), said
 
 
+@pytest.mark.slow
 def test_two_sim_records_hold_different_decays_and_each_names_its_seed(two_sim_records) -> None:
     paths, said = two_sim_records
     assert len(paths) == 2
@@ -57,6 +58,7 @@ def test_two_sim_records_hold_different_decays_and_each_names_its_seed(two_sim_r
     assert "one decay from two files" not in result.output and "not used:" not in result.output
 
 
+@pytest.mark.slow
 def test_the_seed_a_file_names_plays_its_test_again(tmp_path: Path) -> None:
     """``tankdaq.simulate`` without a seed: each call its own decay, its seed in the file; that seed given
     back plays the same samples."""
@@ -69,6 +71,7 @@ def test_the_seed_a_file_names_plays_its_test_again(tmp_path: Path) -> None:
     np.testing.assert_array_equal(again.samples[MEASURED], first.samples[MEASURED])
 
 
+@pytest.mark.slow
 def test_simulate_says_its_fresh_seed_in_the_truth_file(tmp_path: Path) -> None:
     """``tankdaq simulate --truth``: two runs without --seed name two seeds, on stderr and in the file."""
     seeds = []

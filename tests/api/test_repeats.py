@@ -85,6 +85,7 @@ def _free_decays(*paths: Path) -> list:
     [(0.0, 0.6), (0.0, 0.9), (0.45, 1.0), (0.3, 0.8)],
     ids=["first-60%", "first-90%", "from-the-middle", "a-middle-half"],
 )
+@pytest.mark.slow
 def test_a_copy_cut_at_another_point_is_the_same_decay(
     lab_csvs: list[Path], tmp_path: Path, start: float, stop: float
 ) -> None:
@@ -122,6 +123,7 @@ def test_a_group_holding_one_decay_twice_is_doubted(lab_csvs: list[Path], tmp_pa
 
 
 @pytest.mark.skipif(not KVLCC2.is_file(), reason=f"the KVLCC2 roll decay is not at {KVLCC2}")
+@pytest.mark.slow
 def test_the_kvlcc2_run_resaved_in_degrees_is_the_same_decay(tmp_path: Path) -> None:
     copy = _resaved(KVLCC2, tmp_path / "21338_deg.csv", "time", "phi", 180 / np.pi, "phi_deg")
     runs = cut_free_decays(read_decays(KVLCC2, "roll", "time", "phi", None, "rad"), None, None)

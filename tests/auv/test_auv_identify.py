@@ -72,6 +72,7 @@ def test_lssvm_primal_solution_equals_the_dual_system(n_samples, n_features, log
     assert fixed.gamma_ == gamma and np.allclose(fixed.coef_, w_dual, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_least_squares_standard_errors_cover_the_truth():
     rng = np.random.default_rng(1)
     truth = np.array([1.5, -0.7])
@@ -94,6 +95,7 @@ def test_lssvm_picks_a_large_gamma_on_clean_data_and_shrinks_on_noise():
     assert noisy.gamma_ < 1e4 and abs(noisy.coef_[1]) < 0.5  # the weak column is pulled towards zero
 
 
+@pytest.mark.slow
 def test_noise_free_dominant_derivatives_within_two_percent(nps, zigzag, sensitivity):
     ident = SeparateIdentifier(nps, method="lssvm").fit(zigzag)
     errors = relative_errors(ident.derivatives_, nps.derivatives)
@@ -104,6 +106,7 @@ def test_noise_free_dominant_derivatives_within_two_percent(nps, zigzag, sensiti
 
 
 @pytest.mark.parametrize("mode", ["zigzag", "replay"])
+@pytest.mark.slow
 def test_noise_free_resimulation_matches_pitch_and_heave(nps, zigzag, mode):
     model = SeparateIdentifier(nps, method="lssvm").fit(zigzag).model()
     r2 = resimulate(zigzag, model, "identified", mode).r2
@@ -111,6 +114,7 @@ def test_noise_free_resimulation_matches_pitch_and_heave(nps, zigzag, mode):
         assert r2[state] >= 0.99, f"{state}: R^2 {r2[state]:.4f}"
 
 
+@pytest.mark.slow
 def test_ols_agrees_with_lssvm_on_clean_data(nps, zigzag, sensitivity):
     ols = SeparateIdentifier(nps, method="ols").fit(zigzag)
     errors = relative_errors(ols.derivatives_, nps.derivatives)
@@ -123,12 +127,14 @@ def noisy_errors(nps, zigzag):
     return [relative_errors(fit.derivatives_, nps.derivatives) for fit in fits]
 
 
+@pytest.mark.slow
 def test_realistic_noise_dominant_derivatives_within_ten_percent(noisy_errors, sensitivity):
     for errors in noisy_errors:
         for name in sensitivity.dominant:
             assert errors[name] < 0.10, f"{name}: {100 * errors[name]:.1f} %"
 
 
+@pytest.mark.slow
 def test_identification_error_follows_the_sensitivity_ranking(noisy_errors, sensitivity):
     ranked = sensitivity.ranking
     half = len(ranked) // 2
@@ -140,6 +146,7 @@ def test_identification_error_follows_the_sensitivity_ranking(noisy_errors, sens
 
 
 @pytest.mark.parametrize("held_out_deg", [(10.0, 5.0), (20.0, 15.0)])
+@pytest.mark.slow
 def test_identified_model_predicts_a_held_out_manoeuvre(nps, zigzag, held_out_deg):
     model = SeparateIdentifier(nps).fit(add_noise(zigzag, 1.0, seed=4)).model()
     held_out = simulate_zigzag(nps, *np.radians(held_out_deg), rate_hz=RATE_HZ)
@@ -151,6 +158,7 @@ def test_identified_model_predicts_a_held_out_manoeuvre(nps, zigzag, held_out_de
     assert noisy_r2["theta"] >= 0.95 and noisy_r2["q"] >= 0.95
 
 
+@pytest.mark.slow
 def test_fixed_derivatives_move_to_the_target(nps, zigzag, sensitivity):
     others = {n: nps.coefficient(n) for n in nps.present_terms() if n not in sensitivity.dominant}
     reduced = SeparateIdentifier(nps, terms=sensitivity.dominant, fixed=others).fit(zigzag)
@@ -161,6 +169,7 @@ def test_fixed_derivatives_move_to_the_target(nps, zigzag, sensitivity):
     assert all(model.coefficient(n) == v for n, v in others.items())
 
 
+@pytest.mark.slow
 def test_remus_dominant_derivatives_and_held_out_zigzag():
     remus = load_vehicle("remus100")
     record = simulate_zigzag(remus, np.radians(10.0), np.radians(5.0), rate_hz=RATE_HZ)
@@ -173,6 +182,7 @@ def test_remus_dominant_derivatives_and_held_out_zigzag():
     assert all(r2[s] >= 0.95 for s in ("u", "w", "q", "theta", "z")), r2
 
 
+@pytest.mark.slow
 def test_record_without_plane_activity_is_refused(nps, zigzag):
     still = StateRecord(zigzag.t, {**zigzag.states, "delta_s": np.zeros_like(zigzag.t)})
     with pytest.raises(BadIdentificationInput, match="no stern-plane activity") as info:
@@ -180,6 +190,7 @@ def test_record_without_plane_activity_is_refused(nps, zigzag):
     assert info.value.exit_code == 2
 
 
+@pytest.mark.slow
 def test_missing_channel_and_unknown_method_are_refused(nps, zigzag):
     partial = StateRecord(zigzag.t, {k: v for k, v in zigzag.states.items() if k != "q"})
     with pytest.raises(BadIdentificationInput, match="'q'"):
@@ -198,6 +209,7 @@ def test_weak_form_kernel_turns_a_state_into_its_filtered_derivative():
     assert np.allclose(np.convolve(x, dh, mode="valid"), filtered_rate, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_gamma_can_be_chosen_on_a_second_manoeuvre(nps, zigzag):
     second = add_noise(simulate_zigzag(nps, np.radians(20.0), np.radians(15.0), rate_hz=RATE_HZ), 1.0, seed=8)
     ident = SeparateIdentifier(nps).fit(add_noise(zigzag, 1.0, seed=7), holdout=second)

@@ -48,6 +48,7 @@ def test_central_difference_matches_a_direct_perturbation():
     assert result.ranking == ["M_uq", "Z_w|w|"]  # the Munk-like pitch damping term beats cross-flow drag
 
 
+@pytest.mark.slow
 def test_ranking_is_by_index_and_dominance_by_threshold():
     result = sensitivity_analysis(load_vehicle("nps_auv2"), dominant_threshold=0.2)
     indices = [result.index[n] for n in result.ranking]

@@ -66,6 +66,7 @@ def csv_results(csv_campaign: Path) -> list:
     return identify_groups(group_runs(runs))
 
 
+@pytest.mark.slow
 def test_every_condition_is_one_group_and_recovers_its_hull(csv_results: list) -> None:
     keys = [r.key for r in csv_results]
     expected = {GroupKey(h, "pitch", d, a) for h in HULLS for d in DRAFTS for a in ANGLES_DEG}
@@ -79,6 +80,7 @@ def test_every_condition_is_one_group_and_recovers_its_hull(csv_results: list) -
         assert b_eq(fitted, amplitude) == pytest.approx(b_eq(true, amplitude), rel=0.03), result.key
 
 
+@pytest.mark.slow
 def test_report_files_hold_the_table_and_the_plots(csv_results: list, tmp_path: Path) -> None:
     written = write_report(csv_results, tmp_path)
     names = {p.name for p in written}
@@ -112,6 +114,7 @@ def assert_same_fits(results: list[GroupResult], expected: list[GroupResult]) ->
         np.testing.assert_array_equal(result.fit.param_covariance_, serial.fit.param_covariance_)
 
 
+@pytest.mark.slow
 def test_a_process_pool_gives_the_serial_results(
     csv_campaign: Path, csv_results: list, tmp_path: Path
 ) -> None:
@@ -132,6 +135,7 @@ def test_a_process_pool_gives_the_serial_results(
             assert mine.read_text() == serial.read_text()
 
 
+@pytest.mark.slow
 def test_a_dask_cluster_gives_the_serial_results(csv_campaign: Path, csv_results: list) -> None:
     """``--executor dask``: the same units of work on a (here local, in-process) Dask cluster."""
     distributed = pytest.importorskip(
@@ -191,6 +195,7 @@ def test_the_scan_goes_to_each_worker_in_one_run_of_files_of_about_equal_bytes(t
 
 
 @pytest.mark.parametrize("second", ["export beside", "export elsewhere", "copy"])
+@pytest.mark.slow
 def test_a_recording_read_twice_is_one_decay_not_two(tmp_path: Path, second: str) -> None:
     """A folder's recordings a second time (``tankdaq export`` writes its CSV beside each recording by
     default; or the recordings copied into a "selected" folder): a campaign or an identify pooled each
@@ -257,6 +262,7 @@ def test_a_sidecar_names_the_condition(tmp_path: Path) -> None:
         csv_labels(path)
 
 
+@pytest.mark.slow
 def test_cli_campaign_prints_the_table_and_writes_the_report(csv_campaign: Path, tmp_path: Path) -> None:
     result = runner.invoke(app, ["campaign", str(csv_campaign), "--report", str(tmp_path / "out")])
     assert result.exit_code == 0, result.output
@@ -306,6 +312,7 @@ def test_cli_simulate_campaign_writes_the_seeds_matrix(tmp_path: Path) -> None:
         (["simulate-campaign", "{empty}", "--hull", "ferry"], "unknown hull 'ferry'"),
     ],
 )
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_exit_2(
     args: list[str], message: str, csv_campaign: Path, tmp_path: Path
 ) -> None:
@@ -325,6 +332,7 @@ def test_bad_input_is_one_line_and_exit_2(
     assert len(result.output.strip().splitlines()) == 1 and "Traceback" not in result.output
 
 
+@pytest.mark.slow
 def test_a_group_that_cannot_be_fitted_keeps_its_reason(csv_results: list) -> None:
     """One bad condition must not sink the campaign: it is reported, the others are fitted."""
     still = DecayRun(np.arange(0.0, 1.0, 0.01), np.zeros(100), np.zeros(100), axis="pitch", name="still")
@@ -365,6 +373,7 @@ def test_simulate_campaign_follows_a_plan(tmp_path):
     assert bad.exit_code == 2 and "seed001-swath-roll" in bad.output
 
 
+@pytest.mark.slow
 def test_a_streamed_campaign_gives_the_serial_rows_and_keeps_no_recording(
     csv_campaign: Path, csv_results: list
 ) -> None:
@@ -381,6 +390,7 @@ def test_a_streamed_campaign_gives_the_serial_rows_and_keeps_no_recording(
         assert row.warnings == tuple(result.warnings) and row.terms == tuple(result.fit.terms_)
 
 
+@pytest.mark.slow
 def test_on_result_hands_each_whole_fit_over_as_it_comes_and_keeps_only_rows(
     csv_campaign: Path, csv_results: list
 ) -> None:

@@ -59,6 +59,7 @@ def test_include_partial_fits_them_as_asked(folder: Path) -> None:
     assert sum("fitted as asked" in line for line in result.notices) == 2
 
 
+@pytest.mark.slow
 def test_a_folder_of_partial_decays_only_is_one_line(tmp_path: Path) -> None:
     _stopped(tmp_path, 7.0, {"ended": "device_lost"})
     with pytest.raises(InputError, match=r"recorded only in part.*--include-partial"):

@@ -86,6 +86,7 @@ def test_every_decay_of_every_file_is_one_recording(
     assert "0 data rows" in first.imported.not_decays[archive[0] / "notes.txt"]
 
 
+@pytest.mark.slow
 def test_each_recording_holds_its_provenance(first: ArchiveReport) -> None:
     """Read back with the official mcap reader: the source, its SHA-256, its header, the conversions."""
     for decay in first.imported.decays:
@@ -114,6 +115,7 @@ def test_an_imported_decay_fits_as_its_source(first: ArchiveReport) -> None:
     assert from_recording == pytest.approx(from_source, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_the_decays_are_catalogued_and_a_second_import_adds_nothing(
     archive: tuple[Path, Path, str, dict[str, int]], first: ArchiveReport
 ) -> None:

@@ -72,6 +72,7 @@ def test_the_tests_never_touch_the_user_catalogue() -> None:
     assert resolve_url("none") is None
 
 
+@pytest.mark.slow
 def test_index_36_then_again_then_a_moved_file_follows_by_hash(campaign_folder: Path, tmp_path: Path) -> None:
     folder = tmp_path / "copy"
     shutil.copytree(campaign_folder, folder)
@@ -113,6 +114,7 @@ def _table(url: str, table: sa.Table) -> list[dict]:
         return [dict(r._mapping) for r in connection.execute(sa.select(table))]
 
 
+@pytest.mark.slow
 def test_index_takes_lab_csv_decays_and_exports_by_hash(campaign_folder: Path, tmp_path: Path) -> None:
     """A lab's CSV decays are decays (their condition from the name, or unknown); files ``tankdaq
     export`` wrote go to ``exports``, tied to their recording, so no decay is listed twice."""
@@ -261,6 +263,7 @@ def _count(url: str) -> int:
         return int(connection.execute(sa.select(sa.func.count()).select_from(decays)).scalar_one())
 
 
+@pytest.mark.slow
 def test_two_processes_writing_1000_rows_each_into_sqlite_make_2000(tmp_path: Path) -> None:
     url = _url(tmp_path)
     _two_writers(url, tmp_path / "go")
@@ -291,6 +294,7 @@ def test_two_processes_writing_1000_rows_each_into_postgresql_make_2000(
         "r2 >= fast",
     ],
 )
+@pytest.mark.slow
 def test_a_where_that_is_not_the_language_is_one_line_and_touches_nothing(where: str, tmp_path: Path) -> None:
     url = _url(tmp_path)
     result = CliRunner().invoke(app, ["runs", "--where", where, "--catalogue", url])
@@ -298,6 +302,7 @@ def test_a_where_that_is_not_the_language_is_one_line_and_touches_nothing(where:
     assert result.output.count("\n") == 1 and result.output.startswith("error: --where")
 
 
+@pytest.mark.slow
 def test_a_value_is_a_bound_parameter_never_sql(campaign_folder: Path, tmp_path: Path) -> None:
     url = _url(tmp_path)
     with open_catalogue(url) as catalogue:
@@ -340,6 +345,7 @@ def test_a_newer_schema_is_refused_in_one_line(tmp_path: Path) -> None:
         open_catalogue(url)
 
 
+@pytest.mark.slow
 def test_a_campaign_by_query_equals_the_campaign_by_paths(campaign_folder: Path, tmp_path: Path) -> None:
     url = _url(tmp_path)
     with open_catalogue(url) as catalogue:
@@ -390,6 +396,7 @@ def test_runs_with_a_query_no_recording_matches_is_one_line(tmp_path: Path) -> N
 # -- a catalogue that fails never costs a file -------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_corrupt_catalogue_is_one_line_and_identify_still_answers(
     campaign_folder: Path, tmp_path: Path
 ) -> None:
@@ -413,6 +420,7 @@ def test_a_corrupt_catalogue_is_one_line_and_identify_still_answers(
     assert row["coefficients"]["b1"]["ci_low"] < row["coefficients"]["b1"]["value"]
 
 
+@pytest.mark.slow
 def test_a_campaigns_fits_go_in_batches_and_one_that_fails_is_one_line(
     campaign_folder: Path, tmp_path: Path
 ) -> None:
@@ -433,6 +441,7 @@ def test_a_campaigns_fits_go_in_batches_and_one_that_fails_is_one_line(
     assert all(row["fit_source"] == "campaign" and row["b44_hat"]["5"] > 0 for row in written.values())
 
 
+@pytest.mark.slow
 def test_a_locked_catalogue_is_one_line_and_never_holds_the_caller(
     campaign_folder: Path, tmp_path: Path
 ) -> None:
@@ -475,6 +484,7 @@ def test_any_where_text_is_conditions_or_one_refusal_never_sql(empty_catalogue: 
         assert connection.execute(count).scalar_one() == SCHEMA_VERSION  # one row per migration, no more
 
 
+@pytest.mark.slow
 def test_identify_and_diagnose_by_query_read_what_the_paths_read(
     campaign_folder: Path, tmp_path: Path
 ) -> None:

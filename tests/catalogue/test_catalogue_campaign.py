@@ -61,6 +61,7 @@ def _invoke(*args: object) -> str:
     return result.stdout
 
 
+@pytest.mark.slow
 def test_a_campaigns_rows_of_files_not_catalogued_are_the_rows_index_makes(
     lab: Path, tmp_path: Path, catalogue_url: str
 ) -> None:
@@ -90,6 +91,7 @@ def _made_here(path: Path, sha256: str) -> tuple[dict[str, Any], dict[str, Any] 
     return None if made is None else (*made, os.getpid())
 
 
+@pytest.mark.slow
 def test_the_rows_are_made_by_the_workers_for_the_files_not_catalogued_only(
     lab: Path, tmp_path: Path
 ) -> None:
@@ -126,6 +128,7 @@ def test_the_rows_are_made_by_the_workers_for_the_files_not_catalogued_only(
     assert len(written) == 5 and {row["fit_source"] for row in written} == {"campaign"}
 
 
+@pytest.mark.slow
 def test_a_catalogue_that_cannot_answer_asks_for_no_rows_in_one_line(lab: Path, tmp_path: Path) -> None:
     corrupt = tmp_path / "corrupt.sqlite"
     corrupt.write_bytes(b"this is not a database " * 400)

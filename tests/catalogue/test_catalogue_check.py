@@ -65,6 +65,7 @@ def _check(url: str, env: dict[str, str | None] | None = None) -> tuple[int, str
     return result.exit_code, result.output
 
 
+@pytest.mark.slow
 def test_a_sqlite_catalogue_its_version_and_counts_and_a_newer_one_refused(tmp_path: Path) -> None:
     url = f"sqlite:///{tmp_path / 'catalogue.sqlite'}"
     code, out = _check(url)
@@ -90,6 +91,7 @@ def test_a_sqlite_catalogue_its_version_and_counts_and_a_newer_one_refused(tmp_p
     assert len(out.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_postgresql_password_from_a_pgpass_file_when_the_url_has_none(
     guarded_url: str, tmp_path: Path
 ) -> None:
@@ -110,6 +112,7 @@ def test_postgresql_password_from_a_pgpass_file_when_the_url_has_none(
     assert PASSWORD not in out
 
 
+@pytest.mark.slow
 def test_a_wrong_password_is_one_line_without_the_password(guarded_url: str) -> None:
     wrong = "Wr0ng@pass:word"
     code, out = _check(_with_password(guarded_url, wrong), env={"PGPASSFILE": "/nonexistent"})
@@ -132,6 +135,7 @@ for command in json.loads(sys.argv[1]):
 """
 
 
+@pytest.mark.slow
 def test_without_psycopg_every_postgresql_opening_names_the_extra(tmp_path: Path) -> None:
     url = "postgresql://tankdaq:hidden@127.0.0.1:9/tankdaq"
     commands = [

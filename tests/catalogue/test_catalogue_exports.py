@@ -58,6 +58,7 @@ def _index(folder: Path, url: str) -> str:
     return _invoke("catalogue", "index", folder, "--catalogue", url)
 
 
+@pytest.mark.slow
 def test_parquet_and_mat_exports_are_indexed_tied_to_their_recording_by_hash(
     recordings: list[Path], tmp_path: Path
 ) -> None:
@@ -91,6 +92,7 @@ def test_parquet_and_mat_exports_are_indexed_tied_to_their_recording_by_hash(
     assert set(_exports(url)) == {parquet.name, moved.name}
 
 
+@pytest.mark.slow
 def test_another_tools_files_and_a_missing_pyarrow_are_skipped_with_their_reason(
     recordings: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -124,6 +126,7 @@ def test_another_tools_files_and_a_missing_pyarrow_are_skipped_with_their_reason
     )
 
 
+@pytest.mark.slow
 def test_runs_say_where_each_runs_exports_are_in_the_table_json_csv_and_the_api(
     recordings: list[Path], tmp_path: Path, catalogue_url: str
 ) -> None:
@@ -171,6 +174,7 @@ def test_runs_say_where_each_runs_exports_are_in_the_table_json_csv_and_the_api(
     }
 
 
+@pytest.mark.slow
 def test_runs_exports_and_compare_together_is_one_line(tmp_path: Path) -> None:
     result = runner.invoke(
         app, ["runs", "--exports", "--compare", "a", "b", "--catalogue", str(tmp_path / "c.sqlite")]

@@ -64,6 +64,7 @@ def _invoke(*args: str) -> str:
     return done.stdout
 
 
+@pytest.mark.slow
 def test_a_ga_fit_after_an_output_error_fit_leaves_the_reference_and_both_are_listed(
     empty_url: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -209,6 +210,7 @@ def _sha(path: Path) -> str:
     return file_sha256(path)
 
 
+@pytest.mark.slow
 def test_a_file_replaced_under_its_name_keeps_one_row_and_its_fit_on_the_bytes_read(
     empty_url: str, tmp_path: Path
 ) -> None:
@@ -231,6 +233,7 @@ def test_a_file_replaced_under_its_name_keeps_one_row_and_its_fit_on_the_bytes_r
     assert row["reference_fit_id"] == kept[1]["id"]
 
 
+@pytest.mark.slow
 def test_a_decay_stopped_3_s_after_release_says_so_and_runs_campaigns_leave_it_out(
     empty_url: str, tmp_path: Path
 ) -> None:
@@ -264,6 +267,7 @@ def test_a_decay_stopped_3_s_after_release_says_so_and_runs_campaigns_leave_it_o
     assert campaigned == {str(p.resolve()) for p in whole}
 
 
+@pytest.mark.slow
 def test_a_path_that_now_holds_a_copy_of_another_file_retires_its_row(empty_url: str, tmp_path: Path) -> None:
     folder = tmp_path / "lab"
     first, second = write_simulated_campaign(folder, ["swath"], "roll", [1.0], [6.0, 8.0], "csv")
@@ -277,6 +281,7 @@ def test_a_path_that_now_holds_a_copy_of_another_file_retires_its_row(empty_url:
     assert len(_table(empty_url, fits)) == 1  # the retired row's fit is kept
 
 
+@pytest.mark.slow
 def test_a_campaign_fit_of_the_datas_model_is_a_reference_a_later_identify_keeps(
     empty_url: str, tmp_path: Path
 ) -> None:

@@ -79,6 +79,7 @@ def _refused(url: str, *args: str) -> str:
     "where",
     ["decay = 1e30", "size > 1e30", "decay < -1e30", "r2 < nan", "r2 > NaN", "period = inf", "angle = 1e999"],
 )
+@pytest.mark.slow
 def test_a_number_out_of_range_or_not_finite_is_one_line(catalogue: str, where: str) -> None:
     line = _refused(catalogue, "--where", where)
     assert "out of range" in line or "not a finite number" in line, line
@@ -86,6 +87,7 @@ def test_a_number_out_of_range_or_not_finite_is_one_line(catalogue: str, where: 
         tankdaq.runs(where=where, catalogue=catalogue)
 
 
+@pytest.mark.slow
 def test_numbers_the_columns_hold_still_select(catalogue: str) -> None:
     assert len(_listed(catalogue, "--where", "angle < 1e30 and size < 9223372036854775807")) == 4
     assert _listed(catalogue, "--where", "angle > 5 and size > -9223372036854775807") == [
@@ -94,6 +96,7 @@ def test_numbers_the_columns_hold_still_select(catalogue: str) -> None:
     ]
 
 
+@pytest.mark.slow
 def test_a_thousand_and_clauses_are_one_line_and_a_hundred_run(catalogue: str) -> None:
     line = _refused(catalogue, "--where", " and ".join(["angle > 1"] * 1000))
     assert "1000 clauses; at most 100" in line
@@ -103,6 +106,7 @@ def test_a_thousand_and_clauses_are_one_line_and_a_hundred_run(catalogue: str) -
 # ---- dates --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_date_with_a_space_or_a_t_is_a_time_in_utc(catalogue: str) -> None:
     after_midnight = ["swath_1.1T_roll_4deg", "swath_1.1T_roll_6deg", "swath_T_roll_6deg"]
     assert _listed(catalogue, "--since", "2026-11-28 23:59") == after_midnight
@@ -114,6 +118,7 @@ def test_a_date_with_a_space_or_a_t_is_a_time_in_utc(catalogue: str) -> None:
     assert [path.stem.removesuffix("_run01") for path in found] == ["swath_T_roll_4deg"]
 
 
+@pytest.mark.slow
 def test_a_zone_or_local_time_is_converted_and_said(catalogue: str, monkeypatch: pytest.MonkeyPatch) -> None:
     zoned = _runs(catalogue, "--since", "2026-11-29 01:00+01:00", "--json")
     assert "since 2026-11-29 01:00+01:00 read as 2026-11-29T00:00:00 UTC" in zoned.stderr
@@ -130,6 +135,7 @@ def test_a_zone_or_local_time_is_converted_and_said(catalogue: str, monkeypatch:
 
 
 @pytest.mark.parametrize("since", ["2026-11-31", "28.11.2026", "2026-11-28 25:00", "2026-11-28 +01:00"])
+@pytest.mark.slow
 def test_a_date_that_is_not_one_is_one_line_that_says_utc(catalogue: str, since: str) -> None:
     line = _refused(catalogue, "--since", since)
     assert f"date {since!r}" in line and ("UTC" in line or "needs a time" in line), line
@@ -149,12 +155,14 @@ def test_a_date_that_is_not_one_is_one_line_that_says_utc(catalogue: str, since:
         ('hull = swath and plan = "a', "is not closed"),
     ],
 )
+@pytest.mark.slow
 def test_double_equals_and_an_unclosed_quote_are_refused_with_the_right_syntax(
     catalogue: str, where: str, advice: str
 ) -> None:
     assert advice in _refused(catalogue, "--where", where)
 
 
+@pytest.mark.slow
 def test_runs_with_double_equals_is_refused_and_a_quoted_and_is_one_value(catalogue: str) -> None:
     with pytest.raises(BadCatalogueQuery, match=r"write hull=swath \(one ="):
         paths_for("hull==swath", catalogue)
@@ -166,6 +174,7 @@ def test_runs_with_double_equals_is_refused_and_a_quoted_and_is_one_value(catalo
 # ---- a value that is not there ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_value_that_is_not_there_names_the_values_that_are(catalogue: str) -> None:
     result = _runs(catalogue, "--hull", "SWATH")
     assert result.exit_code == 0
@@ -183,6 +192,7 @@ def test_a_value_that_is_not_there_names_the_values_that_are(catalogue: str) -> 
 # ---- an empty result ----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_an_empty_result_has_the_documented_columns(catalogue: str) -> None:
     full = tankdaq.runs(hull="swath", catalogue=catalogue)
     empty = tankdaq.runs(hull="swath", since="2030", catalogue=catalogue)
@@ -202,12 +212,14 @@ def test_an_empty_result_has_the_documented_columns(catalogue: str) -> None:
     assert exports_csv == [",".join(empty_columns(exports=True))]
 
 
+@pytest.mark.slow
 def test_a_value_no_backend_binds_is_one_line_and_recorded_contains_is_text(catalogue: str) -> None:
     assert "holds a NUL character" in _refused(catalogue, "--where", "plan = trial\x002")
     assert "not text (UTF-8)" in _refused(catalogue, "--hull", "sw\udcffath")  # undecodable argv bytes
     assert _listed(catalogue, "--where", "recorded ~ T00:30") == ["swath_T_roll_6deg"]
 
 
+@pytest.mark.slow
 def test_from_python_a_filter_that_is_not_text_is_refused_by_name(catalogue: str, tmp_path: Path) -> None:
     for given, name in ((dict(hull=123), "hull"), (dict(where=0.99), "where"), (dict(fits=[1]), "fits")):
         with pytest.raises(InputError, match=f"^{name}\\W.*give "):

@@ -67,6 +67,7 @@ def _sha(path: Path) -> str:
 # ---- a read never makes or changes a catalogue ----------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_read_of_a_path_with_no_catalogue_says_so_and_makes_nothing(tmp_path: Path) -> None:
     typo = tmp_path / "catalouge.sqlite"
     result = _invoke("runs", "--catalogue", str(typo))
@@ -106,6 +107,7 @@ def _foreign_sqlite(folder: Path, kind: str) -> Path:
 
 
 @pytest.mark.parametrize("kind", ["other", "wal", "empty", "text", "schema_version"])
+@pytest.mark.slow
 def test_a_file_that_is_not_a_tankdaq_catalogue_is_refused_and_left_byte_identical(
     kind: str, tmp_path: Path, recordings: Path
 ) -> None:
@@ -128,6 +130,7 @@ def test_a_file_that_is_not_a_tankdaq_catalogue_is_refused_and_left_byte_identic
         assert after == names  # no journal, -wal or -shm made
 
 
+@pytest.mark.slow
 def test_another_applications_postgresql_database_is_refused_and_keeps_its_tables(
     catalogue_at: str, recordings: Path
 ) -> None:
@@ -142,6 +145,7 @@ def test_another_applications_postgresql_database_is_refused_and_keeps_its_table
     assert table_names(catalogue_at) == ["invoices"]
 
 
+@pytest.mark.slow
 def test_a_writer_may_make_a_new_catalogue_and_a_read_then_lists_it(
     catalogue_at: str, recordings: Path
 ) -> None:
@@ -155,6 +159,7 @@ def test_a_writer_may_make_a_new_catalogue_and_a_read_then_lists_it(
 # ---- waits --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_sqlite_writer_holding_a_transaction_never_makes_runs_wait(
     tmp_path: Path, recordings: Path
 ) -> None:
@@ -176,6 +181,7 @@ def test_a_sqlite_writer_holding_a_transaction_never_makes_runs_wait(
 
 
 @pytest.mark.parametrize("catalogue_at", ["postgresql"], indirect=True)
+@pytest.mark.slow
 def test_a_postgresql_writer_holding_a_transaction_never_makes_runs_wait(
     catalogue_at: str, recordings: Path
 ) -> None:
@@ -245,6 +251,7 @@ def _shows_a_secret(text: str) -> bool:
     return SECRET in text or any(piece in text for piece in PIECES)
 
 
+@pytest.mark.slow
 def test_every_url_form_hides_its_password_in_every_message(recordings: Path) -> None:
     """Nothing listens on the port: every form ends in one line (refused, or not understood)."""
     for url in _url_forms(free_port()):
@@ -260,6 +267,7 @@ def test_every_url_form_hides_its_password_in_every_message(recordings: Path) ->
         assert not _shows_a_secret(str(raised.value)), url
 
 
+@pytest.mark.slow
 def test_postgres_is_an_alias_and_every_form_reaches_the_server(postgres_url: str) -> None:
     """``postgres://``, the driver suffixes and ``password=`` in the query are one catalogue."""
     assert postgres_url.startswith("postgresql://")
@@ -276,6 +284,7 @@ def test_postgres_is_an_alias_and_every_form_reaches_the_server(postgres_url: st
 
 
 @pytest.mark.parametrize("command", ["runs", "index"])
+@pytest.mark.slow
 def test_a_path_that_cannot_be_is_one_line(command: str, tmp_path: Path, recordings: Path) -> None:
     args = ["runs"] if command == "runs" else ["catalogue", "index", str(recordings)]
     for path in ("~nosuchuser_tankdaq/catalogue.sqlite", str(tmp_path / ("x" * 300 + ".sqlite"))):
@@ -292,6 +301,7 @@ def _catalogue_with_rows(folder: Path, recordings: Path) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_damaged_pages_are_one_line(tmp_path: Path, recordings: Path) -> None:
     path = _catalogue_with_rows(tmp_path, recordings)
     data = bytearray(path.read_bytes())
@@ -307,6 +317,7 @@ def test_damaged_pages_are_one_line(tmp_path: Path, recordings: Path) -> None:
         tankdaq.runs(catalogue=str(path))
 
 
+@pytest.mark.slow
 def test_a_hand_edited_json_column_is_one_line(tmp_path: Path, recordings: Path) -> None:
     path = _catalogue_with_rows(tmp_path, recordings)
     with sqlite3.connect(path) as connection:
@@ -331,6 +342,7 @@ def _unreadable(folder: Path, template: Path) -> Path:
     return bad
 
 
+@pytest.mark.slow
 def test_an_unreadable_file_in_index_is_listed_and_the_others_indexed(
     catalogue_at: str, recordings: Path, tmp_path: Path
 ) -> None:
@@ -349,6 +361,7 @@ def test_an_unreadable_file_in_index_is_listed_and_the_others_indexed(
     assert len(tankdaq.runs(catalogue=catalogue_at)) == len(good)
 
 
+@pytest.mark.slow
 def test_a_writers_catalogue_line_hides_the_password_and_the_fit_still_answers(recordings: Path) -> None:
     decay = sorted(recordings.glob("*.csv"))[0]
     for url in _url_forms(free_port())[:8]:  # the forms that parse: the writer's thread fails to connect

@@ -56,6 +56,7 @@ def records(tmp_path_factory) -> dict[str, Path]:
     return paths
 
 
+@pytest.mark.slow
 def test_identify_json_reports_every_derivative_against_the_standard(records):
     result = run("identify", str(records["train"]), "--json")
     assert result.exit_code == 0, result.output
@@ -69,12 +70,14 @@ def test_identify_json_reports_every_derivative_against_the_standard(records):
     assert summary["mean_error_top_half"] < summary["mean_error_bottom_half"]
 
 
+@pytest.mark.slow
 def test_identify_with_gamma_chosen_on_a_held_out_record(records):
     result = run("identify", str(records["train"]), "--holdout", str(records["test"]), "--no-sensitivity")
     assert result.exit_code == 0, result.output
     assert f"(on held-out record {records['test']})" in result.output
 
 
+@pytest.mark.slow
 def test_identify_table_with_ols(records):
     result = run("identify", str(records["test"]), "--method", "ols", "--no-sensitivity")
     assert result.exit_code == 0, result.output
@@ -82,6 +85,7 @@ def test_identify_table_with_ols(records):
     assert "M_uw" in result.output and "Z equation: bias" in result.output
 
 
+@pytest.mark.slow
 def test_sensitivity_ranks_and_marks_dominant_derivatives():
     result = run("sensitivity", "--vehicle", "remus100", "--delta", "10", "--theta", "5", "--json")
     assert result.exit_code == 0, result.output
@@ -92,6 +96,7 @@ def test_sensitivity_ranks_and_marks_dominant_derivatives():
     assert table.exit_code == 0 and "dominant" in table.output and "+/-20 %" in table.output
 
 
+@pytest.mark.slow
 def test_validate_scores_a_held_out_manoeuvre_and_writes_a_plot(records, tmp_path):
     plot = tmp_path / "validation.png"
     result = run(
@@ -104,6 +109,7 @@ def test_validate_scores_a_held_out_manoeuvre_and_writes_a_plot(records, tmp_pat
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.slow
 def test_bad_inputs_get_one_line_and_exit_code_2(records, tmp_path):
     assert_one_line_error(
         run("simulate", "--vehicle", "seaglider", "--out", str(tmp_path / "x.mcap")),
@@ -131,6 +137,7 @@ def test_bad_inputs_get_one_line_and_exit_code_2(records, tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_installed_script_reports_bad_input_without_a_traceback(tmp_path):
     script = Path(sys.executable).with_name("tankdaq")
     completed = subprocess.run(

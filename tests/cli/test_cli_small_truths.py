@@ -7,6 +7,7 @@ import re
 from pathlib import Path
 
 import click
+import pytest
 from typer.main import get_command
 from typer.testing import CliRunner
 
@@ -39,6 +40,7 @@ def help_of(path: str) -> str:
     return " ".join(result.stdout.split())  # click wraps the help: compare it as one line
 
 
+@pytest.mark.slow
 def test_every_draft_option_shows_the_forms_it_takes() -> None:
     found = commands_with("--draft")
     assert {"identify", "diagnose", "record", "predict", "simulate", "simulate-campaign"} <= set(found)
@@ -49,6 +51,7 @@ def test_every_draft_option_shows_the_forms_it_takes() -> None:
     assert runner.invoke(app, ["predict", "--hull", "swath", "--draft", "1.1T", "--help"]).exit_code == 0
 
 
+@pytest.mark.slow
 def test_every_rate_option_lists_every_accepted_rate() -> None:
     """A device's or a simulation's --rate lists the output rates; the --rate of a command that reads
     files is that file's own sample rate (``cli.options.SampleRate``), any, and says so."""
@@ -67,6 +70,7 @@ def test_every_rate_option_lists_every_accepted_rate() -> None:
             assert validation.output_rate_hz(float(rate)) == rate
 
 
+@pytest.mark.slow
 def test_hulls_new_prints_the_template_it_wrote_then_its_path(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setenv("TANKDAQ_HULLS_DIR", str(tmp_path))
     result = runner.invoke(app, ["hulls", "new", "mymodel"])
@@ -78,6 +82,7 @@ def test_hulls_new_prints_the_template_it_wrote_then_its_path(tmp_path: Path, mo
     assert 'name = "mymodel"' in lines and any(line.startswith("[dimensions]") for line in lines)
 
 
+@pytest.mark.slow
 def test_campaign_names_the_folders_read_and_no_recurse_stays_out_of_subfolders(tmp_path: Path) -> None:
     top = tmp_path / "campaign"
     mine = top / "mine"

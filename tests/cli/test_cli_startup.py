@@ -10,6 +10,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 HEAVY = ("scipy", "numba", "matplotlib", "rerun", "pymoo", "distributed", "dask", "mcap")
 #: Not heavy, but each was a tenth of a ``--help``: typer's pydantic coercion of an absent root
 #: ``--help`` (cli.app.OneLineUsageErrors), rich before the first line printed (cli.app.err_console).
@@ -39,6 +41,7 @@ print(json.dumps({"commands": [" ".join(p) for p in paths], "loaded": loaded}))
 """
 
 
+@pytest.mark.slow
 def test_help_of_every_command_imports_no_heavy_library() -> None:
     done = subprocess.run(
         [sys.executable, "-c", PROBE, json.dumps(HEAVY + SLOW_TO_IMPORT)],
@@ -65,6 +68,7 @@ def test_every_command_is_registered_by_the_module_named_for_it() -> None:
     assert {name: module.rsplit(".", 1)[1] for name, module in found.items()} == COMMAND_MODULES
 
 
+@pytest.mark.slow
 def test_a_command_imports_only_its_own_module() -> None:
     """``tankdaq replay --help`` through the console entry point: the record room only, and its help."""
     probe = (

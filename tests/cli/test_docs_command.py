@@ -23,6 +23,7 @@ ROOT = Path(__file__).resolve().parents[2]
 runner = CliRunner()
 
 
+@pytest.mark.slow
 def test_docs_lists_every_page_and_prints_one_as_written() -> None:
     listed = runner.invoke(app, ["docs"])
     assert listed.exit_code == 0, listed.output
@@ -60,6 +61,7 @@ def _cited(text: str) -> set[str]:
     return set(re.findall(r"docs/([a-z-]+)\.md", text))
 
 
+@pytest.mark.slow
 def test_examples_are_copied_into_a_new_folder_and_never_over_a_file(tmp_path: Path) -> None:
     done = runner.invoke(app, ["docs", "--examples", str(tmp_path / "ex")])
     assert done.exit_code == 0, done.output

@@ -18,6 +18,7 @@ def invoke(*args):
     return runner.invoke(app, ["identify", *map(str, args)])
 
 
+@pytest.mark.slow
 def test_json_has_the_documented_shape(tmp_path):
     result = invoke(write_held_tilt_csv(tmp_path / "a.csv"), "--model", "ittc-quadratic", "--json")
     assert result.exit_code == 0, result.output
@@ -38,6 +39,7 @@ def test_json_has_the_documented_shape(tmp_path):
     assert isinstance(out["warnings"], list) and out["elapsed_s"] > 0
 
 
+@pytest.mark.slow
 def test_text_report_writes_out_the_equation_and_dimensional_results(tmp_path):
     result = invoke(write_held_tilt_csv(tmp_path / "a.csv"), "--model", "b1,b2,c1", "--hull", "swath")
     assert result.exit_code == 0, result.output
@@ -45,6 +47,7 @@ def test_text_report_writes_out_the_equation_and_dimensional_results(tmp_path):
     assert "total inertia" in result.stdout
 
 
+@pytest.mark.slow
 def test_compare_ranks_every_model_with_held_out_error(tmp_path):
     files = [write_held_tilt_csv(tmp_path / f"{i}.csv", angle0_deg=a) for i, a in enumerate((8.0, 5.0))]
     result = invoke(*files, "--compare", "--json")
@@ -73,6 +76,7 @@ def test_compare_ranks_every_model_with_held_out_error(tmp_path):
         ("{parquet}",),
     ],
 )
+@pytest.mark.slow
 def test_bad_input_exits_2_with_one_line_and_no_traceback(tmp_path, args):
     good = write_held_tilt_csv(tmp_path / "good.csv")
     parquet = good.rename(tmp_path / "good.parquet") if "{parquet}" in args else None
@@ -85,6 +89,7 @@ def test_bad_input_exits_2_with_one_line_and_no_traceback(tmp_path, args):
     assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
 
 
+@pytest.mark.slow
 def test_mcap_recordings_are_read_through_the_store_reader(tmp_path):
     pytest.importorskip(
         "tankdaq.store.reader", reason="the MCAP reader (store room) is not in this build yet"
@@ -114,6 +119,7 @@ def test_mcap_recordings_are_read_through_the_store_reader(tmp_path):
     assert out["axis"] == "pitch"
 
 
+@pytest.mark.slow
 def test_bootstrap_intervals_replace_the_jacobian_ones(tmp_path):
     result = invoke(
         write_held_tilt_csv(tmp_path / "a.csv"), "--model", "ittc-quadratic", "--bootstrap", "8", "--json"
@@ -124,6 +130,7 @@ def test_bootstrap_intervals_replace_the_jacobian_ones(tmp_path):
     assert all(c["std"] > 0 for c in out["coefficients"].values())
 
 
+@pytest.mark.slow
 def test_repeats_give_intervals_from_the_spread_of_the_runs(tmp_path):
     files = [write_held_tilt_csv(tmp_path / f"{i}.csv", noise_deg=0.05, seed=i) for i in range(4)]
     result = invoke(*files, "--model", "ittc-quadratic", "--repeats", "--json")

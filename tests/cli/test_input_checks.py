@@ -99,6 +99,7 @@ WORK_CASES = [
 
 
 @pytest.mark.parametrize(("args", "mentions"), DEVICE_CASES + WORK_CASES)
+@pytest.mark.slow
 def test_refused_in_one_line_before_a_device_opens_or_work_starts(
     places: dict[str, Path], args: list[str], mentions: str
 ) -> None:
@@ -151,6 +152,7 @@ def test_the_record_daemon_applies_the_same_rules_as_the_command_line(
         (["nosuch"], "No such command"),
     ],
 )
+@pytest.mark.slow
 def test_click_usage_errors_are_one_line_too(args: list[str], mentions: str) -> None:
     line = _refused(args, mentions)
     assert "--help lists the options" in line

@@ -59,6 +59,7 @@ def test_only_what_the_encoding_cannot_show_is_replaced() -> None:
 
 
 @pytest.mark.parametrize("encoding", ENCODINGS)
+@pytest.mark.slow
 def test_predict_prints_b44_hat_in_plain_text(encoding: str) -> None:
     out, _ = tankdaq(encoding, "predict", "--hull", "kvlcc2")
     assert "B44_hat" in out and "B̂" not in out and "B_hatW" in out
@@ -66,6 +67,7 @@ def test_predict_prints_b44_hat_in_plain_text(encoding: str) -> None:
 
 
 @pytest.mark.parametrize("encoding", ENCODINGS)
+@pytest.mark.slow
 def test_identify_with_a_hull_runs_on_its_catalogue_and_campaign(
     encoding: str, recordings: list[Path], tmp_path: Path
 ) -> None:
@@ -91,12 +93,14 @@ def test_identify_with_a_hull_runs_on_its_catalogue_and_campaign(
 
 @pytest.mark.skipif(not (DATA / "model_test_21338.csv").is_file(), reason=f"the KVLCC2 data is not at {DATA}")
 @pytest.mark.parametrize("encoding", ENCODINGS)
+@pytest.mark.slow
 def test_identify_a_real_decay_with_its_hull(encoding: str, tmp_path: Path) -> None:
     args = ["identify", DATA / "model_test_21338.csv", "--angle-unit", "rad", "--time-col", "time"]
     out, _ = tankdaq(encoding, *args, "--angle-col", "phi", "--hull", "kvlcc2", "--catalogue", "none")
     assert "B44_hat" in out and "B̂" not in out
 
 
+@pytest.mark.slow
 def test_the_c_locale_with_stdout_to_a_file(tmp_path: Path) -> None:
     """``LC_ALL=C`` and stdout redirected to a file: Python writes UTF-8 there (PEP 538/540), which shows
     everything; whatever the locale makes of it, the command finishes and the file reads back."""
@@ -115,6 +119,7 @@ def test_the_c_locale_with_stdout_to_a_file(tmp_path: Path) -> None:
     assert "B̂44" in text or "B44_hat" in text
 
 
+@pytest.mark.slow
 def test_a_utf8_stream_is_left_as_it_is(recordings: list[Path]) -> None:
     out, _ = tankdaq("utf-8", "predict", "--hull", "kvlcc2")
     assert "B̂44" in out and "N·m·s" in out

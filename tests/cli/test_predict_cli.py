@@ -122,6 +122,7 @@ def test_full_scale_scales_period_and_b44_by_froude(tmp_path: Path) -> None:
         (["--hull", "NOGYRADIUS"], "needs radius_of_gyration_m under [axes.roll] and added_inertia_fraction"),
     ],
 )
+@pytest.mark.slow
 def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], message: str) -> None:
     places = {
         "HULL": hull_file(tmp_path),
@@ -167,6 +168,7 @@ def test_bad_input_is_one_line_exit_2(tmp_path: Path, args: list[str], message: 
         ),
     ],
 )
+@pytest.mark.slow
 def test_a_unit_slip_or_typo_in_the_hull_is_one_line_naming_the_input(
     tmp_path: Path, typed: str, message: str
 ) -> None:
@@ -254,6 +256,7 @@ def test_kvlcc2_is_shipped_at_model_scale_from_the_parameters_file() -> None:
 
 
 @needs_kvlcc2
+@pytest.mark.slow
 def test_kvlcc2_21338_b44_hat_matches_a_hand_calculation() -> None:
     with (DATA / "model_test_parameters.csv").open() as f:
         row = next(r for r in csv.DictReader(f) if r["id"] == "21338")

@@ -119,6 +119,7 @@ HULL_CASES = {
 
 
 @pytest.mark.parametrize("case", HULL_CASES)
+@pytest.mark.slow
 def test_a_bad_hull_is_one_line_at_load(case: str, lab: Path, tmp_path: Path) -> None:
     text, phrase = HULL_CASES[case]
     hull = lab / "h.toml"
@@ -189,6 +190,7 @@ PLAN_CASES = {
 
 
 @pytest.mark.parametrize("case", PLAN_CASES)
+@pytest.mark.slow
 def test_a_bad_plan_is_one_line_before_anything_is_written(case: str, lab: Path, tmp_path: Path) -> None:
     text, phrase = PLAN_CASES[case]
     (lab / "p.toml").write_text(text)
@@ -375,6 +377,7 @@ def loads_or_one_line(load, path: Path) -> None:  # type: ignore[no-untyped-def]
 
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(table=HULLS)
+@pytest.mark.slow
 def test_random_hull_files_load_or_give_one_line(table: dict[str, object], tmp_path: Path) -> None:
     path = tmp_path / "random.toml"
     path.write_text(toml_file(table))
@@ -393,6 +396,7 @@ def test_random_hull_files_load_or_give_one_line(table: dict[str, object], tmp_p
         },
     )
 )
+@pytest.mark.slow
 def test_random_plan_files_load_or_give_one_line(table: dict[str, object], tmp_path: Path) -> None:
     path = tmp_path / "random.toml"
     path.write_text(toml_file(table))

@@ -41,6 +41,7 @@ def test_xdg_rule(monkeypatch, tmp_path):
     assert user_hulls_dir() == Path.home() / ".config" / "tankdaq" / "hulls"
 
 
+@pytest.mark.slow
 def test_new_writes_a_template_that_loads_and_the_list_says_where_each_came_from(user_folder):
     result = runner.invoke(app, ["hulls", "new", "mymodel"])
     assert result.exit_code == 0, result.output
@@ -74,6 +75,7 @@ def test_record_needs_a_hull():
     assert result.exit_code == 2 and "--hull" in result.output
 
 
+@pytest.mark.slow
 def test_a_hull_without_coefficients_cannot_be_simulated_but_identifies(tmp_path, user_folder):
     own = tmp_path / "mymodel.toml"
     own.write_text(MY_HULL)
@@ -93,6 +95,7 @@ def test_a_hull_without_coefficients_cannot_be_simulated_but_identifies(tmp_path
     assert dimensional["added_inertia_fraction"] is not None  # from the radius of gyration
 
 
+@pytest.mark.slow
 def test_campaign_uses_the_user_hulls_gm(tmp_path, user_folder):
     user_folder.mkdir()
     (user_folder / "mymodel.toml").write_text(MY_HULL)
@@ -106,6 +109,7 @@ def test_campaign_uses_the_user_hulls_gm(tmp_path, user_folder):
     assert "free decay" in fields["cuts"]
 
 
+@pytest.mark.slow
 def test_a_hull_without_coefficients_records_from_a_real_port(tmp_path, record_settings):
     """The lab's own hull on a real serial port (the simulated MTi-G's pty, opened by path like hardware):
     the recording is labelled with it, and its dimensions travel in the file."""

@@ -48,6 +48,7 @@ def one_line(args: list[str], code: int) -> str:
 # ---- a byte-order mark ----------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_hull_and_a_plan_saved_with_a_bom_are_read(tmp_path: Path) -> None:
     hull, plan = tmp_path / "bom.toml", tmp_path / "plan.toml"
     hull.write_bytes(codecs.BOM_UTF8 + HULL.encode())
@@ -58,6 +59,7 @@ def test_a_hull_and_a_plan_saved_with_a_bom_are_read(tmp_path: Path) -> None:
     assert result.exit_code == 0 and "a hull saved by Notepad" in result.output, result.output
 
 
+@pytest.mark.slow
 def test_a_utf16_file_is_named_and_a_bad_one_still_says_where(tmp_path: Path) -> None:
     utf16 = tmp_path / "utf16.toml"
     utf16.write_bytes(HULL.encode("utf-16"))  # Notepad's "Unicode": a BOM, then two bytes a character
@@ -86,6 +88,7 @@ def test_a_utf16_file_is_named_and_a_bad_one_still_says_where(tmp_path: Path) ->
     ],
     ids=["empty", "blank lines", "line 1 cut", "line 1 cut, more after", "no plan"],
 )
+@pytest.mark.slow
 def test_resume_names_what_is_wrong_with_the_log(log: bytes, code: int, said: str, tmp_path: Path) -> None:
     plan, out = tmp_path / "plan.toml", tmp_path / "out"
     plan.write_text(PLAN)
@@ -116,6 +119,7 @@ PIPED = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_long_work_says_where_it_is_when_stderr_is_a_pipe() -> None:
     done = subprocess.run(
         [sys.executable, "-c", PIPED], stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60
@@ -132,6 +136,7 @@ def test_long_work_says_where_it_is_when_stderr_is_a_pipe() -> None:
 # ---- the reason a run was rejected -----------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_runs_rejected_shows_why_each_run_was_rejected(tmp_path: Path) -> None:
     """A guided session's log: decay 1 failed a check and was rejected, decay 2 passed and the operator
     rejected it anyway; ``runs --verdict rejected`` on a real SQLite catalogue says both reasons."""

@@ -22,6 +22,7 @@ def _start(*args: str) -> subprocess.Popen[str]:
     )
 
 
+@pytest.mark.slow
 def test_simulate_prints_a_port_a_driver_can_open_and_stops_cleanly(tmp_path: Path) -> None:
     truth_path = tmp_path / "truth.json"
     process = _start("--speed", "5", "--runs", "2", "--seed", "3", "--truth", str(truth_path))
@@ -60,6 +61,7 @@ def test_simulate_prints_a_port_a_driver_can_open_and_stops_cleanly(tmp_path: Pa
         (["--speed", "0"], "--speed must be positive"),
     ],
 )
+@pytest.mark.slow
 def test_bad_values_exit_2_with_one_line(args: list[str], message: str) -> None:
     process = _start(*args)
     out, err = process.communicate(timeout=30)
@@ -69,6 +71,7 @@ def test_bad_values_exit_2_with_one_line(args: list[str], message: str) -> None:
     assert out == ""
 
 
+@pytest.mark.slow
 def test_simulate_sway_plays_the_swaying_hold(tmp_path: Path) -> None:
     """``--sway``: the truth is the swaying hold's (``Handling.swaying()``), not the still one's."""
     from tankdaq.config.hulls import hull_scenario

@@ -17,6 +17,7 @@ from tankdaq.xsens.constants import MID
 runner = CliRunner()
 
 
+@pytest.mark.slow
 def test_ports_lists_the_simulated_device_as_xsens(simulator: SimulatedMTi) -> None:
     result = runner.invoke(app, ["device", "ports"])
     assert result.exit_code == 0, result.output
@@ -24,6 +25,7 @@ def test_ports_lists_the_simulated_device_as_xsens(simulator: SimulatedMTi) -> N
     assert "Xsens" in line and "077B1A2C" in line and "not USB" in line
 
 
+@pytest.mark.slow
 def test_info_shows_the_device_and_leaves_it_as_found(simulator: SimulatedMTi) -> None:
     with MTiDriver(simulator.link) as driver:
         driver.configure()  # measuring, with the decay outputs
@@ -38,12 +40,14 @@ def test_info_shows_the_device_and_leaves_it_as_found(simulator: SimulatedMTi) -
     assert MID.OUTPUT_CONFIGURATION in simulator.commands_seen
 
 
+@pytest.mark.slow
 def test_reset_reboots_the_device(simulator: SimulatedMTi) -> None:
     result = runner.invoke(app, ["device", "reset", simulator.link])
     assert result.exit_code == 0, result.output
     assert "rebooted (WakeUp seen)" in result.stdout and MID.RESET in simulator.commands_seen
 
 
+@pytest.mark.slow
 def test_restore_defaults_asks_first_and_yes_skips_the_question(simulator: SimulatedMTi) -> None:
     declined = runner.invoke(app, ["device", "restore-defaults", simulator.link], input="n\n")
     assert declined.exit_code == 1 and "nothing changed" in declined.output
@@ -71,6 +75,7 @@ def test_bad_device_input_is_one_line(args: list[str], code: int, mentions: str)
     assert mentions in result.output and "Traceback" not in result.output
 
 
+@pytest.mark.slow
 def test_a_busy_port_is_exit_1_one_line_in_a_real_process(simulator: SimulatedMTi) -> None:
     tankdaq = str(Path(sys.executable).with_name("tankdaq"))
     with MTiDriver(simulator.link):  # holds the port

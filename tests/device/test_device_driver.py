@@ -29,6 +29,7 @@ def _assert_contiguous(samples: np.ndarray, rate_hz: float) -> None:
 
 
 @pytest.mark.parametrize(("rate_hz", "baud"), [(100, 115200), (400, 460800)])
+@pytest.mark.slow
 def test_configure_and_stream_ten_seconds_without_a_gap(rate_hz: int, baud: int) -> None:
     with (
         SimulatedMTi(hull_scenario(rate_hz=rate_hz), speed=SPEED, baud=baud) as sim,
@@ -77,6 +78,7 @@ def test_unplug_raises_device_gone_and_replug_reconnects(simulator: SimulatedMTi
     assert old_port  # the pts number may or may not be reused; the stable link is what matters
 
 
+@pytest.mark.slow
 def test_reconnect_gives_up_with_device_gone_when_nothing_comes_back(simulator: SimulatedMTi) -> None:
     with MTiDriver(simulator.link) as driver:
         driver.configure()
@@ -85,6 +87,7 @@ def test_reconnect_gives_up_with_device_gone_when_nothing_comes_back(simulator: 
             driver.reconnect(timeout_s=0.5)
 
 
+@pytest.mark.slow
 def test_legacy_device_is_driven_with_mtdata() -> None:
     with (
         SimulatedMTi(hull_scenario(rate_hz=100, seed=4), speed=SPEED, legacy=True) as sim,
@@ -101,6 +104,7 @@ def test_legacy_device_is_driven_with_mtdata() -> None:
     assert np.abs(samples["az"]).mean() == pytest.approx(9.81, abs=0.2)
 
 
+@pytest.mark.slow
 def test_corrupted_bytes_are_survived_and_counted() -> None:
     # Rates low enough that two faults in one frame (which an 8-bit checksum misses 1 time in 256)
     # stay out of this test: one faulty byte per frame is always caught.
@@ -122,6 +126,7 @@ def test_corrupted_bytes_are_survived_and_counted() -> None:
     assert set(counters.metadata()) >= {"link_bad_checksums", "link_skipped_bytes", "link_false_syncs"}
 
 
+@pytest.mark.slow
 def test_a_stall_shows_up_as_a_counter_gap(simulator: SimulatedMTi) -> None:
     with MTiDriver(simulator.link) as driver:
         driver.configure()
@@ -171,6 +176,7 @@ def test_permission_denied_names_the_dialout_group_and_the_command() -> None:
     assert "dialout" in message and "sudo usermod -aG dialout $USER" in message
 
 
+@pytest.mark.slow
 def test_a_device_at_another_rate_is_found_by_the_search() -> None:
     with SimulatedMTi(speed=SPEED, baud=460800) as sim, MTiDriver(sim.link) as driver:
         info = driver.configure()
@@ -178,6 +184,7 @@ def test_a_device_at_another_rate_is_found_by_the_search() -> None:
     assert info.baud == 460800 and info.baud_changed_from is None  # it carries 100 Hz: left there
 
 
+@pytest.mark.slow
 def test_a_silent_port_says_what_was_tried_and_what_to_check() -> None:
     master, slave = pty.openpty()  # a real port with nothing behind it
     try:
@@ -195,6 +202,7 @@ def test_a_silent_port_says_what_was_tried_and_what_to_check() -> None:
     assert "--scan-baud" not in message and "\n" not in message
 
 
+@pytest.mark.slow
 def test_a_device_stuck_in_measurement_is_reset_and_its_wakeup_answered() -> None:
     stuck = Behaviour(stuck=True, boot_s=1.7)  # the field report: GoToConfig acked ~1.7 s after Reset
     with (
@@ -210,6 +218,7 @@ def test_a_device_stuck_in_measurement_is_reset_and_its_wakeup_answered() -> Non
     _assert_contiguous(samples, 100)
 
 
+@pytest.mark.slow
 def test_slow_flash_writes_get_their_own_timeout() -> None:
     slow = Behaviour(flash_write_s=0.5)
     with SimulatedMTi(hull_scenario(rate_hz=100), speed=SPEED, behaviour=slow) as sim:
@@ -222,6 +231,7 @@ def test_slow_flash_writes_get_their_own_timeout() -> None:
     assert list(info.configuration) == decay_output_configuration(100)
 
 
+@pytest.mark.slow
 def test_record_rate_400_from_115200_moves_the_device_to_921600_without_gaps() -> None:
     with SimulatedMTi(hull_scenario(rate_hz=400), speed=SPEED, baud=115200) as sim:
         with MTiDriver(sim.link, baud=921600, rate_hz=400) as driver:
@@ -233,6 +243,7 @@ def test_record_rate_400_from_115200_moves_the_device_to_921600_without_gaps() -
     _assert_contiguous(samples, 400)
 
 
+@pytest.mark.slow
 def test_without_baud_the_slowest_rate_that_carries_the_output_is_chosen() -> None:
     with (
         SimulatedMTi(hull_scenario(rate_hz=400), speed=SPEED) as sim,
@@ -243,6 +254,7 @@ def test_without_baud_the_slowest_rate_that_carries_the_output_is_chosen() -> No
     assert (info.baud, info.baud_changed_from) == (460800, 115200)
 
 
+@pytest.mark.slow
 def test_a_600_series_device_is_moved_with_port_config() -> None:
     with SimulatedMTi(hull_scenario(rate_hz=400), speed=SPEED, identity=DeviceIdentity.mti_630()) as sim:
         with MTiDriver(sim.link, baud=921600, rate_hz=400) as driver:
@@ -256,6 +268,7 @@ def test_a_600_series_device_is_moved_with_port_config() -> None:
     _assert_contiguous(samples, 400)
 
 
+@pytest.mark.slow
 def test_a_replug_under_a_new_name_is_found_by_usb_serial_number(simulator: SimulatedMTi) -> None:
     with MTiDriver(simulator.port) as driver:
         driver.configure()  # opened by its /dev/pts name, which will not come back
@@ -281,6 +294,7 @@ def test_device_error_replies_carry_their_names() -> None:
             driver.request(MID.RUN_SELFTEST)
 
 
+@pytest.mark.slow
 def test_release_found_through_the_driver_within_one_sample() -> None:
     scenario = hull_scenario(rate_hz=100, seed=8, runs=2, release_after_s=6.0, decay_s=14.0)
     with SimulatedMTi(scenario, speed=20.0) as sim, MTiDriver(sim.link) as driver:

@@ -40,6 +40,7 @@ STATES = {
 
 
 @pytest.mark.parametrize("state", list(STATES))
+@pytest.mark.slow
 def test_info_writes_nothing_that_changes_the_device(state: str) -> None:
     behaviour, identity = STATES[state]
     legacy = identity == DeviceIdentity.legacy_mti_g()
@@ -64,6 +65,7 @@ def test_info_writes_nothing_that_changes_the_device(state: str) -> None:
         assert f"product: {identity.product_code}" in result.stdout
 
 
+@pytest.mark.slow
 def test_a_pty_that_never_answers_gets_gotoconfig_only_and_one_line() -> None:
     master, slave = pty.openpty()  # a real port with nothing behind it (kept open: the bytes stay readable)
     written = bytearray()
@@ -121,6 +123,7 @@ def test_latency_timer_is_read_through_the_ports_resolved_name(tmp_path: Path) -
     assert "udev rule in docs/protocol.md" in note
 
 
+@pytest.mark.slow
 def test_no_latency_line_for_a_port_that_is_not_an_ftdi_usb_serial_device(
     simulator: SimulatedMTi, tmp_path: Path
 ) -> None:

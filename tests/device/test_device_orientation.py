@@ -84,6 +84,7 @@ def _orientations_asked(sim: SimulatedMTi) -> list[list[str]]:
     ],
     ids=["refuses-euler", "refuses-euler-and-quaternion", "refuses-all", "imu-class-product"],
 )
+@pytest.mark.slow
 def test_the_driver_moves_to_the_next_orientation_output_the_device_refuses(
     behaviour: Behaviour, identity: DeviceIdentity | None, expected: OrientationSource
 ) -> None:
@@ -132,6 +133,7 @@ def test_an_imu_class_device_below_the_integrable_rate_is_one_line() -> None:
     ],
     ids=["quaternion", "rotation-matrix"],
 )
+@pytest.mark.slow
 def test_a_device_refusing_euler_angles_records_roll_from_what_it_gives(
     tmp_path: Path, refuses: set[str], source: str, line: str
 ) -> None:
@@ -165,6 +167,7 @@ def test_a_device_refusing_euler_angles_records_roll_from_what_it_gives(
     np.testing.assert_allclose(played["roll"], recorded["roll"][rows], rtol=0, atol=1e-12)  # the same bytes
 
 
+@pytest.mark.slow
 def test_an_imu_class_device_records_roll_within_a_tenth_of_a_degree_of_the_truth(tmp_path: Path) -> None:
     """The must-hold: the first 20 s after the release, roll from the integrated rate of turn within
     0.1 deg RMS of the simulator's truth, the static error of the accelerometer's bias aside (any
@@ -215,6 +218,7 @@ def test_an_imu_class_device_records_roll_within_a_tenth_of_a_degree_of_the_trut
     ],
     ids=["unknown-output", "imu-and-600", "refuse-and-legacy"],
 )
+@pytest.mark.slow
 def test_simulate_refuses_an_orientation_setting_it_cannot_play_in_one_line(
     args: list[str], start: str
 ) -> None:

@@ -73,6 +73,7 @@ def test_record_400_hz_at_921600_from_a_device_at_115200_has_no_gaps(tmp_path: P
     assert np.all(steps == 1) and meta["link_gaps"] == "0" and meta["link_lost"] == "0"
 
 
+@pytest.mark.slow
 def test_record_moves_a_600_series_device_with_port_config(tmp_path: Path) -> None:
     with SimulatedMTi(_scenario(100, 25.0), speed=SPEED, identity=DeviceIdentity.mti_630()) as sim:
         recording = _record(tmp_path, sim, sim.link, 100, baud=921600)
@@ -81,6 +82,7 @@ def test_record_moves_a_600_series_device_with_port_config(tmp_path: Path) -> No
     assert (meta["product_code"], meta["baud"], meta["baud_before"]) == ("MTi-630-2A8G4", "921600", "115200")
 
 
+@pytest.mark.slow
 def test_record_follows_a_replug_under_a_new_name_by_usb_serial(tmp_path: Path) -> None:
     unplug = Faults(unplug_at_s=15.0, replug_after_s=3.0)  # before the first release, at 25 s
     with SimulatedMTi(_scenario(100, 25.0), speed=SPEED, faults=unplug) as sim:

@@ -60,6 +60,7 @@ def _reset(client: Client) -> list[Frame]:
     return client.collect(0.3, until=MID.WAKEUP)
 
 
+@pytest.mark.slow
 def test_reset_boots_with_wakeup_and_an_acknowledged_wakeup_keeps_config(simulator: SimulatedMTi) -> None:
     client = Client(simulator.link)
     assert [f.mid for f in _reset(client)][-2:] == [MID.RESET_ACK, MID.WAKEUP]
@@ -69,6 +70,7 @@ def test_reset_boots_with_wakeup_and_an_acknowledged_wakeup_keeps_config(simulat
     assert any(f.mid == MID.MTDATA2 for f in client.collect(0.3))
 
 
+@pytest.mark.slow
 def test_unacknowledged_wakeup_means_measuring_with_the_stored_configuration(simulator: SimulatedMTi) -> None:
     client = Client(simulator.link)
     assert _reset(client)[-1].mid == MID.WAKEUP
@@ -83,6 +85,7 @@ def test_unacknowledged_wakeup_means_measuring_with_the_stored_configuration(sim
     }
 
 
+@pytest.mark.slow
 def test_output_configuration_is_honoured_and_the_echo_is_effective(simulator: SimulatedMTi) -> None:
     client = Client(simulator.link)
     assert client.ask(MID.GOTO_CONFIG).mid == MID.GOTO_CONFIG_ACK
@@ -108,6 +111,7 @@ def test_output_configuration_is_honoured_and_the_echo_is_effective(simulator: S
     assert messages[0].precision("EulerAngles") == "fp1632"
 
 
+@pytest.mark.slow
 def test_unknown_messages_get_error_0x04(simulator: SimulatedMTi) -> None:
     client = Client(simulator.link)
     client.ask(MID.GOTO_CONFIG)
@@ -115,6 +119,7 @@ def test_unknown_messages_get_error_0x04(simulator: SimulatedMTi) -> None:
     assert (reply.mid, reply.payload) == (MID.ERROR, b"\x04")
 
 
+@pytest.mark.slow
 def test_baud_rate_change_applies_after_reset_which_wakes_the_device_up() -> None:
     booting = Behaviour(boot_s=0.3)  # a quiet boot after the Reset ack, as on hardware
     with SimulatedMTi(hull_scenario(rate_hz=100), speed=10.0, behaviour=booting) as sim:
@@ -134,6 +139,7 @@ def test_baud_rate_change_applies_after_reset_which_wakes_the_device_up() -> Non
     assert info.baud == 460800 and info.baud_changed_from is None
 
 
+@pytest.mark.slow
 def test_legacy_device_refuses_output_configuration() -> None:
     with SimulatedMTi(legacy=True, speed=10.0) as old:
         client = Client(old.link)
@@ -153,6 +159,7 @@ def test_driver_opens_a_pyserial_url(simulator: SimulatedMTi, tmp_path) -> None:
     assert log.stat().st_size > 0  # the spy handler saw the traffic
 
 
+@pytest.mark.slow
 def test_silence_longer_than_the_timeout_is_a_vanished_device(simulator: SimulatedMTi) -> None:
     with MTiDriver(simulator.link, silence_timeout_s=0.3) as driver:
         driver.configure()
@@ -162,6 +169,7 @@ def test_silence_longer_than_the_timeout_is_a_vanished_device(simulator: Simulat
             driver.samples(5.0)
 
 
+@pytest.mark.slow
 def test_scheduled_unplug_and_replug_keep_the_link() -> None:
     """Out for 20 device seconds (2 s of wall time at speed 10): the link is looked at while it is."""
     faults = Faults(unplug_at_s=3.0, replug_after_s=20.0)
@@ -192,6 +200,7 @@ def _folders_of(pid: int) -> list[Path]:
             and (f / OWNER_FILE).read_text().strip() == str(pid)]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_folder_left_by_kill_9_is_swept_at_the_next_start() -> None:
     process = subprocess.Popen(
         [TANKDAQ, "simulate", "--speed", "5"], stdout=subprocess.PIPE, stderr=subprocess.PIPE
@@ -209,6 +218,7 @@ def test_a_folder_left_by_kill_9_is_swept_at_the_next_start() -> None:
     assert not Path(sim.by_id_dir).parent.exists()  # and this one cleaned on stop
 
 
+@pytest.mark.slow
 def test_an_error_exit_of_simulate_leaves_no_folder(tmp_path: Path) -> None:
     bad_truth = tmp_path / "missing-dir" / "truth.json"  # fails after the simulator has started
     process = subprocess.Popen([TANKDAQ, "simulate", "--truth", str(bad_truth)], stdout=subprocess.PIPE,
@@ -225,6 +235,7 @@ def test_a_simulator_that_cannot_start_leaves_no_folder(tmp_path: Path, private_
     assert str(private_tempdir) not in os.environ.get("TANKDAQ_SERIAL_BY_ID", "")
 
 
+@pytest.mark.slow
 def test_decays_played_on_one_device_keep_its_biases() -> None:
     """A session plays each decay as a scenario of its own seed, on one device: its still water keeps one
     level from decay to decay (a sensor's bias does not step; the session's watch would read a step as

@@ -21,6 +21,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from functools import partial
 
+import pytest
+
 from tankdaq.device.read_process import NO_DATA, ReadProcess
 
 WAIT_S = 30.0
@@ -103,6 +105,7 @@ os.kill(os.getpid(), int(sys.argv[1]))
 """
 
 
+@pytest.mark.slow
 def test_a_recorder_that_dies_takes_its_reader_process_with_it() -> None:
     """Killed hard (SIGKILL: no clean-up ran) or by Ctrl-C, the recorder leaves no reader process behind."""
     for signum in (signal.SIGKILL, signal.SIGINT):

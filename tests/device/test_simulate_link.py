@@ -26,6 +26,7 @@ def _simulate(link: Path) -> subprocess.Popen[str]:
 
 
 @pytest.mark.parametrize("kind", ["file", "link to a file"])
+@pytest.mark.slow
 def test_link_over_something_not_its_own_is_refused_and_left_untouched(tmp_path: Path, kind: str) -> None:
     precious = tmp_path / "notes.txt"
     precious.write_text("calibration of the tank, day 3\n")
@@ -44,6 +45,7 @@ def test_link_over_something_not_its_own_is_refused_and_left_untouched(tmp_path:
     assert target.is_symlink() == (kind == "link to a file")
 
 
+@pytest.mark.slow
 def test_a_dead_simulators_link_is_reused_and_only_its_own_link_is_removed_on_exit(tmp_path: Path) -> None:
     link = tmp_path / "ttyMTi"
     gone = "/dev/pts/999999"
@@ -62,6 +64,7 @@ def test_a_dead_simulators_link_is_reused_and_only_its_own_link_is_removed_on_ex
     assert not os.path.lexists(link), "its own link is removed on exit"
 
 
+@pytest.mark.slow
 def test_a_file_put_where_the_link_was_survives_the_simulators_exit(tmp_path: Path) -> None:
     link = tmp_path / "ttyMTi"
     proc = _simulate(link)

@@ -58,6 +58,7 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[StoredRecording,
     return first, again
 
 
+@pytest.mark.slow
 def test_a_played_back_recording_records_the_same_samples(
     recorded: tuple[StoredRecording, StoredRecording],
 ) -> None:
@@ -83,6 +84,7 @@ def test_a_played_back_recording_records_the_same_samples(
     assert release_b["data"]["release_se_s"] == release_a["data"]["release_se_s"] > 0
 
 
+@pytest.mark.slow
 def test_the_played_back_device_is_the_recorded_one(
     recorded: tuple[StoredRecording, StoredRecording],
 ) -> None:
@@ -94,6 +96,7 @@ def test_the_played_back_device_is_the_recorded_one(
     assert again.metadata["link_gaps"] == "0" and again.metadata["link_lost"] == "0"
 
 
+@pytest.mark.slow
 def test_a_recording_source_keeps_every_byte_and_reads_its_configuration_off_the_frames(
     recorded: tuple[StoredRecording, StoredRecording],
 ) -> None:
@@ -125,6 +128,7 @@ def _values(lines: list[str]) -> np.ndarray:
     return np.array([float(line.split(":")[-1]) for line in lines], dtype=np.float32)
 
 
+@pytest.mark.slow
 def test_a_real_capture_plays_through_the_driver_to_its_reference_decode() -> None:
     path = capture_dir("einride-1")
     configuration = parse_output_configuration((path / "outputconfig.bin").read_bytes())
@@ -182,6 +186,7 @@ def test_the_sim_port_names_a_recording() -> None:
         ("rate", "recorded at 100 Hz: give --rate 100"),
     ],
 )
+@pytest.mark.slow
 def test_a_bad_recording_is_refused_before_the_device_opens(
     recorded: tuple[StoredRecording, StoredRecording],
     tmp_path: Path,
@@ -202,6 +207,7 @@ def test_a_bad_recording_is_refused_before_the_device_opens(
     assert not list(private_tempdir.iterdir()) and not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_simulate_replay_serves_the_recorded_device(
     recorded: tuple[StoredRecording, StoredRecording],
 ) -> None:

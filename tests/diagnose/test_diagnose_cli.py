@@ -38,6 +38,7 @@ def invoke(*args: object):
     return runner.invoke(app, ["diagnose", *map(str, args)])
 
 
+@pytest.mark.slow
 def test_json_tells_the_story_of_a_hidden_heave_coupling(tmp_path: Path) -> None:
     result = invoke(*write_csvs(tmp_path, ("coupling.heave",), seed=21), "--json")
     assert result.exit_code == 0, result.output
@@ -65,6 +66,7 @@ def split_cut_lines(lines: list[str]) -> tuple[list[str], list[str]]:
     return cuts, lines[len(cuts) :]
 
 
+@pytest.mark.slow
 def test_text_and_report(tmp_path: Path) -> None:
     report = tmp_path / "report"
     result = invoke(*write_csvs(tmp_path, ("damping.quadratic",), seed=22), "--report", report)
@@ -99,6 +101,7 @@ def test_max_steps_zero_only_fits_the_baseline(tmp_path: Path) -> None:
         (["{csv}", "--angle-col", "phi"], "no angle column"),
     ],
 )
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, args: list[str], message: str) -> None:
     csv = write_csvs(tmp_path, (), seed=24)[0]
     result = invoke(*[a.format(csv=csv) for a in args])
@@ -109,6 +112,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, args: list[str], messa
 
 
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")
+@pytest.mark.slow
 def test_the_story_goes_to_rerun(tmp_path: Path) -> None:
     data = make_decay_set(("restoring.cubic",), seed=25)
     diagnoser = Diagnoser().fit(data.runs)
@@ -122,6 +126,7 @@ def test_the_story_goes_to_rerun(tmp_path: Path) -> None:
 
 
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")
+@pytest.mark.slow
 def test_cli_writes_the_rrd(tmp_path: Path) -> None:
     from tankdaq.ident.inputs import read_decays
 
@@ -153,6 +158,7 @@ def assert_rrd_tells(path: Path, runs: list, noise_rad: float, lines: list[str])
     assert texts == lines
 
 
+@pytest.mark.slow
 def test_mcap_recordings_are_diagnosed(tmp_path: Path) -> None:
     from tankdaq.samples import SAMPLE_DTYPE
     from tankdaq.store.writer import RecordingWriter

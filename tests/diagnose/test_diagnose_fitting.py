@@ -14,6 +14,7 @@ from tankdaq.errors import BadIdentificationInput
 from tankdaq.records import DecayRun
 
 
+@pytest.mark.slow
 def test_observation_parameters_are_recovered_together() -> None:
     data = make_decay_set(["sensor.lag", "sensor.gain", "sensor.gyro_bias", "sensor.offset"], seed=11)
     spec = ModelSpec(offset=True, gain=True, lag=True, gyro_bias=True)
@@ -27,6 +28,7 @@ def test_observation_parameters_are_recovered_together() -> None:
     assert fit.rms_noise_units == pytest.approx(1.0, abs=0.1)
 
 
+@pytest.mark.slow
 def test_coupling_coefficient_is_recovered_from_the_measured_channel() -> None:
     data = make_decay_set(["coupling.heave"], seed=12)
     base = fit_spec(data.runs, ModelSpec(), guess={"b1": data.truth["b1"], "c1": data.truth["c1"]})

@@ -71,6 +71,7 @@ def simulate_from_release(fit: OutputErrorFit, coefficients: dict[str, float], d
 
 @needs_kvlcc2
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")
+@pytest.mark.slow
 def test_potential_flow_simulation_misses_viscous_damping(tmp_path: Path, kvlcc2) -> None:
     """The 21338 restoring with a small linear (wave) damping only: found in damping, not stiffness;
     named in the damping family; added, the gap over the measured decay shrinks by >= 70 %."""
@@ -125,6 +126,7 @@ def test_potential_flow_simulation_misses_viscous_damping(tmp_path: Path, kvlcc2
 
 
 @needs_kvlcc2
+@pytest.mark.slow
 def test_a_simulation_with_the_wrong_gm_is_corrected_in_its_stiffness(tmp_path: Path, kvlcc2) -> None:
     """The 21338 fit with half its linear restoring (a GM halved: the period 41 % long) is corrected in
     its stiffness alone. Before: the stiffness refit started from the simulation's c1 and stopped in a
@@ -148,6 +150,7 @@ def test_a_simulation_with_the_wrong_gm_is_corrected_in_its_stiffness(tmp_path: 
     assert out["gap"]["reduction"] >= 0.9
 
 
+@pytest.mark.slow
 def test_a_simulation_far_off_in_period_is_not_an_unmeasured_motion(tmp_path: Path) -> None:
     """Measured: 20 s of b1 0.3, b2 0.05, c1 14 with sensor noise. The simulation has c1 4 and no b2
     (the period 87 % long). Its residual holds the measured roll at 1.87 times the simulation's own
@@ -173,6 +176,7 @@ def test_a_simulation_far_off_in_period_is_not_an_unmeasured_motion(tmp_path: Pa
 
 
 @needs_kvlcc2
+@pytest.mark.slow
 def test_a_right_simulation_names_nothing(tmp_path: Path, kvlcc2) -> None:
     """Control: the measured fit itself, simulated and with sensor-class noise, is not corrected."""
     runs, fit = kvlcc2
@@ -230,6 +234,7 @@ def write_swath_decays(folder: Path, angles_deg: tuple[float, ...] = (12.0, 8.0,
     return paths
 
 
+@pytest.mark.slow
 def test_hull_simulation_without_its_cubic_damping(tmp_path: Path) -> None:
     """--simulation hull: a hull file whose [simulation] lacks the cubic damping the decays have."""
     truth = load_hull("swath").simulation_model("roll").coefficients(1.0)
@@ -262,6 +267,7 @@ def test_hull_simulation_without_its_cubic_damping(tmp_path: Path) -> None:
     )
 
 
+@pytest.mark.slow
 def test_report_figures_of_a_hull_comparison_do_not_overlap(tmp_path: Path) -> None:
     truth = load_hull("swath").simulation_model("roll").coefficients(1.0)
     hull = load_hull(str(write_hull(tmp_path / "h.toml", {**truth, "b1": 0.5 * truth["b1"]}, scale=None)))
@@ -330,6 +336,7 @@ def sim_of_swath(
         (lambda d: growing_sim(d), (), "simulation sim.csv grows: its swing rises from"),
     ],
 )
+@pytest.mark.slow
 def test_bad_simulations_are_one_line_and_exit_2(
     tmp_path: Path, swath_decays, make_sim, extra, message
 ) -> None:
@@ -400,6 +407,7 @@ def write_sim_mcap(path: Path, angle_deg: float) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_mcap_simulations_are_matched_by_initial_angle(tmp_path: Path, swath_decays) -> None:
     """Two simulated recordings (12 and 8 deg) against three measured decays: the 4-deg one has no match
     (said, not compared); the simulation is the truth, so nothing is missing."""
@@ -426,6 +434,7 @@ def test_short_run_labels() -> None:
     assert short_labels(["x" * 40, "y" * 40]) == ["run1", "run2"]  # nothing short tells them apart
 
 
+@pytest.mark.slow
 def test_an_ikeda_prediction_of_kvlcc2_is_compared_in_its_own_components(kvlcc2) -> None:
     """The shipped KVLCC2's simplified Ikeda prediction against run 21338: damping, not stiffness, differs,
     the inputs outside the method's range are named, and the prediction says which of its components

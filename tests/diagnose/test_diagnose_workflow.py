@@ -62,6 +62,7 @@ def test_negative_control_adds_nothing(pool: ProcessPoolExecutor) -> None:
         ("friction.coulomb", "coupling.heave"),
     ],
 )
+@pytest.mark.slow
 def test_two_hidden_effects_are_both_found(effects: tuple[str, str]) -> None:
     for seed in (7, 8):
         o = diagnose_draw(effects, seed)
@@ -71,6 +72,7 @@ def test_two_hidden_effects_are_both_found(effects: tuple[str, str]) -> None:
         assert o["rms_over_noise"] <= 1.3
 
 
+@pytest.mark.slow
 def test_quadratic_and_cubic_damping_are_reported_head_to_head() -> None:
     data = make_decay_set(["damping.quadratic"], seed=5)
     step = Diagnoser().fit(data.runs).steps_[0]
@@ -81,6 +83,7 @@ def test_quadratic_and_cubic_damping_are_reported_head_to_head() -> None:
     assert rivals["damping.cubic"].vs_chosen > 0  # ... but less well than the chosen member
 
 
+@pytest.mark.slow
 def test_an_unmeasured_coupling_is_modelled_at_its_own_frequency() -> None:
     data = make_decay_set(["coupling.unmeasured"], seed=6)
     assert not data.runs[0].channels
@@ -92,6 +95,7 @@ def test_an_unmeasured_coupling_is_modelled_at_its_own_frequency() -> None:
     assert diagnoser.final_.rms_angle < 1.1 * data.noise_angle_rad
 
 
+@pytest.mark.slow
 def test_each_step_says_what_the_diagnostics_showed() -> None:
     from tankdaq.diagnose.workflow import signature_seen
 
@@ -143,6 +147,7 @@ def test_bad_settings_are_refused_with_a_reason() -> None:
 
 
 @pytest.mark.skipif(not KVLCC2.is_file(), reason="KVLCC2 model test not available")
+@pytest.mark.slow
 def test_kvlcc2_run_is_diagnosed() -> None:
     from tankdaq.ident.inputs import read_decays
 
@@ -174,6 +179,7 @@ def test_runs_of_different_axes_are_refused() -> None:
         Diagnoser().fit(runs)
 
 
+@pytest.mark.slow
 def test_simulated_campaign_recordings_reveal_the_hull_model(tmp_path: Path) -> None:
     """Recordings from the campaign simulator (its own noise and release model, written as MCAP by the
     store) of the SWATH roll model, whose truth is b1, b3 (cubic damping), c1, c3 (cubic restoring) plus

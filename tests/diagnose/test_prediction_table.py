@@ -38,6 +38,7 @@ def _table(path: Path, header: list[str], rows: list[list[float]]) -> Path:
 
 @pytest.mark.skipif(not KVLCC2.is_file(), reason=f"the KVLCC2 roll decay is not at {KVLCC2}")
 @pytest.mark.parametrize("column", list(COLUMNS))
+@pytest.mark.slow
 def test_a_table_of_the_ikeda_prediction_is_that_prediction(tmp_path: Path, column: str) -> None:
     """The shipped KVLCC2 hull's simplified-Ikeda values, written as another tool would (2-12 deg), give
     the model ``--simulation ikeda`` gives for run 21338."""
@@ -92,6 +93,7 @@ def test_a_table_reaching_less_far_than_the_decays_says_it_extrapolates(
         (["amplitude_deg", "b_eq_per_s"], [[2, 0.3]], ["other.csv"], "stands alone"),
     ],
 )
+@pytest.mark.slow
 def test_a_table_that_cannot_be_a_prediction_is_one_line(
     measured: Path, tmp_path: Path, header: list[str], rows: list[list[float]], extra: list[str], said: str
 ) -> None:
@@ -118,6 +120,7 @@ COMPONENT_KEYS = ["B_F", "B_W", "B_E", "B_L", "B_BK"]
 
 
 @pytest.mark.skipif(not KVLCC2.is_file(), reason=f"the KVLCC2 roll decay is not at {KVLCC2}")
+@pytest.mark.slow
 def test_a_table_with_ikedas_components_explains_the_gap_as_tankdaqs_own_prediction_does(
     tmp_path: Path,
 ) -> None:

@@ -140,6 +140,7 @@ def test_type_a_is_from_repeats_or_says_that_repeats_are_needed(fitted) -> None:
     )
 
 
+@pytest.mark.slow
 def test_monte_carlo_agrees_with_the_sensitivities(fitted, hull) -> None:
     fit, runs = fitted
     figures = hull_figures(hull, "roll", 1.0)
@@ -191,6 +192,7 @@ def test_identify_shows_the_budget_in_text_json_and_a_dataframe(hull, tmp_path: 
     assert EXPANDED_LABEL in result.text() and "repeat the decay" in result.text()
 
 
+@pytest.mark.slow
 def test_expanded_uncertainty_covers_the_truth_in_simulated_campaigns() -> None:
     """12 campaigns of 3 repeats (200 in bench/bench_budget_coverage.py). If U covers the truth in 95 %,
     9 or fewer of 12 covered has a chance of 0.2 %; the RMS of error / u_c of a right budget is near 1
@@ -203,6 +205,7 @@ def test_expanded_uncertainty_covers_the_truth_in_simulated_campaigns() -> None:
 
 
 @pytest.mark.skipif(not KVLCC2.is_file(), reason=f"the KVLCC2 roll decay is not at {KVLCC2}")
+@pytest.mark.slow
 def test_the_kvlcc2_decay_has_a_finite_plausible_budget() -> None:
     from tankdaq.api.identification import Reading
 
@@ -217,6 +220,7 @@ def test_the_kvlcc2_decay_has_a_finite_plausible_budget() -> None:
     assert {"B_eq/I at 5 deg", "B̂44 at 5 deg", "full-scale B44 at 5 deg"} <= set(table["quantity"])
 
 
+@pytest.mark.slow
 def test_the_catalogue_keeps_each_fits_budget(catalogue_url: str, tmp_path: Path) -> None:
     """A campaign's group fit (Type A from its two repeats) and an identify fit (one decay) each keep
     their budget in ``budgets``, a row per quantity and source that adds up as the fit's own did."""
@@ -273,6 +277,7 @@ def test_the_device_profile_follows_the_recordings_product_code(tmp_path: Path) 
     assert row["u"].iloc[0] == 0.1
 
 
+@pytest.mark.slow
 def test_the_cli_takes_a_labs_angle_accuracy_and_refuses_a_bad_one(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 

@@ -90,6 +90,7 @@ def test_get_params_reads_the_constructor_and_clone_round_trips(cls, settings, f
 
 
 @pytest.mark.parametrize(("cls", "settings", "fit"), CASES, ids=IDS)
+@pytest.mark.slow
 def test_fit_leaves_the_settings_as_given(cls, settings, fit) -> None:
     estimator = cls(**settings)
     before = estimator.get_params()

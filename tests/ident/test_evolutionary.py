@@ -68,6 +68,7 @@ def box_optimum(run: DecayRun, model: str) -> tuple[float, dict[str, float]]:
     return float(data.rms(solution.x)[0]), dict(zip(space.terms, solution.x, strict=True))
 
 
+@pytest.mark.slow
 def test_population_objective_equals_the_euler_prediction_sample_by_sample(noisy_run: DecayRun) -> None:
     space = SearchSpace.for_model("seed001-eq1")
     data = OneStepData.from_runs([noisy_run], space.terms)
@@ -137,6 +138,7 @@ def test_registry_offers_the_seeds_searches() -> None:
     )
 
 
+@pytest.mark.slow
 def test_ga_reaches_the_best_objective_in_the_box(noisy_run: DecayRun, ga_fit: GeneticSeedFit) -> None:
     best, _ = box_optimum(noisy_run, "seed001-eq1")
     assert ga_fit.seed_objective_ <= best * (1 + 1e-4)
@@ -146,6 +148,7 @@ def test_ga_reaches_the_best_objective_in_the_box(noisy_run: DecayRun, ga_fit: G
     assert ga_fit.history_.size == QUICK_GA.generations
 
 
+@pytest.mark.slow
 def test_ga_matches_the_truth_objective_with_coefficients_far_from_it(
     noisy_run: DecayRun, ga_fit: GeneticSeedFit
 ) -> None:
@@ -159,6 +162,7 @@ def test_ga_matches_the_truth_objective_with_coefficients_far_from_it(
     assert any(w.startswith("W = ") and "lower bound of the seed001 box" in w for w in ga_fit.warnings_)
 
 
+@pytest.mark.slow
 def test_output_error_recovers_the_truth_better_than_the_ga(
     noisy_run: DecayRun, ga_fit: GeneticSeedFit
 ) -> None:
@@ -169,6 +173,7 @@ def test_output_error_recovers_the_truth_better_than_the_ga(
     assert oe.r2_angle_ > 0.99 > ga_fit.r2_angle_
 
 
+@pytest.mark.slow
 def test_ga_recovers_the_linear_terms_on_a_clean_gyro() -> None:
     """With little gyro noise the seeds' method works: damping and stiffness come back near the truth."""
     run = swath_decay(angle_noise=1e-4, rate_noise=1e-4)
@@ -178,12 +183,14 @@ def test_ga_recovers_the_linear_terms_on_a_clean_gyro() -> None:
     assert fit.r2_angle_ > 0.95
 
 
+@pytest.mark.slow
 def test_swarm_reaches_the_best_objective_in_the_box(noisy_run: DecayRun) -> None:
     fit = SwarmSeedFit("seed001-eq1", settings=SwarmSettings(population=200, generations=60)).fit(noisy_run)
     assert fit.seed_objective_ <= box_optimum(noisy_run, "seed001-eq1")[0] * (1 + 1e-3)
     assert set(fit.seed_variables_) == {"I", "N", "W", "x", "C1", "C2", "C3"}
 
 
+@pytest.mark.slow
 def test_fit_is_reproducible_and_reports_progress(noisy_run: DecayRun) -> None:
     calls: list[tuple[int, int]] = []
     settings = GeneticSettings(population=40, generations=12)
@@ -196,6 +203,7 @@ def test_fit_is_reproducible_and_reports_progress(noisy_run: DecayRun) -> None:
 
 
 @pytest.mark.parametrize("method", ["ga", "pso", "ga-seed000"])
+@pytest.mark.slow
 def test_the_searches_by_method_name_take_their_progress_in_the_constructor(
     method: str, noisy_run: DecayRun
 ) -> None:
@@ -229,6 +237,7 @@ def test_each_alias_defaults_to_its_papers_settings() -> None:
         (GeneticSeedFit("b1,zz", settings=QUICK_GA), "unknown model term"),
     ],
 )
+@pytest.mark.slow
 def test_bad_settings_are_input_errors(noisy_run: DecayRun, estimator: GeneticSeedFit, message: str) -> None:
     with pytest.raises(InputError, match=message):
         estimator.fit(noisy_run)

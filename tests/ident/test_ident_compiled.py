@@ -27,6 +27,7 @@ def native() -> object:
     return module
 
 
+@pytest.mark.slow
 def test_the_native_kernels_compute_what_the_jit_computes(native: object) -> None:
     calls = compiled.example_calls()
     assert set(calls) == set(compiled.KERNELS)
@@ -44,6 +45,7 @@ def test_the_native_kernels_compute_what_the_jit_computes(native: object) -> Non
     assert angle.size == 1500 and np.ptp(angle) > 0.1  # a real decay was compared, not zeros
 
 
+@pytest.mark.slow
 def test_a_wrong_argument_is_a_type_error_not_a_crash(native: object) -> None:
     """The native module does not check types (a list where it wants an array would crash the process)."""
     compiled.use_native(compiled.native_path())
@@ -87,6 +89,7 @@ def _fit_lines(output: str) -> list[str]:
     return [line for line in output.splitlines() if "b1=" in line]
 
 
+@pytest.mark.slow
 def test_a_replay_runs_on_the_native_kernels_without_numba(native: object, decay_recording: Path) -> None:
     done = _replay(decay_recording, None)
     assert done.returncode == 0, done.stderr
@@ -94,6 +97,7 @@ def test_a_replay_runs_on_the_native_kernels_without_numba(native: object, decay
     assert "loaded: []" in done.stderr, done.stderr
 
 
+@pytest.mark.slow
 def test_a_replay_that_cannot_build_the_kernels_uses_the_jit_says_why_and_fits_the_same(
     native: object, decay_recording: Path, tmp_path: Path
 ) -> None:
@@ -109,6 +113,7 @@ def test_a_replay_that_cannot_build_the_kernels_uses_the_jit_says_why_and_fits_t
     assert _fit_lines(on_jit.stdout) == _fit_lines(on_native.stdout) != []
 
 
+@pytest.mark.slow
 def test_a_build_without_a_c_compiler_falls_back_and_is_not_retried(tmp_path: Path) -> None:
     """No working C compiler (CC=/bin/false): the JIT serves, the reason is kept, the next run does not
     try again and says how to make it."""
@@ -138,6 +143,7 @@ def test_a_built_module_that_does_not_run_here_is_refused_before_it_is_used(tmp_
     compiled.check_runs_here(compiled.native_path())  # the module in use passes the same trial
 
 
+@pytest.mark.slow
 def test_a_kernel_warmed_by_prepare_is_loaded_from_the_cache_by_a_call_not_compiled_again(
     tmp_path: Path,
 ) -> None:

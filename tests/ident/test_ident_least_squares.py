@@ -134,6 +134,7 @@ def test_zero_residual_nonlinear_problem_stops_at_the_root() -> None:
     assert result.cost < 1e-25
 
 
+@pytest.mark.slow
 def test_fit_path_does_not_import_scipy_optimize() -> None:
     """scipy.optimize costs ~0.4 s to import: the output-error fit (and replay's path) must not pull it."""
     probe = (

@@ -24,6 +24,7 @@ UNIQUE_MODELS = sorted({alias.terms for alias in MODEL_ALIASES.values()})
 
 
 @pytest.mark.parametrize("terms", UNIQUE_MODELS, ids=[",".join(t) for t in UNIQUE_MODELS])
+@pytest.mark.slow
 def test_every_model_recovers_its_truth(terms):
     truth = truth_for(terms)
     run = synthetic_run(truth, seed=len(terms))
@@ -116,6 +117,7 @@ def test_observation_effects_need_a_gyro():
         OutputErrorFit(tuple(truth), fit_gain=True).fit([synthetic_run(truth, seed=8, with_rate=False)])
 
 
+@pytest.mark.slow
 def test_coulomb_friction_and_exogenous_coupling_are_recovered():
     b1, c1, fc, k, eps = 0.2, 9.0, 0.05, 3.0, 1e-2
     t = np.arange(1500) / 100.0

@@ -105,6 +105,7 @@ def every_figure(results: list[GroupResult]) -> dict[str, Figure]:
     return drawn
 
 
+@pytest.mark.slow
 def test_every_figure_that_draws_an_interval_says_its_coverage_and_kind(results: list[GroupResult]) -> None:
     drawn = every_figure(results)
     with_intervals = {name for name, fig in drawn.items() if intervals_drawn(fig)}
@@ -127,6 +128,7 @@ def test_every_figure_that_draws_an_interval_says_its_coverage_and_kind(results:
     np.testing.assert_allclose(half, 1.96 * 0.001, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_bars_are_what_their_label_says_and_the_angle_axis_is_measured(results: list[GroupResult]) -> None:
     (group, *_) = results
     nominal = dataclasses.replace(
@@ -167,6 +169,7 @@ def test_the_convention_holds_the_budgets_labels_and_each_kind() -> None:
         assert label.coverage.value in docs and label.kind.value in docs
 
 
+@pytest.mark.slow
 def test_tables_json_and_dataframes_say_what_their_intervals_are(
     campaign_folder: Path, results: list[GroupResult], tmp_path: Path
 ) -> None:
@@ -185,6 +188,7 @@ def test_tables_json_and_dataframes_say_what_their_intervals_are(
     assert FIT_STD.text in report and "IMO table" in report and "not reached" in found.text()
 
 
+@pytest.mark.slow
 def test_identify_says_the_kind_of_its_intervals(results: list[GroupResult]) -> None:
     from tankdaq.ident.report import summarize
 

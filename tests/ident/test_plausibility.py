@@ -115,6 +115,7 @@ def kvlcc2_fits() -> dict[str, tuple[OutputErrorFit, list]]:
     return fits
 
 
+@pytest.mark.slow
 def test_kvlcc2_in_radians_is_plausible_with_its_hull(kvlcc2_fits: dict) -> None:
     fit, runs = kvlcc2_fits["rad"]
     assert check_runs(fit.coefficients_, runs, fit.offsets_, KVLCC2_ROLL, "KVLCC2") == []
@@ -123,6 +124,7 @@ def test_kvlcc2_in_radians_is_plausible_with_its_hull(kvlcc2_fits: dict) -> None
     assert finding.check == "period" and "KVLCC2 roll" in finding.message
 
 
+@pytest.mark.slow
 def test_kvlcc2_read_as_degrees_is_implausible(kvlcc2_fits: dict) -> None:
     fit, runs = kvlcc2_fits["deg"]
     found = check_runs(fit.coefficients_, runs, fit.offsets_)
@@ -142,6 +144,7 @@ EDITS = {  # what each edit does to the degrees, and whether the decay is then c
 
 
 @pytest.mark.parametrize(("edit", "clipped"), [(name, clipped) for name, (_, clipped) in EDITS.items()])
+@pytest.mark.slow
 def test_kvlcc2_clipped_in_a_csv_is_doubted_and_a_coarse_sensor_is_not(
     tmp_path: Path, edit: str, clipped: bool
 ) -> None:
@@ -206,6 +209,7 @@ def test_a_forced_implausible_model_carries_its_warning(swath: list[Path]) -> No
     assert "warning: implausible damping" in text.stdout
 
 
+@pytest.mark.slow
 def test_two_drafts_give_two_results_and_say_so(swath: list[Path]) -> None:
     result = runner.invoke(app, ["identify", *map(str, swath), "--json"])
     assert result.exit_code == 0, result.output
@@ -252,6 +256,7 @@ def test_the_live_identifier_starts_simple_and_moves_up_the_family() -> None:
     assert "implausible damping" in forced.finish().warnings[0]
 
 
+@pytest.mark.slow
 def test_campaign_and_diagnose_say_an_implausible_fit(swath: list[Path]) -> None:
     campaign = runner.invoke(app, ["campaign", str(swath[0]), "--model", "b1,b2,c1,c3", "--jobs", "1"])
     assert campaign.exit_code == 0, campaign.output

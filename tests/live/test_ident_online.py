@@ -11,6 +11,7 @@ from tankdaq.ident.output_error import OutputErrorFit
 from tankdaq.live.identifier import OnlineIdentifier
 
 
+@pytest.mark.slow
 def test_online_refits_converge_to_the_offline_fit():
     truth = truth_for(("b1", "b2", "c1", "c3"))
     run = synthetic_run(truth, seed=21, angle0=0.25)
@@ -42,6 +43,7 @@ def test_nothing_is_fitted_before_enough_half_cycles_and_a_short_record_is_refus
         online.finish()
 
 
+@pytest.mark.slow
 def test_a_settled_noisy_record_does_not_trigger_refits():
     """After the motion dies out the gyro only shows noise: its zero crossings are not half-cycles."""
     truth = {"b1": 1.5, "c1": 14.0}  # heavily damped: settled within ~8 s

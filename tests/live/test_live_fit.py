@@ -72,6 +72,7 @@ def _scenario_samples(settings: RecordSettings) -> np.ndarray:
     return samples
 
 
+@pytest.mark.slow
 def test_a_slow_refit_never_holds_up_the_file_and_its_fit_arrives_once_done(tmp_path: Path) -> None:
     settings = RecordSettings(
         port="sim", hull="swath", draft=1.0, angle_deg=8.0, runs=1, out_dir=tmp_path, sim_seed=0
@@ -164,6 +165,7 @@ def test_refits_coalesce_on_the_latest_samples_while_one_runs() -> None:
     assert refits[-1].n_samples == t.size and final.n_samples == t.size
 
 
+@pytest.mark.slow
 def test_a_final_fit_that_cannot_finish_is_given_up_in_bounded_time() -> None:
     gate, identifier, live, t, angle, rate = _held_decay(8.0)
     try:

@@ -65,6 +65,7 @@ def _decay_t(seconds: float, rate_hz: float = 100.0) -> np.ndarray:
     return np.arange(0.0, seconds, 1.0 / rate_hz)
 
 
+@pytest.mark.slow
 def test_an_exploding_simulation_stops_at_once_with_ok_false_and_finite_outputs(source: Any) -> None:
     t = _decay_t(200.0)
     codes = compiled.term_codes(("b1", "c1"))
@@ -102,6 +103,7 @@ def test_a_call_asking_more_steps_than_the_cap_is_refused_before_integrating(sou
     assert compiled.substeps(0.01, np.array([np.nan]), ("c1",), 0.1) == compiled.MAX_SUBSTEPS
 
 
+@pytest.mark.slow
 def test_the_kernels_release_the_interpreter_lock(source: Any) -> None:
     """The main thread runs while a worker is inside a long kernel call (it could not if the call held
     the lock: no tick could fall inside it)."""
@@ -186,6 +188,7 @@ def test_a_start_the_model_diverges_from_is_an_identification_error_not_a_crash(
         OutputErrorFit("b1,c1", compute_diagnostics=False).fit([run], start={"b1": 0.1, "c1": 1e9})
 
 
+@pytest.mark.slow
 def test_a_made_up_start_that_runs_away_is_abandoned_at_its_budget() -> None:
     """b1 = 5000 needs 1000 sub-steps per sample: every evaluation takes about half a second."""
     t = _decay_t(12.0)
@@ -218,6 +221,7 @@ class GyroInMilliradians(OnlineIdentifier):
         return super().update(t, angle, None if rate is None else np.asarray(rate) * GYRO_SCALE)
 
 
+@pytest.mark.slow
 def test_a_live_refit_that_runs_away_is_abandoned_noted_and_the_worker_stops() -> None:
     samples = _swath_samples()
     release = int(np.argmax(samples["t"] >= 10.0))
@@ -238,6 +242,7 @@ def test_a_live_refit_that_runs_away_is_abandoned_noted_and_the_worker_stops() -
         live.close()
 
 
+@pytest.mark.slow
 def test_a_runaway_refit_in_the_recorder_is_abandoned_and_the_file_closes_complete(tmp_path: Path) -> None:
     samples = _swath_samples(seed=1)
     identifiers: list[GyroInMilliradians] = []

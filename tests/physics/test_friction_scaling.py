@@ -122,6 +122,7 @@ def _kato_by_hand(rho: float, r: float, s: float, phi: float, w: float, nu: floa
 
 
 @needs_kvlcc2
+@pytest.mark.slow
 def test_kvlcc2_friction_correction_matches_a_hand_calculation(kvlcc2: Identification) -> None:
     """Kato's B_F of SSPA's KVLCC2 model at the model's and the ship's Reynolds number, worked out here from
     the parameters file by the formulas of ITTC 7.5-02-07-04.5 (15 degC fresh and sea water, ITTC's
@@ -189,6 +190,7 @@ def _refused_in_one_line(result: Result, message: str) -> None:
         (["--sea-temperature", "nan"], "--sea-temperature nan: give a water temperature of 0 to 40 degC"),
     ],
 )
+@pytest.mark.slow
 def test_bad_water_temperatures_are_refused_before_any_work(
     tmp_path: Path, extra: list[str], message: str
 ) -> None:
@@ -210,6 +212,7 @@ def test_bad_water_temperatures_are_refused_before_any_work(
         ("sea_kinematic_viscosity_m2_s = 1.19", "sea_kinematic_viscosity_m2_s = 1.19 is outside"),
     ],
 )
+@pytest.mark.slow
 def test_bad_water_keys_in_a_hull_are_refused_in_one_line(tmp_path: Path, key: str, message: str) -> None:
     shipped = load_hull("kvlcc2").path
     assert shipped is not None
@@ -231,6 +234,7 @@ def test_the_api_refuses_bad_temperatures_by_name(tmp_path: Path, name: str) -> 
         tankdaq.identify(data, hull="kvlcc2", full_scale=True, **{name: 45.0})
 
 
+@pytest.mark.slow
 def test_campaign_shows_both_columns_and_the_water_it_assumed(tmp_path: Path, monkeypatch) -> None:
     """A roll group whose hull gives the particulars: Froude and friction-corrected B44 on its line, the
     correction adding up, and the water each side was taken at (the hull's key, the option)."""

@@ -118,6 +118,7 @@ def test_every_part_of_src_has_a_row() -> None:
     assert parts <= set(table), f"no room in layers.toml for {sorted(parts - set(table))}"
 
 
+@pytest.mark.slow
 def test_the_session_sits_above_the_api_and_acquisition() -> None:
     """The guided session drives a recording and reports through the public API: nothing below it
     (the API, acquisition and what they use) may reach it."""
@@ -132,6 +133,7 @@ def test_the_session_sits_above_the_api_and_acquisition() -> None:
     assert not reaching, f"below the session, these import it: {reaching}"
 
 
+@pytest.mark.slow
 def test_no_module_imports_the_package_root() -> None:
     """``tankdaq/__init__`` loads the public API on first use: a room that imported a name from it
     (``from .. import __version__``) would sit below the API and on top of it at once."""
@@ -152,6 +154,7 @@ def test_no_module_imports_the_package_root() -> None:
 
 
 @pytest.mark.parametrize("path", sorted(SRC.rglob("*.py")), ids=lambda p: str(p.relative_to(SRC)))
+@pytest.mark.slow
 def test_imports_follow_the_table(path: Path) -> None:
     table = layer_table()
     own = part_of(path)
@@ -235,6 +238,7 @@ def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return cycles
 
 
+@pytest.mark.slow
 def test_no_import_cycle_between_modules() -> None:
     """Inside a room too: no module reaches, even lazily, a module that reaches back to it."""
     cycles = import_cycles(module_graph())
@@ -253,6 +257,7 @@ def test_the_cycle_check_sees_a_lazy_cycle(tmp_path: Path) -> None:
     assert import_cycles(module_graph(tmp_path)) == expected
 
 
+@pytest.mark.slow
 def test_no_two_public_classes_share_a_name() -> None:
     """A class name says which class it is: ``Decay`` in one room and ``Decay`` in another made readers
     (and imports) guess. Nested classes count; a leading underscore is private."""

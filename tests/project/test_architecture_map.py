@@ -12,6 +12,8 @@ import hashlib
 import re
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 SRC = ROOT / "src" / "tankdaq"
 MAP = ROOT / "docs" / "architecture.md"
@@ -90,6 +92,7 @@ def test_every_file_and_package_the_map_names_exists() -> None:
     assert not missing, f"docs/architecture.md names what is not in src/tankdaq nor the repository: {missing}"
 
 
+@pytest.mark.slow
 def test_the_picture_names_every_thread_a_decay_crosses_and_no_other() -> None:
     drawn = set(re.findall(r"tankdaq-[a-z]+(?:-[a-z]+)*", PICTURE_SOURCE.read_text(encoding="utf-8")))
     named = {name for name in thread_names() if name.startswith("tankdaq-")}

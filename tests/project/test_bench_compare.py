@@ -70,6 +70,7 @@ def test_a_result_is_one_json_object_with_its_machine_date_and_counts(two_sets: 
     }
 
 
+@pytest.mark.slow
 def test_compare_two_folders_says_each_figures_relative_change(two_sets: tuple[Path, Path]) -> None:
     old, new = two_sets
     done = compare(str(old), str(new))
@@ -96,6 +97,7 @@ def test_compare_says_when_the_counts_are_not_like_for_like(
     assert next(line for line in done.stdout.splitlines() if "batch_m_frames" in line).split()[-1] == "-50.0%"
 
 
+@pytest.mark.slow
 def test_compare_two_git_revisions_reads_their_committed_results(
     tmp_path: Path, two_sets: tuple[Path, Path]
 ) -> None:

@@ -153,6 +153,7 @@ def _needed_to_run(name: str = "tankdaq") -> set[str]:
     return found
 
 
+@pytest.mark.slow
 def test_make_demo_installs_what_tankdaq_needs_to_run_under_the_heartbeat_and_no_test_tool(
     tmp_path: Path,
 ) -> None:

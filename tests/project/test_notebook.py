@@ -38,6 +38,7 @@ def test_the_notebook_is_stored_without_outputs() -> None:
     assert code and all(cell.outputs == [] and cell.execution_count is None for cell in code)
 
 
+@pytest.mark.slow
 def test_the_notebook_identifies_as_the_cli_and_round_trips_its_exports(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

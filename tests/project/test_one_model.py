@@ -35,6 +35,7 @@ def _close(a: float, b: float) -> bool:
     return math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
 
 
+@pytest.mark.slow
 def test_demo_identify_and_campaign_report_one_model_and_the_same_numbers(demo: tuple[Path, str]) -> None:
     folder, demo_out = demo
     (recording,) = sorted(folder.glob("*.mcap"))
@@ -62,6 +63,7 @@ def test_demo_identify_and_campaign_report_one_model_and_the_same_numbers(demo: 
         assert _close(group[term], value), (term, group[term], value)
 
 
+@pytest.mark.slow
 def test_the_session_report_fits_the_model_identify_chose(demo: tuple[Path, str], tmp_path: Path) -> None:
     from tankdaq.session.report import write_session_report
 
@@ -85,6 +87,7 @@ def test_the_session_report_fits_the_model_identify_chose(demo: tuple[Path, str]
         assert _close(float(row[term]), entry["value"]), term
 
 
+@pytest.mark.slow
 def test_a_named_model_is_used_only_when_asked_and_says_so(demo: tuple[Path, str]) -> None:
     folder, _ = demo
     grouped = runner.invoke(app, ["campaign", str(folder), "--json", "--model", "seed001-eq1"])

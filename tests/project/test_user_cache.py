@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 #: Prints where the native module would be built and where numba caches tankdaq's kernels and a user's.
 WHERE = """
 import json, sys
@@ -48,6 +50,7 @@ def _where(tmp_path: Path, **env: str) -> dict[str, str]:
     return dict(json.loads(done.stdout))
 
 
+@pytest.mark.slow
 def test_kernels_and_numba_cache_go_to_the_user_cache_folder_and_a_users_numba_stays_put(
     tmp_path: Path,
 ) -> None:
@@ -61,6 +64,7 @@ def test_kernels_and_numba_cache_go_to_the_user_cache_folder_and_a_users_numba_s
     assert Path(where["users"]).is_relative_to(tmp_path / "users"), "a user's own numba cache moved"
 
 
+@pytest.mark.slow
 def test_tankdaq_cache_dir_chooses_the_folder(tmp_path: Path) -> None:
     chosen = tmp_path / "chosen"
     where = _where(tmp_path, HOME=str(tmp_path / "home"), TANKDAQ_CACHE_DIR=str(chosen))
@@ -68,6 +72,7 @@ def test_tankdaq_cache_dir_chooses_the_folder(tmp_path: Path) -> None:
     assert Path(where["numba"]).is_relative_to(chosen / "numba"), where
 
 
+@pytest.mark.slow
 def test_an_unwritable_cache_leaves_the_jit_working_from_a_private_temp_folder(tmp_path: Path) -> None:
     """A cache folder that cannot be made (a file in its way: refused even to root): the native build
     fails with its reason, and numba still caches tankdaq's kernels (in a temp folder) instead of

@@ -128,6 +128,7 @@ def test_an_existing_report_is_refused_before_any_work(made: dict[str, Any]) -> 
         (("report", "r.mcap", "--runs", "hull=swath", "--out", "x"), "not both"),
     ],
 )
+@pytest.mark.slow
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, args: tuple[str, ...], says: str) -> None:
     (tmp_path / "r.mcap").write_bytes(b"")
     done = tankdaq(*args, cwd=tmp_path)
@@ -233,6 +234,7 @@ def test_a_session_folder_reports_its_accepted_decays(recording: Path, tmp_path:
     assert found.files == [tmp_path / "b.mcap"] and found.sessions == [tmp_path]
 
 
+@pytest.mark.slow
 def test_runs_from_the_catalogue_carry_their_ids(recording: Path, tmp_path: Path) -> None:
     import sqlite3
 
@@ -259,6 +261,7 @@ def test_a_catalogue_password_never_reaches_the_report() -> None:
         assert "s3cret" not in line and "db/tank" in line
 
 
+@pytest.mark.slow
 def test_a_budget_plugs_in_as_a_table(tmp_path: Path) -> None:
     """A section made of another helper's DataFrame (an uncertainty budget) is rendered like any other:
     its rows in the HTML and the PDF, its interval labelled."""

@@ -60,6 +60,7 @@ def predictions(scale: float = 1.0) -> list[Prediction]:
     return out
 
 
+@pytest.mark.slow
 def test_the_checks_see_clipping_and_a_legend_on_data() -> None:
     fig = Figure(figsize=(4, 3))
     FigureCanvasAgg(fig)
@@ -72,6 +73,7 @@ def test_the_checks_see_clipping_and_a_legend_on_data() -> None:
     assert layout_problems(fig)["overlapping"] == []
 
 
+@pytest.mark.slow
 def test_decay_figure_in_time_since_release_with_its_legend_beside() -> None:
     (run, *_) = predictions()
     fig = decay_fit_figure(run.t - run.t[0], run.angle + run.residual_angle, run.angle, title=LONG_NAMES[0])
@@ -101,6 +103,7 @@ def test_run_labels_are_condition_and_run_number() -> None:
     assert plots.run_labels(plain) == ["21338", "21340"]
 
 
+@pytest.mark.slow
 def test_diagnose_figures_show_time_since_release_short_labels_and_no_overlap() -> None:
     baseline, final = predictions(), predictions(0.1)
     labels = ["swath 1.1T roll #1", "swath 1.1T roll #2", "swath 1.1T roll #3"]
@@ -117,6 +120,7 @@ def test_diagnose_figures_show_time_since_release_short_labels_and_no_overlap() 
     assert_fit_to_hand_on(unnamed, "models without labels")
 
 
+@pytest.mark.slow
 def test_spectrum_is_asd_in_hz_against_hz_with_a_fine_grid() -> None:
     rate_hz, omega0 = 100.0, math.sqrt(14.0)
     residuals = [p.residual_angle for p in predictions()]
@@ -137,6 +141,7 @@ def test_spectrum_is_asd_in_hz_against_hz_with_a_fine_grid() -> None:
     assert_fit_to_hand_on(fig, "spectrum")
 
 
+@pytest.mark.slow
 def test_simulation_and_damping_figures_carry_b44_hat_beside_b_eq() -> None:
     sim, fixed = predictions(), predictions(0.1)
     labels = plots.run_labels(
@@ -184,6 +189,7 @@ def campaign_results(tmp_path_factory: pytest.TempPathFactory) -> list[GroupResu
     ]
 
 
+@pytest.mark.slow
 def test_every_campaign_figure_is_fit_to_hand_on(campaign_results: list[GroupResult], tmp_path: Path) -> None:
     swath = [r for r in campaign_results if r.key.hull == "swath"]
     at_t = [r for r in campaign_results if r.key.draft == 1.0]
@@ -215,6 +221,7 @@ def test_every_campaign_figure_is_fit_to_hand_on(campaign_results: list[GroupRes
     assert all(path.stat().st_size > 0 for path in written)
 
 
+@pytest.mark.slow
 def test_campaign_table_has_b44_hat_beside_b_eq(campaign_results: list[GroupResult]) -> None:
     swath = load_hull("swath")
     for result in campaign_results:
@@ -230,6 +237,7 @@ def test_campaign_table_has_b44_hat_beside_b_eq(campaign_results: list[GroupResu
     assert "| B_eq/I 1/s | B̂44 |" in header
 
 
+@pytest.mark.slow
 def test_auv_validation_figure_keeps_its_scores_beside_the_panels() -> None:
     t = np.arange(0.0, 30.0, 0.1)
     states = {
@@ -251,6 +259,7 @@ def test_auv_validation_figure_keeps_its_scores_beside_the_panels() -> None:
     assert_fit_to_hand_on(fig, "auv validation")
 
 
+@pytest.mark.slow
 def test_the_diagnose_reports_own_figures_are_fit_to_hand_on() -> None:
     """``diagnose.report.figures`` of a real (small) diagnosis: runs named in the recording grammar get
     their condition and run number, the decays start at 0 s although the device clock does not."""

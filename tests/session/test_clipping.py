@@ -108,6 +108,7 @@ def test_a_real_mti_g_710_capture_flags_nothing() -> None:
     assert not sample_flags(samples["status"]).clipped.any()
 
 
+@pytest.mark.slow
 def test_clipping_in_the_decay_is_flagged_everywhere_and_left_out_of_the_fit(tmp_path: Path) -> None:
     heard, path, truth = _record(tmp_path, "clipped-decay")
     warnings = [note for note in heard.of(Note) if note.kind == "warning" and note.run == 1]
@@ -150,6 +151,7 @@ def test_clipping_in_the_decay_is_flagged_everywhere_and_left_out_of_the_fit(tmp
     assert masked.sigmas_[0]["rate"] < 0.5 * kept.sigmas_[0]["rate"]  # rate residuals at the noise level
 
 
+@pytest.mark.slow
 def test_clipping_only_during_the_push_is_noted_and_harmless(tmp_path: Path) -> None:
     """Recorded through FTDI-style USB bursts (16 ms) too: the timeline stays the device's."""
     heard, path, _ = _record(tmp_path, "hard-push", Faults.parse("latency=16"))
@@ -209,6 +211,7 @@ class _Operator:
         return ""
 
 
+@pytest.mark.slow
 def test_a_simulated_session_rejects_the_clipped_decay_with_its_reason(tmp_path: Path) -> None:
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text('hulls = ["swath"]\naxis = "roll"\ndrafts = ["T"]\nangles_deg = [10.0]\n')

@@ -396,6 +396,7 @@ def _run_session(tmp_path: Path, *extra: str) -> tuple[Path, list[dict[str, Any]
     return out, _records(out)
 
 
+@pytest.mark.slow
 def test_a_swath_session_with_the_default_model_accepts_positive_damping(tmp_path: Path) -> None:
     _, records = _run_session(tmp_path)
     (run,) = [r for r in records if r["type"] == "run"]
@@ -406,6 +407,7 @@ def test_a_swath_session_with_the_default_model_accepts_positive_damping(tmp_pat
     assert measured["b_eq_per_s"] > 0
 
 
+@pytest.mark.slow
 def test_an_implausible_fit_asks_and_yes_gives_up_after_the_cap(tmp_path: Path) -> None:
     from tankdaq.session.operator import MAX_REJECTED
 

@@ -12,6 +12,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from support.guided_session import ONE_CONDITION_TWICE, Repeating
 from tankdaq.acquire.events import ModelMoved, Released, Settled
@@ -42,6 +43,7 @@ def test_the_drift_fault_creeps_the_still_water_before_the_tilt_and_the_decay_se
     assert abs(tail.mean() - moved_deg) < 0.1 and np.ptp(tail) < 0.2
 
 
+@pytest.mark.slow
 def test_a_session_says_a_drift_before_a_decay_and_flags_that_decay_only(tmp_path: Path) -> None:
     plan_file = tmp_path / "plan.toml"  # sim seeds 1 to 6 were checked (2026-11-26): each passes
     plan_file.write_text(ONE_CONDITION_TWICE)

@@ -100,6 +100,7 @@ class Pausing:
         return "s"  # reject and skip the condition: the session ends (no report to fit)
 
 
+@pytest.mark.slow
 def test_a_question_keeps_the_stream_fed_and_a_release_meanwhile_is_kept(tmp_path: Path) -> None:
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text(ONE_CONDITION_PLAN)

@@ -8,6 +8,8 @@ import dataclasses
 import json
 from pathlib import Path
 
+import pytest
+
 from support.guided_session import Enter
 from tankdaq.config.plans import load_campaign_plan
 from tankdaq.records import DecayEnd
@@ -93,6 +95,7 @@ def test_records_that_contradict_the_log_are_left_out(tmp_path: Path) -> None:
     assert state.next_decay == 2
 
 
+@pytest.mark.slow
 def test_a_deleted_recording_is_redone_and_the_report_still_written(tmp_path: Path) -> None:
     """The log says decay 1 was accepted and the report written; its file was deleted since, and the
     log picked up garbage. The resume lists the garbage, marks decay 1 rejected, records decay 2 on the

@@ -32,6 +32,7 @@ angles_deg = [10.0]
 
 
 @pytest.mark.parametrize("stop_at", [Held, Released])
+@pytest.mark.slow
 def test_a_signal_stops_the_session_as_an_outcome_and_the_decay_under_way_is_kept(
     tmp_path: Path, stop_at: type[Event]
 ) -> None:
@@ -68,6 +69,7 @@ def test_a_signal_stops_the_session_as_an_outcome_and_the_decay_under_way_is_kep
     assert summary is not None and summary.statistics is not None and summary.statistics.message_count > 0
 
 
+@pytest.mark.slow
 def test_session_stopped_mid_decay_exits_130_with_the_resume_advice(tmp_path: Path) -> None:
     """The command: SIGINT while a decay is being written (its file has data and is not yet in the log)."""
     import subprocess

@@ -102,6 +102,7 @@ def _watch(reference_deg: float) -> tuple[ModelWatch, list[Event]]:
         (0.0, 0.0, 0.0, [], False),
     ],
 )
+@pytest.mark.slow
 def test_a_slow_drift_or_an_off_level_rest_is_said_once_and_a_drift_flags_the_next_decay(
     reference_deg: float, creep_s: float, to_deg: float, kinds: list[str], flagged: bool
 ) -> None:
@@ -130,6 +131,7 @@ def _creep_events(motion: list[np.ndarray], seed: int) -> list[Event]:
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.slow
 def test_a_creeping_still_water_is_a_trend_said_before_it_crosses_the_level_tolerance(seed: int) -> None:
     rate_deg_min = 2.0  # a model taking on water, slowly: 1 deg in 30 s
     creep = _ramp(45, 0.0, rate_deg_min * 45 / 60)
@@ -148,6 +150,7 @@ def test_a_creeping_still_water_is_a_trend_said_before_it_crosses_the_level_tole
         assert f"tolerance in about {when};" in ModelMoved("trend", -moved_deg, 0, 0, 0, 1.0, 0, -2.2).line()
 
 
+@pytest.mark.slow
 def test_a_creep_that_slows_for_a_while_is_one_trend() -> None:
     """A leak at 1.5 deg/min, then 0.6 (under the trend's rate, over half of it), then 1.5 again."""
     fast = _ramp(25, 0.0, 1.5 * 25 / 60)
@@ -158,6 +161,7 @@ def test_a_creep_that_slows_for_a_while_is_one_trend() -> None:
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.slow
 def test_still_water_a_dying_swing_or_a_small_step_is_no_trend(seed: int) -> None:
     t_s = np.arange(round(30 * RATE_HZ)) / RATE_HZ
     dying = 0.4 * np.exp(-0.15 * t_s) * np.sin(2 * np.pi * t_s / PERIOD_S + seed)  # a decay's last swings
@@ -170,6 +174,7 @@ def test_still_water_a_dying_swing_or_a_small_step_is_no_trend(seed: int) -> Non
 @pytest.mark.parametrize("seed", [1, 2, 3])
 @pytest.mark.parametrize("still_s", [5.5, 6.5, 9.0])
 @pytest.mark.parametrize("step_deg", [0.13, -0.13])
+@pytest.mark.slow
 def test_a_step_soon_after_the_still_water_began_is_no_trend(
     seed: int, still_s: float, step_deg: float
 ) -> None:
@@ -251,6 +256,7 @@ def test_a_disarmed_watch_says_nothing() -> None:
 # ---- a whole session on the simulated MTi-G ----------------------------------------
 
 
+@pytest.mark.slow
 def test_a_session_says_the_bump_before_a_decay_and_flags_that_decay(tmp_path: Path) -> None:
     plan_file = tmp_path / "plan.toml"
     plan_file.write_text(ONE_CONDITION_TWICE)

@@ -43,6 +43,7 @@ def _export(recording: Path, file_format: str, out: Path) -> Path:
 
 
 @pytest.mark.parametrize("file_format", FORMATS)
+@pytest.mark.slow
 def test_an_export_in_any_format_reads_back_as_its_recording(
     recordings: list[Path], tmp_path: Path, file_format: str
 ) -> None:
@@ -83,6 +84,7 @@ def _kvlcc2_files(folder: Path) -> dict[str, tuple[Path, str, str]]:
 
 
 @pytest.mark.skipif(not KVLCC2.is_file(), reason=f"the KVLCC2 roll decay is not at {KVLCC2}")
+@pytest.mark.slow
 def test_the_kvlcc2_decay_in_another_tools_hdf5_or_matlab_file_reads_as_its_csv(tmp_path: Path) -> None:
     csv = tankdaq.read(KVLCC2, time_col="time", angle_col="phi", rate_col=None)
     for kind, (path, time_col, angle_col) in _kvlcc2_files(tmp_path).items():
@@ -127,6 +129,7 @@ def test_a_unit_attribute_breaks_a_tie_but_never_outvotes_the_data(tmp_path: Pat
         assert any("the other unit would be a decay too" in line for line in rec.notices)
 
 
+@pytest.mark.slow
 def test_two_exports_of_one_recording_are_read_once(recordings: list[Path], tmp_path: Path) -> None:
     first = _export(recordings[0], "h5", tmp_path / "h5").rename(tmp_path / "run_a.h5")
     again = _export(recordings[0], "mat", tmp_path / "mat").rename(tmp_path / "kept_for_matlab.mat")
@@ -141,6 +144,7 @@ def test_two_exports_of_one_recording_are_read_once(recordings: list[Path], tmp_
     assert [run.meta["file"] for run in both.fits[0].runs] == [str(recordings[0])]
 
 
+@pytest.mark.slow
 def test_a_folder_of_renamed_exports_is_a_campaign_labelled_by_their_own_metadata(
     recordings: list[Path], tmp_path: Path
 ) -> None:
@@ -174,6 +178,7 @@ def test_timestamps_in_a_parquet_file_are_seconds_from_the_first_and_said(tmp_pa
     )
 
 
+@pytest.mark.slow
 def test_a_broken_or_foreign_column_file_is_one_line(tmp_path: Path) -> None:
     (tmp_path / "cut.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(40))
     (tmp_path / "cut.mat").write_bytes(b"MATLAB 5.0 MAT-file, cut")
@@ -192,6 +197,7 @@ def test_a_broken_or_foreign_column_file_is_one_line(tmp_path: Path) -> None:
         assert "Traceback" not in lines[0]
 
 
+@pytest.mark.slow
 def test_a_csv_read_with_named_columns_gets_its_catalogue_row_and_fit(tmp_path: Path) -> None:
     """The catalogue makes the row of a file the command has just read with the user's columns, instead
     of failing to read it with the default ones (and saying ``index`` would catch up: it would not)."""
@@ -235,6 +241,7 @@ PANDAS_LAYOUTS = {  # how a lab's notebook saves a frame: pandas' default (fixed
 
 
 @pytest.mark.parametrize("layout", list(PANDAS_LAYOUTS))
+@pytest.mark.slow
 def test_a_frame_pandas_saved_to_hdf5_reads_as_the_csv_of_that_frame(tmp_path: Path, layout: str) -> None:
     pytest.importorskip("tables", reason="PyTables (pandas' HDF5 writer) is not installed")
     options = dict(PANDAS_LAYOUTS[layout])

@@ -80,6 +80,7 @@ def coefficients(result) -> dict[str, float]:
 # ---------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_kvlcc2_in_radians_is_read_as_radians_without_being_told():
     if not KVLCC2_21338.exists():
         pytest.skip(f"the KVLCC2 roll decay is not at {KVLCC2_21338} (shared data folder absent)")
@@ -103,6 +104,7 @@ def test_time_in_milliseconds_is_read_as_milliseconds(tmp_path):
     assert len(said) == 1 and "a model decay's period is 0.3-60 s" in said[0], result.stderr
 
 
+@pytest.mark.slow
 def test_an_xsens_sample_time_column_is_read_in_its_ticks(tmp_path):
     """MT Manager exports the device's time as SampleTimeFine, 10 kHz ticks from a day's start. Read as
     milliseconds (the only unit that made its 1.68 s period a decay's: 16.8 "s") c1 came out 100 times
@@ -142,6 +144,7 @@ def test_an_xsens_sample_time_column_is_read_in_its_ticks(tmp_path):
         ({"time_s": 1.0, "angle_deg": 180 / math.pi}, ("--time-unit", "min"), "use s, ms or tick (0.1 ms)"),
     ],
 )
+@pytest.mark.slow
 def test_a_unit_that_makes_no_decay_is_refused_in_one_line(tmp_path, columns, args, says):
     """The user's unit gives 573 deg, 0.14 deg or a 1680 s period, or no unit gives a decay (scaled
     by 1e3..1e30): one line saying what the data look like and what to give, exit 2."""
@@ -156,6 +159,7 @@ def test_a_unit_that_makes_no_decay_is_refused_in_one_line(tmp_path, columns, ar
     ("written", "said"),
     [({"bom": True}, "UTF-8 byte-order mark"), ({"encoding": "cp1252"}, "Windows-1252 text")],
 )
+@pytest.mark.slow
 def test_a_european_excel_file_is_read_and_its_dialect_said(tmp_path, written, said):
     t, angle, _ = held_tilt()
     columns = {"Zeit_s": t, "Winkel [°]": np.degrees(angle), "Kommentar": np.array(["gut"] * t.size)}
@@ -186,6 +190,7 @@ def test_three_hand_stopped_decays_are_three_runs(tmp_path):
     assert "three: 3 decays found, released at 3.0, 14.3, 25.6 s" in result.stderr
 
 
+@pytest.mark.slow
 def test_a_long_record_gives_every_decay(tmp_path):
     """55 hand-stopped decays in 2 10^5 rows (an afternoon's record): every one is a run."""
     period = 2 * math.pi / math.sqrt(TRUTH["c1"])
@@ -225,6 +230,7 @@ def test_a_part_without_a_decay_is_named(tmp_path):
 
 
 @pytest.mark.parametrize("value", ['["abc"]', "[null]", "[[1,2]]", '"soon"', "[3, 1]"])
+@pytest.mark.slow
 def test_malformed_release_metadata_is_one_line(tmp_path, value):
     t, angle, rate = held_tilt()
     path = tmp_path / "exported.csv"
@@ -344,6 +350,7 @@ def recordings(tmp_path_factory) -> dict[str, Path]:
 
 @pytest.mark.parametrize("command", ["identify", "export", "replay", "diagnose"])
 @pytest.mark.parametrize("name", ["cut8", "cut20", "cut36", "foreign"])
+@pytest.mark.slow
 def test_a_short_or_foreign_mcap_is_one_line(recordings, tmp_path, command, name):
     extra = ["--out", str(tmp_path)] if command == "export" else []
     result = runner.invoke(app, [command, str(recordings[name]), *extra])
@@ -376,6 +383,7 @@ def test_a_campaign_goes_on_past_bad_files(recordings, tmp_path):
 
 
 @pytest.mark.parametrize("nominal", ["-6", "nan", "90"])
+@pytest.mark.slow
 def test_a_recording_whose_nominal_angle_is_no_release_angle_is_skipped(recordings, tmp_path, nominal):
     """An edited recording whose metadata gives the nominal angle -6 or nan grouped and reported as a
     "-6 deg" or "nan deg" condition (B_eq nan ± nan), with no word: it is skipped with its line."""
@@ -425,6 +433,7 @@ def dialects(draw):
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(dialect=dialects())
+@pytest.mark.slow
 def test_any_dialect_gives_the_known_coefficients(tmp_path, dialect):
     """Exact data written to 9 significant digits: the fit recovers the truth to about 1e-5, so 1e-3
     only allows for where the release cut falls. Every dialect drawn is read (none is refused)."""

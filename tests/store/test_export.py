@@ -97,6 +97,7 @@ def assert_exact(read: dict[str, np.ndarray], samples: np.ndarray, release_s: fl
 
 
 @pytest.mark.parametrize("frame", ["device", "release"])
+@pytest.mark.slow
 def test_identify_of_the_export_equals_identify_of_the_recording(recording, direct, tmp_path, frame):
     written = export(recording, "--out", tmp_path, "--frame", frame)
     assert written == [tmp_path / f"{recording.stem}.csv", tmp_path / f"{recording.stem}.json"]
@@ -190,6 +191,7 @@ def usable_roll(path: Path) -> np.ndarray:
     return samples[np.isfinite(samples["roll"]) & np.isfinite(samples["p"])]
 
 
+@pytest.mark.slow
 def test_an_export_written_before_the_sidecar_is_still_read_exactly(recording, direct, tmp_path):
     old = identify_json(old_style_export(recording, tmp_path / "old.csv"))
     for term, c in direct["coefficients"].items():
@@ -201,6 +203,7 @@ def test_an_export_written_before_the_sidecar_is_still_read_exactly(recording, d
     ("key", "value", "says"),
     [("release_t_s", [3, 1], "release_t_s"), ("release_t_s", "soon", "release_t_s"), ("axis", 7, "axis 7")],
 )
+@pytest.mark.slow
 def test_a_malformed_sidecar_is_one_line(recording, tmp_path, key, value, says):
     csv_path, sidecar = export(recording, "--out", tmp_path)
     sidecar.write_text(json.dumps({**json.loads(sidecar.read_text()), key: value}))

@@ -51,6 +51,7 @@ def test_a_simulated_mti_g_log_decodes_every_mtdata2_frame_and_keeps_its_configu
     assert said in log.summary()
 
 
+@pytest.mark.slow
 def test_several_bus_ids_are_one_stream_per_device_and_none_is_corrupt(
     logs: dict[str, tuple[Path, int]],
 ) -> None:
@@ -78,6 +79,7 @@ def test_several_bus_ids_are_one_stream_per_device_and_none_is_corrupt(
     assert live.n_messages < frames + 1 and live.false_syncs > frames
 
 
+@pytest.mark.slow
 def test_an_mtb_log_is_identified_within_one_percent_of_the_truth(logs: dict[str, tuple[Path, int]]) -> None:
     """identify reads the log (time from SampleTimeFine, the Configuration's sampling period being 0)."""
     path, _ = logs["one"]
@@ -88,6 +90,7 @@ def test_an_mtb_log_is_identified_within_one_percent_of_the_truth(logs: dict[str
     assert fit.runs[0].meta["sample_rate_hz"] == pytest.approx(100.0)
 
 
+@pytest.mark.slow
 def test_a_device_of_several_is_chosen_by_id_or_bus_id(logs: dict[str, tuple[Path, int]]) -> None:
     path, _ = logs["bus"]
     with pytest.raises(InputError, match=r"holds 3 devices .*077B1A2C, 077B1A2D, 077B1A2E.*device="):
@@ -100,6 +103,7 @@ def test_a_device_of_several_is_chosen_by_id_or_bus_id(logs: dict[str, tuple[Pat
     assert [run.meta["bus_id"] for run in runs] == [2]
 
 
+@pytest.mark.slow
 def test_decode_reports_a_log_per_device(logs: dict[str, tuple[Path, int]], tmp_path: Path) -> None:
     path, frames = logs["bus"]
     result = runner.invoke(app, ["decode", str(path), "--out", str(tmp_path / "out.jsonl")])
@@ -115,6 +119,7 @@ def test_decode_reports_a_log_per_device(logs: dict[str, tuple[Path, int]], tmp_
     assert [row["BusId"] for row in rows[:6]] == [1, 2, 3, 1, 2, 3]  # which device sent each
 
 
+@pytest.mark.slow
 def test_export_of_a_log_writes_each_device_decay_with_its_device(
     logs: dict[str, tuple[Path, int]], tmp_path: Path
 ) -> None:
@@ -149,6 +154,7 @@ def tow(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {"tdms": tdms_file(folder / "tow.tdms", t, roll, speed), "csv": csv}
 
 
+@pytest.mark.slow
 def test_a_tdms_file_gives_the_csv_fit_and_the_speed(tow: dict[str, Path]) -> None:
     reading = Reading(angle_col="Carriage/Roll", speed_col="Carriage/Speed")
     from_tdms = tankdaq.identify(tow["tdms"], "b1,c1", reading=reading).fits[0]
@@ -183,6 +189,7 @@ def test_a_missing_tdms_channel_is_one_line(tow: dict[str, Path]) -> None:
         tankdaq.read(tow["tdms"], angle_col="Carriage/Rol")
 
 
+@pytest.mark.slow
 def test_catalogue_index_adds_a_log_with_its_device(
     logs: dict[str, tuple[Path, int]], tmp_path: Path
 ) -> None:
@@ -199,6 +206,7 @@ def test_catalogue_index_adds_a_log_with_its_device(
 @pytest.mark.parametrize(
     ("frame", "name"), [("NED", "EulerAngles"), ("NWU", "Quaternion"), ("NED", "RotationMatrix")]
 )
+@pytest.mark.slow
 def test_orientation_logged_in_ned_or_nwu_is_read_as_enu(frame: str, name: str, tmp_path: Path) -> None:
     """A log whose orientation is in another earth frame (its local frame turned, as RotLocal turns it):
     the same roll and pitch as in ENU, said in a line, never dropped as a foreign frame."""
@@ -233,6 +241,7 @@ def test_orientation_logged_in_ned_or_nwu_is_read_as_enu(frame: str, name: str, 
     assert f"turned to ENU ({samples.size} in {frame})" in run.meta["notices"][1]
 
 
+@pytest.mark.slow
 def test_a_device_without_orientation_is_named_and_the_others_read(tmp_path: Path) -> None:
     """A station's own MTData2 (no orientation, no time) beside a sensor's: the sensor is read, the
     station named in a line with what it sent; a log of nothing usable is one line."""

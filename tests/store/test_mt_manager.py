@@ -97,6 +97,7 @@ CASES = [
 
 
 @pytest.mark.parametrize(("name", "settings", "extra", "time_line"), CASES, ids=[c[0] for c in CASES])
+@pytest.mark.slow
 def test_every_mt_manager_style_gives_the_plain_csvs_fit(
     tmp_path: Path, plain_fit: dict[str, float], name: str, settings: dict, extra: tuple, time_line: str
 ) -> None:

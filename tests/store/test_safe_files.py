@@ -58,6 +58,7 @@ def export_name(recording: Path, file_format: str) -> str:
 
 
 @pytest.mark.parametrize("file_format", FORMATS)
+@pytest.mark.slow
 def test_export_never_overwrites_a_users_file(recording: Path, tmp_path: Path, file_format: str) -> None:
     target = tmp_path / export_name(recording, file_format)
     target.write_bytes(USERS)
@@ -76,6 +77,7 @@ def test_a_users_json_beside_the_csv_is_kept_and_nothing_is_written(recording: P
     assert snapshot(tmp_path) == {sidecar.name: USERS}
 
 
+@pytest.mark.slow
 def test_a_symlink_at_the_target_is_not_followed(recording: Path, tmp_path: Path) -> None:
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
@@ -92,6 +94,7 @@ def test_a_symlink_at_the_target_is_not_followed(recording: Path, tmp_path: Path
     assert all(path.is_symlink() for path in out.iterdir()) and len(list(out.iterdir())) == 2
 
 
+@pytest.mark.slow
 def test_two_recordings_of_one_name_into_one_folder_are_refused(recording: Path, tmp_path: Path) -> None:
     first, second = tmp_path / "monday" / "run.mcap", tmp_path / "tuesday" / "run.mcap"
     for copy in (first, second):
@@ -113,6 +116,7 @@ def test_two_recordings_of_one_name_into_one_folder_are_refused(recording: Path,
 
 
 @pytest.mark.parametrize(("file_format", "users_name"), [("csv", "second.csv"), ("h5", "second_decay2.h5")])
+@pytest.mark.slow
 def test_a_taken_name_of_a_later_recording_stops_the_export_before_any_file(
     recording: Path, tmp_path: Path, file_format: str, users_name: str
 ) -> None:
@@ -159,6 +163,7 @@ def run_export(recording: Path, file_format: str, out: Path, limit_bytes: int | 
 
 
 @pytest.mark.parametrize("file_format", FORMATS)
+@pytest.mark.slow
 def test_a_full_disk_leaves_nothing_and_says_one_line(
     recording: Path, full_disk: Path, file_format: str
 ) -> None:
@@ -174,6 +179,7 @@ def test_a_full_disk_leaves_nothing_and_says_one_line(
 
 
 @pytest.mark.parametrize("file_format", FORMATS)
+@pytest.mark.slow
 def test_a_write_the_kernel_refuses_leaves_nothing(recording: Path, tmp_path: Path, file_format: str) -> None:
     """Without root: the file size limit makes the kernel refuse the write part way (EFBIG)."""
     users = tmp_path / "notes.txt"
@@ -209,6 +215,7 @@ def test_a_new_file_is_whole_under_its_name_and_refused_the_second_time(tmp_path
     )
 
 
+@pytest.mark.slow
 def test_each_export_reads_back_with_its_standard_reader(recording: Path, tmp_path: Path) -> None:
     """Written through a temporary name and a hard link, every format is still the whole file."""
     for file_format in FORMATS:
@@ -234,6 +241,7 @@ def test_campaign_report_never_overwrites_and_refuses_before_fitting(recording: 
     assert snapshot(report) == {"campaign.csv": USERS}
 
 
+@pytest.mark.slow
 def test_a_report_figure_of_a_users_name_stops_the_report_before_any_file(
     recording: Path, tmp_path: Path
 ) -> None:
@@ -255,6 +263,7 @@ def test_diagnose_report_never_overwrites(recording: Path, tmp_path: Path) -> No
     assert snapshot(report) == {"diagnose.md": USERS}
 
 
+@pytest.mark.slow
 def test_a_report_onto_a_full_disk_leaves_only_whole_files(recording: Path, full_disk: Path) -> None:
     (full_disk / "filler").write_bytes(bytes(150_000))
     report = full_disk / "report"

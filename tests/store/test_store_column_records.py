@@ -89,6 +89,7 @@ def test_a_file_that_is_not_such_a_record_is_one_clear_error(tmp_path: Path) -> 
         read_csv(ragged, LAYOUT)
 
 
+@pytest.mark.slow
 def test_an_mcap_record_cut_anywhere_is_one_clear_error(
     tmp_path: Path, columns: dict[str, np.ndarray]
 ) -> None:

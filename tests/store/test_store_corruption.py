@@ -122,6 +122,7 @@ def corrupted(
     return path, chosen
 
 
+@pytest.mark.slow
 def test_every_intact_chunk_is_read_and_the_damaged_ones_named(corrupted: tuple[Path, list[int]]) -> None:
     path, garbled = corrupted
     damaged, expected_t = intact_sample_times(path)
@@ -152,6 +153,7 @@ def test_a_file_cut_short_still_reads_as_never_closed(closed: Path, tmp_path: Pa
     assert 0 < recording.samples.size < BATCHES * PER_BATCH
 
 
+@pytest.mark.slow
 def test_identify_says_corrupted_in_one_line(corrupted: tuple[Path, list[int]]) -> None:
     path, _ = corrupted
     result = runner.invoke(app, ["identify", str(path), "--model", "b1,c1"])
@@ -160,6 +162,7 @@ def test_identify_says_corrupted_in_one_line(corrupted: tuple[Path, list[int]]) 
     assert len(warnings) == 1 and "never closed" not in result.output
 
 
+@pytest.mark.slow
 def test_recover_keeps_every_intact_chunk_and_says_corrupted(
     corrupted: tuple[Path, list[int]], tmp_path: Path
 ) -> None:
@@ -174,12 +177,14 @@ def test_recover_keeps_every_intact_chunk_and_says_corrupted(
     np.testing.assert_array_equal(recovered.samples["t"], expected_t)
 
 
+@pytest.mark.slow
 def test_the_catalogue_row_is_not_complete(corrupted: tuple[Path, list[int]], closed: Path) -> None:
     """As a file cut short: ``recover`` then ``index`` gives the complete copy its row."""
     assert recording_row(corrupted[0])[0]["complete"] is False
     assert recording_row(closed)[0]["complete"] is True
 
 
+@pytest.mark.slow
 def test_export_says_corrupted(corrupted: tuple[Path, list[int]], tmp_path: Path) -> None:
     path, _ = corrupted
     result = runner.invoke(app, ["export", str(path), "--out", str(tmp_path)])
@@ -187,6 +192,7 @@ def test_export_says_corrupted(corrupted: tuple[Path, list[int]], tmp_path: Path
     assert "corrupted, not cut short" in result.stderr and "never closed" not in result.stderr
 
 
+@pytest.mark.slow
 def test_index_names_a_corrupted_recording_as_not_complete(
     corrupted: tuple[Path, list[int]], tmp_path: Path
 ) -> None:

@@ -93,6 +93,7 @@ def complete_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_killed_writer_loses_at_most_the_last_second(tmp_path: Path) -> None:
     path = tmp_path / "killed.mcap"
     child = subprocess.Popen(
@@ -142,6 +143,7 @@ def test_killed_writer_loses_at_most_the_last_second(tmp_path: Path) -> None:
     assert run.meta["ended"] is DecayEnd.RECOVERED
 
 
+@pytest.mark.slow
 def test_full_disk_is_a_recording_error_and_earlier_files_stay_readable(tmp_path: Path) -> None:
     first, second = tmp_path / "first.mcap", tmp_path / "second.mcap"
     limit = 200_000
@@ -168,6 +170,7 @@ def invoke(*args: str) -> tuple[int, str]:
     return result.exit_code, result.output
 
 
+@pytest.mark.slow
 def test_recover_cli_exit_codes(tmp_path: Path, complete_file: Path) -> None:
     data = complete_file.read_bytes()
 
@@ -208,6 +211,7 @@ def test_recover_refuses_non_mcap_before_creating_anything(tmp_path: Path) -> No
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.mcap"]
 
 
+@pytest.mark.slow
 def test_lossless_means_the_cut_fell_between_records(tmp_path: Path, complete_file: Path) -> None:
     scan = RecordScan(complete_file)
     boundary = next(

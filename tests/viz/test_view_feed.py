@@ -5,6 +5,8 @@ from __future__ import annotations
 import threading
 import time
 
+import pytest
+
 from tankdaq.viz.view_feed import ViewFeed
 
 
@@ -17,6 +19,7 @@ def _slow_jobs(feed: ViewFeed, count: int, each_s: float) -> None:
         feed.put(lambda: time.sleep(each_s), droppable=False)
 
 
+@pytest.mark.slow
 def test_a_slow_view_is_waited_for_past_the_stall_bound_and_finishes() -> None:
     """80 updates of at least 50 ms take 4 s or more, twice the 2 s no-progress bound: all are done."""
     feed = ViewFeed(on_error=_raise)

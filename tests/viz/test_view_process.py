@@ -41,6 +41,7 @@ def show_run(view: ViewProcess, path: Path, run: int) -> None:
     view.end_run()
 
 
+@pytest.mark.slow
 def test_runs_go_to_fresh_processes_and_every_rrd_is_whole(tmp_path: Path) -> None:
     notes: list[str] = []
     view = ViewProcess("save", terms=list(TRUTH), on_note=notes.append, runs_per_process=2)
@@ -57,6 +58,7 @@ def test_runs_go_to_fresh_processes_and_every_rrd_is_whole(tmp_path: Path) -> No
     assert view.dropped == 0 and notes == []
 
 
+@pytest.mark.slow
 def test_a_view_process_killed_costs_a_note_and_the_next_run_gets_another(tmp_path: Path) -> None:
     noted = threading.Event()
     notes: list[str] = []
@@ -83,6 +85,7 @@ def test_a_view_process_killed_costs_a_note_and_the_next_run_gets_another(tmp_pa
     assert len(scalars["/angle/measured"]) == SAMPLES
 
 
+@pytest.mark.slow
 def test_closing_leaves_no_view_process(tmp_path: Path) -> None:
     view = ViewProcess("save", terms=list(TRUTH), runs_per_process=1)
     show_run(view, tmp_path / "run1.rrd", 1)
@@ -96,6 +99,7 @@ def test_closing_leaves_no_view_process(tmp_path: Path) -> None:
             os.kill(pid, 0)  # joined: not even a zombie is left
 
 
+@pytest.mark.slow
 def test_a_script_without_a_main_guard_is_not_run_again_by_the_view(tmp_path: Path) -> None:
     """A lab's own script that records with the view, written without ``if __name__ == "__main__"``:
     the view's process must not import it again (it would record twice, or fail starting)."""

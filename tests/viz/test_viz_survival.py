@@ -139,6 +139,7 @@ def test_a_view_behind_drops_refits_but_never_a_decays_final_fit(tmp_path: Path)
     assert _rrd_rows(tmp_path / "final.rrd", "/angle/fits/fit_006") == 0
 
 
+@pytest.mark.slow
 def test_record_keeps_its_read_cadence_while_the_view_saves(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -302,6 +303,7 @@ RESERVE = 1_500_000  # the .rrd stops with less than this free (the default is f
 
 
 @pytest.mark.parametrize("size_kb", [160, 3072])
+@pytest.mark.slow
 def test_a_full_disk_takes_the_rrd_never_a_finished_mcap(tmp_path: Path, size_kb: int) -> None:
     """Two decays on a tiny disk. 3 MB holds two MCAPs but not their .rrd files as well (each several
     times the MCAP's size): without the free-space budget the second MCAP is cut; with it the .rrd
@@ -386,6 +388,7 @@ print(chr(10).join(notes))
 """
 
 
+@pytest.mark.slow
 def test_an_rrd_that_hits_the_file_size_limit_is_one_line(tmp_path: Path) -> None:
     """EFBIG in the middle of a run (rerun's file writer dies): one line, no traceback, the caller goes on."""
     rrd = tmp_path / "big.rrd"

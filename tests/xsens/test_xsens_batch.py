@@ -97,6 +97,7 @@ def assert_blocks_equal(a: DecodedBlock, b: DecodedBlock) -> None:
 
 
 @pytest.mark.parametrize("name", SETS)
+@pytest.mark.slow
 def test_real_captures_batch_and_stream_equal_per_message(name: str) -> None:
     data = capture(name).read_bytes()
     block = decode_capture(data)
@@ -156,6 +157,7 @@ pieces = st.one_of(
 
 @settings(max_examples=120, deadline=None)
 @given(st.lists(pieces, max_size=25).map(b"".join), st.lists(st.integers(0, 3000), max_size=12))
+@pytest.mark.slow
 def test_batch_equals_reference_and_stream_under_any_chunking(stream: bytes, cuts: list[int]) -> None:
     block = decode_capture(stream)
     assert_same_as_reference(block, stream)
@@ -183,6 +185,7 @@ def test_structured_outputs_in_mixed_layouts_match_per_message() -> None:
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.slow
 def test_long_corrupted_capture_uses_the_row_sum_path_and_still_matches(seed: int) -> None:
     rng = np.random.default_rng(seed)
     clean = np.frombuffer(decay_capture(6000, seed=seed), dtype=np.uint8).copy()

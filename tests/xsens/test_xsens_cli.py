@@ -94,6 +94,7 @@ def _empty_mcap() -> bytes:
         ("text.txt", b"hello, not a capture", "no Xbus frames"),
     ],
 )
+@pytest.mark.slow
 def test_bad_captures_give_one_line_and_exit_2(
     tmp_path: Path, name: str, content: bytes | None, message: str
 ) -> None:

@@ -117,6 +117,7 @@ def split(data: bytes, cuts: list[int]) -> list[bytes]:
 
 @settings(max_examples=150, deadline=None)
 @given(noisy_streams(), st.lists(st.integers(0, 4000), max_size=20))
+@pytest.mark.slow
 def test_framer_recovers_every_intact_frame_under_any_chunking(
     case: tuple[bytes, list[Frame], int], cuts: list[int]
 ) -> None:

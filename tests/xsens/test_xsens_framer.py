@@ -25,6 +25,7 @@ def noisy() -> tuple[bytes, np.ndarray]:
     return noisy_capture(FRAMES, corrupt_fraction=0.03, stray_fraction=0.03, seed=11)
 
 
+@pytest.mark.slow
 def test_sequential_framer_keeps_every_intact_frame_and_invents_none(noisy) -> None:
     stream, intact = noisy
     clean = np.frombuffer(decay_capture(FRAMES, seed=11), np.uint8).reshape(FRAMES, FRAME_BYTES)
@@ -37,6 +38,7 @@ def test_sequential_framer_keeps_every_intact_frame_and_invents_none(noisy) -> N
     assert framer.false_syncs > 0  # false headers passed the checksum and were turned away
 
 
+@pytest.mark.slow
 def test_streaming_decoder_keeps_every_intact_frame_and_invents_none(noisy) -> None:
     stream, intact = noisy
     expected = decode_capture(decay_capture(FRAMES, seed=11))
@@ -73,6 +75,7 @@ def test_a_frame_waits_for_its_successor_and_a_quiet_line_releases_it() -> None:
     assert framer.pending == len(ack)  # which itself waits for its own successor
 
 
+@pytest.mark.slow
 def test_the_sizes_check_agrees_with_the_decoder_on_random_payloads() -> None:
     rng = np.random.default_rng(4)
     names = ("PacketCounter", "EulerAngles", "DeviceId", "GnssSatInfo", "UtcTime")
@@ -126,6 +129,7 @@ def _in_order(wanted: list[bytes], got: list[bytes]) -> bool:
     loss=st.sampled_from(["stray header", "corrupted frame", "cut frame", "broken header"]),
     chunk=st.integers(1, 300),
 )
+@pytest.mark.slow
 def test_a_stream_that_ends_right_after_a_held_frame_loses_no_intact_frame(
     seed: int, n: int, loss: str, chunk: int
 ) -> None:

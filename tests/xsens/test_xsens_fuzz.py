@@ -70,6 +70,7 @@ def _consume(message: object) -> None:
 
 @settings(max_examples=400, deadline=None)
 @given(st.lists(messages, min_size=1, max_size=6))
+@pytest.mark.slow
 def test_structured_random_mtdata2_never_raises(payloads: list[bytes]) -> None:
     stream = b"".join(build_frame(MID.MTDATA2, payload) for payload in payloads)
     for payload in payloads:
@@ -106,6 +107,7 @@ LEGACY_UTC = (MODE_ORIENTATION, 0x00000002)
 
 @settings(max_examples=200, deadline=None)
 @given(st.binary(max_size=80), st.sampled_from(NOT_A_TIME))
+@pytest.mark.slow
 def test_legacy_messages_with_any_bytes_or_a_zero_time_never_raise(noise: bytes, utc: UtcTime) -> None:
     layout = legacy_layout(*LEGACY_UTC)
     size = layout.length

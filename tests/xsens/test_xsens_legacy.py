@@ -170,6 +170,7 @@ def legacy_messages(draw: st.DrawFn) -> tuple[int, int, dict[str, object]]:
 
 @settings(max_examples=200, deadline=None)
 @given(legacy_messages())
+@pytest.mark.slow
 def test_legacy_round_trip(case: tuple[int, int, dict[str, object]]) -> None:
     mode, settings_, values = case
     payload = encode_mtdata(values, mode, settings_)

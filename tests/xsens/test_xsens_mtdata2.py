@@ -139,6 +139,7 @@ def same(a: object, b: object) -> bool:
 @pytest.mark.parametrize(("spec", "precision", "frame"), COMBINATIONS, ids=lambda v: getattr(v, "name", v))
 @settings(max_examples=15, deadline=None)
 @given(data=st.data())
+@pytest.mark.slow
 def test_round_trip_every_identifier_precision_frame(
     spec: DataSpec, precision: str, frame: str, data: st.DataObject
 ) -> None:
@@ -154,6 +155,7 @@ def test_round_trip_every_identifier_precision_frame(
 
 @settings(max_examples=200, deadline=None)
 @given(messages())
+@pytest.mark.slow
 def test_round_trip_whole_messages_through_frames(items: list[tuple[int, object]]) -> None:
     payload = encode_mtdata2(items)
     msg = decode_mtdata2(parse_frame(build_frame(MID.MTDATA2, payload)).payload)

@@ -79,6 +79,7 @@ def test_real_captures_with_gnss_messages_unwrap_to_themselves() -> None:
     st.lists(st.integers(-600, 50_000), min_size=1, max_size=200),
     st.lists(st.integers(1, 50), max_size=8),
 )
+@pytest.mark.slow
 def test_vectorised_unwrap_equals_scalar_and_recovers_the_true_time(
     start: int, steps: list[int], chunk_sizes: list[int]
 ) -> None:
@@ -105,6 +106,7 @@ def test_counter_gaps_modulo_2_pow_16() -> None:
     assert tracker.lost == 2 + 4994 and tracker.out_of_order == 1  # the repeat is not a loss
 
 
+@pytest.mark.slow
 def test_counter_tracker_vectorised_equals_scalar() -> None:
     rng = np.random.default_rng(7)
     counters = (np.cumsum(rng.choice([1, 1, 1, 2, 5], size=5000)) + 60000) % 65536
