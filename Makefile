@@ -116,7 +116,7 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	mkdir -p build
 	$(BIN)/python -m compileall -q src
 	nice -n 19 $(MAKE) --no-print-directory lint >$(CHECKS_LOG) 2>&1 & checks=$$!; \
-	$(BIN)/python -m tankdaq.prepare || { wait $$checks; cat $(CHECKS_LOG); exit 1; }; \
+	$(BIN)/python -m tankdaq.prepare --jit || { wait $$checks; cat $(CHECKS_LOG); exit 1; }; \
 	nice -n 19 $(MAKE) --no-print-directory docs >$(DOCS_LOG) 2>&1 & docs=$$!; \
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=0 --durations-min=5; tested=$$?; \
 	wait $$checks; checked=$$?; wait $$docs; documented=$$?; \
@@ -131,7 +131,7 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 # compileall: with PYTHONDONTWRITEBYTECODE set, each worker would compile the edited source again.
 check: lint
 	$(BIN)/python -m compileall -q src
-	$(BIN)/python -m tankdaq.prepare
+	$(BIN)/python -m tankdaq.prepare --jit
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile -m "not slow" -q
 
 bench: $(TEST_STAMP)
