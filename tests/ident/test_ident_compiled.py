@@ -134,6 +134,7 @@ def test_a_build_without_a_c_compiler_falls_back_and_is_not_retried(tmp_path: Pa
     assert native == "False" and said.startswith(reason) and f"delete {note} to retry" in said, said
 
 
+@pytest.mark.slow  # a process of its own tries each module
 def test_a_built_module_that_does_not_run_here_is_refused_before_it_is_used(tmp_path: Path) -> None:
     """A module that dies on this CPU (an illegal instruction) must fail the build, not a recording."""
     broken = tmp_path / f"{compiled.MODULE_NAME}.so"
