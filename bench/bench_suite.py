@@ -1,0 +1,89 @@
+"""The maintainers' loop: what ``make check`` costs (issue 43: under a minute on this 2-core machine), and,
+with ``--full``, what the whole suite of ``make test`` costs (under ten minutes).
+
+Run from the repository: .venv/bin/python bench/bench_suite.py [--full]. It writes bench/results/suite.json.
+Each step runs as ``make check`` runs it (the lint with its warm caches, the source compiled, the kernels
+prepared, then ``pytest -n auto --dist loadfile -m "not slow"``); the figures are each step's wall time and
+the CPU time (user + system) of it and its children, with the tests counted from pytest's last line. The
+baseline, measured in the same run, is collecting the tests (``pytest --collect-only``, one process): the
+ratio says how many collections the step costs, a figure that keeps when the machine's speed does not.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from benchjson import write_result
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+PYTEST = [sys.executable, "-m", "pytest", "-p", "no:cacheprovider"]
+STEPS = {
+    "lint": [
+        [str(BIN / "ruff"), "check", "-q", "src", "tests", "bench", "tools"],
+        [str(BIN / "ruff"), "format", "--check", "-q", "src", "tests", "bench", "tools"],
+        [str(BIN / "mypy")],
+    ],
+    "prepare": [
+        [sys.executable, "-m", "compileall", "-q", "src"],
+        [sys.executable, "-m", "tankdaq.prepare", "--jit"],
+    ],
+    "tests_not_slow": [[*PYTEST, "-n", "auto", "--dist", "loadfile", "-m", "not slow", "-q"]],
+}
+FULL = [*PYTEST, "-n", "auto", "--dist", "loadfile", "-q"]
+BASELINE = [*PYTEST, "--collect-only", "-q"]
+
+
+def timed(commands: list[list[str]]) -> tuple[float, float, str]:
+    """Wall and CPU seconds of ``commands`` run one after another (each must pass), and the last output."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.monotonic()
+    said = ""
+    for argv in commands:
+        done = subprocess.run(argv, cwd=ROOT, env=ENV, capture_output=True, text=True)
+        said = done.stdout + done.stderr
+        if done.returncode != 0:
+            raise SystemExit(f"bench_suite: {' '.join(argv[:4])} failed:\n{said[-3000:]}")
+    wall = time.monotonic() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime), said
+
+
+def passed(said: str) -> int:
+    found = re.search(r"(\d+) passed", said)
+    return int(found[1]) if found else 0
+
+
+def main(full: bool) -> None:
+    base_wall, base_cpu, _ = timed([BASELINE])
+    figures: dict[str, dict[str, float]] = {"collect_only": {"wall_s": base_wall, "cpu_s": base_cpu}}
+    counts: dict[str, int] = {}
+    steps = dict(STEPS) | ({"tests_all": [FULL]} if full else {})
+    for name, commands in steps.items():
+        wall, cpu, said = timed(commands)
+        figures[name] = {"wall_s": round(wall, 1), "cpu_s": round(cpu, 1)}
+        if name.startswith("tests"):
+            counts[name] = passed(said)
+        print(f"{name}: {wall:.1f} s wall, {cpu:.1f} s CPU", flush=True)
+    check = {k: sum(figures[s][k] for s in STEPS) for k in ("wall_s", "cpu_s")}
+    figures["make_check"] = {k: round(v, 1) for k, v in check.items()}
+    print(f"make check: {check['wall_s']:.1f} s wall, {check['cpu_s']:.1f} s CPU (target: 60 s wall)")
+    write_result(
+        "suite",
+        "make check's steps (and with --full the whole pytest run of make test): wall and CPU seconds",
+        counts=counts,
+        figures=figures,
+        ratios={"make_check_cpu_over_collect": round(check["cpu_s"] / base_cpu, 2)},
+        baseline="pytest --collect-only in one process, measured in the same run",
+    )
+
+
+if __name__ == "__main__":
+    main("--full" in sys.argv[1:])
