@@ -61,7 +61,7 @@ def tablet_blueprint(terms: Sequence[str] = ()) -> rrb.Blueprint:
     the events last; the plots the last ``WINDOW_S``; side panels collapsed (no room on a phone)."""
     import rerun.blueprint as rrb
 
-    legend = rrb.PlotLegend(corner="RightTop")
+    legend = rrb.PlotLegend(corner="LeftBottom")  # the newest data is drawn on the right
     window = rrb.VisibleTimeRange(
         TIMELINE,
         start=rrb.TimeRangeBoundary.cursor_relative(seconds=-WINDOW_S),
