@@ -1,11 +1,12 @@
 """A recorder with ``--viewer web`` and a real browser on its page: what tests/viz/test_web_viewer.py and
 bench/bench_web_memory.py share.
 
-The recorder is ``tankdaq record`` (or ``session``) in a process of its own, its stderr read on a thread:
-its printed lines (the address, each release and settle) are waited for as events, each wait bounded and
-failing with what it said. The browser is Debian's Chromium, headless, through playwright, drawing WebGL
-in software (SwiftShader): every page costs CPU while it draws, so the pages are small where only the
-data's arrival is checked, and each is closed once checked. What a page holds is read from the viewer
+The recorder is ``tankdaq record`` (or ``session``) in a process of its own, with ``--events jsonl``: its
+typed events (the viewer's address, each release and settle) are read on a thread and waited for, each
+wait bounded and failing with what it said (its printed lines, read on another). The browser is Debian's
+Chromium, headless, through playwright, drawing WebGL in software (SwiftShader): every page costs CPU while
+it draws, so the pages are small where only the data's arrival is checked, and each is closed once
+checked. What a page holds is read from the viewer
 itself: ``window._handle.save_recording()`` (the web viewer's own handle) gives its active recording as
 .rrd bytes, read back with rerun's ``RrdReader``.
 """
@@ -15,8 +16,8 @@ from __future__ import annotations
 import base64
 import contextlib
 import io
+import json
 import os
-import re
 import signal
 import socket
 import subprocess
@@ -93,31 +94,38 @@ def free_ports(count: int) -> list[int]:
 
 
 class RunningTankdaq:
-    """``tankdaq ARGS`` with its stderr collected line by line; ``url`` waits for the printed address.
-    Used as a context manager: stopped at the end (Ctrl-C, killed if that hangs), whatever happened."""
+    """``tankdaq ARGS`` (given ``--events jsonl``) in a process of its own: its events (stdout, one JSON
+    object a line) and its printed lines (stderr, for people and for a failure's message) collected on
+    threads of their own; ``wait_event`` waits for one. Used as a context manager: stopped at the end
+    (Ctrl-C, killed if that hangs), whatever happened."""
 
     def __init__(
         self,
         args: list[str],
         cwd: Path,
         stdin: int | None = subprocess.DEVNULL,
-        on_line: Callable[[str], None] = lambda _line: None,
+        on_event: Callable[[dict[str, Any]], None] = lambda _event: None,
     ) -> None:
-        self.on_line = on_line  # called on the reading thread as each line comes (a memory sample)
+        self.on_event = on_event  # called on the reading thread as each event comes (a memory sample)
         env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
         self.process = subprocess.Popen(
             [str(Path(sys.executable).with_name("tankdaq")), *args],
             cwd=cwd,
             stdin=stdin,
-            stdout=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
             env=env,
         )
+        self.events: list[dict[str, Any]] = []
         self.lines: list[str] = []
         self._heard = threading.Condition()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
+        self._readers = [
+            threading.Thread(target=self._read_events, daemon=True),
+            threading.Thread(target=self._read_lines, daemon=True),
+        ]
+        for reader in self._readers:
+            reader.start()
 
     def __enter__(self) -> RunningTankdaq:
         return self
@@ -125,42 +133,54 @@ class RunningTankdaq:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
-    def _read(self) -> None:
-        assert self.process.stderr is not None
-        for line in self.process.stderr:
-            self.on_line(line)
+    def _read_events(self) -> None:
+        assert self.process.stdout is not None
+        for text in self.process.stdout:
+            event = json.loads(text)
+            self.on_event(event)
             with self._heard:
-                self.lines.append(line.rstrip("\n"))
+                self.events.append(event)
                 self._heard.notify_all()
         with self._heard:
             self._heard.notify_all()  # the end: a waiter stops waiting
+
+    def _read_lines(self) -> None:
+        assert self.process.stderr is not None
+        for line in self.process.stderr:
+            with self._heard:
+                self.lines.append(line.rstrip("\n"))
 
     def said(self) -> str:
         with self._heard:
             return "\n".join(self.lines)
 
-    def wait_line(self, pattern: str, timeout_s: float = LINE_TIMEOUT_S) -> re.Match[str]:
-        """The first line matching ``pattern``, waited for; fails with what was said when none came."""
-        found: list[re.Match[str]] = []
+    def count(self, kind: str) -> int:
+        """How many ``kind`` events it said so far."""
+        with self._heard:
+            return sum(1 for event in self.events if event["event"] == kind)
+
+    def wait_event(self, kind: str, timeout_s: float = LINE_TIMEOUT_S, **values: Any) -> dict[str, Any]:
+        """The first ``kind`` event holding ``values``, waited for; fails with what it said when none came."""
+        found: list[dict[str, Any]] = []
 
         def match() -> bool:
-            found[:] = [m for line in self.lines if (m := re.search(pattern, line))][:1]
-            return bool(found) or not self._reader.is_alive()
+            found[:] = [e for e in self.events if e["event"] == kind and e.items() >= values.items()][:1]
+            return bool(found) or not self._readers[0].is_alive()
 
         with self._heard:
             self._heard.wait_for(match, timeout_s)
         if not found:
-            ended = "it ended" if not self._reader.is_alive() else f"none in {timeout_s:g} s"
-            pytest.fail(f"tankdaq said no line matching {pattern!r} ({ended}); it said:\n{self.said()}")
+            ended = "it ended" if not self._readers[0].is_alive() else f"none in {timeout_s:g} s"
+            pytest.fail(f"tankdaq said no {kind} event {values} ({ended}); it said:\n{self.said()}")
         return found[0]
 
     def release_at(self, run: int) -> float:
-        """The device time of run ``run``'s release (``run N: released ..., t = T s``), waited for."""
-        return float(self.wait_line(rf"^run {run}: released .* t = ([0-9.]+) s").group(1))
+        """The device time of run ``run``'s release, waited for."""
+        return float(self.wait_event("released", run=run)["t_s"])
 
     @property
     def url(self) -> str:
-        return self.wait_line(r"viewer: open (http\S+)").group(1)
+        return str(self.wait_event("viewer_address")["url"])
 
     def interrupt(self, timeout_s: float = LINE_TIMEOUT_S) -> int:
         """Ctrl-C (SIGINT), then its exit code."""
@@ -174,7 +194,8 @@ class RunningTankdaq:
             code = self.process.wait(timeout_s)
         except subprocess.TimeoutExpired:
             pytest.fail(f"tankdaq did not end in {timeout_s:g} s; it said:\n{self.said()}")
-        self._reader.join(5.0)
+        for reader in self._readers:
+            reader.join(5.0)
         return code
 
     def stop(self) -> None:
@@ -391,7 +412,7 @@ def record_args(
     """``tankdaq record`` on the simulated MTi-G (seed 0), ``runs`` decays (None: until stopped), the web
     viewer on ``bind`` (None: the default, the machine's network address) at ``ports`` (data, page)."""
     args = ["record", "--port", "sim", "--draft", "T", "--angle", "8", "--hull", "swath", "--out", str(out)]
-    args += ["--seed", "0", "--sim-speed", speed, "--viewer", viewer]
+    args += ["--seed", "0", "--sim-speed", speed, "--viewer", viewer, "--events", "jsonl"]
     args += ["--runs", str(runs)] if runs is not None else []
     if viewer.startswith("web"):
         args += ["--viewer-port", str(ports[0]), "--viewer-web-port", str(ports[1])]
@@ -406,11 +427,11 @@ def memory_over_decays(
     all along; the resident set of tankdaq (and of it with its view process and server) at each
     decay's settle. The page is checked to have been served a fitted decay at the end."""
     sampler = SettleMemory(on_decay)
-    with RunningTankdaq(record_args(out, decays, free_ports(2)), out.parent, on_line=sampler) as recorder:
+    with RunningTankdaq(record_args(out, decays, free_ports(2)), out.parent, on_event=sampler) as recorder:
         sampler.pid = recorder.process.pid
         with chromium() as browser:
             page = new_page(browser, SMALL, recorder.url)
-            recorder.wait_line(rf"^run {decays}: .* -> ", timeout_s=LINE_TIMEOUT_S * decays)
+            recorder.wait_event("settled", timeout_s=LINE_TIMEOUT_S * decays, run=decays)
             wait_shown(page, lambda seen: bool(seen.fits()), "a fitted decay")
             page.context.close()
         assert recorder.finish() == 0, recorder.said()
@@ -420,7 +441,7 @@ def memory_over_decays(
 
 class SettleMemory:
     """The resident set of a recorder (``pid``; and of it with its view process and server) as each of
-    its decays settles: a line ``run N: ... -> FILE`` heard (``RunningTankdaq``'s ``on_line``)."""
+    its decays settles: its ``settled`` event heard (``RunningTankdaq``'s ``on_event``)."""
 
     def __init__(self, on_decay: Callable[[int], None] = lambda _n: None) -> None:
         self.pid: int | None = None
@@ -428,8 +449,8 @@ class SettleMemory:
         self.tree: list[float] = []
         self.on_decay = on_decay
 
-    def __call__(self, line: str) -> None:
-        if self.pid is None or not re.match(r"^run \d+: .* -> ", line):
+    def __call__(self, event: dict[str, Any]) -> None:
+        if self.pid is None or event["event"] != "settled":
             return
         with contextlib.suppress(OSError):  # ended meanwhile: nothing to measure
             self.own.append(resident_mb(self.pid))

@@ -16,7 +16,6 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import re
 import signal
 import socket
 from pathlib import Path
@@ -44,7 +43,7 @@ from support.web_browser import (
     record_args,
     wait_shown,
 )
-from tankdaq.acquire.events import Held, Released, SessionStep, SessionVerdict
+from tankdaq.acquire.events import Held, Released, SessionStep, SessionVerdict, ViewerAddress
 from tankdaq.acquire.live_panel import LivePanel
 from tankdaq.device.driver import StreamBlock
 from tankdaq.records import Verdict
@@ -120,11 +119,9 @@ def contents(folder: Path) -> list[dict[str, Any]]:
     return kept
 
 
-def release_intervals(lines: list[str]) -> list[float]:
-    """The half-widths (s) of the 95 % intervals of the releases a recorder printed, in order."""
-    return [
-        1e-3 * float(m.group(1)) for line in lines if (m := re.search(r"released .* ± ([0-9.]+) ms", line))
-    ]
+def release_intervals(events: list[dict[str, Any]]) -> list[float]:
+    """The half-widths (s) of the 95 % intervals of a recorder's releases, in order."""
+    return [float(event["u95_s"]) for event in events if event["event"] == "released"]
 
 
 def screenshot(page: Any, size: dict[str, int], name: str) -> bytes:
@@ -147,7 +144,7 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     with contextlib.ExitStack() as stack:
         recorder = stack.enter_context(
             RunningTankdaq(
-                record_args(folder / "watched", None, ports[:2], speed=WATCHED_SPEED), folder, on_line=memory
+                record_args(folder / "watched", None, ports[:2], speed=WATCHED_SPEED), folder, on_event=memory
             )
         )
         memory.pid = pid = recorder.process.pid
@@ -165,9 +162,9 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         for name in ("3", "4", "5"):
             pages.pop(name).close()
         phone, tablet = pages["phone"], pages["tablet"]
-        run = 1 + sum(1 for line in recorder.lines if " released at " in line)
+        run = 1 + recorder.count("released")
         reloaded_at = recorder.release_at(run)
-        settled_before = any(line.startswith(f"run {run}: ") and " -> " in line for line in recorder.lines)
+        settled_before = recorder.count("settled") >= run
         phone.reload()
         phone_seen = wait_shown(phone, lambda seen: settled(seen, reloaded_at), f"decay {run} and its model")
         shots = {"phone": screenshot(phone, PHONE, "live-view-phone.png")}
@@ -177,7 +174,7 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         )
         shots["tablet"] = screenshot(tablet, TABLET, "live-view-tablet.png")
         tablet.close()
-        recorder.wait_line(rf"^run {max(run, COMPARED)}: .* -> ")
+        recorder.wait_event("settled", run=max(run, COMPARED))
         code = recorder.interrupt()
     # the run without a browser after the browsers are gone: nothing else of the test's takes the cores
     with RunningTankdaq(
@@ -187,8 +184,10 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     return {
         "code": code,
         "alone_code": alone_code,
-        "alone_lines": list(alone.lines),
+        "alone_events": list(alone.events),
+        "events": list(recorder.events),
         "lines": list(recorder.lines),
+        "url": url,
         "ports": ports[:2],
         "listens": listens,
         "first": first,
@@ -207,11 +206,11 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
 
 @pytest.mark.slow
 def test_the_printed_address_is_the_one_asked_and_its_qr_code_follows(served: dict[str, Any]) -> None:
-    lines = served["lines"]
+    lines, (grpc, web) = served["lines"], served["ports"]
     assert served["code"] == 130, "\n".join(lines)  # stopped by Ctrl-C, its files closed
-    said = next(i for i, line in enumerate(lines) if line.startswith("viewer: open http://127.0.0.1:"))
-    assert f":{served['ports'][1]}/?url=" in lines[said]  # the page's port asked
-    assert f"%2F%2F127.0.0.1%3A{served['ports'][0]}%2Fproxy" in lines[said]  # the data server's, same host
+    assert served["url"] == WebAddress("127.0.0.1", grpc, web).tablet_url  # the address and ports asked
+    assert f"%2F%2F127.0.0.1%3A{grpc}%2Fproxy" in served["url"]  # the data server's, on the same host
+    said = lines.index(ViewerAddress(served["url"]).line())  # printed for people, as the event says
     assert lines[said + 1].startswith("█") and len(lines[said + 1]) == len(lines[said + 2])  # the QR code
 
 
@@ -265,7 +264,7 @@ def test_browsers_killed_or_many_leave_the_recordings_as_without_any(served: dic
     watched, alone = served["watched"], served["alone"]  # the watched run went on until stopped
     assert len(watched) == len(alone) == COMPARED
     intervals = zip(
-        release_intervals(served["lines"]), release_intervals(served["alone_lines"]), strict=False
+        release_intervals(served["events"]), release_intervals(served["alone_events"]), strict=False
     )
     for ours, theirs, (ours_u95, theirs_u95) in zip(watched, alone, intervals, strict=True):
         release, release_alone = float(ours["release_t_s"]), float(theirs["release_t_s"])
@@ -317,11 +316,11 @@ def test_a_guided_session_shows_its_step_and_verdict_on_the_tablet(tmp_path: Pat
     args = ["session", "plan.toml", "--port", "sim", "--hull", "swath", "--out", "s", "--seed", "0"]
     args += ["--responses", "answers.txt", "--sim-speed", WATCHED_SPEED, "--viewer", "web"]
     args += ["--viewer-bind", "127.0.0.1", "--viewer-port", str(grpc), "--viewer-web-port", str(web)]
+    args += ["--events", "jsonl"]
     ours, theirs = os.openpty()  # the next draft's question waits at this terminal: the panel holds still
     try:
         with RunningTankdaq(args, tmp_path, stdin=theirs) as session, chromium() as browser:
             page = new_page(browser, SMALL, session.url)
-            session.wait_line(r"^decay 1: accepted")
 
             def judged(seen: Shown) -> bool:
                 return "decay 1 **ACCEPTED**" in seen.text("/session") and bool(seen.fits())

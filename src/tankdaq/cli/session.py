@@ -15,6 +15,8 @@ from .app import app, build_kernels_shown, catalogue_option, checked, err_consol
 from .record import (
     DEFAULT_LIVE_MODEL,
     STOPPED_EXIT_CODE,
+    EventsFormat,
+    EventsOption,
     LiveModelOption,
     SimSeedOption,
     SimSpeedOption,
@@ -107,7 +109,9 @@ def session_command(
     sim_seed: SimSeedOption = None,
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
     catalogue: Annotated[str | None, catalogue_option()] = None,
+    events: EventsOption = None,
 ) -> None:
+    from ..acquire.listeners import EventStream
     from ..catalogue.hooks import CatalogueWriter, session_listener
     from ..config.plans import load_campaign_plan
     from ..physics.scenario import parse_fault_script
@@ -145,6 +149,7 @@ def session_command(
             ),
             resume=resume,
             on_verdict=session_listener(writer, out),
+            listeners=[EventStream(sys.stdout)] if events is EventsFormat.jsonl else [],
         )
         build_kernels_shown()
         try:
