@@ -334,7 +334,7 @@ def test_a_guided_session_shows_its_step_and_verdict_on_the_tablet(tmp_path: Pat
         os.close(theirs)
     panel = seen.text("/session")
     assert "Step 1 of 2 · decay 1" in panel and "**T 8 deg**, repeat 1/1" in panel, panel
-    assert "→ target 8°" in panel and "**Next:** 1.1T 8 deg" in panel, panel
+    assert "→ target 8°" in panel and "## Next: 1.1T 8 deg" in panel, panel
     assert colour_pixels(shot, MEASURED_COLOR) > 200 and colour_pixels(shot, MODEL_COLOR) > 100
 
 
@@ -417,7 +417,7 @@ def test_the_operator_panel_says_the_step_the_angle_and_the_verdict() -> None:
     assert "decay 3 **TO JUDGE** — R² 0.97 under 0.99" in pages.shown[-1][0]
     assert "Answer at the PC" in pages.shown[-1][0]
     panel.on_event(SessionVerdict(3, Verdict.REJECTED, ("R² 0.97 under 0.99",), "T 6 deg"))
-    assert "decay 3 **REJECTED**" in pages.shown[-1][0] and "**Next:** T 6 deg" in pages.shown[-1][0]
+    assert "decay 3 **REJECTED**" in pages.shown[-1][0] and "## Next: T 6 deg" in pages.shown[-1][0]
     count = len(pages.shown)
     panel.on_block(block_at(10.1, math.radians(5.8)), None)  # within the refresh: not redrawn
     assert len(pages.shown) == count

@@ -65,7 +65,6 @@ class LivePanel(Sink):
         self.heading = "Recording"
         self.prompt = f"Tilt to {target_deg:g}° and hold, then release"
         self.last = ""
-        self.next = ""
         self.angle_deg = math.nan
         self.t_s = math.nan
         self._shown = ""
@@ -90,7 +89,6 @@ class LivePanel(Sink):
             self.prompt = f"Tilt to {event.target_deg:g}° and hold, then release"
         elif isinstance(event, SessionVerdict):
             self.last = _verdict(event)
-            self.next = event.next
             self.prompt = (
                 "Answer at the PC (accept or repeat)" if event.verdict is None else f"Next: {event.next}"
             )
@@ -111,14 +109,14 @@ class LivePanel(Sink):
         self._show(force=True)
 
     def markdown(self) -> str:
-        """The page: heading, the angle now against the target (large), the prompt, last and next."""
+        """The page: heading, the angle now against the target (large), the prompt (what comes next), the
+        last decay."""
         now = "—" if math.isnan(self.angle_deg) else f"{self.angle_deg:+.1f}°"
         lines = [
             self.heading,
             f"# {now} → target {self.target_deg:g}°",
             f"## {self.prompt}",
             *_optional("Last", self.last),
-            *_optional("Next", self.next),
         ]
         return "\n\n".join(lines)
 
