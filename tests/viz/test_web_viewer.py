@@ -351,6 +351,7 @@ def test_the_address_for_a_tablet_is_the_network_one_unless_asked() -> None:
     assert WebAddress("127.0.0.1").tablet_url.startswith("http://127.0.0.1:9090/?url=rerun%2Bhttp")
 
 
+@pytest.mark.slow  # a recorder of its own
 def test_without_a_bind_the_address_printed_is_the_network_one(tmp_path: Path) -> None:
     lan = lan_address()
     if lan is None:
@@ -361,6 +362,7 @@ def test_without_a_bind_the_address_printed_is_the_network_one(tmp_path: Path) -
     assert url.startswith(f"http://{lan}:") and f"%2F%2F{lan}%3A" in url and lan != "127.0.0.1"
 
 
+@pytest.mark.slow  # a recorder of its own
 def test_a_port_in_use_is_one_line_before_the_device_opens(tmp_path: Path) -> None:
     grpc, web = free_ports(2)
     with socket.socket() as taken:
