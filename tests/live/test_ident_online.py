@@ -58,3 +58,29 @@ def test_a_settled_noisy_record_does_not_trigger_refits():
         refits_after += result is not None and start >= settled_from
     assert len(online.results_) >= 3
     assert refits_after <= 1
+
+
+@pytest.mark.slow
+def test_the_final_fit_is_the_samples_up_to_the_end_whatever_the_refits_and_reads_were():
+    """Two identifiers fed the same decay in different packets (so their refits fall elsewhere and start
+    from other answers), one of them fed a second more past the end the detector decided: the final fits
+    are equal to the last bit, and equal to a cold ``auto`` identifier's fed all at once."""
+    truth = truth_for(("b1", "b2", "c1", "c3"))
+    run = synthetic_run(truth, seed=24, angle0=0.25)
+    end_t = float(run.t[int(run.t.size * 0.8)])
+    finals = []
+    for packet, past_end_s in ((7, 0.0), (53, 1.0)):
+        online = OnlineIdentifier("auto")
+        fed = run.t <= end_t + past_end_s
+        for start in range(0, int(fed.sum()), packet):
+            part = slice(start, min(start + packet, int(fed.sum())))
+            online.update(run.t[part], run.angle[part], run.rate[part])
+        assert online.results_  # refits ran, from starts of their own
+        finals.append(online.finish(until_t=end_t))
+    whole = OnlineIdentifier("auto")
+    kept = run.t <= end_t
+    whole.update(run.t[kept], run.angle[kept], run.rate[kept])
+    finals.append(whole.finish())
+    for other in finals[1:]:
+        assert other.coefficients == finals[0].coefficients
+        assert other.ci95 == finals[0].ci95 and other.n_samples == finals[0].n_samples

@@ -177,8 +177,9 @@ class LiveFit:
             said += self._said(decay, result)
         return said + self._abandoned(self._live, decay)
 
-    def finish(self, decay: LiveDecay) -> list[Event]:
-        """The decay ended: the last refits and the final fit (none after an error: it may be in it)."""
+    def finish(self, decay: LiveDecay, until_t: float = math.inf) -> list[Event]:
+        """The decay ended: the last refits and the final fit of its samples up to ``until_t`` (the device
+        time its end was decided; none after an error: it may be in it)."""
         live, self._live = self._live, None
         if live is None:
             return []
@@ -187,7 +188,7 @@ class LiveFit:
             return []
         started = time.perf_counter()
         try:
-            refits, final = live.finish(FINAL_FIT_WAIT_S)
+            refits, final = live.finish(FINAL_FIT_WAIT_S, until_t)
         except TankdaqError as exc:  # an unfittable decay (too short, cut by an unplug) is a warning
             return [*self._abandoned(live, decay), Note(NoteKind.WARNING, f"no final fit: {exc}", decay.run)]
         finally:

@@ -221,7 +221,7 @@ class DecayPipeline:
         elif event.kind == ReleaseKind.RELEASED and decay is None:
             self._start_decay(axis, event)
         elif event.kind == ReleaseKind.SETTLED and decay is not None:
-            return self._finish_decay(event.ended or DecayEnd.SETTLED)
+            return self._finish_decay(event.ended or DecayEnd.SETTLED, event.confirmed_t)
         return None
 
     # ---- one decay ----------------------------------------
@@ -295,16 +295,17 @@ class DecayPipeline:
             chosen[0] = dataclasses.replace(head, samples=head.samples[head.carried :], carried=0)
         return chosen
 
-    def _finish_decay(self, ended: DecayEnd) -> DecayOutcome:
-        """The final fit broadcast (the file takes it), then every sink hears the settle (the file closes
-        before the view is told), even when one raises (the failure is passed on after, the decay closed)."""
+    def _finish_decay(self, ended: DecayEnd, until_t: float = math.inf) -> DecayOutcome:
+        """The final fit (of the samples up to ``until_t``, where the detector decided) broadcast (the file
+        takes it), then every sink hears the settle (the file closes before the view is told), even when
+        one raises (the failure is passed on after, the decay closed)."""
         decay = self.decay
         assert decay is not None
         decay.ended = ended
         self.state = PipelineState.SETTLED
         try:
             if self.fit is not None:
-                self.broadcast(self.fit.finish(decay))
+                self.broadcast(self.fit.finish(decay, until_t))
         finally:
             self.decay = None
             try:

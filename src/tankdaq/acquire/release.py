@@ -66,7 +66,8 @@ class ReleaseEvent:
     ``put_back``: a hold ended without a release. ``settled``: the amplitude stayed below the
     threshold for a window (``ended`` ``DecayEnd.SETTLED``) or the decay timed out (``TIMEOUT``);
     ``settle_s`` is the time from release.
-    Every event also carries ``confirmed_index``: the sample at which the detector decided.
+    Every event also carries ``confirmed_index`` and ``confirmed_t``: the sample at which the detector
+    decided, and its time on the device clock (where the data, not a read's timing, ends a decay).
     """
 
     kind: ReleaseKind
@@ -81,6 +82,7 @@ class ReleaseEvent:
     release_u95_s: float = math.nan
     settle_s: float = math.nan
     ended: DecayEnd | None = None
+    confirmed_t: float = math.nan
 
 
 def _first_sustained(mask: np.ndarray, length: int, start: int) -> int | None:
@@ -288,6 +290,7 @@ class ReleaseDetector(EstimatorMixin):
             release_u95_s=release_u95_s,
             settle_s=settle_s,
             ended=ended,
+            confirmed_t=float(self._t[confirmed_local]),
         )
         self.events_.append(event)
         return event

@@ -6,7 +6,8 @@ output-error fit is redone on everything so far, started from the previous
 answer, so each refit costs a few Levenberg-Marquardt steps. Results go to a
 callback (the viewer, the recorder's /fit channel) and to ``results_``; a refit
 that fails (too little motion yet) is noted in ``failures_`` and skipped. At the
-end of the decay the last result is the offline ``OutputErrorFit`` of the same data.
+end of the decay the last result is the offline ``OutputErrorFit`` of the same data,
+started cold: the file's fit depends on its samples only, not on when the refits ran.
 
 It runs on a worker thread (``live.worker``) on kernels made ready before a device opens
 (``live.preparation``).
@@ -15,6 +16,7 @@ It runs on a worker thread (``live.worker``) on kernels made ready before a devi
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -154,11 +156,16 @@ class OnlineIdentifier(EstimatorMixin):
             self.failures_.append(f"t = {run.t[-1]:.2f} s: {exc}")
             return None
 
-    def finish(self) -> OnlineResult:
-        """Final refit on everything received: equals the offline fit of the same data."""
-        run = self._run()
+    def finish(self, until_t: float = math.inf) -> OnlineResult:
+        """Final fit on the samples received up to ``until_t`` (device s; the instant the decay's end was
+        decided), from the data alone: started as the offline fit starts, the model (``terms="auto"``)
+        chosen again from the family's simplest. Which refits ran, and how far past the end the last read
+        reached, depend on the machine's timing; the file's fit must not: the same samples give the same
+        fit, bit for bit."""
+        run = self._run(until_t)
         if run is None or (self.estimator_ is None and self._half_cycles(run) < 2):
             raise IdentificationError("the decay ended before a full oscillation: nothing to identify")
+        self.estimator_, self.level_ = None, 0
         return self._refit(run, self._half_cycles(run))
 
     @property
@@ -189,17 +196,19 @@ class OnlineIdentifier(EstimatorMixin):
                 current, self.level_ = larger, level
         return current
 
-    def _run(self) -> DecayRun | None:
+    def _run(self, until_t: float = math.inf) -> DecayRun | None:
+        """Everything received (up to ``until_t``, device s) as one run; None before 20 samples."""
         if not self._t:
             return None
         t = np.concatenate(self._t)
-        if t.size < 20:
+        kept = int(np.searchsorted(t, until_t, side="right"))
+        if kept < 20:
             return None
-        rate = np.concatenate(self._rate) if len(self._rate) == len(self._t) else None
-        excluded = np.concatenate(self._excluded).astype(bool)
+        rate = np.concatenate(self._rate)[:kept] if len(self._rate) == len(self._t) else None
+        excluded = np.concatenate(self._excluded).astype(bool)[:kept]
         return DecayRun(
-            t=t,
-            angle=np.concatenate(self._angle),
+            t=t[:kept],
+            angle=np.concatenate(self._angle)[:kept],
             rate=rate,
             axis=self.axis,
             name="live",

@@ -7,6 +7,7 @@ with a note.
 
 from __future__ import annotations
 
+import math
 import threading
 
 import numpy as np
@@ -54,6 +55,7 @@ class BackgroundFit:
         self._busy = False  # the worker holds samples it has not finished with
         self._results: list[OnlineResult] = []
         self._finish_requested = False
+        self._final_until_t = math.inf
         self._closed = False
         self._final: OnlineResult | None = None
         self._error: BaseException | None = None
@@ -97,8 +99,9 @@ class BackgroundFit:
             raise error
         return results
 
-    def finish(self, timeout_s: float) -> tuple[list[OnlineResult], OnlineResult]:
-        """Wait (at most ``timeout_s``) for the final fit; the refits not yet taken come with it.
+    def finish(self, timeout_s: float, until_t: float = math.inf) -> tuple[list[OnlineResult], OnlineResult]:
+        """Wait (at most ``timeout_s``) for the final fit of the samples up to ``until_t`` (device s); the
+        refits not yet taken come with it.
 
         Raises IdentificationError when the decay cannot be fitted or the fit does not finish
         in time (the worker is then abandoned; the caller closes its file without a final fit).
@@ -106,6 +109,7 @@ class BackgroundFit:
         with self._wake:
             self._finish_requested = True
             self._final_budget_s = timeout_s
+            self._final_until_t = until_t
             self._wake.notify_all()
         if not self._done.wait(timeout_s * FINAL_FIT_WALL_FACTOR):
             self.close()
@@ -148,7 +152,7 @@ class BackgroundFit:
                     self._wake.notify_all()
                 if finishing:
                     with solve_budget(self._final_budget_s, self._cancel):
-                        self._final = self.identifier.finish()
+                        self._final = self.identifier.finish(self._final_until_t)
                     return
         except BaseException as exc:  # handed to the caller's thread, where it is raised
             with self._wake:
