@@ -58,9 +58,9 @@ IMAGES = Path(__file__).resolve().parents[2] / "docs" / "img"
 #: Every field the device sent: a recording's samples share them with another run of the same seed and
 #: script (the host's arrival time is the machine's).
 DEVICE_FIELDS = ("t", "ticks", "counter", "roll", "pitch", "yaw", "p", "q", "r", "ax", "ay", "az", "status")
-#: The recorder's decays compared with the run without a browser (a browser killed in the first, five
-#: pages on it in the first and the second).
-COMPARED = 2
+#: The recorder's decays compared with the run without a browser: the first, released as a browser is
+#: killed, while five pages take it in at once.
+COMPARED = 1
 #: Two animation frames: a page resized has drawn itself at its new size.
 FRAMES_JS = "() => new Promise(done => requestAnimationFrame(() => requestAnimationFrame(() => done(true))))"
 
@@ -149,6 +149,9 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         first = recorder.release_at(1)
         os.killpg(killed.pid, signal.SIGKILL)  # mid-decay
         listens = {"own": listening_ports(pid), "children": [listening_ports(c) for c in children(pid)]}
+        niceness = {"own": os.getpriority(os.PRIO_PROCESS, pid)} | {
+            "server": max(os.getpriority(os.PRIO_PROCESS, c) for c in children(pid) if listening_ports(c))
+        }
         at_once = {
             name: wait_shown(page, lambda seen: released(seen, first), "decay 1")
             for name, page in pages.items()
@@ -181,10 +184,12 @@ def served(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     return {
         "code": code,
         "alone_code": alone_code,
+        "alone_lines": list(alone.lines),
         "lines": list(recorder.lines),
         "url": url,
         "ports": ports[:2],
         "listens": listens,
+        "niceness": niceness,
         "first": first,
         "reloaded_at": reloaded_at,
         "settled_before_reload": settled_before,
@@ -236,10 +241,14 @@ def test_a_reload_mid_decay_shows_the_decay_from_its_release(served: dict[str, A
 
 
 @pytest.mark.slow
-def test_the_web_side_is_view_only(served: dict[str, Any]) -> None:
+def test_the_web_side_is_view_only_and_yields_the_cores_to_the_recorder(served: dict[str, Any]) -> None:
     listens = served["listens"]
     assert listens["own"] == set()  # the recorder takes nothing from the network
     assert set(served["ports"]) in listens["children"]  # only the viewer's server listens, on its two ports
+    niceness = served[
+        "niceness"
+    ]  # pages reloading keep the server busy: it must not starve the device's reads
+    assert niceness["server"] >= niceness["own"] + 10, niceness
 
 
 @pytest.mark.slow
@@ -261,7 +270,9 @@ def test_browsers_killed_or_many_leave_the_recordings_as_without_any(served: dic
     assert len(watched) == len(alone) == COMPARED
     for ours, theirs in zip(watched, alone, strict=True):
         assert abs(float(ours["release_t_s"]) - float(theirs["release_t_s"])) < 1e-6
-        assert ours["ended"] == theirs["ended"] == "settled"
+        ended = (ours["ended"], theirs["ended"])
+        said = [line for line in served["lines"] + served["alone_lines"] if line.startswith("run ")]
+        assert ended == ("settled", "settled"), (ended, said)
         t, t_alone = ours["samples"]["t"], theirs["samples"]["t"]
         start, end = max(t[0], t_alone[0]), min(t[-1], t_alone[-1])
         assert end - start > 10.0 and start < float(ours["release_t_s"]) - 1.0  # the decay, both hold it
@@ -279,7 +290,7 @@ def test_browsers_killed_or_many_leave_the_recordings_as_without_any(served: dic
 @pytest.mark.slow
 def test_memory_stays_flat_over_the_decays_with_browsers(served: dict[str, Any]) -> None:
     own = served["memory"]  # bench/bench_web_memory.py: over 100 decays
-    assert len(own) >= COMPARED and max(own) - min(own) < 50.0, own
+    assert len(own) >= 2 and max(own) - min(own) < 50.0, own  # the reload waits for a second decay
 
 
 @pytest.mark.slow

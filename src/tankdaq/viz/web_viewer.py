@@ -48,6 +48,8 @@ WEB_RATE_HZ = 50.0
 PR_SET_PDEATHSIG = 1
 #: The server must be listening within this long.
 START_TIMEOUT_S = 20.0
+#: The server's niceness: below the recorder's (and its view's) claim on the cores.
+SERVER_NICE = 10
 #: A documentation address (TEST-NET-2, RFC 5737; a unicast one: a broadcast needs SO_BROADCAST):
 #: "connected" to by UDP, nothing is sent, and the socket's own address is then the one of the
 #: interface the default route leaves by.
@@ -160,7 +162,11 @@ class WebAddress:
 
 def _end_with_parent() -> None:
     """In the server's process before it runs (Linux): it gets SIGTERM when the recorder dies, even killed
-    (a server left behind would hold the ports)."""
+    (a server left behind would hold the ports); and it yields the cores to the recorder (``SERVER_NICE``):
+    pages that reload or many browsers make it busy, and a page served late costs nothing, a device starved
+    of reads costs a decay."""
+    with contextlib.suppress(OSError):
+        os.nice(SERVER_NICE)
     with contextlib.suppress(OSError, AttributeError):
         import ctypes
 
