@@ -73,6 +73,8 @@ viewer-test-deps:
 # against 10:01 here), but under the load it added a played-back device missed a 10 s reply once
 # (a run's timings: git history): a CI that fails costs more than two minutes. A test file goes to one worker whole, so
 # a module's fixture is made once (a whole session, killed and resumed: 50 s).
+# --no-loadscope-reorder: xdist would otherwise hand out the files with the most tests first, and the
+# docs' examples and the wheel (minutes each, a few tests) would start last (tests/conftest.py orders them).
 # Every test phase over 5 s is listed at the end (a test over about half a second is marked slow, `make check`
 # leaves it out: tools/mark_slow.py marks them from a run with --durations=0).
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,
@@ -119,7 +121,7 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	nice -n 19 $(MAKE) --no-print-directory lint >$(CHECKS_LOG) 2>&1 & checks=$$!; \
 	$(BIN)/python -m tankdaq.prepare --jit || { wait $$checks; cat $(CHECKS_LOG); exit 1; }; \
 	nice -n 19 $(MAKE) --no-print-directory docs >$(DOCS_LOG) 2>&1 & docs=$$!; \
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --durations=0 --durations-min=5; tested=$$?; \
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --no-loadscope-reorder --durations=0 --durations-min=5; tested=$$?; \
 	wait $$checks; checked=$$?; wait $$docs; documented=$$?; \
 	echo "--- lint and types (make lint) ---"; cat $(CHECKS_LOG); \
 	echo "--- API docs (make docs) ---"; cat $(DOCS_LOG); \
@@ -133,7 +135,7 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 check: lint
 	$(BIN)/python -m compileall -q src
 	$(BIN)/python -m tankdaq.prepare --jit
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile -m "not slow" -q
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --no-loadscope-reorder -m "not slow" -q
 
 bench: $(TEST_STAMP)
 	$(BIN)/python bench/run_all.py

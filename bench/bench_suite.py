@@ -35,9 +35,11 @@ STEPS = {
         [sys.executable, "-m", "compileall", "-q", "src"],
         [sys.executable, "-m", "tankdaq.prepare", "--jit"],
     ],
-    "tests_not_slow": [[*PYTEST, "-n", "auto", "--dist", "loadfile", "-m", "not slow", "-q"]],
+    "tests_not_slow": [
+        [*PYTEST, "-n", "auto", "--dist", "loadfile", "--no-loadscope-reorder", "-m", "not slow", "-q"]
+    ],
 }
-FULL = [*PYTEST, "-n", "auto", "--dist", "loadfile", "-q"]
+FULL = [*PYTEST, "-n", "auto", "--dist", "loadfile", "--no-loadscope-reorder", "-q"]
 BASELINE = [*PYTEST, "--collect-only", "-q"]
 
 
