@@ -47,4 +47,10 @@ def prepare_said(jit: bool = False) -> None:
 
 
 if __name__ == "__main__":  # python -m tankdaq.prepare [--jit]
+    if not set(sys.argv[1:]) <= {"--jit"}:
+        print(
+            "usage: python -m tankdaq.prepare [--jit]  (--jit: also compile numba's JIT kernels)",
+            file=sys.stderr,
+        )
+        sys.exit(2)
     prepare_said(jit="--jit" in sys.argv[1:])

@@ -163,10 +163,11 @@ class OnlineIdentifier(EstimatorMixin):
         reached, depend on the machine's timing; the file's fit must not: the same samples give the same
         fit, bit for bit."""
         run = self._run(until_t)
-        if run is None or (self.estimator_ is None and self._half_cycles(run) < 2):
+        half_cycles = 0 if run is None else self._half_cycles(run)
+        if run is None or (self.estimator_ is None and half_cycles < 2):
             raise IdentificationError("the decay ended before a full oscillation: nothing to identify")
         self.estimator_, self.level_ = None, 0
-        return self._refit(run, self._half_cycles(run))
+        return self._refit(run, half_cycles)
 
     @property
     def _auto(self) -> bool:
