@@ -15,6 +15,8 @@ above ``def``. Re-runnable: prints what it marked.
 from __future__ import annotations
 
 import ast
+import math
+import os
 import re
 import sys
 from collections import defaultdict
@@ -102,7 +104,9 @@ def mark(root: Path, slow: dict[str, set[str]], by_setup: dict[str, set[str]]) -
             if not re.search(r"^import pytest$", new, re.M):
                 future = r"^(from __future__ import annotations\n)"
                 new = re.sub(future, r"\1\nimport pytest\n", new, count=1, flags=re.M)
-            path.write_text(new)
+            temporary = path.with_name(f".{path.name}.mark_slow.tmp")
+            temporary.write_text(new)
+            os.replace(temporary, path)  # a test file is never left half-written
     return marked
 
 
@@ -110,12 +114,25 @@ def main(argv: list[str]) -> int:
     over = 0.5
     if "--over" in argv:
         at = argv.index("--over")
-        over = float(argv[at + 1])
+        try:
+            over = float(argv[at + 1])
+        except (IndexError, ValueError):
+            over = math.nan
+        if not math.isfinite(over) or over < 0:
+            print("mark_slow: --over takes seconds, a number >= 0 (e.g. --over 0.5)", file=sys.stderr)
+            return 2
         del argv[at : at + 2]
     if len(argv) < 2:
         print(__doc__, file=sys.stderr)
         return 2
     root, logs = Path(argv[0]), [Path(a) for a in argv[1:]]
+    missing = [str(log) for log in logs if not log.is_file()]
+    if not root.is_dir() or missing:
+        print(
+            f"mark_slow: no such folder or log: {root if not root.is_dir() else ', '.join(missing)}",
+            file=sys.stderr,
+        )
+        return 2
     slow: dict[str, set[str]] = defaultdict(set)
     by_setup: dict[str, set[str]] = defaultdict(set)
     for (file, name), (seconds, setup) in durations(logs).items():
