@@ -93,8 +93,9 @@ catalogue-test-deps:
 	fi
 
 # The report's tests open its HTML in a real browser (Debian's chromium, driven by playwright from the
-# test extra) and render its PDF to pages (pdftoppm, pdftotext: poppler-utils). Installed where this
-# machine allows; otherwise say why: those tests then skip with their reason.
+# test extra; the live web view's tests open `--viewer web` in it too) and render its PDF to pages
+# (pdftoppm, pdftotext: poppler-utils). Installed where this machine allows; otherwise say why: those tests
+# then skip with their reason.
 REPORT_TEST_PACKAGES := chromium poppler-utils
 report-test-deps:
 	@if [ -x /usr/bin/chromium ] && command -v pdftoppm >/dev/null 2>&1 && command -v pdftotext >/dev/null 2>&1; then \

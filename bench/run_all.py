@@ -49,6 +49,7 @@ QUICK_ARGS: dict[str, list[str]] = {
     "bench_repeats.py": ["--sizes", "36,200"],
     "bench_runaway.py": ["--cap", "20", "--repeats", "1"],
     "bench_two_cores.py": ["--repeats", "1"],
+    "bench_web_memory.py": ["--decays", "10"],
 }
 
 

@@ -27,15 +27,18 @@ from tankdaq.acquire.events import (
     Notice,
     PutBack,
     Released,
+    SessionStep,
+    SessionVerdict,
     Settled,
     Stopped,
     Stopping,
+    ViewerAddress,
     ViewerNote,
     legend,
 )
 from tankdaq.acquire.listeners import EventLog, EventPrinter, EventStream
 from tankdaq.live.identifier import OnlineResult
-from tankdaq.records import DecayEnd
+from tankdaq.records import DecayEnd, Verdict
 
 
 def _fit() -> OnlineResult:
@@ -62,6 +65,8 @@ def _every_event() -> list[Event]:
         ModelMoved("level", 1.1, 0.02, 0.2, 0.6, 1.0, 32.5),
         ModelMoved("trend", 0.41, 0.02, 0.2, 0.03, 1.0, 33.5, 2.2),
         KeptNote("note", "recording stopped by the operator", 2),
+        ViewerAddress("http://192.168.1.20:9090/?url=x", "██"), SessionStep(3, 2, 4, "T 6 deg", 6.0, 1, 2),
+        SessionVerdict(3, None, ("R² 0.97",), "answer at the PC"),
     ]  # fmt: skip
 
 
@@ -105,6 +110,11 @@ def test_every_event_is_a_line_and_a_json_object_of_its_values() -> None:
     assert Note("note", "x").line() == "note: x" and Note("warning", "x", 3).line() == "warning: run 3: x"
     assert Stopping("SIGHUP").line() == "stopping (SIGHUP): closing files"
     assert Held(math.nan, "roll").record()["angle_deg"] is None  # NaN is no JSON
+    address = ViewerAddress("http://192.168.1.20:9090/?url=x", "██")
+    assert address.line().endswith("(same network; view only)\n██") and "qr" not in address.record()
+    judged = SessionVerdict(3, Verdict.ACCEPTED, (), "T 8 deg")
+    assert judged.line() == "decay 3: accepted (every check passed); next: T 8 deg"
+    assert judged.record()["verdict"] == "accepted" and SessionVerdict(3, None, (), "").said == "to judge"
 
 
 def _subclasses(cls: type) -> set[type]:

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import ClassVar
 
 from ..live.identifier import OnlineResult
-from ..records import DecayEnd
+from ..records import DecayEnd, Verdict
 from ..samples import StatusTally
 
 #: How a recorded decay can end (``Settled``'s ``outcome.ended``), as the printed legend explains it. Only
@@ -142,6 +142,22 @@ class ViewerNote(Event):
 
     def line(self, run_name: str | None = None) -> str:
         return f"viewer: {self.text}"
+
+
+@dataclass(frozen=True)
+class ViewerAddress(Event):
+    """The web viewer listens (``--viewer web``): ``url`` is what a tablet or phone opens, ``qr`` its QR
+    code in terminal characters (not in the JSON record: the URL says it)."""
+
+    url: str
+    qr: str = ""
+
+    def line(self, run_name: str | None = None) -> str:
+        qr = f"\n{self.qr}" if self.qr else ""
+        return f"viewer: open {self.url} on a tablet or phone (same network; view only){qr}"
+
+    def record(self) -> dict[str, object]:
+        return {"event": "viewer_address", "url": self.url}
 
 
 @dataclass(frozen=True)
@@ -439,3 +455,46 @@ def legend(event: Event) -> str | None:
         kinds = "; ".join(f"{name} = {why}" for name, why in MOVED_KINDS.items())
         return f"(between decays the session watches the model at rest: {kinds})"
     return None
+
+
+@dataclass(frozen=True)
+class SessionStep(Event):
+    """A guided session asks for its next decay (the operator's panel on the tablet shows it; the terminal
+    has its own line): decay ``decay``, the ``step``-th of the ``steps`` decays the plan keeps, of
+    ``condition`` at ``target_deg``, repeat ``repeat`` of ``repeats``."""
+
+    printed: ClassVar[bool] = False
+    decay: int
+    step: int
+    steps: int
+    condition: str
+    target_deg: float
+    repeat: int
+    repeats: int
+
+    def line(self, run_name: str | None = None) -> str:
+        return (
+            f"decay {self.decay}, step {self.step} of {self.steps}: {self.condition}, repeat "
+            f"{self.repeat}/{self.repeats}: tilt to {self.target_deg:g} deg and release"
+        )
+
+
+@dataclass(frozen=True)
+class SessionVerdict(Event):
+    """A guided session's decay checked: ``verdict`` None while the operator is asked at the PC, then what
+    they said; the checks' ``reasons`` against it and what comes ``next``."""
+
+    printed: ClassVar[bool] = False
+    decay: int
+    verdict: Verdict | None
+    reasons: tuple[str, ...]
+    next: str
+
+    @property
+    def said(self) -> str:
+        """The verdict in words: accepted, rejected, or to judge."""
+        return "to judge" if self.verdict is None else self.verdict.value
+
+    def line(self, run_name: str | None = None) -> str:
+        why = "; ".join(self.reasons) or "every check passed"
+        return f"decay {self.decay}: {self.said} ({why}); next: {self.next}"

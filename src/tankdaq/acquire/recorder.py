@@ -40,9 +40,11 @@ from ..records import DecayEnd
 from ..store.disk import RESERVE_BYTES
 from ..viz.live import LiveView
 from ..viz.view_process import View, ViewProcess
-from ..viz.viewer import default_viewer_mode, describe_mode
+from ..viz.viewer import DEFAULT_BIND, default_viewer_mode, describe_mode
+from ..viz.web_viewer import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebServer, is_web
 from .decay import LiveFit
 from .events import DeviceBack, DeviceLost, DeviceReady, Event, KeptOutcomes, Notice, ViewerNote
+from .live_panel import LivePanel, open_web_viewer
 from .memory import tune_allocator
 from .pipeline import DecayPipeline, DetectionSettings
 from .read_thread import DeviceReader, Read
@@ -77,8 +79,9 @@ class RecordSettings:
     out_dir: Path = Path("recordings")
     runs: int | None = None
     viewer: str | None = "none"  # None: the default (spawn with a display, save without)
-    viewer_bind: str = "127.0.0.1"  # where a spawned viewer listens; 0.0.0.0 only when asked
-    viewer_port: int = 9876
+    viewer_bind: str | None = None  # where a viewer listens (None: spawn 127.0.0.1, web the LAN address)
+    viewer_port: int = DEFAULT_GRPC_PORT  # a spawned viewer's, or the web viewer's data server
+    viewer_web_port: int = DEFAULT_WEB_PORT  # the web viewer's page
     disk_reserve_bytes: int = RESERVE_BYTES  # the .rrd stops with less free space than this
     operator: str = ""
     note: str = ""
@@ -188,6 +191,7 @@ class Recorder:
         self._pipeline: DecayPipeline | None = None
         self._driver: MTiDriver | None = None
         self._reader: DeviceReader | None = None
+        self._web: WebServer | None = None  # --viewer web: its server, for the whole run
 
     def emit(self, event: Event) -> None:
         """An event for every listener: through the pipeline once it runs (every sink), before that to
@@ -283,26 +287,34 @@ class Recorder:
         config["device"]["configuration"] = [[int(x), int(hz)] for x, hz in device.get("configuration", ())]
         return metadata, config
 
-    def _make_view(self) -> View:
+    def _make_views(self) -> list[View]:
+        """The live views: none, or one in a process of its own, replaced every so many decays (what rerun
+        keeps of each recording is given back, its failures stay there: viz.view_process); with web+save
+        two, the web's and the one saving an .rrd per decay."""
         s = self.settings
         mode = s.viewer or default_viewer_mode()
         self.emit(ViewerNote(describe_mode(mode, default=s.viewer is None)))
-        # a view that shows anything runs in a process of its own, replaced every so many decays:
-        # what rerun keeps of each recording is given back, and its failures stay there (viz.view_process)
-        view: View = (LiveView if mode == "none" else ViewProcess)(
-            mode,
-            axis="roll" if s.axis == "auto" else s.axis,
-            bind=s.viewer_bind,
-            spawn_port=s.viewer_port,
-            on_note=lambda line: self.emit(ViewerNote(line)),
-            rrd_reserve_bytes=s.disk_reserve_bytes,
-        )
-        return view
+        axis = "roll" if s.axis == "auto" else s.axis
+        if mode == "none":
+            return [LiveView(mode, axis=axis)]
+        web = self._web.stream if self._web is not None else None
+        return [
+            ViewProcess(
+                each,
+                axis=axis,
+                bind=s.viewer_bind or DEFAULT_BIND,
+                spawn_port=s.viewer_port,
+                on_note=lambda line: self.emit(ViewerNote(line)),
+                rrd_reserve_bytes=s.disk_reserve_bytes,
+                web=web if is_web(each) else None,
+            )
+            for each in (["save", "web"] if mode == "web+save" else [mode])
+        ]
 
     def _make_pipeline(self, driver: MTiDriver) -> DecayPipeline:
         s = self.settings
         metadata, config = self._file_header(driver)
-        view = self._make_view()
+        views = self._make_views()
         detection = DetectionSettings(
             axis=s.axis,
             angle_deg=s.angle_deg,
@@ -324,7 +336,11 @@ class Recorder:
             particulars=self.hull.particulars(s.simulated_axis) if self.hull else None,
             hull=self.hull.name if self.hull else "the hull",
         )
-        sinks = [recording, ViewSink(view), *self.extra_sinks]
+        sinks: list[Sink] = [recording, *(ViewSink(view) for view in views)]
+        for view in views:  # the operator's panel on the tablet (--viewer web)
+            if isinstance(view, ViewProcess) and view.web is not None:
+                sinks.append(LivePanel(view, s.axis, s.angle_deg))
+        sinks += self.extra_sinks
         return DecayPipeline(detection, sinks, self.outcomes, fit=LiveFit(identifier))
 
     # ---- open, feed, retarget, close ----------------------------------------
@@ -334,6 +350,8 @@ class Recorder:
         s = self.settings
         tune_allocator()  # before the view's, rerun's and the fits' threads (acquire.memory)
         prepare_identifier(s.model, self._notice("identifier"))
+        if is_web(s.viewer) and self._web is None:  # before the device: a port in use is one line, first
+            self._web = open_web_viewer(s.viewer_bind, s.viewer_port, s.viewer_web_port, self.emit)
         driver = self._driver = self._open_device()
         self.status.device = driver.info.describe() if driver.info else s.port
         self.emit(DeviceReady(self.status.device))
@@ -462,5 +480,10 @@ class Recorder:
                 if pipeline is not None:
                     pipeline.close()
             finally:
-                if self.device is not None:
-                    self.device.close()
+                try:
+                    if self.device is not None:
+                        self.device.close()
+                finally:
+                    web, self._web = self._web, None
+                    if web is not None:
+                        web.close()

@@ -17,15 +17,18 @@ from pathlib import Path
 from ..device.decoding import SampleDecoder
 from ..device.driver import StreamBlock
 from ..device.legacy_output import LegacyOutput
-from ..errors import BadRecordingInput
+from ..errors import BadRecordingInput, InputError
 from ..live.preparation import prepare_identifier
 from ..records import DecayEnd
 from ..store.reader import read_recording, truncation_notice
 from ..viz.live import LiveView
 from ..viz.view_process import View
 from ..viz.viewer import default_viewer_mode, describe_mode
+from ..viz.web_view import WebLiveView
+from ..viz.web_viewer import WebServer, is_web
 from .decay import LiveFit
 from .events import DecayOutcome, Event, Notice, ViewerNote
+from .live_panel import LivePanel
 from .pipeline import DecayPipeline, DetectionSettings
 from .sinks import Sink, ViewSink
 
@@ -54,6 +57,19 @@ def coalesce(chunks: list[tuple[int, bytes]], span_s: float) -> list[tuple[int, 
     return merged
 
 
+def replay_views(mode: str, axis: str, web: WebServer | None, note: Callable[[str], None]) -> list[View]:
+    """The replay's views: the one ``mode`` names, or with a web viewer's server the web's (the
+    operator's panel: the release angle against the nominal), and beside it the saving one (web+save)."""
+    if is_web(mode) and web is None:
+        raise InputError("viewer mode web needs the web viewer's server: start a viz.web_viewer.WebServer")
+    if web is None:
+        return [LiveView(mode, axis=axis, on_note=note)]
+    views: list[View] = [
+        WebLiveView(web.stream.url, recording_id=web.stream.recording_id, axis=axis, on_note=note)
+    ]
+    return views + ([LiveView("save", axis=axis, on_note=note)] if mode == "web+save" else [])
+
+
 def replay_recording(
     path: str | Path,
     speed: float | None = None,
@@ -61,9 +77,11 @@ def replay_recording(
     model: str | None = None,
     listeners: Sequence[Sink] = (),
     on_progress: Callable[[int, int], None] | None = None,
+    web: WebServer | None = None,
 ) -> list[DecayOutcome]:
     """Replay one tankdaq MCAP; returns the decays found (normally the one it holds). ``listeners`` hear
-    the events (the printer, a collector) and ride along the pipeline."""
+    the events (the printer, a collector) and ride along the pipeline. ``web``: with ``--viewer web``,
+    the web viewer's server (started by the caller, for every file), the view streams to it."""
 
     def emit(event: Event) -> None:  # before the pipeline runs: the listeners only
         for listener in listeners:
@@ -81,7 +99,7 @@ def replay_recording(
         raise BadRecordingInput(f"{path}: the recording holds no raw device bytes to replay")
     mode = viewer or default_viewer_mode()
     emit(ViewerNote(describe_mode(mode, default=viewer is None)))
-    view: View = LiveView(mode, axis=axis, on_note=lambda line: emit(ViewerNote(line)))
+    views = replay_views(mode, axis, web, lambda line: emit(ViewerNote(line)))
     settings = DetectionSettings(
         axis=axis,
         angle_deg=nominal if math.isfinite(nominal) else 0.0,
@@ -89,9 +107,11 @@ def replay_recording(
         model=model or str(meta.get("model", meta.get("model_terms", "ittc-quadratic-restoring"))),
     )
     prepare_identifier(settings.model, lambda text: emit(Notice("identifier", text)))
-    rrd_base = path.with_name(path.stem + ".replay") if view.mode == "save" else None  # spawn falls back
+    rrd_base = path.with_name(path.stem + ".replay")  # for a view that saves (spawn without a display too)
     # the daemon's pipeline without the recording; each block's refit is done before the next block
-    sinks = [ViewSink(view, rrd_base), *listeners]
+    sinks: list[Sink] = [ViewSink(v, rrd_base if v.mode == "save" else None) for v in views]
+    sinks += [LivePanel(v, axis, settings.angle_deg) for v in views if isinstance(v, WebLiveView)]
+    sinks += listeners
     pipeline = DecayPipeline(settings, sinks, fit=LiveFit(wait_for_fits=True))
     legacy = str(meta.get("legacy_protocol", "false")).lower() == "true"
     rate_hz = float(meta.get("sample_rate_hz", "100"))

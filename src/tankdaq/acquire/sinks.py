@@ -185,6 +185,10 @@ class RecordingSink(Sink):
             writer.close()
 
 
+#: View modes that write no .rrd: no view, or a web view alone (``web+save`` is two views, one saving).
+NO_RRD_MODES = ("none", "web")
+
+
 class ViewSink(Sink):
     """The live view (a ``viz.view_process.View``: ``LiveView``, or ``ViewProcess``, the same in a process
     of its own): one run per decay, its .rrd beside the recording.
@@ -205,8 +209,10 @@ class ViewSink(Sink):
         if rrd is None and self.rrd_base is not None:
             suffix = f"-{decay.run}" if decay.run > 1 else ""
             rrd = self.rrd_base.with_name(self.rrd_base.name + suffix + ".rrd")
-        short_of_space = None if view.mode == "none" or rrd is None else self._short_of_space(rrd)
-        if view.mode == "none" or short_of_space:
+        if view.mode in NO_RRD_MODES:
+            rrd = None
+        short_of_space = None if rrd is None else self._short_of_space(rrd)
+        if short_of_space:
             rrd = None
         view.axis = decay.axis
         view.new_run(
@@ -216,7 +222,7 @@ class ViewSink(Sink):
             time_origin_s=decay.release_t,  # the view reads in seconds since the release
         )
         self._showing = True
-        decay.rrd_path = view.rrd_path
+        decay.rrd_path = view.rrd_path or decay.rrd_path  # web+save: the saving view's, whichever is first
         for block in pretrigger:
             view.log_samples(block.samples)
         view.log_event("release", decay.release_message, decay.release_t)

@@ -66,8 +66,26 @@ ViewerOption = Annotated[
     typer.Option(
         "--viewer",
         callback=lambda v: v if v is None else _viewer(v),
-        help="spawn, save (an .rrd beside each MCAP), none, or a rerun URL.",
+        help="spawn, save (an .rrd beside each MCAP), web (served here for a tablet or phone; web,save: "
+        "and the .rrd), none, or a rerun URL.",
     ),
+]
+ViewerBindOption = Annotated[
+    str | None,
+    typer.Option(
+        "--viewer-bind",
+        help="Address the viewer listens on [default: web: this machine's network address; spawn: "
+        "127.0.0.1]; 0.0.0.0 every network, only when asked.",
+    ),
+]
+ViewerPortOption = Annotated[
+    int,
+    typer.Option(
+        "--viewer-port", min=1, max=65535, help="Port of a spawned viewer, or of the web viewer's data."
+    ),
+]
+ViewerWebPortOption = Annotated[
+    int, typer.Option("--viewer-web-port", min=1, max=65535, help="Port of the web viewer's page (web).")
 ]
 SimSpeedOption = Annotated[float, typer.Option("--sim-speed", min=0.1, max=50.0, hidden=True)]
 SimSeedOption = Annotated[
@@ -203,12 +221,9 @@ def record_command(
         None, "--runs", min=1, help="Stop after this many decays (default: until Ctrl-C)."
     ),
     viewer: ViewerOption = None,
-    viewer_bind: str = typer.Option(
-        "127.0.0.1", "--viewer-bind", help="Address a spawned viewer listens on (0.0.0.0: every network)."
-    ),
-    viewer_port: int = typer.Option(
-        9876, "--viewer-port", min=1, max=65535, help="Port a spawned viewer listens on."
-    ),
+    viewer_bind: ViewerBindOption = None,
+    viewer_port: ViewerPortOption = 9876,
+    viewer_web_port: ViewerWebPortOption = 9090,
     operator: str = typer.Option("", "--operator", help="Who ran the test (stored in the file)."),
     note: str = typer.Option("", "--note", help="A note stored in the file."),
     model: LiveModelOption = DEFAULT_LIVE_MODEL,
@@ -239,6 +254,7 @@ def record_command(
         viewer=viewer,  # None: the default; the daemon prints the mode in use at start
         viewer_bind=viewer_bind,
         viewer_port=viewer_port,
+        viewer_web_port=viewer_web_port,
         operator=operator,
         note=note,
         model=model,
@@ -271,23 +287,45 @@ def replay_command(
         None,
         "--viewer",
         callback=lambda v: v if v is None else _viewer(v),
-        help="spawn, save (an .rrd beside each file), none, or a rerun URL.",
+        help="spawn, save (an .rrd beside each file), web (served here for a tablet or phone), none, "
+        "or a rerun URL.",
     ),
+    viewer_bind: ViewerBindOption = None,
+    viewer_port: ViewerPortOption = 9876,
+    viewer_web_port: ViewerWebPortOption = 9090,
     events: EventsOption = None,
 ) -> None:
     """Replay recordings: re-decode the raw bytes, re-detect the release, re-fit, show it again."""
-    from ..acquire.events import said_instant
-    from ..acquire.replay import replay_recording
+    import contextlib
+
+    from ..acquire.events import Event
+    from ..acquire.live_panel import open_web_viewer
+    from ..viz.web_viewer import is_web
 
     pace = _speed(speed)
     build_kernels_shown()
+    listeners = event_listeners(events)
+    with contextlib.ExitStack() as stack:
+        web = None
+        if is_web(viewer):  # one server for every file, before the first is read
+
+            def said(event: Event) -> None:
+                for listener in listeners:
+                    listener.on_event(event)
+
+            web = stack.enter_context(open_web_viewer(viewer_bind, viewer_port, viewer_web_port, said))
+        _replay_files(files, pace, viewer, listeners, events, web)
+
+
+def _replay_files(
+    files: list[Path], pace: float | None, viewer: str | None, listeners: list[Sink], events: Any, web: Any
+) -> None:
+    """Each file replayed in turn, its decays said in one line each (with --events: as events)."""
+    from ..acquire.events import said_instant
+    from ..acquire.replay import replay_recording
+
     for path in files:
-        outcomes = replay_recording(
-            path,
-            speed=pace,
-            viewer=viewer,
-            listeners=event_listeners(events),
-        )
+        outcomes = replay_recording(path, speed=pace, viewer=viewer, listeners=listeners, web=web)
         for o in outcomes if events is None else ():  # with --events the settled events say it
             fit = o.fit
             coeffs = "  ".join(f"{k}={v:.4g}" for k, v in fit.coefficients.items()) if fit else "no fit"

@@ -15,10 +15,15 @@ from .app import app, build_kernels_shown, catalogue_option, checked, err_consol
 from .record import (
     DEFAULT_LIVE_MODEL,
     STOPPED_EXIT_CODE,
+    EventsFormat,
+    EventsOption,
     LiveModelOption,
     SimSeedOption,
     SimSpeedOption,
+    ViewerBindOption,
     ViewerOption,
+    ViewerPortOption,
+    ViewerWebPortOption,
     hull_option,
 )
 
@@ -95,13 +100,18 @@ def session_command(
         help=f"Output rate (Hz): {validation.OUTPUT_RATES_TEXT}.",
     ),
     viewer: ViewerOption = None,
+    viewer_bind: ViewerBindOption = None,
+    viewer_port: ViewerPortOption = 9876,
+    viewer_web_port: ViewerWebPortOption = 9090,
     model: LiveModelOption = DEFAULT_LIVE_MODEL,
     operator: str = typer.Option("", "--operator", help="Who runs the session (stored in every file)."),
     sim_speed: SimSpeedOption = 1.0,
     sim_seed: SimSeedOption = None,
     sim_faults: str = typer.Option("2:wrong-angle,5:double-push", "--sim-faults", hidden=True),
     catalogue: Annotated[str | None, catalogue_option()] = None,
+    events: EventsOption = None,
 ) -> None:
+    from ..acquire.listeners import EventStream
     from ..catalogue.hooks import CatalogueWriter, session_listener
     from ..config.plans import load_campaign_plan
     from ..physics.scenario import parse_fault_script
@@ -117,6 +127,9 @@ def session_command(
             "out_dir": out,
             "rate_hz": rate,
             "viewer": viewer,
+            "viewer_bind": viewer_bind,
+            "viewer_port": viewer_port,
+            "viewer_web_port": viewer_web_port,
             "model": model,
             "operator": operator,
             "sim_speed": sim_speed,
@@ -136,6 +149,7 @@ def session_command(
             ),
             resume=resume,
             on_verdict=session_listener(writer, out),
+            listeners=[EventStream(sys.stdout)] if events is EventsFormat.jsonl else [],
         )
         build_kernels_shown()
         try:

@@ -27,12 +27,13 @@ def open_panel(record: RecordSettings, plan: CampaignPlan, on_note: Callable[[st
     first decay and the decay views reuse it."""
     from ..physics.models import resolve_model
     from ..viz.campaign_view import CampaignView
-    from ..viz.viewer import default_viewer_mode, display_available, spawn_viewer
+    from ..viz.viewer import DEFAULT_BIND, default_viewer_mode, display_available, spawn_viewer
 
     mode = record.viewer or default_viewer_mode()
     url = None
     if mode == "spawn" and display_available():  # without a display each decay's view says so, once
-        _process, url = spawn_viewer(record.viewer_bind, record.viewer_port, on_note)  # it outlives us
+        bind = record.viewer_bind or DEFAULT_BIND
+        _process, url = spawn_viewer(bind, record.viewer_port, on_note)  # it outlives us
     return CampaignView(
         mode,
         record.out_dir / PANEL_NAME,

@@ -45,8 +45,11 @@ from ..acquire.events import (
     Event,
     ModelMoved,
     Notice,
+    SessionStep,
+    SessionVerdict,
     Settled,
     Stopped,
+    ViewerAddress,
     ViewerNote,
 )
 from ..acquire.listeners import EventLog, EventPrinter
@@ -56,6 +59,7 @@ from ..config.hulls import load_hull
 from ..config.plans import PLAN_AXES, CampaignPlan
 from ..config.rules import path_in
 from ..errors import InputError
+from ..records import Verdict
 from .checks import STILL_SD_DEG, Measured, check_decay, is_level, watch_reasons
 from .journal import SessionLock, SessionLog, check_resumable
 from .measure import LEVEL_S, LevelCheck, measure_decay
@@ -71,7 +75,7 @@ if TYPE_CHECKING:
     from ..viz.campaign_view import CampaignView
 
 #: events shown once in a session (the device's lines; each decay's view says the same viewer line)
-SHOWN_ONCE = (Notice, DeviceReady, ViewerNote)
+SHOWN_ONCE = (Notice, DeviceReady, ViewerNote, ViewerAddress)
 
 
 @dataclass
@@ -303,11 +307,16 @@ class GuidedSession:
     def _reload(self) -> SessionState:
         return SessionState.from_log(self.log.read(), self.conditions, self.settings.plan.repeats)
 
-    def _progress(self, state: SessionState, condition: PlannedCondition | None) -> None:
+    def _kept(self, state: SessionState) -> tuple[int, int]:
+        """Decays kept so far, of those the plan keeps (skipped conditions left out)."""
         total = sum(state.repeats for c in self.conditions if c not in state.skipped)
         done = sum(
             min(len(state.accepted(c)), state.repeats) for c in self.conditions if c not in state.skipped
         )
+        return done, total
+
+    def _progress(self, state: SessionState, condition: PlannedCondition | None) -> None:
+        done, total = self._kept(state)
         per_decay = float(np.mean(self._decay_seconds)) if self._decay_seconds else None
         left = None if per_decay is None else per_decay * state.runs_left()
         repeat = len(state.accepted(condition)) + 1 if condition else 0
@@ -381,6 +390,10 @@ class GuidedSession:
             f"decay {decay}: {condition.label}, repeat {repeat}/{state.repeats}: "
             f"tilt to {condition.angle_deg:g} deg and release"
         )
+        done, total = self._kept(state)
+        label, target = condition.label, condition.angle_deg
+        step = SessionStep(decay, done + 1, total, label, target, repeat, state.repeats)
+        self._stream().emit(step)  # the operator's panel on a tablet (--viewer web)
         self._panel().set_status(
             condition.draft, condition.angle_deg, "under way", f"{repeat - 1}/{state.repeats}"
         )
@@ -433,6 +446,8 @@ class GuidedSession:
                 f"decay {entry.decay} passes: {m['angle_deg']:.1f} deg, {m['half_cycles']} half-cycles, "
                 f"R² {m['r2_angle']:.4f}, T0 {m['natural_period_s']:.3f} s, B_eq {m['b_eq_per_s']:.4g} 1/s"
             )
+        stream = self._stream()
+        stream.emit(SessionVerdict(entry.decay, None, tuple(entry.reasons), "answer at the PC"))
         rejected = sum(1 for r in state.runs if r.condition == condition and r.verdict == "rejected")
         question = verdict_question(entry.decay, condition, bool(entry.reasons), rejected)
         key = self._ask(question, entry.decay)
@@ -447,6 +462,9 @@ class GuidedSession:
         state = self._reload()
         self.on_verdict(next(r for r in state.runs if r.decay == entry.decay))
         self.on_line(f"decay {entry.decay}: {verdict} ({question.choices[key]})")
+        following = state.next_condition()
+        after = following.label if following is not None else "the session is done"
+        stream.emit(SessionVerdict(entry.decay, Verdict(verdict), tuple(entry.reasons), after))
         self._show_condition(state, condition)
         return state
 

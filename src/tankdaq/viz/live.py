@@ -42,9 +42,8 @@ APPLICATION_ID = "tankdaq"
 TIMELINE = "t"
 #: At the end of a run rerun gets this long to take what was logged (file and viewer).
 FLUSH_TIMEOUT_S = 5.0
-#: Closing the view waits for the view thread to finish its queue as long as it gets on with it: it gives up
-#: once no update has been done for ``CLOSE_STALL_S`` (a stuck view), or after ``CLOSE_LIMIT_S`` in all (a
-#: view minutes behind). A view that is only slow, on a loaded machine, finishes its .rrd.
+#: Closing waits for the view thread's queue while it gets on: it gives up after ``CLOSE_STALL_S`` with no
+#: update done (stuck), or ``CLOSE_LIMIT_S`` in all (minutes behind); a slow view finishes its .rrd.
 CLOSE_STALL_S = 15.0
 CLOSE_LIMIT_S = 120.0
 
@@ -136,15 +135,17 @@ def release_recordings() -> None:
 class LiveView:
     """Log a decay test to rerun: ``mode`` is spawn, save, none or a rerun URL.
 
-    ``save`` writes one .rrd per run (``rrd_path`` here or in ``new_run``); with
-    spawn or a URL an ``rrd_path`` is written as well. ``terms`` gives each
-    coefficient its own plot with its unit. Every call returns at once; the logging
-    itself runs on the view's thread (see the module docstring). ``on_note`` gets one
-    line per thing the operator should know (viewer started, gone, the .rrd stopped).
-    Spawn with no display falls back to save at once; ``mode`` is the mode in effect.
-    ``queue_limit``: updates waiting for the view thread beyond which sample blocks and refits are
-    dropped (default: a few seconds with a viewer, ``view_feed.SAVE_QUEUE_LIMIT`` when only saving).
+    ``save`` writes one .rrd per run (``rrd_path`` here or in ``new_run``); with spawn or a URL an
+    ``rrd_path`` is written as well. ``terms`` gives each coefficient its own plot with its unit. Every
+    call returns at once; the logging itself runs on the view's thread (see the module docstring).
+    ``on_note`` gets one line per thing the operator should know (viewer started, gone, the .rrd stopped).
+    Spawn with no display falls back to save at once; ``mode`` is the mode in effect. ``queue_limit``:
+    updates waiting beyond which sample blocks and refits are dropped (default: a few seconds with a
+    viewer, ``view_feed.SAVE_QUEUE_LIMIT`` when only saving). ``blueprint``: its recordings' layout.
     """
+
+    blueprint = staticmethod(decay_blueprint)
+    _fits = ""  # the fits' entities' prefix under angle/fits (a view of many decays: each one's own)
 
     def __init__(
         self,
@@ -368,7 +369,7 @@ class LiveView:
             return
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
         self._rec = rec  # kept referenced: a collected stream closes its sinks
-        set_sinks_with_blueprint(rec, sinks, decay_blueprint(terms))
+        set_sinks_with_blueprint(rec, sinks, self.blueprint(terms))
         rec.send_recording_name(name)
         for entity in ("angle/measured", "rate/measured"):
             rec.log(
@@ -447,7 +448,7 @@ class LiveView:
         if rec is None:
             return
         self._revision += 1
-        fit = f"fit_{self._revision:03d}"
+        fit = f"{self._fits}fit_{self._revision:03d}"
         stamp = float(t[-1]) if t_fit is None else float(t_fit)
         label = f"model (fit {self._revision}, t = {stamp - self._origin:.1f} s)"
         curves = {"angle": (t, np.degrees(predicted_angle)), "rate": (t, np.degrees(predicted_rate))}
@@ -469,7 +470,7 @@ class LiveView:
             for age, (color, width, aged) in enumerate(AGED_STYLES, start=1):
                 if self._revision > age:
                     style = rr.SeriesLines(colors=[color], widths=[width], names=[aged])
-                    rec.log(f"{group}/{FITS}/fit_{self._revision - age:03d}", style, static=True)
+                    rec.log(f"{group}/{FITS}/{self._fits}fit_{self._revision - age:03d}", style, static=True)
         rec.set_time(TIMELINE, duration=stamp - self._origin)
         intervals = interval_pairs(coefficients, ci95 or None)
         for term, value in coefficients.items():

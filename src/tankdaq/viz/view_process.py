@@ -34,6 +34,8 @@ from ..store.disk import RESERVE_BYTES
 from .live import CLOSE_LIMIT_S, CLOSE_STALL_S, LiveView, unfinished_note
 from .view_feed import QUEUE_LIMIT, SAVE_QUEUE_LIMIT, ViewFeed
 from .viewer import DEFAULT_BIND, note_to_stderr, settle_mode
+from .web_view import WebLiveView
+from .web_viewer import WebStream, is_web
 
 #: Runs one view process shows before a fresh one takes over (about an hour of decays at 35 s each;
 #: what rerun keeps of so many runs is a megabyte or so).
@@ -105,7 +107,9 @@ def serve_view(conn: Connection) -> None:
 
     view = None
     try:
-        view = LiveView(on_note=lambda line: send(("note", line)), **conn.recv())
+        options = conn.recv()
+        kind = WebLiveView if options.pop("web", False) else LiveView
+        view = kind(on_note=lambda line: send(("note", line)), **options)
         while True:
             method, args, kwargs = conn.recv()
             if method == "close":
@@ -195,8 +199,9 @@ class _Child:
 class ViewProcess:
     """``LiveView``'s calls (``new_run``, ``log_samples``, ``log_fit``, ``log_event``, ``end_run``,
     ``close``), the view itself in a child process replaced every ``runs_per_process`` runs (see the
-    module docstring). ``mode`` is spawn, save or a rerun URL (spawn without a display falls back to
-    save here, at once); the other settings are ``LiveView``'s."""
+    module docstring). ``mode`` is spawn, save, a rerun URL (spawn without a display falls back to
+    save here, at once), or web (``WebLiveView``s streaming to ``web``, the recorder's web viewer
+    server's one recording); the other settings are ``LiveView``'s."""
 
     def __init__(
         self,
@@ -208,6 +213,7 @@ class ViewProcess:
         on_note: Callable[[str], None] | None = None,
         rrd_reserve_bytes: int = RESERVE_BYTES,
         runs_per_process: int = RUNS_PER_PROCESS,
+        web: WebStream | None = None,
     ) -> None:
         if runs_per_process < 1:
             raise InputError(f"runs_per_process {runs_per_process}: give 1 or more")
@@ -218,7 +224,12 @@ class ViewProcess:
         self.rrd_reserve_bytes = rrd_reserve_bytes
         self.runs_per_process = runs_per_process
         self.rrd_path: Path | None = None
-        self._options = {"mode": self.mode, "spawn_port": spawn_port, "bind": bind}
+        self.web = web if is_web(self.mode) else None  # the web viewer's server streamed to (web mode)
+        self._options: dict[str, Any] = {"mode": self.mode, "spawn_port": spawn_port, "bind": bind}
+        if is_web(self.mode):
+            if web is None:
+                raise InputError("viewer mode web needs the web viewer's server (viz.web_viewer.WebServer)")
+            self._options |= {"mode": web.url, "web": True, "recording_id": web.recording_id}
         self._options["rrd_reserve_bytes"] = rrd_reserve_bytes
         self._child: _Child | None = None  # touched by the feed's thread only
         self._retired: list[_Child] = []
@@ -281,6 +292,10 @@ class ViewProcess:
     def log_event(self, kind: str, message: str, t_s: float | None = None) -> None:
         """As ``LiveView.log_event``."""
         self._put("log_event", (kind, message, t_s), droppable=False)
+
+    def log_panel(self, markdown: str, t_s: float) -> None:
+        """As ``WebLiveView.log_panel`` (web mode only; dropped when the view is behind)."""
+        self._put("log_panel", (markdown, t_s), droppable=True)
 
     def end_run(self) -> None:
         """As ``LiveView.end_run`` (returns at once). A view process that has shown its

@@ -20,7 +20,7 @@ from ..errors import InputError
 from ..samples import AXIS_FIELDS
 
 URL_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
-MODES = ("spawn", "save", "none")
+MODES = ("spawn", "save", "none", "web", "web+save")  # web: viz.web_viewer
 
 #: A spawned viewer and its gRPC server listen here unless the operator asks otherwise.
 DEFAULT_BIND = "127.0.0.1"
@@ -63,6 +63,8 @@ def describe_mode(mode: str, default: bool) -> str:
         "spawn": "spawn (a rerun window; an .rrd is saved as well)",
         "save": "save (an .rrd per decay; open it with rerun FILE.rrd)",
         "none": "none (no live view)",
+        "web": "web (the web viewer for a tablet or phone, served from here)",
+        "web+save": "web (the web viewer for a tablet or phone, served from here) and an .rrd per decay",
     }.get(mode, f"stream to {mode}")
     chosen = (
         f"default ({'a display is available' if mode == 'spawn' else 'no display'}); choose with --viewer"
@@ -73,7 +75,10 @@ def describe_mode(mode: str, default: bool) -> str:
 
 
 def check_mode(mode: str) -> str:
-    """Refuse a viewer mode that is neither spawn, save, none nor a rerun URL (exit 2 at the CLI)."""
+    """Refuse a viewer mode that is neither spawn, save, none, web (``web,save`` with an .rrd) nor a rerun
+    URL (exit 2 at the CLI)."""
+    if sorted(mode.replace("+", ",").split(",")) == ["save", "web"]:
+        return "web+save"
     if mode in MODES:
         return mode
     example = "rerun+http://127.0.0.1:9876/proxy"
@@ -86,7 +91,9 @@ def check_mode(mode: str) -> str:
         if not parts.hostname:
             raise InputError(f"viewer URL {mode!r} names no host; write it like {example}")
         return mode
-    raise InputError(f"viewer mode {mode!r} not understood: use spawn, save, none, or a URL like {example}")
+    raise InputError(
+        f"viewer mode {mode!r} not understood: use spawn, save, web, web,save, none, or a URL like {example}"
+    )
 
 
 def url_listening(url: str) -> bool:
