@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
+import time
 from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
@@ -24,13 +26,13 @@ from typer.testing import CliRunner
 from support.record_settings import sim_record_settings
 from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.acquire.decay import LiveDecay, LiveFit
-from tankdaq.acquire.events import Event, Fitted, Released
+from tankdaq.acquire.events import DeviceLost, Event, Fitted, Released
 from tankdaq.acquire.listeners import EventLog
 from tankdaq.acquire.pipeline import DecayPipeline, DetectionSettings
 from tankdaq.acquire.sinks import RecordingSink, Sink, ViewSink
 from tankdaq.cli import app
 from tankdaq.device.decoding import SampleDecoder
-from tankdaq.device.driver import StreamBlock
+from tankdaq.device.driver import SILENCE_TIMEOUT_S, StreamBlock
 from tankdaq.live.identifier import OnlineIdentifier, OnlineResult
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
@@ -259,6 +261,40 @@ def test_a_listener_that_raises_in_the_daemon_loop_closes_the_decay(tmp_path: Pa
     (path,) = tmp_path.glob("*.mcap")
     assert _is_complete_mcap(path)
     assert read_recording(path).ended is DecayEnd.ERROR
+
+
+@pytest.mark.slow
+def test_a_recorder_kept_busy_longer_than_the_silence_window_loses_no_decay(tmp_path: Path) -> None:
+    """The recorder's interpreter taken by one of its own threads for longer than the driver's silence
+    window, mid-decay (what a host starved by browsers drawing in software did to it): the simulated MTi-G
+    runs in a process of its own, as a sensor is hardware, so it streams on, the reader process reads on,
+    and the decay ends whole, every sample in the file. (Its thread in the recorder's process wrote
+    nothing that long: "device gone", the decay lost.)"""
+    busy: list[float] = []
+
+    def take_the_interpreter(event: Event) -> None:
+        """At the first live fit: no other thread of this process runs (the switch interval is longer
+        than the spell, so none asks for the interpreter) until the window has passed half again."""
+        if isinstance(event, Fitted) and not busy:
+            switch = sys.getswitchinterval()
+            sys.setswitchinterval(4 * SILENCE_TIMEOUT_S)
+            try:
+                start = time.monotonic()
+                while time.monotonic() - start < 1.5 * SILENCE_TIMEOUT_S:
+                    pass
+                busy.append(time.monotonic() - start)
+            finally:
+                sys.setswitchinterval(switch)
+
+    heard = EventLog(take_the_interpreter)
+    (outcome,) = RecordDaemon(_settings(tmp_path, reconnect_timeout_s=10.0), sinks=[heard]).run()
+    assert busy and busy[0] > SILENCE_TIMEOUT_S
+    assert heard.of(DeviceLost) == []
+    assert outcome.path is not None
+    recording = read_recording(outcome.path)
+    assert recording.ended is DecayEnd.SETTLED
+    counters = recording.samples["counter"].astype(np.int64)
+    assert np.all(np.diff(counters) % 65536 == 1)  # not a sample missing across the busy spell
 
 
 def test_a_live_model_with_an_input_the_recorder_lacks_is_refused_before_the_device_opens(

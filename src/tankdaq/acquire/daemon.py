@@ -33,7 +33,7 @@ from .signals import Phase, SignalStop
 from .sinks import Sink
 
 if TYPE_CHECKING:
-    from ..device.simulator import SimulatedMTi
+    from ..device.simulator.process import SimulatorProcess
     from ..physics.scenario import DecayScenario
 
 __all__ = ["DaemonStatus", "RecordDaemon", "RecordSettings"]
@@ -72,7 +72,7 @@ class RecordDaemon:
         return self.recorder.recordings
 
     @property
-    def simulator(self) -> SimulatedMTi | None:
+    def simulator(self) -> SimulatorProcess | None:
         """The simulated sensor behind port ``sim`` once started (its ``truth``, ``unplug()``)."""
         return self.recorder.simulator
 

@@ -52,7 +52,8 @@ from .signals import Phase, SignalStop
 from .sinks import RecordingSink, Sink, ViewSink
 
 if TYPE_CHECKING:
-    from ..device.simulator import RecordedSource, SimulatedMTi
+    from ..device.simulator import RecordedSource
+    from ..device.simulator.process import SimulatorProcess
     from ..physics.scenario import DecayScenario
 
 #: The note a decay's file gets when the recording ends with the decay under way, by how it ended.
@@ -230,7 +231,7 @@ class Recorder:
     # ---- the device ----------------------------------------
 
     @property
-    def simulator(self) -> SimulatedMTi | None:
+    def simulator(self) -> SimulatorProcess | None:
         """The simulated sensor behind port ``sim`` once started (its ``truth``, ``unplug()``)."""
         return self.device.simulator if self.device else None
 

@@ -76,6 +76,8 @@ ERROR_NOT_IMPLEMENTED = 0x04
 RESET_ACK_WAIT_S = 0.2
 #: Share of a line's bit rate the data may use (acks and bursts need the rest).
 HEADROOM = 0.9
+#: How long a streaming device may send nothing before it is taken for gone (unplugged, powered off).
+SILENCE_TIMEOUT_S = 3.0
 
 
 @dataclass(frozen=True)
@@ -157,7 +159,7 @@ class MTiDriver(XbusLink):
         goto_config_s: float = 2.0,
         probe_s: float = 0.6,
         boot_s: float = 6.0,
-        silence_timeout_s: float = 3.0,
+        silence_timeout_s: float = SILENCE_TIMEOUT_S,
         modulus: int | None = None,
         by_id_dirs: Sequence[str] | None = None,
     ) -> None:

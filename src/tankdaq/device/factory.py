@@ -1,10 +1,10 @@
 """``open_device(port, ...)``: the one way a recorder gets an opened, configured MTi.
 
-The port ``sim`` is the built-in simulated MTi-G: it is started on a pseudo-terminal and opened by
-path like hardware; ``sim:FILE.mcap`` is the same simulator playing the device of a recording (the
-caller reads the file: ``device.simulator.playback.recorded_device``); any other port is the real driver on
-that path (or pyserial URL). Whoever
-records (the daemon, a guided session) never tests for ``sim`` to get a device.
+The port ``sim`` is the built-in simulated MTi-G: it is started on a pseudo-terminal, in a process of
+its own as a sensor is hardware (``device.simulator.process``), and opened by path like hardware;
+``sim:FILE.mcap`` is the same simulator playing the device of a recording (the caller reads the file:
+``device.simulator.playback.recorded_device``); any other port is the real driver on that path (or
+pyserial URL). Whoever records (the daemon, a guided session) never tests for ``sim`` to get a device.
 """
 
 from __future__ import annotations
@@ -22,7 +22,8 @@ from .latency import ftdi_latency_ms, latency_note
 
 if TYPE_CHECKING:
     from ..physics.scenario import DecayScenario
-    from .simulator import RecordedSource, SimulatedMTi
+    from .simulator import RecordedSource
+    from .simulator.process import SimulatorProcess
 
 #: The port name that starts the built-in simulated MTi-G (``sim:FILE.mcap``: playing a recording).
 SIM_PORT = "sim"
@@ -78,10 +79,11 @@ class DeviceNote:
 
 @dataclass
 class OpenDevice:
-    """An opened, configured device: the driver, and the simulator behind it for port ``sim``."""
+    """An opened, configured device: the driver, and the simulator behind it for port ``sim`` (in a
+    process of its own: ``device.simulator.process``)."""
 
     driver: MTiDriver
-    simulator: SimulatedMTi | None = None
+    simulator: SimulatorProcess | None = None
 
     def close(self) -> None:
         """Close the port, then stop the simulator (the link first, as an unplugged cable)."""
@@ -136,15 +138,15 @@ def open_device(
     return device
 
 
-def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[DeviceNote], None]) -> SimulatedMTi:
-    from .simulator import SimulatedMTi
+def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[DeviceNote], None]) -> SimulatorProcess:
+    from .simulator.process import SimulatorProcess
 
     if sim.recorded is not None:
-        simulator = SimulatedMTi(source=sim.recorded, speed=sim.speed, baud=baud).start()
+        simulator = SimulatorProcess(source=sim.recorded, speed=sim.speed, baud=baud).start()
         label = f"playing the device of {sim.recorded.name}: {len(sim.recorded)} frames"
     else:
         scenario = sim.scenario()
-        simulator = SimulatedMTi(
+        simulator = SimulatorProcess(
             scenario, speed=sim.speed, baud=baud, seed=sim.seed, legacy=sim.legacy
         ).start()
         label = f"{scenario.hull} {format_draft(scenario.draft)} {scenario.axis}, seed {scenario.seed}"

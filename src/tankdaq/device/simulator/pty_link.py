@@ -92,7 +92,7 @@ class PtyLink:
         self.by_id_dir = os.path.join(self._own_dir, "by-id")
         os.mkdir(self.by_id_dir)
         self._by_id_link = os.path.join(self.by_id_dir, self._by_id_name)
-        _register_by_id(self.by_id_dir)
+        register_by_id(self.by_id_dir)
         if not self.link:
             self.link = os.path.join(self._own_dir, "ttyMTi0")
 
@@ -100,7 +100,7 @@ class PtyLink:
         """Unplug and remove the folder (links, by-id, owner file); also runs at interpreter exit."""
         self.unplug()
         if self._own_dir:
-            _unregister_by_id(self.by_id_dir)
+            unregister_by_id(self.by_id_dir)
             shutil.rmtree(self._own_dir, ignore_errors=True)
             atexit.unregister(self.remove)
             self._own_dir = None
@@ -196,13 +196,14 @@ class PtyLink:
         self._burst_at = now  # a USB adapter with a latency timer holds the next bytes a period
 
 
-def _register_by_id(folder: str) -> None:
+def register_by_id(folder: str) -> None:
     """Name ``folder`` in ``TANKDAQ_SERIAL_BY_ID`` so this process's port finder sees the device."""
     dirs = [d for d in os.environ.get(BY_ID_ENV, "").split(os.pathsep) if d]
     os.environ[BY_ID_ENV] = os.pathsep.join([*dirs, folder])
 
 
-def _unregister_by_id(folder: str) -> None:
+def unregister_by_id(folder: str) -> None:
+    """Drop ``folder`` from ``TANKDAQ_SERIAL_BY_ID`` (the device it names is gone)."""
     dirs = [d for d in os.environ.get(BY_ID_ENV, "").split(os.pathsep) if d and d != folder]
     if dirs:
         os.environ[BY_ID_ENV] = os.pathsep.join(dirs)
