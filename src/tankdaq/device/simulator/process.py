@@ -75,6 +75,7 @@ class SimulatorProcess:
         self._process: subprocess.Popen[bytes] | None = None
         self._conn: Connection | None = None
         self.link = self.by_id_dir = ""
+        self._last: dict[str, Any] = {}  # what the device said as it stopped: its ``received``, its ``truth``
 
     def __enter__(self) -> SimulatorProcess:
         return self.start()
@@ -114,8 +115,10 @@ class SimulatorProcess:
             process, conn, self._process, self._conn = self._process, self._conn, None, None
             if process is None or conn is None:
                 return
-            with contextlib.suppress(OSError, ValueError):
+            with contextlib.suppress(OSError, ValueError, EOFError):
                 conn.send(("stop", ()))
+                if conn.poll(END_WAIT_S):
+                    self._last = conn.recv()[1]
             try:
                 process.wait(END_WAIT_S)
             except subprocess.TimeoutExpired:
@@ -139,13 +142,13 @@ class SimulatorProcess:
 
     @property
     def truth(self) -> list[RunTruth]:
-        """The scenario's runs (``SimulatedMTi.truth``)."""
-        return list(self._call("truth"))
+        """The scenario's runs (``SimulatedMTi.truth``), also once stopped."""
+        return list(self._call_or_last("truth"))
 
     @property
     def received(self) -> list[ReceivedMessage]:
-        """Every message the host wrote (``SimulatedMTi.received``)."""
-        return list(self._call("received"))
+        """Every message the host wrote (``SimulatedMTi.received``), also once stopped."""
+        return list(self._call_or_last("received"))
 
     def play(self, scenario: DecayScenario) -> None:
         """Play ``scenario`` next on the same clock (``SimulatedMTi.play``)."""
@@ -166,6 +169,10 @@ class SimulatorProcess:
                 raise DeviceError("the simulated MTi-G is not running")
             self._conn.send((name, args))
             return self._answer()
+
+    def _call_or_last(self, name: str) -> Any:
+        """``name`` asked of the device, or as it said it when it stopped."""
+        return self._last[name] if self._conn is None and name in self._last else self._call(name)
 
     def _answer(self) -> Any:
         """The device process's answer to the last message; its refusal raised here, as it was raised."""
@@ -201,6 +208,8 @@ def _serve(conn: Connection) -> None:
         while True:
             name, args = conn.recv()
             if name == "stop":
+                sim.stop()
+                conn.send((True, {"received": sim.received, "truth": sim.truth}))
                 return
             try:
                 answer = (True, CALLS[name](sim, *args))
