@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -21,9 +23,11 @@ from acquire.test_record import _events, _tankdaq, record_args
 from support.event_stream import wait_for_event
 from support.record_settings import sim_record_settings
 from support.run_metadata import run_metadata
+from support.web_browser import children
 from tankdaq.acquire.daemon import RecordDaemon
 from tankdaq.acquire.events import DeviceBack, DeviceLost, Event, Fitted
 from tankdaq.acquire.listeners import EventLog
+from tankdaq.device.simulator import OWNER_FILE, TEMP_PREFIX
 from tankdaq.records import DecayEnd
 from tankdaq.store.reader import read_recording
 
@@ -69,6 +73,14 @@ def _recording_after_release(out: Path, *extra: str) -> subprocess.Popen:
     return proc
 
 
+def _cmdline(pid: int) -> bytes:
+    """The command line of process ``pid`` (b"" once it has ended)."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
 def _chunk_spans(path: Path) -> list[tuple[int, int]]:
     """(first, last) log time of every complete chunk of a killed file, in file order (ns)."""
     from mcap.records import Chunk
@@ -89,13 +101,16 @@ def _chunk_spans(path: Path) -> list[tuple[int, int]]:
 
 @pytest.mark.slow
 def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
-    """kill -9 in the middle of a decay: every flushed chunk survives and no chunk holds over 1 s.
+    """kill -9 in the middle of a decay: every flushed chunk survives and no chunk holds over 1 s; the
+    simulated MTi-G's process, left at the end of its socket, stops and removes its pty folder.
 
     The loss is measured in the file, not against the test's clock: each complete chunk is one
     flush, so its span of log times is the most a kill can cost, whatever the machine's load.
     """
     proc = _recording_after_release(tmp_path, "--runs", "1", "--sim-seed", "2")
     (path,) = tmp_path.glob("*.mcap")
+    (device,) = [c for c in children(proc.pid) if b"tankdaq.device.simulator.process" in _cmdline(c)]
+    device_ended = os.pidfd_open(device)
     try:
         grown, deadline = 0, time.monotonic() + 60
         while grown < 4 and time.monotonic() < deadline:  # four flushes after the pre-trigger history
@@ -106,6 +121,12 @@ def test_kill_9_mid_decay_loses_at_most_the_last_second(tmp_path: Path) -> None:
     finally:
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
+    try:
+        assert select.select([device_ended], [], [], 30.0)[0], "the simulated MTi-G outlived its recorder"
+    finally:
+        os.close(device_ended)
+    owners = [folder / OWNER_FILE for folder in Path(tempfile.gettempdir()).glob(f"{TEMP_PREFIX}*")]
+    assert not [f for f in owners if f.is_file() and f.read_text().strip() == str(device)]
     spans = _chunk_spans(path)
     assert read_recording(path).ended is DecayEnd.CUT
     result = subprocess.run(
