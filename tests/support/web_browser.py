@@ -42,9 +42,11 @@ CHROMIUM_ARGS = [
     "--enable-unsafe-swiftshader",
     "--disable-dev-shm-usage",
 ]
-#: The browsers run at the lowest priority: drawing in software they would take the cores from the recorder
-#: on the same machine (its simulated device starved, a decay lost as "device gone"), where a tablet
-#: draws on its own.
+#: The browsers are started at the lowest priority, where a tablet draws on its own. It is no bound: Chromium
+#: (as root) puts its browser and GPU processes back at nice -8, and each browser runs in a session of its
+#: own, which the kernel's autogroups give a share of the CPU equal to the recorder's session. So the
+#: recorder on the same machine does get busy; the simulated device keeps streaming in a process of its own
+#: (device/simulator/process.py), as a sensor is hardware.
 NICE = 19
 PHONE = {"width": 390, "height": 844}
 TABLET = {"width": 820, "height": 1180}
