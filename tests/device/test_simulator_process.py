@@ -36,6 +36,15 @@ def test_a_refused_setting_is_the_same_one_line_and_no_process_is_left() -> None
     assert device.pid is None
 
 
+@pytest.mark.parametrize("speed", [float("nan"), float("inf"), 1e400, "2", True])
+def test_a_speed_that_is_not_a_finite_number_is_refused_in_one_line(speed: object) -> None:
+    """Refused where the device is made, not as a traceback of its thread and a device that never speaks."""
+    device = SimulatorProcess(speed=speed)  # type: ignore[arg-type]
+    with pytest.raises(InputError, match=r"^speed must be a finite number \(.*\), got ") as refused:
+        device.start()
+    assert "\n" not in str(refused.value) and device.pid is None
+
+
 @pytest.mark.slow
 def test_the_device_streams_from_its_process_and_is_gone_with_it() -> None:
     with SimulatorProcess(speed=4.0, seed=3) as device:

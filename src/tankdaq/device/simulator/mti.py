@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import os
 import queue
 import select
@@ -56,6 +57,10 @@ class SimulatedMTi:
         behaviour: Behaviour | None = None,
         seed: int = 0,
     ) -> None:
+        if isinstance(speed, bool) or not isinstance(speed, int | float) or not math.isfinite(speed):
+            raise InputError(
+                f"speed must be a finite number (the device clock against the wall's), got {speed!r}"
+            )
         if speed <= 0:
             raise InputError(f"speed must be positive, got {speed:g}")
         if baud not in SERIAL_BAUDS:
