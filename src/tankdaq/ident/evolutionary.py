@@ -2,10 +2,10 @@
 
 The papers searched the total inertia I and dimensional coefficients (N, W, x, C1, C2, C3 ...) inside
 fixed boxes, minimising the RMS of the one-step-ahead predicted angular velocity (seed 000 eq. 4.5-4.6,
-seed 001 eq. 6-7). tankdaq reruns that search on pymoo so the papers' tables can be reproduced and set
-against output error (docs/seeds.md). Only ratios to I are identifiable, so results are reported as
-tankdaq terms (b1..s3) like every other estimator; the seeds' own variables, I included, stay in
-``seed_variables_``.
+seed 001 eq. 6-7). tankdaq reruns that search (``population_search``: the papers' GA and PSO in numpy)
+so the papers' tables can be reproduced and set against output error (docs/seeds.md). Only ratios to I
+are identifiable, so results are reported as tankdaq terms (b1..s3) like every other estimator; the
+seeds' own variables, I included, stay in ``seed_variables_``.
 """
 
 from __future__ import annotations
@@ -14,8 +14,7 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from functools import cache, cached_property, partial
-from typing import TYPE_CHECKING, Any
+from functools import cached_property, partial
 
 import numpy as np
 
@@ -26,10 +25,8 @@ from ..records import DecayRun
 from .base import EstimatorMixin
 from .compiled import simulate, substeps, term_codes, term_matrix
 from .equation_error import check_runs
+from .population_search import Objective, SearchResult, genetic_algorithm, particle_swarm
 from .uncertainty import coefficient_warnings
-
-if TYPE_CHECKING:  # pymoo is imported when a search runs: 0.3 s no other fit needs (bench_startup.py)
-    from pymoo.core.algorithm import Algorithm
 
 #: Lower bound of the total inertia. The papers write I in [0, 0.1]; 0 itself would divide by zero.
 INERTIA_FLOOR = 1e-3
@@ -197,7 +194,7 @@ class GeneticSettings:
 class SwarmSettings:
     """Seed 001's PSO: population, iterations, max particle speed as a fraction of each variable's range.
 
-    The inertia weight moves within 0.4-0.9 as in the paper: pymoo's adaptive PSO spans exactly that.
+    The inertia weight moves from 0.9 to 0.4 over the iterations, the paper's "variable weight 0.4-0.9".
     """
 
     population: int = 200
@@ -223,42 +220,8 @@ SWARM_SETTINGS: dict[str, SwarmSettings] = {
 # --------------------------------------------------------------------------------------------------
 
 
-@cache
-def _pymoo_types() -> tuple[Any, Any]:
-    """(problem, recorder): the pymoo classes the search runs on, made on the first search."""
-    from pymoo.core.callback import Callback
-    from pymoo.core.problem import Problem
-
-    class OneStepProblem(Problem):
-        """pymoo problem: the whole population's seed objective in one vectorised call."""
-
-        def __init__(self, space: SearchSpace, data: OneStepData) -> None:
-            super().__init__(n_var=len(space.variables) + 1, n_obj=1, xl=space.lower, xu=space.upper)
-            self.space = space
-            self.data = data
-
-        def _evaluate(self, x: np.ndarray, out: dict, *args: object, **kwargs: object) -> None:
-            out["F"] = self.data.rms(self.space.coefficients(x))[:, None]
-
-    class GenerationRecorder(Callback):
-        """Keeps the best objective of each generation and reports progress (done, total)."""
-
-        def __init__(self, total: int, progress: Callable[[int, int], None] | None) -> None:
-            super().__init__()
-            self.total = total
-            self.progress = progress
-            self.best: list[float] = []
-
-        def notify(self, algorithm: Algorithm) -> None:
-            self.best.append(float(algorithm.opt.get("F").min()))
-            if self.progress is not None:
-                self.progress(algorithm.n_gen, self.total)
-
-    return OneStepProblem, GenerationRecorder
-
-
 class _SeedSearch(EstimatorMixin):
-    """Shared fit of GeneticSeedFit and SwarmSeedFit: the paper's box, a pymoo run, results as tankdaq terms.
+    """Shared fit of GeneticSeedFit and SwarmSeedFit: the paper's box, a search, results as tankdaq terms.
 
     Settings: ``terms`` (term list or alias), ``paper`` (whose boxes and preset: ``seed000``,
     ``seed001``, ``seed002``; default the alias's paper, else seed 001), ``settings`` (a preset name
@@ -300,7 +263,7 @@ class _SeedSearch(EstimatorMixin):
             raise InputError(f"no {type(self).__name__} settings named {name!r}; known: {known}")
         return self._presets[name]
 
-    def _algorithm(self, settings: GeneticSettings | SwarmSettings) -> Algorithm:
+    def _search(self, objective: Objective, rng: np.random.Generator) -> SearchResult:
         raise NotImplementedError
 
     def fit(self, runs: DecayRun | Sequence[DecayRun]) -> _SeedSearch:
@@ -310,19 +273,10 @@ class _SeedSearch(EstimatorMixin):
         self.space_ = SearchSpace.for_model(self.terms, self.paper)
         self.settings_ = self._resolved_settings(self.space_.paper)
         data = OneStepData.from_runs(self.runs_, self.space_.terms)
-        from pymoo.optimize import minimize
-
-        problem, recording = _pymoo_types()
-        recorder = recording(self.settings_.generations, self.progress)
-        result = minimize(
-            problem(self.space_, data),
-            self._algorithm(self.settings_),
-            termination=("n_gen", self.settings_.generations),
-            seed=self.random_state,
-            callback=recorder,
-            verbose=False,
-        )
-        best_x = np.atleast_1d(result.X).astype(float)
+        space = self.space_
+        rng = np.random.default_rng(self.random_state)
+        result = self._search(lambda x: data.rms(space.coefficients(x)), rng)
+        best_x = result.best
         theta = self.space_.coefficients(best_x)[0]
         self.terms_ = self.space_.terms
         self.seed_variables_ = {"I": float(best_x[0])} | dict(
@@ -330,8 +284,8 @@ class _SeedSearch(EstimatorMixin):
         )
         self.coefficients_ = dict(zip(self.terms_, theta.tolist(), strict=True))
         self.seed_objective_ = float(data.rms(theta)[0])
-        self.history_ = np.array(recorder.best)
-        self.n_evaluations_ = int(result.algorithm.evaluator.n_eval)
+        self.history_ = result.history
+        self.n_evaluations_ = result.evaluations
         self._set_uncertainty(data, theta)
         self._set_angle_fit(theta)
         self.warnings_ = self._bound_warnings(best_x) + coefficient_warnings(
@@ -399,7 +353,7 @@ class _SeedSearch(EstimatorMixin):
 
 
 class GeneticSeedFit(_SeedSearch):
-    """The seeds' genetic algorithm (pymoo GA: SBX crossover, polynomial mutation) on their objective.
+    """The seeds' genetic algorithm (tournament, SBX crossover, polynomial mutation) on their objective.
 
     ``GeneticSeedFit("seed001-eq1").fit(runs)``; ``settings`` takes a preset name (``seed000``,
     ``seed001``, ``seed002``) or ``GeneticSettings``.
@@ -408,31 +362,41 @@ class GeneticSeedFit(_SeedSearch):
     _presets = GENETIC_SETTINGS
     _settings_type = GeneticSettings
 
-    def _algorithm(self, settings: GeneticSettings | SwarmSettings) -> Algorithm:
+    def _search(self, objective: Objective, rng: np.random.Generator) -> SearchResult:
+        settings = self.settings_
         assert isinstance(settings, GeneticSettings)
-        from pymoo.algorithms.soo.nonconvex.ga import GA
-        from pymoo.operators.crossover.sbx import SBX
-        from pymoo.operators.mutation.pm import PM
-
-        return GA(
-            pop_size=settings.population,
-            crossover=SBX(prob=settings.crossover),
-            mutation=PM(prob=settings.mutation),
-            eliminate_duplicates=False,
+        return genetic_algorithm(
+            objective,
+            self.space_.lower,
+            self.space_.upper,
+            population=settings.population,
+            generations=settings.generations,
+            crossover=settings.crossover,
+            mutation=settings.mutation,
+            rng=rng,
+            progress=self.progress,
         )
 
 
 class SwarmSeedFit(_SeedSearch):
-    """Seed 001's particle swarm (pymoo adaptive PSO, inertia weight 0.4-0.9) on the seeds' objective."""
+    """Seed 001's particle swarm (inertia weight 0.9 to 0.4, speed limit per variable) on their objective."""
 
     _presets = SWARM_SETTINGS
     _settings_type = SwarmSettings
 
-    def _algorithm(self, settings: GeneticSettings | SwarmSettings) -> Algorithm:
+    def _search(self, objective: Objective, rng: np.random.Generator) -> SearchResult:
+        settings = self.settings_
         assert isinstance(settings, SwarmSettings)
-        from pymoo.algorithms.soo.nonconvex.pso import PSO
-
-        return PSO(pop_size=settings.population, max_velocity_rate=settings.max_velocity, adaptive=True)
+        return particle_swarm(
+            objective,
+            self.space_.lower,
+            self.space_.upper,
+            particles=settings.population,
+            iterations=settings.generations,
+            max_velocity=settings.max_velocity,
+            rng=rng,
+            progress=self.progress,
+        )
 
 
 #: ``--method`` names of the seeds' searches; ``ga-seed000`` etc. pin a paper's boxes and preset, since
