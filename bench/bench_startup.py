@@ -13,6 +13,7 @@ set, as on this workplace, each start recompiled tankdaq's own modules: about 30
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import resource
 import statistics
@@ -56,11 +57,12 @@ def child_cpu_s(argv: list[str], cwd: Path | None = None) -> float:
 
 
 #: The heavy libraries a command may import; the identify run says which of them it loaded.
-HEAVY = ("pandas", "pyarrow", "scipy.ndimage", "sqlalchemy", "pymoo", "mcap", "matplotlib", "rerun", "h5py")
+HEAVY = ("pandas", "pyarrow", "scipy.ndimage", "sqlalchemy", "mcap", "matplotlib", "rerun", "h5py")
 #: ``tankdaq identify`` in a child that reports, at its end, which of ``HEAVY`` it had loaded. ``BEFORE``
 #: preloads what the command imported before issue 43 took it out of the way (pandas, with pyarrow, for
 #: a check whether a source was a DataFrame; pymoo, for the GA/PSO searches only): the old cost, measured in
-#: the same run as the new.
+#: the same run as the new. pymoo is no longer a dependency (the searches are numpy): it is preloaded only
+#: where it is still installed.
 IDENTIFY = """
 import atexit, sys
 {before}
@@ -69,7 +71,9 @@ from tankdaq.cli import main
 sys.argv = ["tankdaq", "identify", {csv!r}]
 main()
 """
-BEFORE = "import pandas, tankdaq.ident.evolutionary, pymoo.optimize, pymoo.algorithms.soo.nonconvex.ga"
+BEFORE = "import pandas, tankdaq.ident.evolutionary" + (
+    ", pymoo.optimize, pymoo.algorithms.soo.nonconvex.ga" if importlib.util.find_spec("pymoo") else ""
+)
 
 
 def identify_imports(repeats: int = 7) -> dict[str, object]:

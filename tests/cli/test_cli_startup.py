@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-HEAVY = ("scipy", "numba", "matplotlib", "rerun", "pymoo", "distributed", "dask", "mcap")
+HEAVY = ("scipy", "numba", "matplotlib", "rerun", "distributed", "dask", "mcap")
 #: Not heavy, but each was a tenth of a ``--help``: typer's pydantic coercion of an absent root
 #: ``--help`` (cli.app.OneLineUsageErrors), rich before the first line printed (cli.app.err_console).
 SLOW_TO_IMPORT = ("pydantic", "rich")
