@@ -243,6 +243,20 @@ def test_bad_settings_are_input_errors(noisy_run: DecayRun, estimator: GeneticSe
         estimator.fit(noisy_run)
 
 
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: GeneticSettings(population=1), "population >= 2 and generations >= 1, not 1 and 2000"),
+        (lambda: SwarmSettings(generations=0), "population >= 2 and generations >= 1, not 200 and 0"),
+        (lambda: GeneticSettings(mutation=1.5), r"GeneticSettings.mutation is a fraction in \[0, 1\]"),
+        (lambda: SwarmSettings(max_velocity=float("nan")), "SwarmSettings.max_velocity is a fraction"),
+    ],
+)
+def test_settings_no_search_can_run_are_input_errors(make, message: str) -> None:
+    with pytest.raises(InputError, match=message):
+        make()
+
+
 def test_no_runs_is_an_input_error() -> None:
     with pytest.raises(BadIdentificationInput):
         GeneticSeedFit("b1,c1", settings=QUICK_GA).fit([])

@@ -189,6 +189,9 @@ class GeneticSettings:
     crossover: float = 0.8
     mutation: float = 0.15
 
+    def __post_init__(self) -> None:
+        _check_settings(self, {"crossover": self.crossover, "mutation": self.mutation})
+
 
 @dataclass(frozen=True)
 class SwarmSettings:
@@ -200,6 +203,19 @@ class SwarmSettings:
     population: int = 200
     generations: int = 1000
     max_velocity: float = 0.15
+
+    def __post_init__(self) -> None:
+        _check_settings(self, {"max_velocity": self.max_velocity})
+
+
+def _check_settings(settings: GeneticSettings | SwarmSettings, fractions: dict[str, float]) -> None:
+    """A search needs two individuals, one generation, and probabilities and speed limits in [0, 1]."""
+    name, size = type(settings).__name__, (settings.population, settings.generations)
+    if size[0] < 2 or size[1] < 1:
+        raise InputError(f"{name} needs population >= 2 and generations >= 1, not {size[0]} and {size[1]}")
+    for field, value in fractions.items():
+        if not 0.0 <= value <= 1.0:
+            raise InputError(f"{name}.{field} is a fraction in [0, 1], not {value}")
 
 
 GENETIC_SETTINGS: dict[str, GeneticSettings] = {
@@ -264,6 +280,7 @@ class _SeedSearch(EstimatorMixin):
         return self._presets[name]
 
     def _search(self, objective: Objective, rng: np.random.Generator) -> SearchResult:
+        """The paper's search for the smallest ``objective`` in ``space_``'s box with ``settings_``."""
         raise NotImplementedError
 
     def fit(self, runs: DecayRun | Sequence[DecayRun]) -> _SeedSearch:
