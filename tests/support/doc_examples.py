@@ -8,7 +8,7 @@ read, not run). A command's comment may mark it: ``[hardware]`` (needs the MTi-G
 its one-line error), ``[server]`` (needs a lab's PostgreSQL server: the same), ``[Ctrl-C]`` (runs until
 stopped: it must start, print its first line and stop cleanly on SIGINT), ``[on the server]`` (an
 administrator's step on the PostgreSQL server: not run here), ``[long]`` (the seeds' own GA at their
-sizes, minutes to an hour: not run by the test). ``make demo`` is what the
+sizes, seconds to minutes each: not run by the test). ``make demo`` is what the
 clone ran first; ``pip install`` lines are resolved (``--dry-run --no-deps``), not installed over the
 environment the other examples use. A Python line followed by a ``# SomeError: message`` comment must
 raise that error with that message (up to a ``...``).

@@ -18,7 +18,7 @@ Objective = Callable[[np.ndarray], np.ndarray]
 #: Told (generation, generations) after each generation, 1-based.
 Progress = Callable[[int, int], None]
 
-#: Pymoo's defaults, which tankdaq's GA ran on until it moved to numpy: distribution index of SBX and PM.
+#: Distribution indices of SBX and of polynomial mutation: pymoo's defaults, as docs/seeds.md says.
 SBX_ETA = 15.0
 MUTATION_ETA = 20.0
 #: Shi & Eberhart's acceleration coefficients and inertia weight range (seed 001 prints the range only).
