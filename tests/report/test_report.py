@@ -287,3 +287,44 @@ def test_a_budget_plugs_in_as_a_table(tmp_path: Path) -> None:
     text = subprocess.run(["pdftotext", str(tmp_path / "b.pdf"), "-"], capture_output=True, text=True).stdout
     assert "repeats" in text and "0.007" in text and "expanded" in text
     assert table.to_frame().equals(frame)
+
+
+def test_a_figure_page_holds_the_figures_own_pixels(tmp_path: Path) -> None:
+    """The PDF embeds each figure's PNG as it is (the pixels the HTML shows), not resampled to the page:
+    pdfimages reads back the PNG's every pixel."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from tankdaq.report.content import Figure, ReportContent, Section
+    from tankdaq.report.pdf import write_pdf
+
+    if shutil.which("pdfimages") is None:
+        pytest.skip("no pdfimages (make report-test-deps installs Debian's poppler-utils)")
+    rng = np.random.default_rng(7)
+    pixels = rng.integers(0, 256, size=(60, 90, 3), dtype=np.uint8)  # no two neighbours alike
+    png = io.BytesIO()
+    Image.fromarray(pixels).save(png, format="png")
+    figure = Figure("f", "noise", png.getvalue(), "every pixel its own colour")
+    content = ReportContent("t", [Section("s", "figures", figures=[figure])], [], "2026-11-28T12:00:00+00:00")
+    write_pdf(content, tmp_path / "f.pdf")
+    subprocess.run(["pdfimages", "-png", str(tmp_path / "f.pdf"), str(tmp_path / "img")], check=True)
+    (image,) = sorted(tmp_path.glob("img-*.png"))
+    with Image.open(image) as read_back:
+        # stored bottom row first (the page's transform stands it upright)
+        assert np.array_equal(np.asarray(read_back.convert("RGB")), pixels[::-1])
+
+
+def test_a_command_line_without_a_url_does_not_load_the_catalogue() -> None:
+    """The report's command line is masked without importing the catalogue (SQLAlchemy) unless a word
+    of it is a URL; a URL's password is still masked."""
+    code = (
+        "import sys; from tankdaq.report.provenance import masked_command; "
+        "print(masked_command(['tankdaq', 'report', 'runs/', '--out', 'x']), 'sqlalchemy' in sys.modules); "
+        "print(masked_command(['tankdaq', 'report', '--catalogue', 'postgresql://lab:s3cret@db/tank']))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    plain, masked = done.stdout.splitlines()
+    assert plain == "tankdaq report runs/ --out x False"
+    assert "s3cret" not in masked and "db/tank" in masked

@@ -20,7 +20,6 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d, minimum_filter1d, uniform_filter1d
 
 from ..errors import BadIdentificationInput
 from ..records import DecayRun
@@ -140,6 +139,10 @@ def rest_cuts(angle: np.ndarray, noise: float) -> list[int]:
     """Sample indices where the model rests at its equilibrium between decays: the middle of every
     stretch where a natural period around each sample stays within ``REST_NOISES`` noise sigmas, near
     the record's median (a held tilt is not a rest: it belongs to the release that follows)."""
+    # imported here: scipy.ndimage is a third of a second of CPU, and a recording with its release
+    # events (every report, identify or campaign of MCAP files) never comes here
+    from scipy.ndimage import maximum_filter1d, minimum_filter1d, uniform_filter1d
+
     excursion = angle - np.median(angle)
     peaks = half_cycle_peaks(excursion)
     if peaks.size < 3 or noise <= 0:
