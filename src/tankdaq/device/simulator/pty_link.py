@@ -36,7 +36,10 @@ from ..ports import BY_ID_ENV
 #: Temporary folders of simulators: ``tankdaq-sim-<random>`` holding ``owner.pid``.
 TEMP_PREFIX = "tankdaq-sim-"
 OWNER_FILE = "owner.pid"
-#: A device's output buffer: beyond it, data is lost (as on a link that is too slow).
+#: A device's output buffer: beyond it, data is lost (as on a link that is too slow). At ``speed`` times
+#: the device's clock the buffer holds ``speed`` times as many bytes: a host that lags a given wall time
+#: then loses data exactly when it would behind a real device (at 10x speed and 400 Hz the plain limit
+#: was half a second of the wall's, which a loaded test machine's reader lagged).
 OUTBOX_LIMIT = 1 << 18
 
 
@@ -171,8 +174,9 @@ class PtyLink:
         """Write from ``outbox`` what ``baud`` carries since the last write (``speed``: device clock
         speed-up); bytes beyond the device's buffer are lost, at the wrong line speed they are garbage.
         With ``latency_s`` (a USB adapter's latency timer) the bytes go in one burst per period."""
-        if len(outbox) > OUTBOX_LIMIT:
-            excess = len(outbox) - OUTBOX_LIMIT
+        limit = int(OUTBOX_LIMIT * max(1.0, speed))
+        if len(outbox) > limit:
+            excess = len(outbox) - limit
             del outbox[:excess]
             self.bytes_overflowed += excess
         if not outbox or self.master < 0 or self.holding(latency_s) > 0:
