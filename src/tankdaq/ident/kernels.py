@@ -183,7 +183,7 @@ def _rk4_step(
     partials g[0] -> g[2] (g[1] halfway). k (4, z.size) and tmp are work arrays, so no step allocates.
 
     The four stages are one loop around one ``_deriv``: numba inlines its IR (and ``term_eval``'s) once
-    here, not four times as when the stages were written out, which cost a quarter of the native build's
+    here, not four times as when the stages were written out, which cost nearly a third of the native build's
     CPU (``bench/bench_kernel_build.py``) and ran no faster.
     """
     size = z.size
@@ -347,7 +347,7 @@ def _box_full(x: np.ndarray, width: int) -> np.ndarray:
     """Full convolution of each column of x (n, k) with a boxcar of ``width`` ones.
 
     Element loops, not row operations: numba compiles a row assignment (``out[t] = acc``) with its
-    shape-mismatch error message, a fifth of the native build's CPU for that one line.
+    shape-mismatch error message, about a tenth of the native build's CPU for that one line.
     """
     n, k = x.shape
     out = np.zeros((n + width - 1, k))
