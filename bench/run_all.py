@@ -37,6 +37,7 @@ QUICK_ARGS: dict[str, list[str]] = {
     "bench_export.py": ["36000"],
     "bench_first_run.py": ["--repeats", "1"],
     "bench_hidden_effects.py": ["--draws", "3"],
+    "bench_kernel_build.py": ["--builds", "1", "--rounds", "3"],
     "bench_memory_day.py": ["--hours", "1"],
     "bench_mt_manager.py": ["20000"],
     "bench_question_pause.py": ["--pause", "10"],

@@ -174,31 +174,30 @@ def _rk4_step(
     codes: np.ndarray,
     u0: float,
     du: float,
-    g0: np.ndarray,
-    g_mid: np.ndarray,
-    g1: np.ndarray,
+    g: np.ndarray,
     eps: float,
-    k1: np.ndarray,
-    k2: np.ndarray,
-    k3: np.ndarray,
-    k4: np.ndarray,
+    k: np.ndarray,
     tmp: np.ndarray,
 ) -> None:
     """One RK4 step of the state and its sensitivities, in place; the input goes u0 -> u0 + du and its
-    partials g0 -> g1 (g_mid halfway). k1..k4 and tmp are work arrays, so no step allocates."""
+    partials g[0] -> g[2] (g[1] halfway). k (4, z.size) and tmp are work arrays, so no step allocates.
+
+    The four stages are one loop around one ``_deriv``: numba inlines its IR (and ``term_eval``'s) once
+    here, not four times as when the stages were written out, which cost nearly a third of the native build's
+    CPU (``bench/bench_kernel_build.py``) and ran no faster.
+    """
     size = z.size
-    _deriv(z, k1, theta, codes, u0, g0, eps)
     for m in range(size):
-        tmp[m] = z[m] + 0.5 * h * k1[m]
-    _deriv(tmp, k2, theta, codes, u0 + 0.5 * du, g_mid, eps)
+        tmp[m] = z[m]
+    for stage in range(4):
+        u = u0 if stage == 0 else (u0 + 0.5 * du if stage < 3 else u0 + du)
+        _deriv(tmp, k[stage], theta, codes, u, g[(stage + 1) // 2], eps)
+        if stage < 3:
+            step = 0.5 * h if stage < 2 else h
+            for m in range(size):
+                tmp[m] = z[m] + step * k[stage, m]
     for m in range(size):
-        tmp[m] = z[m] + 0.5 * h * k2[m]
-    _deriv(tmp, k3, theta, codes, u0 + 0.5 * du, g_mid, eps)
-    for m in range(size):
-        tmp[m] = z[m] + h * k3[m]
-    _deriv(tmp, k4, theta, codes, u0 + du, g1, eps)
-    for m in range(size):
-        z[m] += h / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
+        z[m] += h / 6.0 * (k[0, m] + 2.0 * k[1, m] + 2.0 * k[2, m] + k[3, m])
 
 
 @numba.njit(cache=True, nogil=True)
@@ -234,14 +233,9 @@ def simulate_with_sensitivities(
     z[1] = v0
     z[2 + 2 * n_theta] = 1.0  # dx/dx0
     z[3 + 2 * (n_theta + 1)] = 1.0  # dv/dv0
-    k1 = np.empty(size)
-    k2 = np.empty(size)
-    k3 = np.empty(size)
-    k4 = np.empty(size)
+    k = np.empty((4, size))
     tmp = np.empty(size)
-    g0 = np.empty(n_in)
-    g_mid = np.empty(n_in)
-    g1 = np.empty(n_in)
+    g = np.empty((3, n_in))  # the input's partials at the step's start, middle and end
     xs = np.empty(n)
     vs = np.empty(n)
     sx = np.empty((n, n_par))
@@ -253,12 +247,12 @@ def simulate_with_sensitivities(
             du = (u[i] - u[i - 1]) / n_sub
             for s in range(n_sub):
                 u0 = u[i - 1] + s * du
-                for k in range(n_in):
-                    dg = (du_dp[i, k] - du_dp[i - 1, k]) / n_sub
-                    g0[k] = du_dp[i - 1, k] + s * dg
-                    g_mid[k] = g0[k] + 0.5 * dg
-                    g1[k] = g0[k] + dg
-                _rk4_step(z, h, theta, codes, u0, du, g0, g_mid, g1, eps, k1, k2, k3, k4, tmp)
+                for q in range(n_in):
+                    dg = (du_dp[i, q] - du_dp[i - 1, q]) / n_sub
+                    g[0, q] = du_dp[i - 1, q] + s * dg
+                    g[1, q] = g[0, q] + 0.5 * dg
+                    g[2, q] = g[0, q] + dg
+                _rk4_step(z, h, theta, codes, u0, du, g, eps, k, tmp)
             ok = _sane(z)
         if ok:
             xs[i] = z[0]
@@ -327,34 +321,44 @@ def _acc(x: float, v: float, theta: np.ndarray, codes: np.ndarray, u: float, eps
 def _rk4_state_step(
     x: float, v: float, h: float, theta: np.ndarray, codes: np.ndarray, u0: float, du: float, eps: float
 ) -> tuple[float, float]:
-    a1 = _acc(x, v, theta, codes, u0, eps)
-    x2 = x + 0.5 * h * v
-    v2 = v + 0.5 * h * a1
-    a2 = _acc(x2, v2, theta, codes, u0 + 0.5 * du, eps)
-    x3 = x + 0.5 * h * v2
-    v3 = v + 0.5 * h * a2
-    a3 = _acc(x3, v3, theta, codes, u0 + 0.5 * du, eps)
-    x4 = x + h * v3
-    v4 = v + h * a3
-    a4 = _acc(x4, v4, theta, codes, u0 + du, eps)
-    return (
-        x + h / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4),
-        v + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4),
-    )
+    """One RK4 step of the state alone: as ``_rk4_step``, its four stages are one loop around one ``_acc``."""
+    xs = x
+    vs = v
+    sum_v = v
+    sum_a = 0.0
+    for stage in range(4):
+        u = u0 if stage == 0 else (u0 + 0.5 * du if stage < 3 else u0 + du)
+        a = _acc(xs, vs, theta, codes, u, eps)
+        if stage == 0:
+            sum_a = a
+        else:  # the weights 2, 2, 1 summed in the order (v + 2 v2 + 2 v3 + v4): the same bits as written out
+            weight = 2.0 if stage < 3 else 1.0
+            sum_v += weight * vs
+            sum_a += weight * a
+        if stage < 3:
+            step = 0.5 * h if stage < 2 else h
+            xs = x + step * vs
+            vs = v + step * a
+    return x + h / 6.0 * sum_v, v + h / 6.0 * sum_a
 
 
 @numba.njit(cache=True, nogil=True)
 def _box_full(x: np.ndarray, width: int) -> np.ndarray:
-    """Full convolution of each column of x (n, k) with a boxcar of ``width`` ones."""
+    """Full convolution of each column of x (n, k) with a boxcar of ``width`` ones.
+
+    Element loops, not row operations: numba compiles a row assignment (``out[t] = acc``) with its
+    shape-mismatch error message, about a tenth of the native build's CPU for that one line.
+    """
     n, k = x.shape
     out = np.zeros((n + width - 1, k))
     acc = np.zeros(k)
     for t in range(n + width - 1):
-        if t < n:
-            acc += x[t]
-        if t >= width:
-            acc -= x[t - width]
-        out[t] = acc
+        for c in range(k):
+            if t < n:
+                acc[c] += x[t, c]
+            if t >= width:
+                acc[c] -= x[t - width, c]
+            out[t, c] = acc[c]
     return out
 
 
