@@ -38,9 +38,9 @@ def prepare(jit: bool = False) -> None:
 
 def prepare_said(jit: bool = False) -> None:
     """``prepare`` with a line when it starts, one every few seconds while it works (the first build
-    takes about half a minute, with nothing else to show), and one when it is done."""
+    takes about twenty seconds, with nothing else to show), and one when it is done."""
     start = time.monotonic()
-    print("tankdaq: preparing the kernels (built once per machine, about 30 s the first time)", flush=True)
+    print("tankdaq: preparing the kernels (built once per machine, about 20 s the first time)", flush=True)
     with heartbeat("preparing the kernels"):
         prepare(jit)
     print(f"tankdaq: kernels ready ({time.monotonic() - start:.0f} s)", flush=True)

@@ -134,7 +134,7 @@ def load_native(path: Path) -> ModuleType | None:
 
 
 def build(folder: Path | None = None) -> Path:
-    """Compile every kernel ahead of time into the native module (a C compiler is needed; 10-15 s).
+    """Compile every kernel ahead of time into the native module (a C compiler is needed; ~20 s of CPU).
 
     Written under a temporary name, tried in a child process (a module that dies on this CPU raises
     ``RuntimeError`` here instead of killing a recording later) and only then renamed: a process
