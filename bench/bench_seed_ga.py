@@ -46,7 +46,7 @@ from tankdaq.ident.evolutionary import (
 )
 from tankdaq.ident.one_step import seed_objective
 from tankdaq.ident.output_error import OutputErrorFit
-from tankdaq.ident.population_search import Objective, genetic_algorithm, particle_swarm
+from tankdaq.ident.population_search import Objective
 from tankdaq.physics.decay import simulate_decay
 from tankdaq.records import DecayRun
 
@@ -74,27 +74,7 @@ def cpu_s(work: Callable[[], T]) -> tuple[float, T]:
 
 def ours(objective: Objective, space: SearchSpace, settings: GeneticSettings | SwarmSettings) -> float:
     """Best objective of tankdaq's search, as GeneticSeedFit/SwarmSeedFit run it."""
-    rng = np.random.default_rng(SEED)
-    if isinstance(settings, GeneticSettings):
-        return genetic_algorithm(
-            objective,
-            space.lower,
-            space.upper,
-            population=settings.population,
-            generations=settings.generations,
-            crossover=settings.crossover,
-            mutation=settings.mutation,
-            rng=rng,
-        ).objective
-    return particle_swarm(
-        objective,
-        space.lower,
-        space.upper,
-        particles=settings.population,
-        iterations=settings.generations,
-        max_velocity=settings.max_velocity,
-        rng=rng,
-    ).objective
+    return settings.search(objective, space.lower, space.upper, np.random.default_rng(SEED)).objective
 
 
 def pymoo_search(

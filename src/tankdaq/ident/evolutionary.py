@@ -25,7 +25,7 @@ from ..records import DecayRun
 from .base import EstimatorMixin
 from .compiled import simulate, substeps, term_codes, term_matrix
 from .equation_error import check_runs
-from .population_search import Objective, SearchResult, genetic_algorithm, particle_swarm
+from .population_search import Objective, Progress, SearchResult, genetic_algorithm, particle_swarm
 from .uncertainty import coefficient_warnings
 
 #: Lower bound of the total inertia. The papers write I in [0, 0.1]; 0 itself would divide by zero.
@@ -192,6 +192,20 @@ class GeneticSettings:
     def __post_init__(self) -> None:
         _check_settings(self, {"crossover": self.crossover, "mutation": self.mutation})
 
+    def search(
+        self,
+        objective: Objective,
+        lower: np.ndarray,
+        upper: np.ndarray,
+        rng: np.random.Generator,
+        progress: Progress | None = None,
+    ) -> SearchResult:
+        """The GA with these settings on ``objective`` in the box [``lower``, ``upper``]."""
+        return genetic_algorithm(
+            objective, lower, upper, population=self.population, generations=self.generations,
+            crossover=self.crossover, mutation=self.mutation, rng=rng, progress=progress,
+        )  # fmt: skip
+
 
 @dataclass(frozen=True)
 class SwarmSettings:
@@ -206,6 +220,20 @@ class SwarmSettings:
 
     def __post_init__(self) -> None:
         _check_settings(self, {"max_velocity": self.max_velocity})
+
+    def search(
+        self,
+        objective: Objective,
+        lower: np.ndarray,
+        upper: np.ndarray,
+        rng: np.random.Generator,
+        progress: Progress | None = None,
+    ) -> SearchResult:
+        """The PSO with these settings on ``objective`` in the box [``lower``, ``upper``]."""
+        return particle_swarm(
+            objective, lower, upper, particles=self.population, iterations=self.generations,
+            max_velocity=self.max_velocity, rng=rng, progress=progress,
+        )  # fmt: skip
 
 
 def _check_settings(settings: GeneticSettings | SwarmSettings, fractions: dict[str, float]) -> None:
@@ -279,10 +307,6 @@ class _SeedSearch(EstimatorMixin):
             raise InputError(f"no {type(self).__name__} settings named {name!r}; known: {known}")
         return self._presets[name]
 
-    def _search(self, objective: Objective, rng: np.random.Generator) -> SearchResult:
-        """The paper's search for the smallest ``objective`` in ``space_``'s box with ``settings_``."""
-        raise NotImplementedError
-
     def fit(self, runs: DecayRun | Sequence[DecayRun]) -> _SeedSearch:
         """Search the paper's box for the smallest seed objective over all runs jointly; returns self."""
         started = time.perf_counter()
@@ -292,7 +316,9 @@ class _SeedSearch(EstimatorMixin):
         data = OneStepData.from_runs(self.runs_, self.space_.terms)
         space = self.space_
         rng = np.random.default_rng(self.random_state)
-        result = self._search(lambda x: data.rms(space.coefficients(x)), rng)
+        result = self.settings_.search(
+            lambda x: data.rms(space.coefficients(x)), space.lower, space.upper, rng, self.progress
+        )
         best_x = result.best
         theta = self.space_.coefficients(best_x)[0]
         self.terms_ = self.space_.terms
@@ -379,41 +405,12 @@ class GeneticSeedFit(_SeedSearch):
     _presets = GENETIC_SETTINGS
     _settings_type = GeneticSettings
 
-    def _search(self, objective: Objective, rng: np.random.Generator) -> SearchResult:
-        settings = self.settings_
-        assert isinstance(settings, GeneticSettings)
-        return genetic_algorithm(
-            objective,
-            self.space_.lower,
-            self.space_.upper,
-            population=settings.population,
-            generations=settings.generations,
-            crossover=settings.crossover,
-            mutation=settings.mutation,
-            rng=rng,
-            progress=self.progress,
-        )
-
 
 class SwarmSeedFit(_SeedSearch):
     """Seed 001's particle swarm (inertia weight 0.9 to 0.4, speed limit per variable) on their objective."""
 
     _presets = SWARM_SETTINGS
     _settings_type = SwarmSettings
-
-    def _search(self, objective: Objective, rng: np.random.Generator) -> SearchResult:
-        settings = self.settings_
-        assert isinstance(settings, SwarmSettings)
-        return particle_swarm(
-            objective,
-            self.space_.lower,
-            self.space_.upper,
-            particles=settings.population,
-            iterations=settings.generations,
-            max_velocity=settings.max_velocity,
-            rng=rng,
-            progress=self.progress,
-        )
 
 
 #: ``--method`` names of the seeds' searches; ``ga-seed000`` etc. pin a paper's boxes and preset, since
