@@ -246,10 +246,13 @@ def test_bad_settings_are_input_errors(noisy_run: DecayRun, estimator: GeneticSe
 @pytest.mark.parametrize(
     ("make", "message"),
     [
-        (lambda: GeneticSettings(population=1), "population >= 2 and generations >= 1, not 1 and 2000"),
-        (lambda: SwarmSettings(generations=0), "population >= 2 and generations >= 1, not 200 and 0"),
+        (lambda: GeneticSettings(population=1), "population >= 2, generations >= 1, not 1 and 2000"),
+        (lambda: SwarmSettings(generations=0), "population >= 2, generations >= 1, not 200 and 0"),
         (lambda: GeneticSettings(mutation=1.5), r"GeneticSettings.mutation is a fraction in \[0, 1\]"),
         (lambda: SwarmSettings(max_velocity=float("nan")), "SwarmSettings.max_velocity is a fraction"),
+        (lambda: GeneticSettings(generations=1e400), "generations >= 1, not 200 and inf"),
+        (lambda: SwarmSettings(population=True), "whole numbers population >= 2"),
+        (lambda: GeneticSettings(crossover="0.8"), r"crossover is a fraction in \[0, 1\], not '0.8'"),
     ],
 )
 def test_settings_no_search_can_run_are_input_errors(make, message: str) -> None:

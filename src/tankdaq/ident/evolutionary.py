@@ -239,11 +239,13 @@ class SwarmSettings:
 def _check_settings(settings: GeneticSettings | SwarmSettings, fractions: dict[str, float]) -> None:
     """A search needs two individuals, one generation, and probabilities and speed limits in [0, 1]."""
     name, size = type(settings).__name__, (settings.population, settings.generations)
-    if size[0] < 2 or size[1] < 1:
-        raise InputError(f"{name} needs population >= 2 and generations >= 1, not {size[0]} and {size[1]}")
+    if not all(isinstance(n, int) and not isinstance(n, bool) for n in size) or size[0] < 2 or size[1] < 1:
+        raise InputError(
+            f"{name} needs whole numbers population >= 2, generations >= 1, not {size[0]!r} and {size[1]!r}"
+        )
     for field, value in fractions.items():
-        if not 0.0 <= value <= 1.0:
-            raise InputError(f"{name}.{field} is a fraction in [0, 1], not {value}")
+        if not isinstance(value, int | float) or isinstance(value, bool) or not 0.0 <= value <= 1.0:
+            raise InputError(f"{name}.{field} is a fraction in [0, 1], not {value!r}")
 
 
 GENETIC_SETTINGS: dict[str, GeneticSettings] = {
