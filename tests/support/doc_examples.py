@@ -10,8 +10,9 @@ stopped: it must start, print its first line and stop cleanly on SIGINT), ``[on 
 administrator's step on the PostgreSQL server: not run here), ``[long]`` (the seeds' own GA at their
 sizes, seconds to minutes each: not run by the test). ``make demo`` is what the
 clone ran first; ``pip install`` lines are resolved (``--dry-run --no-deps``), not installed over the
-environment the other examples use. A Python line followed by a ``# SomeError: message`` comment must
-raise that error with that message (up to a ``...``).
+environment the other examples use; they and ``pip wheel`` build with the test extra's hatchling
+(``--no-build-isolation``: no download of the build backend for each line). A Python line followed by
+a ``# SomeError: message`` comment must raise that error with that message (up to a ``...``).
 """
 
 from __future__ import annotations
@@ -151,8 +152,9 @@ def run(example: Example, cwd: Path, env: dict[str, str], timeout_s: float = 600
         script.unlink()
         return Outcome(done.returncode, done.stdout, done.stderr)
     command = example.text
-    if example.kind == "pip":
+    if example.kind == "pip":  # the build backend from the test extra: no download per line
         command = command.replace("pip install", "pip install --dry-run --no-deps", 1)
+        command = re.sub(r"^pip (install|wheel)", r"pip \1 --no-build-isolation", command)
     if example.marker == "[Ctrl-C]":
         return _until_stopped(command, cwd, env, timeout_s)
     done = subprocess.run(
