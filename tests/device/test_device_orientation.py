@@ -24,6 +24,7 @@ from tankdaq.device.decoding import SampleDecoder
 from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator import Behaviour, DeviceIdentity, ScriptedSource, SimulatedMTi
 from tankdaq.device.simulator.playback import recorded_device
+from tankdaq.device.simulator.process import SimulatorProcess
 from tankdaq.errors import InputError
 from tankdaq.physics.scenario import DecayScenario
 from tankdaq.physics.sensor import GRAVITY_M_S2, SensorNoise
@@ -152,8 +153,9 @@ def test_a_device_refusing_euler_angles_records_roll_from_what_it_gives(
         np.testing.assert_allclose(recorded[name], device[name][rows], atol=2e-6)
     assert np.ptp(recorded["roll"]) > math.radians(10)  # a whole decay, both ways
     # the recording's device plays again (record --port sim:FILE.mcap): it refuses what it did not send
-    with SimulatedMTi(source=recorded_device(recording.path), speed=SPEED) as sim:
-        # the played-back device answers from the recording; a loaded host is given time (10 s, not 1)
+    with SimulatorProcess(source=recorded_device(recording.path), speed=SPEED) as sim:
+        # the played-back device answers from the recording, from a process of its own (as --port sim
+        # plays it): a thread of this test's process missed a 10 s reply here under a loaded host
         driver = MTiDriver(sim.link, rate_hz=RATE_HZ, step_timeout_s=10.0)
         try:
             again = driver.configure().orientation
