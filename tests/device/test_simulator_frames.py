@@ -156,6 +156,13 @@ def test_a_payload_past_254_bytes_takes_the_extended_length_and_past_2048_the_re
     assert isinstance(refused, str) and refused.startswith("ProtocolError")
 
 
+def test_a_device_told_to_send_nothing_sends_empty_messages() -> None:
+    frames = assert_same_frames(
+        Output(items=[]), samples(3, seed=3, scale=1.0, modulus=TICK_MODULUS, rate_hz=100)
+    )
+    assert frames == [bytes.fromhex("FA FF 36 00 CB")] * 3
+
+
 def test_values_the_reference_refuses_or_packs_its_own_way_give_its_bytes_or_its_error() -> None:
     block = samples(8, seed=2, scale=1.0, modulus=TICK_MODULUS, rate_hz=100)
     block["roll"][2], block["p"][5], block["ax"][6] = np.nan, np.inf, 1e39  # float32 overflows: refused

@@ -155,10 +155,10 @@ def _field_type(xdi: int) -> np.dtype:
     return np.dtype((REAL_TYPES[xdi & PRECISION_MASK], (spec.count,)))
 
 
-def _whole_frames(layout: _Layout, values: Sequence[np.ndarray]) -> bytes:
-    """The frames of rows that carry the same items, one after the other."""
-    frames = np.empty(len(values[0]) if values else 0, layout.values)
-    raw = frames.view(np.uint8).reshape(frames.size, layout.template.size)
+def _whole_frames(layout: _Layout, count: int, values: Sequence[np.ndarray]) -> bytes:
+    """The frames of ``count`` rows that carry the same items (``values``: each item's), one after another."""
+    frames = np.empty(count, layout.values)
+    raw = frames.view(np.uint8).reshape(count, layout.template.size)
     raw[:] = layout.template
     for j, column in enumerate(values):
         frames[f"v{j}"] = column
@@ -185,7 +185,7 @@ def mtdata2_frames(
         if layout is None or any(column is None for column in columns):
             return _frame_by_frame(values, present, xdis, named)
         some = rows if len(rows) < block.size else slice(None)
-        data = _whole_frames(layout, [column[some] for column in columns if column is not None])
+        data = _whole_frames(layout, len(rows), [column[some] for column in columns if column is not None])
         size = layout.template.size
         for i, row in enumerate(rows):
             frames[row] = data[i * size : (i + 1) * size]
