@@ -7,8 +7,9 @@ for) and every output the simulator sends, each encoded in the bursts the firmwa
 ``--sim-speed 4`` (``BURST_S`` of wall time: 6 frames at 100 Hz, 26 at 400 Hz). The baseline is the
 ``Output`` of commit ``BASELINE`` (its output.py from git, run in this process on the same samples, in
 turn with the new one, best of ``REPEATS``); the two give the same bytes (checked). Then the whole
-``SimulatorProcess`` streaming ``PROCESS_S`` device seconds at 100 Hz to a reader of its pty: the
-process's own CPU, the baseline's run from that commit's ``src`` tree (``git archive``) on PYTHONPATH.
+``SimulatorProcess`` streaming ``PROCESS_S`` device seconds to the driver, which configures the decay
+outputs at 100 Hz as ``record`` does: the process's own CPU, the baseline's run from that commit's
+``src`` tree (``git archive``) on PYTHONPATH.
 ``--quick`` (run_all's quick mode): a tenth of the counts.
 """
 
@@ -17,7 +18,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import os
-import select
 import subprocess
 import sys
 import tarfile
@@ -31,6 +31,7 @@ import numpy as np
 
 from benchjson import QUICK, write_result
 from tankdaq.config.hulls import hull_scenario
+from tankdaq.device.driver import MTiDriver
 from tankdaq.device.simulator.firmware import BURST_S
 from tankdaq.device.simulator.output import (
     SUPPORTED_OUTPUTS,
@@ -122,23 +123,21 @@ def process_cpu_s(pid: int) -> float:
 
 def streaming(tree: Path | None, device_s: float) -> tuple[float, int]:
     """CPU seconds of a ``SimulatorProcess`` (``tree``: its src on PYTHONPATH) streaming ``device_s`` device
-    seconds of its default output to a reader, and the bytes read."""
+    seconds to the driver, configured as ``record`` configures it (the decay outputs at 100 Hz), and the
+    samples the driver read."""
     saved = os.environ.get("PYTHONPATH")
     if tree is not None:
         os.environ["PYTHONPATH"] = str(tree)
     try:
-        with SimulatorProcess(hull_scenario(rate_hz=100, runs=2), speed=SPEED) as sim:
+        with (
+            SimulatorProcess(hull_scenario(rate_hz=100, runs=2), speed=SPEED) as sim,
+            MTiDriver(sim.link, rate_hz=100) as driver,
+        ):
             assert sim.pid is not None
-            port = os.open(sim.link, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
-            try:
-                select.select([port], [], [], 10.0)  # measuring: the first frames
-                start_cpu, start, read = process_cpu_s(sim.pid), time.monotonic(), 0
-                while time.monotonic() - start < device_s / SPEED:
-                    if select.select([port], [], [], 0.1)[0]:
-                        read += len(os.read(port, 65536))
-                return process_cpu_s(sim.pid) - start_cpu, read
-            finally:
-                os.close(port)
+            driver.configure()
+            start_cpu = process_cpu_s(sim.pid)
+            samples = driver.samples(device_s)
+            return process_cpu_s(sim.pid) - start_cpu, samples.size
     finally:
         if saved is None:
             os.environ.pop("PYTHONPATH", None)
@@ -152,18 +151,18 @@ def processes(device_s: float) -> tuple[dict, float]:
         subprocess.run(["git", "-C", str(REPO), "archive", "-o", str(archive), BASELINE, "src"], check=True)
         with tarfile.open(archive) as tar:
             tar.extractall(folder, filter="data")
-        old_cpu, old_bytes = streaming(Path(folder) / "src", device_s)
-    new_cpu, new_bytes = streaming(None, device_s)
+        old_cpu, old_samples = streaming(Path(folder) / "src", device_s)
+    new_cpu, new_samples = streaming(None, device_s)
     figures = {
         "old_cpu_s_per_device_minute": round(old_cpu * 60 / device_s, 3),
         "new_cpu_s_per_device_minute": round(new_cpu * 60 / device_s, 3),
-        "old_bytes_read": old_bytes,
-        "new_bytes_read": new_bytes,
+        "old_samples_read": old_samples,
+        "new_samples_read": new_samples,
     }
     ratio = round(old_cpu / new_cpu, 2)
     print(
-        f"SimulatorProcess, {device_s:g} device s at 100 Hz: {old_cpu:.2f} -> {new_cpu:.2f} CPU s "
-        f"({ratio:.1f}x)"
+        f"SimulatorProcess, {device_s:g} device s of the decay outputs at 100 Hz: "
+        f"{old_cpu:.2f} -> {new_cpu:.2f} CPU s ({ratio:.1f}x)"
     )
     return figures, ratio
 
@@ -179,7 +178,7 @@ def main() -> None:
         "simulator_cpu",
         "CPU seconds per device-minute of MTData2 frames: the simulated MTi's encoder, frame by frame "
         f"against a block at a time with numpy, in the firmware's bursts at --sim-speed {SPEED:g}; and its "
-        "whole process streaming to a reader",
+        "whole process streaming to the driver",
         counts={"device_s": device_s, "process_device_s": process_s, "repeats": REPEATS, "speed": SPEED},
         figures=figures,
         ratios=ratios,
