@@ -3,25 +3,24 @@
 An MTi-G-710 sends MTData2 as SetOutputConfiguration asked (rates rounded down to a divisor of
 400 Hz, frames forced to ENU); the 2007-era MTi-G sends legacy MTData from OutputMode,
 OutputSettings and Period. ``Output`` holds whichever of the two is in force and turns sample
-rows into the frames that carry them, through the ``tankdaq.xsens`` encoders.
+rows into the frames that carry them: MTData2 a block at a time (``frames``), legacy MTData through
+the ``tankdaq.xsens`` encoders.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...physics.truth import TICK_MODULUS, TICKS_PER_S
+from ...physics.truth import TICK_MODULUS
 from ...xsens.constants import MID
 from ...xsens.control import MAX_FREQUENCY, PER_MESSAGE_OUTPUTS
 from ...xsens.frame import build_frame
 from ...xsens.legacy import encode_mtdata
-from ...xsens.mtdata2 import FRAME_MASK, SPEC_BY_BASE, TYPE_MASK, encode_mtdata2, make_xdi
-from ...xsens.orientation import quaternion, rotation_matrix
+from ...xsens.mtdata2 import FRAME_MASK, SPEC_BY_BASE, TYPE_MASK, make_xdi
 from ..legacy_output import LegacyOutput, sample_values
+from .frames import mtdata2_frames
 
 #: Rates an MTi-G-710 can output: divisors of 400 Hz (the echo rounds a request down to one).
 DEVICE_RATES_HZ = (1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, 80, 100, 200, 400)
@@ -106,38 +105,9 @@ class Output:
             mode, settings = self.legacy_mode.mode, self.legacy_mode.settings
             return [build_frame(MID.MTDATA, encode_mtdata(sample_values(s), mode, settings)) for s in block]
         rate = self.rate_hz
-        forms: dict[str, Callable[..., np.ndarray]] = {
-            "Quaternion": quaternion,
-            "RotationMatrix": rotation_matrix,
-        }
-        orientation: dict[str, np.ndarray] = {}  # the block's quaternions or matrices, made when first asked
-        frames = []
-        for row, (sample, k) in enumerate(zip(block, indices, strict=True)):
-            items: list[tuple[int, object]] = []
-            for item in self.items:
-                if item.hz != MAX_FREQUENCY and k % max(1, round(rate / item.hz)):
-                    continue
-                if item.name in forms:
-                    if item.name not in orientation:
-                        orientation[item.name] = forms[item.name](block["roll"], block["pitch"], block["yaw"])
-                    items.append((item.xdi, tuple(orientation[item.name][row].tolist())))
-                    continue
-                items.append((item.xdi, _value(item.name, sample, self.clock_modulus)))
-            frames.append(build_frame(MID.MTDATA2, encode_mtdata2(items)))
-        return frames
-
-
-def _value(name: str, sample: np.void, clock_modulus: int) -> object:
-    """The MTData2 value of output ``name`` for one sample (Euler angles in degrees, as on the wire)."""
-    ticks = int(sample["ticks"])
-    values: dict[str, Callable[[], object]] = {
-        "PacketCounter": lambda: int(sample["counter"]),
-        "SampleTimeFine": lambda: ticks % clock_modulus,
-        "SampleTimeCoarse": lambda: (ticks // TICKS_PER_S) & 0xFFFFFFFF,
-        "EulerAngles": lambda: tuple(math.degrees(float(sample[f])) for f in ("roll", "pitch", "yaw")),
-        "RateOfTurn": lambda: tuple(float(sample[f]) for f in ("p", "q", "r")),
-        "Acceleration": lambda: tuple(float(sample[f]) for f in ("ax", "ay", "az")),
-        "StatusWord": lambda: int(sample["status"]),
-        "StatusByte": lambda: int(sample["status"]) & 0xFF,
-    }
-    return values[name]()
+        present = np.ones((block.size, len(self.items)), dtype=bool)
+        for j, item in enumerate(self.items):
+            every = 1 if item.hz == MAX_FREQUENCY else max(1, round(rate / item.hz))  # frames
+            if every > 1:
+                present[:, j] = indices % every == 0
+        return mtdata2_frames(block, present, [item.xdi for item in self.items], self.clock_modulus)
