@@ -69,10 +69,11 @@ viewer-test-deps:
 		echo "make: apt-get could not install $(VIEWER_TEST_PACKAGES); the viewer window test skips"; \
 	fi
 
-# One pytest worker per core. A third worker used the time tests wait on real-time streams (pytest 8:23
-# against 10:01 here), but under the load it added a played-back device missed a 10 s reply once
-# (a run's timings: git history): a CI that fails costs more than two minutes. A test file goes to one worker whole, so
-# a module's fixture is made once (a whole session, killed and resumed: 50 s).
+# Two pytest workers per core (tools/test_workers.py says why and how many): the whole run here took 8:25
+# with four workers against 11:04 with two, and all of it passed with six (git history has the runs).
+# A test file goes to one worker whole, so a module's fixture is made once (a whole session, killed and
+# resumed: 50 s).
+TEST_WORKERS := $(shell $(PYTHON) tools/test_workers.py)
 # --no-loadscope-reorder: xdist would otherwise hand out the files with the most tests first, and the
 # docs' examples and the wheel (minutes each, a few tests) would start last (tests/conftest.py orders them).
 # Every test phase over 5 s is listed at the end (a test over about half a second is marked slow, `make check`
@@ -121,7 +122,7 @@ test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	nice -n 19 $(MAKE) --no-print-directory lint >$(CHECKS_LOG) 2>&1 & checks=$$!; \
 	$(BIN)/python -m tankdaq.prepare --jit || { wait $$checks; cat $(CHECKS_LOG); exit 1; }; \
 	nice -n 19 $(MAKE) --no-print-directory docs >$(DOCS_LOG) 2>&1 & docs=$$!; \
-	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n auto --dist loadfile --no-loadscope-reorder --durations=0 --durations-min=5; tested=$$?; \
+	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=0 --durations-min=5; tested=$$?; \
 	wait $$checks; checked=$$?; wait $$docs; documented=$$?; \
 	echo "--- lint and types (make lint) ---"; cat $(CHECKS_LOG); \
 	echo "--- API docs (make docs) ---"; cat $(DOCS_LOG); \

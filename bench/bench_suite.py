@@ -1,5 +1,5 @@
 """The maintainers' loop: what ``make check`` costs (issue 43: under a minute on this 2-core machine), and,
-with ``--full``, what the whole suite of ``make test`` costs (under ten minutes).
+with ``--full``, what the whole suite of ``make test`` costs (under ten minutes), with its workers.
 
 Run from the repository: .venv/bin/python bench/bench_suite.py [--full]. It writes bench/results/suite.json.
 Each step runs as ``make check`` runs it (the lint with its warm caches, the source compiled, the kernels
@@ -39,7 +39,11 @@ STEPS = {
         [*PYTEST, "-n", "auto", "--dist", "loadfile", "--no-loadscope-reorder", "-m", "not slow", "-q"]
     ],
 }
-FULL = [*PYTEST, "-n", "auto", "--dist", "loadfile", "--no-loadscope-reorder", "-q"]
+#: ``make test``'s pytest: its worker count from tools/test_workers.py, as the Makefile takes it.
+WORKERS = subprocess.run(
+    [sys.executable, str(ROOT / "tools" / "test_workers.py")], capture_output=True, text=True, check=True
+).stdout.strip()
+FULL = [*PYTEST, "-n", WORKERS, "--dist", "loadfile", "--no-loadscope-reorder", "-q"]
 BASELINE = [*PYTEST, "--collect-only", "-q"]
 
 
