@@ -116,8 +116,9 @@ def test_a_signal_mid_decay_closes_a_complete_file_that_says_it_was_stopped(
         ]
         assert f"{path.stem}: stopped by the operator {after_s:.1f} s after the release: partial" in warning
         (replayed,) = replay_recording(path, speed=None, viewer="none")  # the file ends mid-decay
-        assert replayed.ended is DecayEnd.STREAM_ENDED  # the last sample as recorded, the release within one
-        assert replayed.ended_after_s == pytest.approx(after_s, abs=0.011)  # as test_record.py's replay
+        assert replayed.ended is DecayEnd.STREAM_ENDED
+        assert replayed.last_t == read_recording(path).samples["t"][-1]  # to the file's last sample
+        assert replayed.ended_after_s == pytest.approx(after_s, abs=0.011)  # the release within one sample
 
 
 @pytest.mark.slow

@@ -130,6 +130,11 @@ def replay_recording(
             pipeline.feed(StreamBlock(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
             if on_progress is not None:
                 on_progress(i + 1, len(chunks))
+        # the file's last frame, held by the decoder for a successor that never comes (live, the quiet line
+        # after it confirmed it): without it a replay ended one sample short of the recording
+        samples, decoded = decoder.finish(chunks[-1][0] / 1e9)
+        if samples.size:
+            pipeline.feed(StreamBlock(samples, b"", chunks[-1][0] / 1e9, min(decoded.carried, samples.size)))
         pipeline.abort(DecayEnd.STREAM_ENDED, "end of recording")
     except KeyboardInterrupt:
         pipeline.abort(DecayEnd.STOPPED, "replay stopped by the operator")
