@@ -18,6 +18,7 @@ import math
 import os
 import signal
 import socket
+import time
 from pathlib import Path
 from typing import Any
 
@@ -118,11 +119,24 @@ def contents(folder: Path) -> list[dict[str, Any]]:
     return kept
 
 
+#: The longest a page may take to settle its drawing after a resize (s): a deadline, not a wait.
+DRAWN_S = 30.0
+
+
 def screenshot(page: Any, size: dict[str, int], name: str) -> bytes:
-    """The page brought to ``size``, drawn there, its screenshot written to docs/img/``name``."""
+    """The page brought to ``size`` and drawn there: shot frame after frame until the trace and the
+    model cover as many pixels as in the frame before (a busy machine's browser lays out and fits the
+    plots over several frames), that screenshot written to docs/img/``name``."""
     page.set_viewport_size(size)
-    page.evaluate(FRAMES_JS)
-    return bytes(page.screenshot(path=str(IMAGES / name)))
+    deadline = time.monotonic() + DRAWN_S
+    drawn: tuple[int, int] | None = None
+    while True:
+        page.evaluate(FRAMES_JS)
+        shot = bytes(page.screenshot())
+        before, drawn = drawn, (colour_pixels(shot, MEASURED_COLOR), colour_pixels(shot, MODEL_COLOR))
+        if drawn == before or time.monotonic() > deadline:
+            (IMAGES / name).write_bytes(shot)
+            return shot
 
 
 @pytest.fixture(scope="module")
