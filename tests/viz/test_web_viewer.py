@@ -123,18 +123,23 @@ def contents(folder: Path) -> list[dict[str, Any]]:
 DRAWN_S = 30.0
 
 
+#: How much the model's pixel count may change between two frames of a settled drawing (the live trace
+#: beside it scrolls on as the next decay's samples arrive, and the plot's bounds with it).
+DRAWN_CHANGE = 0.05
+
+
 def screenshot(page: Any, size: dict[str, int], name: str) -> bytes:
-    """The page brought to ``size`` and drawn there: shot frame after frame until the trace and the
-    model cover as many pixels as in the frame before (a busy machine's browser lays out and fits the
-    plots over several frames), that screenshot written to docs/img/``name``."""
+    """The page brought to ``size`` and drawn there: shot frame after frame until the model covers as
+    many pixels as in the frame before, to ``DRAWN_CHANGE`` (a busy machine's browser lays out and fits
+    the plots over several frames), that screenshot written to docs/img/``name``."""
     page.set_viewport_size(size)
     deadline = time.monotonic() + DRAWN_S
-    drawn: tuple[int, int] | None = None
+    drawn = -1
     while True:
         page.evaluate(FRAMES_JS)
         shot = bytes(page.screenshot())
-        before, drawn = drawn, (colour_pixels(shot, MEASURED_COLOR), colour_pixels(shot, MODEL_COLOR))
-        if drawn == before or time.monotonic() > deadline:
+        before, drawn = drawn, colour_pixels(shot, MODEL_COLOR)
+        if abs(drawn - before) <= DRAWN_CHANGE * drawn or time.monotonic() > deadline:
             (IMAGES / name).write_bytes(shot)
             return shot
 
