@@ -69,11 +69,11 @@ viewer-test-deps:
 		echo "make: apt-get could not install $(VIEWER_TEST_PACKAGES); the viewer window test skips"; \
 	fi
 
-# Two pytest workers per core (tools/test_workers.py says why and how many): the whole run here took 8:25
+# Two pytest workers per core (tools/pytest_workers.py says why and how many): the whole run here took 8:25
 # with four workers against 11:04 with two, and all of it passed with six (git history has the runs).
 # A test file goes to one worker whole, so a module's fixture is made once (a whole session, killed and
 # resumed: 50 s).
-TEST_WORKERS := $(shell $(PYTHON) tools/test_workers.py)
+TEST_WORKERS := $(shell $(PYTHON) tools/pytest_workers.py)
 # --no-loadscope-reorder: xdist would otherwise hand out the files with the most tests first, and the
 # docs' examples and the wheel (minutes each, a few tests) would start last (tests/conftest.py orders them).
 # Every test phase over 5 s is listed at the end (a test over about half a second is marked slow, `make check`

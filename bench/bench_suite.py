@@ -39,9 +39,9 @@ STEPS = {
         [*PYTEST, "-n", "auto", "--dist", "loadfile", "--no-loadscope-reorder", "-m", "not slow", "-q"]
     ],
 }
-#: ``make test``'s pytest: its worker count from tools/test_workers.py, as the Makefile takes it.
+#: ``make test``'s pytest: its worker count from tools/pytest_workers.py, as the Makefile takes it.
 WORKERS = subprocess.run(
-    [sys.executable, str(ROOT / "tools" / "test_workers.py")], capture_output=True, text=True, check=True
+    [sys.executable, str(ROOT / "tools" / "pytest_workers.py")], capture_output=True, text=True, check=True
 ).stdout.strip()
 FULL = [*PYTEST, "-n", WORKERS, "--dist", "loadfile", "--no-loadscope-reorder", "-q"]
 BASELINE = [*PYTEST, "--collect-only", "-q"]

@@ -14,6 +14,8 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import numpy as np
+
 from ..device.decoding import SampleDecoder
 from ..device.driver import StreamBlock
 from ..device.legacy_output import LegacyOutput
@@ -119,6 +121,10 @@ def replay_recording(
     decoder = SampleDecoder.for_recording(meta, output)
     wall0: float | None = None
     t0 = 0.0
+
+    def feed(samples: np.ndarray, raw: bytes, host_t: float, carried: int) -> None:
+        pipeline.feed(StreamBlock(samples, raw, host_t, min(carried, samples.size)))
+
     try:
         for i, (host_ns, raw) in enumerate(chunks):
             samples, decoded = decoder.feed(raw, host_ns / 1e9)
@@ -127,14 +133,15 @@ def replay_recording(
                     wall0, t0 = time.monotonic(), float(samples["t"][0])
                 due = wall0 + (float(samples["t"][-1]) - t0) / speed
                 time.sleep(max(0.0, due - time.monotonic()))
-            pipeline.feed(StreamBlock(samples, raw, host_ns / 1e9, min(decoded.carried, samples.size)))
+            feed(samples, raw, host_ns / 1e9, decoded.carried)
             if on_progress is not None:
                 on_progress(i + 1, len(chunks))
         # the file's last frame, held by the decoder for a successor that never comes (live, the quiet line
         # after it confirmed it): without it a replay ended one sample short of the recording
-        samples, decoded = decoder.finish(chunks[-1][0] / 1e9)
+        end_t = chunks[-1][0] / 1e9
+        samples, decoded = decoder.finish(end_t)
         if samples.size:
-            pipeline.feed(StreamBlock(samples, b"", chunks[-1][0] / 1e9, min(decoded.carried, samples.size)))
+            feed(samples, b"", end_t, decoded.carried)
         pipeline.abort(DecayEnd.STREAM_ENDED, "end of recording")
     except KeyboardInterrupt:
         pipeline.abort(DecayEnd.STOPPED, "replay stopped by the operator")

@@ -11,11 +11,11 @@ from __future__ import annotations
 import os
 
 
-def test_workers(cores: int | None = None) -> int:
-    """The worker count for ``cores`` (this machine's when None)."""
-    n = cores if cores is not None else os.cpu_count() or 1
+def worker_count() -> int:
+    """The worker count for this machine's cores."""
+    n = os.cpu_count() or 1
     return min(2 * n, max(n, 8))
 
 
 if __name__ == "__main__":
-    print(test_workers())
+    print(worker_count())
