@@ -114,14 +114,18 @@ report-test-deps:
 # and go on while the tests run: they take what the tests leave idle (a test waiting on a real-time device
 # or server) and do not slow one that waits. Their output is shown at the end; any failing fails the target.
 # compileall: pip does not byte-compile an editable install's own source, and with PYTHONDONTWRITEBYTECODE
-# set every tankdaq process a test starts would compile the package from source again.
+# set every tankdaq process a test starts would compile the package from source again. The test modules
+# are collected once beside the kernels' build, which caches them rewritten for their asserts
+# (tests/conftest.py): each worker then collects in about 5 s of CPU, not 10.
 CHECKS_LOG := build/checks.log
 DOCS_LOG := build/docs.log
 test: $(TEST_STAMP) viewer-test-deps catalogue-test-deps report-test-deps
 	mkdir -p build
 	$(BIN)/python -m compileall -q src
 	nice -n 19 $(MAKE) --no-print-directory lint >$(CHECKS_LOG) 2>&1 & checks=$$!; \
+	$(BIN)/python -m pytest --collect-only -q -p no:cacheprovider >/dev/null 2>&1 & collected=$$!; \
 	$(BIN)/python -m tankdaq.prepare --jit || { wait $$checks; cat $(CHECKS_LOG); exit 1; }; \
+	wait $$collected; \
 	nice -n 19 $(MAKE) --no-print-directory docs >$(DOCS_LOG) 2>&1 & docs=$$!; \
 	OPENBLAS_NUM_THREADS=1 $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder --durations=0 --durations-min=5; tested=$$?; \
 	wait $$checks; checked=$$?; wait $$docs; documented=$$?; \

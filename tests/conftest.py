@@ -15,12 +15,19 @@ The longest modules are run first (``pytest_collection_modifyitems``, tests/dura
 from __future__ import annotations
 
 import json
+import sys
 import tempfile
 from collections.abc import Callable, Iterator, Mapping, Set
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
+
+#: pytest caches a test module rewritten for its asserts only where bytecode may be written: with
+#: PYTHONDONTWRITEBYTECODE set (as here and on CI), each worker rewrote and compiled every test module
+#: again, half of its collection. The test processes write their bytecode; the processes they start keep
+#: the environment's setting.
+sys.dont_write_bytecode = False
 
 if TYPE_CHECKING:
     from tankdaq.acquire.daemon import RecordSettings
