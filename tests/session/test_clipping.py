@@ -17,8 +17,9 @@ from typer.testing import CliRunner
 
 from support.xsens_captures import capture
 from tankdaq.acquire.daemon import RecordDaemon, RecordSettings
-from tankdaq.acquire.events import Note, Settled
+from tankdaq.acquire.events import DeviceReady, Event, Note, Settled
 from tankdaq.acquire.listeners import EventLog
+from tankdaq.acquire.sinks import Sink
 from tankdaq.cli import app
 from tankdaq.config.hulls import hull_scenario
 from tankdaq.config.plans import load_campaign_plan
@@ -29,7 +30,7 @@ from tankdaq.device.simulator.pty_link import PtyLink
 from tankdaq.errors import DeviceGone, InputError
 from tankdaq.ident.equation_error import EquationErrorFit
 from tankdaq.ident.output_error import OutputErrorFit
-from tankdaq.physics.scenario import SCRIPTED_FAULTS, scripted_run
+from tankdaq.physics.scenario import SCRIPTED_FAULTS, DecayScenario, scripted_run
 from tankdaq.records import DecayEnd, DecayRun
 from tankdaq.samples import (
     STATUS_CLIP_ACC,
@@ -51,19 +52,33 @@ SPEED = 6.0
 FAST = 1e6
 
 
+class _PlayWhenReady(Sink):
+    """Plays ``scenario`` on the device once the recorder says it is configured and read: the hand's tilt
+    then comes while the recorder listens, however long the device took to open on a busy machine (a
+    scenario from power-up had its push over before then)."""
+
+    def __init__(self, device: SimulatedMTi, scenario: DecayScenario) -> None:
+        self.device = device
+        self.scenario = scenario
+
+    def on_event(self, event: Event) -> None:
+        if isinstance(event, DeviceReady):
+            self.device.play(self.scenario)
+
+
 def _record(
     tmp_path: Path, fault: str, faults: Faults | None = None
 ) -> tuple[EventLog, Path, dict[str, float]]:
-    """One short decay of the default hull with a scripted fault, recorded through the pty; its events."""
+    """One short decay of the default hull with a scripted fault, recorded through the pty once the
+    device streams still water to the recorder; its events."""
     scenario = hull_scenario(runs=1, seed=3, release_after_s=6.0, decay_s=15.0, **scripted_run(fault, 8.0))
     heard = EventLog()
-    with SimulatedMTi(scenario, speed=SPEED, faults=faults) as sim:
+    with SimulatedMTi(hull_scenario(runs=0, seed=3), speed=SPEED, faults=faults) as sim:
         settings = RecordSettings(port=sim.link, draft=1.0, angle_deg=8.0, angle_tolerance_deg=3.0,
                                   out_dir=tmp_path, runs=1, viewer="none")  # fmt: skip
-        (outcome,) = RecordDaemon(settings, sinks=[heard]).run()
-        truth = sim.truth[0].coefficients
+        (outcome,) = RecordDaemon(settings, sinks=[heard, _PlayWhenReady(sim, scenario)]).run()
     assert outcome.path is not None
-    return heard, outcome.path, truth
+    return heard, outcome.path, scenario.samples()[1].runs[0].coefficients
 
 
 def _identify(path: Path, *extra: str) -> str:
