@@ -75,8 +75,7 @@ viewer-test-deps:
 # resumed: 50 s).
 TEST_WORKERS := $(shell $(PYTHON) tools/pytest_workers.py)
 # --no-loadscope-reorder: xdist would otherwise hand out the files with the most tests first, and the
-# docs' examples and the wheel (minutes each, a few tests) would start last: tests/conftest.py hands out
-# the longest modules first, from their times in tests/durations.json (tools/module_durations.py).
+# docs' examples and the wheel (minutes each, a few tests) would start last (tests/conftest.py orders them).
 # Every test phase over 5 s is listed at the end (a test over about half a second is marked slow, `make check`
 # leaves it out: tools/mark_slow.py marks them from a run with --durations=0).
 # The kernels are built and compiled first, in one process (see src/tankdaq/prepare.py): again here,

@@ -9,15 +9,14 @@
   ``catalogue_url``: a test's catalogue, once a SQLite file and once that server's database.
 
 tankdaq is imported inside the fixtures, so collecting a test that uses none of them costs nothing.
-The longest modules are run first (``pytest_collection_modifyitems``, tests/durations.json).
+The modules that hold a long test are run first (``pytest_collection_modifyitems``).
 """
 
 from __future__ import annotations
 
-import json
 import sys
 import tempfile
-from collections.abc import Callable, Iterator, Mapping, Set
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -34,27 +33,21 @@ if TYPE_CHECKING:
     from tankdaq.device.simulator import SimulatedMTi
 
 
-#: Each test module's time in a whole run (s): tools/module_durations.py writes it from a run's durations.
-DURATIONS = Path(__file__).with_name("durations.json")
-#: What a module holding a ``slow`` test and not in DURATIONS yet is taken to last (s).
-UNMEASURED_SLOW_S = 10.0
-
-
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The longest modules first (their time in DURATIONS), each module's tests together and in their
-    order: xdist gives a module to one worker whole, so the workers then share the short modules at the
-    end instead of one running a long module on alone (a module's fixtures are still made once)."""
-    known: dict[str, float] = json.loads(DURATIONS.read_text()) if DURATIONS.is_file() else {}
+    """The modules given a timeout beyond the default first (the docs' examples and the wheel: minutes
+    each), then those holding a test marked ``slow``, each module's tests together and in their order:
+    the workers then share the short tests at the end instead of one waiting on another's long one (a
+    module's fixtures are still made once)."""
+    longest: dict[str, float] = {}
+    for item in items:
+        module = item.nodeid.split("::")[0]
+        marker = item.get_closest_marker("timeout")
+        allowed = float(marker.args[0]) if marker is not None and marker.args else 0.0
+        longest[module] = max(longest.get(module, 0.0), allowed)
     slow = {item.nodeid.split("::")[0] for item in items if item.get_closest_marker("slow") is not None}
-    items.sort(  # stable: each module's tests stay together, in their order
-        key=lambda item: expected_seconds(item.nodeid.split("::")[0], known, slow), reverse=True
+    items.sort(
+        key=lambda item: (-longest[item.nodeid.split("::")[0]], item.nodeid.split("::")[0] not in slow)
     )
-
-
-def expected_seconds(module: str, known: Mapping[str, float], slow: Set[str]) -> float:
-    """How long ``module`` is taken to run: its time in ``known``, else ``UNMEASURED_SLOW_S`` if it holds
-    a test marked slow, else nothing."""
-    return known.get(module, UNMEASURED_SLOW_S if module in slow else 0.0)
 
 
 #: The simulator fixture's device clock against the wall clock: a decay in a few seconds.
