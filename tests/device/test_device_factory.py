@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from tankdaq.config.hulls import hull_scenario
-from tankdaq.device.factory import DeviceNote, SimulatedSensor, open_device, sim_baud
+from tankdaq.device.driver import MTiDriver
+from tankdaq.device.factory import SIM_REPLY_TIMEOUT_S, DeviceNote, SimulatedSensor, open_device, sim_baud
 from tankdaq.errors import DeviceNotFound, InputError
 
 #: Generous deadline for the first samples (reads, not timings, decide the test).
@@ -33,6 +34,10 @@ def test_port_sim_is_the_simulated_sensor_opened_by_path_and_close_stops_it() ->
         assert device.simulator is not None
         assert device.driver.port == device.simulator.link == str(_link(notes))
         assert device.simulator.baud == sim_baud(100.0)
+        # a process on a machine busy on every core may answer late; hardware's own timeouts are shorter
+        hardware = MTiDriver("/dev/ttyUSB0")
+        for timeout in ("step_timeout_s", "flash_timeout_s", "goto_config_s"):
+            assert getattr(device.driver, timeout) == SIM_REPLY_TIMEOUT_S > getattr(hardware, timeout)
         samples = 0
         for _ in range(DEADLINE_READS):
             samples += device.driver.read_block().samples.size

@@ -31,6 +31,12 @@ SIM_PORT = "sim"
 #: Standard baud rates tried, smallest first, when the simulated sensor needs a faster line.
 SIM_BAUDS = (115200, 230400, 460800, 921600)
 
+#: How long the driver waits for each reply of the simulated sensor, in seconds. Hardware answers in
+#: milliseconds and the driver's own timeouts are set for it; the simulator is a process on the same
+#: machine, and a machine busy on every core can keep it from answering within a second. It always
+#: answers (no stuck or slow behaviour is played on port ``sim``), so waiting longer costs nothing.
+SIM_REPLY_TIMEOUT_S = 15.0
+
 
 @dataclass(frozen=True)
 class SimPort:
@@ -120,7 +126,7 @@ def open_device(
         simulator = _start_simulator(sim, baud or sim_baud(rate_hz), say)
         port = simulator.link
     device = OpenDevice(
-        MTiDriver(port, baud=baud, rate_hz=rate_hz, probe_first=simulator.baud if simulator else 115200),
+        _driver(port, baud, rate_hz, simulator),
         simulator,
     )
     try:
@@ -136,6 +142,22 @@ def open_device(
         device.close()
         raise
     return device
+
+
+def _driver(port: str, baud: int | None, rate_hz: float, simulator: SimulatorProcess | None) -> MTiDriver:
+    """The driver for ``port``: hardware's timeouts, or the patient ones of the simulated sensor."""
+    if simulator is None:
+        return MTiDriver(port, baud=baud, rate_hz=rate_hz)
+    patient = SIM_REPLY_TIMEOUT_S
+    return MTiDriver(
+        port,
+        baud=baud,
+        rate_hz=rate_hz,
+        probe_first=simulator.baud,
+        step_timeout_s=patient,
+        flash_timeout_s=patient,
+        goto_config_s=patient,
+    )
 
 
 def _start_simulator(sim: SimulatedSensor, baud: int, say: Callable[[DeviceNote], None]) -> SimulatorProcess:
