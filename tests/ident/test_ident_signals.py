@@ -1,12 +1,14 @@
-"""The Savitzky-Golay derivatives the equation-error fit starts from, against scipy.signal's."""
+"""The signal helpers against scipy's own: the Savitzky-Golay derivatives the equation-error fit starts
+from (scipy.signal), the running spread and mean that find where a model rests (scipy.ndimage)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.ndimage import maximum_filter1d, minimum_filter1d, uniform_filter1d
 from scipy.signal import savgol_filter
 
-from tankdaq.ident.signals import smoothed_derivatives, white_noise_level
+from tankdaq.ident.signals import running_mean, running_range, smoothed_derivatives, white_noise_level
 from tankdaq.physics.decay import simulate_decay
 
 
@@ -19,6 +21,17 @@ def test_smoothed_derivatives_are_scipys_savgol_filter(n: int, window: int, dt: 
     for deriv, mine in enumerate(smoothed_derivatives(y, dt, window, polyorder=3)):
         expected = savgol_filter(y, window, 3, deriv=deriv, delta=dt, mode="nearest")
         np.testing.assert_allclose(mine, expected, rtol=0, atol=1e-12 * np.max(np.abs(expected)))
+
+
+@pytest.mark.parametrize(("n", "window"), [(9, 3), (10, 3), (40, 4), (1001, 64), (12345, 101), (5000, 250)])
+def test_running_spread_and_mean_are_scipy_ndimages_filters(n: int, window: int) -> None:
+    """Centred windows, odd and even, the ends mirrored as ``mode="reflect"``: the spread exactly,
+    the mean to rounding (a running sum here, scipy's own there)."""
+    y = np.random.default_rng(n).normal(0.0, 0.01, n).cumsum()
+    spread = maximum_filter1d(y, window) - minimum_filter1d(y, window)
+    np.testing.assert_array_equal(running_range(y, window), spread)
+    expected = uniform_filter1d(y, window)
+    np.testing.assert_allclose(running_mean(y, window), expected, rtol=0, atol=1e-12 * np.max(np.abs(y)))
 
 
 def test_white_noise_level_recovers_white_noise_on_a_decay() -> None:

@@ -34,7 +34,7 @@ from ..store.csv_import import (
 )
 from ..store.inputs import read_runs
 from .free_decay import SPLIT_AFTER, find_free_end
-from .signals import half_cycle_peaks, white_noise_level
+from .signals import half_cycle_peaks, running_mean, running_range, white_noise_level
 
 #: Fraction of the largest excursion a peak must reach to count as the release.
 RELEASE_FRACTION = 0.5
@@ -139,10 +139,6 @@ def rest_cuts(angle: np.ndarray, noise: float) -> list[int]:
     """Sample indices where the model rests at its equilibrium between decays: the middle of every
     stretch where a natural period around each sample stays within ``REST_NOISES`` noise sigmas, near
     the record's median (a held tilt is not a rest: it belongs to the release that follows)."""
-    # imported here: scipy.ndimage is a third of a second of CPU, and a recording with its release
-    # events (every report, identify or campaign of MCAP files) never comes here
-    from scipy.ndimage import maximum_filter1d, minimum_filter1d, uniform_filter1d
-
     excursion = angle - np.median(angle)
     peaks = half_cycle_peaks(excursion)
     if peaks.size < 3 or noise <= 0:
@@ -150,8 +146,8 @@ def rest_cuts(angle: np.ndarray, noise: float) -> list[int]:
     window = max(2 * int(np.median(np.diff(peaks))), 3)
     if angle.size < 3 * window:
         return []
-    spread = maximum_filter1d(angle, window) - minimum_filter1d(angle, window)
-    level = np.abs(uniform_filter1d(excursion, window))
+    spread = running_range(angle, window)
+    level = np.abs(running_mean(excursion, window))
     quiet = (spread < REST_NOISES * noise) & (level < REST_LEVEL * float(np.max(np.abs(excursion))))
     edges = np.flatnonzero(np.diff(np.concatenate([[0], quiet.view(np.int8), [0]])))
     return [int((a + b) // 2) for a, b in zip(edges[::2], edges[1::2], strict=True)]
